@@ -1,0 +1,25 @@
+"""Adapters: read a recording into a :class:`replay.frame.Frame`.
+
+Each adapter is a function ``load(path, **options) -> Frame``. It validates the
+input, raises :class:`replay.errors.DataError` with one clear line on bad input,
+and records in ``frame.report`` every sample or channel it dropped, flagged,
+masked or repaired. ``ADAPTERS`` maps the adapter names used in dataset
+manifests (``datasets/*.toml``) to ``"module:function"``.
+"""
+from importlib import import_module
+
+ADAPTERS = {
+    "bohai-csv": "replay.adapters.bohai:load",
+}
+
+
+def get_adapter(name: str):
+    """The loader function registered under ``name``."""
+    from replay.errors import ReplayError
+
+    try:
+        target = ADAPTERS[name]
+    except KeyError:
+        raise ReplayError(f"unknown adapter {name!r} (known: {', '.join(sorted(ADAPTERS))})") from None
+    module, func = target.split(":")
+    return getattr(import_module(module), func)
