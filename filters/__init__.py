@@ -1,0 +1,28 @@
+"""Filters. ``FILTERS`` maps a filter name (as on the command line) to "module:Class".
+
+Every filter runs on the model protocol of :mod:`replay.model` and knows
+nothing of files, datasets or the CLI.
+"""
+from importlib import import_module
+
+FILTERS = {
+    "kf": "replay.filters.kalman:KalmanFilter",
+    "ekf": "replay.filters.kalman:EKF",
+    "ukf": "replay.filters.sigma:UKF",
+    "ckf": "replay.filters.sigma:CKF",
+    "pf": "replay.filters.pf:ParticleFilter",
+}
+
+
+def make_filter(name: str, **params):
+    """Instantiate the filter registered as ``name`` with ``params``."""
+    from replay.errors import ReplayError
+
+    try:
+        module, cls = FILTERS[name].split(":")
+    except KeyError:
+        raise ReplayError(f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})") from None
+    try:
+        return getattr(import_module(module), cls)(**params)
+    except TypeError as err:
+        raise ReplayError(f"filter {name!r}: {err}") from None

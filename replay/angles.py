@@ -4,25 +4,47 @@ Every angle in ``replay`` is in radians. Residuals between angles are wrapped to
 [-pi, pi) and means of angles are circular means, so a set of sigma points or
 particles that straddles +-pi averages to +-pi and not to 0 (the failure of
 averaging raw angles, seen in popular filter libraries).
+
+``angles`` arguments are tuples of component indices (along the last axis).
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
+
+TWO_PI = 2.0 * np.pi
 
 
 def wrap(a):
     """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+    a = np.asarray(a, dtype=float)
+    return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+
+
+@lru_cache(maxsize=256)
+def index(angles: tuple[int, ...]):
+    """A slice for contiguous component indices (cheaper to apply), else a list."""
+    if angles and list(angles) == list(range(angles[0], angles[-1] + 1)):
+        return slice(angles[0], angles[-1] + 1)
+    return list(angles)
 
 
 def residual(a, b, angles=()):
     """``a - b`` along the last axis, with components listed in ``angles`` wrapped."""
-    d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
-    if len(angles):
-        d = d.copy() if d.base is not None else d
-        idx = list(angles)
-        d[..., idx] = wrap(d[..., idx])
+    d = np.subtract(a, b, dtype=float)
+    if angles:
+        i = index(tuple(angles))
+        d[..., i] = wrap(d[..., i])
     return d
+
+
+def wrap_components(x, angles=()):
+    """Wrap the angle components of ``x`` in place and return it."""
+    if angles:
+        i = index(tuple(angles))
+        x[..., i] = wrap(x[..., i])
+    return x
 
 
 def weighted_mean(x, w, angles=()):
@@ -32,11 +54,13 @@ def weighted_mean(x, w, angles=()):
     for scaled unscented points). Angle components get the circular mean
     ``atan2(sum w sin, sum w cos)``.
     """
-    x = np.asarray(x, dtype=float)
-    m = np.einsum("...ij,i->...j", x, w)
-    if len(angles):
-        idx = list(angles)
-        s = np.einsum("...ij,i->...j", np.sin(x[..., idx]), w)
-        c = np.einsum("...ij,i->...j", np.cos(x[..., idx]), w)
-        m[..., idx] = np.arctan2(s, c)
+    m = w @ x if x.ndim == 2 else np.einsum("...ij,i->...j", x, w)
+    if angles:
+        i = index(tuple(angles))
+        xa = x[..., i]
+        if x.ndim == 2:
+            m[i] = np.arctan2(w @ np.sin(xa), w @ np.cos(xa))
+        else:
+            m[..., i] = np.arctan2(np.einsum("...ij,i->...j", np.sin(xa), w),
+                                   np.einsum("...ij,i->...j", np.cos(xa), w))
     return m

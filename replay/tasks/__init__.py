@@ -1,0 +1,76 @@
+"""Tasks: what is measured over a frame, by which model.
+
+A task turns a :class:`replay.frame.Frame` into a :class:`Problem`: the model,
+the measurement array the filters see, the prior, and — kept for the scorer
+only — the truth. ``TASKS`` maps task names to "module:Class".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import import_module
+
+import numpy as np
+
+TASKS = {
+    "position": "replay.tasks.position:PositionTask",
+    "sonar": "replay.tasks.sonar:SonarTask",
+}
+
+
+@dataclass
+class Problem:
+    """Everything a run needs. Filters get ``model, z, x0, P0``; the scorer gets the rest."""
+
+    model: object
+    z: np.ndarray  # (n, nz), NaN = missing
+    x0: np.ndarray
+    P0: np.ndarray
+    t: np.ndarray
+    truth_position: np.ndarray  # (n, d) reference position, for scoring only
+    truth_valid: np.ndarray  # (n,) False where the reference is masked
+    position_index: tuple[int, ...]  # state components holding the position
+    axis_names: tuple[str, ...]
+    truth_angles: dict = field(default_factory=dict)  # name -> (n,) reference angle
+    angle_index: dict = field(default_factory=dict)  # name -> state component
+    params: dict = field(default_factory=dict)
+
+
+class Task:
+    name = "task"
+
+    def build(self, frame, rng: np.random.Generator) -> Problem:
+        raise NotImplementedError
+
+    def params(self) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(self).items()}
+
+
+def make_task(name: str, **params) -> Task:
+    from replay.errors import ReplayError
+
+    try:
+        module, cls = TASKS[name].split(":")
+    except KeyError:
+        raise ReplayError(f"unknown task {name!r} (known: {', '.join(sorted(TASKS))})") from None
+    try:
+        return getattr(import_module(module), cls)(**params)
+    except TypeError as err:
+        raise ReplayError(f"task {name!r}: {err}") from None
+
+
+def reference_position_3d(frame, z0: float | None = None):
+    """(n, 3) reference position and its validity from the frame's ``position`` reference.
+
+    A 2-D reference (east, north) gets a constant third component ``z0`` (the
+    vertical is not observed, as in the Bohai files, whose ``depth`` is zero).
+    """
+    from replay.errors import ReplayError
+
+    ref = frame.reference.get("position")
+    if ref is None:
+        raise ReplayError(f"{frame.meta.get('dataset') or frame.meta.get('source')}: "
+                          "no reference position channel to score against")
+    p = ref.values
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.full(len(p), 0.0 if z0 is None else z0)])
+    return p, ref.valid.copy()

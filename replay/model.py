@@ -1,0 +1,136 @@
+"""The model protocol shared by every filter.
+
+A model is the discrete-time state-space system
+
+    x_k = f(x_{k-1}, k) + w_k,   w_k ~ N(0, Q_k)
+    z_k = h(x_k, k) + v_k,       v_k ~ N(0, R_k)
+
+``f`` and ``h`` take arrays of states of shape ``(..., nx)`` — one state, the
+sigma points of a UKF, the cubature points of a CKF, the particles of a PF, or
+all of them for many Monte Carlo runs at once — and return ``(..., nx)`` and
+``(..., nz)``. Filters never loop over points in Python.
+
+Angles are declared: ``x_angles`` and ``z_angles`` list the state and
+measurement components that are angles (radians). Filters form residuals of
+those components with :func:`replay.angles.residual` and means with
+:func:`replay.angles.weighted_mean`.
+
+Jacobians ``F`` and ``H`` are optional; the defaults are central differences
+(also vectorised: all ``2 nx`` perturbed states go through ``f`` at once).
+Filters know nothing of files, datasets or the CLI: they see a model and
+measurements only.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from replay.angles import residual, wrap
+from replay.linalg import cholesky
+
+
+class Model:
+    """Base class: subclasses set ``nx``, ``nz``, ``Q``, ``R`` and define ``f``, ``h``."""
+
+    nx: int
+    nz: int
+    x_angles: tuple[int, ...] = ()
+    z_angles: tuple[int, ...] = ()
+    Q: np.ndarray
+    R: np.ndarray
+    jacobian_step: float = 1e-6
+
+    # --- dynamics and measurement -------------------------------------------------
+    def f(self, x: np.ndarray, k: int) -> np.ndarray:
+        raise NotImplementedError
+
+    def h(self, x: np.ndarray, k: int) -> np.ndarray:
+        raise NotImplementedError
+
+    def process_cov(self, k: int) -> np.ndarray:
+        """Q_k; time-invariant ``self.Q`` unless overridden."""
+        return self.Q
+
+    def measurement_cov(self, k: int) -> np.ndarray:
+        """R_k; time-invariant ``self.R`` unless overridden."""
+        return self.R
+
+    # --- Jacobians ---------------------------------------------------------------
+    def F(self, x: np.ndarray, k: int) -> np.ndarray:
+        """Jacobian of f at a single state ``x`` (nx,) -> (nx, nx)."""
+        return self._numeric_jacobian(self.f, x, k, self.x_angles)
+
+    def H(self, x: np.ndarray, k: int) -> np.ndarray:
+        """Jacobian of h at a single state ``x`` (nx,) -> (nz, nx)."""
+        return self._numeric_jacobian(self.h, x, k, self.z_angles)
+
+    def _numeric_jacobian(self, fun, x, k, out_angles):
+        n = x.shape[-1]
+        eps = self.jacobian_step * np.maximum(1.0, np.abs(x))
+        pts = np.concatenate([x + np.diag(eps), x - np.diag(eps)])
+        y = fun(pts, k)
+        d = residual(y[:n], y[n:], out_angles)
+        return (d / (2.0 * eps)[:, None]).T
+
+    # --- sampling and likelihood (particle filters) -------------------------------
+    def sample_f(self, x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        """Draw x_k ~ p(x_k | x_{k-1}) for an array of states."""
+        y = self.f(x, k)
+        return y + rng.standard_normal(y.shape) @ cholesky(self.process_cov(k)).T
+
+    def loglik(self, z: np.ndarray, x: np.ndarray, k: int, mask=None) -> np.ndarray:
+        """log p(z_k | x_k) for an array of states (Gaussian, wrapped angle residuals).
+
+        ``mask`` selects the measured components (others are missing).
+        """
+        R = self.measurement_cov(k)
+        zh = self.h(x, k)
+        angles = self.z_angles
+        if mask is not None:
+            zh, z, R = zh[..., mask], z[mask], R[np.ix_(mask, mask)]
+            angles = remap_indices(self.z_angles, mask)
+        d = residual(z, zh, angles)
+        L = cholesky(R)
+        u = solve_triangular(L, d.reshape(-1, d.shape[-1]).T, lower=True, check_finite=False)
+        logdet = 2.0 * np.log(np.diag(L)).sum()
+        maha = np.einsum("ij,ij->j", u, u).reshape(d.shape[:-1])
+        return -0.5 * (maha + logdet + len(z) * np.log(2 * np.pi))
+
+    # --- simulation ----------------------------------------------------------------
+    def simulate_measurements(self, x: np.ndarray, rng: np.random.Generator, k0: int = 0) -> np.ndarray:
+        """z_k = h(x_k) + v_k for a trajectory ``x`` (n, nx); angles wrapped."""
+        n = len(x)
+        z = np.empty((n, self.nz))
+        for i in range(n):
+            L = np.linalg.cholesky(self.measurement_cov(k0 + i))
+            z[i] = self.h(x[i], k0 + i) + L @ rng.standard_normal(self.nz)
+        if self.z_angles:
+            z[:, list(self.z_angles)] = wrap(z[:, list(self.z_angles)])
+        return z
+
+
+class LinearGaussian(Model):
+    """x_k = A x_{k-1} + w, z_k = C x_k + v: the case where every Kalman variant is exact."""
+
+    def __init__(self, A, C, Q, R):
+        self.A, self.C = np.asarray(A, float), np.asarray(C, float)
+        self.Q, self.R = np.asarray(Q, float), np.asarray(R, float)
+        self.nx, self.nz = self.A.shape[0], self.C.shape[0]
+
+    def f(self, x, k):
+        return x @ self.A.T
+
+    def h(self, x, k):
+        return x @ self.C.T
+
+    def F(self, x, k):
+        return self.A
+
+    def H(self, x, k):
+        return self.C
+
+
+def remap_indices(indices, mask) -> tuple[int, ...]:
+    """Positions of ``indices`` within the components kept by boolean ``mask``."""
+    pos = np.cumsum(mask) - 1
+    return tuple(int(pos[i]) for i in indices if mask[i])

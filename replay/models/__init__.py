@@ -1,0 +1,1 @@
+"""Concrete models over the protocol of :mod:`replay.model`."""
