@@ -1,0 +1,127 @@
+"""The ``replay`` command line.
+
+Bad input raises :class:`replay.errors.ReplayError`; :class:`Main` turns it into
+one line on stderr and exit status 2 (no traceback).
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+import replay
+from replay.errors import ReplayError
+
+
+class Main(click.Group):
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except ReplayError as err:
+            click.echo(f"replay: error: {err}", err=True)
+            ctx.exit(2)
+
+
+def parse_params(items, what: str) -> dict:
+    """``["pf.n_particles=500", ...]`` -> ``{"pf": {"n_particles": 500}}`` (values parsed as JSON)."""
+    out: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ReplayError(f"{what} {item!r}: expected KEY=VALUE")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        node = out
+        *path, leaf = key.split(".")
+        for part in path:
+            node = node.setdefault(part, {})
+        node[leaf] = parsed
+    return out
+
+
+@click.group(cls=Main)
+@click.version_option(replay.__version__, prog_name="replay")
+def main():
+    """Replay navigation logs through state-estimation filters and score them."""
+
+
+@main.command("eval")
+@click.argument("dataset")
+@click.option("--task", "-t", default=None, help="Task (default: the dataset's default task).")
+@click.option("--filters", "-f", default="ekf,ukf,ckf,pf", show_default=True,
+              help="Comma-separated filter names.")
+@click.option("--runs", "-n", default=1, show_default=True, type=click.IntRange(1), help="Monte Carlo runs.")
+@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
+@click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
+@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
+              help="Output directory (default: runs/<dataset>/<task>).")
+@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@click.option("--param", "-p", "params", multiple=True,
+              help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable).")
+@click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
+def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, params, task_params):
+    """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
+    from replay.evaluate import evaluate
+    from replay.outputs import format_table, write_all
+
+    names = [f.strip() for f in filters.split(",") if f.strip()]
+    if not names:
+        raise ReplayError("--filters: no filter named")
+    ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
+                  data_dir=data_dir, filter_params=parse_params(params, "--param"),
+                  task_params=parse_params(task_params, "--task-param"))
+    click.echo(format_table(ev))
+    out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
+    paths = write_all(ev, out)
+    click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+
+
+@main.command("rerun")
+@click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--data-dir", default=None, type=click.Path())
+@click.option("--out", "-o", default=None, type=click.Path(file_okay=False))
+def rerun_cmd(manifest_file, data_dir, out):
+    """Repeat the run recorded in a manifest.json and check that every RMSE is reproduced exactly."""
+    from replay.evaluate import evaluate
+    from replay.outputs import format_table, write_all
+
+    try:
+        old = json.loads(Path(manifest_file).read_text())
+        cfg = old["config"]
+    except (json.JSONDecodeError, KeyError) as err:
+        raise ReplayError(f"{manifest_file}: not a replay manifest ({err})") from None
+    ev = evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
+                  seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
+                  task_params=cfg["task_params"], filter_params=cfg["filter_params"],
+                  dataset_params=cfg.get("dataset_params"))
+    click.echo(format_table(ev))
+    if out:
+        write_all(ev, Path(out))
+    if cfg.get("dataset_sha256") and ev.config["dataset_sha256"] != cfg["dataset_sha256"]:
+        raise ReplayError(f"{manifest_file}: dataset checksum differs from the recorded one")
+    bad = []
+    for r in ev.results:
+        for k, v in r.summary.items():
+            if k.endswith("_rmse"):
+                was = old["results"][r.name].get(k)
+                if was is not None and not (v == was or (v != v and was != was)):
+                    bad.append(f"{r.name}.{k}: {was} -> {v}")
+    if bad:
+        raise ReplayError(f"{manifest_file}: results differ: " + "; ".join(bad[:5]))
+    click.echo("reproduced: every RMSE equals the recorded value")
+
+
+def _register_optional():
+    from replay.cli_datasets import datasets
+
+    main.add_command(datasets)
+
+
+_register_optional()
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

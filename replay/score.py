@@ -1,0 +1,93 @@
+"""Scoring estimates against the reference.
+
+Per run (:func:`score_run`), over the samples where the reference is valid and
+the filter has an estimate:
+
+* ``pos_rmse``  = sqrt(mean_k |p^_k - p_k|^2)  (3-D position RMSE, metres)
+* ``<axis>_rmse`` = sqrt(mean_k (p^_k,a - p_k,a)^2) for each axis a
+* ``<angle>_rmse`` = sqrt(mean_k wrap(a^_k - a_k)^2) for each scored angle
+* ``scored`` / ``masked``: samples used, and samples skipped because the
+  reference is masked there (e.g. jumps of a navigation solution).
+
+Over Monte Carlo runs (:func:`aggregate`):
+
+* ``<metric>`` is the **mean over runs of the per-run RMSE**, with
+  ``<metric>_ci95`` the half-width of its 95 % interval (Student t);
+* :func:`rmse_over_time` gives the **RMSE across runs at each time step**,
+  sqrt(mean_runs |e_k|^2) — the curve papers plot.
+
+Diverged runs (non-finite or non-positive covariance) are counted in
+``diverged`` and left out of the means.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from replay.angles import wrap
+
+
+def errors(problem, est) -> dict:
+    """Error series of one run: ``position`` (n, d) and each angle (n,); NaN where not scored."""
+    pos = est.x[:, list(problem.position_index)] - problem.truth_position
+    ok = problem.truth_valid & np.isfinite(pos).all(axis=1)
+    out = {"position": np.where(ok[:, None], pos, np.nan)}
+    for name, truth in problem.truth_angles.items():
+        e = wrap(est.x[:, problem.angle_index[name]] - truth)
+        out[name] = np.where(ok, e, np.nan)
+    return out
+
+
+def score_run(problem, est) -> dict:
+    """RMSE metrics of one run (see the module docstring)."""
+    err = errors(problem, est)
+    pos = err["position"]
+    ok = np.isfinite(pos).all(axis=1)
+    e = pos[ok]
+    m = {"pos_rmse": float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) if len(e) else np.nan}
+    for j, axis in enumerate(problem.axis_names):
+        m[f"{axis}_rmse"] = float(np.sqrt(np.mean(e[:, j] ** 2))) if len(e) else np.nan
+    for name in problem.truth_angles:
+        a = err[name][np.isfinite(err[name])]
+        m[f"{name}_rmse"] = float(np.sqrt(np.mean(a**2))) if len(a) else np.nan
+    m["scored"] = int(ok.sum())
+    m["masked"] = int((~problem.truth_valid).sum())
+    m["us_per_step"] = est.us_per_step
+    m["diverged"] = bool(est.diverged)
+    return m
+
+
+def ci95(values) -> float:
+    """Half-width of the 95 % Student-t interval of the mean of ``values``."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if len(v) < 2:
+        return float("nan")
+    return float(stats.t.ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)))
+
+
+def aggregate(run_metrics: list[dict]) -> dict:
+    """Monte Carlo summary of per-run metrics (mean of per-run RMSE, 95 % interval)."""
+    ok = [m for m in run_metrics if not m["diverged"]]
+    out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok)}
+    keys = [k for k in run_metrics[0] if k.endswith("_rmse")] if run_metrics else []
+    for k in keys:
+        vals = [m[k] for m in ok]
+        out[k] = float(np.nanmean(vals)) if vals and np.isfinite(vals).any() else float("nan")
+        out[f"{k}_ci95"] = ci95(vals)
+    us = [m["us_per_step"] for m in run_metrics if np.isfinite(m["us_per_step"])]
+    out["us_per_step"] = float(np.median(us)) if us else float("nan")
+    out["scored"] = int(np.mean([m["scored"] for m in run_metrics])) if run_metrics else 0
+    out["masked"] = int(np.mean([m["masked"] for m in run_metrics])) if run_metrics else 0
+    return out
+
+
+def rmse_over_time(error_runs: list[np.ndarray]) -> np.ndarray:
+    """RMSE across runs at each step: sqrt(mean over runs of |e_k|^2), NaN-aware.
+
+    ``error_runs`` holds one (n, d) or (n,) error array per run.
+    """
+    e = np.stack([x if x.ndim == 2 else x[:, None] for x in error_runs])
+    sq = np.sum(e**2, axis=2)
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.nanmean(np.where(np.isfinite(sq), sq, np.nan), axis=0))
