@@ -1,0 +1,100 @@
+"""`replay datasets ...`: list, describe and download the registered datasets.
+
+Errors are raised as ReplayError; the top-level `replay` command prints them on
+one line and exits with status 2.
+"""
+from __future__ import annotations
+
+import click
+
+from replay import registry
+from replay.errors import ReplayError
+from replay.fetch import fetch as fetch_dataset
+
+DATA_DIR = click.option("--data-dir", type=click.Path(file_okay=False), default=None,
+                        help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).")
+
+
+@click.group("datasets")
+def datasets():
+    """List, describe and download datasets."""
+
+
+def _where(ds, data_dir) -> str:
+    if ds.kind == "sim":
+        return "generated"
+    path = registry.locate(ds, data_dir)
+    return str(path) if path else "missing"
+
+
+def _short(text: str, width: int = 60) -> str:
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
+@datasets.command("list")
+@DATA_DIR
+def list_cmd(data_dir):
+    """One line per dataset: where it is, rows, whether its checksum is known."""
+    rows = [("id", "present", "rows", "sha256", "description")]
+    for ds in registry.all_datasets().values():
+        known = "-" if ds.kind == "sim" else ("known" if ds.sha256 else "unknown")
+        rows.append((ds.id, _where(ds, data_dir), str(ds.rows or "-"), known, _short(ds.description)))
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    for r in rows:
+        click.echo("  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[4])
+
+
+@datasets.command("info")
+@click.argument("dataset_id")
+@DATA_DIR
+def info_cmd(dataset_id, data_dir):
+    """Manifest fields, location and, when present, what loading it gives."""
+    ds = registry.get(dataset_id)
+    for key, value in ds.__dict__.items():
+        if value not in (None, ""):
+            click.echo(f"{key + ':':15s} {value}")
+    where = _where(ds, data_dir)
+    click.echo(f"{'location:':15s} {where}")
+    if where == "missing":
+        roots = ", ".join(str(r) for r in registry.search_roots(data_dir))
+        click.echo(f"{'searched:':15s} {roots}")
+        click.echo(f"run `replay datasets fetch {ds.id}` or pass --data-dir")
+        return
+    frame = registry.load_frame(ds, data_dir=data_dir, rng=0)
+    click.echo("summary:")
+    for line in frame.summary():
+        click.echo(f"  {line}")
+    lines = frame.report.lines()
+    click.echo("report:" if lines else "report: nothing dropped, repaired or flagged")
+    for line in lines:
+        click.echo(f"  {line}")
+    click.echo("meta:")
+    for key, value in frame.meta.items():
+        click.echo(f"  {key}: {_short(str(value), 100)}")
+
+
+@datasets.command("fetch")
+@click.argument("dataset_ids", nargs=-1)
+@click.option("--dest", type=click.Path(file_okay=False), default=None,
+              help="Download into this directory (default: the user cache).")
+@click.option("--all", "fetch_all", is_flag=True, help="Fetch every downloadable dataset.")
+def fetch_cmd(dataset_ids, dest, fetch_all):
+    """Download datasets (checked against their sha256 when known)."""
+    if fetch_all:
+        chosen = [ds for ds in registry.all_datasets().values() if ds.kind == "file"]
+    elif dataset_ids:
+        chosen = [registry.get(i) for i in dataset_ids]
+    else:
+        raise ReplayError("give dataset ids to fetch, or --all")
+    if len(chosen) == 1:
+        click.echo(fetch_dataset(chosen[0], dest).message)
+        return
+    failed = []
+    for ds in chosen:
+        try:
+            click.echo(fetch_dataset(ds, dest).message)
+        except ReplayError as e:
+            click.echo(f"error: {e}", err=True)
+            failed.append(ds.id)
+    if failed:
+        raise ReplayError(f"{len(failed)} of {len(chosen)} downloads failed: {', '.join(failed)}")

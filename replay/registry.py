@@ -1,0 +1,317 @@
+"""The dataset registry: manifests, local copies, and loading a dataset as a Frame.
+
+Manifests are TOML files ``datasets/*.toml`` (format: ``datasets/README.md``).
+They are read from ``<repo>/datasets`` in a source checkout, otherwise from
+``sys.prefix/share/replay/datasets`` where ``pip install`` puts them.
+
+A file dataset is searched for, in this order, in: the ``data_dir`` argument,
+each directory of ``$REPLAY_DATA_DIR`` (``os.pathsep``-separated), then the user
+cache (``$REPLAY_CACHE_DIR``, else ``$XDG_CACHE_HOME/replay``, else
+``~/.cache/replay``). In each root the file may sit flat (``root/<file>``), in
+the upstream layout (``root/<upstream_path>``), or either way under a folder
+named after the id's prefix (``root/bohai/...``).
+"""
+from __future__ import annotations
+
+import difflib
+import functools
+import hashlib
+import json
+import os
+import sys
+import tomllib
+from dataclasses import dataclass, fields
+from importlib import import_module
+from pathlib import Path
+
+import numpy as np
+
+import replay
+from replay.errors import DataError, ReplayError
+
+CHECKSUMS_FILE = "checksums.json"
+
+# Adapter used for a plain file path, by extension.
+ADAPTER_BY_SUFFIX = {".csv": "bohai-csv"}
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """One manifest entry."""
+
+    id: str
+    kind: str  # "file" (a recording to locate or download) or "sim" (generated)
+    description: str = ""
+    default_task: str = ""
+    adapter: str | None = None  # file datasets: name in replay.adapters.ADAPTERS
+    generator: str | None = None  # sim datasets: "module:function"
+    file: str | None = None
+    upstream_path: str | None = None
+    url: str | None = None
+    sha256: str | None = None  # None when not known
+    site: str = ""
+    rows: int | None = None
+    span_s: float | None = None
+    license: str = ""
+    citation: str = ""
+    manifest: str = ""  # the manifest file this entry came from
+
+    @property
+    def namespace(self) -> str:
+        """The id's prefix, e.g. "bohai"."""
+        return self.id.split("/", 1)[0]
+
+
+MANIFEST_KEYS = {f.name for f in fields(Dataset)} - {"kind", "manifest"}
+
+
+# ---------------------------------------------------------------- manifests
+
+def manifests_dir() -> Path:
+    """Where the ``*.toml`` manifests are: the source tree first, then the install prefix."""
+    repo = Path(replay.__file__).resolve().parents[1]
+    source = repo / "datasets"
+    if (repo / "pyproject.toml").is_file() and any(source.glob("*.toml")):
+        return source
+    return Path(sys.prefix) / "share" / "replay" / "datasets"
+
+
+def all_datasets(directory: str | Path | None = None) -> dict[str, Dataset]:
+    """Every dataset of every manifest, by id (manifests read once, then cached)."""
+    return dict(_read_manifests(str(Path(directory) if directory else manifests_dir())))
+
+
+@functools.lru_cache(maxsize=None)
+def _read_manifests(directory: str) -> dict[str, Dataset]:
+    paths = sorted(Path(directory).glob("*.toml"))
+    if not paths:
+        raise ReplayError(f"no dataset manifests (*.toml) found in {directory}")
+    out: dict[str, Dataset] = {}
+    for path in paths:
+        for ds in _read_manifest(path):
+            if ds.id in out:
+                raise ReplayError(f"{path}: dataset {ds.id} is also defined in {out[ds.id].manifest}")
+            out[ds.id] = ds
+    return out
+
+
+def _read_manifest(path: Path) -> list[Dataset]:
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ReplayError(f"{path}: cannot read manifest: {e}") from None
+    entries = doc.pop("dataset", [])
+    defaults = doc  # top-level keys apply to every entry
+    if not isinstance(entries, list):
+        raise ReplayError(f"{path}: `dataset` must be an array of tables ([[dataset]])")
+    return [_make_dataset(path, {**defaults, **entry}) for entry in entries]
+
+
+def _make_dataset(path: Path, entry: dict) -> Dataset:
+    ds_id = entry.get("id")
+    where = f"{path}: dataset {ds_id}"
+    if not isinstance(ds_id, str) or "/" not in ds_id:
+        raise ReplayError(f"{path}: every [[dataset]] needs an id of the form 'prefix/name' (got {ds_id!r})")
+    unknown = sorted(set(entry) - MANIFEST_KEYS)
+    if unknown:
+        raise ReplayError(f"{where}: unknown field(s) {', '.join(unknown)}")
+    if ("file" in entry) == ("generator" in entry):
+        raise ReplayError(f"{where}: give exactly one of `file` (a recording) or `generator` (a simulator)")
+    kind = "file" if "file" in entry else "sim"
+    if kind == "file" and not entry.get("adapter"):
+        raise ReplayError(f"{where}: a file dataset needs an `adapter`")
+    if kind == "sim" and ":" not in entry["generator"]:
+        raise ReplayError(f"{where}: `generator` must be 'module:function'")
+    sha = entry.get("sha256")
+    if sha is not None:
+        sha = sha.lower()
+        if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+            raise ReplayError(f"{where}: sha256 must be 64 hex digits")
+        entry["sha256"] = sha
+    return Dataset(kind=kind, manifest=str(path), **entry)
+
+
+def ids() -> list[str]:
+    return list(all_datasets())
+
+
+def get(dataset_id: str) -> Dataset:
+    """The dataset with this id; an unknown id raises ReplayError with close matches."""
+    known = all_datasets()
+    if dataset_id in known:
+        return known[dataset_id]
+    raise ReplayError(f"unknown dataset {dataset_id!r}{_suggest(dataset_id, known)}; "
+                      "`replay datasets list` shows them all")
+
+
+def _suggest(query: str, known) -> str:
+    # compare with the full ids and with the part after the prefix
+    keys = {}
+    for ds_id in known:
+        keys.setdefault(ds_id, ds_id)
+        keys.setdefault(ds_id.split("/", 1)[1], ds_id)
+    close = difflib.get_close_matches(query, list(keys), n=6, cutoff=0.6)
+    matches = list(dict.fromkeys(keys[k] for k in close))[:3]
+    if not matches:
+        return ""
+    listed = matches[0] if len(matches) == 1 else f"{', '.join(matches[:-1])} or {matches[-1]}"
+    return f" (did you mean {listed}?)"
+
+
+# ---------------------------------------------------------------- local copies
+
+def cache_dir() -> Path:
+    """The user cache: $REPLAY_CACHE_DIR, else $XDG_CACHE_HOME/replay, else ~/.cache/replay."""
+    if os.environ.get("REPLAY_CACHE_DIR"):
+        return Path(os.environ["REPLAY_CACHE_DIR"]).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "replay"
+
+
+def search_roots(data_dir: str | Path | None = None) -> list[Path]:
+    """The directories searched, in order: data_dir, $REPLAY_DATA_DIR, the user cache."""
+    roots = [Path(data_dir).expanduser()] if data_dir else []
+    env = os.environ.get("REPLAY_DATA_DIR", "")
+    roots += [Path(p).expanduser() for p in env.split(os.pathsep) if p]
+    roots.append(cache_dir())
+    return list(dict.fromkeys(roots))
+
+
+def candidates(ds: Dataset, root: Path) -> list[Path]:
+    """Where in one root the file may be: flat, upstream layout, and both under <prefix>/."""
+    rels = [ds.file] + ([ds.upstream_path] if ds.upstream_path else [])
+    paths = [root / r for r in rels] + [root / ds.namespace / r for r in rels]
+    return list(dict.fromkeys(paths))
+
+
+def locate(ds: Dataset | str, data_dir: str | Path | None = None) -> Path | None:
+    """The first existing local copy of a file dataset, or None (always None for sims)."""
+    ds = get(ds) if isinstance(ds, str) else ds
+    if ds.kind != "file":
+        return None
+    for root in search_roots(data_dir):
+        for path in candidates(ds, root):
+            if path.is_file():
+                return path
+    return None
+
+
+def sha256_file(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def read_checksums(directory: str | Path) -> dict:
+    """The checksums recorded by `fetch` in ``directory/checksums.json`` ({} if none)."""
+    path = Path(directory) / CHECKSUMS_FILE
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as e:
+        raise ReplayError(f"{path}: cannot read recorded checksums: {e}") from None
+
+
+def check_file(ds: Dataset, path: Path) -> tuple[str, str]:
+    """(sha256, status) of a local copy; status is "verified", "mismatch", "recorded",
+    "changed" (differs from the checksum recorded at download) or "unknown"."""
+    got = sha256_file(path)
+    if ds.sha256:
+        return got, "verified" if got == ds.sha256 else "mismatch"
+    recorded = read_checksums(path.parent).get(path.name, {}).get("sha256")
+    if recorded:
+        return got, "recorded" if got == recorded else "changed"
+    return got, "unknown"
+
+
+# ---------------------------------------------------------------- loading
+
+def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
+               adapter: str | None = None, **params):
+    """Load a dataset id, a :class:`Dataset`, or a plain file path as a Frame.
+
+    File datasets are located (see :func:`locate`) and read by their adapter with
+    ``params``; sim datasets are generated by ``generator(rng, **params)`` where
+    ``rng`` is a seed, a ``numpy.random.Generator`` or None. ``first`` keeps the
+    first samples. A local copy whose sha256 differs from the manifest still loads
+    (users may edit files) but gets a "flagged" entry in the frame report.
+    ``adapter`` overrides the adapter chosen for a plain path.
+    """
+    if first is not None and int(first) < 1:
+        raise ReplayError(f"first must be a positive number of samples (got {first})")
+    if isinstance(dataset, Dataset):
+        ds = dataset
+    elif isinstance(dataset, Path) or (dataset not in all_datasets() and _looks_like_path(dataset)):
+        return _load_path(Path(dataset), adapter, params).head(first)
+    else:
+        ds = get(dataset)
+    frame = _load_sim(ds, rng, params) if ds.kind == "sim" else _load_file(ds, data_dir, params)
+    frame.meta["dataset"] = ds.id
+    return frame.head(first)
+
+
+def _looks_like_path(text: str) -> bool:
+    path = Path(text).expanduser()
+    return path.suffix.lower() in ADAPTER_BY_SUFFIX or path.exists()
+
+
+def adapter_for(path: Path) -> str:
+    """The adapter for a plain file, by extension (for now .csv -> bohai-csv)."""
+    try:
+        return ADAPTER_BY_SUFFIX[path.suffix.lower()]
+    except KeyError:
+        known = ", ".join(sorted(ADAPTER_BY_SUFFIX))
+        raise ReplayError(f"{path}: cannot tell the file format from its extension "
+                          f"{path.suffix or '(none)'!r} (known: {known})") from None
+
+
+def _adapter(name: str):
+    from replay.adapters import get_adapter
+
+    try:
+        return get_adapter(name)
+    except ImportError as e:
+        raise ReplayError(f"adapter {name} is not available: {e}") from None
+
+
+def _load_path(path: Path, adapter: str | None, params: dict):
+    path = path.expanduser()
+    if not path.is_file():
+        raise DataError(path, "no such file")
+    frame = _adapter(adapter or adapter_for(path))(path, **params)
+    frame.meta.update(dataset=str(path), path=str(path), sha256=sha256_file(path), checksum="unknown")
+    return frame
+
+
+def _load_file(ds: Dataset, data_dir, params: dict):
+    path = locate(ds, data_dir)
+    if path is None:
+        where = ", ".join(str(r) for r in search_roots(data_dir))
+        raise ReplayError(f"dataset {ds.id} not found in {where}; "
+                          f"run `replay datasets fetch {ds.id}` or pass --data-dir")
+    frame = _adapter(ds.adapter)(path, **params)
+    sha, status = check_file(ds, path)
+    frame.meta.update(path=str(path), sha256=sha, checksum=status)
+    if status in ("mismatch", "changed"):
+        expected = ds.sha256 or "the checksum recorded at download"
+        frame.report.add("flagged", path.name, 1,
+                         f"sha256 {sha} differs from {expected}: the file was edited or is "
+                         "another version; results may not compare with published ones")
+    return frame
+
+
+def _load_sim(ds: Dataset, rng, params: dict):
+    module, func = ds.generator.split(":")
+    try:
+        make_frame = getattr(import_module(module), func)
+    except (ImportError, AttributeError) as e:
+        raise ReplayError(f"dataset {ds.id}: generator {ds.generator} is not available ({e})") from None
+    frame = make_frame(np.random.default_rng(rng), **params)
+    frame.meta.setdefault("generator", ds.generator)
+    if isinstance(rng, (int, np.integer)):
+        frame.meta.setdefault("seed", int(rng))
+    return frame

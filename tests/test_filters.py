@@ -1,0 +1,152 @@
+"""Filters against analytic answers: the Kalman filter on a linear-Gaussian model."""
+import numpy as np
+import pytest
+
+from replay.filters import make_filter
+from replay.model import LinearGaussian, Model
+
+
+def plain_kalman(A, C, Q, R, z, x0, P0):
+    """Textbook Kalman filter (standard covariance update), independent of replay's code."""
+    x, P = x0.copy(), P0.copy()
+    xs, Ps = [], []
+    for zk in z:
+        x = A @ x
+        P = A @ P @ A.T + Q
+        S = C @ P @ C.T + R
+        K = P @ C.T @ np.linalg.inv(S)
+        x = x + K @ (zk - C @ x)
+        P = P - K @ S @ K.T
+        xs.append(x)
+        Ps.append(P)
+    return np.array(xs), np.array(Ps)
+
+
+@pytest.fixture(scope="module")
+def linear_case():
+    rng = np.random.default_rng(42)
+    dt = 0.5
+    A = np.array([[1, dt, 0, 0], [0, 1, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1.0]])
+    C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0.3, 0, -0.2, 0.1]])
+    Q = 0.05 * np.kron(np.eye(2), [[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]) + 1e-4 * np.eye(4)
+    R = np.diag([0.5, 0.8, 0.3])
+    model = LinearGaussian(A, C, Q, R)
+    x = np.array([1.0, 0.5, -2.0, 0.2])
+    zs = []
+    for _ in range(80):
+        x = A @ x + rng.multivariate_normal(np.zeros(4), Q)
+        zs.append(C @ x + rng.multivariate_normal(np.zeros(3), R))
+    x0, P0 = np.array([0.8, 0.4, -1.5, 0.0]), np.diag([1.0, 0.5, 1.0, 0.5])
+    xs, Ps = plain_kalman(A, C, Q, R, np.array(zs), x0, P0)
+    return model, np.array(zs), x0, P0, xs, Ps
+
+
+@pytest.mark.parametrize("name", ["kf", "ekf", "ukf", "ckf"])
+def test_kalman_variants_equal_kalman_filter(linear_case, name):
+    model, z, x0, P0, xs, Ps = linear_case
+    est = make_filter(name).run(model, z, x0, P0)
+    assert not est.diverged
+    np.testing.assert_allclose(est.x, xs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(est.P, Ps, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("alpha", [1e-3, 0.5, 1.0])
+def test_ukf_exact_for_any_alpha(linear_case, alpha):
+    model, z, x0, P0, xs, Ps = linear_case
+    est = make_filter("ukf", alpha=alpha).run(model, z, x0, P0)
+    tol = 1e-9 if alpha >= 0.5 else 1e-6  # alpha = 1e-3 cancels weights of order 1e6
+    np.testing.assert_allclose(est.x, xs, atol=tol)
+
+
+def test_particle_filter_mean_matches_kalman(linear_case):
+    model, z, x0, P0, xs, Ps = linear_case
+    est = make_filter("pf", n_particles=20000).run(model, z, x0, P0, np.random.default_rng(7))
+    sd = np.sqrt(np.diagonal(Ps, axis1=1, axis2=2))
+    # Monte Carlo error of a PF mean is a small fraction of the posterior sd with 2e4 particles.
+    normalised = np.abs(est.x - xs) / sd
+    assert np.mean(normalised) < 0.05
+    assert np.max(normalised) < 1.0  # worst step of 320 components: impoverished velocity particles
+    np.testing.assert_allclose(np.sqrt(np.diagonal(est.P, axis1=1, axis2=2)).mean(0), sd.mean(0), rtol=0.05)
+
+
+def test_particle_filter_is_reproducible_from_seed(linear_case):
+    model, z, x0, P0, *_ = linear_case
+    pf = make_filter("pf", n_particles=500)
+    a = pf.run(model, z, x0, P0, np.random.default_rng(3)).x
+    b = pf.run(model, z, x0, P0, np.random.default_rng(3)).x
+    c = pf.run(model, z, x0, P0, np.random.default_rng(4)).x
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "pf"])
+def test_missing_components_equal_reduced_model(linear_case, name):
+    """A NaN component means: update with the others only."""
+    model, z, x0, P0, *_ = linear_case
+    zmiss = z.copy()
+    zmiss[::3, 1] = np.nan
+    zmiss[5] = np.nan  # a whole row missing: predict only
+    est = make_filter(name, **({"n_particles": 300} if name == "pf" else {})).run(
+        model, zmiss, x0, P0, np.random.default_rng(1))
+    # Reference: the plain KF with row-dependent C, R
+    A, C, Q, R = model.A, model.C, model.Q, model.R
+    x, P = x0.copy(), P0.copy()
+    for k, zk in enumerate(zmiss):
+        x, P = A @ x, A @ P @ A.T + Q
+        m = np.isfinite(zk)
+        if m.any():
+            Cm, Rm = C[m], R[np.ix_(m, m)]
+            S = Cm @ P @ Cm.T + Rm
+            K = P @ Cm.T @ np.linalg.inv(S)
+            x, P = x + K @ (zk[m] - Cm @ x), P - K @ S @ K.T
+    tol = 1e-9 if name != "pf" else 0.5
+    np.testing.assert_allclose(est.x[-1], x, atol=tol)
+
+
+class Heading(Model):
+    """A heading turning at a constant rate, measured directly: crosses +-pi many times."""
+
+    nx = nz = 2
+    x_angles = (0,)
+    z_angles = (0,)
+
+    def __init__(self):
+        self.Q = np.diag([1e-4, 1e-6])
+        self.R = np.diag([0.05**2, 0.02**2])
+
+    def f(self, x, k):
+        y = x.copy()
+        y[..., 0] += 0.1 * x[..., 1]
+        return y
+
+    def h(self, x, k):
+        return np.stack([x[..., 0], x[..., 1] + 0.0 * x[..., 0]], axis=-1)
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "pf"])
+def test_heading_across_pi(name):
+    rng = np.random.default_rng(5)
+    model = Heading()
+    n = 300
+    rate = 0.8  # rad/s: wraps about 4 times
+    truth = (3.0 + rate * 0.1 * np.arange(1, n + 1) + np.pi) % (2 * np.pi) - np.pi
+    z = np.column_stack([truth + rng.normal(0, 0.05, n), rate + rng.normal(0, 0.02, n)])
+    z[:, 0] = (z[:, 0] + np.pi) % (2 * np.pi) - np.pi
+    params = {"n_particles": 2000} if name == "pf" else {}
+    est = make_filter(name, **params).run(model, z, np.array([3.0, rate]), np.diag([0.01, 0.01]),
+                                          np.random.default_rng(0))
+    err = (est.x[:, 0] - truth + np.pi) % (2 * np.pi) - np.pi
+    assert np.all(est.x[:, 0] >= -np.pi) and np.all(est.x[:, 0] < np.pi)
+    assert np.sqrt(np.mean(err**2)) < 0.04
+    assert np.max(np.abs(err)) < 0.2
+
+
+def test_divergence_is_reported_not_raised():
+    class Exploding(LinearGaussian):
+        pass
+
+    model = Exploding(np.eye(2) * 1e200, np.eye(2), np.eye(2), np.eye(2))
+    z = np.ones((20, 2))
+    est = make_filter("ekf").run(model, z, np.ones(2), np.eye(2))
+    assert est.diverged and est.diverged_at < 20
+    assert np.isnan(est.x[est.diverged_at:]).all()
