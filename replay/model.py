@@ -76,7 +76,11 @@ class Model:
     def sample_f(self, x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         """Draw x_k ~ p(x_k | x_{k-1}) for an array of states."""
         y = self.f(x, k)
-        return y + rng.standard_normal(y.shape) @ cholesky(self.process_cov(k)).T
+        Q = self.process_cov(k)
+        e = rng.standard_normal(y.shape)
+        if is_diagonal(Q):
+            return y + e * np.sqrt(np.diagonal(Q))
+        return y + e @ cholesky(Q).T
 
     def loglik(self, z: np.ndarray, x: np.ndarray, k: int, mask=None) -> np.ndarray:
         """log p(z_k | x_k) for an array of states (Gaussian, wrapped angle residuals).
@@ -90,10 +94,15 @@ class Model:
             zh, z, R = zh[..., mask], z[mask], R[np.ix_(mask, mask)]
             angles = remap_indices(self.z_angles, mask)
         d = residual(z, zh, angles)
-        L = cholesky(R)
-        u = solve_triangular(L, d.reshape(-1, d.shape[-1]).T, lower=True, check_finite=False)
-        logdet = 2.0 * np.log(np.diag(L)).sum()
-        maha = np.einsum("ij,ij->j", u, u).reshape(d.shape[:-1])
+        if is_diagonal(R):
+            r = np.diagonal(R)
+            maha = (d * d) @ (1.0 / r)
+            logdet = np.log(r).sum()
+        else:
+            L = cholesky(R)
+            u = solve_triangular(L, d.reshape(-1, d.shape[-1]).T, lower=True, check_finite=False)
+            logdet = 2.0 * np.log(np.diag(L)).sum()
+            maha = np.einsum("ij,ij->j", u, u).reshape(d.shape[:-1])
         return -0.5 * (maha + logdet + len(z) * np.log(2 * np.pi))
 
     # --- simulation ----------------------------------------------------------------
@@ -128,6 +137,11 @@ class LinearGaussian(Model):
 
     def H(self, x, k):
         return self.C
+
+
+def is_diagonal(M: np.ndarray) -> bool:
+    """True when a square matrix has no non-zero off-diagonal entry."""
+    return not np.any(M - np.diag(np.diagonal(M)))
 
 
 def remap_indices(indices, mask) -> tuple[int, ...]:
