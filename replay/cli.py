@@ -60,10 +60,11 @@ def main():
 @click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
               help="Output directory (default: runs/<dataset>/<task>).")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option("--param", "-p", "params", multiple=True,
               help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable).")
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
-def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, params, task_params):
+def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.evaluate import evaluate
     from replay.outputs import format_table, write_all
@@ -73,7 +74,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, params, t
         raise ReplayError("--filters: no filter named")
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
                   data_dir=data_dir, filter_params=parse_params(params, "--param"),
-                  task_params=parse_params(task_params, "--task-param"))
+                  task_params=parse_params(task_params, "--task-param"), adapter=adapter)
     click.echo(format_table(ev))
     out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
     paths = write_all(ev, out)
@@ -97,7 +98,7 @@ def rerun_cmd(manifest_file, data_dir, out):
     ev = evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
                   seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
                   task_params=cfg["task_params"], filter_params=cfg["filter_params"],
-                  dataset_params=cfg.get("dataset_params"))
+                  dataset_params=cfg.get("dataset_params"), adapter=cfg.get("adapter"))
     click.echo(format_table(ev))
     if out:
         write_all(ev, Path(out))
@@ -113,6 +114,21 @@ def rerun_cmd(manifest_file, data_dir, out):
     if bad:
         raise ReplayError(f"{manifest_file}: results differ: " + "; ".join(bad[:5]))
     click.echo("reproduced: every RMSE equals the recorded value")
+
+
+@main.command("reproduce")
+@click.argument("paper")
+@click.option("--runs", "-n", default=None, type=click.IntRange(1), help="Monte Carlo runs (default: the paper's).")
+@click.option("--seed", "-s", default=0, show_default=True, type=int)
+@click.option("--data-dir", default=None, type=click.Path())
+@click.option("--doc", default=None, type=click.Path(dir_okay=False),
+              help="Markdown report to write (default: docs/reproduction/<paper>.md).")
+@click.option("--quick", is_flag=True, help="A short version (few runs) for a smoke check.")
+def reproduce_cmd(paper, runs, seed, data_dir, doc, quick):
+    """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""
+    from replay.reproduce import run_reproduction
+
+    run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick)
 
 
 def _register_optional():

@@ -67,7 +67,7 @@ def config_hash(config: dict) -> str:
 def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,
              seed: int = 0, first: int | None = None, data_dir=None,
              task_params: dict | None = None, filter_params: dict | None = None,
-             dataset_params: dict | None = None) -> Evaluation:
+             dataset_params: dict | None = None, adapter: str | None = None) -> Evaluation:
     """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run."""
     ds = resolve(dataset)
     task_name = task or (ds.default_task if ds is not None else "position")
@@ -81,7 +81,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     for run in range(runs):
         if frame is None or is_sim:
             frame = registry.load_frame(dataset, data_dir=data_dir, rng=rng_for(seed, run, 0),
-                                        first=first, **(dataset_params or {}))
+                                        first=first, adapter=adapter, **(dataset_params or {}))
         problem = the_task.build(frame, rng_for(seed, run, 1))
         truths.append(problem.truth_position)
         for name, flt, res in zip(filters, instances, results):
@@ -96,6 +96,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "dataset": dataset, "task": task_name, "task_params": the_task.params(),
         "filters": list(filters), "filter_params": {r.name: r.params for r in results},
         "runs": runs, "seed": seed, "first": first, "dataset_params": dataset_params or {},
+        "adapter": adapter,
         "dataset_sha256": frame.meta.get("sha256"), "replay_version": replay.__version__,
     }
     config["config_hash"] = config_hash(config)
@@ -104,7 +105,9 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
 
 def resolve(dataset: str):
     """The registry entry for a dataset id, or None for a plain file path."""
-    if Path(dataset).exists() or dataset.endswith((".csv", ".bag", ".mcap", ".tsv")):
+    if dataset in registry.all_datasets():
+        return registry.get(dataset)
+    if Path(dataset).exists() or dataset.endswith((".csv", ".bag", ".mcap", ".tsv", ".db3")):
         return None
     return registry.get(dataset)
 
@@ -135,6 +138,8 @@ def command_line(config: dict) -> str:
              "--seed", str(config["seed"])]
     if config.get("first"):
         parts += ["--first", str(config["first"])]
+    if config.get("adapter"):
+        parts += ["--adapter", config["adapter"]]
     return " ".join(parts)
 
 

@@ -1,0 +1,23 @@
+"""Paper reproductions: ``replay reproduce PAPER``.
+
+``REPRODUCTIONS`` maps a paper number (the prefix of its file in the seeds) to
+"module:function"; the function is called as
+``function(runs=..., seed=..., data_dir=..., doc=..., quick=...)``, prints the
+paper's numbers beside ours (with 95 % intervals) and writes the Markdown
+report (``docs/reproduction/<paper>.md`` by default).
+"""
+from importlib import import_module
+
+from replay.errors import ReplayError
+
+REPRODUCTIONS: dict[str, str] = {}
+
+
+def run_reproduction(paper: str, **options):
+    key = paper.zfill(3)
+    try:
+        module, func = REPRODUCTIONS[key].split(":")
+    except KeyError:
+        known = ", ".join(sorted(REPRODUCTIONS)) or "none yet"
+        raise ReplayError(f"no reproduction for paper {paper!r} (known: {known})") from None
+    return getattr(import_module(module), func)(**options)
