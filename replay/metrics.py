@@ -1,0 +1,159 @@
+"""Metrics beyond RMSE: consistency (NEES, NIS), ATE with alignment, drift, final error, pairs.
+
+Per run (:func:`run_metrics`, on top of :func:`replay.score.score_run`):
+
+* ``ate`` — absolute trajectory error: the position RMSE after aligning the
+  estimate to the reference with ``alignment`` (``none``, ``yaw``, ``se3``,
+  ``sim3``; :mod:`replay.align`), over the scored samples (m);
+* ``final_err`` — position error at the last scored sample (m);
+* ``drift_pct`` — ``final_err`` as a percentage of the distance travelled
+  along the reference over the scored samples;
+* ``nees`` — mean over steps of the position NEES e' P^-1 e (e the position
+  error, P the position block of the covariance; d = number of position axes);
+* ``nis`` — mean over steps of y' S^-1 y (filters that record innovations:
+  the batched Kalman family; NaN otherwise);
+* ``diverged`` — the filter's own divergence (non-finite or non-positive
+  covariance, :attr:`Estimates.diverged_at`) or, when a
+  ``divergence_threshold`` (m) is given, a position error beyond it.
+
+Over a Monte Carlo ensemble of M runs (:func:`consistency`), at each step the
+average NEES over runs is compared with the two-sided 95 % chi-square band for
+the average of M chi-square(d) variables, [chi2.ppf(0.025, M d), chi2.ppf(0.975,
+M d)] / M (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2): ``anees`` is the mean
+of that average over steps, ``anees_inside`` the fraction of steps inside the
+band (about 0.95 for a consistent filter). NIS likewise with its degrees of
+freedom (measured components) per step.
+
+Pairs (:func:`paired`): two filters run on the same measurements (common
+random numbers, see :mod:`replay.evaluate`) are compared run by run; the mean
+difference and its 95 % Student-t interval are much tighter than the two
+separate intervals suggest.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from replay import score
+from replay.align import align, apply
+from replay.score import ci95
+
+
+def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """e' P^-1 e for stacked errors ``e`` (..., d) and covariances ``P`` (..., d, d); NaN where e is."""
+    e, P = np.asarray(e, float), np.asarray(P, float)
+    out = np.full(e.shape[:-1], np.nan)
+    ok = np.isfinite(e).all(axis=-1) & np.isfinite(P).all(axis=(-1, -2))
+    if ok.any():
+        try:
+            u = np.linalg.solve(P[ok], e[ok][..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            u = np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(P[ok], e[ok])])
+        out[ok] = np.einsum("...i,...i->...", e[ok], u)
+    return out
+
+
+def chi2_band(dof, runs: int, p: float = 0.95):
+    """Two-sided ``p`` band of the average of ``runs`` chi-square(``dof``) variables."""
+    dof = np.asarray(dof, float) * runs
+    a = (1 - p) / 2
+    return stats.chi2.ppf(a, dof) / runs, stats.chi2.ppf(1 - a, dof) / runs
+
+
+def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
+    """Ensemble consistency of per-run, per-step NEES or NIS ``values`` (M, n).
+
+    ``dof`` is a scalar or (n,) per step (0 where the statistic is undefined).
+    Returns ``<prefix>`` (mean over steps of the average over runs), its band
+    for one step ``<prefix>_lo``/``_hi`` (for the median dof), and
+    ``<prefix>_inside`` the fraction of steps whose average lies in its band.
+    """
+    v = np.asarray(values, float)
+    dof = np.broadcast_to(np.asarray(dof, float), v.shape[-1:])
+    runs = np.isfinite(v).sum(axis=0)
+    use = (runs > 0) & (dof > 0)
+    out = {prefix: np.nan, f"{prefix}_lo": np.nan, f"{prefix}_hi": np.nan, f"{prefix}_inside": np.nan}
+    if not use.any():
+        return out
+    with np.errstate(invalid="ignore"):
+        avg = np.nansum(v[:, use], axis=0) / runs[use]
+    lo, hi = chi2_band(dof[use], runs[use])
+    d0 = float(np.median(dof[use]))
+    blo, bhi = chi2_band(d0, int(np.median(runs[use])))
+    out.update({prefix: float(avg.mean()), f"{prefix}_lo": float(blo), f"{prefix}_hi": float(bhi),
+                f"{prefix}_inside": float(np.mean((avg >= lo) & (avg <= hi)))})
+    return out
+
+
+def ate(est: np.ndarray, ref: np.ndarray, alignment: str = "none") -> float:
+    """Position RMSE after aligning ``est`` (n, d) onto ``ref`` (rows with NaN skipped)."""
+    ok = np.isfinite(est).all(axis=1) & np.isfinite(ref).all(axis=1)
+    a, b = est[ok], ref[ok]
+    if not len(a):
+        return float("nan")
+    R, t, c = align(a, b, alignment)
+    e = apply(R, t, c, a) - b
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+def path_length(p: np.ndarray) -> float:
+    """Distance travelled along the finite rows of ``p`` (n, d)."""
+    q = p[np.isfinite(p).all(axis=1)]
+    return float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) if len(q) > 1 else 0.0
+
+
+def quat_angle(q_est: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) between unit quaternions (..., 4) [w, x, y, z]: |log(q_ref^-1 q_est)|.
+
+    2 atan2(|v|, |w|) of the relative quaternion: accurate near 0 (unlike 2 acos|w|).
+    """
+    a, b = np.asarray(q_est, float), np.asarray(q_ref, float)
+    w = np.einsum("...i,...i->...", a, b)  # real part of conj(b) a
+    v = (b[..., :1] * a[..., 1:] - a[..., :1] * b[..., 1:] - np.cross(b[..., 1:], a[..., 1:]))
+    return 2.0 * np.arctan2(np.linalg.norm(v, axis=-1), np.abs(w))
+
+
+def pose_errors(p_est, q_est, p_ref, q_ref) -> dict:
+    """Position error norm (m) and attitude error angle (rad) of every pose, with their RMSE."""
+    dp = np.linalg.norm(np.asarray(p_est, float) - p_ref, axis=-1)
+    da = quat_angle(q_est, q_ref)
+    return {"position": dp, "attitude": da, "pos_rmse": float(np.sqrt(np.mean(dp**2))),
+            "att_rmse": float(np.sqrt(np.mean(da**2)))}
+
+
+def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None):
+    """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``."""
+    m = score.score_run(problem, est)
+    err = score.errors(problem, est)["position"]
+    pos = list(problem.position_index)
+    P = est.P[:, pos][:, :, pos]
+    nees_k = nees(err, P)
+    ok = np.isfinite(err).all(axis=1)
+    est_pos = np.where(ok[:, None], est.x[:, pos], np.nan)
+    ref = np.where(ok[:, None], problem.truth_position, np.nan)
+    m["ate"] = ate(est_pos, ref, alignment)
+    last = np.flatnonzero(ok)
+    m["final_err"] = float(np.linalg.norm(err[last[-1]])) if len(last) else float("nan")
+    dist = path_length(ref)
+    m["drift_pct"] = 100.0 * m["final_err"] / dist if dist > 0 else float("nan")
+    nis_k = np.asarray(est.info.get("nis", np.full(len(err), np.nan)), float)
+    nis_dof = np.asarray(est.info.get("nis_dof", np.zeros(len(err), int)))
+    m["nees"] = float(np.nanmean(nees_k)) if np.isfinite(nees_k).any() else float("nan")
+    m["nis"] = float(np.nanmean(nis_k)) if np.isfinite(nis_k).any() else float("nan")
+    big = divergence_threshold is not None and np.nanmax(np.linalg.norm(err, axis=1), initial=0) > divergence_threshold
+    m["diverged"] = bool(est.diverged or big)
+    m["diverged_at"] = est.diverged_at
+    return m, {"nees": nees_k, "nis": nis_k, "nis_dof": nis_dof}
+
+
+def paired(a, b) -> dict:
+    """Run-by-run comparison of a metric for two filters on the same runs: mean of a - b, 95 % interval.
+
+    ``a``, ``b``: per-run values in run order (NaN pairs skipped). ``a_better`` is
+    the fraction of runs where a < b (lower is better for errors).
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    d = a[ok] - b[ok]
+    return {"n": int(ok.sum()), "diff": float(d.mean()) if len(d) else float("nan"),
+            "diff_ci95": ci95(d), "a_better": float(np.mean(d < 0)) if len(d) else float("nan")}

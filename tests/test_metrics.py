@@ -1,0 +1,115 @@
+"""NEES/NIS consistency, Umeyama alignment, ATE, drift, attitude error, paired comparisons."""
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from replay import align, metrics
+from replay.filters import make_filter
+from replay.filters.batched import run_batched
+from replay.model import LinearGaussian
+
+
+def _cv_model(q_scale=1.0):
+    dt = 0.5
+    A = np.array([[1, dt, 0, 0], [0, 1, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1.0]])
+    C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    Q = 0.05 * np.kron(np.eye(2), [[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    return LinearGaussian(A, C, Q * q_scale, np.diag([0.5, 0.8]))
+
+
+@pytest.fixture(scope="module")
+def ensemble():
+    """200 runs of a constant-velocity target: truth, measurements, prior (x0 ~ N(x0_hat, P0))."""
+    M, n = 200, 60
+    model = _cv_model()
+    rng = np.random.default_rng(7)
+    P0 = np.diag([1.0, 0.5, 1.0, 0.5])
+    x = rng.multivariate_normal(np.zeros(4), P0, size=M)
+    truth, z = np.empty((M, n, 4)), np.empty((M, n, 2))
+    Lq, Lr = np.linalg.cholesky(model.Q), np.linalg.cholesky(model.R)
+    for k in range(n):
+        x = x @ model.A.T + rng.standard_normal((M, 4)) @ Lq.T
+        truth[:, k] = x
+        z[:, k] = x @ model.C.T + rng.standard_normal((M, 2)) @ Lr.T
+    return truth, z, np.zeros((M, 4)), np.broadcast_to(P0, (M, 4, 4)).copy()
+
+
+def _nees_of(ensemble, q_scale):
+    truth, z, x0, P0 = ensemble
+    est = run_batched(make_filter("kf"), _cv_model(q_scale), z, x0, P0, [None] * len(z))
+    X, P = np.stack([e.x for e in est]), np.stack([e.P for e in est])
+    nis = np.stack([e.info["nis"] for e in est])
+    return metrics.nees(X - truth, P), nis
+
+
+def test_nees_of_tuned_kf_inside_band_mistuned_outside(ensemble):
+    nees, nis = _nees_of(ensemble, 1.0)
+    c = metrics.consistency(nees, 4)
+    lo, hi = metrics.chi2_band(4, 200)
+    assert (c["anees_lo"], c["anees_hi"]) == (lo, hi)
+    assert lo < c["anees"] < hi  # time-averaged ANEES inside the per-step band
+    assert c["anees_inside"] >= 0.85  # ~95 % of the steps
+    n = metrics.consistency(nis, 2, "anis")
+    assert n["anis_lo"] < n["anis"] < n["anis_hi"] and n["anis_inside"] >= 0.85
+    bad = metrics.consistency(_nees_of(ensemble, 0.1)[0], 4)
+    assert bad["anees"] > hi and bad["anees_inside"] < 0.2
+
+
+def test_nees_known_value_and_nan():
+    e = np.array([[1.0, 2.0], [np.nan, 0.0]])
+    P = np.array([np.diag([1.0, 4.0]), np.eye(2)])
+    out = metrics.nees(e, P)
+    assert out[0] == pytest.approx(2.0) and np.isnan(out[1])
+
+
+@pytest.mark.parametrize("method,scale", [("se3", 1.0), ("sim3", 2.5)])
+def test_umeyama_recovers_known_transform(method, scale):
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(500, 3)) * [50, 30, 5]
+    R = Rotation.from_euler("zyx", [0.7, -0.2, 0.1]).as_matrix()
+    t = np.array([10.0, -4.0, 2.0])
+    b = scale * a @ R.T + t
+    R2, t2, c2 = align.align(a, b, method)
+    np.testing.assert_allclose(R2, R, atol=1e-9)
+    np.testing.assert_allclose(t2, t, atol=1e-9)
+    assert c2 == pytest.approx(scale, abs=1e-9)
+    assert metrics.ate(a, b, method) < 1e-9
+    assert metrics.ate(a, b, "none") > 1.0
+
+
+def test_yaw_alignment_recovers_yaw_and_translation():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(200, 3)) * 20
+    R = Rotation.from_euler("z", 1.2).as_matrix()
+    b = a @ R.T + [3.0, 4.0, -1.0]
+    R2, t2, _ = align.align(a, b, "yaw")
+    np.testing.assert_allclose(R2, R, atol=1e-12)
+    np.testing.assert_allclose(t2, [3.0, 4.0, -1.0], atol=1e-9)
+    # a roll is not a yaw: the 4-DOF alignment cannot remove it, SE(3) can
+    b3 = a @ Rotation.from_euler("x", 0.3).as_matrix().T
+    assert metrics.ate(a, b3, "yaw") > 1.0 > 1e-9 > metrics.ate(a, b3, "se3")
+
+
+def test_drift_final_error_path_length():
+    ref = np.array([[0.0, 0, 0], [3, 0, 0], [3, 4, 0]])
+    assert metrics.path_length(ref) == 7.0
+    assert metrics.path_length(np.vstack([ref, [np.nan] * 3])) == 7.0
+
+
+def test_quaternion_angle_known_values():
+    q1 = Rotation.from_euler("z", 0.3).as_quat(scalar_first=True)
+    q2 = Rotation.from_euler("z", -0.2).as_quat(scalar_first=True)
+    assert metrics.quat_angle(q1, q2) == pytest.approx(0.5, abs=1e-12)
+    assert metrics.quat_angle(q1, -q1) == pytest.approx(0.0, abs=1e-12)  # q and -q: one rotation
+    tiny = Rotation.from_rotvec([1e-9, 0, 0]).as_quat(scalar_first=True)
+    assert metrics.quat_angle(tiny, [1.0, 0, 0, 0]) == pytest.approx(1e-9, rel=1e-6)
+
+
+def test_paired_comparison_is_tighter_than_separate_intervals():
+    rng = np.random.default_rng(5)
+    common = rng.normal(10.0, 3.0, 100)  # run-to-run variation shared by both filters
+    a, b = common + 0.1 + rng.normal(0, 0.05, 100), common + rng.normal(0, 0.05, 100)
+    p = metrics.paired(a, b)
+    assert p["n"] == 100 and abs(p["diff"] - 0.1) < 3 * p["diff_ci95"]
+    assert p["diff_ci95"] < 0.05 < metrics.ci95(a)
+    assert p["a_better"] < 0.1
