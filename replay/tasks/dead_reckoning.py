@@ -1,0 +1,126 @@
+"""``dead-reckoning``: paper 001's small-AUV navigation (model :mod:`replay.models.sauv`).
+
+The filter state is in north-east-down (NED); the frame's ENU reference is
+converted for scoring (axes ``north, east, depth`` — or ``north, east`` when the
+reference is 2-D). Roll and pitch from the frame's ``attitude`` channel are
+the model's inputs; the heading is a measurement. Attitude channels follow the
+Bohai adapter's convention (roll positive left side up, pitch positive front
+down, yaw 0 = east counter-clockwise), converted here: NED pitch = −pitch,
+NED heading = π/2 − yaw, roll unchanged.
+
+* **DVL frame** (``dvl_velocity`` present, e.g. ``sim/sauv-current``): the
+  paper's measurement (eq. 3), z = [depth, v_b, a_b, heading]; no position
+  fix at all (pure dead reckoning); prior: the simulator's initial state,
+  drawn once with P0 from the task's seed.
+* **Bohai frame** (no DVL: the adapter drops the logged velocities as
+  implausible): z = [north, east, v_yb, v_zb, heading], where north/east are
+  the fresh GPS fixes (``gps_position`` valid only when a new fix arrived,
+  i.e. at the surface) with ``gps_sigma`` m, and v_yb = v_zb = 0 are
+  pseudo-measurements (a torpedo AUV does not slip sideways or heave in its
+  body frame; ``pseudo_sigma`` m/s). Forward speed is *estimated* (random
+  walk) from the fixes. Depth is not measured (the Bohai ``depth`` column is
+  all zero) and not scored. **The reference** is the vehicle's own navigation
+  solution (``lat``/``lon`` columns, an INS/DVL/GPS product of unknown
+  quality, with jumps masked by the adapter), not ground truth.
+  With ``score="fixes"`` the reference is instead the **first fresh GPS fix
+  after each dive** (a gap of more than ``dive_gap`` s between fixes): that
+  fix is withheld from the filter and the RMSE is the position error at the
+  resurfacing fixes.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.angles import wrap
+from replay.errors import ReplayError
+from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
+
+from . import Problem, Task
+
+BOHAI_MEASURED = (0, 1, 4, 5, 9)
+
+
+def ned_attitude(att):
+    """(roll, pitch, heading) in NED from an adapter-convention attitude channel (n, 3)."""
+    return att[:, 0], -att[:, 1], wrap(np.pi / 2 - att[:, 2])
+
+
+class DeadReckoningTask(Task):
+    name = "dead-reckoning"
+
+    def __init__(self, Q=None, R=None, P0=None, gps_sigma: float = 5.0, pseudo_sigma: float = 0.05,
+                 score: str = "navigation", dive_gap: float = 10.0, mean_maneuver: str = "previous"):
+        if score not in ("navigation", "fixes"):
+            raise ReplayError(f"dead-reckoning: score={score!r} must be 'navigation' or 'fixes'")
+        self.Q, self.R, self.P0 = Q, R, P0
+        self.gps_sigma, self.pseudo_sigma = float(gps_sigma), float(pseudo_sigma)
+        self.score, self.dive_gap, self.mean_maneuver = score, float(dive_gap), mean_maneuver
+
+    def build(self, frame, rng):
+        att = frame.channels.get("attitude")
+        if att is None or att.width != 3:
+            raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: dead-reckoning needs an "
+                              "'attitude' channel [roll, pitch, yaw]")
+        roll, pitch, heading = ned_attitude(np.where(att.valid[:, None], att.values, 0.0))
+        heading = np.where(att.valid, heading, np.nan)
+        dt = np.diff(frame.t, prepend=frame.t[0] - (np.median(np.diff(frame.t)) if len(frame.t) > 1 else 1.0))
+        Q = None if self.Q is None else np.diag(np.asarray(self.Q, float)) if np.ndim(self.Q) == 1 \
+            else np.asarray(self.Q, float)
+        if Q is None:
+            Q = Q_DEFAULT * (float(np.median(dt)) / 0.5)
+        if "dvl_velocity" in frame.channels:
+            return self._dvl(frame, rng, dt, roll, pitch, heading, Q)
+        return self._bohai(frame, dt, roll, pitch, heading, Q)
+
+    def _dvl(self, frame, rng, dt, roll, pitch, heading, Q):
+        ch = frame.channels
+        cols = [np.where(ch["depth"].valid, ch["depth"].values, np.nan)]
+        for name in ("dvl_velocity", "accel"):
+            c = ch[name]
+            cols += list(np.where(c.valid[:, None], c.values, np.nan).T)
+        z = np.column_stack(cols + [heading])
+        model = SAUV(dt, pitch, roll, Q=Q, R=self.R, measured=PAPER_MEASURED, mean_maneuver=self.mean_maneuver)
+        ref = frame.reference["position"]
+        truth = np.column_stack([ref.values[:, 1], ref.values[:, 0], -ref.values[:, 2]])
+        P0 = np.diag([1.0, 1.0, 1.0] + [0.05**2] * 3 + [0.02**2] * 3 + [(2 * DEG) ** 2]) \
+            if self.P0 is None else np.asarray(self.P0, float)
+        x_true0 = np.asarray(frame.meta["initial_state_ned"], float)
+        x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
+        x0[9] = wrap(x0[9])
+        return Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
+                       ("north", "east", "depth"), params=self.params())
+
+    def _bohai(self, frame, dt, roll, pitch, heading, Q):
+        gps = frame.channels.get("gps_position")
+        ref = frame.reference.get("position")
+        if gps is None or ref is None:
+            raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: dead-reckoning needs a DVL channel, "
+                              "or gps_position fixes and a reference position")
+        n = len(frame.t)
+        fix = gps.valid.copy()
+        ne = np.column_stack([gps.values[:, 1], gps.values[:, 0]])
+        truth = np.column_stack([ref.values[:, 1], ref.values[:, 0]])
+        valid = ref.valid.copy()
+        idx = np.flatnonzero(fix)
+        resurface = idx[1:][np.diff(frame.t[idx]) > self.dive_gap] if len(idx) > 1 else idx[:0]
+        if self.score == "fixes":
+            truth = np.where(fix[:, None], ne, np.nan)
+            valid = np.zeros(n, bool)
+            valid[resurface] = True
+            fix[resurface] = False  # withheld from the filter: it is the reference there
+        z = np.full((n, 5), np.nan)
+        z[fix, :2] = ne[fix]
+        z[:, 2:4] = 0.0
+        z[:, 4] = heading
+        R = np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [(2 * DEG) ** 2]) \
+            if self.R is None else np.asarray(self.R, float)
+        model = SAUV(dt, pitch, roll, Q=Q, R=R, measured=BOHAI_MEASURED, mean_maneuver=self.mean_maneuver)
+        first = idx[0] if len(idx) else int(np.argmax(ref.valid))
+        start = ne[first] if len(idx) else truth[first]
+        x0 = np.zeros(10)
+        x0[:2] = start
+        x0[9] = heading[first] if np.isfinite(heading[first]) else 0.0
+        P0 = np.diag([self.gps_sigma**2] * 2 + [1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.1, (5 * DEG) ** 2]) \
+            if self.P0 is None else np.asarray(self.P0, float)
+        params = dict(self.params(), resurfacing_fixes=int(len(resurface)), fixes_used=int(fix.sum()))
+        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params)

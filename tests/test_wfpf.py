@@ -1,0 +1,73 @@
+"""Weight-factor PF (003 eq. 27) and glint noise (003 eq. 7-10)."""
+import numpy as np
+import pytest
+
+from replay.errors import ReplayError
+from replay.filters.wfpf import WeightFactorPF, temper
+from replay.noise import Glint
+
+
+def test_alpha_one_leaves_weights_unchanged():
+    w = np.random.default_rng(0).dirichlet(np.ones(50))
+    out, logout = temper(np.log(w), 1.0)
+    assert np.allclose(out, w, rtol=1e-12, atol=0)
+    assert np.allclose(np.exp(logout), w, rtol=1e-12)
+
+
+def test_alpha_to_zero_tends_to_uniform():
+    w = np.random.default_rng(1).dirichlet(np.ones(50) * 0.2)
+    spreads = [np.ptp(temper(np.log(w), a)[0]) for a in (0.5, 0.1, 1e-3, 1e-6)]
+    assert all(s2 < s1 for s1, s2 in zip(spreads, spreads[1:]))
+    assert np.allclose(temper(np.log(w), 1e-9)[0], 1 / 50, atol=1e-8)
+
+
+def test_alpha_lifts_small_weights_lowers_large():
+    w = np.array([0.01, 0.09, 0.2, 0.7])
+    new = temper(np.log(w), 0.75)[0]
+    assert new[0] > w[0] and new[-1] < w[-1] and new.sum() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("alpha", [0.0, -0.1, 1.01])
+def test_bad_alpha(alpha):
+    with pytest.raises(ReplayError, match="alpha"):
+        WeightFactorPF(alpha=alpha)
+
+
+@pytest.mark.parametrize("eps", [-0.01, 1.5])
+def test_bad_glint_probability(eps):
+    with pytest.raises(ReplayError, match="eps"):
+        Glint(np.eye(2), np.eye(2), eps=eps)
+
+
+def test_non_pd_glint_covariance():
+    with pytest.raises(ReplayError, match="glint P2"):
+        Glint(np.eye(2), np.diag([1.0, 0.0]))
+
+
+def test_glint_moments_match_mixture():
+    mu1, mu2 = np.array([1.0, -2.0]), np.array([-3.0, 0.5])
+    P1 = np.array([[1.0, 0.3], [0.3, 0.5]])
+    P2 = np.array([[9.0, -1.0], [-1.0, 4.0]])
+    g = Glint(P1, P2, eps=0.3, mu1=mu1, mu2=mu2)
+    mu = 0.7 * mu1 + 0.3 * mu2  # eq. 9
+    assert np.allclose(g.mean, mu)
+    cov = 0.7 * (P1 + np.outer(mu1, mu1)) + 0.3 * (P2 + np.outer(mu2, mu2)) - np.outer(mu, mu)
+    assert np.allclose(g.cov, cov)
+    n = 400_000
+    e = g.sample(np.random.default_rng(2), n)
+    # Monte Carlo tolerance: 5 standard errors
+    se_mean = np.sqrt(np.diagonal(cov) / n)
+    assert np.all(np.abs(e.mean(axis=0) - mu) < 5 * se_mean)
+    S = np.cov(e.T)
+    assert np.allclose(S, cov, rtol=0.02, atol=0.02)
+    # the printed eq. 10 (without P1, P2) would be far off
+    printed = 0.7 * np.outer(mu1, mu1) + 0.3 * np.outer(mu2, mu2) - np.outer(mu, mu)
+    assert not np.allclose(S, printed, rtol=0.2)
+
+
+def test_glint_logpdf_integrates_to_one_1d():
+    g = Glint([[1.0]], [[16.0]], eps=0.75)
+    x = np.linspace(-40, 40, 20001)[:, None]
+    p = np.exp(g.logpdf(x))
+    assert np.trapezoid(p, x[:, 0]) == pytest.approx(1.0, abs=1e-6)
+    assert g.cov[0, 0] == pytest.approx(0.25 * 1 + 0.75 * 16)
