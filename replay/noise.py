@@ -61,6 +61,8 @@ class Glint:
         self.mu1 = np.zeros(d) if mu1 is None else np.asarray(mu1, float).reshape(d)
         self.mu2 = np.zeros(d) if mu2 is None else np.asarray(mu2, float).reshape(d)
         self._L = (np.linalg.cholesky(self.P1), np.linalg.cholesky(self.P2))
+        self._diag = not (np.any(self.P1 - np.diag(np.diagonal(self.P1)))
+                          or np.any(self.P2 - np.diag(np.diagonal(self.P2))))
         self._logdet = (2 * np.log(np.diag(self._L[0])).sum(), 2 * np.log(np.diag(self._L[1])).sum())
 
     @property
@@ -95,7 +97,10 @@ class Glint:
                                  (self.eps, self.mu2, self._L[1], self._logdet[1])):
             if w == 0.0:
                 continue
-            u = solve_triangular(L, (e - mu).reshape(-1, self.dim).T, lower=True,
-                                 check_finite=False).T.reshape(e.shape)
+            if self._diag:
+                u = (e - mu) / np.diagonal(L)
+            else:
+                u = solve_triangular(L, (e - mu).reshape(-1, self.dim).T, lower=True,
+                                     check_finite=False).T.reshape(e.shape)
             terms.append(np.log(w) - 0.5 * (np.sum(u * u, axis=-1) + logdet + self.dim * np.log(2 * np.pi)))
         return terms[0] if len(terms) == 1 else logsumexp(np.stack(terms), axis=0)

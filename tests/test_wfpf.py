@@ -71,3 +71,17 @@ def test_glint_logpdf_integrates_to_one_1d():
     p = np.exp(g.logpdf(x))
     assert np.trapezoid(p, x[:, 0]) == pytest.approx(1.0, abs=1e-6)
     assert g.cov[0, 0] == pytest.approx(0.25 * 1 + 0.75 * 16)
+
+
+def test_formation_end_to_end_and_diagonal_fast_path():
+    from replay.evaluate import evaluate
+
+    g = Glint(np.diag([25.0, 1e-4]), np.diag([25.0, 4e-4]), eps=0.75)
+    e = np.random.default_rng(0).standard_normal((7, 2)) * [5, 0.01]
+    full = Glint(np.array([[25.0, 1e-9], [1e-9, 1e-4]]), np.array([[25.0, 1e-9], [1e-9, 4e-4]]), eps=0.75)
+    assert np.allclose(g.logpdf(e), full.logpdf(e), atol=1e-6)
+    ev = evaluate("sim/uav-formation", filters=("pf", "wf-pf"), runs=2, seed=1,
+                  filter_params={"pf": {"n_particles": 300}, "wf-pf": {"n_particles": 300}})
+    for r in ev.results:
+        assert r.summary["diverged"] == 0 and 0.5 < r.summary["pos_rmse"] < 30
+        assert "vx_rmse" in r.summary

@@ -1,0 +1,82 @@
+"""Follower UAV ranging a leader: paper 003, eq. 1–6.
+
+State of the follower ``x = [x, y, vx, vy]`` (m, m/s; x east, y north).
+Coordinated turn with known turn rate w_k (eq. 3; w > 0 left, w < 0 right,
+w = 0 straight), step T:
+
+    F(w) = [[1, 0, sin(wT)/w, (cos(wT) − 1)/w],
+            [0, 1, (1 − cos(wT))/w, sin(wT)/w],
+            [0, 0, cos(wT), −sin(wT)],
+            [0, 0, sin(wT), cos(wT)]]
+
+The paper prints F with sin(w)/w (i.e. T = 1 s) and the noise gain G (eq. 4)
+as [[T²/2, 0], [T, 0], [0, T²/2], [0, T]], which is the gain of the state
+order [x, vx, y, vy]; for our state order [x, y, vx, vy] it is
+[[T²/2, 0], [0, T²/2], [T, 0], [0, T]]. Process noise w ~ N(0, Q_a), Q_a the
+2×2 acceleration covariance, so the state's process covariance G Q_a Gᵀ is
+singular (rank 2); :meth:`sample_f` draws through G.
+
+Measurement (eq. 5–6) of the leader at the known position (x_l, y_l) (the
+leader broadcasts its GPS/INS position):
+
+    r = sqrt((x_l − x)² + (y_l − y)²),  b = atan2(y_l − y, x_l − x)
+
+(the paper writes arctan((y_l − y)/(x_l − x)); atan2 keeps the quadrant).
+The noise is ``noise`` (e.g. :class:`replay.noise.Glint`, eq. 7–10): the PF
+likelihood is its density, and R = its covariance for the Kalman family.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.angles import residual
+from replay.model import Model
+
+
+def gain(T: float) -> np.ndarray:
+    return np.array([[T * T / 2, 0.0], [0.0, T * T / 2], [T, 0.0], [0.0, T]])
+
+
+def transition(w: float, T: float) -> np.ndarray:
+    if abs(w) < 1e-12:
+        return np.array([[1.0, 0, T, 0], [0, 1.0, 0, T], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
+    s, c = np.sin(w * T), np.cos(w * T)
+    return np.array([[1.0, 0, s / w, (c - 1) / w], [0, 1.0, (1 - c) / w, s / w],
+                     [0, 0, c, -s], [0, 0, s, c]])
+
+
+class Formation(Model):
+    nx, nz = 4, 2
+    z_angles = (1,)
+    components = ("x", "y", "vx", "vy")
+
+    def __init__(self, leader, turn_rate, T: float = 1.0, Qa=np.eye(2), noise=None, R=None):
+        self.leader = np.asarray(leader, float)  # (n, 2)
+        self.turn_rate = np.broadcast_to(np.asarray(turn_rate, float), (len(self.leader),))
+        self.T = float(T)
+        self.Qa = np.asarray(Qa, float)
+        self.G = gain(self.T)
+        self.Q = self.G @ self.Qa @ self.G.T
+        self.noise = noise
+        self.R = np.asarray(R, float) if R is not None else noise.cov
+        self._F = [transition(w, self.T) for w in self.turn_rate]
+        self._La = np.linalg.cholesky(self.Qa)
+
+    def f(self, x, k):
+        return x @ self._F[k].T
+
+    def F(self, x, k):
+        return self._F[k]
+
+    def h(self, x, k):
+        d = self.leader[k] - x[..., :2]
+        return np.stack([np.hypot(d[..., 0], d[..., 1]), np.arctan2(d[..., 1], d[..., 0])], axis=-1)
+
+    def sample_f(self, x, k, rng):
+        e = rng.standard_normal(x.shape[:-1] + (2,)) @ self._La.T
+        return self.f(x, k) + e @ self.G.T
+
+    def loglik(self, z, x, k, mask=None):
+        if self.noise is None or mask is not None:
+            return super().loglik(z, x, k, mask)
+        return self.noise.logpdf(residual(z, self.h(x, k), self.z_angles))
