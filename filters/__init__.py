@@ -11,6 +11,8 @@ FILTERS = {
     "ukf": "replay.filters.sigma:UKF",
     "ckf": "replay.filters.sigma:CKF",
     "pf": "replay.filters.pf:ParticleFilter",
+    "aukf": "replay.filters.aukf:AUKF",
+    "wf-pf": "replay.filters.wfpf:WeightFactorPF",
 }
 
 

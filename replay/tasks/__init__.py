@@ -14,6 +14,8 @@ import numpy as np
 TASKS = {
     "position": "replay.tasks.position:PositionTask",
     "sonar": "replay.tasks.sonar:SonarTask",
+    "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
+    "formation": "replay.tasks.formation:FormationTask",
 }
 
 
