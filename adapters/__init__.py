@@ -10,6 +10,8 @@ from importlib import import_module
 
 ADAPTERS = {
     "bohai-csv": "replay.adapters.bohai:load",
+    "lake": "replay.adapters.lake:load",
+    "bags": "replay.adapters.bags:load",
 }
 
 

@@ -64,7 +64,14 @@ def main():
 @click.option("--param", "-p", "params", multiple=True,
               help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable).")
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
-def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params):
+@click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
+@click.option("--mcap", "mcap_out", default=None, type=click.Path(dir_okay=False),
+              help="Also export the run as a Foxglove MCAP file.")
+@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(file_okay=False),
+              help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
+def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
+             mapping=None, mcap_out=None, ros2_out=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.evaluate import evaluate
     from replay.outputs import format_table, write_all
@@ -74,11 +81,16 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         raise ReplayError("--filters: no filter named")
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
                   data_dir=data_dir, filter_params=parse_params(params, "--param"),
-                  task_params=parse_params(task_params, "--task-param"), adapter=adapter)
+                  task_params=parse_params(task_params, "--task-param"), adapter=adapter,
+                  dataset_params={"mapping": str(Path(mapping).resolve())} if mapping else None)
     click.echo(format_table(ev))
     out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
     paths = write_all(ev, out)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+    if mcap_out or ros2_out:
+        from replay.cli_bags import export_outputs
+
+        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir)
 
 
 @main.command("rerun")
@@ -135,6 +147,14 @@ def _register_optional():
     from replay.cli_datasets import datasets
 
     main.add_command(datasets)
+    from replay.cli_bags import export_cmd, inspect_cmd
+
+    main.add_command(inspect_cmd)
+    main.add_command(export_cmd)
+    from replay.cli_campaign import COMMANDS as campaign_commands
+
+    for cmd in campaign_commands:
+        main.add_command(cmd)
 
 
 _register_optional()

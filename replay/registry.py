@@ -32,7 +32,7 @@ from replay.errors import DataError, ReplayError
 CHECKSUMS_FILE = "checksums.json"
 
 # Adapter used for a plain file path, by extension.
-ADAPTER_BY_SUFFIX = {".csv": "bohai-csv"}
+ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
 
 
 @dataclass(frozen=True)
@@ -260,7 +260,9 @@ def _looks_like_path(text: str) -> bool:
 
 
 def adapter_for(path: Path) -> str:
-    """The adapter for a plain file, by extension (for now .csv -> bohai-csv)."""
+    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags)."""
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        return "bags"
     try:
         return ADAPTER_BY_SUFFIX[path.suffix.lower()]
     except KeyError:
@@ -280,10 +282,12 @@ def _adapter(name: str):
 
 def _load_path(path: Path, adapter: str | None, params: dict):
     path = path.expanduser()
-    if not path.is_file():
+    bag_dir = path.is_dir() and (path / "metadata.yaml").is_file()  # a ROS 2 bag is a directory
+    if not (path.is_file() or bag_dir):
         raise DataError(path, "no such file")
     frame = _adapter(adapter or adapter_for(path))(path, **params)
-    frame.meta.update(dataset=str(path), path=str(path), sha256=sha256_file(path), checksum="unknown")
+    sha = frame.meta.get("sha256") if bag_dir else sha256_file(path)
+    frame.meta.update(dataset=str(path), path=str(path), sha256=sha, checksum="unknown")
     return frame
 
 

@@ -14,6 +14,9 @@ import numpy as np
 TASKS = {
     "position": "replay.tasks.position:PositionTask",
     "sonar": "replay.tasks.sonar:SonarTask",
+    "ungm": "replay.tasks.ungm:UNGMTask",
+    "gps-odom": "replay.tasks.gps_odom:GpsOdomTask",
+    "depth": "replay.tasks.depth:DepthTask",
     "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
     "formation": "replay.tasks.formation:FormationTask",
 }
@@ -35,6 +38,7 @@ class Problem:
     truth_angles: dict = field(default_factory=dict)  # name -> (n,) reference angle
     angle_index: dict = field(default_factory=dict)  # name -> state component
     params: dict = field(default_factory=dict)
+    truth_extra: dict = field(default_factory=dict)  # name -> ((n,) truth, NaN = not scored; state index)
 
 
 class Task:

@@ -1,0 +1,154 @@
+"""Topic mapping files: which topic of a recording feeds which frame channel.
+
+A mapping is a small TOML file (documented in ``docs/bags.md``)::
+
+    time = "header"        # "header" (header.stamp, default) or "log" (the bag's receive time)
+    until = 60.0           # optional: only messages logged within this many s of the first one
+    allow_truncated = false  # optional: use what precedes a truncation (flagged in the report)
+
+    [channels]             # sensor channels: name = topic, or name = {topic, type}
+    gps = "/fix"
+    odom = { topic = "/husky_velocity_controller/odom", type = "nav_msgs/msg/Odometry" }
+
+    [reference]            # reference channels (truth / external reference), same form
+    position = "/fix"
+
+    [params]               # conversion parameters
+    water_density = 1025.0
+    atmospheric_pressure = 101325.0
+
+Each entry ``name = topic`` gives the channel ``name`` (the message kind's primary
+field, e.g. a position) and ``name_<field>`` for its other fields (see
+:mod:`replay.adapters.rosmsg`).
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from replay.errors import DataError, ReplayError
+
+from .rosmsg import KINDS, kind_of, normalize_type
+
+TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "params"}
+PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
+
+
+@dataclass
+class Entry:
+    name: str
+    topic: str
+    type: str | None = None  # expected message type (checked when given)
+    reference: bool = False
+
+
+@dataclass
+class Mapping:
+    entries: list[Entry] = field(default_factory=list)
+    time: str = "header"
+    until: float | None = None
+    allow_truncated: bool = False
+    params: dict = field(default_factory=dict)
+    source: str = "(proposed)"
+
+    @property
+    def topics(self) -> list[str]:
+        return list(dict.fromkeys(e.topic for e in self.entries))
+
+    def to_toml(self) -> str:
+        lines = [f'time = "{self.time}"']
+        if self.until is not None:
+            lines.append(f"until = {self.until!r}")
+        for group, ref in (("channels", False), ("reference", True)):
+            lines += ["", f"[{group}]"]
+            for e in self.entries:
+                if e.reference == ref:
+                    typ = f', type = "{e.type}"' if e.type else ""
+                    lines.append(f'{e.name} = {{ topic = "{e.topic}"{typ} }}')
+        if self.params:
+            lines += ["", "[params]"] + [f"{k} = {v!r}" for k, v in self.params.items()]
+        return "\n".join(lines) + "\n"
+
+
+def load_mapping(path) -> Mapping:
+    """Read and check a mapping file; errors name the file and the key."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DataError(path, "no such mapping file") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise DataError(path, f"cannot read mapping: {e}") from None
+    return from_dict(doc, str(path))
+
+
+def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
+    unknown = sorted(set(doc) - TOP_KEYS)
+    if unknown:
+        raise ReplayError(f"{source}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(TOP_KEYS))})")
+    time = doc.get("time", "header")
+    if time not in ("header", "log"):
+        raise ReplayError(f"{source}: time must be \"header\" or \"log\" (got {time!r})")
+    until = doc.get("until")
+    if until is not None and (not isinstance(until, (int, float)) or until <= 0):
+        raise ReplayError(f"{source}: until must be a positive number of seconds (got {until!r})")
+    params = dict(doc.get("params", {}))
+    bad = sorted(set(params) - PARAM_KEYS)
+    if bad:
+        raise ReplayError(f"{source}: unknown param(s) {', '.join(bad)} (known: {', '.join(sorted(PARAM_KEYS))})")
+    entries = []
+    for group, ref in (("channels", False), ("reference", True)):
+        table = doc.get(group, {})
+        if not isinstance(table, dict):
+            raise ReplayError(f"{source}: [{group}] must be a table of name = topic")
+        for name, spec in table.items():
+            if isinstance(spec, str):
+                spec = {"topic": spec}
+            if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str):
+                raise ReplayError(f"{source}: [{group}] {name}: give a topic (name = \"/topic\")")
+            typ = spec.get("type")
+            if typ is not None and kind_of(typ) is None:
+                raise ReplayError(f"{source}: [{group}] {name}: unknown message type {typ!r} "
+                                  f"(supported: {', '.join(sorted(KINDS))})")
+            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref))
+    if not entries:
+        raise ReplayError(f"{source}: maps no topic ([channels] and [reference] are empty)")
+    return Mapping(entries, time, float(until) if until is not None else None,
+                   bool(doc.get("allow_truncated", False)), params, source)
+
+
+def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
+    """A mapping for the obvious cases, from ``{topic: (type, count)}``.
+
+    Each supported topic becomes a channel named after its kind (gps, odom, imu,
+    depth, dvl, pose; numbered when a kind repeats). The reference is a pose or
+    odometry topic named like ground truth (``truth``, ``groundtruth``,
+    ``ground_truth``, ``gt``, ``reference``, ``mocap``, ``vicon``); failing
+    that, a single NavSatFix (the fix track as reference, see docs/bags.md).
+    """
+    names = {"navsatfix": "gps", "odometry": "odom", "imu": "imu", "pressure": "depth",
+             "twist": "dvl", "pose": "pose"}
+    entries, used = [], {}
+    truth_words = ("groundtruth", "ground_truth", "truth", "gt", "reference", "mocap", "vicon")
+    reference = None
+    for topic, (typ, count) in topics.items():
+        kind = kind_of(typ)
+        if kind is None or count == 0:
+            continue
+        base = topic.strip("/").lower().replace("/", "_")
+        if reference is None and kind in ("pose", "odometry") and any(
+                w == base or base.endswith(w) or base.startswith(w) for w in truth_words):
+            reference = Entry("position", topic, normalize_type(typ), True)
+            continue
+        stem = names[kind]
+        used[stem] = used.get(stem, 0) + 1
+        name = stem if used[stem] == 1 else f"{stem}{used[stem]}"
+        entries.append(Entry(name, topic, normalize_type(typ)))
+    if reference is None:
+        fixes = [e for e in entries if e.type and kind_of(e.type) == "navsatfix"]
+        if len(fixes) == 1:
+            reference = Entry("position", fixes[0].topic, fixes[0].type, True)
+    if reference is not None:
+        entries.append(reference)
+    return Mapping(entries)
