@@ -6,6 +6,8 @@ the filter has an estimate:
 * ``pos_rmse``  = sqrt(mean_k |p^_k - p_k|^2)  (3-D position RMSE, metres)
 * ``<axis>_rmse`` = sqrt(mean_k (p^_k,a - p_k,a)^2) for each axis a
 * ``<angle>_rmse`` = sqrt(mean_k wrap(a^_k - a_k)^2) for each scored angle
+* ``<name>_rmse`` = sqrt(mean_k (x^_k,i - x_k,i)^2) for each other scored state
+  component ``Problem.truth_extra[name] = (truth, i)`` (NaN truth = not scored)
 * ``scored`` / ``masked``: samples used, and samples skipped because the
   reference is masked there (e.g. jumps of a navigation solution).
 
@@ -35,6 +37,8 @@ def errors(problem, est) -> dict:
     for name, truth in problem.truth_angles.items():
         e = wrap(est.x[:, problem.angle_index[name]] - truth)
         out[name] = np.where(ok, e, np.nan)
+    for name, (truth, i) in getattr(problem, "truth_extra", {}).items():
+        out[name] = np.where(ok, est.x[:, i] - truth, np.nan)
     return out
 
 
@@ -47,7 +51,7 @@ def score_run(problem, est) -> dict:
     m = {"pos_rmse": float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) if len(e) else np.nan}
     for j, axis in enumerate(problem.axis_names):
         m[f"{axis}_rmse"] = float(np.sqrt(np.mean(e[:, j] ** 2))) if len(e) else np.nan
-    for name in problem.truth_angles:
+    for name in [*problem.truth_angles, *getattr(problem, "truth_extra", {})]:
         a = err[name][np.isfinite(err[name])]
         m[f"{name}_rmse"] = float(np.sqrt(np.mean(a**2))) if len(a) else np.nan
     m["scored"] = int(ok.sum())
@@ -89,5 +93,8 @@ def rmse_over_time(error_runs: list[np.ndarray]) -> np.ndarray:
     """
     e = np.stack([x if x.ndim == 2 else x[:, None] for x in error_runs])
     sq = np.sum(e**2, axis=2)
-    with np.errstate(invalid="ignore"):
-        return np.sqrt(np.nanmean(np.where(np.isfinite(sq), sq, np.nan), axis=0))
+    sq = np.where(np.isfinite(sq), sq, np.nan)
+    counts = np.isfinite(sq).sum(axis=0)
+    total = np.nansum(sq, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.sqrt(total / np.maximum(counts, 1)), np.nan)
