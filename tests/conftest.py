@@ -32,3 +32,17 @@ def bohai_dir(shared_dir) -> Path:
     if not path.is_dir():
         pytest.skip(SKIP_REASON)
     return path
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """With ``REPLAY_REQUIRE_SHARED=1`` (set by .ci/run) a test skipped for want of
+    ``../shared`` data fails instead: CI must always run the real-data tests.
+    Skips for other reasons (e.g. no Node.js for the MCAP validator) stay skips."""
+    outcome = yield
+    rep = outcome.get_result()
+    if rep.skipped and os.environ.get("REPLAY_REQUIRE_SHARED") == "1":
+        reason = str(rep.longrepr)
+        if "shared" in reason.lower() and "node" not in reason.lower():
+            rep.outcome = "failed"
+            rep.longrepr = f"REPLAY_REQUIRE_SHARED=1 but the test was skipped: {reason}"
