@@ -261,8 +261,13 @@ def _protobuf_decoder(path, schema, channel):
 
     fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
     pool = descriptor_pool.DescriptorPool()
-    for fd in fds.file:
-        pool.Add(fd)
+    todo, added = list(fds.file), set()
+    while todo:  # dependencies first, whatever the order in the set
+        ready = [fd for fd in todo if set(fd.dependency) <= added] or todo[:1]
+        for fd in ready:
+            pool.Add(fd)
+            added.add(fd.name)
+            todo.remove(fd)
     cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
     return lambda data: _foxglove(cls.FromString(data), proto=True)
 
