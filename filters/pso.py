@@ -1,0 +1,88 @@
+"""Particle-swarm optimisation (PSO) as used by the PSO-PF and PSO-CPF baselines of paper 002, §4.1.
+
+Each particle i has a position X_i, a velocity V_i (zero at the start), and a
+personal best; g is the swarm's best. For t = 1..T (T = 20):
+
+    omega(t) = omega_min + (omega_max - omega_min) exp(-alpha (t - 1)),   omega_max = 0.9, omega_min = 0.4, alpha = 0.2
+    c1(t) from 2.0 down to 1.0, c2(t) from 1.5 up to 2.0   (linear in t; the paper says only "from .. to")
+    V_i = omega V_i + c1 r1 (pbest_i - X_i) + c2 r2 (g - X_i),   r1, r2 uniform in [0, 1] element-wise
+    X_i = clip(X_i + V_i, LB, UB)
+
+The paper gives no velocity limit: none is applied (the bounds clip the
+positions). The swarm's best fitness never worsens (recorded and asserted).
+The particle filter keeps the final *positions* X_i (not the personal bests):
+the swarm replaces resampling, and the positions are its population.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.errors import ReplayError
+
+# 002, §4.1: bounds of the search for the AUV state [x, y, z, v, pitch, yaw].
+LB_002 = (-300.0, -300.0, -300.0, 0.0, -np.pi / 2, -np.pi)
+UB_002 = (300.0, 300.0, 0.0, 10.0, np.pi / 2, np.pi)
+
+
+def inertia(t: int, omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2) -> float:
+    """omega(t) = omega_min + (omega_max - omega_min) exp(-alpha (t - 1)), t = 1, 2, ..."""
+    return omega_min + (omega_max - omega_min) * np.exp(-alpha * (t - 1))
+
+
+def ramp(t: int, iterations: int, start: float, end: float) -> float:
+    """Linear schedule from ``start`` (t = 1) to ``end`` (t = iterations)."""
+    return start + (end - start) * (t - 1) / max(iterations - 1, 1)
+
+
+def check_bounds(lower, upper):
+    """Validate a pair of bound vectors (or None for unbounded); one-line error naming the problem."""
+    if lower is None and upper is None:
+        return None, None
+    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
+    if lo.shape != hi.shape or lo.ndim != 1:
+        raise ReplayError(f"PSO bounds: lower and upper must be vectors of one length (got {lo.shape}, {hi.shape})")
+    bad = np.flatnonzero(~(lo < hi))
+    if len(bad):
+        i = int(bad[0])
+        raise ReplayError(f"PSO bounds: LB >= UB in component {i} ({lo[i]} >= {hi[i]})")
+    return lo, hi
+
+
+def check_params(iterations, omega_max, omega_min):
+    if not (isinstance(iterations, (int, np.integer)) and iterations >= 1):
+        raise ReplayError(f"PSO iterations must be a positive integer (got {iterations!r})")
+    if not 0 <= omega_min <= omega_max:
+        raise ReplayError(f"PSO inertia needs 0 <= omega_min <= omega_max (got {omega_min}, {omega_max})")
+
+
+def optimize(X: np.ndarray, fitness, rng: np.random.Generator, iterations: int = 20,
+             omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2,
+             c1=(2.0, 1.0), c2=(1.5, 2.0), project=None):
+    """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds.
+
+    Returns final positions, their fitness, and the swarm's best fitness before
+    and after each iteration (non-increasing).
+    """
+    X = np.array(X, dtype=float)
+    if project is not None:
+        X = project(X)
+    f = fitness(X)
+    pbest, pf = X.copy(), f.copy()
+    g = int(np.argmin(pf))
+    V = np.zeros_like(X)
+    best = [float(pf[g])]
+    r = rng.random((iterations, 2) + X.shape)
+    for t in range(1, iterations + 1):
+        w = inertia(t, omega_max, omega_min, alpha)
+        a1, a2 = ramp(t, iterations, *c1), ramp(t, iterations, *c2)
+        V = w * V + a1 * r[t - 1, 0] * (pbest - X) + a2 * r[t - 1, 1] * (pbest[g] - X)
+        X = X + V
+        if project is not None:
+            X = project(X)
+        f = fitness(X)
+        better = f < pf
+        pbest[better], pf[better] = X[better], f[better]
+        g = int(np.argmin(pf))
+        best.append(float(pf[g]))
+        assert best[-1] <= best[-2], "PSO global best got worse"
+    return X, f, np.array(best)

@@ -1,0 +1,37 @@
+"""``ungm``: filter the UNGM measurements of ``sim/ungm`` (paper 002, §3.2).
+
+The model's Q, R and growth come from the frame's metadata (the values the
+simulator used) unless given. Prior: x_0 = the simulator's initial state (0)
+with P0 = ``p0`` (002 gives x_0 = 0 and no P0; we take 1).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.models.ungm import UNGM
+
+from . import Problem, Task
+
+
+class UNGMTask(Task):
+    name = "ungm"
+
+    def __init__(self, q: float | None = None, r: float | None = None, p0: float = 1.0,
+                 growth: float | None = None):
+        self.q, self.r, self.p0, self.growth = q, r, p0, growth
+
+    def build(self, frame, rng):
+        from replay.errors import ReplayError
+
+        if "z" not in frame.channels or "position" not in frame.reference:
+            raise ReplayError("task ungm: needs a frame from sim/ungm (channel 'z', reference 'position')")
+        meta = frame.meta
+        q = meta.get("q", 1.0) if self.q is None else self.q
+        r = meta.get("r", 1.0) if self.r is None else self.r
+        g = meta.get("growth", 2.5) if self.growth is None else self.growth
+        model = UNGM(q, r, g)
+        ch, ref = frame.channels["z"], frame.reference["position"]
+        z = np.where(ch.valid[:, None], ch.values, np.nan)
+        x0 = np.asarray(meta.get("initial_state", [0.0]), float)
+        return Problem(model, z, x0, np.array([[self.p0]]), frame.t, ref.values, ref.valid.copy(),
+                       (0,), ("x",), params={"q": q, "r": r, "growth": g, "p0": self.p0})
