@@ -70,8 +70,9 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
              dataset_params: dict | None = None, adapter: str | None = None) -> Evaluation:
     """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run."""
     ds = resolve(dataset)
-    task_name = task or (ds.default_task if ds is not None else "position")
-    the_task = make_task(task_name, **(task_params or {}))
+    task_name = task or (ds.default_task if ds is not None else None)
+    # a plain file's task: the one its adapter names in frame.meta["default_task"], else "position"
+    the_task = make_task(task_name, **(task_params or {})) if task_name else None
     filter_params = filter_params or {}
     instances = [make_filter(name, **filter_params.get(name, {})) for name in filters]
     results = [FilterResult(name, f.params()) for name, f in zip(filters, instances)]
@@ -82,6 +83,9 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         if frame is None or is_sim:
             frame = registry.load_frame(dataset, data_dir=data_dir, rng=rng_for(seed, run, 0),
                                         first=first, adapter=adapter, **(dataset_params or {}))
+        if the_task is None:
+            task_name = frame.meta.get("default_task", "position")
+            the_task = make_task(task_name, **(task_params or {}))
         problem = the_task.build(frame, rng_for(seed, run, 1))
         truths.append(problem.truth_position)
         for name, flt, res in zip(filters, instances, results):

@@ -1,0 +1,370 @@
+"""Lake-trial depth log adapter (``lake``), and its writer.
+
+The format (also in README.md, "Lake-trial logs"): a CSV or TSV text file.
+
+* Optional comment lines first, starting with ``#``. ``# key: value`` lines are
+  kept in ``meta["header"]``; ``# units: depth=m, pitch=deg`` gives units of
+  columns whose names carry none; ``# synthetic: true`` marks generated data.
+* One header row, then one row per internal-sensor sample (any fixed or
+  jittered rate). Columns, in any order, case-insensitive, unit in the name
+  (``pitch_deg``, ``pitch [deg]``, ``pitch (deg)``) or in the ``units`` line:
+
+  ============  ==========================  =====================================
+  column        units                       meaning
+  ============  ==========================  =====================================
+  ``time``      s, ms                       sensor time (required)
+  ``depth``     m, cm, mm                   depth gauge, positive down
+  ``speed``     m/s (mps), cm/s, kn         speed sensor, forward
+  ``pitch``     deg, rad                    pitch sensor, positive nose down
+  ``ref_time``  s, ms                       time of the reference samples (optional)
+  ``ref_depth`` m, cm, mm                   external-reference depth
+  ``ref_speed`` m/s, cm/s, kn               reference speed, where measured
+  ``ref_pitch`` deg, rad                    reference pitch, where measured
+  ============  ==========================  =====================================
+
+  With a ``ref_time`` column the reference is its own time series (rows may
+  hold only reference cells, or only sensor cells); without it a reference
+  cell belongs to the sensor time of its row. Empty cells are missing values.
+
+What :func:`load` does (everything counted in ``frame.report``):
+
+* sensor rows need a finite, strictly increasing time (others are dropped);
+  values outside plausible ranges (:data:`RANGES`) are masked;
+* pitch in radians whose values pass pi/2 is refused (the column is in degrees);
+  pitch in degrees that never leaves +-0.5 deg is flagged (possibly radians);
+* the reference is **aligned** to the sensor times without inventing samples:
+  a sensor sample at a reference time takes it; between two reference samples
+  at most ``max_gap`` seconds apart (default 0.5 s) it is linearly
+  interpolated ("repaired"); inside a longer gap, or outside the reference's
+  time span, it is masked. ``meta["reference_alignment"]`` holds the counts.
+
+Bad input (no time column, unrecognised unit, a reference with no time
+overlap, ...) raises :class:`replay.errors.DataError`: one line naming the
+file and the column.
+"""
+from __future__ import annotations
+
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from replay.angles import wrap
+from replay.errors import DataError, ReplayError
+from replay.frame import Channel, Frame, Report
+
+MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
+KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
+         "speed": "speed", "velocity": "speed", "pitch": "pitch"}
+REF_PREFIXES = ("ref_", "ref.", "ref ", "reference_", "ext_", "external_")
+UNITS = {  # kind -> {unit spelling: factor to SI}
+    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3},
+    "depth": {"m": 1.0, "cm": 1e-2, "mm": 1e-3},
+    "speed": {"m/s": 1.0, "mps": 1.0, "m_s": 1.0, "ms-1": 1.0, "cm/s": 1e-2, "cmps": 1e-2,
+              "kn": 0.514444, "knots": 0.514444, "kt": 0.514444},
+    "pitch": {"rad": 1.0, "deg": np.pi / 180, "degrees": np.pi / 180, "°": np.pi / 180},
+}
+SI = {"time": "s", "depth": "m", "speed": "m/s", "pitch": "rad"}
+RANGES = {"depth": (-10.0, 11000.0), "speed": (-2.0, 20.0), "pitch": (-np.pi / 2, np.pi / 2)}
+FRAMES = {"depth": "down", "speed": "body forward", "pitch": "body"}
+DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",
+               "pitch": "pitch sensor, positive nose down"}
+
+
+# ---------------------------------------------------------------- columns
+
+def parse_column(name: str, units_line: dict):
+    """(is_reference, kind, unit) of a column name, or None when it is not a known column."""
+    low = name.strip().lower()
+    unit = None
+    m = re.match(r"^(.*?)\s*[\[(](.+?)[\])]\s*$", low)
+    if m:
+        low, unit = m.group(1).strip(), m.group(2).strip()
+    ref = low.startswith(REF_PREFIXES)
+    base = low
+    for p in REF_PREFIXES:
+        if base.startswith(p):
+            base = base[len(p):]
+            break
+    kind = KINDS.get(base)
+    if kind is None and unit is None and "_" in base:
+        head, _, tail = base.partition("_")
+        if head in KINDS:
+            kind, unit = KINDS[head], tail
+    if kind is None:
+        return None
+    key = ("ref_" if ref else "") + kind
+    if unit is None:
+        unit = units_line.get(key) or units_line.get(kind)
+    return ref, kind, unit
+
+
+def _comments(path, text: str):
+    lines = text.splitlines()
+    comments, i = [], 0
+    while i < len(lines) and (lines[i].lstrip().startswith("#") or not lines[i].strip()):
+        if lines[i].strip():
+            comments.append(lines[i].lstrip()[1:].strip())
+        i += 1
+    header, units = {}, {}
+    for c in comments:
+        key, sep, value = c.partition(":")
+        if sep and key.strip() and " " not in key.strip():
+            header[key.strip().lower()] = value.strip()
+    for item in re.split(r"[,;]", header.get("units", "")):
+        k, sep, v = item.partition("=")
+        if sep:
+            units[k.strip().lower()] = v.strip().lower()
+    return comments, header, units, i
+
+
+def _read_table(path: Path):
+    if not path.is_file():
+        raise DataError(path, "file not found")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataError(path, f"cannot read as text: {err}") from None
+    comments, header, units, skip = _comments(path, text)
+    body = text.splitlines()[skip:]
+    if not body:
+        raise DataError(path, "no header row (expected e.g. time_s,depth_m,speed_mps,pitch_deg,ref_depth_m)")
+    sep = "\t" if "\t" in body[0] else ("," if "," in body[0] else (";" if ";" in body[0] else ","))
+    try:
+        table = pd.read_csv(io.StringIO("\n".join(body)), sep=sep, dtype=str, skip_blank_lines=True,
+                            keep_default_na=False)
+    except (pd.errors.ParserError, ValueError) as err:
+        raise DataError(path, f"not a readable {'TSV' if sep == chr(9) else 'CSV'} table: "
+                        f"{str(err).strip().splitlines()[-1]}") from None
+    table.columns = [str(c).strip() for c in table.columns]
+    if len(table) == 0:
+        raise DataError(path, "header only, no data rows")
+    return table, comments, header, units, skip + 2  # file line of the first data row
+
+
+def _numeric(path, table, col, first_line) -> np.ndarray:
+    s = table[col].str.strip()
+    s = s.where(~s.str.lower().isin(["", "nan", "na", "null"]), None)
+    num = pd.to_numeric(s, errors="coerce")
+    bad = num.isna().to_numpy() & s.notna().to_numpy()
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise DataError(path, f"column {col}: non-numeric value {table[col].iloc[i]!r}", row=first_line + i)
+    return num.to_numpy(dtype=float)
+
+
+# ---------------------------------------------------------------- alignment
+
+def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GAP,
+          angle: bool = False, tol: float = 1e-6):
+    """Reference samples (tr, vr) on times ``t`` without inventing samples.
+
+    Returns ``(values, valid, counts)``: a time within ``tol`` of a reference
+    sample takes its value (``exact``); a time between two reference samples at
+    most ``max_gap`` apart is linearly interpolated (``interpolated``; angles by
+    their wrapped difference); a time inside a longer gap (``in_gaps``, with
+    ``gaps`` the number of such gaps that hold sensor samples) or outside
+    [tr[0], tr[-1]] (``outside``) is masked.
+    """
+    out = np.full(len(t), np.nan)
+    n = len(tr)
+    counts = {"exact": 0, "interpolated": 0, "in_gaps": 0, "gaps": 0, "outside": 0}
+    if n == 0:
+        counts["outside"] = len(t)
+        return out, np.zeros(len(t), bool), counts
+    j = np.searchsorted(tr, t)  # tr[j-1] < t <= tr[j]
+    hi = np.clip(j, 0, n - 1)
+    lo = np.clip(j - 1, 0, n - 1)
+    exact_hi = np.abs(tr[hi] - t) <= tol
+    exact_lo = np.abs(tr[lo] - t) <= tol
+    exact = exact_hi | exact_lo
+    out[exact_hi] = vr[hi[exact_hi]]
+    out[exact_lo & ~exact_hi] = vr[lo[exact_lo & ~exact_hi]]
+    inside = ~exact & (j > 0) & (j < n)
+    span = tr[hi] - tr[lo]
+    interp = inside & (span <= max_gap)
+    gap = inside & (span > max_gap)
+    frac = (t[interp] - tr[lo[interp]]) / span[interp]
+    d = vr[hi[interp]] - vr[lo[interp]]
+    out[interp] = vr[lo[interp]] + (wrap(d) if angle else d) * frac
+    counts.update(exact=int(exact.sum()), interpolated=int(interp.sum()), in_gaps=int(gap.sum()),
+                  gaps=int(len(np.unique(j[gap]))), outside=int((~exact & ~inside).sum()))
+    return out, exact | interp, counts
+
+
+# ---------------------------------------------------------------- loading
+
+def load(path, *, max_gap: float = MAX_GAP) -> Frame:
+    """Read a lake-trial depth log (module docstring) into a :class:`Frame`."""
+    path = Path(path)
+    if not (isinstance(max_gap, (int, float)) and max_gap > 0):
+        raise ReplayError(f"lake adapter: max_gap must be a positive number of seconds (got {max_gap!r})")
+    table, comments, header, units_line, first_line = _read_table(path)
+    report = Report()
+    cols: dict[tuple[bool, str], str] = {}
+    for col in table.columns:
+        parsed = parse_column(col, units_line)
+        if parsed is None:
+            report.add("dropped", col, len(table), "not a column of the lake-trial format")
+            continue
+        ref, kind, unit = parsed
+        if (ref, kind) in cols:
+            raise DataError(path, f"column {col}: a second {'reference ' if ref else ''}{kind} column "
+                            f"(first: {cols[(ref, kind)]})")
+        if unit is None:
+            raise DataError(path, f"column {col}: no unit (name it e.g. {kind}_{SI[kind].replace('/', 'p')} "
+                            f"or add '# units: {col}={SI[kind]}')")
+        if unit not in UNITS[kind]:
+            raise DataError(path, f"column {col}: unit {unit!r} not recognised for {kind} "
+                            f"(known: {', '.join(UNITS[kind])})")
+        cols[(ref, kind)] = col
+    if (False, "time") not in cols:
+        raise DataError(path, f"no time column (expected e.g. 'time_s'; columns: {', '.join(table.columns)})")
+    sensors = [k for k in ("depth", "speed", "pitch") if (False, k) in cols]
+    if not sensors:
+        raise DataError(path, "no sensor column (depth, speed or pitch) besides the time")
+
+    def si(ref, kind):
+        col = cols[(ref, kind)]
+        unit = parse_column(col, units_line)[2]
+        return _numeric(path, table, col, first_line) * UNITS[kind][unit]
+
+    rows = np.arange(len(table)) + first_line
+    time = si(False, "time")
+    has_time = np.isfinite(time)
+    keep = has_time.copy()
+    running = -np.inf
+    for i in np.flatnonzero(has_time):  # strictly increasing sensor time
+        if time[i] <= running:
+            keep[i] = False
+        else:
+            running = time[i]
+    dropped = has_time & ~keep
+    if dropped.any():
+        report.add("dropped", cols[(False, "time")], int(dropped.sum()),
+                   f"time not increasing (first at line {rows[np.argmax(dropped)]})")
+    if keep.sum() < 2:
+        raise DataError(path, f"column {cols[(False, 'time')]}: fewer than 2 valid sensor times")
+    t_abs = time[keep]
+    t0 = float(t_abs[0])
+    t = t_abs - t0
+    channels = {}
+    for kind in sensors:
+        v = si(False, kind)[keep]
+        channels[kind] = _channel(path, cols[(False, kind)], kind, v, report, header, units_line,
+                                  f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})")
+    reference = {}
+    alignment = {}
+    ref_kinds = [k for k in ("depth", "speed", "pitch") if (True, k) in cols]
+    if (True, "time") in cols:
+        rt = si(True, "time")
+    else:
+        rt = np.where(keep, time, np.nan)
+    for kind in ref_kinds:
+        col = cols[(True, kind)]
+        vr = si(True, kind)
+        ok = np.isfinite(rt) & np.isfinite(vr)
+        tr, vv = rt[ok], vr[ok]
+        order = np.argsort(tr, kind="stable")
+        tr, vv = tr[order], vv[order]
+        dup = np.concatenate([[False], np.diff(tr) <= 0])
+        if dup.any():
+            report.add("dropped", col, int(dup.sum()), "repeated reference time")
+            tr, vv = tr[~dup], vv[~dup]
+        if len(tr) == 0:
+            raise DataError(path, f"column {col}: no reference sample with a time")
+        if tr[-1] < t_abs[0] or tr[0] > t_abs[-1]:
+            raise DataError(path, f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
+                            f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s")
+        vv = _check_range(path, col, kind, vv, report, header, units_line)
+        vals, valid, counts = align(t_abs, tr, vv, max_gap, angle=(kind == "pitch"))
+        valid &= np.isfinite(vals)
+        alignment[kind] = dict(counts, column=col, max_gap=max_gap)
+        if counts["interpolated"]:
+            report.add("repaired", f"reference {kind}", counts["interpolated"],
+                       f"{col} interpolated linearly between reference samples at most {max_gap:g} s apart")
+        if counts["in_gaps"]:
+            report.add("masked", f"reference {kind}", counts["in_gaps"],
+                       f"{col}: {counts['gaps']} gap(s) longer than {max_gap:g} s")
+        if counts["outside"]:
+            report.add("masked", f"reference {kind}", counts["outside"],
+                       f"{col}: sensor samples outside the reference's time span")
+        reference[kind] = Channel(vals, SI[kind], FRAMES[kind], valid, (kind,), (0,) if kind == "pitch" else (),
+                                  "positive nose down" if kind == "pitch" else "",
+                                  f"external reference {kind} (column {col})")
+    step = np.diff(t)
+    meta = {"source": str(path), "adapter": "lake", "comments": comments, "header": header,
+            "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
+            "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
+            "time": {"offset": t0, "median_step": float(np.median(step)),
+                     "min_step": float(step.min()), "max_step": float(step.max())},
+            "dt": float(np.median(step)), "reference_alignment": alignment,
+            "pitch_convention": "pitch positive nose down", "default_task": "depth"}
+    if "maneuvers" in header:
+        meta["maneuvers"] = _parse_maneuvers(header["maneuvers"], t0)
+    return Frame(t, channels, reference, None, meta, report)
+
+
+def _channel(path, col, kind, v, report, header, units_line, description) -> Channel:
+    missing = ~np.isfinite(v)
+    if missing.any():
+        report.add("masked", kind, int(missing.sum()), f"{col}: empty cells")
+    v = _check_range(path, col, kind, v, report, header, units_line)
+    return Channel(v, SI[kind], FRAMES[kind], None, (kind,), (0,) if kind == "pitch" else (),
+                   "positive nose down" if kind == "pitch" else "", description)
+
+
+def _check_range(path, col, kind, v, report, header, units_line) -> np.ndarray:
+    lo, hi = RANGES[kind]
+    fin = np.isfinite(v)
+    if kind == "pitch" and fin.any():
+        peak = float(np.abs(v[fin]).max())
+        declared = parse_column(col, units_line)[2]
+        if UNITS["pitch"][declared] == 1.0 and peak > np.pi / 2:
+            raise DataError(path, f"column {col}: values reach {peak:.3g}, beyond pi/2 rad: "
+                            "the column looks like degrees (name it pitch_deg)")
+        if UNITS["pitch"][declared] != 1.0 and peak < np.deg2rad(0.5):
+            report.add("flagged", col, int(fin.sum()), f"declared degrees but never beyond "
+                       f"{np.rad2deg(peak):.3g} deg: is it radians?")
+    out = fin & ((v < lo) | (v > hi))
+    if out.any():
+        report.add("masked", col, int(out.sum()), f"outside the plausible {kind} range "
+                   f"[{lo:g}, {hi:g}] {SI[kind]}")
+        v = np.where(out, np.nan, v)
+    return v
+
+
+def _parse_maneuvers(text: str, t0: float) -> list[list]:
+    out = []
+    for item in text.split(";"):
+        m = re.match(r"\s*([-\d.eE+]+)\s*-\s*([-\d.eE+]+)\s*(.*)$", item)
+        if m:
+            out.append([float(m.group(1)) - t0, float(m.group(2)) - t0, m.group(3).strip()])
+    return out
+
+
+# ---------------------------------------------------------------- writing
+
+def write(frame: Frame, path, comments=(), pitch_unit: str = "deg") -> Path:
+    """Write a frame with depth/speed/pitch channels (and reference) as a lake-trial log.
+
+    Reference cells share the sensor row's time; invalid samples are empty cells.
+    """
+    path = Path(path)
+    scale = {"depth": 1.0, "speed": 1.0, "pitch": 1.0 / UNITS["pitch"][pitch_unit]}
+    suffix = {"depth": "m", "speed": "mps", "pitch": pitch_unit}
+    data = {"time_s": frame.t}
+    for prefix, group in (("", frame.channels), ("ref_", frame.reference)):
+        for kind in ("depth", "speed", "pitch"):
+            ch = group.get(kind)
+            if ch is not None:
+                data[f"{prefix}{kind}_{suffix[kind]}"] = np.where(ch.valid, ch.values * scale[kind], np.nan)
+    lines = [f"# {c}" for c in ["replay lake-trial depth log (format: README.md, 'Lake-trial logs')",
+                                *comments]]
+    table = pd.DataFrame(data)
+    body = table.to_csv(index=False, float_format="%.10g", na_rep="", lineterminator="\n")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n" + body, encoding="utf-8")
+    return path
