@@ -1,0 +1,227 @@
+"""ROS 2 bags (MCAP storage, standard message types only) written from frames and runs.
+
+* :func:`write_frame_bag` writes every mapped topic of a frame read by the
+  ``bags`` adapter (``frame.meta["mapping"]``) back as its message type, at the
+  samples where the topic's primary channel is valid: header stamp =
+  ``meta["t0_ns"] + t``, log time from ``<name>_log_time`` when kept. Reading
+  the bag back with the same mapping gives the same frame (the round trip the
+  tests check; NavSatFix and FluidPressure go through the inverse projection /
+  pressure formula, so they agree to float round-off).
+* :func:`export_run_ros2` writes a ``replay eval`` run for ``ros2 bag play``:
+  ``/replay/<filter>/odom`` and ``/replay/reference/odom`` (nav_msgs/Odometry,
+  frame ``enu``, child ``base_link``; position, heading as a yaw quaternion when
+  the task estimates one; pose covariance from the estimate's variances).
+
+No Foxglove JSON/protobuf channel ever goes into these bags.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from replay.adapters import rosmsg
+from replay.errors import ReplayError
+
+
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+class BagOut:
+    """rosbags' ROS 2 writer with MCAP storage; messages built from the humble typestore."""
+
+    def __init__(self, path, overwrite: bool = True):
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        path = Path(path)
+        if path.exists():
+            if not overwrite or not (path / "metadata.yaml").is_file():
+                raise ReplayError(f"{path}: exists and is not a ROS 2 bag to replace")
+            shutil.rmtree(path)
+        self.ts = _typestore()
+        self.T = self.ts.types
+        self.w = Writer(path, version=8, storage_plugin=StoragePlugin.MCAP)
+        self.w.open()
+        self.count = 0
+
+    def connection(self, topic, msgtype):
+        return self.w.add_connection(topic, msgtype, typestore=self.ts)
+
+    def write(self, conn, log_ns: int, msg) -> None:
+        self.w.write(conn, int(log_ns), self.ts.serialize_cdr(msg, conn.msgtype))
+        self.count += 1
+
+    def close(self):
+        self.w.close()
+
+    # message pieces
+    def header(self, ns: int, frame_id: str):
+        sec, nsec = divmod(int(ns), 1_000_000_000)
+        return self.T["std_msgs/msg/Header"](stamp=self.T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                             frame_id=frame_id)
+
+    def vec(self, v):
+        return self.T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+    def point(self, v):
+        return self.T["geometry_msgs/msg/Point"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+    def quat(self, q):
+        return self.T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+
+    def pose(self, p, q):
+        return self.T["geometry_msgs/msg/Pose"](position=self.point(p), orientation=self.quat(q))
+
+    def twist(self, v, w):
+        return self.T["geometry_msgs/msg/Twist"](linear=self.vec(v), angular=self.vec(w))
+
+    def odometry(self, ns, frame_id, child, p, q, v, w, pcov=None):
+        T = self.T
+        pcov = np.zeros(36) if pcov is None else np.asarray(pcov, float)
+        return T["nav_msgs/msg/Odometry"](
+            header=self.header(ns, frame_id), child_frame_id=child,
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(p, q), covariance=pcov),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=self.twist(v, w), covariance=np.zeros(36)))
+
+
+def _get(group, key, n, width):
+    ch = group.get(key)
+    if ch is None:
+        return np.zeros((n, width)), np.zeros(n, bool)
+    return ch.values.reshape(n, -1), ch.valid
+
+
+def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
+    """Build one message of ``kind`` from field arrays ``f`` at sample i."""
+    T = out.T
+    hdr = out.header(ns, fid.get("main", ""))
+    if kind == "imu":
+        att_ok = f["attitude"][1][i]
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0] if att_ok else np.array([0, 0, 0, 1.0])
+        ocov = np.zeros(9)
+        ocov[0] = 0.0 if att_ok else -1.0
+        return T[typ](header=hdr, orientation=out.quat(q), orientation_covariance=ocov,
+                      angular_velocity=out.vec(f["gyro"][0][i]), angular_velocity_covariance=np.zeros(9),
+                      linear_acceleration=out.vec(f["accel"][0][i]), linear_acceleration_covariance=np.zeros(9))
+    if kind == "odometry":
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0]
+        return out.odometry(ns, fid.get("main", ""), fid.get("velocity", ""), f["position"][0][i], q,
+                            f["velocity"][0][i], f["rate"][0][i])
+    if kind == "pose":
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0]
+        pose = out.pose(f["position"][0][i], q)
+        if typ.endswith("PoseWithCovarianceStamped"):
+            pose = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+        return T[typ](header=hdr, pose=pose)
+    if kind == "twist":
+        tw = out.twist(f["velocity"][0][i], f["rate"][0][i])
+        if typ.endswith("TwistWithCovarianceStamped"):
+            tw = T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36))
+        return T[typ](header=hdr, twist=tw)
+    if kind == "pressure":
+        rho = float(params.get("water_density", rosmsg.WATER_DENSITY))
+        p_atm = float(params.get("atmospheric_pressure", rosmsg.ATMOSPHERIC_PRESSURE))
+        g = float(params.get("gravity", rosmsg.GRAVITY))
+        p = p_atm + rho * g * float(f["depth"][0][i][0])
+        return T[typ](header=hdr, fluid_pressure=p, variance=0.0)
+    if kind == "navsatfix":
+        ok = f["position"][1][i]
+        if ok:
+            lat, lon, alt = (a[0] for a in geo(f["position"][0][i:i + 1]))
+        else:
+            lat = lon = alt = float("nan")
+        status = int(f["status"][0][i][0]) if f["status"][1][i] else (0 if ok else -1)
+        sig = f["sigma"][0][i]
+        cov = np.zeros(9)
+        cov[[0, 4, 8]] = np.where(np.isfinite(sig), sig**2, 0.0)
+        return T[typ](header=hdr, status=T["sensor_msgs/msg/NavSatStatus"](status=status, service=1),
+                      latitude=float(lat), longitude=float(lon), altitude=float(alt),
+                      position_covariance=cov, position_covariance_type=2)
+    raise ReplayError(f"cannot write message kind {kind}")
+
+
+def write_frame_bag(frame, path) -> int:
+    """Write the mapped topics of a ``bags`` frame back as a ROS 2 bag; returns messages written."""
+    from replay.adapters.bags import enu_to_geodetic
+
+    mapping = frame.meta.get("mapping")
+    if not mapping or "t0_ns" not in frame.meta:
+        raise ReplayError("write_frame_bag: the frame was not read by the bags adapter (no mapping / t0_ns)")
+    t0 = int(frame.meta["t0_ns"])
+    n = len(frame.t)
+    ns = t0 + np.round(frame.t * 1e9).astype(np.int64)
+    params = mapping.get("params") or {}
+    geo = (lambda enu: enu_to_geodetic(enu, frame.meta)) if frame.meta.get("crs") else None
+    other = "header_time" if mapping.get("time") == "log" else "log_time"
+    out = BagOut(path)
+    try:
+        done = set()
+        for e in mapping["entries"]:
+            if e["topic"] in done:
+                continue
+            done.add(e["topic"])
+            group = frame.reference if e["reference"] else frame.channels
+            typ = e.get("type") or frame.meta["topics"][e["topic"]]["type"]
+            kind = rosmsg.kind_of(typ)
+            primary = rosmsg.PRIMARY[kind]
+            name = e["name"]
+            f, fid = {}, {}
+            for key in group:
+                if key == name or (key.startswith(name + "_") and key[len(name) + 1:] != other):
+                    fname = primary if key == name else key[len(name) + 1:]
+                    f[fname] = (group[key].values.reshape(n, -1), group[key].valid)
+                    fid[fname] = group[key].frame
+            for fname in ("gyro", "accel", "attitude", "position", "velocity", "rate", "depth", "status", "sigma"):
+                f.setdefault(fname, (np.full((n, 3), np.nan), np.zeros(n, bool)))
+            fid["main"] = fid.get(primary, "")
+            t_other = group.get(f"{name}_{other}")
+            present = t_other.valid if t_other is not None else f[primary][1]
+            conn = out.connection(e["topic"], typ)
+            for i in np.flatnonzero(present):
+                stamp = int(ns[i])
+                log = stamp
+                if t_other is not None and mapping.get("time") != "log":
+                    log = t0 + int(round(t_other.values[i] * 1e9))
+                elif t_other is not None:  # time = log: the frame axis is the log time
+                    stamp = t0 + int(round(t_other.values[i] * 1e9))
+                    log = int(ns[i])
+                out.write(conn, log, _message(out, kind, typ, stamp, i, f, fid, params, geo))
+    finally:
+        out.close()
+    return out.count
+
+
+def export_run_ros2(run_dir, path, data_dir=None) -> int:
+    """nav_msgs/Odometry per filter and for the reference (run 0) -> ROS 2 bag (MCAP storage)."""
+    from replay.export_mcap import _heading_index, load_run, time_ns
+
+    run = load_run(run_dir, data_dir)
+    frame, problem = run["frame"], run["problem"]
+    pidx = list(problem.position_index)
+    hidx = _heading_index(problem)
+    out = BagOut(path)
+    try:
+        tracks = [("reference", time_ns(frame, frame.t), problem.truth_position, None, None,
+                   problem.truth_valid)]
+        for name, est in run["estimates"].items():
+            tracks.append((name, time_ns(frame, est["t"]), est["x"][:, pidx],
+                           est["x"][:, hidx] if hidx is not None else None, est["P"][:, pidx], None))
+        for name, ns, pos, yaw, var, ok in tracks:
+            pos = np.column_stack([pos, np.zeros(len(pos))]) if pos.shape[1] == 2 else pos
+            ok = np.isfinite(pos).all(axis=1) if ok is None else ok & np.isfinite(pos).all(axis=1)
+            conn = out.connection(f"/replay/{name}/odom", "nav_msgs/msg/Odometry")
+            for i in np.flatnonzero(ok):
+                y = float(yaw[i]) if yaw is not None and np.isfinite(yaw[i]) else 0.0
+                cov = np.zeros(36)
+                if var is not None:
+                    cov[[0, 7, 14][:var.shape[1]]] = var[i]
+                out.write(conn, int(ns[i]), out.odometry(int(ns[i]), "enu", "base_link", pos[i],
+                                                          (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
+                                                          (0, 0, 0), (0, 0, 0), cov))
+    finally:
+        out.close()
+    return out.count
