@@ -13,12 +13,14 @@ NED heading = π/2 − yaw, roll unchanged.
   fix at all (pure dead reckoning); prior: the simulator's initial state,
   drawn once with P0 from the task's seed.
 * **Bohai frame** (no DVL: the adapter drops the logged velocities as
-  implausible): z = [north, east, v_yb, v_zb, heading], where north/east are
+  implausible): z = [north, east, v_yb, v_zb, a_b, heading], where north/east are
   the fresh GPS fixes (``gps_position`` valid only when a new fix arrived,
   i.e. at the surface) with ``gps_sigma`` m, and v_yb = v_zb = 0 are
   pseudo-measurements (a torpedo AUV does not slip sideways or heave in its
-  body frame; ``pseudo_sigma`` m/s). Forward speed is *estimated* (random
-  walk) from the fixes. Depth is not measured (the Bohai ``depth`` column is
+  body frame; ``pseudo_sigma`` m/s), and so is a_b = 0 (``accel_sigma``
+  m/s²: the log's accelerations are dropped or include gravity, and an
+  unobserved random-walk acceleration integrates to kilometres over a
+  10-minute dive). Forward speed is *estimated* from the fixes. Depth is not measured (the Bohai ``depth`` column is
   all zero) and not scored. **The reference** is the vehicle's own navigation
   solution (``lat``/``lon`` columns, an INS/DVL/GPS product of unknown
   quality, with jumps masked by the adapter), not ground truth.
@@ -37,7 +39,7 @@ from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
 
 from . import Problem, Task
 
-BOHAI_MEASURED = (0, 1, 4, 5, 9)
+BOHAI_MEASURED = (0, 1, 4, 5, 6, 7, 8, 9)
 
 
 def ned_attitude(att):
@@ -49,11 +51,13 @@ class DeadReckoningTask(Task):
     name = "dead-reckoning"
 
     def __init__(self, Q=None, R=None, P0=None, gps_sigma: float = 5.0, pseudo_sigma: float = 0.05,
+                 accel_sigma: float = 0.05,
                  score: str = "navigation", dive_gap: float = 10.0, mean_maneuver: str = "previous"):
         if score not in ("navigation", "fixes"):
             raise ReplayError(f"dead-reckoning: score={score!r} must be 'navigation' or 'fixes'")
         self.Q, self.R, self.P0 = Q, R, P0
         self.gps_sigma, self.pseudo_sigma = float(gps_sigma), float(pseudo_sigma)
+        self.accel_sigma = float(accel_sigma)
         self.score, self.dive_gap, self.mean_maneuver = score, float(dive_gap), mean_maneuver
 
     def build(self, frame, rng):
@@ -87,8 +91,16 @@ class DeadReckoningTask(Task):
         x_true0 = np.asarray(frame.meta["initial_state_ned"], float)
         x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
         x0[9] = wrap(x0[9])
-        return Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
-                       ("north", "east", "depth"), params=self.params())
+        pb = Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
+                     ("north", "east", "depth"), params=self.params())
+        extra = {}  # body velocity and acceleration, scored as extra components when present
+        for name, first in (("velocity_body", 3), ("accel_body", 6)):
+            if name in frame.reference:
+                c = frame.reference[name]
+                for j, comp in enumerate(c.components):
+                    extra[comp] = (np.where(c.valid, c.values[:, j], np.nan), first + j)
+        pb.truth_extra = extra
+        return pb
 
     def _bohai(self, frame, dt, roll, pitch, heading, Q):
         gps = frame.channels.get("gps_position")
@@ -108,11 +120,12 @@ class DeadReckoningTask(Task):
             valid = np.zeros(n, bool)
             valid[resurface] = True
             fix[resurface] = False  # withheld from the filter: it is the reference there
-        z = np.full((n, 5), np.nan)
+        z = np.full((n, 8), np.nan)
         z[fix, :2] = ne[fix]
-        z[:, 2:4] = 0.0
-        z[:, 4] = heading
-        R = np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [(2 * DEG) ** 2]) \
+        z[:, 2:7] = 0.0
+        z[:, 7] = heading
+        R = np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [self.accel_sigma**2] * 3
+                    + [(2 * DEG) ** 2]) \
             if self.R is None else np.asarray(self.R, float)
         model = SAUV(dt, pitch, roll, Q=Q, R=R, measured=BOHAI_MEASURED, mean_maneuver=self.mean_maneuver)
         first = idx[0] if len(idx) else int(np.argmax(ref.valid))
