@@ -10,7 +10,10 @@ from importlib import import_module
 
 from replay.errors import ReplayError
 
-REPRODUCTIONS: dict[str, str] = {}
+REPRODUCTIONS: dict[str, str] = {
+    "001": "replay.reproduce.p001:run",
+    "003": "replay.reproduce.p003:run",
+}
 
 
 def run_reproduction(paper: str, **options):
