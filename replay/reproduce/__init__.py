@@ -11,6 +11,8 @@ from importlib import import_module
 from replay.errors import ReplayError
 
 REPRODUCTIONS: dict[str, str] = {
+    "000": "replay.reproduce.p000:run",
+    "002": "replay.reproduce.p002:run",
     "001": "replay.reproduce.p001:run",
     "003": "replay.reproduce.p003:run",
 }
