@@ -1,0 +1,169 @@
+"""Running a campaign: plan the missing units, execute jobs, store results as they finish.
+
+One code path for every backend: :func:`plan` lists the jobs (blocks of runs
+not yet stored), a backend maps :func:`replay.campaign.units.execute_job` over
+them and yields (job, results) as jobs finish, and the main process stores
+each unit (:class:`~replay.campaign.store.Store`) and advances the progress.
+Workers only compute; only the main process writes, so a Dask worker on
+another machine needs no access to the output directory.
+
+Backends:
+
+* ``serial`` — in this process (chosen for one job, or ``--workers 1``);
+* ``processes`` — a local process pool, ``--workers N`` (default: all cores);
+* ``dask`` — a Dask distributed cluster, ``--scheduler tcp://host:port``, or a
+  LocalCluster of N single-threaded worker processes on 127.0.0.1
+  (``--dask-local N``). A scheduler that does not answer within
+  ``connect_timeout`` seconds raises a one-line ReplayError.
+
+The numbers do not depend on the backend, the number of workers or the order
+in which jobs finish: every run draws from its own seed streams and jobs are
+fixed blocks of runs.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from contextlib import contextmanager
+from pathlib import Path
+
+from replay.errors import ReplayError
+
+from . import board
+from .progress import Progress
+from .spec import Campaign
+from .store import Store
+from .units import Job, config_hash, execute_job
+
+
+def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
+    """Jobs for every unit not yet stored, in blocks of ``campaign.batch`` runs."""
+    jobs = []
+    for cfg in campaign.configs:
+        c = cfg.as_dict()
+        h = config_hash(c)
+        store.save_config(h, c)
+        have = store.stored_runs(h, include_failed=not retry_failed)
+        for start in range(0, campaign.runs, campaign.batch):
+            runs = [r for r in range(start, min(start + campaign.batch, campaign.runs)) if r not in have]
+            if runs:
+                jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
+    return jobs
+
+
+def _serial(jobs):
+    for job in jobs:
+        yield job, execute_job(job)
+
+
+@contextmanager
+def _processes(workers: int):
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+
+    def run(jobs):
+        futures = {pool.submit(execute_job, job): job for job in jobs}
+        for fut in as_completed(futures):
+            yield futures[fut], _result(fut, futures[fut])
+
+    try:
+        yield run
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextmanager
+def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise ReplayError("Dask is not installed: pip install 'replay-nav[campaign]'") from None
+    import logging
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    cluster = None
+    try:
+        if scheduler:
+            client = Client(scheduler, timeout=f"{connect_timeout}s", set_as_default=False)
+        else:
+            cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None)
+            client = Client(cluster, set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        if cluster is not None:
+            cluster.close()
+        raise ReplayError(f"Dask scheduler {scheduler or 'LocalCluster'}: no answer within "
+                          f"{connect_timeout:g} s ({type(err).__name__})") from None
+
+    def run(jobs):
+        futures = client.map(execute_job, jobs, pure=False)
+        owner = {f.key: j for f, j in zip(futures, jobs)}
+        with client.as_current():
+            for fut in as_completed(futures):
+                yield owner[fut.key], _result(fut, owner[fut.key])
+
+    try:
+        yield run
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _result(fut, job):
+    """A job's results; a job that died as a whole (worker lost) marks each of its runs failed."""
+    try:
+        return fut.result()
+    except Exception as err:  # noqa: BLE001 — recorded per unit, the campaign goes on
+        return [{"run": r, "status": "failed", "error": f"{type(err).__name__}: {err}".splitlines()[0]}
+                for r in job.runs]
+
+
+def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str | None = None,
+        dask_local: int | None = None, quiet: bool = False, retry_failed: bool = False,
+        data_dir=None, limit: int | None = None, connect_timeout: float = 5.0,
+        progress_stream=None) -> dict:
+    """Compute every unit of ``campaign`` not yet stored in ``out``; write the leaderboard.
+
+    ``limit`` stops after that many jobs (for tests of resuming). Returns counts.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    store = Store(out)
+    if campaign.path.resolve() != (out / "campaign.toml").resolve():
+        shutil.copyfile(campaign.path, out / "campaign.toml")
+    jobs = plan(campaign, store, retry_failed, data_dir)
+    if limit is not None:
+        jobs = jobs[:limit]
+    total = sum(len(j.runs) for j in jobs)
+    counts = {"jobs": len(jobs), "units": total, "done": 0, "failed": 0,
+              "stored_before": sum(len(store.stored_runs(h)) for h, _ in store.configs()), "backend": "none"}
+    if jobs:
+        workers = workers or os.cpu_count() or 1
+        if scheduler or dask_local:
+            backend, counts["backend"] = _dask(scheduler, dask_local, connect_timeout), "dask"
+        elif workers == 1 or len(jobs) == 1:
+            backend, counts["backend"] = _nullcontext(_serial), "serial"
+        else:
+            backend, counts["backend"] = _processes(min(workers, len(jobs))), f"processes({min(workers, len(jobs))})"
+        progress = Progress(total, quiet, progress_stream)
+        try:
+            with backend as mapper:
+                for job, results in mapper(jobs):
+                    for res in results:
+                        store.write(job.config_hash, res)
+                    bad = sum(r["status"] != "done" for r in results)
+                    counts["done"] += len(results) - bad
+                    counts["failed"] += bad
+                    progress.update(len(results), bad)
+        finally:
+            progress.close()
+    counts["rows"] = board.summarise(out)
+    return counts
+
+
+@contextmanager
+def _nullcontext(value):
+    yield value

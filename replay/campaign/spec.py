@@ -1,0 +1,255 @@
+"""Campaign files: datasets x tasks x filters (with parameter grids) x runs x seeds.
+
+A campaign is a TOML file::
+
+    [campaign]
+    name = "example"
+    runs = 50                 # Monte Carlo runs per configuration
+    seed = 0                  # master seed (streams as in replay.evaluate)
+    batch = 25                # runs per job (one batched filter call); optional
+    alignment = "se3"         # ATE alignment: none, yaw, se3, sim3; optional
+    divergence_threshold = 100.0   # m; a run whose position error exceeds it counts as diverged
+    data_dir = "../data"      # where file datasets are looked for first (relative to this file)
+
+    [[dataset]]
+    id = "sim/auv-sonar"
+    tasks = ["sonar"]         # default: the dataset's default task
+    params = { steps = 100 }  # passed to the generator or adapter
+    first = 2000              # optional: only the first N samples
+
+    [task.sonar]              # optional task parameters, for every dataset using the task
+    yaw_rate = 0.25
+
+    [[filter]]
+    name = "pf"
+    params = { resampling = "systematic" }
+    grid = { n_particles = [200, 1000] }    # one configuration per combination
+
+Everything is checked before any work starts (:func:`load`): an unknown
+section, key, dataset, task, filter or parameter, a wrong type, or an empty
+grid raises :class:`~replay.errors.ReplayError` with one line naming the file,
+the line and the key.
+"""
+from __future__ import annotations
+
+import inspect
+import itertools
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from replay.align import ALIGNMENTS
+from replay.errors import ReplayError
+from replay.evaluate import _jsonable as _plain
+
+CAMPAIGN_KEYS = {"name": str, "runs": int, "seed": int, "batch": int, "alignment": str,
+                 "divergence_threshold": float, "data_dir": str}
+DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int}
+FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration: everything that fixes the numbers of its runs except the run index."""
+
+    dataset: str
+    dataset_params: dict
+    first: int | None
+    task: str
+    task_params: dict
+    filter: str
+    filter_params: dict
+    seed: int
+    alignment: str
+    divergence_threshold: float | None
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass
+class Campaign:
+    path: Path
+    name: str
+    runs: int
+    seed: int
+    batch: int
+    data_dir: str | None
+    configs: list[Config] = field(default_factory=list)
+
+
+class _Where:
+    """Finds the line of a key in the campaign text for error messages."""
+
+    def __init__(self, path: Path, text: str):
+        self.path, self.lines = path, text.splitlines()
+
+    def line(self, key: str, value=None) -> int:
+        pats = []
+        if value is not None and isinstance(value, str):
+            pats.append(re.compile(re.escape(f'"{value}"') + "|" + re.escape(f"'{value}'")))
+        pats.append(re.compile(r"(^|[\s{,\[.])" + re.escape(str(key)) + r"\s*[=\]]"))
+        for pat in pats:
+            for i, text in enumerate(self.lines, 1):
+                if pat.search(text.split("#", 1)[0]):
+                    return i
+        return 1
+
+    def error(self, key: str, what: str, value=None) -> ReplayError:
+        return ReplayError(f"{self.path}:{self.line(key, value)}: {key}: {what}")
+
+
+def _check_type(where, key, value, typ):
+    ok = isinstance(value, typ) and not (typ in (int, float) and isinstance(value, bool))
+    if typ is float and isinstance(value, int) and not isinstance(value, bool):
+        ok = True
+    if not ok:
+        raise where.error(key, f"expected {typ.__name__}, got {type(value).__name__} {value!r}")
+
+
+def _check_keys(where, table: dict, allowed: dict, what: str):
+    for key, value in table.items():
+        if key not in allowed:
+            raise where.error(key, f"unknown key in {what} (known: {', '.join(sorted(allowed))})")
+        _check_type(where, key, value, allowed[key])
+
+
+def check_params(where, owner: str, cls, params: dict) -> None:
+    """Unknown parameter names and values of the wrong type (against the constructor's defaults)."""
+    sig = inspect.signature(cls.__init__)
+    names = {n: p for n, p in sig.parameters.items() if n != "self"}
+    if any(p.kind == p.VAR_KEYWORD for p in names.values()):
+        return
+    for key, value in params.items():
+        if key not in names:
+            known = ", ".join(n for n in names if names[n].kind != names[n].VAR_POSITIONAL) or "none"
+            raise where.error(key, f"{owner} has no parameter {key!r} (known: {known})")
+        default = names[key].default
+        if isinstance(default, (bool, int, float, str)) and default is not None:
+            typ = float if type(default) is float else type(default)
+            _check_type(where, key, value, typ)
+
+
+def _class_of(registry: dict, name: str):
+    from importlib import import_module
+
+    module, cls = registry[name].split(":")
+    return getattr(import_module(module), cls)
+
+
+def load(path) -> Campaign:
+    """Read and check a campaign file; returns its configurations (no work done)."""
+    from replay import registry
+    from replay.filters import FILTERS
+    from replay.tasks import TASKS, make_task
+    from replay.filters import make_filter
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ReplayError(f"{path}: cannot read campaign file: {e.strerror}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ReplayError(f"{path}: not valid TOML: {e}") from None
+    where = _Where(path, text)
+    for key in doc:
+        if key not in ("campaign", "dataset", "task", "filter"):
+            raise where.error(key, "unknown section (known: campaign, dataset, task, filter)")
+    head = doc.get("campaign", {})
+    _check_keys(where, head, CAMPAIGN_KEYS, "[campaign]")
+    runs, seed, batch = head.get("runs", 1), head.get("seed", 0), head.get("batch", 25)
+    if runs < 1:
+        raise where.error("runs", f"must be at least 1 (got {runs})")
+    if batch < 1:
+        raise where.error("batch", f"must be at least 1 (got {batch})")
+    alignment = head.get("alignment", "se3")
+    if alignment not in ALIGNMENTS:
+        raise where.error("alignment", f"{alignment!r} is not one of {', '.join(ALIGNMENTS)}", alignment)
+    threshold = head.get("divergence_threshold")
+    data_dir = head.get("data_dir")
+    if data_dir is not None:
+        data_dir = str((path.parent / data_dir).resolve())
+
+    task_params = doc.get("task", {})
+    for tname, tp in task_params.items():
+        if tname not in TASKS:
+            raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
+        if not isinstance(tp, dict):
+            raise where.error(tname, "expected a table of task parameters")
+        check_params(where, f"task {tname!r}", _class_of(TASKS, tname), tp)
+
+    datasets = doc.get("dataset", [])
+    if not isinstance(datasets, list) or not datasets:
+        raise where.error("dataset", "the campaign needs at least one [[dataset]]")
+    filters = doc.get("filter", [])
+    if not isinstance(filters, list) or not filters:
+        raise where.error("filter", "the campaign needs at least one [[filter]]")
+
+    ds_entries = []
+    for entry in datasets:
+        _check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
+        if "id" not in entry:
+            raise where.error("dataset", "every [[dataset]] needs an id")
+        ds_id = entry["id"]
+        try:
+            ds = registry.get(ds_id)
+        except ReplayError as e:
+            raise where.error("id", str(e), ds_id) from None
+        tasks = entry.get("tasks", [ds.default_task or "position"])
+        if not tasks:
+            raise where.error("tasks", "empty list of tasks")
+        for t in tasks:
+            if not isinstance(t, str) or t not in TASKS:
+                raise where.error("tasks", f"unknown task {t!r} (known: {', '.join(sorted(TASKS))})", t)
+        first = entry.get("first")
+        if first is not None and first < 1:
+            raise where.error("first", f"must be at least 1 (got {first})")
+        if ds.kind == "file" and registry.locate(ds, data_dir) is None:
+            raise where.error("id", f"dataset {ds_id} not found (set data_dir in [campaign], pass "
+                                    f"--data-dir, or run `replay datasets fetch {ds_id}`)", ds_id)
+        ds_entries.append((ds_id, entry.get("params", {}), first, tasks))
+
+    flt_entries = []
+    for entry in filters:
+        _check_keys(where, entry, FILTER_KEYS, "[[filter]]")
+        name = entry.get("name")
+        if name is None:
+            raise where.error("filter", "every [[filter]] needs a name")
+        if name not in FILTERS:
+            raise where.error("name", f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})", name)
+        cls = _class_of(FILTERS, name)
+        base, grid = entry.get("params", {}), entry.get("grid", {})
+        check_params(where, f"filter {name!r}", cls, base)
+        for key, values in grid.items():
+            if not isinstance(values, list):
+                raise where.error(key, f"grid values must be a list, got {type(values).__name__}")
+            if not values:
+                raise where.error(key, "empty grid: give at least one value")
+            for v in values:
+                check_params(where, f"filter {name!r}", cls, {key: v})
+        keys = list(grid)
+        for combo in itertools.product(*(grid[k] for k in keys)):
+            params = {**base, **dict(zip(keys, combo))}
+            try:
+                flt = make_filter(name, **params)
+            except ReplayError as e:
+                raise where.error(name, str(e), name) from None
+            except Exception as e:  # a constructor's own validation
+                raise where.error(name, f"filter {name!r}: {e}", name) from None
+            flt_entries.append((name, _plain(flt.params())))
+
+    configs = []
+    for ds_id, ds_params, first, tasks in ds_entries:
+        for t in tasks:
+            tp = task_params.get(t, {})
+            try:
+                canonical = _plain(make_task(t, **tp).params())
+            except ReplayError as e:
+                raise where.error(t, str(e), t) from None
+            for name, fp in flt_entries:
+                configs.append(Config(ds_id, ds_params, first, t, canonical, name, fp, seed,
+                                      alignment, threshold))
+    return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs)

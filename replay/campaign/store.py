@@ -1,0 +1,118 @@
+"""The result directory of a campaign; units stored atomically as they finish.
+
+Layout of ``OUT``::
+
+    campaign.toml                      copy of the campaign file last run here
+    units/<config_hash>/config.json    the configuration (dataset, task, filter, parameters, seed, ...)
+    units/<config_hash>/<run>.parquet  per-step table: k, t, x<i>, P<ii>, ref_<axis>, err_<axis>,
+                                       err_<angle>, nees, nis, nis_dof
+    units/<config_hash>/<run>.json     status (done/failed), metrics or error, version — written last
+    leaderboard.csv, paired.csv        summaries (replay.campaign.board)
+
+A unit counts as stored when its ``.json`` exists. Every file is written to a
+temporary name in the same directory and renamed into place (``os.replace`` is
+atomic), the table before the record, so a run killed at any instant leaves at
+worst a stray ``*.tmp`` or a table without record: the unit is computed again.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+import replay
+
+RUN_FILE = re.compile(r"^(\d+)\.json$")
+
+
+def _atomic(path: Path, write) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    write(tmp)
+    os.replace(tmp, path)
+
+
+def write_json(path: Path, obj) -> None:
+    _atomic(path, lambda p: p.write_text(json.dumps(obj, indent=1, default=_default)))
+
+
+def _default(v):
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+class Store:
+    def __init__(self, out):
+        self.out = Path(out)
+        self.units = self.out / "units"
+
+    def stored_runs(self, config_hash: str, include_failed: bool = True) -> set[int]:
+        d = self.units / config_hash
+        if not d.is_dir():
+            return set()
+        runs = set()
+        for p in d.iterdir():
+            m = RUN_FILE.match(p.name)
+            if m and (include_failed or self._status(p) == "done"):
+                runs.add(int(m.group(1)))
+        return runs
+
+    @staticmethod
+    def _status(path: Path) -> str:
+        try:
+            return json.loads(path.read_text()).get("status", "failed")
+        except (OSError, json.JSONDecodeError):
+            return "failed"
+
+    def save_config(self, config_hash: str, config: dict) -> None:
+        d = self.units / config_hash
+        d.mkdir(parents=True, exist_ok=True)
+        if not (d / "config.json").exists():
+            write_json(d / "config.json", config)
+
+    def write(self, config_hash: str, result: dict) -> None:
+        """Store one unit: the per-step table (done units), then the record that marks it stored."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        d = self.units / config_hash
+        run = result["run"]
+        record = {k: v for k, v in result.items() if k != "series"}
+        record.update(key=f"{config_hash}/{run}", config_hash=config_hash, version=replay.__version__)
+        if result["status"] == "done":
+            table = pa.table({k: np.asarray(v) for k, v in result["series"].items()})
+            _atomic(d / f"{run}.parquet", lambda p: pq.write_table(table, p))
+        write_json(d / f"{run}.json", record)
+
+    def configs(self):
+        """(config_hash, config) of every stored configuration."""
+        if not self.units.is_dir():
+            return []
+        out = []
+        for d in sorted(self.units.iterdir()):
+            if (d / "config.json").is_file():
+                out.append((d.name, json.loads((d / "config.json").read_text())))
+        return out
+
+    def records(self, config_hash: str) -> list[dict]:
+        """Stored unit records of a configuration, in run order."""
+        d = self.units / config_hash
+        recs = []
+        for run in sorted(self.stored_runs(config_hash)):
+            try:
+                recs.append(json.loads((d / f"{run}.json").read_text()))
+            except (OSError, json.JSONDecodeError):
+                continue
+        return recs
+
+    def series(self, config_hash: str, run: int, columns=None):
+        """The per-step table of a unit as a dict of numpy arrays."""
+        import pyarrow.parquet as pq
+
+        t = pq.ParquetFile(self.units / config_hash / f"{run}.parquet").read(columns=columns)
+        return {name: t.column(name).to_numpy(zero_copy_only=False) for name in t.column_names}

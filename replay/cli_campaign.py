@@ -1,0 +1,73 @@
+"""``replay campaign run``, ``replay leaderboard``, ``replay report``."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from replay.errors import ReplayError
+
+
+@click.group("campaign")
+def campaign():
+    """Evaluation campaigns: datasets x tasks x filters x parameters x runs, resumable."""
+
+
+@campaign.command("run")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
+              help="Result directory (default: runs/campaign-<name>).")
+@click.option("--workers", "-w", default=None, type=click.IntRange(1),
+              help="Local worker processes (default: all cores; 1 = in this process).")
+@click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
+@click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
+@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@click.option("--retry-failed", is_flag=True, help="Compute failed units again.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress output.")
+def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet):
+    """Run the units of campaign FILE not yet stored in the result directory."""
+    from replay.campaign import board, execute, spec
+
+    if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
+        raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
+    c = spec.load(file)
+    out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
+    counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
+                         retry_failed=retry_failed, data_dir=data_dir)
+    if not quiet:
+        click.echo(board.format_rows(counts["rows"]))
+    if counts["units"] == 0:
+        click.echo(f"nothing to do: all {counts['stored_before']} units already stored in {out}")
+    else:
+        click.echo(f"{counts['done']} units computed, {counts['failed']} failed ({counts['backend']}); "
+                   f"wrote {out / 'leaderboard.csv'}, {out / 'paired.csv'}")
+
+
+@click.command("leaderboard")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(exists=True))
+@click.option("--sort", default=None, help="Sort by this column (ascending), e.g. pos_rmse, ate.")
+@click.option("--out", "-o", default=None, type=click.Path(dir_okay=False), help="Write the merged CSV here.")
+def leaderboard(dirs, sort, out):
+    """Merge the leaderboards of result directories (campaigns or `replay eval` outputs)."""
+    from replay.campaign import board
+
+    rows = board.merge(dirs, sort)
+    click.echo(board.format_rows(rows))
+    if out:
+        board._write(rows, Path(out), board.columns(rows))
+        click.echo(f"wrote {out}")
+
+
+@click.command("report")
+@click.argument("dir", type=click.Path(exists=True, file_okay=False))
+@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
+              help="Where to write the PNGs and report.html (default: DIR/report).")
+def report(dir, out):
+    """Plots (trajectory, error over time, RMSE, NEES/NIS) and one self-contained HTML page."""
+    from replay.report import make_report
+
+    path = make_report(Path(dir), Path(out) if out else None)
+    click.echo(f"wrote {path}")
+
+
+COMMANDS = (campaign, leaderboard, report)

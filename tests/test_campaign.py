@@ -1,0 +1,206 @@
+"""Campaigns: resumable, atomic, backend-independent, validated before any work."""
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from replay.campaign import board, execute, spec
+from replay.cli import main
+from replay.errors import ReplayError
+
+SMALL = """\
+[campaign]
+name = "small"
+runs = 6
+seed = 3
+batch = 3
+alignment = "se3"
+
+[[dataset]]
+id = "sim/auv-sonar"
+tasks = ["sonar"]
+params = { steps = 30 }
+
+[[filter]]
+name = "ekf"
+
+[[filter]]
+name = "ukf"
+grid = { alpha = [0.5, 1.0] }
+
+[[filter]]
+name = "pf"
+params = { n_particles = 60 }
+"""
+
+
+def write(tmp_path, text, name="c.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def board_rows(out):
+    """Leaderboard without the columns that are not results (timing, version)."""
+    with open(Path(out) / "leaderboard.csv") as fh:
+        return [{k: v for k, v in r.items() if k not in ("us_per_step", "version")} for r in csv.DictReader(fh)]
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    d = tmp_path_factory.mktemp("serial")
+    c = spec.load(write(d, SMALL))
+    counts = execute.run(c, d / "out", workers=1, quiet=True)
+    return d / "out", counts
+
+
+def test_campaign_runs_every_unit_then_does_no_work(serial, tmp_path):
+    out, counts = serial
+    assert counts["units"] == 4 * 6 and counts["done"] == 24 and counts["failed"] == 0
+    rows = board_rows(out)
+    assert [r["label"] for r in rows] == ["ekf", "pf", "ukf(alpha=0.5)", "ukf(alpha=1.0)"]
+    assert all(r["runs"] == "6" and r["task"] == "sonar" for r in rows)
+    again = execute.run(spec.load(write(tmp_path, SMALL)), out, workers=1, quiet=True)
+    assert again["units"] == 0 and again["stored_before"] == 24
+    assert board_rows(out) == rows
+
+
+def test_campaign_numbers_equal_replay_eval(serial):
+    """The campaign's (batched) runs give `replay eval`'s (one-by-one) numbers."""
+    from replay.evaluate import evaluate
+
+    out, _ = serial
+    ev = evaluate("sim/auv-sonar", filters=["ekf", "ukf", "pf"], runs=6, seed=3, dataset_params={"steps": 30},
+                  filter_params={"pf": {"n_particles": 60}})
+    rows = {r["label"]: r for r in board.read_dir(out)}
+    for name, label in (("ekf", "ekf"), ("ukf", "ukf(alpha=0.5)"), ("pf", "pf")):
+        res = next(r for r in ev.results if r.name == name)
+        assert rows[label]["pos_rmse"] == pytest.approx(res.summary["pos_rmse"], rel=1e-9)
+        assert rows[label]["yaw_rmse"] == pytest.approx(res.summary["yaw_rmse"], rel=1e-9)
+
+
+def test_interrupted_and_resumed_equals_uninterrupted(serial, tmp_path):
+    out = tmp_path / "out"
+    c = spec.load(write(tmp_path, SMALL))
+    first = execute.run(c, out, workers=1, quiet=True, limit=3)
+    assert first["units"] == 9
+    # debris of a run killed while writing: a temporary file and a table without its record
+    store = board.Store(out)
+    h = next(h for h, _ in store.configs() if 5 not in store.stored_runs(h))
+    (out / "units" / h / ".5.parquet.123.tmp").write_bytes(b"half")
+    (out / "units" / h / "5.parquet").write_bytes(b"half-written")
+    rest = execute.run(c, out, workers=2, quiet=True)  # resumed on a process pool
+    assert rest["units"] == 15 and rest["backend"].startswith("processes")
+    assert board_rows(out) == board_rows(serial[0])
+
+
+def test_killed_subprocess_resumes_to_identical_results(serial, tmp_path):
+    path = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "replay.cli", "campaign", "run", str(path), "-o", str(out), "-w", "1", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(out.glob("units/*/[0-9]*.json"))) < 3:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    stored = len(list(out.glob("units/*/[0-9]*.json")))
+    assert 0 < stored < 24, stored
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert f"{24 - stored} units computed" in res.stdout
+    assert board_rows(out) == board_rows(serial[0])
+
+
+def test_dask_local_cluster_equals_serial(serial, tmp_path):
+    pytest.importorskip("distributed")
+    c = spec.load(write(tmp_path, SMALL))
+    counts = execute.run(c, tmp_path / "out", dask_local=2, quiet=True)
+    assert counts["backend"] == "dask" and counts["done"] == 24
+    assert board_rows(tmp_path / "out") == board_rows(serial[0])
+
+
+def test_unanswering_scheduler_fails_fast_with_one_line(tmp_path):
+    pytest.importorskip("distributed")
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there
+    t0 = time.monotonic()
+    res = CliRunner().invoke(main, ["campaign", "run", str(write(tmp_path, SMALL)), "-o", str(tmp_path / "o"),
+                                    "--scheduler", f"tcp://127.0.0.1:{port}", "-q"])
+    assert res.exit_code == 2, res.output
+    assert time.monotonic() - t0 < 20
+    assert "no answer within 5 s" in res.output and "Traceback" not in res.output
+
+
+def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path):
+    text = SMALL.replace('params = { n_particles = 60 }', 'params = { n_particles = 60, resampling = "nope" }')
+    out = tmp_path / "out"
+    counts = execute.run(spec.load(write(tmp_path, text)), out, workers=1, quiet=True)
+    assert counts["failed"] == 6 and counts["done"] == 18
+    rows = {r["filter"] + r["label"]: r for r in board_rows(out)}
+    assert rows["pfpf"]["failed"] == "6" and rows["pfpf"]["runs"] == "0"
+    assert rows["ekfekf"]["runs"] == "6"
+    recs = [json.loads(p.read_text()) for p in out.glob("units/*/[0-9]*.json")]
+    failed = [r for r in recs if r["status"] == "failed"]
+    assert len(failed) == 6 and all("KeyError" in r["error"] and "nope" in r["error"] for r in failed)
+
+
+@pytest.mark.parametrize("edit,line,needle", [
+    (('id = "sim/auv-sonar"', 'id = "sim/auv-sonnar"'), 9, "unknown dataset"),
+    (('tasks = ["sonar"]', 'tasks = ["sonr"]'), 10, "unknown task 'sonr'"),
+    (('name = "ukf"', 'name = "xkf"'), 17, "unknown filter 'xkf'"),
+    (("grid = { alpha = [0.5, 1.0] }", "grid = { alpa = [0.5, 1.0] }"), 18, "no parameter 'alpa'"),
+    (("grid = { alpha = [0.5, 1.0] }", "grid = { alpha = [] }"), 18, "empty grid"),
+    (("n_particles = 60", 'n_particles = "many"'), 22, "expected int, got str"),
+    (("runs = 6", 'runs = "6"'), 3, "runs: expected int"),
+    (("batch = 3", "bacth = 3"), 5, "bacth: unknown key"),
+])
+def test_bad_campaign_refused_before_work_with_file_and_line(tmp_path, edit, line, needle):
+    path = write(tmp_path, SMALL.replace(*edit))
+    with pytest.raises(ReplayError) as err:
+        spec.load(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}:{line}: ") and needle in msg and "\n" not in msg
+    res = CliRunner().invoke(main, ["campaign", "run", str(path), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2 and not (tmp_path / "o").exists()
+
+
+def test_leaderboard_command_merges_and_sorts(serial, tmp_path):
+    out = serial[0]
+    ev = tmp_path / "ev"
+    res = CliRunner().invoke(main, ["eval", "sim/auv-sonar", "-f", "ckf", "--runs", "2", "-o", str(ev)])
+    assert res.exit_code == 0, res.output
+    merged = tmp_path / "merged.csv"
+    res = CliRunner().invoke(main, ["leaderboard", str(out), str(ev), "--sort", "pos_rmse", "-o", str(merged)])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(open(merged)))
+    assert len(rows) == 5 and {r["filter"] for r in rows} == {"ekf", "ukf", "pf", "ckf"}
+    vals = [float(r["pos_rmse"]) for r in rows]
+    assert vals == sorted(vals)
+    bad = CliRunner().invoke(main, ["leaderboard", str(out), "--sort", "nonsense"])
+    assert bad.exit_code == 2 and "--sort nonsense" in bad.output
+
+
+def test_paired_and_consistency_columns(serial):
+    out = serial[0]
+    rows = {r["label"]: r for r in board_rows(out)}
+    ukf = rows["ukf(alpha=0.5)"]
+    lo, hi = float(ukf["anees_lo"]), float(ukf["anees_hi"])
+    from replay.metrics import chi2_band
+
+    assert (lo, hi) == pytest.approx(chi2_band(3, 6))
+    assert 0 <= float(ukf["anees_inside"]) <= 1 and float(ukf["anis"]) > 0
+    assert rows["pf"]["anis"] == "nan"  # the PF has no innovation covariance
+    paired = list(csv.DictReader(open(out / "paired.csv")))
+    assert len(paired) == 6 * 2 and all(p["n"] == "6" for p in paired)
