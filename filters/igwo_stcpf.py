@@ -129,8 +129,8 @@ class SwarmParticleFilter(CubatureParticleFilter):
         def absolute(Xr):
             return wrap_components(c + Xr, m.x_angles)
 
-        def fitness(Xr):
-            return fit(absolute(Xr))
+        def fitness(Xr):  # h is periodic in angle components: no need to wrap before it
+            return fit(c + Xr)
 
         project = None
         if state.bounds is not None:

@@ -1,0 +1,86 @@
+#!/usr/bin/env python
+"""Speed of the paper-002 filters: IGWO-STCPF per step, and the whole Table 5 reproduction.
+
+    python benchmarks/bench_002.py [--repeat 5] [--table-runs 100] [--skip-table]
+
+1. Time per step of each Table 5 filter (N = 100, T_max = 20, the paper's
+   settings) on ``sim/auv-sonar`` built as the product builds it
+   (``make_frame`` + ``sonar`` task): wall time of ``Filter.run`` over the 100
+   steps divided by 100, best of ``--repeat`` rounds after one warm-up run,
+   garbage collector off. Printed beside the paper's Table 4 (their seconds per
+   step) with the ratio. Target: IGWO-STCPF <= 1 ms per step (paper: 7.7 ms).
+2. Wall time of the Table 5 evaluation (five filters, ``--table-runs`` Monte
+   Carlo runs, exactly the call ``replay reproduce 002`` makes). Target: <= 60 s
+   for 100 runs.
+
+Targets are reported as PASS/MISS, never asserted. The machine's load matters:
+``os.getloadavg()`` is printed with the figures.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import time
+
+import numpy as np
+
+from replay import registry
+from replay.evaluate import evaluate
+from replay.filters import make_filter
+from replay.tasks import make_task
+
+FIVE = ("stckf", "pf", "pso-pf", "pso-cpf", "igwo-stcpf")
+PAPER_TABLE4 = {"stckf": 0.000366, "pf": 0.000634, "pso-pf": 0.009093, "pso-cpf": 0.017261,
+                "igwo-stcpf": 0.007697}  # s per step; PSO-CPF printed "1.007261", total 1.7261 s / 100 steps
+PARAMS = {"pf": {"n_particles": 100}}
+
+
+def per_step(repeat: int) -> dict:
+    frame = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(0))
+    pb = make_task("sonar").build(frame, np.random.default_rng(1))
+    out = {}
+    for name in FIVE:
+        flt = make_filter(name, **PARAMS.get(name, {}))
+        flt.run(pb.model, pb.z, pb.x0, pb.P0, np.random.default_rng(2))  # warm-up
+        best = np.inf
+        gc.disable()
+        try:
+            for r in range(repeat):
+                t0 = time.perf_counter()
+                flt.run(pb.model, pb.z, pb.x0, pb.P0, np.random.default_rng(3 + r))
+                best = min(best, (time.perf_counter() - t0) / len(pb.z))
+        finally:
+            gc.enable()
+        out[name] = best
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--table-runs", type=int, default=100)
+    ap.add_argument("--skip-table", action="store_true")
+    a = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    steps = per_step(a.repeat)
+    print(f"{'filter':12s} {'ours ms/step':>13s} {'paper ms/step':>14s} {'paper/ours':>11s}")
+    for name, s in steps.items():
+        p = PAPER_TABLE4[name]
+        print(f"{name:12s} {s * 1e3:13.3f} {p * 1e3:14.3f} {p / s:11.1f}")
+    s = steps["igwo-stcpf"]
+    print(f"IGWO-STCPF N=100 T_max=20: {s * 1e3:.3f} ms/step, target 1 ms: "
+          f"{'PASS' if s <= 1e-3 else 'MISS'} ({s / 1e-3:.2f} x target)")
+    if a.skip_table:
+        return
+    t0 = time.perf_counter()
+    evaluate("sim/auv-sonar", task="sonar", filters=FIVE, runs=a.table_runs, seed=0, filter_params=PARAMS)
+    wall = time.perf_counter() - t0
+    target = 60.0 * a.table_runs / 100
+    print(f"Table 5, five filters, {a.table_runs} runs: {wall:.1f} s, target {target:.0f} s: "
+          f"{'PASS' if wall <= target else 'MISS'} ({wall / target:.2f} x target); "
+          f"load average now {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
