@@ -154,7 +154,7 @@ def cmd(ev, extra=""):
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False):
     started = time.perf_counter()
     mc = runs or (3 if quick else 100)
-    bohai_runs = min(mc, 2 if quick else 10)
+    bohai_runs = min(mc, 2 if quick else 3)
     first = 200 if quick else 1000
     n_sweep = (50, 100) if quick else (50, 100, 500)
     out = ["# Reproduction of paper 002 (IGWO-STCPF)", "",
