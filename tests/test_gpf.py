@@ -185,3 +185,11 @@ def test_score_reports_speed_as_extra(problem):
     truth_v = problem.truth_extra["speed"][0]
     ok = np.isfinite(est.x[:, 1])
     assert m["speed_rmse"] == pytest.approx(np.sqrt(np.mean((est.x[ok, 1] - truth_v[ok]) ** 2)))
+
+
+def test_reproduction_verdicts():
+    from replay.reproduce.p000 import _verdict
+
+    assert _verdict(np.array([-0.1, -0.12, -0.09, -0.11]))[0] == "confirmed"
+    assert _verdict(np.array([0.1, 0.12, 0.09, 0.11]))[0] == "refuted"
+    assert _verdict(np.array([-0.1, 0.1, -0.05, 0.05]))[0] == "inconclusive"

@@ -1,0 +1,231 @@
+"""``replay reproduce 000``: GPF vs MMPF vs EKF on synthetic lake-trial logs (paper 000).
+
+The paper's lake-trial data are not published, so every run uses a fresh
+``sim/lake-depth`` log (SYNTHETIC: same maneuvering profile, new sensor noise
+from the run's seed) under the ``depth`` task with the paper's parameters:
+T = 0.05 s, N = 1000, N_grey = 100, L = 30, wavelet window 50, db6; Q = the
+fallback diag(0.2^2, 1^2, 0.5^2) (the printed Q is not positive definite);
+EKF and MMPF with R = diag(0.2^2, 5^2, 0.5^2).
+
+Reported per channel (depth, speed, pitch): mean over runs of the per-run
+RMSE with its 95 % interval, the same inside and outside the maneuver
+segments, and paired differences (common random numbers: every filter sees the
+same measurements in a run). The paper's claims are checked:
+
+* "GPF < MMPF < EKF": confirmed when both paired differences are negative with
+  95 % intervals below zero; refuted when an interval lies wholly above zero;
+  otherwise inconclusive;
+* "EKF worst during maneuvers": EKF's maneuver-segment RMSE is the largest of
+  the three (paired intervals), and its maneuver/level ratio the largest.
+
+Ablation: GPF without grey particles (``grey=False``) and without wavelet noise
+estimation (``wavelet=False``, fixed R). The raw sensor's RMSE is given as a
+yardstick. Seeds as in ``replay eval``: (seed, run, 0) data, (seed, run, 1)
+task, (seed, run, 2, crc32(label)) filter.
+"""
+from __future__ import annotations
+
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from replay import registry, score
+from replay.evaluate import filter_stream, rng_for
+from replay.filters import make_filter
+from replay.tasks.depth import DepthTask
+
+VARIANTS = {  # label -> (filter, params)
+    "GPF": ("gpf", {}),
+    "MMPF": ("mmpf", {}),
+    "EKF": ("ekf", {}),
+    "GPF without grey particles": ("gpf", {"grey": False}),
+    "GPF without wavelet noise": ("gpf", {"wavelet": False}),
+}
+MAIN = ("GPF", "MMPF", "EKF")
+CHANNELS = (("depth", 0, "m"), ("speed", 1, "m/s"), ("pitch", 2, "rad"))
+DATASET = "sim/lake-depth"
+
+
+def one_run(args):
+    """Errors (n, 3) of every variant and of the raw sensor for one Monte Carlo run."""
+    seed, run = args
+    frame = registry.load_frame(DATASET, rng=rng_for(seed, run, 0))
+    problem = DepthTask().build(frame, rng_for(seed, run, 1))
+    truth = np.column_stack([frame.reference[c].values for c, _, _ in CHANNELS])
+    out = {"sensor": (problem.z - truth, np.nan)}
+    for label, (name, params) in VARIANTS.items():
+        est = make_filter(name, **params).run(problem.model, problem.z, problem.x0, problem.P0,
+                                               rng_for(seed, run, 2, filter_stream(label)))
+        e = est.x - truth
+        e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        out[label] = (e, est.us_per_step)
+    return out, frame.t, frame.meta["maneuvers"]
+
+
+def _mean_ci(values):
+    v = np.asarray(values, float)
+    return float(np.nanmean(v)), score.ci95(v)
+
+
+def _rmse(e, sel):
+    return np.sqrt(np.nanmean(e[sel] ** 2, axis=0))
+
+
+def run(runs=None, seed=0, data_dir=None, doc=None, quick=False):
+    runs = runs or (4 if quick else 100)
+    doc = Path(doc) if doc else Path("docs/reproduction/000.md")
+    t0 = time.perf_counter()
+    workers = max(1, min(int(os.environ.get("REPLAY_WORKERS", 2)), runs))
+    jobs = [(seed, r) for r in range(runs)]
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            results = list(pool.map(one_run, jobs))
+    else:
+        results = [one_run(j) for j in jobs]
+    t, segments = results[0][1], results[0][2]
+    man = np.zeros(len(t), bool)
+    for a, b, _ in segments:
+        man |= (t >= a) & (t < b)
+    labels = ["sensor", *VARIANTS]
+    per = {lab: {"all": [], "man": [], "level": [], "us": []} for lab in labels}
+    curves = {lab: [] for lab in labels}
+    for res, _, _ in results:
+        for lab in labels:
+            e, us = res[lab]
+            per[lab]["all"].append(_rmse(e, slice(None)))
+            per[lab]["man"].append(_rmse(e, man))
+            per[lab]["level"].append(_rmse(e, ~man))
+            per[lab]["us"].append(us)
+            curves[lab].append(e)
+    for lab in labels:
+        for k in ("all", "man", "level"):
+            per[lab][k] = np.array(per[lab][k])  # (runs, 3)
+    elapsed = time.perf_counter() - t0
+    png = doc.with_name(doc.stem + "_rmse.png")
+    doc.parent.mkdir(parents=True, exist_ok=True)
+    _plot(png, t, curves, segments)
+    text = _report(per, runs, seed, segments, elapsed, png.name)
+    doc.write_text(text)
+    print(text)
+    print(f"wrote {doc} and {png}")
+    return per
+
+
+def _verdict(diff):
+    """Claim 'a < b' from paired per-run differences a - b."""
+    m, c = _mean_ci(diff)
+    if m + c < 0:
+        return "confirmed", m, c
+    if m - c > 0:
+        return "refuted", m, c
+    return "inconclusive", m, c
+
+
+def _report(per, runs, seed, segments, elapsed, png):
+    L = ["# Paper 000 — grey particle filter (GPF) for maneuvering-AUV depth: reproduction", "",
+         "Generated by `replay reproduce 000"
+         + (f" --runs {runs}" if runs != 100 else "") + (f" --seed {seed}" if seed else "") + "`"
+         f" ({runs} Monte Carlo runs, {elapsed:.0f} s). **Data: SYNTHETIC** lake-trial logs from "
+         "`sim/lake-depth` (the paper's lake trial is not published): one fixed maneuvering profile, "
+         "new sensor noise every run, noise std changing over time (regimes ×1, ×3, ×0.5, ×2 over the "
+         "quarters of the run, times a slow drift 1 → 1.5); the true trajectory is the external reference.",
+         "", "Parameters as printed (§3): T = 0.05 s, N = 1000, N_grey = 100, grey window L = 30, wavelet "
+         "window 50, M = 5, db6; EKF and MMPF with R = diag(0.2², 5², 0.5²). **Q**: the printed matrix "
+         "[[0.2², 0.8², 0.6²], [0.8², 1², 0], [0.6², 0, 0.5²]] is not positive definite (determinant "
+         "−0.22), so Q = diag(0.2², 1², 0.5²) is used, as the digest prescribes. The printed numbers are "
+         "read in SI units (m, m/s, rad); the paper does not state them (0.5 rad of pitch noise per "
+         "0.05 s step is very large; a degree reading would be more plausible). MMPF: three modes "
+         "(steady, pitch rate ±10°/s), stay probability 0.95 (`filters/mmpf.py`).", "",
+         "Maneuver segments (non-zero pitch command, +1.5 s settling): "
+         + ", ".join(f"{a:g}–{b:g} s {lab}" for a, b, lab in segments) + ".", "",
+         "## RMSE, mean over runs (± 95 % interval)", "",
+         "| filter | depth (m) | speed (m/s) | pitch (rad) | µs/step |", "|---|---|---|---|---|"]
+    for lab in ["sensor", *VARIANTS]:
+        cells = []
+        for j in range(3):
+            m, c = _mean_ci(per[lab]["all"][:, j])
+            cells.append(f"{m:.4f} ± {c:.4f}")
+        us = np.nanmedian(per[lab]["us"]) if lab != "sensor" else float("nan")
+        name = "raw sensor (yardstick)" if lab == "sensor" else lab
+        L.append(f"| {name} | " + " | ".join(cells) + f" | {'' if lab == 'sensor' else f'{us:.0f}'} |")
+    L += ["", "## During maneuvers and level runs", "",
+          "| filter | depth man. | depth level | speed man. | speed level | pitch man. | pitch level |",
+          "|---|---|---|---|---|---|---|"]
+    for lab in ["sensor", *MAIN]:
+        cells = []
+        for j in range(3):
+            for k in ("man", "level"):
+                m, c = _mean_ci(per[lab][k][:, j])
+                cells.append(f"{m:.4f} ± {c:.4f}")
+        L.append(f"| {lab} | " + " | ".join(cells) + " |")
+    L += ["", "## The paper's claims, per channel", "",
+          "Paired differences of per-run RMSE (mean ± 95 % interval).", "",
+          "| channel | GPF − MMPF | GPF < MMPF | MMPF − EKF | MMPF < EKF | GPF < MMPF < EKF | "
+          "EKF worst in maneuvers | EKF degrades most (man./level) |", "|---|---|---|---|---|---|---|---|"]
+    for j, (ch, _, unit) in enumerate(CHANNELS):
+        v1, m1, c1 = _verdict(per["GPF"]["all"][:, j] - per["MMPF"]["all"][:, j])
+        v2, m2, c2 = _verdict(per["MMPF"]["all"][:, j] - per["EKF"]["all"][:, j])
+        both = "confirmed" if v1 == v2 == "confirmed" else (
+            "refuted" if "refuted" in (v1, v2) else "inconclusive")
+        worst = [_verdict(per[o]["man"][:, j] - per["EKF"]["man"][:, j])[0] for o in ("GPF", "MMPF")]
+        ekf_worst = "confirmed" if worst == ["confirmed"] * 2 else (
+            "refuted" if "refuted" in worst else "inconclusive")
+        ratio = {lab: np.nanmean(per[lab]["man"][:, j]) / np.nanmean(per[lab]["level"][:, j]) for lab in MAIN}
+        degr = "yes" if max(ratio, key=ratio.get) == "EKF" else "no"
+        rtxt = ", ".join(f"{k} {v:.2f}" for k, v in ratio.items())
+        L.append(f"| {ch} ({unit}) | {m1:+.4f} ± {c1:.4f} | {v1} | {m2:+.4f} ± {c2:.4f} | {v2} | **{both}** | "
+                 f"{ekf_worst} | {degr} ({rtxt}) |")
+    L += ["", "## Ablation: which part of GPF does the work", "",
+          "| variant | depth | speed | pitch |", "|---|---|---|---|"]
+    for lab in ("GPF", "GPF without grey particles", "GPF without wavelet noise"):
+        cells = []
+        for j in range(3):
+            d = per[lab]["all"][:, j] - per["GPF"]["all"][:, j]
+            m, c = _mean_ci(d)
+            base = np.nanmean(per[lab]["all"][:, j])
+            cells.append(f"{base:.4f}" + ("" if lab == "GPF" else f" (vs GPF {m:+.4f} ± {c:.4f})"))
+        L.append(f"| {lab} | " + " | ".join(cells) + " |")
+    L += ["", f"![RMSE across runs at each time step, maneuvers shaded]({png})", "",
+          "## Reading", "",
+          "The verdicts above are computed, not written by hand; see the tables. What drives them: with the "
+          "paper's Q (speed random walk of 1 m/s and pitch of 0.5 rad per 0.05 s step) every particle filter "
+          "spreads its particles far wider than the sensor noise, so after weighting the PFs track the "
+          "measurements about as closely as the likelihood width lets them (GPF: the wavelet-estimated, "
+          "small sensor noise; MMPF: the fixed R). The EKF, with the large fixed R, averages over many "
+          "samples, which on this smooth trajectory beats following the measurements. Whether the paper's "
+          "ordering would appear with its real lake-trial data (and its unstated units) cannot be checked.",
+          "", "Reproduce: `replay reproduce 000` (100 runs; `--quick` for a 4-run smoke check; "
+          "`REPLAY_WORKERS` sets the worker processes, default 2).", ""]
+    return "\n".join(L)
+
+
+def _plot(path, t, curves, segments):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    styles = {"GPF": "C0-", "MMPF": "C1-", "EKF": "C2-", "GPF without grey particles": "C0:",
+              "GPF without wavelet noise": "C0--", "sensor": "k-"}
+    for j, (ch, _, unit) in enumerate(CHANNELS):
+        ax = axes[j]
+        for a, b, _ in segments:
+            ax.axvspan(a, b, color="0.9")
+        for lab, style in styles.items():
+            e = np.stack(curves[lab])[:, :, j]
+            with np.errstate(invalid="ignore"):
+                r = np.sqrt(np.nanmean(e**2, axis=0))
+            ax.plot(t, r, style, lw=0.8 if lab == "sensor" else 1.2, alpha=0.5 if lab == "sensor" else 1,
+                    label="raw sensor" if lab == "sensor" else lab)
+        ax.set_ylabel(f"{ch} RMSE ({unit})")
+        ax.set_yscale("log")
+    axes[0].legend(fontsize=7, ncol=3)
+    axes[-1].set_xlabel("time (s); grey: maneuver segments")
+    fig.suptitle("Paper 000 on synthetic lake-trial logs: RMSE across Monte Carlo runs")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
