@@ -91,11 +91,12 @@ def recording_kind(path: Path) -> str:
     raise DataError(path, f"not a bag or MCAP file (extension {suffix or '(none)'!r})")
 
 
-def read(path, topics=None, until: float | None = None) -> Recording:
+def read(path, topics=None, until: float | None = None, first_only: bool = False) -> Recording:
     """Open a recording; deserialize the messages of ``topics`` (all when None, none when []).
 
     ``topics`` may also be a function ``{topic: (type, count)} -> list of topics``,
     called once the topics are known (ROS bags; for MCAP after the single pass).
+    ``first_only`` deserializes only the first message of each topic (log times of all).
     """
     path = Path(path).expanduser()
     if not path.exists():
@@ -104,11 +105,11 @@ def read(path, topics=None, until: float | None = None) -> Recording:
     if kind == "ros2" and path.is_file():
         path = path.parent
     if kind == "mcap":
-        return _read_mcap(path, topics, until)
-    return _read_rosbags(path, kind, topics, until)
+        return _read_mcap(path, topics, until, first_only)
+    return _read_rosbags(path, kind, topics, until, first_only)
 
 
-def _read_rosbags(path: Path, kind: str, topics, until) -> Recording:
+def _read_rosbags(path: Path, kind: str, topics, until, first_only=False) -> Recording:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
@@ -138,10 +139,10 @@ def _read_rosbags(path: Path, kind: str, topics, until) -> Recording:
                     current = conn.topic
                     if limit is not None and log_ns > limit:
                         break
-                    msg = reader.deserialize(raw, conn.msgtype)
                     topic = rec.topics[conn.topic]
                     topic.log_ns.append(log_ns)
-                    topic.msgs.append(msg)
+                    if not (first_only and topic.msgs):
+                        topic.msgs.append(reader.deserialize(raw, conn.msgtype))
                     rec.read_messages += 1
         except Exception as e:  # noqa: BLE001
             rec.truncated = f"reading stopped on topic {current or '?'}: {_reason(e)}"
@@ -160,7 +161,7 @@ def _reason(e: Exception) -> str:
 
 # ---------------------------------------------------------------- MCAP
 
-def _read_mcap(path: Path, topics, until) -> Recording:
+def _read_mcap(path: Path, topics, until, first_only=False) -> Recording:
     """Stream every record (so a truncated file yields what precedes the damage)."""
     from mcap.stream_reader import StreamReader
     from mcap.records import Channel as McChannel, Message, Schema
@@ -192,6 +193,8 @@ def _read_mcap(path: Path, topics, until) -> Recording:
     except Exception as e:  # noqa: BLE001 - truncated / corrupted stream
         where = f" after topic {current}" if current else ""
         rec.truncated = f"reading stopped{where}: {_reason(e)}"
+    if not channels and rec.truncated:
+        raise DataError(path, f"truncated or corrupted, no channel could be read ({rec.truncated})")
     if any(s.encoding == "ros2msg" for s in schemas.values()) or any(
             c.message_encoding == "cdr" for c in channels.values()):
         rec.format = "mcap-ros2"
@@ -207,6 +210,9 @@ def _read_mcap(path: Path, topics, until) -> Recording:
         if cid not in decoders:
             decoders[cid] = _decoder(path, schemas.get(ch.schema_id), ch)
         topic = rec.topics[ch.topic]
+        if first_only and topic.msgs:
+            topic.log_ns.append(log_ns)
+            continue
         try:
             msg = decoders[cid](data)
         except Exception as e:  # noqa: BLE001
@@ -215,8 +221,6 @@ def _read_mcap(path: Path, topics, until) -> Recording:
         topic.log_ns.append(log_ns)
         topic.msgs.append(msg)
         rec.read_messages += 1
-    if not channels and rec.truncated:
-        raise DataError(path, f"cannot open ({rec.truncated}); no message could be read")
     return rec
 
 
@@ -420,7 +424,7 @@ def _check_topics(rec: Recording, mp: Mapping) -> None:
 
 def _stamps(rec: Recording, topic: Topic, time: str) -> tuple[np.ndarray, np.ndarray]:
     log = np.asarray(topic.log_ns, np.int64)
-    header = np.array([rosmsg.stamp_ns(m) for m in topic.msgs], np.int64) if time == "header" else log
+    header = np.array([rosmsg.stamp_ns(m) for m in topic.msgs], np.int64)
     use = header if time == "header" else log
     bad = np.flatnonzero(np.diff(use) <= 0)
     if len(bad):
@@ -520,7 +524,7 @@ def _sha256(path: Path) -> str:
 
 def inspect(path) -> dict:
     """Topics (type, count, rate, span by log time), the recording span and a proposed mapping."""
-    rec = read(path, None)
+    rec = read(path, None, first_only=True)
     rows = []
     for t in rec.topics.values():
         log = np.asarray(t.log_ns, np.int64)
