@@ -164,11 +164,10 @@ def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     cid = out.proto_channel(f"{prefix}/pose", PoseInFrame)
     msg = PoseInFrame(frame_id=FRAME_ID)
     p, q, ts = msg.pose.position, msg.pose.orientation, msg.timestamp
-    for i in idx:
-        t = int(ns[i])
+    for t, pi, qi in zip(ns[idx].tolist(), pos3[idx].tolist(), quat[idx].tolist()):
         ts.seconds, ts.nanos = divmod(t, 1_000_000_000)
-        p.x, p.y, p.z = pos3[i]
-        q.x, q.y, q.z, q.w = quat[i]
+        p.x, p.y, p.z = pi
+        q.x, q.y, q.z, q.w = qi
         out.add(cid, t, msg.SerializeToString())
     path = PosesInFrame(frame_id=FRAME_ID)
     path.timestamp.seconds, path.timestamp.nanos = divmod(int(ns[idx[0]]), 1_000_000_000)
@@ -183,10 +182,10 @@ def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
         lat, lon, alt = enu_to_geodetic(pos3[idx], geo_meta)
         cid = out.proto_channel(f"{prefix}/fix", LocationFix)
         fix = LocationFix(frame_id=FRAME_ID)
-        for j, i in enumerate(idx):
-            t = int(ns[i])
-            fix.timestamp.seconds, fix.timestamp.nanos = divmod(t, 1_000_000_000)
-            fix.latitude, fix.longitude, fix.altitude = lat[j], lon[j], alt[j]
+        ts = fix.timestamp
+        for t, la, lo, al in zip(ns[idx].tolist(), lat.tolist(), lon.tolist(), alt.tolist()):
+            ts.seconds, ts.nanos = divmod(t, 1_000_000_000)
+            fix.latitude, fix.longitude, fix.altitude = la, lo, al
             out.add(cid, t, fix.SerializeToString())
 
 
@@ -195,15 +194,12 @@ def _write_values(out: McapOut, topic, ns, values, ok, names) -> None:
     if not len(idx):
         return
     cid = out.json_channel(topic, names)
-    v = values.reshape(len(values), -1)
-    keys = [json.dumps(n) for n in names]
-    for i in idx:
-        body = ",".join(f"{k}:{_num(x)}" for k, x in zip(keys, v[i]))
-        out.add(cid, int(ns[i]), ("{" + body + "}").encode())
-
-
-def _num(x) -> str:
-    return repr(float(x)) if np.isfinite(x) else "null"
+    v = values.reshape(len(values), -1)[idx]
+    keys = [json.dumps(n) + ":" for n in names]
+    text = [[k + (repr(x) if x == x and abs(x) != float("inf") else "null") for k, x in zip(keys, row)]
+            for row in v.tolist()]
+    for t, row in zip(ns[idx].tolist(), text):
+        out.add(cid, t, ("{" + ",".join(row) + "}").encode())
 
 
 def _heading_index(problem):
