@@ -204,3 +204,12 @@ def test_paired_and_consistency_columns(serial):
     assert rows["pf"]["anis"] == "nan"  # the PF has no innovation covariance
     paired = list(csv.DictReader(open(out / "paired.csv")))
     assert len(paired) == 6 * 2 and all(p["n"] == "6" for p in paired)
+
+
+def test_extended_campaign_computes_only_the_new_filters(serial, tmp_path):
+    only_ekf = SMALL.split("[[filter]]")[0] + '[[filter]]\nname = "ekf"\n'
+    out = tmp_path / "out"
+    assert execute.run(spec.load(write(tmp_path, only_ekf, "a.toml")), out, workers=1, quiet=True)["units"] == 6
+    more = execute.run(spec.load(write(tmp_path, SMALL, "b.toml")), out, workers=1, quiet=True)
+    assert more["units"] == 18 and more["stored_before"] == 6
+    assert board_rows(out) == board_rows(serial[0])
