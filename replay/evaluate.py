@@ -57,6 +57,7 @@ class Evaluation:
     results: list[FilterResult]
     t: np.ndarray
     truths: list = field(default_factory=list)  # per-run truth positions
+    axis_names: tuple = ("x", "y", "z")  # names of the scored position axes
 
 
 def config_hash(config: dict) -> str:
@@ -104,7 +105,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "dataset_sha256": frame.meta.get("sha256"), "replay_version": replay.__version__,
     }
     config["config_hash"] = config_hash(config)
-    return Evaluation(config, _jsonable(frame.meta), frame.report.to_list(), results, frame.t, truths)
+    return Evaluation(config, _jsonable(frame.meta), frame.report.to_list(), results, frame.t, truths,
+                      tuple(problem.axis_names))
 
 
 def resolve(dataset: str):
@@ -144,6 +146,8 @@ def command_line(config: dict) -> str:
         parts += ["--first", str(config["first"])]
     if config.get("adapter"):
         parts += ["--adapter", config["adapter"]]
+    if (config.get("dataset_params") or {}).get("mapping"):
+        parts += ["--mapping", str(config["dataset_params"]["mapping"])]
     return " ".join(parts)
 
 

@@ -101,7 +101,7 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
     for r in ev.results:
         nx = r.estimates[0].x.shape[1]
         head = ["run", "k", "t"] + [f"x{i}" for i in range(nx)] + [f"P{i}{i}" for i in range(nx)]
-        head += ["err_x", "err_y", "err_z"]
+        head += [f"err_{axis}" for axis in ev.axis_names]
         with gzip.open(est_dir / f"{r.name}.csv.gz", "wt", newline="") as fh:
             fh.write(",".join(head) + "\n")
             for run, (est, err) in enumerate(zip(r.estimates, r.errors)):
