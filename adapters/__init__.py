@@ -6,8 +6,6 @@ and records in ``frame.report`` every sample or channel it dropped, flagged,
 masked or repaired. ``ADAPTERS`` maps the adapter names used in dataset
 manifests (``datasets/*.toml``) to ``"module:function"``.
 """
-from importlib import import_module
-
 ADAPTERS = {
     "bohai-csv": "replay.adapters.bohai:load",
     "lake": "replay.adapters.lake:load",
@@ -17,11 +15,6 @@ ADAPTERS = {
 
 def get_adapter(name: str):
     """The loader function registered under ``name``."""
-    from replay.errors import ReplayError
+    from replay.lookup import resolve
 
-    try:
-        target = ADAPTERS[name]
-    except KeyError:
-        raise ReplayError(f"unknown adapter {name!r} (known: {', '.join(sorted(ADAPTERS))})") from None
-    module, func = target.split(":")
-    return getattr(import_module(module), func)
+    return resolve(ADAPTERS, name, "adapter")

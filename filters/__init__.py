@@ -3,8 +3,6 @@
 Every filter runs on the model protocol of :mod:`replay.model` and knows
 nothing of files, datasets or the CLI.
 """
-from importlib import import_module
-
 FILTERS = {
     "kf": "replay.filters.kalman:KalmanFilter",
     "ekf": "replay.filters.kalman:EKF",
@@ -27,13 +25,6 @@ FILTERS = {
 
 def make_filter(name: str, **params):
     """Instantiate the filter registered as ``name`` with ``params``."""
-    from replay.errors import ReplayError
+    from replay.lookup import instantiate
 
-    try:
-        module, cls = FILTERS[name].split(":")
-    except KeyError:
-        raise ReplayError(f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})") from None
-    try:
-        return getattr(import_module(module), cls)(**params)
-    except TypeError as err:
-        raise ReplayError(f"filter {name!r}: {err}") from None
+    return instantiate(FILTERS, name, "filter", **params)

@@ -7,7 +7,6 @@ only — the truth. ``TASKS`` maps task names to "module:Class".
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from importlib import import_module
 
 import numpy as np
 
@@ -52,16 +51,10 @@ class Task:
 
 
 def make_task(name: str, **params) -> Task:
-    from replay.errors import ReplayError
+    """Instantiate the task registered as ``name`` with ``params``."""
+    from replay.lookup import instantiate
 
-    try:
-        module, cls = TASKS[name].split(":")
-    except KeyError:
-        raise ReplayError(f"unknown task {name!r} (known: {', '.join(sorted(TASKS))})") from None
-    try:
-        return getattr(import_module(module), cls)(**params)
-    except TypeError as err:
-        raise ReplayError(f"task {name!r}: {err}") from None
+    return instantiate(TASKS, name, "task", **params)
 
 
 def reference_position_3d(frame, z0: float | None = None):

@@ -1,0 +1,25 @@
+"""Named plugins: the registries of filters, tasks, adapters and reproductions map
+a name to ``"module:attribute"``; modules are imported only when used."""
+from __future__ import annotations
+
+from importlib import import_module
+
+from replay.errors import ReplayError
+
+
+def resolve(table: dict, name: str, kind: str):
+    """The object registered as ``name`` in ``table``; unknown names -> one-line ReplayError."""
+    try:
+        module, attr = table[name].split(":")
+    except KeyError:
+        raise ReplayError(f"unknown {kind} {name!r} (known: {', '.join(sorted(table))})") from None
+    return getattr(import_module(module), attr)
+
+
+def instantiate(table: dict, name: str, kind: str, **params):
+    """``resolve(...)(**params)``; a wrong parameter name -> one-line ReplayError."""
+    cls = resolve(table, name, kind)
+    try:
+        return cls(**params)
+    except TypeError as err:
+        raise ReplayError(f"{kind} {name!r}: {err}") from None
