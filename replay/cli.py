@@ -143,6 +143,32 @@ def reproduce_cmd(paper, runs, seed, data_dir, doc, quick):
     run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick)
 
 
+@main.command("list")
+@click.argument("what", type=click.Choice(["filters", "tasks", "adapters", "reproductions"]))
+def list_cmd(what):
+    """List the registered filters, tasks, adapters or paper reproductions, with their parameters."""
+    import inspect
+
+    from replay.adapters import ADAPTERS
+    from replay.filters import FILTERS
+    from replay.lookup import resolve
+    from replay.reproduce import REPRODUCTIONS
+    from replay.tasks import TASKS
+
+    table = {"filters": FILTERS, "tasks": TASKS, "adapters": ADAPTERS, "reproductions": REPRODUCTIONS}[what]
+    for name in sorted(table):
+        obj = resolve(table, name, what[:-1])
+        doc = inspect.getdoc(obj) if obj.__doc__ else inspect.getdoc(sys.modules[obj.__module__])
+        doc = (doc or "").split("\n")[0]
+        click.echo(f"{name:14s} {doc}")
+        if inspect.isclass(obj):
+            sig = inspect.signature(obj.__init__)
+            args = [f"{p.name}={p.default!r}" for p in sig.parameters.values()
+                    if p.name != "self" and p.default is not inspect.Parameter.empty]
+            if args:
+                click.echo(f"{'':14s} parameters: {', '.join(args)}")
+
+
 def _register_optional():
     from replay.cli_datasets import datasets
 

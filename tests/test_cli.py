@@ -115,3 +115,13 @@ def test_bad_csv_via_cli(tmp_path, content, expected):
     assert res.returncode == 2 and "Traceback" not in res.stderr
     lines = [line for line in res.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "bad.csv" in lines[0] and expected in lines[0].lower()
+
+
+def test_list_filters_shows_every_registered_filter_with_parameters():
+    from replay.filters import FILTERS
+
+    res = CliRunner().invoke(main, ["list", "filters"])
+    assert res.exit_code == 0, res.output
+    names = {line.split()[0] for line in res.output.splitlines() if not line.startswith(" ")}
+    assert names == set(FILTERS)
+    assert "n_particles=1000" in res.output
