@@ -18,6 +18,9 @@ publish time = the sample's time, ``meta["t0_ns"]`` or ``epoch`` + ``t``):
 | ``/sensors/<channel>`` | JSON ``{<component>: value}`` | every sensor channel of the frame at its valid samples |
 
 Frame id of poses and paths: ``"enu"`` (the local east-north-up frame).
+
+Each channel is encoded at once (``replay.pb_columns`` for protobuf, ``json_rows``
+for JSON) and written by ``replay.mcap_bulk.BulkWriter`` (time-ordered zstd chunks).
 """
 from __future__ import annotations
 
@@ -99,14 +102,12 @@ def file_descriptor_set(message_class) -> bytes:
 
 
 class McapOut:
-    """A thin layer over ``mcap.writer.Writer``: protobuf and JSON channels by topic."""
+    """Protobuf and JSON channels by topic over ``replay.mcap_bulk.BulkWriter`` (whole channels at once)."""
 
-    def __init__(self, path):
-        from mcap.writer import CompressionType, Writer
+    def __init__(self, path, compression: str = "zstd"):
+        from replay.mcap_bulk import BulkWriter
 
-        self.fh = open(path, "wb")
-        self.w = Writer(self.fh, compression=CompressionType.ZSTD)
-        self.w.start(profile="", library="replay")
+        self.w = BulkWriter(path, compression=compression)
         self.schemas, self.channels, self.count = {}, {}, 0
 
     def proto_channel(self, topic, message_class) -> int:
@@ -128,13 +129,12 @@ class McapOut:
         self.channels[topic] = self.w.register_channel(topic, encoding, schema_id)
         return self.channels[topic]
 
-    def add(self, channel_id, t_ns: int, data: bytes) -> None:
-        self.w.add_message(channel_id, log_time=t_ns, data=data, publish_time=t_ns)
-        self.count += 1
+    def add_many(self, channel_id, t_ns, data) -> None:
+        """Messages of one channel: times (ns) and payloads (list of bytes or ``Rows.flat()``)."""
+        self.count += self.w.add_messages(channel_id, t_ns, data)
 
     def close(self):
         self.w.finish()
-        self.fh.close()
 
 
 # ---------------------------------------------------------------- writing
@@ -151,42 +151,65 @@ def _quat_yaw(yaw):
     return np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)])
 
 
+def _stamp(ns) -> dict:
+    sec, nanos = np.divmod(np.asarray(ns, np.int64), 1_000_000_000)
+    return {"timestamp.seconds": sec, "timestamp.nanos": nanos}
+
+
+def _pose_fields(pos3, quat, prefix="") -> dict:
+    f = {f"{prefix}position.{a}": pos3[:, i] for i, a in enumerate("xyz")}
+    f.update({f"{prefix}orientation.{a}": quat[:, i] for i, a in enumerate("xyzw")})
+    return f
+
+
 def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+    from foxglove_schemas_protobuf.Pose_pb2 import Pose
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
     from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
+
+    from replay.pb_columns import embed, encode
 
     idx = np.flatnonzero(ok)
     if not len(idx):
         return
+    n, t = len(idx), ns[idx]
     pos3 = pos if pos.shape[1] == 3 else np.column_stack([pos, np.zeros(len(pos))])
-    quat = _quat_yaw(np.where(np.isfinite(yaw), yaw, 0.0))
-    cid = out.proto_channel(f"{prefix}/pose", PoseInFrame)
-    msg = PoseInFrame(frame_id=FRAME_ID)
-    p, q, ts = msg.pose.position, msg.pose.orientation, msg.timestamp
-    for t, pi, qi in zip(ns[idx].tolist(), pos3[idx].tolist(), quat[idx].tolist()):
-        ts.seconds, ts.nanos = divmod(t, 1_000_000_000)
-        p.x, p.y, p.z = pi
-        q.x, q.y, q.z, q.w = qi
-        out.add(cid, t, msg.SerializeToString())
-    path = PosesInFrame(frame_id=FRAME_ID)
-    path.timestamp.seconds, path.timestamp.nanos = divmod(int(ns[idx[0]]), 1_000_000_000)
-    for i in idx:
-        pose = path.poses.add()
-        pose.position.x, pose.position.y, pose.position.z = pos3[i]
-        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = quat[i]
-    out.add(out.proto_channel(f"{prefix}/path", PosesInFrame), int(ns[idx[0]]), path.SerializeToString())
+    pos3 = pos3[idx]
+    quat = _quat_yaw(np.where(np.isfinite(yaw), yaw, 0.0))[idx]
+    poses = encode(PoseInFrame, {**_stamp(t), "frame_id": FRAME_ID, **_pose_fields(pos3, quat, "pose.")}, n)
+    out.add_many(out.proto_channel(f"{prefix}/pose", PoseInFrame), t, poses.flat())
+    # the whole path: one PosesInFrame whose repeated `poses` field is every pose in turn
+    head = encode(PosesInFrame, {**_stamp(t[:1]), "frame_id": FRAME_ID}, 1).flat()[0]
+    items = encode(Pose, _pose_fields(pos3, quat), n)
+    number = PosesInFrame.DESCRIPTOR.fields_by_name["poses"].number
+    body = type(items)(n, embed(number, items)).flat()[0]
+    path = np.concatenate([head, body])
+    out.add_many(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], (path, [len(path)]))
     if geo_meta:
         from replay.adapters.bags import enu_to_geodetic
 
-        lat, lon, alt = enu_to_geodetic(pos3[idx], geo_meta)
-        cid = out.proto_channel(f"{prefix}/fix", LocationFix)
-        fix = LocationFix(frame_id=FRAME_ID)
-        ts = fix.timestamp
-        for t, la, lo, al in zip(ns[idx].tolist(), lat.tolist(), lon.tolist(), alt.tolist()):
-            ts.seconds, ts.nanos = divmod(t, 1_000_000_000)
-            fix.latitude, fix.longitude, fix.altitude = la, lo, al
-            out.add(cid, t, fix.SerializeToString())
+        lat, lon, alt = enu_to_geodetic(pos3, geo_meta)
+        fixes = encode(LocationFix, {**_stamp(t), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon,
+                                     "altitude": alt}, n)
+        out.add_many(out.proto_channel(f"{prefix}/fix", LocationFix), t, fixes.flat())
+
+
+def json_rows(values, names) -> list[bytes]:
+    """One JSON object ``{name: value}`` per row; exact floats (repr), non-finite values as null."""
+    values = np.asarray(values, float)
+    fmt = "{" + ",".join(json.dumps(n).replace("%", "%%") + ":%r" for n in names) + "}"
+    finite = np.isfinite(values).all(axis=1)
+    good = values[finite]
+    text = ("\n".join([fmt] * len(good)) % tuple(good.ravel().tolist())).encode().split(b"\n") if len(good) else []
+    if finite.all():
+        return text
+    rows, it = [], iter(text)
+    keys = [json.dumps(n) + ":" for n in names]
+    for ok_row, row in zip(finite.tolist(), values.tolist()):
+        rows.append(next(it) if ok_row else ("{" + ",".join(
+            k + (repr(x) if np.isfinite(x) else "null") for k, x in zip(keys, row)) + "}").encode())
+    return rows
 
 
 def _write_values(out: McapOut, topic, ns, values, ok, names) -> None:
@@ -194,12 +217,7 @@ def _write_values(out: McapOut, topic, ns, values, ok, names) -> None:
     if not len(idx):
         return
     cid = out.json_channel(topic, names)
-    v = values.reshape(len(values), -1)[idx]
-    keys = [json.dumps(n) + ":" for n in names]
-    text = [[k + (repr(x) if x == x and abs(x) != float("inf") else "null") for k, x in zip(keys, row)]
-            for row in v.tolist()]
-    for t, row in zip(ns[idx].tolist(), text):
-        out.add(cid, t, ("{" + ",".join(row) + "}").encode())
+    out.add_many(cid, ns[idx], json_rows(values.reshape(len(values), -1)[idx], names))
 
 
 def _heading_index(problem):
