@@ -35,6 +35,7 @@ from .progress import Progress
 from .spec import Campaign
 from .store import Store
 from .units import Job, config_hash, execute_job
+from .workers import init_worker
 
 
 def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
@@ -64,7 +65,8 @@ def _processes(workers: int):
 
     # fork (Linux) starts workers with everything imported; spawn elsewhere
     method = "fork" if "fork" in mp.get_all_start_methods() and sys.platform == "linux" else "spawn"
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method),
+                               initializer=init_worker, initargs=(os.getpid(),))  # die with this process
 
     def run(jobs):
         futures = {pool.submit(execute_job, job): job for job in jobs}

@@ -1,0 +1,96 @@
+"""Local pool workers end when `replay campaign run` is killed with SIGKILL."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+LONG = """\
+[campaign]
+runs = 400
+batch = 1
+[[dataset]]
+id = "sim/auv-sonar"
+[[filter]]
+name = "pf"
+params = { n_particles = 3000 }
+"""
+
+
+def children(pid: int) -> list[int]:
+    """Live (not zombie) processes whose parent is ``pid``, from /proc."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            state, ppid = stat.rsplit(")", 1)[1].split()[:2]
+            if int(ppid) == pid and state != "Z":
+                out.append(int(d.name))
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc to find the workers")
+def test_workers_exit_when_campaign_is_killed(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(LONG)
+    cmd = [sys.executable, "-m", "replay.cli", "campaign", "run", str(path), "-o", str(tmp_path / "out"),
+           "-w", "2", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline, workers = time.monotonic() + 60, []
+        while time.monotonic() < deadline and len(workers) < 2:
+            assert proc.poll() is None, "the campaign ended before its workers started"
+            time.sleep(0.1)
+            workers = children(proc.pid)
+        assert len(workers) >= 2, workers
+        time.sleep(0.5)  # the workers are computing units
+        assert all(alive(w) for w in workers)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and any(alive(w) for w in workers):
+            time.sleep(0.05)
+        survivors = [w for w in workers if alive(w)]
+        assert not survivors, f"orphaned workers still running: {survivors}"
+    finally:
+        for w in children(proc.pid) + [proc.pid]:
+            try:
+                os.kill(w, signal.SIGKILL)
+            except OSError:
+                pass
+        proc.wait()
+
+
+def test_watch_thread_fallback_ends_an_orphan(tmp_path):
+    """Without prctl: the getppid watch alone ends a worker whose parent died."""
+    code = ("import os, sys, time\n"
+            "from replay.campaign import workers\n"
+            "workers._pdeathsig = lambda sig: False\n"
+            "pid = os.fork()\n"
+            "if pid == 0:\n"
+            "    workers.init_worker(os.getppid(), poll=0.05)\n"
+            "    time.sleep(60)\n"
+            "    os._exit(0)\n"
+            "print(pid, flush=True)\n"
+            "time.sleep(0.5)\n"
+            "os._exit(0)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    child = int(res.stdout.split()[0])
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and alive(child):
+        time.sleep(0.05)
+    assert not alive(child)
