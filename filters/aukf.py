@@ -6,7 +6,7 @@ error, eq. 16–19), estimated on line by a suboptimal MAP estimator with
 exponential fading memory. With forgetting factor ``b`` (0 < b < 1) and the
 j-th update,
 
-    d_j = (1 − b) / (1 − b^j)                                             (eq. 85–87)
+    d_j = (1 − b) / (1 − b^j)                                             (eq. 83, 87)
 
 Predict (γ_i = f(χ_i(k−1|k−1)), the paper's B·X̄_SUB input is part of the model's f):
 
@@ -22,28 +22,50 @@ Update (ζ_i = h(χ_i), Z_i = ζ_i + p̂(k−1)):
     R̂ = (1 − d) R̂ + d [ε εᵀ − Γ]                                                (107)
     Q̂ = (1 − d) Q̂ + d [K ε εᵀ Kᵀ + P(k|k) − Θ]                                  (110)
 
+Since Σ wᵐ = 1, eq. 105–106 are q̂ ← q̂ + d·Kε and p̂ ← p̂ + d·ε, and (with the
+redrawn points below) eq. 107 and 110 are R̂ ← R̂ + d(εεᵀ − P_zz) and
+Q̂ ← Q̂ + d·K(εεᵀ − P_zz)Kᵀ: the Sage–Husa recursions, stationary when the
+innovations have the covariance the filter predicts.
+
 Choices (the paper is silent or ambiguous):
 
 * **Points for the update.** The paper pushes the predicted points χ_i(k|k−1)
-  through h (eq. 97). Our UKF (filters/sigma.py) redraws the points from
-  (x̂(k|k−1), P(k|k−1)) so that the spread includes Q̂; the AUKF does the same,
-  so Γ and P_xz are those of the redrawn points and the estimator switched off
-  is *exactly* our UKF (``adapt=False``; tested to 1e-12).
-* **Switch.** ``adapt=False`` freezes q̂ = 0, p̂ = 0 and uses the model's Q_k,
-  R_k at every step: the plain UKF. The limit b → 0 (d → 1, memory of one
-  step) is *not* a UKF: it is the single-sample estimator, which the guard
-  below would clip at almost every step. ``adapt_q`` / ``adapt_r`` switch the
-  covariance estimators separately, ``adapt_means`` the mean estimators.
-* **Initial values.** q̂₀ = 0, p̂₀ = 0, Q̂₀ = model Q_0, R̂₀ = model R_0 (the
-  model's nominal noise is the prior of the estimator). d₁ = 1, so the first
-  update replaces Q̂₀, R̂₀ by a one-sample estimate (usually indefinite: the
-  guard fires, as it should).
-* **Guard.** R̂ and Q̂ of eq. 107 and 110 are differences of matrices and can
-  lose positive definiteness. After each update the matrix is symmetrised and,
-  in the units of the prior (scaled by the square roots of the prior's
-  diagonal, so depth in metres and heading in radians are treated alike), its
-  eigenvalues are clipped from below at ``guard_floor``. Every clip is counted
-  (``guard_q``, ``guard_r`` in ``Estimates.info``).
+  through h (eq. 97), whose spread Θ lacks Q̂, so its P_xz and Γ omit Q̂'s
+  share. Our UKF (filters/sigma.py) redraws the points from
+  (x̂(k|k−1), P(k|k−1)); the AUKF does the same, so Γ and P_xz include Q̂, the
+  R̂ update of eq. 107 is unbiased (E[εεᵀ] = Γ + R), and the estimator
+  switched off is *exactly* our UKF (``adapt=False``; tested to 1e-12).
+  Θ of eq. 95/110 is the spread of the propagated points, without Q̂.
+* **Switches.** ``adapt=False`` freezes q̂ = 0, p̂ = 0 and uses the model's
+  Q_k, R_k at every step: the plain UKF. The limit b → 0 (d → 1, memory of
+  one step) is *not* a UKF: it is the single-sample estimator. ``adapt_q`` /
+  ``adapt_r`` switch the covariance estimators; ``adapt_means`` the mean
+  estimators: True (both, the paper), False (neither), "q" or "p" (one).
+  q̂ and p̂ are driven by the same innovation, and wherever a measured state
+  is a random walk (here velocity, acceleration, heading, depth) a state
+  offset c with p̂ offset −c leaves every innovation unchanged: the pair is
+  not observable and drifts (tests/test_aukf.py shows it on a linear model).
+* **Initial values.** q̂₀ = 0, p̂₀ = 0, Q̂₀ = model Q_0, R̂₀ = model R_0. The
+  paper's d₁ = 1 (eq. 83 with k = 1) gives the first innovation full weight:
+  its one-sample R̂₁, Q̂₁ are indefinite and the guard decides what replaces
+  them (with ``guard="previous"`` or ``"biased"``: the prior Q̂₀, R̂₀).
+* **Guard** (the paper has none; the digest allows clipping or keeping the
+  previous value). The updated matrix is symmetrised; when it is not positive
+  definite at the ``guard_floor`` level (a Cholesky attempt on the matrix in
+  the units of the prior, scaled by the square roots of the prior's diagonal,
+  minus ``guard_floor``·I), ``guard`` decides:
+
+  - ``"biased"`` (default): use instead the paper's own *biased* estimators,
+    eq. 73 for R (R̂ ← (1−d)R̂ + d εεᵀ) and eq. 70 for Q
+    (Q̂ ← (1−d)Q̂ + d KεεᵀKᵀ), positive definite for d < 1; at d = 1 (one
+    sample) the previous value is kept. Biased upwards (conservative) at the
+    steps where it is used.
+  - ``"previous"``: keep the previous estimate.
+  - ``"clip"``: clip the scaled eigenvalues at ``guard_floor`` (an
+    eigendecomposition). After an indefinite one-sample update this leaves
+    R̂ near ``guard_floor``·R₀ in most directions: an overconfident filter.
+
+  Every firing is counted (``guard_q``, ``guard_r`` in ``Estimates.info``).
 * **Missing components.** When only part of z is present, p̂ and R̂ are updated
   on that block only.
 * **Angles.** q̂ and p̂ components of angles are wrapped; residuals are wrapped.
@@ -60,6 +82,10 @@ from replay.noise import require_spd
 
 from .sigma import UKF
 
+GUARDS = ("biased", "previous", "clip")
+MEANS = {True: (True, True), False: (False, False), "qp": (True, True), "q": (True, False),
+         "p": (False, True), "none": (False, False), "true": (True, True), "false": (False, False)}
+
 
 class AUKF(UKF):
     """UKF with on-line fading-memory estimates of q, p, Q, R (001 eq. 92–110)."""
@@ -68,17 +94,24 @@ class AUKF(UKF):
 
     def __init__(self, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0,
                  forgetting: float = 0.98, adapt: bool = True, adapt_q: bool = True,
-                 adapt_r: bool = True, adapt_means: bool = True, guard_floor: float = 1e-3,
-                 keep_history: bool = False):
+                 adapt_r: bool = True, adapt_means=True, guard: str = "biased",
+                 guard_floor: float = 1e-3, keep_history: bool = False):
         super().__init__(alpha, beta, kappa)
         b = float(forgetting)
         if not 0.0 < b < 1.0:
             raise ReplayError(f"aukf: forgetting factor forgetting={b:g} must lie in (0, 1)")
         if not 0.0 < float(guard_floor) < 1.0:
             raise ReplayError(f"aukf: guard_floor={guard_floor:g} must lie in (0, 1)")
+        if guard not in GUARDS:
+            raise ReplayError(f"aukf: guard={guard!r} must be one of {', '.join(GUARDS)}")
+        key = adapt_means.lower() if isinstance(adapt_means, str) else adapt_means
+        if key not in MEANS:
+            raise ReplayError(f"aukf: adapt_means={adapt_means!r} must be true, false, 'q' or 'p'")
         self.forgetting = b
         self.adapt, self.adapt_q, self.adapt_r = bool(adapt), bool(adapt_q), bool(adapt_r)
-        self.adapt_means = bool(adapt_means)
+        self.adapt_means = adapt_means
+        self._qmean, self._pmean = MEANS[key]
+        self.guard = guard
         self.guard_floor = float(guard_floor)
         self.keep_history = bool(keep_history)
 
@@ -94,6 +127,7 @@ class AUKF(UKF):
         state.p = np.zeros(m.nz)
         state.sq = 1.0 / np.sqrt(np.diagonal(state.Qh))
         state.sr = 1.0 / np.sqrt(np.diagonal(state.Rh))
+        state.sq2, state.sr2 = np.outer(state.sq, state.sq), np.outer(state.sr, state.sr)
         state.j = 0
         state.guard_q = state.guard_r = 0
         state.history = {"q": [], "p": [], "Q": [], "R": []} if self.keep_history else None
@@ -103,62 +137,80 @@ class AUKF(UKF):
             return super().predict(state, k)
         m = state.model
         G = m.f(self._sigma(state, state.x, state.P), k)  # gamma_i (92)
-        state.gm = weighted_mean(G, state.wm, m.x_angles)  # sum wm gamma_i (105)
-        Y = wrap_components(G + state.q, m.x_angles)  # chi_i(k|k-1) (93)
-        x = weighted_mean(Y, state.wm, m.x_angles)  # (94)
-        D = residual(Y, x, m.x_angles)
+        gm = weighted_mean(G, state.wm, m.x_angles)  # sum wm gamma_i
+        # chi_i = gamma_i + q-hat (93) shifts every point alike: its mean is gm + q-hat (94)
+        # and its spread about that mean is the spread of gamma_i about gm (95)
+        D = residual(G, gm, m.x_angles)
         state.theta = (D.T * state.wc) @ D  # (95)
-        state.x = x
+        state.x = wrap_components(gm + state.q, m.x_angles)  # (94)
         state.P = state.theta + state.Qh  # (96)
-
-    def innovation(self, state, z, k, mask):
-        if not self.adapt:
-            return super().innovation(state, z, k, mask)
-        # the base class forms residuals against sum wm zeta_i and uses the model's R;
-        # swap in R-hat (its block for the components present)
-        y, Gamma, Pxz, _ = super().innovation(state, z, k, mask)
-        idx = slice(None) if mask is None else np.flatnonzero(mask)
-        R = state.Rh if mask is None else state.Rh[np.ix_(idx, idx)]
-        return y, Gamma, Pxz, R
 
     def update(self, state, z, k, mask):
         if not self.adapt:
             return super().update(state, z, k, mask)
         m = state.model
-        angles = m.z_angles if mask is None else remap_indices(m.z_angles, mask)
-        idx = slice(None) if mask is None else np.flatnonzero(mask)
-        y, Gamma, Pxz, R = self.innovation(state, z, k, mask)  # y = z - sum wm zeta_i
+        full = mask is None
+        angles = m.z_angles if full else remap_indices(m.z_angles, mask)
+        idx = slice(None) if full else np.flatnonzero(mask)
+        blk = (slice(None), slice(None)) if full else np.ix_(idx, idx)
+        y, Gamma, Pxz, _ = self.innovation(state, z, k, mask)  # y = z - sum wm zeta_i
+        R = state.Rh[blk]
         eps = residual(y, state.p[idx], angles)  # (103): z - (sum wm zeta_i + p-hat)
         S = Gamma + R  # (101)
         K = gain(S, Pxz)  # (108)
         Ke = K @ eps
         x = wrap_components(state.x + Ke, m.x_angles)  # (104)
         P = state.P - K @ S @ K.T  # (109)
-        P = 0.5 * (P + P.T)
-        state.x, state.P = x, P
+        state.x, state.P = x, 0.5 * (P + P.T)
         state.j += 1
         b = self.forgetting
         d = (1.0 - b) / (1.0 - b**state.j)
-        if self.adapt_means:
-            state.q = wrap_components((1 - d) * state.q + d * residual(x, state.gm, m.x_angles),
-                                      m.x_angles)  # (105)
-            p = state.p.copy()
-            p[idx] = (1 - d) * p[idx] + d * y  # (106)
-            state.p = wrap_components(p, m.z_angles)
+        # (105)-(106) as increments: x(k|k) - sum wm gamma_i = q-hat + K eps (94, 104) and
+        # z - sum wm zeta_i = p-hat + eps (103), so (1 - d) q-hat + d [...] = q-hat + d K eps
+        if self._qmean:
+            state.q = wrap_components(state.q + d * Ke, m.x_angles)  # (105)
+        if self._pmean:
+            state.p[idx] += d * eps  # (106)
+            wrap_components(state.p, m.z_angles)
+        ee = np.outer(eps, eps)
         if self.adapt_r:
-            blk = np.ix_(idx, idx) if mask is not None else (slice(None), slice(None))
             Rn = state.Rh.copy()
-            Rn[blk] = (1 - d) * R + d * (np.outer(eps, eps) - Gamma)  # (107)
-            state.Rh, fired = guard_spd(Rn, state.sr, self.guard_floor)
+            Rn[blk] = (1 - d) * R + d * (ee - Gamma)  # (107)
+            Rn, fired = self._guard(Rn, state.sr, state.sr2, state.Rh, blk, ee, d)
+            state.Rh = Rn
             state.guard_r += fired
         if self.adapt_q:
-            Qn = (1 - d) * state.Qh + d * (np.outer(Ke, Ke) + P - state.theta)  # (110)
-            state.Qh, fired = guard_spd(Qn, state.sq, self.guard_floor)
+            KeKe = np.outer(Ke, Ke)
+            Qn = (1 - d) * state.Qh + d * (KeKe + state.P - state.theta)  # (110)
+            Qn, fired = self._guard(Qn, state.sq, state.sq2, state.Qh, None, KeKe, d)
+            state.Qh = Qn
             state.guard_q += fired
         if state.history is not None:
             h = state.history
             h["q"].append(state.q.copy()), h["p"].append(state.p.copy())
             h["Q"].append(state.Qh.copy()), h["R"].append(state.Rh.copy())
+
+    def _guard(self, M, scale, scale2, previous, blk, sample, d):
+        """(M or its replacement, 1 if the guard fired else 0); see the module docstring.
+
+        ``sample`` is εεᵀ (for R, eq. 73) or KεεᵀKᵀ (for Q, eq. 70): the biased
+        replacement is (1 − d)·previous + d·sample on the block ``blk``.
+        """
+        M = 0.5 * (M + M.T)
+        if is_spd(M, scale2, self.guard_floor):
+            return M, 0
+        if self.guard == "clip":
+            return clip_spd(M, scale, self.guard_floor), 1
+        if self.guard == "biased" and d < 1.0:
+            if blk is None:
+                out = (1 - d) * previous + d * sample
+            else:
+                out = previous.copy()
+                out[blk] = (1 - d) * previous[blk] + d * sample
+            out = 0.5 * (out + out.T)
+            if is_spd(out, scale2, self.guard_floor):
+                return out, 1
+        return previous, 1
 
     def finish(self, state, info):
         info["adapt"] = self.adapt
@@ -170,6 +222,28 @@ class AUKF(UKF):
             info["history"] = {k: np.array(v) for k, v in state.history.items()}
 
 
+def is_spd(M: np.ndarray, scale2: np.ndarray, floor: float) -> bool:
+    """True when diag(s) M diag(s) − floor·I has a Cholesky factor (M symmetric, scale2 = s sᵀ)."""
+    Ms = M * scale2
+    Ms.flat[::len(Ms) + 1] -= floor
+    try:
+        cholesky(Ms)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def clip_spd(M: np.ndarray, scale: np.ndarray, floor: float) -> np.ndarray:
+    """Symmetric M with the eigenvalues of diag(scale) M diag(scale) clipped at ``floor``."""
+    Ms = M * scale[:, None] * scale[None, :]
+    w, V = np.linalg.eigh(Ms)
+    if not np.all(np.isfinite(w)):
+        raise np.linalg.LinAlgError("noise estimate is not finite")
+    Ms = (V * np.maximum(w, floor)) @ V.T
+    inv = 1.0 / scale
+    return 0.5 * (Ms + Ms.T) * inv[:, None] * inv[None, :]
+
+
 def guard_spd(M: np.ndarray, scale: np.ndarray, floor: float):
     """(M', fired): M symmetrised, eigenvalues of diag(scale) M diag(scale) clipped at ``floor``.
 
@@ -178,15 +252,6 @@ def guard_spd(M: np.ndarray, scale: np.ndarray, floor: float):
     symmetrised, untouched otherwise).
     """
     M = 0.5 * (M + M.T)
-    Ms = M * scale[:, None] * scale[None, :]
-    try:
-        cholesky(Ms - floor * np.eye(len(M)))
+    if is_spd(M, np.outer(scale, scale), floor):
         return M, 0
-    except np.linalg.LinAlgError:
-        pass
-    w, V = np.linalg.eigh(Ms)
-    if not np.all(np.isfinite(w)):
-        raise np.linalg.LinAlgError("noise estimate is not finite")
-    Ms = (V * np.maximum(w, floor)) @ V.T
-    inv = 1.0 / scale
-    return 0.5 * (Ms + Ms.T) * inv[:, None] * inv[None, :], 1
+    return clip_spd(M, scale, floor), 1
