@@ -125,3 +125,13 @@ def test_list_filters_shows_every_registered_filter_with_parameters():
     names = {line.split()[0] for line in res.output.splitlines() if not line.startswith(" ")}
     assert names == set(FILTERS)
     assert "n_particles=1000" in res.output
+
+
+def test_lake_log_is_recognised_without_adapter_option(tmp_path):
+    log = tmp_path / "lake.csv"
+    res = CliRunner().invoke(main, ["datasets", "make", "sim/lake-depth", "--out", str(log)])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(main, ["eval", str(log), "--filters", "ekf", "-o", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    row = next(csv.DictReader(open(tmp_path / "o" / "leaderboard.csv")))
+    assert row["task"] == "depth" and 0.0 < float(row["depth_rmse"]) < 0.5
