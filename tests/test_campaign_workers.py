@@ -94,3 +94,38 @@ def test_watch_thread_fallback_ends_an_orphan(tmp_path):
     while time.monotonic() < deadline and alive(child):
         time.sleep(0.05)
     assert not alive(child)
+
+
+def test_worker_blas_limit():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import numpy  # noqa: F401  (loads OpenBLAS, as in a forked worker)
+
+    from replay.campaign import workers
+
+    workers.limit_threads(1)
+    try:
+        blas = [p for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+        assert blas and all(p["num_threads"] == 1 for p in blas)
+    finally:
+        workers._limits.restore_original_limits()
+
+
+def test_packed_results_store_the_same_table(tmp_path):
+    """Parquet encoded in the worker (pack) and in the main process give the same stored table."""
+    import numpy as np
+
+    from replay.campaign.store import Store, pack
+
+    series = {"k": np.arange(5), "t": np.linspace(0, 1, 5), "nees": np.array([1.0, np.nan, 2.0, 3.0, 4.0])}
+    res = [{"run": 0, "status": "done", "metrics": {"rmse": 1.5}, "series": series},
+           {"run": 1, "status": "failed", "error": "X: y"}]
+    packed = pack(res)
+    assert "series" not in packed[0] and packed[0]["parquet"][:4] == b"PAR1" and packed[1] == res[1]
+    a, b = Store(tmp_path / "a"), Store(tmp_path / "b")
+    for store, results in ((a, res), (b, packed)):
+        (store.units / "h").mkdir(parents=True)
+        for r in results:
+            store.write("h", r)
+    for name in ("k", "t", "nees"):
+        np.testing.assert_array_equal(a.series("h", 0)[name], b.series("h", 0)[name])
+    assert a.records("h") == b.records("h") and a.stored_runs("h") == {0, 1}

@@ -4,8 +4,10 @@ One code path for every backend: :func:`plan` lists the jobs (blocks of runs
 not yet stored), a backend maps :func:`replay.campaign.units.execute_job` over
 them and yields (job, results) as jobs finish, and the main process stores
 each unit (:class:`~replay.campaign.store.Store`) and advances the progress.
-Workers only compute; only the main process writes, so a Dask worker on
-another machine needs no access to the output directory.
+Workers only compute (and encode each unit's per-step table as Parquet bytes,
+:func:`execute_packed`, so that the encoding runs in parallel); only the main
+process writes files, so a Dask worker on another machine needs no access to the
+output directory.
 
 Backends:
 
@@ -33,7 +35,7 @@ from replay.errors import ReplayError
 from . import board
 from .progress import Progress
 from .spec import Campaign
-from .store import Store
+from .store import Store, pack
 from .units import Job, config_hash, execute_job
 from .workers import init_worker
 
@@ -53,9 +55,14 @@ def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=
     return jobs
 
 
+def execute_packed(job: Job) -> list[dict]:
+    """What a worker runs: the job's results with each per-step table already Parquet-encoded."""
+    return pack(execute_job(job))
+
+
 def _serial(jobs):
     for job in jobs:
-        yield job, execute_job(job)
+        yield job, execute_packed(job)
 
 
 @contextmanager
@@ -65,11 +72,13 @@ def _processes(workers: int):
 
     # fork (Linux) starts workers with everything imported; spawn elsewhere
     method = "fork" if "fork" in mp.get_all_start_methods() and sys.platform == "linux" else "spawn"
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method),
-                               initializer=init_worker, initargs=(os.getpid(),))  # die with this process
+    if method == "fork":  # imported once here rather than in every worker
+        import pyarrow.parquet  # noqa: F401
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method), initializer=init_worker,
+                               initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // workers)))
 
     def run(jobs):
-        futures = {pool.submit(execute_job, job): job for job in jobs}
+        futures = {pool.submit(execute_packed, job): job for job in jobs}
         for fut in as_completed(futures):
             yield futures[fut], _result(fut, futures[fut])
 
@@ -103,7 +112,7 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
                           f"{connect_timeout:g} s ({type(err).__name__})") from None
 
     def run(jobs):
-        futures = client.map(execute_job, jobs, pure=False)
+        futures = client.map(execute_packed, jobs, pure=False)
         owner = {f.key: j for f, j in zip(futures, jobs)}
         with client.as_current():
             for fut in as_completed(futures):

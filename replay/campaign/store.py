@@ -46,6 +46,23 @@ def _default(v):
     return str(v)
 
 
+def parquet_bytes(series: dict) -> bytes:
+    """A unit's per-step table (dict of equal-length arrays) as the bytes of a Parquet file."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(pa.table({k: np.asarray(v) for k, v in series.items()}), sink)
+    return sink.getvalue().to_pybytes()
+
+
+def pack(results: list[dict]) -> list[dict]:
+    """Worker side: replace each result's ``series`` by its Parquet bytes (smaller to send,
+    and the encoding runs in parallel instead of in the main process)."""
+    return [{k: v for k, v in r.items() if k != "series"} | {"parquet": parquet_bytes(r["series"])}
+            if "series" in r else r for r in results]
+
+
 class Store:
     def __init__(self, out):
         self.out = Path(out)
@@ -76,17 +93,17 @@ class Store:
             write_json(d / "config.json", config)
 
     def write(self, config_hash: str, result: dict) -> None:
-        """Store one unit: the per-step table (done units), then the record that marks it stored."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        """Store one unit: the per-step table (done units), then the record that marks it stored.
 
+        The table comes as ``result["parquet"]`` (bytes from :func:`pack`, encoded by the
+        worker) or as ``result["series"]`` (a dict of arrays, encoded here)."""
         d = self.units / config_hash
         run = result["run"]
-        record = {k: v for k, v in result.items() if k != "series"}
+        record = {k: v for k, v in result.items() if k not in ("series", "parquet")}
         record.update(key=f"{config_hash}/{run}", config_hash=config_hash, version=replay.__version__)
         if result["status"] == "done":
-            table = pa.table({k: np.asarray(v) for k, v in result["series"].items()})
-            _atomic(d / f"{run}.parquet", lambda p: pq.write_table(table, p))
+            data = result["parquet"] if "parquet" in result else parquet_bytes(result["series"])
+            _atomic(d / f"{run}.parquet", lambda p: p.write_bytes(data))
         write_json(d / f"{run}.json", record)
 
     def configs(self):

@@ -14,6 +14,10 @@ process that started it dies:
   ``os.getppid()`` with the original parent's pid every ``poll`` seconds and calls
   ``os._exit`` when it has changed (the worker was re-parented).
 
+The initializer also limits each worker's BLAS threads (``threadpoolctl``) to
+cores // workers: OpenBLAS otherwise starts one thread per core in every worker,
+and two workers on two cores then run four spinning threads.
+
 Workers only compute (the main process writes every result), so ending them
 abruptly loses nothing that a resumed campaign does not compute again.
 """
@@ -46,8 +50,25 @@ def _watch(parent_pid: int, poll: float) -> None:
     os._exit(1)
 
 
-def init_worker(parent_pid: int, poll: float = 0.5) -> None:
-    """Pool initializer: end this worker when ``parent_pid`` (the campaign process) dies."""
+_limits = None  # the BLAS thread limit of this worker, kept alive
+
+
+def limit_threads(n: int) -> None:
+    """At most ``n`` BLAS/OpenMP threads in this process (``threadpoolctl``), so that
+    N workers on N cores do not each start N threads that compete for the cores."""
+    global _limits
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    _limits = threadpool_limits(limits=n)
+
+
+def init_worker(parent_pid: int, blas_threads: int | None = None, poll: float = 0.5) -> None:
+    """Pool initializer: end this worker when ``parent_pid`` (the campaign process) dies;
+    limit its BLAS threads to ``blas_threads`` when given."""
+    if blas_threads:
+        limit_threads(blas_threads)
     if not _pdeathsig(signal.SIGKILL):
         threading.Thread(target=_watch, args=(parent_pid, poll), daemon=True, name="parent-watch").start()
     if os.getppid() != parent_pid:  # the parent died before the watch was set
