@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
+import subprocess
 import tempfile
 from pathlib import Path
 from time import perf_counter, process_time
@@ -53,9 +55,22 @@ def bench_export(repeat: int, n: int = 10_000, filters: int = 5) -> float:
             count = write_mcap(Path(tmp) / "bench.mcap", frame, problem, est)
             best, cpu = min(best, perf_counter() - t0), process_time() - c0
         size = (Path(tmp) / "bench.mcap").stat().st_size
-    print(f"export {n} steps x {filters} filters to MCAP ({count} messages, {size / 1e6:.1f} MB): "
-          f"{best:.3f} s wall, {cpu:.3f} s CPU (target < 3 s, {3.0 / best:.1f}x margin)")
+        print(f"export {n} steps x {filters} filters to MCAP ({count} messages, {size / 1e6:.1f} MB): "
+              f"{best:.3f} s wall, {cpu:.3f} s CPU (target < 3 s, {3.0 / best:.1f}x margin)")
+        validate(Path(tmp) / "bench.mcap")
     return best
+
+
+def validate(path) -> None:
+    """Run mcap-validate (Foxglove's TypeScript readers) on the exported file when installed."""
+    from replay.registry import cache_dir
+
+    tool = Path(os.environ.get("REPLAY_MCAP_VALIDATE_DIR", cache_dir() / "mcap-validate"))
+    if shutil.which("node") is None or not (tool / "node_modules").is_dir():
+        print(f"  mcap-validate: skipped (node or {tool}/node_modules missing)")
+        return
+    res = subprocess.run(["node", str(tool / "validate_mcap.js"), str(path)], capture_output=True, text=True)
+    print("  mcap-validate:", (res.stdout.splitlines() or [res.stderr.strip()])[0][:160])
 
 
 if __name__ == "__main__":
