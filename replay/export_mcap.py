@@ -241,25 +241,23 @@ def write_mcap(mcap_path, frame, problem, estimates: dict) -> int:
     ns_frame = time_ns(frame, frame.t)
     pidx = list(problem.position_index)
     hidx = _heading_index(problem)
-    out = McapOut(mcap_path)
-    try:
-        ref = np.asarray(problem.truth_position, float)
-        ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
-        _write_track(out, "/replay/reference", ns_frame, ref, np.full(len(ref), np.nan), ok, geo)
-        axes = [f"e{a}" for a in problem.axis_names]
-        for name, est in estimates.items():
-            ns = time_ns(frame, est["t"])
-            x = est["x"]
-            pos = x[:, pidx]
-            yaw = x[:, hidx] if hidx is not None else np.full(len(x), np.nan)
-            _write_track(out, f"/replay/{name}", ns, pos, yaw, np.isfinite(pos).all(axis=1), geo)
-            err = est["err"][:, :len(pidx)]
-            ok_e = np.isfinite(err).all(axis=1)
-            vals = np.column_stack([err, np.sqrt(np.sum(np.where(ok_e[:, None], err, 0.0) ** 2, axis=1))])
-            _write_values(out, f"/replay/{name}/error", ns, vals, ok_e, axes + ["norm"])
-        for cname, ch in frame.channels.items():
-            comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
-            _write_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)
-    finally:
-        out.close()
+    out = McapOut(mcap_path)  # nothing is written before close(): a failure leaves no partial file
+    ref = np.asarray(problem.truth_position, float)
+    ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
+    _write_track(out, "/replay/reference", ns_frame, ref, np.full(len(ref), np.nan), ok, geo)
+    axes = [f"e{a}" for a in problem.axis_names]
+    for name, est in estimates.items():
+        ns = time_ns(frame, est["t"])
+        x = est["x"]
+        pos = x[:, pidx]
+        yaw = x[:, hidx] if hidx is not None else np.full(len(x), np.nan)
+        _write_track(out, f"/replay/{name}", ns, pos, yaw, np.isfinite(pos).all(axis=1), geo)
+        err = est["err"][:, :len(pidx)]
+        ok_e = np.isfinite(err).all(axis=1)
+        vals = np.column_stack([err, np.sqrt(np.sum(np.where(ok_e[:, None], err, 0.0) ** 2, axis=1))])
+        _write_values(out, f"/replay/{name}/error", ns, vals, ok_e, axes + ["norm"])
+    for cname, ch in frame.channels.items():
+        comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
+        _write_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)
+    out.close()
     return out.count

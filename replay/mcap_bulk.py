@@ -30,6 +30,8 @@ from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, S
                           SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 
+from replay.errors import ReplayError
+
 _MSG_HEADER = np.dtype([("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
                         ("log_time", "<u8"), ("publish_time", "<u8")])  # 31 bytes, packed
 
@@ -77,6 +79,9 @@ class BulkWriter:
         buf, lens = payload_of(data)
         if len(lens) != len(t):
             raise ValueError(f"channel {channel_id}: {len(t)} times for {len(lens)} payloads")
+        if len(t) and t.min() < 0:
+            topic = self.channels[channel_id - 1].topic
+            raise ReplayError(f"{self.path}: topic {topic}: time {t.min()} ns before 1970 (MCAP log times are unsigned)")
         if len(t):
             self.parts.append((channel_id, t, buf, lens))
         return len(t)

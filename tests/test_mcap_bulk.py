@@ -10,6 +10,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from test_export_mcap import validate
 
+from replay.errors import ReplayError
 from replay.export_mcap import file_descriptor_set, json_rows
 from replay.mcap_bulk import BulkWriter, gather
 from replay.pb_columns import encode, varint
@@ -97,6 +98,13 @@ def test_bulk_writer_reads_back(tmp_path, compression):
     pose = [PoseInFrame.FromString(d).pose.position.x for _, c, d in got if c == cid]
     assert pose == list(np.arange(40.0))
     validate(path)
+
+
+def test_bulk_writer_refuses_negative_times(tmp_path):
+    w = BulkWriter(tmp_path / "n.mcap")
+    cid = w.register_channel("/x", "json", w.register_schema("s", "jsonschema", b"{}"))
+    with pytest.raises(ReplayError, match="topic /x: time -5 ns before 1970"):
+        w.add_messages(cid, [-5, 0], [b"{}", b"{}"])
 
 
 def test_bulk_writer_empty(tmp_path):
