@@ -61,6 +61,8 @@ class MultipleModelPF(Filter):
             raise ReplayError(f"mmpf: transition must be a {M}x{M} matrix of non-negative rows summing to 1")
         if resampling not in SCHEMES:
             raise ReplayError(f"mmpf: resampling must be one of {', '.join(SCHEMES)} (got {resampling!r})")
+        if not 0.0 <= ess_threshold <= 1.0:
+            raise ReplayError(f"mmpf: ess_threshold must be in [0, 1] (got {ess_threshold!r})")
         self.n_particles = int(n_particles)
         self.modes = rates.tolist()
         self.stay = stay

@@ -130,6 +130,8 @@ def test_gpf_params_validated_in_constructor():
         make_filter("gpf", grey_window=2)
     with pytest.raises(ReplayError, match="mmpf: transition"):
         make_filter("mmpf", transition=[[0.5, 0.6], [0.5, 0.5]])
+    with pytest.raises(ReplayError, match="mmpf: ess_threshold"):
+        make_filter("mmpf", ess_threshold=1.5)
 
 
 def test_gpf_runs_reproducibly_and_uses_both_parts(problem):
@@ -193,3 +195,58 @@ def test_reproduction_verdicts():
     assert _verdict(np.array([-0.1, -0.12, -0.09, -0.11]))[0] == "confirmed"
     assert _verdict(np.array([0.1, 0.12, 0.09, 0.11]))[0] == "refuted"
     assert _verdict(np.array([-0.1, 0.1, -0.05, 0.05]))[0] == "inconclusive"
+
+
+# ---------------------------------------------------------------- PFs against the EKF
+
+@pytest.fixture(scope="module")
+def near_linear():
+    """A depth model with small, known Q and R (pitch 0.3 deg / 1 deg) and data drawn from it:
+    nearly linear, so the EKF is close to optimal and a correct PF must agree with it."""
+    from replay.filters.kalman import EKF
+
+    Q = np.diag([0.01**2, 0.02**2, np.deg2rad(0.3) ** 2])
+    R = np.diag([0.1**2, 0.2**2, np.deg2rad(1.0) ** 2])
+    m = DepthModel(Q, R, 0.05)
+    rng = np.random.default_rng(0)
+    x = np.empty((600, 3))
+    s = np.array([[5.0, 1.5, 0.2]])
+    for k in range(len(x)):
+        s = m.sample_f(s, k, rng)
+        x[k] = s[0]
+    z = x + rng.standard_normal(x.shape) * np.sqrt(np.diag(R))
+    ekf = EKF().run(m, z, x[0], R)
+    err = np.sqrt(np.mean((ekf.x - x)[50:] ** 2, axis=0))
+    return m, z, x, R, ekf, err
+
+
+@pytest.mark.parametrize("name, params, bound", [
+    ("gpf", {"grey": False, "wavelet": False}, 0.3),  # a bootstrap PF with the fixed R
+    ("mmpf", {"modes": [[0.0, 0.0, 0.0]]}, 0.3),      # one mode: the same bootstrap PF
+    ("gpf", {"grey": False}, 0.6),                    # wavelet R ~ the true R: close, noisier
+])
+def test_particle_filters_agree_with_ekf_on_a_near_linear_model(near_linear, name, params, bound):
+    """Catches a wrong motion model in the particles, process noise scaled by T (Q T instead of Q
+    per step, eq. 4: ratios ~4) and the wavelet sigma used as a variance (ratios ~1.1)."""
+    m, z, x, R, ekf, err = near_linear
+    est = make_filter(name, **params).run(m, z, x[0], R, np.random.default_rng(1))
+    gap = np.sqrt(np.mean((est.x - ekf.x)[50:] ** 2, axis=0))
+    assert (gap < bound * err).all(), gap / err
+
+
+def test_gpf_estimate_is_weighted_mean_before_resampling(near_linear):
+    """Eq. 24 then step 5: the estimate is sum w^j x^j of the weighted particles of step k."""
+    m, z, x, R, _, _ = near_linear
+    f = make_filter("gpf", n_particles=200, n_grey=20)
+    from replay.filters.base import State
+
+    state = State(m, np.random.default_rng(4))
+    f.start(state, x[0], R)
+    for k in range(40):
+        f.predict(state, k)
+        f.update(state, z[k], k, None)
+        xk, _ = f.estimate(state)
+    w, P = state.w, state.particles
+    assert xk[:2] == pytest.approx(w @ P[:, :2], abs=1e-12)
+    assert xk[2] == pytest.approx(np.arctan2(w @ np.sin(P[:, 2]), w @ np.cos(P[:, 2])), abs=1e-12)
+    assert np.ptp(state.w) > 0  # still weighted: resampling happens in the next predict

@@ -140,3 +140,16 @@ def test_eval_sim_lake_depth_three_filters(tmp_path):
     for name in ("gpf", "mmpf", "ekf"):
         assert f"\n{name} " in res.output
     assert registry.get("sim/lake-depth").default_task == "depth"
+
+
+def test_base_for_rms_puts_the_sensor_noise_at_a_target_level():
+    from replay.sim.lake_depth import base_for_rms, make_frame
+
+    target = (0.2, 5.0, np.deg2rad(0.5))
+    base = base_for_rms(target)
+    frame = make_frame(np.random.default_rng(5), base_sigma=base)
+    for c, want in zip(("depth", "speed", "pitch"), target):
+        e = frame.channels[c].values - frame.reference[c].values
+        assert np.sqrt(np.mean(e * e)) == pytest.approx(want, rel=0.05)  # 1800 samples: ~2 % spread
+    # regimes (1, 3, 0.5, 2) times a drift 1 -> 1.5: the RMS factor is 2.373
+    assert base[0] == pytest.approx(0.2 / 2.3733, rel=1e-3)

@@ -102,6 +102,18 @@ def noise_sigma(t: np.ndarray, duration: float, base, regimes, drift: float) -> 
     return factor[:, None] * np.asarray(base, float)
 
 
+def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=(1.0, 3.0, 0.5, 2.0),
+                 drift: float = 0.5) -> tuple:
+    """``base_sigma`` whose sigma_c(t) has root-mean-square ``target[c]`` over the run.
+
+    Used to put the sensors at the level of a filter's fixed R (R's std = the
+    sensor's RMS noise, the regimes and drift varying around it).
+    """
+    t = dt * np.arange(int(round(duration / dt)))
+    f = noise_sigma(t, duration, (1.0,), regimes, drift)[:, 0]
+    return tuple(float(v) for v in np.asarray(target, float) / np.sqrt(np.mean(f * f)))
+
+
 def make_frame(rng: np.random.Generator, *, duration: float = 90.0, dt: float = T,
                depth0: float = 3.0, base_sigma=(0.05, 0.05, float(np.deg2rad(0.5))),
                regimes=(1.0, 3.0, 0.5, 2.0), drift: float = 0.5, ref_every: int = 1,
