@@ -56,8 +56,14 @@ from .sigma import CKF, UKF
 
 
 def supports(flt) -> bool:
-    """True when ``flt`` (exactly one of the built-in classes) has a batched implementation."""
-    return type(flt) in KINDS
+    """True when ``flt`` (exactly one of the built-in classes, or a filter with an
+    ``engine(model, rngs)`` method) has a batched implementation."""
+    return type(flt) in KINDS or hasattr(flt, "engine")
+
+
+def exact(flt) -> bool:
+    """True when the batched runs of ``flt`` give exactly the numbers of one-by-one runs."""
+    return supports(flt) and (getattr(KINDS.get(type(flt)), "exact", False) or hasattr(flt, "engine"))
 
 
 def run_batched(flt, model, Z, X0, P0, rngs) -> list[Estimates]:
@@ -68,7 +74,7 @@ def run_batched(flt, model, Z, X0, P0, rngs) -> list[Estimates]:
     M, n = Z.shape[:2]
     if X0.shape != (M, model.nx) or P0.shape != (M, model.nx, model.nx) or len(rngs) != M:
         raise ValueError("run_batched: Z, X0, P0 and rngs must describe the same number of runs")
-    engine = KINDS[type(flt)](flt, model, rngs)
+    engine = KINDS[type(flt)](flt, model, rngs) if type(flt) in KINDS else flt.engine(model, rngs)
     engine.start(X0, P0)
     X = np.full((M, n, model.nx), np.nan)
     P = np.full((M, n, model.nx, model.nx), np.nan)
@@ -249,6 +255,8 @@ class _BatchedSigma(_Kalman):
 
 class _BatchedPF:
     """Bootstrap PF of :mod:`replay.filters.pf` on a stack of runs (particles (M, N, nx))."""
+
+    exact = True  # bit for bit the numbers of one-by-one runs
 
     def __init__(self, flt, model, rngs):
         self.flt, self.model, self.rngs = flt, model, list(rngs)

@@ -35,8 +35,6 @@ between GWO and IGWO comes from the convergence factor.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from replay.errors import ReplayError
@@ -69,16 +67,37 @@ def a_sigmoid(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0,
 
 
 def entropy_weights(f, eps: float = 1e-12, xi: float = 1e-4) -> np.ndarray:
-    """Entropy weights of the three leaders (002, §3.2.2), normalised to sum to one.
+    """Entropy weights of the leaders (002, §3.2.2), normalised to sum to one (along the last axis).
 
     p_i = (1 / (f_i + eps)) / sum_j 1 / (f_j + eps);  E_i = -p_i log(p_i + eps);
     w*_i = 1 - E_i;  w_i = max(w*_i, xi);  w~_i = w_i / sum_j w_j.
     """
-    inv = [1.0 / (float(v) + eps) for v in f]
-    s = sum(inv)
-    w = [max(1.0 + (i / s) * math.log(i / s + eps), xi) for i in inv]
-    s = sum(w)
-    return np.array([v / s for v in w])
+    inv = 1.0 / (np.asarray(f, float) + eps)
+    p = inv / inv.sum(axis=-1, keepdims=True)
+    w = np.maximum(1.0 + p * np.log(p + eps), xi)
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+def as_runs(X, rng, fitness, project):
+    """(N, d) wolves, one generator and functions of (N, d) -> the batched forms with M = 1;
+    (M, N, d) with M generators (functions of (M, N, d)) unchanged. Returns X, rngs, fitness, project, single."""
+    X = np.array(X, dtype=float)
+    if X.ndim != 2:
+        rngs = list(rng)
+        if len(rngs) != len(X):
+            raise ValueError("one generator per run of wolves is needed")
+        return X, rngs, fitness, project, False
+    one = project
+    return (X[None], [rng], lambda Y: fitness(Y[0])[None],
+            None if one is None else (lambda Y: one(Y[0])[None]), True)
+
+
+def draws(rngs, shape):
+    """One ``random(shape)`` per run from its own generator, written in place: (M, *shape)."""
+    out = np.empty((len(rngs),) + tuple(shape))
+    for g, o in zip(rngs, out):
+        g.random(out=o)
+    return out
 
 
 def check_params(t_max, a_start, a_end, xi):
@@ -90,7 +109,7 @@ def check_params(t_max, a_start, a_end, xi):
         raise ReplayError(f"xi (entropy-weight floor) must lie in [1e-6, 1e-3] (got {xi})")
 
 
-def optimize(X: np.ndarray, fitness, rng: np.random.Generator, t_max: int = 20, improved: bool = True,
+def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True,
              a_start: float = 2.0, a_end: float = 0.0, b_start: float = 1.0, b_end: float = 0.5,
              xi: float = 1e-4, eps: float = 1e-12, project=None):
     """Run ``t_max`` GWO (``improved=False``) or IGWO iterations on wolves ``X`` (N, d).
@@ -99,34 +118,51 @@ def optimize(X: np.ndarray, fitness, rng: np.random.Generator, t_max: int = 20, 
     maps moved wolves back into the feasible set. Returns the moved wolves,
     their fitness, and the best fitness before and after each iteration
     (``t_max + 1`` values, non-increasing).
+
+    Batched: ``X`` (M, N, d) are M independent swarms (Monte Carlo runs) with
+    ``rng`` a sequence of M generators, ``fitness`` maps (M, N, d) -> (M, N);
+    the returns gain the leading axis M. Each swarm draws all its random
+    numbers for the ``t_max`` iterations in one call, (t_max, 2, 3, N, d).
+    The three leaders are not sorted: their weights depend only on their own
+    fitness (GWO: 1/3 each), so their order does not matter.
     """
-    X = np.array(X, dtype=float)
-    n, d = X.shape
+    X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
+    M, n, d = X.shape
+    rows = np.arange(M)[:, None]
     f = fitness(X)
-    best = [float(f.min())]
+    best = np.empty((M, t_max + 1))
+    best[:, 0] = f.min(axis=1)
     k = min(3, n)
     if improved:
-        a = [a_sigmoid(t, t_max, a_start, a_end, b_start, b_end) for t in range(t_max)]
+        a = np.array([a_sigmoid(t, t_max, a_start, a_end, b_start, b_end) for t in range(t_max)])
     else:
-        a = [a_linear(t, t_max, a_start, a_end) for t in range(t_max)]
-    r = rng.random((t_max, 2, k, n, d))
-    U = 2.0 * r[:, 0] - 1.0  # A = a (2 r1 - 1)
-    C = 2.0 * r[:, 1]
-    w = np.full(k, 1.0 / k)
+        a = np.array([a_linear(t, t_max, a_start, a_end) for t in range(t_max)])
+    r = draws(rngs, (t_max, 2, k, n, d))  # (M, t_max, 2, k, n, d)
+    A, C = r[:, :, 0], r[:, :, 1]  # in place, all iterations at once: A = a (2 r1 - 1), C = 2 r2
+    A *= 2.0
+    A -= 1.0
+    A *= a[:, None, None, None]
+    C *= 2.0
+    w = np.full((M, k), 1.0 / k)
+    buf = np.empty((M, k, n, d))
     for t in range(t_max):
-        lead = np.argpartition(f, k - 1)[:k] if n > k else np.arange(n)
-        lead = lead[np.argsort(f[lead], kind="stable")]
+        lead = np.argpartition(f, k - 1, axis=1)[:, :k] if n > k else np.broadcast_to(np.arange(n), (M, n))
+        fl = f[rows, lead]
         if improved:
-            w = entropy_weights(f[lead], eps, xi)
-        XL = X[lead][:, None, :]  # (k, 1, d)
-        Y = XL - (a[t] * U[t]) * np.abs(C[t] * XL - X)
-        Xn = (w @ Y.reshape(k, n * d)).reshape(n, d)
+            w = entropy_weights(fl, eps, xi)
+        XL = X[rows, lead][:, :, None, :]  # (M, k, 1, d)
+        Y = np.multiply(C[:, t], XL, out=buf)  # Y = X_L - A |C X_L - X|, in one buffer
+        np.subtract(Y, X[:, None], out=Y)
+        np.abs(Y, out=Y)
+        np.multiply(Y, A[:, t], out=Y)
+        np.subtract(XL, Y, out=Y)
+        Xn = np.einsum("mk,mknd->mnd", w, Y)
         if project is not None:
             Xn = project(Xn)
-        Xn[lead] = X[lead]  # elitism: the leaders stay where they are
+        Xn[rows, lead] = XL[:, :, 0]  # elitism: the leaders stay where they are
         fn = fitness(Xn)
-        fn[lead] = f[lead]
+        fn[rows, lead] = fl
         X, f = Xn, fn
-        best.append(float(f.min()))
-        assert best[-1] <= best[-2], "GWO elitism violated: best fitness got worse"
-    return X, f, np.array(best)
+        best[:, t + 1] = f.min(axis=1)
+    assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
+    return (X[0], f[0], best[0]) if single else (X, f, best)

@@ -49,28 +49,37 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
+from replay.angles import residual, wrap_components
 from replay.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso
-from .stcpf import CubatureParticleFilter
+from .stcpf import CubatureParticleFilter, Engine, weighted_mean_rows
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
 
 
-def residual_fitness(model, z, k, mask=None):
-    """f(X) = (z - h(X))' R^-1 (z - h(X)) for an array of states (wrapped angle residuals)."""
-    R, angles = model.measurement_cov(k), model.z_angles
-    if mask is not None:
-        z, R = z[mask], R[np.ix_(mask, mask)]
-        angles = remap_indices(angles, mask)
-    Ri = 1.0 / np.diagonal(R) if is_diagonal(R) else np.linalg.inv(R)
+def residual_fitness(model, z, k, mask=None, meas=None):
+    """f(X) = (z - h(X))' R^-1 (z - h(X)) for an array of states (wrapped angle residuals).
+
+    ``z`` (nz,) with ``X`` (N, nx), or per run (M, nz) with ``X`` (M, N, nx);
+    ``meas`` = (R, angles, R^-1, log det R) of the step when already computed
+    (:meth:`replay.filters.stcpf.Engine.measurement`, masked components only).
+    """
+    if meas is None:
+        R, angles = model.measurement_cov(k), model.z_angles
+        if mask is not None:
+            z, R = z[..., mask], R[np.ix_(mask, mask)]
+            angles = remap_indices(angles, mask)
+        Ri = 1.0 / np.diagonal(R) if is_diagonal(R) else np.linalg.inv(R)
+    else:
+        angles, Ri = meas[1], meas[2]
+    zb = z[..., None, :] if z.ndim == 2 else z
 
     def fitness(X):
         zh = model.h(X, k)
-        d = residual(z, zh[..., mask] if mask is not None else zh, angles)
-        return (d * d) @ Ri if Ri.ndim == 1 else np.einsum("ni,ij,nj->n", d, Ri, d)
+        d = residual(zb, zh[..., mask] if mask is not None else zh, angles)
+        return (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
 
     return fitness
 
@@ -85,8 +94,10 @@ class SwarmParticleFilter(CubatureParticleFilter):
                  b_end: float = 0.5, xi: float = 1e-4, omega_max: float = 0.9, omega_min: float = 0.4,
                  omega_decay: float = 0.2, c1=(2.0, 1.0), c2=(1.5, 2.0),
                  lower=pso.LB_002, upper=pso.UB_002, rho: float = 0.95, beta: float = 1.2,
-                 m_form: str = "propagated", scale_prior: bool = True, estimate_at: str = "after"):
-        super().__init__(n_particles, proposal, rho, beta, m_form, scale_prior)
+                 m_form: str = "propagated", scale_prior: bool = True, estimate_at: str = "after",
+                 resampling: str = "systematic", ess_threshold: float = 1.0):
+        # resampling / ess_threshold: used only on steps without a measurement (nothing to optimise)
+        super().__init__(n_particles, proposal, rho, beta, m_form, scale_prior, resampling, ess_threshold)
         if estimate_at not in ("before", "after"):
             raise ReplayError(f"estimate must be 'before' or 'after' the optimiser (got {estimate_at!r})")
         self.estimate_at = estimate_at
@@ -103,111 +114,121 @@ class SwarmParticleFilter(CubatureParticleFilter):
         self.lower = None if lo is None else lo.tolist()
         self.upper = None if hi is None else hi.tolist()
 
-    def start(self, state, x0, P0):
-        super().start(state, x0, P0)
-        state.relocated = False
-        state.pending = None
-        state.gain_sum = 0.0
-        state.moves = 0
-        n = state.model.nx
-        use = self.optimizer == "pso" and self.lower is not None and len(self.lower) == n
-        state.bounds = (np.asarray(self.lower), np.asarray(self.upper)) if use else None
+    def engine(self, model, rngs):
+        return SwarmEngine(self, model, rngs)
 
-    def relocate(self, state, z, k, mask):
-        if self.estimate_at == "after":
-            self._move(state, z, k, mask)
-            state.logw = state.model.loglik(z, state.X, k, mask)
+
+class SwarmEngine(Engine):
+    """M runs x N particles of a :class:`SwarmParticleFilter` (see :class:`replay.filters.stcpf.Engine`)."""
+
+    def start(self, X0, P0):
+        super().start(X0, P0)
+        flt, n = self.flt, self.model.nx
+        self.relocated, self.pending = False, None
+        M = len(self.rngs)
+        self.gain_sum, self.moves = np.zeros(M), np.zeros(M, int)
+        use = flt.optimizer == "pso" and flt.lower is not None and len(flt.lower) == n
+        self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
+
+    def relocate(self, zz, k, mask, meas):
+        if self.flt.estimate_at == "after":
+            self.move(zz, k, mask, meas)
+            self.logw = self.loglik(zz, self.X, k, mask, meas)
         else:
-            state.pending = (z, k, mask)
+            self.pending = (zz, k, mask, meas)
 
-    def _move(self, state, z, k, mask):
-        m = state.model
-        w = self.normalise(state)
-        c = weighted_mean(state.X, w, m.x_angles)
-        fit = residual_fitness(m, z, k, mask)
-
-        def absolute(Xr):
-            return wrap_components(c + Xr, m.x_angles)
+    def move(self, zz, k, mask, meas):
+        flt, m = self.flt, self.model
+        w = self.normalise()
+        c = weighted_mean_rows(self.X, w, m.x_angles)[:, None, :]
+        fit = residual_fitness(m, zz, k, mask, None if self.custom_loglik else meas)
 
         def fitness(Xr):  # h is periodic in angle components: no need to wrap before it
             return fit(c + Xr)
 
         project = None
-        if state.bounds is not None:
-            lo, hi = state.bounds
+        if self.bounds is not None:
+            lo, hi = self.bounds
 
             def project(Xr):
-                return residual(np.clip(absolute(Xr), lo, hi), c, m.x_angles)
+                return residual(np.clip(wrap_components(c + Xr, m.x_angles), lo, hi), c, m.x_angles)
 
-        Xr = residual(state.X, c, m.x_angles)
-        if self.optimizer == "pso":
-            Xr, _, best = pso.optimize(Xr, fitness, state.rng, self.t_max, self.omega_max, self.omega_min,
-                                       self.omega_decay, self.c1, self.c2, project)
+        Xr = residual(self.X, c, m.x_angles)
+        rngs = self.active_rngs()
+        if flt.optimizer == "pso":
+            Xr, _, best = pso.optimize(Xr, fitness, rngs, flt.t_max, flt.omega_max, flt.omega_min,
+                                       flt.omega_decay, flt.c1, flt.c2, project)
         else:
-            Xr, _, best = gwo.optimize(Xr, fitness, state.rng, self.t_max, self.optimizer == "igwo",
-                                       self.a_start, self.a_end, self.b_start, self.b_end, self.xi)
-        state.gain_sum += best[0] - best[-1]
-        state.moves += 1
-        state.X = absolute(Xr)
-        state.relocated = True
+            Xr, _, best = gwo.optimize(Xr, fitness, rngs, flt.t_max, flt.optimizer == "igwo",
+                                       flt.a_start, flt.a_end, flt.b_start, flt.b_end, flt.xi)
+        self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
+        self.moves[self.ids] += 1
+        self.X = wrap_components(c + Xr, m.x_angles)
+        self.relocated = True
 
-    def after_estimate(self, state, w):
-        if state.pending is not None:
-            self._move(state, *state.pending)
-            state.pending = None
-        if state.relocated:
-            state.logw = np.full(self.n_particles, -np.log(self.n_particles))
-            state.relocated = False
+    def after_estimate(self, w):
+        if self.pending is not None:
+            self.move(*self.pending)
+            self.pending = None
+        if self.relocated:
+            N = self.flt.n_particles
+            self.logw = np.full(self.logw.shape, -np.log(N))
+            self.relocated = False
         else:
-            super().after_estimate(state, w)
+            super().after_estimate(w)
 
-    def finish(self, state, info):
-        super().finish(state, info)
-        info["optimizer"] = self.optimizer
-        info["mean_fitness_gain"] = state.gain_sum / state.moves if state.moves else 0.0
-        info["bounds"] = "paper (002 §4.1)" if state.bounds is not None else "none"
+    def finish(self, m, info):
+        super().finish(m, info)
+        info["optimizer"] = self.flt.optimizer
+        info["mean_fitness_gain"] = float(self.gain_sum[m] / self.moves[m]) if self.moves[m] else 0.0
+        info["bounds"] = "paper (002 §4.1)" if self.bounds is not None else "none"
+
+
+def _fixed(cls, params: dict, t_max: int) -> dict:
+    """Constructor arguments of a named variant: its proposal and optimiser are fixed (a manifest
+    records them, so ``replay rerun`` passes them back: accepted when equal, refused otherwise)."""
+    for key, value in (("proposal", cls.PROPOSAL), ("optimizer", cls.OPTIMIZER)):
+        given = params.pop(key, value)
+        if given != value:
+            raise ReplayError(f"{cls.name}: {key} is fixed to {value!r} (got {given!r})")
+    params.setdefault("t_max", t_max)
+    return dict(proposal=cls.PROPOSAL, optimizer=cls.OPTIMIZER, **params)
 
 
 class IGWOSTCPF(SwarmParticleFilter):
     """IGWO-STCPF (002, §3.3): STCKF importance density, IGWO in place of resampling."""
 
-    name = "igwo-stcpf"
+    name, PROPOSAL, OPTIMIZER = "igwo-stcpf", "stckf", "igwo"
 
     def __init__(self, n_particles: int = 100, t_max: int = 20, **params):
-        super().__init__(n_particles, "stckf", "igwo", t_max, **params)
+        super().__init__(n_particles, **_fixed(type(self), dict(params, t_max=t_max), t_max))
 
 
-class GWOPF(SwarmParticleFilter):
+class GWOPF(IGWOSTCPF):
     """Bootstrap PF with standard GWO in place of resampling (002, §3.2 benchmark 1)."""
 
-    name = "gwo-pf"
-
-    def __init__(self, n_particles: int = 100, t_max: int = 20, **params):
-        super().__init__(n_particles, "prior", "gwo", t_max, **params)
+    name, PROPOSAL, OPTIMIZER = "gwo-pf", "prior", "gwo"
 
 
-class IGWOPF(SwarmParticleFilter):
+class IGWOPF(IGWOSTCPF):
     """Bootstrap PF with IGWO in place of resampling (002, §3.2 benchmark 1)."""
 
-    name = "igwo-pf"
-
-    def __init__(self, n_particles: int = 100, t_max: int = 20, **params):
-        super().__init__(n_particles, "prior", "igwo", t_max, **params)
+    name, PROPOSAL, OPTIMIZER = "igwo-pf", "prior", "igwo"
 
 
 class PSOPF(SwarmParticleFilter):
-    """PSO-PF baseline (002, §4.1): bootstrap PF, PSO (20 iterations, bounded) in place of resampling."""
+    """PSO-PF baseline (002, §4.1): bootstrap PF, PSO (20 iterations, bounded) in place of resampling.
 
-    name = "pso-pf"
+    ``iterations`` is the PSO name of ``t_max`` (recorded as ``t_max``; either is accepted).
+    """
+
+    name, PROPOSAL, OPTIMIZER = "pso-pf", "prior", "pso"
 
     def __init__(self, n_particles: int = 100, iterations: int = 20, **params):
-        super().__init__(n_particles, "prior", "pso", iterations, **params)
+        super().__init__(n_particles, **_fixed(type(self), params, iterations))
 
 
-class PSOCPF(SwarmParticleFilter):
+class PSOCPF(PSOPF):
     """PSO-CPF baseline (002, §4.1): PSO-PF with a per-particle CKF importance density."""
 
-    name = "pso-cpf"
-
-    def __init__(self, n_particles: int = 100, iterations: int = 20, **params):
-        super().__init__(n_particles, "ckf", "pso", iterations, **params)
+    name, PROPOSAL, OPTIMIZER = "pso-cpf", "ckf", "pso"

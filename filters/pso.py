@@ -19,6 +19,8 @@ import numpy as np
 
 from replay.errors import ReplayError
 
+from .gwo import as_runs, draws
+
 # 002, §4.1: bounds of the search for the AUV state [x, y, z, v, pitch, yaw].
 LB_002 = (-300.0, -300.0, -300.0, 0.0, -np.pi / 2, -np.pi)
 UB_002 = (300.0, 300.0, 0.0, 10.0, np.pi / 2, np.pi)
@@ -55,34 +57,44 @@ def check_params(iterations, omega_max, omega_min):
         raise ReplayError(f"PSO inertia needs 0 <= omega_min <= omega_max (got {omega_min}, {omega_max})")
 
 
-def optimize(X: np.ndarray, fitness, rng: np.random.Generator, iterations: int = 20,
+def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
              omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2,
              c1=(2.0, 1.0), c2=(1.5, 2.0), project=None):
     """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds.
 
     Returns final positions, their fitness, and the swarm's best fitness before
-    and after each iteration (non-increasing).
+    and after each iteration (non-increasing). Batched like
+    :func:`replay.filters.gwo.optimize`: ``X`` (M, N, d) with M generators.
+    Each swarm draws its (iterations, 2, N, d) uniforms in one call.
     """
-    X = np.array(X, dtype=float)
+    X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
+    M = len(X)
     if project is not None:
         X = project(X)
     f = fitness(X)
     pbest, pf = X.copy(), f.copy()
-    g = int(np.argmin(pf))
+    rows = np.arange(M)
+    g = np.argmin(pf, axis=1)
     V = np.zeros_like(X)
-    best = [float(pf[g])]
-    r = rng.random((iterations, 2) + X.shape)
-    for t in range(1, iterations + 1):
-        w = inertia(t, omega_max, omega_min, alpha)
-        a1, a2 = ramp(t, iterations, *c1), ramp(t, iterations, *c2)
-        V = w * V + a1 * r[t - 1, 0] * (pbest - X) + a2 * r[t - 1, 1] * (pbest[g] - X)
+    best = np.empty((M, iterations + 1))
+    best[:, 0] = pf[rows, g]
+    t = np.arange(1, iterations + 1)
+    w = inertia(t, omega_max, omega_min, alpha)
+    a1, a2 = ramp(t, iterations, *c1), ramp(t, iterations, *c2)
+    r = draws(rngs, (iterations, 2) + X.shape[1:])  # (M, iterations, 2, N, d)
+    R1, R2 = r[:, :, 0], r[:, :, 1]  # in place: c1(t) r1, c2(t) r2 for all iterations
+    R1 *= a1[:, None, None]
+    R2 *= a2[:, None, None]
+    for i in range(iterations):
+        V = w[i] * V + R1[:, i] * (pbest - X) + R2[:, i] * (pbest[rows, g][:, None, :] - X)
         X = X + V
         if project is not None:
             X = project(X)
         f = fitness(X)
         better = f < pf
-        pbest[better], pf[better] = X[better], f[better]
-        g = int(np.argmin(pf))
-        best.append(float(pf[g]))
-        assert best[-1] <= best[-2], "PSO global best got worse"
-    return X, f, np.array(best)
+        pbest = np.where(better[..., None], X, pbest)
+        pf = np.where(better, f, pf)
+        g = np.argmin(pf, axis=1)
+        best[:, i + 1] = pf[rows, g]
+    assert np.all(np.diff(best, axis=1) <= 0), "PSO global best got worse"
+    return (X[0], f[0], best[0]) if single else (X, f, best)

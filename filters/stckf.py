@@ -59,29 +59,34 @@ def next_V(V, e, rho):
 
 
 def fading_factor(V, H, F, P_prev, Q, R, beta, m_form="propagated"):
-    """lambda = max(1, tr(N) / tr(M)) (1 where tr(M) <= 0); works on stacks of matrices."""
-    HT = np.swapaxes(H, -1, -2)
-    N = V - H @ Q @ HT - beta * R
+    """lambda = max(1, tr(N) / tr(M)) (1 where tr(M) <= 0); works on stacks of matrices.
+
+    Only traces are needed: tr(N) = tr(V) - tr(H Q H') - beta tr(R) and
+    tr(H F P F' H') = sum((H F P) * (H F)), so no product is formed beyond H F P.
+    """
+    HF = H @ F
+    trN = np.trace(V, axis1=-2, axis2=-1) - ((H @ Q) * H).sum(axis=(-2, -1)) - beta * np.trace(R)
     if m_form == "propagated":
-        M = H @ F @ P_prev @ np.swapaxes(F, -1, -2) @ HT
+        trM = ((HF @ P_prev) * HF).sum(axis=(-2, -1))
     else:
-        M = H @ F @ HT
-    trN = np.trace(N, axis1=-2, axis2=-1)
-    trM = np.trace(M, axis1=-2, axis2=-1)
+        trM = np.trace(HF @ np.swapaxes(H, -1, -2), axis1=-2, axis2=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         lam0 = np.where(trM > 0, trN / np.where(trM > 0, trM, 1.0), 1.0)
     return np.maximum(1.0, lam0)
 
 
 def batched_jacobian(fun, X, k, out_angles=(), step=1e-6):
-    """Central-difference Jacobians of ``fun`` at each row of ``X`` (N, n) -> (N, m, n), one call to ``fun``."""
-    N, n = X.shape
+    """Central-difference Jacobians of ``fun`` at each row of ``X`` (..., n) -> (..., m, n), one call to ``fun``."""
+    lead, n = X.shape[:-1], X.shape[-1]
+    X = X.reshape(-1, n)
+    N = len(X)
     eps = step * np.maximum(1.0, np.abs(X))
     E = eps[:, :, None] * np.eye(n)
     pts = np.concatenate([X[:, None, :] + E, X[:, None, :] - E], axis=1)
-    Y = fun(pts.reshape(2 * N * n, n), k).reshape(N, 2 * n, -1)
+    Y = fun(pts, k)
     d = residual(Y[:, :n], Y[:, n:], out_angles)
-    return np.swapaxes(d / (2.0 * eps)[:, :, None], 1, 2)
+    J = np.swapaxes(d / (2.0 * eps)[:, :, None], 1, 2)
+    return J.reshape(lead + J.shape[1:])
 
 
 class STCKF(CKF):

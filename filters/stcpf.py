@@ -8,7 +8,7 @@ particles):
     1. STCKF (or CKF) step from (x^i_{k-1}, P^i_{k-1}):  (m^i, P^i) = posterior given z_k
     2. draw       x^i_k ~ q^i = N(m^i, P^i)
     3. weight     w^i ∝ w^i_{k-1} p(z_k | x^i_k) p(x^i_k | x^i_{k-1}) / q^i(x^i_k)      (002, §2.1)
-    4. relocate   :meth:`relocate`: here resampling (systematic when ESS < threshold N);
+    4. relocate   :meth:`Engine.relocate`: here resampling (systematic when ESS < threshold N);
                   IGWO / PSO in :mod:`replay.filters.igwo_stcpf`
     5. estimate   weighted mean (circular for angles) and covariance
 
@@ -19,17 +19,35 @@ Choices (002 leaves them open): the next step's cubature filter of particle i
 starts from its sample x^i_k (not from m^i) with covariance P^i; resampling
 copies x, P and V together. A predict-only step (no measurement) draws from the
 predicted (m^i-, P^i-) with weight p(x | x_prev) / q(x).
+
+Arrays: the :class:`Engine` holds M Monte Carlo runs of N particles at once,
+``X`` (M, N, nx), ``P`` (M, N, nx, nx), so that one filter step for many runs
+is one array computation (:func:`replay.filters.batched.run_batched`).
+``Filter.run`` of a single run is the same engine with M = 1, so batched and
+one-by-one runs give the same numbers: each run draws from its own generator,
+per step, in the same order (the importance draw (N, nx), then the
+relocation's draws), and every operation acts on each run's slice alone.
+
+Jacobians (STCKF fading factor): the model's analytic ``F``/``H`` when the
+model declares ``vector_jacobians = True`` (they accept stacks of states), else
+central differences (:func:`replay.filters.stckf.batched_jacobian`).
+
+Arithmetic shortcuts (exact in real arithmetic, cheaper): with cubature points
+X_c = m ± sqrt(n) L e_c, the cross covariance is
+P_xz = sqrt(n)/(2n) L (Z_+ - Z_-)' (no state deviations formed); the posterior
+is P = P- - P_xz K' (= P- - K S K' since K S = P_xz); and the importance
+density's exponent at the drawn x = m + L e is e'e (no triangular solve).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
+from replay.angles import index, residual, wrap, wrap_components
 from replay.errors import ReplayError
-from replay.model import is_diagonal, remap_indices
+from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
-from .resampling import SCHEMES, effective_sample_size
+from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
 PROPOSALS = ("prior", "ckf", "stckf")
@@ -38,14 +56,14 @@ LOG2PI = np.log(2.0 * np.pi)
 
 def batched_cholesky(P):
     """Lower Cholesky factors of a stack of covariances; a non-positive-definite
-    one is repaired by clipping its eigenvalues (and counted by the caller)."""
+    one is repaired by clipping its eigenvalues. Returns (L, repairs per leading index)."""
     try:
-        return np.linalg.cholesky(P), 0
+        return np.linalg.cholesky(P), None
     except np.linalg.LinAlgError:
         P = 0.5 * (P + np.swapaxes(P, -1, -2))
         s, U = np.linalg.eigh(P)
         floor = 1e-12 * np.maximum(1.0, s.max(axis=-1, keepdims=True))
-        bad = int((s.min(axis=-1) <= floor[..., 0]).sum())
+        bad = s.min(axis=-1) <= floor[..., 0]
         P = (U * np.maximum(s, floor)[..., None, :]) @ np.swapaxes(U, -1, -2)
         return np.linalg.cholesky(P), bad
 
@@ -56,6 +74,26 @@ def check_common(n_particles, rho, beta, proposal):
     if proposal not in PROPOSALS:
         raise ReplayError(f"proposal must be one of {', '.join(PROPOSALS)} (got {proposal!r})")
     check_params(rho, beta)
+
+
+def circular_mean(Y, angles, axis=-2):
+    """Equal-weight mean over ``axis`` (circular for the ``angles`` components)."""
+    mean = Y.mean(axis=axis)
+    if angles:
+        i = index(tuple(angles))
+        a = Y[..., i]
+        mean[..., i] = np.arctan2(np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis))
+    return mean
+
+
+def weighted_mean_rows(X, w, angles):
+    """Per-run weighted mean: X (M, N, n), w (M, N) summing to one per run -> (M, n)."""
+    mean = np.einsum("mni,mn->mi", X, w)
+    if angles:
+        i = index(tuple(angles))
+        a = X[..., i]
+        mean[:, i] = np.arctan2(np.einsum("mni,mn->mi", np.sin(a), w), np.einsum("mni,mn->mi", np.cos(a), w))
+    return mean
 
 
 class CubatureParticleFilter(Filter):
@@ -73,167 +111,269 @@ class CubatureParticleFilter(Filter):
         self.rho, self.beta, self.m_form, self.scale_prior = rho, beta, m_form, scale_prior
         self.resampling, self.ess_threshold = resampling, ess_threshold
 
-    # --- set-up -------------------------------------------------------------------
-    def start(self, state, x0, P0):
-        super().start(state, x0, P0)
-        m, N = state.model, self.n_particles
-        n = m.nx
-        L0 = np.linalg.cholesky(np.asarray(P0, float))
-        state.X = wrap_components(state.x + state.rng.standard_normal((N, n)) @ L0.T, m.x_angles)
-        state.P = np.broadcast_to(np.asarray(P0, float), (N, n, n)).copy()
-        state.V = None
-        state.logw = np.full(N, -np.log(N))
-        state.xi = np.sqrt(n) * np.vstack([np.eye(n), -np.eye(n)])
-        state.repairs = state.resampled = 0
-        state.lam_sum, state.lam_n = 0.0, 0
-        state.updated = True
+    def engine(self, model, rngs):
+        """The array engine for M runs (one generator each); see :func:`replay.filters.batched.run_batched`."""
+        return Engine(self, model, rngs)
 
-    # --- batched cubature moments -------------------------------------------------
-    def _points(self, state, X, P):
+    def run(self, model, z, x0, P0, rng=None):
+        from .batched import run_batched
+
+        z = np.asarray(z, float)
+        return run_batched(self, model, z[None], np.asarray(x0, float)[None], np.asarray(P0, float)[None],
+                           [rng])[0]
+
+
+class Engine:
+    """M runs x N particles of a :class:`CubatureParticleFilter` (or a subclass)."""
+
+    exact = True  # batched runs give the numbers of one-by-one runs
+
+    def __init__(self, flt, model, rngs):
+        self.flt, self.model = flt, model
+        self.rngs = [r if r is not None else np.random.default_rng(0) for r in rngs]
+        n = model.nx
+        self.s = np.sqrt(n)
+        self.prior = flt.proposal == "prior"
+        self.custom_noise = type(model).sample_f is not Model.sample_f
+        self.custom_loglik = type(model).loglik is not Model.loglik
+        M = len(self.rngs)
+        self.repairs, self.resampled = np.zeros(M, int), np.zeros(M, int)
+        self.lam_sum, self.lam_n = np.zeros(M), np.zeros(M, int)
+
+    # --- set-up and bookkeeping ----------------------------------------------------
+    def start(self, X0, P0):
+        M, n = X0.shape
+        N = self.flt.n_particles
+        self.ids = np.arange(M)
+        self.X = np.empty((M, N, n))
+        for j in range(M):
+            L0 = np.linalg.cholesky(P0[j])
+            self.X[j] = X0[j] + self.rngs[j].standard_normal((N, n)) @ L0.T
+        wrap_components(self.X, self.model.x_angles)
+        self.P = np.broadcast_to(P0[:, None], (M, N, n, n)).copy()
+        self.V, self.V_key = None, None
+        self.logw = np.full((M, N), -np.log(N))
+        self.updated = True
+
+    def keep(self, ok):
+        self.ids = self.ids[ok]
+        for name in ("X", "P", "V", "logw"):
+            if getattr(self, name) is not None:
+                setattr(self, name, getattr(self, name)[ok])
+
+    def active_rngs(self):
+        return [self.rngs[i] for i in self.ids]
+
+    def normal(self, shape):
+        """One standard-normal draw of ``shape`` per active run, from the run's own generator -> (M, *shape)."""
+        return np.stack([g.standard_normal(shape) for g in self.active_rngs()])
+
+    def cholesky(self, P):
         L, bad = batched_cholesky(P)
-        state.repairs += bad
-        return X[:, None, :] + np.einsum("mj,nij->nmi", state.xi, L)
+        if bad is not None:
+            self.repairs[self.ids] += bad.reshape(len(self.ids), -1).sum(axis=1)
+        return L
 
-    def _moments(self, Y, angles):
-        w = np.full(Y.shape[1], 1.0 / Y.shape[1])
-        mean = weighted_mean(Y, w, angles)
-        D = residual(Y, mean[:, None, :], angles)
-        return mean, D
+    def measurement(self, k, mask):
+        """Per-step constants of the measurement: R, angles, R^-1 (vector when diagonal), log det R."""
+        m = self.model
+        R, angles = m.measurement_cov(k), m.z_angles
+        if mask is not None:
+            R, angles = R[np.ix_(mask, mask)], remap_indices(angles, mask)
+        if is_diagonal(R):
+            r = np.diagonal(R)
+            return R, angles, 1.0 / r, float(np.log(r).sum())
+        return R, angles, np.linalg.inv(R), float(np.linalg.slogdet(R)[1])
 
-    # --- predict --------------------------------------------------------------------
-    def predict(self, state, k):
-        m = state.model
-        N, n = state.X.shape
-        state.Qk = m.process_cov(k)
-        state.updated = False
-        if self.proposal == "prior":
-            state.X = m.sample_f(state.X, k, state.rng)
+    def step(self, rows, k, z, finite):
+        if len(rows) != len(self.ids):  # a lone retry after a failure: the batch's state moved on
+            raise np.linalg.LinAlgError("particle filter step failed")
+        pattern = finite[0]
+        if not (finite == pattern).all():
+            raise ValueError("runs with different missing-measurement patterns cannot share a batched step")
+        self.predict(k)
+        if pattern.all():
+            self.update(z, k, None)
+        elif pattern.any():
+            self.update(z, k, pattern)
+        x, P = self.estimate()
+        M = len(x)
+        return x, P, np.full(M, np.nan), np.zeros(M, int)
+
+    def finish(self, m, info):
+        info.pop("nis", None), info.pop("nis_dof", None)
+        info["resampled"] = int(self.resampled[m])
+        info["covariance_repairs"] = int(self.repairs[m])
+        if self.lam_n[m]:
+            info["lambda_mean"] = float(self.lam_sum[m] / self.lam_n[m])
+
+    def jacobian(self, analytic, fun, X, k, angles):
+        """Jacobians at every particle: the model's own when it declares ``vector_jacobians``
+        (F, H taking stacks of states), else central differences in one call of ``fun``."""
+        if getattr(self.model, "vector_jacobians", False):
+            return analytic(X, k)
+        return batched_jacobian(fun, X, k, angles, self.model.jacobian_step)
+
+    # --- cubature moments ------------------------------------------------------------
+    def points(self, X, P):
+        """Cubature points X ± sqrt(n) L e_i (..., 2n, n) and the factors L."""
+        L = self.cholesky(P)
+        sL = self.s * np.swapaxes(L, -1, -2)
+        Xb = X[..., None, :]
+        return np.concatenate([Xb + sL, Xb - sL], axis=-2), L
+
+    # --- predict ---------------------------------------------------------------------
+    def predict(self, k):
+        m = self.model
+        self.Qk = m.process_cov(k)
+        self.updated = False
+        if self.prior:
+            if self.custom_noise:
+                for j, g in enumerate(self.active_rngs()):
+                    self.X[j] = m.sample_f(self.X[j], k, g)
+                return
+            y = m.f(self.X, k)
+            e = self.normal(y.shape[1:])
+            if is_diagonal(self.Qk):
+                self.X = y + e * np.sqrt(np.diagonal(self.Qk))
+            else:
+                self.X = y + e @ np.linalg.cholesky(self.Qk).T
             return
-        state.fx = m.f(state.X, k)
-        state.P_prev = state.P
-        pts = self._points(state, state.X, state.P)
-        Y = m.f(pts.reshape(-1, n), k).reshape(pts.shape)
-        state.m, D = self._moments(Y, m.x_angles)
-        state.Pm = np.einsum("nmi,nmj->nij", D, D) / D.shape[1] + state.Qk
-        if self.proposal == "stckf":
-            state.F = batched_jacobian(m.f, state.X, k, m.x_angles, m.jacobian_step)
+        self.fx = m.f(self.X, k)
+        self.P_prev = self.P
+        pts, _ = self.points(self.X, self.P)
+        Y = m.f(pts, k)
+        self.mean = circular_mean(Y, m.x_angles)
+        D = residual(Y, self.mean[..., None, :], m.x_angles)
+        self.Pm = np.swapaxes(D, -1, -2) @ D / D.shape[-2] + self.Qk
+        if self.flt.proposal == "stckf":
+            self.F = self.jacobian(m.F, m.f, self.X, k, m.x_angles)
 
     # --- update -------------------------------------------------------------------------
-    def update(self, state, z, k, mask):
-        m = state.model
-        if self.proposal == "prior":
-            state.logw = state.logw + m.loglik(z, state.X, k, mask)
+    def update(self, z, k, mask):
+        meas = self.measurement(k, mask)
+        zz = z if mask is None else z[:, mask]
+        if self.prior:
+            self.logw = self.logw + self.loglik(zz, self.X, k, mask, meas)
         else:
-            mean, P = self._posterior(state, z, k, mask)
-            self._draw(state, mean, P)
-            state.logw = state.logw + m.loglik(z, state.X, k, mask) + self._log_ratio(state)
-        state.updated = True
-        self.relocate(state, z, k, mask)
+            mean, P = self.posterior(zz, k, mask, meas)
+            self.draw(mean, P)
+            self.logw = self.logw + self.loglik(zz, self.X, k, mask, meas) + self.log_ratio()
+        self.updated = True
+        self.relocate(zz, k, mask, meas)
 
-    def _posterior(self, state, z, k, mask):
+    def loglik(self, zz, X, k, mask, meas):
+        """log p(z | x) for every particle of every run (Gaussian, wrapped angle residuals)."""
+        m = self.model
+        if self.custom_loglik:
+            full = np.full((len(zz), m.nz), np.nan)
+            full[:, slice(None) if mask is None else mask] = zz
+            return np.stack([m.loglik(full[j], X[j], k, mask) for j in range(len(X))])
+        R, angles, Ri, logdet = meas
+        zh = m.h(X, k)
+        d = residual(zz[:, None, :], zh if mask is None else zh[..., mask], angles)
+        maha = (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
+        return -0.5 * (maha + logdet + len(R) * LOG2PI)
+
+    def posterior(self, zz, k, mask, meas):
         """Batched CKF / STCKF measurement update of every particle's (m, Pm)."""
-        m = state.model
+        m = self.model
+        R, zang = meas[0], meas[1]
         n = m.nx
-        pts = self._points(state, state.m, state.Pm)
-        Z = m.h(pts.reshape(-1, n), k).reshape(pts.shape[0], pts.shape[1], -1)
-        R, zang = m.measurement_cov(k), m.z_angles
+        pts, L = self.points(self.mean, self.Pm)
+        Z = m.h(pts, k)
         if mask is not None:
-            Z, z, R = Z[..., mask], z[mask], R[np.ix_(mask, mask)]
-            zang = remap_indices(zang, mask)
-        zh, Dz = self._moments(Z, zang)
-        Dx = residual(pts, state.m[:, None, :], m.x_angles)
-        c = 1.0 / pts.shape[1]
-        Pzz = np.einsum("nmi,nmj->nij", Dz, Dz) * c
-        Pxz = np.einsum("nmi,nmj->nij", Dx, Dz) * c
-        Pm = state.Pm
-        if self.proposal == "stckf":
-            lam = self._fading(state, z, k, mask, R, zang)
-            Pzz, Pxz = lam[:, None, None] * Pzz, lam[:, None, None] * Pxz
-            if self.scale_prior:
-                Pm = lam[:, None, None] * Pm
+            Z = Z[..., mask]
+        zh = circular_mean(Z, zang)
+        Dz = residual(Z, zh[..., None, :], zang)
+        c = 2 * n
+        Pzz = np.swapaxes(Dz, -1, -2) @ Dz / c
+        Pxz = (self.s / c) * (L @ (Dz[..., :n, :] - Dz[..., n:, :]))
+        Pm = self.Pm
+        if self.flt.proposal == "stckf":
+            lam = self.fading(zz, k, mask, R, zang)[..., None, None]
+            Pzz, Pxz = lam * Pzz, lam * Pxz
+            if self.flt.scale_prior:
+                Pm = lam * Pm
         S = Pzz + R
-        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(Pxz, 1, 2)), 1, 2)
-        y = residual(z, zh, zang)
-        mean = wrap_components(state.m + np.einsum("nij,nj->ni", K, y), m.x_angles)
-        P = Pm - K @ S @ np.swapaxes(K, 1, 2)
-        return mean, 0.5 * (P + np.swapaxes(P, 1, 2))
+        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(Pxz, -1, -2)), -1, -2)
+        y = residual(zz[:, None, :], zh, zang)
+        mean = wrap_components(self.mean + (K @ y[..., None])[..., 0], m.x_angles)
+        P = Pm - Pxz @ np.swapaxes(K, -1, -2)
+        return mean, 0.5 * (P + np.swapaxes(P, -1, -2))
 
-    def _fading(self, state, z, k, mask, R, zang):
-        m = state.model
-        H = batched_jacobian(m.h, state.m, k, m.z_angles, m.jacobian_step)
-        zh = m.h(state.m, k)
+    def fading(self, zz, k, mask, R, zang):
+        m, flt = self.model, self.flt
+        H = self.jacobian(m.H, m.h, self.mean, k, m.z_angles)
+        zh = m.h(self.mean, k)
         if mask is not None:
-            H, zh = H[:, mask], zh[:, mask]
+            H, zh = H[..., mask, :], zh[..., mask]
         key = None if mask is None else tuple(mask)
-        if key != getattr(state, "V_mask", None):
-            state.V, state.V_mask = None, key
-        state.V = next_V(state.V, residual(z, zh, zang), self.rho)
-        lam = fading_factor(state.V, H, state.F, state.P_prev, state.Qk, R, self.beta, self.m_form)
-        state.lam_sum += float(lam.sum())
-        state.lam_n += len(lam)
+        if key != self.V_key:
+            self.V, self.V_key = None, key
+        self.V = next_V(self.V, residual(zz[:, None, :], zh, zang), flt.rho)
+        lam = fading_factor(self.V, H, self.F, self.P_prev, self.Qk, R, flt.beta, flt.m_form)
+        self.lam_sum[self.ids] += lam.sum(axis=1)
+        self.lam_n[self.ids] += lam.shape[1]
         return lam
 
-    def _draw(self, state, mean, P):
-        L, bad = batched_cholesky(P)
-        state.repairs += bad
-        e = state.rng.standard_normal(mean.shape)
-        state.X = wrap_components(mean + np.einsum("nij,nj->ni", L, e), state.model.x_angles)
-        state.P, state.q_mean, state.q_L = P, mean, L
+    def draw(self, mean, P):
+        """x = m + L e, e ~ N(0, I) from each run's generator; keeps what :meth:`log_ratio` needs."""
+        L = self.cholesky(P)
+        e = self.normal(mean.shape[1:])
+        self.X = wrap_components(mean + (L @ e[..., None])[..., 0], self.model.x_angles)
+        self.P, self.q_e, self.q_L = P, e, L
 
-    def _log_ratio(self, state, X=None):
-        """log p(x | x_prev) - log q(x), at the particles ``X`` (default: the current ones)."""
-        m = state.model
-        X = state.X if X is None else X
-        d = residual(X, state.fx, m.x_angles)
-        Q = state.Qk
+    def log_ratio(self):
+        """log p(x | x_prev) - log q(x) at the drawn particles (constants 2 pi cancel)."""
+        d = residual(self.X, self.fx, self.model.x_angles)
+        Q = self.Qk
         if is_diagonal(Q):
             q = np.diagonal(Q)
             log_prior = -0.5 * ((d * d) @ (1.0 / q) + np.log(q).sum())
         else:
-            Lq = np.linalg.cholesky(Q)
-            u = np.linalg.solve(Lq, d.T)
-            log_prior = -0.5 * (np.einsum("ij,ij->j", u, u) + 2.0 * np.log(np.diag(Lq)).sum())
-        dq = residual(X, state.q_mean, m.x_angles)
-        u = np.linalg.solve(state.q_L, dq[..., None])[..., 0]
-        logdet = 2.0 * np.log(np.diagonal(state.q_L, axis1=1, axis2=2)).sum(axis=1)
-        return log_prior + 0.5 * (np.einsum("ni,ni->n", u, u) + logdet)
+            maha = np.einsum("...i,ij,...j->...", d, np.linalg.inv(Q), d)
+            log_prior = -0.5 * (maha + np.linalg.slogdet(Q)[1])
+        logdet = 2.0 * np.log(np.diagonal(self.q_L, axis1=-2, axis2=-1)).sum(axis=-1)
+        return log_prior + 0.5 * (np.einsum("...i,...i->...", self.q_e, self.q_e) + logdet)
 
     # --- relocation (resampling) and estimate -------------------------------------
-    def relocate(self, state, z, k, mask):
+    def relocate(self, zz, k, mask, meas):
         """Resampling happens in :meth:`estimate` (after the estimate, as in :mod:`.pf`)."""
 
-    def normalise(self, state):
-        lw = state.logw - state.logw.max()
+    def normalise(self):
+        lw = self.logw - self.logw.max(axis=1, keepdims=True)
         w = np.exp(lw)
-        s = w.sum()
-        state.logw = lw - np.log(s)
+        s = w.sum(axis=1, keepdims=True)
+        self.logw = lw - np.log(s)
         return w / s
 
-    def estimate(self, state):
-        m = state.model
-        if not state.updated and self.proposal != "prior":  # predict only: draw from the prediction
-            self._draw(state, state.m, state.Pm)
-            state.logw = state.logw + self._log_ratio(state)
-        state.updated = True
-        w = self.normalise(state)
-        x = weighted_mean(state.X, w, m.x_angles)
-        D = residual(state.X, x, m.x_angles)
-        P = (D.T * w) @ D
-        self.after_estimate(state, w)
+    def estimate(self):
+        m = self.model
+        if not self.updated and not self.prior:  # predict only: draw from the prediction
+            self.draw(self.mean, self.Pm)
+            self.logw = self.logw + self.log_ratio()
+        self.updated = True
+        w = self.normalise()
+        x = weighted_mean_rows(self.X, w, m.x_angles)
+        D = residual(self.X, x[:, None, :], m.x_angles)
+        P = np.swapaxes(D * w[..., None], -1, -2) @ D
+        self.after_estimate(w)
         return x, P
 
-    def after_estimate(self, state, w):
-        N = self.n_particles
-        if effective_sample_size(w) < self.ess_threshold * N:
-            idx = SCHEMES[self.resampling](w, state.rng)
-            state.X, state.P = state.X[idx], state.P[idx]
-            if state.V is not None:
-                state.V = state.V[idx]
-            state.logw = np.full(N, -np.log(N))
-            state.resampled += 1
+    def after_estimate(self, w):
+        flt = self.flt
+        N = flt.n_particles
+        ess = 1.0 / np.einsum("mn,mn->m", w, w)
+        for j in np.flatnonzero(ess < flt.ess_threshold * N):
+            idx = SCHEMES[flt.resampling](w[j], self.rngs[self.ids[j]])
+            self.X[j] = self.X[j][idx]
+            if not self.prior:
+                self.P[j] = self.P[j][idx]
+            if self.V is not None:
+                self.V[j] = self.V[j][idx]
+            self.logw[j] = -np.log(N)
+            self.resampled[self.ids[j]] += 1
 
-    def finish(self, state, info):
-        info["resampled"] = state.resampled
-        info["covariance_repairs"] = state.repairs
-        if state.lam_n:
-            info["lambda_mean"] = state.lam_sum / state.lam_n
+
+__all__ = ["CubatureParticleFilter", "Engine", "batched_cholesky", "check_common", "wrap"]

@@ -64,6 +64,10 @@ def main():
 @click.option("--param", "-p", "params", multiple=True,
               help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable).")
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
+@click.option("--dataset-param", "dataset_params", multiple=True,
+              help="Dataset (simulator) parameter NAME=VALUE, e.g. q=10 for sim/ungm (repeatable).")
+@click.option("--baseline", default=None,
+              help="Filter the leaderboard's paired columns compare with (default: the first listed).")
 @click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
 @click.option("--mcap", "mcap_out", default=None, type=click.Path(dir_okay=False),
@@ -71,7 +75,7 @@ def main():
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(file_okay=False),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
-             mapping=None, mcap_out=None, ros2_out=None):
+             dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.evaluate import evaluate
     from replay.outputs import format_table, write_all
@@ -79,13 +83,18 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     names = [f.strip() for f in filters.split(",") if f.strip()]
     if not names:
         raise ReplayError("--filters: no filter named")
+    if baseline is not None and baseline not in names:
+        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names)})")
+    dparams = parse_params(dataset_params, "--dataset-param")
+    if mapping:
+        dparams["mapping"] = str(Path(mapping).resolve())
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
                   data_dir=data_dir, filter_params=parse_params(params, "--param"),
                   task_params=parse_params(task_params, "--task-param"), adapter=adapter,
-                  dataset_params={"mapping": str(Path(mapping).resolve())} if mapping else None)
+                  dataset_params=dparams or None)
     click.echo(format_table(ev))
     out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
-    paths = write_all(ev, out)
+    paths = write_all(ev, out, baseline)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:
         from replay.cli_bags import export_outputs

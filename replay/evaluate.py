@@ -10,12 +10,18 @@ from the user's seed ``S`` with :class:`numpy.random.SeedSequence`:
 So in a given run every filter sees the same measurements (common random
 numbers: paired comparisons have tight intervals), and adding a filter changes
 no other filter's numbers.
+
+Filters whose batched form gives exactly the one-by-one numbers
+(:func:`replay.filters.batched.exact`: the bootstrap PF, the particle and swarm
+filters of paper 002) run all Monte Carlo runs as one array computation
+(:func:`run_all`); the others run one by one. Either way the numbers are the same.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import platform
+import shlex
 import sys
 import zlib
 from dataclasses import dataclass, field
@@ -25,7 +31,7 @@ import numpy as np
 
 import replay
 from replay import registry, score
-from replay.filters import make_filter
+from replay.filters import batched, make_filter
 from replay.tasks import make_task
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
@@ -80,6 +86,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     is_sim = ds is not None and ds.kind == "sim"
     frame = None
     truths = []
+    batch = [runs > 1 and batched.exact(f) for f in instances]  # filled after the loop, all runs at once
+    problems = []
     for run in range(runs):
         if frame is None or is_sim:
             frame = registry.load_frame(dataset, data_dir=data_dir, rng=rng_for(seed, run, 0),
@@ -89,12 +97,18 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
             the_task = make_task(task_name, **(task_params or {}))
         problem = the_task.build(frame, rng_for(seed, run, 1))
         truths.append(problem.truth_position)
-        for name, flt, res in zip(filters, instances, results):
+        if any(batch):
+            problems.append(problem)
+        for name, flt, res, b in zip(filters, instances, results, batch):
+            if b:
+                continue
             est = flt.run(problem.model, problem.z, problem.x0, problem.P0,
                           rng_for(seed, run, 2, filter_stream(name)))
-            res.runs.append(score.score_run(problem, est))
-            res.errors.append(score.errors(problem, est))
-            res.estimates.append(est)
+            _record(res, problem, est)
+    for name, flt, res, b in zip(filters, instances, results, batch):
+        if b:
+            for problem, est in zip(problems, run_all(flt, name, problems, seed)):
+                _record(res, problem, est)
     for res in results:
         res.summary = score.aggregate(res.runs)
     config = {
@@ -107,6 +121,42 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     config["config_hash"] = config_hash(config)
     return Evaluation(config, _jsonable(frame.meta), frame.report.to_list(), results, frame.t, truths,
                       tuple(problem.axis_names))
+
+
+def _record(res: FilterResult, problem, est) -> None:
+    res.runs.append(score.score_run(problem, est))
+    res.errors.append(score.errors(problem, est))
+    res.estimates.append(est)
+
+
+BATCH_PARTICLES = 10_000  # runs per batched call: about this many particles in all
+
+
+def run_all(flt, name: str, problems: list, seed: int) -> list:
+    """Every run of one filter with the seeds of the one-by-one loop; batched
+    (:mod:`replay.filters.batched`) when its batched form is exact and the runs
+    share one model and one pattern of missing measurements. A run that
+    diverges in a batch is run again alone, so the numbers are always those of
+    one-by-one runs."""
+    from replay.campaign.units import same_model
+
+    def one(r):
+        p = problems[r]
+        return flt.run(p.model, p.z, p.x0, p.P0, rng_for(seed, r, 2, filter_stream(name)))
+
+    p0 = problems[0]
+    finite = np.isfinite(p0.z)
+    if not all(p.z.shape == p0.z.shape and same_model(p.model, p0.model) and np.array_equal(np.isfinite(p.z), finite)
+               for p in problems):
+        return [one(r) for r in range(len(problems))]
+    chunk = max(1, BATCH_PARTICLES // int(getattr(flt, "n_particles", 1)))
+    out = []
+    for s in range(0, len(problems), chunk):
+        ps = problems[s:s + chunk]
+        out += batched.run_batched(flt, p0.model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]),
+                                   np.stack([p.P0 for p in ps]),
+                                   [rng_for(seed, s + j, 2, filter_stream(name)) for j in range(len(ps))])
+    return [one(r) if est.diverged else est for r, est in enumerate(out)]
 
 
 def resolve(dataset: str):
@@ -148,6 +198,10 @@ def command_line(config: dict) -> str:
         parts += ["--adapter", config["adapter"]]
     if (config.get("dataset_params") or {}).get("mapping"):
         parts += ["--mapping", str(config["dataset_params"]["mapping"])]
+    for key, value in (config.get("dataset_params") or {}).items():
+        if key != "mapping":
+            text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
+            parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
     return " ".join(parts)
 
 

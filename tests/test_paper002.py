@@ -12,10 +12,10 @@ import pytest
 from replay import registry
 from replay.errors import ReplayError
 from replay.evaluate import evaluate
-from replay.filters import gwo, make_filter, pso
+from replay.filters import batched, gwo, make_filter, pso
+from replay.filters.batched import run_batched
 from replay.filters.sigma import CKF
 from replay.filters.stckf import STCKF, batched_jacobian, fading_factor
-from replay.filters.stcpf import CubatureParticleFilter
 from replay.model import LinearGaussian
 from replay.models.auv_sonar import AUVSonar
 from replay.models.ungm import UNGM
@@ -83,26 +83,74 @@ def test_batched_jacobian_matches_analytic():
 
 
 # --- batched per-particle cubature filters ----------------------------------------------
+def engine_at(name, pb, rngs, **params):
+    flt = make_filter(name, **params)
+    eng = flt.engine(pb.model, rngs)
+    M = len(rngs)
+    eng.start(np.repeat(pb.x0[None], M, axis=0), np.repeat(pb.P0[None], M, axis=0))
+    return eng
+
+
 @pytest.mark.parametrize("proposal", ["ckf", "stckf"])
 def test_batched_particle_update_equals_single_filter(proposal):
     pb = sonar_problem()
-    m, N = pb.model, 7
     single = (CKF() if proposal == "ckf" else STCKF())
     s_state = type("S", (), {})()
-    s_state.model, s_state.rng = m, np.random.default_rng(0)
+    s_state.model, s_state.rng = pb.model, np.random.default_rng(0)
     single.start(s_state, pb.x0, pb.P0)
-    flt = CubatureParticleFilter(N, proposal)
-    b = type("S", (), {})()
-    b.model, b.rng = m, np.random.default_rng(0)
-    flt.start(b, pb.x0, pb.P0)
-    b.X = np.repeat(pb.x0[None], N, axis=0)  # every particle at the same mean
+    eng = engine_at("stcpf", pb, [np.random.default_rng(0)] * 2, n_particles=7, proposal=proposal)
+    eng.X[:] = pb.x0  # every particle of both runs at the same mean
     single.predict(s_state, 0)
-    flt.predict(b, 0)
-    assert np.allclose(b.m, s_state.x) and np.allclose(b.Pm, s_state.P)
+    eng.predict(0)
+    assert np.allclose(eng.mean, s_state.x) and np.allclose(eng.Pm, s_state.P)
     single.update(s_state, pb.z[0], 0, None)
-    mean, P = flt._posterior(b, pb.z[0], 0, None)
+    mean, P = eng.posterior(np.repeat(pb.z[:1], 2, axis=0), 0, None, eng.measurement(0, None))
     assert np.allclose(mean, s_state.x, rtol=1e-6, atol=1e-8)
     assert np.allclose(P, s_state.P, rtol=1e-5, atol=1e-8)
+
+
+@pytest.mark.parametrize("name,params", [("igwo-stcpf", {"t_max": 4}), ("pso-cpf", {"iterations": 4}),
+                                         ("gwo-pf", {"t_max": 4}), ("stcpf", {})])
+def test_batched_runs_equal_one_by_one_exactly(name, params):
+    pbs = [sonar_problem(s) for s in (1, 2, 3)]
+    for p in pbs:
+        p.z = p.z[:25]
+    flt = make_filter(name, n_particles=20, **params)
+    seq = [flt.run(p.model, p.z, p.x0, p.P0, np.random.default_rng(50 + r)) for r, p in enumerate(pbs)]
+    bat = run_batched(flt, pbs[0].model, np.stack([p.z for p in pbs]), np.stack([p.x0 for p in pbs]),
+                      np.stack([p.P0 for p in pbs]), [np.random.default_rng(50 + r) for r in range(3)])
+    assert batched.exact(flt)
+    for a, b in zip(seq, bat):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert a.info == b.info
+    assert not np.array_equal(seq[0].x, seq[1].x)
+
+
+def test_evaluate_batches_and_matches_a_single_run():
+    kw = dict(task="sonar", filters=("igwo-stcpf", "pf"), seed=3,
+              filter_params={"igwo-stcpf": {"n_particles": 20, "t_max": 3}, "pf": {"n_particles": 50}},
+              dataset_params={"steps": 30})
+    one = evaluate("sim/auv-sonar", runs=1, **kw)
+    three = evaluate("sim/auv-sonar", runs=3, **kw)  # batched: run 0 must be the same numbers
+    for a, b in zip(one.results, three.results):
+        assert a.runs[0]["pos_rmse"] == b.runs[0]["pos_rmse"]
+        assert np.array_equal(a.estimates[0].x, b.estimates[0].x)
+
+
+def test_vector_jacobians_equal_per_state_and_numerical():
+    m = AUVSonar(origin=(1.0, -2.0, 0.5))
+    X = np.random.default_rng(0).normal(size=(3, 4, 6)) * 20
+    F, H = m.F(X, 0), m.H(X, 0)
+    Fn, Hn = batched_jacobian(m.f, X, 0, m.x_angles), batched_jacobian(m.h, X, 0, m.z_angles)
+    assert F.shape == (3, 4, 6, 6) and H.shape == (3, 4, 3, 6)
+    assert np.allclose(F, Fn, atol=1e-6) and np.allclose(H, Hn, atol=1e-7)
+    assert np.array_equal(F[2, 1], m.F(X[2, 1], 0)) and np.array_equal(H[2, 1], m.H(X[2, 1], 0))
+    X[0, 0, :3] = m.origin  # at the sonar: no information
+    assert np.all(m.H(X, 0)[0, 0] == 0) and np.all(m.H(X[0, 0], 0) == 0)
+    u = UNGM()
+    x = np.array([[0.3], [-2.0]])
+    assert np.allclose(u.F(x, 0), batched_jacobian(u.f, x, 0), atol=1e-7)
+    assert u.F(x[0], 0).shape == (1, 1) and u.H(x, 0)[1, 0, 0] == pytest.approx(-0.2)
 
 
 # --- GWO / IGWO ----------------------------------------------------------------------------
@@ -120,6 +168,20 @@ def test_gwo_keeps_the_elite(improved):
     # the initial alpha wolf is still in the population unless something better was found
     assert f.min() <= sphere(X0).min()
     assert np.allclose(f, sphere(X))
+
+
+def test_batched_gwo_and_pso_equal_separate_swarms():
+    X0 = np.random.default_rng(1).standard_normal((3, 25, 4)) * 5
+
+    def fit(X):
+        return np.sum((X - 3.0) ** 2, axis=-1)
+
+    for opt, kw in ((gwo.optimize, {"improved": True}), (gwo.optimize, {"improved": False}), (pso.optimize, {})):
+        Xb, fb, bb = opt(X0, fit, [np.random.default_rng(10 + m) for m in range(3)], 6, **kw)
+        assert bb.shape == (3, 7) and np.all(np.diff(bb, axis=1) <= 0)
+        for m in range(3):
+            Xs, fs, bs = opt(X0[m], fit, np.random.default_rng(10 + m), 6, **kw)
+            assert np.array_equal(Xs, Xb[m]) and np.array_equal(bs, bb[m])
 
 
 def test_igwo_converges_closer_than_gwo_on_a_sphere():
@@ -172,17 +234,20 @@ def test_pso_stays_within_bounds():
 
 def test_pso_pf_particles_within_bounds_on_the_sonar_task():
     pb = sonar_problem(3)
-    flt = make_filter("pso-pf", n_particles=30)
+    eng = engine_at("pso-pf", pb, [np.random.default_rng(0), np.random.default_rng(1)], n_particles=30)
     lo, hi = np.array(pso.LB_002), np.array(pso.UB_002)
-    from replay.filters.base import State
-
-    st = State(pb.model, np.random.default_rng(0))
-    flt.start(st, pb.x0, pb.P0)
     for k in range(5):
-        flt.predict(st, k)
-        flt.update(st, pb.z[k], k, None)
-        flt.estimate(st)
-        assert np.all(st.X >= lo - 1e-12) and np.all(st.X <= hi + 1e-12)
+        eng.step(eng.ids, k, np.repeat(pb.z[k:k + 1], 2, axis=0), np.ones((2, 3), bool))
+        assert np.all(eng.X >= lo - 1e-12) and np.all(eng.X <= hi + 1e-12)
+
+
+def test_named_variants_rebuild_from_their_recorded_parameters():
+    for name in ("igwo-stcpf", "gwo-pf", "igwo-pf", "pso-pf", "pso-cpf", "stcpf"):
+        p = make_filter(name).params()
+        assert make_filter(name, **p).params() == p  # what `replay rerun` does
+    assert make_filter("pso-pf", iterations=5).t_max == 5
+    with pytest.raises(ReplayError, match="proposal is fixed"):
+        make_filter("gwo-pf", proposal="ckf")
 
 
 # --- bad parameters -------------------------------------------------------------------------

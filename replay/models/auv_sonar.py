@@ -36,6 +36,7 @@ class AUVSonar(Model):
     x_angles = (4, 5)
     z_angles = (1, 2)
     components = ("x", "y", "z", "v", "pitch", "yaw")
+    vector_jacobians = True  # F and H also take stacks of states (..., nx)
 
     def __init__(self, Q=Q_TABLE2, R=R_TABLE2, dt=1.0, yaw_rate=0.25, origin=(0.0, 0.0, 0.0)):
         self.Q = np.asarray(Q, float)
@@ -59,32 +60,46 @@ class AUVSonar(Model):
         return y
 
     def F(self, x, k):
+        """Jacobian of f at ``x`` (6,) -> (6, 6), or at a stack (..., 6) -> (..., 6, 6)."""
         T = self._dt(k)
-        v, th, ps = x[3], x[4], x[5]
+        v, th, ps = x[..., 3], x[..., 4], x[..., 5]
         c, s, cp, sp = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
-        J = np.eye(6)
-        J[0, 3:6] = [c * cp * T, -v * s * cp * T, -v * c * sp * T]
-        J[1, 3:6] = [c * sp * T, -v * s * sp * T, v * c * cp * T]
-        J[2, 3:5] = [-s * T, -v * c * T]
+        J = np.zeros(np.shape(x)[:-1] + (6, 6))
+        J[..., range(6), range(6)] = 1.0
+        J[..., 0, 3], J[..., 0, 4], J[..., 0, 5] = c * cp * T, -v * s * cp * T, -v * c * sp * T
+        J[..., 1, 3], J[..., 1, 4], J[..., 1, 5] = c * sp * T, -v * s * sp * T, v * c * cp * T
+        J[..., 2, 3], J[..., 2, 4] = -s * T, -v * c * T
         return J
 
     def h(self, x, k):
         d = x[..., :3] - self.origin
-        rho2 = d[..., 0] ** 2 + d[..., 1] ** 2
-        r = np.sqrt(rho2 + d[..., 2] ** 2)
-        el = np.arctan2(d[..., 2], np.sqrt(rho2))
-        az = np.arctan2(d[..., 1], d[..., 0])
-        return np.stack([r, el, az], axis=-1)
+        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+        rho2 = dx * dx + dy * dy
+        out = np.empty(np.shape(x)[:-1] + (3,))
+        rho = np.sqrt(rho2)
+        np.sqrt(rho2 + dz * dz, out=out[..., 0])
+        np.arctan2(dz, rho, out=out[..., 1])
+        np.arctan2(dy, dx, out=out[..., 2])
+        return out
 
     def H(self, x, k):
-        dx, dy, dz = x[:3] - self.origin
+        """Jacobian of h at ``x`` (6,) -> (3, 6), or at a stack (..., 6) -> (..., 3, 6).
+
+        Zero where the AUV is at the sonar (bearing undefined, no information).
+        """
+        d = x[..., :3] - self.origin
+        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
         rho2 = dx * dx + dy * dy
         r2 = rho2 + dz * dz
-        r, rho = np.sqrt(r2), np.sqrt(rho2)
-        J = np.zeros((3, 6))
-        if r2 == 0.0 or rho2 == 0.0:  # at the sonar: bearing undefined, no information
+        J = np.zeros(np.shape(x)[:-1] + (3, 6))
+        bad = (r2 == 0.0) | (rho2 == 0.0)
+        if np.all(bad):
             return J
-        J[0, :3] = [dx / r, dy / r, dz / r]
-        J[1, :3] = [-dx * dz / (r2 * rho), -dy * dz / (r2 * rho), rho / r2]
-        J[2, :2] = [-dy / rho2, dx / rho2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r, rho = np.sqrt(r2), np.sqrt(rho2)
+            J[..., 0, 0], J[..., 0, 1], J[..., 0, 2] = dx / r, dy / r, dz / r
+            J[..., 1, 0], J[..., 1, 1], J[..., 1, 2] = -dx * dz / (r2 * rho), -dy * dz / (r2 * rho), rho / r2
+            J[..., 2, 0], J[..., 2, 1] = -dy / rho2, dx / rho2
+        if np.any(bad):
+            J[bad] = 0.0
         return J

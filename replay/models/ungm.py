@@ -18,6 +18,7 @@ from replay.model import Model
 class UNGM(Model):
     nx = nz = 1
     components = ("x",)
+    vector_jacobians = True  # F and H also take stacks of states (..., 1)
 
     def __init__(self, Q=1.0, R=1.0, growth: float = 2.5, k0: int = 1):
         self.Q = np.atleast_2d(np.asarray(Q, float))
@@ -28,11 +29,12 @@ class UNGM(Model):
         return 0.5 * x + self.growth * x / (1.0 + x * x) + 8.0 * np.cos(1.2 * (k + self.k0))
 
     def F(self, x, k):
-        x = float(x[0])
-        return np.array([[0.5 + self.growth * (1.0 - x * x) / (1.0 + x * x) ** 2]])
+        """d f / d x at ``x`` (1,) -> (1, 1), or at a stack (..., 1) -> (..., 1, 1)."""
+        x = np.asarray(x, float)[..., :1, None]
+        return 0.5 + self.growth * (1.0 - x * x) / (1.0 + x * x) ** 2
 
     def h(self, x, k):
         return x * x / 20.0
 
     def H(self, x, k):
-        return np.array([[float(x[0]) / 10.0]])
+        return np.asarray(x, float)[..., :1, None] / 10.0

@@ -184,9 +184,8 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False):
             print(f"Q=R={q:g} {name:8s} paper {paper[name]:.4f} ours {mean:.4f} ±{ci:.4f} ratio {mean / paper[name]:.2f}")
             out.append(f"| {q:g} | {name} | {paper[name]:.4f} | {mean:.4f} ± {ci:.4f} | {mean / paper[name]:.2f} | "
                        + (f"{d[0]:.4f} ± {d[1]:.4f}" if name == "igwo-pf" else "") +
-                       f" | `{cmd(ev, f' --dataset-param q={q:g} --dataset-param r={r:g}')}` |")
-    out += ["", "`--dataset-param` is not a `replay eval` option yet: the reproduction passes "
-            "`dataset_params` to `replay.evaluate.evaluate` (same seeds as `replay eval`).", ""]
+                       f" | `{cmd(ev)}` |")
+    out += [""]
 
     # 2. AUV sonar
     out += ["## Benchmark 2: simulated AUV tracked by a sonar (002 §4, Table 2)", ""]
@@ -205,7 +204,7 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False):
     rows6 = table_rows(ev6, TABLE6)
     print_rows(rows6, "Table 6 (mixed Gaussian noise)")
     out += md_table(rows6, "Table 6: mixed-Gaussian noise (1 − ε) N(0, R1) + ε N(0, 10 R1), ε = 0.05",
-                    cmd(ev6, " -p pf.n_particles=100  (dataset_params mixture_eps=0.05 mixture_scale=10)"),
+                    cmd(ev6, " -p pf.n_particles=100"),
                     "The filters assume N(0, R1) (they are not told about the outliers).")
     position_fit.append(("Table 6", rows6, TABLE6))
 
