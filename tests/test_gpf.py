@@ -250,3 +250,18 @@ def test_gpf_estimate_is_weighted_mean_before_resampling(near_linear):
     assert xk[:2] == pytest.approx(w @ P[:, :2], abs=1e-12)
     assert xk[2] == pytest.approx(np.arctan2(w @ np.sin(P[:, 2]), w @ np.cos(P[:, 2])), abs=1e-12)
     assert np.ptp(state.w) > 0  # still weighted: resampling happens in the next predict
+
+
+def test_reproduction_readings_convert_only_the_pitch_entries():
+    from replay.reproduce.p000 import PRIMARY, READINGS
+    from replay.sim.lake_depth import base_for_rms
+
+    assert READINGS[PRIMARY][:2] == ({}, {})
+    deg = np.deg2rad(1.0)
+    for name in ("degrees", "degrees, sensors at R"):
+        task, _, _ = READINGS[name]
+        np.testing.assert_allclose(np.diag(task["Q"]), [0.2**2, 1.0, (0.5 * deg) ** 2], rtol=1e-12)
+        np.testing.assert_allclose(np.diag(task["R"]), [0.2**2, 25.0, (0.5 * deg) ** 2], rtol=1e-12)
+    assert READINGS["degrees"][1] == {}
+    np.testing.assert_allclose(READINGS["degrees, sensors at R"][1]["base_sigma"],
+                               base_for_rms([0.2, 5.0, 0.5 * deg]), rtol=1e-12)
