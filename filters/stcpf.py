@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import index, residual, wrap, wrap_components
+from replay.angles import index, residual, wrap_components
 from replay.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
@@ -375,5 +375,3 @@ class Engine:
             self.logw[j] = -np.log(N)
             self.resampled[self.ids[j]] += 1
 
-
-__all__ = ["CubatureParticleFilter", "Engine", "batched_cholesky", "check_common", "wrap"]

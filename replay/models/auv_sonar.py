@@ -62,6 +62,14 @@ class AUVSonar(Model):
     def F(self, x, k):
         """Jacobian of f at ``x`` (6,) -> (6, 6), or at a stack (..., 6) -> (..., 6, 6)."""
         T = self._dt(k)
+        if np.ndim(x) == 1:  # one state: scalar arithmetic is cheaper
+            v, th, ps = x[3], x[4], x[5]
+            c, s, cp, sp = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+            J = np.eye(6)
+            J[0, 3:6] = [c * cp * T, -v * s * cp * T, -v * c * sp * T]
+            J[1, 3:6] = [c * sp * T, -v * s * sp * T, v * c * cp * T]
+            J[2, 3:5] = [-s * T, -v * c * T]
+            return J
         v, th, ps = x[..., 3], x[..., 4], x[..., 5]
         c, s, cp, sp = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
         J = np.zeros(np.shape(x)[:-1] + (6, 6))
@@ -87,6 +95,18 @@ class AUVSonar(Model):
 
         Zero where the AUV is at the sonar (bearing undefined, no information).
         """
+        if np.ndim(x) == 1:  # one state: scalar arithmetic is cheaper
+            dx, dy, dz = x[:3] - self.origin
+            rho2 = dx * dx + dy * dy
+            r2 = rho2 + dz * dz
+            J = np.zeros((3, 6))
+            if r2 == 0.0 or rho2 == 0.0:
+                return J
+            r, rho = np.sqrt(r2), np.sqrt(rho2)
+            J[0, :3] = [dx / r, dy / r, dz / r]
+            J[1, :3] = [-dx * dz / (r2 * rho), -dy * dz / (r2 * rho), rho / r2]
+            J[2, :2] = [-dy / rho2, dx / rho2]
+            return J
         d = x[..., :3] - self.origin
         dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
         rho2 = dx * dx + dy * dy
