@@ -129,3 +129,21 @@ def test_packed_results_store_the_same_table(tmp_path):
     for name in ("k", "t", "nees"):
         np.testing.assert_array_equal(a.series("h", 0)[name], b.series("h", 0)[name])
     assert a.records("h") == b.records("h") and a.stored_runs("h") == {0, 1}
+
+
+def test_unit_tables_do_not_import_pandas(tmp_path):
+    """Writing and reading a unit's table stays clear of pandas (about 1 s to import, per process)."""
+    code = ("import sys, numpy as np\n"
+            "from replay.campaign.store import Store, pack\n"
+            "s = Store(sys.argv[1]); (s.units / 'h').mkdir(parents=True)\n"
+            "r = pack([{'run': 0, 'status': 'done', 'metrics': {}, 'series': {'k': np.arange(4), "
+            "'nees': np.array([1.0, np.nan, 2.0, 3.5])}}])[0]\n"
+            "s.write('h', r)\n"
+            "t = s.series('h', 0)\n"
+            "assert t['k'].dtype == np.int64 and t['k'].tolist() == [0, 1, 2, 3], t\n"
+            "assert np.array_equal(t['nees'], [1.0, np.nan, 2.0, 3.5], equal_nan=True)\n"
+            "print('pandas' in sys.modules)\n")
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path / "o")], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "False"

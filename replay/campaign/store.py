@@ -46,13 +46,37 @@ def _default(v):
     return str(v)
 
 
+def to_arrow(values):
+    """A 1-D numpy array as a pyarrow Array. Integer and float columns go through their
+    buffer: ``pa.array(ndarray)`` imports pandas (about 1 s), once in every worker and
+    again in the main process when the leaderboard reads the tables back."""
+    import pyarrow as pa
+
+    v = np.ascontiguousarray(values)
+    if v.ndim == 1 and v.dtype.kind in "iuf" and v.dtype.isnative:
+        return pa.Array.from_buffers(pa.from_numpy_dtype(v.dtype), len(v), [None, pa.py_buffer(v)])
+    return pa.array(v)
+
+
+def to_numpy(column) -> np.ndarray:
+    """A pyarrow (Chunked)Array as numpy; without pandas for integer/float columns without nulls."""
+    import pyarrow as pa
+
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    if arr.null_count == 0 and (pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type)):
+        dt = np.dtype(arr.type.to_pandas_dtype())
+        return np.frombuffer(arr.buffers()[1], dt, count=len(arr), offset=arr.offset * dt.itemsize)
+    return arr.to_numpy(zero_copy_only=False)
+
+
 def parquet_bytes(series: dict) -> bytes:
     """A unit's per-step table (dict of equal-length arrays) as the bytes of a Parquet file."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     sink = pa.BufferOutputStream()
-    pq.write_table(pa.table({k: np.asarray(v) for k, v in series.items()}), sink)
+    table = pa.Table.from_arrays([to_arrow(np.asarray(v)) for v in series.values()], names=list(series))
+    pq.write_table(table, sink)
     return sink.getvalue().to_pybytes()
 
 
@@ -132,4 +156,4 @@ class Store:
         import pyarrow.parquet as pq
 
         t = pq.ParquetFile(self.units / config_hash / f"{run}.parquet").read(columns=columns)
-        return {name: t.column(name).to_numpy(zero_copy_only=False) for name in t.column_names}
+        return {name: to_numpy(t.column(name)) for name in t.column_names}
