@@ -90,6 +90,13 @@ def main():
         p = PAPER_TABLE4[name]
         ours = b if np.isfinite(b) else s
         print(f"{name:12s} {s * 1e3:16.3f} {b * 1e3:22.3f} {p * 1e3:14.3f} {p / ours:11.1f}")
+    g = np.random.default_rng(0)
+    shape = (20, 2, 3, 100, 6)  # IGWO's r1, r2 for T_max = 20 iterations, 3 leaders, N = 100, 6 states
+    t0 = time.perf_counter()
+    for _ in range(200):
+        g.random(shape)
+    floor = (time.perf_counter() - t0) / 200
+    print(f"floor: drawing IGWO's {int(np.prod(shape))} uniforms per step takes {floor * 1e3:.3f} ms")
     s, b = steps["igwo-stcpf"]
     for label, v in (("one run", s), (f"batched x{a.batch}, amortised", b)):
         if np.isfinite(v):

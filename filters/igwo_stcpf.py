@@ -54,7 +54,7 @@ from replay.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso
-from .stcpf import CubatureParticleFilter, Engine, weighted_mean_rows
+from .stcpf import CubatureParticleFilter, Engine, fast_residual, weighted_mean_rows, wrap_inplace
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
 
@@ -78,7 +78,7 @@ def residual_fitness(model, z, k, mask=None, meas=None):
 
     def fitness(X):
         zh = model.h(X, k)
-        d = residual(zb, zh[..., mask] if mask is not None else zh, angles)
+        d = fast_residual(zb, zh[..., mask] if mask is not None else zh, angles)
         return (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
 
     return fitness
@@ -151,7 +151,10 @@ class SwarmEngine(Engine):
             lo, hi = self.bounds
 
             def project(Xr):
-                return residual(np.clip(wrap_components(c + Xr, m.x_angles), lo, hi), c, m.x_angles)
+                A = wrap_inplace(c + Xr, m.x_angles)
+                np.clip(A, lo, hi, out=A)
+                A -= c
+                return wrap_inplace(A, m.x_angles)
 
         Xr = residual(self.X, c, m.x_angles)
         rngs = self.active_rngs()

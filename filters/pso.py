@@ -85,15 +85,21 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
     R1, R2 = r[:, :, 0], r[:, :, 1]  # in place: c1(t) r1, c2(t) r2 for all iterations
     R1 *= a1[:, None, None]
     R2 *= a2[:, None, None]
-    for i in range(iterations):
-        V = w[i] * V + R1[:, i] * (pbest - X) + R2[:, i] * (pbest[rows, g][:, None, :] - X)
+    for i in range(iterations):  # in place, same arithmetic order as V = w V + R1 (p - X) + R2 (g - X)
+        V *= w[i]
+        t = pbest - X
+        t *= R1[:, i]
+        V += t
+        np.subtract(pbest[rows, g][:, None, :], X, out=t)
+        t *= R2[:, i]
+        V += t
         X = X + V
         if project is not None:
             X = project(X)
         f = fitness(X)
         better = f < pf
-        pbest = np.where(better[..., None], X, pbest)
-        pf = np.where(better, f, pf)
+        np.copyto(pbest, X, where=better[..., None])
+        np.copyto(pf, f, where=better)
         g = np.argmin(pf, axis=1)
         best[:, i + 1] = pf[rows, g]
     assert np.all(np.diff(best, axis=1) <= 0), "PSO global best got worse"

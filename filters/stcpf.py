@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import index, residual, wrap_components
+from replay.angles import TWO_PI, index, wrap_components
 from replay.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
@@ -76,14 +76,65 @@ def check_common(n_particles, rho, beta, proposal):
     check_params(rho, beta)
 
 
-def circular_mean(Y, angles, axis=-2):
-    """Equal-weight mean over ``axis`` (circular for the ``angles`` components)."""
-    mean = Y.mean(axis=axis)
+def circular_mean(Y, angles):
+    """Equal-weight mean over the points axis -2 (circular for the ``angles`` components)."""
+    mean = np.einsum("...ci->...i", Y) * (1.0 / Y.shape[-2])
     if angles:
         i = index(tuple(angles))
         a = Y[..., i]
-        mean[..., i] = np.arctan2(np.sin(a).mean(axis=axis), np.cos(a).mean(axis=axis))
+        mean[..., i] = np.arctan2(np.einsum("...ci->...i", np.sin(a)), np.einsum("...ci->...i", np.cos(a)))
     return mean
+
+
+def wrap_inplace(x, angles):
+    """Wrap the ``angles`` components of ``x`` in place: the arithmetic of
+    :func:`replay.angles.wrap` (bit for bit) without its temporaries. Returns ``x``."""
+    if angles:
+        a = x[..., index(tuple(angles))]
+        t = a + np.pi
+        t /= TWO_PI
+        np.floor(t, out=t)
+        t *= TWO_PI
+        a -= t
+        if not isinstance(index(tuple(angles)), slice):  # fancy index: a is a copy
+            x[..., index(tuple(angles))] = a
+    return x
+
+
+def fast_residual(a, b, angles):
+    """``a - b`` with the ``angles`` components wrapped; equals :func:`replay.angles.residual`."""
+    return wrap_inplace(np.subtract(a, b), angles)
+
+
+def solve_stack(S, B):
+    """S^-1 B for a stack of small symmetric positive-definite S (..., m, m), B (..., m, p).
+
+    m <= 3: the explicit inverse (adjugate / determinant), a few array
+    operations for the whole stack instead of one LAPACK call per matrix; a
+    singular S gives non-finite values (the run is then counted as diverged).
+    Larger m: ``numpy.linalg.solve``.
+    """
+    m = S.shape[-1]
+    if m > 3:
+        return np.linalg.solve(S, B)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if m == 1:
+            return B / S
+        if m == 2:
+            a, b, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+            inv = np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2)
+            return inv @ B / (a * d - b * b)[..., None, None]
+        a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 0, 2]
+        e, f, i = S[..., 1, 1], S[..., 1, 2], S[..., 2, 2]
+        inv = np.empty_like(S)
+        inv[..., 0, 0] = e * i - f * f
+        inv[..., 0, 1] = inv[..., 1, 0] = c * f - b * i
+        inv[..., 0, 2] = inv[..., 2, 0] = b * f - c * e
+        inv[..., 1, 1] = a * i - c * c
+        inv[..., 1, 2] = inv[..., 2, 1] = b * c - a * f
+        inv[..., 2, 2] = a * e - b * b
+        det = a * inv[..., 0, 0] + b * inv[..., 1, 0] + c * inv[..., 2, 0]
+        return inv @ B / det[..., None, None]
 
 
 def weighted_mean_rows(X, w, angles):
@@ -151,13 +202,14 @@ class Engine:
             self.X[j] = X0[j] + self.rngs[j].standard_normal((N, n)) @ L0.T
         wrap_components(self.X, self.model.x_angles)
         self.P = np.broadcast_to(P0[:, None], (M, N, n, n)).copy()
+        self.L = None  # Cholesky factors of P when known (set by the importance draw)
         self.V, self.V_key = None, None
         self.logw = np.full((M, N), -np.log(N))
         self.updated = True
 
     def keep(self, ok):
         self.ids = self.ids[ok]
-        for name in ("X", "P", "V", "logw"):
+        for name in ("X", "P", "L", "V", "logw"):
             if getattr(self, name) is not None:
                 setattr(self, name, getattr(self, name)[ok])
 
@@ -215,9 +267,9 @@ class Engine:
         return batched_jacobian(fun, X, k, angles, self.model.jacobian_step)
 
     # --- cubature moments ------------------------------------------------------------
-    def points(self, X, P):
-        """Cubature points X ± sqrt(n) L e_i (..., 2n, n) and the factors L."""
-        L = self.cholesky(P)
+    def points(self, X, P, L=None):
+        """Cubature points X ± sqrt(n) L e_i (..., 2n, n) and the factors L (given, or of P)."""
+        L = self.cholesky(P) if L is None else L
         sL = self.s * np.swapaxes(L, -1, -2)
         Xb = X[..., None, :]
         return np.concatenate([Xb + sL, Xb - sL], axis=-2), L
@@ -241,10 +293,10 @@ class Engine:
             return
         self.fx = m.f(self.X, k)
         self.P_prev = self.P
-        pts, _ = self.points(self.X, self.P)
+        pts, _ = self.points(self.X, self.P, self.L)
         Y = m.f(pts, k)
         self.mean = circular_mean(Y, m.x_angles)
-        D = residual(Y, self.mean[..., None, :], m.x_angles)
+        D = fast_residual(Y, self.mean[..., None, :], m.x_angles)
         self.Pm = np.swapaxes(D, -1, -2) @ D / D.shape[-2] + self.Qk
         if self.flt.proposal == "stckf":
             self.F = self.jacobian(m.F, m.f, self.X, k, m.x_angles)
@@ -271,7 +323,7 @@ class Engine:
             return np.stack([m.loglik(full[j], X[j], k, mask) for j in range(len(X))])
         R, angles, Ri, logdet = meas
         zh = m.h(X, k)
-        d = residual(zz[:, None, :], zh if mask is None else zh[..., mask], angles)
+        d = fast_residual(zz[:, None, :], zh if mask is None else zh[..., mask], angles)
         maha = (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
         return -0.5 * (maha + logdet + len(R) * LOG2PI)
 
@@ -285,7 +337,7 @@ class Engine:
         if mask is not None:
             Z = Z[..., mask]
         zh = circular_mean(Z, zang)
-        Dz = residual(Z, zh[..., None, :], zang)
+        Dz = fast_residual(Z, zh[..., None, :], zang)
         c = 2 * n
         Pzz = np.swapaxes(Dz, -1, -2) @ Dz / c
         Pxz = (self.s / c) * (L @ (Dz[..., :n, :] - Dz[..., n:, :]))
@@ -296,8 +348,8 @@ class Engine:
             if self.flt.scale_prior:
                 Pm = lam * Pm
         S = Pzz + R
-        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(Pxz, -1, -2)), -1, -2)
-        y = residual(zz[:, None, :], zh, zang)
+        K = np.swapaxes(solve_stack(S, np.swapaxes(Pxz, -1, -2)), -1, -2)
+        y = fast_residual(zz[:, None, :], zh, zang)
         mean = wrap_components(self.mean + (K @ y[..., None])[..., 0], m.x_angles)
         P = Pm - Pxz @ np.swapaxes(K, -1, -2)
         return mean, 0.5 * (P + np.swapaxes(P, -1, -2))
@@ -311,7 +363,7 @@ class Engine:
         key = None if mask is None else tuple(mask)
         if key != self.V_key:
             self.V, self.V_key = None, key
-        self.V = next_V(self.V, residual(zz[:, None, :], zh, zang), flt.rho)
+        self.V = next_V(self.V, fast_residual(zz[:, None, :], zh, zang), flt.rho)
         lam = fading_factor(self.V, H, self.F, self.P_prev, self.Qk, R, flt.beta, flt.m_form)
         self.lam_sum[self.ids] += lam.sum(axis=1)
         self.lam_n[self.ids] += lam.shape[1]
@@ -323,10 +375,11 @@ class Engine:
         e = self.normal(mean.shape[1:])
         self.X = wrap_components(mean + (L @ e[..., None])[..., 0], self.model.x_angles)
         self.P, self.q_e, self.q_L = P, e, L
+        self.L = L  # the next predict's cubature points need the factor of this P
 
     def log_ratio(self):
         """log p(x | x_prev) - log q(x) at the drawn particles (constants 2 pi cancel)."""
-        d = residual(self.X, self.fx, self.model.x_angles)
+        d = fast_residual(self.X, self.fx, self.model.x_angles)
         Q = self.Qk
         if is_diagonal(Q):
             q = np.diagonal(Q)
@@ -356,7 +409,7 @@ class Engine:
         self.updated = True
         w = self.normalise()
         x = weighted_mean_rows(self.X, w, m.x_angles)
-        D = residual(self.X, x[:, None, :], m.x_angles)
+        D = fast_residual(self.X, x[:, None, :], m.x_angles)
         P = np.swapaxes(D * w[..., None], -1, -2) @ D
         self.after_estimate(w)
         return x, P
@@ -370,6 +423,8 @@ class Engine:
             self.X[j] = self.X[j][idx]
             if not self.prior:
                 self.P[j] = self.P[j][idx]
+                if self.L is not None:
+                    self.L[j] = self.L[j][idx]
             if self.V is not None:
                 self.V[j] = self.V[j][idx]
             self.logw[j] = -np.log(N)
