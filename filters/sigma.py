@@ -42,7 +42,9 @@ class SigmaPointFilter(Filter):
         state.xi, state.wm, state.wc = self.points(state.model.nx)
 
     def _sigma(self, state, x, P):
-        return x + state.xi @ cholesky(P).T
+        """Points x + L xi_i; their deviations L xi_i are kept in ``state.dev`` (no wrapping needed)."""
+        state.dev = state.xi @ cholesky(P).T
+        return x + state.dev
 
     def predict(self, state, k):
         m = state.model
@@ -64,7 +66,7 @@ class SigmaPointFilter(Filter):
             angles = remap_indices(angles, mask)
         zh = weighted_mean(Z, state.wm, angles)
         Dz = residual(Z, zh, angles)
-        Dx = residual(X, state.x, m.x_angles)
+        Dx = state.dev  # X_i - x-, exactly
         Pzz = (Dz.T * state.wc) @ Dz
         Pxz = (Dx.T * state.wc) @ Dz
         return residual(z, zh, angles), Pzz, Pxz, R

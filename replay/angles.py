@@ -9,17 +9,27 @@ averaging raw angles, seen in popular filter libraries).
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
 
 TWO_PI = 2.0 * np.pi
+_INV_TWO_PI = 1.0 / TWO_PI
 
 
 def wrap(a):
     """Wrap angles to [-pi, pi)."""
     a = np.asarray(a, dtype=float)
-    return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    k = a * _INV_TWO_PI
+    k += 0.5
+    np.floor(k, out=k)
+    k *= TWO_PI
+    return a - k
+
+
+def _wrap_scalar(x: float) -> float:
+    return x - TWO_PI * math.floor(x * _INV_TWO_PI + 0.5)
 
 
 @lru_cache(maxsize=256)
@@ -34,16 +44,24 @@ def residual(a, b, angles=()):
     """``a - b`` along the last axis, with components listed in ``angles`` wrapped."""
     d = np.subtract(a, b, dtype=float)
     if angles:
-        i = index(tuple(angles))
-        d[..., i] = wrap(d[..., i])
+        if d.ndim == 1:  # one vector: a Python loop beats numpy's per-call overhead
+            for i in angles:
+                d[i] = _wrap_scalar(d[i])
+        else:
+            i = index(tuple(angles))
+            d[..., i] = wrap(d[..., i])
     return d
 
 
 def wrap_components(x, angles=()):
     """Wrap the angle components of ``x`` in place and return it."""
     if angles:
-        i = index(tuple(angles))
-        x[..., i] = wrap(x[..., i])
+        if x.ndim == 1:
+            for i in angles:
+                x[i] = _wrap_scalar(x[i])
+        else:
+            i = index(tuple(angles))
+            x[..., i] = wrap(x[..., i])
     return x
 
 
