@@ -90,15 +90,20 @@ class Filter:
                     self.update(state, z[k], k, None)
                 elif some[k]:
                     self.update(state, z[k], k, finite[k])
-                xk, Pk = self.estimate(state)
-            except np.linalg.LinAlgError:
+                X[k], P[k] = self.estimate(state)
+            except (np.linalg.LinAlgError, FloatingPointError):
                 diverged = k
                 break
             secs[k] = clock() - t0
-            if not (np.isfinite(xk.sum() + Pk.sum()) and np.diagonal(Pk).min() >= 0.0):
-                diverged = k
-                break
-            X[k], P[k] = xk, Pk
+        # Divergence: the first step whose estimate is non-finite or whose covariance has a
+        # negative variance (checked once over the arrays, not on every step's hot path).
+        end = n if diverged is None else diverged
+        ok = (np.isfinite(X[:end]).all(axis=1) & np.isfinite(P[:end]).all(axis=(1, 2))
+              & (np.diagonal(P[:end], axis1=1, axis2=2) >= 0.0).all(axis=1))
+        if not ok.all():
+            diverged = int(np.argmin(ok))
+        if diverged is not None:
+            X[diverged:], P[diverged:], secs[diverged:] = np.nan, np.nan, np.nan
         info = {}
         self.finish(state, info)
         return Estimates(X, P, secs, diverged, info)

@@ -67,8 +67,9 @@ class SigmaPointFilter(Filter):
         zh = weighted_mean(Z, state.wm, angles)
         Dz = residual(Z, zh, angles)
         Dx = state.dev  # X_i - x-, exactly
-        Pzz = (Dz.T * state.wc) @ Dz
-        Pxz = (Dx.T * state.wc) @ Dz
+        W = state.wc[:, None] * Dz
+        Pzz = Dz.T @ W
+        Pxz = Dx.T @ W
         return residual(z, zh, angles), Pzz, Pxz, R
 
     def update(self, state, z, k, mask):
@@ -78,8 +79,10 @@ class SigmaPointFilter(Filter):
     def correct(self, state, y, S, Pxz):
         K = gain(S, Pxz)
         x = wrap_components(state.x + K @ y, state.model.x_angles)
-        P = state.P - K @ S @ K.T
-        state.x, state.P = x, 0.5 * (P + P.T)
+        P = state.P - K @ Pxz.T  # K S K' = K Pxz'
+        P += P.T
+        P *= 0.5
+        state.x, state.P = x, P
 
 
 class UKF(SigmaPointFilter):

@@ -22,6 +22,8 @@ measurements only.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.linalg import solve_triangular
 
@@ -76,11 +78,13 @@ class Model:
     def sample_f(self, x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         """Draw x_k ~ p(x_k | x_{k-1}) for an array of states."""
         y = self.f(x, k)
-        Q = self.process_cov(k)
+        diagonal, factor, _, _ = noise_factor(self.process_cov(k))
         e = rng.standard_normal(y.shape)
-        if is_diagonal(Q):
-            return y + e * np.sqrt(np.diagonal(Q))
-        return y + e @ cholesky(Q).T
+        if diagonal:
+            e *= factor
+        else:
+            e = e @ factor.T
+        return y + e  # not in place: f may return its input (a random walk)
 
     def loglik(self, z: np.ndarray, x: np.ndarray, k: int, mask=None) -> np.ndarray:
         """log p(z_k | x_k) for an array of states (Gaussian, wrapped angle residuals).
@@ -94,14 +98,12 @@ class Model:
             zh, z, R = zh[..., mask], z[mask], R[np.ix_(mask, mask)]
             angles = remap_indices(self.z_angles, mask)
         d = residual(z, zh, angles)
-        if is_diagonal(R):
-            r = np.diagonal(R)
-            maha = (d * d) @ (1.0 / r)
-            logdet = np.log(r).sum()
+        diagonal, L, inv_var, logdet = noise_factor(R)
+        if diagonal:
+            d *= d
+            maha = d @ inv_var
         else:
-            L = cholesky(R)
             u = solve_triangular(L, d.reshape(-1, d.shape[-1]).T, lower=True, check_finite=False)
-            logdet = 2.0 * np.log(np.diag(L)).sum()
             maha = np.einsum("ij,ij->j", u, u).reshape(d.shape[:-1])
         return -0.5 * (maha + logdet + len(z) * np.log(2 * np.pi))
 
@@ -137,6 +139,29 @@ class LinearGaussian(Model):
 
     def H(self, x, k):
         return self.C
+
+
+def noise_factor(M: np.ndarray):
+    """``(diagonal, factor, inverse variances, log det)`` of a covariance matrix, cached.
+
+    ``factor`` is the vector of standard deviations for a diagonal matrix, else
+    the lower Cholesky factor. Cached by the matrix's bytes (not its identity),
+    so a matrix changed in place is refactored.
+    """
+    M = np.ascontiguousarray(M, dtype=float)
+    return _noise_factor(M.tobytes(), M.shape[0])
+
+
+@lru_cache(maxsize=128)
+def _noise_factor(buf: bytes, n: int):
+    M = np.frombuffer(buf).reshape(n, n)
+    if is_diagonal(M):
+        var = np.diagonal(M).copy()
+        if (var <= 0).any():
+            raise np.linalg.LinAlgError("covariance has a non-positive diagonal entry")
+        return True, np.sqrt(var), 1.0 / var, float(np.log(var).sum())
+    L = cholesky(M)
+    return False, L, None, float(2.0 * np.log(np.diagonal(L)).sum())
 
 
 def is_diagonal(M: np.ndarray) -> bool:
