@@ -91,8 +91,8 @@ def wrap_inplace(x, angles):
     :func:`replay.angles.wrap` (bit for bit) without its temporaries. Returns ``x``."""
     if angles:
         a = x[..., index(tuple(angles))]
-        t = a + np.pi
-        t /= TWO_PI
+        t = a * (1.0 / TWO_PI)
+        t += 0.5
         np.floor(t, out=t)
         t *= TWO_PI
         a -= t

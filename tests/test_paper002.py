@@ -150,6 +150,16 @@ def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
         assert a.summary == b.summary
 
 
+def test_fast_residual_is_replay_angles_residual_bit_for_bit():
+    from replay.angles import residual
+    from replay.filters.stcpf import fast_residual
+
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(7, 9, 6)) * 10, rng.normal(size=(7, 1, 6)) * 10
+    for angles in [(4, 5), (1, 2), (0,), (1, 3), ()]:
+        assert np.array_equal(fast_residual(a, b, angles), residual(a, b, angles))
+
+
 def test_vector_jacobians_equal_per_state_and_numerical():
     m = AUVSonar(origin=(1.0, -2.0, 0.5))
     X = np.random.default_rng(0).normal(size=(3, 4, 6)) * 20
