@@ -21,6 +21,8 @@ _INV_TWO_PI = 1.0 / TWO_PI
 def wrap(a):
     """Wrap angles to [-pi, pi)."""
     a = np.asarray(a, dtype=float)
+    if a.ndim == 0:
+        return np.float64(_wrap_scalar(float(a)))
     k = a * _INV_TWO_PI
     k += 0.5
     np.floor(k, out=k)

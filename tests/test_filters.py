@@ -150,3 +150,19 @@ def test_divergence_is_reported_not_raised():
     est = make_filter("ekf").run(model, z, np.ones(2), np.eye(2))
     assert est.diverged and est.diverged_at < 20
     assert np.isnan(est.x[est.diverged_at:]).all()
+
+
+def test_wrap_values_and_shapes():
+    from replay.angles import residual, weighted_mean, wrap
+
+    assert wrap(np.pi) == -np.pi and wrap(-np.pi) == -np.pi
+    assert wrap(3 * np.pi / 2) == pytest.approx(-np.pi / 2)
+    assert np.ndim(wrap(7.0)) == 0 and wrap(7.0) == pytest.approx(7.0 - 2 * np.pi)
+    a = np.linspace(-20, 20, 401).reshape(-1, 1)
+    w = wrap(a)
+    assert np.all((w >= -np.pi) & (w < np.pi))
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
+    # A residual across +-pi is small, and a mean of points straddling +-pi is near pi.
+    assert residual(np.array([np.pi - 0.1]), np.array([-np.pi + 0.1]), (0,))[0] == pytest.approx(-0.2)
+    pts = np.array([[np.pi - 0.1], [-np.pi + 0.1]])
+    assert abs(abs(weighted_mean(pts, np.array([0.5, 0.5]), (0,))[0]) - np.pi) < 1e-12
