@@ -80,12 +80,12 @@ class AUVSonar(Model):
         return J
 
     def h(self, x, k):
-        d = x[..., :3] - self.origin
-        dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
-        rho2 = dx * dx + dy * dy
-        out = np.empty(np.shape(x)[:-1] + (3,))
-        rho = np.sqrt(rho2)
-        np.sqrt(rho2 + dz * dz, out=out[..., 0])
+        if self.origin.any():
+            x = x[..., :3] - self.origin
+        dx, dy, dz = x[..., 0], x[..., 1], x[..., 2]
+        rho = np.hypot(dx, dy)
+        out = np.empty(x.shape[:-1] + (3,))
+        np.hypot(rho, dz, out=out[..., 0])
         np.arctan2(dz, rho, out=out[..., 1])
         np.arctan2(dy, dx, out=out[..., 2])
         return out
