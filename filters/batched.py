@@ -63,6 +63,8 @@ def supports(flt) -> bool:
 
 def exact(flt) -> bool:
     """True when the batched runs of ``flt`` give exactly the numbers of one-by-one runs."""
+    if getattr(flt, "roughening", 0):  # the batched PF has no roughening: run one by one
+        return False
     return supports(flt) and (getattr(KINDS.get(type(flt)), "exact", False) or hasattr(flt, "engine"))
 
 

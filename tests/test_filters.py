@@ -166,3 +166,21 @@ def test_wrap_values_and_shapes():
     assert residual(np.array([np.pi - 0.1]), np.array([-np.pi + 0.1]), (0,))[0] == pytest.approx(-0.2)
     pts = np.array([[np.pi - 0.1], [-np.pi + 0.1]])
     assert abs(abs(weighted_mean(pts, np.array([0.5, 0.5]), (0,))[0]) - np.pi) < 1e-12
+
+
+def test_roughening_option_and_parameter_checks(linear_case):
+    from replay.errors import ReplayError
+    from replay.filters import batched
+
+    model, z, x0, P0, xs, Ps = linear_case
+    rough = make_filter("pf", n_particles=2000, roughening=0.2)
+    a = rough.run(model, z, x0, P0, np.random.default_rng(1)).x
+    b = rough.run(model, z, x0, P0, np.random.default_rng(1)).x
+    plain = make_filter("pf", n_particles=2000).run(model, z, x0, P0, np.random.default_rng(1)).x
+    assert np.array_equal(a, b) and not np.array_equal(a, plain)
+    # Jitter widens the cloud but the mean still tracks the Kalman filter.
+    assert np.mean(np.abs(a - xs) / np.sqrt(np.diagonal(Ps, axis1=1, axis2=2))) < 0.3
+    assert not batched.exact(rough) and batched.exact(make_filter("pf"))
+    for bad in ({"n_particles": 0}, {"ess_threshold": 1.5}, {"roughening": -1}, {"resampling": "nope"}):
+        with pytest.raises(ReplayError):
+            make_filter("pf", **bad)
