@@ -143,10 +143,18 @@ def test_unanswering_scheduler_fails_fast_with_one_line(tmp_path):
     assert "no answer within 5 s" in res.output and "Traceback" not in res.output
 
 
-def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path):
-    text = SMALL.replace('params = { n_particles = 60 }', 'params = { n_particles = 60, resampling = "nope" }')
+def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
+    # Parameters are validated before any work, so make the PF fail while it runs:
+    # its resampling scheme raises (the campaign must record that and go on).
+    from replay.filters import resampling
+
+    def broken(w, rng, n=None):
+        raise KeyError("nope")
+
+    plan = spec.load(write(tmp_path, SMALL))
+    monkeypatch.setitem(resampling.SCHEMES, "systematic", broken)
     out = tmp_path / "out"
-    counts = execute.run(spec.load(write(tmp_path, text)), out, workers=1, quiet=True)
+    counts = execute.run(plan, out, workers=1, quiet=True)
     assert counts["failed"] == 6 and counts["done"] == 18
     rows = {r["filter"] + r["label"]: r for r in board_rows(out)}
     assert rows["pfpf"]["failed"] == "6" and rows["pfpf"]["runs"] == "0"
