@@ -44,21 +44,13 @@ def index(angles: tuple[int, ...]):
 
 def residual(a, b, angles=()):
     """``a - b`` along the last axis, with components listed in ``angles`` wrapped."""
-    d = np.subtract(a, b, dtype=float)
-    if angles:
-        if d.ndim == 1:  # one vector: a Python loop beats numpy's per-call overhead
-            for i in angles:
-                d[i] = _wrap_scalar(d[i])
-        else:
-            i = index(tuple(angles))
-            d[..., i] = wrap(d[..., i])
-    return d
+    return wrap_components(np.subtract(a, b, dtype=float), angles)
 
 
 def wrap_components(x, angles=()):
     """Wrap the angle components of ``x`` in place and return it."""
     if angles:
-        if x.ndim == 1:
+        if x.ndim == 1:  # one vector: a Python loop beats numpy's per-call overhead
             for i in angles:
                 x[i] = _wrap_scalar(x[i])
         else:
