@@ -66,6 +66,13 @@ def a_sigmoid(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0,
     return a_end + (a_start - a_end) / (1.0 + np.exp(s))
 
 
+def schedule(t_max, improved, a_start=2.0, a_end=0.0, b_start=1.0, b_end=0.5) -> np.ndarray:
+    """The convergence factor a(t) of iterations t = 0 .. t_max - 1: sigmoid (IGWO) or linear (GWO)."""
+    if improved:
+        return np.array([a_sigmoid(t, t_max, a_start, a_end, b_start, b_end) for t in range(t_max)])
+    return np.array([a_linear(t, t_max, a_start, a_end) for t in range(t_max)])
+
+
 def entropy_weights(f, eps: float = 1e-12, xi: float = 1e-4) -> np.ndarray:
     """Entropy weights of the leaders (002, §3.2.2), normalised to sum to one (along the last axis).
 
@@ -92,12 +99,31 @@ def as_runs(X, rng, fitness, project):
             None if one is None else (lambda Y: one(Y[0])[None]), True)
 
 
+def raw_draws(rngs, shape):
+    """(M, *shape) uint32: 32-bit random integers from each run's generator, two per 64-bit
+    output of its bit generator (``random_raw``: half the cost of ``random``)."""
+    size = int(np.prod(shape))
+    half = (size + 1) // 2
+    raw = [g.bit_generator.random_raw(half).view(np.uint32)[:size] for g in rngs]
+    out = raw[0][None] if len(raw) == 1 else np.stack(raw)
+    return out.reshape((len(rngs),) + tuple(shape))
+
+
+def uniforms(raw):
+    """Uniforms (u + 0.5) 2^-32 in (0, 1) of 32-bit integers u (the GWO and PSO coefficients r1, r2)."""
+    r = raw.astype(float)
+    r += 0.5
+    r *= 2.0**-32
+    return r
+
+
 def draws(rngs, shape):
-    """One ``random(shape)`` per run from its own generator, written in place: (M, *shape)."""
-    out = np.empty((len(rngs),) + tuple(shape))
-    for g, o in zip(rngs, out):
-        g.random(out=o)
-    return out
+    """One array of uniforms of ``shape`` per run, from the run's own generator: (M, *shape).
+
+    32-bit resolution (:func:`raw_draws`), ample for the random coefficients of
+    a swarm step; :mod:`replay.filters.compiled` converts the same integers.
+    """
+    return uniforms(raw_draws(rngs, shape))
 
 
 def check_params(t_max, a_start, a_end, xi):
@@ -123,8 +149,9 @@ def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True
     ``rng`` a sequence of M generators, ``fitness`` maps (M, N, d) -> (M, N);
     the returns gain the leading axis M. Each swarm draws all its random
     numbers for the ``t_max`` iterations in one call, (t_max, 2, 3, N, d).
-    The three leaders are not sorted: their weights depend only on their own
-    fitness (GWO: 1/3 each), so their order does not matter.
+    The leaders are taken in the order alpha, beta, delta (fitness, then
+    index): the k-th leader uses the k-th slice of the draws, so the order fixes
+    the numbers (and :func:`replay.filters.compiled.gwo_runs` uses the same).
     """
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
     M, n, d = X.shape
@@ -133,10 +160,7 @@ def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True
     best = np.empty((M, t_max + 1))
     best[:, 0] = f.min(axis=1)
     k = min(3, n)
-    if improved:
-        a = np.array([a_sigmoid(t, t_max, a_start, a_end, b_start, b_end) for t in range(t_max)])
-    else:
-        a = np.array([a_linear(t, t_max, a_start, a_end) for t in range(t_max)])
+    a = schedule(t_max, improved, a_start, a_end, b_start, b_end)
     r = draws(rngs, (t_max, 2, k, n, d))  # (M, t_max, 2, k, n, d)
     A, C = r[:, :, 0], r[:, :, 1]  # in place, all iterations at once: A = a (2 r1 - 1), C = 2 r2
     A *= 2.0
@@ -146,7 +170,7 @@ def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True
     w = np.full((M, k), 1.0 / k)
     buf = np.empty((M, k, n, d))
     for t in range(t_max):
-        lead = np.argpartition(f, k - 1, axis=1)[:, :k] if n > k else np.broadcast_to(np.arange(n), (M, n))
+        lead = np.argsort(f, axis=1, kind="stable")[:, :k]  # alpha, beta, delta (ties: lower index)
         fl = f[rows, lead]
         if improved:
             w = entropy_weights(fl, eps, xi)

@@ -54,6 +54,7 @@ from replay.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso
+from .parallel import Kernel, split
 from .stcpf import CubatureParticleFilter, Engine, fast_residual, weighted_mean_rows, wrap_inplace
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
@@ -95,9 +96,10 @@ class SwarmParticleFilter(CubatureParticleFilter):
                  omega_decay: float = 0.2, c1=(2.0, 1.0), c2=(1.5, 2.0),
                  lower=pso.LB_002, upper=pso.UB_002, rho: float = 0.95, beta: float = 1.2,
                  m_form: str = "propagated", scale_prior: bool = True, estimate_at: str = "after",
-                 resampling: str = "systematic", ess_threshold: float = 1.0):
+                 resampling: str = "systematic", ess_threshold: float = 1.0, compiled: bool = True):
         # resampling / ess_threshold: used only on steps without a measurement (nothing to optimise)
-        super().__init__(n_particles, proposal, rho, beta, m_form, scale_prior, resampling, ess_threshold)
+        super().__init__(n_particles, proposal, rho, beta, m_form, scale_prior, resampling, ess_threshold,
+                         compiled)
         if estimate_at not in ("before", "after"):
             raise ReplayError(f"estimate must be 'before' or 'after' the optimiser (got {estimate_at!r})")
         self.estimate_at = estimate_at
@@ -129,9 +131,23 @@ class SwarmEngine(Engine):
         self.gain_sum, self.moves = np.zeros(M), np.zeros(M, int)
         use = flt.optimizer == "pso" and flt.lower is not None and len(flt.lower) == n
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
+        # compiled GWO/IGWO with the model's compiled h (Gaussian weights only)
+        kern = self.model.kernels() if flt.compiled and not self.custom_loglik else None
+        self.k_swarm = None
+        if kern is not None and flt.optimizer != "pso":
+            from . import compiled
+
+            self.k_swarm = Kernel(compiled.swarm_move, kern[1])
+            self.xmask = self.angle_mask(self.model.x_angles, n)
+            self.zmask = self.angle_mask(self.model.z_angles, self.model.nz)
+            self.cache = getattr(self, "cache", {})
+            self.schedule = gwo.schedule(flt.t_max, flt.optimizer == "igwo", flt.a_start, flt.a_end,
+                                         flt.b_start, flt.b_end)
 
     def relocate(self, zz, k, mask, meas):
-        if self.flt.estimate_at == "after":
+        if self.k_swarm is not None and mask is None and self.flt.estimate_at == "after":
+            self.compiled_move(zz, k, meas)
+        elif self.flt.estimate_at == "after":
             self.move(zz, k, mask, meas)
             self.logw = self.loglik(zz, self.X, k, mask, meas)
         else:
@@ -167,6 +183,22 @@ class SwarmEngine(Engine):
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1
         self.X = wrap_components(c + Xr, m.x_angles)
+        self.relocated = True
+
+    def compiled_move(self, zz, k, meas):
+        """:meth:`move` and the new weights for a full Gaussian measurement and GWO/IGWO, by
+        :func:`replay.filters.compiled.swarm_move` (the same draws from the same generators)."""
+        flt, m = self.flt, self.model
+        M, N, n = self.X.shape
+        raw = gwo.raw_draws(self.active_rngs(), (flt.t_max, 2, min(3, N), N, n))
+        best = np.empty((M, flt.t_max + 1))
+        Ri, logdet_R = self.constants("R", meas[0])
+        split(self.k_swarm, M, np.asarray(m.kernel_params(k)[1], float), self.X, self.logw,
+              np.ascontiguousarray(zz, float), Ri, self.xmask, self.zmask, raw, self.schedule,
+              flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, best)
+        assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
+        self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
+        self.moves[self.ids] += 1
         self.relocated = True
 
     def after_estimate(self, w):

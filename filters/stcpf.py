@@ -47,6 +47,7 @@ from replay.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
+from .parallel import Kernel, split
 from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
@@ -154,13 +155,16 @@ class CubatureParticleFilter(Filter):
 
     def __init__(self, n_particles: int = 100, proposal: str = "stckf", rho: float = 0.95,
                  beta: float = 1.2, m_form: str = "propagated", scale_prior: bool = True,
-                 resampling: str = "systematic", ess_threshold: float = 1.0):
+                 resampling: str = "systematic", ess_threshold: float = 1.0, compiled: bool = True):
         check_common(n_particles, rho, beta, proposal)
+        if m_form not in ("propagated", "printed"):
+            raise ReplayError(f"m_form must be 'propagated' or 'printed' (got {m_form!r})")
         if resampling not in SCHEMES:
             raise ReplayError(f"resampling must be one of {', '.join(SCHEMES)} (got {resampling!r})")
         self.n_particles, self.proposal = n_particles, proposal
         self.rho, self.beta, self.m_form, self.scale_prior = rho, beta, m_form, scale_prior
         self.resampling, self.ess_threshold = resampling, ess_threshold
+        self.compiled = bool(compiled)
 
     def engine(self, model, rngs):
         """The array engine for M runs (one generator each); see :func:`replay.filters.batched.run_batched`."""
@@ -188,6 +192,18 @@ class Engine:
         self.custom_noise = type(model).sample_f is not Model.sample_f
         self.custom_loglik = type(model).loglik is not Model.loglik
         M = len(self.rngs)
+        # compiled kernels (replay.filters.compiled) when the model has them and the weights are Gaussian
+        self.kern = None
+        if getattr(flt, "compiled", False) and not self.prior and not self.custom_loglik:
+            self.kern = model.kernels()
+        if self.kern is not None:
+            from . import compiled
+
+            self.k_cubature = Kernel(compiled.cubature_step, *self.kern)
+            self.k_estimate = Kernel(compiled.estimate)
+            self.xmask = self.angle_mask(model.x_angles, model.nx)
+            self.zmask = self.angle_mask(model.z_angles, model.nz)
+            self.cache = {}
         self.repairs, self.resampled = np.zeros(M, int), np.zeros(M, int)
         self.lam_sum, self.lam_n = np.zeros(M), np.zeros(M, int)
 
@@ -243,11 +259,14 @@ class Engine:
         pattern = finite[0]
         if not (finite == pattern).all():
             raise ValueError("runs with different missing-measurement patterns cannot share a batched step")
-        self.predict(k)
-        if pattern.all():
-            self.update(z, k, None)
-        elif pattern.any():
-            self.update(z, k, pattern)
+        if self.kern is not None and pattern.all():
+            self.compiled_update(z, k)
+        else:
+            self.predict(k)
+            if pattern.all():
+                self.update(z, k, None)
+            elif pattern.any():
+                self.update(z, k, pattern)
         x, P = self.estimate()
         M = len(x)
         return x, P, np.full(M, np.nan), np.zeros(M, int)
@@ -313,6 +332,52 @@ class Engine:
             self.logw = self.logw + self.loglik(zz, self.X, k, mask, meas) + self.log_ratio()
         self.updated = True
         self.relocate(zz, k, mask, meas)
+
+    def compiled_update(self, z, k):
+        """:meth:`predict` and :meth:`update` with every measurement component present, by
+        :func:`replay.filters.compiled.cubature_step` (same equations, same draws, same order)."""
+        m, flt = self.model, self.flt
+        M, N, n = self.X.shape
+        Q = self.Qk = m.process_cov(k)
+        Qi, logdet_Q = self.constants("Q", Q)
+        R = m.measurement_cov(k)
+        Ri, logdet_R = self.constants("R", R)
+        e = self.normal((N, n))
+        have_L = self.L is not None
+        if not have_L:
+            self.L = np.empty_like(self.P)
+        stckf = flt.proposal == "stckf"
+        have_V = stckf and self.V is not None and self.V_key is None
+        if not have_V:
+            self.V, self.V_key = np.empty((M, N, m.nz, m.nz)), None
+        lam = np.empty((M, N))
+        rep = np.zeros((M, N), np.int64)
+        pf, ph = m.kernel_params(k)
+        opts = np.array([have_L, have_V, stckf, flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior,
+                         logdet_Q, logdet_R], float)
+        split(self.k_cubature, M * N, np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V,
+              self.logw, np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep)
+        self.repairs[self.ids] += rep.sum(axis=1)
+        if stckf:
+            self.lam_sum[self.ids] += lam.sum(axis=1)
+            self.lam_n[self.ids] += N
+        self.updated = True
+        self.relocate(z, k, None, (R, m.z_angles, Ri, logdet_R))
+
+    def constants(self, name, C):
+        """(C^-1, log det C) of a covariance, recomputed only when C changes."""
+        C = np.ascontiguousarray(C, float)
+        key = C.tobytes()
+        cached = self.cache.get(name)
+        if cached is None or cached[0] != key:
+            cached = self.cache[name] = (key, np.linalg.inv(C), float(np.linalg.slogdet(C)[1]))
+        return cached[1], cached[2]
+
+    @staticmethod
+    def angle_mask(angles, n):
+        mask = np.zeros(n, bool)
+        mask[list(angles)] = True
+        return mask
 
     def loglik(self, zz, X, k, mask, meas):
         """log p(z | x) for every particle of every run (Gaussian, wrapped angle residuals)."""
@@ -407,10 +472,15 @@ class Engine:
             self.draw(self.mean, self.Pm)
             self.logw = self.logw + self.log_ratio()
         self.updated = True
-        w = self.normalise()
-        x = weighted_mean_rows(self.X, w, m.x_angles)
-        D = fast_residual(self.X, x[:, None, :], m.x_angles)
-        P = np.swapaxes(D * w[..., None], -1, -2) @ D
+        if self.kern is not None:
+            M, N, n = self.X.shape
+            x, P, w = np.empty((M, n)), np.empty((M, n, n)), np.empty((M, N))
+            self.k_estimate(self.X, self.logw, self.xmask, x, P, w)
+        else:
+            w = self.normalise()
+            x = weighted_mean_rows(self.X, w, m.x_angles)
+            D = fast_residual(self.X, x[:, None, :], m.x_angles)
+            P = np.swapaxes(D * w[..., None], -1, -2) @ D
         self.after_estimate(w)
         return x, P
 

@@ -74,6 +74,24 @@ class Model:
         d = residual(y[:n], y[n:], out_angles)
         return (d / (2.0 * eps)[:, None]).T
 
+    # --- compiled kernels (optional) ----------------------------------------------
+    def kernels(self):
+        """Numba kernels ``(f, h, F, H)`` of one state, or None (the default: no compiled path).
+
+        Each kernel is a ``numba.njit`` function ``(x, p, out)`` writing f(x),
+        h(x), the Jacobian of f or the Jacobian of h at one state ``x`` (nx,)
+        into ``out``, with ``p`` a float array of the model's parameters at a
+        step (:meth:`kernel_params`). They must compute what ``f``, ``h``,
+        ``F``, ``H`` compute (a test per model asserts it). The compiled
+        filter paths (:mod:`replay.filters.compiled`) use them; every filter
+        also runs without them.
+        """
+        return None
+
+    def kernel_params(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters ``(p_f, p_h)`` passed to the kernels of :meth:`kernels` at step ``k``."""
+        raise NotImplementedError
+
     # --- sampling and likelihood (particle filters) -------------------------------
     def sample_f(self, x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         """Draw x_k ~ p(x_k | x_{k-1}) for an array of states."""

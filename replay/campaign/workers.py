@@ -69,6 +69,7 @@ def init_worker(parent_pid: int, blas_threads: int | None = None, poll: float = 
     limit its BLAS threads to ``blas_threads`` when given."""
     if blas_threads:
         limit_threads(blas_threads)
+        os.environ["REPLAY_THREADS"] = str(blas_threads)  # the compiled filter kernels' threads
     if not _pdeathsig(signal.SIGKILL):
         threading.Thread(target=_watch, args=(parent_pid, poll), daemon=True, name="parent-watch").start()
     if os.getppid() != parent_pid:  # the parent died before the watch was set

@@ -1,0 +1,513 @@
+"""Compiled (numba) kernels of the particle-level work of paper 002's filters.
+
+The numpy engine of :mod:`replay.filters.stcpf` and the optimiser of
+:mod:`replay.filters.gwo` are the reference implementations: readable, with
+the paper's equations beside them. This module computes the same quantities
+in two compiled loops, for models that provide numba kernels of ``f``, ``h``,
+``F``, ``H`` (:meth:`replay.model.Model.kernels`):
+
+* :func:`cubature_step` — one step of every particle's cubature filter (CKF or
+  STCKF, 002 §2.2), the importance draw x = m + L e with ``e`` drawn by the
+  caller, and the importance weight (002 §2.1), for M runs x N particles;
+* :func:`gwo_runs` — the ``t_max`` GWO/IGWO iterations (002 §3.1–3.2) of M
+  swarms, fitness included, with the uniforms drawn by the caller.
+
+Every random number is drawn by the caller from the run's own generator in
+the order of the numpy engine, so the compiled and numpy paths consume the
+same streams; ``tests/test_compiled.py`` asserts that they agree to rounding
+(1e-9 relative) step by step. Differences that remain, all at the rounding
+level: sums are accumulated in a different order; a covariance that fails its
+Cholesky factorisation is repaired alone (the numpy engine repairs the whole
+stack it belongs to, with the same eigenvalue floor); ``S^-1`` comes from a
+Cholesky solve instead of the adjugate.
+
+Why compiled: one particle's 6-state cubature step is a few hundred flops on
+6 x 6 matrices, where numpy spends its time in per-call overhead; 20 GWO
+iterations of 100 wolves are 20 small array passes. Compiled, one IGWO-STCPF
+step (N = 100, T_max = 20) costs about what drawing its 72,000 uniforms costs.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numba as nb
+import numpy as np
+from numba.core.errors import NumbaExperimentalFeatureWarning
+
+# the model's kernels are passed as first-class functions (typed once per model, see .parallel)
+warnings.filterwarnings("ignore", "First-class function type", NumbaExperimentalFeatureWarning)
+
+TWO_PI = 2.0 * np.pi
+LOG2PI = np.log(2.0 * np.pi)
+U32 = 2.0**-32  # 32-bit integer u -> uniform (u + 0.5) 2^-32 in (0, 1)
+
+
+@nb.njit(cache=True)
+def wrap(v, mask):
+    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (the arithmetic of replay.angles.wrap)."""
+    for i in range(v.shape[0]):
+        if mask[i]:
+            v[i] -= np.floor(v[i] * (1.0 / TWO_PI) + 0.5) * TWO_PI
+
+
+@nb.njit(cache=True)
+def cholesky(A, L):
+    """Lower Cholesky factor of A into L; False when A is not (numerically) positive definite."""
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            t = A[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / d
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@nb.njit(cache=True)
+def factor(A, L):
+    """Cholesky factor of A into L, or of a repaired copy of A when needed, as
+    :func:`replay.filters.stcpf.batched_cholesky` does: symmetrise, floor the
+    eigenvalues at 1e-12 max(1, largest). A is not changed. Returns 1 when repaired, else 0."""
+    if cholesky(A, L):
+        return 0
+    n = A.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if not np.isfinite(A[i, j]):
+                L[:, :] = np.nan
+                return 1
+    S = 0.5 * (A + A.T)
+    s, U = np.linalg.eigh(S)
+    floor = 1e-12 * max(1.0, s.max())
+    for i in range(n):
+        s[i] = max(s[i], floor)
+    if not cholesky((U * s) @ U.T, L):
+        L[:, :] = np.nan
+    return 1
+
+
+@nb.njit(cache=True)
+def chol_solve_rows(S, B, out):
+    """out = B S^-1 for symmetric positive-definite S (m, m) and B (n, m); False when S is not."""
+    m = S.shape[0]
+    L = np.empty((m, m))
+    if not cholesky(S, L):
+        out[:, :] = np.nan
+        return False
+    for r in range(B.shape[0]):  # solve S x = b for b = B[r] (S symmetric: x' = b' S^-1)
+        y = np.empty(m)
+        for i in range(m):
+            t = B[r, i]
+            for k in range(i):
+                t -= L[i, k] * y[k]
+            y[i] = t / L[i, i]
+        for i in range(m - 1, -1, -1):
+            t = y[i]
+            for k in range(i + 1, m):
+                t -= L[k, i] * out[r, k]
+            out[r, i] = t / L[i, i]
+    return True
+
+
+@nb.njit(cache=True)
+def matmul(A, B, out):
+    """out = A B by loops (BLAS calls cost more than these small products)."""
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            t = 0.0
+            for k in range(A.shape[1]):
+                t += A[i, k] * B[k, j]
+            out[i, j] = t
+
+
+@nb.njit(cache=True)
+def quad(d, W):
+    """d' W d."""
+    s = 0.0
+    for i in range(d.shape[0]):
+        t = 0.0
+        for j in range(d.shape[0]):
+            t += W[i, j] * d[j]
+        s += d[i] * t
+    return s
+
+
+@nb.njit(cache=True)
+def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
+    """Points x +- s L e_j through ``fun`` into Y (2n, m); their (circular) mean and wrapped deviations D."""
+    n = x.shape[0]
+    pt = np.empty(n)
+    for j in range(n):
+        for i in range(n):
+            pt[i] = x[i] + s * L[i, j]
+        fun(pt, p, Y[j])
+        for i in range(n):
+            pt[i] = x[i] - s * L[i, j]
+        fun(pt, p, Y[n + j])
+    c = 2 * n
+    m = Y.shape[1]
+    for i in range(m):
+        if mask[i]:
+            ss, cc = 0.0, 0.0
+            for j in range(c):
+                ss += np.sin(Y[j, i])
+                cc += np.cos(Y[j, i])
+            mean[i] = np.arctan2(ss, cc)
+        else:
+            t = 0.0
+            for j in range(c):
+                t += Y[j, i]
+            mean[i] = t * (1.0 / c)
+    for j in range(c):
+        for i in range(m):
+            D[j, i] = Y[j, i] - mean[i]
+        wrap(D[j], mask)
+
+
+@nb.njit(cache=True, nogil=True)
+def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs,
+                  start, stop):
+    """One CKF/STCKF proposal step of particles, the draw and the weight (002 §2.1–2.2).
+
+    For the flat particle indices start .. stop - 1 (index = m N + i, run m,
+    particle i), in place: X[m, i] <- m^i + L^i E[m, i] with (m^i, P^i) the
+    cubature posterior given Z[m]; P[m, i] <- P^i; L[m, i] <- its factor;
+    V[m, i] (STCKF) <- the innovation average; logw[m, i] += log p(z | x) +
+    log p(x | x_prev) - log q(x); lam[m, i] <- the fading factor (1 for a
+    CKF); repairs[m, i] <- covariances repaired. ``opts`` = [have_L, have_V,
+    stckf, rho, beta, propagated, scale_prior, log det Q, log det R].
+    The equations, and the choices where 002 is ambiguous, are those of
+    :class:`replay.filters.stcpf.Engine`. Particles are independent: callers
+    may split the index range among threads (the function releases the GIL).
+    """
+    have_L, have_V, stckf = opts[0] != 0, opts[1] != 0, opts[2] != 0
+    rho, beta, propagated, scale_prior = opts[3], opts[4], opts[5] != 0, opts[6] != 0
+    logdet_Q, logdet_R = opts[7], opts[8]
+    M, N, n = X.shape
+    nz = Z.shape[1]
+    c = 2 * n
+    s = np.sqrt(n)
+    Y = np.empty((c, n))
+    Dx = np.empty((c, n))
+    Zc = np.empty((c, nz))
+    Dz = np.empty((c, nz))
+    mean, fx, mpost, xnew = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    zh, zh0, ez, y, d = np.empty(nz), np.empty(nz), np.empty(nz), np.empty(nz), np.empty(nz)
+    Lp, Lm = np.empty((n, n)), np.empty((n, n))
+    Pm = np.empty((n, n))
+    Fj = np.empty((n, n))
+    Hj = np.empty((nz, n))
+    Pxz = np.empty((n, nz))
+    Pzz = np.empty((nz, nz))
+    K = np.empty((n, nz))
+    S = np.empty((nz, nz))
+    Pn = np.empty((n, n))
+    HQ, HF, HFP = np.empty((nz, n)), np.empty((nz, n)), np.empty((nz, n))
+    dx = np.empty(n)
+    trR = np.trace(R)
+    for flat in range(start, stop):
+        m, i = flat // N, flat % N
+        z = Z[m]
+        x = X[m, i]
+        f(x, pf, fx)
+        # --- predict: cubature points of (x^i, P^i) through f ---
+        if have_L:
+            Lp[:, :] = L[m, i]
+        else:
+            repairs[m, i] = factor(P[m, i], Lp)
+        cubature_moments(f, pf, x, Lp, s, xang, Y, mean, Dx)
+        for a in range(n):
+            for b in range(n):
+                t = 0.0
+                for j in range(c):
+                    t += Dx[j, a] * Dx[j, b]
+                Pm[a, b] = t / c + Q[a, b]
+        if stckf:
+            F(x, pf, Fj)
+        # --- update: cubature points of (m^i-, P^i-) through h ---
+        repairs[m, i] += factor(Pm, Lm)
+        cubature_moments(h, ph, mean, Lm, s, zang, Zc, zh, Dz)
+        for a in range(nz):
+            for b in range(nz):
+                t = 0.0
+                for j in range(c):
+                    t += Dz[j, a] * Dz[j, b]
+                Pzz[a, b] = t / c
+        for a in range(n):  # P_xz = s/c L (Z_+ - Z_-)
+            for b in range(nz):
+                t = 0.0
+                for j in range(n):
+                    t += Lm[a, j] * (Dz[j, b] - Dz[n + j, b])
+                Pxz[a, b] = (s / c) * t
+        g = 1.0
+        if stckf:  # fading factor (002 §2.2.2)
+            H(mean, ph, Hj)
+            h(mean, ph, zh0)
+            for a in range(nz):
+                ez[a] = z[a] - zh0[a]
+            wrap(ez, zang)
+            for a in range(nz):
+                for b in range(nz):
+                    ee = ez[a] * ez[b]
+                    V[m, i, a, b] = (rho * V[m, i, a, b] + ee) / (1.0 + rho) if have_V else ee
+            trN = np.trace(V[m, i]) - beta * trR
+            matmul(Hj, Q, HQ)
+            matmul(Hj, Fj, HF)
+            trN -= np.sum(HQ * Hj)
+            if propagated:  # tr(H F P F' H') = sum((H F P) * (H F))
+                matmul(HF, P[m, i], HFP)
+                trM = np.sum(HFP * HF)
+            else:  # tr(H F H') as printed
+                trM = 0.0
+                for a in range(nz):
+                    for b in range(n):
+                        trM += HF[a, b] * Hj[a, b]
+            g = max(1.0, trN / trM) if trM > 0 else 1.0
+            Pzz *= g
+            Pxz *= g
+            if scale_prior:
+                Pm *= g
+        lam[m, i] = g
+        for a in range(nz):
+            for b in range(nz):
+                S[a, b] = Pzz[a, b] + R[a, b]
+        chol_solve_rows(S, Pxz, K)
+        for a in range(nz):
+            y[a] = z[a] - zh[a]
+        wrap(y, zang)
+        for a in range(n):
+            t = 0.0
+            for b in range(nz):
+                t += K[a, b] * y[b]
+            mpost[a] = mean[a] + t
+        wrap(mpost, xang)
+        for a in range(n):  # P = P- - P_xz K', symmetrised
+            for b in range(n):
+                t = 0.0
+                for j in range(nz):
+                    t += Pxz[a, j] * K[b, j]
+                Pn[a, b] = Pm[a, b] - t
+        for a in range(n):
+            for b in range(a):
+                Pn[a, b] = Pn[b, a] = 0.5 * (Pn[a, b] + Pn[b, a])
+        # --- draw x = m + L e and weight it ---
+        Lq = L[m, i]
+        repairs[m, i] += factor(Pn, Lq)
+        e = E[m, i]
+        for a in range(n):
+            t = 0.0
+            for b in range(a + 1):
+                t += Lq[a, b] * e[b]
+            xnew[a] = mpost[a] + t
+        wrap(xnew, xang)
+        P[m, i] = Pn
+        X[m, i] = xnew
+        h(xnew, ph, zh0)
+        for a in range(nz):
+            d[a] = z[a] - zh0[a]
+        wrap(d, zang)
+        loglik = -0.5 * (quad(d, Ri) + logdet_R + nz * LOG2PI)
+        for a in range(n):
+            dx[a] = xnew[a] - fx[a]
+        wrap(dx, xang)
+        log_prior = -0.5 * (quad(dx, Qi) + logdet_Q)
+        logdet_q = 0.0
+        ee = 0.0
+        for a in range(n):
+            logdet_q += np.log(Lq[a, a])
+            ee += e[a] * e[a]
+        logw[m, i] += loglik + log_prior + 0.5 * (ee + 2.0 * logdet_q)
+
+
+@nb.njit(cache=True)
+def fitness_rows(h, ph, c, Xr, z, Ri, zang, out, skip):
+    """out[i] = (z - h(c + Xr[i]))' R^-1 (z - h(c + Xr[i])) for rows i not in ``skip`` (wrapped angle residuals)."""
+    n, nz = Xr.shape[1], z.shape[0]
+    x = np.empty(n)
+    zh, d = np.empty(nz), np.empty(nz)
+    for i in range(Xr.shape[0]):
+        if skip[i]:
+            continue
+        for a in range(n):
+            x[a] = c[a] + Xr[i, a]
+        h(x, ph, zh)
+        for a in range(nz):
+            d[a] = z[a] - zh[a]
+        wrap(d, zang)
+        out[i] = quad(d, Ri)
+
+
+@nb.njit(cache=True)
+def leaders(f, k, out):
+    """Indices of the k smallest of ``f`` in increasing order (ties: lower index first): alpha, beta, delta."""
+    for j in range(k):
+        best = -1
+        for i in range(f.shape[0]):
+            taken = False
+            for q in range(j):
+                if out[q] == i:
+                    taken = True
+            if taken:
+                continue
+            if best < 0 or f[i] < f[best]:
+                best = i
+        out[j] = best
+
+
+@nb.njit(cache=True, nogil=True)
+def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, logdet_R, best, start, stop):
+    """The relocation of :class:`replay.filters.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
+    for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
+    log weights, log p(z | x).
+
+    Per run: normalised weights from ``logw``; their weighted (circular) mean c;
+    the wolves X - c (wrapped); :func:`swarm` with the uniforms ``raw`` (M,
+    t_max, 2, k, N, n) as 32-bit integers (see :func:`replay.filters.gwo.draws`);
+    X <- c + wolves (wrapped); logw <- -(f + log det R + nz log 2 pi) / 2 with f
+    the final fitness. ``best`` (M, t_max + 1) as in :func:`swarm`.
+    """
+    M, N, n = X.shape
+    nz = Z.shape[1]
+    c = np.empty(n)
+    Xr = np.empty((N, n))
+    f = np.empty(N)
+    w = np.empty(N)
+    for m in range(start, stop):
+        top = logw[m].max()
+        tot = 0.0
+        for i in range(N):
+            w[i] = np.exp(logw[m, i] - top)
+            tot += w[i]
+        for q in range(n):
+            if xang[q]:
+                ss, cc = 0.0, 0.0
+                for i in range(N):
+                    ss += w[i] / tot * np.sin(X[m, i, q])
+                    cc += w[i] / tot * np.cos(X[m, i, q])
+                c[q] = np.arctan2(ss, cc)
+            else:
+                t = 0.0
+                for i in range(N):
+                    t += w[i] / tot * X[m, i, q]
+                c[q] = t
+        for i in range(N):
+            for q in range(n):
+                Xr[i, q] = X[m, i, q] - c[q]
+            wrap(Xr[i], xang)
+        swarm(h, ph, Xr, c, Z[m], Ri, zang, raw[m], a, improved, xi, eps, f, best[m])
+        for i in range(N):
+            for q in range(n):
+                X[m, i, q] = c[q] + Xr[i, q]
+            wrap(X[m, i], xang)
+            logw[m, i] = -0.5 * (f[i] + logdet_R + nz * LOG2PI)
+
+
+@nb.njit(cache=True)
+def swarm(h, ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
+    """``t_max = len(a)`` GWO (``improved`` False) or IGWO iterations (002 §3.1–3.2) of one swarm, in place.
+
+    X (N, n) are the wolves as deviations from the centre c (n,); the fitness
+    of a wolf is that of :func:`fitness_rows` at c + X. ``raw`` (t_max, 2, k,
+    N, n) holds the uniforms r1, r2 as 32-bit integers u, r = (u + 0.5) 2^-32;
+    ``a`` the convergence factor per iteration. Outputs: fm (N,) the final
+    fitness; best (t_max + 1,) the best fitness before and after each
+    iteration. The leaders are not moved (elitism); the candidates are
+    X_L - A |C X_L - X| with A = a (2 r1 - 1), C = 2 r2, combined with weights
+    1/k (GWO) or the entropy weights of the leaders' fitness (IGWO), exactly
+    as in :func:`replay.filters.gwo.optimize`.
+    """
+    N, n = X.shape
+    k = raw.shape[2]
+    t_max = a.shape[0]
+    lead = np.empty(k, np.int64)
+    none = np.zeros(N, np.bool_)
+    is_lead = np.zeros(N, np.bool_)
+    w = np.empty(k)
+    fl = np.empty(k)
+    XL = np.empty((k, n))
+    fitness_rows(h, ph, c, X, z, Ri, zang, fm, none)
+    best[0] = fm.min()
+    for t in range(t_max):
+        leaders(fm, k, lead)
+        is_lead[:] = False
+        for j in range(k):
+            is_lead[lead[j]] = True
+            fl[j] = fm[lead[j]]
+            XL[j] = X[lead[j]]
+        if improved:  # entropy weights (002 §3.2.2)
+            sinv = 0.0
+            for j in range(k):
+                sinv += 1.0 / (fl[j] + eps)
+            sw = 0.0
+            for j in range(k):
+                p = (1.0 / (fl[j] + eps)) / sinv
+                w[j] = max(1.0 + p * np.log(p + eps), xi)
+                sw += w[j]
+            for j in range(k):
+                w[j] /= sw
+        else:
+            w[:] = 1.0 / k
+        at = a[t]
+        for i in range(N):
+            if is_lead[i]:
+                continue
+            for q in range(n):
+                acc = 0.0
+                for j in range(k):
+                    A = ((raw[t, 0, j, i, q] + 0.5) * U32 * 2.0 - 1.0) * at
+                    Cq = (raw[t, 1, j, i, q] + 0.5) * U32 * 2.0
+                    acc += w[j] * (XL[j, q] - np.abs(Cq * XL[j, q] - X[i, q]) * A)
+                X[i, q] = acc
+        fitness_rows(h, ph, c, X, z, Ri, zang, fm, is_lead)
+        best[t + 1] = fm.min()
+
+
+@nb.njit(cache=True, nogil=True)
+def estimate(X, logw, xang, x, P, w):
+    """Weighted estimate of every run, as :meth:`replay.filters.stcpf.Engine.estimate`: the
+    weights w (M, N) normalised from ``logw`` (which is renormalised in place), the weighted
+    (circular) mean x (M, n) and covariance P (M, n, n) with wrapped deviations."""
+    M, N, n = X.shape
+    d = np.empty(n)
+    for m in range(M):
+        top = logw[m].max()
+        tot = 0.0
+        for i in range(N):
+            w[m, i] = np.exp(logw[m, i] - top)
+            tot += w[m, i]
+        lt = np.log(tot)
+        for i in range(N):
+            logw[m, i] = logw[m, i] - top - lt
+            w[m, i] /= tot
+        for q in range(n):
+            if xang[q]:
+                ss, cc = 0.0, 0.0
+                for i in range(N):
+                    ss += w[m, i] * np.sin(X[m, i, q])
+                    cc += w[m, i] * np.cos(X[m, i, q])
+                x[m, q] = np.arctan2(ss, cc)
+            else:
+                t = 0.0
+                for i in range(N):
+                    t += w[m, i] * X[m, i, q]
+                x[m, q] = t
+        P[m] = 0.0
+        for i in range(N):
+            for q in range(n):
+                d[q] = X[m, i, q] - x[m, q]
+            wrap(d, xang)
+            for a in range(n):
+                for b in range(a + 1):
+                    P[m, a, b] += w[m, i] * d[a] * d[b]
+        for a in range(n):
+            for b in range(a):
+                P[m, b, a] = P[m, a, b]

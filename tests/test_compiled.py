@@ -1,0 +1,142 @@
+"""The compiled kernels (replay.filters.compiled) against the numpy reference engine."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from replay import registry
+from replay.evaluate import rng_for
+from replay.filters import compiled, gwo, make_filter, parallel
+from replay.filters.batched import run_batched
+from replay.filters.stcpf import batched_cholesky
+from replay.models.auv_sonar import AUVSonar
+from replay.tasks import make_task
+
+
+@pytest.fixture(scope="module")
+def sonar():
+    return make_task("sonar").build(registry.load_frame("sim/auv-sonar", rng=rng_for(0, 0, 0)), rng_for(0, 0, 1))
+
+
+def test_auv_sonar_kernels_equal_numpy_model():
+    m = AUVSonar(dt=0.7, yaw_rate=0.3, origin=(5.0, -3.0, 1.0))
+    f, h, F, H = m.kernels()
+    pf, ph = m.kernel_params(0)
+    X = np.random.default_rng(0).normal([40, -20, -30, 8, 0.5, 2.5], [30, 30, 30, 2, 0.5, 2.0], (50, 6))
+    for x in X:
+        out, J, Jh = np.empty(6), np.empty((6, 6)), np.empty((3, 6))
+        f(x, pf, out)
+        np.testing.assert_allclose(out, m.f(x, 0), rtol=1e-14, atol=1e-13)
+        F(x, pf, J)
+        np.testing.assert_allclose(J, m.F(x, 0), rtol=1e-14, atol=1e-14)
+        z = np.empty(3)
+        h(x, ph, z)
+        np.testing.assert_allclose(z, m.h(x, 0), rtol=1e-14, atol=1e-14)
+        H(x, ph, Jh)
+        np.testing.assert_allclose(Jh, m.H(x, 0), rtol=1e-14, atol=1e-14)
+    Jh = np.full((3, 6), 7.0)
+    H(np.array([5.0, -3.0, 1.0, 1, 0, 0]), ph, Jh)  # at the sonar: no information, zero Jacobian
+    assert not Jh.any()
+
+
+@pytest.mark.parametrize("params", [{}, {"proposal": "ckf"}, {"m_form": "printed"}, {"scale_prior": False}])
+def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
+    """STCPF / CPF: the compiled step and the numpy engine agree to rounding over 100 steps.
+    The printed M = H Phi H' gives fading factors of 1e3 and more that amplify rounding
+    (and both blow up near step 56), and the unscaled prior makes covariances indefinite
+    (repaired): 10 steps, to 1e-6 relative."""
+    printed = params.get("m_form") == "printed" or params.get("scale_prior") is False
+    z = sonar.z[:10] if printed else sonar.z
+    a = make_filter("stcpf", compiled=True, **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = make_filter("stcpf", compiled=False, **params).run(sonar.model, z, sonar.x0, sonar.P0,
+                                                           np.random.default_rng(5))
+    assert a.diverged is False and b.diverged is False
+    np.testing.assert_allclose(a.x, b.x, rtol=1e-6 if printed else 0, atol=1e-9)
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-5 if printed else 1e-7, atol=1e-6 if printed else 1e-9)
+    if "lambda_mean" in b.info:
+        assert a.info["lambda_mean"] == pytest.approx(b.info["lambda_mean"], rel=1e-5 if printed else 1e-10)
+        assert b.info["lambda_mean"] > 1.0  # the fading factor acts: the STCKF branch is exercised
+
+
+@pytest.mark.parametrize("name", ["igwo-stcpf", "igwo-pf", "gwo-pf"])
+def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name):
+    """The swarm collapses onto near-ties, so rounding eventually picks another leader and the
+    runs part; before that (the first 10 steps) they agree to 1e-8."""
+    a = make_filter(name, compiled=True).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = make_filter(name, compiled=False).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-8)
+    assert a.info["mean_fitness_gain"] == pytest.approx(b.info["mean_fitness_gain"], rel=1e-6)
+    assert a.info["mean_fitness_gain"] > 0
+
+
+@pytest.mark.parametrize("threads", ["1", "2", "3"])
+def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
+    def run():
+        flt = make_filter("igwo-stcpf", n_particles=50, t_max=5)
+        Z = np.stack([sonar.z[:15]] * 3)
+        return run_batched(flt, sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
+                           [np.random.default_rng(r) for r in range(3)])
+
+    monkeypatch.setenv("REPLAY_THREADS", "1")
+    ref = run()
+    monkeypatch.setenv("REPLAY_THREADS", threads)
+    for a, b in zip(run(), ref):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+
+
+def test_batched_compiled_runs_equal_one_by_one_exactly(sonar):
+    flt = make_filter("igwo-stcpf", n_particles=40, t_max=6)
+    Z, X0, P0 = np.stack([sonar.z[:12]] * 3), np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3)
+    many = run_batched(flt, sonar.model, Z, X0, P0, [np.random.default_rng(10 + r) for r in range(3)])
+    for r in range(3):
+        one = flt.run(sonar.model, Z[r], X0[r], P0[r], np.random.default_rng(10 + r))
+        assert np.array_equal(one.x, many[r].x)
+
+
+def test_factor_repairs_like_the_numpy_engine():
+    A = np.diag([4.0, 1.0, -1e-9])  # indefinite by a hair: eigenvalue floored
+    L = np.empty((3, 3))
+    assert compiled.factor(A.copy(), L) == 1
+    ref, bad = batched_cholesky(A[None])
+    np.testing.assert_allclose(L, ref[0], rtol=1e-12, atol=1e-12)
+    assert bad[0]
+    B = np.array([[4.0, 2.0], [2.0, 3.0]])
+    assert compiled.factor(B, L[:2, :2]) == 0
+    np.testing.assert_allclose(L[:2, :2], np.linalg.cholesky(B), rtol=1e-15)
+
+
+def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
+    """One swarm on a quadratic fitness (h = identity on 3 states): the kernel and
+    gwo.optimize give the same wolves from the same 32-bit draws."""
+    import numba
+
+    @numba.njit
+    def identity(x, p, out):
+        out[:] = x
+
+    X = np.random.default_rng(1).normal(size=(30, 3)) * 3
+    z = np.array([0.5, -1.0, 2.0])
+    Ri = np.linalg.inv(np.diag([1.0, 2.0, 4.0]))
+    raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
+    a = gwo.schedule(8, True)
+    Xk, f, best = X.copy(), np.empty(30), np.empty(9)
+    compiled.swarm(identity, np.zeros(0), Xk, np.zeros(3), z, Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12,
+                   f, best)
+    assert np.all(np.diff(best) <= 0) and best[-1] < best[0]
+    Xn, fn, bn = gwo.optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
+                              np.random.default_rng(2), t_max=8, improved=True)
+    np.testing.assert_allclose(Xk, Xn, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(best, bn, rtol=1e-12)
+
+
+def test_kernel_call_falls_back_when_argument_types_change():
+    k = parallel.Kernel(compiled.estimate)
+    X = np.random.default_rng(0).normal(size=(2, 5, 3))
+    out = []
+    for Xi in (X, np.asfortranarray(X), X[:, ::-1]):  # contiguous, then two layouts the first typing did not see
+        logw = np.zeros((2, 5))
+        x, P, w = np.empty((2, 3)), np.empty((2, 3, 3)), np.empty((2, 5))
+        k(Xi, logw, np.array([False, False, True]), x, P, w)
+        out.append(x)
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-14)
+    np.testing.assert_allclose(out[0], out[2], rtol=1e-14)
