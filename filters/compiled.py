@@ -371,7 +371,8 @@ def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, log
 
     Per run: normalised weights from ``logw``; their weighted (circular) mean c;
     the wolves X - c (wrapped); :func:`swarm` with the uniforms ``raw`` (M,
-    t_max, 2, k, N, n) as 32-bit integers (see :func:`replay.filters.gwo.draws`);
+    t_max, 2, k, N, n) as 32-bit integers (see :func:`replay.filters.gwo.draws`),
+    ``raw[j]`` for run ``start + j``;
     X <- c + wolves (wrapped); logw <- -(f + log det R + nz log 2 pi) / 2 with f
     the final fitness. ``best`` (M, t_max + 1) as in :func:`swarm`.
     """
@@ -403,7 +404,7 @@ def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, log
             for q in range(n):
                 Xr[i, q] = X[m, i, q] - c[q]
             wrap(Xr[i], xang)
-        swarm(h, ph, Xr, c, Z[m], Ri, zang, raw[m], a, improved, xi, eps, f, best[m])
+        swarm(h, ph, Xr, c, Z[m], Ri, zang, raw[m - start], a, improved, xi, eps, f, best[m])
         for i in range(N):
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]

@@ -190,12 +190,19 @@ class SwarmEngine(Engine):
         :func:`replay.filters.compiled.swarm_move` (the same draws from the same generators)."""
         flt, m = self.flt, self.model
         M, N, n = self.X.shape
-        raw = gwo.raw_draws(self.active_rngs(), (flt.t_max, 2, min(3, N), N, n))
+        rngs = self.active_rngs()
+        shape = (flt.t_max, 2, min(3, N), N, n)
         best = np.empty((M, flt.t_max + 1))
         Ri, logdet_R = self.constants("R", meas[0])
-        split(self.k_swarm, M, np.asarray(m.kernel_params(k)[1], float), self.X, self.logw,
-              np.ascontiguousarray(zz, float), Ri, self.xmask, self.zmask, raw, self.schedule,
-              flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, best)
+        args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, np.ascontiguousarray(zz, float), Ri,
+                self.xmask, self.zmask)
+        opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, best)
+
+        def runs(start, stop):  # each run draws from its own generator, in the thread that moves it
+            for j in range(start, stop):
+                self.k_swarm(*args, gwo.raw_draws([rngs[j]], shape), *opts, j, j + 1)
+
+        split(runs, M)
         assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1

@@ -59,7 +59,8 @@ class Kernel:
 
 
 def split(kernel, total: int, *args) -> None:
-    """``kernel(*args, start, stop)`` over 0 .. total - 1, in one contiguous range per thread."""
+    """``kernel(*args, start, stop)`` over 0 .. total - 1, in one contiguous range per thread
+    (``kernel`` may also be a Python function that calls kernels)."""
     global _pool, _pool_size
     n = min(threads(), total)
     if n <= 1:

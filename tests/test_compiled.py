@@ -10,6 +10,8 @@ from replay.filters import compiled, gwo, make_filter, parallel
 from replay.filters.batched import run_batched
 from replay.filters.stcpf import batched_cholesky
 from replay.models.auv_sonar import AUVSonar
+from replay.models.random_walk import RandomWalkPosition
+from replay.models.ungm import UNGM
 from replay.tasks import make_task
 
 
@@ -18,24 +20,37 @@ def sonar():
     return make_task("sonar").build(registry.load_frame("sim/auv-sonar", rng=rng_for(0, 0, 0)), rng_for(0, 0, 1))
 
 
-def test_auv_sonar_kernels_equal_numpy_model():
-    m = AUVSonar(dt=0.7, yaw_rate=0.3, origin=(5.0, -3.0, 1.0))
+MODELS = {
+    "auv-sonar": lambda: AUVSonar(dt=0.7, yaw_rate=0.3, origin=(5.0, -3.0, 1.0)),
+    "ungm": lambda: UNGM(Q=2.0, R=3.0),
+    "random-walk": lambda: RandomWalkPosition(np.eye(3), 2 * np.eye(3)),
+}
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_model_kernels_equal_numpy_model(name):
+    m = MODELS[name]()
     f, h, F, H = m.kernels()
-    pf, ph = m.kernel_params(0)
-    X = np.random.default_rng(0).normal([40, -20, -30, 8, 0.5, 2.5], [30, 30, 30, 2, 0.5, 2.0], (50, 6))
+    k = 3
+    pf, ph = m.kernel_params(k)
+    X = np.random.default_rng(0).normal([40, -20, -30, 8, 0.5, 2.5][:m.nx], [30, 30, 30, 2, 0.5, 2.0][:m.nx],
+                                        (50, m.nx))
     for x in X:
-        out, J, Jh = np.empty(6), np.empty((6, 6)), np.empty((3, 6))
+        out, J, z, Jh = np.empty(m.nx), np.empty((m.nx, m.nx)), np.empty(m.nz), np.empty((m.nz, m.nx))
         f(x, pf, out)
-        np.testing.assert_allclose(out, m.f(x, 0), rtol=1e-14, atol=1e-13)
+        np.testing.assert_allclose(out, m.f(x, k), rtol=1e-14, atol=1e-13)
         F(x, pf, J)
-        np.testing.assert_allclose(J, m.F(x, 0), rtol=1e-14, atol=1e-14)
-        z = np.empty(3)
+        np.testing.assert_allclose(J, m.F(x, k), rtol=1e-14, atol=1e-14)
         h(x, ph, z)
-        np.testing.assert_allclose(z, m.h(x, 0), rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(z, m.h(x, k), rtol=1e-14, atol=1e-14)
         H(x, ph, Jh)
-        np.testing.assert_allclose(Jh, m.H(x, 0), rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(Jh, np.reshape(m.H(x, k), (m.nz, m.nx)), rtol=1e-14, atol=1e-14)
+
+
+def test_sonar_jacobian_kernel_is_zero_at_the_sonar():
+    m = MODELS["auv-sonar"]()
     Jh = np.full((3, 6), 7.0)
-    H(np.array([5.0, -3.0, 1.0, 1, 0, 0]), ph, Jh)  # at the sonar: no information, zero Jacobian
+    m.kernels()[3](np.array([5.0, -3.0, 1.0, 1, 0, 0]), m.kernel_params(0)[1], Jh)
     assert not Jh.any()
 
 

@@ -18,6 +18,14 @@ class RandomWalkPosition(Model):
         self.nx = self.nz = self.Q.shape[0]
         self._I = np.eye(self.nx)
 
+    def kernels(self):
+        from . import random_walk_kernels as kern
+
+        return kern.identity, kern.identity, kern.unit, kern.unit
+
+    def kernel_params(self, k):
+        return np.empty(0), np.empty(0)
+
     def f(self, x, k):
         return x
 

@@ -25,6 +25,14 @@ class UNGM(Model):
         self.R = np.atleast_2d(np.asarray(R, float))
         self.growth, self.k0 = float(growth), int(k0)
 
+    def kernels(self):
+        from . import ungm_kernels as kern
+
+        return kern.f, kern.h, kern.F, kern.H
+
+    def kernel_params(self, k):
+        return np.array([self.growth, 8.0 * np.cos(1.2 * (k + self.k0))]), np.empty(0)
+
     def f(self, x, k):
         return 0.5 * x + self.growth * x / (1.0 + x * x) + 8.0 * np.cos(1.2 * (k + self.k0))
 
