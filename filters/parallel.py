@@ -10,7 +10,9 @@ dimensions, layout; a change goes back through the dispatcher).
 :func:`split` runs a kernel that takes a ``start, stop`` index range on
 ``threads()`` threads (the kernels release the GIL). Each index is computed by
 one thread with the same arithmetic, so the numbers do not depend on the
-thread count. ``REPLAY_THREADS`` sets the count (default: the CPUs this
+thread count. Measured on the 2-core machine: one IGWO-STCPF run (100
+particles) gains nothing from a second thread (hence ``grain``), 100 batched
+runs gain 1.37x. ``REPLAY_THREADS`` sets the count (default: the CPUs this
 process may use, at most 8); campaign workers set it to 1.
 """
 from __future__ import annotations
@@ -58,11 +60,12 @@ class Kernel:
         return out
 
 
-def split(kernel, total: int, *args) -> None:
+def split(kernel, total: int, *args, grain: int = 1) -> None:
     """``kernel(*args, start, stop)`` over 0 .. total - 1, in one contiguous range per thread
-    (``kernel`` may also be a Python function that calls kernels)."""
+    (``kernel`` may also be a Python function that calls kernels), at least ``grain`` indices
+    per thread: waking a thread costs tens of microseconds, more than small ranges take."""
     global _pool, _pool_size
-    n = min(threads(), total)
+    n = min(threads(), total // max(grain, 1))
     if n <= 1:
         kernel(*args, 0, total)
         return

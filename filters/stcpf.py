@@ -52,6 +52,7 @@ from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
 PROPOSALS = ("prior", "ckf", "stckf")
+GRAIN = 1000  # particles per thread at least, in the compiled cubature step (see replay.filters.parallel)
 LOG2PI = np.log(2.0 * np.pi)
 
 
@@ -164,6 +165,8 @@ class CubatureParticleFilter(Filter):
         self.n_particles, self.proposal = n_particles, proposal
         self.rho, self.beta, self.m_form, self.scale_prior = rho, beta, m_form, scale_prior
         self.resampling, self.ess_threshold = resampling, ess_threshold
+        if not isinstance(compiled, (bool, np.bool_)):
+            raise ReplayError(f"compiled must be true or false (got {compiled!r})")
         self.compiled = bool(compiled)
 
     def engine(self, model, rngs):
@@ -356,7 +359,8 @@ class Engine:
         opts = np.array([have_L, have_V, stckf, flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior,
                          logdet_Q, logdet_R], float)
         split(self.k_cubature, M * N, np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V,
-              self.logw, np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep)
+              self.logw, np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep,
+              grain=GRAIN)
         self.repairs[self.ids] += rep.sum(axis=1)
         if stckf:
             self.lam_sum[self.ids] += lam.sum(axis=1)

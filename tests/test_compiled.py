@@ -6,7 +6,7 @@ import pytest
 
 from replay import registry
 from replay.evaluate import rng_for
-from replay.filters import compiled, gwo, make_filter, parallel
+from replay.filters import compiled, gwo, make_filter, parallel, stcpf
 from replay.filters.batched import run_batched
 from replay.filters.stcpf import batched_cholesky
 from replay.models.auv_sonar import AUVSonar
@@ -92,6 +92,7 @@ def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
         return run_batched(flt, sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
                            [np.random.default_rng(r) for r in range(3)])
 
+    monkeypatch.setattr(stcpf, "GRAIN", 10)  # split even these few particles among the threads
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
