@@ -60,19 +60,31 @@ class Kernel:
         return out
 
 
+def _get_pool(n: int) -> ThreadPoolExecutor:
+    global _pool, _pool_size
+    if _pool is None or _pool_size < n:
+        _pool, _pool_size = ThreadPoolExecutor(n, thread_name_prefix="replay-kernel"), n
+    return _pool
+
+
+def background(fn, *args):
+    """``fn(*args)`` started on a pool thread (returns its Future), or None when this process
+    runs one thread: for GIL-free work (random draws) that can overlap a kernel."""
+    n = threads()
+    return _get_pool(n).submit(fn, *args) if n > 1 else None
+
+
 def split(kernel, total: int, *args, grain: int = 1) -> None:
     """``kernel(*args, start, stop)`` over 0 .. total - 1, in one contiguous range per thread
     (``kernel`` may also be a Python function that calls kernels), at least ``grain`` indices
     per thread: waking a thread costs tens of microseconds, more than small ranges take."""
-    global _pool, _pool_size
     n = min(threads(), total // max(grain, 1))
     if n <= 1:
         kernel(*args, 0, total)
         return
-    if _pool is None or _pool_size < n:
-        _pool, _pool_size = ThreadPoolExecutor(n, thread_name_prefix="replay-kernel"), n
+    pool = _get_pool(n)
     size = (total + n - 1) // n
-    futures = [_pool.submit(kernel, *args, j * size, min(total, (j + 1) * size)) for j in range(1, n)]
+    futures = [pool.submit(kernel, *args, j * size, min(total, (j + 1) * size)) for j in range(1, n)]
     kernel(*args, 0, min(total, size))  # the calling thread takes the first range
     for fut in futures:
         fut.result()

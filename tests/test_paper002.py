@@ -334,3 +334,10 @@ def test_short_bohai_position_experiment():
     for r in ev.results:
         # R = 2 I3: the raw measurements have 3-D RMSE sqrt(6); any filter must stay near or below it
         assert r.summary["pos_rmse"] < 3.5
+
+
+def test_committed_reproduction_document_is_whole_lines():
+    """docs/reproduction/002.md is generated: its notes section is lines, not one character per line."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "reproduction" / "002.md").read_text(encoding="utf-8")
+    assert "## Where we do not match, and what was tried" in text.splitlines()
+    assert sum(len(line) == 1 for line in text.splitlines()) < 5
