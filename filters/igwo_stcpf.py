@@ -54,7 +54,7 @@ from replay.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso
-from .parallel import Kernel, background, split
+from .parallel import Kernel, split
 from .stcpf import CubatureParticleFilter, Engine, fast_residual, weighted_mean_rows, wrap_inplace
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
@@ -133,7 +133,7 @@ class SwarmEngine(Engine):
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
         # compiled GWO/IGWO with the model's compiled h (Gaussian weights only)
         kern = self.model.kernels() if flt.compiled and not self.custom_loglik else None
-        self.k_swarm, self.drawing = None, None
+        self.k_swarm = None
         if kern is not None and flt.optimizer != "pso":
             from . import compiled
 
@@ -185,15 +185,6 @@ class SwarmEngine(Engine):
         self.X = wrap_components(c + Xr, m.x_angles)
         self.relocated = True
 
-    def prefetch(self):
-        """One run: its cubature step runs on this thread (too few particles to split), so its
-        swarm uniforms are drawn meanwhile on another (the same generator, the same order)."""
-        flt = self.flt
-        if self.k_swarm is None or flt.estimate_at != "after" or len(self.ids) != 1:
-            return
-        N, n = self.X.shape[1:]
-        self.drawing = background(gwo.raw_draws, self.active_rngs(), (flt.t_max, 2, min(3, N), N, n))
-
     def compiled_move(self, zz, k, meas):
         """:meth:`move` and the new weights for a full Gaussian measurement and GWO/IGWO, by
         :func:`replay.filters.compiled.swarm_move` (the same draws from the same generators)."""
@@ -211,11 +202,7 @@ class SwarmEngine(Engine):
             for j in range(start, stop):
                 self.k_swarm(*args, gwo.raw_draws([rngs[j]], shape), *opts, j, j + 1)
 
-        if self.drawing is not None:  # one run: its draws were made during the cubature step
-            raw, self.drawing = self.drawing.result(), None
-            self.k_swarm(*args, raw, *opts, 0, 1)
-        else:
-            split(runs, M)
+        split(runs, M)
         assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1

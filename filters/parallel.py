@@ -67,13 +67,6 @@ def _get_pool(n: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def background(fn, *args):
-    """``fn(*args)`` started on a pool thread (returns its Future), or None when this process
-    runs one thread: for GIL-free work (random draws) that can overlap a kernel."""
-    n = threads()
-    return _get_pool(n).submit(fn, *args) if n > 1 else None
-
-
 def split(kernel, total: int, *args, grain: int = 1) -> None:
     """``kernel(*args, start, stop)`` over 0 .. total - 1, in one contiguous range per thread
     (``kernel`` may also be a Python function that calls kernels), at least ``grain`` indices

@@ -361,7 +361,6 @@ class Engine:
         pf, ph = m.kernel_params(k)
         opts = np.array([have_L, have_V, stckf, flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior,
                          logdet_Q, logdet_R], float)
-        self.prefetch()
         split(self.k_cubature, M * N, np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V,
               self.logw, np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep,
               grain=GRAIN)
@@ -371,10 +370,6 @@ class Engine:
             self.lam_n[self.ids] += N
         self.updated = True
         self.relocate(z, k, None, (R, m.z_angles, Ri, logdet_R))
-
-    def prefetch(self):
-        """Start this step's later random draws on another thread while the cubature kernel
-        runs (they come after the importance draw in each run's stream); see SwarmEngine."""
 
     def constants(self, name, C):
         """(C^-1, log det C) of a covariance, recomputed only when C changes."""

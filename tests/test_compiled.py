@@ -100,18 +100,6 @@ def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
         assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
 
 
-def test_one_run_drawing_on_another_thread_equals_one_thread(sonar, monkeypatch):
-    """A single run draws its swarm uniforms on a pool thread during the cubature step."""
-    def run():
-        return make_filter("igwo-stcpf", n_particles=60, t_max=5).run(sonar.model, sonar.z[:15], sonar.x0, sonar.P0,
-                                                                       np.random.default_rng(4))
-
-    monkeypatch.setenv("REPLAY_THREADS", "1")
-    ref = run()
-    monkeypatch.setenv("REPLAY_THREADS", "2")
-    assert np.array_equal(run().x, ref.x)
-
-
 def test_batched_compiled_runs_equal_one_by_one_exactly(sonar):
     flt = make_filter("igwo-stcpf", n_particles=40, t_max=6)
     Z, X0, P0 = np.stack([sonar.z[:12]] * 3), np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3)
