@@ -24,7 +24,11 @@ Cholesky solve instead of the adjugate.
 Why compiled: one particle's 6-state cubature step is a few hundred flops on
 6 x 6 matrices, where numpy spends its time in per-call overhead; 20 GWO
 iterations of 100 wolves are 20 small array passes. Compiled, one IGWO-STCPF
-step (N = 100, T_max = 20) costs about what drawing its 72,000 uniforms costs.
+step (N = 100, T_max = 20, sim/auv-sonar) takes about 1.1 ms on one core of the
+2-core machine, a third of the numpy engine's time; most of it is the ~200 sin,
+cos, atan2 and sqrt per particle of the cubature step and the 2,000 fitness
+evaluations of the swarm (``benchmarks/bench_002.py``). The circular means of
+the cubature points use :func:`sincos_small` for that reason.
 """
 from __future__ import annotations
 
@@ -142,6 +146,35 @@ def quad(d, W):
 
 
 @nb.njit(cache=True)
+def sincos_small(d):
+    """(sin d, cos d): Taylor polynomials for |d| <= 0.5 (truncation below 1e-19, i.e. exact to
+    rounding), libm beyond. The cubature points of an angle lie close together, so their
+    circular mean (about the first point) mostly needs small arguments; this costs a third
+    of a libm sin and cos."""
+    if abs(d) > 0.5:
+        return np.sin(d), np.cos(d)
+    d2 = d * d
+    s = 1.0 / 1307674368000.0  # 1/15!
+    s = s * -d2 + 1.0 / 6227020800.0
+    s = s * -d2 + 1.0 / 39916800.0
+    s = s * -d2 + 1.0 / 362880.0
+    s = s * -d2 + 1.0 / 5040.0
+    s = s * -d2 + 1.0 / 120.0
+    s = s * -d2 + 1.0 / 6.0
+    s = d - d * d2 * s
+    c = 1.0 / 20922789888000.0  # 1/16!
+    c = c * -d2 + 1.0 / 87178291200.0
+    c = c * -d2 + 1.0 / 479001600.0
+    c = c * -d2 + 1.0 / 3628800.0
+    c = c * -d2 + 1.0 / 40320.0
+    c = c * -d2 + 1.0 / 720.0
+    c = c * -d2 + 1.0 / 24.0
+    c = c * -d2 + 0.5
+    c = 1.0 - d2 * c
+    return s, c
+
+
+@nb.njit(cache=True)
 def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
     """Points x +- s L e_j through ``fun`` into Y (2n, m); their (circular) mean and wrapped deviations D."""
     n = x.shape[0]
@@ -156,12 +189,17 @@ def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
     c = 2 * n
     m = Y.shape[1]
     for i in range(m):
-        if mask[i]:
+        if mask[i]:  # circular mean, about the first point: ref + atan2(sum sin d_j, sum cos d_j)
+            ref = Y[0, i]
             ss, cc = 0.0, 0.0
             for j in range(c):
-                ss += np.sin(Y[j, i])
-                cc += np.cos(Y[j, i])
-            mean[i] = np.arctan2(ss, cc)
+                d = Y[j, i] - ref
+                d -= np.floor(d * (1.0 / TWO_PI) + 0.5) * TWO_PI
+                sd, cd = sincos_small(d)
+                ss += sd
+                cc += cd
+            t = ref + np.arctan2(ss, cc)
+            mean[i] = t - np.floor(t * (1.0 / TWO_PI) + 0.5) * TWO_PI
         else:
             t = 0.0
             for j in range(c):
