@@ -39,8 +39,6 @@ import numba as nb
 import numpy as np
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from replay.kernel_math import atan2
-
 # the model's kernels are passed as first-class functions (typed once per model, see .parallel)
 warnings.filterwarnings("ignore", "First-class function type", NumbaExperimentalFeatureWarning)
 
@@ -192,7 +190,7 @@ def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
                 sd, cd = sincos_small(d)
                 ss += sd
                 cc += cd
-            t = ref + atan2(ss, cc)
+            t = ref + np.arctan2(ss, cc)
             mean[i] = t - np.floor(t * (1.0 / TWO_PI) + 0.5) * TWO_PI
         else:
             t = 0.0
@@ -426,7 +424,7 @@ def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, log
                 for i in range(N):
                     ss += w[i] / tot * np.sin(X[m, i, q])
                     cc += w[i] / tot * np.cos(X[m, i, q])
-                c[q] = atan2(ss, cc)
+                c[q] = np.arctan2(ss, cc)
             else:
                 t = 0.0
                 for i in range(N):
@@ -527,7 +525,7 @@ def estimate(X, logw, xang, x, P, w):
                 for i in range(N):
                     ss += w[m, i] * np.sin(X[m, i, q])
                     cc += w[m, i] * np.cos(X[m, i, q])
-                x[m, q] = atan2(ss, cc)
+                x[m, q] = np.arctan2(ss, cc)
             else:
                 t = 0.0
                 for i in range(N):

@@ -1,15 +1,13 @@
 """Numba kernels of :class:`replay.models.auv_sonar.AUVSonar` for one state (see ``Model.kernels``).
 
-The same arithmetic as the model's numpy ``f``, ``h``, ``F``, ``H`` (atan2 from
-:mod:`replay.kernel_math`, within 2 ulp of numpy's), written for one state ``x`` (6,) with the parameters ``p_f = [T, yaw_rate]`` and
+The same arithmetic as the model's numpy ``f``, ``h``, ``F``, ``H``, written
+for one state ``x`` (6,) with the parameters ``p_f = [T, yaw_rate]`` and
 ``p_h = origin`` (3,). ``tests/test_compiled.py`` asserts the agreement.
 """
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
-
-from replay.kernel_math import atan2
 
 
 @nb.njit(cache=True)
@@ -43,8 +41,8 @@ def h(x, p, out):
     rho2 = dx * dx + dy * dy
     rho = np.sqrt(rho2)
     out[0] = np.sqrt(rho2 + dz * dz)
-    out[1] = atan2(dz, rho)
-    out[2] = atan2(dy, dx)
+    out[1] = np.arctan2(dz, rho)
+    out[2] = np.arctan2(dy, dx)
 
 
 @nb.njit(cache=True)
