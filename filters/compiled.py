@@ -152,8 +152,9 @@ def quad(d, W):
 def sincos_small(d):
     """(sin d, cos d): Taylor polynomials for |d| <= 0.5 (truncation below 1e-19, i.e. exact to
     rounding), libm beyond. The cubature points of an angle lie close together, so their
-    circular mean (about the first point) mostly needs small arguments; this costs a third
-    of a libm sin and cos."""
+    circular mean (about the first point) mostly needs small arguments: 7 + 8 multiply-adds
+    instead of a libm sin and cos (the IGWO-STCPF step was 4-14 % faster in four alternating
+    runs on the noisy 2-core machine)."""
     if abs(d) > 0.5:
         return np.sin(d), np.cos(d)
     d2 = d * d
