@@ -3,13 +3,19 @@
 The numpy engine of :mod:`replay.filters.stcpf` and the optimiser of
 :mod:`replay.filters.gwo` are the reference implementations: readable, with
 the paper's equations beside them. This module computes the same quantities
-in two compiled loops, for models that provide numba kernels of ``f``, ``h``,
-``F``, ``H`` (:meth:`replay.model.Model.kernels`):
+in compiled loops, for models that provide numba kernels of ``f``, ``h``,
+``F``, ``H`` (:meth:`replay.model.Model.kernels`). This file is a template: the
+entry points call the model's kernels as module globals ``f``, ``h``, ``F``,
+``H``, which :mod:`replay.filters.binding` supplies by writing a copy of this
+file with the model's imports at the MODEL KERNELS line (so that numba can cache
+the compiled code on disk; functions passed as arguments would be recompiled
+in every process). The helpers without model kernels (:func:`factor`,
+:func:`estimate`, ...) are usable from this module directly.
 
 * :func:`cubature_step` — one step of every particle's cubature filter (CKF or
   STCKF, 002 §2.2), the importance draw x = m + L e with ``e`` drawn by the
   caller, and the importance weight (002 §2.1), for M runs x N particles;
-* :func:`gwo_runs` — the ``t_max`` GWO/IGWO iterations (002 §3.1–3.2) of M
+* :func:`swarm_move` — the ``t_max`` GWO/IGWO iterations (002 §3.1–3.2) of M
   swarms, fitness included, with the uniforms drawn by the caller.
 
 Every random number is drawn by the caller from the run's own generator in
@@ -33,14 +39,11 @@ the cubature points use :func:`sincos_small` for that reason.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numba as nb
 import numpy as np
-from numba.core.errors import NumbaExperimentalFeatureWarning
 
-# the model's kernels are passed as first-class functions (typed once per model, see .parallel)
-warnings.filterwarnings("ignore", "First-class function type", NumbaExperimentalFeatureWarning)
+# MODEL KERNELS: replay.filters.binding puts here the import of one model's f, h, F, H
 
 TWO_PI = 2.0 * np.pi
 LOG2PI = np.log(2.0 * np.pi)
@@ -168,19 +171,19 @@ def sincos_small(d):
 
 
 @nb.njit(cache=True)
-def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
-    """Points x +- s L e_j through ``fun`` into Y (2n, m); their (circular) mean and wrapped deviations D."""
+def cubature_points(x, L, s, pts):
+    """The cubature points x +- s L e_j, j = 1..n, into pts (2n, n)."""
     n = x.shape[0]
-    pt = np.empty(n)
     for j in range(n):
         for i in range(n):
-            pt[i] = x[i] + s * L[i, j]
-        fun(pt, p, Y[j])
-        for i in range(n):
-            pt[i] = x[i] - s * L[i, j]
-        fun(pt, p, Y[n + j])
-    c = 2 * n
-    m = Y.shape[1]
+            pts[j, i] = x[i] + s * L[i, j]
+            pts[n + j, i] = x[i] - s * L[i, j]
+
+
+@nb.njit(cache=True)
+def moments(Y, mask, mean, D):
+    """Equal-weight (circular for ``mask``) mean of the rows of Y (2n, m), and the wrapped deviations D."""
+    c, m = Y.shape
     for i in range(m):
         if mask[i]:  # circular mean, about the first point: ref + atan2(sum sin d_j, sum cos d_j)
             ref = Y[0, i]
@@ -205,8 +208,7 @@ def cubature_moments(fun, p, x, L, s, mask, Y, mean, D):
 
 
 @nb.njit(cache=True, nogil=True)
-def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs,
-                  start, stop):
+def cubature_step(pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs, start, stop):
     """One CKF/STCKF proposal step of particles, the draw and the weight (002 §2.1–2.2).
 
     For the flat particle indices start .. stop - 1 (index = m N + i, run m,
@@ -228,6 +230,7 @@ def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang
     c = 2 * n
     s = np.sqrt(n)
     Y = np.empty((c, n))
+    pts = np.empty((c, n))
     Dx = np.empty((c, n))
     Zc = np.empty((c, nz))
     Dz = np.empty((c, nz))
@@ -255,7 +258,10 @@ def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang
             Lp[:, :] = L[m, i]
         else:
             repairs[m, i] = factor(P[m, i], Lp)
-        cubature_moments(f, pf, x, Lp, s, xang, Y, mean, Dx)
+        cubature_points(x, Lp, s, pts)
+        for j in range(c):
+            f(pts[j], pf, Y[j])
+        moments(Y, xang, mean, Dx)
         for a in range(n):
             for b in range(n):
                 t = 0.0
@@ -266,7 +272,10 @@ def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang
             F(x, pf, Fj)
         # --- update: cubature points of (m^i-, P^i-) through h ---
         repairs[m, i] += factor(Pm, Lm)
-        cubature_moments(h, ph, mean, Lm, s, zang, Zc, zh, Dz)
+        cubature_points(mean, Lm, s, pts)
+        for j in range(c):
+            h(pts[j], ph, Zc[j])
+        moments(Zc, zang, zh, Dz)
         for a in range(nz):
             for b in range(nz):
                 t = 0.0
@@ -360,7 +369,7 @@ def cubature_step(f, h, F, H, pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang
 
 
 @nb.njit(cache=True)
-def fitness_rows(h, ph, c, Xr, z, Ri, zang, out, skip):
+def fitness_rows(ph, c, Xr, z, Ri, zang, out, skip):
     """out[i] = (z - h(c + Xr[i]))' R^-1 (z - h(c + Xr[i])) for rows i not in ``skip`` (wrapped angle residuals)."""
     n, nz = Xr.shape[1], z.shape[0]
     x = np.empty(n)
@@ -395,7 +404,7 @@ def leaders(f, k, out):
 
 
 @nb.njit(cache=True, nogil=True)
-def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, logdet_R, best, start, stop):
+def swarm_move(ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, logdet_R, best, start, stop):
     """The relocation of :class:`replay.filters.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
     for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
     log weights, log p(z | x).
@@ -435,7 +444,7 @@ def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, log
             for q in range(n):
                 Xr[i, q] = X[m, i, q] - c[q]
             wrap(Xr[i], xang)
-        swarm(h, ph, Xr, c, Z[m], Ri, zang, raw[m - start], a, improved, xi, eps, f, best[m])
+        swarm(ph, Xr, c, Z[m], Ri, zang, raw[m - start], a, improved, xi, eps, f, best[m])
         for i in range(N):
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]
@@ -444,7 +453,7 @@ def swarm_move(h, ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, log
 
 
 @nb.njit(cache=True)
-def swarm(h, ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
+def swarm(ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
     """``t_max = len(a)`` GWO (``improved`` False) or IGWO iterations (002 §3.1–3.2) of one swarm, in place.
 
     X (N, n) are the wolves as deviations from the centre c (n,); the fitness
@@ -466,7 +475,7 @@ def swarm(h, ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
     w = np.empty(k)
     fl = np.empty(k)
     XL = np.empty((k, n))
-    fitness_rows(h, ph, c, X, z, Ri, zang, fm, none)
+    fitness_rows(ph, c, X, z, Ri, zang, fm, none)
     best[0] = fm.min()
     for t in range(t_max):
         leaders(fm, k, lead)
@@ -499,7 +508,7 @@ def swarm(h, ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
                     Cq = (raw[t, 1, j, i, q] + 0.5) * U32 * 2.0
                     acc += w[j] * (XL[j, q] - np.abs(Cq * XL[j, q] - X[i, q]) * A)
                 X[i, q] = acc
-        fitness_rows(h, ph, c, X, z, Ri, zang, fm, is_lead)
+        fitness_rows(ph, c, X, z, Ri, zang, fm, is_lead)
         best[t + 1] = fm.min()
 
 

@@ -54,6 +54,7 @@ from replay.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso
+from .binding import bind
 from .parallel import Kernel, split
 from .stcpf import CubatureParticleFilter, Engine, fast_residual, weighted_mean_rows, wrap_inplace
 
@@ -135,9 +136,7 @@ class SwarmEngine(Engine):
         kern = self.model.kernels() if flt.compiled and not self.custom_loglik else None
         self.k_swarm = None
         if kern is not None and flt.optimizer != "pso":
-            from . import compiled
-
-            self.k_swarm = Kernel(compiled.swarm_move, kern[1])
+            self.k_swarm = Kernel(bind(kern).swarm_move)
             self.xmask = self.angle_mask(self.model.x_angles, n)
             self.zmask = self.angle_mask(self.model.z_angles, self.model.nz)
             self.cache = getattr(self, "cache", {})

@@ -47,6 +47,7 @@ from replay.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
+from .binding import bind
 from .parallel import Kernel, split
 from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
@@ -200,10 +201,9 @@ class Engine:
         if getattr(flt, "compiled", False) and not self.prior and not self.custom_loglik:
             self.kern = model.kernels()
         if self.kern is not None:
-            from . import compiled
-
-            self.k_cubature = Kernel(compiled.cubature_step, *self.kern)
-            self.k_estimate = Kernel(compiled.estimate)
+            self.bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
+            self.k_cubature = Kernel(self.bound.cubature_step)
+            self.k_estimate = Kernel(self.bound.estimate)
             self.xmask = self.angle_mask(model.x_angles, model.nx)
             self.zmask = self.angle_mask(model.z_angles, model.nz)
             self.cache = {}

@@ -6,7 +6,7 @@ import pytest
 
 from replay import registry
 from replay.evaluate import rng_for
-from replay.filters import compiled, gwo, make_filter, parallel, stcpf
+from replay.filters import binding, compiled, gwo, make_filter, parallel, stcpf
 from replay.filters.batched import run_batched
 from replay.filters.stcpf import batched_cholesky
 from replay.models.auv_sonar import AUVSonar
@@ -122,22 +122,16 @@ def test_factor_repairs_like_the_numpy_engine():
 
 
 def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
-    """One swarm on a quadratic fitness (h = identity on 3 states): the kernel and
-    gwo.optimize give the same wolves from the same 32-bit draws."""
-    import numba
-
-    @numba.njit
-    def identity(x, p, out):
-        out[:] = x
-
+    """One swarm on a quadratic fitness (the random-walk model: h = identity on 3 states):
+    the kernel and gwo.optimize give the same wolves from the same 32-bit draws."""
+    bound = binding.bind(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
     X = np.random.default_rng(1).normal(size=(30, 3)) * 3
     z = np.array([0.5, -1.0, 2.0])
     Ri = np.linalg.inv(np.diag([1.0, 2.0, 4.0]))
     raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
     a = gwo.schedule(8, True)
     Xk, f, best = X.copy(), np.empty(30), np.empty(9)
-    compiled.swarm(identity, np.zeros(0), Xk, np.zeros(3), z, Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12,
-                   f, best)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12, f, best)
     assert np.all(np.diff(best) <= 0) and best[-1] < best[0]
     Xn, fn, bn = gwo.optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
                               np.random.default_rng(2), t_max=8, improved=True)
@@ -167,17 +161,39 @@ def test_small_angle_sincos_matches_libm_to_rounding():
 
 def test_circular_mean_of_points_across_the_wrap():
     """Points straddling +-pi: the mean is near pi, not near 0 (and equals atan2(sum sin, sum cos))."""
-    def ident(x, p, out):
-        out[:] = x
-
-    import numba
-
-    fun = numba.njit(ident)
     x = np.array([np.pi - 0.05, 1.0])
     L = np.diag([0.2, 0.1])
     Y, mean, D = np.empty((4, 2)), np.empty(2), np.empty((4, 2))
-    compiled.cubature_moments(fun, np.zeros(0), x, L, np.sqrt(2), np.array([True, False]), Y, mean, D)
+    compiled.cubature_points(x, L, np.sqrt(2), Y)
+    compiled.moments(Y, np.array([True, False]), mean, D)
     ang = Y[:, 0]
     assert mean[0] == pytest.approx(np.arctan2(np.sin(ang).sum(), np.cos(ang).sum()), abs=1e-15)
     assert abs(mean[0]) > 3.0 and mean[1] == pytest.approx(1.0)
     assert np.all(np.abs(D[:, 0]) < 0.3)  # deviations wrapped
+
+
+def test_bound_kernels_are_cached_by_content(tmp_path, monkeypatch):
+    """bind() writes compiled.py with the model's imports; the same kernels give the same file."""
+    monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(binding, "_bound", {})
+    m = RandomWalkPosition(np.eye(2), np.eye(2))
+    mod = binding.bind(m.kernels())
+    files = list((tmp_path / "kernels").glob("replay_compiled_*.py"))
+    assert len(files) == 1 and mod.__file__ == str(files[0])
+    text = files[0].read_text()
+    assert "from replay.models.random_walk_kernels import identity as h" in text
+    monkeypatch.setattr(binding, "_bound", {})
+    assert binding.bind(m.kernels()).__file__ == mod.__file__
+
+
+def test_bind_refuses_kernels_that_are_not_module_level():
+    import numba
+
+    from replay.errors import ReplayError
+
+    @numba.njit
+    def local(x, p, out):
+        out[:] = x
+
+    with pytest.raises(ReplayError, match="module-level"):
+        binding.bind((local, local, local, local))
