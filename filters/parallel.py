@@ -10,9 +10,10 @@ dimensions, layout; a change goes back through the dispatcher).
 :func:`split` runs a kernel that takes a ``start, stop`` index range on
 ``threads()`` threads (the kernels release the GIL). Each index is computed by
 one thread with the same arithmetic, so the numbers do not depend on the
-thread count. Measured on the 2-core machine: one IGWO-STCPF run (100
-particles) gains nothing from a second thread (hence ``grain``), 100 batched
-runs gain 1.37x. ``REPLAY_THREADS`` sets the count (default: the CPUs this
+thread count. The cubature step of :mod:`replay.filters.stcpf` uses numba's
+own (OpenMP) threads instead (``compiled.cubature_threads``): they spin between
+steps, where waking a Python thread costs about 70 us, more than half a step
+of one run takes. ``REPLAY_THREADS`` sets the count (default: the CPUs this
 process may use, at most 8); campaign workers set it to 1.
 """
 from __future__ import annotations

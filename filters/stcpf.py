@@ -48,12 +48,12 @@ from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
 from .binding import bind
-from .parallel import Kernel, split
+from .parallel import Kernel, threads
 from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
 PROPOSALS = ("prior", "ckf", "stckf")
-GRAIN = 1000  # particles per thread at least, in the compiled cubature step (see replay.filters.parallel)
+GRAIN = 50  # particles per thread at least, in the compiled cubature step
 LOG2PI = np.log(2.0 * np.pi)
 
 
@@ -203,6 +203,7 @@ class Engine:
         if self.kern is not None:
             self.bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
             self.k_cubature = Kernel(self.bound.cubature_step)
+            self.k_threads = Kernel(self.bound.cubature_threads)
             self.k_estimate = Kernel(self.bound.estimate)
             self.xmask = self.angle_mask(model.x_angles, model.nx)
             self.zmask = self.angle_mask(model.z_angles, model.nz)
@@ -361,9 +362,13 @@ class Engine:
         pf, ph = m.kernel_params(k)
         opts = np.array([have_L, have_V, stckf, flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior,
                          logdet_Q, logdet_R], float)
-        split(self.k_cubature, M * N, np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V,
-              self.logw, np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep,
-              grain=GRAIN)
+        args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V, self.logw,
+                np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep)
+        chunks = min(threads(), M * N // GRAIN)
+        if chunks > 1:
+            self.k_threads(*args, chunks)
+        else:
+            self.k_cubature(*args, 0, M * N)
         self.repairs[self.ids] += rep.sum(axis=1)
         if stckf:
             self.lam_sum[self.ids] += lam.sum(axis=1)
