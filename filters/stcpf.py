@@ -48,12 +48,13 @@ from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
 from .binding import bind
-from .parallel import Kernel, threads
+from .parallel import Kernel, split, threads
 from .resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
 PROPOSALS = ("prior", "ckf", "stckf")
-GRAIN = 50  # particles per thread at least, in the compiled cubature step
+GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run
+GRAIN_RUNS = 1000  # the same for batched runs
 LOG2PI = np.log(2.0 * np.pi)
 
 
@@ -365,10 +366,10 @@ class Engine:
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, self.V, self.logw,
                 np.ascontiguousarray(z, float), e, Q, Qi, R, Ri, self.xmask, self.zmask, opts, lam, rep)
         chunks = min(threads(), M * N // GRAIN)
-        if chunks > 1:
+        if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
             self.k_threads(*args, chunks)
-        else:
-            self.k_cubature(*args, 0, M * N)
+        else:  # runs: Python threads, each range long enough to pay for waking its thread; no spinning
+            split(self.k_cubature, M * N, *args, grain=GRAIN_RUNS)
         self.repairs[self.ids] += rep.sum(axis=1)
         if stckf:
             self.lam_sum[self.ids] += lam.sum(axis=1)

@@ -92,12 +92,26 @@ def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
         return run_batched(flt, sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
                            [np.random.default_rng(r) for r in range(3)])
 
-    monkeypatch.setattr(stcpf, "GRAIN", 10)  # split even these few particles among the threads
+    monkeypatch.setattr(stcpf, "GRAIN_RUNS", 10)  # split even these few particles among the threads
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
     for a, b in zip(run(), ref):
         assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+
+
+@pytest.mark.parametrize("threads", ["1", "2", "3"])
+def test_one_run_on_openmp_threads_equals_one_thread(sonar, monkeypatch, threads):
+    def run():
+        return make_filter("igwo-stcpf", n_particles=60, t_max=4).run(sonar.model, sonar.z[:12], sonar.x0, sonar.P0,
+                                                                       np.random.default_rng(4))
+
+    monkeypatch.setattr(stcpf, "GRAIN", 7)
+    monkeypatch.setenv("REPLAY_THREADS", "1")
+    ref = run()
+    monkeypatch.setenv("REPLAY_THREADS", threads)
+    out = run()
+    assert np.array_equal(out.x, ref.x) and np.array_equal(out.P, ref.P)
 
 
 def test_batched_compiled_runs_equal_one_by_one_exactly(sonar):
