@@ -171,6 +171,18 @@ def sincos_small(d):
 
 
 @nb.njit(cache=True)
+def gram(D, out):
+    """out = D' D / (rows of D): the lower triangle computed, the upper mirrored."""
+    c, m = D.shape
+    for a in range(m):
+        for b in range(a + 1):
+            t = 0.0
+            for j in range(c):
+                t += D[j, a] * D[j, b]
+            out[a, b] = out[b, a] = t / c
+
+
+@nb.njit(cache=True)
 def cubature_points(x, L, s, pts):
     """The cubature points x +- s L e_j, j = 1..n, into pts (2n, n)."""
     n = x.shape[0]
@@ -262,12 +274,10 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts
         for j in range(c):
             f(pts[j], pf, Y[j])
         moments(Y, xang, mean, Dx)
+        gram(Dx, Pm)
         for a in range(n):
             for b in range(n):
-                t = 0.0
-                for j in range(c):
-                    t += Dx[j, a] * Dx[j, b]
-                Pm[a, b] = t / c + Q[a, b]
+                Pm[a, b] += Q[a, b]
         if stckf:
             F(x, pf, Fj)
         # --- update: cubature points of (m^i-, P^i-) through h ---
@@ -276,12 +286,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts
         for j in range(c):
             h(pts[j], ph, Zc[j])
         moments(Zc, zang, zh, Dz)
-        for a in range(nz):
-            for b in range(nz):
-                t = 0.0
-                for j in range(c):
-                    t += Dz[j, a] * Dz[j, b]
-                Pzz[a, b] = t / c
+        gram(Dz, Pzz)
         for a in range(n):  # P_xz = s/c L (Z_+ - Z_-)
             for b in range(nz):
                 t = 0.0
