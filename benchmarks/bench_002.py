@@ -52,12 +52,12 @@ def problems(runs: int):
             for r in range(runs)]
 
 
-def per_step(repeat: int, batch: int) -> dict:
+def per_step(repeat: int, batch: int, names=FIVE) -> dict:
     """{filter: (seconds per step of one run, amortised seconds per run-step in a batch or nan)}."""
     pbs = problems(max(batch, 1))
     pb = pbs[0]
     out = {}
-    for name in FIVE:
+    for name in names:
         flt = make_filter(name, **PARAMS.get(name, {}))
         flt.run(pb.model, pb.z, pb.x0, pb.P0, np.random.default_rng(2))  # warm-up
         best = np.inf
@@ -92,37 +92,49 @@ def numpy_reference(repeat: int) -> float:
     return best
 
 
+def gauge() -> float:
+    """Seconds to draw IGWO's uniforms of one step (T_max = 20, 3 leaders, N = 100, 6 states): the
+    machine's speed at the moment, to read the other figures against."""
+    g = np.random.default_rng(0)
+    t0 = time.perf_counter()
+    for _ in range(200):
+        gwo.raw_draws([g], (20, 2, 3, 100, 6))
+    return (time.perf_counter() - t0) / 200
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--table-runs", type=int, default=100)
     ap.add_argument("--skip-table", action="store_true")
     ap.add_argument("--batch", type=int, default=100, help="runs per batched call (0: skip)")
+    ap.add_argument("--filters", default=",".join(FIVE), help="which of the five to time per step (comma-separated)")
     a = ap.parse_args()
+    names = [n for n in a.filters.split(",") if n]
+    if not set(names) <= set(FIVE):
+        ap.error(f"--filters: choose among {','.join(FIVE)}")
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    steps = per_step(a.repeat, a.batch)
+    gauge_before = gauge()
+    steps = per_step(a.repeat, a.batch, names)
     print(f"{'filter':12s} {'one run ms/step':>16s} {f'batched x{a.batch} ms/step':>22s} {'paper ms/step':>14s} "
           f"{'paper/ours':>11s}")
     for name, (s, b) in steps.items():
         p = PAPER_TABLE4[name]
         ours = b if np.isfinite(b) else s
         print(f"{name:12s} {s * 1e3:16.3f} {b * 1e3:22.3f} {p * 1e3:14.3f} {p / ours:11.1f}")
-    ref = numpy_reference(a.repeat)
-    print(f"igwo-stcpf, numpy reference engine (compiled=False), one run: {ref * 1e3:.3f} ms/step "
-          f"({ref / steps['igwo-stcpf'][0]:.1f}x the compiled kernels)")
-    g = np.random.default_rng(0)
-    shape = (20, 2, 3, 100, 6)  # IGWO's r1, r2 for T_max = 20 iterations, 3 leaders, N = 100, 6 states
-    t0 = time.perf_counter()
-    for _ in range(200):
-        gwo.raw_draws([g], shape)
-    floor = (time.perf_counter() - t0) / 200
-    print(f"floor: drawing IGWO's {int(np.prod(shape))} uniforms (32-bit) per step takes {floor * 1e3:.3f} ms; "
-          f"compiled kernels on {parallel.threads()} thread(s) (REPLAY_THREADS)")
-    s, b = steps["igwo-stcpf"]
-    for label, v in (("one run", s), (f"batched x{a.batch}, amortised", b)):
-        if np.isfinite(v):
-            print(f"IGWO-STCPF N=100 T_max=20, {label}: {v * 1e3:.3f} ms/step, target 1 ms: "
-                  f"{'PASS' if v <= 1e-3 else 'MISS'} ({v / 1e-3:.2f} x target)")
+    if "igwo-stcpf" in steps:
+        ref = numpy_reference(a.repeat)
+        print(f"igwo-stcpf, numpy reference engine (compiled=False), one run: {ref * 1e3:.3f} ms/step "
+              f"({ref / steps['igwo-stcpf'][0]:.1f}x the compiled kernels)")
+    print(f"gauge: drawing IGWO's 72000 uniforms (32-bit) took {gauge_before * 1e3:.3f} ms before the per-step "
+          f"timings and {gauge() * 1e3:.3f} ms after (0.09-0.10 when this machine is fast); compiled kernels "
+          f"on {parallel.threads()} thread(s) (REPLAY_THREADS)")
+    if "igwo-stcpf" in steps:
+        s, b = steps["igwo-stcpf"]
+        for label, v in (("one run", s), (f"batched x{a.batch}, amortised", b)):
+            if np.isfinite(v):
+                print(f"IGWO-STCPF N=100 T_max=20, {label}: {v * 1e3:.3f} ms/step, target 1 ms: "
+                      f"{'PASS' if v <= 1e-3 else 'MISS'} ({v / 1e-3:.2f} x target)")
     if a.skip_table:
         return
     t0 = time.perf_counter()
