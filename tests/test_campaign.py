@@ -103,6 +103,23 @@ def test_interrupted_and_resumed_equals_uninterrupted(serial, tmp_path):
     assert board_rows(out) == board_rows(serial[0])
 
 
+def test_block_resumed_with_one_run_left_equals_uninterrupted(serial, tmp_path):
+    """The case a kill leaves at random: one run of a batched block missing. It is computed
+    alone on resume and must give the numbers of the whole block (Kalman filters: also the NIS)."""
+    import shutil
+
+    out = tmp_path / "out"
+    shutil.copytree(serial[0], out)
+    store = board.Store(out)
+    for h, cfg in store.configs():
+        if cfg["filter"] in ("ukf", "ekf"):
+            (out / "units" / h / "4.json").unlink()
+            (out / "units" / h / "4.parquet").unlink()
+    rest = execute.run(spec.load(write(tmp_path, SMALL)), out, workers=1, quiet=True)
+    assert rest["units"] == 3
+    assert board_rows(out) == board_rows(serial[0])
+
+
 def test_killed_subprocess_resumes_to_identical_results(serial, tmp_path):
     path = write(tmp_path, SMALL)
     out = tmp_path / "out"

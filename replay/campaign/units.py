@@ -109,7 +109,9 @@ def execute_job(job: Job) -> list[dict]:
     estimates = {}
     probs = [problems[r] for r in runs]
     t0 = perf_counter()
-    if (len(runs) > 1 and supports(flt) and all(same_model(p.model, probs[0].model) for p in probs)
+    # batched whenever possible, even for one run: a block resumed with one run left must give the
+    # numbers (and the NIS) of the whole block, whatever was stored before
+    if (runs and supports(flt) and all(same_model(p.model, probs[0].model) for p in probs)
             and len({p.z.shape for p in probs}) == 1):
         try:
             out = run_batched(flt, probs[0].model, np.stack([p.z for p in probs]),
