@@ -440,23 +440,8 @@ def swarm_move(ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, logdet
     f = np.empty(N)
     w = np.empty(N)
     for m in range(start, stop):
-        top = logw[m].max()
-        tot = 0.0
-        for i in range(N):
-            w[i] = np.exp(logw[m, i] - top)
-            tot += w[i]
-        for q in range(n):
-            if xang[q]:
-                ss, cc = 0.0, 0.0
-                for i in range(N):
-                    ss += w[i] / tot * np.sin(X[m, i, q])
-                    cc += w[i] / tot * np.cos(X[m, i, q])
-                c[q] = np.arctan2(ss, cc)
-            else:
-                t = 0.0
-                for i in range(N):
-                    t += w[i] / tot * X[m, i, q]
-                c[q] = t
+        normalise(logw[m], w)
+        weighted_mean(X[m], w, xang, c)
         for i in range(N):
             for q in range(n):
                 Xr[i, q] = X[m, i, q] - c[q]
@@ -529,6 +514,38 @@ def swarm(ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
         best[t + 1] = fm.min()
 
 
+@nb.njit(cache=True)
+def normalise(lw, w):
+    """Weights w proportional to exp(lw), summing to one; lw renormalised in place (log w)."""
+    top = lw.max()
+    tot = 0.0
+    for i in range(lw.shape[0]):
+        w[i] = np.exp(lw[i] - top)
+        tot += w[i]
+    lt = np.log(tot)
+    for i in range(lw.shape[0]):
+        lw[i] = lw[i] - top - lt
+        w[i] /= tot
+
+
+@nb.njit(cache=True)
+def weighted_mean(X, w, xang, out):
+    """The w-weighted mean of the rows of X (N, n), circular for the ``xang`` components."""
+    N, n = X.shape
+    for q in range(n):
+        if xang[q]:
+            ss, cc = 0.0, 0.0
+            for i in range(N):
+                ss += w[i] * np.sin(X[i, q])
+                cc += w[i] * np.cos(X[i, q])
+            out[q] = np.arctan2(ss, cc)
+        else:
+            t = 0.0
+            for i in range(N):
+                t += w[i] * X[i, q]
+            out[q] = t
+
+
 @nb.njit(cache=True, nogil=True)
 def estimate(X, logw, xang, x, P, w):
     """Weighted estimate of every run, as :meth:`replay.filters.stcpf.Engine.estimate`: the
@@ -537,27 +554,8 @@ def estimate(X, logw, xang, x, P, w):
     M, N, n = X.shape
     d = np.empty(n)
     for m in range(M):
-        top = logw[m].max()
-        tot = 0.0
-        for i in range(N):
-            w[m, i] = np.exp(logw[m, i] - top)
-            tot += w[m, i]
-        lt = np.log(tot)
-        for i in range(N):
-            logw[m, i] = logw[m, i] - top - lt
-            w[m, i] /= tot
-        for q in range(n):
-            if xang[q]:
-                ss, cc = 0.0, 0.0
-                for i in range(N):
-                    ss += w[m, i] * np.sin(X[m, i, q])
-                    cc += w[m, i] * np.cos(X[m, i, q])
-                x[m, q] = np.arctan2(ss, cc)
-            else:
-                t = 0.0
-                for i in range(N):
-                    t += w[m, i] * X[m, i, q]
-                x[m, q] = t
+        normalise(logw[m], w[m])
+        weighted_mean(X[m], w[m], xang, x[m])
         P[m] = 0.0
         for i in range(N):
             for q in range(n):
