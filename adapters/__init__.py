@@ -1,7 +1,7 @@
 """Adapters: read a recording into a :class:`replay.frame.Frame`.
 
 Each adapter is a function ``load(path, **options) -> Frame``. It validates the
-input, raises :class:`replay.errors.DataError` with one clear line on bad input,
+input, raises :class:`replay.util.errors.DataError` with one clear line on bad input,
 and records in ``frame.report`` every sample or channel it dropped, flagged,
 masked or repaired. ``ADAPTERS`` maps the adapter names used in dataset
 manifests (``datasets/*.toml``) to ``"module:function"``.
@@ -15,6 +15,6 @@ ADAPTERS = {
 
 def get_adapter(name: str):
     """The loader function registered under ``name``."""
-    from replay.lookup import resolve
+    from replay.util.lookup import resolve
 
     return resolve(ADAPTERS, name, "adapter")

@@ -24,7 +24,7 @@ relative to its first valid fix: ``meta["crs"]``, ``meta["origin"]`` (easting,
 northing) and ``meta["origin_alt"]``. Fixes with ``status < 0`` (NO_FIX) or
 impossible coordinates are masked and counted.
 
-**Bad input** raises :class:`~replay.errors.DataError` with one line naming the
+**Bad input** raises :class:`~replay.util.errors.DataError` with one line naming the
 file and topic: a missing topic, a topic of an unsupported or unexpected type,
 no messages on a mapped topic, non-increasing stamps on a topic, a truncated or
 corrupted file. After a truncation, the messages before it are used only with
@@ -43,7 +43,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from replay.errors import DataError
+from replay.util.errors import DataError
 from replay.frame import Channel, Frame, Report
 
 from . import rosmsg

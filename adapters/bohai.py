@@ -30,7 +30,7 @@ What the returned :class:`~replay.frame.Frame` holds:
   jumps, speed, yaw_course, gyro_attitude, dropped_columns; gps (36 columns);
   gps_time_of_day when ``time_gps`` holds one.
 
-Bad input raises :class:`~replay.errors.DataError` with one line naming the
+Bad input raises :class:`~replay.util.errors.DataError` with one line naming the
 file and, where it applies, the file line (header = line 1).
 """
 from __future__ import annotations
@@ -44,8 +44,8 @@ import numpy as np
 import pandas as pd
 import pyproj
 
-from replay.angles import wrap
-from replay.errors import DataError
+from replay.util.angles import wrap
+from replay.util.errors import DataError
 from replay.frame import Channel, Frame, Report
 
 COLS36 = ("lat_gps", "lon_gps", "alt_gps", "roll", "pitch", "yaw", "vn", "ve", "vf", "vl", "vu",

@@ -39,7 +39,7 @@ What :func:`load` does (everything counted in ``frame.report``):
   time span, it is masked. ``meta["reference_alignment"]`` holds the counts.
 
 Bad input (no time column, unrecognised unit, a reference with no time
-overlap, ...) raises :class:`replay.errors.DataError`: one line naming the
+overlap, ...) raises :class:`replay.util.errors.DataError`: one line naming the
 file and the column.
 """
 from __future__ import annotations
@@ -51,8 +51,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from replay.angles import wrap
-from replay.errors import DataError, ReplayError
+from replay.util.angles import wrap
+from replay.util.errors import DataError, ReplayError
 from replay.frame import Channel, Frame, Report
 
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation

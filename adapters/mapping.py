@@ -27,7 +27,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 
 from .rosmsg import KINDS, kind_of, normalize_type
 

@@ -74,7 +74,7 @@ def build_problem(steps: int):
 
 
 def wrap(a):
-    """Wrap to [-pi, pi) (same convention as replay.angles.wrap)."""
+    """Wrap to [-pi, pi) (same convention as replay.util.angles.wrap)."""
     return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
 
 

@@ -25,6 +25,6 @@ FILTERS = {
 
 def make_filter(name: str, **params):
     """Instantiate the filter registered as ``name`` with ``params``."""
-    from replay.lookup import instantiate
+    from replay.util.lookup import instantiate
 
     return instantiate(FILTERS, name, "filter", **params)

@@ -44,8 +44,8 @@ from time import perf_counter
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
-from replay.linalg import cholesky
+from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.linalg import cholesky
 from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Estimates

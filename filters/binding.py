@@ -21,7 +21,7 @@ import os
 import sys
 from pathlib import Path
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 MARKER = "# MODEL KERNELS:"
 _bound: dict = {}

@@ -54,7 +54,7 @@ COS_TAYLOR = tuple(1.0 / math.factorial(k) for k in (16, 14, 12, 10, 8, 6, 4, 2)
 
 @nb.njit(cache=True)
 def wrap(v, mask):
-    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (the arithmetic of replay.angles.wrap)."""
+    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (the arithmetic of replay.util.angles.wrap)."""
     for i in range(v.shape[0]):
         if mask[i]:
             v[i] -= np.floor(v[i] * (1.0 / TWO_PI) + 0.5) * TWO_PI

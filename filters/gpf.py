@@ -38,9 +38,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
-from replay.errors import ReplayError
-from replay.linalg import cholesky
+from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.errors import ReplayError
+from replay.util.linalg import cholesky
 from replay.model import remap_indices
 
 from .base import Filter

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 ALPHA = 0.5  # background weight of eq. 10 ("generally 0.5")
 

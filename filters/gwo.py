@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 def a_linear(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0) -> float:

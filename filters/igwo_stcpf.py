@@ -49,8 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, wrap_components
-from replay.errors import ReplayError
+from replay.util.angles import residual, wrap_components
+from replay.util.errors import ReplayError
 from replay.model import is_diagonal, remap_indices
 
 from . import gwo, pso

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, wrap_components
-from replay.linalg import gain
+from replay.util.angles import residual, wrap_components
+from replay.util.linalg import gain
 from replay.model import remap_indices
 
 from .base import Filter

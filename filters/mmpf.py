@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
-from replay.errors import ReplayError
+from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.errors import ReplayError
 
 from .base import Filter
 from .resampling import SCHEMES, effective_sample_size

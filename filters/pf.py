@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean
+from replay.util.angles import residual, weighted_mean
 
 from .base import Filter
 from .resampling import SCHEMES, effective_sample_size
@@ -35,7 +35,7 @@ class ParticleFilter(Filter):
 
     def __init__(self, n_particles: int = 1000, resampling: str = "systematic",
                  ess_threshold: float = 1.0, roughening: float = 0.0):
-        from replay.errors import ReplayError
+        from replay.util.errors import ReplayError
 
         if int(n_particles) < 1:
             raise ReplayError(f"pf: n_particles must be at least 1 (got {n_particles})")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 from .gwo import as_runs, draws
 

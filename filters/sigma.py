@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual, weighted_mean, wrap_components
-from replay.linalg import cholesky, gain
+from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.linalg import cholesky, gain
 from replay.model import remap_indices
 
 from .base import Filter

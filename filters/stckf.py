@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual
-from replay.errors import ReplayError
+from replay.util.angles import residual
+from replay.util.errors import ReplayError
 from replay.model import remap_indices
 
 from .sigma import CKF

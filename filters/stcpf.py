@@ -42,8 +42,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import TWO_PI, index, wrap_components
-from replay.errors import ReplayError
+from replay.util.angles import TWO_PI, index, wrap_components
+from replay.util.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
 from .base import Filter
@@ -92,7 +92,7 @@ def circular_mean(Y, angles):
 
 def wrap_inplace(x, angles):
     """Wrap the ``angles`` components of ``x`` in place: the arithmetic of
-    :func:`replay.angles.wrap` (bit for bit) without its temporaries. Returns ``x``."""
+    :func:`replay.util.angles.wrap` (bit for bit) without its temporaries. Returns ``x``."""
     if angles:
         a = x[..., index(tuple(angles))]
         t = a * (1.0 / TWO_PI)
@@ -106,7 +106,7 @@ def wrap_inplace(x, angles):
 
 
 def fast_residual(a, b, angles):
-    """``a - b`` with the ``angles`` components wrapped; equals :func:`replay.angles.residual`."""
+    """``a - b`` with the ``angles`` components wrapped; equals :func:`replay.util.angles.residual`."""
     return wrap_inplace(np.subtract(a, b), angles)
 
 

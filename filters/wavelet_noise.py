@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 import pywt
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 MAD_SCALE = 0.6745  # eq. 17: median |N(0, 1)|
 WINDOW = 50  # the paper's sliding window (§3)

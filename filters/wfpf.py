@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 from .pf import ParticleFilter
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 ALIGNMENTS = ("none", "yaw", "se3", "sim3")
 

@@ -1,6 +1,6 @@
 """The ``replay`` command line.
 
-Bad input raises :class:`replay.errors.ReplayError`; :class:`Main` turns it into
+Bad input raises :class:`replay.util.errors.ReplayError`; :class:`Main` turns it into
 one line on stderr and exit status 2 (no traceback).
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import click
 
 import replay
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 class Main(click.Group):
@@ -160,7 +160,7 @@ def list_cmd(what):
 
     from replay.adapters import ADAPTERS
     from replay.filters import FILTERS
-    from replay.lookup import resolve
+    from replay.util.lookup import resolve
     from replay.reproduce import REPRODUCTIONS
     from replay.tasks import TASKS
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 @click.command("inspect")

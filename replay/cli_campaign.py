@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 @click.group("campaign")

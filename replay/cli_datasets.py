@@ -8,7 +8,7 @@ from __future__ import annotations
 import click
 
 from replay import registry
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.fetch import fetch as fetch_dataset
 
 DATA_DIR = click.option("--data-dir", type=click.Path(file_okay=False), default=None,

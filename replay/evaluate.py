@@ -33,16 +33,10 @@ import replay
 from replay import registry, score
 from replay.filters import batched, make_filter
 from replay.tasks import make_task
+from replay.util.seeds import filter_stream, rng_for  # noqa: F401 (re-exported)
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
 
-
-def rng_for(seed: int, run: int, *stream: int) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence([int(seed), int(run), *stream]))
-
-
-def filter_stream(name: str) -> int:
-    return zlib.crc32(name.encode())
 
 
 @dataclass

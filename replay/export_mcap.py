@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 
 FRAME_ID = "enu"
 

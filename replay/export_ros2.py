@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.adapters import rosmsg
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 def _typestore():

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import replay
 from replay import registry
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.registry import CHECKSUMS_FILE, Dataset
 
 

@@ -30,7 +30,7 @@ from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, S
                           SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 _MSG_HEADER = np.dtype([("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
                         ("log_time", "<u8"), ("publish_time", "<u8")])  # 31 bytes, packed

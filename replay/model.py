@@ -12,8 +12,8 @@ all of them for many Monte Carlo runs at once — and return ``(..., nx)`` and
 
 Angles are declared: ``x_angles`` and ``z_angles`` list the state and
 measurement components that are angles (radians). Filters form residuals of
-those components with :func:`replay.angles.residual` and means with
-:func:`replay.angles.weighted_mean`.
+those components with :func:`replay.util.angles.residual` and means with
+:func:`replay.util.angles.weighted_mean`.
 
 Jacobians ``F`` and ``H`` are optional; the defaults are central differences
 (also vectorised: all ``2 nx`` perturbed states go through ``f`` at once).
@@ -27,8 +27,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from replay.angles import residual, wrap
-from replay.linalg import cholesky
+from replay.util.angles import residual, wrap
+from replay.util.linalg import cholesky
 
 
 class Model:

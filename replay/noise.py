@@ -22,7 +22,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 def require_spd(M, name: str) -> np.ndarray:

@@ -35,7 +35,7 @@ TAIL = ["us_per_step", "scored", "masked", "version", "config_hash"]
 
 def paired_columns(ev: Evaluation, baseline: str | None = None, metric: str = "pos_rmse") -> dict:
     """{filter: {"<metric>_vs_<baseline>": diff, "..._ci95": half-width}} (empty strings for the baseline)."""
-    from replay.errors import ReplayError
+    from replay.util.errors import ReplayError
     from replay.metrics import paired
 
     names = [r.name for r in ev.results]

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import replay
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 
 CHECKSUMS_FILE = "checksums.json"
 

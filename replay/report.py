@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 AXES = ("x", "y", "z")
 

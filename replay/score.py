@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from replay.angles import wrap
+from replay.util.angles import wrap
 
 
 def errors(problem, est) -> dict:

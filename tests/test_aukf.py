@@ -9,7 +9,7 @@ or for the wrong points in Gamma.
 import numpy as np
 import pytest
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.filters.aukf import AUKF, guard_spd
 from replay.filters.sigma import UKF
 from replay.model import LinearGaussian

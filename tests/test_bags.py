@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from replay.adapters import bags, rosmsg
 from replay.cli import main
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 
 REPO = Path(__file__).resolve().parents[1]
 RL_MAP = REPO / "docs" / "mappings" / "rl_test1.toml"

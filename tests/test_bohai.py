@@ -10,7 +10,7 @@ import pytest
 
 from replay.adapters import get_adapter
 from replay.adapters.bohai import COLS31, COLS36, load, mask_jumps
-from replay.errors import DataError
+from replay.util.errors import DataError
 
 ROWS = {"20220822_0_0.csv": 3478, "20220822_0_3.csv": 8500, "20220822_0_4.csv": 7614,
         "20220822_0_5.csv": 7067, "20220822_0_6.csv": 7509, "20220625_0_0.csv": 8476}

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from replay.campaign import board, execute, spec
 from replay.cli import main
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 SMALL = """\
 [campaign]

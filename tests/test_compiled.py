@@ -203,7 +203,7 @@ def test_bound_kernels_are_cached_by_content(tmp_path, monkeypatch):
 def test_bind_refuses_kernels_that_are_not_module_level():
     import numba
 
-    from replay.errors import ReplayError
+    from replay.util.errors import ReplayError
 
     @numba.njit
     def local(x, p, out):

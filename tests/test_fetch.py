@@ -20,7 +20,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay import registry
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.fetch import download_url, fetch
 
 REPO = Path(__file__).resolve().parents[1]

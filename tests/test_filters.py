@@ -153,7 +153,7 @@ def test_divergence_is_reported_not_raised():
 
 
 def test_wrap_values_and_shapes():
-    from replay.angles import residual, weighted_mean, wrap
+    from replay.util.angles import residual, weighted_mean, wrap
 
     assert wrap(np.pi) == -np.pi and wrap(-np.pi) == -np.pi
     assert wrap(3 * np.pi / 2) == pytest.approx(-np.pi / 2)
@@ -169,7 +169,7 @@ def test_wrap_values_and_shapes():
 
 
 def test_roughening_option_and_parameter_checks(linear_case):
-    from replay.errors import ReplayError
+    from replay.util.errors import ReplayError
     from replay.filters import batched
 
     model, z, x0, P0, xs, Ps = linear_case

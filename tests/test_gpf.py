@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from replay import registry, score
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.filters import make_filter
 from replay.filters.grey import GreyPredictor, gm11_fit, gm11_predict
 from replay.filters.wavelet_noise import WaveletNoise, detail_matrix, wavelet_sigma

@@ -6,7 +6,7 @@ from click.testing import CliRunner
 from replay import registry
 from replay.adapters.lake import align, load, write
 from replay.cli import main
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 from replay.sim.lake_depth import make_frame, maneuvers
 
 

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from test_export_mcap import validate
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.export_mcap import file_descriptor_set, json_rows
 from replay.mcap_bulk import BulkWriter, gather
 from replay.pb_columns import encode, varint

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from replay import registry
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.evaluate import evaluate
 from replay.filters import batched, gwo, make_filter, pso
 from replay.filters.batched import run_batched
@@ -151,7 +151,7 @@ def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
 
 
 def test_fast_residual_is_replay_angles_residual_bit_for_bit():
-    from replay.angles import residual
+    from replay.util.angles import residual
     from replay.filters.stcpf import fast_residual
 
     rng = np.random.default_rng(0)

@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay import registry
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 from replay.frame import Channel, Frame
 from replay.registry import Dataset
 

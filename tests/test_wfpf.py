@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.filters.wfpf import WeightFactorPF, temper
 from replay.noise import Glint
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from replay import metrics
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.score import ci95
 
 from .store import Store

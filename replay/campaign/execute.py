@@ -30,7 +30,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 from . import board
 from .progress import Progress

@@ -27,7 +27,7 @@ A campaign is a TOML file::
 
 Everything is checked before any work starts (:func:`load`): an unknown
 section, key, dataset, task, filter or parameter, a wrong type, or an empty
-grid raises :class:`~replay.errors.ReplayError` with one line naming the file,
+grid raises :class:`~replay.util.errors.ReplayError` with one line naming the file,
 the line and the key.
 """
 from __future__ import annotations
@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from replay.align import ALIGNMENTS
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.evaluate import _jsonable as _plain
 
 CAMPAIGN_KEYS = {"name": str, "runs": int, "seed": int, "batch": int, "alignment": str,

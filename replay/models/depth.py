@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.linalg import cholesky
+from replay.util.linalg import cholesky
 from replay.model import Model, is_diagonal
 
 T_PAPER = 0.05

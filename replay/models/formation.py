@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import residual
+from replay.util.angles import residual
 from replay.model import Model
 
 

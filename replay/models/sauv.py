@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
+from replay.util.angles import wrap
 from replay.model import Model
 
 KNOT = 1852.0 / 3600.0

@@ -8,7 +8,7 @@ report (``docs/reproduction/<paper>.md`` by default).
 """
 from importlib import import_module
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 REPRODUCTIONS: dict[str, str] = {
     "000": "replay.reproduce.p000:run",

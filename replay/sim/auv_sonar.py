@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
+from replay.util.angles import wrap
 from replay.frame import Channel, Frame
 from replay.models.auv_sonar import AUVSonar, Q_TABLE2, R_TABLE2
 

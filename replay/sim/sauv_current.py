@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
+from replay.util.angles import wrap
 from replay.frame import Channel, Frame
 from replay.models.sauv import DEG, KNOT, body_to_level
 

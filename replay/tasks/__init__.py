@@ -52,7 +52,7 @@ class Task:
 
 def make_task(name: str, **params) -> Task:
     """Instantiate the task registered as ``name`` with ``params``."""
-    from replay.lookup import instantiate
+    from replay.util.lookup import instantiate
 
     return instantiate(TASKS, name, "task", **params)
 
@@ -63,7 +63,7 @@ def reference_position_3d(frame, z0: float | None = None):
     A 2-D reference (east, north) gets a constant third component ``z0`` (the
     vertical is not observed, as in the Bohai files, whose ``depth`` is zero).
     """
-    from replay.errors import ReplayError
+    from replay.util.errors import ReplayError
 
     ref = frame.reference.get("position")
     if ref is None:

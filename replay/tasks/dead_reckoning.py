@@ -33,8 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
-from replay.errors import ReplayError
+from replay.util.angles import wrap
+from replay.util.errors import ReplayError
 from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
 
 from . import Problem, Task

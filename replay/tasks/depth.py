@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import DataError, ReplayError
+from replay.util.errors import DataError, ReplayError
 from replay.models.depth import R_FIXED, DepthModel, paper_Q
 
 from . import Problem, Task

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 from replay.models.formation import Formation
 from replay.sim.uav_formation import glint_003
 

@@ -45,8 +45,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
-from replay.errors import ReplayError
+from replay.util.angles import wrap
+from replay.util.errors import ReplayError
 from replay.model import Model
 
 from . import Problem, Task

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.angles import wrap
+from replay.util.angles import wrap
 from replay.models.auv_sonar import P0_TABLE2, Q_TABLE2, R_TABLE2, AUVSonar
 
 from . import Problem, Task, reference_position_3d

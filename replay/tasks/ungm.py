@@ -21,7 +21,7 @@ class UNGMTask(Task):
         self.q, self.r, self.p0, self.growth = q, r, p0, growth
 
     def build(self, frame, rng):
-        from replay.errors import ReplayError
+        from replay.util.errors import ReplayError
 
         if "z" not in frame.channels or "position" not in frame.reference:
             raise ReplayError("task ungm: needs a frame from sim/ungm (channel 'z', reference 'position')")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from importlib import import_module
 
-from replay.errors import ReplayError
+from replay.util.errors import ReplayError
 
 
 def resolve(table: dict, name: str, kind: str):
