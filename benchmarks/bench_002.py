@@ -21,7 +21,7 @@
 
 3. The same single IGWO-STCPF run on the numpy reference engine
    (``compiled=False``): what the compiled kernels
-   (:mod:`replay.filters.compiled`) buy.
+   (:mod:`replay.filters.p002.compiled`) buy.
 
 Targets are reported as PASS/MISS, never asserted. The machine's load matters:
 ``os.getloadavg()`` is printed with the figures.
@@ -37,7 +37,8 @@ import numpy as np
 
 from replay import registry
 from replay.evaluate import evaluate, rng_for
-from replay.filters import batched, gwo, make_filter, parallel
+from replay.filters import batched, make_filter
+from replay.filters.p002 import gwo, parallel
 from replay.tasks import make_task
 
 FIVE = ("stckf", "pf", "pso-pf", "pso-cpf", "igwo-stcpf")

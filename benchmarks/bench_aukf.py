@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from replay.filters.aukf import AUKF
+from replay.filters.p001.aukf import AUKF
 from replay.filters.sigma import UKF
 from replay.sim.sauv_current import make_frame
 from replay.tasks.dead_reckoning import DeadReckoningTask

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from replay.adapters import bags
-from replay.export_mcap import write_mcap
+from replay.outputs.export_mcap import write_mcap
 from replay.frame import Channel, Frame
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))

@@ -25,8 +25,8 @@ import numpy as np
 
 from replay import registry
 from replay.filters import make_filter
-from replay.filters.grey import GreyPredictor
-from replay.filters.wavelet_noise import WaveletNoise
+from replay.filters.p000.grey import GreyPredictor
+from replay.filters.p000.wavelet_noise import WaveletNoise
 from replay.tasks.depth import DepthTask
 
 

@@ -83,7 +83,7 @@ class Model:
         into ``out``, with ``p`` a float array of the model's parameters at a
         step (:meth:`kernel_params`). They must compute what ``f``, ``h``,
         ``F``, ``H`` compute (a test per model asserts it). The compiled
-        filter paths (:mod:`replay.filters.compiled`) use them; every filter
+        filter paths (:mod:`replay.filters.p002.compiled`) use them; every filter
         also runs without them.
         """
         return None

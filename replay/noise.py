@@ -14,7 +14,7 @@ zero). :attr:`Glint.cov` is the mixture's true covariance, as above.
 
 In paper 003, ε is called an "influence factor" and printed as 0.75 (§4.1);
 it is a different quantity from the weight exponent α of eq. 27, which the
-paper also prints as 0.75 (§4.2): see :mod:`replay.filters.wfpf`.
+paper also prints as 0.75 (§4.2): see :mod:`replay.filters.p003.wfpf`.
 """
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from replay.util.errors import ReplayError
-from replay.filters.aukf import AUKF, guard_spd
+from replay.filters.p001.aukf import AUKF, guard_spd
 from replay.filters.sigma import UKF
 from replay.model import LinearGaussian
 

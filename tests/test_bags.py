@@ -122,7 +122,7 @@ def _assert_same_frame(f1, f2, atol):
 
 
 def test_round_trip_frame_ros2_frame(bagdir, tmp_path):
-    from replay.export_ros2 import write_frame_bag
+    from replay.outputs.export_ros2 import write_frame_bag
 
     f1 = bags.load(bagdir / "derived/rl_test1_60s_sqlite3", mapping=RL_MAP)
     assert write_frame_bag(f1, tmp_path / "rt") == 2551
@@ -134,7 +134,7 @@ def test_round_trip_frame_ros2_frame(bagdir, tmp_path):
 
 
 def test_auv_bag_round_trip_and_pressure(tmp_path):
-    from replay.export_ros2 import write_frame_bag
+    from replay.outputs.export_ros2 import write_frame_bag
     from replay.sim.auv_bag import AUV_MAPPING, make_bag
 
     make_bag(tmp_path / "auv", np.random.default_rng(3), duration=30.0, sigma_p=0.0)
@@ -171,7 +171,7 @@ def test_quaternion_round_trip():
 
 def _write_bag(path, stamps_ns, status=0):
     """A tiny ROS 2 bag with NavSatFix on /fix at the given header stamps."""
-    from replay.export_ros2 import BagOut
+    from replay.outputs.export_ros2 import BagOut
 
     out = BagOut(path)
     T = out.T

@@ -1,4 +1,4 @@
-"""The compiled kernels (replay.filters.compiled) against the numpy reference engine."""
+"""The compiled kernels (replay.filters.p002.compiled) against the numpy reference engine."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,9 +6,10 @@ import pytest
 
 from replay import registry
 from replay.evaluate import rng_for
-from replay.filters import binding, compiled, gwo, make_filter, parallel, stcpf
+from replay.filters import make_filter
+from replay.filters.p002 import binding, compiled, gwo, parallel, stcpf
 from replay.filters.batched import run_batched
-from replay.filters.stcpf import batched_cholesky
+from replay.filters.p002.stcpf import batched_cholesky
 from replay.models.auv_sonar import AUVSonar
 from replay.models.random_walk import RandomWalkPosition
 from replay.models.ungm import UNGM

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from replay.adapters import bags
 from replay.cli import main
-from replay.export_mcap import read_estimates
+from replay.outputs.export_mcap import read_estimates
 
 
 def validator_dir():

@@ -5,8 +5,8 @@ import pytest
 from replay import registry, score
 from replay.util.errors import ReplayError
 from replay.filters import make_filter
-from replay.filters.grey import GreyPredictor, gm11_fit, gm11_predict
-from replay.filters.wavelet_noise import WaveletNoise, detail_matrix, wavelet_sigma
+from replay.filters.p000.grey import GreyPredictor, gm11_fit, gm11_predict
+from replay.filters.p000.wavelet_noise import WaveletNoise, detail_matrix, wavelet_sigma
 from replay.models.depth import Q_FALLBACK, Q_PRINTED, DepthModel, is_positive_definite, paper_Q
 from replay.tasks.depth import DepthTask
 

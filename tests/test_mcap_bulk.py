@@ -11,9 +11,9 @@ from mcap.stream_reader import StreamReader
 from test_export_mcap import validate
 
 from replay.util.errors import ReplayError
-from replay.export_mcap import file_descriptor_set, json_rows
-from replay.mcap_bulk import BulkWriter, gather
-from replay.pb_columns import encode, varint
+from replay.outputs.export_mcap import file_descriptor_set, json_rows
+from replay.outputs.mcap_bulk import BulkWriter, gather
+from replay.outputs.pb_columns import encode, varint
 
 
 def test_varint_known_values():

@@ -12,10 +12,11 @@ import pytest
 from replay import registry
 from replay.util.errors import ReplayError
 from replay.evaluate import evaluate
-from replay.filters import batched, gwo, make_filter, pso
+from replay.filters import batched, make_filter
+from replay.filters.p002 import gwo, pso
 from replay.filters.batched import run_batched
 from replay.filters.sigma import CKF
-from replay.filters.stckf import STCKF, batched_jacobian, fading_factor
+from replay.filters.p002.stckf import STCKF, batched_jacobian, fading_factor
 from replay.model import LinearGaussian
 from replay.models.auv_sonar import AUVSonar
 from replay.models.ungm import UNGM
@@ -152,7 +153,7 @@ def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
 
 def test_fast_residual_is_replay_angles_residual_bit_for_bit():
     from replay.util.angles import residual
-    from replay.filters.stcpf import fast_residual
+    from replay.filters.p002.stcpf import fast_residual
 
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(7, 9, 6)) * 10, rng.normal(size=(7, 1, 6)) * 10

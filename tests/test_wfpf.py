@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from replay.util.errors import ReplayError
-from replay.filters.wfpf import WeightFactorPF, temper
+from replay.filters.p003.wfpf import WeightFactorPF, temper
 from replay.noise import Glint
 
 

@@ -143,7 +143,7 @@ def columns(rows) -> list[str]:
 def _write(rows, path, cols):
     from io import StringIO
 
-    from replay.outputs import _fmt, write_atomic
+    from replay.outputs.files import _fmt, write_atomic
 
     buf = StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore", lineterminator="\n")

@@ -57,7 +57,7 @@ def make_bag(path, rng: np.random.Generator, *, duration: float = 120.0, speed: 
              latency: float = 0.005) -> int:
     """Write the recording to ``path`` (a ROS 2 bag directory); returns messages written."""
     from replay.adapters.rosmsg import ATMOSPHERIC_PRESSURE, GRAVITY, WATER_DENSITY, rpy_to_quat
-    from replay.export_ros2 import BagOut
+    from replay.outputs.export_ros2 import BagOut
 
     fine = np.arange(0.0, duration, 0.01)
     e, n, d, h, w = trajectory(fine, speed, depth, depth_swing)

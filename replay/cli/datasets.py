@@ -112,7 +112,7 @@ def make_cmd(dataset_id, out, seed, params):
 
     import numpy as np
 
-    from replay.cli import parse_params
+    from replay.cli.main import parse_params
 
     ds = registry.get(dataset_id)
     if ds.kind != "sim":

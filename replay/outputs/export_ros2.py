@@ -197,7 +197,7 @@ def write_frame_bag(frame, path) -> int:
 
 def export_run_ros2(run_dir, path, data_dir=None) -> int:
     """nav_msgs/Odometry per filter and for the reference (run 0) -> ROS 2 bag (MCAP storage)."""
-    from replay.export_mcap import _heading_index, load_run, time_ns
+    from replay.outputs.export_mcap import _heading_index, load_run, time_ns
 
     run = load_run(run_dir, data_dir)
     frame, problem = run["frame"], run["problem"]

@@ -1,4 +1,4 @@
-"""Calling the compiled kernels of :mod:`replay.filters.compiled`: argument typing once, threads.
+"""Calling the compiled kernels of :mod:`replay.filters.p002.compiled`: argument typing once, threads.
 
 :class:`Kernel` binds a kernel to the model's functions (``f``, ``h``, ...).
 numba types every argument of every call, and a function argument costs
@@ -10,7 +10,7 @@ dimensions, layout; a change goes back through the dispatcher).
 :func:`split` runs a kernel that takes a ``start, stop`` index range on
 ``threads()`` threads (the kernels release the GIL). Each index is computed by
 one thread with the same arithmetic, so the numbers do not depend on the
-thread count. The cubature step of :mod:`replay.filters.stcpf` uses numba's
+thread count. The cubature step of :mod:`replay.filters.p002.stcpf` uses numba's
 own (OpenMP) threads instead (``compiled.cubature_threads``): they spin between
 steps, where waking a Python thread costs about 70 us, more than half a step
 of one run takes. ``REPLAY_THREADS`` sets the count (default: the CPUs this

@@ -1,12 +1,12 @@
 """Compiled (numba) kernels of the particle-level work of paper 002's filters.
 
-The numpy engine of :mod:`replay.filters.stcpf` and the optimiser of
-:mod:`replay.filters.gwo` are the reference implementations: readable, with
+The numpy engine of :mod:`replay.filters.p002.stcpf` and the optimiser of
+:mod:`replay.filters.p002.gwo` are the reference implementations: readable, with
 the paper's equations beside them. This module computes the same quantities
 in compiled loops, for models that provide numba kernels of ``f``, ``h``,
 ``F``, ``H`` (:meth:`replay.model.Model.kernels`). This file is a template: the
 entry points call the model's kernels as module globals ``f``, ``h``, ``F``,
-``H``, which :mod:`replay.filters.binding` supplies by writing a copy of this
+``H``, which :mod:`replay.filters.p002.binding` supplies by writing a copy of this
 file with the model's imports at the MODEL KERNELS line (so that numba can cache
 the compiled code on disk; functions passed as arguments would be recompiled
 in every process). The helpers without model kernels (:func:`factor`,
@@ -43,7 +43,7 @@ import math
 import numba as nb
 import numpy as np
 
-# MODEL KERNELS: replay.filters.binding puts here the import of one model's f, h, F, H
+# MODEL KERNELS: replay.filters.p002.binding puts here the import of one model's f, h, F, H
 
 TWO_PI = 2.0 * np.pi
 LOG2PI = np.log(2.0 * np.pi)
@@ -85,7 +85,7 @@ def cholesky(A, L):
 @nb.njit(cache=True)
 def factor(A, L):
     """Cholesky factor of A into L, or of a repaired copy of A when needed, as
-    :func:`replay.filters.stcpf.batched_cholesky` does: symmetrise, floor the
+    :func:`replay.filters.p002.stcpf.batched_cholesky` does: symmetrise, floor the
     eigenvalues at 1e-12 max(1, largest). A is not changed. Returns 1 when repaired, else 0."""
     if cholesky(A, L):
         return 0
@@ -231,7 +231,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, E, Q, Qi, R, Ri, xang, zang, opts
     CKF); repairs[m, i] <- covariances repaired. ``opts`` = [have_L, have_V,
     stckf, rho, beta, propagated, scale_prior, log det Q, log det R].
     The equations, and the choices where 002 is ambiguous, are those of
-    :class:`replay.filters.stcpf.Engine`. Particles are independent: callers
+    :class:`replay.filters.p002.stcpf.Engine`. Particles are independent: callers
     may split the index range among threads (the function releases the GIL).
     """
     have_L, have_V, stckf = opts[0] != 0, opts[1] != 0, opts[2] != 0
@@ -422,13 +422,13 @@ def leaders(f, k, out):
 
 @nb.njit(cache=True, nogil=True)
 def swarm_move(ph, X, logw, Z, Ri, xang, zang, raw, a, improved, xi, eps, logdet_R, best, start, stop):
-    """The relocation of :class:`replay.filters.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
+    """The relocation of :class:`replay.filters.p002.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
     for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
     log weights, log p(z | x).
 
     Per run: normalised weights from ``logw``; their weighted (circular) mean c;
     the wolves X - c (wrapped); :func:`swarm` with the uniforms ``raw`` (M,
-    t_max, 2, k, N, n) as 32-bit integers (see :func:`replay.filters.gwo.draws`),
+    t_max, 2, k, N, n) as 32-bit integers (see :func:`replay.filters.p002.gwo.draws`),
     ``raw[j]`` for run ``start + j``;
     X <- c + wolves (wrapped); logw <- -(f + log det R + nz log 2 pi) / 2 with f
     the final fitness. ``best`` (M, t_max + 1) as in :func:`swarm`.
@@ -466,7 +466,7 @@ def swarm(ph, X, c, z, Ri, zang, raw, a, improved, xi, eps, fm, best):
     iteration. The leaders are not moved (elitism); the candidates are
     X_L - A |C X_L - X| with A = a (2 r1 - 1), C = 2 r2, combined with weights
     1/k (GWO) or the entropy weights of the leaders' fitness (IGWO), exactly
-    as in :func:`replay.filters.gwo.optimize`.
+    as in :func:`replay.filters.p002.gwo.optimize`.
     """
     N, n = X.shape
     k = raw.shape[2]
@@ -548,7 +548,7 @@ def weighted_mean(X, w, xang, out):
 
 @nb.njit(cache=True, nogil=True)
 def estimate(X, logw, xang, x, P, w):
-    """Weighted estimate of every run, as :meth:`replay.filters.stcpf.Engine.estimate`: the
+    """Weighted estimate of every run, as :meth:`replay.filters.p002.stcpf.Engine.estimate`: the
     weights w (M, N) normalised from ``logw`` (which is renormalised in place), the weighted
     (circular) mean x (M, n) and covariance P (M, n, n) with wrapped deviations."""
     M, N, n = X.shape

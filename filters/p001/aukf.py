@@ -80,7 +80,7 @@ from replay.util.linalg import cholesky, gain
 from replay.model import remap_indices
 from replay.noise import require_spd
 
-from .sigma import UKF
+from ..sigma import UKF
 
 GUARDS = ("biased", "previous", "clip")
 MEANS = {True: (True, True), False: (False, False), "qp": (True, True), "q": (True, False),

@@ -30,8 +30,8 @@ import numpy as np
 from replay.util.angles import residual, weighted_mean, wrap_components
 from replay.util.errors import ReplayError
 
-from .base import Filter
-from .resampling import SCHEMES, effective_sample_size
+from ..base import Filter
+from ..resampling import SCHEMES, effective_sample_size
 
 PITCH_RATE = float(np.deg2rad(10.0))
 DEFAULT_MODES = ((0.0, 0.0, 0.0), (0.0, 0.0, PITCH_RATE), (0.0, 0.0, -PITCH_RATE))

@@ -52,12 +52,12 @@ def inspect_cmd(path, write_mapping):
 def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None) -> None:
     """Export an evaluation directory as a Foxglove MCAP and/or a ROS 2 bag."""
     if mcap_out:
-        from replay.export_mcap import export_run
+        from replay.outputs.export_mcap import export_run
 
         n = export_run(run_dir, mcap_out, data_dir=data_dir)
         click.echo(f"wrote {mcap_out} ({n} messages)")
     if ros2_out:
-        from replay.export_ros2 import export_run_ros2
+        from replay.outputs.export_ros2 import export_run_ros2
 
         n = export_run_ros2(run_dir, ros2_out, data_dir=data_dir)
         click.echo(f"wrote {ros2_out}/ ({n} messages)")

@@ -6,11 +6,11 @@ A bootstrap particle filter with two changes. Each step k:
    motion model (eq. 20, ``model.sample_f``, from ancestors resampled by the
    previous weights); N_grey particles are drawn around the GM(1,1) grey
    prediction of each measured channel from its last L measurements
-   z_{k-L..k-1} (eq. 21, :func:`replay.filters.grey.gm11_predict`):
+   z_{k-L..k-1} (eq. 21, :func:`replay.filters.p000.grey.gm11_predict`):
    x^j_k = x^grey_k + u^j_k, u ~ N(0, Q_k) (eq. 22).
 2. **Weighting** (eq. 13-19, 23). R_k = diag(sigma_1^2, ...) with each sigma
    re-estimated from the last ``noise_window`` measurements (z_k included) by
-   the db6 wavelet estimator (eq. 17, :class:`replay.filters.wavelet_noise.WaveletNoise`);
+   the db6 wavelet estimator (eq. 17, :class:`replay.filters.p000.wavelet_noise.WaveletNoise`);
    w^j ∝ exp(-1/2 (z_k - x^j)' R_k^-1 (z_k - x^j)) (eq. 23, wrapped angle residuals).
 3. Estimate = weighted mean (eq. 24; circular for angles); resample (step 5)
    every step, systematic.
@@ -43,9 +43,9 @@ from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky
 from replay.model import remap_indices
 
-from .base import Filter
+from ..base import Filter
 from .grey import GreyPredictor
-from .resampling import SCHEMES, effective_sample_size
+from ..resampling import SCHEMES, effective_sample_size
 from .wavelet_noise import WaveletNoise
 
 

@@ -1,9 +1,9 @@
 """IGWO-STCPF and the swarm-optimised particle filters of paper 002 (§3.3, §4.1).
 
-IGWO-STCPF (002, §3.3, Fig. 8) = STCPF (:mod:`replay.filters.stcpf`: each
+IGWO-STCPF (002, §3.3, Fig. 8) = STCPF (:mod:`replay.filters.p002.stcpf`: each
 particle's importance density is an STCKF posterior) whose resampling is
 replaced by an IGWO optimisation of the particle positions
-(:mod:`replay.filters.gwo`). The baselines share the machinery:
+(:mod:`replay.filters.p002.gwo`). The baselines share the machinery:
 
 | filter      | importance density        | resampling replaced by |
 |-------------|---------------------------|------------------------|
@@ -66,7 +66,7 @@ def residual_fitness(model, z, k, mask=None, meas=None):
 
     ``z`` (nz,) with ``X`` (N, nx), or per run (M, nz) with ``X`` (M, N, nx);
     ``meas`` = (R, angles, R^-1, log det R) of the step when already computed
-    (:meth:`replay.filters.stcpf.Engine.measurement`, masked components only).
+    (:meth:`replay.filters.p002.stcpf.Engine.measurement`, masked components only).
     """
     if meas is None:
         R, angles = model.measurement_cov(k), model.z_angles
@@ -122,7 +122,7 @@ class SwarmParticleFilter(CubatureParticleFilter):
 
 
 class SwarmEngine(Engine):
-    """M runs x N particles of a :class:`SwarmParticleFilter` (see :class:`replay.filters.stcpf.Engine`)."""
+    """M runs x N particles of a :class:`SwarmParticleFilter` (see :class:`replay.filters.p002.stcpf.Engine`)."""
 
     def start(self, X0, P0):
         super().start(X0, P0)
@@ -186,7 +186,7 @@ class SwarmEngine(Engine):
 
     def compiled_move(self, zz, k, meas):
         """:meth:`move` and the new weights for a full Gaussian measurement and GWO/IGWO, by
-        :func:`replay.filters.compiled.swarm_move` (the same draws from the same generators)."""
+        :func:`replay.filters.p002.compiled.swarm_move` (the same draws from the same generators)."""
         flt, m = self.flt, self.model
         M, N, n = self.X.shape
         rngs = self.active_rngs()

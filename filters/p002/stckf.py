@@ -42,7 +42,7 @@ from replay.util.angles import residual
 from replay.util.errors import ReplayError
 from replay.model import remap_indices
 
-from .sigma import CKF
+from ..sigma import CKF
 
 
 def check_params(rho, beta):

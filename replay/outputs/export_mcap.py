@@ -19,8 +19,8 @@ publish time = the sample's time, ``meta["t0_ns"]`` or ``epoch`` + ``t``):
 
 Frame id of poses and paths: ``"enu"`` (the local east-north-up frame).
 
-Each channel is encoded at once (``replay.pb_columns`` for protobuf, ``json_rows``
-for JSON) and written by ``replay.mcap_bulk.BulkWriter`` (time-ordered zstd chunks).
+Each channel is encoded at once (``replay.outputs.pb_columns`` for protobuf, ``json_rows``
+for JSON) and written by ``replay.outputs.mcap_bulk.BulkWriter`` (time-ordered zstd chunks).
 """
 from __future__ import annotations
 
@@ -102,10 +102,10 @@ def file_descriptor_set(message_class) -> bytes:
 
 
 class McapOut:
-    """Protobuf and JSON channels by topic over ``replay.mcap_bulk.BulkWriter`` (whole channels at once)."""
+    """Protobuf and JSON channels by topic over ``replay.outputs.mcap_bulk.BulkWriter`` (whole channels at once)."""
 
     def __init__(self, path, compression: str = "zstd"):
-        from replay.mcap_bulk import BulkWriter
+        from replay.outputs.mcap_bulk import BulkWriter
 
         self.w = BulkWriter(path, compression=compression)
         self.schemas, self.channels, self.count = {}, {}, 0
@@ -168,7 +168,7 @@ def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
     from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 
-    from replay.pb_columns import embed, encode
+    from replay.outputs.pb_columns import embed, encode
 
     idx = np.flatnonzero(ok)
     if not len(idx):

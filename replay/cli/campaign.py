@@ -64,7 +64,7 @@ def leaderboard(dirs, sort, out):
               help="Where to write the PNGs and report.html (default: DIR/report).")
 def report(dir, out):
     """Plots (trajectory, error over time, RMSE, NEES/NIS) and one self-contained HTML page."""
-    from replay.report import make_report
+    from replay.outputs.report import make_report
 
     path = make_report(Path(dir), Path(out) if out else None)
     click.echo(f"wrote {path}")

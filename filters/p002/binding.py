@@ -1,4 +1,4 @@
-"""The kernels of :mod:`replay.filters.compiled` bound to one model's ``f``, ``h``, ``F``, ``H``.
+"""The kernels of :mod:`replay.filters.p002.compiled` bound to one model's ``f``, ``h``, ``F``, ``H``.
 
 ``compiled.py`` calls the model's kernels as module globals. :func:`bind`
 writes a copy of it with one model's imports at its MODEL KERNELS line and
@@ -43,7 +43,7 @@ def _where(fn):
 
 
 def bind(kernels):
-    """The copy of :mod:`replay.filters.compiled` bound to the model kernels ``(f, h, F, H)``."""
+    """The copy of :mod:`replay.filters.p002.compiled` bound to the model kernels ``(f, h, F, H)``."""
     key = tuple(id(k) for k in kernels)
     if key not in _bound:
         from . import compiled

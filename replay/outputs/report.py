@@ -2,7 +2,7 @@
 
 Works on a campaign directory (``units/``, :mod:`replay.campaign.store`) and on
 a ``replay eval`` output directory (``estimates/<filter>.csv.gz``,
-``leaderboard.csv``, ``manifest.json``; see :mod:`replay.outputs`). For each
+``leaderboard.csv``, ``manifest.json``; see :mod:`replay.outputs.files`). For each
 dataset x task it draws, with matplotlib's non-interactive Agg backend:
 
 * ``trajectory_<n>.png`` — reference and estimates (run 0) in the horizontal

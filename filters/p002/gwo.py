@@ -121,7 +121,7 @@ def draws(rngs, shape):
     """One array of uniforms of ``shape`` per run, from the run's own generator: (M, *shape).
 
     32-bit resolution (:func:`raw_draws`), ample for the random coefficients of
-    a swarm step; :mod:`replay.filters.compiled` converts the same integers.
+    a swarm step; :mod:`replay.filters.p002.compiled` converts the same integers.
     """
     return uniforms(raw_draws(rngs, shape))
 
@@ -151,7 +151,7 @@ def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True
     numbers for the ``t_max`` iterations in one call, (t_max, 2, 3, N, d).
     The leaders are taken in the order alpha, beta, delta (fitness, then
     index): the k-th leader uses the k-th slice of the draws, so the order fixes
-    the numbers (and :func:`replay.filters.compiled.gwo_runs` uses the same).
+    the numbers (and :func:`replay.filters.p002.compiled.gwo_runs` uses the same).
     """
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
     M, n, d = X.shape

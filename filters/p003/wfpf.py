@@ -29,7 +29,7 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 
-from .pf import ParticleFilter
+from ..pf import ParticleFilter
 
 
 

@@ -78,7 +78,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.evaluate import evaluate
-    from replay.outputs import format_table, write_all
+    from replay.outputs.files import format_table, write_all
 
     names = [f.strip() for f in filters.split(",") if f.strip()]
     if not names:
@@ -97,7 +97,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     paths = write_all(ev, out, baseline)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:
-        from replay.cli_bags import export_outputs
+        from replay.cli.bags import export_outputs
 
         export_outputs(out, mcap_out, ros2_out, data_dir=data_dir)
 
@@ -109,7 +109,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
 def rerun_cmd(manifest_file, data_dir, out):
     """Repeat the run recorded in a manifest.json and check that every RMSE is reproduced exactly."""
     from replay.evaluate import evaluate
-    from replay.outputs import format_table, write_all
+    from replay.outputs.files import format_table, write_all
 
     try:
         old = json.loads(Path(manifest_file).read_text())
@@ -179,14 +179,14 @@ def list_cmd(what):
 
 
 def _register_optional():
-    from replay.cli_datasets import datasets
+    from replay.cli.datasets import datasets
 
     main.add_command(datasets)
-    from replay.cli_bags import export_cmd, inspect_cmd
+    from replay.cli.bags import export_cmd, inspect_cmd
 
     main.add_command(inspect_cmd)
     main.add_command(export_cmd)
-    from replay.cli_campaign import COMMANDS as campaign_commands
+    from replay.cli.campaign import COMMANDS as campaign_commands
 
     for cmd in campaign_commands:
         main.add_command(cmd)

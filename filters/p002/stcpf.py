@@ -9,7 +9,7 @@ particles):
     2. draw       x^i_k ~ q^i = N(m^i, P^i)
     3. weight     w^i ∝ w^i_{k-1} p(z_k | x^i_k) p(x^i_k | x^i_{k-1}) / q^i(x^i_k)      (002, §2.1)
     4. relocate   :meth:`Engine.relocate`: here resampling (systematic when ESS < threshold N);
-                  IGWO / PSO in :mod:`replay.filters.igwo_stcpf`
+                  IGWO / PSO in :mod:`replay.filters.p002.igwo_stcpf`
     5. estimate   weighted mean (circular for angles) and covariance
 
 ``proposal="prior"`` gives a bootstrap PF (x^i_k ~ p(x_k | x^i_{k-1}), weight =
@@ -30,7 +30,7 @@ relocation's draws), and every operation acts on each run's slice alone.
 
 Jacobians (STCKF fading factor): the model's analytic ``F``/``H`` when the
 model declares ``vector_jacobians = True`` (they accept stacks of states), else
-central differences (:func:`replay.filters.stckf.batched_jacobian`).
+central differences (:func:`replay.filters.p002.stckf.batched_jacobian`).
 
 Arithmetic shortcuts (exact in real arithmetic, cheaper): with cubature points
 X_c = m ± sqrt(n) L e_c, the cross covariance is
@@ -46,10 +46,10 @@ from replay.util.angles import TWO_PI, index, wrap_components
 from replay.util.errors import ReplayError
 from replay.model import Model, is_diagonal, remap_indices
 
-from .base import Filter
+from ..base import Filter
 from .binding import bind
 from .parallel import Kernel, split, threads
-from .resampling import SCHEMES
+from ..resampling import SCHEMES
 from .stckf import batched_jacobian, check_params, fading_factor, next_V
 
 PROPOSALS = ("prior", "ckf", "stckf")
@@ -176,7 +176,7 @@ class CubatureParticleFilter(Filter):
         return Engine(self, model, rngs)
 
     def run(self, model, z, x0, P0, rng=None):
-        from .batched import run_batched
+        from ..batched import run_batched
 
         z = np.asarray(z, float)
         return run_batched(self, model, z[None], np.asarray(x0, float)[None], np.asarray(P0, float)[None],
@@ -197,7 +197,7 @@ class Engine:
         self.custom_noise = type(model).sample_f is not Model.sample_f
         self.custom_loglik = type(model).loglik is not Model.loglik
         M = len(self.rngs)
-        # compiled kernels (replay.filters.compiled) when the model has them and the weights are Gaussian
+        # compiled kernels (replay.filters.p002.compiled) when the model has them and the weights are Gaussian
         self.kern = None
         if getattr(flt, "compiled", False) and not self.prior and not self.custom_loglik:
             self.kern = model.kernels()
@@ -343,7 +343,7 @@ class Engine:
 
     def compiled_update(self, z, k):
         """:meth:`predict` and :meth:`update` with every measurement component present, by
-        :func:`replay.filters.compiled.cubature_step` (same equations, same draws, same order)."""
+        :func:`replay.filters.p002.compiled.cubature_step` (same equations, same draws, same order)."""
         m, flt = self.model, self.flt
         M, N, n = self.X.shape
         Q = self.Qk = m.process_cov(k)

@@ -1,0 +1,1 @@
+"""Paper p000's algorithms (see ../shared/seeds/README.md and docs/architecture.md)."""

@@ -1,0 +1,1 @@
+"""Outputs of an evaluation: leaderboard and estimate files, the HTML report, MCAP and ROS 2 exports."""
