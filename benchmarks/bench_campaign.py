@@ -61,7 +61,7 @@ def bench_poses(n):
 
 def bench_batched(runs):
     from replay import registry
-    from replay.evaluate import rng_for
+    from replay.util.seeds import rng_for
     from replay.filters import make_filter
     from replay.filters.batched import run_batched
     from replay.tasks import make_task

@@ -1,20 +1,57 @@
-"""What every filter shares: the run loop, the estimates it returns, divergence.
+"""The one filter protocol: declared parameters, an engine over Monte Carlo runs, the one run loop.
 
-A filter is configured by its constructor (its parameters, named and defaulted)
-and run by :meth:`Filter.run` on a :class:`replay.model.Model` and an array of
-measurements ``z`` of shape ``(n, nz)``; NaN components are missing (a row of
-NaN means predict only; a partly NaN row updates with the finite components).
+A filter is configured by its declared parameters (``PARAMS``, keyword-only
+construction, :class:`replay.util.params.Declared`) and run on a
+:class:`replay.model.Model` for M Monte Carlo runs at once (a single run is
+M = 1). :meth:`Filter.engine` builds the engine of M runs (one
+``numpy.random.Generator`` per run):
 
-Time convention: ``x0, P0`` describe the state one step before the first
-measurement; every step k = 0..n-1 predicts with ``f(., k)`` and then updates
-with ``z[k]``. Estimates are the posterior mean and covariance at each step.
+* ``start(X0 (M, nx), P0 (M, nx, nx))``
+* ``step(k, Z_k (Ma, nz), finite (Ma, nz)) -> x (Ma, nx), P (Ma, nx, nx), nis (Ma,), nis_dof (Ma,)``
+  over the Ma active runs (NaN components of ``Z_k`` are missing; nis NaN and
+  dof 0 where the filter records no normalised innovation squared)
+* ``keep(ok (Ma,) bool)``: drop the runs that diverged
+* ``finish(m, info)``: diagnostics of run m (index among the M runs) into ``info``
+
+:meth:`Filter.run_batch` is the one loop over steps (:meth:`Filter.run` is the
+batch of one). Time convention: ``x0, P0`` describe the state one step before
+the first measurement; step k = 0..n-1 predicts with ``f(., k)`` and updates
+with ``z[k]``; estimates are the posterior mean and covariance at each step.
+
+Divergence is per run: a non-finite mean or covariance, or a negative variance,
+at step k makes that run's ``diverged_at = k`` (its estimates from k on are
+NaN) and drops it from the engine; the other runs go on. A numerical exception
+(LinAlgError, FloatingPointError, ValueError, IndexError, ...) raised by
+``start`` or ``step`` while several runs are active redoes the whole call run
+by run (M = 1 each) from the generators' saved starting states, so a run's
+numbers never depend on which runs share its batch; with one run it marks that
+run diverged at k with ``info["error"] = "<Type>: <message>"``. Errors of the
+user (ReplayError) and of the program (TypeError, AttributeError, ...) are
+raised, never counted as divergence.
+
+Exactness rule for every engine: each run draws only from its own generator
+and every operation acts on each run's slice alone, so a batch of M runs gives
+the numbers of M runs of one, bit for bit.
+
+Filters written per run (a mutable :class:`State` per run) define
+``start(state, x0, P0)``, ``predict(state, k)``, ``update(state, z, k, mask)``,
+``estimate(state)`` and ``finish(state, info)``; the default :meth:`engine`
+loops over the runs calling them (:class:`PerRunEngine`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from math import isfinite
 from time import perf_counter
 
 import numpy as np
+
+from replay.util.errors import ReplayError
+from replay.util.params import Declared
+
+PER_RUN = ("start", "predict", "update", "estimate", "finish")
+# errors of the user or of the program: raised, never counted as a divergence
+NOT_NUMERICAL = (ReplayError, TypeError, AttributeError, NameError, NotImplementedError, AssertionError)
 
 
 @dataclass
@@ -45,11 +82,55 @@ class State:
         self.rng = rng
 
 
-class Filter:
-    """Base class. Subclasses define ``start``, ``predict``, ``update``, ``estimate``."""
+class _Redo(Exception):
+    """A numerical exception with several runs active: redo the batch run by run."""
 
+
+def numerical(err: BaseException) -> bool:
+    """True when ``err`` is a numerical failure of a run (counted as divergence)."""
+    return isinstance(err, Exception) and not isinstance(err, NOT_NUMERICAL)
+
+
+class Filter(Declared):
+    """Base class of every filter (see the module docstring)."""
+
+    KIND = "filter"
     name = "filter"
+    PARAMS = ()
 
+    def __init__(self, *args, **params):
+        # Transitional: positional values in PARAMS order, for subclasses not yet declared that
+        # call super().__init__(a, b, ...); the protocol is keyword-only construction.
+        for p, value in zip(self.PARAMS, args):
+            if p.name in params:
+                raise TypeError(f"{self.owner()}: {p.name} given twice")
+            params[p.name] = value
+        if len(args) > len(self.PARAMS):
+            raise TypeError(f"{self.owner()}: takes keyword parameters only")
+        super().__init__(**params)
+
+    def params(self) -> dict:
+        """The filter's parameters, for manifests and leaderboards.
+
+        A filter not yet declared (public attributes set by its own constructor
+        that are not in ``PARAMS``) reports its public attributes, as before.
+        """
+        public = {k: v for k, v in vars(self).items() if not k.startswith("_")}
+        names = {p.name for p in self.PARAMS}
+        if set(public) <= names and all(hasattr(self, n) for n in names):
+            return super().params()
+        return public
+
+    # --- the engine of M runs (override for filters written over the run axis) --------
+    def engine(self, model, rngs):
+        """The engine of ``len(rngs)`` runs; by default :class:`PerRunEngine` over the per-run methods."""
+        return PerRunEngine(self, model, rngs)
+
+    def overrides(self, cls, names=PER_RUN) -> bool:
+        """True when this filter's class overrides one of the methods ``names`` defined by ``cls``."""
+        return any(getattr(type(self), n) is not getattr(cls, n) for n in names)
+
+    # --- per-run methods (filters written per run) --------------------------------------
     def start(self, state: State, x0: np.ndarray, P0: np.ndarray) -> None:
         state.x = np.array(x0, dtype=float)
         state.P = np.array(P0, dtype=float)
@@ -66,44 +147,143 @@ class Filter:
     def finish(self, state: State, info: dict) -> None:
         """Add run diagnostics to ``info`` (e.g. resampling counts)."""
 
-    def params(self) -> dict:
-        """The filter's parameters, for manifests and leaderboards."""
-        return {k: v for k, v in vars(self).items() if not k.startswith("_")}
-
+    # --- the run loop ---------------------------------------------------------------------
     def run(self, model, z, x0, P0, rng: np.random.Generator | None = None) -> Estimates:
+        """One run: the batch of one."""
         z = np.asarray(z, dtype=float)
-        n, nx = len(z), model.nx
-        state = State(model, rng if rng is not None else np.random.default_rng(0))
-        self.start(state, x0, P0)
-        X = np.full((n, nx), np.nan)
-        P = np.full((n, nx, nx), np.nan)
-        secs = np.full(n, np.nan)
-        finite = np.isfinite(z)
-        full, some = finite.all(axis=1), finite.any(axis=1)
-        diverged = None
+        return self.run_batch(model, z[None], np.asarray(x0, float)[None], np.asarray(P0, float)[None],
+                              [rng if rng is not None else np.random.default_rng(0)])[0]
+
+    def run_batch(self, model, Z, X0, P0, rngs) -> list[Estimates]:
+        """M runs: measurements ``Z`` (M, n, nz), priors ``X0`` (M, nx), ``P0`` (M, nx, nx), one
+        generator per run (None: ``default_rng(0)``). One Estimates per run (module docstring)."""
+        Z, X0, P0 = (np.asarray(a, dtype=float) for a in (Z, X0, P0))
+        M, nx = len(Z), model.nx
+        if Z.ndim != 3 or X0.shape != (M, nx) or P0.shape != (M, nx, nx) or len(rngs) != M:
+            raise ValueError(f"run_batch: Z {Z.shape}, X0 {X0.shape}, P0 {P0.shape} and {len(rngs)} "
+                             f"generators must describe the same runs of a model with nx = {nx}")
+        rngs = [g if g is not None else np.random.default_rng(0) for g in rngs]
+        saved = [g.bit_generator.state for g in rngs]
+        try:
+            return self._loop(model, Z, X0, P0, rngs)
+        except _Redo:
+            for g, s in zip(rngs, saved):
+                g.bit_generator.state = s
+            return [self._loop(model, Z[m:m + 1], X0[m:m + 1], P0[m:m + 1], rngs[m:m + 1])[0]
+                    for m in range(M)]
+
+    def _loop(self, model, Z, X0, P0, rngs) -> list[Estimates]:
+        M, n = Z.shape[:2]
+        nx = model.nx
+        X = np.full((M, n, nx), np.nan)
+        P = np.full((M, n, nx, nx), np.nan)
+        secs = np.full((M, n), np.nan)
+        nis = np.full((M, n), np.nan)
+        dof = np.zeros((M, n), int)
+        diverged, errors = [None] * M, {}
+        finite = np.isfinite(Z)
+        active = np.arange(M)
+        engine = self.engine(model, rngs)
+        started = True
+        try:
+            engine.start(X0, P0)
+        except Exception as err:
+            if not numerical(err):
+                raise
+            if M > 1:
+                raise _Redo from err
+            diverged[0], errors[0], active, started = 0, err, active[:0], False
         clock = perf_counter
         for k in range(n):
+            na = len(active)
+            if not na:
+                break
+            rows = slice(None) if na == M else active
             t0 = clock()
             try:
-                self.predict(state, k)
-                if full[k]:
-                    self.update(state, z[k], k, None)
-                elif some[k]:
-                    self.update(state, z[k], k, finite[k])
-                X[k], P[k] = self.estimate(state)
-            except (np.linalg.LinAlgError, FloatingPointError):
-                diverged = k
+                xk, Pk, nk, dk = engine.step(k, Z[rows, k], finite[rows, k])
+            except Exception as err:
+                if not numerical(err):
+                    raise
+                if na > 1:
+                    raise _Redo from err
+                diverged[active[0]], errors[active[0]] = k, err
                 break
-            secs[k] = clock() - t0
-        # Divergence: the first step whose estimate is non-finite or whose covariance has a
-        # negative variance (checked once over the arrays, not on every step's hot path).
-        end = n if diverged is None else diverged
-        ok = (np.isfinite(X[:end]).all(axis=1) & np.isfinite(P[:end]).all(axis=(1, 2))
-              & (np.diagonal(P[:end], axis1=1, axis2=2) >= 0.0).all(axis=1))
-        if not ok.all():
-            diverged = int(np.argmin(ok))
-        if diverged is not None:
-            X[diverged:], P[diverged:], secs[diverged:] = np.nan, np.nan, np.nan
-        info = {}
-        self.finish(state, info)
-        return Estimates(X, P, secs, diverged, info)
+            dt = (clock() - t0) / na
+            if _all_fine(xk, Pk):
+                X[rows, k], P[rows, k], secs[rows, k], nis[rows, k], dof[rows, k] = xk, Pk, dt, nk, dk
+                continue
+            d = Pk.diagonal(0, 1, 2)
+            ok = np.isfinite(xk).all(axis=1) & np.isfinite(Pk).all(axis=(1, 2)) & (d >= 0.0).all(axis=1)
+            good = active[ok]
+            X[good, k], P[good, k], secs[good, k], nis[good, k], dof[good, k] = xk[ok], Pk[ok], dt, nk[ok], dk[ok]
+            for m in active[~ok]:
+                diverged[m] = k
+            active = good
+            engine.keep(ok)
+        out = []
+        for m in range(M):
+            info = {"nis": nis[m], "nis_dof": dof[m]}
+            if started:
+                engine.finish(m, info)
+            if m in errors:
+                info["error"] = f"{type(errors[m]).__name__}: {errors[m]}"
+            out.append(Estimates(X[m], P[m], secs[m], diverged[m], info))
+        return out
+
+
+def _all_fine(x, P) -> bool:
+    """True when every run's mean and covariance are finite with non-negative variances.
+
+    False may be a false alarm (a sum overflowing); the caller then checks run by run.
+    """
+    if len(x) == 1:  # one run: Python floats beat numpy's per-call cost on a few numbers
+        p = P.ravel().tolist()
+        return isfinite(sum(p) + sum(x.ravel().tolist())) and min(p[::len(P[0]) + 1]) >= 0.0
+    return isfinite(x.sum() + P.sum()) and P.diagonal(0, 1, 2).min() >= 0.0
+
+
+class PerRunEngine:
+    """Default engine: one :class:`State` per run, the filter's per-run methods on each.
+
+    A numerical exception in one run marks that run (NaN estimate: diverged at
+    that step, ``info["error"]``); the other runs go on.
+    """
+
+    def __init__(self, flt, model, rngs):
+        self.flt, self.model = flt, model
+        self.states = [State(model, g) for g in rngs]
+        self.errors = {}
+
+    def start(self, X0, P0):
+        self.ids = np.arange(len(self.states))
+        for m, s in enumerate(self.states):
+            self.flt.start(s, X0[m], P0[m])
+
+    def keep(self, ok):
+        self.ids = self.ids[ok]
+
+    def step(self, k, Z, finite):
+        flt, nx = self.flt, self.model.nx
+        Ma = len(self.ids)
+        x, P = np.full((Ma, nx), np.nan), np.full((Ma, nx, nx), np.nan)
+        for j, m in enumerate(self.ids):
+            state, f = self.states[m], finite[j]
+            try:
+                flt.predict(state, k)
+                if f.all():
+                    flt.update(state, Z[j], k, None)
+                elif f.any():
+                    flt.update(state, Z[j], k, f)
+                x[j], P[j] = flt.estimate(state)
+            except Exception as err:
+                if not numerical(err):
+                    raise
+                self.errors[m] = err  # left NaN: the loop marks the run diverged at k
+        return x, P, np.full(Ma, np.nan), np.zeros(Ma, int)
+
+    def finish(self, m, info):
+        self.flt.finish(self.states[m], info)
+        if m in self.errors:
+            err = self.errors[m]
+            info["error"] = f"{type(err).__name__}: {err}"

@@ -1,64 +1,168 @@
-"""Kalman filter and extended Kalman filter.
+"""Kalman filter and extended Kalman filter, over the Monte Carlo run axis.
 
 Equations (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to
-Tracking and Navigation*, 2001, ch. 5 and 10):
+Tracking and Navigation*, 2001: §5.2 the Kalman filter, §5.4 the NIS, §10.3
+the EKF), for each run:
 
     predict   x = f(x),  P = F P F' + Q                 F = df/dx at the prior
     update    y = z - h(x)  (angle components wrapped)
-              S = H P H' + R,  K = P H' S^-1
-              x = x + K y  (state angles wrapped),  P = (I - K H) P (I - K H)' + K R K'
+              S = H P H' + R,  K = P H' S^-1             H = dh/dx at the predicted state
+              x = x + K y  (state angles wrapped)
+              P = (I - K H) P (I - K H)' + K R K'        (Joseph form)
+    NIS       y' S^-1 y, with nz (measured components) degrees of freedom
 
 The Joseph form keeps P symmetric positive semi-definite. ``KalmanFilter`` is
 the EKF applied to a linear model (its Jacobians are the model matrices), so
 the two cannot drift apart.
+
+The engine holds the means of the active runs ``x`` (M, nx) and their
+covariances ``P`` (M, nx, nx); ``f``, ``h``, every product, Cholesky factor
+and solve act on the whole stack, one matrix per run (see
+:mod:`replay.util.linalg`), and ``model.F``/``model.H`` (a single state in the
+model protocol) are called once per run. The functions are written over any
+leading axes: a single run (M = 1) is held without the run axis, x (nx,) and
+P (nx, nx), where numpy's per-call costs are lowest; each slice of a stack
+gets the numbers of that case bit for bit (same LAPACK routines, same memory
+layout per matrix). Runs whose measurements miss different components are
+updated in groups of equal pattern (missing components are left out of z, h,
+H and R).
+
+:class:`KalmanEngine` is shared with the sigma-point filters of
+:mod:`replay.filters.sigma`, which replace ``predict`` and ``update``.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from replay.util.angles import residual, wrap_components
-from replay.util.linalg import gain
+from replay.util.linalg import solve_spd
 from replay.model import remap_indices
 
 from .base import Filter
 
 
-def kalman_gain_update(x, P, y, H, R, x_angles=()):
-    """Update (x, P) with innovation ``y``, Jacobian ``H`` and noise ``R``; Joseph form."""
-    PHt = P @ H.T
+def T(A):
+    """Transpose of the last two axes (a stack of matrices)."""
+    return A.swapaxes(-1, -2)
+
+
+def gain_nis(S, Pxz, y):
+    """K = Pxz S^-1 (..., nx, nz) and NIS y' S^-1 y (...), from one solve of ``S`` (..., nz, nz)."""
+    B = np.concatenate([T(Pxz), y[..., None]], axis=-1)
+    X = solve_spd(S, B)
+    return T(X[..., :-1]), (y[..., None, :] @ X[..., -1:])[..., 0, 0]
+
+
+def kalman_update(x, P, y, H, R, x_angles=()):
+    """The Kalman update (module docstring) over any leading axes: returns x, P (Joseph form), NIS."""
+    PHt = P @ T(H)
     S = H @ PHt + R
-    K = gain(S, PHt)
-    x = wrap_components(x + K @ y, x_angles)
-    I_KH = np.eye(len(x)) - K @ H
-    P = I_KH @ P @ I_KH.T + K @ R @ K.T
-    return x, 0.5 * (P + P.T)
+    K, nis = gain_nis(S, PHt, y)
+    x = wrap_components(x + (K @ y[..., None])[..., 0], x_angles)
+    I_KH = np.eye(x.shape[-1]) - K @ H
+    P = I_KH @ P @ T(I_KH) + K @ R @ T(K)
+    return x, 0.5 * (P + T(P)), nis
+
+
+def jacobians(fun, x, k):
+    """``fun`` (model.F or model.H, a single state) at the state x (nx,) or each run's (M, nx)."""
+    if x.ndim == 1:  # C order, as np.stack gives: products round by their operands' layout
+        return np.ascontiguousarray(fun(x, k), dtype=float)
+    return np.stack([fun(xi, k) for xi in x])
+
+
+def measurement(model, k, mask):
+    """R_k and the measurement's angle indices, restricted to the measured components ``mask``."""
+    R, angles = model.measurement_cov(k), model.z_angles
+    if mask is not None:
+        R, angles = R[np.ix_(mask, mask)], remap_indices(angles, mask)
+    return R, angles
+
+
+def groups(finite):
+    """Runs sharing a measurement pattern: [(rows, mask or None for full)]."""
+    patterns, inverse = np.unique(finite, axis=0, return_inverse=True)
+    return [(np.flatnonzero(inverse.ravel() == g), None if pat.all() else pat)
+            for g, pat in enumerate(patterns) if pat.any()]
+
+
+class KalmanEngine:
+    """M runs of a Kalman-family filter: start, keep and the step; subclasses predict and update
+    (over any leading axes: one run is held as x (nx,), P (nx, nx))."""
+
+    def __init__(self, flt, model, rngs):
+        self.flt, self.model = flt, model
+
+    def start(self, X0, P0):
+        self.one = len(X0) == 1
+        self.x, self.P = (X0[0].copy(), P0[0].copy()) if self.one else (X0.copy(), P0.copy())
+
+    def keep(self, ok):
+        if not self.one:
+            self.x, self.P = self.x[ok], self.P[ok]
+
+    def finish(self, m, info):
+        pass
+
+    def step(self, k, Z, finite):
+        x, P = self.predict(self.x, self.P, k)
+        if self.one:
+            f, nis = finite[0], np.nan
+            if f.all():
+                x, P, nis = self.update(x, P, Z[0], k, None)
+            elif f.any():
+                x, P, nis = self.update(x, P, Z[0][f], k, f)
+            self.x, self.P = x, P
+            return x[None], P[None], np.array([nis]), np.array([f.sum()])
+        if finite.all():
+            self.x, self.P, nis = self.update(x, P, Z, k, None)
+            return self.x, self.P, nis, np.full(len(x), Z.shape[1])
+        nis, dof = np.full(len(x), np.nan), np.zeros(len(x), int)
+        for rows, mask in groups(finite):
+            z = Z[rows] if mask is None else Z[rows][:, mask]
+            x[rows], P[rows], nis[rows] = self.update(x[rows], P[rows], z, k, mask)
+            dof[rows] = z.shape[1]
+        self.x, self.P = x, P
+        return x, P, nis, dof
+
+    def predict(self, x, P, k):
+        raise NotImplementedError
+
+    def update(self, x, P, z, k, mask):
+        raise NotImplementedError
+
+
+class EKFEngine(KalmanEngine):
+    """The EKF's predict and update on one run or a stack of runs."""
+
+    def predict(self, x, P, k):
+        m = self.model
+        F = jacobians(m.F, x, k)
+        x = wrap_components(m.f(x, k), m.x_angles)
+        return x, F @ P @ T(F) + m.process_cov(k)
+
+    def update(self, x, P, z, k, mask):
+        m = self.model
+        H = jacobians(m.H, x, k)
+        zh = m.h(x, k)
+        R, angles = measurement(m, k, mask)
+        if mask is not None:
+            H, zh = H[..., mask, :], zh[..., mask]
+        return kalman_update(x, P, residual(z, zh, angles), H, R, m.x_angles)
 
 
 class EKF(Filter):
     """Extended Kalman filter (first order), with model or numerical Jacobians."""
 
     name = "ekf"
+    PARAMS = ()
 
-    def predict(self, state, k):
-        m = state.model
-        F = m.F(state.x, k)
-        state.x = wrap_components(m.f(state.x, k), m.x_angles)
-        state.P = F @ state.P @ F.T + m.process_cov(k)
-
-    def update(self, state, z, k, mask):
-        m = state.model
-        H = m.H(state.x, k)
-        zh = m.h(state.x, k)
-        R = m.measurement_cov(k)
-        angles = m.z_angles
-        if mask is not None:
-            H, zh, z, R = H[mask], zh[mask], z[mask], R[np.ix_(mask, mask)]
-            angles = remap_indices(angles, mask)
-        y = residual(z, zh, angles)
-        state.x, state.P = kalman_gain_update(state.x, state.P, y, H, R, m.x_angles)
+    def engine(self, model, rngs):
+        return EKFEngine(self, model, rngs)
 
 
 class KalmanFilter(EKF):
     """The Kalman filter: exact for :class:`replay.model.LinearGaussian` models."""
 
     name = "kf"
+    PARAMS = ()

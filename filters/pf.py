@@ -1,12 +1,13 @@
-"""Bootstrap particle filter (Gordon, Salmond & Smith 1993).
+"""Bootstrap particle filter (Gordon, Salmond & Smith 1993), over the Monte Carlo run axis.
 
-For each step, with N particles x^i and log-weights l^i:
+For each step and run, with N particles x^i and log-weights l^i:
 
-    propagate   x^i ~ p(x_k | x^i_{k-1})               (model.sample_f, all particles at once)
+    propagate   x^i ~ p(x_k | x^i_{k-1})               (model.sample_f, or f + Gaussian noise from Q)
     weight      l^i += log p(z_k | x^i)                 (model.loglik, wrapped angle residuals)
     normalise   w^i = exp(l^i - max l) / sum_j exp(l^j - max l)   (log domain: no underflow)
     estimate    x^ = sum w^i x^i (circular mean for angles), P = sum w^i (x^i - x^)(x^i - x^)'
     resample    when ESS = 1 / sum (w^i)^2 < threshold * N (threshold = 1: every step)
+    roughen     after resampling, x^i_j += K E_j N^(-1/d) e,  e ~ N(0, 1)   (when K > 0)
 
 The estimate is taken before resampling (lower variance). Resampling is
 systematic by default.
@@ -17,76 +18,123 @@ range of the particles along j and d the state dimension. It counters sample
 impoverishment when the likelihood is much sharper than the prediction (e.g.
 0.01 rad sonar bearings, ``sim/auv-sonar``). ``roughening = K``; 0 (the
 default) is the plain bootstrap filter; the paper suggests K = 0.2.
+
+Over runs: particles (M, N, nx), log-weights (M, N). ``model.f`` runs once on
+the particles of every run; the process noise, resampling and roughening of
+run m are drawn from run m's generator only (a model that overrides
+``sample_f`` draws run by run), in the order propagate, resample, roughen; the
+bookkeeping is :mod:`replay.filters.particles`. So M runs at once give the
+numbers of M runs of one, bit for bit.
+
+Subclasses change the weighting through :meth:`ParticleFilter.weigh` (the
+weight-factor PF of paper 003 tempers the weights).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import residual, weighted_mean
+from replay.model import Model, noise_factor
+from replay.util.params import Param
 
+from . import particles
 from .base import Filter
-from .resampling import SCHEMES, effective_sample_size
+from .resampling import SCHEMES
+from .sigma import on_points
 
 
 class ParticleFilter(Filter):
-    """Bootstrap PF with systematic resampling and log-domain weights."""
+    """Bootstrap PF with systematic resampling, log-domain weights and optional roughening."""
 
     name = "pf"
+    PARAMS = (
+        Param("n_particles", int, 1000, "particles per run", low=1),
+        Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
+        Param("ess_threshold", float, 1.0, "resample when ESS < ess_threshold * N (1: every step, 0: never)",
+              low=0.0, high=1.0),
+        Param("roughening", float, 0.0, "roughening constant K after resampling (Gordon et al. 1993 §4; "
+              "0: off, the paper suggests 0.2)", low=0.0),
+    )
 
-    def __init__(self, n_particles: int = 1000, resampling: str = "systematic",
-                 ess_threshold: float = 1.0, roughening: float = 0.0):
-        from replay.util.errors import ReplayError
+    def engine(self, model, rngs):
+        return PFEngine(self, model, rngs)
 
-        if int(n_particles) < 1:
-            raise ReplayError(f"pf: n_particles must be at least 1 (got {n_particles})")
-        if resampling not in SCHEMES:
-            raise ReplayError(f"pf: resampling must be one of {', '.join(SCHEMES)} (got {resampling!r})")
-        if not 0.0 <= ess_threshold <= 1.0:
-            raise ReplayError(f"pf: ess_threshold must be in [0, 1] (got {ess_threshold})")
-        if roughening < 0:
-            raise ReplayError(f"pf: roughening must be >= 0 (got {roughening})")
-        self.n_particles = int(n_particles)
-        self.resampling = resampling
-        self.ess_threshold = ess_threshold
-        self.roughening = roughening
+    def weigh(self, logw: np.ndarray, ll: np.ndarray):
+        """Normalised ``(w, logw)`` (R, N) of the prior log-weights plus the log-likelihoods ``ll``."""
+        return particles.normalise(logw + ll)
 
-    def start(self, state, x0, P0):
-        super().start(state, x0, P0)
-        L = np.linalg.cholesky(np.asarray(P0, float))
-        state.particles = state.x + state.rng.standard_normal((self.n_particles, len(state.x))) @ L.T
-        state.logw = np.full(self.n_particles, -np.log(self.n_particles))
-        state.w = np.full(self.n_particles, 1.0 / self.n_particles)
-        state.resampled = 0
-        state._resample = SCHEMES[self.resampling]
 
-    def predict(self, state, k):
-        state.particles = state.model.sample_f(state.particles, k, state.rng)
+class PFEngine:
+    """M runs of a :class:`ParticleFilter` (or a subclass): particles (M, N, nx)."""
 
-    def update(self, state, z, k, mask):
-        logw = state.logw + state.model.loglik(z, state.particles, k, mask)
-        logw -= logw.max()
-        w = np.exp(logw)
-        s = w.sum()
-        state.w = w / s
-        state.logw = logw - np.log(s)
+    def __init__(self, flt, model, rngs):
+        self.flt, self.model, self.rngs = flt, model, list(rngs)
+        self.own_noise = type(model).sample_f is not Model.sample_f
 
-    def estimate(self, state):
-        m = state.model
-        w = state.w
-        x = weighted_mean(state.particles, w, m.x_angles)
-        D = residual(state.particles, x, m.x_angles)
-        P = (D.T * w) @ D
-        if effective_sample_size(w) < self.ess_threshold * self.n_particles:
-            idx = state._resample(w, state.rng)
-            state.particles = state.particles[idx]
-            if self.roughening:
-                p = state.particles
-                sd = self.roughening * np.ptp(p, axis=0) * self.n_particles ** (-1.0 / p.shape[1])
-                state.particles = p + state.rng.standard_normal(p.shape) * sd
-            state.w = np.full(self.n_particles, 1.0 / self.n_particles)
-            state.logw = np.full(self.n_particles, -np.log(self.n_particles))
-            state.resampled += 1
-        return x, P
+    def start(self, X0, P0):
+        M, N = len(X0), self.flt.n_particles
+        self.ids = np.arange(M)
+        self.active = list(self.rngs)
+        self.X = particles.gaussian(X0, P0, N, self.rngs)
+        self.logw = np.full((M, N), -np.log(N))
+        self.w = np.full((M, N), 1.0 / N)
+        self.resampled = np.zeros(M, int)
 
-    def finish(self, state, info):
-        info["resampled"] = state.resampled
+    def keep(self, ok):
+        self.ids = self.ids[ok]
+        self.active = [self.rngs[i] for i in self.ids]
+        self.X, self.logw, self.w = self.X[ok], self.logw[ok], self.w[ok]
+
+    def finish(self, m, info):
+        info["resampled"] = int(self.resampled[m])
+
+    def step(self, k, Z, finite):
+        self.propagate(k)
+        self.update(k, Z, finite)
+        x, P = particles.estimate(self.X, self.w, self.model.x_angles)
+        self.resample()
+        M = len(x)
+        return x, P, np.full(M, np.nan), np.zeros(M, int)
+
+    def propagate(self, k):
+        """x^i ~ p(x_k | x^i_{k-1}): f on every run's particles, noise from each run's generator."""
+        m = self.model
+        if self.own_noise:
+            for j, g in enumerate(self.active):
+                self.X[j] = m.sample_f(self.X[j], k, g)
+            return
+        Y = on_points(m.f, self.X, k)
+        diagonal, factor, _, _ = noise_factor(m.process_cov(k))
+        for j, g in enumerate(self.active):
+            e = g.standard_normal(Y.shape[1:])
+            if diagonal:
+                e *= factor
+            else:
+                e = e @ factor.T
+            Y[j] += e
+        self.X = Y
+
+    def update(self, k, Z, finite):
+        """Weights of the runs with a measurement (missing components left out of the likelihood)."""
+        loglik, X = self.model.loglik, self.X
+        if finite.all():
+            ll = np.stack([loglik(Z[j], X[j], k, None) for j in range(len(X))])
+            self.w, self.logw = self.flt.weigh(self.logw, ll)
+            return
+        rows = np.flatnonzero(finite.any(axis=1))
+        if len(rows):
+            full = finite.all(axis=1)
+            ll = np.stack([loglik(Z[j], X[j], k, None if full[j] else finite[j]) for j in rows])
+            self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], ll)
+
+    def resample(self):
+        """Resample (and roughen) the runs whose ESS < threshold * N, each from its own generator."""
+        flt = self.flt
+        N = self.X.shape[1]
+        for j, a in particles.resample(self.w, self.active, flt.resampling, flt.ess_threshold).items():
+            Xj = self.X[j][a]
+            if flt.roughening:
+                Xj = particles.roughen(Xj, flt.roughening, self.active[j])
+            self.X[j] = Xj
+            self.w[j] = 1.0 / N
+            self.logw[j] = -np.log(N)
+            self.resampled[self.ids[j]] += 1

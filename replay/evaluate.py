@@ -1,42 +1,34 @@
-"""``replay eval``: dataset -> frame -> task -> filters -> estimates -> scores -> outputs.
+"""``replay eval``: a campaign of one configuration per filter, computed in memory.
 
-Seeds. Every random number comes from a ``numpy.random.Generator`` derived
-from the user's seed ``S`` with :class:`numpy.random.SeedSequence`:
-
-* ``(S, run, 0)``: the dataset (a simulator's truth and sensor noise);
-* ``(S, run, 1)``: the task (synthesised measurement noise, the prior draw);
-* ``(S, run, 2, crc32(filter name))``: the filter's own randomness.
-
-So in a given run every filter sees the same measurements (common random
-numbers: paired comparisons have tight intervals), and adding a filter changes
-no other filter's numbers.
-
-Filters whose batched form gives exactly the one-by-one numbers
-(:func:`replay.filters.batched.exact`: the bootstrap PF, the particle and swarm
-filters of paper 002) run all Monte Carlo runs as one array computation
-(:func:`run_all`); the others run one by one. Either way the numbers are the same.
+``evaluate`` makes one :class:`replay.pipeline.Config` per filter (parameters
+validated against their declarations and stored with every default filled in)
+and computes its runs with :func:`replay.pipeline.run_block` in the blocks a
+campaign uses (``batch`` runs each), so ``replay eval`` and ``replay campaign
+run`` give the same rows (:mod:`replay.summary`) for the same configuration.
+Seeds: :mod:`replay.util.seeds` (dataset, task and filter streams per run:
+every filter sees the same measurements in a run — common random numbers).
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import platform
 import shlex
 import sys
-import zlib
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 import replay
-from replay import registry, score
-from replay.filters import batched, make_filter
+from replay import registry, summary
+from replay.filters import make_filter
+from replay.pipeline import Config, config_hash, default_task, plain, run_block
+from replay.pipeline import resolve as _resolve
 from replay.tasks import make_task
-from replay.util.seeds import filter_stream, rng_for  # noqa: F401 (re-exported)
+from replay.util.errors import ReplayError
+
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
-
+BATCH = 25  # runs per block: the campaign default (``[campaign] batch``)
 
 
 @dataclass
@@ -46,7 +38,10 @@ class FilterResult:
     runs: list = field(default_factory=list)  # per-run metric dicts
     errors: list = field(default_factory=list)  # per-run error dicts
     estimates: list = field(default_factory=list)  # per-run Estimates
-    summary: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)  # the leaderboard row (replay.summary)
+    config_hash: str = ""
+    config: dict = field(default_factory=dict)  # the configuration (replay.pipeline.Config)
+    records: list = field(default_factory=list)  # per-run records of replay.pipeline.run_block
 
 
 @dataclass
@@ -58,108 +53,79 @@ class Evaluation:
     t: np.ndarray
     truths: list = field(default_factory=list)  # per-run truth positions
     axis_names: tuple = ("x", "y", "z")  # names of the scored position axes
+    rows: list = field(default_factory=list)  # leaderboard rows, in --filters order
+    baseline: str | None = None
+
+    def first(self, n: int) -> "Evaluation":
+        """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
+        evaluation (a run's seeds and numbers depend only on (seed, run))."""
+        if n >= self.config["runs"]:
+            return self
+        results = [FilterResult(r.name, r.params, r.runs[:n], r.errors[:n], r.estimates[:n],
+                                config_hash=r.config_hash, config=r.config, records=r.records[:n])
+                   for r in self.results]
+        rows = _summarise(results, self.baseline)
+        return replace(self, config=dict(self.config, runs=n), results=results, truths=self.truths[:n], rows=rows)
 
 
-def config_hash(config: dict) -> str:
-    text = json.dumps({k: v for k, v in config.items() if k not in ("out",)}, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
+def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
+    """Each result's leaderboard row (``summary``), labelled, with the paired columns."""
+    for res in results:
+        series = {r["run"]: r["series"] for r in res.records}
+        res.summary = summary.config_row(res.config, res.config_hash, res.records,
+                                         lambda run, cols, s=series: {k: s[run][k] for k in cols},
+                                         replay.__version__)
+    rows = summary.label([r.summary for r in results])
+    return summary.add_paired(rows, {r.config_hash: r.config for r in results},
+                              {r.config_hash: r.records for r in results}, baseline)
 
 
 def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,
              seed: int = 0, first: int | None = None, data_dir=None,
              task_params: dict | None = None, filter_params: dict | None = None,
-             dataset_params: dict | None = None, adapter: str | None = None) -> Evaluation:
-    """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run."""
-    ds = resolve(dataset)
-    task_name = task or (ds.default_task if ds is not None else None)
-    # a plain file's task: the one its adapter names in frame.meta["default_task"], else "position"
-    the_task = make_task(task_name, **(task_params or {})) if task_name else None
+             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
+             divergence_threshold: float | None = None, baseline: str | None = None,
+             batch: int = BATCH) -> Evaluation:
+    """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring)."""
+    filters = list(filters)
     filter_params = filter_params or {}
-    instances = [make_filter(name, **filter_params.get(name, {})) for name in filters]
-    results = [FilterResult(name, f.params()) for name, f in zip(filters, instances)]
-    is_sim = ds is not None and ds.kind == "sim"
-    frame = None
-    truths = []
-    batch = [runs > 1 and batched.exact(f) for f in instances]  # filled after the loop, all runs at once
-    problems = []
-    for run in range(runs):
-        if frame is None or is_sim:
-            frame = registry.load_frame(dataset, data_dir=data_dir, rng=rng_for(seed, run, 0),
-                                        first=first, adapter=adapter, **(dataset_params or {}))
-        if the_task is None:
-            task_name = frame.meta.get("default_task", "position")
-            the_task = make_task(task_name, **(task_params or {}))
-        problem = the_task.build(frame, rng_for(seed, run, 1))
-        truths.append(problem.truth_position)
-        if any(batch):
-            problems.append(problem)
-        for name, flt, res, b in zip(filters, instances, results, batch):
-            if b:
-                continue
-            est = flt.run(problem.model, problem.z, problem.x0, problem.P0,
-                          rng_for(seed, run, 2, filter_stream(name)))
-            _record(res, problem, est)
-    for name, flt, res, b in zip(filters, instances, results, batch):
-        if b:
-            for problem, est in zip(problems, run_all(flt, name, problems, seed)):
-                _record(res, problem, est)
-    for res in results:
-        res.summary = score.aggregate(res.runs)
-    config = {
-        "dataset": dataset, "task": task_name, "task_params": the_task.params(),
-        "filters": list(filters), "filter_params": {r.name: r.params for r in results},
-        "runs": runs, "seed": seed, "first": first, "dataset_params": dataset_params or {},
-        "adapter": adapter,
-        "dataset_sha256": frame.meta.get("sha256"), "replay_version": replay.__version__,
-    }
-    config["config_hash"] = config_hash(config)
-    return Evaluation(config, _jsonable(frame.meta), frame.report.to_list(), results, frame.t, truths,
-                      tuple(problem.axis_names))
-
-
-def _record(res: FilterResult, problem, est) -> None:
-    res.runs.append(score.score_run(problem, est))
-    res.errors.append(score.errors(problem, est))
-    res.estimates.append(est)
-
-
-BATCH_PARTICLES = 10_000  # runs per batched call: about this many particles in all
-
-
-def run_all(flt, name: str, problems: list, seed: int) -> list:
-    """Every run of one filter with the seeds of the one-by-one loop; batched
-    (:mod:`replay.filters.batched`) when its batched form is exact and the runs
-    share one model and one pattern of missing measurements. A run that
-    diverges in a batch is run again alone, so the numbers are always those of
-    one-by-one runs."""
-    from replay.campaign.units import same_model
-
-    def one(r):
-        p = problems[r]
-        return flt.run(p.model, p.z, p.x0, p.P0, rng_for(seed, r, 2, filter_stream(name)))
-
+    for name in filter_params:
+        if name not in filters:
+            raise ReplayError(f"parameters given for filter {name!r}, which is not among the filters run "
+                              f"({', '.join(filters)})")
+    instances = [make_filter(name, **filter_params.get(name, {})) for name in filters]  # validated up front
+    dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
+    task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
+                                     dataset_params=dataset_params, seed=seed)
+    the_task = make_task(task_name, **(task_params or {}))
+    configs = [Config(dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()), name,
+                      plain(f.params()), seed, alignment, divergence_threshold, adapter)
+               for name, f in zip(filters, instances)]
+    results = []
+    for cfg in configs:
+        c, h = cfg.as_dict(), config_hash(cfg.as_dict())
+        recs = []
+        for start in range(0, runs, batch):
+            recs += run_block(c, list(range(start, min(runs, start + batch))), data_dir, keep=True, strict=True)
+        results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
+                                    [r["errors"] for r in recs], [r["estimates"] for r in recs],
+                                    config_hash=h, config=c, records=recs))
+    rows = _summarise(results, baseline)
+    problems = [r["problem"] for r in results[0].records]
     p0 = problems[0]
-    finite = np.isfinite(p0.z)
-    if not all(p.z.shape == p0.z.shape and same_model(p.model, p0.model) and np.array_equal(np.isfinite(p.z), finite)
-               for p in problems):
-        return [one(r) for r in range(len(problems))]
-    chunk = max(1, BATCH_PARTICLES // int(getattr(flt, "n_particles", 1)))
-    out = []
-    for s in range(0, len(problems), chunk):
-        ps = problems[s:s + chunk]
-        out += batched.run_batched(flt, p0.model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]),
-                                   np.stack([p.P0 for p in ps]),
-                                   [rng_for(seed, s + j, 2, filter_stream(name)) for j in range(len(ps))])
-    return [one(r) if est.diverged else est for r, est in enumerate(out)]
+    config = {
+        "dataset": dataset, "task": task_name, "task_params": configs[0].task_params,
+        "filters": filters, "filter_params": {r.name: r.params for r in results},
+        "runs": runs, "seed": seed, "first": first, "dataset_params": configs[0].dataset_params,
+        "adapter": adapter, "alignment": alignment, "divergence_threshold": divergence_threshold,
+        "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
+        "config_hashes": {r.name: r.config_hash for r in results},
+    }
+    return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
+                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline)
 
 
-def resolve(dataset: str):
-    """The registry entry for a dataset id, or None for a plain file path."""
-    if dataset in registry.all_datasets():
-        return registry.get(dataset)
-    if Path(dataset).exists() or dataset.endswith((".csv", ".bag", ".mcap", ".tsv", ".db3")):
-        return None
-    return registry.get(dataset)
+resolve = _resolve
 
 
 def versions() -> dict:
@@ -169,16 +135,7 @@ def versions() -> dict:
             "numpy": np.__version__, "scipy": scipy.__version__, "platform": platform.platform()}
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    return obj
+_jsonable = plain
 
 
 def command_line(config: dict) -> str:

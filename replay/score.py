@@ -70,14 +70,19 @@ def ci95(values) -> float:
     return float(stats.t.ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)))
 
 
-def aggregate(run_metrics: list[dict]) -> dict:
-    """Monte Carlo summary of per-run metrics (mean of per-run RMSE, 95 % interval)."""
+def aggregate(run_metrics: list[dict], names=()) -> dict:
+    """Monte Carlo summary of per-run metrics: ``runs``, ``diverged``, and for every ``*_rmse``
+    metric and every metric in ``names`` the mean over non-diverged runs with the half-width of
+    its 95 % interval (``<m>_ci95``); ``us_per_step`` (median), ``scored``/``masked`` (mean).
+    The one aggregation of every leaderboard (:func:`replay.summary.config_row`)."""
     ok = [m for m in run_metrics if not m["diverged"]]
     out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok)}
-    keys = [k for k in run_metrics[0] if k.endswith("_rmse")] if run_metrics else []
+    keys = list(names)
+    for m in run_metrics:
+        keys += [k for k in m if k.endswith("_rmse") and k not in keys]
     for k in keys:
-        vals = [m[k] for m in ok]
-        out[k] = float(np.nanmean(vals)) if vals and np.isfinite(vals).any() else float("nan")
+        vals = np.asarray([m.get(k, np.nan) for m in ok], float)
+        out[k] = float(np.nanmean(vals)) if np.isfinite(vals).any() else float("nan")
         out[f"{k}_ci95"] = ci95(vals)
     us = [m["us_per_step"] for m in run_metrics if np.isfinite(m["us_per_step"])]
     out["us_per_step"] = float(np.median(us)) if us else float("nan")

@@ -1,13 +1,38 @@
-"""Shared fixtures: where the real data lives.
+"""Shared fixtures: where the real data lives, and a temporary cache per session.
 
 Real-data tests read ``../shared`` beside the checkout (the repository root's
 parent holds ``main/`` and ``shared/``), or the directory named by the
 environment variable ``REPLAY_SHARED``. When it is absent those tests skip.
+
+The session runs with ``REPLAY_CACHE_DIR`` set to a fresh temporary directory
+(removed at the end), set here before any test module imports numba: the
+paper-002 kernels (``filters/p002/binding.py`` writes them to
+``$REPLAY_CACHE_DIR/kernels``) are compiled once per session from the current
+sources and never read from a developer's cache, and the registry's user cache
+is empty (tests name their data directories). ``REPLAY_TEST_CACHE_DIR=DIR``
+keeps that cache in DIR across sessions instead. Subprocesses inherit it.
+Tests that compile kernels are marked ``slow``: ``pytest -m "not slow"`` compiles nothing.
 """
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
+
+from replay.registry import cache_dir as _user_cache
+
+# the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
+os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
+_KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
+SESSION_CACHE = Path(_KEEP).expanduser() if _KEEP else Path(tempfile.mkdtemp(prefix="replay-tests-"))
+os.environ["REPLAY_CACHE_DIR"] = str(SESSION_CACHE)
+
+
+def pytest_unconfigure(config):
+    if not _KEEP:
+        shutil.rmtree(SESSION_CACHE, ignore_errors=True)
+
 
 SKIP_REASON = "../shared/datasets not found: real-data tests need the shared data beside the checkout"
 

@@ -171,7 +171,7 @@ def test_noise_times_4_is_estimated_and_nees_is_consistent(unknown, tol):
     """True R (or Q) is 4x the model's; the other one is known and not adapted."""
     scaled = {"R": 4 * R_AR} if unknown == "R" else {"Q": 4 * Q_AR}
     model, z, xs = ar_problem(3000, 3 if unknown == "R" else 4, **scaled)
-    a, u = aukf_and_ukf(model, z, adapt_means=False, adapt_q=unknown == "Q", adapt_r=unknown == "R")
+    a, u = aukf_and_ukf(model, z, adapt_means="none", adapt_q=unknown == "Q", adapt_r=unknown == "R")
     avg = np.diagonal(a.info["history"][unknown][-1000:].mean(axis=0))
     assert np.all(np.abs(avg / np.diagonal(scaled[unknown]) - 1) < tol), avg
     assert 1.7 < nees(a, xs) < 2.3  # E[NEES] = nx = 2
@@ -182,7 +182,7 @@ def test_noise_times_4_is_estimated_and_nees_is_consistent(unknown, tol):
 def test_first_update_guard(guard):
     """d_1 = 1: one innovation replaces R0 by eps eps' - Gamma, indefinite for nz = 2."""
     model = LinearGaussian(np.eye(2), np.eye(2), np.eye(2) * 0.1, np.eye(2))
-    est = AUKF(guard=guard, adapt_means=False).run(model, np.array([[3.0, 0.0]]), np.zeros(2), np.eye(2))
+    est = AUKF(guard=guard, adapt_means="none").run(model, np.array([[3.0, 0.0]]), np.zeros(2), np.eye(2))
     assert est.info["guard_r"] == 1
     R = est.info["R_hat"]
     if guard == "clip":
@@ -195,7 +195,7 @@ def test_biased_guard_uses_eq_73():
     """When eps eps' - Gamma would make R-hat indefinite, R-hat <- (1 - d) R-hat + d eps eps'."""
     model = LinearGaussian(np.eye(2), np.eye(2), np.eye(2) * 0.1, np.eye(2))
     z = np.array([[0.0, 0.0], [0.0, 0.0]])
-    est = AUKF(adapt_means=False, adapt_q=False, keep_history=True, forgetting=0.5).run(
+    est = AUKF(adapt_means="none", adapt_q=False, keep_history=True, forgetting=0.5).run(
         model, z, np.zeros(2), np.eye(2))
     R1, R2 = est.info["history"]["R"]
     assert np.array_equal(R1, np.eye(2))  # eps = 0: eq. 107 gives -Gamma, guard keeps R0 (d = 1)
@@ -204,7 +204,9 @@ def test_biased_guard_uses_eq_73():
 
 
 def test_bad_guard_and_means_refused():
-    with pytest.raises(ReplayError, match="guard="):
+    with pytest.raises(ReplayError, match="guard must be one of"):
         AUKF(guard="eig")
-    with pytest.raises(ReplayError, match="adapt_means="):
+    with pytest.raises(ReplayError, match="adapt_means must be one of both, q, p, none"):
         AUKF(adapt_means="x")
+    with pytest.raises(ReplayError, match="adapt_means"):
+        AUKF(adapt_means=False)  # a string: one name per choice

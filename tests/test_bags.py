@@ -53,6 +53,7 @@ def test_recording_counts_and_span(bagdir, rel, counts, span):
     assert abs((rec.end_ns - rec.start_ns) / 1e9 - span) < 1.0
 
 
+@pytest.mark.slow
 def test_inspect_proposes_sensible_mappings(bagdir):
     def entries(rel):
         mp = bags.inspect(bagdir / rel)["mapping"]
@@ -92,6 +93,7 @@ def test_sim_time_recording(bagdir):
     assert f.report.find("info", "t")
 
 
+@pytest.mark.slow
 def test_gps_odom_same_leaderboard_three_forms(bagdir, tmp_path):
     boards = []
     for i, rel in enumerate(["robot_localization/test1.bag", "derived/rl_test1_60s_sqlite3",

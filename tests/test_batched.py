@@ -1,15 +1,15 @@
-"""Batched Monte Carlo gives the numbers of one-by-one runs with the same seeds."""
+"""Every filter runs over the Monte Carlo run axis: a batch of M runs equals M runs of one, bit for bit."""
 import numpy as np
 import pytest
 
 from replay import registry
-from replay.evaluate import filter_stream, rng_for
 from replay.filters import make_filter
-from replay.filters.batched import run_batched, supports
-from replay.model import LinearGaussian
+from replay.model import LinearGaussian, Model
 from replay.tasks import make_task
+from replay.util.linalg import cholesky, gain, solve_spd
+from replay.util.seeds import filter_rng, rng_for
 
-RUNS = 6
+RUNS = 4
 
 
 @pytest.fixture(scope="module")
@@ -19,57 +19,189 @@ def sonar_problems():
             for r in range(RUNS)]
 
 
-def _both(name, problems, **params):
-    flt = make_filter(name, **params)
-    seq = [flt.run(p.model, p.z, p.x0, p.P0, rng_for(4, r, 2, filter_stream(name))) for r, p in enumerate(problems)]
-    bat = run_batched(flt, problems[0].model, np.stack([p.z for p in problems]),
-                      np.stack([p.x0 for p in problems]), np.stack([p.P0 for p in problems]),
-                      [rng_for(4, r, 2, filter_stream(name)) for r in range(len(problems))])
+def _both(flt, problems, name):
+    seq = [flt.run(p.model, p.z, p.x0, p.P0, filter_rng(4, r, name)) for r, p in enumerate(problems)]
+    bat = flt.run_batch(problems[0].model, np.stack([p.z for p in problems]),
+                        np.stack([p.x0 for p in problems]), np.stack([p.P0 for p in problems]),
+                        [filter_rng(4, r, name) for r in range(len(problems))])
     return seq, bat
 
 
-@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
-def test_batched_kalman_family_equals_one_by_one(sonar_problems, name):
-    # Stacked LAPACK/BLAS instead of direct dpotrf/dposv/gemv: rounding-level differences only.
-    seq, bat = _both(name, sonar_problems)
+def _same(a, b):
+    assert a.diverged_at == b.diverged_at
+    assert np.array_equal(a.x, b.x, equal_nan=True) and np.array_equal(a.P, b.P, equal_nan=True)
+    assert a.info.keys() == b.info.keys()
+    for key, va in a.info.items():
+        vb = b.info[key]
+        if isinstance(va, np.ndarray) and va.dtype.kind == "f":
+            assert np.array_equal(va, vb, equal_nan=True), key
+        else:
+            assert np.array_equal(va, vb), key
+
+
+@pytest.mark.parametrize("name, params", [
+    ("ekf", {}), ("ukf", {}), ("ckf", {}),
+    ("pf", {"n_particles": 200, "ess_threshold": 0.5}),
+    ("pf", {"n_particles": 200, "roughening": 0.5}),
+    ("wf-pf", {"n_particles": 200}),
+    ("stckf", {}), ("aukf", {}),  # written per run: the default engine loops over the runs
+])
+def test_batch_equals_one_by_one_bit_for_bit(sonar_problems, name, params):
+    flt = make_filter(name, **params)
+    seq, bat = _both(flt, sonar_problems, name)
     for a, b in zip(seq, bat):
-        assert a.diverged_at == b.diverged_at
-        np.testing.assert_allclose(b.x, a.x, rtol=1e-10, atol=1e-10)
-        np.testing.assert_allclose(b.P, a.P, rtol=1e-10, atol=1e-12)
-        assert np.isfinite(b.info["nis"]).all() and (b.info["nis_dof"] == 3).all()
+        _same(a, b)
+        assert not a.diverged
+    assert not np.array_equal(seq[0].x, seq[1].x)
+    if name in ("ekf", "ukf", "ckf"):
+        assert all(np.isfinite(b.info["nis"]).all() and (b.info["nis_dof"] == 3).all() for b in bat)
+    if name.endswith("pf"):
+        assert all(b.info["resampled"] > 0 for b in bat)
 
 
-def test_batched_pf_is_bit_identical(sonar_problems):
-    seq, bat = _both("pf", sonar_problems[:3], n_particles=200, ess_threshold=0.5)
-    for a, b in zip(seq, bat):
-        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
-        assert a.info["resampled"] == b.info["resampled"] > 0
+class Turning(LinearGaussian):
+    """Nonlinear, no Jacobians of its own: the EKF uses central differences (transposed arrays)."""
+
+    x_angles = z_angles = (0,)
+
+    def f(self, x, k):
+        y = x.copy()
+        y[..., 0] += 0.1 * np.sin(x[..., 1]) + 0.3
+        return y
+
+    F, H = Model.F, Model.H  # central differences
 
 
-def test_missing_measurements_and_divergence_per_run():
-    """Runs with different NaN patterns group correctly; a run whose covariance breaks leaves the stack."""
-    A, C = np.eye(2), np.array([[1.0, 0.0], [0.0, 1.0]])
-    model = LinearGaussian(A, C, 0.1 * np.eye(2), 0.5 * np.eye(2))
+@pytest.mark.parametrize("name", ["ekf", "ukf", "pf"])
+def test_numerical_jacobians_and_angles_bit_for_bit(name):
+    model = Turning(np.eye(2), np.eye(2), np.diag([1e-3, 1e-2]), np.diag([0.01, 0.1]))
+    Z = np.random.default_rng(6).standard_normal((3, 40, 2)) * 0.1 + np.array([3.0, 1.0])
+    X0, P0 = np.tile([3.0, 1.0], (3, 1)), np.stack([np.diag([0.1, 0.1])] * 3)
+    flt = make_filter(name, **({"n_particles": 64} if name == "pf" else {}))
+    bat = flt.run_batch(model, Z, X0, P0, [np.random.default_rng(m) for m in range(3)])
+    for m in range(3):
+        _same(bat[m], flt.run(model, Z[m], X0[m], P0[m], np.random.default_rng(m)))
+        assert not bat[m].diverged
+
+
+def test_roughening_is_applied_in_batches(sonar_problems):
+    """The batched PF used to skip roughening (issue 11): a batch now differs from the plain PF."""
+    pbs = sonar_problems[:2]
+    plain = _both(make_filter("pf", n_particles=200), pbs, "pf")[1]
+    rough = _both(make_filter("pf", n_particles=200, roughening=0.5), pbs, "pf")[1]
+    assert not np.array_equal(plain[0].x, rough[0].x)
+
+
+def _linear():
+    A, C = np.eye(2), np.eye(2)
+    return LinearGaussian(A, C, 0.1 * np.eye(2), 0.5 * np.eye(2))
+
+
+@pytest.mark.parametrize("name", ["kf", "ukf", "ckf", "pf"])
+def test_missing_measurements_and_divergence_per_run(name):
+    """Runs with different NaN patterns group correctly; a run whose prior breaks leaves the stack."""
+    model = _linear()
     rng = np.random.default_rng(0)
     Z = rng.standard_normal((3, 20, 2))
     Z[0, 5] = np.nan
     Z[1, 7, 1] = np.nan
     X0 = np.zeros((3, 2))
     P0 = np.stack([np.eye(2), np.eye(2), np.eye(2)])
-    P0[2] = [[1.0, 2.0], [2.0, 1.0]]  # not positive definite: the UKF's Cholesky fails at step 0
-    flt = make_filter("ukf")
-    bat = run_batched(flt, model, Z, X0, P0, [None] * 3)
+    P0[2] = [[1.0, 2.0], [2.0, 1.0]]  # not positive definite: a Cholesky factor fails at the start
+    flt = make_filter(name, **({"n_particles": 100} if name == "pf" else {}))
+    bat = flt.run_batch(model, Z, X0, P0, [np.random.default_rng(m) for m in range(3)])
     for m in range(2):
-        one = flt.run(model, Z[m], X0[m], P0[m])
-        np.testing.assert_allclose(bat[m].x, one.x, rtol=1e-12, atol=1e-12)
-    assert bat[1].info["nis_dof"][7] == 1 and np.isnan(bat[0].info["nis"][5])
+        _same(bat[m], flt.run(model, Z[m], X0[m], P0[m], np.random.default_rng(m)))
+    if name != "pf":
+        assert bat[1].info["nis_dof"][7] == 1 and bat[0].info["nis_dof"][5] == 0
+        assert np.isnan(bat[0].info["nis"][5]) and np.isfinite(bat[1].info["nis"][7])
     assert bat[2].diverged_at == 0 and np.isnan(bat[2].x).all()
+    if name != "kf":  # the EKF needs no factor of P; the others fail with a LinAlgError
+        assert bat[2].info["error"].startswith("LinAlgError")
 
 
-def test_supports_only_exact_builtin_classes():
-    assert all(supports(make_filter(n)) for n in ("kf", "ekf", "ukf", "ckf", "pf"))
+class Fragile(LinearGaussian):
+    """h raises (as a numerical routine may) when the first state component passes 50, and the
+    likelihood of the particle filters when the measurement does."""
 
-    class Custom(type(make_filter("ukf"))):
-        pass
+    def h(self, x, k):
+        if np.any(x[..., 0] > 50.0):
+            raise FloatingPointError("boom")
+        return super().h(x, k)
 
-    assert not supports(Custom())
+    def loglik(self, z, x, k, mask=None):
+        if z[0] > 50.0:
+            raise FloatingPointError("boom")
+        return super().loglik(z, x, k, mask)
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "pf", "wf-pf", "stckf"])
+def test_exception_in_one_run_leaves_the_others_as_alone(name):
+    model = Fragile(np.eye(2), np.eye(2), 0.1 * np.eye(2), 0.5 * np.eye(2))
+    Z = np.random.default_rng(1).standard_normal((3, 30, 2))
+    Z[1, 10:, 0] = 100.0  # run 1 walks past 50 and h raises for it
+    X0, P0 = np.zeros((3, 2)), np.stack([np.eye(2)] * 3)
+    flt = make_filter(name, **({"n_particles": 100} if name.endswith("pf") else {}))
+    bat = flt.run_batch(model, Z, X0, P0, [np.random.default_rng(m) for m in range(3)])
+    for m in (0, 2):
+        alone = flt.run(model, Z[m], X0[m], P0[m], np.random.default_rng(m))
+        _same(bat[m], alone)
+        assert not alone.diverged
+    k = bat[1].diverged_at
+    assert k is not None and 10 <= k < 30 and bat[1].info["error"] == "FloatingPointError: boom"
+    assert np.isfinite(bat[1].x[:k]).all() and np.isnan(bat[1].x[k:]).all()
+    _same(bat[1], flt.run(model, Z[1], X0[1], P0[1], np.random.default_rng(1)))
+
+
+def test_kalman_filter_equals_closed_form_for_every_run():
+    """Static scalar state, unit measurements: P_k = 1 / (1/P0 + k/r), x_k = P_k (x0/P0 + sum z / r)."""
+    r = 0.5
+    model = LinearGaussian([[1.0]], [[1.0]], [[0.0]], [[r]])
+    M, n = 3, 25
+    Z = np.random.default_rng(2).standard_normal((M, n, 1)) + np.array([1.0, -2.0, 4.0])[:, None, None]
+    X0 = np.array([[0.0], [1.0], [-1.0]])
+    P0 = np.array([[[1.0]], [[4.0]], [[0.25]]])
+    for name in ("kf", "ekf", "ukf", "ckf"):
+        est = make_filter(name).run_batch(model, Z, X0, P0, [None] * M)
+        for m in range(M):
+            k = np.arange(1, n + 1)
+            Pk = 1.0 / (1.0 / P0[m, 0, 0] + k / r)
+            xk = Pk * (X0[m, 0] / P0[m, 0, 0] + np.cumsum(Z[m, :, 0]) / r)
+            np.testing.assert_allclose(est[m].P[:, 0, 0], Pk, rtol=1e-12)
+            np.testing.assert_allclose(est[m].x[:, 0], xk, rtol=1e-11, atol=1e-12)
+            # NIS: y^2 / S with y = z_k - x_{k-1}, S = P_{k-1} + r
+            Pprev = np.r_[P0[m, 0, 0], Pk[:-1]]
+            xprev = np.r_[X0[m, 0], xk[:-1]]
+            np.testing.assert_allclose(est[m].info["nis"], (Z[m, :, 0] - xprev) ** 2 / (Pprev + r), rtol=1e-10)
+
+
+def test_divergence_is_reported_per_run_not_raised():
+    model = LinearGaussian(np.eye(2) * 1e200, np.eye(2), np.eye(2), np.eye(2))
+    Z = np.ones((2, 20, 2))
+    P0 = np.stack([np.eye(2), np.eye(2)])
+    for name in ("ekf", "ukf"):
+        with np.errstate(all="ignore"):
+            est = make_filter(name).run_batch(model, Z, np.ones((2, 2)), P0, [None, None])
+        for e in est:
+            assert e.diverged and e.diverged_at < 20 and np.isnan(e.x[e.diverged_at:]).all()
+            assert np.isfinite(e.x[:e.diverged_at]).all() and np.isnan(e.step_seconds[e.diverged_at:]).all()
+
+
+def test_stacked_linear_algebra_equals_one_matrix():
+    """The M = 1 fast paths (direct LAPACK) give the numbers of numpy's stacked LAPACK, bit for bit."""
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 6, 11):
+        A = rng.standard_normal((5, n, n))
+        S = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(n)
+        B = rng.standard_normal((5, n, 4))
+        L, X, K = cholesky(S), solve_spd(S, B), gain(S, np.swapaxes(B, 1, 2))
+        for m in range(5):
+            assert np.array_equal(cholesky(S[m:m + 1])[0], L[m])
+            assert np.array_equal(solve_spd(S[m:m + 1], B[m:m + 1])[0], X[m])
+            assert np.array_equal(gain(S[m:m + 1], np.swapaxes(B[m:m + 1], 1, 2))[0], K[m])
+        np.testing.assert_allclose(L @ np.swapaxes(L, 1, 2), S, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(S @ X, B, rtol=1e-9, atol=1e-9)
+    bad = np.stack([np.eye(2), [[1.0, 2.0], [2.0, 1.0]]])
+    for f in (lambda: cholesky(bad), lambda: cholesky(bad[1:]), lambda: solve_spd(bad, np.ones((2, 2, 1)))):
+        with pytest.raises(np.linalg.LinAlgError):
+            f()

@@ -1,7 +1,6 @@
 """The Bohai AUV CSV adapter: real files in ../shared, and bad input built in tmp_path."""
 import csv
 import hashlib
-import time
 
 import numpy as np
 import pandas as pd
@@ -224,18 +223,6 @@ def test_31_column_layout(bohai_dir, tmp_path):
     ref = frame.reference["position"]
     keep = np.flatnonzero(ref.valid)
     assert (np.hypot(*np.diff(ref.values[keep], axis=0).T) / np.diff(frame.t[keep]) * 0.1).max() <= 5.0
-
-
-def test_load_time(bohai_dir):
-    path = bohai_dir / "20220822_0_3.csv"
-    best = min(_timed(load, path) for _ in range(2))
-    assert best < 1.0
-
-
-def _timed(fn, *args):
-    start = time.perf_counter()
-    fn(*args)
-    return time.perf_counter() - start
 
 
 # ---------------------------------------------------------------- jump masking

@@ -67,7 +67,7 @@ def test_campaign_runs_every_unit_then_does_no_work(serial, tmp_path):
     out, counts = serial
     assert counts["units"] == 4 * 6 and counts["done"] == 24 and counts["failed"] == 0
     rows = board_rows(out)
-    assert [r["label"] for r in rows] == ["ekf", "pf", "ukf(alpha=0.5)", "ukf(alpha=1.0)"]
+    assert [r["label"] for r in rows] == ["ekf", "ukf(alpha=0.5)", "ukf(alpha=1.0)", "pf"]  # campaign file order
     assert all(r["runs"] == "6" and r["task"] == "sonar" for r in rows)
     again = execute.run(spec.load(write(tmp_path, SMALL)), out, workers=1, quiet=True)
     assert again["units"] == 0 and again["stored_before"] == 24
@@ -120,6 +120,7 @@ def test_block_resumed_with_one_run_left_equals_uninterrupted(serial, tmp_path):
     assert board_rows(out) == board_rows(serial[0])
 
 
+@pytest.mark.slow
 def test_killed_subprocess_resumes_to_identical_results(serial, tmp_path):
     path = write(tmp_path, SMALL)
     out = tmp_path / "out"
@@ -138,6 +139,7 @@ def test_killed_subprocess_resumes_to_identical_results(serial, tmp_path):
     assert board_rows(out) == board_rows(serial[0])
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_equals_serial(serial, tmp_path):
     pytest.importorskip("distributed")
     c = spec.load(write(tmp_path, SMALL))
@@ -146,23 +148,22 @@ def test_dask_local_cluster_equals_serial(serial, tmp_path):
     assert board_rows(tmp_path / "out") == board_rows(serial[0])
 
 
+@pytest.mark.slow
 def test_unanswering_scheduler_fails_fast_with_one_line(tmp_path):
     pytest.importorskip("distributed")
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()  # nothing listens there
-    t0 = time.monotonic()
     res = CliRunner().invoke(main, ["campaign", "run", str(write(tmp_path, SMALL)), "-o", str(tmp_path / "o"),
                                     "--scheduler", f"tcp://127.0.0.1:{port}", "-q"])
     assert res.exit_code == 2, res.output
-    assert time.monotonic() - t0 < 20
     assert "no answer within 5 s" in res.output and "Traceback" not in res.output
 
 
-def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
-    # Parameters are validated before any work, so make the PF fail while it runs:
-    # its resampling scheme raises (the campaign must record that and go on).
+def test_exception_inside_a_filter_is_that_runs_divergence(tmp_path, monkeypatch):
+    # An exception inside the PF's numeric step (its resampling raises) is a divergence of
+    # the run, recorded with its error; the other filters and the campaign go on.
     from replay.filters import resampling
 
     def broken(w, rng, n=None):
@@ -172,13 +173,37 @@ def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     monkeypatch.setitem(resampling.SCHEMES, "systematic", broken)
     out = tmp_path / "out"
     counts = execute.run(plan, out, workers=1, quiet=True)
-    assert counts["failed"] == 6 and counts["done"] == 18
-    rows = {r["filter"] + r["label"]: r for r in board_rows(out)}
-    assert rows["pfpf"]["failed"] == "6" and rows["pfpf"]["runs"] == "0"
-    assert rows["ekfekf"]["runs"] == "6"
+    assert counts["failed"] == 0 and counts["done"] == 24
+    rows = {r["label"]: r for r in board_rows(out)}
+    assert rows["pf"]["diverged"] == "6" and rows["pf"]["runs"] == "6" and rows["pf"]["pos_rmse"] == "nan"
+    assert rows["ekf"]["diverged"] == "0" and rows["ekf"]["runs"] == "6"
+    recs = [json.loads(p.read_text()) for p in out.glob("units/*/[0-9]*.json")]
+    pf = [r for r in recs if "error" in r["metrics"]]
+    assert len(pf) == 6 and all(r["metrics"]["error"] == "KeyError: 'nope'" for r in pf)
+    assert all(r["metrics"]["diverged_at"] == 0 for r in pf)
+
+
+def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
+    # A run whose problem cannot be built is recorded as failed, with its error; the rest go on.
+    from replay import pipeline
+
+    build = pipeline.build_problem
+
+    def flaky(config, run, data_dir=None):
+        if run == 2:
+            raise KeyError("nope")
+        return build(config, run, data_dir)
+
+    plan = spec.load(write(tmp_path, SMALL))
+    monkeypatch.setattr(pipeline, "build_problem", flaky)
+    out = tmp_path / "out"
+    counts = execute.run(plan, out, workers=1, quiet=True)
+    assert counts["failed"] == 4 and counts["done"] == 20
+    rows = board_rows(out)
+    assert all(r["failed"] == "1" and r["runs"] == "5" for r in rows)
     recs = [json.loads(p.read_text()) for p in out.glob("units/*/[0-9]*.json")]
     failed = [r for r in recs if r["status"] == "failed"]
-    assert len(failed) == 6 and all("KeyError" in r["error"] and "nope" in r["error"] for r in failed)
+    assert len(failed) == 4 and all(r["run"] == 2 and "KeyError" in r["error"] for r in failed)
 
 
 @pytest.mark.parametrize("edit,line,needle", [
@@ -187,7 +212,7 @@ def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     (('name = "ukf"', 'name = "xkf"'), 17, "unknown filter 'xkf'"),
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpa = [0.5, 1.0] }"), 18, "no parameter 'alpa'"),
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpha = [] }"), 18, "empty grid"),
-    (("n_particles = 60", 'n_particles = "many"'), 22, "expected int, got str"),
+    (("n_particles = 60", 'n_particles = "many"'), 22, "n_particles must be an integer >= 1 (got 'many')"),
     (("runs = 6", 'runs = "6"'), 3, "runs: expected int"),
     (("batch = 3", "bacth = 3"), 5, "bacth: unknown key"),
 ])

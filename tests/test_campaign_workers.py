@@ -44,6 +44,7 @@ def alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc to find the workers")
+@pytest.mark.slow
 def test_workers_exit_when_campaign_is_killed(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text(LONG)

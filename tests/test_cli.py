@@ -65,6 +65,7 @@ def test_adding_a_filter_changes_no_other_filter():
     (["eval", "sim/auv-sonar", "--task", "nope"], "unknown task 'nope'"),
     (["eval", "/nonexistent/log.csv"], "/nonexistent/log.csv"),
 ])
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(args, expected, tmp_path):
     res = run_cli(*args, "-o", str(tmp_path / "o"), cwd=tmp_path)
     assert res.returncode == 2, res.stderr
@@ -108,6 +109,7 @@ def test_datasets_list_shows_presence(bohai_dir):
     ("", "empty"),
     ("lat,lon\n1,2\n", "missing"),
 ])
+@pytest.mark.slow
 def test_bad_csv_via_cli(tmp_path, content, expected):
     bad = tmp_path / "bad.csv"
     bad.write_text(content)
@@ -124,7 +126,31 @@ def test_list_filters_shows_every_registered_filter_with_parameters():
     assert res.exit_code == 0, res.output
     names = {line.split()[0] for line in res.output.splitlines() if not line.startswith(" ")}
     assert names == set(FILTERS)
-    assert "n_particles=1000" in res.output
+    assert "\n    n_particles = 1000: an integer >= 1. " in res.output
+
+
+@pytest.mark.parametrize("kind", ["filters", "tasks", "adapters", "datasets", "reproductions"])
+def test_list_is_plain_text(kind):
+    res = CliRunner().invoke(main, ["list", kind])
+    assert res.exit_code == 0, res.output
+    for markup in ("``", ":mod:", ":class:", ":func:", ":data:"):
+        assert markup not in res.output, (kind, markup)
+
+
+def test_list_tasks_and_datasets_show_declarations():
+    res = CliRunner().invoke(main, ["list", "tasks", "position"])
+    assert res.exit_code == 0, res.output
+    assert res.output.splitlines() == [
+        "position  the Bohai experiment of paper 002 (benchmark 3), as the digest reads it.",
+        "    q = 1.0 [m^2]: a finite number > 0. process noise variance per axis and sample (Q = q I3)",
+        "    r = 2.0 [m^2]: a finite number > 0. measurement noise variance per axis (R = r I3; 002 prints 2)",
+        "    p0 = 0.1 [m^2]: a finite number > 0. prior variance per axis (P0 = p0 I3)",
+        "    z0 = null [m]: a finite number (or null). constant vertical position; null = minus the first GPS "
+        "altitude"]
+    res = CliRunner().invoke(main, ["list", "datasets", "sim/ungm"])
+    assert "    q = 1.0: a finite number > 0. process noise variance Q (002 §3.2: 1 or 10)" in res.output
+    res = run_cli("list", "tasks", "nope")
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "no task 'nope' (known: " in res.stderr
 
 
 def test_lake_log_is_recognised_without_adapter_option(tmp_path):

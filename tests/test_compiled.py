@@ -1,15 +1,14 @@
-"""The compiled kernels (replay.filters.p002.compiled) against the numpy reference engine."""
+"""The compiled kernels (replay.filters.p002.compiled, compiled_util) against the numpy reference engine."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from replay import registry
-from replay.evaluate import rng_for
+from replay.util.seeds import rng_for
 from replay.filters import make_filter
-from replay.filters.p002 import binding, compiled, gwo, parallel, stcpf
-from replay.filters.batched import run_batched
-from replay.filters.p002.stcpf import batched_cholesky
+from replay.filters.p002 import binding, compiled_util, cubature, gwo, parallel
+from replay.filters.p002.stack import batched_cholesky
 from replay.models.auv_sonar import AUVSonar
 from replay.models.random_walk import RandomWalkPosition
 from replay.models.ungm import UNGM
@@ -29,6 +28,7 @@ MODELS = {
 
 
 @pytest.mark.parametrize("name", MODELS)
+@pytest.mark.slow
 def test_model_kernels_equal_numpy_model(name):
     m = MODELS[name]()
     f, h, F, H = m.kernels()
@@ -56,6 +56,7 @@ def test_sonar_jacobian_kernel_is_zero_at_the_sonar():
 
 
 @pytest.mark.parametrize("params", [{}, {"proposal": "ckf"}, {"m_form": "printed"}, {"scale_prior": False}])
+@pytest.mark.slow
 def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
     """STCPF / CPF: the compiled step and the numpy engine agree to rounding over 100 steps.
     The printed M = H Phi H' gives fading factors of 1e3 and more that amplify rounding
@@ -75,6 +76,7 @@ def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
 
 
 @pytest.mark.parametrize("name", ["igwo-stcpf", "igwo-pf", "gwo-pf"])
+@pytest.mark.slow
 def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name):
     """The swarm collapses onto near-ties, so rounding eventually picks another leader and the
     runs part; before that (the first 10 steps) they agree to 1e-8."""
@@ -86,14 +88,15 @@ def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name):
 
 
 @pytest.mark.parametrize("threads", ["1", "2", "3"])
+@pytest.mark.slow
 def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
     def run():
         flt = make_filter("igwo-stcpf", n_particles=50, t_max=5)
         Z = np.stack([sonar.z[:15]] * 3)
-        return run_batched(flt, sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
-                           [np.random.default_rng(r) for r in range(3)])
+        return flt.run_batch(sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
+                             [np.random.default_rng(r) for r in range(3)])
 
-    monkeypatch.setattr(stcpf, "GRAIN_RUNS", 10)  # split even these few particles among the threads
+    monkeypatch.setattr(cubature, "GRAIN_RUNS", 10)  # split even these few particles among the threads
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
@@ -102,12 +105,13 @@ def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
 
 
 @pytest.mark.parametrize("threads", ["1", "2", "3"])
+@pytest.mark.slow
 def test_one_run_on_openmp_threads_equals_one_thread(sonar, monkeypatch, threads):
     def run():
         return make_filter("igwo-stcpf", n_particles=60, t_max=4).run(sonar.model, sonar.z[:12], sonar.x0, sonar.P0,
                                                                        np.random.default_rng(4))
 
-    monkeypatch.setattr(stcpf, "GRAIN", 7)
+    monkeypatch.setattr(cubature, "GRAIN", 7)
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
@@ -115,27 +119,30 @@ def test_one_run_on_openmp_threads_equals_one_thread(sonar, monkeypatch, threads
     assert np.array_equal(out.x, ref.x) and np.array_equal(out.P, ref.P)
 
 
+@pytest.mark.slow
 def test_batched_compiled_runs_equal_one_by_one_exactly(sonar):
     flt = make_filter("igwo-stcpf", n_particles=40, t_max=6)
     Z, X0, P0 = np.stack([sonar.z[:12]] * 3), np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3)
-    many = run_batched(flt, sonar.model, Z, X0, P0, [np.random.default_rng(10 + r) for r in range(3)])
+    many = flt.run_batch(sonar.model, Z, X0, P0, [np.random.default_rng(10 + r) for r in range(3)])
     for r in range(3):
         one = flt.run(sonar.model, Z[r], X0[r], P0[r], np.random.default_rng(10 + r))
         assert np.array_equal(one.x, many[r].x)
 
 
+@pytest.mark.slow
 def test_factor_repairs_like_the_numpy_engine():
     A = np.diag([4.0, 1.0, -1e-9])  # indefinite by a hair: eigenvalue floored
     L = np.empty((3, 3))
-    assert compiled.factor(A.copy(), L) == 1
+    assert compiled_util.factor(A.copy(), L) == 1
     ref, bad = batched_cholesky(A[None])
     np.testing.assert_allclose(L, ref[0], rtol=1e-12, atol=1e-12)
     assert bad[0]
     B = np.array([[4.0, 2.0], [2.0, 3.0]])
-    assert compiled.factor(B, L[:2, :2]) == 0
+    assert compiled_util.factor(B, L[:2, :2]) == 0
     np.testing.assert_allclose(L[:2, :2], np.linalg.cholesky(B), rtol=1e-15)
 
 
+@pytest.mark.slow
 def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
     """One swarm on a quadratic fitness (the random-walk model: h = identity on 3 states):
     the kernel and gwo.optimize give the same wolves from the same 32-bit draws."""
@@ -154,8 +161,9 @@ def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
     np.testing.assert_allclose(best, bn, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_kernel_call_falls_back_when_argument_types_change():
-    k = parallel.Kernel(compiled.estimate)
+    k = parallel.Kernel(compiled_util.estimate)
     X = np.random.default_rng(0).normal(size=(2, 5, 3))
     out = []
     for Xi in (X, np.asfortranarray(X), X[:, ::-1]):  # contiguous, then two layouts the first typing did not see
@@ -169,7 +177,7 @@ def test_kernel_call_falls_back_when_argument_types_change():
 
 def test_small_angle_sincos_matches_libm_to_rounding():
     for d in np.concatenate([np.linspace(-0.5, 0.5, 2001), [0.0, 1e-300, -0.49999999, 0.5000001, 3.0, -2.5]]):
-        s, c = compiled.sincos_small(d)
+        s, c = compiled_util.sincos_small(d)
         assert abs(s - np.sin(d)) <= 2.3e-16 * max(abs(np.sin(d)), 1e-300)
         assert abs(c - np.cos(d)) <= 1.2e-16
 
@@ -179,8 +187,8 @@ def test_circular_mean_of_points_across_the_wrap():
     x = np.array([np.pi - 0.05, 1.0])
     L = np.diag([0.2, 0.1])
     Y, mean, D = np.empty((4, 2)), np.empty(2), np.empty((4, 2))
-    compiled.cubature_points(x, L, np.sqrt(2), Y)
-    compiled.moments(Y, np.array([True, False]), mean, D)
+    compiled_util.cubature_points(x, L, np.sqrt(2), Y)
+    compiled_util.moments(Y, np.array([True, False]), mean, D)
     ang = Y[:, 0]
     assert mean[0] == pytest.approx(np.arctan2(np.sin(ang).sum(), np.cos(ang).sum()), abs=1e-15)
     assert abs(mean[0]) > 3.0 and mean[1] == pytest.approx(1.0)

@@ -170,7 +170,6 @@ def test_wrap_values_and_shapes():
 
 def test_roughening_option_and_parameter_checks(linear_case):
     from replay.util.errors import ReplayError
-    from replay.filters import batched
 
     model, z, x0, P0, xs, Ps = linear_case
     rough = make_filter("pf", n_particles=2000, roughening=0.2)
@@ -180,7 +179,7 @@ def test_roughening_option_and_parameter_checks(linear_case):
     assert np.array_equal(a, b) and not np.array_equal(a, plain)
     # Jitter widens the cloud but the mean still tracks the Kalman filter.
     assert np.mean(np.abs(a - xs) / np.sqrt(np.diagonal(Ps, axis1=1, axis2=2))) < 0.3
-    assert not batched.exact(rough) and batched.exact(make_filter("pf"))
-    for bad in ({"n_particles": 0}, {"ess_threshold": 1.5}, {"roughening": -1}, {"resampling": "nope"}):
-        with pytest.raises(ReplayError):
+    for bad in ({"n_particles": 0}, {"ess_threshold": 1.5}, {"roughening": -1}, {"resampling": "nope"},
+                {"n_particles": 1.5}, {"n_particles": True}, {"roughening": float("nan")}, {"nope": 1}):
+        with pytest.raises(ReplayError, match=f"^filter 'pf': .*{next(iter(bad))}"):
             make_filter("pf", **bad)

@@ -128,10 +128,18 @@ def test_gpf_params_validated_in_constructor():
         make_filter("gpf", n_particles=100, n_grey=100)
     with pytest.raises(ReplayError, match="grey_window"):
         make_filter("gpf", grey_window=2)
-    with pytest.raises(ReplayError, match="mmpf: transition"):
+    with pytest.raises(ReplayError, match="noise_window"):
+        make_filter("gpf", noise_window=5)  # shorter than the 12 taps of db6
+    with pytest.raises(ReplayError, match="'mmpf': transition must be a 3x3"):
         make_filter("mmpf", transition=[[0.5, 0.6], [0.5, 0.5]])
-    with pytest.raises(ReplayError, match="mmpf: ess_threshold"):
+    with pytest.raises(ReplayError, match="'mmpf': ess_threshold must be a finite number in \\[0, 1\\]"):
         make_filter("mmpf", ess_threshold=1.5)
+    with pytest.raises(ReplayError, match="modes must be a list of rows"):
+        make_filter("mmpf", modes=[[0.0, 0.0, 0.0], [1.0, 2.0]])
+    with pytest.raises(ReplayError, match="n_particles must be an integer >= 2"):
+        make_filter("gpf", n_particles=1000.0)
+    p = make_filter("mmpf", modes=[[0, 0, 0]]).params()
+    assert p["modes"] == [[0.0, 0.0, 0.0]] and make_filter("mmpf", **p).params() == p
 
 
 def test_gpf_runs_reproducibly_and_uses_both_parts(problem):

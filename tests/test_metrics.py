@@ -5,7 +5,6 @@ from scipy.spatial.transform import Rotation
 
 from replay import align, metrics
 from replay.filters import make_filter
-from replay.filters.batched import run_batched
 from replay.model import LinearGaussian
 
 
@@ -36,7 +35,7 @@ def ensemble():
 
 def _nees_of(ensemble, q_scale):
     truth, z, x0, P0 = ensemble
-    est = run_batched(make_filter("kf"), _cv_model(q_scale), z, x0, P0, [None] * len(z))
+    est = make_filter("kf").run_batch(_cv_model(q_scale), z, x0, P0, [None] * len(z))
     X, P = np.stack([e.x for e in est]), np.stack([e.P for e in est])
     nis = np.stack([e.info["nis"] for e in est])
     return metrics.nees(X - truth, P), nis

@@ -210,9 +210,13 @@ def test_load_frame_plain_csv_path(clean_env, fake_adapter):
 
 
 def test_load_frame_sim_generator(monkeypatch):
+    from replay.sim import generator
+    from replay.util.params import Param
+
     module = types.ModuleType("fake_sim_module")
 
-    def make_frame(rng, steps=20):
+    @generator((Param("steps", int, 20, "samples", low=1),))
+    def make_frame(rng, *, steps):
         t = np.arange(steps) * 0.5
         return Frame(t, {"r": Channel(rng.normal(size=steps), "m")})
 
@@ -224,9 +228,27 @@ def test_load_frame_sim_generator(monkeypatch):
     assert len(a) == 30 and len(b) == 10
     assert np.array_equal(a.channels["r"].values[:10], b.channels["r"].values)
     assert a.meta["dataset"] == "sim/fake" and a.meta["seed"] == 7
+    with pytest.raises(ReplayError, match=r"^dataset 'sim/fake': steps must be an integer >= 1 \(got 2.5\)$"):
+        registry.load_frame(ds, rng=7, steps=2.5)
+    with pytest.raises(ReplayError, match=r"^dataset 'sim/fake': unknown parameter 'step' \(known: steps\)$"):
+        registry.load_frame(ds, rng=7, step=3)
     missing = Dataset(id="sim/none", kind="sim", generator="no_such_module_xyz:make_frame")
     with pytest.raises(ReplayError, match="generator no_such_module_xyz:make_frame is not available"):
         registry.load_frame(missing)
+    module.undeclared = lambda rng, steps=20: None
+    with pytest.raises(ReplayError, match="declares no parameters"):
+        registry.load_frame(Dataset(id="sim/bare", kind="sim", generator="fake_sim_module:undeclared"))
+
+
+def test_file_dataset_options_are_checked_against_the_adapter(clean_env):
+    write_fake(clean_env / "d" / "20220822_0_7.csv", n=5)
+    with pytest.raises(ReplayError) as err:
+        registry.load_frame("bohai/20220822_0_7", data_dir=clean_env / "d", jump=3.0)
+    assert str(err.value) == ("adapter bohai-csv: unknown option 'jump' "
+                              "(known: jump_threshold, max_speed, gps_tolerance, gap_factor)")
+    assert registry.check_params("bohai/20220822_0_7", {"max_speed": 4.0}) == {"max_speed": 4.0}
+    with pytest.raises(ReplayError, match=r"^adapter lake: unknown option 'mapping' \(known: max_gap\)$"):
+        registry.check_params(str(clean_env / "x.csv"), {"mapping": "m.toml"}, adapter="lake")
 
 
 def test_load_real_bohai_file_if_adapter_available(clean_env):

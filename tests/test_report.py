@@ -2,6 +2,7 @@
 import base64
 import re
 
+import pytest
 from click.testing import CliRunner
 
 from replay.cli import main
@@ -28,6 +29,7 @@ def _pngs_in(html):
     return [base64.b64decode(b) for b in imgs]
 
 
+@pytest.mark.slow
 def test_report_on_campaign_and_eval_dirs(tmp_path):
     (tmp_path / "c.toml").write_text(CAMPAIGN)
     out = tmp_path / "camp"

@@ -38,14 +38,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.angles import residual, wrap_components
 from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky
+from replay.util.params import Param
 from replay.model import remap_indices
 
+from .. import particles
 from ..base import Filter
+from ..resampling import SCHEMES
 from .grey import GreyPredictor
-from ..resampling import SCHEMES, effective_sample_size
 from .wavelet_noise import WaveletNoise
 
 
@@ -53,34 +55,36 @@ class GreyParticleFilter(Filter):
     """GPF: grey-model particles plus wavelet-estimated measurement noise (paper 000)."""
 
     name = "gpf"
+    PARAMS = (
+        Param("n_particles", int, 1000, "particles N (000 §3: 1000)", low=2),
+        Param("n_grey", int, 100, "grey particles N_grey among the N (000 §3: 100, N_grey : N_std = 1 : 9)",
+              low=0),
+        Param("grey_window", int, 30, "GM(1,1) window L (eq. 7; 000 §3: 30)", unit="steps", low=3),
+        Param("noise_window", int, 50, "wavelet noise window (eq. 17; 000 §3: 50)", unit="steps", low=1),
+        Param("wavelet_name", str, "db6", "wavelet of the noise estimator (000 §3: db6)"),
+        Param("grey", bool, True, "draw grey particles (false: a bootstrap PF with the wavelet R)"),
+        Param("wavelet", bool, True, "estimate R by wavelets (false: the model's fixed R)"),
+        Param("grey_alpha", float, 0.5, "GM(1,1) background weight alpha (eq. 10)", low=0.0, high=1.0),
+        Param("grey_response", str, "discrete", "GM(1,1) time response: of the fitted discrete equation, "
+              "or eq. 12 as printed", choices=("discrete", "continuous")),
+        Param("grey_floor", float, 1.0, "GM(1,1) conditioning shift applies when the window dips below this "
+              "(null: never)", optional=True),
+        Param("grey_shift_ratio", float, 100.0, "GM(1,1) conditioning shift: max(floor, ratio * span) - min",
+              low=0.0),
+        Param("sigma_floor", float, 1e-6, "lower bound of each wavelet sigma", low=0.0, low_open=True),
+        Param("resampling", str, "systematic", "resampling scheme (every step)", choices=tuple(SCHEMES)),
+    )
 
-    def __init__(self, n_particles: int = 1000, n_grey: int = 100, grey_window: int = 30,
-                 noise_window: int = 50, wavelet_name: str = "db6", grey: bool = True,
-                 wavelet: bool = True, grey_alpha: float = 0.5, grey_response: str = "discrete",
-                 grey_floor: float = 1.0, grey_shift_ratio: float = 100.0,
-                 sigma_floor: float = 1e-6, resampling: str = "systematic"):
-        for name, v, lo in (("n_particles", n_particles, 2), ("n_grey", n_grey, 0),
-                            ("grey_window", grey_window, 3), ("noise_window", noise_window, 1)):
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-                raise ReplayError(f"gpf: {name} must be an integer >= {lo} (got {v!r})")
-        if n_grey >= n_particles:
-            raise ReplayError(f"gpf: n_grey ({n_grey}) must be smaller than n_particles ({n_particles})")
-        if resampling not in SCHEMES:
-            raise ReplayError(f"gpf: resampling must be one of {', '.join(SCHEMES)} (got {resampling!r})")
-        if grey_response not in ("discrete", "continuous"):
-            raise ReplayError(f"gpf: grey_response must be 'discrete' or 'continuous' (got {grey_response!r})")
-        if not 0.0 <= grey_alpha <= 1.0:
-            raise ReplayError(f"gpf: grey_alpha must be in [0, 1] (got {grey_alpha!r})")
-        if not sigma_floor > 0:
-            raise ReplayError(f"gpf: sigma_floor must be positive (got {sigma_floor!r})")
-        self.n_particles, self.n_grey = int(n_particles), int(n_grey)
-        self.grey_window, self.noise_window = int(grey_window), int(noise_window)
-        self.wavelet_name, self.grey, self.wavelet = wavelet_name, bool(grey), bool(wavelet)
-        self.grey_alpha, self.grey_response = float(grey_alpha), grey_response
-        self.grey_floor, self.grey_shift_ratio = grey_floor, float(grey_shift_ratio)
-        self.sigma_floor, self.resampling = float(sigma_floor), resampling
-        self._noise = WaveletNoise(self.noise_window, wavelet_name)  # validates window and wavelet
-        self._grey = GreyPredictor(self.grey_window, self.grey_alpha, grey_response, grey_floor,
+    def check(self):
+        """n_grey < n_particles; the wavelet accepts the window. Builds the two estimators."""
+        if self.n_grey >= self.n_particles:
+            raise ReplayError(f"{self.owner()}: n_grey must be < n_particles = {self.n_particles} "
+                              f"(got {self.n_grey})")
+        try:
+            self._noise = WaveletNoise(self.noise_window, self.wavelet_name)
+        except ReplayError as err:
+            raise ReplayError(f"{self.owner()}: noise_window / wavelet_name: {err}") from None
+        self._grey = GreyPredictor(self.grey_window, self.grey_alpha, self.grey_response, self.grey_floor,
                                    self.grey_shift_ratio)
 
     # ------------------------------------------------------------------ run
@@ -89,19 +93,17 @@ class GreyParticleFilter(Filter):
         m = state.model
         probe = np.asarray(x0, float) + np.arange(1.0, m.nx + 1.0)
         if m.nz != m.nx or not np.allclose(m.h(probe[None], 0)[0], probe):
-            raise ReplayError("gpf: the model must measure its state directly (h(x) = x, eq. 6); "
+            raise ReplayError(f"{self.owner()}: the model must measure its state directly (h(x) = x, eq. 6); "
                               f"this one has nx={m.nx}, nz={m.nz}")
-        L = np.linalg.cholesky(np.asarray(P0, float))
         N = self.n_particles
-        state.particles = state.x + state.rng.standard_normal((N, m.nx)) @ L.T
-        wrap_components(state.particles, m.x_angles)
+        X = particles.gaussian(state.x[None], state.P[None], N, [state.rng])[0]
+        state.particles = wrap_components(X, m.x_angles)
         state.w = np.full(N, 1.0 / N)
         state.hist = np.full((max(self.grey_window, self.noise_window), m.nz), np.nan)
         state.sigma = np.sqrt(np.diagonal(m.measurement_cov(0))).copy()
         state.first = True
         state.grey_steps = state.wavelet_steps = 0
         state.ess_sum, state.steps = 0.0, 0
-        state._resample = SCHEMES[self.resampling]
 
     def predict(self, state, k):
         m, rng, N = state.model, state.rng, self.n_particles
@@ -110,14 +112,14 @@ class GreyParticleFilter(Filter):
         if state.first:
             idx = np.arange(N) if n_std == N else rng.choice(N, n_std, replace=False)
             state.first = False
-        else:
-            idx = state._resample(state.w, rng, n_std)
-        particles = m.sample_f(state.particles[idx], k, rng)  # eq. 20
+        else:  # step 5 of the previous step: n_std ancestors from its weights
+            idx = SCHEMES[self.resampling](state.w, rng, n_std)
+        X = m.sample_f(state.particles[idx], k, rng)  # eq. 20
         if g is not None:  # eq. 22
             u = rng.standard_normal((self.n_grey, m.nx)) @ cholesky(m.process_cov(k)).T
-            particles = np.concatenate([particles, g + u])
+            X = np.concatenate([X, g + u])
             state.grey_steps += 1
-        state.particles = wrap_components(particles, m.x_angles)
+        state.particles = wrap_components(X, m.x_angles)
         state.w = np.full(N, 1.0 / N)
         state.hist[:-1] = state.hist[1:]
         state.hist[-1] = np.nan  # z_k, filled by update when measured
@@ -149,16 +151,14 @@ class GreyParticleFilter(Filter):
         else:
             d = residual(z, state.particles, angles)
         logw = -0.5 * ((d * d) @ (1.0 / (sig * sig)))  # eq. 23
-        w = np.exp(logw - logw.max())
-        state.w = w / w.sum()
+        state.w = particles.normalise(logw[None])[0][0]
 
     def estimate(self, state):
-        m, w = state.model, state.w
-        x = weighted_mean(state.particles, w, m.x_angles)  # eq. 24
-        D = residual(state.particles, x, m.x_angles)
-        state.ess_sum += effective_sample_size(w)
+        w = state.w[None]
+        x, P = particles.estimate(state.particles[None], w, state.model.x_angles)  # eq. 24
+        state.ess_sum += float(particles.ess(w)[0])
         state.steps += 1
-        return x, (D.T * w) @ D
+        return x[0], P[0]
 
     def finish(self, state, info):
         info.update(grey_steps=state.grey_steps, wavelet_steps=state.wavelet_steps,

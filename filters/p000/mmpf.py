@@ -25,65 +25,98 @@ after the model step (the depth feels the new pitch from the next step on).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util.angles import wrap_components
 from replay.util.errors import ReplayError
+from replay.util.params import Param
 
+from .. import particles
 from ..base import Filter
-from ..resampling import SCHEMES, effective_sample_size
+from ..resampling import SCHEMES
 
 PITCH_RATE = float(np.deg2rad(10.0))
 DEFAULT_MODES = ((0.0, 0.0, 0.0), (0.0, 0.0, PITCH_RATE), (0.0, 0.0, -PITCH_RATE))
+
+
+class Rows(Param):
+    """A matrix parameter: a list of rows, each a list of finite numbers, all of one length.
+
+    (Declared as ``type=list``; the value is normalised to a tuple of tuples.)
+    """
+
+    def accepts(self) -> str:
+        return "a list of rows of numbers, all of one length" + (" (or null)" if self.optional else "")
+
+    def _coerce(self, v):
+        if not isinstance(v, (list, tuple)) or not v:
+            return False, v
+        rows = []
+        for row in v:
+            if not isinstance(row, (list, tuple)) or len(row) != len(v[0]) or not row:
+                return False, v
+            if not all(_finite_number(x) for x in row):
+                return False, v
+            rows.append(tuple(float(x) for x in row))
+        return True, tuple(rows)
+
+
+def _finite_number(x) -> bool:
+    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+            and math.isfinite(x))
 
 
 class MultipleModelPF(Filter):
     """Jump-Markov bootstrap PF over motion modes (module docstring)."""
 
     name = "mmpf"
+    PARAMS = (
+        Param("n_particles", int, 1000, "particles N", low=2),
+        Rows("modes", list, DEFAULT_MODES, "one rate vector per motion mode (state units per second), added "
+             "to the model's motion"),
+        Param("stay", float, 0.95, "probability of staying in a mode (when transition is null)",
+              low=0.0, high=1.0, low_open=True),
+        Rows("transition", list, None, "Markov switching matrix Pi, rows summing to 1 (null: from stay)",
+             optional=True),
+        Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
+        Param("ess_threshold", float, 1.0, "resample when ESS < threshold * N (1: every step)", low=0.0, high=1.0),
+    )
 
-    def __init__(self, n_particles: int = 1000, modes=DEFAULT_MODES, stay: float = 0.95,
-                 transition=None, resampling: str = "systematic", ess_threshold: float = 1.0):
-        if not isinstance(n_particles, (int, np.integer)) or n_particles < 2:
-            raise ReplayError(f"mmpf: n_particles must be an integer >= 2 (got {n_particles!r})")
-        rates = np.asarray(modes, float)
-        if rates.ndim != 2 or len(rates) < 1:
-            raise ReplayError("mmpf: modes must be a list of rate vectors, one per mode")
+    def check(self):
+        rates = np.asarray(self.modes, float)
         M = len(rates)
-        if transition is None:
-            if not 0.0 < stay <= 1.0:
-                raise ReplayError(f"mmpf: stay must be in (0, 1] (got {stay!r})")
-            Pi = np.full((M, M), (1.0 - stay) / max(M - 1, 1)) if M > 1 else np.ones((1, 1))
-            np.fill_diagonal(Pi, stay if M > 1 else 1.0)
+        if self.transition is None:
+            Pi = np.full((M, M), (1.0 - self.stay) / max(M - 1, 1)) if M > 1 else np.ones((1, 1))
+            np.fill_diagonal(Pi, self.stay if M > 1 else 1.0)
         else:
-            Pi = np.asarray(transition, float)
+            Pi = np.asarray(self.transition, float)
         if Pi.shape != (M, M) or (Pi < 0).any() or not np.allclose(Pi.sum(axis=1), 1.0):
-            raise ReplayError(f"mmpf: transition must be a {M}x{M} matrix of non-negative rows summing to 1")
-        if resampling not in SCHEMES:
-            raise ReplayError(f"mmpf: resampling must be one of {', '.join(SCHEMES)} (got {resampling!r})")
-        if not 0.0 <= ess_threshold <= 1.0:
-            raise ReplayError(f"mmpf: ess_threshold must be in [0, 1] (got {ess_threshold!r})")
-        self.n_particles = int(n_particles)
-        self.modes = rates.tolist()
-        self.stay = stay
-        self.transition = Pi.tolist()
-        self.resampling = resampling
-        self.ess_threshold = float(ess_threshold)
+            raise ReplayError(f"{self.owner()}: transition must be a {M}x{M} matrix (one row per mode) of "
+                              f"non-negative rows summing to 1 (got {Pi.tolist()})")
         self._rates, self._cum = rates, np.cumsum(Pi, axis=1)
+
+    def params(self) -> dict:
+        """As declared, with the matrices as lists of lists (as a manifest or campaign file writes them)."""
+        p = super().params()
+        for key in ("modes", "transition"):
+            if p[key] is not None:
+                p[key] = [list(row) for row in p[key]]
+        return p
 
     def start(self, state, x0, P0):
         super().start(state, x0, P0)
         m, N = state.model, self.n_particles
         if self._rates.shape[1] != m.nx:
-            raise ReplayError(f"mmpf: each mode needs {m.nx} rates (one per state component), "
-                              f"got {self._rates.shape[1]}")
-        L = np.linalg.cholesky(np.asarray(P0, float))
-        state.particles = wrap_components(state.x + state.rng.standard_normal((N, m.nx)) @ L.T, m.x_angles)
+            raise ReplayError(f"{self.owner()}: modes must have {m.nx} rates per mode (one per state "
+                              f"component of this model; got {self._rates.shape[1]})")
+        X = particles.gaussian(state.x[None], state.P[None], N, [state.rng])[0]
+        state.particles = wrap_components(X, m.x_angles)
         state.modes = state.rng.integers(0, len(self._rates), N)
         state.w = np.full(N, 1.0 / N)
         state.mu_sum = np.zeros(len(self._rates))
         state.resampled, state.steps = 0, 0
-        state._resample = SCHEMES[self.resampling]
 
     def predict(self, state, k):
         m, rng = state.model, state.rng
@@ -96,22 +129,19 @@ class MultipleModelPF(Filter):
 
     def update(self, state, z, k, mask):
         logw = np.log(state.w) + state.model.loglik(z, state.particles, k, mask)
-        w = np.exp(logw - logw.max())
-        state.w = w / w.sum()
+        state.w = particles.normalise(logw[None])[0][0]
 
     def estimate(self, state):
-        m, w = state.model, state.w
-        x = weighted_mean(state.particles, w, m.x_angles)
-        D = residual(state.particles, x, m.x_angles)
-        P = (D.T * w) @ D
-        state.mu_sum += np.bincount(state.modes, weights=w, minlength=len(self._rates))
+        w = state.w[None]
+        x, P = particles.estimate(state.particles[None], w, state.model.x_angles)
+        state.mu_sum += np.bincount(state.modes, weights=state.w, minlength=len(self._rates))
         state.steps += 1
-        if effective_sample_size(w) < self.ess_threshold * self.n_particles:
-            idx = state._resample(w, state.rng)
+        idx = particles.resample(w, [state.rng], self.resampling, self.ess_threshold).get(0)
+        if idx is not None:
             state.particles, state.modes = state.particles[idx], state.modes[idx]
             state.w = np.full(self.n_particles, 1.0 / self.n_particles)
             state.resampled += 1
-        return x, P
+        return x[0], P[0]
 
     def finish(self, state, info):
         info.update(resampled=state.resampled,

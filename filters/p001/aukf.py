@@ -40,7 +40,7 @@ Choices (the paper is silent or ambiguous):
   Q_k, R_k at every step: the plain UKF. The limit b → 0 (d → 1, memory of
   one step) is *not* a UKF: it is the single-sample estimator. ``adapt_q`` /
   ``adapt_r`` switch the covariance estimators; ``adapt_means`` the mean
-  estimators: True (both, the paper), False (neither), "q" or "p" (one).
+  estimators: "both" (the paper), "none", "q" or "p" (one).
   q̂ and p̂ are driven by the same innovation, and wherever a measured state
   is a random walk (here velocity, acceleration, heading, depth) a state
   offset c with p̂ offset −c leaves every innovation unchanged: the pair is
@@ -75,45 +75,39 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import residual, weighted_mean, wrap_components
-from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky, gain
+from replay.util.params import Param
 from replay.model import remap_indices
 from replay.noise import require_spd
 
 from ..sigma import UKF
 
 GUARDS = ("biased", "previous", "clip")
-MEANS = {True: (True, True), False: (False, False), "qp": (True, True), "q": (True, False),
-         "p": (False, True), "none": (False, False), "true": (True, True), "false": (False, False)}
+MEANS = {"both": (True, True), "q": (True, False), "p": (False, True), "none": (False, False)}
 
 
 class AUKF(UKF):
     """UKF with on-line fading-memory estimates of q, p, Q, R (001 eq. 92–110)."""
 
     name = "aukf"
+    PARAMS = UKF.PARAMS + (
+        Param("forgetting", float, 0.98, "forgetting factor b of the fading memory (eq. 83)",
+              low=0.0, high=1.0, low_open=True, high_open=True),
+        Param("adapt", bool, True, "estimate the noise statistics (false: the plain UKF)"),
+        Param("adapt_q", bool, True, "estimate the process noise covariance Q (eq. 110)"),
+        Param("adapt_r", bool, True, "estimate the measurement noise covariance R (eq. 107)"),
+        Param("adapt_means", str, "both", "which noise means to estimate: q (eq. 105), p (eq. 106), both "
+              "(the paper) or none", choices=tuple(MEANS)),
+        Param("guard", str, "biased", "what replaces an updated Q or R that is not positive definite",
+              choices=GUARDS),
+        Param("guard_floor", float, 1e-3, "eigenvalue floor of the guard, in units of the prior",
+              low=0.0, high=1.0, low_open=True, high_open=True),
+        Param("keep_history", bool, False, "keep every step's q, p, Q, R in info['history']"),
+    )
 
-    def __init__(self, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0,
-                 forgetting: float = 0.98, adapt: bool = True, adapt_q: bool = True,
-                 adapt_r: bool = True, adapt_means=True, guard: str = "biased",
-                 guard_floor: float = 1e-3, keep_history: bool = False):
-        super().__init__(alpha, beta, kappa)
-        b = float(forgetting)
-        if not 0.0 < b < 1.0:
-            raise ReplayError(f"aukf: forgetting factor forgetting={b:g} must lie in (0, 1)")
-        if not 0.0 < float(guard_floor) < 1.0:
-            raise ReplayError(f"aukf: guard_floor={guard_floor:g} must lie in (0, 1)")
-        if guard not in GUARDS:
-            raise ReplayError(f"aukf: guard={guard!r} must be one of {', '.join(GUARDS)}")
-        key = adapt_means.lower() if isinstance(adapt_means, str) else adapt_means
-        if key not in MEANS:
-            raise ReplayError(f"aukf: adapt_means={adapt_means!r} must be true, false, 'q' or 'p'")
-        self.forgetting = b
-        self.adapt, self.adapt_q, self.adapt_r = bool(adapt), bool(adapt_q), bool(adapt_r)
-        self.adapt_means = adapt_means
-        self._qmean, self._pmean = MEANS[key]
-        self.guard = guard
-        self.guard_floor = float(guard_floor)
-        self.keep_history = bool(keep_history)
+    def check(self):
+        super().check()
+        self._qmean, self._pmean = MEANS[self.adapt_means]
 
     # ------------------------------------------------------------------ run
     def start(self, state, x0, P0):

@@ -6,8 +6,9 @@ imports that copy: numba then caches the compiled code on disk beside it, and
 a new process loads it instead of compiling for about 20 s. (Passing the
 kernels as function arguments instead works, but numba cannot cache such
 signatures across processes.) The copy's name carries a hash of its text,
-which includes the kernels' source files: a change to ``compiled.py`` or to a
-model's kernels gives a new copy and a fresh compilation, never stale machine
+which includes the kernels' source files and ``compiled_util.py`` (the
+model-free helpers it imports): a change to ``compiled.py``, to its helpers or
+to a model's kernels gives a new copy and a fresh compilation, never stale machine
 code. Copies live in ``$REPLAY_CACHE_DIR/kernels`` (default
 ``~/.cache/replay/kernels``). A model's kernels must be module-level
 functions of an importable module.
@@ -46,7 +47,7 @@ def bind(kernels):
     """The copy of :mod:`replay.filters.p002.compiled` bound to the model kernels ``(f, h, F, H)``."""
     key = tuple(id(k) for k in kernels)
     if key not in _bound:
-        from . import compiled
+        from . import compiled, compiled_util
 
         places = [_where(k) for k in kernels]
         lines = [f"from {mod} import {name} as {alias}  # noqa: E402"
@@ -55,6 +56,10 @@ def bind(kernels):
                                  for m in sorted({m for m, _ in places}))
         digest = hashlib.sha256(kernel_sources.encode()).hexdigest()[:16]
         lines.append(f"# kernels' sources: sha256 {digest}")
+        # numba's cache of this copy holds compiled_util's functions inlined but checks only this
+        # file's stamp: the helpers' source in the name makes a change to them a new copy
+        helpers = Path(inspect.getsourcefile(compiled_util)).read_text(encoding="utf-8")
+        lines.append(f"# compiled_util: sha256 {hashlib.sha256(helpers.encode()).hexdigest()[:16]}")
         text = Path(inspect.getsourcefile(compiled)).read_text(encoding="utf-8")
         at = text.index(MARKER)
         end = text.index("\n", at)

@@ -37,8 +37,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.errors import ReplayError
-
 
 def a_linear(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0) -> float:
     """Standard GWO convergence factor: linear from ``a_start`` (t = 0) toward ``a_end``."""
@@ -124,15 +122,6 @@ def draws(rngs, shape):
     a swarm step; :mod:`replay.filters.p002.compiled` converts the same integers.
     """
     return uniforms(raw_draws(rngs, shape))
-
-
-def check_params(t_max, a_start, a_end, xi):
-    if not (isinstance(t_max, (int, np.integer)) and t_max >= 0):
-        raise ReplayError(f"t_max must be a non-negative integer number of GWO iterations (got {t_max!r})")
-    if not a_start >= a_end >= 0:
-        raise ReplayError(f"GWO convergence factor needs a_start >= a_end >= 0 (got {a_start}, {a_end})")
-    if not 1e-6 <= xi <= 1e-3:
-        raise ReplayError(f"xi (entropy-weight floor) must lie in [1e-6, 1e-3] (got {xi})")
 
 
 def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True,

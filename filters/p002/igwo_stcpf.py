@@ -51,14 +51,40 @@ import numpy as np
 
 from replay.util.angles import residual, wrap_components
 from replay.util.errors import ReplayError
+from replay.util.params import Param, without
 from replay.model import is_diagonal, remap_indices
 
+from .. import particles
 from . import gwo, pso
 from .binding import bind
 from .parallel import Kernel, split
-from .stcpf import CubatureParticleFilter, Engine, fast_residual, weighted_mean_rows, wrap_inplace
+from .stack import fast_residual, wrap_inplace
+from .stckf import STCKF_PARAMS
+from .stcpf import CubatureParticleFilter, Engine
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
+GWO_PARAMS = (
+    Param("a_start", float, 2.0, "GWO convergence factor a at the first iteration (002 §3.1)", low=0.0),
+    Param("a_end", float, 0.0, "GWO convergence factor a at the last iteration", low=0.0),
+    Param("b_start", float, 1.0, "IGWO sigmoid steepness b at the last iteration (002 §3.2.1; not printed)", low=0.0),
+    Param("b_end", float, 0.5, "IGWO sigmoid steepness b at the first iteration (not printed)", low=0.0),
+    Param("xi", float, 1e-4, "floor of the IGWO entropy weights (002 §3.2.2)", low=1e-6, high=1e-3),
+)
+PSO_PARAMS = (
+    Param("omega_max", float, 0.9, "PSO inertia at the first iteration (002 §4.1)", low=0.0),
+    Param("omega_min", float, 0.4, "PSO inertia limit", low=0.0),
+    Param("omega_decay", float, 0.2, "PSO inertia decay rate alpha: omega_min + (max - min) exp(-alpha (t - 1))",
+          low=0.0),
+    Param("c1", list, (2.0, 1.0), "PSO cognitive coefficient, from .. to (linear in t)", length=2),
+    Param("c2", list, (1.5, 2.0), "PSO social coefficient, from .. to (linear in t)", length=2),
+    Param("lower", list, pso.LB_002, "PSO search lower bounds (002 §4.1), used when as long as the state",
+          optional=True),
+    Param("upper", list, pso.UB_002, "PSO search upper bounds (002 §4.1), used when as long as the state",
+          optional=True),
+)
+STCKF_NAMES = tuple(p.name for p in STCKF_PARAMS)
+GWO_NAMES = tuple(p.name for p in GWO_PARAMS)
+PSO_NAMES = tuple(p.name for p in PSO_PARAMS)
 
 
 def residual_fitness(model, z, k, mask=None, meas=None):
@@ -66,7 +92,7 @@ def residual_fitness(model, z, k, mask=None, meas=None):
 
     ``z`` (nz,) with ``X`` (N, nx), or per run (M, nz) with ``X`` (M, N, nx);
     ``meas`` = (R, angles, R^-1, log det R) of the step when already computed
-    (:meth:`replay.filters.p002.stcpf.Engine.measurement`, masked components only).
+    (:meth:`replay.filters.p002.cubature.CubatureUpdate.measurement`, masked components only).
     """
     if meas is None:
         R, angles = model.measurement_cov(k), model.z_angles
@@ -87,35 +113,46 @@ def residual_fitness(model, z, k, mask=None, meas=None):
 
 
 class SwarmParticleFilter(CubatureParticleFilter):
-    """A particle filter whose resampling is a GWO, IGWO or PSO optimisation of the particles."""
+    """A particle filter whose resampling is a GWO, IGWO or PSO optimisation of the particles.
+
+    ``resampling`` / ``ess_threshold`` act only on steps without a measurement (nothing to optimise).
+    """
 
     name = "swarm-pf"
+    PARAMS = (
+        *CubatureParticleFilter.PARAMS[:2],
+        Param("optimizer", str, "igwo", "what replaces resampling", choices=OPTIMIZERS),
+        Param("t_max", int, 20, "optimiser iterations per step (002: T_max = 20; PSO: its 'iterations')", low=0),
+        Param("estimate_at", str, "after", "estimate from the particles after the optimiser moved them "
+              "(weighted by the likelihood) or before", choices=("after", "before")),
+        *GWO_PARAMS,
+        *PSO_PARAMS,
+        *CubatureParticleFilter.PARAMS[2:],
+    )
 
-    def __init__(self, n_particles: int = 100, proposal: str = "stckf", optimizer: str = "igwo",
-                 t_max: int = 20, a_start: float = 2.0, a_end: float = 0.0, b_start: float = 1.0,
-                 b_end: float = 0.5, xi: float = 1e-4, omega_max: float = 0.9, omega_min: float = 0.4,
-                 omega_decay: float = 0.2, c1=(2.0, 1.0), c2=(1.5, 2.0),
-                 lower=pso.LB_002, upper=pso.UB_002, rho: float = 0.95, beta: float = 1.2,
-                 m_form: str = "propagated", scale_prior: bool = True, estimate_at: str = "after",
-                 resampling: str = "systematic", ess_threshold: float = 1.0, compiled: bool = True):
-        # resampling / ess_threshold: used only on steps without a measurement (nothing to optimise)
-        super().__init__(n_particles, proposal, rho, beta, m_form, scale_prior, resampling, ess_threshold,
-                         compiled)
-        if estimate_at not in ("before", "after"):
-            raise ReplayError(f"estimate must be 'before' or 'after' the optimiser (got {estimate_at!r})")
-        self.estimate_at = estimate_at
-        if optimizer not in OPTIMIZERS:
-            raise ReplayError(f"optimizer must be one of {', '.join(OPTIMIZERS)} (got {optimizer!r})")
-        gwo.check_params(t_max, a_start, a_end, xi)
-        if optimizer == "pso":
-            pso.check_params(t_max, omega_max, omega_min)
-        lo, hi = pso.check_bounds(lower, upper)
-        self.optimizer, self.t_max = optimizer, t_max
-        self.a_start, self.a_end, self.b_start, self.b_end, self.xi = a_start, a_end, b_start, b_end, xi
-        self.omega_max, self.omega_min, self.omega_decay = omega_max, omega_min, omega_decay
-        self.c1, self.c2 = tuple(c1), tuple(c2)
-        self.lower = None if lo is None else lo.tolist()
-        self.upper = None if hi is None else hi.tolist()
+    def check(self):
+        p, owner = self.params(), self.owner()
+        if "a_start" in p and not p["a_start"] >= p["a_end"]:
+            raise ReplayError(f"{owner}: a_end must be <= a_start = {p['a_start']:g} (got {p['a_end']:g})")
+        if self.optimizer != "pso":
+            return
+        if self.t_max < 1:
+            raise ReplayError(f"{owner}: t_max must be an integer >= 1 for PSO (got {self.t_max})")
+        if not p["omega_min"] <= p["omega_max"]:
+            raise ReplayError(f"{owner}: omega_min must be <= omega_max = {p['omega_max']:g} "
+                              f"(got {p['omega_min']:g})")
+        lo, hi = p["lower"], p["upper"]
+        if (lo is None) != (hi is None):
+            raise ReplayError(f"{owner}: lower and upper must be given together or both null "
+                              f"(got lower={lo}, upper={hi})")
+        if lo is not None:
+            if len(lo) != len(hi):
+                raise ReplayError(f"{owner}: lower and upper must have one length (got {len(lo)} and {len(hi)})")
+            bad = [i for i, (a, b) in enumerate(zip(lo, hi)) if not a < b]
+            if bad:
+                i = bad[0]
+                raise ReplayError(f"{owner}: lower must be < upper in every component "
+                                  f"(component {i}: lower {lo[i]:g} >= upper {hi[i]:g})")
 
     def engine(self, model, rngs):
         return SwarmEngine(self, model, rngs)
@@ -133,9 +170,10 @@ class SwarmEngine(Engine):
         use = flt.optimizer == "pso" and flt.lower is not None and len(flt.lower) == n
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
         # compiled GWO/IGWO with the model's compiled h (Gaussian weights only)
-        kern = self.model.kernels() if flt.compiled and not self.custom_loglik else None
+        compiled = getattr(flt, "compiled", False) and flt.optimizer != "pso" and not self.custom_loglik
+        kern = self.model.kernels() if compiled else None
         self.k_swarm = None
-        if kern is not None and flt.optimizer != "pso":
+        if kern is not None:
             self.k_swarm = Kernel(bind(kern).swarm_move)
             self.xmask = self.angle_mask(self.model.x_angles, n)
             self.zmask = self.angle_mask(self.model.z_angles, self.model.nz)
@@ -154,8 +192,8 @@ class SwarmEngine(Engine):
 
     def move(self, zz, k, mask, meas):
         flt, m = self.flt, self.model
-        w = self.normalise()
-        c = weighted_mean_rows(self.X, w, m.x_angles)[:, None, :]
+        w, self.logw = particles.normalise(self.logw)
+        c = particles.estimate(self.X, w, m.x_angles)[0][:, None, :]
         fit = residual_fitness(m, zz, k, mask, None if self.custom_loglik else meas)
 
         def fitness(Xr):  # h is periodic in angle components: no need to wrap before it
@@ -207,7 +245,7 @@ class SwarmEngine(Engine):
         self.moves[self.ids] += 1
         self.relocated = True
 
-    def after_estimate(self, w):
+    def resample(self, w):
         if self.pending is not None:
             self.move(*self.pending)
             self.pending = None
@@ -216,7 +254,7 @@ class SwarmEngine(Engine):
             self.logw = np.full(self.logw.shape, -np.log(N))
             self.relocated = False
         else:
-            super().after_estimate(w)
+            super().resample(w)
 
     def finish(self, m, info):
         super().finish(m, info)
@@ -225,51 +263,39 @@ class SwarmEngine(Engine):
         info["bounds"] = "paper (002 §4.1)" if self.bounds is not None else "none"
 
 
-def _fixed(cls, params: dict, t_max: int) -> dict:
-    """Constructor arguments of a named variant: its proposal and optimiser are fixed (a manifest
-    records them, so ``replay rerun`` passes them back: accepted when equal, refused otherwise)."""
-    for key, value in (("proposal", cls.PROPOSAL), ("optimizer", cls.OPTIMIZER)):
-        given = params.pop(key, value)
-        if given != value:
-            raise ReplayError(f"{cls.name}: {key} is fixed to {value!r} (got {given!r})")
-    params.setdefault("t_max", t_max)
-    return dict(proposal=cls.PROPOSAL, optimizer=cls.OPTIMIZER, **params)
-
-
 class IGWOSTCPF(SwarmParticleFilter):
     """IGWO-STCPF (002, §3.3): STCKF importance density, IGWO in place of resampling."""
 
-    name, PROPOSAL, OPTIMIZER = "igwo-stcpf", "stckf", "igwo"
-
-    def __init__(self, n_particles: int = 100, t_max: int = 20, **params):
-        super().__init__(n_particles, **_fixed(type(self), dict(params, t_max=t_max), t_max))
+    name, proposal, optimizer = "igwo-stcpf", "stckf", "igwo"
+    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES)
 
 
-class GWOPF(IGWOSTCPF):
+class GWOPF(SwarmParticleFilter):
     """Bootstrap PF with standard GWO in place of resampling (002, §3.2 benchmark 1)."""
 
-    name, PROPOSAL, OPTIMIZER = "gwo-pf", "prior", "gwo"
+    name, proposal, optimizer = "gwo-pf", "prior", "gwo"
+    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES, *STCKF_NAMES)
 
 
-class IGWOPF(IGWOSTCPF):
+class IGWOPF(GWOPF):
     """Bootstrap PF with IGWO in place of resampling (002, §3.2 benchmark 1)."""
 
-    name, PROPOSAL, OPTIMIZER = "igwo-pf", "prior", "igwo"
+    name, proposal, optimizer = "igwo-pf", "prior", "igwo"
 
 
 class PSOPF(SwarmParticleFilter):
     """PSO-PF baseline (002, §4.1): bootstrap PF, PSO (20 iterations, bounded) in place of resampling.
 
-    ``iterations`` is the PSO name of ``t_max`` (recorded as ``t_max``; either is accepted).
+    The PSO iteration count is ``t_max`` (the paper's "iterations"; one name for
+    every swarm filter). Nothing is compiled (the bootstrap proposal and PSO are numpy).
     """
 
-    name, PROPOSAL, OPTIMIZER = "pso-pf", "prior", "pso"
-
-    def __init__(self, n_particles: int = 100, iterations: int = 20, **params):
-        super().__init__(n_particles, **_fixed(type(self), params, iterations))
+    name, proposal, optimizer = "pso-pf", "prior", "pso"
+    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES, "compiled")
 
 
-class PSOCPF(PSOPF):
-    """PSO-CPF baseline (002, §4.1): PSO-PF with a per-particle CKF importance density."""
+class PSOCPF(SwarmParticleFilter):
+    """PSO-CPF baseline (002, §4.1): PSO-PF with a per-particle CKF importance density (``t_max`` iterations)."""
 
-    name, PROPOSAL, OPTIMIZER = "pso-cpf", "ckf", "pso"
+    name, proposal, optimizer = "pso-cpf", "ckf", "pso"
+    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES)

@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.errors import ReplayError
-
 from .gwo import as_runs, draws
 
 # 002, §4.1: bounds of the search for the AUV state [x, y, z, v, pitch, yaw].
@@ -34,27 +32,6 @@ def inertia(t: int, omega_max: float = 0.9, omega_min: float = 0.4, alpha: float
 def ramp(t: int, iterations: int, start: float, end: float) -> float:
     """Linear schedule from ``start`` (t = 1) to ``end`` (t = iterations)."""
     return start + (end - start) * (t - 1) / max(iterations - 1, 1)
-
-
-def check_bounds(lower, upper):
-    """Validate a pair of bound vectors (or None for unbounded); one-line error naming the problem."""
-    if lower is None and upper is None:
-        return None, None
-    lo, hi = np.asarray(lower, float), np.asarray(upper, float)
-    if lo.shape != hi.shape or lo.ndim != 1:
-        raise ReplayError(f"PSO bounds: lower and upper must be vectors of one length (got {lo.shape}, {hi.shape})")
-    bad = np.flatnonzero(~(lo < hi))
-    if len(bad):
-        i = int(bad[0])
-        raise ReplayError(f"PSO bounds: LB >= UB in component {i} ({lo[i]} >= {hi[i]})")
-    return lo, hi
-
-
-def check_params(iterations, omega_max, omega_min):
-    if not (isinstance(iterations, (int, np.integer)) and iterations >= 1):
-        raise ReplayError(f"PSO iterations must be a positive integer (got {iterations!r})")
-    if not 0 <= omega_min <= omega_max:
-        raise ReplayError(f"PSO inertia needs 0 <= omega_min <= omega_max (got {omega_min}, {omega_max})")
 
 
 def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,

@@ -39,17 +39,20 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import residual
-from replay.util.errors import ReplayError
+from replay.util.params import Param
 from replay.model import remap_indices
 
 from ..sigma import CKF
 
 
-def check_params(rho, beta):
-    if not 0.0 < rho <= 1.0:
-        raise ReplayError(f"rho (STCKF forgetting factor) must lie in (0, 1] (got {rho})")
-    if not beta >= 1.0:
-        raise ReplayError(f"beta (STCKF weakening factor) must be >= 1 (got {beta})")
+STCKF_PARAMS = (
+    Param("rho", float, 0.95, "STCKF forgetting factor of the innovation average V (002 §2.2.2)",
+          low=0.0, high=1.0, low_open=True),
+    Param("beta", float, 1.2, "STCKF weakening factor (002 §2.2.2)", low=1.0),
+    Param("m_form", str, "propagated", "M of the fading factor: H Phi P Phi' H' (propagated) or H Phi H' "
+          "as printed", choices=("propagated", "printed")),
+    Param("scale_prior", bool, True, "scale the prior covariance by the fading factor too (false: as printed)"),
+)
 
 
 def next_V(V, e, rho):
@@ -93,13 +96,7 @@ class STCKF(CKF):
     """CKF with the strong-tracking fading factor of 002 §2.2.2 (rho = 0.95, beta = 1.2)."""
 
     name = "stckf"
-
-    def __init__(self, rho: float = 0.95, beta: float = 1.2, m_form: str = "propagated",
-                 scale_prior: bool = True):
-        check_params(rho, beta)
-        if m_form not in ("propagated", "printed"):
-            raise ReplayError(f"m_form must be 'propagated' or 'printed' (got {m_form!r})")
-        self.rho, self.beta, self.m_form, self.scale_prior = rho, beta, m_form, scale_prior
+    PARAMS = CKF.PARAMS + STCKF_PARAMS
 
     def start(self, state, x0, P0):
         super().start(state, x0, P0)

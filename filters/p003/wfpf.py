@@ -1,6 +1,7 @@
 """Weight-factor particle filter (paper 003, §3, eq. 22–27).
 
-The bootstrap PF of :mod:`replay.filters.pf` with two changes from 003:
+The bootstrap PF of :mod:`replay.filters.pf` (over the Monte Carlo run axis,
+without roughening) with two changes from 003, made in its weighting step:
 
 * likelihood weights are floored at ``weight_floor`` = 1e−99 (§2, under
   eq. 22: "to avoid zero weights, the minimum is set to 1e−99"): applied to
@@ -27,40 +28,35 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.errors import ReplayError
+from replay.util.params import Param
 
+from .. import particles
 from ..pf import ParticleFilter
 
+_PF = {p.name: p for p in ParticleFilter.PARAMS}
 
 
 class WeightFactorPF(ParticleFilter):
-    """Bootstrap PF with weight floor and weight exponent α (003 eq. 27)."""
+    """Bootstrap PF with weight floor and weight exponent α (003 eq. 22, 27)."""
 
     name = "wf-pf"
+    PARAMS = (
+        _PF["n_particles"],
+        Param("alpha", float, 0.75, "weight exponent α of eq. 27 (1: the bootstrap PF; toward 0: uniform)",
+              low=0.0, high=1.0, low_open=True),
+        Param("weight_floor", float, 1e-99, "floor of the unnormalised weight w p(z | x) (§2, under eq. 22)",
+              low=0.0, low_open=True),
+        _PF["resampling"],
+        _PF["ess_threshold"],
+    )
+    roughening = 0.0  # the paper has none
 
-    def __init__(self, n_particles: int = 1000, alpha: float = 0.75, weight_floor: float = 1e-99,
-                 resampling: str = "systematic", ess_threshold: float = 1.0):
-        super().__init__(n_particles, resampling, ess_threshold)
-        a = float(alpha)
-        if not 0.0 < a <= 1.0:
-            raise ReplayError(f"wf-pf: weight exponent alpha={a:g} must lie in (0, 1]")
-        if not float(weight_floor) > 0.0:
-            raise ReplayError(f"wf-pf: weight_floor={weight_floor:g} must be positive")
-        self.alpha = a
-        self.weight_floor = float(weight_floor)
-
-    def update(self, state, z, k, mask):
-        logw = state.logw + state.model.loglik(z, state.particles, k, mask)
-        logw = np.maximum(logw, np.log(self.weight_floor))  # floor 1e-99 (eq. 22)
-        logw = logw - logw.max()
-        logw -= np.log(np.exp(logw).sum())  # normalised (eq. 23)
-        state.w, state.logw = temper(logw, self.alpha)
+    def weigh(self, logw, ll):
+        l = np.maximum(logw + ll, np.log(self.weight_floor))  # floor 1e-99 (eq. 22)
+        _, l = particles.normalise(l)  # normalised (eq. 23)
+        return temper(l, self.alpha)  # eq. 27
 
 
 def temper(logw: np.ndarray, alpha: float):
-    """Eq. 27 on normalised log-weights: (w, log w) of w^α / Σ w^α."""
-    a = alpha * logw
-    a -= a.max()
-    w = np.exp(a)
-    s = w.sum()
-    return w / s, a - np.log(s)
+    """Eq. 27 on normalised log-weights (..., N): (w, log w) of w^α / Σ w^α."""
+    return particles.normalise(alpha * logw)

@@ -174,7 +174,7 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
                     progress.update(len(results), bad)
         finally:
             progress.close()
-    counts["rows"] = board.summarise(out)
+    counts["rows"] = board.summarise(out, [config_hash(c.as_dict()) for c in campaign.configs])
     return counts
 
 

@@ -26,13 +26,15 @@ A campaign is a TOML file::
     grid = { n_particles = [200, 1000] }    # one configuration per combination
 
 Everything is checked before any work starts (:func:`load`): an unknown
-section, key, dataset, task, filter or parameter, a wrong type, or an empty
-grid raises :class:`~replay.util.errors.ReplayError` with one line naming the file,
-the line and the key.
+section, key, dataset, task, filter or parameter, a parameter of the wrong type
+or out of the bounds its declaration states (:mod:`replay.util.params`), or an
+empty grid raises :class:`~replay.util.errors.ReplayError` with one line naming
+the file, the line and the key. Each configuration stores its parameters with
+every default filled in (canonical), so ``{}`` and the defaults are the same
+configuration, with the same hash.
 """
 from __future__ import annotations
 
-import inspect
 import itertools
 import re
 import tomllib
@@ -41,31 +43,13 @@ from pathlib import Path
 
 from replay.align import ALIGNMENTS
 from replay.util.errors import ReplayError
-from replay.evaluate import _jsonable as _plain
+from replay.pipeline import Config
+from replay.pipeline import plain as _plain
 
 CAMPAIGN_KEYS = {"name": str, "runs": int, "seed": int, "batch": int, "alignment": str,
                  "divergence_threshold": float, "data_dir": str}
 DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int}
 FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
-
-
-@dataclass(frozen=True)
-class Config:
-    """One configuration: everything that fixes the numbers of its runs except the run index."""
-
-    dataset: str
-    dataset_params: dict
-    first: int | None
-    task: str
-    task_params: dict
-    filter: str
-    filter_params: dict
-    seed: int
-    alignment: str
-    divergence_threshold: float | None
-
-    def as_dict(self) -> dict:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
 @dataclass
@@ -115,27 +99,23 @@ def _check_keys(where, table: dict, allowed: dict, what: str):
         _check_type(where, key, value, allowed[key])
 
 
-def check_params(where, owner: str, cls, params: dict) -> None:
-    """Unknown parameter names and values of the wrong type (against the constructor's defaults)."""
-    sig = inspect.signature(cls.__init__)
-    names = {n: p for n, p in sig.parameters.items() if n != "self"}
-    if any(p.kind == p.VAR_KEYWORD for p in names.values()):
-        return
+def check_params(where, owner: str, declarations, params: dict) -> None:
+    """Each parameter against its declaration: an unknown name, a wrong type or a value out of
+    bounds -> ``file:line: key: message``."""
+    known = {p.name: p for p in declarations}
     for key, value in params.items():
-        if key not in names:
-            known = ", ".join(n for n in names if names[n].kind != names[n].VAR_POSITIONAL) or "none"
-            raise where.error(key, f"{owner} has no parameter {key!r} (known: {known})")
-        default = names[key].default
-        if isinstance(default, (bool, int, float, str)) and default is not None:
-            typ = float if type(default) is float else type(default)
-            _check_type(where, key, value, typ)
+        if key not in known:
+            raise where.error(key, f"{owner} has no parameter {key!r} (known: {', '.join(known) or 'none'})")
+        try:
+            known[key].check(value, owner)
+        except ReplayError as e:
+            raise where.error(key, str(e), value) from None
 
 
 def _class_of(registry: dict, name: str):
-    from importlib import import_module
+    from replay.util.lookup import resolve
 
-    module, cls = registry[name].split(":")
-    return getattr(import_module(module), cls)
+    return resolve(registry, name, "component")
 
 
 def load(path) -> Campaign:
@@ -179,7 +159,7 @@ def load(path) -> Campaign:
             raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
         if not isinstance(tp, dict):
             raise where.error(tname, "expected a table of task parameters")
-        check_params(where, f"task {tname!r}", _class_of(TASKS, tname), tp)
+        check_params(where, f"task {tname!r}", _class_of(TASKS, tname).PARAMS, tp)
 
     datasets = doc.get("dataset", [])
     if not isinstance(datasets, list) or not datasets:
@@ -210,7 +190,14 @@ def load(path) -> Campaign:
         if ds.kind == "file" and registry.locate(ds, data_dir) is None:
             raise where.error("id", f"dataset {ds_id} not found (set data_dir in [campaign], pass "
                                     f"--data-dir, or run `replay datasets fetch {ds_id}`)", ds_id)
-        ds_entries.append((ds_id, entry.get("params", {}), first, tasks))
+        ds_params = entry.get("params", {})
+        if ds.kind == "sim":
+            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, ds_params)
+        try:
+            ds_params = _plain(registry.check_params(ds, ds_params))
+        except ReplayError as e:
+            raise where.error(next(iter(ds_params), "params"), str(e)) from None
+        ds_entries.append((ds_id, ds_params, first, tasks))
 
     flt_entries = []
     for entry in filters:
@@ -220,16 +207,16 @@ def load(path) -> Campaign:
             raise where.error("filter", "every [[filter]] needs a name")
         if name not in FILTERS:
             raise where.error("name", f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})", name)
-        cls = _class_of(FILTERS, name)
+        declared = _class_of(FILTERS, name).PARAMS
         base, grid = entry.get("params", {}), entry.get("grid", {})
-        check_params(where, f"filter {name!r}", cls, base)
+        check_params(where, f"filter {name!r}", declared, base)
         for key, values in grid.items():
             if not isinstance(values, list):
                 raise where.error(key, f"grid values must be a list, got {type(values).__name__}")
             if not values:
                 raise where.error(key, "empty grid: give at least one value")
             for v in values:
-                check_params(where, f"filter {name!r}", cls, {key: v})
+                check_params(where, f"filter {name!r}", declared, {key: v})
         keys = list(grid)
         for combo in itertools.product(*(grid[k] for k in keys)):
             params = {**base, **dict(zip(keys, combo))}

@@ -112,7 +112,7 @@ def make_cmd(dataset_id, out, seed, params):
 
     import numpy as np
 
-    from replay.cli.main import parse_params
+    from replay.cli.params import dataset_params
 
     ds = registry.get(dataset_id)
     if ds.kind != "sim":
@@ -121,8 +121,5 @@ def make_cmd(dataset_id, out, seed, params):
     writer = getattr(module, "write_example", None)
     if writer is None:
         raise ReplayError(f"{ds.id}: its generator has no file format to write (no write_example)")
-    try:
-        frame = writer(out, np.random.default_rng(seed), **parse_params(params, "--param"))
-    except TypeError as err:
-        raise ReplayError(f"{ds.id}: {err}") from None
+    frame = writer(out, np.random.default_rng(seed), **dataset_params(params, ds, option="--param"))
     click.echo(f"wrote {out}: {len(frame)} samples, seed {seed} (synthetic, {ds.id})")

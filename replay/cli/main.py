@@ -24,25 +24,6 @@ class Main(click.Group):
             ctx.exit(2)
 
 
-def parse_params(items, what: str) -> dict:
-    """``["pf.n_particles=500", ...]`` -> ``{"pf": {"n_particles": 500}}`` (values parsed as JSON)."""
-    out: dict = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ReplayError(f"{what} {item!r}: expected KEY=VALUE")
-        try:
-            parsed = json.loads(value)
-        except json.JSONDecodeError:
-            parsed = value
-        node = out
-        *path, leaf = key.split(".")
-        for part in path:
-            node = node.setdefault(part, {})
-        node[leaf] = parsed
-    return out
-
-
 @click.group(cls=Main)
 @click.version_option(replay.__version__, prog_name="replay")
 def main():
@@ -62,10 +43,12 @@ def main():
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option("--param", "-p", "params", multiple=True,
-              help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable).")
-@click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
+              help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable; "
+                   "VALUE is JSON; `replay list filters` shows every filter's parameters).")
+@click.option("--task-param", "task_params", multiple=True,
+              help="Task parameter NAME=VALUE (repeatable; `replay list tasks`).")
 @click.option("--dataset-param", "dataset_params", multiple=True,
-              help="Dataset (simulator) parameter NAME=VALUE, e.g. q=10 for sim/ungm (repeatable).")
+              help="Dataset parameter NAME=VALUE, e.g. q=10 for sim/ungm (repeatable; `replay list datasets`).")
 @click.option("--baseline", default=None,
               help="Filter the leaderboard's paired columns compare with (default: the first listed).")
 @click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
@@ -74,9 +57,15 @@ def main():
               help="Also export the run as a Foxglove MCAP file.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(file_okay=False),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
+@click.option("--alignment", default="se3", show_default=True, type=click.Choice(["none", "yaw", "se3", "sim3"]),
+              help="Alignment of the estimate onto the reference for the ATE column.")
+@click.option("--divergence-threshold", default=None, type=click.FloatRange(0, min_open=True),
+              help="Position error (m) beyond which a run counts as diverged (default: none).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
-             dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None):
+             dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
+             divergence_threshold=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
+    from replay.cli import params as cli_params
     from replay.evaluate import evaluate
     from replay.outputs.files import format_table, write_all
 
@@ -85,16 +74,20 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         raise ReplayError("--filters: no filter named")
     if baseline is not None and baseline not in names:
         raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names)})")
-    dparams = parse_params(dataset_params, "--dataset-param")
+    fparams = cli_params.filter_params(params, names)
+    tparams = cli_params.task_params(task_params, task)
+    dparams = cli_params.dataset_params(dataset_params)
     if mapping:
         dparams["mapping"] = str(Path(mapping).resolve())
+    cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
-                  data_dir=data_dir, filter_params=parse_params(params, "--param"),
-                  task_params=parse_params(task_params, "--task-param"), adapter=adapter,
-                  dataset_params=dparams or None)
+                  data_dir=data_dir, filter_params=fparams,
+                  task_params=tparams, adapter=adapter,
+                  dataset_params=dparams or None, alignment=alignment,
+                  divergence_threshold=divergence_threshold, baseline=baseline)
     click.echo(format_table(ev))
     out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
-    paths = write_all(ev, out, baseline)
+    paths = write_all(ev, out)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:
         from replay.cli.bags import export_outputs
@@ -119,7 +112,8 @@ def rerun_cmd(manifest_file, data_dir, out):
     ev = evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
                   seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
                   task_params=cfg["task_params"], filter_params=cfg["filter_params"],
-                  dataset_params=cfg.get("dataset_params"), adapter=cfg.get("adapter"))
+                  dataset_params=cfg.get("dataset_params"), adapter=cfg.get("adapter"),
+                  alignment=cfg.get("alignment", "se3"), divergence_threshold=cfg.get("divergence_threshold"))
     click.echo(format_table(ev))
     if out:
         write_all(ev, Path(out))
@@ -152,36 +146,12 @@ def reproduce_cmd(paper, runs, seed, data_dir, doc, quick):
     run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick)
 
 
-@main.command("list")
-@click.argument("what", type=click.Choice(["filters", "tasks", "adapters", "reproductions"]))
-def list_cmd(what):
-    """List the registered filters, tasks, adapters or paper reproductions, with their parameters."""
-    import inspect
-
-    from replay.adapters import ADAPTERS
-    from replay.filters import FILTERS
-    from replay.util.lookup import resolve
-    from replay.reproduce import REPRODUCTIONS
-    from replay.tasks import TASKS
-
-    table = {"filters": FILTERS, "tasks": TASKS, "adapters": ADAPTERS, "reproductions": REPRODUCTIONS}[what]
-    for name in sorted(table):
-        obj = resolve(table, name, what[:-1])
-        doc = inspect.getdoc(obj) if obj.__doc__ else inspect.getdoc(sys.modules[obj.__module__])
-        doc = (doc or "").split("\n")[0]
-        click.echo(f"{name:14s} {doc}")
-        if inspect.isclass(obj):
-            sig = inspect.signature(obj.__init__)
-            args = [f"{p.name}={p.default!r}" for p in sig.parameters.values()
-                    if p.name != "self" and p.default is not inspect.Parameter.empty]
-            if args:
-                click.echo(f"{'':14s} parameters: {', '.join(args)}")
-
-
 def _register_optional():
     from replay.cli.datasets import datasets
+    from replay.cli.listing import list_cmd
 
     main.add_command(datasets)
+    main.add_command(list_cmd)
     from replay.cli.bags import export_cmd, inspect_cmd
 
     main.add_command(inspect_cmd)

@@ -40,7 +40,8 @@ FRAME_ID = "enu"
 def load_run(run_dir, data_dir=None) -> dict:
     """The manifest, run-0 estimates per filter, the frame and the rebuilt problem."""
     from replay import registry
-    from replay.evaluate import resolve, rng_for
+    from replay.pipeline import resolve
+    from replay.util.seeds import rng_for
     from replay.tasks import make_task
 
     run_dir = Path(run_dir)
@@ -187,7 +188,7 @@ def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     path = np.concatenate([head, body])
     out.add_many(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], (path, [len(path)]))
     if geo_meta:
-        from replay.adapters.bags import enu_to_geodetic
+        from replay.adapters.geodesy import enu_to_geodetic
 
         lat, lon, alt = enu_to_geodetic(pos3, geo_meta)
         fixes = encode(LocationFix, {**_stamp(t), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon,

@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from replay import registry, score
-from replay.evaluate import filter_stream, rng_for
+from replay.util.seeds import filter_stream, rng_for
 from replay.filters import make_filter
 from replay.models.depth import R_FIXED, paper_Q
 from replay.sim.lake_depth import base_for_rms

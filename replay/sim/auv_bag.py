@@ -23,6 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.util.params import Param, validate
+
+from . import generator
+
 AUV_MAPPING = {
     "time": "header",
     "channels": {
@@ -51,13 +55,31 @@ def trajectory(t, speed=1.5, depth=10.0, depth_swing=2.0, leg=60.0):
     return east, north, d, heading, rate
 
 
-def make_bag(path, rng: np.random.Generator, *, duration: float = 120.0, speed: float = 1.5,
-             depth: float = 10.0, depth_swing: float = 2.0, sigma_dvl: float = 0.02,
-             sigma_p: float = 50.0, sigma_gyro: float = 0.002, sigma_yaw: float = 0.01,
-             latency: float = 0.005) -> int:
-    """Write the recording to ``path`` (a ROS 2 bag directory); returns messages written."""
+PARAMS = (
+    Param("duration", float, 120.0, "length of the recording", unit="s", low=0, low_open=True),
+    Param("speed", float, 1.5, "survey speed", unit="m/s", low=0),
+    Param("depth", float, 10.0, "mean depth", unit="m"),
+    Param("depth_swing", float, 2.0, "amplitude of the slow (300 s) depth change", unit="m", low=0),
+    Param("sigma_dvl", float, 0.02, "DVL velocity noise standard deviation", unit="m/s", low=0),
+    Param("sigma_p", float, 50.0, "pressure noise standard deviation", unit="Pa", low=0),
+    Param("sigma_gyro", float, 0.002, "gyro noise standard deviation", unit="rad/s", low=0),
+    Param("sigma_yaw", float, 0.01, "IMU yaw noise standard deviation", unit="rad", low=0),
+    Param("latency", float, 0.005, "log time minus header stamp", unit="s", low=0),
+)
+
+
+def make_bag(path, rng: np.random.Generator, **params) -> int:
+    """Write the recording to ``path`` (a ROS 2 bag directory); returns messages written.
+
+    ``params``: see :data:`PARAMS` (checked, defaults filled in).
+    """
     from replay.adapters.rosmsg import ATMOSPHERIC_PRESSURE, GRAVITY, WATER_DENSITY, rpy_to_quat
-    from replay.outputs.export_ros2 import BagOut
+    from replay.adapters.bags import BagOut
+
+    p = validate(PARAMS, params, "simulator replay.sim.auv_bag")
+    duration, speed, depth, depth_swing = p["duration"], p["speed"], p["depth"], p["depth_swing"]
+    sigma_dvl, sigma_p, sigma_gyro, sigma_yaw = p["sigma_dvl"], p["sigma_p"], p["sigma_gyro"], p["sigma_yaw"]
+    latency = p["latency"]
 
     fine = np.arange(0.0, duration, 0.01)
     e, n, d, h, w = trajectory(fine, speed, depth, depth_swing)
@@ -108,6 +130,7 @@ def make_bag(path, rng: np.random.Generator, *, duration: float = 120.0, speed: 
     return out.count
 
 
+@generator(PARAMS)
 def make_frame(rng: np.random.Generator, **params):
     """Generate the bag in a temporary directory and read it with the ``bags`` adapter."""
     from replay.adapters.bags import load

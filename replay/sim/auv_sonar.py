@@ -14,17 +14,36 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
+from replay.util.params import Param
 from replay.frame import Channel, Frame
 from replay.models.auv_sonar import AUVSonar, Q_TABLE2, R_TABLE2
+from replay.noise import Covariance, as_matrix, diagonal
+
+from . import Numbers, generator
 
 X0_TABLE2 = (0.0, 0.0, 0.0, 10.0, np.pi / 4, np.pi / 10)
 
+PARAMS = (
+    Param("steps", int, 100, "number of samples (t = T, 2T, ..., steps T)", low=1),
+    Param("T", float, 1.0, "time step", unit="s", low=0, low_open=True),
+    Numbers("x0", list, X0_TABLE2, "initial state [x, y, z, v, pitch, yaw] at t = 0 (Table 2)",
+            unit="m, m/s, rad", length=6),
+    Param("yaw_rate", float, 0.25, "constant yaw rate of the AUV", unit="rad/s"),
+    Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance (Table 2)", dim=6),
+    Covariance("R", list, diagonal(R_TABLE2), "sonar noise covariance, range/elevation/azimuth "
+               "(Table 2)", unit="m^2, rad^2", dim=3),
+    Param("mixture_eps", float, 0.0, "probability of an outlier, drawn from N(0, mixture_scale R) "
+          "(Table 6: 0.05)", low=0, high=1),
+    Param("mixture_scale", float, 10.0, "outlier covariance as a multiple of R (Table 6: 10)",
+          low=0, low_open=True),
+)
 
-def make_frame(rng: np.random.Generator, *, steps: int = 100, T: float = 1.0,
-               x0=X0_TABLE2, yaw_rate: float = 0.25, Q=Q_TABLE2, R=R_TABLE2,
-               mixture_eps: float = 0.0, mixture_scale: float = 10.0) -> Frame:
+
+@generator(PARAMS)
+def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixture_eps,
+               mixture_scale) -> Frame:
     """Simulate ``steps`` samples of truth and sonar measurements from ``rng``."""
-    model = AUVSonar(Q=Q, R=R, dt=T, yaw_rate=yaw_rate)
+    model = AUVSonar(Q=as_matrix(Q), R=as_matrix(R), dt=T, yaw_rate=yaw_rate)
     x0 = np.asarray(x0, float)
     Lq = np.linalg.cholesky(model.Q)
     Lr = np.linalg.cholesky(model.R)

@@ -32,8 +32,13 @@ from __future__ import annotations
 import numpy as np
 
 from replay.frame import Channel, Frame
+from replay.util.params import Param
+
+from . import Intervals, Numbers, generator
 
 T = 0.05
+REGIMES = (1.0, 3.0, 0.5, 2.0)
+DRIFT = 0.5
 # (start s, end s, commanded pitch deg, commanded speed m/s, label); level runs in between
 PROFILE = (
     (0.0, 10.0, 0.0, 1.5, "level"),
@@ -102,8 +107,8 @@ def noise_sigma(t: np.ndarray, duration: float, base, regimes, drift: float) -> 
     return factor[:, None] * np.asarray(base, float)
 
 
-def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=(1.0, 3.0, 0.5, 2.0),
-                 drift: float = 0.5) -> tuple:
+def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=REGIMES,
+                 drift: float = DRIFT) -> tuple:
     """``base_sigma`` whose sigma_c(t) has root-mean-square ``target[c]`` over the run.
 
     Used to put the sensors at the level of a filter's fixed R (R's std = the
@@ -114,10 +119,23 @@ def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=(1.0, 3.
     return tuple(float(v) for v in np.asarray(target, float) / np.sqrt(np.mean(f * f)))
 
 
-def make_frame(rng: np.random.Generator, *, duration: float = 90.0, dt: float = T,
-               depth0: float = 3.0, base_sigma=(0.05, 0.05, float(np.deg2rad(0.5))),
-               regimes=(1.0, 3.0, 0.5, 2.0), drift: float = 0.5, ref_every: int = 1,
-               ref_gaps=()) -> Frame:
+PARAMS = (
+    Param("duration", float, 90.0, "length of the log", unit="s", low=0, low_open=True),
+    Param("dt", float, T, "sample period", unit="s", low=0, low_open=True),
+    Param("depth0", float, 3.0, "initial depth", unit="m"),
+    Numbers("base_sigma", list, (0.05, 0.05, float(np.deg2rad(0.5))),
+            "base noise standard deviations of the depth, speed and pitch sensors", unit="m, m/s, rad",
+            length=3, low=0),
+    Numbers("regimes", list, REGIMES, "noise factor of each equal part of the run", low=0),
+    Param("drift", float, DRIFT, "slow rise of the noise: factor 1 + drift t / duration", low=0),
+    Param("ref_every", int, 1, "reference at every ref_every-th sample", low=1),
+    Intervals("ref_gaps", list, (), "[t0, t1) spans without reference", unit="s"),
+)
+
+
+@generator(PARAMS)
+def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, regimes, drift, ref_every,
+               ref_gaps) -> Frame:
     """A synthetic lake-trial frame: sensors in ``channels``, truth in ``reference``."""
     n = int(round(duration / dt))
     t = dt * np.arange(n)
@@ -125,7 +143,7 @@ def make_frame(rng: np.random.Generator, *, duration: float = 90.0, dt: float = 
     sigma = noise_sigma(t, duration, base_sigma, regimes, drift)
     z = x + sigma * rng.standard_normal((n, 3))
     ref_ok = np.zeros(n, bool)
-    ref_ok[:: max(1, int(ref_every))] = True
+    ref_ok[::ref_every] = True
     for t0, t1 in ref_gaps:
         ref_ok &= ~((t >= t0) & (t < t1))
     desc = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",

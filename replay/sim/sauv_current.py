@@ -54,6 +54,9 @@ import numpy as np
 from replay.util.angles import wrap
 from replay.frame import Channel, Frame
 from replay.models.sauv import DEG, KNOT, body_to_level
+from replay.util.params import Param
+
+from . import Numbers, generator
 
 LAMBDA, C_PHASE = 0.84, 0.12
 ATT_CONVENTION = ("roll: positive = left side up; pitch: positive = front down; "
@@ -138,12 +141,35 @@ def gauss_markov(rng, n, sigma, tau, T):
     return out
 
 
-def make_frame(rng: np.random.Generator, *, T: float = 0.5, strength: float = 0.5,
-               length_scale: float = 100.0, grid: float = 8.0, origin_en=(0.0, 0.0),
-               dive_pitch_deg: float = 20.0, cruise_s: float = 300.0, heading0_deg: float = 45.0,
-               depth_full_scale: float = 50.0, dvl_percent: float = 1.0, acc_bias: float = 0.02,
-               acc_noise_density: float = 0.02, ahrs_sigma_deg: float = 2.0,
-               ahrs_tau: float = 30.0) -> Frame:
+PARAMS = (
+    Param("T", float, 0.5, "time step (ours)", unit="s", low=0, low_open=True),
+    Param("strength", float, 0.5, "current velocity scale (the jet is non-dimensional)", unit="m/s", low=0),
+    Param("length_scale", float, 100.0, "metres per non-dimensional unit of the jet", unit="m",
+          low=0, low_open=True),
+    Param("grid", float, 8.0, "cell of the sampled current field (001: 8 m); 0 = continuous", unit="m", low=0),
+    Numbers("origin_en", list, (0.0, 0.0), "start point [east, north]", unit="m", length=2),
+    Param("dive_pitch_deg", float, 20.0, "pitch of the dive and the climb (ours)", unit="deg",
+          low=0, high=90, low_open=True, high_open=True),
+    Param("cruise_s", float, 300.0, "duration of the cruise leg DE (ours)", unit="s", low=0),
+    Param("heading0_deg", float, 45.0, "initial heading, NED (ours)", unit="deg"),
+    Param("depth_full_scale", float, 50.0, "depth gauge full scale; its noise is 3 % of it (ours)", unit="m",
+          low=0, low_open=True),
+    Param("dvl_percent", float, 1.0, "DVL noise standard deviation, percent of speed per axis (001 §5)",
+          unit="%", low=0),
+    Param("acc_bias", float, 0.02, "accelerometer bias standard deviation, constant over a run (001 §5)",
+          unit="m/s^2", low=0),
+    Param("acc_noise_density", float, 0.02, "accelerometer white noise density (001 §5)",
+          unit="m/(s^2 sqrt(Hz))", low=0),
+    Param("ahrs_sigma_deg", float, 2.0, "AHRS roll, pitch and heading error standard deviation (001 §5)",
+          unit="deg", low=0),
+    Param("ahrs_tau", float, 30.0, "correlation time of the AHRS error (ours); 0 = white", unit="s", low=0),
+)
+
+
+@generator(PARAMS)
+def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, origin_en, dive_pitch_deg,
+               cruise_s, heading0_deg, depth_full_scale, dvl_percent, acc_bias, acc_noise_density,
+               ahrs_sigma_deg, ahrs_tau) -> Frame:
     """Simulate the A→G mission in the current field; sensors from ``rng``."""
     t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
     n = len(t)

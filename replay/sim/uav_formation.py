@@ -26,14 +26,17 @@ from replay.util.angles import wrap
 from replay.frame import Channel, Frame
 from replay.models.formation import Formation
 from replay.noise import Glint
+from replay.util.params import Param
+
+from . import Numbers, generator
 
 DEG = np.pi / 180
 X0_FOLLOWER = (400.0, 400.0, 50.0, 50.0)
 X0_LEADER = (520.0, 560.0, 50.0, 50.0)
 
 
-def glint_003(eps: float = 0.75, range_sigma: float = 5.0, sigma1: float = 0.4 * DEG,
-              sigma2: float = 0.8 * DEG) -> Glint:
+def glint_003(eps: float, range_sigma: float, sigma1: float, sigma2: float) -> Glint:
+    """(1 - eps) N(0, diag(range_sigma^2, sigma1^2)) + eps N(0, diag(range_sigma^2, sigma2^2)) (003 eq. 8)."""
     return Glint(np.diag([range_sigma**2, sigma1**2]), np.diag([range_sigma**2, sigma2**2]), eps)
 
 
@@ -42,10 +45,31 @@ def turn_schedule(steps: int, leg: int, rate: float) -> np.ndarray:
     return pattern[(np.arange(steps) // leg) % 4]
 
 
-def make_frame(rng: np.random.Generator, *, steps: int = 100, T: float = 1.0, leg: int = 20,
-               turn_rate: float = 0.05, accel_sigma: float = 1.0, eps: float = 0.75,
-               range_sigma: float = 5.0, sigma1: float = 0.4 * DEG, sigma2: float = 0.8 * DEG,
-               x0=X0_FOLLOWER, leader0=X0_LEADER) -> Frame:
+PARAMS = (
+    Param("steps", int, 100, "number of samples (t = T, ..., steps T)", low=1),
+    Param("T", float, 1.0, "time step (ours)", unit="s", low=0, low_open=True),
+    Param("leg", int, 20, "steps per leg of the straight / left / straight / right pattern (ours)", low=1),
+    Param("turn_rate", float, 0.05, "|w| of the commanded turns, eq. 3 (ours)", unit="rad/s"),
+    Param("accel_sigma", float, 1.0, "follower acceleration noise standard deviation (ours)",
+          unit="m/s^2", low=0, low_open=True),
+    Param("eps", float, 0.75, "glint probability epsilon (003 §4.1)", low=0, high=1),
+    Param("range_sigma", float, 5.0, "range noise standard deviation (003 §4.1)", unit="m",
+          low=0, low_open=True),
+    Param("sigma1", float, 0.4 * DEG, "thermal bearing noise standard deviation (003 §4.1)", unit="rad",
+          low=0, low_open=True),
+    Param("sigma2", float, 0.8 * DEG, "glint bearing noise standard deviation (003 §4.1)", unit="rad",
+          low=0, low_open=True),
+    Numbers("x0", list, X0_FOLLOWER, "follower initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s",
+            length=4),
+    Numbers("leader0", list, X0_LEADER, "leader initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s",
+            length=4),
+)
+
+
+@generator(PARAMS)
+def make_frame(rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigma, eps, range_sigma,
+               sigma1, sigma2, x0, leader0) -> Frame:
+    """Simulate ``steps`` samples of both aircraft and the follower's radar from ``rng``."""
     noise = glint_003(eps, range_sigma, sigma1, sigma2)
     w = turn_schedule(steps, leg, turn_rate)
     lead = np.empty((steps, 4))

@@ -11,10 +11,21 @@ import numpy as np
 
 from replay.frame import Channel, Frame
 from replay.models.ungm import UNGM
+from replay.util.params import Param
+
+from . import generator
+
+PARAMS = (
+    Param("steps", int, 100, "number of samples (k = 1..steps)", low=1),
+    Param("q", float, 1.0, "process noise variance Q (002 §3.2: 1 or 10)", low=0, low_open=True),
+    Param("r", float, 1.0, "measurement noise variance R (002 §3.2: 1 or 10)", low=0, low_open=True),
+    Param("x0", float, 0.0, "initial state x_0"),
+    Param("growth", float, 2.5, "coefficient g of the term g x / (1 + x^2) (see replay.models.ungm)"),
+)
 
 
-def make_frame(rng: np.random.Generator, *, steps: int = 100, q: float = 1.0, r: float = 1.0,
-               x0: float = 0.0, growth: float = 2.5) -> Frame:
+@generator(PARAMS)
+def make_frame(rng: np.random.Generator, *, steps, q, r, x0, growth) -> Frame:
     """Simulate ``steps`` samples (k = 1..steps) of the UNGM from ``rng``."""
     model = UNGM(q, r, growth)
     w = rng.standard_normal(steps) * np.sqrt(q)

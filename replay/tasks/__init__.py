@@ -2,13 +2,17 @@
 
 A task turns a :class:`replay.frame.Frame` into a :class:`Problem`: the model,
 the measurement array the filters see, the prior, and — kept for the scorer
-only — the truth. ``TASKS`` maps task names to "module:Class".
+only — the truth. ``TASKS`` maps task names to "module:Class". Every task
+declares its parameters (``PARAMS``, :mod:`replay.util.params`): they are
+checked strictly when the task is made, before any data is read.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from replay.util.params import Declared
 
 TASKS = {
     "position": "replay.tasks.position:PositionTask",
@@ -40,21 +44,26 @@ class Problem:
     truth_extra: dict = field(default_factory=dict)  # name -> ((n,) truth, NaN = not scored; state index)
 
 
-class Task:
+class Task(Declared):
+    """A task: keyword-only parameters declared in ``PARAMS``; :meth:`build` makes the problem."""
+
+    KIND = "task"
     name = "task"
 
     def build(self, frame, rng: np.random.Generator) -> Problem:
         raise NotImplementedError
 
-    def params(self) -> dict:
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(self).items()}
+
+def task_class(name: str) -> type[Task]:
+    """The class registered as ``name``; an unknown name -> one-line ReplayError listing the known."""
+    from replay.util.lookup import resolve
+
+    return resolve(TASKS, name, "task")
 
 
 def make_task(name: str, **params) -> Task:
-    """Instantiate the task registered as ``name`` with ``params``."""
-    from replay.util.lookup import instantiate
-
-    return instantiate(TASKS, name, "task", **params)
+    """The task registered as ``name`` with ``params`` (checked against its declarations)."""
+    return task_class(name)(**params)
 
 
 def reference_position_3d(frame, z0: float | None = None):

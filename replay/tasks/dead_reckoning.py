@@ -35,7 +35,9 @@ import numpy as np
 
 from replay.util.angles import wrap
 from replay.util.errors import ReplayError
+from replay.util.params import Param
 from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
+from replay.noise import Covariance, as_matrix
 
 from . import Problem, Task
 
@@ -50,15 +52,26 @@ def ned_attitude(att):
 class DeadReckoningTask(Task):
     name = "dead-reckoning"
 
-    def __init__(self, Q=None, R=None, P0=None, gps_sigma: float = 5.0, pseudo_sigma: float = 0.05,
-                 accel_sigma: float = 0.05,
-                 score: str = "navigation", dive_gap: float = 10.0, mean_maneuver: str = "previous"):
-        if score not in ("navigation", "fixes"):
-            raise ReplayError(f"dead-reckoning: score={score!r} must be 'navigation' or 'fixes'")
-        self.Q, self.R, self.P0 = Q, R, P0
-        self.gps_sigma, self.pseudo_sigma = float(gps_sigma), float(pseudo_sigma)
-        self.accel_sigma = float(accel_sigma)
-        self.score, self.dive_gap, self.mean_maneuver = score, float(dive_gap), mean_maneuver
+    PARAMS = (
+        Covariance("Q", list, None, "process noise covariance of the 10 states; null = the model's, "
+                   "scaled by the frame's step / 0.5 s", dim=10, optional=True),
+        Covariance("R", list, None, "measurement noise covariance (4 components on a DVL frame, 8 on a "
+                   "Bohai frame); null = from the sigmas below", optional=True),
+        Covariance("P0", list, None, "prior covariance of the 10 states; null = the task's", dim=10,
+                   optional=True),
+        Param("gps_sigma", float, 5.0, "GPS fix noise standard deviation (Bohai frames)", unit="m",
+              low=0, low_open=True),
+        Param("pseudo_sigma", float, 0.05, "standard deviation of the zero sideways/heave pseudo-measurements",
+              unit="m/s", low=0, low_open=True),
+        Param("accel_sigma", float, 0.05, "standard deviation of the zero-acceleration pseudo-measurements",
+              unit="m/s^2", low=0, low_open=True),
+        Param("score", str, "navigation", "reference: the vehicle's navigation solution, or the first fix "
+              "after each dive", choices=("navigation", "fixes")),
+        Param("dive_gap", float, 10.0, "a gap between fixes longer than this is a dive", unit="s",
+              low=0, low_open=True),
+        Param("mean_maneuver", str, "previous", "mean manoeuvre of the model (replay.models.sauv)",
+              choices=("previous", "zero")),
+    )
 
     def build(self, frame, rng):
         att = frame.channels.get("attitude")
@@ -68,8 +81,7 @@ class DeadReckoningTask(Task):
         roll, pitch, heading = ned_attitude(np.where(att.valid[:, None], att.values, 0.0))
         heading = np.where(att.valid, heading, np.nan)
         dt = np.diff(frame.t, prepend=frame.t[0] - (np.median(np.diff(frame.t)) if len(frame.t) > 1 else 1.0))
-        Q = None if self.Q is None else np.diag(np.asarray(self.Q, float)) if np.ndim(self.Q) == 1 \
-            else np.asarray(self.Q, float)
+        Q = as_matrix(self.Q)
         if Q is None:
             Q = Q_DEFAULT * (float(np.median(dt)) / 0.5)
         if "dvl_velocity" in frame.channels:
@@ -83,11 +95,12 @@ class DeadReckoningTask(Task):
             c = ch[name]
             cols += list(np.where(c.valid[:, None], c.values, np.nan).T)
         z = np.column_stack(cols + [heading])
-        model = SAUV(dt, pitch, roll, Q=Q, R=self.R, measured=PAPER_MEASURED, mean_maneuver=self.mean_maneuver)
+        model = SAUV(dt, pitch, roll, Q=Q, R=as_matrix(self.R), measured=PAPER_MEASURED,
+                     mean_maneuver=self.mean_maneuver)
         ref = frame.reference["position"]
         truth = np.column_stack([ref.values[:, 1], ref.values[:, 0], -ref.values[:, 2]])
         P0 = np.diag([1.0, 1.0, 1.0] + [0.05**2] * 3 + [0.02**2] * 3 + [(2 * DEG) ** 2]) \
-            if self.P0 is None else np.asarray(self.P0, float)
+            if self.P0 is None else as_matrix(self.P0)
         x_true0 = np.asarray(frame.meta["initial_state_ned"], float)
         x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
         x0[9] = wrap(x0[9])
@@ -126,7 +139,7 @@ class DeadReckoningTask(Task):
         z[:, 7] = heading
         R = np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [self.accel_sigma**2] * 3
                     + [(2 * DEG) ** 2]) \
-            if self.R is None else np.asarray(self.R, float)
+            if self.R is None else as_matrix(self.R)
         model = SAUV(dt, pitch, roll, Q=Q, R=R, measured=BOHAI_MEASURED, mean_maneuver=self.mean_maneuver)
         first = idx[0] if len(idx) else int(np.argmax(ref.valid))
         start = ne[first] if len(idx) else truth[first]
@@ -134,6 +147,6 @@ class DeadReckoningTask(Task):
         x0[:2] = start
         x0[9] = heading[first] if np.isfinite(heading[first]) else 0.0
         P0 = np.diag([self.gps_sigma**2] * 2 + [1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.1, (5 * DEG) ** 2]) \
-            if self.P0 is None else np.asarray(self.P0, float)
+            if self.P0 is None else as_matrix(self.P0)
         params = dict(self.params(), resurfacing_fixes=int(len(resurface)), fixes_used=int(fix.sum()))
         return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params)

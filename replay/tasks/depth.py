@@ -20,27 +20,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.errors import DataError, ReplayError
+from replay.util.errors import DataError
+from replay.util.params import Param
 from replay.models.depth import R_FIXED, DepthModel, paper_Q
+from replay.noise import Covariance, as_matrix, diagonal
 
 from . import Problem, Task
 
 CHANNELS = ("depth", "speed", "pitch")
+UNITS = "m^2, (m/s)^2, rad^2"
 
 
 class DepthTask(Task):
     name = "depth"
-
-    def __init__(self, Q=None, R=None, P0=None, window: int = 50):
-        self.Q = None if Q is None else np.asarray(Q, float)
-        self.R = R_FIXED.copy() if R is None else np.asarray(R, float)
-        self.P0 = None if P0 is None else np.asarray(P0, float)
-        self.window = int(window)
-        for name, M in (("Q", self.Q), ("R", self.R), ("P0", self.P0)):
-            if M is not None and M.shape != (3, 3):
-                raise ReplayError(f"task depth: {name} must be 3x3 (got shape {M.shape})")
+    PARAMS = (
+        Covariance("Q", list, None, "process noise covariance of [z, v, phi]; null = the paper's, made "
+                   "positive definite (replay.models.depth.paper_Q)", unit=UNITS, dim=3, optional=True),
+        Covariance("R", list, diagonal(R_FIXED), "fixed measurement noise covariance (000: used by "
+                   "EKF and MMPF)", unit=UNITS, dim=3),
+        Covariance("P0", list, None, "prior covariance; null = R", unit=UNITS, dim=3, optional=True),
+        Param("window", int, 50, "noise-estimation window: fewer valid samples in a channel are refused",
+              low=1),
+    )
 
     def build(self, frame, rng):
+        Qgiven, R, P0given = as_matrix(self.Q), as_matrix(self.R), as_matrix(self.P0)
         source = frame.meta.get("path") or frame.meta.get("source") or frame.meta.get("dataset")
         columns = frame.meta.get("columns", {})
         z = np.empty((len(frame.t), 3))
@@ -61,11 +65,11 @@ class DepthTask(Task):
         med = float(np.median(step)) if len(step) else float(frame.meta.get("dt", 0.05))
         uniform = len(step) == 0 or float(step.max() - step.min()) <= 1e-6 * med
         dt = med if uniform else np.concatenate([[med], step])
-        Q = paper_Q()[0] if self.Q is None else self.Q
-        model = DepthModel(Q, self.R, dt)
+        Q = paper_Q()[0] if Qgiven is None else Qgiven
+        model = DepthModel(Q, R, dt)
         first = np.isfinite(z).all(axis=1)
         x0 = np.nan_to_num(z[int(np.argmax(first))] if first.any() else z[0])
-        P0 = self.R if self.P0 is None else self.P0
+        P0 = R if P0given is None else P0given
         angles, extra = {}, {}
         if "pitch" in frame.reference:
             p = frame.reference["pitch"]
@@ -75,6 +79,6 @@ class DepthTask(Task):
             extra["speed"] = (np.where(s.valid, s.values, np.nan), 1)
         return Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0,), ("depth",),
                        angles, {"pitch": 2} if angles else {},
-                       params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if self.Q is None else "user",
-                               "R": self.R.tolist(), "T": med},
+                       params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if Qgiven is None else "user",
+                               "R": R.tolist(), "T": med},
                        truth_extra=extra)

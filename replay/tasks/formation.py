@@ -5,7 +5,7 @@ Model :class:`replay.models.formation.Formation` built from the frame's
 figures; the measurement noise is the glint mixture (003 eq. 7–10) with the
 frame's ε unless ``eps`` is given (the filters may then assume a glint
 strength different from the simulated one). Prior: x₀ ~ N(x_true0, P0) drawn
-once from the task's seed, P0 = diag(10², 10², 1, 1) (ours: the paper does not
+once from the task's seed, P0 = diag(10², 10², 1, 1) by default (ours: the paper does not
 say how it initialises). Scored: position x, y; velocity vx, vy as extra
 components.
 """
@@ -14,7 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.errors import ReplayError
+from replay.util.params import Param
 from replay.models.formation import Formation
+from replay.noise import Covariance, as_matrix
 from replay.sim.uav_formation import glint_003
 
 from . import Problem, Task
@@ -22,10 +24,12 @@ from . import Problem, Task
 
 class FormationTask(Task):
     name = "formation"
-
-    def __init__(self, eps: float | None = None, P0=None):
-        self.eps = eps
-        self.P0 = P0
+    PARAMS = (
+        Param("eps", float, None, "glint probability the filters assume; null = the simulator's",
+              low=0, high=1, optional=True),
+        Covariance("P0", list, (100.0, 100.0, 1.0, 1.0), "prior covariance of [x, y, vx, vy] (ours)",
+                   unit="m^2, (m/s)^2", dim=4),
+    )
 
     def build(self, frame, rng):
         need = ("radar", "leader_position", "turn_rate")
@@ -37,7 +41,7 @@ class FormationTask(Task):
                           m["dt"], m["accel_sigma"] ** 2 * np.eye(2), noise)
         radar = frame.channels["radar"]
         z = np.where(radar.valid[:, None], radar.values, np.nan)
-        P0 = np.diag([100.0, 100.0, 1.0, 1.0]) if self.P0 is None else np.asarray(self.P0, float)
+        P0 = as_matrix(self.P0)
         x0 = np.asarray(m["initial_state"], float) + np.linalg.cholesky(P0) @ rng.standard_normal(4)
         ref = frame.reference
         pb = Problem(model, z, x0, P0, frame.t, ref["position"].values, ref["position"].valid.copy(),

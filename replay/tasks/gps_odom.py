@@ -48,6 +48,7 @@ import numpy as np
 from replay.util.angles import wrap
 from replay.util.errors import ReplayError
 from replay.model import Model
+from replay.util.params import Param
 
 from . import Problem, Task
 
@@ -92,22 +93,27 @@ class UnicycleModel(Model):
         return self._H
 
 
+def _variance(name, default, doc, unit):
+    return Param(name, float, default, doc, unit=unit, low=0, low_open=True)
+
+
 class GpsOdomTask(Task):
     name = "gps-odom"
-
-    def __init__(self, gps_every: int = 5, q_pos: float = 0.01, q_heading: float = 0.01,
-                 q_v: float = 0.5, q_omega: float = 0.5, r_gps: float = 1.0, r_v: float = 0.04,
-                 r_omega: float = 0.1, r_gyro: float = 0.01, p0_heading: float = 0.25,
-                 p0_v: float = 1.0, p0_omega: float = 0.25):
-        if int(gps_every) < 1:
-            raise ReplayError(f"gps-odom: gps_every must be >= 1 (got {gps_every})")
-        vals = dict(q_pos=q_pos, q_heading=q_heading, q_v=q_v, q_omega=q_omega, r_gps=r_gps, r_v=r_v,
-                    r_omega=r_omega, r_gyro=r_gyro, p0_heading=p0_heading, p0_v=p0_v, p0_omega=p0_omega)
-        for k, v in vals.items():
-            if not (isinstance(v, (int, float)) and v > 0):
-                raise ReplayError(f"gps-odom: {k} must be a positive number (got {v!r})")
-        self.gps_every = int(gps_every)
-        vars(self).update({k: float(v) for k, v in vals.items()})
+    PARAMS = (
+        Param("gps_every", int, 5, "every gps_every-th valid fix is fed to the filters; the others are "
+              "the held-out reference", low=1),
+        _variance("q_pos", 0.01, "process noise of east and north, per second", "m^2/s"),
+        _variance("q_heading", 0.01, "process noise of the heading, per second", "rad^2/s"),
+        _variance("q_v", 0.5, "process noise of the forward speed, per second", "(m/s)^2/s"),
+        _variance("q_omega", 0.5, "process noise of the turn rate, per second", "(rad/s)^2/s"),
+        _variance("r_gps", 1.0, "GPS fix noise variance per axis (also the prior's)", "m^2"),
+        _variance("r_v", 0.04, "odometry forward-speed noise variance", "(m/s)^2"),
+        _variance("r_omega", 0.1, "odometry yaw-rate noise variance", "(rad/s)^2"),
+        _variance("r_gyro", 0.01, "IMU yaw-rate noise variance", "(rad/s)^2"),
+        _variance("p0_heading", 0.25, "prior variance of the heading", "rad^2"),
+        _variance("p0_v", 1.0, "prior variance of the forward speed", "(m/s)^2"),
+        _variance("p0_omega", 0.25, "prior variance of the turn rate", "(rad/s)^2"),
+    )
 
     def build(self, frame, rng):
         where = frame.meta.get("source") or frame.meta.get("dataset") or "frame"

@@ -16,15 +16,23 @@ from __future__ import annotations
 import numpy as np
 
 from replay.models.random_walk import RandomWalkPosition
+from replay.util.params import Param
 
 from . import Problem, Task, reference_position_3d
+
+POSITIVE = dict(low=0, low_open=True)
 
 
 class PositionTask(Task):
     name = "position"
-
-    def __init__(self, q: float = 1.0, r: float = 2.0, p0: float = 0.1, z0: float | None = None):
-        self.q, self.r, self.p0, self.z0 = q, r, p0, z0
+    PARAMS = (
+        Param("q", float, 1.0, "process noise variance per axis and sample (Q = q I3)", unit="m^2", **POSITIVE),
+        Param("r", float, 2.0, "measurement noise variance per axis (R = r I3; 002 prints 2)", unit="m^2",
+              **POSITIVE),
+        Param("p0", float, 0.1, "prior variance per axis (P0 = p0 I3)", unit="m^2", **POSITIVE),
+        Param("z0", float, None, "constant vertical position; null = minus the first GPS altitude", unit="m",
+              optional=True),
+    )
 
     def build(self, frame, rng):
         z0 = self.z0

@@ -17,30 +17,37 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
+from replay.util.params import Param
 from replay.models.auv_sonar import P0_TABLE2, Q_TABLE2, R_TABLE2, AUVSonar
+from replay.noise import Covariance, as_matrix, diagonal
 
 from . import Problem, Task, reference_position_3d
 
 
 class SonarTask(Task):
     name = "sonar"
-
-    def __init__(self, Q=None, R=None, P0=None, yaw_rate: float | None = None):
-        self.Q = Q_TABLE2 if Q is None else np.asarray(Q, float)
-        self.R = R_TABLE2 if R is None else np.asarray(R, float)
-        self.P0 = P0 if P0 is None else np.asarray(P0, float)
-        self.yaw_rate = yaw_rate
+    PARAMS = (
+        Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance the filters assume "
+                   "(Table 2)", dim=6),
+        Covariance("R", list, diagonal(R_TABLE2), "sonar noise covariance the filters assume, "
+                   "range/elevation/azimuth (Table 2)", unit="m^2, rad^2", dim=3),
+        Covariance("P0", list, None, "prior covariance; null = Table 2's on a sonar frame, "
+                   "diag(1, 1, 1, 4, 0.1, pi^2) otherwise", dim=6, optional=True),
+        Param("yaw_rate", float, None, "yaw rate of the model; null = the simulator's (0 on other frames)",
+              unit="rad/s", optional=True),
+    )
 
     def build(self, frame, rng):
+        Q, R, P0 = as_matrix(self.Q), as_matrix(self.R), as_matrix(self.P0)
         truth, valid = reference_position_3d(frame)
         if "sonar" in frame.channels:
             meta = frame.meta
-            model = AUVSonar(self.Q, self.R, dt=meta.get("dt", 1.0),
+            model = AUVSonar(Q, R, dt=meta.get("dt", 1.0),
                              yaw_rate=meta.get("yaw_rate", 0.25) if self.yaw_rate is None else self.yaw_rate,
                              origin=meta.get("sonar_origin", (0, 0, 0)))
             ch = frame.channels["sonar"]
             z = np.where(ch.valid[:, None], ch.values, np.nan)
-            P0 = P0_TABLE2 if self.P0 is None else self.P0
+            P0 = P0_TABLE2 if P0 is None else P0
             x_true0 = np.asarray(meta["initial_state"], float)
             x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(6)
             x0[4:] = wrap(x0[4:])
@@ -48,13 +55,13 @@ class SonarTask(Task):
             first = int(np.argmax(valid))
             origin = truth[first]
             dt = np.diff(frame.t, prepend=frame.t[0] - np.median(np.diff(frame.t)))
-            model = AUVSonar(self.Q, self.R, dt=dt, yaw_rate=self.yaw_rate or 0.0, origin=origin)
-            meas = model.h(truth, 0) + rng.standard_normal(truth.shape) @ np.linalg.cholesky(self.R).T
+            model = AUVSonar(Q, R, dt=dt, yaw_rate=self.yaw_rate or 0.0, origin=origin)
+            meas = model.h(truth, 0) + rng.standard_normal(truth.shape) @ np.linalg.cholesky(R).T
             meas[:, 1:] = wrap(meas[:, 1:])
             z = np.where(valid[:, None], meas, np.nan)
             z[first] = np.nan  # at the sonar itself the bearing is undefined
             x0 = np.concatenate([origin, [0.0, 0.0, 0.0]])
-            P0 = np.diag([1.0, 1.0, 1.0, 4.0, 0.1, np.pi**2]) if self.P0 is None else self.P0
+            P0 = np.diag([1.0, 1.0, 1.0, 4.0, 0.1, np.pi**2]) if P0 is None else P0
         angles = {}
         att = frame.reference.get("attitude")
         if att is not None and att.components == ("pitch", "yaw"):
@@ -62,4 +69,4 @@ class SonarTask(Task):
                       "yaw": np.where(att.valid, att.values[:, 1], np.nan)}
         return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1, 2), ("x", "y", "z"),
                        angles, {"pitch": 4, "yaw": 5} if angles else {},
-                       params={"Q": np.diag(self.Q).tolist(), "R": np.diag(self.R).tolist()})
+                       params={"Q": np.diag(Q).tolist(), "R": np.diag(R).tolist()})

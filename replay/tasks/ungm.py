@@ -9,16 +9,22 @@ from __future__ import annotations
 import numpy as np
 
 from replay.models.ungm import UNGM
+from replay.util.params import Param
 
 from . import Problem, Task
 
 
 class UNGMTask(Task):
     name = "ungm"
-
-    def __init__(self, q: float | None = None, r: float | None = None, p0: float = 1.0,
-                 growth: float | None = None):
-        self.q, self.r, self.p0, self.growth = q, r, p0, growth
+    PARAMS = (
+        Param("q", float, None, "process noise variance the filters assume; null = the simulator's",
+              low=0, low_open=True, optional=True),
+        Param("r", float, None, "measurement noise variance the filters assume; null = the simulator's",
+              low=0, low_open=True, optional=True),
+        Param("p0", float, 1.0, "prior variance (002 gives none)", low=0, low_open=True),
+        Param("growth", float, None, "growth coefficient g the filters assume; null = the simulator's",
+              optional=True),
+    )
 
     def build(self, frame, rng):
         from replay.util.errors import ReplayError

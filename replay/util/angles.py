@@ -31,6 +31,7 @@ def wrap(a):
 
 
 def _wrap_scalar(x: float) -> float:
+    """:func:`wrap` of one number: the same operations, so the same bits."""
     return x - TWO_PI * math.floor(x * _INV_TWO_PI + 0.5)
 
 
@@ -53,6 +54,10 @@ def wrap_components(x, angles=()):
         if x.ndim == 1:  # one vector: a Python loop beats numpy's per-call overhead
             for i in angles:
                 x[i] = _wrap_scalar(x[i])
+        elif x.ndim == 2 and len(x) == 1:  # a stack of one vector (one run): the same, same bits
+            v = x[0]
+            for i in angles:
+                v[i] = _wrap_scalar(v[i])
         else:
             i = index(tuple(angles))
             x[..., i] = wrap(x[..., i])
@@ -64,15 +69,13 @@ def weighted_mean(x, w, angles=()):
 
     ``w`` has shape ``(n_points,)`` and sums to one (weights may be negative, as
     for scaled unscented points). Angle components get the circular mean
-    ``atan2(sum w sin, sum w cos)``.
+    ``atan2(sum w sin, sum w cos)``. ``x`` may carry leading axes (a stack of
+    Monte Carlo runs): one matrix product per stacked slice, so each slice gets
+    the numbers it gets alone.
     """
-    m = w @ x if x.ndim == 2 else np.einsum("...ij,i->...j", x, w)
+    m = w @ x
     if angles:
         i = index(tuple(angles))
         xa = x[..., i]
-        if x.ndim == 2:
-            m[i] = np.arctan2(w @ np.sin(xa), w @ np.cos(xa))
-        else:
-            m[..., i] = np.arctan2(np.einsum("...ij,i->...j", np.sin(xa), w),
-                                   np.einsum("...ij,i->...j", np.cos(xa), w))
+        m[..., i] = np.arctan2(w @ np.sin(xa), w @ np.cos(xa))
     return m

@@ -1,32 +1,75 @@
-"""Small dense linear algebra on the hot path of every filter step.
+"""Small dense linear algebra on the hot path of every filter step, for one matrix or a stack.
 
-Direct LAPACK calls: for the 3x3 to 20x20 matrices of a filter step the
-per-call overhead of ``numpy.linalg`` (several microseconds) is most of the
-cost. Failures raise ``numpy.linalg.LinAlgError`` so the run loop can count a
+Every function takes one matrix (n, n) or a stack (M, n, n) (a leading Monte
+Carlo run axis) and acts on each matrix alone. For the 3x3 to 20x20 matrices
+of a filter step the per-call overhead of ``numpy.linalg`` (about 5 µs) is
+most of the cost, so one matrix, or a stack of one, goes straight to LAPACK
+(``dpotrf``, ``dgesv`` of SciPy) and a stack of several to numpy's stacked
+LAPACK, which calls the same routines once per matrix: each matrix of a stack
+gets the numbers it gets alone, bit for bit (tests/test_batched.py asserts
+it). Results are column-major per matrix, as LAPACK returns one matrix,
+whatever M: a matrix product's rounding depends on its operands' memory
+layout (BLAS transposition flags), so a stack must have the layout of one.
+
+Failures raise ``numpy.linalg.LinAlgError`` so the run loop can count a
 divergence.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.lapack import dposv, dpotrf
+from scipy.linalg.lapack import dgesv, dpotrf
 
 
-def cholesky(P: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of a symmetric positive-definite matrix."""
+def _not_pd(info):
+    return np.linalg.LinAlgError(f"matrix not positive definite (LAPACK info {info})")
+
+
+def _column_major(A):
+    """A C-ordered stack laid out column-major per matrix (the layout of LAPACK's output)."""
+    return np.ascontiguousarray(A.swapaxes(-1, -2)).swapaxes(-1, -2)
+
+
+def _potrf(P):
     L, info = dpotrf(P, lower=1, clean=1)
     if info != 0:
-        raise np.linalg.LinAlgError(f"matrix not positive definite (LAPACK info {info})")
+        raise _not_pd(info)
     return L
 
 
-def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``S^-1 B`` for symmetric positive-definite ``S``."""
-    _, X, info = dposv(S, B, lower=1)
+def cholesky(P: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor of a symmetric positive-definite matrix (n, n) or stack (M, n, n)."""
+    if P.ndim == 2:
+        return _potrf(P)
+    if len(P) == 1:
+        return _potrf(P[0])[None]
+    return _column_major(np.linalg.cholesky(P))
+
+
+def _posdef_solve(S, B):
+    info = dpotrf(S, lower=1, clean=0)[1]
     if info != 0:
-        raise np.linalg.LinAlgError(f"matrix not positive definite (LAPACK info {info})")
+        raise _not_pd(info)
+    _, _, X, info = dgesv(S, B)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"singular matrix (LAPACK info {info})")
     return X
 
 
+def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``S^-1 B`` for symmetric positive-definite ``S``: (n, n) with (n, k), or stacks (M, n, n), (M, n, k).
+
+    A Cholesky factorisation first (LinAlgError when ``S`` is not positive
+    definite), then an LU solve (``dgesv``, what ``numpy.linalg.solve`` calls
+    per matrix of a stack).
+    """
+    if S.ndim == 2:
+        return _posdef_solve(S, B)
+    if len(S) == 1:
+        return _posdef_solve(S[0], B[0])[None]
+    np.linalg.cholesky(S)
+    return _column_major(np.linalg.solve(S, B))
+
+
 def gain(S: np.ndarray, Pxz: np.ndarray) -> np.ndarray:
-    """Kalman gain ``K = Pxz S^-1`` (S symmetric positive definite)."""
-    return solve_spd(S, Pxz.T).T
+    """Kalman gain ``K = Pxz S^-1`` (S symmetric positive definite; one matrix or stacks)."""
+    return solve_spd(S, Pxz.swapaxes(-1, -2)).swapaxes(-1, -2)

@@ -1,0 +1,207 @@
+"""``load``: a recording and its mapping into a :class:`~replay.frame.Frame`; ``inspect``: what a recording holds."""
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from replay.adapters.geodesy import Geo, plausible_latlon
+from replay.frame import Channel, Frame, Report
+from replay.util.errors import DataError
+
+from .. import rosmsg
+from ..mapping import Mapping, from_dict, load_mapping, propose
+from .reading import read
+from .recording import Recording, Topic
+
+SIM_TIME_BEFORE_NS = 315_532_800 * 10**9  # 1980-01-01: earlier stamps are simulation time
+
+
+def resolve_mapping(mapping) -> Mapping | None:
+    if mapping is None or isinstance(mapping, Mapping):
+        return mapping
+    if isinstance(mapping, dict):
+        return from_dict(mapping)
+    return load_mapping(mapping)
+
+
+def load(path, *, mapping=None, time: str | None = None, until: float | None = None,
+         allow_truncated: bool | None = None, **params) -> Frame:
+    """Read a bag or MCAP into a Frame (see the module docstring).
+
+    ``mapping``: a mapping file path, a dict of the same form, or None (proposed).
+    ``time``, ``until``, ``allow_truncated`` and the conversion ``params``
+    (water_density, atmospheric_pressure, gravity) override the mapping's.
+    """
+    path = Path(path).expanduser()
+    mp = resolve_mapping(mapping)
+    proposed = []
+
+    def choose(listing):  # no mapping: propose one from the topic list
+        proposed.append(propose(listing))
+        if not proposed[0].entries:
+            raise DataError(path, "no topic of a supported type to map; write a mapping "
+                                  "(see `replay inspect` and docs/bags.md)")
+        return proposed[0].topics
+
+    until = until if until is not None else (mp.until if mp else None)
+    rec = read(path, mp.topics if mp else choose, until)
+    mp = mp or proposed[0]
+    time = time or mp.time
+    if time not in ("header", "log"):
+        raise DataError(path, f"time must be 'header' or 'log' (got {time!r})")
+    allow = mp.allow_truncated if allow_truncated is None else bool(allow_truncated)
+    opts = {**mp.params, **params}
+    report = Report()
+    _fail_if_truncated(rec, report, allow)
+    return build_frame(rec, mp, time, opts, report, until)
+
+
+def _fail_if_truncated(rec: Recording, report, allow) -> None:
+    if rec.truncated is None:
+        return
+    if not allow:
+        raise DataError(rec.path, f"truncated or corrupted: {rec.truncated}; "
+                                  f"{rec.read_messages} message(s) before it could be read — set "
+                                  "allow_truncated = true in the mapping to use them (flagged)")
+    if report is not None:
+        report.add("flagged", str(rec.path), rec.read_messages,
+                   f"TRUNCATED recording: only the messages before the damage were read ({rec.truncated})")
+
+
+def _check_topics(rec: Recording, mp: Mapping) -> None:
+    for e in mp.entries:
+        topic = rec.topics.get(e.topic)
+        if topic is None:
+            close = difflib.get_close_matches(e.topic, list(rec.topics), n=1)
+            hint = f" (did you mean {close[0]}?)" if close else f" (topics: {', '.join(rec.topics)})"
+            raise DataError(rec.path, f"topic {e.topic} (mapped to {e.name}) is not in the recording{hint}")
+        if rosmsg.kind_of(topic.type) is None:
+            raise DataError(rec.path, f"topic {e.topic} has type {topic.type}, which no converter reads "
+                                      f"(supported: {', '.join(sorted(rosmsg.KINDS))})")
+        if e.type and rosmsg.normalize_type(e.type) != topic.type:
+            raise DataError(rec.path, f"topic {e.topic}: the mapping expects {e.type}, the recording has {topic.type}")
+        if not topic.msgs:
+            span = " within `until`" if mp.until or rec.truncated else ""
+            raise DataError(rec.path, f"topic {e.topic} (mapped to {e.name}) has no messages{span}")
+
+
+def _stamps(rec: Recording, topic: Topic, time: str) -> tuple[np.ndarray, np.ndarray]:
+    log = np.asarray(topic.log_ns, np.int64)
+    header = np.array([rosmsg.stamp_ns(m) for m in topic.msgs], np.int64)
+    use = header if time == "header" else log
+    bad = np.flatnonzero(np.diff(use) <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        raise DataError(rec.path, f"topic {topic.name}: non-increasing {time} stamps at message {i} "
+                                  f"({use[i]} ns after {use[i - 1]} ns)")
+    return use, (log if time == "header" else header)
+
+
+def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Report,
+                until: float | None) -> Frame:
+    _check_topics(rec, mp)
+    stamps, other, fields = {}, {}, {}
+    geo = None
+    for topic_name in mp.topics:
+        topic = rec.topics[topic_name]
+        stamps[topic_name], other[topic_name] = _stamps(rec, topic, time)
+        kind = rosmsg.kind_of(topic.type)
+        if kind == "navsatfix" and geo is None:
+            geo = _make_geo(rec, topic)
+        fields[topic_name] = rosmsg.convert(kind, topic.msgs, geo, opts)
+    axis = np.unique(np.concatenate(list(stamps.values())))
+    t0 = int(axis[0])
+    t = (axis - t0) / 1e9
+    n = len(axis)
+    sim = t0 < SIM_TIME_BEFORE_NS
+    channels, reference = {}, {}
+    other_name = "header_time" if time == "log" else "log_time"
+    for e in mp.entries:
+        topic = rec.topics[e.topic]
+        kind = rosmsg.kind_of(topic.type)
+        idx = np.searchsorted(axis, stamps[e.topic])
+        group = reference if e.reference else channels
+        for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[e.topic].items():
+            key = e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
+            full = np.full((n,) + vals.shape[1:], np.nan)
+            full[idx] = vals
+            ok = np.zeros(n, bool)
+            ok[idx] = valid
+            group[key] = Channel(full, unit, frame, ok, tuple(comps), tuple(angles), conv,
+                                 f"{e.topic} ({topic.type}) {fname}")
+        t_other = np.full(n, np.nan)
+        t_other[idx] = (other[e.topic] - t0) / 1e9
+        group[f"{e.name}_{other_name}"] = Channel(t_other, "s", "", np.isin(np.arange(n), idx),
+                                                  description=f"{e.topic} {other_name.replace('_', ' ')}, "
+                                                              "seconds from t = 0")
+        primary = fields[e.topic][rosmsg.PRIMARY[kind]][1]
+        report.add("info", e.name, len(idx), f"{e.topic} ({topic.type}): {len(idx)} messages at their "
+                                             f"{time} stamps; not valid at the other {n - len(idx)} samples")
+        if (~primary).any():
+            report.add("masked", e.name, int((~primary).sum()),
+                       f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
+                       "NaN, unnormalised quaternion)")
+    shared = sum(len(s) for s in stamps.values()) - n
+    report.add("info", "t", n, f"union of the {time} stamps of {len(stamps)} mapped topic(s)"
+                               + (f"; {shared} stamp(s) shared by several topics" if shared else ""))
+    if sim:
+        report.add("info", "t", n, f"simulation time: stamps start at {t0 / 1e9:.3f} s; epoch unknown")
+    meta = {"adapter": "bags", "source": str(rec.path), "format": rec.format, "time": time,
+            "t0_ns": t0, "sim_time": bool(sim), "until": until, "truncated": rec.truncated,
+            "sha256": _sha256(rec.path), "mapping": json.loads(json.dumps(_mapping_dict(mp))),
+            "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)}
+                       for k, v in rec.topics.items()}}
+    if geo is not None:
+        meta.update(geo.meta())
+    return Frame(t, channels, reference, None if sim else t0 / 1e9, meta, report)
+
+
+def _make_geo(rec: Recording, topic: Topic) -> Geo:
+    lat = np.array([m.latitude for m in topic.msgs], float)
+    lon = np.array([m.longitude for m in topic.msgs], float)
+    alt = np.array([m.altitude for m in topic.msgs], float)
+    status = np.array([m.status.status if hasattr(m, "status") else 0 for m in topic.msgs])
+    ok = (status >= 0) & np.isfinite(alt) & plausible_latlon(lat, lon)
+    if not ok.any():
+        raise DataError(rec.path, f"topic {topic.name}: no valid fix (every status < 0 or lat/lon impossible)")
+    return Geo(lat, lon, alt, ok)
+
+
+def _mapping_dict(mp: Mapping) -> dict:
+    return {"time": mp.time, "until": mp.until, "source": mp.source, "params": mp.params,
+            "entries": [e.__dict__ for e in mp.entries]}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    files = [path] if path.is_file() else sorted(p for p in path.iterdir() if p.is_file())
+    for p in files:
+        with open(p, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def inspect(path) -> dict:
+    """Topics (type, count, rate, span by log time), the recording span and a proposed mapping."""
+    rec = read(path, None, first_only=True)
+    rows = []
+    for t in rec.topics.values():
+        log = np.asarray(t.log_ns, np.int64)
+        span = (log[-1] - log[0]) / 1e9 if len(log) > 1 else 0.0
+        rate = (len(log) - 1) / span if span > 0 else float("nan")
+        stamp0 = None
+        if t.msgs and hasattr(t.msgs[0], "header"):
+            stamp0 = rosmsg.stamp_ns(t.msgs[0]) / 1e9
+        rows.append({"topic": t.name, "type": t.type, "count": t.count, "rate_hz": rate,
+                     "span_s": span, "supported": rosmsg.kind_of(t.type) is not None,
+                     "first_stamp_s": stamp0, "first_log_s": log[0] / 1e9 if len(log) else None})
+    span = (rec.end_ns - rec.start_ns) / 1e9 if rec.start_ns is not None else 0.0
+    mp = propose({t.name: (t.type, t.count) for t in rec.topics.values()})
+    return {"path": str(rec.path), "format": rec.format, "start_ns": rec.start_ns, "span_s": span,
+            "messages": sum(t.count for t in rec.topics.values()), "topics": rows,
+            "truncated": rec.truncated, "mapping": mp}

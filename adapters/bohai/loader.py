@@ -1,0 +1,115 @@
+"""``load``: one Bohai CSV log into a :class:`~replay.frame.Frame` (see the package docstring)."""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pyproj
+
+from replay.adapters.geodesy import plausible_latlon, project, utm_epsg
+from replay.frame import Channel, Frame, Report
+from replay.util.errors import DataError
+
+from .checks import _gyro_check, _speed_check, _yaw_check, track_velocity
+from .columns import COLS31, COLS36, COLUMNS, GROUPS, check_columns
+from .gps import _fresh_alt, _gps_fixes, _time_of_day
+from .reading import _clean_rows, _drop, _layout, _parse, _read_bytes, _rows, _time_axis
+from .reference import _reference_mask
+
+
+def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
+         gps_tolerance: float = 15.0, gap_factor: float = 5.0) -> Frame:
+    """Read one Bohai CSV log into a :class:`Frame`.
+
+    ``jump_threshold`` (m per 0.1 s) defines a jump of the navigation solution,
+    ``max_speed`` (m/s) the fastest plausible motion of the vehicle,
+    ``gps_tolerance`` (m) how far a fresh GPS fix may lie from the navigation
+    solution before it contradicts it (None: no GPS check), and
+    ``gap_factor`` which time steps are flagged as gaps (> factor x median).
+    """
+    path = Path(path)
+    data = _read_bytes(path)
+    table, lines = _parse(path, data)
+    layout = _layout(path, list(table.columns))
+    report = Report()
+    meta = {"source": str(path), "sha256": hashlib.sha256(data).hexdigest(),
+            "layout": layout, "adapter": "bohai-csv", "dropped_columns": {}}
+    names = COLS36 if layout == 36 else COLS31
+    for c in table.columns:
+        if c not in names:
+            _drop(report, meta, c, len(table), f"not a column of the {layout}-column layout")
+    cols, lines = _clean_rows(path, table, names, lines, report, meta)
+    time = cols["time"]
+    t = time - time[0]
+    meta["time"] = _time_axis(t, lines, report, gap_factor)
+    meta["time"]["offset"] = float(time[0])
+
+    # projection, GPS fixes, reference position
+    lat, lon = cols["lat"], cols["lon"]
+    geo_ok = plausible_latlon(lat, lon)
+    if not geo_ok.any():
+        raise DataError(path, "no plausible lat/lon in the navigation solution")
+    if (~geo_ok).any():
+        report.add("masked", "position", int((~geo_ok).sum()),
+                   f"lat/lon missing or impossible at {_rows(lines, ~geo_ok)}")
+    epsg = utm_epsg(lat[geo_ok], lon[geo_ok])
+    to_utm = pyproj.Transformer.from_crs("EPSG:4326", epsg, always_xy=True)
+    utm = project(to_utm, lat, lon, geo_ok)
+    gps = _gps_fixes(cols, t, to_utm, lines, report, meta, jump_threshold, max_speed) \
+        if layout == 36 else None
+    valid = _reference_mask(t, utm, geo_ok, gps, lines, report, meta,
+                            jump_threshold, max_speed, gps_tolerance)
+    origin = utm[int(np.argmax(valid if valid.any() else geo_ok))].copy()
+    meta.update(crs=f"EPSG:{epsg}", epsg=epsg, origin=[float(origin[0]), float(origin[1])])
+    pos = utm - origin
+    reference = {"position": Channel(pos, "m", "ENU local", valid, ("east", "north"),
+                                     description="navigation solution lat/lon in UTM minus origin; "
+                                                 "masked where displaced (see meta['jumps'])")}
+    vel = track_velocity(t, pos, valid)
+    meta["speed"] = _speed_check(vel, report)
+
+    channels = _sensor_channels(cols, t, vel, lines, report, meta)
+    if gps is not None:
+        channels["gps_position"] = Channel(gps["utm"] - origin, "m", "ENU local", gps["valid"],
+                                           ("east", "north"),
+                                           description="GPS fix lat_gps/lon_gps in UTM minus origin; "
+                                                       "valid only where a new fix appears")
+    if layout == 36:
+        _time_of_day(cols["time_gps"], t, report, meta)
+    return Frame(t, channels, reference, None, meta, report)
+
+
+def _sensor_channels(cols, t, vel, lines, report, meta) -> dict:
+    """Channels from the columns that pass the plausibility checks."""
+    n = len(t)
+    channels = {}
+    for c, found in check_columns(cols, vel).items():
+        if found:
+            _drop(report, meta, c, n, "; ".join(found))
+    passed = [c for c in cols if c in COLUMNS and c not in meta["dropped_columns"]]
+    for name, (members, comps, angles, convention) in GROUPS.items():
+        if all(c in passed for c in members):
+            values = np.column_stack([cols[c] for c in members])
+            frame = "body" if name == "attitude" else COLUMNS[members[0]][2]
+            channels[name] = Channel(values, COLUMNS[members[0]][1], frame, None, comps, angles,
+                                     convention, ", ".join(COLUMNS[c][3] for c in members))
+            passed = [c for c in passed if c not in members]
+    if "attitude" in channels:
+        meta["yaw_course"] = _yaw_check(channels["attitude"].values[:, 2], vel, report)
+    if "attitude" in channels and "gyro" in channels:
+        meta["gyro_attitude"] = _gyro_check(t, channels["gyro"].values, channels["attitude"].values,
+                                            report)
+    for c in passed:
+        kind, unit, frame, desc = COLUMNS[c]
+        if kind == "altitude":
+            name = "gps_alt" if c == "alt_gps" else c
+            channels[name] = _fresh_alt(cols[c], t, lines, name, report)
+            continue
+        angles = (0,) if kind in ("roll", "pitch", "yaw") else ()
+        channels[c] = Channel(cols[c], unit, frame, None, (c,), angles, "", desc)
+    for name, ch in channels.items():
+        bad = ~np.isfinite(ch.values.reshape(n, -1)).all(axis=1)
+        if bad.any() and name not in ("gps_alt", "alt"):
+            report.add("masked", name, int(bad.sum()), f"missing values at {_rows(lines, bad)}")
+    return channels

@@ -1,0 +1,184 @@
+"""Validity of the reference position: jumps of the navigation solution and GPS contradictions."""
+from __future__ import annotations
+
+import numpy as np
+
+NOMINAL_STEP = 0.1  # s: the logs are about 10 Hz; jump_threshold is per such step
+
+
+def _reach(dt, jump_threshold, max_speed):
+    """Largest plausible displacement (m) over ``dt`` seconds."""
+    return np.minimum(jump_threshold * dt / NOMINAL_STEP, max_speed * dt + jump_threshold)
+
+
+def find_jumps(t, p, jump_threshold=5.0, max_speed=10.0):
+    """Indices of the samples that follow a jump: a step > jump_threshold per 0.1 s."""
+    step = np.hypot(*np.diff(p, axis=0).T)
+    return np.flatnonzero(step > _reach(np.diff(t), jump_threshold, max_speed)) + 1
+
+
+def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
+    """Keep-mask for a track ``p`` (n, 2) in metres (all finite).
+
+    A *jump* is a step between consecutive samples longer than
+    ``jump_threshold`` per 0.1 s (scaled by the actual step). Two samples are
+    *compatible* when their distance is at most ``min(jump_threshold * dt /
+    0.1, max_speed * dt + jump_threshold)``: never a jump, and across a masked
+    gap no faster than ``max_speed`` plus one jump_threshold of slack. The
+    kept samples are the largest set in which each kept sample is compatible
+    with the next kept one, found by dynamic programming over blocks (the
+    jump-free runs cut into pieces of ``block`` samples), then grown back
+    sample by sample at the edges of each masked stretch. A spike or a
+    displaced stretch that comes back (out and back) is masked as a whole; at
+    a step that persists, the samples next to the step are masked until the
+    rest is reachable at ``max_speed``. Nothing else is masked.
+    """
+    t = np.asarray(t, float)
+    p = np.asarray(p, float)
+    n = len(t)
+    jumps = find_jumps(t, p, jump_threshold, max_speed) if n > 1 else np.zeros(0, int)
+    if not len(jumps):
+        return np.ones(n, bool)
+    starts = np.union1d(np.arange(0, n, block), jumps)
+    ends = np.r_[starts[1:], n] - 1
+    best = np.zeros(len(starts))
+    prev = np.full(len(starts), -1)
+    for k in range(len(starts)):
+        if k:
+            d = np.hypot(*(p[ends[:k]] - p[starts[k]]).T)
+            ok = d <= _reach(t[starts[k]] - t[ends[:k]], jump_threshold, max_speed)
+            if ok.any():
+                cand = np.where(ok, best[:k], -1.0)
+                prev[k] = k - 1 - int(np.argmax(cand[::-1]))  # the latest among equals
+                best[k] = best[prev[k]]
+        best[k] += ends[k] - starts[k] + 1
+    keep = np.zeros(n, bool)
+    k = len(starts) - 1 - int(np.argmax(best[::-1]))
+    while k >= 0:
+        keep[starts[k]:ends[k] + 1] = True
+        k = prev[k]
+    _regrow(t, p, keep, jump_threshold, max_speed)
+    return keep
+
+
+def _regrow(t, p, keep, jump_threshold, max_speed):
+    """Unmask samples at the edges of masked stretches while they stay compatible."""
+    def ok(i, j):
+        if i is None or j is None:
+            return True
+        return np.hypot(*(p[j] - p[i])) <= _reach(t[j] - t[i], jump_threshold, max_speed)
+
+    n = len(t)
+    for a, b in _runs(~keep):
+        lo = a - 1 if a > 0 else None
+        hi = b + 1 if b < n - 1 else None
+        while b >= a and ok(b, hi) and ok(lo, b):
+            keep[b] = True
+            hi, b = b, b - 1
+        while a <= b and ok(lo, a) and ok(a, hi):
+            keep[a] = True
+            lo, a = a, a + 1
+
+
+def _runs(mask):
+    """(first, last) index pairs of the runs of True in ``mask``."""
+    idx = np.flatnonzero(mask)
+    if not len(idx):
+        return []
+    cut = np.flatnonzero(np.diff(idx) > 1)
+    return list(zip(np.r_[idx[0], idx[cut + 1]], np.r_[idx[cut], idx[-1]]))
+
+
+def gps_contradiction(t, p, fixes, fix_p, after_jump, tolerance=15.0, window=1.0):
+    """Reference samples that fresh GPS fixes contradict, and each fix's distance.
+
+    ``fixes`` are the sample indices of fresh, valid fixes at ``fix_p``; ``p``
+    is the reference (NaN where unknown); ``after_jump`` marks the samples
+    that follow a jump of the reference. A fix contradicts the reference when
+    they are more than ``tolerance`` apart at the fix. Masked: the samples
+    whose nearest fix (within ``window`` s) contradicts the reference, and all
+    samples between two consecutive contradicting fixes when the reference
+    makes no jump between them (its offset cannot have gone away).
+    """
+    n = len(t)
+    out = np.zeros(n, bool)
+    if not len(fixes):
+        return out, np.zeros(0)
+    dist = np.hypot(*(p[fixes] - fix_p).T)
+    bad = dist > tolerance
+    tf = t[fixes]
+    k = np.clip(np.searchsorted(tf, t), 1, max(len(tf) - 1, 1))
+    left = np.minimum(k - 1, len(tf) - 1)
+    right = np.minimum(k, len(tf) - 1)
+    near = np.where(np.abs(t - tf[left]) <= np.abs(tf[right] - t), left, right)
+    out |= (np.abs(t - tf[near]) <= window) & bad[near]
+    seg = np.cumsum(after_jump)
+    pair = bad[:-1] & bad[1:] & (seg[fixes[:-1]] == seg[fixes[1:]])
+    mark = np.zeros(n + 1, int)
+    np.add.at(mark, fixes[:-1][pair], 1)
+    np.add.at(mark, fixes[1:][pair] + 1, -1)
+    out |= np.cumsum(mark)[:n] > 0
+    return out, dist
+
+
+def _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, max_speed,
+                    gps_tolerance):
+    """Validity of the reference: plausible lat/lon, not contradicted by GPS, no jumps.
+
+    Two stages. First (36-column files) the samples that fresh GPS fixes
+    contradict (:func:`gps_contradiction`): this decides which side of a
+    persistent step is displaced whenever the vehicle is at the surface.
+    Then :func:`mask_jumps` on what is left removes spikes, displaced
+    stretches and the samples next to the remaining steps.
+    """
+    n = len(t)
+    idx = np.flatnonzero(geo_ok)
+    jumps = idx[find_jumps(t[idx], utm[idx], jump_threshold, max_speed)]
+    steps = np.hypot(*(utm[jumps] - utm[idx[np.searchsorted(idx, jumps) - 1]]).T)
+    valid = geo_ok.copy()
+    contra = np.zeros(n, bool)
+    gps_check = gps is not None and gps_tolerance is not None
+    if gps_check:
+        fixes = np.flatnonzero(gps["valid"])
+        after_jump = np.zeros(n, bool)
+        after_jump[jumps] = True
+        contra, dist = gps_contradiction(t, utm, fixes, gps["utm"][fixes], after_jump, gps_tolerance)
+        contra &= geo_ok
+        valid &= ~contra
+        far = dist > gps_tolerance
+        gps["info"].update(median_distance_to_reference_m=float(np.nanmedian(dist)),
+                           fixes_contradicting_reference=int(far.sum()))
+        worst = int(np.nanargmax(np.nan_to_num(dist, nan=-1.0)))
+        report.add("info", "gps_position", len(fixes),
+                   f"fresh fixes vs navigation solution: median {np.nanmedian(dist):.1f} m, "
+                   f"{int(far.sum())} fixes > {gps_tolerance:g} m (largest {dist[worst]:.1f} m "
+                   f"at line {lines[fixes[worst]]})")
+        if contra.any():
+            report.add("masked", "position", int(contra.sum()),
+                       f"contradicted by fresh GPS fixes: {int(far.sum())} fixes > {gps_tolerance:g} m "
+                       f"from the navigation solution; samples within 1 s of them, and between "
+                       f"consecutive ones without a jump, masked ({len(_runs(contra))} stretches)")
+    rest = np.flatnonzero(valid)
+    keep = mask_jumps(t[rest], utm[rest], jump_threshold, max_speed)
+    kinematic = np.zeros(n, bool)
+    kinematic[rest[~keep]] = True
+    valid &= ~kinematic
+    masked = contra | kinematic
+    meta["jumps"] = {
+        "events": len(jumps), "largest_m": float(steps.max()) if len(steps) else 0.0,
+        "masked": int(masked.sum()), "masked_gps": int(contra.sum()),
+        "masked_kinematic": int(kinematic.sum()), "stretches": len(_runs(masked)),
+        "steps": [{"line": int(lines[i]), "t": float(t[i]), "step_m": float(s)}
+                  for i, s in zip(jumps, steps)],
+        "method": (f"masked where fresh GPS fixes contradict it by > {gps_tolerance:g} m, then "
+                   if gps_check else "") +
+                  f"the largest set of samples with no step > {jump_threshold:g} m per 0.1 s and "
+                  f"no motion > {max_speed:g} m/s across masked stretches"}
+    if len(jumps):
+        i = int(np.argmax(steps))
+        report.add("masked", "position", int(kinematic.sum()),
+                   f"{len(jumps)} jumps > {jump_threshold:g} m per 0.1 s in the navigation solution "
+                   f"(largest {steps[i]:.1f} m at line {lines[jumps[i]]}); {int(kinematic.sum())} "
+                   f"displaced samples in {len(_runs(kinematic))} stretches masked so that no "
+                   f"kept step is a jump and no masked gap is crossed faster than {max_speed:g} m/s")
+    return valid

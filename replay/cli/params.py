@@ -1,0 +1,157 @@
+"""Parameters given on the command line: parsed, then checked against the declarations.
+
+``-p FILTER.NAME=VALUE``, ``--task-param NAME=VALUE`` and ``--dataset-param
+NAME=VALUE``: the value is read as JSON (``500``, ``1.5``, ``true``, ``null``,
+``[1, 2]``, ``NaN``), and a bare word that is not JSON stays a string
+(``resampling=systematic``). Everything is refused with one line naming the
+option, the parameter, what it accepts and the value given:
+
+* :func:`filter_params`: a missing ``FILTER.`` prefix, an unknown filter, a
+  filter not among ``--filters`` (with the registered name suggested), an
+  unknown parameter, a value its declaration refuses;
+* :func:`task_params`, :func:`dataset_params`: the same against the task's
+  and the dataset's declarations when they are known;
+* :func:`check_config`: the whole configuration at once, before any data is
+  read, with every parameter made canonical (defaults filled in).
+"""
+from __future__ import annotations
+
+import difflib
+import json
+from dataclasses import dataclass
+
+from replay.util.errors import ReplayError
+
+
+def parse(item: str, option: str) -> tuple[str, object]:
+    """``"NAME=VALUE"`` -> ``("NAME", value)``, the value read as JSON (a bare word stays a string)."""
+    key, sep, text = item.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ReplayError(f"{option} {item!r}: expected NAME=VALUE")
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text
+    return key, value
+
+
+def _assignments(items, option: str) -> dict:
+    out: dict = {}
+    for item in items:
+        key, value = parse(item, option)
+        if key in out:
+            raise ReplayError(f"{option} {key}: given twice ({_text(out[key])} and {_text(value)})")
+        out[key] = value
+    return out
+
+
+def _text(value) -> str:
+    return json.dumps(value) if not isinstance(value, str) else value
+
+
+def _suggest(name: str, known) -> str:
+    near = difflib.get_close_matches(name.replace("_", "-"), list(known), n=1, cutoff=0.6)
+    return f" (did you mean {near[0]}?)" if near else ""
+
+
+def filter_params(items, filters) -> dict:
+    """``["pf.n_particles=500", ...]`` -> ``{"pf": {"n_particles": 500}}``, checked against the
+    declarations of the filters named in ``filters`` (the ``--filters`` list)."""
+    from replay.filters import FILTERS
+
+    filters = list(filters)
+    out: dict = {}
+    for item in items:
+        key, value = parse(item, "-p")
+        name, dot, param = key.partition(".")
+        if not dot or not name or not param:
+            raise ReplayError(f"-p {item}: expected FILTER.NAME=VALUE, e.g. "
+                              f"{(filters or ['pf'])[0]}.{param or key}={_text(value)}")
+        if name not in FILTERS:
+            raise ReplayError(f"-p {item}: unknown filter {name!r}{_suggest(name, FILTERS)} "
+                              f"(known: {', '.join(sorted(FILTERS))})")
+        if name not in filters:
+            raise ReplayError(f"-p {item}: filter {name!r} is not in --filters ({', '.join(filters)})")
+        given = out.setdefault(name, {})
+        if param in given:
+            raise ReplayError(f"-p {name}.{param}: given twice ({_text(given[param])} and {_text(value)})")
+        given[param] = check_one(filter_declarations(name), param, value, f"filter {name!r}")
+    return out
+
+
+def task_params(items, task: str | None = None) -> dict:
+    """``["r=2", ...]`` -> ``{"r": 2.0}``; checked against ``task``'s declarations when it is given."""
+    from replay.tasks import task_class
+
+    given = _assignments(items, "--task-param")
+    if task is None:
+        return given
+    cls = task_class(task)
+    return {k: check_one(cls.PARAMS, k, v, cls.owner()) for k, v in given.items()}
+
+
+def dataset_params(items, dataset=None, adapter: str | None = None, option: str = "--dataset-param") -> dict:
+    """``["q=10", ...]`` -> ``{"q": 10.0}``; checked against ``dataset``'s declarations (a
+    simulator's parameters, or its adapter's options) when it is given. Only the given ones."""
+    from replay import registry
+
+    given = _assignments(items, option)
+    if dataset is None:
+        return given
+    full = registry.check_params(dataset, given, adapter=adapter)
+    return {k: full[k] for k in given}
+
+
+def check_one(declarations, name: str, value, owner: str):
+    """One value checked (and normalised) by the declaration of ``name``."""
+    from replay.util.params import validate
+
+    return validate(declarations, {name: value}, owner)[name]
+
+
+def filter_declarations(name: str):
+    """The declared parameters of filter ``name``."""
+    from replay.filters import FILTERS
+    from replay.util.lookup import resolve
+
+    return resolve(FILTERS, name, "filter").PARAMS
+
+
+@dataclass
+class Checked:
+    """A configuration checked by :func:`check_config`, every parameter canonical."""
+
+    task: str | None
+    task_params: dict
+    filter_params: dict  # filter name -> every parameter's value
+    dataset_params: dict
+
+
+def check_config(dataset, task, filters, filter_params=None, task_params=None, dataset_params=None,
+                 adapter=None) -> Checked:
+    """Check a whole configuration before any data is read; returns it canonical.
+
+    The dataset (its parameters against its generator's declarations or its
+    adapter's options), the task (the given one or the dataset's default) and
+    its parameters, every filter and its parameters (made, so relations between
+    parameters are checked too). A plain file without ``task`` gets its task
+    from the frame: its task parameters are checked when the task is made.
+    """
+    from replay import registry
+    from replay.filters import make_filter
+    from replay.tasks import make_task
+
+    filters = list(filters)
+    if not filters:
+        raise ReplayError("--filters: no filter named")
+    extra = [n for n in (filter_params or {}) if n not in filters]
+    if extra:
+        raise ReplayError(f"-p {extra[0]}: filter {extra[0]!r} is not in --filters ({', '.join(filters)})")
+    dparams = registry.check_params(dataset, dataset_params or {}, adapter=adapter)
+    if task is None and not (isinstance(dataset, str) and registry.is_path(dataset)):
+        ds = dataset if isinstance(dataset, registry.Dataset) else registry.get(dataset)
+        task = ds.default_task or None
+    tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
+    fparams = {name: make_filter(name, **(filter_params or {}).get(name, {})).params() for name in filters}
+    return Checked(task, tparams, fparams, dparams)

@@ -1,0 +1,256 @@
+"""The one evaluation pipeline: a configuration and a block of runs -> one scored record per run.
+
+Everything that prints or stores a number goes through here: ``replay eval``
+(:func:`replay.evaluate.evaluate`, an in-memory campaign with one
+configuration per filter), ``replay campaign run`` (a job is a block of runs of
+one configuration, :func:`replay.campaign.units.execute_job`), ``replay
+reproduce`` and ``replay rerun`` (both through ``evaluate``).
+
+A :class:`Config` is one dataset x task x filter x parameters x seed; its
+hash (:func:`config_hash`) names it everywhere (leaderboards, campaign
+directories, manifests). Parameters are stored canonically, every default
+filled in, so ``{}`` and the defaults are the same configuration.
+
+:func:`run_block` computes runs ``runs`` of a configuration:
+
+1. each run's problem (:func:`build_problem`): the frame (a simulator draws it
+   from the run's data stream; a file is read once), then the task builds the
+   measurements and prior from the task stream (seed streams: :mod:`replay.util.seeds`);
+2. the filter runs every run of the block in one call of
+   :meth:`replay.filters.base.Filter.run_batch` (runs sharing one model and one
+   pattern of missing measurements; otherwise in groups that do). Every filter
+   is written over the Monte Carlo run axis and each run draws only from its own
+   generator, so a run's numbers do not depend on which runs share its block:
+   eval and campaign agree by construction (``tests/test_pipeline.py``);
+3. each run is scored by :func:`replay.metrics.run_metrics` (RMSE per axis and
+   angle, ATE, drift, NEES/NIS) into a record ``{"run", "status", "metrics",
+   "series"}``; ``keep=True`` also keeps the problem, the estimates and the
+   error series in memory (``replay eval`` writes and plots them).
+
+It never raises for one run: a run whose problem cannot be built or whose
+scoring fails comes back as ``status = "failed"`` with its error.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from time import perf_counter
+
+import numpy as np
+
+from replay import metrics, registry, score
+from replay.filters import make_filter
+from replay.tasks import make_task
+from replay.util.seeds import DATA, TASK, filter_rng, rng_for
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration: everything that fixes the numbers of its runs except the run index."""
+
+    dataset: str
+    dataset_params: dict
+    first: int | None
+    task: str
+    task_params: dict
+    filter: str
+    filter_params: dict
+    seed: int
+    alignment: str = "se3"
+    divergence_threshold: float | None = None
+    adapter: str | None = None
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def config_hash(config: dict) -> str:
+    """The hash of a configuration's canonical JSON (16 hex digits); the one name of a configuration."""
+    text = json.dumps(plain(config), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def plain(obj):
+    """``obj`` with numpy values, tuples and paths made JSON-plain (lists, floats, ints, strings)."""
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def resolve(dataset: str):
+    """The registry entry for a dataset id, or None for a plain file path."""
+    if dataset in registry.all_datasets():
+        return registry.get(dataset)
+    if Path(dataset).exists() or dataset.endswith((".csv", ".bag", ".mcap", ".tsv", ".db3")):
+        return None
+    return registry.get(dataset)
+
+
+def is_sim(dataset: str) -> bool:
+    ds = resolve(dataset)
+    return ds is not None and ds.kind == "sim"
+
+
+@functools.lru_cache(maxsize=4)
+def _file_frame(dataset, first, data_dir, adapter, params_json):
+    """A file dataset's frame, read once per process (the same for every run)."""
+    return registry.load_frame(dataset, data_dir=data_dir, first=first, adapter=adapter,
+                               **json.loads(params_json))
+
+
+def load_frame(config: Config | dict, run: int, data_dir=None):
+    """The frame of ``run``: drawn from the run's data stream for a simulator, read once for a file."""
+    c = config.as_dict() if isinstance(config, Config) else config
+    if is_sim(c["dataset"]):
+        return registry.load_frame(c["dataset"], data_dir=data_dir, rng=rng_for(c["seed"], run, DATA),
+                                   first=c["first"], adapter=c.get("adapter"), **c["dataset_params"])
+    return _file_frame(c["dataset"], c["first"], None if data_dir is None else str(data_dir), c.get("adapter"),
+                       json.dumps(c["dataset_params"], sort_keys=True))
+
+
+def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
+    """The task a dataset is scored with when none is named: the registry's, else the adapter's choice."""
+    ds = resolve(dataset)
+    if ds is not None and ds.default_task:
+        return ds.default_task
+    cfg = {"dataset": dataset, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
+           "adapter": adapter}
+    return load_frame(cfg, 0, data_dir).meta.get("default_task", "position")
+
+
+def build_problem(config: Config | dict, run: int, data_dir=None):
+    """The Problem of ``run`` under ``config`` (frame, then the task on the run's task stream)."""
+    c = config.as_dict() if isinstance(config, Config) else config
+    frame = load_frame(c, run, data_dir)
+    task = make_task(c["task"], **c["task_params"])
+    problem = task.build(frame, rng_for(c["seed"], run, TASK))
+    problem.frame_meta, problem.frame_report = frame.meta, frame.report
+    return problem
+
+
+def failed(run: int, err: BaseException) -> dict:
+    return {"run": run, "status": "failed",
+            "error": f"{type(err).__name__}: {err}".splitlines()[0][:500],
+            "traceback": "".join(traceback.format_exception(err))[-4000:]}
+
+
+def _groups(runs, problems):
+    """Runs that can share one batched call: same model equations, same measurement shape and
+    the same pattern of missing measurements."""
+    groups: list[list[int]] = []
+    for r in runs:
+        p = problems[r]
+        for g in groups:
+            q = problems[g[0]]
+            if (p.z.shape == q.z.shape and same_model(p.model, q.model)
+                    and np.array_equal(np.isfinite(p.z), np.isfinite(q.z))):
+                g.append(r)
+                break
+        else:
+            groups.append([r])
+    return groups
+
+
+def same_model(a, b) -> bool:
+    """True when two models are the same equations (same class, equal attributes)."""
+    if a is b:
+        return True
+    if type(a) is not type(b):
+        return False
+    va, vb = vars(a), vars(b)
+    if va.keys() != vb.keys():
+        return False
+    for k in va:
+        x, y = va[k], vb[k]
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
+                return False
+        elif x is not y and x != y:
+            return False
+    return True
+
+
+def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False) -> list[dict]:
+    """Compute and score runs ``runs`` of ``config`` (module docstring); one record per run, in run order.
+
+    ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``).
+    Exceptions inside a filter's numeric step are never raised: they are that run's divergence.
+    """
+    c = config.as_dict() if isinstance(config, Config) else config
+    results, problems = [], {}
+    for run in runs:
+        try:
+            problems[run] = build_problem(c, run, data_dir)
+        except Exception as err:  # recorded; the other runs go on
+            if strict:
+                raise
+            results.append(failed(run, err))
+    if not problems:
+        return results
+    try:
+        flt = make_filter(c["filter"], **c["filter_params"])
+    except Exception as err:
+        if strict:
+            raise
+        return results + [failed(run, err) for run in problems]
+    estimates, wall = {}, {}
+    for group in _groups(list(problems), problems):
+        ps = [problems[r] for r in group]
+        t0 = perf_counter()
+        try:
+            out = flt.run_batch(ps[0].model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]),
+                                np.stack([p.P0 for p in ps]), [filter_rng(c["seed"], r, c["filter"]) for r in group])
+        except Exception as err:  # a failure outside the filter's numeric steps
+            if strict:
+                raise
+            results += [failed(r, err) for r in group]
+            continue
+        dt = (perf_counter() - t0) / len(group)
+        for r, est in zip(group, out):
+            estimates[r], wall[r] = est, dt
+    for r in problems:
+        if r not in estimates:
+            continue
+        try:
+            results.append(score_record(c, problems[r], estimates[r], r, wall[r], keep))
+        except Exception as err:
+            if strict:
+                raise
+            results.append(failed(r, err))
+    return sorted(results, key=lambda d: d["run"])
+
+
+def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> dict:
+    """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
+    m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"])
+    err = score.errors(problem, est)
+    cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
+    for i in range(est.x.shape[1]):
+        cols[f"x{i}"] = est.x[:, i]
+    for i in range(est.x.shape[1]):
+        cols[f"P{i}{i}"] = est.P[:, i, i]
+    for j, axis in enumerate(problem.axis_names):
+        cols[f"ref_{axis}"] = np.where(problem.truth_valid, problem.truth_position[:, j], np.nan)
+        cols[f"err_{axis}"] = err["position"][:, j]
+    for name in problem.truth_angles:
+        cols[f"err_{name}"] = err[name]
+    cols.update(series)
+    m["seconds"] = wall
+    rec = {"run": run, "status": "done", "metrics": m, "series": cols}
+    if est.info.get("error"):
+        rec["metrics"]["error"] = est.info["error"]
+    if keep:
+        rec.update(problem=problem, estimates=est, errors=err)
+    return rec

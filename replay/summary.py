@@ -1,0 +1,155 @@
+"""Leaderboard rows: one schema for ``replay eval``, campaigns, reproductions and merges.
+
+One row per configuration (dataset x task x filter x parameters x seed), from
+its per-run records (:func:`replay.pipeline.run_block`), whether they are in
+memory (eval) or stored (a campaign directory).
+
+Columns (stable):
+
+``dataset, task, filter, label, params, runs, diverged, failed, seed, first`` —
+the configuration (``params``: the filter's parameters as JSON, defaults
+included; ``label``: the filter name plus the parameters that differ between
+rows of the same filter; ``runs``: successful runs; ``diverged``: runs whose
+filter diverged (non-finite or non-positive covariance, an exception in its
+numeric step, or an error beyond ``divergence_threshold``), left out of every
+mean; ``failed``: runs that could not be computed);
+
+``<m>, <m>_ci95`` for each per-run metric ``m`` — the mean over non-diverged
+runs and the half-width of its 95 % Student-t interval: ``pos_rmse``,
+``x_rmse``, ``y_rmse``, ``z_rmse`` (m), ``<angle>_rmse`` (rad, wrapped), ``ate``
+(m, after ``alignment``), ``final_err`` (m), ``drift_pct`` (%), ``nees``,
+``nis`` (per-run time means; see :mod:`replay.metrics`);
+
+``pos_rmse_vs_<baseline>, pos_rmse_vs_<baseline>_ci95`` — paired comparison
+with the baseline configuration of the same dataset and task (the first, or the
+one named): mean over runs of this row's per-run ``pos_rmse`` minus the
+baseline's in the same run (common random numbers) and its 95 % half-width;
+empty in the baseline's own row and where there is one configuration;
+
+``anees, anees_lo, anees_hi, anees_inside`` and the same for ``anis`` — the
+ensemble consistency (:func:`replay.metrics.consistency`);
+
+``scored, masked`` — reference samples scored and skipped (masked reference),
+mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
+over the batch); ``alignment, version, config_hash``.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from replay import metrics, score
+
+HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "failed", "seed", "first"]
+RUN_METRICS = ["pos_rmse", "x_rmse", "y_rmse", "z_rmse", "ate", "final_err", "drift_pct", "nees", "nis"]
+ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anis", "anis_lo", "anis_hi", "anis_inside"]
+TAIL = ["scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
+TIMING = ("us_per_step",)
+
+
+def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> dict:
+    """The row of one configuration from its run records; ``series(run, columns)`` gives a
+    run's per-step columns (``nees``, ``nis``, ``nis_dof``)."""
+    done = [r for r in records if r["status"] == "done"]
+    ok = [r for r in done if not r["metrics"]["diverged"]]
+    row = {"dataset": cfg["dataset"], "task": cfg["task"], "filter": cfg["filter"], "label": cfg["filter"],
+           "params": json.dumps(cfg["filter_params"], sort_keys=True, separators=(",", ":")),
+           "runs": len(done), "diverged": len(done) - len(ok), "failed": len(records) - len(done),
+           "seed": cfg["seed"], "first": cfg["first"] or ""}
+    with np.errstate(all="ignore"):
+        agg = score.aggregate([r["metrics"] for r in done], RUN_METRICS)
+        row.update({k: v for k, v in agg.items() if k not in ("runs", "diverged", "us_per_step", "scored", "masked")})
+        row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok]))
+    row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=agg["us_per_step"],
+               alignment=cfg["alignment"], version=version, config_hash=h)
+    return row
+
+
+def ensemble(cols: list[dict]) -> dict:
+    """ANEES (3-D position) and ANIS over the runs' per-step ``nees``, ``nis``, ``nis_dof``."""
+    out = {k: float("nan") for k in ENSEMBLE}
+    if not cols:
+        return out
+    n = min(len(c["nees"]) for c in cols)
+    nees = np.stack([c["nees"][:n] for c in cols])
+    out.update(metrics.consistency(nees, 3 if nees.size else 0, "anees"))
+    nis = np.stack([c["nis"][:n] for c in cols])
+    out.update(metrics.consistency(nis, cols[0]["nis_dof"][:n], "anis"))
+    return out
+
+
+def label(rows: list[dict]) -> list[dict]:
+    """Each row's label: its filter, plus the parameters that differ between rows of that filter."""
+    by_filter = {}
+    for row in rows:
+        by_filter.setdefault(row["filter"], []).append(json.loads(row["params"]))
+    for row in rows:
+        group = by_filter[row["filter"]]
+        p = json.loads(row["params"])
+        vary = [k for k in p if any(g.get(k) != p[k] for g in group)]
+        row["label"] = row["filter"] + (f"({', '.join(f'{k}={p[k]}' for k in vary)})" if vary else "")
+    return rows
+
+
+def group_key(cfg: dict) -> str:
+    """Configurations with the same key ran on the same measurements (paired comparisons)."""
+    return json.dumps([cfg["dataset"], cfg["dataset_params"], cfg["first"], cfg["task"], cfg["task_params"],
+                       cfg["seed"], cfg.get("adapter")], sort_keys=True, default=str)
+
+
+def per_run(records: list[dict], metric: str) -> dict:
+    """{run: value} of a metric over the runs that finished without diverging."""
+    return {r["run"]: r["metrics"].get(metric, np.nan) for r in records
+            if r["status"] == "done" and not r["metrics"]["diverged"]}
+
+
+def add_paired(rows: list[dict], configs: dict, records: dict, baseline: str | None = None,
+               metric: str = "pos_rmse") -> list[dict]:
+    """Add ``<metric>_vs_<baseline>`` columns to ``rows`` (in place): within each group of
+    configurations on the same measurements, against ``baseline`` (a label) or the first row."""
+    groups = {}
+    for row in rows:
+        groups.setdefault(group_key(configs[row["config_hash"]]), []).append(row)
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        base = next((r for r in members if r["label"] == baseline), members[0])
+        col = f"{metric}_vs_{base['label']}"
+        ref = per_run(records[base["config_hash"]], metric)
+        for row in members:
+            if row is base:
+                row[col], row[f"{col}_ci95"] = "", ""
+                continue
+            mine = per_run(records[row["config_hash"]], metric)
+            common = sorted(set(ref) & set(mine))
+            p = metrics.paired([mine[r] for r in common], [ref[r] for r in common])
+            row[col], row[f"{col}_ci95"] = p["diff"], p["diff_ci95"]
+    return rows
+
+
+def paired_rows(rows, configs: dict, records: dict, metric_names=("pos_rmse", "ate")) -> list[dict]:
+    """Every two configurations on the same measurements, compared run by run (``paired.csv``)."""
+    groups = {}
+    for row in rows:
+        groups.setdefault(group_key(configs[row["config_hash"]]), []).append(row)
+    out = []
+    for members in groups.values():
+        for i, a in enumerate(members):
+            for b in members[i + 1:]:
+                for m in metric_names:
+                    pa, pb = per_run(records[a["config_hash"]], m), per_run(records[b["config_hash"]], m)
+                    common = sorted(set(pa) & set(pb))
+                    p = metrics.paired([pa[r] for r in common], [pb[r] for r in common])
+                    out.append({"dataset": a["dataset"], "task": a["task"], "a": a["label"], "b": b["label"],
+                                "metric": m, "n": p["n"], "diff": p["diff"], "diff_ci95": p["diff_ci95"],
+                                "a_better": p["a_better"]})
+    return out
+
+
+def columns(rows) -> list[str]:
+    """The leaderboard's columns: the fixed head, every metric present, the ensemble and the tail."""
+    extra = []
+    for row in rows:
+        extra += [k for k in row if k not in HEAD + ENSEMBLE + TAIL and k not in extra]
+    return HEAD + extra + ENSEMBLE + TAIL
