@@ -7,7 +7,7 @@
    (quaternions, :func:`replay.metrics.pose_errors`) and the SE(3)-aligned ATE
    (Umeyama). Target: < 0.3 s in total (best of 5).
 2. 100 UKF runs of the ``sim/auv-sonar`` problem (100 steps): one by one
-   (``Filter.run``) against one batched call (:func:`replay.filters.batched.run_batched`).
+   (``Filter.run``) against one batched call (:meth:`replay.filters.base.Filter.run_batch`).
    Target: batched >= 10x faster. Also the largest difference between the two.
 3. A small campaign (sim/auv-sonar, ekf + ukf + ckf + pf, 40 runs) with
    ``--workers 1`` and ``--workers 2``: target wall(2) ~ wall(1) / 2 on 2 cores.
@@ -63,7 +63,6 @@ def bench_batched(runs):
     from replay import registry
     from replay.util.seeds import rng_for
     from replay.filters import make_filter
-    from replay.filters.batched import run_batched
     from replay.tasks import make_task
 
     task = make_task("sonar")
@@ -72,7 +71,7 @@ def bench_batched(runs):
     flt = make_filter("ukf")
     Z, X0, P0 = (np.stack([getattr(p, a) for p in probs]) for a in ("z", "x0", "P0"))
     seq = lambda: [flt.run(p.model, p.z, p.x0, p.P0) for p in probs]
-    bat = lambda: run_batched(flt, probs[0].model, Z, X0, P0, [None] * runs)
+    bat = lambda: flt.run_batch(probs[0].model, Z, X0, P0, [None] * runs)
     ts, tb = best(seq, 3), best(bat, 3)
     diff = max(np.max(np.abs(a.x - b.x)) for a, b in zip(seq(), bat()))
     print(f"{runs} UKF runs x 100 steps: one by one {ts:.3f} s, batched {tb:.3f} s, "

@@ -27,7 +27,10 @@ by run (M = 1 each) from the generators' saved starting states, so a run's
 numbers never depend on which runs share its batch; with one run it marks that
 run diverged at k with ``info["error"] = "<Type>: <message>"``. Errors of the
 user (ReplayError) and of the program (TypeError, AttributeError, ...) are
-raised, never counted as divergence.
+raised, never counted as divergence. (The loop first runs without per-step
+tests and checks all estimates once at the end: most runs never diverge. When
+a run diverged or raised, the call is redone from the generators' saved states
+testing every step, so the numbers are those of the checked loop.)
 
 Exactness rule for every engine: each run draws only from its own generator
 and every operation acts on each run's slice alone, so a batch of M runs gives
@@ -86,6 +89,10 @@ class _Redo(Exception):
     """A numerical exception with several runs active: redo the batch run by run."""
 
 
+class _Careful(Exception):
+    """A divergence or exception in a careless pass: redo it checking every step."""
+
+
 def numerical(err: BaseException) -> bool:
     """True when ``err`` is a numerical failure of a run (counted as divergence)."""
     return isinstance(err, Exception) and not isinstance(err, NOT_NUMERICAL)
@@ -98,22 +105,11 @@ class Filter(Declared):
     name = "filter"
     PARAMS = ()
 
-    def __init__(self, *args, **params):
-        # Transitional: positional values in PARAMS order, for subclasses not yet declared that
-        # call super().__init__(a, b, ...); the protocol is keyword-only construction.
-        for p, value in zip(self.PARAMS, args):
-            if p.name in params:
-                raise TypeError(f"{self.owner()}: {p.name} given twice")
-            params[p.name] = value
-        if len(args) > len(self.PARAMS):
-            raise TypeError(f"{self.owner()}: takes keyword parameters only")
-        super().__init__(**params)
-
     def params(self) -> dict:
         """The filter's parameters, for manifests and leaderboards.
 
-        A filter not yet declared (public attributes set by its own constructor
-        that are not in ``PARAMS``) reports its public attributes, as before.
+        A filter whose own constructor sets public attributes that are not in
+        ``PARAMS`` (not declared) reports its public attributes.
         """
         public = {k: v for k, v in vars(self).items() if not k.startswith("_")}
         names = {p.name for p in self.PARAMS}
@@ -164,15 +160,26 @@ class Filter(Declared):
                              f"generators must describe the same runs of a model with nx = {nx}")
         rngs = [g if g is not None else np.random.default_rng(0) for g in rngs]
         saved = [g.bit_generator.state for g in rngs]
+
+        def restore():
+            for g, state in zip(rngs, saved):
+                g.bit_generator.state = state
+
         try:
-            return self._loop(model, Z, X0, P0, rngs)
+            try:
+                return self._loop(model, Z, X0, P0, rngs, careful=False)
+            except _Careful:
+                restore()
+                return self._loop(model, Z, X0, P0, rngs, careful=True)
         except _Redo:
-            for g, s in zip(rngs, saved):
-                g.bit_generator.state = s
-            return [self._loop(model, Z[m:m + 1], X0[m:m + 1], P0[m:m + 1], rngs[m:m + 1])[0]
+            restore()
+            return [self._loop(model, Z[m:m + 1], X0[m:m + 1], P0[m:m + 1], rngs[m:m + 1], careful=True)[0]
                     for m in range(M)]
 
-    def _loop(self, model, Z, X0, P0, rngs) -> list[Estimates]:
+    def _loop(self, model, Z, X0, P0, rngs, careful: bool) -> list[Estimates]:
+        """The steps of M runs. Careless first (no per-step test: most runs never diverge), checked
+        once at the end; any divergence or exception -> _Careful: the caller redoes it carefully,
+        dropping each run where it diverges (_Redo: run by run, after an exception)."""
         M, n = Z.shape[:2]
         nx = model.nx
         X = np.full((M, n, nx), np.nan)
@@ -190,6 +197,8 @@ class Filter(Declared):
         except Exception as err:
             if not numerical(err):
                 raise
+            if not careful:
+                raise _Careful from err
             if M > 1:
                 raise _Redo from err
             diverged[0], errors[0], active, started = 0, err, active[:0], False
@@ -205,12 +214,14 @@ class Filter(Declared):
             except Exception as err:
                 if not numerical(err):
                     raise
+                if not careful:
+                    raise _Careful from err
                 if na > 1:
                     raise _Redo from err
                 diverged[active[0]], errors[active[0]] = k, err
                 break
             dt = (clock() - t0) / na
-            if _all_fine(xk, Pk):
+            if not careful or _all_fine(xk, Pk):
                 X[rows, k], P[rows, k], secs[rows, k], nis[rows, k], dof[rows, k] = xk, Pk, dt, nk, dk
                 continue
             d = Pk.diagonal(0, 1, 2)
@@ -221,6 +232,9 @@ class Filter(Declared):
                 diverged[m] = k
             active = good
             engine.keep(ok)
+        if not careful and not (np.isfinite(X).all() and np.isfinite(P).all()
+                                and P.diagonal(0, 2, 3).min(initial=0.0) >= 0.0):
+            raise _Careful
         out = []
         for m in range(M):
             info = {"nis": nis[m], "nis_dof": dof[m]}
@@ -230,6 +244,14 @@ class Filter(Declared):
                 info["error"] = f"{type(errors[m]).__name__}: {errors[m]}"
             out.append(Estimates(X[m], P[m], secs[m], diverged[m], info))
         return out
+
+
+def on_points(fun, X, k):
+    """``fun`` (model.f or model.h) on points (..., m, nx) (sigma points, particles of M runs),
+    called on their (-1, nx) view: numpy's elementwise kernels cost less on 2-d arrays."""
+    if X.ndim == 2:
+        return fun(X, k)
+    return fun(X.reshape(-1, X.shape[-1]), k).reshape(X.shape[:-1] + (-1,))
 
 
 def _all_fine(x, P) -> bool:

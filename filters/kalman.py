@@ -41,27 +41,22 @@ from replay.model import remap_indices
 from .base import Filter
 
 
-def T(A):
-    """Transpose of the last two axes (a stack of matrices)."""
-    return A.swapaxes(-1, -2)
-
-
 def gain_nis(S, Pxz, y):
     """K = Pxz S^-1 (..., nx, nz) and NIS y' S^-1 y (...), from one solve of ``S`` (..., nz, nz)."""
-    B = np.concatenate([T(Pxz), y[..., None]], axis=-1)
+    B = np.concatenate([Pxz.swapaxes(-1, -2), y[..., None]], axis=-1)
     X = solve_spd(S, B)
-    return T(X[..., :-1]), (y[..., None, :] @ X[..., -1:])[..., 0, 0]
+    return X[..., :-1].swapaxes(-1, -2), (y[..., None, :] @ X[..., -1:])[..., 0, 0]
 
 
 def kalman_update(x, P, y, H, R, x_angles=()):
     """The Kalman update (module docstring) over any leading axes: returns x, P (Joseph form), NIS."""
-    PHt = P @ T(H)
+    PHt = P @ H.swapaxes(-1, -2)
     S = H @ PHt + R
     K, nis = gain_nis(S, PHt, y)
     x = wrap_components(x + (K @ y[..., None])[..., 0], x_angles)
     I_KH = np.eye(x.shape[-1]) - K @ H
-    P = I_KH @ P @ T(I_KH) + K @ R @ T(K)
-    return x, 0.5 * (P + T(P)), nis
+    P = I_KH @ P @ I_KH.swapaxes(-1, -2) + K @ R @ K.swapaxes(-1, -2)
+    return x, 0.5 * (P + P.swapaxes(-1, -2)), nis
 
 
 def jacobians(fun, x, k):
@@ -96,6 +91,7 @@ class KalmanEngine:
     def start(self, X0, P0):
         self.one = len(X0) == 1
         self.x, self.P = (X0[0].copy(), P0[0].copy()) if self.one else (X0.copy(), P0.copy())
+        self.nis1, self.dof1 = np.empty(1), np.empty(1, int)  # one run's NIS and its dof, per step
 
     def keep(self, ok):
         if not self.one:
@@ -108,12 +104,14 @@ class KalmanEngine:
         x, P = self.predict(self.x, self.P, k)
         if self.one:
             f, nis = finite[0], np.nan
-            if f.all():
+            dof = np.count_nonzero(f)
+            if dof == len(f):
                 x, P, nis = self.update(x, P, Z[0], k, None)
-            elif f.any():
+            elif dof:
                 x, P, nis = self.update(x, P, Z[0][f], k, f)
             self.x, self.P = x, P
-            return x[None], P[None], np.array([nis]), np.array([f.sum()])
+            self.nis1[0], self.dof1[0] = nis, dof
+            return x[None], P[None], self.nis1, self.dof1
         if finite.all():
             self.x, self.P, nis = self.update(x, P, Z, k, None)
             return self.x, self.P, nis, np.full(len(x), Z.shape[1])
@@ -139,7 +137,7 @@ class EKFEngine(KalmanEngine):
         m = self.model
         F = jacobians(m.F, x, k)
         x = wrap_components(m.f(x, k), m.x_angles)
-        return x, F @ P @ T(F) + m.process_cov(k)
+        return x, F @ P @ F.swapaxes(-1, -2) + m.process_cov(k)
 
     def update(self, x, P, z, k, mask):
         m = self.model

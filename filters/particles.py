@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import index, residual
+from replay.util.angles import index, wrap
 
 from .resampling import SCHEMES
 
@@ -40,22 +40,28 @@ def estimate(X: np.ndarray, w: np.ndarray, angles=()):
     """Weighted mean ``x`` (M, nx) and covariance ``P`` (M, nx, nx) of particles X (M, N, nx).
 
     Angle components (``angles``, indices along the last axis) get the circular
-    mean and wrapped residuals.
+    mean and wrapped residuals. (Elementwise work runs on (M N, nx) views:
+    numpy costs less on 2-d arrays than on 3-d ones.)
     """
+    M, N, nx = X.shape
     wr = w[:, None, :]  # (M, 1, N): one stacked product per run
     x = (wr @ X)[:, 0]
     if angles:
         i = index(tuple(angles))
-        Xa = X[..., i]
-        x[:, i] = np.arctan2((wr @ np.sin(Xa))[:, 0], (wr @ np.cos(Xa))[:, 0])
-    D = residual(X, x[:, None, :], angles)
-    P = (np.swapaxes(D, -1, -2) * wr) @ D
+        Xa = X.reshape(M * N, nx)[:, i]
+        sin, cos = np.sin(Xa).reshape(M, N, -1), np.cos(Xa).reshape(M, N, -1)
+        x[:, i] = np.arctan2((wr @ sin)[:, 0], (wr @ cos)[:, 0])
+    D = X - x[:, None, :]
+    if angles:  # particles' angles are not kept wrapped: wrap every residual (no test first)
+        D2 = D.reshape(M * N, nx)
+        D2[:, i] = wrap(D2[:, i])
+    P = (D.swapaxes(-1, -2) * wr) @ D
     return x, P
 
 
 def ess(w: np.ndarray) -> np.ndarray:
     """Effective sample size 1 / sum w^2 of each run (M,)."""
-    return 1.0 / (w * w).sum(axis=-1)
+    return 1.0 / (w[:, None, :] @ w[:, :, None])[:, 0, 0]
 
 
 def resample(w: np.ndarray, rngs, scheme: str = "systematic", threshold: float = 1.0) -> dict:
@@ -64,10 +70,8 @@ def resample(w: np.ndarray, rngs, scheme: str = "systematic", threshold: float =
     Returns ``{j: indices}``; run j draws from ``rngs[j]`` only. Runs above the
     threshold are absent (not resampled, nothing drawn from their generator).
     """
-    draw = SCHEMES[scheme]
-    N = w.shape[-1]
-    low = np.flatnonzero(ess(w) < threshold * N)
-    return {int(j): draw(w[j], rngs[j]) for j in low}
+    draw, limit = SCHEMES[scheme], threshold * w.shape[-1]
+    return {j: draw(w[j], rngs[j]) for j, e in enumerate(ess(w).tolist()) if e < limit}
 
 
 def roughen(X_j: np.ndarray, K: float, rng: np.random.Generator) -> np.ndarray:

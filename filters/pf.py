@@ -37,9 +37,8 @@ from replay.model import Model, noise_factor
 from replay.util.params import Param
 
 from . import particles
-from .base import Filter
+from .base import Filter, on_points
 from .resampling import SCHEMES
-from .sigma import on_points
 
 
 class ParticleFilter(Filter):
@@ -75,14 +74,17 @@ class PFEngine:
         self.ids = np.arange(M)
         self.active = list(self.rngs)
         self.X = particles.gaussian(X0, P0, N, self.rngs)
+        self.logw0 = -np.log(N)
         self.logw = np.full((M, N), -np.log(N))
         self.w = np.full((M, N), 1.0 / N)
-        self.resampled = np.zeros(M, int)
+        self.resampled = [0] * M
+        self.no_nis = np.full(M, np.nan), np.zeros(M, int)  # a PF records no innovation
 
     def keep(self, ok):
         self.ids = self.ids[ok]
         self.active = [self.rngs[i] for i in self.ids]
         self.X, self.logw, self.w = self.X[ok], self.logw[ok], self.w[ok]
+        self.no_nis = self.no_nis[0][ok], self.no_nis[1][ok]
 
     def finish(self, m, info):
         info["resampled"] = int(self.resampled[m])
@@ -92,8 +94,7 @@ class PFEngine:
         self.update(k, Z, finite)
         x, P = particles.estimate(self.X, self.w, self.model.x_angles)
         self.resample()
-        M = len(x)
-        return x, P, np.full(M, np.nan), np.zeros(M, int)
+        return x, P, *self.no_nis
 
     def propagate(self, k):
         """x^i ~ p(x_k | x^i_{k-1}): f on every run's particles, noise from each run's generator."""
@@ -115,26 +116,40 @@ class PFEngine:
 
     def update(self, k, Z, finite):
         """Weights of the runs with a measurement (missing components left out of the likelihood)."""
-        loglik, X = self.model.loglik, self.X
         if finite.all():
-            ll = np.stack([loglik(Z[j], X[j], k, None) for j in range(len(X))])
-            self.w, self.logw = self.flt.weigh(self.logw, ll)
+            self.w, self.logw = self.flt.weigh(self.logw, self.loglik(k, Z, None, range(len(Z))))
             return
         rows = np.flatnonzero(finite.any(axis=1))
         if len(rows):
-            full = finite.all(axis=1)
-            ll = np.stack([loglik(Z[j], X[j], k, None if full[j] else finite[j]) for j in rows])
-            self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], ll)
+            self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], self.loglik(k, Z, finite, rows))
+
+    def loglik(self, k, Z, finite, rows):
+        """log p(z_k | x^i) (len(rows), N) of the runs ``rows`` (``finite``: measured components)."""
+        loglik, X = self.model.loglik, self.X
+        masks = [None if finite is None or finite[j].all() else finite[j] for j in rows]
+        if len(rows) == 1:  # no copy
+            return loglik(Z[rows[0]], X[rows[0]], k, masks[0])[None]
+        ll = np.empty((len(rows), X.shape[1]))
+        for i, j in enumerate(rows):
+            ll[i] = loglik(Z[j], X[j], k, masks[i])
+        return ll
 
     def resample(self):
         """Resample (and roughen) the runs whose ESS < threshold * N, each from its own generator."""
         flt = self.flt
-        N = self.X.shape[1]
+        M, N = self.w.shape
+        new = {}
         for j, a in particles.resample(self.w, self.active, flt.resampling, flt.ess_threshold).items():
             Xj = self.X[j][a]
             if flt.roughening:
                 Xj = particles.roughen(Xj, flt.roughening, self.active[j])
-            self.X[j] = Xj
+            new[j] = Xj
             self.w[j] = 1.0 / N
-            self.logw[j] = -np.log(N)
+            self.logw[j] = self.logw0
             self.resampled[self.ids[j]] += 1
+        if M == 1:
+            if new:  # no second copy of the only run's particles
+                self.X = new[0][None]
+        else:
+            for j, Xj in new.items():
+                self.X[j] = Xj

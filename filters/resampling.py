@@ -1,4 +1,8 @@
-"""Resampling schemes: each maps normalised weights ``w`` (N,) to ancestor indices."""
+"""Resampling schemes: each maps normalised weights ``w`` (N,) of one run to ancestor indices.
+
+:func:`replay.filters.particles.resample` applies them over the run axis (and
+``particles.ess`` is the effective sample size that decides when).
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -19,11 +23,6 @@ def multinomial(w: np.ndarray, rng: np.random.Generator, n: int | None = None) -
     c = np.cumsum(w)
     c[-1] = 1.0
     return np.searchsorted(c, rng.random(n), side="right")
-
-
-def effective_sample_size(w: np.ndarray) -> float:
-    """ESS = 1 / sum w_i^2 for normalised weights."""
-    return 1.0 / float(w @ w)
 
 
 SCHEMES = {"systematic": systematic, "multinomial": multinomial}

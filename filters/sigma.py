@@ -39,20 +39,14 @@ from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky
 from replay.util.params import Param
 
-from .base import PER_RUN, Filter
-from .kalman import T, KalmanEngine, gain_nis, measurement
+from .base import PER_RUN, Filter, on_points
+from .kalman import KalmanEngine, gain_nis, measurement
 
 
 # --- the step over a stack of runs -------------------------------------------------------
-def on_points(fun, X, k):
-    """``fun`` (model.f or model.h) on points (..., m, nx), called on their (-1, nx) view:
-    numpy's elementwise kernels cost less on 2-d arrays than on 3-d ones."""
-    return fun(X.reshape(-1, X.shape[-1]), k).reshape(X.shape[:-1] + (-1,))
-
-
 def sigma_points(x, P, xi):
     """Points X_i = x + L xi_i (..., m, nx) and their deviations L xi_i from x."""
-    dev = xi @ T(cholesky(P))
+    dev = xi @ cholesky(P).swapaxes(-1, -2)
     return x[..., None, :] + dev, dev
 
 
@@ -61,7 +55,7 @@ def predict(model, x, P, k, xi, wm, wc):
     Y = on_points(model.f, sigma_points(x, P, xi)[0], k)
     x = weighted_mean(Y, wm, model.x_angles)
     D = residual(Y, x[..., None, :], model.x_angles)
-    return x, (T(D) * wc) @ D + model.process_cov(k)
+    return x, (D.swapaxes(-1, -2) * wc) @ D + model.process_cov(k)
 
 
 def innovation(model, x, P, z, k, mask, xi, wm, wc):
@@ -77,15 +71,15 @@ def innovation(model, x, P, z, k, mask, xi, wm, wc):
     zh = weighted_mean(Z, wm, angles)
     Dz = residual(Z, zh[..., None, :], angles)
     W = wc[:, None] * Dz
-    return residual(z, zh, angles), T(Dz) @ W, T(dev) @ W, R
+    return residual(z, zh, angles), Dz.swapaxes(-1, -2) @ W, dev.swapaxes(-1, -2) @ W, R
 
 
 def correct(x, P, y, S, Pxz, x_angles=()):
     """x + K y (state angles wrapped), P - K Pxz' (symmetrised) and the NIS, K = Pxz S^-1."""
     K, nis = gain_nis(S, Pxz, y)
     x = wrap_components(x + (K @ y[..., None])[..., 0], x_angles)
-    P = P - K @ T(Pxz)
-    return x, 0.5 * (P + T(P)), nis
+    P = P - K @ Pxz.swapaxes(-1, -2)
+    return x, 0.5 * (P + P.swapaxes(-1, -2)), nis
 
 
 class SigmaEngine(KalmanEngine):

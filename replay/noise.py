@@ -25,23 +25,9 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
+from replay.util.linalg import require_spd  # noqa: F401 (re-exported)
 from replay.util.errors import ReplayError
 from replay.util.params import Param, _is_number
-
-
-def require_spd(M, name: str) -> np.ndarray:
-    """``M`` as a float array, or ReplayError naming ``name`` if not symmetric positive definite."""
-    M = np.atleast_2d(np.asarray(M, dtype=float))
-    if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.all(np.isfinite(M)):
-        raise ReplayError(f"{name} must be a finite square matrix (got shape {M.shape})")
-    if not np.allclose(M, M.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(M).max())):
-        raise ReplayError(f"{name} must be symmetric")
-    try:
-        np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        raise ReplayError(f"{name} must be positive definite "
-                          f"(smallest eigenvalue {np.linalg.eigvalsh(M).min():.3g})") from None
-    return M
 
 
 @dataclass(frozen=True)

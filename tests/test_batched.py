@@ -196,9 +196,14 @@ def test_stacked_linear_algebra_equals_one_matrix():
         B = rng.standard_normal((5, n, 4))
         L, X, K = cholesky(S), solve_spd(S, B), gain(S, np.swapaxes(B, 1, 2))
         for m in range(5):
-            assert np.array_equal(cholesky(S[m:m + 1])[0], L[m])
-            assert np.array_equal(solve_spd(S[m:m + 1], B[m:m + 1])[0], X[m])
-            assert np.array_equal(gain(S[m:m + 1], np.swapaxes(B[m:m + 1], 1, 2))[0], K[m])
+            for one in (lambda a: a[m:m + 1], lambda a: a[m][None]):  # a stack of one, one matrix
+                assert np.array_equal(cholesky(one(S))[0], L[m])
+                assert np.array_equal(solve_spd(one(S), one(B))[0], X[m])
+            assert np.array_equal(cholesky(S[m]), L[m]) and np.array_equal(solve_spd(S[m], B[m]), X[m])
+            assert np.array_equal(gain(S[m], B[m].T), K[m])
+            # column-major per matrix whatever M (products round by their operands' layout)
+            if n > 1:
+                assert cholesky(S[m]).strides == L[m].strides and solve_spd(S[m], B[m]).strides == X[m].strides
         np.testing.assert_allclose(L @ np.swapaxes(L, 1, 2), S, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(S @ X, B, rtol=1e-9, atol=1e-9)
     bad = np.stack([np.eye(2), [[1.0, 2.0], [2.0, 1.0]]])

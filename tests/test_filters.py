@@ -183,3 +183,54 @@ def test_roughening_option_and_parameter_checks(linear_case):
                 {"n_particles": 1.5}, {"n_particles": True}, {"roughening": float("nan")}, {"nope": 1}):
         with pytest.raises(ReplayError, match=f"^filter 'pf': .*{next(iter(bad))}"):
             make_filter("pf", **bad)
+
+
+def test_declared_parameters_of_the_kalman_family_and_pf():
+    from replay.util.errors import ReplayError
+
+    assert make_filter("ukf").params() == {"alpha": 0.5, "beta": 2.0, "kappa": 0.0}
+    assert make_filter("ckf").params() == {} and make_filter("ekf").params() == {}
+    assert make_filter("pf").params() == {"n_particles": 1000, "resampling": "systematic", "ess_threshold": 1.0,
+                                          "roughening": 0.0}
+    assert make_filter("wf-pf").params() == {"n_particles": 1000, "alpha": 0.75, "weight_floor": 1e-99,
+                                             "resampling": "systematic", "ess_threshold": 1.0}
+    for name, bad in (("ukf", {"alpha": 0.0}), ("ukf", {"beta": -1.0}), ("ukf", {"alpha": True}),
+                      ("wf-pf", {"roughening": 0.2}), ("wf-pf", {"weight_floor": 0.0}), ("kf", {"q": 1.0})):
+        with pytest.raises(ReplayError, match=f"^filter '{name}': .*{next(iter(bad))}"):
+            make_filter(name, **bad)
+    # kappa is checked against the state dimension when the model is known: raised, not a divergence
+    model = LinearGaussian(np.eye(2), np.eye(2), np.eye(2), np.eye(2))
+    with pytest.raises(ReplayError, match="kappa must be > -2"):
+        make_filter("ukf", kappa=-2.0).run(model, np.zeros((3, 2)), np.zeros(2), np.eye(2))
+
+
+def test_filter_written_per_run_goes_through_the_default_engine():
+    """A State-based filter with its own constructor: params() reports its attributes, the default
+    engine loops over the runs, and an exception in one run marks that run only."""
+    from replay.filters.base import Filter
+
+    class Shrinking(Filter):
+        name = "shrinking"
+
+        def __init__(self, gain=0.5):
+            self.gain = gain
+
+        def predict(self, state, k):
+            if state.x[0] > 50:
+                raise ValueError("too far")
+
+        def update(self, state, z, k, mask):
+            state.x = state.x + self.gain * (np.where(np.isfinite(z), z, state.x) - state.x)
+            state.P = state.P * (1 - self.gain)
+
+    flt = Shrinking()
+    assert flt.params() == {"gain": 0.5}
+    model = LinearGaussian(np.eye(2), np.eye(2), np.eye(2), np.eye(2))
+    Z = np.ones((3, 10, 2))
+    Z[1, 4:, 0] = 200.0
+    Z[2, 2, 1] = np.nan
+    est = flt.run_batch(model, Z, np.zeros((3, 2)), np.stack([np.eye(2)] * 3), [None] * 3)
+    assert est[0].x[2].tolist() == [0.875, 0.875] and not est[0].diverged
+    assert est[2].x[2].tolist() == [0.875, 0.75]  # the missing component kept its prediction
+    assert est[1].diverged_at == 5 and est[1].info["error"] == "ValueError: too far"
+    assert np.isnan(est[1].x[5:]).all() and est[1].x[4, 0] == 0.9375 + 0.5 * (200.0 - 0.9375)

@@ -78,7 +78,7 @@ from replay.util.angles import residual, weighted_mean, wrap_components
 from replay.util.linalg import cholesky, gain
 from replay.util.params import Param
 from replay.model import remap_indices
-from replay.noise import require_spd
+from replay.util.linalg import require_spd
 
 from ..sigma import UKF
 

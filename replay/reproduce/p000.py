@@ -238,7 +238,7 @@ def _report(per_all, runs, seed, segments, elapsed, png, workers=2):
          "−0.22), so Q = diag(0.2², 1², 0.5²) is used, as the digest prescribes. The primary tables read "
          "the printed numbers in SI units (m, m/s, rad); the paper does not state them (0.5 rad of pitch "
          "noise per 0.05 s step is very large): see the sensitivity section for the degree readings. "
-         "MMPF: three modes (steady, pitch rate ±10°/s), stay probability 0.95 (`filters/mmpf.py`).", "",
+         "MMPF: three modes (steady, pitch rate ±10°/s), stay probability 0.95 (`filters/p000/mmpf.py`).", "",
          "Maneuver segments (non-zero pitch command, +1.5 s settling): "
          + ", ".join(f"{a:g}–{b:g} s {lab}" for a, b, lab in segments) + ".", "",
          "## RMSE, mean over runs (± 95 % interval)", "", *_rmse_table(per, ["sensor", *VARIANTS]),

@@ -23,14 +23,14 @@ from replay.score import ci95
 from .common5 import mean_ci, plot_curves, rmse_curve
 
 METRICS = ["north", "east", "depth", "vx", "vy", "vz", "ax", "ay", "az"]
-# AUKF variants for the ablation: which estimators run and which guard (filters/aukf.py)
+# AUKF variants for the ablation: which estimators run and which guard (filters/p001/aukf.py)
 ABLATION = [("paper (all four estimators, guard biased)", {}),
             ("guard previous", {"guard": "previous"}),
             ("guard clip", {"guard": "clip"}),
-            ("no mean estimators (Q̂, R̂ only)", {"adapt_means": False}),
-            ("R̂ only", {"adapt_means": False, "adapt_q": False}),
-            ("Q̂ only", {"adapt_means": False, "adapt_r": False}),
-            ("Q̂ only, guard previous", {"adapt_means": False, "adapt_r": False, "guard": "previous"}),
+            ("no mean estimators (Q̂, R̂ only)", {"adapt_means": "none"}),
+            ("R̂ only", {"adapt_means": "none", "adapt_q": False}),
+            ("Q̂ only", {"adapt_means": "none", "adapt_r": False}),
+            ("Q̂ only, guard previous", {"adapt_means": "none", "adapt_r": False, "guard": "previous"}),
             ("p̂ only", {"adapt_means": "p", "adapt_q": False, "adapt_r": False}),
             ("q̂ only", {"adapt_means": "q", "adapt_q": False, "adapt_r": False})]
 MEASURED = ["depth", "vx", "vy", "vz", "ax", "ay", "az", "heading"]

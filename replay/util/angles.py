@@ -60,7 +60,11 @@ def wrap_components(x, angles=()):
                 v[i] = _wrap_scalar(v[i])
         else:
             i = index(tuple(angles))
-            x[..., i] = wrap(x[..., i])
+            a = x[..., i]
+            # |a| < 3 (< pi - 0.14): floor(a / 2 pi + 0.5) = 0 exactly, so wrap(a) is a itself;
+            # one cheap test skips the wrap of small residuals (sigma points, particles)
+            if not (a.size and np.abs(a).max() < 3.0):
+                x[..., i] = wrap(a)
     return x
 
 

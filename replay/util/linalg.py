@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dgesv, dpotrf
 
+from replay.util.errors import ReplayError
+
 
 def _not_pd(info):
     return np.linalg.LinAlgError(f"matrix not positive definite (LAPACK info {info})")
@@ -73,3 +75,18 @@ def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
 def gain(S: np.ndarray, Pxz: np.ndarray) -> np.ndarray:
     """Kalman gain ``K = Pxz S^-1`` (S symmetric positive definite; one matrix or stacks)."""
     return solve_spd(S, Pxz.swapaxes(-1, -2)).swapaxes(-1, -2)
+
+
+def require_spd(M, name: str) -> np.ndarray:
+    """``M`` as a float array, or ReplayError naming ``name`` if not symmetric positive definite."""
+    M = np.atleast_2d(np.asarray(M, dtype=float))
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.all(np.isfinite(M)):
+        raise ReplayError(f"{name} must be a finite square matrix (got shape {M.shape})")
+    if not np.allclose(M, M.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(M).max())):
+        raise ReplayError(f"{name} must be symmetric")
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise ReplayError(f"{name} must be positive definite "
+                          f"(smallest eigenvalue {np.linalg.eigvalsh(M).min():.3g})") from None
+    return M
