@@ -40,8 +40,10 @@ GPF, MMPF and EKF on the same runs (same data seeds):
 
 The printed Q is not positive definite under any of these readings (its
 depth-speed entry 0.8^2 exceeds sqrt(0.2^2 * 1^2)), so the diagonal fallback is
-converted. Seeds as in ``replay eval``: (seed, run, 0) data, (seed, run, 1)
-task, (seed, run, 2, crc32(label)) filter.
+converted. Every run goes through the pipeline of ``replay eval``
+(:func:`replay.pipeline.run_block`), with its seeds: (seed, run, 0) data,
+(seed, run, 1) task, (seed, run, 2, crc32(filter name)) filter — the ablation
+variants of the GPF share the GPF's stream (common random numbers).
 """
 from __future__ import annotations
 
@@ -52,12 +54,10 @@ from pathlib import Path
 
 import numpy as np
 
-from replay import registry, score
-from replay.util.seeds import filter_stream, rng_for
-from replay.filters import make_filter
+from replay import score
 from replay.models.depth import R_FIXED, paper_Q
+from replay.pipeline import Config, run_block
 from replay.sim.lake_depth import base_for_rms
-from replay.tasks.depth import DepthTask
 
 VARIANTS = {  # label -> (filter, params)
     "GPF": ("gpf", {}),
@@ -79,11 +79,11 @@ def _readings():
     return {
         PRIMARY: ({}, {}, "SI units as printed: Q = diag(0.2², 1², 0.5²) (m², (m/s)², rad²), "
                   "R = diag(0.2², 5², 0.5²) (m², (m/s)², rad²); `sim/lake-depth` sensors as generated"),
-        "degrees": ({"Q": Qd, "R": Rd}, {}, "pitch entries in degrees: Q = diag(0.2², 1², (0.5°)²), "
+        "degrees": ({"Q": Qd.tolist(), "R": Rd.tolist()}, {}, "pitch entries in degrees: Q = diag(0.2², 1², (0.5°)²), "
                     "R = diag(0.2², 5², (0.5°)²); sensors as generated (RMS over the run ≈ 0.12 m, 0.12 m/s, "
                     "1.2°: depth and speed below R, pitch 2.4 × R's 0.5°)"),
-        "degrees, sensors at R": ({"Q": Qd, "R": Rd},
-                                  {"base_sigma": base_for_rms(np.sqrt(np.diag(Rd)))},
+        "degrees, sensors at R": ({"Q": Qd.tolist(), "R": Rd.tolist()},
+                                  {"base_sigma": [float(v) for v in base_for_rms(np.sqrt(np.diag(Rd)))]},
                                   "Q and R as in `degrees`; sensor noise scaled so that its RMS over the run "
                                   "is R's std (0.2 m, 5 m/s, 0.5°), regimes and drift around it"),
     }
@@ -92,22 +92,30 @@ def _readings():
 READINGS = _readings()
 
 
-def one_run(args):
-    """Errors (n, 3) of every variant and of the raw sensor for one Monte Carlo run of a reading."""
-    seed, run, reading = args
+def config(reading: str, name: str, params: dict, seed: int) -> Config:
+    """The pipeline configuration of one variant under one reading (:mod:`replay.pipeline`)."""
     task_opts, gen_opts, _ = READINGS[reading]
-    frame = registry.load_frame(DATASET, rng=rng_for(seed, run, 0), **gen_opts)
-    problem = DepthTask(**task_opts).build(frame, rng_for(seed, run, 1))
-    truth = np.column_stack([frame.reference[c].values for c, _, _ in CHANNELS])
-    out = {"sensor": (problem.z - truth, np.nan)}
+    return Config(DATASET, gen_opts, None, "depth", task_opts, name, params, seed)
+
+
+def one_run(args):
+    """Errors (n, 3) of every variant and of the raw sensor for one Monte Carlo run of a reading,
+    computed by the pipeline of ``replay eval`` (:func:`replay.pipeline.run_block`)."""
+    seed, run, reading = args
     variants = VARIANTS if reading == PRIMARY else {k: VARIANTS[k] for k in MAIN}
+    out, problem = {}, None
     for label, (name, params) in variants.items():
-        est = make_filter(name, **params).run(problem.model, problem.z, problem.x0, problem.P0,
-                                               rng_for(seed, run, 2, filter_stream(label)))
-        e = est.x - truth
-        e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
-        out[label] = (e, est.us_per_step)
-    return out, frame.t, frame.meta["maneuvers"], reading
+        rec = run_block(config(reading, name, params, seed), [run], keep=True, strict=True)[0]
+        err, problem = rec["errors"], rec["problem"]
+        e = np.column_stack([err["position"][:, 0], err["speed"], err["pitch"]])
+        out[label] = (e, rec["estimates"].us_per_step)
+    truth = np.column_stack([problem.truth_position[:, 0], problem.truth_extra["speed"][0],
+                             problem.truth_angles["pitch"]])
+    e = problem.z - truth
+    e[:, 2] = (e[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    out["sensor"] = (e, np.nan)
+    meta = problem.frame_meta
+    return out, problem.t, meta["maneuvers"], reading
 
 
 def _mean_ci(values):
