@@ -82,7 +82,8 @@ class Model:
         h(x), the Jacobian of f or the Jacobian of h at one state ``x`` (nx,)
         into ``out``, with ``p`` a float array of the model's parameters at a
         step (:meth:`kernel_params`). They must compute what ``f``, ``h``,
-        ``F``, ``H`` compute (a test per model asserts it). The compiled
+        ``F``, ``H`` compute: a :class:`replay.models.kernel_model.KernelModel`
+        derives those from them, so the kernels are its one source. The compiled
         filter paths (:mod:`replay.filters.p002.compiled`) use them; every filter
         also runs without them.
         """

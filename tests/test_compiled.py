@@ -29,23 +29,27 @@ MODELS = {
 
 @pytest.mark.parametrize("name", MODELS)
 @pytest.mark.slow
-def test_model_kernels_equal_numpy_model(name):
+def test_model_kernels_equal_the_model_on_stacks(name):
+    """The kernels as the compiled filters call them (one state, ``kernel_params``) give what the
+    model's array methods (derived from them: tests/test_models.py checks those against numpy)
+    give on a stack of states (to rounding: numba may vectorise the stack's loop differently)."""
     m = MODELS[name]()
     f, h, F, H = m.kernels()
     k = 3
     pf, ph = m.kernel_params(k)
     X = np.random.default_rng(0).normal([40, -20, -30, 8, 0.5, 2.5][:m.nx], [30, 30, 30, 2, 0.5, 2.0][:m.nx],
                                         (50, m.nx))
-    for x in X:
+    fX, hX, FX, HX = m.f(X, k), m.h(X, k), m.F(X, k), m.H(X, k)
+    for i, x in enumerate(X):
         out, J, z, Jh = np.empty(m.nx), np.empty((m.nx, m.nx)), np.empty(m.nz), np.empty((m.nz, m.nx))
         f(x, pf, out)
-        np.testing.assert_allclose(out, m.f(x, k), rtol=1e-14, atol=1e-13)
+        np.testing.assert_allclose(out, fX[i], rtol=1e-14, atol=1e-13)
         F(x, pf, J)
-        np.testing.assert_allclose(J, m.F(x, k), rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(J, FX[i], rtol=1e-14, atol=1e-13)
         h(x, ph, z)
-        np.testing.assert_allclose(z, m.h(x, k), rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(z, hX[i], rtol=1e-14, atol=1e-13)
         H(x, ph, Jh)
-        np.testing.assert_allclose(Jh, np.reshape(m.H(x, k), (m.nz, m.nx)), rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(Jh, HX[i], rtol=1e-14, atol=1e-13)
 
 
 def test_sonar_jacobian_kernel_is_zero_at_the_sonar():

@@ -1,4 +1,11 @@
-"""Numba kernels of :class:`replay.models.random_walk.RandomWalkPosition` (f = h = identity)."""
+"""Random-walk position model observed directly (the Bohai experiment of paper 002), once.
+
+    x_k = x_{k-1} + w_k,  w ~ N(0, Q);   z_k = x_k + v_k,  v ~ N(0, R):
+
+f = h = identity, F = H = I. The numba kernels of one state of
+:class:`replay.models.random_walk.RandomWalkPosition` (see
+:mod:`replay.models.kernel_model`); no parameters (``p_f``, ``p_h`` empty).
+"""
 from __future__ import annotations
 
 import numba as nb
@@ -6,11 +13,19 @@ import numba as nb
 
 @nb.njit(cache=True)
 def identity(x, p, out):
-    out[:] = x
+    """out = x."""
+    for i in range(x.shape[0]):  # element loops, not slice assignments: several times faster per state
+        out[i] = x[i]
 
 
 @nb.njit(cache=True)
 def unit(x, p, J):
-    J[:, :] = 0.0
+    """J = I."""
     for i in range(J.shape[0]):
+        for j in range(J.shape[1]):
+            J[i, j] = 0.0
         J[i, i] = 1.0
+
+
+f = h = identity
+F = H = unit
