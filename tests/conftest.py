@@ -11,7 +11,8 @@ paper-002 kernels (``filters/p002/binding.py`` writes them to
 sources and never read from a developer's cache, and the registry's user cache
 is empty (tests name their data directories). ``REPLAY_TEST_CACHE_DIR=DIR``
 keeps that cache in DIR across sessions instead. Subprocesses inherit it.
-Tests that compile kernels are marked ``slow``: ``pytest -m "not slow"`` compiles nothing.
+Tests that compile the paper-002 filter kernels are marked ``slow``; ``pytest -m "not slow"`` compiles
+only the models' small gufuncs (replay/models/kernel_model.py, about 2 s once, cached by numba).
 """
 import os
 import shutil
