@@ -47,7 +47,7 @@ LOG2PI = np.log(2.0 * np.pi)
 U32 = 2.0**-32  # 32-bit integer u -> uniform (u + 0.5) 2^-32 in (0, 1)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def observe(x, ph, zidx, zf, out):
     """out = the measured components ``zidx`` of h(x) (``zf`` holds the whole h(x))."""
     h(x, ph, zf)
@@ -55,7 +55,7 @@ def observe(x, ph, zidx, zf, out):
         out[a] = zf[zidx[a]]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def predict_particle(pf, x, Lp, Q, xang, s, pts, Y, fx, mean, Dx, Pm):
     """The cubature prediction of one particle (002 §2.2.1), shared by the update and predict-only steps:
 
@@ -96,6 +96,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     logdet_Q, logdet_R, nzf = opts[7], opts[8], int(opts[9])
     M, N, n = X.shape
     nz = zidx.shape[0]
+    full = nz == nzf  # every component measured: h straight into its rows, no gather
     c = 2 * n
     s = np.sqrt(n)
     Y = np.empty((c, n))
@@ -138,7 +139,10 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
             repairs[m, i] += factor(Pm, Lm)
             cubature_points(mean, Lm, s, pts)
             for j in range(c):
-                observe(pts[j], ph, zidx, zf, Zc[j])
+                if full:
+                    h(pts[j], ph, Zc[j])
+                else:
+                    observe(pts[j], ph, zidx, zf, Zc[j])
             moments(Zc, zang, zh, Dz)
             gram(Dz, Pzz)
             for a in range(n):  # P_xz = s/c L (Z_+ - Z_-)
@@ -148,10 +152,14 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
                         t += Lm[a, j] * (Dz[j, b] - Dz[n + j, b])
                     Pxz[a, b] = (s / c) * t
             if stckf:  # fading factor (002 §2.2.2)
-                H(mean, ph, Hf)
-                for a in range(nz):
-                    Hj[a] = Hf[zidx[a]]
-                observe(mean, ph, zidx, zf, zh0)
+                if full:
+                    H(mean, ph, Hj)
+                    h(mean, ph, zh0)
+                else:
+                    H(mean, ph, Hf)
+                    for a in range(nz):
+                        Hj[a] = Hf[zidx[a]]
+                    observe(mean, ph, zidx, zf, zh0)
                 for a in range(nz):
                     ez[a] = z[a] - zh0[a]
                 wrap(ez, zang)
@@ -212,8 +220,11 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         P[m, i] = Pn
         X[m, i] = xnew
         loglik = 0.0
-        if nz > 0:
+        if full:
+            h(xnew, ph, zh0)
+        elif nz > 0:
             observe(xnew, ph, zidx, zf, zh0)
+        if nz > 0:
             for a in range(nz):
                 d[a] = Z[m, a] - zh0[a]
             wrap(d, zang)
@@ -249,12 +260,16 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, out, skip, zf):
     n, nz = Xr.shape[1], z.shape[0]
     x = np.empty(n)
     zh, d = np.empty(nz), np.empty(nz)
+    full = nz == zf.shape[0]
     for i in range(Xr.shape[0]):
         if skip[i]:
             continue
         for a in range(n):
             x[a] = c[a] + Xr[i, a]
-        observe(x, ph, zidx, zf, zh)
+        if full:
+            h(x, ph, zh)
+        else:
+            observe(x, ph, zidx, zf, zh)
         for a in range(nz):
             d[a] = z[a] - zh[a]
         wrap(d, zang)

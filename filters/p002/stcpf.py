@@ -115,6 +115,7 @@ class Engine:
                                   f"with it); {type(model).__name__} overrides loglik")
             self.xmask = self.angle_mask(model.x_angles, model.nx)
             self.zmask = self.angle_mask(model.z_angles, model.nz)
+            self.z_all = np.arange(model.nz)
             self.cache = {}
         if not self.prior:
             bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
@@ -229,7 +230,8 @@ class Engine:
         M, N, n = self.X.shape
         Q = m.process_cov(k)
         Qi, logdet_Q = self.constants("Q", Q)
-        zidx = np.flatnonzero(pattern)
+        full = len(pattern) == m.nz and pattern.all()
+        zidx = self.z_all if full else np.flatnonzero(pattern)
         meas, logdet_R = None, 0.0
         if len(zidx):
             R = m.measurement_cov(k)
@@ -255,8 +257,9 @@ class Engine:
         pf, ph = m.kernel_params(k)
         st = (flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior) if stckf else (1.0, 1.0, True, True)
         opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz], float)
+        zang = self.zmask if full else self.zmask[zidx]
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
-                np.ascontiguousarray(zz, float), zidx, e, Q, Qi, R, Ri, self.xmask, self.zmask[zidx], opts, lam, rep)
+                np.ascontiguousarray(zz, float), zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
             self.k_threads(*args, chunks)
