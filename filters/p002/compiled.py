@@ -11,8 +11,8 @@ in every process). The helpers without model kernels (:func:`factor`,
 this file imports by its absolute name (the bound copy lives outside the package).
 
 * :func:`cubature_step` — one step of every particle's cubature filter (CKF or
-  STCKF, 002 §2.2): the prediction (:func:`predict_particle`), the update with
-  the measured components (none: a predict-only step), the importance draw
+  STCKF, 002 §2.2): the prediction, the update with the measured components
+  (none: a predict-only step, which draws from the same prediction), the importance draw
   x = m + L e with ``e`` drawn by the caller, and the importance weight
   (002 §2.1), for M runs x N particles;
 * :func:`swarm_move` — the ``t_max`` GWO/IGWO iterations (002 §3.1–3.2) of M
@@ -47,31 +47,12 @@ LOG2PI = np.log(2.0 * np.pi)
 U32 = 2.0**-32  # 32-bit integer u -> uniform (u + 0.5) 2^-32 in (0, 1)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def observe(x, ph, zidx, zf, out):
     """out = the measured components ``zidx`` of h(x) (``zf`` holds the whole h(x))."""
     h(x, ph, zf)
     for a in range(zidx.shape[0]):
         out[a] = zf[zidx[a]]
-
-
-@nb.njit(cache=True, inline="always")
-def predict_particle(pf, x, Lp, Q, xang, s, pts, Y, fx, mean, Dx, Pm):
-    """The cubature prediction of one particle (002 §2.2.1), shared by the update and predict-only steps:
-
-        X_j = x ± sqrt(n) L e_j (L L' = P),  m- = mean_j f(X_j) (circular for angles),
-        P- = 1/2n sum_j (f(X_j) - m-)(f(X_j) - m-)' + Q;   fx = f(x) (for p(x_k | x_{k-1})).
-    """
-    n = x.shape[0]
-    f(x, pf, fx)
-    cubature_points(x, Lp, s, pts)
-    for j in range(2 * n):
-        f(pts[j], pf, Y[j])
-    moments(Y, xang, mean, Dx)
-    gram(Dx, Pm)
-    for a in range(n):
-        for b in range(n):
-            Pm[a, b] += Q[a, b]
 
 
 @nb.njit(cache=True, nogil=True)
@@ -81,8 +62,11 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     For the flat particle indices start .. stop - 1 (index = m N + i, run m,
     particle i), in place: X[m, i] <- m^i + L^i E[m, i] with (m^i, P^i) the
     cubature posterior given the measured components ``zidx`` of z (Z[m] holds
-    them; R, R^-1, ``zang`` are theirs), or the prediction (m^i-, P^i-) when
-    ``zidx`` is empty (a predict-only step); P[m, i] <- P^i; L[m, i] <- its
+    them; R, R^-1, ``zang`` are theirs; ``zidx`` None: all), or the
+    prediction (m^i-, P^i-) when ``Z`` is None (a predict-only step). A None
+    argument gives numba a specialisation with the branch pruned, so the
+    common full-measurement step carries neither the gathers nor the
+    predict-only branch; P[m, i] <- P^i; L[m, i] <- its
     factor; V[m, i] (STCKF) <- the innovation average; logw[m, i] += log p(z | x)
     (0 without a measurement) + log p(x | x_prev) - log q(x); lam[m, i] <- the
     fading factor (1 for a CKF); repairs[m, i] <- covariances repaired.
@@ -95,8 +79,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     rho, beta, propagated, scale_prior = opts[3], opts[4], opts[5] != 0, opts[6] != 0
     logdet_Q, logdet_R, nzf = opts[7], opts[8], int(opts[9])
     M, N, n = X.shape
-    nz = zidx.shape[0]
-    full = nz == nzf  # every component measured: h straight into its rows, no gather
+    nz = zang.shape[0]  # measured components (0: predict only)
     c = 2 * n
     s = np.sqrt(n)
     Y = np.empty((c, n))
@@ -122,13 +105,23 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     for flat in range(start, stop):
         m, i = flat // N, flat % N
         x = X[m, i]
+        f(x, pf, fx)  # f(x_prev), for p(x | x_prev)
+        # --- predict (002 §2.2.1), shared by the update and the predict-only step: cubature points
+        # X_j = x ± sqrt(n) L e_j through f; m- their (circular) mean; P- = 1/2n sum_j D_j D_j' + Q
         if have_L:
             Lp[:, :] = L[m, i]
         else:
             repairs[m, i] = factor(P[m, i], Lp)
-        predict_particle(pf, x, Lp, Q, xang, s, pts, Y, fx, mean, Dx, Pm)
+        cubature_points(x, Lp, s, pts)
+        for j in range(c):
+            f(pts[j], pf, Y[j])
+        moments(Y, xang, mean, Dx)
+        gram(Dx, Pm)
+        for a in range(n):
+            for b in range(n):
+                Pm[a, b] += Q[a, b]
         g = 1.0
-        if nz == 0:  # predict only: the importance density is the prediction
+        if Z is None:  # predict only: the importance density is the prediction
             mpost[:] = mean
             Pn[:, :] = Pm
         else:
@@ -139,7 +132,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
             repairs[m, i] += factor(Pm, Lm)
             cubature_points(mean, Lm, s, pts)
             for j in range(c):
-                if full:
+                if zidx is None:
                     h(pts[j], ph, Zc[j])
                 else:
                     observe(pts[j], ph, zidx, zf, Zc[j])
@@ -152,7 +145,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
                         t += Lm[a, j] * (Dz[j, b] - Dz[n + j, b])
                     Pxz[a, b] = (s / c) * t
             if stckf:  # fading factor (002 §2.2.2)
-                if full:
+                if zidx is None:
                     H(mean, ph, Hj)
                     h(mean, ph, zh0)
                 else:
@@ -219,12 +212,13 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         wrap(xnew, xang)
         P[m, i] = Pn
         X[m, i] = xnew
-        loglik = 0.0
-        if full:
-            h(xnew, ph, zh0)
-        elif nz > 0:
-            observe(xnew, ph, zidx, zf, zh0)
-        if nz > 0:
+        if Z is None:
+            loglik = 0.0
+        else:
+            if zidx is None:
+                h(xnew, ph, zh0)
+            else:
+                observe(xnew, ph, zidx, zf, zh0)
             for a in range(nz):
                 d[a] = Z[m, a] - zh0[a]
             wrap(d, zang)
@@ -260,13 +254,12 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, out, skip, zf):
     n, nz = Xr.shape[1], z.shape[0]
     x = np.empty(n)
     zh, d = np.empty(nz), np.empty(nz)
-    full = nz == zf.shape[0]
     for i in range(Xr.shape[0]):
         if skip[i]:
             continue
         for a in range(n):
             x[a] = c[a] + Xr[i, a]
-        if full:
+        if zidx is None:  # all components measured (numba prunes the other branch)
             h(x, ph, zh)
         else:
             observe(x, ph, zidx, zf, zh)
@@ -291,7 +284,7 @@ def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, raw, a, improved, xi, eps, 
     the final fitness. ``best`` (M, t_max + 1) as in :func:`swarm`.
     """
     M, N, n = X.shape
-    nz = zidx.shape[0]
+    nz = Z.shape[1]
     c = np.empty(n)
     Xr = np.empty((N, n))
     f = np.empty(N)

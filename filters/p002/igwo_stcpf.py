@@ -238,7 +238,7 @@ class SwarmEngine(Engine):
         shape = (flt.t_max, 2, min(3, N), N, n)
         best = np.empty((M, flt.t_max + 1))
         Ri, logdet_R = self.constants("R", meas[0])
-        zidx = self.z_all if mask is None else np.flatnonzero(mask)
+        zidx = None if mask is None else np.flatnonzero(mask)  # None: all (no gather in the kernel)
         args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, np.ascontiguousarray(zz, float), zidx, Ri,
                 self.xmask, self.zmask if mask is None else self.zmask[zidx])
         opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, m.nz, best)

@@ -115,7 +115,6 @@ class Engine:
                                   f"with it); {type(model).__name__} overrides loglik")
             self.xmask = self.angle_mask(model.x_angles, model.nx)
             self.zmask = self.angle_mask(model.z_angles, model.nz)
-            self.z_all = np.arange(model.nz)
             self.cache = {}
         if not self.prior:
             bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
@@ -230,15 +229,16 @@ class Engine:
         M, N, n = self.X.shape
         Q = m.process_cov(k)
         Qi, logdet_Q = self.constants("Q", Q)
-        full = len(pattern) == m.nz and pattern.all()
-        zidx = self.z_all if full else np.flatnonzero(pattern)
+        full = pattern.all()
+        zidx = None if full else np.flatnonzero(pattern)  # None: all (the kernel then gathers nothing)
+        nzm = m.nz if full else len(zidx)
         meas, logdet_R = None, 0.0
-        if len(zidx):
+        if nzm:
             R = m.measurement_cov(k)
-            if len(zidx) < m.nz:
+            if not full:
                 R = R[np.ix_(zidx, zidx)]
             Ri, logdet_R = self.constants("R", R)
-            angles = m.z_angles if len(zidx) == m.nz else remap_indices(m.z_angles, pattern)
+            angles = m.z_angles if full else remap_indices(m.z_angles, pattern)
             meas = (R, angles, Ri, logdet_R)
         else:
             R = Ri = np.zeros((0, 0))
@@ -247,11 +247,11 @@ class Engine:
         if not have_L:
             self.L = np.empty_like(self.P)
         stckf = flt.proposal == "stckf"
-        key = None if len(zidx) == m.nz else tuple(pattern)
-        if stckf and len(zidx) and not (self.V is not None and self.V_key == key):
+        key = None if full else tuple(pattern)
+        if stckf and nzm and not (self.V is not None and self.V_key == key):
             self.V, self.V_key = None, key  # V restarts when the measured components change
         have_V = stckf and self.V is not None
-        V = self.V if have_V else np.empty((M, N, len(zidx), len(zidx)))
+        V = self.V if have_V else np.empty((M, N, nzm, nzm))
         lam = np.empty((M, N))
         rep = np.zeros((M, N), np.int64)
         pf, ph = m.kernel_params(k)
@@ -259,14 +259,14 @@ class Engine:
         opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz], float)
         zang = self.zmask if full else self.zmask[zidx]
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
-                np.ascontiguousarray(zz, float), zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
+                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
             self.k_threads(*args, chunks)
         else:  # runs: Python threads, each range long enough to pay for waking its thread; no spinning
             split(self.k_cubature, M * N, *args, grain=GRAIN_RUNS)
         self.repairs[self.ids] += rep.sum(axis=1)
-        if stckf and len(zidx):
+        if stckf and nzm:
             self.V = V
             self.lam_sum[self.ids] += lam.sum(axis=1)
             self.lam_n[self.ids] += N
