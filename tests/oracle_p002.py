@@ -29,7 +29,7 @@ from replay.filters import particles
 from replay.filters.p002 import gwo
 from replay.filters.p002.igwo_stcpf import SwarmEngine, residual_fitness
 from replay.filters.p002.stack import fast_residual
-from replay.filters.p002.stckf import batched_jacobian, fading_factor, next_V
+from replay.filters.p002.stckf import fading_factor, next_V
 from replay.filters.p002.stcpf import Engine, propagate
 from replay.model import is_diagonal
 from replay.util.angles import index, residual, wrap_components
@@ -58,6 +58,20 @@ def circular_mean(Y, angles):
         a = Y[..., i]
         mean[..., i] = np.arctan2(np.einsum("...ci->...i", np.sin(a)), np.einsum("...ci->...i", np.cos(a)))
     return mean
+
+
+def batched_jacobian(fun, X, k, out_angles=(), step=1e-6):
+    """Central-difference Jacobians of ``fun`` at each row of ``X`` (..., n) -> (..., m, n), one call to ``fun``."""
+    lead, n = X.shape[:-1], X.shape[-1]
+    X = X.reshape(-1, n)
+    N = len(X)
+    eps = step * np.maximum(1.0, np.abs(X))
+    E = eps[:, :, None] * np.eye(n)
+    pts = np.concatenate([X[:, None, :] + E, X[:, None, :] - E], axis=1)
+    Y = fun(pts, k)
+    d = residual(Y[:, :n], Y[:, n:], out_angles)
+    J = np.swapaxes(d / (2.0 * eps)[:, :, None], 1, 2)
+    return J.reshape(lead + J.shape[1:])
 
 
 # --- GWO / IGWO -------------------------------------------------------------------------------

@@ -15,13 +15,13 @@ from replay.evaluate import evaluate
 from replay.filters import make_filter
 from replay.filters.p002 import gwo, pso
 from replay.filters.sigma import CKF
-from replay.filters.p002.stckf import STCKF, batched_jacobian, fading_factor
+from replay.filters.p002.stckf import STCKF, fading_factor
 from replay.model import LinearGaussian
 from replay.models.auv_sonar import AUVSonar
 from replay.models.ungm import UNGM
 from replay.tasks import make_task
 
-from oracle_p002 import entropy_weights, gwo_optimize, oracle_filter
+from oracle_p002 import batched_jacobian, entropy_weights, gwo_optimize, oracle_filter
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
 BOHAI = SHARED / "datasets" / "bohai"
