@@ -1,4 +1,5 @@
-"""The compiled kernels (replay.filters.p002.compiled, compiled_util) against the numpy reference engine."""
+"""The compiled kernels (replay.filters.p002.compiled, compiled_util), the library's only paper-002 engine,
+against the numpy test oracle (tests/oracle_p002.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,12 +8,13 @@ import pytest
 from replay import registry
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
-from replay.filters.p002 import binding, compiled_util, cubature, gwo, parallel
-from replay.filters.p002.stack import batched_cholesky
+from replay.filters.p002 import binding, compiled_util, gwo, parallel, stcpf
 from replay.models.auv_sonar import AUVSonar
 from replay.models.random_walk import RandomWalkPosition
 from replay.models.ungm import UNGM
 from replay.tasks import make_task
+
+from oracle_p002 import batched_cholesky, gwo_optimize, oracle_filter
 
 
 @pytest.fixture(scope="module")
@@ -68,9 +70,8 @@ def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
     (repaired): 10 steps, to 1e-6 relative."""
     printed = params.get("m_form") == "printed" or params.get("scale_prior") is False
     z = sonar.z[:10] if printed else sonar.z
-    a = make_filter("stcpf", compiled=True, **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
-    b = make_filter("stcpf", compiled=False, **params).run(sonar.model, z, sonar.x0, sonar.P0,
-                                                           np.random.default_rng(5))
+    a = make_filter("stcpf", **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = oracle_filter("stcpf", **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
     assert a.diverged is False and b.diverged is False
     np.testing.assert_allclose(a.x, b.x, rtol=1e-6 if printed else 0, atol=1e-9)
     np.testing.assert_allclose(a.P, b.P, rtol=1e-5 if printed else 1e-7, atol=1e-6 if printed else 1e-9)
@@ -84,11 +85,90 @@ def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
 def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name):
     """The swarm collapses onto near-ties, so rounding eventually picks another leader and the
     runs part; before that (the first 10 steps) they agree to 1e-8."""
-    a = make_filter(name, compiled=True).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
-    b = make_filter(name, compiled=False).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    a = make_filter(name).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = oracle_filter(name).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-8)
     assert a.info["mean_fitness_gain"] == pytest.approx(b.info["mean_fitness_gain"], rel=1e-6)
     assert a.info["mean_fitness_gain"] > 0
+
+
+def gappy(z):
+    """The sonar measurements with whole steps missing (predict-only) and single components missing."""
+    z = z.copy()
+    z[[3, 4, 11]] = np.nan  # no measurement: draw from the prediction
+    z[[6, 7, 8, 15], 1] = np.nan  # bearing missing (one set of measured components)
+    z[[9, 16], 0] = np.nan  # range missing (another set: the STCKF's V restarts)
+    z[17, 1:] = np.nan
+    return z
+
+
+@pytest.mark.parametrize("params", [{}, {"proposal": "ckf"}])
+@pytest.mark.slow
+def test_compiled_predict_only_and_masked_steps_equal_the_oracle(sonar, params):
+    """Steps without a measurement and with components missing: the kernels against the oracle, to rounding."""
+    z = gappy(sonar.z[:40])
+    a = make_filter("stcpf", **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(7))
+    b = oracle_filter("stcpf", **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(7))
+    assert a.diverged is False and b.diverged is False
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.P, b.P, rtol=1e-7, atol=1e-9)
+    if "lambda_mean" in b.info:
+        assert a.info["lambda_mean"] == pytest.approx(b.info["lambda_mean"], rel=1e-10)
+
+
+@pytest.mark.parametrize("name,params", [("igwo-stcpf", {"estimate_at": "before"}), ("igwo-stcpf", {}),
+                                         ("gwo-pf", {"estimate_at": "before"}), ("igwo-pf", {}),
+                                         ("pso-cpf", {"estimate_at": "before"})])
+@pytest.mark.slow
+def test_compiled_swarm_masked_and_before_equal_the_oracle_at_first(sonar, name, params):
+    """The swarm filters on gappy measurements and with the estimate before the move: the kernels agree
+    with the oracle over the first steps (until rounding flips a leader among near-ties), and the
+    elitism invariant holds (asserted on every move by the engine)."""
+    z = gappy(sonar.z[:20])[:10]
+    z[2, 2] = np.nan  # a masked step early, where the runs still agree
+    a = make_filter(name, t_max=5, **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = oracle_filter(name, t_max=5, **params).run(sonar.model, z, sonar.x0, sonar.P0, np.random.default_rng(5))
+    assert a.diverged is False and b.diverged is False
+    np.testing.assert_allclose(a.x[:6], b.x[:6], rtol=0, atol=1e-7)
+    assert a.info["mean_fitness_gain"] > 0
+
+
+class NoKernels(UNGM):
+    def kernels(self):
+        return None
+
+
+class OwnLikelihood(UNGM):
+    def loglik(self, z, x, k, mask=None):
+        return super().loglik(z, x, k, mask)
+
+
+@pytest.mark.parametrize("name", ["stcpf", "igwo-stcpf", "gwo-pf", "igwo-pf", "pso-cpf"])
+def test_kernel_filters_refuse_a_model_without_kernels_in_one_line(name):
+    from replay.models.depth import DepthModel
+    from replay.util.errors import ReplayError
+
+    rng = [np.random.default_rng(0)]
+    flt = make_filter(name)
+    with pytest.raises(ReplayError, match=f"^{name} needs a model with compiled kernels .*; DepthModel has none$"):
+        flt.engine(DepthModel(), rng)
+    with pytest.raises(ReplayError, match=f"^{name} needs a model with compiled kernels .*; NoKernels has none$"):
+        flt.engine(NoKernels(), rng)
+    with pytest.raises(ReplayError, match=f"^{name} needs the Gaussian likelihood .*; OwnLikelihood overrides loglik$"):
+        flt.engine(OwnLikelihood(), rng)
+
+
+def test_filters_without_kernels_run_on_any_model():
+    """PSO-PF (bootstrap proposal, model.loglik, PSO) and the bootstrap STCPF need no kernels."""
+    from replay.util.errors import ReplayError
+
+    z = np.random.default_rng(0).normal(size=(6, 1))
+    for model in (NoKernels(), OwnLikelihood()):
+        for flt in (make_filter("pso-pf", n_particles=20, t_max=3), make_filter("stcpf", proposal="prior")):
+            est = flt.run(model, z, np.zeros(1), np.eye(1), np.random.default_rng(1))
+            assert est.diverged is False and np.isfinite(est.x).all()
+    with pytest.raises(ReplayError, match="compiled"):
+        make_filter("stcpf", compiled=False)
 
 
 @pytest.mark.parametrize("threads", ["1", "2", "3"])
@@ -100,7 +180,7 @@ def test_thread_count_does_not_change_the_numbers(sonar, monkeypatch, threads):
         return flt.run_batch(sonar.model, Z, np.stack([sonar.x0] * 3), np.stack([sonar.P0] * 3),
                              [np.random.default_rng(r) for r in range(3)])
 
-    monkeypatch.setattr(cubature, "GRAIN_RUNS", 10)  # split even these few particles among the threads
+    monkeypatch.setattr(stcpf, "GRAIN_RUNS", 10)  # split even these few particles among the threads
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
@@ -115,7 +195,7 @@ def test_one_run_on_openmp_threads_equals_one_thread(sonar, monkeypatch, threads
         return make_filter("igwo-stcpf", n_particles=60, t_max=4).run(sonar.model, sonar.z[:12], sonar.x0, sonar.P0,
                                                                        np.random.default_rng(4))
 
-    monkeypatch.setattr(cubature, "GRAIN", 7)
+    monkeypatch.setattr(stcpf, "GRAIN", 7)
     monkeypatch.setenv("REPLAY_THREADS", "1")
     ref = run()
     monkeypatch.setenv("REPLAY_THREADS", threads)
@@ -134,7 +214,7 @@ def test_batched_compiled_runs_equal_one_by_one_exactly(sonar):
 
 
 @pytest.mark.slow
-def test_factor_repairs_like_the_numpy_engine():
+def test_factor_repairs_like_the_oracle():
     A = np.diag([4.0, 1.0, -1e-9])  # indefinite by a hair: eigenvalue floored
     L = np.empty((3, 3))
     assert compiled_util.factor(A.copy(), L) == 1
@@ -147,9 +227,9 @@ def test_factor_repairs_like_the_numpy_engine():
 
 
 @pytest.mark.slow
-def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
+def test_swarm_kernel_keeps_the_elite_and_matches_the_oracle():
     """One swarm on a quadratic fitness (the random-walk model: h = identity on 3 states):
-    the kernel and gwo.optimize give the same wolves from the same 32-bit draws."""
+    the kernel and the oracle's gwo_optimize give the same wolves from the same 32-bit draws."""
     bound = binding.bind(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
     X = np.random.default_rng(1).normal(size=(30, 3)) * 3
     z = np.array([0.5, -1.0, 2.0])
@@ -157,9 +237,10 @@ def test_swarm_kernel_keeps_the_elite_and_matches_gwo_optimize():
     raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
     a = gwo.schedule(8, True)
     Xk, f, best = X.copy(), np.empty(30), np.empty(9)
-    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12, f, best)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12,
+                f, best, 3)
     assert np.all(np.diff(best) <= 0) and best[-1] < best[0]
-    Xn, fn, bn = gwo.optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
+    Xn, fn, bn = gwo_optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
                               np.random.default_rng(2), t_max=8, improved=True)
     np.testing.assert_allclose(Xk, Xn, rtol=0, atol=1e-12)
     np.testing.assert_allclose(best, bn, rtol=1e-12)

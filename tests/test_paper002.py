@@ -15,11 +15,13 @@ from replay.evaluate import evaluate
 from replay.filters import make_filter
 from replay.filters.p002 import gwo, pso
 from replay.filters.sigma import CKF
-from replay.filters.p002.stckf import STCKF, batched_jacobian, fading_factor
+from replay.filters.p002.stckf import STCKF, fading_factor
 from replay.model import LinearGaussian
 from replay.models.auv_sonar import AUVSonar
 from replay.models.ungm import UNGM
 from replay.tasks import make_task
+
+from oracle_p002 import batched_jacobian, entropy_weights, gwo_optimize, oracle_filter
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
 BOHAI = SHARED / "datasets" / "bohai"
@@ -98,7 +100,8 @@ def test_batched_particle_update_equals_single_filter(proposal):
     s_state = type("S", (), {})()
     s_state.model, s_state.rng = pb.model, np.random.default_rng(0)
     single.start(s_state, pb.x0, pb.P0)
-    eng = engine_at("stcpf", pb, [np.random.default_rng(0)] * 2, n_particles=7, proposal=proposal)
+    eng = oracle_filter("stcpf", n_particles=7, proposal=proposal).engine(pb.model, [np.random.default_rng(0)] * 2)
+    eng.start(np.repeat(pb.x0[None], 2, axis=0), np.repeat(pb.P0[None], 2, axis=0))  # the numpy oracle's engine
     eng.X[:] = pb.x0  # every particle of both runs at the same mean
     single.predict(s_state, 0)
     eng.predict(0)
@@ -181,7 +184,7 @@ def test_vector_jacobians_equal_per_state_and_numerical():
     assert u.F(x[0], 0).shape == (1, 1) and u.H(x, 0)[1, 0, 0] == pytest.approx(-0.2)
 
 
-# --- GWO / IGWO ----------------------------------------------------------------------------
+# --- GWO / IGWO (the move: its numpy reading in tests/oracle_p002.py; the kernel is checked against it) --
 def sphere(X):
     return np.sum((X - 3.0) ** 2, axis=1)
 
@@ -190,7 +193,7 @@ def sphere(X):
 def test_gwo_keeps_the_elite(improved):
     rng = np.random.default_rng(4)
     X0 = rng.standard_normal((50, 4)) * 10
-    X, f, best = gwo.optimize(X0, sphere, rng, t_max=20, improved=improved)
+    X, f, best = gwo_optimize(X0, sphere, rng, t_max=20, improved=improved)
     assert len(best) == 21 and np.all(np.diff(best) <= 0)
     assert best[0] == sphere(X0).min() and best[-1] == f.min() < best[0]
     # the initial alpha wolf is still in the population unless something better was found
@@ -204,7 +207,7 @@ def test_batched_gwo_and_pso_equal_separate_swarms():
     def fit(X):
         return np.sum((X - 3.0) ** 2, axis=-1)
 
-    for opt, kw in ((gwo.optimize, {"improved": True}), (gwo.optimize, {"improved": False}), (pso.optimize, {})):
+    for opt, kw in ((gwo_optimize, {"improved": True}), (gwo_optimize, {"improved": False}), (pso.optimize, {})):
         Xb, fb, bb = opt(X0, fit, [np.random.default_rng(10 + m) for m in range(3)], 6, **kw)
         assert bb.shape == (3, 7) and np.all(np.diff(bb, axis=1) <= 0)
         for m in range(3):
@@ -215,7 +218,7 @@ def test_batched_gwo_and_pso_equal_separate_swarms():
 def test_igwo_converges_closer_than_gwo_on_a_sphere():
     res = {}
     for improved in (False, True):
-        vals = [gwo.optimize(np.random.default_rng(s).standard_normal((30, 3)) * 10, sphere,
+        vals = [gwo_optimize(np.random.default_rng(s).standard_normal((30, 3)) * 10, sphere,
                              np.random.default_rng(100 + s), 20, improved)[2][-1] for s in range(20)]
         res[improved] = np.median(vals)
     # initial best about 17; both optimise, IGWO's late, steep fall of a(t) converges far tighter
@@ -226,10 +229,10 @@ def test_entropy_weights_sum_to_one_and_respect_floor():
     f = np.array([1.0, 2.0, 4.0])
     p = (1 / f) / (1 / f).sum()
     w = 1 + p * np.log(p)
-    assert np.allclose(gwo.entropy_weights(f, eps=0.0), w / w.sum())
+    assert np.allclose(entropy_weights(f, eps=0.0), w / w.sum())
     for f in ([0.0, 1e300, 1e300], [1e-9, 1e-9, 1e-9], [5.0, 0.1, 7.0]):
         for xi in (1e-6, 1e-3):
-            w = gwo.entropy_weights(f, xi=xi)
+            w = entropy_weights(f, xi=xi)
             assert w.sum() == pytest.approx(1.0) and np.all(w >= xi / 3)
 
 

@@ -2,11 +2,16 @@
 
 * :mod:`.stckf` — the strong-tracking CKF (per run) and its fading factor;
 * :mod:`.stcpf` — the STCPF / CPF / bootstrap filter class and its engine over
-  M runs x N particles; :mod:`.cubature` — the engine's per-particle cubature
-  importance density, draw and weight; :mod:`.stack` — stacked small-matrix helpers;
-* :mod:`.gwo`, :mod:`.pso` — the optimisers; :mod:`.igwo_stcpf` — the swarm
-  filters (IGWO-STCPF, GWO-PF, IGWO-PF, PSO-PF, PSO-CPF);
+  M runs x N particles; :mod:`.igwo_stcpf` — the swarm filters (IGWO-STCPF,
+  GWO-PF, IGWO-PF, PSO-PF, PSO-CPF);
 * :mod:`.compiled` (template bound to a model's kernels by :mod:`.binding`) and
-  :mod:`.compiled_util` (model-free helpers) — the numba kernels;
-  :mod:`.parallel` — calling them, threads.
+  :mod:`.compiled_util` (model-free helpers) — the numba kernels, the only
+  implementation of the per-particle cubature step, the importance draw and
+  weight, and the GWO/IGWO move; :mod:`.parallel` — calling them, threads;
+* :mod:`.gwo` — the GWO/IGWO convergence-factor schedule and the uniforms the
+  kernels are given; :mod:`.pso` — PSO (numpy, its only implementation);
+  :mod:`.stack` — angle helpers of the numpy code.
+
+The former numpy engine is kept only as the test oracle ``tests/oracle_p002.py``
+(``tests/test_compiled.py`` compares the kernels with it).
 """

@@ -2,13 +2,12 @@
 
 :mod:`replay.filters.p002.compiled` (the kernels that call a model's ``f``,
 ``h``, ``F``, ``H``) imports these; they are usable directly too (the particle
-estimate :func:`estimate` needs no model). Each mirrors a numpy function of
-the reference engine (:mod:`replay.filters.p002.stack`,
-:mod:`replay.filters.particles`) to rounding:
+estimate :func:`estimate` needs no model). The particle bookkeeping ones
+mirror :mod:`replay.filters.particles` to rounding; the repair of :func:`factor`
+is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 
 * :func:`wrap` — angles into [-pi, pi) (:func:`replay.util.angles.wrap`);
-* :func:`cholesky`, :func:`factor` (with the eigenvalue repair of
-  :func:`replay.filters.p002.stack.batched_cholesky`), :func:`chol_solve_rows`,
+* :func:`cholesky`, :func:`factor` (with an eigenvalue-floor repair), :func:`chol_solve_rows`,
   :func:`matmul`, :func:`quad`, :func:`gram`;
 * :func:`cubature_points`, :func:`moments` — the cubature points and their
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
@@ -61,8 +60,7 @@ def cholesky(A, L):
 
 @nb.njit(cache=True)
 def factor(A, L):
-    """Cholesky factor of A into L, or of a repaired copy of A when needed, as
-    :func:`replay.filters.p002.stack.batched_cholesky` does: symmetrise, floor the
+    """Cholesky factor of A into L, or of a repaired copy of A when needed: symmetrise, floor the
     eigenvalues at 1e-12 max(1, largest). A is not changed. Returns 1 when repaired, else 0."""
     if cholesky(A, L):
         return 0

@@ -15,17 +15,29 @@ IGWO (002, §3.2) changes two things:
 
 1. the convergence factor (§3.2.1) is the sigmoid :func:`a_sigmoid`;
 2. the three leader terms are combined with entropy weights (§3.2.2,
-   :func:`entropy_weights`): X(t+1) = w~_alpha X_alpha' + w~_beta X_beta' + w~_delta X_delta'.
+   below): X(t+1) = w~_alpha X_alpha' + w~_beta X_beta' + w~_delta X_delta'.
    Ambiguity: the paper prints ``w~_a X_a + w~_b X_b + w~_d X_d`` with the
    leaders' own positions, which would put every wolf on one point after the
    first iteration; we read X_a, X_b, X_d as the standard GWO candidates
    X_L' = X_L - A_L D_L (as the digest does).
 
+IGWO entropy weights (002, §3.2.2) of the leaders' fitness f_i:
+
+    p_i = (1 / (f_i + eps)) / sum_j 1 / (f_j + eps);  E_i = -p_i log(p_i + eps);
+    w*_i = 1 - E_i;  w_i = max(w*_i, xi);  w~_i = w_i / sum_j w_j.
+
 Elitism (002, §3.4.1, proof of condition 1): the alpha, beta and delta wolves
 are not moved; only the other wolves are updated, and the leaders of the next
 iteration are the three best of the new population (which contains the old
-leaders). Hence the best fitness never worsens between iterations;
-:func:`optimize` records it and asserts it.
+leaders). Hence the best fitness never worsens between iterations; the move
+records it and the engine asserts it.
+
+Where it is computed: the move itself (leaders, candidates, entropy weights,
+elitism) is the compiled :func:`replay.filters.p002.compiled.swarm`, the
+library's only GWO/IGWO move; this module holds what it is given: the
+convergence-factor schedule (:func:`schedule`) and the uniforms (:func:`raw_draws`,
+shared with PSO). A numpy reading of the move is kept as the test oracle
+``tests/oracle_p002.py``.
 
 Observation (not a choice): with the paper's entropy formula, E_i = -p_i log p_i
 is at most 1/e, so w*_i = 1 - E_i lies in [0.63, 1] and the floor xi never
@@ -71,18 +83,6 @@ def schedule(t_max, improved, a_start=2.0, a_end=0.0, b_start=1.0, b_end=0.5) ->
     return np.array([a_linear(t, t_max, a_start, a_end) for t in range(t_max)])
 
 
-def entropy_weights(f, eps: float = 1e-12, xi: float = 1e-4) -> np.ndarray:
-    """Entropy weights of the leaders (002, §3.2.2), normalised to sum to one (along the last axis).
-
-    p_i = (1 / (f_i + eps)) / sum_j 1 / (f_j + eps);  E_i = -p_i log(p_i + eps);
-    w*_i = 1 - E_i;  w_i = max(w*_i, xi);  w~_i = w_i / sum_j w_j.
-    """
-    inv = 1.0 / (np.asarray(f, float) + eps)
-    p = inv / inv.sum(axis=-1, keepdims=True)
-    w = np.maximum(1.0 + p * np.log(p + eps), xi)
-    return w / w.sum(axis=-1, keepdims=True)
-
-
 def as_runs(X, rng, fitness, project):
     """(N, d) wolves, one generator and functions of (N, d) -> the batched forms with M = 1;
     (M, N, d) with M generators (functions of (M, N, d)) unchanged. Returns X, rngs, fitness, project, single."""
@@ -122,60 +122,3 @@ def draws(rngs, shape):
     a swarm step; :mod:`replay.filters.p002.compiled` converts the same integers.
     """
     return uniforms(raw_draws(rngs, shape))
-
-
-def optimize(X: np.ndarray, fitness, rng, t_max: int = 20, improved: bool = True,
-             a_start: float = 2.0, a_end: float = 0.0, b_start: float = 1.0, b_end: float = 0.5,
-             xi: float = 1e-4, eps: float = 1e-12, project=None):
-    """Run ``t_max`` GWO (``improved=False``) or IGWO iterations on wolves ``X`` (N, d).
-
-    ``fitness(X) -> (N,)`` (smaller is better); ``project(X) -> X`` optionally
-    maps moved wolves back into the feasible set. Returns the moved wolves,
-    their fitness, and the best fitness before and after each iteration
-    (``t_max + 1`` values, non-increasing).
-
-    Batched: ``X`` (M, N, d) are M independent swarms (Monte Carlo runs) with
-    ``rng`` a sequence of M generators, ``fitness`` maps (M, N, d) -> (M, N);
-    the returns gain the leading axis M. Each swarm draws all its random
-    numbers for the ``t_max`` iterations in one call, (t_max, 2, 3, N, d).
-    The leaders are taken in the order alpha, beta, delta (fitness, then
-    index): the k-th leader uses the k-th slice of the draws, so the order fixes
-    the numbers (and :func:`replay.filters.p002.compiled.gwo_runs` uses the same).
-    """
-    X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
-    M, n, d = X.shape
-    rows = np.arange(M)[:, None]
-    f = fitness(X)
-    best = np.empty((M, t_max + 1))
-    best[:, 0] = f.min(axis=1)
-    k = min(3, n)
-    a = schedule(t_max, improved, a_start, a_end, b_start, b_end)
-    r = draws(rngs, (t_max, 2, k, n, d))  # (M, t_max, 2, k, n, d)
-    A, C = r[:, :, 0], r[:, :, 1]  # in place, all iterations at once: A = a (2 r1 - 1), C = 2 r2
-    A *= 2.0
-    A -= 1.0
-    A *= a[:, None, None, None]
-    C *= 2.0
-    w = np.full((M, k), 1.0 / k)
-    buf = np.empty((M, k, n, d))
-    for t in range(t_max):
-        lead = np.argsort(f, axis=1, kind="stable")[:, :k]  # alpha, beta, delta (ties: lower index)
-        fl = f[rows, lead]
-        if improved:
-            w = entropy_weights(fl, eps, xi)
-        XL = X[rows, lead][:, :, None, :]  # (M, k, 1, d)
-        Y = np.multiply(C[:, t], XL, out=buf)  # Y = X_L - A |C X_L - X|, in one buffer
-        np.subtract(Y, X[:, None], out=Y)
-        np.abs(Y, out=Y)
-        np.multiply(Y, A[:, t], out=Y)
-        np.subtract(XL, Y, out=Y)
-        Xn = np.einsum("mk,mknd->mnd", w, Y)
-        if project is not None:
-            Xn = project(Xn)
-        Xn[rows, lead] = XL[:, :, 0]  # elitism: the leaders stay where they are
-        fn = fitness(Xn)
-        fn[rows, lead] = fl
-        X, f = Xn, fn
-        best[:, t + 1] = f.min(axis=1)
-    assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
-    return (X[0], f[0], best[0]) if single else (X, f, best)

@@ -92,7 +92,7 @@ def residual_fitness(model, z, k, mask=None, meas=None):
 
     ``z`` (nz,) with ``X`` (N, nx), or per run (M, nz) with ``X`` (M, N, nx);
     ``meas`` = (R, angles, R^-1, log det R) of the step when already computed
-    (:meth:`replay.filters.p002.cubature.CubatureUpdate.measurement`, masked components only).
+    (:meth:`replay.filters.p002.stcpf.Engine.measurement`, masked components only).
     """
     if meas is None:
         R, angles = model.measurement_cov(k), model.z_angles
@@ -116,6 +116,8 @@ class SwarmParticleFilter(CubatureParticleFilter):
     """A particle filter whose resampling is a GWO, IGWO or PSO optimisation of the particles.
 
     ``resampling`` / ``ess_threshold`` act only on steps without a measurement (nothing to optimise).
+    One engine: the compiled kernels for the cubature proposal and the GWO/IGWO move (no
+    ``compiled`` parameter), so those need a model with :meth:`replay.model.Model.kernels`.
     """
 
     name = "swarm-pf"
@@ -157,9 +159,18 @@ class SwarmParticleFilter(CubatureParticleFilter):
     def engine(self, model, rngs):
         return SwarmEngine(self, model, rngs)
 
+    def needs_kernels(self) -> bool:
+        """The cubature proposal or the GWO/IGWO move is compiled; only PSO on the prior is not."""
+        return self.proposal != "prior" or self.optimizer != "pso"
+
 
 class SwarmEngine(Engine):
-    """M runs x N particles of a :class:`SwarmParticleFilter` (see :class:`replay.filters.p002.stcpf.Engine`)."""
+    """M runs x N particles of a :class:`SwarmParticleFilter` (see :class:`replay.filters.p002.stcpf.Engine`).
+
+    The GWO/IGWO move is the compiled :func:`replay.filters.p002.compiled.swarm_move` (the
+    library's only GWO/IGWO move; its numpy reading is the test oracle ``tests/oracle_p002.py``);
+    PSO is :func:`replay.filters.p002.pso.optimize` (numpy, the only PSO).
+    """
 
     def start(self, X0, P0):
         super().start(X0, P0)
@@ -169,28 +180,29 @@ class SwarmEngine(Engine):
         self.gain_sum, self.moves = np.zeros(M), np.zeros(M, int)
         use = flt.optimizer == "pso" and flt.lower is not None and len(flt.lower) == n
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
-        # compiled GWO/IGWO with the model's compiled h (Gaussian weights only)
-        compiled = getattr(flt, "compiled", False) and flt.optimizer != "pso" and not self.custom_loglik
-        kern = self.model.kernels() if compiled else None
-        self.k_swarm = None
-        if kern is not None:
-            self.k_swarm = Kernel(bind(kern).swarm_move)
-            self.xmask = self.angle_mask(self.model.x_angles, n)
-            self.zmask = self.angle_mask(self.model.z_angles, self.model.nz)
-            self.cache = getattr(self, "cache", {})
+        if flt.optimizer != "pso":
+            self.k_swarm = Kernel(bind(self.kern).swarm_move)
             self.schedule = gwo.schedule(flt.t_max, flt.optimizer == "igwo", flt.a_start, flt.a_end,
                                          flt.b_start, flt.b_end)
 
     def relocate(self, zz, k, mask, meas):
-        if self.k_swarm is not None and mask is None and self.flt.estimate_at == "after":
-            self.compiled_move(zz, k, meas)
-        elif self.flt.estimate_at == "after":
-            self.move(zz, k, mask, meas)
-            self.logw = self.loglik(zz, self.X, k, mask, meas)
-        else:
+        if self.flt.estimate_at == "after":  # move, then weigh by the likelihood at the new positions
+            self.move(zz, k, mask, meas, weigh=True)
+        else:  # the estimate first, from the importance weights: the move follows it (:meth:`resample`)
             self.pending = (zz, k, mask, meas)
 
-    def move(self, zz, k, mask, meas):
+    def move(self, zz, k, mask, meas, weigh):
+        """The optimiser's move of every active run's particles; with ``weigh`` the new log weights
+        log p(z | x). GWO/IGWO: :meth:`compiled_move`; PSO: :meth:`pso_move`."""
+        if self.flt.optimizer == "pso":
+            self.pso_move(zz, k, mask, meas)
+            if weigh:
+                self.logw = self.loglik(zz, self.X, k, mask, meas)
+        else:
+            self.compiled_move(zz, k, mask, meas)
+        self.relocated = True
+
+    def pso_move(self, zz, k, mask, meas):
         flt, m = self.flt, self.model
         w, self.logw = particles.normalise(self.logw)
         c = particles.estimate(self.X, w, m.x_angles)[0][:, None, :]
@@ -210,30 +222,26 @@ class SwarmEngine(Engine):
                 return wrap_inplace(A, m.x_angles)
 
         Xr = residual(self.X, c, m.x_angles)
-        rngs = self.active_rngs()
-        if flt.optimizer == "pso":
-            Xr, _, best = pso.optimize(Xr, fitness, rngs, flt.t_max, flt.omega_max, flt.omega_min,
-                                       flt.omega_decay, flt.c1, flt.c2, project)
-        else:
-            Xr, _, best = gwo.optimize(Xr, fitness, rngs, flt.t_max, flt.optimizer == "igwo",
-                                       flt.a_start, flt.a_end, flt.b_start, flt.b_end, flt.xi)
+        Xr, _, best = pso.optimize(Xr, fitness, self.active_rngs(), flt.t_max, flt.omega_max, flt.omega_min,
+                                   flt.omega_decay, flt.c1, flt.c2, project)
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1
         self.X = wrap_components(c + Xr, m.x_angles)
-        self.relocated = True
 
-    def compiled_move(self, zz, k, meas):
-        """:meth:`move` and the new weights for a full Gaussian measurement and GWO/IGWO, by
-        :func:`replay.filters.p002.compiled.swarm_move` (the same draws from the same generators)."""
+    def compiled_move(self, zz, k, mask, meas):
+        """GWO/IGWO on every run's particles and their new log weights log p(z | x) (Gaussian), by
+        :func:`replay.filters.p002.compiled.swarm_move`: per run, the wolves are the particles
+        centred on their weighted mean; the uniforms are drawn from the run's own generator."""
         flt, m = self.flt, self.model
         M, N, n = self.X.shape
         rngs = self.active_rngs()
         shape = (flt.t_max, 2, min(3, N), N, n)
         best = np.empty((M, flt.t_max + 1))
         Ri, logdet_R = self.constants("R", meas[0])
-        args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, np.ascontiguousarray(zz, float), Ri,
-                self.xmask, self.zmask)
-        opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, best)
+        zidx = None if mask is None else np.flatnonzero(mask)  # None: all (no gather in the kernel)
+        args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, np.ascontiguousarray(zz, float), zidx, Ri,
+                self.xmask, self.zmask if mask is None else self.zmask[zidx])
+        opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, m.nz, best)
 
         def runs(start, stop):  # each run draws from its own generator, in the thread that moves it
             for j in range(start, stop):
@@ -243,11 +251,10 @@ class SwarmEngine(Engine):
         assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1
-        self.relocated = True
 
     def resample(self, w):
         if self.pending is not None:
-            self.move(*self.pending)
+            self.move(*self.pending, weigh=False)
             self.pending = None
         if self.relocated:
             N = self.flt.n_particles
@@ -287,11 +294,12 @@ class PSOPF(SwarmParticleFilter):
     """PSO-PF baseline (002, §4.1): bootstrap PF, PSO (20 iterations, bounded) in place of resampling.
 
     The PSO iteration count is ``t_max`` (the paper's "iterations"; one name for
-    every swarm filter). Nothing is compiled (the bootstrap proposal and PSO are numpy).
+    every swarm filter). Nothing is compiled (the bootstrap proposal and PSO are numpy): it runs
+    on any model, kernels or not, with the model's own likelihood.
     """
 
     name, proposal, optimizer = "pso-pf", "prior", "pso"
-    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES, "compiled")
+    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES)
 
 
 class PSOCPF(SwarmParticleFilter):

@@ -41,7 +41,7 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
 
     Returns final positions, their fitness, and the swarm's best fitness before
     and after each iteration (non-increasing). Batched like
-    :func:`replay.filters.p002.gwo.optimize`: ``X`` (M, N, d) with M generators.
+    the GWO move: ``X`` (M, N, d) with M generators.
     Each swarm draws its (iterations, 2, N, d) uniforms in one call.
     """
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)

@@ -78,20 +78,6 @@ def fading_factor(V, H, F, P_prev, Q, R, beta, m_form="propagated"):
     return np.maximum(1.0, lam0)
 
 
-def batched_jacobian(fun, X, k, out_angles=(), step=1e-6):
-    """Central-difference Jacobians of ``fun`` at each row of ``X`` (..., n) -> (..., m, n), one call to ``fun``."""
-    lead, n = X.shape[:-1], X.shape[-1]
-    X = X.reshape(-1, n)
-    N = len(X)
-    eps = step * np.maximum(1.0, np.abs(X))
-    E = eps[:, :, None] * np.eye(n)
-    pts = np.concatenate([X[:, None, :] + E, X[:, None, :] - E], axis=1)
-    Y = fun(pts, k)
-    d = residual(Y[:, :n], Y[:, n:], out_angles)
-    J = np.swapaxes(d / (2.0 * eps)[:, :, None], 1, 2)
-    return J.reshape(lead + J.shape[1:])
-
-
 class STCKF(CKF):
     """CKF with the strong-tracking fading factor of 002 §2.2.2 (rho = 0.95, beta = 1.2)."""
 

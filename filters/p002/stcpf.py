@@ -1,27 +1,33 @@
 """Particle filters with a per-particle cubature importance density: STCPF and CPF (paper 002, §2–3.3).
 
 Each particle i carries a sample x^i, a covariance P^i and (for the STCKF) its
-own innovation matrix V^i. One step, for all particles at once (the N
-cubature filters are one batched array computation, no Python loop over
-particles):
+own innovation matrix V^i. One step, for all particles at once:
 
     1. STCKF (or CKF) step from (x^i_{k-1}, P^i_{k-1}):  (m^i, P^i) = posterior given z_k
     2. draw       x^i_k ~ q^i = N(m^i, P^i)
     3. weight     w^i ∝ w^i_{k-1} p(z_k | x^i_k) p(x^i_k | x^i_{k-1}) / q^i(x^i_k)      (002, §2.1)
     4. relocate   :meth:`Engine.relocate`: nothing here (resampling follows the estimate);
                   IGWO / PSO in :mod:`replay.filters.p002.igwo_stcpf`
-    5. estimate   weighted mean (circular for angles) and covariance (:func:`replay.filters.particles.estimate`)
+    5. estimate   weighted mean (circular for angles) and covariance
     6. resample   systematic when ESS < threshold N (:func:`replay.filters.particles.resample`)
 
-Steps 1–3 are :class:`replay.filters.p002.cubature.CubatureUpdate`.
-``proposal="prior"`` gives a bootstrap PF (x^i_k ~ p(x_k | x^i_{k-1}) by
-:func:`replay.filters.pf.propagate`, weight = likelihood) that shares the
-relocation machinery (GWO-PF, PSO-PF).
+Steps 1–3 are one compiled call, :func:`replay.filters.p002.compiled.cubature_step`
+(the library's only implementation of them: there is no numpy engine and no
+``compiled`` parameter; a readable numpy version is kept as a test oracle in
+``tests/oracle_p002.py``). So these filters need a model with numba kernels
+(:meth:`replay.model.Model.kernels`) and the Gaussian likelihood of
+:meth:`replay.model.Model.loglik`; any other model is refused when the engine
+is built, in one line. ``proposal="prior"`` gives a bootstrap PF
+(x^i_k ~ p(x_k | x^i_{k-1}) by :func:`replay.filters.pf.propagate`, weight =
+likelihood) that shares the relocation machinery (GWO-PF, PSO-PF) and needs
+no kernels.
 
 Choices (002 leaves them open): the next step's cubature filter of particle i
 starts from its sample x^i_k (not from m^i) with covariance P^i; resampling
 copies x, P and V together. A predict-only step (no measurement) draws from the
-predicted (m^i-, P^i-) with weight p(x | x_prev) / q(x).
+predicted (m^i-, P^i-) with weight p(x | x_prev) / q(x). Missing measurement
+components: the update uses the measured rows of h, R and S; the STCKF's V
+restarts when the set of measured components changes.
 
 Arrays: the :class:`Engine` holds M Monte Carlo runs of N particles at once,
 ``X`` (M, N, nx), ``P`` (M, N, nx, nx) (the engine of the filter protocol,
@@ -35,8 +41,9 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap_components
+from replay.util.errors import ReplayError
 from replay.util.params import Param
-from replay.model import Model
+from replay.model import Model, is_diagonal, remap_indices
 
 from .. import particles
 from ..base import Filter
@@ -54,16 +61,22 @@ except ImportError:  # TEMPORARY (helper A2): until filters/pf.py exposes propag
 from ..resampling import SCHEMES
 from . import compiled_util
 from .binding import bind
-from .cubature import CubatureUpdate
-from .parallel import Kernel
-from .stack import circular_mean, fast_residual
+from .parallel import Kernel, split, threads
+from .stack import fast_residual
 from .stckf import STCKF_PARAMS
 
 PROPOSALS = ("prior", "ckf", "stckf")
+GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run
+GRAIN_RUNS = 1000  # the same for batched runs
+LOG2PI = np.log(2.0 * np.pi)
 
 
 class CubatureParticleFilter(Filter):
-    """STCPF (``proposal="stckf"``), CPF (``"ckf"``) or bootstrap PF (``"prior"``), batched over particles."""
+    """STCPF (``proposal="stckf"``), CPF (``"ckf"``) or bootstrap PF (``"prior"``), batched over particles.
+
+    One engine, the compiled kernels (no ``compiled`` parameter): the cubature
+    proposals need a model with :meth:`replay.model.Model.kernels`.
+    """
 
     name = "stcpf"
     PARAMS = (
@@ -73,37 +86,42 @@ class CubatureParticleFilter(Filter):
         *STCKF_PARAMS,
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
         Param("ess_threshold", float, 1.0, "resample when ESS < threshold * N (1: every step)", low=0.0, high=1.0),
-        Param("compiled", bool, True, "use the numba kernels when the model has them (same numbers to "
-              "rounding; false: the numpy engine)"),
     )
 
     def engine(self, model, rngs):
         return Engine(self, model, rngs)
 
+    def needs_kernels(self) -> bool:
+        """True when a step calls the compiled kernels (the cubature proposal; GWO/IGWO in subclasses)."""
+        return self.proposal != "prior"
 
-class Engine(CubatureUpdate):
+
+class Engine:
     """M runs x N particles of a :class:`CubatureParticleFilter` (or a subclass)."""
 
     def __init__(self, flt, model, rngs):
         self.flt, self.model = flt, model
         self.rngs = [r if r is not None else np.random.default_rng(0) for r in rngs]
-        n = model.nx
-        self.s = np.sqrt(n)
         self.prior = flt.proposal == "prior"
         self.custom_loglik = type(model).loglik is not Model.loglik
-        M = len(self.rngs)
-        # compiled kernels (replay.filters.p002.compiled) when the model has them and the weights are Gaussian
         self.kern = None
-        if getattr(flt, "compiled", False) and not self.prior and not self.custom_loglik:
+        if flt.needs_kernels():
             self.kern = model.kernels()
-        if self.kern is not None:
+            if self.kern is None:
+                raise ReplayError(f"{flt.name} needs a model with compiled kernels (Model.kernels()); "
+                                  f"{type(model).__name__} has none")
+            if self.custom_loglik:
+                raise ReplayError(f"{flt.name} needs the Gaussian likelihood of Model.loglik (its kernels weight "
+                                  f"with it); {type(model).__name__} overrides loglik")
+            self.xmask = self.angle_mask(model.x_angles, model.nx)
+            self.zmask = self.angle_mask(model.z_angles, model.nz)
+            self.cache = {}
+        if not self.prior:
             bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
             self.k_cubature = Kernel(bound.cubature_step)
             self.k_threads = Kernel(bound.cubature_threads)
             self.k_estimate = Kernel(compiled_util.estimate)
-            self.xmask = self.angle_mask(model.x_angles, model.nx)
-            self.zmask = self.angle_mask(model.z_angles, model.nz)
-            self.cache = {}
+        M = len(self.rngs)
         self.repairs, self.resampled = np.zeros(M, int), np.zeros(M, int)
         self.lam_sum, self.lam_n = np.zeros(M), np.zeros(M, int)
 
@@ -117,20 +135,22 @@ class Engine(CubatureUpdate):
         self.L = None  # Cholesky factors of P when known (set by the importance draw)
         self.V, self.V_key = None, None
         self.logw = np.full((M, N), -np.log(N))
-        self.updated = True
 
     def step(self, k, Z, finite):
         pattern = finite[0]
         if not (finite == pattern).all():  # the base loop then redoes the runs one by one
             raise ValueError("runs with different missing-measurement patterns cannot share a batched step")
-        if self.kern is not None and pattern.all():
-            self.compiled_update(Z, k)
+        mask = None if pattern.all() else pattern
+        zz = Z if mask is None else Z[:, pattern]
+        if self.prior:
+            self.X = propagate(self.model, self.X, k, self.active_rngs())
+            if pattern.any():
+                meas = self.measurement(k, mask)
+                self.logw = self.logw + self.loglik(zz, self.X, k, mask, meas)
         else:
-            self.predict(k)
-            if pattern.all():
-                self.update(Z, k, None)
-            elif pattern.any():
-                self.update(Z, k, pattern)
+            meas = self.cubature(zz, k, pattern)
+        if pattern.any():
+            self.relocate(zz, k, mask, meas)
         x, P = self.estimate()
         M = len(x)
         return x, P, np.full(M, np.nan), np.zeros(M, int)
@@ -158,34 +178,106 @@ class Engine(CubatureUpdate):
             return rngs[0].standard_normal(shape)[None]
         return np.stack([g.standard_normal(shape) for g in rngs])
 
-    # --- predict ----------------------------------------------------------------------------
-    def predict(self, k):
+    # --- the measurement ------------------------------------------------------------------
+    def measurement(self, k, mask):
+        """Per-step constants of the measurement: R, angles, R^-1 (vector when diagonal), log det R."""
         m = self.model
-        self.Qk = m.process_cov(k)
-        self.updated = False
-        if self.prior:
-            self.X = propagate(m, self.X, k, self.active_rngs())
-            return
-        self.fx = m.f(self.X, k)
-        self.P_prev = self.P
-        pts, _ = self.points(self.X, self.P, self.L)
-        Y = m.f(pts, k)
-        self.mean = circular_mean(Y, m.x_angles)
-        D = fast_residual(Y, self.mean[..., None, :], m.x_angles)
-        self.Pm = np.swapaxes(D, -1, -2) @ D / D.shape[-2] + self.Qk
-        if self.flt.proposal == "stckf":
-            self.F = self.jacobian(m.F, m.f, self.X, k, m.x_angles)
+        R, angles = m.measurement_cov(k), m.z_angles
+        if mask is not None:
+            R, angles = R[np.ix_(mask, mask)], remap_indices(angles, mask)
+        if is_diagonal(R):
+            r = np.diagonal(R)
+            return R, angles, 1.0 / r, float(np.log(r).sum())
+        return R, angles, np.linalg.inv(R), float(np.linalg.slogdet(R)[1])
+
+    def loglik(self, zz, X, k, mask, meas):
+        """log p(z | x) for every particle of every run (the model's own when it overrides
+        :meth:`replay.model.Model.loglik`, else Gaussian with wrapped angle residuals)."""
+        m = self.model
+        if self.custom_loglik:
+            full = np.full((len(zz), m.nz), np.nan)
+            full[:, slice(None) if mask is None else mask] = zz
+            return np.stack([m.loglik(full[j], X[j], k, mask) for j in range(len(X))])
+        R, angles, Ri, logdet = meas
+        zh = m.h(X, k)
+        d = fast_residual(zz[:, None, :], zh if mask is None else zh[..., mask], angles)
+        maha = (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
+        return -0.5 * (maha + logdet + len(R) * LOG2PI)
+
+    def constants(self, name, C):
+        """(C^-1, log det C) of a covariance, recomputed only when C changes."""
+        C = np.ascontiguousarray(C, float)
+        key = C.tobytes()
+        cached = self.cache.get(name)
+        if cached is None or cached[0] != key:
+            cached = self.cache[name] = (key, np.linalg.inv(C), float(np.linalg.slogdet(C)[1]))
+        return cached[1], cached[2]
+
+    @staticmethod
+    def angle_mask(angles, n):
+        mask = np.zeros(n, bool)
+        mask[list(angles)] = True
+        return mask
+
+    # --- the cubature step (compiled) -----------------------------------------------------
+    def cubature(self, zz, k, pattern):
+        """Steps 1–3 for every particle of every active run, by
+        :func:`replay.filters.p002.compiled.cubature_step`: the measured components ``pattern`` of
+        z (``zz`` holds them; none: a predict-only step drawing from the prediction). Returns the
+        measurement constants (R, angles, R^-1, log det R) of the measured components, or None."""
+        m, flt = self.model, self.flt
+        M, N, n = self.X.shape
+        Q = m.process_cov(k)
+        Qi, logdet_Q = self.constants("Q", Q)
+        full = pattern.all()
+        zidx = None if full else np.flatnonzero(pattern)  # None: all (the kernel then gathers nothing)
+        nzm = m.nz if full else len(zidx)
+        meas, logdet_R = None, 0.0
+        if nzm:
+            R = m.measurement_cov(k)
+            if not full:
+                R = R[np.ix_(zidx, zidx)]
+            Ri, logdet_R = self.constants("R", R)
+            angles = m.z_angles if full else remap_indices(m.z_angles, pattern)
+            meas = (R, angles, Ri, logdet_R)
+        else:
+            R = Ri = np.zeros((0, 0))
+        e = self.normal((N, n))
+        have_L = self.L is not None
+        if not have_L:
+            self.L = np.empty_like(self.P)
+        stckf = flt.proposal == "stckf"
+        key = None if full else tuple(pattern)
+        if stckf and nzm and not (self.V is not None and self.V_key == key):
+            self.V, self.V_key = None, key  # V restarts when the measured components change
+        have_V = stckf and self.V is not None
+        V = self.V if have_V else np.empty((M, N, nzm, nzm))
+        lam = np.empty((M, N))
+        rep = np.zeros((M, N), np.int64)
+        pf, ph = m.kernel_params(k)
+        st = (flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior) if stckf else (1.0, 1.0, True, True)
+        opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz], float)
+        zang = self.zmask if full else self.zmask[zidx]
+        args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
+                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
+        chunks = min(threads(), M * N // GRAIN)
+        if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
+            self.k_threads(*args, chunks)
+        else:  # runs: Python threads, each range long enough to pay for waking its thread; no spinning
+            split(self.k_cubature, M * N, *args, grain=GRAIN_RUNS)
+        self.repairs[self.ids] += rep.sum(axis=1)
+        if stckf and nzm:
+            self.V = V
+            self.lam_sum[self.ids] += lam.sum(axis=1)
+            self.lam_n[self.ids] += N
+        return meas
 
     # --- relocation, estimate, resampling ---------------------------------------------------
     def relocate(self, zz, k, mask, meas):
         """Nothing: resampling follows the estimate (:meth:`resample`), as in :mod:`replay.filters.pf`."""
 
     def estimate(self):
-        if not self.updated and not self.prior:  # predict only: draw from the prediction
-            self.draw(self.mean, self.Pm)
-            self.logw = self.logw + self.log_ratio()
-        self.updated = True
-        if self.kern is not None:
+        if not self.prior:
             M, N, n = self.X.shape
             x, P, w = np.empty((M, n)), np.empty((M, n, n)), np.empty((M, N))
             self.k_estimate(self.X, self.logw, self.xmask, x, P, w)
