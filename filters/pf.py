@@ -62,12 +62,32 @@ class ParticleFilter(Filter):
         return particles.normalise(logw + ll)
 
 
+def propagate(model, X, k, rngs):
+    """x^i ~ p(x_k | x^i_{k-1}) for particles ``X`` (M, N, nx) of M runs, one generator per run:
+    ``model.sample_f`` run by run when the model draws its own noise, else ``f`` on every run's
+    particles at once plus Gaussian noise from Q drawn from each run's generator (in run order).
+    The one propagation of every bootstrap-proposal filter (pf, wf-pf, gwo-pf, igwo-pf, pso-pf)."""
+    if type(model).sample_f is not Model.sample_f:
+        for j, g in enumerate(rngs):
+            X[j] = model.sample_f(X[j], k, g)
+        return X
+    Y = on_points(model.f, X, k)
+    diagonal, factor, _, _ = noise_factor(model.process_cov(k))
+    for j, g in enumerate(rngs):
+        e = g.standard_normal(Y.shape[1:])
+        if diagonal:
+            e *= factor
+        else:
+            e = e @ factor.T
+        Y[j] += e
+    return Y
+
+
 class PFEngine:
     """M runs of a :class:`ParticleFilter` (or a subclass): particles (M, N, nx)."""
 
     def __init__(self, flt, model, rngs):
         self.flt, self.model, self.rngs = flt, model, list(rngs)
-        self.own_noise = type(model).sample_f is not Model.sample_f
 
     def start(self, X0, P0):
         M, N = len(X0), self.flt.n_particles
@@ -97,22 +117,8 @@ class PFEngine:
         return x, P, *self.no_nis
 
     def propagate(self, k):
-        """x^i ~ p(x_k | x^i_{k-1}): f on every run's particles, noise from each run's generator."""
-        m = self.model
-        if self.own_noise:
-            for j, g in enumerate(self.active):
-                self.X[j] = m.sample_f(self.X[j], k, g)
-            return
-        Y = on_points(m.f, self.X, k)
-        diagonal, factor, _, _ = noise_factor(m.process_cov(k))
-        for j, g in enumerate(self.active):
-            e = g.standard_normal(Y.shape[1:])
-            if diagonal:
-                e *= factor
-            else:
-                e = e @ factor.T
-            Y[j] += e
-        self.X = Y
+        """x^i ~ p(x_k | x^i_{k-1}) for every active run (:func:`propagate`)."""
+        self.X = propagate(self.model, self.X, k, self.active)
 
     def update(self, k, Z, finite):
         """Weights of the runs with a measurement (missing components left out of the likelihood)."""

@@ -47,17 +47,7 @@ from replay.model import Model, is_diagonal, remap_indices
 
 from .. import particles
 from ..base import Filter
-try:
-    from ..pf import propagate
-except ImportError:  # TEMPORARY (helper A2): until filters/pf.py exposes propagate(model, X, k, rngs)
-    from ..pf import PFEngine
-
-    def propagate(model, X, k, rngs):
-        e = PFEngine.__new__(PFEngine)
-        e.model, e.X, e.active = model, X, list(rngs)
-        e.own_noise = type(model).sample_f is not Model.sample_f
-        e.propagate(k)
-        return e.X
+from ..pf import propagate
 from ..resampling import SCHEMES
 from . import compiled_util
 from .binding import bind

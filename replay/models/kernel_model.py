@@ -68,14 +68,14 @@ class KernelModel(Model):
     vector_jacobians = True  # F and H take stacks of states (..., nx) too
 
     def kernels(self):
-        mod = importlib.import_module(self.kernel_module)
-        return mod.f, mod.h, mod.F, mod.H
+        return _module_kernels(self.kernel_module)
 
     def _forms(self):
         """``(kernels, array forms)`` of this model's class, built on first use."""
         forms = _forms.get(type(self))
         if forms is None:
-            f, h, F, H = kernels = self.kernels()
+            f, h, F, H = kernels = _module_kernels(self.kernel_module)  # not self.kernels(): a subclass
+            # may hide its kernels from the filters and still compute with them
             forms = _forms[type(self)] = (kernels, (array_form(f, False), array_form(h, False),
                                                     array_form(F, True), array_form(H, True)))
         return forms
@@ -111,3 +111,9 @@ class KernelModel(Model):
         """Jacobian of h at ``x`` (nx,) -> (nz, nx), or at a stack (..., nx) -> (..., nz, nx)."""
         x = self._states(x)
         return self._apply(3, x, self.kernel_params(k)[1], x.shape[:-1] + (self.nz, self.nx))
+
+
+def _module_kernels(name: str):
+    """The module-level kernels ``f, h, F, H`` of the kernels module ``name``."""
+    mod = importlib.import_module(name)
+    return mod.f, mod.h, mod.F, mod.H
