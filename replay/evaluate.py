@@ -149,8 +149,12 @@ def command_line(config: dict) -> str:
         parts += ["--adapter", config["adapter"]]
     if (config.get("dataset_params") or {}).get("mapping"):
         parts += ["--mapping", str(config["dataset_params"]["mapping"])]
+    try:  # name only the dataset parameters that differ from their declared defaults
+        defaults = plain(registry.check_params(config["dataset"], {}, adapter=config.get("adapter")))
+    except Exception:  # noqa: BLE001 — a dataset no longer registered: name them all
+        defaults = {}
     for key, value in (config.get("dataset_params") or {}).items():
-        if key != "mapping":
+        if key != "mapping" and (key not in defaults or defaults[key] != value):
             text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
             parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
     return " ".join(parts)
