@@ -157,6 +157,15 @@ def command_line(config: dict) -> str:
         if key != "mapping" and (key not in defaults or defaults[key] != value):
             text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
             parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
+    for name, params in (config.get("filter_params") or {}).items():  # those that differ from the defaults
+        try:
+            defaults = plain(make_filter(name).params())
+        except Exception:  # noqa: BLE001 — a filter no longer registered: name them all
+            defaults = {}
+        for key, value in params.items():
+            if key not in defaults or defaults[key] != value:
+                text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
+                parts += ["-p", shlex.quote(f"{name}.{key}={text}")]
     return " ".join(parts)
 
 

@@ -123,3 +123,20 @@ def test_eval_manifest_records_the_config_hashes_of_its_rows(tmp_path):
     assert {n: rows[n]["config_hash"] for n in rows} == man["config"]["config_hashes"]
     # the paired column against the first filter, empty in its own row
     assert rows["ekf"]["pos_rmse_vs_ekf"] == "" and float(rows["ckf"]["pos_rmse_vs_ekf_ci95"]) >= 0
+
+
+def test_manifest_command_repeats_the_evaluation(tmp_path):
+    """The manifest's command names the non-default dataset and filter parameters: run, it gives the same rows."""
+    import shlex
+
+    args = ["eval", "sim/ungm", "--filters", "ekf,pf", "--runs", "2", "--dataset-param", "q=10",
+            "-p", "pf.n_particles=60", "--out", str(tmp_path / "a")]
+    res = CliRunner().invoke(main, args, catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    command = json.loads((tmp_path / "a" / "manifest.json").read_text())["command"]
+    assert "--dataset-param q=10.0" in command and "-p pf.n_particles=60" in command
+    assert "steps=" not in command and "resampling" not in command  # defaults are not repeated
+    again = shlex.split(command)[1:] + ["--out", str(tmp_path / "b")]
+    res = CliRunner().invoke(main, again, catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    assert _rows(tmp_path / "a" / "leaderboard.csv") == _rows(tmp_path / "b" / "leaderboard.csv")
