@@ -36,6 +36,16 @@ def test_int_refuses_fractions_bools_and_strings():
     assert refused(p, 0) == "filter 'x': n_particles must be an integer >= 1 (got 0)"
 
 
+def test_int_takes_numpy_integers_but_not_numpy_floats_or_bools():
+    import numpy as np
+
+    p = Param("n_particles", int, 1000, "particles", low=1)
+    for v in np.arange(1, 4):  # a sweep built with numpy
+        assert p.check(v) == int(v) and type(p.check(v)) is int
+    assert refused(p, np.float64(7.0)) == "filter 'x': n_particles must be an integer >= 1 (got 7.0)"
+    assert "got true" in refused(p, np.bool_(True)) or "got True" in refused(p, np.bool_(True))
+
+
 def test_float_refuses_nan_inf_and_bools_and_takes_integers():
     p = Param("r", float, 1.0, "variance", low=0, low_open=True)
     assert p.check(2) == 2.0 and isinstance(p.check(2), float)

@@ -105,7 +105,7 @@ class Param:
                 return False, v
             return True, tuple(float(x) for x in v)
         if self.type is int:
-            if not (isinstance(v, int) and not isinstance(v, bool)):
+            if not (_is_integer(v)):
                 return False, v
             v = int(v)
         else:
@@ -137,6 +137,17 @@ def _is_number(v) -> bool:
     except ImportError:  # pragma: no cover
         pass
     return isinstance(v, (int, float))
+
+
+def _is_integer(v) -> bool:
+    """A Python or numpy integer (not a bool, not a float even if integral)."""
+    if isinstance(v, bool):
+        return False
+    if isinstance(v, int):
+        return True
+    import numpy as np
+
+    return isinstance(v, np.integer)
 
 
 def _show(v) -> str:
