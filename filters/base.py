@@ -98,6 +98,18 @@ def numerical(err: BaseException) -> bool:
     return isinstance(err, Exception) and not isinstance(err, NOT_NUMERICAL)
 
 
+def _escalate(err: Exception, careful: bool, active: int) -> None:
+    """What an exception raised by an engine means: a program or user error is raised as it is;
+    in the careless pass, redo carefully (_Careful); with several runs active, redo them one by
+    one (_Redo); returns only when it is the divergence of the one active run."""
+    if not numerical(err):
+        raise err
+    if not careful:
+        raise _Careful from err
+    if active > 1:
+        raise _Redo from err
+
+
 class Filter(Declared):
     """Base class of every filter (see the module docstring)."""
 
@@ -195,12 +207,7 @@ class Filter(Declared):
         try:
             engine.start(X0, P0)
         except Exception as err:
-            if not numerical(err):
-                raise
-            if not careful:
-                raise _Careful from err
-            if M > 1:
-                raise _Redo from err
+            _escalate(err, careful, M)
             diverged[0], errors[0], active, started = 0, err, active[:0], False
         clock = perf_counter
         for k in range(n):
@@ -212,12 +219,7 @@ class Filter(Declared):
             try:
                 xk, Pk, nk, dk = engine.step(k, Z[rows, k], finite[rows, k])
             except Exception as err:
-                if not numerical(err):
-                    raise
-                if not careful:
-                    raise _Careful from err
-                if na > 1:
-                    raise _Redo from err
+                _escalate(err, careful, na)
                 diverged[active[0]], errors[active[0]] = k, err
                 break
             dt = (clock() - t0) / na

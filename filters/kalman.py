@@ -59,9 +59,11 @@ def kalman_update(x, P, y, H, R, x_angles=()):
     return x, 0.5 * (P + P.swapaxes(-1, -2)), nis
 
 
-def jacobians(fun, x, k):
-    """``fun`` (model.F or model.H, a single state) at the state x (nx,) or each run's (M, nx)."""
-    if x.ndim == 1:  # C order, as np.stack gives: products round by their operands' layout
+def jacobians(fun, x, k, stacked=False):
+    """``fun`` (model.F or model.H) at the state x (nx,) or each run's (M, nx): one call on the
+    stack when the model's Jacobians take stacks (``stacked``, ``Model.vector_jacobians``), else
+    one call per run. C order either way: products round by their operands' layout."""
+    if x.ndim == 1 or stacked:
         return np.ascontiguousarray(fun(x, k), dtype=float)
     return np.stack([fun(xi, k) for xi in x])
 
@@ -135,13 +137,13 @@ class EKFEngine(KalmanEngine):
 
     def predict(self, x, P, k):
         m = self.model
-        F = jacobians(m.F, x, k)
+        F = jacobians(m.F, x, k, m.vector_jacobians)
         x = wrap_components(m.f(x, k), m.x_angles)
         return x, F @ P @ F.swapaxes(-1, -2) + m.process_cov(k)
 
     def update(self, x, P, z, k, mask):
         m = self.model
-        H = jacobians(m.H, x, k)
+        H = jacobians(m.H, x, k, m.vector_jacobians)
         zh = m.h(x, k)
         R, angles = measurement(m, k, mask)
         if mask is not None:

@@ -22,7 +22,6 @@ import replay
 from replay import registry, summary
 from replay.filters import make_filter
 from replay.pipeline import Config, config_hash, default_task, plain, run_block
-from replay.pipeline import resolve as _resolve
 from replay.tasks import make_task
 from replay.util.errors import ReplayError
 
@@ -125,17 +124,11 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline)
 
 
-resolve = _resolve
-
-
 def versions() -> dict:
     import scipy
 
     return {"replay": replay.__version__, "python": platform.python_version(),
             "numpy": np.__version__, "scipy": scipy.__version__, "platform": platform.platform()}
-
-
-_jsonable = plain
 
 
 def command_line(config: dict) -> str:

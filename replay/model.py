@@ -41,6 +41,7 @@ class Model:
     Q: np.ndarray
     R: np.ndarray
     jacobian_step: float = 1e-6
+    vector_jacobians: bool = False  # True when F and H also take stacks of states (..., nx)
 
     # --- dynamics and measurement -------------------------------------------------
     def f(self, x: np.ndarray, k: int) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
-from replay.util.linalg import require_spd  # noqa: F401 (re-exported)
+from replay.util.linalg import require_spd
 from replay.util.errors import ReplayError
 from replay.util.params import Param, _is_number
 

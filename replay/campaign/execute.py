@@ -30,13 +30,14 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+from replay.pipeline import config_hash
 from replay.util.errors import ReplayError
 
 from . import board
 from .progress import Progress
 from .spec import Campaign
 from .store import Store, pack
-from .units import Job, config_hash, execute_job
+from .units import Job, execute_job
 from .workers import init_worker
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from replay.pipeline import config_hash, run_block  # noqa: F401 (config_hash re-exported)
+from replay.pipeline import run_block
 
 
 @dataclass
