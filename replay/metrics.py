@@ -12,6 +12,10 @@ Per run (:func:`run_metrics`, on top of :func:`replay.score.score_run`):
   error, P the position block of the covariance; d = number of position axes);
 * ``nis`` — mean over steps of y' S^-1 y (filters that record innovations:
   the batched Kalman family; NaN otherwise);
+* ``lost`` — the run lost the track: its position error exceeded the task's
+  ``lost_threshold`` (m) for ``lost_steps`` consecutive scored samples
+  (:class:`replay.tasks.Task`; None when the problem carries no rule). A lost run
+  is a result, kept in the means, and counted beside ``diverged``;
 * ``diverged`` — the filter's own divergence (non-finite or non-positive
   covariance, :attr:`Estimates.diverged_at`) or, when a
   ``divergence_threshold`` (m) is given, a position error beyond it.
@@ -121,6 +125,20 @@ def pose_errors(p_est, q_est, p_ref, q_ref) -> dict:
             "att_rmse": float(np.sqrt(np.mean(da**2)))}
 
 
+def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
+    """True when ``err_norm`` (n,) exceeds ``threshold`` for ``steps`` consecutive scored samples
+    (NaN samples are not scored and skipped; a run scored on fewer samples needs all of them above);
+    None when there is no threshold."""
+    if threshold is None:
+        return None
+    e = err_norm[np.isfinite(err_norm)]
+    if not len(e):
+        return False
+    edges = np.diff(np.concatenate([[0], (e > threshold).astype(np.int8), [0]]))
+    longest = (np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)).max(initial=0)
+    return bool(longest >= min(int(steps), len(e)))
+
+
 def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None):
     """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``."""
     m = score.score_run(problem, est)
@@ -142,6 +160,8 @@ def run_metrics(problem, est, alignment: str = "none", divergence_threshold: flo
     m["nis"] = float(np.nanmean(nis_k)) if np.isfinite(nis_k).any() else float("nan")
     big = divergence_threshold is not None and np.nanmax(np.linalg.norm(err, axis=1), initial=0) > divergence_threshold
     m["diverged"] = bool(est.diverged or big)
+    m["lost"] = None if m["diverged"] else lost_track(np.linalg.norm(err, axis=1), getattr(
+        problem, "lost_threshold", None), getattr(problem, "lost_steps", 10))
     m["diverged_at"] = est.diverged_at
     return m, {"nees": nees_k, "nis": nis_k, "nis_dof": nis_dof}
 

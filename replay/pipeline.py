@@ -135,7 +135,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None):
     c = config.as_dict() if isinstance(config, Config) else config
     frame = load_frame(c, run, data_dir)
     task = make_task(c["task"], **c["task_params"])
-    problem = task.build(frame, rng_for(c["seed"], run, TASK))
+    problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
     problem.frame_meta, problem.frame_report = frame.meta, frame.report
     return problem
 

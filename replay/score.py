@@ -76,7 +76,8 @@ def aggregate(run_metrics: list[dict], names=()) -> dict:
     its 95 % interval (``<m>_ci95``); ``us_per_step`` (median), ``scored``/``masked`` (mean).
     The one aggregation of every leaderboard (:func:`replay.summary.config_row`)."""
     ok = [m for m in run_metrics if not m["diverged"]]
-    out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok)}
+    out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok),
+           "lost": sum(1 for m in ok if m.get("lost"))}
     keys = list(names)
     for m in run_metrics:
         keys += [k for k in m if k.endswith("_rmse") and k not in keys]
@@ -84,6 +85,8 @@ def aggregate(run_metrics: list[dict], names=()) -> dict:
         vals = np.asarray([m.get(k, np.nan) for m in ok], float)
         out[k] = float(np.nanmean(vals)) if np.isfinite(vals).any() else float("nan")
         out[f"{k}_ci95"] = ci95(vals)
+        if k == "pos_rmse":  # beside the mean: a few lost runs move the mean, not the median
+            out["pos_rmse_median"] = float(np.nanmedian(vals)) if np.isfinite(vals).any() else float("nan")
     us = [m["us_per_step"] for m in run_metrics if np.isfinite(m["us_per_step"])]
     out["us_per_step"] = float(np.median(us)) if us else float("nan")
     out["scored"] = int(np.mean([m["scored"] for m in run_metrics])) if run_metrics else 0

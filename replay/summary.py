@@ -6,13 +6,16 @@ memory (eval) or stored (a campaign directory).
 
 Columns (stable):
 
-``dataset, task, filter, label, params, runs, diverged, failed, seed, first`` —
+``dataset, task, filter, label, params, runs, diverged, lost, lost_share, failed, seed, first`` —
 the configuration (``params``: the filter's parameters as JSON, defaults
 included; ``label``: the filter name plus the parameters that differ between
 rows of the same filter; ``runs``: successful runs; ``diverged``: runs whose
 filter diverged (non-finite or non-positive covariance, an exception in its
 numeric step, or an error beyond ``divergence_threshold``), left out of every
-mean; ``failed``: runs that could not be computed);
+mean; ``lost``: runs that lost the track by the task's rule (:class:`replay.tasks.Task`),
+kept in the means; ``lost_share``: the share of the summed per-run ``pos_rmse``
+coming from lost runs (above 0.5 the mean is dominated by lost tracks);
+``failed``: runs that could not be computed); ``pos_rmse_median`` beside the mean;
 
 ``<m>, <m>_ci95`` for each per-run metric ``m`` — the mean over non-diverged
 runs and the half-width of its 95 % Student-t interval: ``pos_rmse``,
@@ -41,7 +44,8 @@ import numpy as np
 
 from replay import metrics, score
 
-HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "failed", "seed", "first"]
+HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
+        "first"]
 RUN_METRICS = ["pos_rmse", "x_rmse", "y_rmse", "z_rmse", "ate", "final_err", "drift_pct", "nees", "nis"]
 ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anis", "anis_lo", "anis_hi", "anis_inside"]
 TAIL = ["scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
@@ -59,11 +63,34 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
            "seed": cfg["seed"], "first": cfg["first"] or ""}
     with np.errstate(all="ignore"):
         agg = score.aggregate([r["metrics"] for r in done], RUN_METRICS)
-        row.update({k: v for k, v in agg.items() if k not in ("runs", "diverged", "us_per_step", "scored", "masked")})
+        row.update({k: v for k, v in agg.items()
+                    if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")})
+        row["lost"] = agg["lost"] if any(r["metrics"].get("lost") is not None for r in ok) or not ok else ""
+        row["lost_share"] = lost_share([r["metrics"] for r in ok])
         row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok]))
     row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=agg["us_per_step"],
                alignment=cfg["alignment"], version=version, config_hash=h)
     return row
+
+
+def lost_share(run_metrics: list[dict]) -> float:
+    """The share of the summed per-run ``pos_rmse`` that comes from lost runs: above 0.5, the
+    mean is dominated by lost tracks (the printed tables mark such rows)."""
+    vals = [(m.get("pos_rmse", np.nan), bool(m.get("lost"))) for m in run_metrics]
+    vals = [(v, lost) for v, lost in vals if np.isfinite(v)]
+    total = sum(v for v, _ in vals)
+    return float(sum(v for v, lost in vals if lost) / total) if total > 0 else float("nan")
+
+
+def lost_cell(row) -> str:
+    """``lost k/N`` (``?`` when the task judged no run), ``*`` when lost runs dominate the mean."""
+    lost, runs = row.get("lost", ""), row.get("runs", "")
+    share = row.get("lost_share", float("nan"))
+    try:
+        mark = "*" if float(share) > 0.5 else ""
+    except (TypeError, ValueError):
+        mark = ""
+    return f"{'?' if lost in ('', None) else int(float(lost))}/{int(float(runs))}{mark}"
 
 
 def ensemble(cols: list[dict]) -> dict:

@@ -146,7 +146,11 @@ def test_list_tasks_and_datasets_show_declarations():
         "    r = 2.0 [m^2]: a finite number > 0. measurement noise variance per axis (R = r I3; 002 prints 2)",
         "    p0 = 0.1 [m^2]: a finite number > 0. prior variance per axis (P0 = p0 I3)",
         "    z0 = null [m]: a finite number (or null). constant vertical position; null = minus the first GPS "
-        "altitude"]
+        "altitude",
+        "    lost_threshold = 10.0 [m]: a finite number > 0. a run whose position error stays above this for "
+        "lost_steps consecutive scored samples is counted lost",
+        "    lost_steps = 10: an integer >= 1. consecutive scored samples above lost_threshold that make a run "
+        "lost"]
     res = CliRunner().invoke(main, ["list", "datasets", "sim/ungm"])
     assert "    q = 1.0: a finite number > 0. process noise variance Q (002 §3.2: 1 or 10)" in res.output
     res = run_cli("list", "tasks", "nope")

@@ -112,3 +112,31 @@ def test_paired_comparison_is_tighter_than_separate_intervals():
     assert p["n"] == 100 and abs(p["diff"] - 0.1) < 3 * p["diff_ci95"]
     assert p["diff_ci95"] < 0.05 < metrics.ci95(a)
     assert p["a_better"] < 0.1
+
+
+def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
+    from replay.metrics import lost_track
+
+    e = np.array([1.0, 30, 30, 30, 1, 30, 30, np.nan, 30, 30, 1])
+    assert lost_track(e, None, 3) is None  # no rule: not judged
+    assert lost_track(e, 20.0, 3) is True  # steps 1-3
+    assert lost_track(e, 20.0, 4) is True  # steps 5, 6, (masked), 8, 9: NaN samples are skipped
+    assert lost_track(e, 20.0, 5) is False
+    assert lost_track(e, 40.0, 1) is False
+    assert lost_track(np.array([25.0, 26.0]), 20.0, 10) is True  # shorter than lost_steps: all above
+    assert lost_track(np.full(4, np.nan), 20.0, 2) is False
+
+
+def test_lost_tracks_are_counted_not_reported_as_success():
+    """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
+    176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""
+    from replay.evaluate import evaluate
+
+    ev = evaluate("sim/auv-sonar", filters=("ekf", "pf"), runs=20, seed=0)
+    ekf, pf = ev.rows
+    assert ekf["lost"] == 0 and ekf["diverged"] == 0 and ekf["lost_share"] == 0.0
+    assert pf["lost"] == 2 and pf["diverged"] == 0 and pf["lost_share"] > 0.5
+    assert pf["pos_rmse_median"] < 4.0 < 14.0 < pf["pos_rmse"]
+    lost = [r for r, m in enumerate(ev.results[1].runs) if m["lost"]]
+    assert all(ev.results[1].runs[r]["pos_rmse"] > 20.0 for r in lost)
+    assert ev.config["task_params"]["lost_threshold"] == 20.0  # the rule is recorded in the manifest

@@ -148,7 +148,7 @@ def test_task_and_sim_refusals_name_owner_parameter_and_value():
         (lambda: make_task("gps-odom", gps_every=2.5), "task 'gps-odom': gps_every must be an integer >= 1 (got 2.5)"),
         (lambda: make_task("dead-reckoning", score="best"),
          "task 'dead-reckoning': score must be one of navigation, fixes (got 'best')"),
-        (lambda: make_task("position", nope=1), "task 'position': unknown parameter 'nope' (known: q, r, p0, z0)"),
+        (lambda: make_task("position", nope=1), "task 'position': unknown parameter 'nope' (known: q, r, p0, z0, lost_threshold, lost_steps)"),
         (lambda: registry.load_frame("sim/ungm", rng=0, q=math.inf),
          "dataset 'sim/ungm': q must be a finite number > 0 (got inf)"),
         (lambda: registry.load_frame("sim/uav-formation", rng=0, eps=1.5),
@@ -198,7 +198,8 @@ def test_check_config_is_canonical_and_loads_nothing(monkeypatch):
 
     monkeypatch.setattr(registry, "load_frame", lambda *a, **k: pytest.fail("loaded data"))
     a = check_config("sim/ungm", None, ["ekf"], {}, {"r": 2}, {"q": 10})
-    assert a.task == "ungm" and a.task_params == {"q": None, "r": 2.0, "p0": 1.0, "growth": None}
+    assert a.task == "ungm" and a.task_params == {"q": None, "r": 2.0, "p0": 1.0, "growth": None,
+                                                  "lost_threshold": 10.0, "lost_steps": 10}
     assert a.dataset_params == {"steps": 100, "q": 10.0, "r": 1.0, "x0": 0.0, "growth": 2.5}
     b = check_config("sim/ungm", "ungm", ["ekf"], {"ekf": {}}, a.task_params, a.dataset_params)
     assert (b.task_params, b.dataset_params, b.filter_params) == (a.task_params, a.dataset_params, a.filter_params)
@@ -316,7 +317,7 @@ def test_campaign_configs_are_canonical(tmp_path):
     full, _ = load_campaign(tmp_path, "{ steps = 100, q = 1, r = 1.0, x0 = 0, growth = 2.5 }", "p0 = 1")
     [a], [b] = empty.configs, full.configs
     assert a.dataset_params == {"steps": 100, "q": 1.0, "r": 1.0, "x0": 0.0, "growth": 2.5}
-    assert a.task_params == {"q": None, "r": None, "p0": 1.0, "growth": None}
+    assert a.task_params == {"q": None, "r": None, "p0": 1.0, "growth": None, "lost_threshold": 10.0, "lost_steps": 10}
     assert config_hash(a.as_dict()) == config_hash(b.as_dict())
 
 

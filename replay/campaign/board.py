@@ -123,14 +123,15 @@ def _num(v) -> float:
 
 def format_rows(rows) -> str:
     """A compact text table of the main columns."""
-    head = ["dataset", "task", "filter", "pos_rmse", "ate", "anees", "diverged", "us/step"]
+    head = ["dataset", "task", "filter", "pos_rmse", "median", "ate", "anees", "diverged", "lost", "us/step"]
     body = []
     for r in rows:
         pm, pc = _num(r.get("pos_rmse")), _num(r.get("pos_rmse_ci95"))
         body.append([str(r.get("dataset", "")), str(r.get("task", "")), str(r.get("label") or r.get("filter")),
-                     f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""), f"{_num(r.get('ate')):.4f}",
+                     f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
+                     f"{_num(r.get('pos_rmse_median')):.4f}", f"{_num(r.get('ate')):.4f}",
                      f"{_num(r.get('anees')):.3g}",
-                     f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}",
+                     f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}", summary.lost_cell(r),
                      f"{_num(r.get('us_per_step')):.1f}"])
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.evaluate import Evaluation, manifest
-from replay.summary import columns
+from replay.summary import columns, lost_cell
 from replay.util.files import write_atomic, write_csv
 from replay.score import rmse_over_time
 
@@ -26,22 +26,30 @@ def format_table(ev: Evaluation) -> str:
     """The table ``replay eval`` prints."""
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
-    head = ["filter"] + metrics + ["us/step", "diverged"]
+    head = ["filter"] + metrics[:1] + ["median"] + metrics[1:] + ["us/step", "diverged", "lost"]
     body = []
     for row in rows:
         cells = [row["filter"]]
         for k in metrics:
             v, c = row.get(k, np.nan), row.get(f"{k}_ci95", np.nan)
             cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) else ""))
-        cells += [f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}"]
+            if k == metrics[0]:
+                cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
+        cells += [f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}", lost_cell(row)]
         body.append(cells)
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)
                                    for i, (c, w) in enumerate(zip(cells, widths)))
     cfg = ev.config
+    rule = ", ".join(f"{k}={cfg['task_params'][k]:g}" for k in ("lost_threshold", "lost_steps")
+                     if k in cfg["task_params"])
     title = (f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}"
              + (f"  first={cfg['first']}" if cfg["first"] else ""))
-    note = "RMSE: mean over runs of per-run RMSE (m, rad), ± half-width of the 95 % interval"
+    note = ("RMSE: mean over runs of per-run RMSE (m, rad), ± half-width of the 95 % interval; median: "
+            "median over runs of the position RMSE (m)\n"
+            f"diverged: numerical failure (left out of the means); lost: the track was lost "
+            f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
+            "kept in the means); * = lost runs make up most of the mean")
     return "\n".join([title, line(head), *(line(b) for b in body), note])
 
 

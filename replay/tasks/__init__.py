@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from replay.util.params import Declared
+from replay.util.params import Declared, Param
 
 TASKS = {
     "position": "replay.tasks.position:PositionTask",
@@ -42,13 +42,38 @@ class Problem:
     angle_index: dict = field(default_factory=dict)  # name -> state component
     params: dict = field(default_factory=dict)
     truth_extra: dict = field(default_factory=dict)  # name -> ((n,) truth, NaN = not scored; state index)
+    lost_threshold: float | None = None  # m: the task's rule for a lost track (None: not judged)
+    lost_steps: int = 10
 
 
 class Task(Declared):
-    """A task: keyword-only parameters declared in ``PARAMS``; :meth:`build` makes the problem."""
+    """A task: keyword-only parameters declared in ``PARAMS``; :meth:`build` makes the problem.
+
+    Every task also declares how a lost track is judged (:mod:`replay.metrics`): a run is
+    *lost* when its position error exceeds ``lost_threshold`` metres for ``lost_steps``
+    consecutive scored samples. Each task sets its default ``LOST_M`` from the scale of its
+    problem; both are parameters (``--task-param lost_threshold=...``), recorded in the manifest.
+    """
 
     KIND = "task"
     name = "task"
+    LOST_M: float = 10.0
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "lost_threshold" not in {p.name for p in cls.PARAMS}:
+            cls.PARAMS = tuple(cls.PARAMS) + (
+                Param("lost_threshold", float, float(cls.LOST_M), "a run whose position error stays above "
+                      "this for lost_steps consecutive scored samples is counted lost", unit="m",
+                      low=0.0, low_open=True),
+                Param("lost_steps", int, 10, "consecutive scored samples above lost_threshold that make a "
+                      "run lost", low=1),
+            )
+
+    def judge(self, problem: Problem) -> Problem:
+        """``problem`` with this task's lost-track rule attached (the scorer applies it)."""
+        problem.lost_threshold, problem.lost_steps = self.lost_threshold, self.lost_steps
+        return problem
 
     def build(self, frame, rng: np.random.Generator) -> Problem:
         raise NotImplementedError

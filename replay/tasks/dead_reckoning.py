@@ -51,6 +51,7 @@ def ned_attitude(att):
 
 class DeadReckoningTask(Task):
     name = "dead-reckoning"
+    LOST_M = 1000.0  # lost-track threshold (m): dead reckoning drifts by hundreds of metres over the mission by design
 
     PARAMS = (
         Covariance("Q", list, None, "process noise covariance of the 10 states; null = the model's, "

@@ -33,6 +33,7 @@ UNITS = "m^2, (m/s)^2, rad^2"
 
 class DepthTask(Task):
     name = "depth"
+    LOST_M = 1.0  # lost-track threshold (m): depth sensor noise 0.05-0.2 m; working filters stay near 0.1 m
     PARAMS = (
         Covariance("Q", list, None, "process noise covariance of [z, v, phi]; null = the paper's, made "
                    "positive definite (replay.models.depth.paper_Q)", unit=UNITS, dim=3, optional=True),

@@ -24,6 +24,7 @@ from . import Problem, Task
 
 class FormationTask(Task):
     name = "formation"
+    LOST_M = 20.0  # lost-track threshold (m): working filters stay near 1-2 m
     PARAMS = (
         Param("eps", float, None, "glint probability the filters assume; null = the simulator's",
               low=0, high=1, optional=True),

@@ -99,6 +99,7 @@ def _variance(name, default, doc, unit):
 
 class GpsOdomTask(Task):
     name = "gps-odom"
+    LOST_M = 20.0  # lost-track threshold (m): GPS-scale errors; working filters stay near 1-3 m
     PARAMS = (
         Param("gps_every", int, 5, "every gps_every-th valid fix is fed to the filters; the others are "
               "the held-out reference", low=1),
