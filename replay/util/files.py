@@ -30,3 +30,42 @@ def write_csv(rows: list[dict], path, columns: list[str]) -> None:
     for row in rows:
         w.writerow({k: fmt(v) for k, v in row.items()})
     write_atomic(path, buf.getvalue())
+
+
+def refuse_overlap(out, inputs, what: str = "output") -> Path:
+    """Refuse an output path that equals, contains or lies inside one of ``inputs``.
+
+    ``inputs`` are paths this command reads (files or directories; ``None`` entries are
+    skipped). Paths are compared after resolving symbolic links, so a link to an input
+    is the input. Returns the resolved output path. Raises :class:`ReplayError` with one
+    line naming both paths.
+    """
+    from replay.util.errors import ReplayError
+
+    target = Path(out).resolve()
+    for src in inputs:
+        if src is None:
+            continue
+        s = Path(src).resolve()
+        if target == s:
+            raise ReplayError(f"{what} {out}: is an input of this command; refusing to overwrite it")
+        if s.is_relative_to(target):
+            raise ReplayError(f"{what} {out}: contains the input {src}; refusing to replace it")
+        if target.is_relative_to(s) and s.is_dir():
+            raise ReplayError(f"{what} {out}: lies inside the input {src}; refusing to write there")
+    return target
+
+
+def check_writable(out, what: str = "output") -> None:
+    """Refuse, before any computation, an output whose nearest existing parent is not writable."""
+    from replay.util.errors import ReplayError
+
+    p = Path(out).resolve()
+    probe = p if p.exists() else next((q for q in p.parents if q.exists()), None)
+    if probe is not None and probe.exists() and not probe.is_dir():
+        if p == probe:
+            probe = p.parent
+        else:
+            raise ReplayError(f"{what} {out}: {probe} is a file, not a directory")
+    if probe is None or not os.access(probe, os.W_OK | os.X_OK):
+        raise ReplayError(f"{what} {out}: {probe} is not writable")
