@@ -64,19 +64,30 @@ def chi2_band(dof, runs: int, p: float = 0.95):
     return stats.chi2.ppf(a, dof) / runs, stats.chi2.ppf(1 - a, dof) / runs
 
 
+COLLAPSED = 1e4  # a mean NEES/NIS above 1e4 per degree of freedom: the covariance has collapsed
+
+
 def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
     """Ensemble consistency of per-run, per-step NEES or NIS ``values`` (M, n).
 
     ``dof`` is a scalar or (n,) per step (0 where the statistic is undefined).
     Returns ``<prefix>`` (mean over steps of the average over runs), its band
-    for one step ``<prefix>_lo``/``_hi`` (for the median dof), and
-    ``<prefix>_inside`` the fraction of steps whose average lies in its band.
+    for one step ``<prefix>_lo``/``_hi`` (for the median dof),
+    ``<prefix>_inside`` the fraction of steps whose average lies in its band, and
+    ``<prefix>_flag``: ``consistent`` (the mean lies in the band), ``optimistic``
+    (above: the covariance is too small), ``pessimistic`` (below) or ``collapsed``.
+
+    *Collapsed*: the mean exceeds ``COLLAPSED`` times the degrees of freedom (errors of
+    more than 100 standard deviations on average) or is not finite. The covariance then
+    says nothing about the error; its value (1e+235 has been seen) is not a measurement of
+    anything, so ``<prefix>`` is set to NaN and only the flag remains.
     """
     v = np.asarray(values, float)
     dof = np.broadcast_to(np.asarray(dof, float), v.shape[-1:])
     runs = np.isfinite(v).sum(axis=0)
     use = (runs > 0) & (dof > 0)
-    out = {prefix: np.nan, f"{prefix}_lo": np.nan, f"{prefix}_hi": np.nan, f"{prefix}_inside": np.nan}
+    out = {prefix: np.nan, f"{prefix}_lo": np.nan, f"{prefix}_hi": np.nan, f"{prefix}_inside": np.nan,
+           f"{prefix}_flag": ""}
     if not use.any():
         return out
     with np.errstate(invalid="ignore"):
@@ -84,8 +95,14 @@ def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
     lo, hi = chi2_band(dof[use], runs[use])
     d0 = float(np.median(dof[use]))
     blo, bhi = chi2_band(d0, int(np.median(runs[use])))
-    out.update({prefix: float(avg.mean()), f"{prefix}_lo": float(blo), f"{prefix}_hi": float(bhi),
+    with np.errstate(all="ignore"):
+        mean = float(avg.mean())
+    out.update({prefix: mean, f"{prefix}_lo": float(blo), f"{prefix}_hi": float(bhi),
                 f"{prefix}_inside": float(np.mean((avg >= lo) & (avg <= hi)))})
+    if not np.isfinite(mean) or mean > COLLAPSED * d0:
+        out.update({prefix: np.nan, f"{prefix}_flag": "collapsed"})
+    else:
+        out[f"{prefix}_flag"] = "optimistic" if mean > bhi else "pessimistic" if mean < blo else "consistent"
     return out
 
 

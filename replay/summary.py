@@ -29,8 +29,10 @@ one named): mean over runs of this row's per-run ``pos_rmse`` minus the
 baseline's in the same run (common random numbers) and its 95 % half-width;
 empty in the baseline's own row and where there is one configuration;
 
-``anees, anees_lo, anees_hi, anees_inside`` and the same for ``anis`` — the
-ensemble consistency (:func:`replay.metrics.consistency`);
+``anees, anees_lo, anees_hi, anees_inside, anees_flag`` and the same for ``anis`` — the
+ensemble consistency (:func:`replay.metrics.consistency`); the flag is ``consistent``,
+``optimistic``, ``pessimistic`` or ``collapsed`` (then ``anees`` is empty: a collapsed
+covariance gives no number worth printing);
 
 ``scored, masked`` — reference samples scored and skipped (masked reference),
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
@@ -47,7 +49,8 @@ from replay import metrics, score
 HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
         "first"]
 RUN_METRICS = ["pos_rmse", "x_rmse", "y_rmse", "z_rmse", "ate", "final_err", "drift_pct", "nees", "nis"]
-ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anis", "anis_lo", "anis_hi", "anis_inside"]
+ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anees_flag",
+            "anis", "anis_lo", "anis_hi", "anis_inside", "anis_flag"]
 TAIL = ["scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
 TIMING = ("us_per_step",)
 
@@ -93,9 +96,19 @@ def lost_cell(row) -> str:
     return f"{'?' if lost in ('', None) else int(float(lost))}/{int(float(runs))}{mark}"
 
 
+def consistency_cell(row, prefix: str = "anees") -> str:
+    """The printed ANEES/ANIS: the number, or ``collapsed`` when the covariance collapsed."""
+    if row.get(f"{prefix}_flag") == "collapsed":
+        return "collapsed"
+    try:
+        return f"{float(row.get(prefix)):.3g}"
+    except (TypeError, ValueError):
+        return "nan"
+
+
 def ensemble(cols: list[dict]) -> dict:
     """ANEES (3-D position) and ANIS over the runs' per-step ``nees``, ``nis``, ``nis_dof``."""
-    out = {k: float("nan") for k in ENSEMBLE}
+    out = {k: "" if k.endswith("_flag") else float("nan") for k in ENSEMBLE}
     if not cols:
         return out
     n = min(len(c["nees"]) for c in cols)

@@ -140,3 +140,25 @@ def test_lost_tracks_are_counted_not_reported_as_success():
     lost = [r for r, m in enumerate(ev.results[1].runs) if m["lost"]]
     assert all(ev.results[1].runs[r]["pos_rmse"] > 20.0 for r in lost)
     assert ev.config["task_params"]["lost_threshold"] == 20.0  # the rule is recorded in the manifest
+
+
+def test_consistency_flags_collapsed_covariance_and_hides_its_number():
+    from replay.metrics import consistency
+
+    rng = np.random.default_rng(3)
+    good = rng.chisquare(3, size=(50, 200))                 # a consistent filter: NEES ~ chi2(3)
+    out = consistency(good, 3, "anees")
+    assert out["anees_flag"] == "consistent" and abs(out["anees"] - 3) < 0.1
+    assert consistency(good * 4, 3, "anees")["anees_flag"] == "optimistic"
+    assert consistency(good / 4, 3, "anees")["anees_flag"] == "pessimistic"
+    bad = consistency(good * 1e230, 3, "anees")            # P shrunk to nothing: 1e+230-size NEES
+    assert bad["anees_flag"] == "collapsed" and np.isnan(bad["anees"])
+    edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")   # just below 1e4 per dof
+    assert edge["anees_flag"] == "optimistic" and edge["anees"] == pytest.approx(29970)
+
+
+def test_collapsed_consistency_printed_as_word():
+    from replay.summary import consistency_cell
+
+    assert consistency_cell({"anees": float("nan"), "anees_flag": "collapsed"}) == "collapsed"
+    assert consistency_cell({"anees": 3.14159, "anees_flag": "consistent"}) == "3.14"

@@ -130,7 +130,7 @@ def format_rows(rows) -> str:
         body.append([str(r.get("dataset", "")), str(r.get("task", "")), str(r.get("label") or r.get("filter")),
                      f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
                      f"{_num(r.get('pos_rmse_median')):.4f}", f"{_num(r.get('ate')):.4f}",
-                     f"{_num(r.get('anees')):.3g}",
+                     summary.consistency_cell(r, "anees"),
                      f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}", summary.lost_cell(r),
                      f"{_num(r.get('us_per_step')):.1f}"])
     widths = [max(len(x) for x in col) for col in zip(head, *body)]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.evaluate import Evaluation, manifest
-from replay.summary import columns, lost_cell
+from replay.summary import columns, consistency_cell, lost_cell
 from replay.util.files import write_atomic, write_csv
 from replay.score import rmse_over_time
 
@@ -26,7 +26,7 @@ def format_table(ev: Evaluation) -> str:
     """The table ``replay eval`` prints."""
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
-    head = ["filter"] + metrics[:1] + ["median"] + metrics[1:] + ["us/step", "diverged", "lost"]
+    head = ["filter"] + metrics[:1] + ["median"] + metrics[1:] + ["anees", "us/step", "diverged", "lost"]
     body = []
     for row in rows:
         cells = [row["filter"]]
@@ -35,7 +35,7 @@ def format_table(ev: Evaluation) -> str:
             cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) else ""))
             if k == metrics[0]:
                 cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
-        cells += [f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}", lost_cell(row)]
+        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}", lost_cell(row)]
         body.append(cells)
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)
@@ -47,6 +47,8 @@ def format_table(ev: Evaluation) -> str:
              + (f"  first={cfg['first']}" if cfg["first"] else ""))
     note = ("RMSE: mean over runs of per-run RMSE (m, rad), ± half-width of the 95 % interval; median: "
             "median over runs of the position RMSE (m)\n"
+            "anees: mean position NEES over runs and steps (3 if consistent; 'collapsed' when the "
+            "covariance has shrunk to nothing)\n"
             f"diverged: numerical failure (left out of the means); lost: the track was lost "
             f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
             "kept in the means); * = lost runs make up most of the mean")

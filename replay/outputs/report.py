@@ -199,7 +199,9 @@ def _table(rows, cols) -> str:
         cells = []
         for c in cols:
             v = r.get(c, "")
-            if isinstance(v, float):
+            if c in ("anees", "anis") and r.get(f"{c}_flag") == "collapsed":
+                v = "collapsed"
+            elif isinstance(v, float):
                 v = "nan" if not np.isfinite(v) else f"{v:.4g}"
             cells.append(f"<td>{html.escape(str(v))}</td>")
         out.append("<tr>" + "".join(cells) + "</tr>")
