@@ -35,17 +35,32 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import residual, wrap_components
-from replay.util.linalg import solve_spd
+from replay.util import kernels
 from replay.model import remap_indices
 
 from .base import Filter
 
 
+def stack_of(a, one: bool):
+    """``a`` as a C-ordered float stack with a leading run axis (a single run gets one)."""
+    return np.ascontiguousarray(a[None] if one else a, dtype=float)
+
+
+def not_pd(run: int) -> np.linalg.LinAlgError:
+    return np.linalg.LinAlgError(f"innovation covariance not positive definite (run {run} of the stack)")
+
+
 def gain_nis(S, Pxz, y):
-    """K = Pxz S^-1 (..., nx, nz) and NIS y' S^-1 y (...), from one solve of ``S`` (..., nz, nz)."""
-    B = np.concatenate([Pxz.swapaxes(-1, -2), y[..., None]], axis=-1)
-    X = solve_spd(S, B)
-    return X[..., :-1].swapaxes(-1, -2), (y[..., None, :] @ X[..., -1:])[..., 0, 0]
+    """K = Pxz S^-1 (..., nx, nz) and the NIS y' S^-1 y (...), for one run (S (nz, nz)) or a
+    stack of runs (S (M, nz, nz)); compiled (:func:`replay.util.kernels.gain_nis`, one Cholesky
+    factor of S per run). LinAlgError when an S is not positive definite."""
+    one = S.ndim == 2
+    S3, P3, y2 = stack_of(S, one), stack_of(Pxz, one), stack_of(y, one)
+    K, nis = np.empty(P3.shape), np.empty(len(S3))
+    bad = kernels.gain_nis(S3, P3, y2, K, nis)
+    if bad >= 0:
+        raise not_pd(bad)
+    return (K[0], nis[0]) if one else (K, nis)
 
 
 def kalman_update(x, P, y, H, R, x_angles=()):

@@ -34,20 +34,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import residual, weighted_mean, wrap_components
+from replay.util import kernels
+from replay.util.angles import angle_mask, residual, weighted_mean
 from replay.util.errors import ReplayError
-from replay.util.linalg import cholesky
 from replay.util.params import Param
 
 from .base import PER_RUN, Filter, on_points
-from .kalman import KalmanEngine, gain_nis, measurement
+from .kalman import KalmanEngine, measurement, not_pd, stack_of
 
 
 # --- the step over a stack of runs -------------------------------------------------------
 def sigma_points(x, P, xi):
-    """Points X_i = x + L xi_i (..., m, nx) and their deviations L xi_i from x."""
-    dev = xi @ cholesky(P).swapaxes(-1, -2)
-    return x[..., None, :] + dev, dev
+    """Points X_i = x + L xi_i (..., m, nx) and their deviations L xi_i from x (compiled:
+    :func:`replay.util.kernels.sigma_points`). LinAlgError when a P is not positive definite."""
+    one = x.ndim == 1
+    x2, P3 = stack_of(x, one), stack_of(P, one)
+    X, dev = np.empty((len(x2),) + xi.shape), np.empty((len(x2),) + xi.shape)
+    bad = kernels.sigma_points(x2, P3, xi, X, dev)
+    if bad >= 0:
+        raise np.linalg.LinAlgError(f"covariance not positive definite (run {bad} of the stack)")
+    return (X[0], dev[0]) if one else (X, dev)
 
 
 def predict(model, x, P, k, xi, wm, wc):
@@ -75,11 +81,17 @@ def innovation(model, x, P, z, k, mask, xi, wm, wc):
 
 
 def correct(x, P, y, S, Pxz, x_angles=()):
-    """x + K y (state angles wrapped), P - K Pxz' (symmetrised) and the NIS, K = Pxz S^-1."""
-    K, nis = gain_nis(S, Pxz, y)
-    x = wrap_components(x + (K @ y[..., None])[..., 0], x_angles)
-    P = P - K @ Pxz.swapaxes(-1, -2)
-    return x, 0.5 * (P + P.swapaxes(-1, -2)), nis
+    """x + K y (state angles wrapped), P - K Pxz' (symmetrised) and the NIS, K = Pxz S^-1: the
+    compiled :func:`replay.util.kernels.kalman_correct` on each run (new arrays returned).
+    LinAlgError when an S is not positive definite."""
+    one = x.ndim == 1
+    x3, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
+    nis = np.empty(len(x3))
+    bad = kernels.kalman_correct(x3, P3, stack_of(y, one), stack_of(S, one), stack_of(Pxz, one),
+                                 angle_mask(x_angles, x3.shape[-1]), nis)
+    if bad >= 0:
+        raise not_pd(bad)
+    return (x3[0], P3[0], nis[0]) if one else (x3, P3, nis)
 
 
 class SigmaEngine(KalmanEngine):

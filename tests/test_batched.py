@@ -6,7 +6,7 @@ from replay import registry
 from replay.filters import make_filter
 from replay.model import LinearGaussian, Model
 from replay.tasks import make_task
-from replay.util.linalg import cholesky, gain, solve_spd
+from replay.util.linalg import cholesky
 from replay.util.seeds import filter_rng, rng_for
 
 RUNS = 4
@@ -188,25 +188,66 @@ def test_divergence_is_reported_per_run_not_raised():
 
 
 def test_stacked_linear_algebra_equals_one_matrix():
-    """The M = 1 fast paths (direct LAPACK) give the numbers of numpy's stacked LAPACK, bit for bit."""
+    """Cholesky (LAPACK) and the compiled gain/NIS, correction and sigma points: each matrix of a
+    stack gets the numbers it gets alone, bit for bit, and the numbers of the algebra to 1e-12."""
+    from replay.filters.kalman import gain_nis
+    from replay.filters.sigma import correct, sigma_points
+
     rng = np.random.default_rng(3)
     for n in (1, 2, 3, 6, 11):
         A = rng.standard_normal((5, n, n))
         S = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(n)
-        B = rng.standard_normal((5, n, 4))
-        L, X, K = cholesky(S), solve_spd(S, B), gain(S, np.swapaxes(B, 1, 2))
+        Pxz, y = rng.standard_normal((5, n + 2, n)), rng.standard_normal((5, n))
+        P = rng.standard_normal((5, n + 2, n + 2))
+        P = P @ np.swapaxes(P, 1, 2) + 0.1 * np.eye(n + 2)
+        x, xi = rng.standard_normal((5, n + 2)), rng.standard_normal((2 * n + 5, n + 2))
+        L, (K, nis) = cholesky(S), gain_nis(S, Pxz, y)
+        xc, Pc, nc = correct(x, P + 10 * np.eye(n + 2), y, S, Pxz, (0,))
+        X, dev = sigma_points(x, P, xi)
         for m in range(5):
-            for one in (lambda a: a[m:m + 1], lambda a: a[m][None]):  # a stack of one, one matrix
+            for one in (lambda a: a[m:m + 1], lambda a: a[m][None]):  # a stack of one
                 assert np.array_equal(cholesky(one(S))[0], L[m])
-                assert np.array_equal(solve_spd(one(S), one(B))[0], X[m])
-            assert np.array_equal(cholesky(S[m]), L[m]) and np.array_equal(solve_spd(S[m], B[m]), X[m])
-            assert np.array_equal(gain(S[m], B[m].T), K[m])
-            # column-major per matrix whatever M (products round by their operands' layout)
-            if n > 1:
-                assert cholesky(S[m]).strides == L[m].strides and solve_spd(S[m], B[m]).strides == X[m].strides
+            assert np.array_equal(cholesky(S[m]), L[m])
+            Km, nm = gain_nis(S[m], Pxz[m], y[m])
+            assert np.array_equal(Km, K[m]) and nm == nis[m]
+            c1 = correct(x[m], P[m] + 10 * np.eye(n + 2), y[m], S[m], Pxz[m], (0,))
+            assert all(np.array_equal(a, b) for a, b in zip(c1, (xc[m], Pc[m], nc[m])))
+            assert all(np.array_equal(a, b) for a, b in zip(sigma_points(x[m], P[m], xi), (X[m], dev[m])))
+        Si = np.linalg.inv(S)
         np.testing.assert_allclose(L @ np.swapaxes(L, 1, 2), S, rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(S @ X, B, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(K, Pxz @ Si, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(nis, np.einsum("mi,mij,mj->m", y, Si, y), rtol=1e-9)
+        Kx = Pxz @ Si
+        want = x + np.einsum("mij,mj->mi", Kx, y)
+        want[:, 0] = (want[:, 0] + np.pi) % (2 * np.pi) - np.pi
+        np.testing.assert_allclose(xc, want, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(Pc, P + 10 * np.eye(n + 2) - Kx @ np.swapaxes(Pxz, 1, 2), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(dev, xi @ np.swapaxes(np.linalg.cholesky(P), 1, 2), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(X, x[:, None] + dev, rtol=0, atol=0)
     bad = np.stack([np.eye(2), [[1.0, 2.0], [2.0, 1.0]]])
-    for f in (lambda: cholesky(bad), lambda: cholesky(bad[1:]), lambda: solve_spd(bad, np.ones((2, 2, 1)))):
+    for f in (lambda: cholesky(bad), lambda: cholesky(bad[1:]), lambda: gain_nis(bad, np.ones((2, 3, 2)), np.ones((2, 2))),
+              lambda: sigma_points(np.zeros((2, 2)), bad, np.eye(2))):
         with pytest.raises(np.linalg.LinAlgError):
             f()
+
+
+def test_compiled_kernels_equal_their_python_source():
+    """The compiled Kalman kernels and their un-jitted py_func (the readable source) agree to 1e-12."""
+    from replay.util import kernels
+
+    rng = np.random.default_rng(8)
+    A = rng.standard_normal((3, 3, 3))
+    S = A @ np.swapaxes(A, 1, 2) + 0.5 * np.eye(3)
+    Pxz, y = rng.standard_normal((3, 6, 3)), rng.standard_normal((3, 3))
+    P0 = rng.standard_normal((3, 6, 6))
+    P0 = P0 @ np.swapaxes(P0, 1, 2) + 20 * np.eye(6)
+    x0 = rng.standard_normal((3, 6)) * 4
+    mask = np.array([0, 0, 0, 0, 1, 1], bool)
+    out = []
+    for fun in (kernels.kalman_correct, kernels.kalman_correct.py_func):
+        x, P, nis = x0.copy(), P0.copy(), np.empty(3)
+        assert fun(x, P, y, S, Pxz, mask, nis) == -1
+        out.append((x, P, nis))
+    for a, b in zip(*out):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    assert (np.abs(out[0][0][:, 4:]) <= np.pi).all()

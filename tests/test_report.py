@@ -56,3 +56,15 @@ def test_report_on_campaign_and_eval_dirs(tmp_path):
 def test_report_on_other_dir_is_one_line_error(tmp_path):
     res = CliRunner().invoke(main, ["report", str(tmp_path)])
     assert res.exit_code == 2 and "not a result directory" in res.output
+
+
+def test_report_table_shows_lost_and_collapsed():
+    from replay.outputs.report import TABLE, _table
+
+    rows = [{"dataset": "d", "task": "t", "label": "pf", "runs": 20, "diverged": 0, "lost": 2, "lost_share": 0.7,
+             "pos_rmse": 14.75, "pos_rmse_median": 3.44, "anees": float("nan"), "anees_flag": "collapsed"},
+            {"dataset": "d", "task": "t", "label": "ekf", "runs": 20, "diverged": 0, "lost": 0, "lost_share": 0.0,
+             "pos_rmse": 2.40, "pos_rmse_median": 2.39, "anees": 10.04, "anees_flag": "optimistic"}]
+    page = _table(rows, TABLE)
+    assert "<th>lost</th>" in page and "<td>2/20*</td>" in page and "<td>0/20</td>" in page
+    assert "<td>collapsed</td>" in page and "<td>10.04</td>" in page and "<td>3.44</td>" in page

@@ -75,11 +75,13 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import residual, weighted_mean, wrap_components
-from replay.util.linalg import cholesky, gain
+from replay.util.linalg import cholesky
+
 from replay.util.params import Param
 from replay.model import remap_indices
 from replay.util.linalg import require_spd
 
+from ..kalman import gain_nis
 from ..sigma import UKF
 
 GUARDS = ("biased", "previous", "clip")
@@ -151,7 +153,7 @@ class AUKF(UKF):
         R = state.Rh[blk]
         eps = residual(y, state.p[idx], angles)  # (103): z - (sum wm zeta_i + p-hat)
         S = Gamma + R  # (101)
-        K = gain(S, Pxz)  # (108)
+        K, state.nis = gain_nis(S, Pxz, eps)  # (108); NIS of the corrected innovation eps
         Ke = K @ eps
         x = wrap_components(state.x + Ke, m.x_angles)  # (104)
         P = state.P - K @ S @ K.T  # (109)

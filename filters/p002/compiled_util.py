@@ -6,9 +6,9 @@ estimate :func:`estimate` needs no model). The particle bookkeeping ones
 mirror :mod:`replay.filters.particles` to rounding; the repair of :func:`factor`
 is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 
-* :func:`wrap` — angles into [-pi, pi) (:func:`replay.util.angles.wrap`);
-* :func:`cholesky`, :func:`factor` (with an eigenvalue-floor repair), :func:`chol_solve_rows`,
-  :func:`matmul`, :func:`quad`, :func:`gram`;
+* :func:`wrap`, :func:`cholesky`, :func:`chol_solve_rows`, :func:`matmul`, :func:`quad` — from
+  :mod:`replay.util.kernels` (the one compiled linear algebra of the project), re-exported;
+* :func:`factor` (Cholesky with an eigenvalue-floor repair), :func:`gram`;
 * :func:`cubature_points`, :func:`moments` — the cubature points and their
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
 * :func:`leaders` — the alpha, beta, delta wolves of GWO;
@@ -23,39 +23,11 @@ import math
 import numba as nb
 import numpy as np
 
+from replay.util.kernels import chol_solve_rows, cholesky, matmul, quad, wrap  # noqa: F401 (re-exported)
+
 TWO_PI = 2.0 * np.pi
 SIN_TAYLOR = tuple(1.0 / math.factorial(k) for k in (15, 13, 11, 9, 7, 5, 3))  # sin d = d - d^3 (1/3! - ...)
 COS_TAYLOR = tuple(1.0 / math.factorial(k) for k in (16, 14, 12, 10, 8, 6, 4, 2))  # cos d = 1 - d^2 (1/2! - ...)
-
-
-@nb.njit(cache=True)
-def wrap(v, mask):
-    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (the arithmetic of replay.util.angles.wrap)."""
-    for i in range(v.shape[0]):
-        if mask[i]:
-            v[i] -= np.floor(v[i] * (1.0 / TWO_PI) + 0.5) * TWO_PI
-
-
-@nb.njit(cache=True)
-def cholesky(A, L):
-    """Lower Cholesky factor of A into L; False when A is not (numerically) positive definite."""
-    n = A.shape[0]
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        d = np.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-        for i in range(j):
-            L[i, j] = 0.0
-    return True
 
 
 @nb.njit(cache=True)
@@ -78,52 +50,6 @@ def factor(A, L):
     if not cholesky((U * s) @ U.T, L):
         L[:, :] = np.nan
     return 1
-
-
-@nb.njit(cache=True)
-def chol_solve_rows(S, B, out):
-    """out = B S^-1 for symmetric positive-definite S (m, m) and B (n, m); False when S is not."""
-    m = S.shape[0]
-    L = np.empty((m, m))
-    if not cholesky(S, L):
-        out[:, :] = np.nan
-        return False
-    for r in range(B.shape[0]):  # solve S x = b for b = B[r] (S symmetric: x' = b' S^-1)
-        y = np.empty(m)
-        for i in range(m):
-            t = B[r, i]
-            for k in range(i):
-                t -= L[i, k] * y[k]
-            y[i] = t / L[i, i]
-        for i in range(m - 1, -1, -1):
-            t = y[i]
-            for k in range(i + 1, m):
-                t -= L[k, i] * out[r, k]
-            out[r, i] = t / L[i, i]
-    return True
-
-
-@nb.njit(cache=True)
-def matmul(A, B, out):
-    """out = A B by loops (BLAS calls cost more than these small products)."""
-    for i in range(A.shape[0]):
-        for j in range(B.shape[1]):
-            t = 0.0
-            for k in range(A.shape[1]):
-                t += A[i, k] * B[k, j]
-            out[i, j] = t
-
-
-@nb.njit(cache=True)
-def quad(d, W):
-    """d' W d."""
-    s = 0.0
-    for i in range(d.shape[0]):
-        t = 0.0
-        for j in range(d.shape[0]):
-            t += W[i, j] * d[j]
-        s += d[i] * t
-    return s
 
 
 @nb.njit(cache=True)

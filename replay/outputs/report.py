@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay import summary
 from replay.util.errors import ReplayError
 
 AXES = ("x", "y", "z")
@@ -188,7 +189,8 @@ def _f(v) -> float:
         return float("nan")
 
 
-TABLE = ["dataset", "task", "label", "runs", "diverged", "failed", "pos_rmse", "pos_rmse_ci95", "ate",
+TABLE = ["dataset", "task", "label", "runs", "diverged", "lost", "failed", "pos_rmse", "pos_rmse_ci95",
+         "pos_rmse_median", "ate",
          "final_err", "drift_pct", "anees", "anees_inside", "anis", "us_per_step"]
 
 
@@ -201,6 +203,8 @@ def _table(rows, cols) -> str:
             v = r.get(c, "")
             if c in ("anees", "anis") and r.get(f"{c}_flag") == "collapsed":
                 v = "collapsed"
+            elif c == "lost":
+                v = summary.lost_cell(r)
             elif isinstance(v, float):
                 v = "nan" if not np.isfinite(v) else f"{v:.4g}"
             cells.append(f"<td>{html.escape(str(v))}</td>")

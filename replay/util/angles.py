@@ -43,6 +43,15 @@ def index(angles: tuple[int, ...]):
     return list(angles)
 
 
+@lru_cache(maxsize=256)
+def angle_mask(angles: tuple[int, ...], n: int) -> np.ndarray:
+    """A read-only boolean mask (n,) of the components ``angles`` (for compiled kernels)."""
+    m = np.zeros(n, dtype=np.bool_)
+    m[list(angles)] = True
+    m.flags.writeable = False
+    return m
+
+
 def residual(a, b, angles=()):
     """``a - b`` along the last axis, with components listed in ``angles`` wrapped."""
     return wrap_components(np.subtract(a, b, dtype=float), angles)

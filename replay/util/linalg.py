@@ -17,7 +17,7 @@ divergence.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.lapack import dgesv, dpotrf
+from scipy.linalg.lapack import dpotrf
 
 from replay.util.errors import ReplayError
 
@@ -45,36 +45,6 @@ def cholesky(P: np.ndarray) -> np.ndarray:
     if len(P) == 1:
         return _potrf(P[0])[None]
     return _column_major(np.linalg.cholesky(P))
-
-
-def _posdef_solve(S, B):
-    info = dpotrf(S, lower=1, clean=0)[1]
-    if info != 0:
-        raise _not_pd(info)
-    _, _, X, info = dgesv(S, B)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"singular matrix (LAPACK info {info})")
-    return X
-
-
-def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``S^-1 B`` for symmetric positive-definite ``S``: (n, n) with (n, k), or stacks (M, n, n), (M, n, k).
-
-    A Cholesky factorisation first (LinAlgError when ``S`` is not positive
-    definite), then an LU solve (``dgesv``, what ``numpy.linalg.solve`` calls
-    per matrix of a stack).
-    """
-    if S.ndim == 2:
-        return _posdef_solve(S, B)
-    if len(S) == 1:
-        return _posdef_solve(S[0], B[0])[None]
-    np.linalg.cholesky(S)
-    return _column_major(np.linalg.solve(S, B))
-
-
-def gain(S: np.ndarray, Pxz: np.ndarray) -> np.ndarray:
-    """Kalman gain ``K = Pxz S^-1`` (S symmetric positive definite; one matrix or stacks)."""
-    return solve_spd(S, Pxz.swapaxes(-1, -2)).swapaxes(-1, -2)
 
 
 def require_spd(M, name: str) -> np.ndarray:
