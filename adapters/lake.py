@@ -28,8 +28,10 @@ The format (also in README.md, "Lake-trial logs"): a CSV or TSV text file.
 
 What :func:`load` does (everything counted in ``frame.report``):
 
-* sensor rows need a finite, strictly increasing time (others are dropped);
+* sensor rows need a finite, strictly increasing time (others are dropped and
+  counted); ``inf`` cells are missing values (masked and counted per column);
   values outside plausible ranges (:data:`RANGES`) are masked;
+* a median time step outside :data:`STEP_RANGE` (1 ms .. 10 s) contradicts the time unit: refused;
 * pitch in radians whose values pass pi/2 is refused (the column is in degrees);
   pitch in degrees that never leaves +-0.5 deg is flagged (possibly radians);
 * the reference is **aligned** to the sensor times without inventing samples:
@@ -56,6 +58,7 @@ from replay.util.errors import DataError, ReplayError
 from replay.frame import Channel, Frame, Report
 
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
+STEP_RANGE = (1e-3, 10.0)  # s: plausible median step of a sensor log (1 kHz .. 0.1 Hz)
 KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
          "speed": "speed", "velocity": "speed", "pitch": "pitch"}
 REF_PREFIXES = ("ref_", "ref.", "ref ", "reference_", "ext_", "external_")
@@ -226,14 +229,23 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
     if not sensors:
         raise DataError(path, "no sensor column (depth, speed or pitch) besides the time")
 
+    rows = np.arange(len(table)) + first_line
+
     def si(ref, kind):
         col = cols[(ref, kind)]
         unit = parse_column(col, units_line)[2]
-        return _numeric(path, table, col, first_line) * UNITS[kind][unit]
+        v = _numeric(path, table, col, first_line) * UNITS[kind][unit]
+        if (inf := np.isinf(v)).any():
+            report.add("masked", col, int(inf.sum()), f"infinite values (inf) at {_lines(rows, inf)}: missing")
+        return np.where(inf, np.nan, v)
 
-    rows = np.arange(len(table)) + first_line
     time = si(False, "time")
     has_time = np.isfinite(time)
+    empty = [table[cols[(False, k)]].str.strip().str.lower().isin(["", "nan", "na", "null"]) for k in sensors]
+    no_time = ~has_time & ~np.logical_and.reduce([e.to_numpy() for e in empty])
+    if no_time.any():
+        report.add("dropped", "rows", int(no_time.sum()),
+                   f"sensor values without a time ({cols[(False, 'time')]}) at {_lines(rows, no_time)}")
     keep = has_time.copy()
     running = -np.inf
     for i in np.flatnonzero(has_time):  # strictly increasing sensor time
@@ -250,6 +262,7 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
     t_abs = time[keep]
     t0 = float(t_abs[0])
     t = t_abs - t0
+    _check_step(path, cols[(False, "time")], parse_column(cols[(False, "time")], units_line)[2], np.diff(t_abs))
     channels = {}
     for kind in sensors:
         v = si(False, kind)[keep]
@@ -307,10 +320,26 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
     return Frame(t, channels, reference, None, meta, report)
 
 
+def _lines(rows, mask, most=5) -> str:
+    sel = np.asarray(rows)[np.asarray(mask)]
+    more = " ..." if len(sel) > most else ""
+    return ("line " if len(sel) == 1 else "lines ") + ", ".join(map(str, sel[:most])) + more
+
+
+def _check_step(path, col, unit, steps) -> None:
+    """Refuse a median time step that contradicts the declared unit (module docstring)."""
+    med, (lo, hi), seconds = float(np.median(steps)), STEP_RANGE, UNITS["time"][unit] == 1.0
+    if not lo <= med <= hi:
+        guess = ("milliseconds (name it time_ms)" if med > hi and seconds else
+                 "seconds (name it time_s)" if med < lo and not seconds else "another unit")
+        raise DataError(path, f"column {col}: median time step {med:.4g} s is implausible for a sensor log "
+                              f"(expected {lo:g}-{hi:g} s): are the times in {guess}?")
+
+
 def _channel(path, col, kind, v, report, header, units_line, description) -> Channel:
     missing = ~np.isfinite(v)
     if missing.any():
-        report.add("masked", kind, int(missing.sum()), f"{col}: empty cells")
+        report.add("masked", kind, int(missing.sum()), f"{col}: missing values (empty or infinite cells)")
     v = _check_range(path, col, kind, v, report, header, units_line)
     return Channel(v, SI[kind], FRAMES[kind], None, (kind,), (0,) if kind == "pitch" else (),
                    "positive nose down" if kind == "pitch" else "", description)

@@ -45,7 +45,8 @@ class Covariance(Param):
     def accepts(self) -> str:
         n = f"{self.dim}x{self.dim}" if self.dim else "square"
         diag = f"{self.dim} positive numbers" if self.dim else "positive numbers"
-        return (f"a {n} symmetric positive-definite matrix or its diagonal ({diag})"
+        article = "an" if n.startswith(("8", "11", "18")) else "a"
+        return (f"{article} {n} symmetric positive-definite matrix or its diagonal ({diag})"
                 + (" (or null)" if self.optional else ""))
 
     def check(self, value, owner: str = ""):

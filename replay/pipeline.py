@@ -136,7 +136,10 @@ def build_problem(config: Config | dict, run: int, data_dir=None):
     frame = load_frame(c, run, data_dir)
     task = make_task(c["task"], **c["task_params"])
     problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
-    problem.frame_meta, problem.frame_report = frame.meta, frame.report
+    # the manifest's "dataset" section: the frame's metadata plus what the task used and noted
+    problem.frame_meta = dict(frame.meta, task_inputs=getattr(problem, "inputs", {}),
+                              task_notes=getattr(problem, "notes", []))
+    problem.frame_report = frame.report
     return problem
 
 

@@ -13,11 +13,15 @@ from replay.frame import Channel, Frame, Report
 from replay.util.errors import DataError
 
 from .. import rosmsg
-from ..mapping import Mapping, from_dict, load_mapping, propose
+from ..mapping import Mapping, from_dict, load_mapping, propose, role_of
 from .reading import read
 from .recording import Recording, Topic
 
 SIM_TIME_BEFORE_NS = 315_532_800 * 10**9  # 1980-01-01: earlier stamps are simulation time
+
+# role -> the message fields (rosmsg converters) a task may take from an entry of that role
+ROLE_FIELDS = {"gps": ("position",), "odometry": ("velocity", "rate"), "imu": ("gyro", "accel", "attitude"),
+               "depth": ("depth",), "velocity": ("velocity",), "pose": ("position", "attitude")}
 
 
 def resolve_mapping(mapping) -> Mapping | None:
@@ -118,13 +122,21 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     t = (axis - t0) / 1e9
     n = len(axis)
     sim = t0 < SIM_TIME_BEFORE_NS
-    channels, reference = {}, {}
+    channels, reference, roles = {}, {}, {}
     other_name = "header_time" if time == "log" else "log_time"
+    made = {}  # (group, channel name) -> the entry that made it
     for e in mp.entries:
         topic = rec.topics[e.topic]
         kind = rosmsg.kind_of(topic.type)
         idx = np.searchsorted(axis, stamps[e.topic])
         group = reference if e.reference else channels
+        keys = [e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}" for f in fields[e.topic]]
+        for key in keys + [f"{e.name}_{other_name}"]:
+            maker = made.setdefault((e.reference, key), e.name)
+            if maker != e.name:
+                raise DataError(mp.source, f"[{'reference' if e.reference else 'channels'}] {e.name} "
+                                           f"({e.topic}) makes channel {key}, which {maker} makes too: "
+                                           "rename one of them")
         for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[e.topic].items():
             key = e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
             full = np.full((n,) + vals.shape[1:], np.nan)
@@ -138,6 +150,13 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
         group[f"{e.name}_{other_name}"] = Channel(t_other, "s", "", np.isin(np.arange(n), idx),
                                                   description=f"{e.topic} {other_name.replace('_', ' ')}, "
                                                               "seconds from t = 0")
+        role = role_of(e, topic.type, mp.source)
+        if role and role != "none":
+            names = {f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
+                     for f in ROLE_FIELDS[role] if f in fields[e.topic]}
+            roles.setdefault(role, []).append({
+                "entry": e.name, "source": f"{e.topic} ({topic.type})", "declared": e.role is not None,
+                "channels": names})
         primary = fields[e.topic][rosmsg.PRIMARY[kind]][1]
         report.add("info", e.name, len(idx), f"{e.topic} ({topic.type}): {len(idx)} messages at their "
                                              f"{time} stamps; not valid at the other {n - len(idx)} samples")
@@ -153,6 +172,7 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     meta = {"adapter": "bags", "source": str(rec.path), "format": rec.format, "time": time,
             "t0_ns": t0, "sim_time": bool(sim), "until": until, "truncated": rec.truncated,
             "sha256": _sha256(rec.path), "mapping": json.loads(json.dumps(_mapping_dict(mp))),
+            "roles": roles,
             "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)}
                        for k, v in rec.topics.items()}}
     if geo is not None:

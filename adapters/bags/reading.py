@@ -37,6 +37,8 @@ def read(path, topics=None, until: float | None = None, first_only: bool = False
     if not path.exists():
         raise DataError(path, "no such file or directory")
     kind = recording_kind(path)
+    if path.is_file() and path.stat().st_size == 0:
+        raise DataError(path, "empty file (0 bytes): not a recording")
     if kind == "ros2" and path.is_file():
         path = path.parent
     if kind == "mcap":

@@ -12,7 +12,11 @@ shared data directory):
 What the returned :class:`~replay.frame.Frame` holds:
 
 * ``t``: ``time - time[0]`` (s); ``epoch`` is None (no trusted date in the
-  files). A ``time_gps`` column that decodes as a GPS time of day (hhmmss) is
+  files). A ``time`` column in milliseconds (or micro-, nanoseconds) is
+  recognised from its median step and the position-derived speed, converted,
+  and counted as "repaired" (``meta["time_unit"]``); a step that fits no unit
+  is refused (:mod:`.cells`). A ``time_gps`` column that decodes as a GPS
+  time of day (hhmmss) is
   recorded in ``meta["gps_time_of_day"]``, nothing more.
 * ``reference["position"]``: (n, 2) east/north in m, local ENU = UTM - origin,
   from the navigation solution ``lat``/``lon``. Masked where lat/lon is
@@ -25,7 +29,14 @@ What the returned :class:`~replay.frame.Frame` holds:
   every other column that passes the plausibility checks (named after the
   column). A column that fails is not passed on: ``frame.report`` holds a
   "dropped" entry with the finding and ``meta["dropped_columns"]`` maps the
-  column to the same reason.
+  column to the same reason. ``inf`` cells are missing values, and a few cells
+  beyond their kind's magnitude limit (at most 1 % of the column) are masked:
+  both counted per column, neither drops the column.
+* ``meta["roles"]``: what tasks may use the channels for
+  (:func:`replay.tasks.role_input`): ``gps`` = ``gps_position``; ``imu`` =
+  ``gyro`` when its wz follows the yaw rate. ``meta["channel_columns"]`` maps
+  a channel to its columns, so that a task lacking a channel can name the
+  report line that removed it.
 * ``meta``: source, sha256, layout, adapter, crs, epsg, origin, rows, time,
   jumps, speed, yaw_course, gyro_attitude, dropped_columns; gps (36 columns);
   gps_time_of_day when ``time_gps`` holds one.
@@ -34,7 +45,8 @@ Bad input raises :class:`~replay.util.errors.DataError` with one line naming the
 file and, where it applies, the file line (header = line 1).
 
 Modules: :mod:`.loader` (:func:`load`: the frame from the checked parts),
-:mod:`.reading` (bytes, table, layout, rows, time axis), :mod:`.columns` (the
+:mod:`.reading` (bytes, table, layout, rows, time axis), :mod:`.cells`
+(infinite and isolated out-of-limit cells, the time unit), :mod:`.columns` (the
 two layouts, what each column is, the per-column plausibility checks),
 :mod:`.reference` (jumps of the navigation solution, GPS contradictions),
 :mod:`.gps` (fresh fixes, stale values, time of day), :mod:`.checks` (track

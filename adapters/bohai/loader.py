@@ -11,6 +11,7 @@ from replay.adapters.geodesy import plausible_latlon, project, utm_epsg
 from replay.frame import Channel, Frame, Report
 from replay.util.errors import DataError
 
+from .cells import mask_infinite, mask_isolated, time_unit
 from .checks import _gyro_check, _speed_check, _yaw_check, track_velocity
 from .columns import COLS31, COLS36, COLUMNS, GROUPS, check_columns
 from .gps import _fresh_alt, _gps_fixes, _time_of_day
@@ -33,6 +34,7 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
     table, lines = _parse(path, data)
     layout = _layout(path, list(table.columns))
     report = Report()
+    mask_infinite(table, lines, report)
     meta = {"source": str(path), "sha256": hashlib.sha256(data).hexdigest(),
             "layout": layout, "adapter": "bohai-csv", "dropped_columns": {}}
     names = COLS36 if layout == 36 else COLS31
@@ -40,7 +42,8 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
         if c not in names:
             _drop(report, meta, c, len(table), f"not a column of the {layout}-column layout")
     cols, lines = _clean_rows(path, table, names, lines, report, meta)
-    time = cols["time"]
+    time = time_unit(path, cols["time"], cols, lines, report, meta, max_speed)
+    mask_isolated(cols, lines, report)
     t = time - time[0]
     meta["time"] = _time_axis(t, lines, report, gap_factor)
     meta["time"]["offset"] = float(time[0])
@@ -77,7 +80,23 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
                                                        "valid only where a new fix appears")
     if layout == 36:
         _time_of_day(cols["time_gps"], t, report, meta)
+    meta["channel_columns"] = {"attitude": ["roll", "pitch", "yaw"], "gyro": ["wx", "wy", "wz"],
+                               "gps_position": ["lat_gps", "lon_gps"], "gps_alt": ["alt_gps"]}
+    meta["roles"] = _roles(channels, meta)
     return Frame(t, channels, reference, None, meta, report)
+
+
+def _roles(channels, meta) -> dict:
+    """What tasks may use the channels for (replay.tasks.role_input): the GPS fixes, and the gyro as
+    an IMU when its wz follows the yaw rate (the adapter's gyro check)."""
+    roles = {}
+    if "gps_position" in channels:
+        roles["gps"] = [{"entry": "gps_position", "source": "columns lat_gps, lon_gps", "declared": False,
+                         "channels": {"position": "gps_position"}}]
+    if "gyro" in channels and meta.get("gyro_attitude", {}).get("wz_yaw", 0.0) >= 0.3:
+        roles["imu"] = [{"entry": "gyro", "source": "columns wx, wy, wz", "declared": False,
+                         "channels": {"gyro": "gyro"}}]
+    return roles
 
 
 def _sensor_channels(cols, t, vel, lines, report, meta) -> dict:

@@ -5,6 +5,15 @@ the measurement array the filters see, the prior, and — kept for the scorer
 only — the truth. ``TASKS`` maps task names to "module:Class". Every task
 declares its parameters (``PARAMS``, :mod:`replay.util.params`): they are
 checked strictly when the task is made, before any data is read.
+
+**Inputs.** A task finds optional sensor inputs by *role* (:func:`role_input`:
+the adapter's ``meta["roles"]``, declared in a bag mapping or detected from the
+message type), never by a channel's name, and records in ``Problem.inputs``
+which channels it used (the pipeline puts them in the manifest, beside the
+frame's metadata, as ``task_inputs``). A task that finds none of an optional
+input says so in ``Problem.notes`` (``task_notes`` in the manifest). A task
+that lacks a required channel refuses in one line naming the adapter's report
+line that removed it (:func:`missing`).
 """
 from __future__ import annotations
 
@@ -12,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from replay.util.errors import ReplayError
 from replay.util.params import Declared, Param
 
 TASKS = {
@@ -44,6 +54,8 @@ class Problem:
     truth_extra: dict = field(default_factory=dict)  # name -> ((n,) truth, NaN = not scored; state index)
     lost_threshold: float | None = None  # m: the task's rule for a lost track (None: not judged)
     lost_steps: int = 10
+    inputs: dict = field(default_factory=dict)  # what the task used: input -> "channel (source)"
+    notes: list = field(default_factory=list)  # one-line notices (e.g. an optional input not found)
 
 
 class Task(Declared):
@@ -91,18 +103,88 @@ def make_task(name: str, **params) -> Task:
     return task_class(name)(**params)
 
 
-def reference_position_3d(frame, z0: float | None = None):
+def source_of(frame) -> str:
+    """The file or dataset a frame came from, for messages."""
+    return str(frame.meta.get("source") or frame.meta.get("path") or frame.meta.get("dataset") or "frame")
+
+
+def describe(frame, name: str, group: str = "channels") -> str:
+    """'name (what it holds)' of a channel (or reference channel), for ``Problem.inputs``."""
+    ch = getattr(frame, group).get(name)
+    if ch is None:
+        return name
+    return f"{name} ({ch.description})" if ch.description else name
+
+
+# frames whose adapter declares no roles (no ``meta["roles"]``): a channel named as the role
+LEGACY_ROLES = {"gps": ("gps", {"position": "gps"}),
+                "odometry": ("odom", {"velocity": "odom_velocity", "rate": "odom_rate"}),
+                "imu": ("imu", {"gyro": "imu"})}
+
+
+def role_input(frame, role: str, task: str) -> dict | None:
+    """The frame's input of ``role``: ``{"entry", "source", "channels": {field: channel name}}`` or None.
+
+    Adapters that know what their channels are (bags: from the mapping's ``role`` or the
+    message type; bohai-csv) list them in ``meta["roles"]``; the lookup is by role only,
+    whatever the channels are called. Two inputs of one role are refused (one line: keep
+    one, e.g. ``role = "none"`` on the others in the mapping). A frame without
+    ``meta["roles"]`` (simulated frames) falls back to a channel named after the role.
+    """
+    roles = frame.meta.get("roles")
+    if roles is None:
+        if role not in LEGACY_ROLES or LEGACY_ROLES[role][0] not in frame.channels:
+            return None
+        entry, chans = LEGACY_ROLES[role]
+        chans = {k: v for k, v in chans.items() if v in frame.channels}
+        return {"entry": entry, "source": frame.channels[entry].description, "declared": False,
+                "channels": chans}
+    found = [r for r in roles.get(role, []) if any(c in frame.channels for c in r["channels"].values())]
+    if len(found) > 1:
+        raise ReplayError(f"{source_of(frame)}: task {task}: {len(found)} inputs have role {role} ("
+                          + ", ".join(f"{r['entry']} = {r['source']}" for r in found)
+                          + "): keep one (role = \"none\" on the others in the mapping)")
+    return found[0] if found else None
+
+
+def why_missing(frame, names) -> str:
+    """What the adapter's report says about channels or columns ``names`` (dropped, masked), or ''.
+
+    ``meta["channel_columns"]`` (bohai-csv) maps a channel to the columns it is made of.
+    """
+    cols = frame.meta.get("channel_columns", {})
+    wanted = []
+    for n in names:
+        wanted += [n, *cols.get(n, [])]
+    for action in ("dropped", "masked", "flagged"):
+        for e in frame.report.entries:
+            if e.action == action and e.what in wanted:
+                return f"the adapter {action} {e.what} ({e.count} samples: {e.reason})"
+    return ""
+
+
+def missing(frame, task: str, need: str, names=(), hint: str = "") -> ReplayError:
+    """The one-line refusal of a task that lacks ``need``: names the report line that removed it."""
+    why = why_missing(frame, names or (need,))
+    text = f"{source_of(frame)}: task {task} needs {need}"
+    if why:
+        text += f": {why}"
+    elif hint:
+        text += f" ({hint})"
+    return ReplayError(text)
+
+
+def reference_position_3d(frame, z0: float | None = None, task: str = "this"):
     """(n, 3) reference position and its validity from the frame's ``position`` reference.
 
     A 2-D reference (east, north) gets a constant third component ``z0`` (the
     vertical is not observed, as in the Bohai files, whose ``depth`` is zero).
     """
-    from replay.util.errors import ReplayError
-
     ref = frame.reference.get("position")
     if ref is None:
-        raise ReplayError(f"{frame.meta.get('dataset') or frame.meta.get('source')}: "
-                          "no reference position channel to score against")
+        raise missing(frame, task, "a reference position channel to score against", ("position",))
+    if not ref.valid.any():
+        raise missing(frame, task, "a valid reference position (every sample is masked)", ("position",))
     p = ref.values
     if p.shape[1] == 2:
         p = np.column_stack([p, np.full(len(p), 0.0 if z0 is None else z0)])

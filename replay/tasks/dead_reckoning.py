@@ -34,12 +34,11 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
-from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
 from replay.noise import Covariance, as_matrix
 
-from . import Problem, Task
+from . import Problem, Task, describe, missing
 
 BOHAI_MEASURED = (0, 1, 4, 5, 6, 7, 8, 9)
 
@@ -56,8 +55,9 @@ class DeadReckoningTask(Task):
     PARAMS = (
         Covariance("Q", list, None, "process noise covariance of the 10 states; null = the model's, "
                    "scaled by the frame's step / 0.5 s", dim=10, optional=True),
-        Covariance("R", list, None, "measurement noise covariance (4 components on a DVL frame, 8 on a "
-                   "Bohai frame); null = from the sigmas below", optional=True),
+        Covariance("R", list, None, "measurement noise covariance (DVL frame: depth, body velocity, "
+                   "acceleration, heading; Bohai frame: north, east, pseudo-measurements, heading); null = from "
+                   "the sigmas below", dim=8, optional=True),
         Covariance("P0", list, None, "prior covariance of the 10 states; null = the task's", dim=10,
                    optional=True),
         Param("gps_sigma", float, 5.0, "GPS fix noise standard deviation (Bohai frames)", unit="m",
@@ -77,8 +77,9 @@ class DeadReckoningTask(Task):
     def build(self, frame, rng):
         att = frame.channels.get("attitude")
         if att is None or att.width != 3:
-            raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: dead-reckoning needs an "
-                              "'attitude' channel [roll, pitch, yaw]")
+            raise missing(frame, self.name, "an attitude channel [roll, pitch, yaw]", ("attitude",))
+        if not att.valid.any():
+            raise missing(frame, self.name, "a valid attitude sample (every one is masked)", ("attitude",))
         roll, pitch, heading = ned_attitude(np.where(att.valid[:, None], att.values, 0.0))
         heading = np.where(att.valid, heading, np.nan)
         dt = np.diff(frame.t, prepend=frame.t[0] - (np.median(np.diff(frame.t)) if len(frame.t) > 1 else 1.0))
@@ -106,7 +107,8 @@ class DeadReckoningTask(Task):
         x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
         x0[9] = wrap(x0[9])
         pb = Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
-                     ("north", "east", "depth"), params=self.params())
+                     ("north", "east", "depth"), params=self.params(),
+                     inputs={name: describe(frame, name) for name in ("depth", "dvl_velocity", "accel", "attitude")})
         extra = {}  # body velocity and acceleration, scored as extra components when present
         for name, first in (("velocity_body", 3), ("accel_body", 6)):
             if name in frame.reference:
@@ -119,9 +121,11 @@ class DeadReckoningTask(Task):
     def _bohai(self, frame, dt, roll, pitch, heading, Q):
         gps = frame.channels.get("gps_position")
         ref = frame.reference.get("position")
-        if gps is None or ref is None:
-            raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: dead-reckoning needs a DVL channel, "
-                              "or gps_position fixes and a reference position")
+        if gps is None:
+            raise missing(frame, self.name, "a DVL channel, or gps_position fixes (columns lat_gps, lon_gps)",
+                          ("gps_position",))
+        if ref is None:
+            raise missing(frame, self.name, "a reference position", ("position",))
         n = len(frame.t)
         fix = gps.valid.copy()
         ne = np.column_stack([gps.values[:, 1], gps.values[:, 0]])
@@ -150,4 +154,7 @@ class DeadReckoningTask(Task):
         P0 = np.diag([self.gps_sigma**2] * 2 + [1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.1, (5 * DEG) ** 2]) \
             if self.P0 is None else as_matrix(self.P0)
         params = dict(self.params(), resurfacing_fixes=int(len(resurface)), fixes_used=int(fix.sum()))
-        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params)
+        inputs = {"attitude": describe(frame, "attitude"), "gps": describe(frame, "gps_position"),
+                  "reference": describe(frame, "position", "reference")}
+        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params,
+                       inputs=inputs)

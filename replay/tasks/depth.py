@@ -25,7 +25,7 @@ from replay.util.params import Param
 from replay.models.depth import R_FIXED, DepthModel, paper_Q
 from replay.noise import Covariance, as_matrix, diagonal
 
-from . import Problem, Task
+from . import Problem, Task, describe, why_missing
 
 CHANNELS = ("depth", "speed", "pitch")
 UNITS = "m^2, (m/s)^2, rad^2"
@@ -51,16 +51,24 @@ class DepthTask(Task):
         z = np.empty((len(frame.t), 3))
         for i, name in enumerate(CHANNELS):
             ch = frame.channels.get(name)
+            col = columns.get(name, name)
             if ch is None:
-                raise DataError(source, f"no {name} sensor column: the depth task needs depth, speed and pitch")
+                why = why_missing(frame, (name, col))
+                raise DataError(source, f"no {name} sensor column: the depth task needs depth, speed and pitch"
+                                + (f" ({why})" if why else ""))
             z[:, i] = np.where(ch.valid, ch.values, np.nan)
             n_ok = int(np.isfinite(z[:, i]).sum())
             if n_ok < self.window:
-                raise DataError(source, f"column {columns.get(name, name)}: {n_ok} valid samples, "
-                                f"fewer than the noise-estimation window of {self.window}")
+                why = why_missing(frame, (name, col))
+                raise DataError(source, f"column {col}: {n_ok} valid samples, "
+                                f"fewer than the noise-estimation window of {self.window}"
+                                + (f"; {why}" if why else ""))
         ref = frame.reference.get("depth")
         if ref is None:
             raise DataError(source, "no reference depth column (e.g. ref_depth_m) to score against")
+        if not ref.valid.any():
+            why = why_missing(frame, ("reference depth", columns.get("ref_depth", "ref_depth")))
+            raise DataError(source, "no valid reference depth sample to score against" + (f" ({why})" if why else ""))
         truth = np.where(ref.valid, ref.values, np.nan)[:, None]
         step = np.diff(frame.t)
         med = float(np.median(step)) if len(step) else float(frame.meta.get("dt", 0.05))
@@ -82,4 +90,6 @@ class DepthTask(Task):
                        angles, {"pitch": 2} if angles else {},
                        params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if Qgiven is None else "user",
                                "R": R.tolist(), "T": med},
-                       truth_extra=extra)
+                       truth_extra=extra,
+                       inputs={**{n: describe(frame, n) for n in CHANNELS},
+                               **{f"reference {n}": describe(frame, n, "reference") for n in frame.reference}})

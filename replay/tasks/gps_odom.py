@@ -37,9 +37,14 @@ by looking at the first 60 s of test1.bag (with tighter values the particle
 filter collapses onto a wrong heading); they are engineering choices, not a
 paper's, and every one is a task parameter.
 
-Channels used: ``gps`` (required), ``odom_velocity`` and ``odom_rate``,
-``imu`` (gyro) when present. Defaults are plain engineering choices (no paper
-prescribes them), written here and in the manifest.
+Inputs are found by **role** (:func:`replay.tasks.role_input`), whatever the
+channels are called: ``gps`` (required: a NavSatFix topic, or one declared
+``role = "gps"``), ``odometry`` (its forward speed and yaw rate: an Odometry
+topic, or a twist declared ``role = "odometry"``) and ``imu`` (its z gyro)
+when present. Which channels were used goes into ``Problem.inputs`` (the
+manifest's ``task_inputs``); without odometry or IMU a note says that the
+filters run on the fixes only (``task_notes``). Defaults are plain engineering
+choices (no paper prescribes them), written here and in the manifest.
 """
 from __future__ import annotations
 
@@ -50,7 +55,7 @@ from replay.util.errors import ReplayError
 from replay.model import Model
 from replay.util.params import Param
 
-from . import Problem, Task
+from . import Problem, Task, describe, missing, role_input, source_of, why_missing
 
 
 class UnicycleModel(Model):
@@ -117,25 +122,50 @@ class GpsOdomTask(Task):
     )
 
     def build(self, frame, rng):
-        where = frame.meta.get("source") or frame.meta.get("dataset") or "frame"
-        gps = frame.channels.get("gps")
+        where = source_of(frame)
+        gps_in = role_input(frame, "gps", self.name)
         ref = frame.reference.get("position")
-        if gps is None:
-            raise ReplayError(f"{where}: task gps-odom needs a `gps` channel (a NavSatFix topic in the mapping)")
+        if gps_in is None or "position" not in gps_in["channels"]:
+            raise missing(frame, self.name, "a gps input (a NavSatFix topic, or a topic with role = \"gps\" "
+                          "in the mapping; docs/bags.md)", ("gps", "gps_position"))
+        gps_name = gps_in["channels"]["position"]
+        gps = frame.channels[gps_name]
         if ref is None:
-            raise ReplayError(f"{where}: task gps-odom needs a `position` reference (see docs/bags.md)")
+            raise missing(frame, self.name, "a position reference ([reference] position in the mapping; "
+                          "docs/bags.md)", ("position",))
         n = len(frame.t)
         idx = np.flatnonzero(gps.valid)
         if len(idx) < 2:
-            raise ReplayError(f"{where}: gps-odom needs at least 2 valid fixes (got {len(idx)})")
+            raise ReplayError(f"{where}: task gps-odom needs at least 2 valid fixes on {gps_name} (got {len(idx)})"
+                              + (f"; {why}" if (why := why_missing(frame, (gps_name,))) else ""))
         fed = np.zeros(n, bool)
         fed[idx[:: self.gps_every]] = True
         z = np.full((n, 5), np.nan)
         z[fed, :2] = gps.values[fed, :2]
-        for col, name, comp in ((2, "odom_velocity", 0), (3, "odom_rate", 2), (4, "imu", 2)):
-            ch = frame.channels.get(name)
-            if ch is not None:
-                z[ch.valid, col] = ch.values[ch.valid, comp]
+        inputs = {"gps": describe(frame, gps_name), "reference": describe(frame, "position", "reference")}
+        absent = []
+        for role, fields in (("odometry", ((2, "velocity", 0), (3, "rate", 2))), ("imu", ((4, "gyro", 2),))):
+            found = role_input(frame, role, self.name)
+            used = []
+            for col, fname, comp in fields:
+                name = (found or {}).get("channels", {}).get(fname)
+                ch = frame.channels.get(name) if name else None
+                if ch is None or ch.width <= comp:
+                    continue
+                ok = ch.valid & np.isfinite(ch.values.reshape(n, -1)[:, comp])
+                if ok.any():
+                    z[ok, col] = ch.values.reshape(n, -1)[ok, comp]
+                    used.append(name)
+                    inputs[f"{role}_{fname}"] = describe(frame, name)
+            if not used:
+                absent.append(role if found is None else f"{role} ({found['entry']}: no valid sample)")
+        notes = []
+        if len(absent) == 2:
+            notes.append(f"task gps-odom: no {absent[0]} and no {absent[1]} input (roles odometry, imu; "
+                         "docs/bags.md): the filters use the GPS fixes only")
+        elif absent:
+            notes.append(f"task gps-odom: no {absent[0]} input (docs/bags.md): the filters use the GPS fixes "
+                         f"and the {'imu' if absent[0].startswith('odometry') else 'odometry'} only")
         truth = ref.values[:, :2]
         valid = ref.valid.copy()
         holdout = ref.description == gps.description
@@ -151,4 +181,5 @@ class GpsOdomTask(Task):
         x0 = np.array([p_first[0], p_first[1], np.arctan2(d[1], d[0]), 0.0, 0.0])
         P0 = np.diag([self.r_gps, self.r_gps, self.p0_heading, self.p0_v, self.p0_omega])
         return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("x", "y"),
-                       params=dict(self.params(), fed_fixes=int(fed.sum()), holdout=bool(holdout)))
+                       params=dict(self.params(), fed_fixes=int(fed.sum()), holdout=bool(holdout)),
+                       inputs=inputs, notes=notes)

@@ -18,7 +18,7 @@ import numpy as np
 from replay.models.random_walk import RandomWalkPosition
 from replay.util.params import Param
 
-from . import Problem, Task, reference_position_3d
+from . import Problem, Task, describe, reference_position_3d
 
 POSITIVE = dict(low=0, low_open=True)
 
@@ -37,14 +37,18 @@ class PositionTask(Task):
 
     def build(self, frame, rng):
         z0 = self.z0
+        inputs = {"reference": describe(frame, "position", "reference")}
         if z0 is None:
-            alt = frame.channels.get("gps_alt") or frame.channels.get("alt")
+            name = "gps_alt" if "gps_alt" in frame.channels else "alt"
+            alt = frame.channels.get(name)
             z0 = -float(alt.values[alt.valid][0]) if alt is not None and alt.valid.any() else 0.0
-        truth, valid = reference_position_3d(frame, z0)
+            inputs["z0"] = f"minus the first valid {describe(frame, name)}" if alt is not None and alt.valid.any() \
+                else "0 (no altitude channel)"
+        truth, valid = reference_position_3d(frame, z0, task="position")
         model = RandomWalkPosition(self.q * np.eye(3), self.r * np.eye(3))
         noise = rng.standard_normal(truth.shape) * np.sqrt(self.r)
         z = np.where(valid[:, None], truth + noise, np.nan)
         first = int(np.argmax(valid))
         x0 = truth[first].copy()
         return Problem(model, z, x0, self.p0 * np.eye(3), frame.t, truth, valid, (0, 1, 2),
-                       ("x", "y", "z"), params=dict(self.params(), z0_used=z0))
+                       ("x", "y", "z"), params=dict(self.params(), z0_used=z0), inputs=inputs)

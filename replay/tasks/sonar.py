@@ -21,7 +21,7 @@ from replay.util.params import Param
 from replay.models.auv_sonar import P0_TABLE2, Q_TABLE2, R_TABLE2, AUVSonar
 from replay.noise import Covariance, as_matrix, diagonal
 
-from . import Problem, Task, reference_position_3d
+from . import Problem, Task, describe, reference_position_3d
 
 
 class SonarTask(Task):
@@ -40,7 +40,7 @@ class SonarTask(Task):
 
     def build(self, frame, rng):
         Q, R, P0 = as_matrix(self.Q), as_matrix(self.R), as_matrix(self.P0)
-        truth, valid = reference_position_3d(frame)
+        truth, valid = reference_position_3d(frame, task="sonar")
         if "sonar" in frame.channels:
             meta = frame.meta
             model = AUVSonar(Q, R, dt=meta.get("dt", 1.0),
@@ -68,6 +68,9 @@ class SonarTask(Task):
         if att is not None and att.components == ("pitch", "yaw"):
             angles = {"pitch": np.where(att.valid, att.values[:, 0], np.nan),
                       "yaw": np.where(att.valid, att.values[:, 1], np.nan)}
+        inputs = {"reference": describe(frame, "position", "reference"),
+                  "sonar": describe(frame, "sonar") if "sonar" in frame.channels
+                  else "synthesised from the reference with noise R"}
         return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1, 2), ("x", "y", "z"),
                        angles, {"pitch": 4, "yaw": 5} if angles else {},
-                       params={"Q": np.diag(Q).tolist(), "R": np.diag(R).tolist()})
+                       params={"Q": np.diag(Q).tolist(), "R": np.diag(R).tolist()}, inputs=inputs)
