@@ -1,42 +1,75 @@
-"""Download file datasets, verified and atomically.
+"""Download file datasets: bounded in time, checked, written atomically.
 
 The file is streamed into a temporary ``.<file>.*.part`` in the destination
-directory and hashed while it is written. When the manifest knows the sha256,
-a mismatch discards the download; otherwise the observed sha256 is recorded in
-``checksums.json`` beside the file. Only a complete, checked file is moved
-(``os.replace``) to its final name, so a final name never holds a partial file.
+directory and hashed while it is written. Only a file that passed every check
+is moved (``os.replace``) to its final name, so a final name never holds a
+partial or unchecked file, and a failed download leaves no temporary file (and
+an existing copy untouched, also with ``force``).
+
+Checks, in order; the first that fails refuses the download in one line naming
+the dataset and the URL:
+
+* the answer: HTTP 200 after at most ``MAX_REDIRECTS`` redirects (no loop, no
+  https -> http), no ``Content-Encoding`` (none is asked for), not an HTML page,
+  not empty, the announced ``Content-Length`` equal to the registered size;
+* the body: as many bytes as ``Content-Length`` announced;
+* with a registered checksum (``replay/checksums.py``): the size and the sha256;
+* without one: the adapter's content check (``checksums.CONTENT_CHECKS``; a Bohai CSV
+  needs a header of one of the two Bohai layouts, the same number of fields on
+  every line and a final line end, so a body cut short is refused even when the
+  server gave no size). A dataset whose adapter has no content check is not
+  downloaded at all. The sha256 seen is kept in ``checksums.json`` beside the
+  file with ``content_checked``, never as a registered checksum; loading it
+  reports ``checksum: not registered upstream (content-checked)``. Known limit:
+  a body cut exactly at a line end, from a server that gave no size, passes.
+
+Time: ``timeout`` bounds each wait for the server (connect, each read), and
+``deadline`` the whole download, redirects included: when it passes, the open
+socket is shut down, so a server dripping one byte every few seconds cannot hold
+it longer (only the DNS look-up is not covered).
 
 The download URL is the manifest's ``url``, unless ``url=`` is given or
 ``$REPLAY_DATASET_BASE_URL`` is set: then it is ``<base>/<upstream_path>``
-(a mirror, or a test server, laid out like the upstream repository).
+(a mirror, or a test server, laid out like the upstream repository). An
+``http(s)_proxy`` from the environment is used (CONNECT for https).
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import http.client
-import json
 import os
+import socket
+import ssl
 import tempfile
-import urllib.error
+import threading
+import time
 import urllib.parse
 import urllib.request
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 
 import replay
 from replay import registry
+from replay.checksums import CONTENT_CHECKS, record_download
+from replay.registry import Dataset
 from replay.util.errors import ReplayError
-from replay.registry import CHECKSUMS_FILE, Dataset
+from replay.util.files import check_space, check_writable
+
+DEFAULT_TIMEOUT = 30.0  # s of silence from the server (connect, each read)
+DEFAULT_DEADLINE = 300.0  # s for a whole download (the Bohai files are 0.3-4 MB)
+MAX_REDIRECTS = 5
+LOCAL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO}
 
 
 @dataclass
 class FetchResult:
     path: Path
     sha256: str
-    verified: bool  # matched the manifest's checksum
+    verified: bool  # matched the registered checksum
     downloaded: bool = True  # False when the file was already in place
     message: str = ""  # one line for the user
+    content_checked: bool = False  # no registered checksum; passed the content check
 
 
 def download_url(ds: Dataset, url: str | None = None) -> str:
@@ -57,100 +90,291 @@ def default_dest(ds: Dataset) -> Path:
 
 
 def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | None = None,
-          timeout: float = 30) -> FetchResult:
-    """Make sure ``dest_dir/<file>`` holds the dataset, downloading it if needed."""
+          timeout: float = DEFAULT_TIMEOUT, deadline: float = DEFAULT_DEADLINE,
+          force: bool = False) -> FetchResult:
+    """Make sure ``dest_dir/<file>`` holds the dataset, downloading it if needed.
+
+    ``force`` downloads again and replaces the copy in place (only once the new one
+    passed every check). ``timeout``: seconds of silence allowed; ``deadline``:
+    seconds for the whole download.
+    """
     ds = registry.get(ds) if isinstance(ds, str) else ds
     if ds.kind != "file":
         raise ReplayError(f"{ds.id} is generated on demand; there is nothing to download")
+    check = None if ds.sha256 else CONTENT_CHECKS.get(ds.adapter)
+    if not ds.sha256 and check is None:
+        raise ReplayError(f"cannot download {ds.id}: it has no registered checksum and its adapter "
+                          f"{ds.adapter} has no content check, so nothing could confirm the download")
+    for name, value in (("timeout", timeout), ("deadline", deadline)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+            raise ReplayError(f"download {name} must be a positive number of seconds (got {value!r})")
     dest = Path(dest_dir).expanduser() if dest_dir else default_dest(ds)
     target = dest / ds.file
 
     note = ""
     if target.is_file():
-        sha, status = registry.check_file(ds, target)
-        if status != "mismatch":
-            extra = {"verified": "checksum verified", "unknown": "checksum not known upstream",
-                     "recorded": "matches the checksum recorded at download",
-                     "changed": "differs from the checksum recorded at download"}[status]
-            return FetchResult(target, sha, status == "verified", False,
-                               f"{ds.id}: already present at {target} ({extra})")
-        note = "; the local copy did not match the manifest checksum and was replaced"
+        if force:
+            note = "; the copy that was there was replaced (force)"
+        else:
+            present = _present(ds, target, check)
+            if isinstance(present, FetchResult):
+                return present
+            note = present
 
     src = download_url(ds, url)
     if urllib.parse.urlsplit(src).scheme not in ("https", "http"):
         raise ReplayError(f"cannot download {ds.id}: only http(s) URLs are supported (url {src})")
+    check_writable(dest, "download destination")
+    check_space(dest, "download destination", need=ds.size)
     try:
         dest.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ReplayError(f"cannot create {dest}: {e.strerror or e}") from None
 
-    sha = _download(ds, src, dest, target, timeout)
+    sha, size, announced, summary = _download(ds, src, dest, target, timeout, deadline, check)
     if ds.sha256:
-        return FetchResult(target, sha, True, True, f"{ds.id}: downloaded to {target}, sha256 verified{note}")
-    record = _record_checksum(dest, ds, sha, src)
+        return FetchResult(target, sha, True, True,
+                           f"{ds.id}: downloaded to {target}, size and sha256 verified{note}")
+    record = record_download(dest, ds, sha, size, src)
+    told = "as announced by the server" if announced else "no size announced by the server"
     return FetchResult(target, sha, False, True,
-                       f"{ds.id}: downloaded to {target}; checksum not known upstream; "
-                       f"recorded sha256 {sha} in {record}")
+                       f"{ds.id}: downloaded to {target} ({size} bytes, {told}); checksum not registered "
+                       f"upstream; content-checked: {summary}; sha256 {sha} kept in {record}{note}",
+                       content_checked=True)
 
 
-def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float) -> str:
-    """Stream ``src`` into a temp file in ``dest``, check it, move it to ``target``."""
-    fd, tmp = tempfile.mkstemp(dir=dest, prefix=f".{ds.file}.", suffix=".part")
+def _present(ds: Dataset, target: Path, check) -> FetchResult | str:
+    """A result when the copy at ``target`` is fine, else the note saying why it is replaced."""
+    if ds.sha256:
+        sha, status = registry.check_file(ds, target)
+        if status == "verified":
+            return FetchResult(target, sha, True, False, f"{ds.id}: already present at {target} (sha256 verified)")
+        return "; the local copy did not match the registered checksum and was replaced"
     try:
-        h = hashlib.sha256()
+        summary = check(target)
+    except (ValueError, OSError) as e:
+        return f"; the local copy failed the content check ({e}) and was replaced"
+    sha, status = registry.check_file(ds, target)
+    how = {registry.CONTENT_CHECKED: "the file downloaded and content-checked",
+           "changed": "passes the content check but differs from the file downloaded"}.get(
+        status, "passes the content check")
+    return FetchResult(target, sha, False, False, f"{ds.id}: already present at {target} (checksum not "
+                       f"registered upstream; {how}: {summary})", content_checked=True)
+
+
+class _Deadline:
+    """The wall-clock budget of one download: when it passes, the watched socket is shut down,
+    which ends any wait on it (connect, TLS, headers, body)."""
+
+    def __init__(self, seconds: float):
+        self.seconds, self.expired, self._sock = seconds, False, None
+        self.end = time.monotonic() + seconds
+        self._lock = threading.Lock()
+        self._timer = threading.Timer(seconds, self._expire)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _expire(self):
+        with self._lock:
+            self.expired, sock = True, self._sock
+        if sock is not None:
+            _shutdown(sock)
+
+    def watch(self, sock):
+        with self._lock:
+            self._sock, expired = sock, self.expired
+        if expired:
+            _shutdown(sock)
+
+    @property
+    def passed(self) -> bool:
+        return self.expired or time.monotonic() >= self.end
+
+    def left(self) -> float:
+        """Seconds left (a connect attempt is not allowed to wait longer)."""
+        if self.passed:
+            raise TimeoutError
+        return self.end - time.monotonic()
+
+    def cancel(self):
+        self._timer.cancel()
+
+
+def _shutdown(sock):
+    try:
+        sock.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass
+
+
+class _TLS(http.client.HTTPSConnection):
+    """HTTPS whose TLS socket is put under the deadline before its handshake (wrapping a
+    socket detaches it, so the plain socket watched by ``_create_connection`` no longer
+    reaches the connection once it is wrapped)."""
+
+    def __init__(self, host, port, *, timeout, clock, tls_host):
+        self._tls, self._clock, self._tls_host = ssl.create_default_context(), clock, tls_host
+        super().__init__(host, port, timeout=timeout, context=self._tls)
+
+    def connect(self):
+        http.client.HTTPConnection.connect(self)  # TCP (and the proxy tunnel), plain socket watched
+        self.sock = self._tls.wrap_socket(self.sock, server_hostname=self._tls_host, do_handshake_on_connect=False)
+        self._clock.watch(self.sock)
+        self.sock.do_handshake()
+
+
+def _connect(parts, clock: _Deadline, timeout: float) -> tuple[http.client.HTTPConnection, str]:
+    """A connection for ``parts`` (through the environment's proxy, if any) and the request target;
+    every socket it opens is under the deadline."""
+    host, port = parts.hostname, parts.port
+    path = (parts.path or "/") + (f"?{parts.query}" if parts.query else "")
+    proxy = None if urllib.request.proxy_bypass(host) else urllib.request.getproxies().get(parts.scheme)
+    if proxy:
+        p = urllib.parse.urlsplit(proxy if "://" in proxy else f"http://{proxy}")
+        host, port, path = p.hostname, p.port or 80, (path if parts.scheme == "https" else parts.geturl())
+    if parts.scheme == "https":
+        conn = _TLS(host, port, timeout=timeout, clock=clock, tls_host=parts.hostname)
+        if proxy:
+            conn.set_tunnel(parts.hostname, parts.port)
+    else:
+        conn = http.client.HTTPConnection(host, port, timeout=timeout)
+
+    def create(address, wait=None, source=None):
+        sock = socket.create_connection(address, min(wait or timeout, clock.left()), source)
+        sock.settimeout(wait or timeout)  # the connect was bounded by the deadline; now silence only
+        clock.watch(sock)
+        return sock
+
+    conn._create_connection = create
+    return conn, path
+
+
+def _open(src: str, clock: _Deadline, timeout: float, fail):
+    """(response, connection) of a 200 answer for ``src``, following redirects."""
+    url, seen = src, [src]
+    while True:
+        parts = urllib.parse.urlsplit(url)
+        if parts.scheme not in ("http", "https") or not parts.hostname:
+            fail(f"redirected to {url}, which is not an http(s) URL")
+        conn, path = _connect(parts, clock, timeout)
+        try:
+            conn.request("GET", path, headers={"User-Agent": f"replay-nav/{replay.__version__}",
+                                               "Accept-Encoding": "identity"})
+            resp = conn.getresponse()
+        except BaseException:
+            conn.close()
+            raise
+        if resp.status not in (301, 302, 303, 307, 308):
+            if resp.status != 200:
+                conn.close()
+                fail(f"HTTP {resp.status} {' '.join(str(resp.reason).split())}".rstrip())
+            return resp, conn
+        location = (resp.getheader("Location") or "").strip()
+        conn.close()
+        if not location:
+            fail(f"HTTP {resp.status} redirect without a Location")
+        nxt = urllib.parse.urljoin(url, location)
+        if nxt in seen:
+            fail(f"redirect loop: back to {nxt} at redirect {len(seen)}")
+        if len(seen) > MAX_REDIRECTS:
+            fail(f"more than {MAX_REDIRECTS} redirects")
+        if parts.scheme == "https" and not nxt.startswith("https:"):
+            fail(f"redirected from https to {nxt}")
+        seen.append(nxt)
+        url = nxt
+
+
+def _check_answer(ds: Dataset, resp, fail) -> int | None:
+    """Refuse an answer that cannot be the file from its headers; the announced size or None."""
+    encoding = (resp.getheader("Content-Encoding") or "identity").strip().lower()
+    if encoding != "identity":
+        fail(f"the server sent {encoding}-encoded content, which was not asked for")
+    ctype = (resp.getheader("Content-Type") or "").split(";")[0].strip().lower()
+    if ctype in ("text/html", "application/xhtml+xml"):
+        fail(f"the server sent an HTML page (Content-Type {ctype}), not the data file")
+    announced = resp.length  # None when absent, invalid or chunked
+    if announced == 0:
+        fail("the server sent an empty body (Content-Length 0)")
+    if ds.size and announced is not None and announced != ds.size:
+        fail(f"the server announces {announced} bytes, the registered size is {ds.size}")
+    return announced
+
+
+def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, deadline: float, check):
+    """Stream ``src`` into a temp file in ``dest``, check it, move it to ``target``.
+
+    Returns (sha256, size, whether the server announced the size, content summary).
+    """
+    def fail(reason):
+        raise ReplayError(f"cannot download {ds.id}: {reason} (url {src})")
+
+    try:
+        fd, tmp = tempfile.mkstemp(dir=dest, prefix=f".{ds.file}.", suffix=".part")
+    except OSError as e:
+        raise ReplayError(f"cannot write into {dest}: {e.strerror or e}") from None
+    clock = _Deadline(deadline)
+    try:
+        h, size = hashlib.sha256(), 0
         with os.fdopen(fd, "wb") as out:
-            request = urllib.request.Request(src, headers={"User-Agent": f"replay-nav/{replay.__version__}"})
             try:
-                with urllib.request.urlopen(request, timeout=timeout) as resp:
-                    expected = resp.headers.get("Content-Length")
-                    size = 0
-                    while chunk := resp.read(1 << 16):
+                resp, conn = _open(src, clock, timeout, fail)
+                try:
+                    announced = _check_answer(ds, resp, fail)
+                    while chunk := resp.read1(1 << 16):
                         out.write(chunk)
                         h.update(chunk)
                         size += len(chunk)
-                if expected is not None and size != int(expected):
-                    raise ReplayError(f"cannot download {ds.id}: connection closed after {size} of "
-                                      f"{expected} bytes (url {src})")
+                        if ds.size and size > ds.size:
+                            fail(f"the server sent more than the registered size of {ds.size} bytes")
+                finally:
+                    conn.close()
+                if clock.passed:
+                    raise TimeoutError
                 out.flush()
                 os.fsync(out.fileno())
             except (OSError, http.client.HTTPException, ValueError) as e:
-                raise ReplayError(f"cannot download {ds.id}: {_reason(e, timeout)} (url {src})") from None
+                if getattr(e, "errno", None) in LOCAL_ERRNOS:  # writing, not the network
+                    raise ReplayError(f"cannot write {target}: {e.strerror}; the download was discarded") from None
+                if clock.passed:
+                    fail(f"not complete within the deadline of {deadline:g} s ({size} bytes received)")
+                fail(_reason(e, timeout))
+            finally:
+                clock.cancel()
+        if announced is not None and size != announced:
+            fail(f"connection closed after {size} of {announced} bytes")
+        if size == 0:
+            fail("the server sent an empty body")
+        if ds.size and size != ds.size:
+            fail(f"got {size} bytes, the registered size is {ds.size}")
         sha = h.hexdigest()
         if ds.sha256 and sha != ds.sha256:
             raise ReplayError(f"checksum mismatch for {ds.id}: expected {ds.sha256}, got {sha}; "
                               f"the download was discarded (url {src})")
-        os.replace(tmp, target)
-        return sha
+        summary = ""
+        if check is not None:
+            try:
+                summary = check(Path(tmp))
+            except ValueError as e:
+                fail(f"the content check failed: {e}; the download was discarded")
+        try:
+            os.replace(tmp, target)
+        except OSError as e:
+            raise ReplayError(f"cannot put the download at {target}: {e.strerror or e}") from None
+        return sha, size, announced is not None, summary
     finally:
+        clock.cancel()
         Path(tmp).unlink(missing_ok=True)  # gone already after a successful replace
 
 
 def _reason(e: Exception, timeout: float) -> str:
     """A short one-line reason for a network failure."""
-    if isinstance(e, urllib.error.HTTPError):
-        return f"HTTP {e.code} {e.reason}"
-    if isinstance(e, urllib.error.URLError):
-        if not isinstance(e.reason, BaseException):
-            return " ".join(str(e.reason).split())
-        e = e.reason
     if isinstance(e, TimeoutError):
         return f"timed out after {timeout:g} s"
+    if isinstance(e, http.client.IncompleteRead):
+        return "connection closed before the end of the body"
+    if isinstance(e, http.client.RemoteDisconnected):
+        return "the server closed the connection without an answer"
+    if isinstance(e, http.client.HTTPException):
+        return f"not a valid HTTP answer ({type(e).__name__}: {' '.join(str(e).split())[:80]})"
     text = getattr(e, "strerror", None) or str(e) or type(e).__name__
     return " ".join(str(text).split())
-
-
-def _record_checksum(dest: Path, ds: Dataset, sha: str, src: str) -> Path:
-    """Add the observed checksum to ``dest/checksums.json`` (written atomically)."""
-    path = dest / CHECKSUMS_FILE
-    data = registry.read_checksums(dest)
-    data[ds.file] = {"dataset": ds.id, "sha256": sha, "url": src,
-                     "fetched": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-    fd, tmp = tempfile.mkstemp(dir=dest, prefix=f".{CHECKSUMS_FILE}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=2, sort_keys=True)
-            f.write("\n")
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
-    return path

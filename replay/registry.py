@@ -10,14 +10,15 @@ cache (``$REPLAY_CACHE_DIR``, else ``$XDG_CACHE_HOME/replay``, else
 ``~/.cache/replay``). In each root the file may sit flat (``root/<file>``), in
 the upstream layout (``root/<upstream_path>``), or either way under a folder
 named after the id's prefix (``root/bohai/...``).
+
+Registered upstream checksums and sizes, and the checks of a local copy, are in
+``replay/checksums.py`` (re-exported here).
 """
 from __future__ import annotations
 
 import difflib
 import functools
-import hashlib
 import inspect
-import json
 import os
 import sys
 import tomllib
@@ -28,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 import replay
+from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, read_checksums,  # noqa: F401
+                              sha256_file, with_registered)
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import validate
-
-CHECKSUMS_FILE = "checksums.json"
 
 # Adapter used for a plain file path, by extension.
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
@@ -50,7 +51,8 @@ class Dataset:
     file: str | None = None
     upstream_path: str | None = None
     url: str | None = None
-    sha256: str | None = None  # None when not known
+    sha256: str | None = None  # the registered upstream checksum; None when not registered
+    size: int | None = None  # bytes, when registered
     site: str = ""
     rows: int | None = None
     span_s: float | None = None
@@ -130,7 +132,10 @@ def _make_dataset(path: Path, entry: dict) -> Dataset:
         if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
             raise ReplayError(f"{where}: sha256 must be 64 hex digits")
         entry["sha256"] = sha
-    return Dataset(kind=kind, manifest=str(path), **entry)
+    size = entry.get("size")
+    if size is not None and (isinstance(size, bool) or not isinstance(size, int) or size < 1):
+        raise ReplayError(f"{where}: size must be a positive number of bytes (got {size!r})")
+    return with_registered(Dataset(kind=kind, manifest=str(path), **entry), where)
 
 
 def ids() -> list[str]:
@@ -197,37 +202,6 @@ def locate(ds: Dataset | str, data_dir: str | Path | None = None) -> Path | None
             if path.is_file():
                 return path
     return None
-
-
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def read_checksums(directory: str | Path) -> dict:
-    """The checksums recorded by `fetch` in ``directory/checksums.json`` ({} if none)."""
-    path = Path(directory) / CHECKSUMS_FILE
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return {}
-    except (OSError, ValueError) as e:
-        raise ReplayError(f"{path}: cannot read recorded checksums: {e}") from None
-
-
-def check_file(ds: Dataset, path: Path) -> tuple[str, str]:
-    """(sha256, status) of a local copy; status is "verified", "mismatch", "recorded",
-    "changed" (differs from the checksum recorded at download) or "unknown"."""
-    got = sha256_file(path)
-    if ds.sha256:
-        return got, "verified" if got == ds.sha256 else "mismatch"
-    recorded = read_checksums(path.parent).get(path.name, {}).get("sha256")
-    if recorded:
-        return got, "recorded" if got == recorded else "changed"
-    return got, "unknown"
 
 
 # ---------------------------------------------------------------- loading

@@ -148,3 +148,64 @@ def test_unit_tables_do_not_import_pandas(tmp_path):
                          timeout=60)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "False"
+
+
+def _silent_listener():
+    """A socket that accepts connections and never answers (the kernel completes the TCP handshake)."""
+    import socket
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(8)
+    return sock
+
+
+def test_scheduler_that_accepts_and_never_answers_is_refused_in_time():
+    """A fake scheduler that accepts the connection and sends nothing: one line naming the
+    address and the timeout (before: `campaign run` hung for ever in the Dask handshake)."""
+    pytest.importorskip("distributed")
+    from replay.campaign.workers import connect_scheduler
+    from replay.util.errors import ReplayError
+
+    with _silent_listener() as sock:
+        address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+        with pytest.raises(ReplayError) as err:
+            connect_scheduler(address, 1)
+    assert str(err.value) == (f"Dask scheduler {address}: no answer within 1 s "
+                              "(it accepted the connection but sent no handshake)")
+
+
+def test_scheduler_address_errors_are_one_line():
+    pytest.importorskip("distributed")
+    from replay.campaign.workers import connect_scheduler
+    from replay.util.errors import ReplayError
+
+    with pytest.raises(ReplayError, match=r"^Dask scheduler nope://x: not a scheduler address \(unknown address "
+                                          r"scheme 'nope'"):
+        connect_scheduler("nope://x", 1)
+    with _silent_listener() as sock:
+        port = sock.getsockname()[1]
+        sock.close()  # nothing listens there now
+        with pytest.raises(ReplayError, match=rf"^Dask scheduler tcp://127.0.0.1:{port}: no answer within 0.5 s "
+                                              r"\(nothing accepted the connection\)$"):
+            connect_scheduler(f"tcp://127.0.0.1:{port}", 0.5)
+
+
+@pytest.mark.slow
+def test_campaign_run_with_a_silent_scheduler_ends(tmp_path):
+    """`replay campaign run --scheduler` against a scheduler that never answers ends with one
+    line within seconds (needs replay/campaign/execute.py to connect through connect_scheduler)."""
+    pytest.importorskip("distributed")
+    path = tmp_path / "c.toml"
+    path.write_text(LONG.replace("runs = 400", "runs = 2"))
+    with _silent_listener() as sock:
+        address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+        cmd = [sys.executable, "-m", "replay.cli", "campaign", "run", str(path), "-o", str(tmp_path / "out"),
+               "--scheduler", address, "-q"]
+        try:
+            res = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        except subprocess.TimeoutExpired:
+            pytest.fail("campaign run still waiting for the scheduler after 60 s")
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines() == [f"replay: error: Dask scheduler {address}: no answer within 5 s "
+                                               "(it accepted the connection but sent no handshake)"]

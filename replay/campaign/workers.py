@@ -20,6 +20,9 @@ and two workers on two cores then run four spinning threads.
 
 Workers only compute (the main process writes every result), so ending them
 abruptly loses nothing that a resumed campaign does not compute again.
+
+:func:`connect_scheduler` connects a Dask client to a remote scheduler within a
+bounded time (distributed leaves the comm handshake unbounded).
 """
 from __future__ import annotations
 
@@ -28,6 +31,8 @@ import signal
 import sys
 import threading
 import time
+
+from replay.util.errors import ReplayError
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
@@ -74,3 +79,45 @@ def init_worker(parent_pid: int, blas_threads: int | None = None, poll: float = 
         threading.Thread(target=_watch, args=(parent_pid, poll), daemon=True, name="parent-watch").start()
     if os.getppid() != parent_pid:  # the parent died before the watch was set
         os._exit(1)
+
+
+def connect_scheduler(address: str, timeout: float):
+    """A ``distributed.Client`` of the scheduler at ``address``, or a one-line ReplayError
+    naming the address and ``timeout`` (seconds) when it does not answer within it.
+
+    ``Client(address, timeout=...)`` bounds the TCP connect and the registration, but not
+    the comm handshake in between (``distributed.comm.core.connect`` awaits the peer's
+    handshake with no limit): anything that accepts the connection and never answers
+    would hold ``campaign run`` for ever. So the handshake is made first, on a private
+    event loop under ``asyncio.wait_for`` (1.25 ``timeout`` + 0.1 s at most); only a peer
+    that answered it as a Dask scheduler is then given to ``Client`` (``timeout`` again).
+    Not covered: a scheduler that answers this handshake and stalls on the next one.
+    """
+    import asyncio
+
+    from distributed import Client
+    from distributed.comm import connect
+
+    async def handshake():  # connect() gives up on the TCP connection itself after `timeout`
+        comm = await asyncio.wait_for(connect(address, timeout=timeout), 1.25 * timeout + 0.1)
+        await comm.close()
+
+    def refuse(why: str):
+        return ReplayError(f"Dask scheduler {address}: no answer within {timeout:g} s ({why})")
+
+    try:
+        asyncio.run(handshake())
+    except (asyncio.TimeoutError, TimeoutError):
+        raise refuse("it accepted the connection but sent no handshake") from None
+    except OSError as err:  # refused until the timeout, unknown host, ...
+        raise refuse(err.strerror or ("nothing accepted the connection" if "Timed out" in str(err)
+                                      else type(err).__name__)) from None
+    except ValueError as err:
+        raise ReplayError(f"Dask scheduler {address}: not a scheduler address ({err})") from None
+    except Exception as err:  # noqa: BLE001 — whatever answered is not a Dask scheduler
+        raise ReplayError(f"Dask scheduler {address}: the answer is not a Dask handshake "
+                          f"({type(err).__name__})") from None
+    try:
+        return Client(address, timeout=f"{timeout}s", set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        raise refuse(type(err).__name__) from None

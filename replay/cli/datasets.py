@@ -9,7 +9,7 @@ import click
 
 from replay import registry
 from replay.util.errors import ReplayError
-from replay.fetch import fetch as fetch_dataset
+from replay.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
 
 DATA_DIR = click.option("--data-dir", type=click.Path(file_okay=False), default=None,
                         help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).")
@@ -55,6 +55,8 @@ def info_cmd(dataset_id, data_dir):
             click.echo(f"{key + ':':15s} {value}")
     where = _where(ds, data_dir)
     click.echo(f"{'location:':15s} {where}")
+    if ds.kind == "file" and not ds.sha256:
+        click.echo(f"{'checksum:':15s} not registered upstream (a download is accepted only after a content check)")
     if where == "missing":
         roots = ", ".join(str(r) for r in registry.search_roots(data_dir))
         click.echo(f"{'searched:':15s} {roots}")
@@ -78,8 +80,15 @@ def info_cmd(dataset_id, data_dir):
 @click.option("--dest", type=click.Path(file_okay=False), default=None,
               help="Download into this directory (default: the user cache).")
 @click.option("--all", "fetch_all", is_flag=True, help="Fetch every downloadable dataset.")
-def fetch_cmd(dataset_ids, dest, fetch_all):
-    """Download datasets (checked against their sha256 when known)."""
+@click.option("--force", is_flag=True,
+              help="Download again even if present; the copy is replaced only once the new one passed every check.")
+@click.option("--deadline", type=float, default=DEFAULT_DEADLINE,
+              show_default=True, help="Seconds allowed for each whole download.")
+def fetch_cmd(dataset_ids, dest, fetch_all, force, deadline):
+    """Download datasets, checked by size and sha256 where registered upstream, else by content.
+
+    Nothing reaches its final name before it passed its checks; a failed download leaves
+    what was there before."""
     if fetch_all:
         chosen = [ds for ds in registry.all_datasets().values() if ds.kind == "file"]
     elif dataset_ids:
@@ -87,14 +96,14 @@ def fetch_cmd(dataset_ids, dest, fetch_all):
     else:
         raise ReplayError("give dataset ids to fetch, or --all")
     if len(chosen) == 1:
-        click.echo(fetch_dataset(chosen[0], dest).message)
+        click.echo(fetch_dataset(chosen[0], dest, deadline=deadline, force=force).message)
         return
     failed = []
     for ds in chosen:
         try:
-            click.echo(fetch_dataset(ds, dest).message)
+            click.echo(fetch_dataset(ds, dest, deadline=deadline, force=force).message)
         except ReplayError as e:
-            click.echo(f"error: {e}", err=True)
+            click.echo(f"failed: {e}")  # stdout: the one line on stderr is the summary below
             failed.append(ds.id)
     if failed:
         raise ReplayError(f"{len(failed)} of {len(chosen)} downloads failed: {', '.join(failed)}")
