@@ -3,10 +3,19 @@
 The leaderboard has the one schema of :mod:`replay.summary` (the campaign's):
 one row per dataset x task x filter, with the paired columns against the
 baseline filter (the first listed unless ``--baseline`` names one).
+
+The files are written as one set (:func:`write_all`): into a staging directory
+beside the output directory, then moved into place in one step
+(:func:`replay.util.files.staged_dir`), so that a full disk, a kill or an error
+leaves the previous set or the new one, never a mix. An existing output
+directory is replaced only when it is a whole ``replay eval`` output (its marker,
+or a replay manifest and nothing else); it must not be, hold or lie inside an
+input (:func:`check_output`).
 """
 from __future__ import annotations
 
 import gzip
+import io
 import json
 from pathlib import Path
 
@@ -14,7 +23,7 @@ import numpy as np
 
 from replay.evaluate import Evaluation, manifest
 from replay.summary import columns, consistency_cell, lost_cell
-from replay.util.files import write_atomic, write_csv
+from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
 from replay.score import rmse_over_time
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:
@@ -67,7 +76,9 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
         nx = r.estimates[0].x.shape[1]
         head = ["run", "k", "t"] + [f"x{i}" for i in range(nx)] + [f"P{i}{i}" for i in range(nx)]
         head += [f"err_{axis}" for axis in ev.axis_names]
-        with gzip.open(est_dir / f"{r.name}.csv.gz", "wt", newline="") as fh:
+        with open(est_dir / f"{r.name}.csv.gz", "wb") as raw, \
+                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz, \
+                io.TextIOWrapper(gz, newline="") as fh:  # mtime 0: the same run gives the same bytes
             fh.write(",".join(head) + "\n")
             for run, (est, err) in enumerate(zip(r.estimates, r.errors)):
                 n = len(est.x)
@@ -79,12 +90,61 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
                    delimiter=",", header="t,pos_rmse_across_runs", comments="", fmt="%.10g")
 
 
-def write_all(ev: Evaluation, out: Path) -> dict:
-    """Leaderboard, estimates and manifest into ``out``; returns the paths written."""
+KIND = "replay eval"  # the kind recorded in the output directory's ownership marker
+
+
+def legacy_output(path: Path) -> bool:
+    """Whether ``path`` is a ``replay eval`` output written before ownership markers: a replay
+    manifest, the leaderboard, estimates (and a ``replay report``) and nothing else."""
+    try:
+        man = json.loads((path / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return False
+    if not (isinstance(man, dict) and "config" in man and "results" in man):
+        return False
+    for e in path.iterdir():
+        if e.name in ("leaderboard.csv", "manifest.json") and e.is_file() or is_report_dir(e):
+            continue
+        if e.name == "estimates" and e.is_dir() and not e.is_symlink() and all(
+                f.is_file() and f.name.endswith((".csv.gz", "_rmse_over_time.csv")) for f in e.iterdir()):
+            continue
+        return False
+    return True
+
+
+def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
+    """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
+    a registered file dataset where it is found), and the topic mapping."""
+    from replay import registry
+
+    paths = [Path(mapping)] if mapping else []
+    if registry.is_path(dataset):
+        return [Path(dataset).expanduser(), *paths]
+    ds = registry.get(dataset)
+    found = registry.locate(ds, data_dir) if ds.kind == "file" else None
+    return [found, *paths] if found else paths
+
+
+def check_output(out, inputs=(), what: str = "--out") -> Path:
+    """Before computing: refuse (one line) an output directory that is, holds or lies inside an
+    input, is not writable, is on a read-only or full file system, or exists and is not a whole
+    ``replay eval`` output. Returns it resolved."""
+    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=legacy_output)
+
+
+def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
+    """Leaderboard, estimates and manifest into ``out``, as one set; returns the paths written.
+
+    The set is written into a staging directory and moved into place in one step; the previous
+    set (if ``out`` holds one) is replaced only as a whole. The dataset file and mapping of ``ev``
+    are inputs: ``out`` may not be, hold or lie inside them.
+    """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_leaderboard(leaderboard_rows(ev), out / "leaderboard.csv")
-    write_estimates(ev, out)
-    write_atomic(out / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
+    mapping = (ev.config.get("dataset_params") or {}).get("mapping")
+    check_output(out, [ev.frame_meta.get("path"), mapping], what)
+    with staged_dir(out, kind=KIND, what=what, legacy=legacy_output) as stage:
+        write_leaderboard(leaderboard_rows(ev), stage / "leaderboard.csv")
+        write_estimates(ev, stage)
+        write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
     return {"leaderboard": out / "leaderboard.csv", "manifest": out / "manifest.json",
             "estimates": out / "estimates"}
