@@ -263,3 +263,74 @@ def test_extended_campaign_computes_only_the_new_filters(serial, tmp_path):
     more = execute.run(spec.load(write(tmp_path, SMALL, "b.toml")), out, workers=1, quiet=True)
     assert more["units"] == 18 and more["stored_before"] == 6
     assert board_rows(out) == board_rows(serial[0])
+
+
+def _unit(run, n=4):
+    return {"run": run, "status": "done", "metrics": {"diverged": False},
+            "series": {"k": np.arange(n), "t": np.arange(n) * 0.5, "nees": np.ones(n), "nis": np.ones(n),
+                       "nis_dof": np.full(n, 2)}}
+
+
+def test_store_flushes_each_record_and_the_directory_once_per_job(tmp_path, monkeypatch):
+    """Durability: each record is fsynced before its rename, then the directory once per job
+    (tables are vouched for by the checksum in their record)."""
+    from replay.campaign import store as store_mod
+
+    synced = []
+    real = os.fsync
+    monkeypatch.setattr(store_mod.os, "fsync", lambda fd: (synced.append(os.readlink(f"/proc/self/fd/{fd}")),
+                                                           real(fd))[1])
+    s = store_mod.Store(tmp_path)
+    (s.units / "h").mkdir(parents=True)
+    s.write_job("h", [_unit(0), _unit(1), {"run": 2, "status": "failed", "error": "X: y"}])
+    names = [os.path.basename(p) for p in synced]
+    assert names[:3] == [f".{run}.json.{os.getpid()}.tmp" for run in (0, 1, 2)] and names[3:] == ["h"]
+    assert s.stored_runs("h") == {0, 1, 2}
+
+
+def test_records_without_a_table_description_are_checked_against_the_others(tmp_path):
+    """Units stored before records described their table: still read, and a table of another
+    row count than the configuration's other units is damaged."""
+    from replay.campaign.store import Store
+
+    s = Store(tmp_path)
+    (s.units / "h").mkdir(parents=True)
+    s.write_job("h", [_unit(0), _unit(1), _unit(2, n=3)])
+    for run in (0, 1, 2):  # as written before: no "table" in the record
+        p = s.units / "h" / f"{run}.json"
+        p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items() if k != "table"}))
+    good, bad = s.scan("h")
+    assert sorted(good) == [0, 1] and list(bad) == [2]
+    assert bad[2] == f"{s.units / 'h' / '2.parquet'}: 3 rows, the configuration's other units have 4"
+    with pytest.raises(ReplayError, match=r"2\.parquet: 3 rows.*run `replay campaign run`"):
+        s.records("h")
+
+
+def test_second_campaign_waits_for_the_lock_with_wait(tmp_path):
+    """--wait: the second process blocks until the first releases the directory's lock."""
+    import threading
+
+    from replay.campaign.lock import holder, locked
+
+    order = []
+    with locked(tmp_path) as path:
+        assert holder(path) == str(os.getpid())
+        with pytest.raises(ReplayError, match=rf"pid {os.getpid()}\) is writing to"):
+            with locked(tmp_path):
+                pass
+        def second():
+            with locked(tmp_path, wait=True):
+                order.append("second")
+
+        waiter = threading.Thread(target=second)
+        waiter.start()
+        waiter.join(0.3)
+        order.append("first released")
+    waiter.join(10)
+    assert order == ["first released", "second"]
+
+
+def test_plain_name_with_dots_and_dashes_is_accepted(tmp_path):
+    """Only names that would leave runs/ are refused (tests/test_hostile_campaign.py)."""
+    c = spec.load(write(tmp_path, SMALL.replace('name = "small"', 'name = "sweep.v2-a_b"')))
+    assert c.name == "sweep.v2-a_b"

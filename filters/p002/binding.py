@@ -12,20 +12,38 @@ to a model's kernels gives a new copy and a fresh compilation, never stale machi
 code. Copies live in ``$REPLAY_CACHE_DIR/kernels`` (default
 ``~/.cache/replay/kernels``). A model's kernels must be module-level
 functions of an importable module.
+
+The cache is checked before it is imported (:func:`_load`): a copy is named
+``replay_compiled_<model>_<digest>``, ``<model>`` a hash of where the model's
+kernels live and ``<digest>`` the SHA-256 of the copy's text; a copy whose
+content does not hash to its name (edited, truncated, another version's) is
+written again and its numba cache (``__pycache__/<name>.*``) removed, so it
+is compiled afresh — counted in :data:`CACHE_REPORT` and noted once on the
+``replay.kernels`` logger. Older copies of the same model (another digest, or
+the former ``replay_compiled_<digest>`` names) are removed with their numba
+cache files: the cache keeps one copy per model. Two checkouts of different
+versions sharing one cache directory therefore recompile each other's copies;
+give them separate ``REPLAY_CACHE_DIR``.
 """
 from __future__ import annotations
 
 import hashlib
 import importlib.util
 import inspect
+import logging
 import os
+import re
 import sys
 from pathlib import Path
 
 from replay.util.errors import ReplayError
 
 MARKER = "# MODEL KERNELS:"
+PREFIX = "replay_compiled_"
+LEGACY = re.compile(r"^replay_compiled_[0-9a-f]{20}$")  # names before the model key
 _bound: dict = {}
+CACHE_REPORT = {"rewritten": 0, "pruned": 0}  # copies of this process: rewritten (mismatch), removed (old)
+_log = logging.getLogger("replay.kernels")
 
 
 def cache_dir() -> Path:
@@ -64,21 +82,68 @@ def bind(kernels):
         at = text.index(MARKER)
         end = text.index("\n", at)
         text = text[:at] + "\n".join(lines) + text[end:]
-        name = "replay_compiled_" + hashlib.sha256(text.encode()).hexdigest()[:20]
-        _bound[key] = _load(name, text)
+        model = hashlib.sha256(repr(places).encode()).hexdigest()[:8]
+        _bound[key] = _load(f"{PREFIX}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text)
     return _bound[key]
 
 
 def _load(name: str, text: str):
+    """Import the copy ``name`` (``replay_compiled_<model>_<digest>``) holding ``text``: written
+    when absent, written again when its content does not hash to ``<digest>``; older copies of
+    the model pruned (module docstring)."""
     directory = cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.py"
+    digest = name.rsplit("_", 1)[1]
     if not path.exists():
-        tmp = directory / f".{name}.{os.getpid()}.tmp"
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)  # atomic: concurrent processes write the same text
+        _write(directory, name, text)
+    elif not _matches(path, digest):
+        _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
+        _write(directory, name, text)
+        CACHE_REPORT["rewritten"] += 1
+        _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
+    _prune(directory, name)
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def _matches(path: Path, digest: str) -> bool:
+    """Whether the file's content hashes to ``digest`` (the name's hash of the text)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return False
+    return hashlib.sha256(data).hexdigest()[:len(digest)] == digest
+
+
+def _write(directory: Path, name: str, text: str) -> None:
+    tmp = directory / f".{name}.{os.getpid()}.tmp"
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, directory / f"{name}.py")  # atomic: concurrent processes write the same text
+
+
+def _drop_numba_cache(directory: Path, name: str) -> int:
+    """Remove numba's cache (index, machine code) and the bytecode of copy ``name``."""
+    n = 0
+    cache = directory / "__pycache__"
+    if cache.is_dir():
+        for p in cache.iterdir():
+            if p.name.startswith(name + "."):
+                p.unlink(missing_ok=True)
+                n += 1
+    return n
+
+
+def _prune(directory: Path, current: str) -> None:
+    """Remove the other copies of ``current``'s model (another digest) and copies named
+    before the model key, with their numba caches."""
+    model = current[:current.rindex("_") + 1]
+    for p in directory.glob(f"{PREFIX}*.py"):
+        stem = p.stem
+        if stem != current and (stem.startswith(model) or LEGACY.match(stem)):
+            p.unlink(missing_ok=True)
+            _drop_numba_cache(directory, stem)
+            CACHE_REPORT["pruned"] += 1

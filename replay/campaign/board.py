@@ -39,8 +39,13 @@ def campaign_rows(out, order=None, baseline: str | None = None) -> list[dict]:
     rows = []
     for h, cfg in configs.items():
         recs = records[h]
-        rows.append(summary.config_row(cfg, h, recs, lambda run, cols, h=h: store.series(h, run, cols),
-                                       recs[0]["version"] if recs else ""))
+        try:
+            rows.append(summary.config_row(cfg, h, recs, lambda run, cols, h=h: store.series(h, run, cols),
+                                           recs[0].get("version", "") if recs else ""))
+        except (KeyError, TypeError, ValueError, IndexError) as err:  # records edited by hand
+            raise ReplayError(f"{store.units / h}: unit records lack what the leaderboard needs "
+                              f"({type(err).__name__}: {err}); remove the directory and run "
+                              "`replay campaign run` again") from None
     rows = [r for r in rows if r["runs"] or r["failed"]]
     if order is not None:
         rank = {h: i for i, h in enumerate(order)}

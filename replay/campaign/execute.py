@@ -25,7 +25,6 @@ fixed blocks of runs.
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -34,26 +33,39 @@ from replay.pipeline import config_hash
 from replay.util.errors import ReplayError
 
 from . import board
+from .lock import locked
 from .progress import Progress
 from .spec import Campaign
-from .store import Store, pack
+from .store import Store, pack, write_bytes
 from .units import Job, execute_job
-from .workers import init_worker
+from .workers import connect_scheduler, init_worker
 
 
 def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
-    """Jobs for every unit not yet stored, in blocks of ``campaign.batch`` runs."""
-    jobs = []
+    """Jobs for every unit not yet stored intact, in blocks of ``campaign.batch`` runs."""
+    return _plan(campaign, store, retry_failed, data_dir)[0]
+
+
+def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None):
+    """(jobs, damaged, stored): the jobs; ``(config_hash, run, problem)`` of each damaged unit
+    found (``problem`` one line naming the file), which the jobs compute again, and of a
+    damaged ``config.json`` (run None; rewritten here); the number of units stored intact."""
+    jobs, damaged, stored = [], [], 0
     for cfg in campaign.configs:
         c = cfg.as_dict()
         h = config_hash(c)
-        store.save_config(h, c)
-        have = store.stored_runs(h, include_failed=not retry_failed)
+        problem = store.save_config(h, c)
+        if problem is not None:
+            damaged.append((h, None, problem))
+        good, bad = store.scan(h)
+        stored += len(good)
+        have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
+        damaged.extend((h, r, bad[r]) for r in sorted(bad))
         for start in range(0, campaign.runs, campaign.batch):
             runs = [r for r in range(start, min(start + campaign.batch, campaign.runs)) if r not in have]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
-    return jobs
+    return jobs, damaged, stored
 
 
 def execute_packed(job: Job) -> list[dict]:
@@ -101,7 +113,7 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     cluster = None
     try:
         if scheduler:
-            client = Client(scheduler, timeout=f"{connect_timeout}s", set_as_default=False)
+            client = connect_scheduler(scheduler, connect_timeout)  # bounds the handshake too
         else:
             cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=None)
@@ -139,22 +151,45 @@ def _result(fut, job):
 def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str | None = None,
         dask_local: int | None = None, quiet: bool = False, retry_failed: bool = False,
         data_dir=None, limit: int | None = None, connect_timeout: float = 5.0,
-        progress_stream=None) -> dict:
-    """Compute every unit of ``campaign`` not yet stored in ``out``; write the leaderboard.
+        progress_stream=None, wait: bool = False) -> dict:
+    """Compute every unit of ``campaign`` not yet stored intact in ``out``; write the leaderboard.
 
-    ``limit`` stops after that many jobs (for tests of resuming). Returns counts.
+    Holds the directory's campaign lock throughout (:mod:`.lock`; ``wait``: block until a
+    running campaign on ``out`` has finished instead of refusing). ``limit`` stops after that
+    many jobs (for tests of resuming). Returns counts; ``damaged`` lists the damaged units
+    found and computed again, ``rewritten`` the damaged ``config.json`` files replaced (one
+    line each, naming the file).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    with locked(out, wait=wait):
+        return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
+                           limit, connect_timeout, progress_stream)
+
+
+def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir, limit,
+                connect_timeout, progress_stream) -> dict:
     store = Store(out)
+    hashes = [config_hash(c.as_dict()) for c in campaign.configs]
+    stored_before = 0
+    for h, _ in store.configs(skip=hashes):  # other campaign files' configurations: not recomputed here
+        good, bad = store.scan(h)
+        if bad:
+            raise ReplayError(f"{bad[min(bad)]}; this configuration is not in {campaign.path}: run the "
+                              f"campaign file that made it on {out} to recompute it")
+        stored_before += len(good)
     if campaign.path.resolve() != (out / "campaign.toml").resolve():
-        shutil.copyfile(campaign.path, out / "campaign.toml")
-    jobs = plan(campaign, store, retry_failed, data_dir)
+        write_bytes(out / "campaign.toml", campaign.path.read_bytes())
+    jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir)
+    stored_before += stored
     if limit is not None:
         jobs = jobs[:limit]
+    scheduled = {(j.config_hash, r) for j in jobs for r in j.runs}
     total = sum(len(j.runs) for j in jobs)
     counts = {"jobs": len(jobs), "units": total, "done": 0, "failed": 0,
-              "stored_before": sum(len(store.stored_runs(h)) for h, _ in store.configs()), "backend": "none"}
+              "damaged": [what for h, r, what in damaged if r is not None and (h, r) in scheduled],
+              "rewritten": [what for h, r, what in damaged if r is None],
+              "stored_before": stored_before, "backend": "none"}
     if jobs:
         workers = workers or os.cpu_count() or 1
         if scheduler or dask_local:
@@ -167,15 +202,14 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
         try:
             with backend as mapper:
                 for job, results in mapper(jobs):
-                    for res in results:
-                        store.write(job.config_hash, res)
+                    store.write_job(job.config_hash, results)
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
                     progress.update(len(results), bad)
         finally:
             progress.close()
-    counts["rows"] = board.summarise(out, [config_hash(c.as_dict()) for c in campaign.configs])
+    counts["rows"] = board.summarise(out, hashes)
     return counts
 
 

@@ -3,7 +3,7 @@
 A campaign is a TOML file::
 
     [campaign]
-    name = "example"
+    name = "example"          # names the default result directory runs/campaign-<name>
     runs = 50                 # Monte Carlo runs per configuration
     seed = 0                  # master seed (streams as in replay.evaluate)
     batch = 25                # runs per job (one batched filter call); optional
@@ -28,14 +28,16 @@ A campaign is a TOML file::
 Everything is checked before any work starts (:func:`load`): an unknown
 section, key, dataset, task, filter or parameter, a parameter of the wrong type
 or out of the bounds its declaration states (:mod:`replay.util.params`), or an
-empty grid raises :class:`~replay.util.errors.ReplayError` with one line naming
-the file, the line and the key. Each configuration stores its parameters with
+empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
+an absolute path: it would place the output outside the output root) raises
+:class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key. Each configuration stores its parameters with
 every default filled in (canonical), so ``{}`` and the defaults are the same
 configuration, with the same hash.
 """
 from __future__ import annotations
 
 import itertools
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -82,6 +84,20 @@ class _Where:
 
     def error(self, key: str, what: str, value=None) -> ReplayError:
         return ReplayError(f"{self.path}:{self.line(key, value)}: {key}: {what}")
+
+
+def check_name(where, name: str) -> None:
+    """A campaign name must be a plain name: it becomes the directory ``runs/campaign-<name>``,
+    and a separator, ``..`` or an absolute path would place the output elsewhere."""
+    seps = {"/", "\\", os.sep} | ({os.altsep} if os.altsep else set())
+    bad = ("it is empty" if not name.strip() else
+           "it is an absolute path" if os.path.isabs(name) else
+           "it contains a path separator" if any(c in name for c in seps) else
+           "it is . or .." if name in (".", "..") else
+           "it contains a control character" if any(ord(c) < 32 or ord(c) == 127 for c in name) else None)
+    if bad:
+        raise where.error("name", f"{name!r} is not a plain name ({bad}; the output would not be "
+                                  f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'", name)
 
 
 def _check_type(where, key, value, typ):
@@ -140,6 +156,7 @@ def load(path) -> Campaign:
             raise where.error(key, "unknown section (known: campaign, dataset, task, filter)")
     head = doc.get("campaign", {})
     _check_keys(where, head, CAMPAIGN_KEYS, "[campaign]")
+    check_name(where, head.get("name", path.stem))
     runs, seed, batch = head.get("runs", 1), head.get("seed", 0), head.get("batch", 25)
     if runs < 1:
         raise where.error("runs", f"must be at least 1 (got {runs})")

@@ -6,6 +6,7 @@ from pathlib import Path
 import click
 
 from replay.util.errors import ReplayError
+from replay.util.files import check_writable, refuse_overlap
 
 
 @click.group("campaign")
@@ -24,7 +25,10 @@ def campaign():
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--retry-failed", is_flag=True, help="Compute failed units again.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress output.")
-def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet):
+@click.option("--wait", is_flag=True,
+              help="If another campaign process is writing to the result directory, wait for it "
+                   "instead of refusing.")
+def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet, wait):
     """Run the units of campaign FILE not yet stored in the result directory."""
     from replay.campaign import board, execute, spec
 
@@ -32,8 +36,16 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
     c = spec.load(file)
     out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
+    refuse_overlap(out, [c.data_dir, data_dir], "--out")  # never onto or inside the data
+    check_writable(out, "--out")
     counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
-                         retry_failed=retry_failed, data_dir=data_dir)
+                         retry_failed=retry_failed, data_dir=data_dir, wait=wait)
+    for key, what in (("rewritten", "rewrote {n} damaged configuration file{s}"),
+                      ("damaged", "recomputed {n} damaged unit{s}")):
+        found = counts[key]
+        if found:
+            more = f"; and {len(found) - 5} more" if len(found) > 5 else ""
+            click.echo(what.format(n=len(found), s="s" * (len(found) != 1)) + ": " + "; ".join(found[:5]) + more)
     if not quiet:
         click.echo(board.format_rows(counts["rows"]))
     if counts["units"] == 0:
@@ -51,6 +63,9 @@ def leaderboard(dirs, sort, out):
     """Merge the leaderboards of result directories (campaigns or `replay eval` outputs)."""
     from replay.campaign import board
 
+    if out:
+        refuse_overlap(out, dirs, "--out")
+        check_writable(out, "--out")
     rows = board.merge(dirs, sort)
     click.echo(board.format_rows(rows))
     if out:

@@ -5,7 +5,6 @@ one line on stderr and exit status 2 (no traceback).
 """
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -38,8 +37,8 @@ def main():
 @click.option("--runs", "-n", default=1, show_default=True, type=click.IntRange(1), help="Monte Carlo runs.")
 @click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
 @click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
-@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
-              help="Output directory (default: runs/<dataset>/<task>).")
+@click.option("--out", "-o", default=None, type=click.Path(),
+              help="Output directory (default: runs/<dataset>/<task>), replaced as a whole.")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option("--param", "-p", "params", multiple=True,
@@ -67,7 +66,8 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
-    from replay.outputs.files import format_table, write_all
+    from replay.outputs.files import check_output, eval_inputs, format_table, write_all
+    from replay.pipeline import default_task
 
     names = [f.strip() for f in filters.split(",") if f.strip()]
     if not names:
@@ -80,14 +80,24 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     if mapping:
         dparams["mapping"] = str(Path(mapping).resolve())
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
+    # the output set is checked before the computation (inputs, writable, space, ownership)
+    task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
+                                dataset_params=dparams, seed=seed)
+    out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / task
+    check_output(out, eval_inputs(dataset, data_dir, mapping), "--out")
+    for opt, path in (("--mcap", mcap_out), ("--ros2-bag", ros2_out)):
+        if path and (Path(path).resolve().is_relative_to(out.resolve())
+                     or out.resolve().is_relative_to(Path(path).resolve())):
+            raise ReplayError(f"{opt} {path}: overlaps the output directory {out}, which is replaced as a whole")
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
                   data_dir=data_dir, filter_params=fparams,
                   task_params=tparams, adapter=adapter,
                   dataset_params=dparams or None, alignment=alignment,
                   divergence_threshold=divergence_threshold, baseline=baseline)
+    for note in ev.frame_meta.get("task_notes", []):
+        click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
-    out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / ev.config["task"]
-    paths = write_all(ev, out)
+    paths = write_all(ev, out, what="--out")
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:
         from replay.cli.bags import export_outputs
@@ -98,36 +108,20 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
 @main.command("rerun")
 @click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--data-dir", default=None, type=click.Path())
-@click.option("--out", "-o", default=None, type=click.Path(file_okay=False))
+@click.option("--out", "-o", default=None, type=click.Path())
 def rerun_cmd(manifest_file, data_dir, out):
     """Repeat the run recorded in a manifest.json and check that every RMSE is reproduced exactly."""
-    from replay.evaluate import evaluate
-    from replay.outputs.files import format_table, write_all
+    from replay import rerun
+    from replay.outputs.files import check_output, format_table, write_all
 
-    try:
-        old = json.loads(Path(manifest_file).read_text())
-        cfg = old["config"]
-    except (json.JSONDecodeError, KeyError) as err:
-        raise ReplayError(f"{manifest_file}: not a replay manifest ({err})") from None
-    ev = evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
-                  seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
-                  task_params=cfg["task_params"], filter_params=cfg["filter_params"],
-                  dataset_params=cfg.get("dataset_params"), adapter=cfg.get("adapter"),
-                  alignment=cfg.get("alignment", "se3"), divergence_threshold=cfg.get("divergence_threshold"))
+    man = rerun.load(manifest_file)  # checked before any computation
+    if out:
+        check_output(Path(out), [manifest_file], "--out")
+    ev = rerun.repeat(man, data_dir)
     click.echo(format_table(ev))
     if out:
         write_all(ev, Path(out))
-    if cfg.get("dataset_sha256") and ev.config["dataset_sha256"] != cfg["dataset_sha256"]:
-        raise ReplayError(f"{manifest_file}: dataset checksum differs from the recorded one")
-    bad = []
-    for r in ev.results:
-        for k, v in r.summary.items():
-            if k.endswith("_rmse"):
-                was = old["results"][r.name].get(k)
-                if was is not None and not (v == was or (v != v and was != was)):
-                    bad.append(f"{r.name}.{k}: {was} -> {v}")
-    if bad:
-        raise ReplayError(f"{manifest_file}: results differ: " + "; ".join(bad[:5]))
+    rerun.verify(man, ev, manifest_file)
     click.echo("reproduced: every RMSE equals the recorded value")
 
 

@@ -1,0 +1,59 @@
+"""One campaign process per result directory: an exclusive ``flock`` on ``OUT/campaign.lock``.
+
+Two ``replay campaign run`` processes on one output would compute the same
+units twice and interleave their leaderboards. The process that runs takes the
+lock for its whole run and writes its pid into the lock file; a second one
+refuses in one line naming the lock file and the holder's pid, or, with
+``wait=True`` (``--wait``), blocks until the first has finished. The kernel
+releases the lock when its holder exits, even on SIGKILL, so a crashed run
+never leaves a stale lock; the file itself stays (removing it would race with a
+process about to lock it).
+"""
+from __future__ import annotations
+
+import errno
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+from replay.util.errors import ReplayError
+
+LOCK_NAME = "campaign.lock"
+
+
+def holder(path: Path) -> str:
+    """The pid recorded in a lock file, or ``unknown``."""
+    try:
+        text = Path(path).read_text().strip()
+    except OSError:
+        return "unknown"
+    return text if text.isdigit() else "unknown"
+
+
+@contextmanager
+def locked(out, wait: bool = False):
+    """Hold the campaign lock of result directory ``out`` (which must exist) for the block."""
+    import fcntl
+
+    path = Path(out) / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as err:
+        raise ReplayError(f"{path}: cannot open the campaign lock ({err.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except OSError as err:
+            if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise ReplayError(f"{path}: cannot lock ({err.strerror})") from None
+            raise ReplayError(f"{path}: another campaign process (pid {holder(path)}) is writing to "
+                              f"{out}; wait for it to finish or pass --wait") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        try:
+            yield path
+        finally:
+            os.ftruncate(fd, 0)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)

@@ -1,0 +1,214 @@
+"""``replay rerun MANIFEST``: repeat a recorded ``replay eval`` and check every RMSE.
+
+A manifest is accepted only when it can be trusted to describe a run
+(:func:`load`), checked before any computation, each problem one line naming
+the manifest and the key:
+
+* its schema: ``config`` and ``results`` objects with every key the rerun needs,
+  each of its type (``runs`` an integer >= 1, ``filters`` a non-empty list of
+  distinct names, ``filter_params`` an object per filter, ...);
+* each filter's configuration hash, recomputed from the recorded configuration
+  (:func:`replay.pipeline.config_hash`), equals the recorded one
+  (``config.config_hashes`` and the result's ``config_hash``): an edited
+  configuration is not the one whose numbers are recorded;
+* every filter has its recorded result, with its RMSE values (numbers);
+* the dataset's checksum is recorded (``dataset_sha256``, 64 hex digits); it may
+  be null only for a simulated dataset, which the simulator and its recorded
+  parameters identify.
+
+:func:`repeat` runs the configuration again (:func:`replay.evaluate.evaluate`),
+and :func:`verify` compares: the same dataset checksum, the same configuration
+hashes, the same set of RMSE keys, and every RMSE equal to the recorded value
+(exactly; NaN equals NaN).
+"""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from replay.align import ALIGNMENTS
+from replay.pipeline import Config, config_hash, is_sim
+from replay.util.errors import ReplayError
+
+SHA256 = re.compile(r"^[0-9a-f]{64}$")
+HASH = re.compile(r"^[0-9a-f]{16}$")
+_NUM = (int, float)
+
+
+def _is(value, kinds) -> bool:
+    """``isinstance`` that keeps bools out of the numbers."""
+    if isinstance(value, bool) and bool not in kinds:
+        return False
+    return isinstance(value, kinds)
+
+
+# key: (accepted types, may be null, description for the message)
+CONFIG = {
+    "dataset": ((str,), False, "a dataset id or path"),
+    "task": ((str,), False, "a task name"),
+    "task_params": ((dict,), False, "an object of task parameters"),
+    "filters": ((list,), False, "a list of filter names"),
+    "filter_params": ((dict,), False, "an object of parameters per filter"),
+    "runs": ((int,), False, "an integer >= 1"),
+    "seed": ((int,), False, "an integer"),
+    "first": ((int,), True, "an integer >= 1 or null"),
+    "dataset_params": ((dict,), False, "an object of dataset parameters"),
+    "adapter": ((str,), True, "an adapter name or null"),
+    "alignment": ((str,), False, "an alignment name"),
+    "divergence_threshold": (_NUM, True, "a number > 0 or null"),
+    "dataset_sha256": ((str,), True, "64 hex digits (null only for a simulated dataset)"),
+    "config_hashes": ((dict,), False, "an object of configuration hashes per filter"),
+}
+
+
+def load(path) -> dict:
+    """The manifest at ``path``, checked (module docstring); raises a one-line :class:`ReplayError`."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise ReplayError(f"{path}: cannot read the manifest ({err.strerror})") from None
+    if not raw.strip():
+        raise ReplayError(f"{path}: empty file, not a replay manifest")
+    try:
+        man = json.loads(raw)
+    except UnicodeDecodeError:
+        raise ReplayError(f"{path}: not a replay manifest (not UTF-8 text)") from None
+    except ValueError as err:
+        raise ReplayError(f"{path}: not a replay manifest (not valid JSON: {str(err).splitlines()[0]})") from None
+    check(man, path)
+    return man
+
+
+def check(man, path) -> None:
+    """Refuse, in one line, a manifest that cannot be trusted (module docstring)."""
+    def bad(key, what):
+        return ReplayError(f"{path}: {key}: {what}")
+
+    if not isinstance(man, dict):
+        raise ReplayError(f"{path}: not a replay manifest (a JSON {type(man).__name__}, not an object)")
+    for key in ("config", "results"):
+        if key not in man:
+            raise bad(key, "missing: not a replay manifest")
+        if not isinstance(man[key], dict):
+            raise bad(key, f"expected an object, got {type(man[key]).__name__}")
+    cfg, results = man["config"], man["results"]
+    for key, (kinds, nullable, what) in CONFIG.items():
+        if key not in cfg:
+            raise bad(f"config.{key}", f"missing (expected {what})")
+        value = cfg[key]
+        if not (value is None and nullable) and not _is(value, kinds):
+            raise bad(f"config.{key}", f"expected {what}, got {type(value).__name__} {value!r:.60}")
+    if cfg["runs"] < 1:
+        raise bad("config.runs", f"expected an integer >= 1, got {cfg['runs']}")
+    if cfg["first"] is not None and cfg["first"] < 1:
+        raise bad("config.first", f"expected an integer >= 1 or null, got {cfg['first']}")
+    if cfg["divergence_threshold"] is not None and not cfg["divergence_threshold"] > 0:
+        raise bad("config.divergence_threshold", f"expected a number > 0 or null, got {cfg['divergence_threshold']}")
+    if cfg["alignment"] not in ALIGNMENTS:
+        raise bad("config.alignment", f"{cfg['alignment']!r:.40} is not one of {', '.join(ALIGNMENTS)}")
+    filters = cfg["filters"]
+    if not filters:
+        raise bad("config.filters", "empty: no filter to repeat")
+    for name in filters:
+        if not isinstance(name, str) or not name:
+            raise bad("config.filters", f"expected filter names, got {name!r}")
+    if len(set(filters)) != len(filters):
+        raise bad("config.filters", f"a filter is listed twice ({', '.join(filters)})")
+    for key in ("filter_params", "config_hashes"):
+        extra = sorted(set(cfg[key]) - set(filters))
+        if extra:
+            raise bad(f"config.{key}", f"{', '.join(extra)} not among config.filters ({', '.join(filters)})")
+    for name in filters:
+        _check_filter(cfg, results, name, bad)
+    _check_dataset(cfg, bad)
+
+
+def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
+    if name not in cfg["filter_params"]:
+        raise bad(f"config.filter_params.{name}", "missing: the filter's parameters are not recorded")
+    if not isinstance(cfg["filter_params"][name], dict):
+        raise bad(f"config.filter_params.{name}", f"expected an object, got {type(cfg['filter_params'][name]).__name__}")
+    recorded = cfg["config_hashes"].get(name)
+    if not isinstance(recorded, str) or not HASH.match(recorded):
+        raise bad(f"config.config_hashes.{name}", f"expected 16 hex digits, got {recorded!r}")
+    config = Config(cfg["dataset"], cfg["dataset_params"], cfg["first"], cfg["task"], cfg["task_params"], name,
+                    cfg["filter_params"][name], cfg["seed"], cfg["alignment"], cfg["divergence_threshold"],
+                    cfg["adapter"])
+    actual = config_hash(config.as_dict())
+    if actual != recorded:
+        raise bad(f"config.config_hashes.{name}", f"{recorded} does not match the recorded configuration "
+                                                  f"(which hashes to {actual}): the manifest was edited or damaged")
+    res = results.get(name)
+    if res is None:
+        raise bad(f"results.{name}", "missing: the filter's recorded results are not in the manifest")
+    if not isinstance(res, dict):
+        raise bad(f"results.{name}", f"expected an object, got {type(res).__name__}")
+    if res.get("config_hash") != recorded:
+        raise bad(f"results.{name}.config_hash", f"{res.get('config_hash')!r} is not the configuration's "
+                                                 f"hash {recorded}")
+    expected = ["pos_rmse"] + [k[:-5] for k in res if k.endswith("_rmse_ci95")]  # each mean beside its interval
+    for key in expected:
+        if key not in res:
+            raise bad(f"results.{name}.{key}", "missing: the recorded RMSE values are incomplete")
+    for key, value in res.items():
+        if key.endswith("_rmse") and not _is(value, _NUM):
+            raise bad(f"results.{name}.{key}", f"expected a number, got {type(value).__name__} {value!r:.40}")
+
+
+def _check_dataset(cfg: dict, bad) -> None:
+    sha = cfg["dataset_sha256"]
+    try:
+        simulated = is_sim(cfg["dataset"])
+    except ReplayError as err:
+        raise bad("config.dataset", str(err)) from None
+    if sha is None:
+        if not simulated:
+            raise bad("config.dataset_sha256", f"null, but {cfg['dataset']} is not a simulated dataset: without "
+                                               "its checksum the rerun cannot tell whether the data changed")
+    elif not SHA256.match(sha):
+        raise bad("config.dataset_sha256", f"expected 64 lowercase hex digits, got {sha!r:.80}")
+
+
+def repeat(man: dict, data_dir=None):
+    """Run the manifest's configuration again: the :class:`replay.evaluate.Evaluation`."""
+    from replay.evaluate import evaluate
+
+    cfg = man["config"]
+    return evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
+                    seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
+                    task_params=cfg["task_params"], filter_params=cfg["filter_params"],
+                    dataset_params=cfg["dataset_params"], adapter=cfg["adapter"],
+                    alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"])
+
+
+def differences(man: dict, ev) -> list[str]:
+    """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything)."""
+    cfg, out = man["config"], []
+    if cfg["dataset_sha256"] != ev.config.get("dataset_sha256"):
+        out.append(f"dataset checksum {cfg['dataset_sha256']} -> {ev.config.get('dataset_sha256')}")
+    for r in ev.results:
+        was = man["results"][r.name]
+        if r.config_hash != cfg["config_hashes"][r.name]:
+            out.append(f"{r.name}: configuration {cfg['config_hashes'][r.name]} -> {r.config_hash} "
+                       f"(this version fills in other parameters)")
+        new = {k: v for k, v in r.summary.items() if k.endswith("_rmse")}
+        old = {k: v for k, v in was.items() if k.endswith("_rmse")}
+        for k in sorted(set(new) - set(old)):
+            out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {new[k]}")
+        for k in sorted(set(old) - set(new)):
+            out.append(f"{r.name}.{k}: {old[k]} -> not computed")
+        for k in sorted(set(old) & set(new)):
+            v, w = new[k], old[k]
+            if not (v == w or (v != v and w != w)):
+                out.append(f"{r.name}.{k}: {w} -> {v}")
+    return out
+
+
+def verify(man: dict, ev, path) -> None:
+    """Raise a one-line :class:`ReplayError` unless ``ev`` reproduces the manifest exactly."""
+    diff = differences(man, ev)
+    if diff:
+        more = f" (and {len(diff) - 5} more)" if len(diff) > 5 else ""
+        raise ReplayError(f"{path}: not reproduced: " + "; ".join(diff[:5]) + more)
