@@ -19,7 +19,12 @@ the manifest and the key:
 :func:`repeat` runs the configuration again (:func:`replay.evaluate.evaluate`),
 and :func:`verify` compares: the same dataset checksum, the same configuration
 hashes, the same set of RMSE keys, and every RMSE equal to the recorded value
-(exactly; NaN equals NaN).
+(exactly; NaN equals NaN) — except for a filter whose class declares
+``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's swarm
+filters: another CPU's floating-point reductions give another trajectory of the
+swarm), whose values must agree to that relative tolerance. The tolerance comes
+from the code, not from the manifest (which records it for the reader, under
+``results.<filter>.rerun_rtol``), so an edited manifest cannot loosen it.
 """
 from __future__ import annotations
 
@@ -183,6 +188,17 @@ def repeat(man: dict, data_dir=None):
                     alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"])
 
 
+def rerun_rtol(name: str) -> float:
+    """The relative tolerance ``replay rerun`` allows the filter ``name`` (0: exact)."""
+    from replay.filters import FILTERS
+    from replay.util.lookup import resolve
+
+    try:
+        return float(getattr(resolve(FILTERS, name, "filter"), "RERUN_RTOL", 0.0))
+    except ReplayError:
+        return 0.0
+
+
 def differences(man: dict, ev) -> list[str]:
     """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything)."""
     cfg, out = man["config"], []
@@ -199,10 +215,11 @@ def differences(man: dict, ev) -> list[str]:
             out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {new[k]}")
         for k in sorted(set(old) - set(new)):
             out.append(f"{r.name}.{k}: {old[k]} -> not computed")
+        rtol = rerun_rtol(r.name)
         for k in sorted(set(old) & set(new)):
             v, w = new[k], old[k]
-            if not (v == w or (v != v and w != w)):
-                out.append(f"{r.name}.{k}: {w} -> {v}")
+            if not (v == w or (v != v and w != w) or (rtol > 0 and abs(v - w) <= rtol * abs(w))):
+                out.append(f"{r.name}.{k}: {w} -> {v}" + (f" (beyond its rerun tolerance {rtol:g})" if rtol else ""))
     return out
 
 

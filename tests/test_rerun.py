@@ -101,3 +101,21 @@ def test_changed_data_file_is_not_reproduced(tmp_path):
     log.write_text("".join(lines[:-1]) + ",".join(last))
     pipeline._file_frame.cache_clear()  # a new process would read the file again
     assert_refused(["rerun", path], rf"not reproduced: dataset checksum {sha} -> [0-9a-f]{{64}}$")
+
+
+def test_rerun_tolerance_comes_from_the_filter_class(monkeypatch):
+    """A filter declaring RERUN_RTOL is compared to that relative tolerance, others exactly."""
+    from types import SimpleNamespace
+
+    from replay import rerun
+    from replay.filters.kalman import EKF
+
+    man = {"config": {"dataset_sha256": None, "config_hashes": {"ekf": "h"}},
+           "results": {"ekf": {"pos_rmse": 2.0}}}
+    ev = SimpleNamespace(config={"dataset_sha256": None},
+                         results=[SimpleNamespace(name="ekf", config_hash="h", summary={"pos_rmse": 2.001})])
+    assert rerun.differences(man, ev) == ["ekf.pos_rmse: 2.0 -> 2.001"]
+    monkeypatch.setattr(EKF, "RERUN_RTOL", 1e-3, raising=False)
+    assert rerun.rerun_rtol("ekf") == 1e-3 and rerun.differences(man, ev) == []
+    ev.results[0].summary["pos_rmse"] = 2.003
+    assert rerun.differences(man, ev) == ["ekf.pos_rmse: 2.0 -> 2.003 (beyond its rerun tolerance 0.001)"]

@@ -122,7 +122,10 @@ def rerun_cmd(manifest_file, data_dir, out):
     if out:
         write_all(ev, Path(out))
     rerun.verify(man, ev, manifest_file)
-    click.echo("reproduced: every RMSE equals the recorded value")
+    loose = [f"{n} to {rerun.rerun_rtol(n):g}" for n in man["config"]["filters"] if rerun.rerun_rtol(n) > 0]
+    click.echo("reproduced: every RMSE equals the recorded value"
+               + (f" (relative tolerance of the filters chaotic at rounding level: {', '.join(loose)})"
+                  if loose else ""))
 
 
 @main.command("reproduce")
