@@ -1,5 +1,8 @@
 """Export of a run: Foxglove MCAP (read back, validated by ../shared/tools/mcap-validate
-when node and its node_modules are present) and ROS 2 bag (read back)."""
+when node and its node_modules are present) and ROS 2 bag (read back); the streamed
+MCAP writer gives the same messages and chunk layout as the whole-file writer it
+replaced (a digest recorded from that writer); positions of north-east-down tasks
+are exported in east-north-up."""
 import os
 import shutil
 import subprocess
@@ -96,3 +99,105 @@ def test_geodetic_export_location_fix(shared_dir, tmp_path):
 def test_export_bad_run_dir(tmp_path):
     res = CliRunner().invoke(main, ["export", str(tmp_path), "--mcap", str(tmp_path / "x.mcap")])
     assert res.exit_code == 2 and "manifest.json" in res.output and "Traceback" not in res.output
+
+
+# ---------------------------------------------------------------- the streamed writer: same file as before
+
+def synthetic_run(n=3000, seed=5):
+    """A frame, a problem and three filters' estimates with gaps, NaN cells and ties in time."""
+    from types import SimpleNamespace
+
+    from replay.frame import Channel, Frame
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.1
+    truth = np.cumsum(rng.standard_normal((n, 3)), axis=0)
+    dvl = rng.standard_normal((n, 3))
+    dvl[rng.random(n) < 0.05, 1] = np.nan  # a NaN component in a valid row: JSON null
+    frame = Frame(t, {"dvl": Channel(dvl, "m/s", components=("x", "y", "z"), valid=rng.random(n) < 0.9),
+                      "depth": Channel(rng.standard_normal(n) + 10, "m", valid=np.arange(n) % 4 == 0)},
+                  {"position": Channel(truth, "m")}, epoch=1.7e9)
+    problem = SimpleNamespace(truth_position=truth, truth_valid=rng.random(n) < 0.8, position_index=(0, 1, 2),
+                              axis_names=("x", "y", "z"), angle_index={}, model=SimpleNamespace(x_angles=(3,)))
+    est = {}
+    for i, m in enumerate((n, n, n - 700)):
+        x = np.column_stack([truth[:m] + rng.standard_normal((m, 3)), np.zeros(m)])
+        x[rng.random(m) < 0.02, 0] = np.nan  # a lost estimate: no pose at that step
+        err = rng.standard_normal((m, 3))
+        err[rng.random(m) < 0.1] = np.nan  # unscored steps
+        est[f"f{i}"] = {"t": t[:m], "x": x, "P": np.full((m, 4), 0.5), "err": err}
+    return frame, problem, est
+
+
+def record_digest(path) -> str:
+    """sha256 of every record after the magic, chunks opened: messages (channel, times, bytes),
+    message indexes, chunk layout (times, sizes; no file offsets, which move with the schema
+    bytes of the installed foxglove-schemas-protobuf), channels, statistics and header."""
+    import hashlib
+
+    from mcap.stream_reader import StreamReader
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for r in StreamReader(fh, validate_crcs=True).records:
+            kind = type(r).__name__
+            if kind == "Message":
+                h.update(b"M%d,%d,%d,%d," % (r.channel_id, r.sequence, r.log_time, r.publish_time) + r.data)
+            elif kind == "MessageIndex":
+                h.update(b"I%d," % r.channel_id + repr(r.records).encode())
+            elif kind == "ChunkIndex":
+                h.update(b"C%d,%d,%d,%d" % (r.message_start_time, r.message_end_time, r.uncompressed_size,
+                                            r.message_index_length))
+            elif kind in ("Channel", "Statistics", "Header"):
+                h.update(kind.encode() + repr(sorted(vars(r).items())).encode())
+    return h.hexdigest()
+
+
+# recorded from the whole-file writer (commit 58d5cb4, before the export was streamed):
+# write_mcap(synthetic_run()) with 64 KiB zstd chunks, 21,530 messages in 44 chunks
+REFERENCE_DIGEST = "d837e632b5254277d97a36d4b7d835ff99657914150a6fd41704d53213fbac9b"
+
+
+@pytest.mark.parametrize("window", [1 << 16, 500])
+def test_streamed_export_matches_the_whole_file_writer(tmp_path, window):
+    from replay.outputs.export_mcap import write_mcap
+
+    frame, problem, est = synthetic_run()
+    path = tmp_path / "s.mcap"
+    assert write_mcap(path, frame, problem, est, chunk_size=1 << 16, window=window) == 21530
+    assert record_digest(path) == REFERENCE_DIGEST
+    assert [p.name for p in tmp_path.iterdir()] == ["s.mcap"]  # no temporary left
+
+
+def test_window_does_not_change_the_file_and_bounds_what_is_held(tmp_path, monkeypatch):
+    from replay.outputs import mcap_bulk
+    from replay.outputs.export_mcap import write_mcap
+
+    frame, problem, est = synthetic_run()
+    write_mcap(tmp_path / "whole.mcap", frame, problem, est, window=10**9)
+    held, flush = [], mcap_bulk.BulkWriter.flush
+
+    def spy(self):
+        held.append(sum(len(p[1]) for p in self.parts))
+        return flush(self)
+
+    monkeypatch.setattr(mcap_bulk.BulkWriter, "flush", spy)
+    write_mcap(tmp_path / "win.mcap", frame, problem, est, window=2000)
+    assert (tmp_path / "win.mcap").read_bytes() == (tmp_path / "whole.mcap").read_bytes()
+    assert sum(held) == 21530 and len(held) > 10
+    assert max(held) <= 2000 + 9 * 26  # a window, plus at most 9 messages per channel (window cut times)
+
+
+def test_ned_task_exported_in_enu():
+    from types import SimpleNamespace
+
+    from replay.outputs.run_data import enu_axes, enu_yaw, ned, to_enu
+
+    dr = SimpleNamespace(axis_names=("north", "east", "depth"), position_index=(0, 1, 2))
+    p = np.array([[10.0, 2.0, 5.0]])
+    assert to_enu(p, enu_axes(dr)).tolist() == [[2.0, 10.0, -5.0]]  # east, north, up
+    assert ned(dr) and enu_yaw(np.array([0.0]), True)[0] == pytest.approx(np.pi / 2)  # heading north
+    xy = SimpleNamespace(axis_names=("x", "y"), position_index=(0, 1))
+    assert to_enu(p[:, :2], enu_axes(xy)).tolist() == [[10.0, 2.0, 0.0]] and not ned(xy)
+    depth = SimpleNamespace(axis_names=("depth",), position_index=(0,))
+    assert to_enu(p[:, :1], enu_axes(depth)).tolist() == [[0.0, 0.0, -10.0]]

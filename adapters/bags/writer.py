@@ -5,7 +5,6 @@ bag dataset; no Foxglove JSON/protobuf channel ever goes into these bags.
 """
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -20,20 +19,30 @@ def _typestore():
 
 
 class BagOut:
-    """rosbags' ROS 2 writer with MCAP storage; messages built from the humble typestore."""
+    """rosbags' ROS 2 writer with MCAP storage; messages built from the humble typestore.
 
-    def __init__(self, path, overwrite: bool = True):
+    ``path`` must not exist: nothing is ever replaced here (an export writes into a
+    hidden temporary directory and swaps it in, ``replay.outputs.export_safety``).
+    ``custom_data`` (str -> str) goes into ``metadata.yaml`` (rosbag2 ``custom_data``).
+    """
+
+    def __init__(self, path, custom_data: dict | None = None):
         from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2.errors import WriterError
 
         path = Path(path)
-        if path.exists():
-            if not overwrite or not (path / "metadata.yaml").is_file():
-                raise ReplayError(f"{path}: exists and is not a ROS 2 bag to replace")
-            shutil.rmtree(path)
+        if path.exists() or path.is_symlink():
+            raise ReplayError(f"{path}: exists; a ROS 2 bag is written to a new directory only")
+        self.path = path
         self.ts = _typestore()
         self.T = self.ts.types
-        self.w = Writer(path, version=8, storage_plugin=StoragePlugin.MCAP)
-        self.w.open()
+        try:
+            self.w = Writer(path, version=8, storage_plugin=StoragePlugin.MCAP)
+            for key, value in (custom_data or {}).items():
+                self.w.set_custom_data(key, value)
+            self.w.open()
+        except (WriterError, OSError) as e:
+            raise ReplayError(f"{path}: cannot write a ROS 2 bag: {e}") from None
         self.count = 0
 
     def connection(self, topic, msgtype):
@@ -44,7 +53,9 @@ class BagOut:
         self.count += 1
 
     def close(self):
-        self.w.close()
+        """Write the summary and metadata.yaml (the bag is complete only then)."""
+        if self.w.storage is not None:
+            self.w.close()
 
     # message pieces
     def header(self, ns: int, frame_id: str):

@@ -49,26 +49,57 @@ def inspect_cmd(path, write_mapping):
         click.echo(f"wrote {write_mapping}")
 
 
-def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None) -> None:
-    """Export an evaluation directory as a Foxglove MCAP and/or a ROS 2 bag."""
-    if mcap_out:
-        from replay.outputs.export_mcap import export_run
+def check_export_targets(mcap_out, ros2_out, inputs) -> None:
+    """Refuse export targets before any work: onto or inside an input, onto each other,
+    unwritable, or replacing something this tool did not write (one line each)."""
+    from replay.outputs.export_safety import check_target
 
-        n = export_run(run_dir, mcap_out, data_dir=data_dir)
+    if mcap_out:
+        check_target(mcap_out, inputs, "mcap", others=[ros2_out])
+    if ros2_out:
+        check_target(ros2_out, inputs, "ros2", others=[mcap_out])
+
+
+def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_dir=None) -> None:
+    """For `replay eval --mcap/--ros2-bag`: the same refusals, before the evaluation runs
+    (the inputs: the dataset's files, the mapping and the output directory ``out_dir``)."""
+    from replay.outputs.export_safety import dataset_inputs
+
+    if mcap_out or ros2_out:
+        check_export_targets(mcap_out, ros2_out, [out_dir] + dataset_inputs(dataset, mapping, data_dir))
+
+
+def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None) -> None:
+    """Export an evaluation directory as a Foxglove MCAP and/or a ROS 2 bag.
+
+    Both targets are checked before the run is loaded (once, for both exports), and
+    again against the dataset file the load resolved; each is written to a hidden
+    temporary beside it and moved into place when complete.
+    """
+    from replay.outputs.export_mcap import write_mcap
+    from replay.outputs.export_ros2 import write_run_ros2
+    from replay.outputs.export_safety import run_inputs
+    from replay.outputs.run_data import load_run
+
+    inputs = run_inputs(run_dir, data_dir)
+    check_export_targets(mcap_out, ros2_out, inputs)
+    run = load_run(run_dir, data_dir)
+    check_export_targets(mcap_out, ros2_out, inputs + [run["frame"].meta.get("path")])
+    if mcap_out:
+        n = write_mcap(mcap_out, run["frame"], run["problem"], run["estimates"])
         click.echo(f"wrote {mcap_out} ({n} messages)")
     if ros2_out:
-        from replay.outputs.export_ros2 import export_run_ros2
-
-        n = export_run_ros2(run_dir, ros2_out, data_dir=data_dir)
+        n = write_run_ros2(run, ros2_out)
         click.echo(f"wrote {ros2_out}/ ({n} messages)")
 
 
 @click.command("export")
-@click.argument("run_dir", type=click.Path(exists=True, file_okay=False))
-@click.option("--mcap", "mcap_out", default=None, type=click.Path(dir_okay=False),
-              help="Foxglove MCAP to write (poses, paths, errors, sensor data).")
-@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(file_okay=False),
-              help="ROS 2 bag directory (MCAP storage) with nav_msgs/Odometry per filter and the reference.")
+@click.argument("run_dir", type=click.Path())
+@click.option("--mcap", "mcap_out", default=None, type=click.Path(),
+              help="Foxglove MCAP to write (poses, paths, errors, sensor data); replaces only an MCAP replay wrote.")
+@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
+              help="ROS 2 bag directory (MCAP storage) with nav_msgs/Odometry per filter and the reference; "
+                   "replaces only a bag replay wrote.")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 def export_cmd(run_dir, mcap_out, ros2_out, data_dir):
     """Export a `replay eval` output directory for Foxglove (MCAP) or `ros2 bag play`."""

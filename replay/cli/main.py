@@ -33,7 +33,9 @@ def main():
 @click.argument("dataset")
 @click.option("--task", "-t", default=None, help="Task (default: the dataset's default task).")
 @click.option("--filters", "-f", default="ekf,ukf,ckf,pf", show_default=True,
-              help="Comma-separated filter names.")
+              help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
+                   "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
+                   "as recorded:<name>, or recorded:none for none).")
 @click.option("--runs", "-n", default=1, show_default=True, type=click.IntRange(1), help="Monte Carlo runs.")
 @click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
 @click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
@@ -52,9 +54,9 @@ def main():
               help="Filter the leaderboard's paired columns compare with (default: the first listed).")
 @click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
               help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
-@click.option("--mcap", "mcap_out", default=None, type=click.Path(dir_okay=False),
+@click.option("--mcap", "mcap_out", default=None, type=click.Path(),
               help="Also export the run as a Foxglove MCAP file.")
-@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(file_okay=False),
+@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
 @click.option("--alignment", default="se3", show_default=True, type=click.Choice(["none", "yaw", "se3", "sim3"]),
               help="Alignment of the estimate onto the reference for the ATE column.")
@@ -69,12 +71,11 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     from replay.outputs.files import check_output, eval_inputs, format_table, write_all
     from replay.pipeline import default_task
 
-    names = [f.strip() for f in filters.split(",") if f.strip()]
-    if not names:
-        raise ReplayError("--filters: no filter named")
-    if baseline is not None and baseline not in names:
-        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names)})")
-    fparams = cli_params.filter_params(params, names)
+    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
+    if baseline is not None and baseline not in names + (recorded or []) and not (
+            recorded is None and baseline.startswith("recorded:")):
+        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
+    fparams = cli_params.filter_params(params, names + (recorded or []))
     tparams = cli_params.task_params(task_params, task)
     dparams = cli_params.dataset_params(dataset_params)
     if mapping:
@@ -89,14 +90,20 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         if path and (Path(path).resolve().is_relative_to(out.resolve())
                      or out.resolve().is_relative_to(Path(path).resolve())):
             raise ReplayError(f"{opt} {path}: overlaps the output directory {out}, which is replaced as a whole")
+    if mcap_out or ros2_out:
+        from replay.cli.bags import check_eval_exports
+
+        check_eval_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
     ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
                   data_dir=data_dir, filter_params=fparams,
                   task_params=tparams, adapter=adapter,
                   dataset_params=dparams or None, alignment=alignment,
-                  divergence_threshold=divergence_threshold, baseline=baseline)
+                  divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded)
     for note in ev.frame_meta.get("task_notes", []):
         click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
+    for note in ev.notes:
+        click.echo(note)
     paths = write_all(ev, out, what="--out")
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:

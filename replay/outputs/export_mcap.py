@@ -1,9 +1,8 @@
 """Export an evaluation (``replay eval`` output directory) as one Foxglove MCAP.
 
-Reads ``manifest.json`` and ``estimates/<filter>.csv.gz`` (run 0: the first
-Monte Carlo run), reloads the dataset named in the manifest (same adapter,
-mapping, ``first`` and, for a simulator, the run-0 seed) and rebuilds the task
-problem for the reference. No filter is run again.
+Reads the run with ``replay.outputs.run_data.load_run`` (manifest, run 0 of the
+estimates, the dataset reloaded and the task problem rebuilt for the reference; no
+filter is run again).
 
 Channels (schemas from the ``foxglove-schemas-protobuf`` package; log time =
 publish time = the sample's time, ``meta["t0_ns"]`` or ``epoch`` + ``t``):
@@ -17,70 +16,29 @@ publish time = the sample's time, ``meta["t0_ns"]`` or ``epoch`` + ``t``):
 | ``/replay/reference/pose``, ``/path``, ``/fix`` | as above | the reference where valid |
 | ``/sensors/<channel>`` | JSON ``{<component>: value}`` | every sensor channel of the frame at its valid samples |
 
-Frame id of poses and paths: ``"enu"`` (the local east-north-up frame).
+Frame id of poses and paths: ``"enu"`` (the local east-north-up frame; a
+north-east-down task's positions and heading are converted, ``run_data.enu_axes``).
 
-Each channel is encoded at once (``replay.outputs.pb_columns`` for protobuf, ``json_rows``
-for JSON) and written by ``replay.outputs.mcap_bulk.BulkWriter`` (time-ordered zstd chunks).
+Messages are encoded many at a time (``replay.outputs.pb_columns`` for protobuf,
+``json_rows`` for JSON) and written by ``replay.outputs.mcap_bulk.BulkWriter``
+(time-ordered zstd chunks) in time windows of about 65,536 messages: the memory
+holds one window, not the file (``McapOut``). The file goes to a hidden temporary
+name beside the target and is renamed over it when complete
+(``replay.outputs.export_safety``).
 """
 from __future__ import annotations
 
-import gzip
 import json
-from pathlib import Path
 
 import numpy as np
 
-from replay.util.errors import DataError, ReplayError
+from replay.outputs.run_data import (enu_axes, enu_yaw, heading_index, load_run, ned, read_estimates, time_ns,
+                                     to_enu)
+from replay.util.errors import ReplayError
+
+__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap"]
 
 FRAME_ID = "enu"
-
-
-# ---------------------------------------------------------------- reading a run
-
-def load_run(run_dir, data_dir=None) -> dict:
-    """The manifest, run-0 estimates per filter, the frame and the rebuilt problem."""
-    from replay import registry
-    from replay.pipeline import resolve
-    from replay.util.seeds import rng_for
-    from replay.tasks import make_task
-
-    run_dir = Path(run_dir)
-    try:
-        man = json.loads((run_dir / "manifest.json").read_text())
-        cfg = man["config"]
-    except FileNotFoundError:
-        raise DataError(run_dir / "manifest.json", "no such file: not a `replay eval` output directory") from None
-    except (ValueError, KeyError) as e:
-        raise DataError(run_dir / "manifest.json", f"not a replay manifest ({e})") from None
-    ds = resolve(cfg["dataset"])
-    frame = registry.load_frame(cfg["dataset"], data_dir=data_dir, rng=rng_for(cfg["seed"], 0, 0),
-                                first=cfg.get("first"), adapter=cfg.get("adapter"),
-                                **(cfg.get("dataset_params") or {}))
-    task = make_task(cfg["task"], **(cfg.get("task_params") or {}))
-    if ds is not None and ds.kind == "sim":
-        pass  # the generator was seeded as in run 0 above
-    problem = task.build(frame, rng_for(cfg["seed"], 0, 1))
-    estimates = {}
-    for name in cfg["filters"]:
-        estimates[name] = read_estimates(run_dir / "estimates" / f"{name}.csv.gz")
-    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates}
-
-
-def read_estimates(path, run: int = 0) -> dict:
-    """``{t, x, err}`` of one run from an ``estimates/<filter>.csv.gz`` file."""
-    try:
-        with gzip.open(path, "rt") as fh:
-            head = fh.readline().strip().split(",")
-            data = np.loadtxt(fh, delimiter=",", ndmin=2)
-    except FileNotFoundError:
-        raise DataError(path, "no such estimates file") from None
-    except (OSError, ValueError, EOFError) as e:
-        raise DataError(path, f"cannot read estimates ({e})") from None
-    nx = sum(1 for h in head if h.startswith("x") and h[1:].isdigit())
-    data = data[data[:, 0] == run]
-    n_err = data.shape[1] - 3 - 2 * nx
-    return {"t": data[:, 2], "x": data[:, 3:3 + nx], "P": data[:, 3 + nx:3 + 2 * nx],
-            "err": data[:, 3 + 2 * nx:3 + 2 * nx + n_err]}
 
 
 # ---------------------------------------------------------------- schemas
@@ -103,13 +61,23 @@ def file_descriptor_set(message_class) -> bytes:
 
 
 class McapOut:
-    """Protobuf and JSON channels by topic over ``replay.outputs.mcap_bulk.BulkWriter`` (whole channels at once)."""
+    """Protobuf and JSON channels by topic, written in time windows by ``mcap_bulk.BulkWriter``.
 
-    def __init__(self, path, compression: str = "zstd"):
+    Each channel is declared with the log times of all its messages and a function
+    ``encode(sel)`` giving the payloads of the messages ``sel`` (an index array); the
+    file is then written window by window (:meth:`close`), each window about
+    ``window`` messages of all channels between two times, so that only one window's
+    payloads exist at a time. The order (time, then channel declaration, then message)
+    and so the file are the same as if every channel were encoded at once.
+    """
+
+    def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, window: int = 1 << 16,
+                 name=None):
         from replay.outputs.mcap_bulk import BulkWriter
 
-        self.w = BulkWriter(path, compression=compression)
-        self.schemas, self.channels, self.count = {}, {}, 0
+        self.w = BulkWriter(path, compression=compression, chunk_size=chunk_size, name=name)
+        self.schemas, self.channels, self.count, self.window = {}, {}, 0, window
+        self.plans: list[tuple] = []  # (channel id, sorted times, message order, encode)
 
     def proto_channel(self, topic, message_class) -> int:
         name = message_class.DESCRIPTOR.full_name
@@ -130,23 +98,53 @@ class McapOut:
         self.channels[topic] = self.w.register_channel(topic, encoding, schema_id)
         return self.channels[topic]
 
-    def add_many(self, channel_id, t_ns, data) -> None:
-        """Messages of one channel: times (ns) and payloads (list of bytes or ``Rows.flat()``)."""
-        self.count += self.w.add_messages(channel_id, t_ns, data)
+    def plan(self, channel_id, t_ns, encode, big: bool = False) -> None:
+        """Messages of one channel: their times (ns) and ``encode(sel) -> payloads`` of messages ``sel``.
 
-    def close(self):
-        self.w.finish()
+        ``big``: a few large messages (a whole path); each is written alone, so that
+        only one of them is in memory at a time.
+        """
+        t = np.asarray(t_ns, np.int64)
+        order = np.argsort(t, kind="stable") if np.any(t[1:] < t[:-1]) else None  # None: in order
+        self.plans.append((channel_id, t if order is None else t[order], order, encode, big))
+
+    def _bounds(self) -> np.ndarray:
+        """Times that cut the messages into windows of about ``self.window`` messages."""
+        times = [p[1] for p in self.plans if len(p[1])]
+        total = sum(map(len, times))
+        # the instant of each big message is a window of its own: [t, t + 1)
+        cuts = [np.r_[t, t + 1] for _, t, _, _, big in self.plans if big]
+        if total > self.window:
+            step = max(1, self.window // (8 * len(times)))
+            cand = np.unique(np.concatenate([t[::step] for t in times]))
+            before = sum(np.searchsorted(t, cand, "left") for t in times)  # messages earlier than each
+            j = np.searchsorted(before, np.arange(self.window, total, self.window), "left")
+            cuts.append(cand[j[j < len(cand)]])
+        return np.unique(np.concatenate(cuts)) if cuts else np.zeros(0, np.int64)
+
+    def close(self) -> int:
+        """Write every planned message, window by window, and finish the file; returns the count."""
+        bounds = self._bounds()
+        edges = [np.r_[0, np.searchsorted(p[1], bounds, "left"), len(p[1])] for p in self.plans]
+        try:
+            for k in range(len(bounds) + 1):
+                # one instant: its messages keep the channel order when flushed channel by channel
+                instant = 0 < k < len(bounds) and bounds[k] == bounds[k - 1] + 1
+                for (cid, t, order, encode, _), e in zip(self.plans, edges):
+                    a, b = e[k], e[k + 1]
+                    if b > a:
+                        sel = np.arange(a, b) if order is None else order[a:b]
+                        self.count += self.w.add_messages(cid, t[a:b], encode(sel))
+                        if instant:
+                            self.w.flush()
+                self.w.flush()
+            self.w.finish()
+        finally:
+            self.w.close()
+        return self.count
 
 
 # ---------------------------------------------------------------- writing
-
-def time_ns(frame, t) -> np.ndarray:
-    """Absolute nanoseconds of frame times ``t``: meta t0_ns, else epoch, else 0, plus t."""
-    t0 = frame.meta.get("t0_ns")
-    if t0 is None:
-        t0 = int(round(frame.epoch * 1e9)) if frame.epoch is not None else 0
-    return int(t0) + np.round(np.asarray(t, float) * 1e9).astype(np.int64)
-
 
 def _quat_yaw(yaw):
     return np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)])
@@ -163,37 +161,58 @@ def _pose_fields(pos3, quat, prefix="") -> dict:
     return f
 
 
-def _write_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
+PATH_BLOCK = 1 << 14  # poses encoded at a time into a path message
+
+
+def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
+    """Pose, path and (geodetic data) fix channels of one track at rows ``ok``.
+
+    ``pos(rows)``, ``yaw(rows)``: ENU positions (n, 3) and yaws (NaN: none) of those
+    rows, taken when a window is written (no copy of the whole track is kept).
+    """
     from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
     from foxglove_schemas_protobuf.Pose_pb2 import Pose
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
     from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 
-    from replay.outputs.pb_columns import embed, encode
+    from replay.outputs.pb_columns import Rows, embed, encode
 
     idx = np.flatnonzero(ok)
     if not len(idx):
         return
-    n, t = len(idx), ns[idx]
-    pos3 = pos if pos.shape[1] == 3 else np.column_stack([pos, np.zeros(len(pos))])
-    pos3 = pos3[idx]
-    quat = _quat_yaw(np.where(np.isfinite(yaw), yaw, 0.0))[idx]
-    poses = encode(PoseInFrame, {**_stamp(t), "frame_id": FRAME_ID, **_pose_fields(pos3, quat, "pose.")}, n)
-    out.add_many(out.proto_channel(f"{prefix}/pose", PoseInFrame), t, poses.flat())
-    # the whole path: one PosesInFrame whose repeated `poses` field is every pose in turn
-    head = encode(PosesInFrame, {**_stamp(t[:1]), "frame_id": FRAME_ID}, 1).flat()[0]
-    items = encode(Pose, _pose_fields(pos3, quat), n)
-    number = PosesInFrame.DESCRIPTOR.fields_by_name["poses"].number
-    body = type(items)(n, embed(number, items)).flat()[0]
-    path = np.concatenate([head, body])
-    out.add_many(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], (path, [len(path)]))
-    if geo_meta:
+    t = ns[idx]
+
+    def rows(sel):  # ENU positions and yaw quaternions of messages sel
+        p = pos(idx[sel])
+        y = np.asarray(yaw(idx[sel]), float)
+        return p, _quat_yaw(np.where(np.isfinite(y), y, 0.0))
+
+    def poses(sel):
+        p, q = rows(sel)
+        return encode(PoseInFrame, {**_stamp(t[sel]), "frame_id": FRAME_ID, **_pose_fields(p, q, "pose.")},
+                      len(sel)).flat()
+
+    def path(_):  # one PosesInFrame whose repeated `poses` field is every pose in turn
+        number = PosesInFrame.DESCRIPTOR.fields_by_name["poses"].number
+        pieces = [encode(PosesInFrame, {**_stamp(t[:1]), "frame_id": FRAME_ID}, 1).flat()[0]]
+        for lo in range(0, len(idx), PATH_BLOCK):
+            sel = np.arange(lo, min(lo + PATH_BLOCK, len(idx)))
+            items = encode(Pose, _pose_fields(*rows(sel)), len(sel))
+            pieces.append(Rows(len(sel), embed(number, items)).flat()[0])
+        body = np.concatenate(pieces)
+        return body, np.array([len(body)])
+
+    def fixes(sel):
         from replay.adapters.geodesy import enu_to_geodetic
 
-        lat, lon, alt = enu_to_geodetic(pos3, geo_meta)
-        fixes = encode(LocationFix, {**_stamp(t), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon,
-                                     "altitude": alt}, n)
-        out.add_many(out.proto_channel(f"{prefix}/fix", LocationFix), t, fixes.flat())
+        lat, lon, alt = enu_to_geodetic(rows(sel)[0], geo_meta)
+        return encode(LocationFix, {**_stamp(t[sel]), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon,
+                                    "altitude": alt}, len(sel)).flat()
+
+    out.plan(out.proto_channel(f"{prefix}/pose", PoseInFrame), t, poses)
+    out.plan(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], path, big=True)
+    if geo_meta:
+        out.plan(out.proto_channel(f"{prefix}/fix", LocationFix), t, fixes)
 
 
 def json_rows(values, names) -> list[bytes]:
@@ -213,52 +232,68 @@ def json_rows(values, names) -> list[bytes]:
     return rows
 
 
-def _write_values(out: McapOut, topic, ns, values, ok, names) -> None:
+def _plan_values(out: McapOut, topic, ns, values, ok, names) -> None:
+    """A JSON channel: rows ``ok`` of ``values`` (a function of row indices, or an array)."""
     idx = np.flatnonzero(ok)
     if not len(idx):
         return
-    cid = out.json_channel(topic, names)
-    out.add_many(cid, ns[idx], json_rows(values.reshape(len(values), -1)[idx], names))
+    get = values if callable(values) else (lambda rows: values.reshape(len(values), -1)[rows])
+    out.plan(out.json_channel(topic, names), ns[idx], lambda sel: json_rows(get(idx[sel]), names))
 
 
-def _heading_index(problem):
-    for name in ("heading", "yaw", "psi"):
-        if name in problem.angle_index:
-            return problem.angle_index[name]
-    model = problem.model
-    angles = getattr(model, "x_angles", ())
-    return angles[0] if len(angles) == 1 else None
+def _error_rows(err):
+    """Position error components and their norm, for rows of ``err`` that are all finite."""
+    def get(rows):
+        e = err[rows]
+        return np.column_stack([e, np.sqrt(np.sum(e ** 2, axis=1))])
+    return get
 
 
 def export_run(run_dir, mcap_path, data_dir=None) -> int:
-    """Write the run in ``run_dir`` as a Foxglove MCAP; returns the number of messages."""
+    """Write the run in ``run_dir`` as a Foxglove MCAP; returns the number of messages.
+
+    Refused before anything is read or written: a target that is an input of the run
+    (or inside one), or an existing file not written by replay (``export_safety``).
+    """
+    from replay.outputs.export_safety import check_target, run_inputs
+
+    inputs = run_inputs(run_dir, data_dir)
+    check_target(mcap_path, inputs, "mcap")
     run = load_run(run_dir, data_dir)
+    check_target(mcap_path, inputs + [run["frame"].meta.get("path")], "mcap")
     return write_mcap(mcap_path, run["frame"], run["problem"], run["estimates"])
 
 
-def write_mcap(mcap_path, frame, problem, estimates: dict) -> int:
-    """Estimates ``{filter: {t, x, err}}`` of one run, the reference and the sensors -> MCAP."""
+def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str = "zstd",
+               chunk_size: int = 4 << 20, window: int = 1 << 16) -> int:
+    """Estimates ``{filter: {t, x, err}}`` of one run, the reference and the sensors -> MCAP.
+
+    Written to a hidden temporary file beside ``mcap_path`` and renamed over it when
+    complete; an existing ``mcap_path`` is replaced only if replay wrote it.
+    """
+    from replay.outputs.export_safety import staged_file
+
     geo = frame.meta if frame.meta.get("crs") and frame.meta.get("origin") else None
     ns_frame = time_ns(frame, frame.t)
     pidx = list(problem.position_index)
-    hidx = _heading_index(problem)
-    out = McapOut(mcap_path)  # nothing is written before close(): a failure leaves no partial file
-    ref = np.asarray(problem.truth_position, float)
-    ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
-    _write_track(out, "/replay/reference", ns_frame, ref, np.full(len(ref), np.nan), ok, geo)
-    axes = [f"e{a}" for a in problem.axis_names]
-    for name, est in estimates.items():
-        ns = time_ns(frame, est["t"])
-        x = est["x"]
-        pos = x[:, pidx]
-        yaw = x[:, hidx] if hidx is not None else np.full(len(x), np.nan)
-        _write_track(out, f"/replay/{name}", ns, pos, yaw, np.isfinite(pos).all(axis=1), geo)
-        err = est["err"][:, :len(pidx)]
-        ok_e = np.isfinite(err).all(axis=1)
-        vals = np.column_stack([err, np.sqrt(np.sum(np.where(ok_e[:, None], err, 0.0) ** 2, axis=1))])
-        _write_values(out, f"/replay/{name}/error", ns, vals, ok_e, axes + ["norm"])
-    for cname, ch in frame.channels.items():
-        comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
-        _write_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)
-    out.close()
-    return out.count
+    hidx, axes_enu, is_ned = heading_index(problem), enu_axes(problem), ned(problem)
+    with staged_file(mcap_path, "--mcap") as tmp:
+        out = McapOut(tmp, compression=compression, chunk_size=chunk_size, window=window, name=mcap_path)
+        ref = np.asarray(problem.truth_position, float)
+        ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
+        no_yaw = lambda rows: np.full(len(rows), np.nan)  # noqa: E731
+        _plan_track(out, "/replay/reference", ns_frame, lambda rows: to_enu(ref[rows], axes_enu), no_yaw, ok, geo)
+        axes = [f"e{a}" for a in problem.axis_names]
+        for name, est in estimates.items():
+            ns = time_ns(frame, est["t"])
+            x = est["x"]
+            yaw = (lambda rows, x=x: enu_yaw(x[rows, hidx], is_ned)) if hidx is not None else no_yaw
+            _plan_track(out, f"/replay/{name}", ns, lambda rows, x=x: to_enu(x[rows][:, pidx], axes_enu), yaw,
+                        np.isfinite(x[:, pidx]).all(axis=1), geo)
+            err = est["err"][:, :len(pidx)]
+            _plan_values(out, f"/replay/{name}/error", ns, _error_rows(err), np.isfinite(err).all(axis=1),
+                         axes + ["norm"])
+        for cname, ch in frame.channels.items():
+            comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
+            _plan_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)
+        return out.close()

@@ -10,10 +10,16 @@
 * :func:`export_run_ros2` writes a ``replay eval`` run for ``ros2 bag play``:
   ``/replay/<filter>/odom`` and ``/replay/reference/odom`` (nav_msgs/Odometry,
   frame ``enu``, child ``base_link``; position, heading as a yaw quaternion when
-  the task estimates one; pose covariance from the estimate's variances).
+  the task estimates one; pose covariance from the estimate's variances; a
+  north-east-down task converted to east-north-up, ``run_data.enu_axes``).
 
 No Foxglove JSON/protobuf channel ever goes into these bags. The writer,
 :class:`~replay.adapters.bags.writer.BagOut`, is the ``bags`` adapter's inverse.
+
+Both write the bag inside a hidden temporary directory beside the target and swap it
+in when complete (``replay.outputs.export_safety.staged_dir``); the bag's
+``metadata.yaml`` carries ``custom_data: {replay.output: ...}``, the mark that lets a
+later export replace it. An existing directory without that mark is never replaced.
 """
 from __future__ import annotations
 
@@ -21,6 +27,7 @@ import numpy as np
 
 from replay.adapters import rosmsg
 from replay.adapters.bags.writer import BagOut
+from replay.outputs.export_safety import MARK_KEY, staged_dir
 from replay.util.errors import ReplayError
 
 
@@ -93,7 +100,11 @@ def write_frame_bag(frame, path) -> int:
     params = mapping.get("params") or {}
     geo = (lambda enu: enu_to_geodetic(enu, frame.meta)) if frame.meta.get("crs") else None
     other = "header_time" if mapping.get("time") == "log" else "log_time"
-    out = BagOut(path)
+    with staged_dir(path, "bag") as tmp:
+        return _write_frame(BagOut(tmp, {MARK_KEY: "frame bag"}), frame, mapping, n, ns, t0, params, geo, other)
+
+
+def _write_frame(out, frame, mapping, n, ns, t0, params, geo, other) -> int:
     try:
         done = set()
         for e in mapping["entries"]:
@@ -132,29 +143,49 @@ def write_frame_bag(frame, path) -> int:
 
 
 def export_run_ros2(run_dir, path, data_dir=None) -> int:
-    """nav_msgs/Odometry per filter and for the reference (run 0) -> ROS 2 bag (MCAP storage)."""
-    from replay.outputs.export_mcap import _heading_index, load_run, time_ns
+    """nav_msgs/Odometry per filter and for the reference (run 0) -> ROS 2 bag (MCAP storage).
 
+    Refused before anything is read or written: a target that is an input of the run
+    (or inside one), or an existing directory that is not a bag this tool wrote.
+    """
+    from replay.outputs.export_safety import check_target, run_inputs
+    from replay.outputs.run_data import load_run
+
+    inputs = run_inputs(run_dir, data_dir)
+    check_target(path, inputs, "ros2")
     run = load_run(run_dir, data_dir)
+    check_target(path, inputs + [run["frame"].meta.get("path")], "ros2")
+    return write_run_ros2(run, path)
+
+
+def write_run_ros2(run: dict, path) -> int:
+    """The odometry bag of a loaded run (``run_data.load_run``), staged and swapped in at ``path``."""
+    with staged_dir(path, "--ros2-bag") as tmp:
+        return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}), run)
+
+
+def _write_run(out, run) -> int:
+    from replay.outputs.run_data import enu_axes, enu_yaw, heading_index, ned, time_ns, to_enu
+
     frame, problem = run["frame"], run["problem"]
     pidx = list(problem.position_index)
-    hidx = _heading_index(problem)
-    out = BagOut(path)
+    hidx, axes, is_ned = heading_index(problem), enu_axes(problem), ned(problem)
+    diag = [7 * slot for slot, _ in axes]  # the ENU variances in the 6 x 6 pose covariance
     try:
         tracks = [("reference", time_ns(frame, frame.t), problem.truth_position, None, None,
                    problem.truth_valid)]
         for name, est in run["estimates"].items():
             tracks.append((name, time_ns(frame, est["t"]), est["x"][:, pidx],
-                           est["x"][:, hidx] if hidx is not None else None, est["P"][:, pidx], None))
+                           enu_yaw(est["x"][:, hidx], is_ned) if hidx is not None else None, est["P"][:, pidx], None))
         for name, ns, pos, yaw, var, ok in tracks:
-            pos = np.column_stack([pos, np.zeros(len(pos))]) if pos.shape[1] == 2 else pos
+            pos = to_enu(pos, axes)
             ok = np.isfinite(pos).all(axis=1) if ok is None else ok & np.isfinite(pos).all(axis=1)
             conn = out.connection(f"/replay/{name}/odom", "nav_msgs/msg/Odometry")
             for i in np.flatnonzero(ok):
                 y = float(yaw[i]) if yaw is not None and np.isfinite(yaw[i]) else 0.0
                 cov = np.zeros(36)
                 if var is not None:
-                    cov[[0, 7, 14][:var.shape[1]]] = var[i]
+                    cov[diag] = var[i]
                 out.write(conn, int(ns[i]), out.odometry(int(ns[i]), "enu", "base_link", pos[i],
                                                           (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
                                                           (0, 0, 0), (0, 0, 0), cov))

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.util.errors import ReplayError
 from replay.util.params import Param, validate
 
 from . import generator
@@ -135,8 +136,12 @@ def make_frame(rng: np.random.Generator, **params):
     """Generate the bag in a temporary directory and read it with the ``bags`` adapter."""
     from replay.adapters.bags import load
 
-    with tempfile.TemporaryDirectory() as tmp:
-        make_bag(Path(tmp) / "auv", rng, **params)
-        frame = load(Path(tmp) / "auv", mapping=AUV_MAPPING)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            make_bag(Path(tmp) / "auv", rng, **params)
+            frame = load(Path(tmp) / "auv", mapping=AUV_MAPPING)
+    except OSError as err:  # a full disk or a file-size limit while writing the temporary bag
+        raise ReplayError(f"sim/auv-bag: cannot write its temporary bag in {tempfile.gettempdir()} "
+                          f"({err.strerror or err})") from None
     frame.meta["generator"] = "replay.sim.auv_bag:make_frame"
     return frame
