@@ -29,9 +29,21 @@ whatever its name. By default the role follows the message type
 (:data:`ROLE_KINDS`, e.g. a DVL twist as ``odometry``, a pose as ``gps``), and
 ``role = "none"`` keeps a channel out of every task's inputs. Tasks find their
 inputs by role (:func:`replay.tasks.role_input`), never by channel name.
+
+**Recorded estimates.** ``[estimates]`` names what an estimator already
+recorded (``name = "/topic"`` or ``name = {topic, type, frame, child,
+t_max_diff, t_offset, align}``): Odometry, PoseStamped, PoseWithCovarianceStamped,
+a TF pair (TFMessage / TransformStamped with ``frame`` = parent and ``child``),
+nav_msgs/Path (its last message) or NavSatFix. They become
+``Frame.estimates`` (leaderboard rows ``recorded:<name>``), never a filter's
+input; ``t_max_diff`` / ``t_offset`` (s) are the defaults of their time
+association with the reference, ``align`` (none, yaw, se3, sim3) of the fit that
+first moves them onto the reference (replay.pipeline.RECORDED_PARAMS). ``frame``/``child`` also select a TF pair in
+``[channels]`` and ``[reference]`` (a TF-only recording needs them).
 """
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,9 +52,13 @@ from replay.util.errors import DataError, ReplayError
 
 from .rosmsg import KINDS, kind_of, normalize_type
 
-TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "params"}
+TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role"}
+ENTRY_KEYS = {"topic", "type", "role", "frame", "child"}
+ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
+ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.align.ALIGNMENTS
+ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
+ESTIMATE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")  # it names a row and a file
 
 # role -> the message kinds (rosmsg.KINDS) that can supply it
 ROLE_KINDS = {
@@ -65,6 +81,18 @@ class Entry:
     type: str | None = None  # expected message type (checked when given)
     reference: bool = False
     role: str | None = None  # declared role (None: from the message type, DEFAULT_ROLE)
+    frame: str | None = None  # TF pair: parent frame (TFMessage / TransformStamped topics)
+    child: str | None = None  # TF pair: child frame
+    estimate: bool = False  # an [estimates] entry
+    params: dict = field(default_factory=dict)  # [estimates]: t_max_diff, t_offset
+
+    @property
+    def group(self) -> str:
+        return "estimates" if self.estimate else "reference" if self.reference else "channels"
+
+    @property
+    def pair(self) -> str:
+        return f" [{self.frame} -> {self.child}]" if self.frame or self.child else ""
 
 
 @dataclass
@@ -75,22 +103,28 @@ class Mapping:
     allow_truncated: bool = False
     params: dict = field(default_factory=dict)
     source: str = "(proposed)"
+    estimates: list[Entry] = field(default_factory=list)
 
     @property
     def topics(self) -> list[str]:
-        return list(dict.fromkeys(e.topic for e in self.entries))
+        return list(dict.fromkeys(e.topic for e in self.entries + self.estimates))
 
     def to_toml(self) -> str:
         lines = [f'time = "{self.time}"']
         if self.until is not None:
             lines.append(f"until = {self.until!r}")
-        for group, ref in (("channels", False), ("reference", True)):
+        for group in ("channels", "reference", "estimates"):
+            chosen = [e for e in self.entries + self.estimates if e.group == group]
+            if group == "estimates" and not chosen:
+                continue
             lines += ["", f"[{group}]"]
-            for e in self.entries:
-                if e.reference == ref:
-                    typ = f', type = "{e.type}"' if e.type else ""
-                    role = f', role = "{e.role}"' if e.role else ""
-                    lines.append(f'{e.name} = {{ topic = "{e.topic}"{typ}{role} }}')
+            for e in chosen:
+                extra = "".join(f', {k} = "{v}"' for k, v in (("type", e.type), ("role", e.role),
+                                                               ("frame", e.frame), ("child", e.child)) if v)
+                extra += "".join(f", {k} = {v!r}" if not isinstance(v, str) else f', {k} = "{v}"'
+                                 for k, v in e.params.items())
+                key = e.name if re.fullmatch(r"[A-Za-z0-9_-]+", e.name) else f'"{e.name}"'
+                lines.append(f'{key} = {{ topic = "{e.topic}"{extra} }}')
         if self.params:
             lines += ["", "[params]"] + [f"{k} = {v!r}" for k, v in self.params.items()]
         return "\n".join(lines) + "\n"
@@ -132,24 +166,29 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
     for key, value in params.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
             raise ReplayError(f"{source}: [params] {key} must be a positive finite number (got {value!r})")
-    entries = []
-    for group, ref in (("channels", False), ("reference", True)):
+    entries, estimates = [], []
+    for group, ref in (("channels", False), ("reference", True), ("estimates", False)):
         table = doc.get(group, {})
         if not isinstance(table, dict):
             raise ReplayError(f"{source}: [{group}] must be a table of name = topic")
+        keys = ESTIMATE_KEYS if group == "estimates" else ENTRY_KEYS
         for name, spec in table.items():
             if isinstance(spec, str):
                 spec = {"topic": spec}
             if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str) or not spec["topic"]:
                 raise ReplayError(f"{source}: [{group}] {name}: give a topic (name = \"/topic\")")
-            extra = sorted(set(spec) - ENTRY_KEYS)
+            extra = sorted(set(spec) - keys)
             if extra:
                 raise ReplayError(f"{source}: [{group}] {name}: unknown key(s) {', '.join(extra)} "
-                                  f"(known: {', '.join(sorted(ENTRY_KEYS))})")
+                                  f"(known: {', '.join(sorted(keys))})")
             typ = spec.get("type")
             if typ is not None and (not isinstance(typ, str) or kind_of(typ) is None):
                 raise ReplayError(f"{source}: [{group}] {name}: unknown message type {typ!r} "
                                   f"(supported: {', '.join(sorted(KINDS))})")
+            frame, child = _pair(source, group, name, spec)
+            if group == "estimates":
+                estimates.append(_estimate(source, name, spec, typ, frame, child))
+                continue
             role = spec.get("role")
             if role is not None and ref:
                 raise ReplayError(f"{source}: [reference] {name}: a reference has no role "
@@ -157,13 +196,56 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
             if role is not None and role not in ROLE_KINDS:
                 raise ReplayError(f"{source}: [channels] {name}: unknown role {role!r} "
                                   f"(known: {', '.join(ROLE_KINDS)})")
-            if role is not None and typ is not None and kind_of(typ) not in ROLE_KINDS[role]:
+            if role is not None and typ is not None and pose_like(kind_of(typ)) not in ROLE_KINDS[role]:
                 raise ReplayError(f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
                                   f"{role!r} (it takes {kinds_for(role)})")
-            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role))
+            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role, frame, child))
     if not entries:
-        raise ReplayError(f"{source}: maps no topic ([channels] and [reference] are empty)")
-    return Mapping(entries, time, float(until) if until is not None else None, allow, params, source)
+        raise ReplayError(f"{source}: maps no topic ([channels] and [reference] are empty)"
+                          + ("; recorded [estimates] need a [reference] to be scored against" if estimates else ""))
+    return Mapping(entries, time, float(until) if until is not None else None, allow, params, source, estimates)
+
+
+def _pair(source: str, group: str, name: str, spec: dict):
+    """The TF pair (``frame`` = parent, ``child``) an entry selects, or (None, None)."""
+    frame, child = spec.get("frame"), spec.get("child")
+    for key, value in (("frame", frame), ("child", child)):
+        if value is not None and (not isinstance(value, str) or not value.strip("/")):
+            raise ReplayError(f"{source}: [{group}] {name}: {key} must be a frame name (got {value!r})")
+    if (frame is None) != (child is None):
+        raise ReplayError(f"{source}: [{group}] {name}: a TF pair needs both frame (the parent) and child")
+    return (frame.strip("/"), child.strip("/")) if frame is not None else (None, None)
+
+
+def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
+    """One ``[estimates]`` entry, checked (name, message kind, association defaults)."""
+    if not ESTIMATE_NAME.match(name):
+        raise ReplayError(f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - "
+                          "(it names the leaderboard row recorded:<name> and its files)")
+    if typ is not None and kind_of(typ) not in ESTIMATE_KINDS:
+        raise ReplayError(f"{source}: [estimates] {name}: a {normalize_type(typ)} is not a trajectory "
+                          "(an estimate is an Odometry, PoseStamped, PoseWithCovarianceStamped, TFMessage / "
+                          "TransformStamped pair, Path or NavSatFix)")
+    params = {}
+    for key, low in (("t_max_diff", 0.0), ("t_offset", None)):
+        if key in spec:
+            v = spec[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or abs(v) == float("inf") \
+                    or (low is not None and v < low):
+                raise ReplayError(f"{source}: [estimates] {name}: {key} must be a finite number of seconds"
+                                  + (" >= 0" if low is not None else "") + f" (got {v!r})")
+            params[key] = float(v)
+    if "align" in spec:
+        if spec["align"] not in ESTIMATE_ALIGN:
+            raise ReplayError(f"{source}: [estimates] {name}: align must be one of {', '.join(ESTIMATE_ALIGN)} "
+                              f"(got {spec['align']!r})")
+        params["align"] = spec["align"]
+    return Entry(name, spec["topic"], normalize_type(typ) if typ else None, False, None, frame, child, True, params)
+
+
+def pose_like(kind: str | None) -> str | None:
+    """The kind whose converter reads a message kind: a TF pair and a Path are poses."""
+    return "pose" if kind in ("tf", "path") else kind
 
 
 def kinds_for(role: str) -> str:
@@ -180,7 +262,7 @@ def role_of(entry: Entry, msgtype: str, source: str) -> str | None:
     """
     if entry.reference:
         return None
-    kind = kind_of(msgtype)
+    kind = pose_like(kind_of(msgtype))
     if entry.role is None:
         return DEFAULT_ROLE.get(kind)
     if kind not in ROLE_KINDS[entry.role]:
@@ -197,6 +279,8 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
     odometry topic named like ground truth (``truth``, ``groundtruth``,
     ``ground_truth``, ``gt``, ``reference``, ``mocap``, ``vicon``); failing
     that, a single NavSatFix (the fix track as reference, see docs/bags.md).
+    Beside a ground-truth reference, every other pose topic is also proposed as a
+    recorded estimate (``[estimates]``, named after its topic), as evo would score it.
     """
     names = {"navsatfix": "gps", "odometry": "odom", "imu": "imu", "pressure": "depth",
              "twist": "dvl", "pose": "pose"}
@@ -205,7 +289,7 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
     reference = None
     for topic, (typ, count) in topics.items():
         kind = kind_of(typ)
-        if kind is None or count == 0:
+        if kind not in names or count == 0:  # TF needs a named pair, a Path is an estimate: not proposed
             continue
         base = topic.strip("/").lower().replace("/", "_")
         if reference is None and kind in ("pose", "odometry") and any(
@@ -220,6 +304,12 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
         fixes = [e for e in entries if e.type and kind_of(e.type) == "navsatfix"]
         if len(fixes) == 1:
             reference = Entry("position", fixes[0].topic, fixes[0].type, True)
+    estimates = []
     if reference is not None:
         entries.append(reference)
-    return Mapping(entries)
+        if kind_of(reference.type) != "navsatfix":  # a ground truth: the other poses are estimates to score
+            for e in entries:
+                est = re.sub(r"[^A-Za-z0-9_.+-]", "_", e.topic.strip("/")).lstrip("_.+-") or e.name
+                if not e.reference and kind_of(e.type) == "pose" and est not in {x.name for x in estimates}:
+                    estimates.append(Entry(est, e.topic, e.type, estimate=True))
+    return Mapping(entries, estimates=estimates)

@@ -13,6 +13,8 @@ frame, components, angles, convention)}``; the adapter names the channels
 | pressure | sensor_msgs/FluidPressure | depth (m, positive down) | pressure (Pa) |
 | twist | geometry_msgs/TwistStamped, TwistWithCovarianceStamped | velocity (m/s, header.frame_id) | rate (rad/s) |
 | pose | geometry_msgs/PoseStamped, PoseWithCovarianceStamped, foxglove.PoseInFrame | position (m, frame_id) | attitude |
+| tf | tf2_msgs/TFMessage, geometry_msgs/TransformStamped | one parent -> child pair, read as a pose (:func:`tf_pair`) | attitude |
+| path | nav_msgs/Path | the poses of its last message, read as poses (:func:`path_poses`) | attitude |
 
 Attitude is (roll, pitch, yaw) in radians from the quaternion, ZYX (yaw about
 z, then pitch about y, then roll about x), angles wrapped to (-pi, pi]; ``yaw``
@@ -38,9 +40,13 @@ KINDS = {
     "geometry_msgs/msg/PoseWithCovarianceStamped": "pose",
     "foxglove.PoseInFrame": "pose",
     "foxglove.LocationFix": "navsatfix",
+    "tf2_msgs/msg/TFMessage": "tf",
+    "tf/msg/tfMessage": "tf",  # ROS 1's older tf (the same fields)
+    "geometry_msgs/msg/TransformStamped": "tf",
+    "nav_msgs/msg/Path": "path",
 }
 PRIMARY = {"imu": "gyro", "odometry": "position", "navsatfix": "position", "pressure": "depth",
-           "twist": "velocity", "pose": "position"}
+           "twist": "velocity", "pose": "position", "tf": "position", "path": "position"}
 
 WATER_DENSITY = 1025.0  # kg/m^3, sea water
 ATMOSPHERIC_PRESSURE = 101325.0  # Pa
@@ -116,6 +122,51 @@ def _pose_of(msg):
     """The geometry_msgs/Pose inside a PoseStamped / PoseWithCovarianceStamped / PoseInFrame."""
     pose = msg.pose
     return pose.pose if hasattr(pose, "pose") else pose
+
+
+class _Pose:
+    """A stamped pose made from a transform or a Path element (read like a PoseStamped)."""
+
+    __slots__ = ("header", "pose")
+
+    def __init__(self, header, position, orientation):
+        self.header = header
+        self.pose = _Plain(position=position, orientation=orientation)
+
+
+class _Plain:
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def frame_name(name) -> str:
+    """A TF frame name without ROS 1's leading '/'."""
+    return str(name).strip("/")
+
+
+def tf_pair(msgs: list, log_ns, parent: str | None, child: str | None):
+    """The transforms ``parent`` -> ``child`` of TFMessage / TransformStamped messages, as poses.
+
+    Returns (poses, log times of the messages holding them, every pair seen with its count).
+    ``parent``/``child`` None (a TransformStamped topic): every transform.
+    """
+    poses, logs, seen = [], [], {}
+    for msg, log in zip(msgs, log_ns):
+        for tr in (msg.transforms if hasattr(msg, "transforms") else [msg]):
+            pair = (frame_name(tr.header.frame_id), frame_name(tr.child_frame_id))
+            seen[pair] = seen.get(pair, 0) + 1
+            if parent is None or pair == (parent, child):
+                poses.append(_Pose(tr.header, tr.transform.translation, tr.transform.rotation))
+                logs.append(log)
+    return poses, logs, seen
+
+
+def path_poses(msgs: list, log_ns):
+    """The poses of the last nav_msgs/Path message (each with its own header), and its log time each."""
+    if not msgs:
+        return [], []
+    last = list(msgs[-1].poses)
+    return last, [log_ns[-1]] * len(last)
 
 
 def convert(kind: str, msgs: list, geo=None, options: dict | None = None) -> dict:

@@ -7,6 +7,11 @@ campaign uses (``batch`` runs each), so ``replay eval`` and ``replay campaign
 run`` give the same rows (:mod:`replay.summary`) for the same configuration.
 Seeds: :mod:`replay.util.seeds` (dataset, task and filter streams per run:
 every filter sees the same measurements in a run — common random numbers).
+
+Recorded estimates of the frame (``[estimates]`` of a bag mapping) are rows
+``recorded:<name>`` beside the filters, through the same pipeline and summary
+(:func:`replay.pipeline.recorded_estimates`): one run each (deterministic), scored
+on the task's reference; their notes (what was associated) are ``Evaluation.notes``.
 """
 from __future__ import annotations
 
@@ -21,7 +26,8 @@ import numpy as np
 import replay
 from replay import registry, summary
 from replay.filters import make_filter
-from replay.pipeline import Config, config_hash, default_task, plain, run_block
+from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
+                             load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
 from replay.util.errors import ReplayError
 
@@ -54,6 +60,7 @@ class Evaluation:
     axis_names: tuple = ("x", "y", "z")  # names of the scored position axes
     rows: list = field(default_factory=list)  # leaderboard rows, in --filters order
     baseline: str | None = None
+    notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
 
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
@@ -84,33 +91,48 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
              task_params: dict | None = None, filter_params: dict | None = None,
              dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
              divergence_threshold: float | None = None, baseline: str | None = None,
-             batch: int = BATCH) -> Evaluation:
-    """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring)."""
+             batch: int = BATCH, recorded=()) -> Evaluation:
+    """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring).
+
+    ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
+    more by name, or, when None, every estimate the frame holds that ``filters`` does not name.
+    """
     filters = list(filters)
     filter_params = filter_params or {}
-    for name in filter_params:
-        if name not in filters:
-            raise ReplayError(f"parameters given for filter {name!r}, which is not among the filters run "
-                              f"({', '.join(filters)})")
-    instances = [make_filter(name, **filter_params.get(name, {})) for name in filters]  # validated up front
+    offline = [n for n in filters if not is_recorded(n)]
+    instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
     task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
+    names, estimates = _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir)
+    filters = offline + names
+    for name in filter_params:
+        if name not in filters:
+            raise ReplayError(f"parameters given for filter {name!r}, which is not among the filters run "
+                              f"({', '.join(filters) or 'none'})")
+    if not filters:
+        raise ReplayError(f"{dataset}: nothing to score: no filter (--filters none) and no recorded estimate "
+                          "(declare them in the mapping's [estimates]; docs/bags.md)")
+    if baseline is not None and baseline not in filters:
+        raise ReplayError(f"--baseline {baseline!r}: not among the rows ({', '.join(filters)})")
     the_task = make_task(task_name, **(task_params or {}))
-    configs = [Config(dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()), name,
-                      plain(f.params()), seed, alignment, divergence_threshold, adapter)
-               for name, f in zip(filters, instances)]
+    base = (dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()))
+    tail = (seed, alignment, divergence_threshold, adapter)
+    configs = [Config(*base, name, plain(f.params()), *tail) for name, f in zip(offline, instances)]
+    configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
+                                                          estimates[name[len(RECORDED):]].params)), *tail)
+                for name in names]
     results = []
     for cfg in configs:
         c, h = cfg.as_dict(), config_hash(cfg.as_dict())
         recs = []
-        for start in range(0, runs, batch):
+        for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
             recs += run_block(c, list(range(start, min(runs, start + batch))), data_dir, keep=True, strict=True)
         results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
                                     [r["errors"] for r in recs], [r["estimates"] for r in recs],
                                     config_hash=h, config=c, records=recs))
     rows = _summarise(results, baseline)
-    problems = [r["problem"] for r in results[0].records]
+    problems = [r["problem"] for r in max(results, key=lambda r: len(r.records)).records]
     p0 = problems[0]
     config = {
         "dataset": dataset, "task": task_name, "task_params": configs[0].task_params,
@@ -120,8 +142,25 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
         "config_hashes": {r.name: r.config_hash for r in results},
     }
+    notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
-                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline)
+                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes)
+
+
+def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):
+    """(``recorded:<name>`` rows to compute, {name: RecordedEstimate}) from the frame's estimates."""
+    named = [n for n in filters if is_recorded(n)] + [n if is_recorded(n) else RECORDED + n for n in recorded or ()]
+    if not named and (recorded is not None or is_sim(dataset)):
+        return [], {}
+    cfg = {"dataset": dataset, "dataset_params": dataset_params, "first": first, "seed": seed, "adapter": adapter}
+    estimates = getattr(load_frame(cfg, 0, data_dir), "estimates", {})
+    if recorded is None:
+        named += [RECORDED + k for k in estimates if RECORDED + k not in named]
+    for n in named:
+        if n[len(RECORDED):] not in estimates:
+            raise ReplayError(f"{dataset}: no recorded estimate {n[len(RECORDED):]!r} (the mapping's [estimates] "
+                              f"declare: {', '.join(estimates) or 'none'})")
+    return list(dict.fromkeys(named)), estimates
 
 
 def versions() -> dict:
@@ -152,7 +191,8 @@ def command_line(config: dict) -> str:
             parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
     for name, params in (config.get("filter_params") or {}).items():  # those that differ from the defaults
         try:
-            defaults = plain(make_filter(name).params())
+            defaults = ({p.name: p.default for p in RECORDED_PARAMS} if is_recorded(name)
+                        else plain(make_filter(name).params()))
         except Exception:  # noqa: BLE001 — a filter no longer registered: name them all
             defaults = {}
         for key, value in params.items():
@@ -173,5 +213,7 @@ def _tolerance(name: str) -> dict:
     from replay.filters import FILTERS
     from replay.util.lookup import resolve
 
+    if is_recorded(name):
+        return {}
     rtol = float(getattr(resolve(FILTERS, name, "filter"), "RERUN_RTOL", 0.0))
     return {"rerun_rtol": rtol} if rtol > 0 else {}

@@ -19,6 +19,13 @@ Every adapter produces a :class:`Frame`; every task consumes one. Conventions:
   ``Frame.reference``, apart from the sensor ``Frame.channels``. Tasks read the
   reference only to score, or to synthesise measurements as a paper's protocol
   prescribes; no filter is ever handed a Frame.
+* **Recorded estimates** (``Frame.estimates``, :class:`RecordedEstimate`): what
+  an estimator already wrote into the recording (an onboard EKF's odometry, a
+  SLAM system's poses, a vendor INS solution). Each keeps its own stamps (seconds
+  on the origin of ``t``, not merged into the time axis, so declaring one never
+  changes what the filters see), its positions in the recording's frame, its
+  orientation and its position covariance when recorded. They are data for the
+  scorer (leaderboard rows ``recorded:<name>``), never inputs of a filter.
 * **Report**: the adapter's account of every sample or channel it dropped,
   flagged, masked or repaired. Nothing is removed silently.
 """
@@ -61,6 +68,53 @@ class Channel:
     def take(self, index) -> "Channel":
         return Channel(self.values[index], self.unit, self.frame, self.valid[index],
                        self.components, self.angles, self.convention, self.description)
+
+
+@dataclass
+class RecordedEstimate:
+    """A trajectory an estimator recorded: one pose per stamp, on its own stamps.
+
+    ``t`` (m,) strictly increasing seconds on the frame's origin (may start before
+    or end after the frame's axis); ``position`` (m, 3) in ``frame`` (the
+    recording's parent frame, or local ENU for a NavSatFix); ``orientation`` (m, 4)
+    unit quaternions x, y, z, w or None when not recorded; ``covariance`` (m, 3, 3)
+    position covariance (NaN where a message has none) or None when never recorded;
+    ``child`` the body frame when known; ``params`` association settings from the
+    mapping (``t_max_diff``, ``t_offset``), the defaults of its leaderboard row.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    frame: str = ""
+    child: str = ""
+    description: str = ""
+    params: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.t = np.asarray(self.t, dtype=float)
+        pos = np.asarray(self.position, dtype=float)
+        self.position = pos.reshape(len(self.t), -1) if pos.size else pos.reshape(0, 3)
+        if self.t.ndim != 1 or (len(self.t) > 1 and not np.all(np.diff(self.t) > 0)):
+            raise ValueError("recorded estimate stamps must be one-dimensional and strictly increasing")
+        for name, shape in (("orientation", (len(self.t), 4)), ("covariance", (len(self.t), 3, 3))):
+            value = getattr(self, name)
+            if value is not None:
+                value = np.asarray(value, dtype=float)
+                if value.shape != shape:
+                    raise ValueError(f"recorded estimate {name} must have shape {shape}, got {value.shape}")
+                setattr(self, name, value)
+
+    def __len__(self):
+        return len(self.t)
+
+    def until(self, t_end: float) -> "RecordedEstimate":
+        """The poses stamped at or before ``t_end``."""
+        keep = self.t <= t_end
+        pick = (lambda a: None if a is None else a[keep])
+        return RecordedEstimate(self.t[keep], self.position[keep], pick(self.orientation), pick(self.covariance),
+                                self.frame, self.child, self.description, dict(self.params))
 
 
 @dataclass
@@ -107,6 +161,7 @@ class Frame:
     epoch: float | None = None
     meta: dict = field(default_factory=dict)
     report: Report = field(default_factory=Report)
+    estimates: dict[str, RecordedEstimate] = field(default_factory=dict)
 
     def __post_init__(self):
         self.t = np.asarray(self.t, dtype=float)
@@ -128,9 +183,10 @@ class Frame:
             return self
         sl = slice(0, int(n))
         meta = dict(self.meta, first=int(n))
+        end = float(self.t[int(n) - 1])  # recorded estimates: the poses stamped within the kept span
         return Frame(self.t[sl], {k: c.take(sl) for k, c in self.channels.items()},
                      {k: c.take(sl) for k, c in self.reference.items()},
-                     self.epoch, meta, self.report)
+                     self.epoch, meta, self.report, {k: e.until(end) for k, e in self.estimates.items()})
 
     def summary(self) -> list[str]:
         """Human-readable lines: span, channels, reference, report."""
@@ -143,4 +199,9 @@ class Frame:
                 comp = f" [{', '.join(ch.components)}]" if ch.components else ""
                 out.append(f"{kind:9s} {name}{comp}: {ch.unit}, {ch.frame or '-'}, "
                            f"{int(ch.valid.sum())}/{len(ch)} valid")
+        for name, est in self.estimates.items():
+            span = f"{est.t[0]:.1f}..{est.t[-1]:.1f} s" if len(est) else "empty"
+            extra = [w for w, v in (("orientation", est.orientation), ("covariance", est.covariance)) if v is not None]
+            out.append(f"estimate  {name}: {len(est)} poses, {span}, {est.frame or '-'}"
+                       + (f" -> {est.child}" if est.child else "") + (f", with {' and '.join(extra)}" if extra else ""))
         return out

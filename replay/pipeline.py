@@ -29,9 +29,18 @@ filled in, so ``{}`` and the defaults are the same configuration.
 
 It never raises for one run: a run whose problem cannot be built or whose
 scoring fails comes back as ``status = "failed"`` with its error.
+
+**Recorded estimates** (``Frame.estimates``: an onboard EKF's odometry, a SLAM
+system's poses) are configurations too: ``filter = "recorded:<name>"`` with the
+association parameters :data:`RECORDED_PARAMS` as its parameters. Nothing is
+filtered: :func:`recorded_estimates` associates the recorded poses with the task's
+reference (:func:`associate`) and the run is scored by the same
+:func:`score_record`. A recorded estimate is deterministic: it has one run, run 0
+(:func:`runs_of`), whatever the number of runs asked for.
 """
 from __future__ import annotations
 
+import copy
 import functools
 import hashlib
 import json
@@ -43,9 +52,23 @@ from time import perf_counter
 import numpy as np
 
 from replay import metrics, registry, score
+from replay.align import ALIGNMENTS, align, apply
 from replay.filters import make_filter
-from replay.tasks import make_task
+from replay.filters.base import Estimates
+from replay.tasks import make_task, source_of
+from replay.util.errors import ReplayError
+from replay.util.params import Param, validate
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
+
+RECORDED = "recorded:"  # the filter name of a recorded estimate's configuration: recorded:<name>
+RECORDED_PARAMS = (
+    Param("t_max_diff", float, 0.01, "a recorded pose and a reference sample are associated when their stamps "
+          "differ by at most this (nearest stamp, as evo's --t_max_diff)", unit="s", low=0.0),
+    Param("t_offset", float, 0.0, "added to the recorded stamps before association (evo's --t_offset)", unit="s"),
+    Param("align", str, "none", "the recorded trajectory is first moved onto the reference by this fit over "
+          "the associated poses (as evo's -a / --correct_scale): every column is then in the reference's frame",
+          choices=ALIGNMENTS),
+)
 
 
 @dataclass(frozen=True)
@@ -140,6 +163,8 @@ def build_problem(config: Config | dict, run: int, data_dir=None):
     problem.frame_meta = dict(frame.meta, task_inputs=getattr(problem, "inputs", {}),
                               task_notes=getattr(problem, "notes", []))
     problem.frame_report = frame.report
+    problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
+    problem.source = source_of(frame)
     return problem
 
 
@@ -192,6 +217,8 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
     Exceptions inside a filter's numeric step are never raised: they are that run's divergence.
     """
     c = config.as_dict() if isinstance(config, Config) else config
+    if is_recorded(c["filter"]):
+        return [_recorded_run(c, run, data_dir, keep, strict) for run in runs_of(c, runs)]
     results, problems = [], {}
     for run in runs:
         try:
@@ -256,4 +283,104 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
         rec["metrics"]["error"] = est.info["error"]
     if keep:
         rec.update(problem=problem, estimates=est, errors=err)
+    return rec
+
+
+# ---------------------------------------------------------------- recorded estimates
+
+def is_recorded(name: str) -> bool:
+    """Whether a configuration's ``filter`` names a recorded estimate (``recorded:<name>``)."""
+    return isinstance(name, str) and name.startswith(RECORDED)
+
+
+def recorded_params(name: str, given: dict | None = None, defaults: dict | None = None) -> dict:
+    """The association parameters of ``recorded:<name>``: ``given`` over the mapping's ``defaults``
+    over the declared ones, checked (one line naming the parameter)."""
+    return validate(RECORDED_PARAMS, {**(defaults or {}), **(given or {})}, f"recorded estimate {name!r}")
+
+
+def runs_of(config: dict, runs) -> list:
+    """The runs of ``runs`` a configuration computes: all, or only run 0 for a recorded estimate."""
+    return [r for r in runs if r == 0] if is_recorded(config["filter"]) else list(runs)
+
+
+def associate(t_ref, t_est, t_max_diff: float = 0.01, t_offset: float = 0.0):
+    """Pairs ``(i_ref, i_est)`` of reference and estimate stamps, as evo associates trajectories.
+
+    ``t_offset`` is added to the estimate's stamps. The shorter of the two drives: each of
+    its stamps is paired with the nearest stamp of the other (the earlier on a tie) when
+    they differ by at most ``t_max_diff`` (evo's ``sync.associate_trajectories``; the
+    matching is :func:`replay.trajectory.associate.matching_indices`, shared with
+    ``replay score``). Both stamp arrays strictly increase.
+    """
+    from replay.trajectory.associate import matching_indices
+
+    a, b = np.asarray(t_ref, float), np.asarray(t_est, float)
+    if not len(a) or not len(b):
+        return np.zeros(0, int), np.zeros(0, int)
+    if len(b) > len(a):
+        return matching_indices(a, b + t_offset, t_max_diff)
+    j, i = matching_indices(b, a - t_offset, t_max_diff)
+    return i, j
+
+
+def recorded_estimates(problem, name: str, params: dict):
+    """(problem to score, Estimates, note): ``recorded:<name>`` on the problem's time axis.
+
+    Each associated pose is placed at its reference sample (its own stamp differs by at
+    most ``t_max_diff``); the other samples hold NaN and are not scored. Two poses on one
+    reference sample (the estimate denser there): the nearer is kept. The scored
+    position is the first d components (the task's axes); the covariance is the d x d
+    block where recorded and positive definite (NEES), NaN elsewhere. Fewer than 3
+    associated poses: one line naming the file and topic.
+    """
+    rec = getattr(problem, "recorded", {}).get(name)
+    src = getattr(problem, "source", "dataset")
+    if rec is None:
+        known = ", ".join(getattr(problem, "recorded", {})) or "none"
+        raise ReplayError(f"{src}: no recorded estimate {name!r} (the mapping's [estimates] declare: {known})")
+    d = len(problem.axis_names)
+    ref = np.flatnonzero(problem.truth_valid)
+    i, j = associate(problem.t[ref], rec.t, params["t_max_diff"], params["t_offset"])
+    k = ref[i]
+    dt = np.abs(problem.t[k] - rec.t[j] - params["t_offset"])
+    order = np.lexsort((dt, k))
+    first = np.r_[True, np.diff(k[order]) != 0] if len(k) else np.zeros(0, bool)
+    k, j, dup = k[order][first], j[order][first], int((~first).sum())
+    if len(k) < 3:
+        raise ReplayError(f"{src}: recorded estimate {name} ({rec.description}): {len(k)} pose(s) associated with "
+                          f"the reference within t_max_diff {params['t_max_diff']:g} s (t_offset "
+                          f"{params['t_offset']:g} s); at least 3 are needed: check the stamps, or raise "
+                          f"t_max_diff (-p recorded:{name}.t_max_diff=..., or in the mapping's [estimates])")
+    n = len(problem.t)
+    x, P = np.full((n, d), np.nan), np.full((n, d, d), np.nan)
+    R, t, c = align(rec.position[j, :d], problem.truth_position[k], params["align"])
+    x[k] = apply(R, t, c, rec.position[j, :d])
+    if rec.covariance is not None:
+        block = c * c * R @ rec.covariance[j][:, :d, :d] @ R.T
+        ok = np.isfinite(block).all(axis=(1, 2))
+        ok[ok] = np.all(np.linalg.eigvalsh(block[ok]) > 0, axis=1)
+        P[k[ok]] = block[ok]
+    est = Estimates(x, P, np.full(n, np.nan), None, {"recorded": name, "associated": int(len(k))})
+    scored = copy.copy(problem)  # the position only: a recorded state has no task-specific components
+    scored.position_index, scored.truth_angles, scored.angle_index, scored.truth_extra = tuple(range(d)), {}, {}, {}
+    note = (f"recorded:{name}: {len(k)} of its {len(rec)} poses associated with {len(ref)} reference samples "
+            f"(nearest stamp within {params['t_max_diff']:g} s, t_offset {params['t_offset']:g} s"
+            + (f"; moved onto the reference by a {params['align']} fit" if params["align"] != "none" else "")
+            + (f"; {dup} more pose(s) on an already associated sample left out" if dup else "")
+            + "); position scored, one run (a recorded estimate is deterministic)")
+    return scored, est, note
+
+
+def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> dict:
+    """The record of run 0 of a ``recorded:<name>`` configuration (never raises unless ``strict``)."""
+    try:
+        problem = build_problem(c, run, data_dir)
+        scored, est, note = recorded_estimates(problem, c["filter"][len(RECORDED):], c["filter_params"])
+        rec = score_record(c, scored, est, run, float("nan"), keep)
+    except Exception as err:
+        if strict:
+            raise
+        return failed(run, err)
+    rec["note"] = note
     return rec

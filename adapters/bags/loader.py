@@ -14,6 +14,8 @@ from replay.util.errors import DataError
 
 from .. import rosmsg
 from ..mapping import Mapping, from_dict, load_mapping, propose, role_of
+from . import estimates as recorded
+from . import sources
 from .reading import read
 from .recording import Recording, Topic
 
@@ -47,8 +49,12 @@ def load(path, *, mapping=None, time: str | None = None, until: float | None = N
     def choose(listing):  # no mapping: propose one from the topic list
         proposed.append(propose(listing))
         if not proposed[0].entries:
+            tf = [t for t, (typ, _) in listing.items() if rosmsg.kind_of(typ) == "tf"]
             raise DataError(path, "no topic of a supported type to map; write a mapping "
-                                  "(see `replay inspect` and docs/bags.md)")
+                                  "(see `replay inspect` and docs/bags.md)"
+                            + (f"; {', '.join(tf)} hold(s) TF: name a pair in the mapping "
+                               '(e.g. position = { topic = "/tf", frame = "odom", child = "base_link" })'
+                               if tf else ""))
         return proposed[0].topics
 
     until = until if until is not None else (mp.until if mp else None)
@@ -77,12 +83,13 @@ def _fail_if_truncated(rec: Recording, report, allow) -> None:
 
 
 def _check_topics(rec: Recording, mp: Mapping) -> None:
-    for e in mp.entries:
+    for e in mp.entries + mp.estimates:
         topic = rec.topics.get(e.topic)
         if topic is None:
             close = difflib.get_close_matches(e.topic, list(rec.topics), n=1)
             hint = f" (did you mean {close[0]}?)" if close else f" (topics: {', '.join(rec.topics)})"
-            raise DataError(rec.path, f"topic {e.topic} (mapped to {e.name}) is not in the recording{hint}")
+            what = f"estimate {e.name}" if e.estimate else e.name
+            raise DataError(rec.path, f"topic {e.topic} (mapped to {what}) is not in the recording{hint}")
         if rosmsg.kind_of(topic.type) is None:
             raise DataError(rec.path, f"topic {e.topic} has type {topic.type}, which no converter reads "
                                       f"(supported: {', '.join(sorted(rosmsg.KINDS))})")
@@ -93,30 +100,20 @@ def _check_topics(rec: Recording, mp: Mapping) -> None:
             raise DataError(rec.path, f"topic {e.topic} (mapped to {e.name}) has no messages{span}")
 
 
-def _stamps(rec: Recording, topic: Topic, time: str) -> tuple[np.ndarray, np.ndarray]:
-    log = np.asarray(topic.log_ns, np.int64)
-    header = np.array([rosmsg.stamp_ns(m) for m in topic.msgs], np.int64)
-    use = header if time == "header" else log
-    bad = np.flatnonzero(np.diff(use) <= 0)
-    if len(bad):
-        i = int(bad[0]) + 1
-        raise DataError(rec.path, f"topic {topic.name}: non-increasing {time} stamps at message {i} "
-                                  f"({use[i]} ns after {use[i - 1]} ns)")
-    return use, (log if time == "header" else header)
-
-
 def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Report,
                 until: float | None) -> Frame:
     _check_topics(rec, mp)
-    stamps, other, fields = {}, {}, {}
+    stamps, other, fields, kinds = {}, {}, {}, {}
     geo = None
-    for topic_name in mp.topics:
-        topic = rec.topics[topic_name]
-        stamps[topic_name], other[topic_name] = _stamps(rec, topic, time)
-        kind = rosmsg.kind_of(topic.type)
-        if kind == "navsatfix" and geo is None:
-            geo = _make_geo(rec, topic)
-        fields[topic_name] = rosmsg.convert(kind, topic.msgs, geo, opts)
+    for topic_name in mp.topics:  # the projection: the first mapped NavSatFix topic
+        if geo is None and rosmsg.kind_of(rec.topics[topic_name].type) == "navsatfix":
+            geo = _make_geo(rec, rec.topics[topic_name])
+    for e in mp.entries:  # one source per topic (and TF pair), shared by the entries reading it
+        src = sources.key(e)
+        if src not in fields:
+            msgs, logs, kinds[src] = sources.messages(rec, e)
+            stamps[src], other[src] = sources.stamps(rec, e, msgs, logs, time)
+            fields[src] = rosmsg.convert(kinds[src], msgs, geo, opts)
     axis = np.unique(np.concatenate(list(stamps.values())))
     t0 = int(axis[0])
     t = (axis - t0) / 1e9
@@ -127,37 +124,38 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     made = {}  # (group, channel name) -> the entry that made it
     for e in mp.entries:
         topic = rec.topics[e.topic]
-        kind = rosmsg.kind_of(topic.type)
-        idx = np.searchsorted(axis, stamps[e.topic])
+        src = sources.key(e)
+        kind = kinds[src]
+        idx = np.searchsorted(axis, stamps[src])
         group = reference if e.reference else channels
-        keys = [e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}" for f in fields[e.topic]]
+        keys = [e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}" for f in fields[src]]
         for key in keys + [f"{e.name}_{other_name}"]:
             maker = made.setdefault((e.reference, key), e.name)
             if maker != e.name:
                 raise DataError(mp.source, f"[{'reference' if e.reference else 'channels'}] {e.name} "
                                            f"({e.topic}) makes channel {key}, which {maker} makes too: "
                                            "rename one of them")
-        for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[e.topic].items():
+        for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[src].items():
             key = e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
             full = np.full((n,) + vals.shape[1:], np.nan)
             full[idx] = vals
             ok = np.zeros(n, bool)
             ok[idx] = valid
             group[key] = Channel(full, unit, frame, ok, tuple(comps), tuple(angles), conv,
-                                 f"{e.topic} ({topic.type}) {fname}")
+                                 f"{e.topic}{e.pair} ({topic.type}) {fname}")
         t_other = np.full(n, np.nan)
-        t_other[idx] = (other[e.topic] - t0) / 1e9
+        t_other[idx] = (other[src] - t0) / 1e9
         group[f"{e.name}_{other_name}"] = Channel(t_other, "s", "", np.isin(np.arange(n), idx),
                                                   description=f"{e.topic} {other_name.replace('_', ' ')}, "
                                                               "seconds from t = 0")
         role = role_of(e, topic.type, mp.source)
         if role and role != "none":
             names = {f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
-                     for f in ROLE_FIELDS[role] if f in fields[e.topic]}
+                     for f in ROLE_FIELDS[role] if f in fields[src]}
             roles.setdefault(role, []).append({
                 "entry": e.name, "source": f"{e.topic} ({topic.type})", "declared": e.role is not None,
                 "channels": names})
-        primary = fields[e.topic][rosmsg.PRIMARY[kind]][1]
+        primary = fields[src][rosmsg.PRIMARY[kind]][1]
         report.add("info", e.name, len(idx), f"{e.topic} ({topic.type}): {len(idx)} messages at their "
                                              f"{time} stamps; not valid at the other {n - len(idx)} samples")
         if (~primary).any():
@@ -169,15 +167,18 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
                                + (f"; {shared} stamp(s) shared by several topics" if shared else ""))
     if sim:
         report.add("info", "t", n, f"simulation time: stamps start at {t0 / 1e9:.3f} s; epoch unknown")
+    refs = [stamps[sources.key(e)] for e in mp.entries if e.reference]
+    span = (min(int(s[0]) for s in refs), max(int(s[-1]) for s in refs)) if refs else None
+    estimates = recorded.build(rec, mp, time, geo, t0, report, span)
     meta = {"adapter": "bags", "source": str(rec.path), "format": rec.format, "time": time,
             "t0_ns": t0, "sim_time": bool(sim), "until": until, "truncated": rec.truncated,
             "sha256": _sha256(rec.path), "mapping": json.loads(json.dumps(_mapping_dict(mp))),
-            "roles": roles,
+            "roles": roles, "estimates": recorded.meta(estimates),
             "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)}
                        for k, v in rec.topics.items()}}
     if geo is not None:
         meta.update(geo.meta())
-    return Frame(t, channels, reference, None if sim else t0 / 1e9, meta, report)
+    return Frame(t, channels, reference, None if sim else t0 / 1e9, meta, report, estimates)
 
 
 def _make_geo(rec: Recording, topic: Topic) -> Geo:
@@ -193,7 +194,7 @@ def _make_geo(rec: Recording, topic: Topic) -> Geo:
 
 def _mapping_dict(mp: Mapping) -> dict:
     return {"time": mp.time, "until": mp.until, "source": mp.source, "params": mp.params,
-            "entries": [e.__dict__ for e in mp.entries]}
+            "entries": [e.__dict__ for e in mp.entries], "estimates": [e.__dict__ for e in mp.estimates]}
 
 
 def _sha256(path: Path) -> str:

@@ -25,6 +25,18 @@ A campaign is a TOML file::
     params = { resampling = "systematic" }
     grid = { n_particles = [200, 1000] }    # one configuration per combination
 
+    [[dataset]]               # a recording by path (relative to this file), with its mapping
+    id = "../data/ROS_example.bag"
+    params = { mapping = "maps/evo_ros_example.toml" }
+    recorded = ["ORB-SLAM"]   # recorded estimates scored as rows recorded:<name>; default: all
+
+**Recorded estimates.** A dataset read by the bags adapter whose mapping declares
+``[estimates]`` adds one configuration ``recorded:<name>`` per estimate (all by
+default; ``recorded = [...]`` chooses, ``recorded = []`` none), beside the filters,
+with the mapping's association settings as its parameters; it has one unit (run 0:
+a recorded estimate is deterministic). A campaign may have no ``[[filter]]`` when it
+scores recorded estimates only.
+
 Everything is checked before any work starts (:func:`load`): an unknown
 section, key, dataset, task, filter or parameter, a parameter of the wrong type
 or out of the bounds its declaration states (:mod:`replay.util.params`), or an
@@ -45,12 +57,12 @@ from pathlib import Path
 
 from replay.align import ALIGNMENTS
 from replay.util.errors import ReplayError
-from replay.pipeline import Config
+from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
 
 CAMPAIGN_KEYS = {"name": str, "runs": int, "seed": int, "batch": int, "alignment": str,
                  "divergence_threshold": float, "data_dir": str}
-DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int}
+DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
 FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
 
 
@@ -182,7 +194,9 @@ def load(path) -> Campaign:
     if not isinstance(datasets, list) or not datasets:
         raise where.error("dataset", "the campaign needs at least one [[dataset]]")
     filters = doc.get("filter", [])
-    if not isinstance(filters, list) or not filters:
+    maybe_recorded = any(isinstance(d, dict) and (d.get("recorded") or "mapping" in (d.get("params") or {}))
+                         for d in datasets)  # recorded estimates alone need no [[filter]]
+    if not isinstance(filters, list) or not (filters or maybe_recorded):
         raise where.error("filter", "the campaign needs at least one [[filter]]")
 
     ds_entries = []
@@ -191,10 +205,14 @@ def load(path) -> Campaign:
         if "id" not in entry:
             raise where.error("dataset", "every [[dataset]] needs an id")
         ds_id = entry["id"]
-        try:
-            ds = registry.get(ds_id)
-        except ReplayError as e:
-            raise where.error("id", str(e), ds_id) from None
+        ds = _recording(where, path, ds_id)
+        if ds is None:
+            try:
+                ds = registry.get(ds_id)
+            except ReplayError as e:
+                raise where.error("id", str(e), ds_id) from None
+        else:
+            ds_id = ds.id
         tasks = entry.get("tasks", [ds.default_task or "position"])
         if not tasks:
             raise where.error("tasks", "empty list of tasks")
@@ -204,17 +222,20 @@ def load(path) -> Campaign:
         first = entry.get("first")
         if first is not None and first < 1:
             raise where.error("first", f"must be at least 1 (got {first})")
-        if ds.kind == "file" and registry.locate(ds, data_dir) is None:
+        if ds.kind == "file" and ds.manifest and registry.locate(ds, data_dir) is None:
             raise where.error("id", f"dataset {ds_id} not found (set data_dir in [campaign], pass "
                                     f"--data-dir, or run `replay datasets fetch {ds_id}`)", ds_id)
-        ds_params = entry.get("params", {})
+        ds_params = dict(entry.get("params", {}))
+        if isinstance(ds_params.get("mapping"), str) and (path.parent / ds_params["mapping"]).is_file():
+            ds_params["mapping"] = str((path.parent / ds_params["mapping"]).resolve())  # relative to this file
         if ds.kind == "sim":
             check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, ds_params)
         try:
-            ds_params = _plain(registry.check_params(ds, ds_params))
+            ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
         except ReplayError as e:
             raise where.error(next(iter(ds_params), "params"), str(e)) from None
-        ds_entries.append((ds_id, ds_params, first, tasks))
+        recorded = _recorded(where, entry, ds_id, ds_params, first, data_dir, ds.adapter)
+        ds_entries.append((ds_id, ds_params, first, tasks, recorded))
 
     flt_entries = []
     for entry in filters:
@@ -245,15 +266,67 @@ def load(path) -> Campaign:
                 raise where.error(name, f"filter {name!r}: {e}", name) from None
             flt_entries.append((name, _plain(flt.params())))
 
+    if not flt_entries and not any(e[4] for e in ds_entries):
+        raise where.error("filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with "
+                                    "recorded estimates)")
     configs = []
-    for ds_id, ds_params, first, tasks in ds_entries:
+    for ds_id, ds_params, first, tasks, recorded in ds_entries:
         for t in tasks:
             tp = task_params.get(t, {})
             try:
                 canonical = _plain(make_task(t, **tp).params())
             except ReplayError as e:
                 raise where.error(t, str(e), t) from None
-            for name, fp in flt_entries:
+            rows = flt_entries + [(RECORDED + k, v) for k, v in recorded.items()]
+            for name, fp in rows:
                 configs.append(Config(ds_id, ds_params, first, t, canonical, name, fp, seed,
                                       alignment, threshold))
     return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs)
+
+
+def _recording(where, path: Path, ds_id: str):
+    """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): a
+    stand-in Dataset (``manifest`` empty, ``file`` the absolute path); None for a registered id."""
+    from replay import registry
+
+    if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
+        return None
+    file = (path.parent / ds_id).resolve()
+    if not file.exists():
+        raise where.error("id", f"no such recording {file}", ds_id)
+    try:
+        adapter = registry.adapter_for(file)
+    except ReplayError as e:
+        raise where.error("id", str(e), ds_id) from None
+    return registry.Dataset(id=str(file), kind="file", adapter=adapter, file=str(file))
+
+
+def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapter) -> dict:
+    """{name: association parameters} of the recorded estimates a dataset entry scores: those
+    named in ``recorded``, else every estimate its mapping declares (bags adapter only)."""
+    declared = {}
+    if adapter == "bags":
+        try:
+            if ds_params.get("mapping") is not None:
+                from replay.adapters.bags import resolve_mapping
+
+                declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
+            else:  # the proposed mapping: read the recording
+                from replay.pipeline import load_frame
+
+                frame = load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
+                                    "adapter": None}, 0, data_dir)
+                declared = {k: e.params for k, e in frame.estimates.items()}
+        except ReplayError as e:
+            raise where.error("params", str(e)) from None
+    chosen = entry.get("recorded", list(declared))
+    out = {}
+    for name in chosen:
+        if not isinstance(name, str) or name not in declared:
+            raise where.error("recorded", f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
+                                          f"declare: {', '.join(declared) or 'none'})", name)
+        try:
+            out[name] = _plain(recorded_params(name, None, declared[name]))
+        except ReplayError as e:
+            raise where.error("recorded", str(e), name) from None
+    return out

@@ -10,6 +10,10 @@ A **job** is a block of runs of one configuration, ``runs [b*batch, (b+1)*batch)
 less those already stored; :func:`execute_job` is :func:`replay.pipeline.run_block`
 — the pipeline ``replay eval`` runs too — and never raises: a run that fails
 comes back with ``status = "failed"`` and its error.
+
+A recorded estimate's configuration (``recorded:<name>``, :mod:`replay.campaign.spec`)
+has one unit, run 0: :func:`replay.pipeline.run_block` computes only that run of a
+job (:func:`replay.pipeline.runs_of`) and returns no record for the others.
 """
 from __future__ import annotations
 

@@ -13,6 +13,10 @@ option, the parameter, what it accepts and the value given:
   and the dataset's declarations when they are known;
 * :func:`check_config`: the whole configuration at once, before any data is
   read, with every parameter made canonical (defaults filled in).
+
+Recorded estimates (``[estimates]`` of a bag mapping) are named in ``--filters``
+as ``recorded:<name>`` (:func:`split_filters`) and take ``-p
+recorded:<name>.t_max_diff=...`` / ``t_offset`` (:data:`replay.pipeline.RECORDED_PARAMS`).
 """
 from __future__ import annotations
 
@@ -55,6 +59,35 @@ def _suggest(name: str, known) -> str:
     return f" (did you mean {near[0]}?)" if near else ""
 
 
+def split_filters(names) -> tuple[list, list | None]:
+    """``--filters`` items -> (offline filters, recorded estimates to score).
+
+    ``none`` alone: no offline filter. ``recorded:<name>`` items choose the recorded
+    estimates (``recorded:none``: none of them); without any, every estimate the
+    mapping declares is scored (``None``).
+    """
+    from replay.pipeline import RECORDED, is_recorded
+
+    names = list(names)
+    if not names:
+        raise ReplayError("--filters: no filter named")
+    offline = [n for n in names if not is_recorded(n)]
+    chosen = [n for n in names if is_recorded(n)]
+    if "none" in offline:
+        if offline != ["none"]:
+            raise ReplayError(f"--filters: 'none' (no offline filter) cannot be listed with filters "
+                              f"({', '.join(n for n in offline if n != 'none')})")
+        offline = []
+    for n in chosen:
+        if n == RECORDED or (n == f"{RECORDED}none" and len(chosen) > 1):
+            raise ReplayError(f"--filters {n!r}: expected recorded:<name> (an [estimates] name of the mapping) "
+                              "or recorded:none alone")
+    if len(set(names)) != len(names):
+        raise ReplayError(f"--filters: a name is listed twice ({', '.join(names)})")
+    recorded = None if not chosen else [] if chosen == [f"{RECORDED}none"] else chosen
+    return offline, recorded
+
+
 def filter_params(items, filters) -> dict:
     """``["pf.n_particles=500", ...]`` -> ``{"pf": {"n_particles": 500}}``, checked against the
     declarations of the filters named in ``filters`` (the ``--filters`` list)."""
@@ -64,10 +97,20 @@ def filter_params(items, filters) -> dict:
     out: dict = {}
     for item in items:
         key, value = parse(item, "-p")
-        name, dot, param = key.partition(".")
+        name, dot, param = key.rpartition(".") if key.startswith("recorded:") else key.partition(".")
         if not dot or not name or not param:
             raise ReplayError(f"-p {item}: expected FILTER.NAME=VALUE, e.g. "
                               f"{(filters or ['pf'])[0]}.{param or key}={_text(value)}")
+        if name.startswith("recorded:"):  # a recorded estimate: its association parameters
+            from replay.pipeline import RECORDED_PARAMS
+
+            if any(f.startswith("recorded:") for f in filters) and name not in filters:
+                raise ReplayError(f"-p {item}: {name!r} is not in --filters ({', '.join(filters)})")
+            given = out.setdefault(name, {})
+            if param in given:
+                raise ReplayError(f"-p {name}.{param}: given twice ({_text(given[param])} and {_text(value)})")
+            given[param] = check_one(RECORDED_PARAMS, param, value, f"recorded estimate {name[9:]!r}")
+            continue
         if name not in FILTERS:
             raise ReplayError(f"-p {item}: unknown filter {name!r}{_suggest(name, FILTERS)} "
                               f"(known: {', '.join(sorted(FILTERS))})")
@@ -142,10 +185,8 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     from replay.filters import make_filter
     from replay.tasks import make_task
 
-    filters = list(filters)
-    if not filters:
-        raise ReplayError("--filters: no filter named")
-    extra = [n for n in (filter_params or {}) if n not in filters]
+    filters = [n for n in filters if not n.startswith("recorded:")]  # recorded: checked with the frame
+    extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
     if extra:
         raise ReplayError(f"-p {extra[0]}: filter {extra[0]!r} is not in --filters ({', '.join(filters)})")
     dparams = registry.check_params(dataset, dataset_params or {}, adapter=adapter)
