@@ -29,7 +29,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from replay.pipeline import config_hash
+from replay.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
 
 from . import board
@@ -61,8 +61,10 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
         stored += len(good)
         have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
         damaged.extend((h, r, bad[r]) for r in sorted(bad))
+        wanted = set(runs_of(c, range(campaign.runs)))  # a recorded estimate: run 0 only
         for start in range(0, campaign.runs, campaign.batch):
-            runs = [r for r in range(start, min(start + campaign.batch, campaign.runs)) if r not in have]
+            runs = [r for r in range(start, min(start + campaign.batch, campaign.runs))
+                    if r in wanted and r not in have]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
     return jobs, damaged, stored
