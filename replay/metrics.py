@@ -163,6 +163,7 @@ def run_metrics(problem, est, alignment: str = "none", divergence_threshold: flo
     pos = list(problem.position_index)
     P = est.P[:, pos][:, :, pos]
     nees_k = nees(err, P)
+    m["nees_dof"] = len(pos)  # degrees of freedom of the position NEES (the task's position axes)
     ok = np.isfinite(err).all(axis=1)
     est_pos = np.where(ok[:, None], est.x[:, pos], np.nan)
     ref = np.where(ok[:, None], problem.truth_position, np.nan)

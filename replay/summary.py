@@ -70,7 +70,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
                     if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")})
         row["lost"] = agg["lost"] if any(r["metrics"].get("lost") is not None for r in ok) or not ok else ""
         row["lost_share"] = lost_share([r["metrics"] for r in ok])
-        row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok]))
+        dof = ok[0]["metrics"].get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
+        row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
     row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=agg["us_per_step"],
                alignment=cfg["alignment"], version=version, config_hash=h)
     return row
@@ -106,14 +107,15 @@ def consistency_cell(row, prefix: str = "anees") -> str:
         return "nan"
 
 
-def ensemble(cols: list[dict]) -> dict:
-    """ANEES (3-D position) and ANIS over the runs' per-step ``nees``, ``nis``, ``nis_dof``."""
+def ensemble(cols: list[dict], nees_dof: int = 3) -> dict:
+    """ANEES (position NEES with ``nees_dof`` degrees of freedom: the task's position axes) and
+    ANIS over the runs' per-step ``nees``, ``nis``, ``nis_dof``."""
     out = {k: "" if k.endswith("_flag") else float("nan") for k in ENSEMBLE}
     if not cols:
         return out
     n = min(len(c["nees"]) for c in cols)
     nees = np.stack([c["nees"][:n] for c in cols])
-    out.update(metrics.consistency(nees, 3 if nees.size else 0, "anees"))
+    out.update(metrics.consistency(nees, nees_dof if nees.size else 0, "anees"))
     nis = np.stack([c["nis"][:n] for c in cols])
     out.update(metrics.consistency(nis, cols[0]["nis_dof"][:n], "anis"))
     return out

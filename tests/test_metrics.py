@@ -162,3 +162,16 @@ def test_collapsed_consistency_printed_as_word():
 
     assert consistency_cell({"anees": float("nan"), "anees_flag": "collapsed"}) == "collapsed"
     assert consistency_cell({"anees": 3.14159, "anees_flag": "consistent"}) == "3.14"
+
+
+def test_anees_band_uses_the_tasks_position_dimension():
+    """A 1-D task's NEES is chi2(1): its band and verdict use 1 degree of freedom, not 3."""
+    from replay.summary import ensemble
+
+    rng = np.random.default_rng(4)
+    cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)}
+            for _ in range(40)]
+    one = ensemble(cols, nees_dof=1)
+    assert one["anees_flag"] == "consistent" and abs(one["anees"] - 1) < 0.05
+    assert one["anees_lo"] < 1 < one["anees_hi"] < 1.5
+    assert ensemble(cols, nees_dof=3)["anees_flag"] == "pessimistic"  # the old hard-coded 3 misjudged it
