@@ -78,7 +78,7 @@ def leaderboard(dirs, sort, out):
 @click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
               help="Where to write the PNGs and report.html (default: DIR/report).")
 def report(dir, out):
-    """Plots (trajectory, error over time, RMSE, NEES/NIS) and one self-contained HTML page."""
+    """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report
 
     path = make_report(Path(dir), Path(out) if out else None)
