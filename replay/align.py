@@ -18,6 +18,17 @@ parameters between two point patterns", IEEE TPAMI 13(4), eq. 38-42:
 
 The yaw case is the same problem restricted to rotations about z: with centred
 horizontal coordinates, yaw = atan2(sum (a_x b_y - a_y b_x), sum (a_x b_x + a_y b_y)).
+
+For trajectories (:mod:`replay.trajectory`, ``replay score``), as evo does it:
+
+* ``scale`` — scale only (evo's ``-s`` without ``-a``): c of the Sim(3) fit, R = I, t = 0;
+* ``n_to_align`` — the transform is fitted on the first N pairs only and applied to all
+  (evo's ``--n_to_align``);
+* ``strict`` — a point set whose cross-covariance has rank below d - 1 (all points on one
+  spot or, for the horizontal yaw fit, all on one vertical line) leaves the rotation
+  undetermined and is refused (evo raises there too) instead of returning some rotation;
+* :func:`origin` — the rigid transform taking the first estimated pose onto the first
+  reference pose (evo's ``--align_origin``): R = R_b0 R_a0', t = p_b0 - R p_a0.
 """
 from __future__ import annotations
 
@@ -26,6 +37,7 @@ import numpy as np
 from replay.util.errors import ReplayError
 
 ALIGNMENTS = ("none", "yaw", "se3", "sim3")
+TRAJECTORY_ALIGNMENTS = (*ALIGNMENTS, "scale")  # accepted by align(); the ATE column offers ALIGNMENTS
 
 
 def umeyama(a: np.ndarray, b: np.ndarray, with_scale: bool = False):
@@ -55,16 +67,53 @@ def yaw_align(a: np.ndarray, b: np.ndarray):
     return R, mu_b - R @ mu_a, 1.0
 
 
-def align(a: np.ndarray, b: np.ndarray, method: str = "none"):
-    """Transform (R, t, c) of ``method`` (one of :data:`ALIGNMENTS`) taking ``a`` onto ``b``."""
-    if method not in ALIGNMENTS:
-        raise ReplayError(f"alignment {method!r}: expected one of {', '.join(ALIGNMENTS)}")
+def align(a: np.ndarray, b: np.ndarray, method: str = "none", *, n_to_align: int | None = None,
+          strict: bool = False):
+    """Transform (R, t, c) of ``method`` (one of :data:`TRAJECTORY_ALIGNMENTS`) taking ``a`` onto ``b``,
+    fitted on the first ``n_to_align`` rows (all when None); ``strict`` refuses a degenerate fit."""
+    if method not in TRAJECTORY_ALIGNMENTS:
+        raise ReplayError(f"alignment {method!r}: expected one of {', '.join(TRAJECTORY_ALIGNMENTS)}")
+    a, b = np.asarray(a, float), np.asarray(b, float)
     d = a.shape[1]
-    if method == "none" or len(a) < 2:
+    if n_to_align is not None:
+        if n_to_align < 1:
+            raise ReplayError(f"n_to_align {n_to_align}: expected a positive number of poses")
+        a, b = a[:n_to_align], b[:n_to_align]
+    if method == "none":
+        return np.eye(d), np.zeros(d), 1.0
+    if strict:
+        check_rank(a, b, method)
+    elif len(a) < 2:
         return np.eye(d), np.zeros(d), 1.0
     if method == "yaw":
         return yaw_align(a, b)
-    return umeyama(a, b, with_scale=method == "sim3")
+    R, t, c = umeyama(a, b, with_scale=method in ("sim3", "scale"))
+    if method == "scale":
+        return np.eye(d), np.zeros(d), c
+    return R, t, c
+
+
+def check_rank(a: np.ndarray, b: np.ndarray, method: str) -> None:
+    """Refuse (ReplayError) a point set on which ``method`` is undetermined (see the module docstring)."""
+    n, d = a.shape
+    if n < 2:
+        raise ReplayError(f"{method} alignment needs at least 2 poses, got {n}")
+    if method == "yaw":
+        spread = np.ptp(a[:, :2], axis=0).max(initial=0) * np.ptp(b[:, :2], axis=0).max(initial=0)
+        if not spread > 0:
+            raise ReplayError("yaw alignment is undetermined: the aligned poses do not move horizontally")
+        return
+    sigma = (b - b.mean(axis=0)).T @ (a - a.mean(axis=0)) / n
+    D = np.linalg.svd(sigma, compute_uv=False)
+    if np.count_nonzero(D > np.finfo(float).eps) < d - 1:
+        raise ReplayError(f"{method} alignment is undetermined: the {n} aligned positions lie on a line or "
+                          "a point (cross-covariance of rank < 2)")
+
+
+def origin(R_a0: np.ndarray, p_a0: np.ndarray, R_b0: np.ndarray, p_b0: np.ndarray):
+    """(R, t, 1) taking the pose (R_a0, p_a0) onto (R_b0, p_b0): origin alignment."""
+    R = np.asarray(R_b0, float) @ np.asarray(R_a0, float).T
+    return R, np.asarray(p_b0, float) - R @ np.asarray(p_a0, float), 1.0
 
 
 def apply(R, t, c, a):

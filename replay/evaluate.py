@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 import replay
-from replay import registry, summary
+from replay import registry, score, summary
 from replay.filters import make_filter
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
@@ -61,6 +61,7 @@ class Evaluation:
     rows: list = field(default_factory=list)  # leaderboard rows, in --filters order
     baseline: str | None = None
     notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
+    units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.score.units)
 
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
@@ -144,7 +145,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
-                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes)
+                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
+                      score.units(p0))
 
 
 def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):
@@ -204,7 +206,7 @@ def command_line(config: dict) -> str:
 
 def manifest(ev: Evaluation) -> dict:
     return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
-            "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report,
+            "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
             "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results}}
 
 

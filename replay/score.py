@@ -61,6 +61,17 @@ def score_run(problem, est) -> dict:
     return m
 
 
+def units(problem) -> dict:
+    """The unit of each RMSE metric :func:`score_run` gives: position axes in the task's
+    ``position_unit`` (m), angles in rad, extra states as the task declares them."""
+    out = {"pos_rmse": problem.position_unit}
+    out.update({f"{a}_rmse": problem.position_unit for a in problem.axis_names})
+    out.update({f"{a}_rmse": "rad" for a in problem.truth_angles})
+    out.update({f"{a}_rmse": getattr(problem, "extra_units", {}).get(a, "?")
+                for a in getattr(problem, "truth_extra", {})})
+    return out
+
+
 def ci95(values) -> float:
     """Half-width of the 95 % Student-t interval of the mean of ``values``."""
     v = np.asarray(values, float)

@@ -16,7 +16,7 @@ from replay.evaluate import evaluate
 
 def _eval(tmp_path, *args):
     out = tmp_path / "o"
-    r = CliRunner().invoke(main, ["eval", "sim/ungm", "--task", "ungm", "--runs", "3", "-o", str(out), *args])
+    r = CliRunner().invoke(main, ["eval", "sim/ungm", "--task", "ungm", "--runs", "3", "-o", str(out), "--force", *args])
     return r, out
 
 

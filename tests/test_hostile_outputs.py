@@ -143,17 +143,29 @@ def test_read_only_mount_refused(tmp_path, monkeypatch):
         subprocess.run(["umount", "-l", str(mnt)], check=True)
 
 
+def test_new_runs_go_to_new_numbered_directories(tmp_path):
+    """Without --out, each eval gets the next runs/<dataset>/<task>/NNN; latest points to it."""
+    for _ in range(2):
+        assert_ok(["eval", *SIM, "--runs", "1"], cwd=tmp_path)
+    base = tmp_path / "runs" / "sim_ungm" / "ungm"
+    assert sorted(p.name for p in base.iterdir()) == ["001", "002", "latest"]
+    assert (base / "latest").resolve() == (base / "002").resolve()
+    assert (base / "001" / "manifest.json").is_file() and (base / "002" / "manifest.json").is_file()
+
+
 def test_eval_output_replaced_and_report_goes_with_it(tmp_path):
     """The positive counterpart: an eval set (with a `replay report` inside) and a set written
     before markers existed are replaced as a whole; an empty directory is used."""
     assert_ok(["eval", *SIM, "--runs", "1", "-o", "run"], cwd=tmp_path)
     (tmp_path / "run" / "report").mkdir()
     (tmp_path / "run" / "report" / "report.html").write_text("<html/>")
-    assert_ok(["eval", *SIM, "--runs", "2", "-o", "run"], cwd=tmp_path)
+    assert_refused(["eval", *SIM, "--runs", "2", "-o", "run"], r"--out run: holds an earlier replay eval "
+                   r"output; pass --force", cwd=tmp_path)  # never replaced silently
+    assert_ok(["eval", *SIM, "--runs", "2", "-o", "run", "--force"], cwd=tmp_path)
     assert not (tmp_path / "run" / "report").exists()
     assert json.loads((tmp_path / "run" / "manifest.json").read_text())["config"]["runs"] == 2
     (tmp_path / "run" / ".replay-output.json").unlink()  # as written by earlier versions
-    assert_ok(["eval", *SIM, "--runs", "3", "-o", "run"], cwd=tmp_path)
+    assert_ok(["eval", *SIM, "--runs", "3", "-o", "run", "--force"], cwd=tmp_path)
     assert (tmp_path / "run" / ".replay-output.json").is_file()
     (tmp_path / "empty").mkdir()
     assert_ok(["eval", *SIM, "--runs", "1", "-o", "empty"], cwd=tmp_path)

@@ -40,7 +40,10 @@ def main():
 @click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
 @click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
 @click.option("--out", "-o", default=None, type=click.Path(),
-              help="Output directory (default: runs/<dataset>/<task>), replaced as a whole.")
+              help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
+                   "with runs/<dataset>/<task>/latest pointing to it).")
+@click.option("--force", is_flag=True, help="Replace --out if it holds an earlier replay eval output "
+              "(never anything else).")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option("--param", "-p", "params", multiple=True,
@@ -64,11 +67,11 @@ def main():
               help="Position error (m) beyond which a run counts as diverged (default: none).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None):
+             divergence_threshold=None, force=False):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
-    from replay.outputs.files import check_output, eval_inputs, format_table, write_all
+    from replay.outputs.files import check_output, eval_inputs, format_table, mark_latest, new_run_dir, write_all
     from replay.pipeline import default_task
 
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
@@ -84,8 +87,12 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     # the output set is checked before the computation (inputs, writable, space, ownership)
     task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                 dataset_params=dparams, seed=seed)
-    out = Path(out) if out else Path("runs") / dataset.replace("/", "_").replace("\\", "_") / task
-    check_output(out, eval_inputs(dataset, data_dir, mapping), "--out")
+    numbered = out is None
+    out = new_run_dir(dataset, task) if numbered else Path(out)
+    check_output(out, eval_inputs(dataset, data_dir, mapping), "--out")  # inputs, ownership, space
+    if not numbered and not force and out.is_dir() and any(out.iterdir()):
+        raise ReplayError(f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
+                          "or leave out --out for a new numbered directory")
     for opt, path in (("--mcap", mcap_out), ("--ros2-bag", ros2_out)):
         if path and (Path(path).resolve().is_relative_to(out.resolve())
                      or out.resolve().is_relative_to(Path(path).resolve())):
@@ -105,6 +112,8 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     for note in ev.notes:
         click.echo(note)
     paths = write_all(ev, out, what="--out")
+    if numbered:
+        mark_latest(out)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
     if mcap_out or ros2_out:
         from replay.cli.bags import export_outputs
@@ -160,6 +169,9 @@ def _register_optional():
 
     main.add_command(inspect_cmd)
     main.add_command(export_cmd)
+    from replay.cli.score import score_cmd
+
+    main.add_command(score_cmd)
     from replay.cli.campaign import COMMANDS as campaign_commands
 
     for cmd in campaign_commands:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -54,10 +55,13 @@ def format_table(ev: Evaluation) -> str:
                      if k in cfg["task_params"])
     title = (f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}"
              + (f"  first={cfg['first']}" if cfg["first"] else ""))
-    note = ("RMSE: mean over runs of per-run RMSE (m, rad), ± half-width of the 95 % interval; median: "
-            "median over runs of the position RMSE (m)\n"
-            "anees: mean position NEES over runs and steps (3 if consistent; 'collapsed' when the "
-            "covariance has shrunk to nothing)\n"
+    unit = ev.units or {}
+    shown = ", ".join(f"{k} {unit[k]}" for k in metrics if k in unit)
+    note = ("RMSE: mean over runs of per-run RMSE, ± half-width of the 95 % interval; median: "
+            f"median over runs of the position RMSE ({unit.get('pos_rmse', 'm')})\n"
+            f"units: {shown}{', ' if shown else ''}us/step µs per step (1 = dimensionless)\n"
+            "anees: mean position NEES over runs and steps (about the number of position axes if "
+            "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
             f"diverged: numerical failure (left out of the means); lost: the track was lost "
             f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
             "kept in the means); * = lost runs make up most of the mean")
@@ -148,3 +152,35 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
     return {"leaderboard": out / "leaderboard.csv", "manifest": out / "manifest.json",
             "estimates": out / "estimates"}
+
+
+def readable_name(dataset: str) -> str:
+    """A directory name for a dataset: a registered id with ``/`` as ``_`` (``bohai_20220822_0_6``),
+    a file or bag directory by its name without suffix (``ROS_example``)."""
+    p = Path(dataset)
+    if p.exists() or p.suffix.lower() in (".csv", ".bag", ".mcap", ".db3", ".log", ".txt"):
+        name = p.name if p.is_dir() else p.stem
+    else:
+        name = dataset.replace("/", "_").replace("\\", "_")
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._") or "dataset"
+
+
+def new_run_dir(dataset: str, task: str, root: Path = Path("runs")) -> Path:
+    """The next numbered directory ``runs/<dataset>/<task>/NNN`` (001, 002, ...): a new run never
+    replaces an earlier one. ``latest`` beside them points to the newest (see :func:`mark_latest`)."""
+    base = root / readable_name(dataset) / task
+    taken = [int(p.name) for p in base.glob("[0-9][0-9][0-9]*") if p.name.isdigit()] if base.is_dir() else []
+    return base / f"{max(taken, default=0) + 1:03d}"
+
+
+def mark_latest(out: Path) -> None:
+    """Point ``<out's parent>/latest`` at ``out`` (a relative symbolic link, swapped atomically)."""
+    link = out.parent / "latest"
+    tmp = out.parent / f".latest.{os.getpid()}.tmp"
+    try:
+        if tmp.is_symlink():
+            tmp.unlink()
+        os.symlink(out.name, tmp)
+        os.replace(tmp, link)
+    except OSError:  # a file system without symbolic links: the numbered directory is enough
+        tmp.unlink(missing_ok=True)

@@ -2,7 +2,10 @@
 
 A task turns a :class:`replay.frame.Frame` into a :class:`Problem`: the model,
 the measurement array the filters see, the prior, and — kept for the scorer
-only — the truth. ``TASKS`` maps task names to "module:Class". Every task
+only — the truth. ``TASKS`` maps task names to "module:Class" (a
+:class:`replay.util.plugins.Registry`: the built-in tasks, the ``replay.tasks``
+entry points of installed distributions, and ``"module:Class"`` names; a plugin task
+is a subclass of :class:`Task` defining ``build``, ``docs/plugins.md``). Every task
 declares its parameters (``PARAMS``, :mod:`replay.util.params`): they are
 checked strictly when the task is made, before any data is read.
 
@@ -23,8 +26,15 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 from replay.util.params import Declared, Param
+from replay.util.plugins import Registry, class_problem
 
-TASKS = {
+
+def _check(obj):
+    """What keeps ``obj`` from being a task, or None."""
+    return class_problem(obj, Task, "replay.tasks.Task", (("build",),))
+
+
+TASKS = Registry("task", {
     "position": "replay.tasks.position:PositionTask",
     "sonar": "replay.tasks.sonar:SonarTask",
     "ungm": "replay.tasks.ungm:UNGMTask",
@@ -32,7 +42,7 @@ TASKS = {
     "depth": "replay.tasks.depth:DepthTask",
     "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
     "formation": "replay.tasks.formation:FormationTask",
-}
+}, check=_check)
 
 
 @dataclass
@@ -56,6 +66,8 @@ class Problem:
     lost_steps: int = 10
     inputs: dict = field(default_factory=dict)  # what the task used: input -> "channel (source)"
     notes: list = field(default_factory=list)  # one-line notices (e.g. an optional input not found)
+    position_unit: str = "m"  # unit of the position axes ("1": dimensionless, e.g. UNGM)
+    extra_units: dict = field(default_factory=dict)  # truth_extra name -> unit (e.g. speed: m/s)
 
 
 class Task(Declared):

@@ -90,6 +90,6 @@ class DepthTask(Task):
                        angles, {"pitch": 2} if angles else {},
                        params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if Qgiven is None else "user",
                                "R": R.tolist(), "T": med},
-                       truth_extra=extra,
+                       truth_extra=extra, extra_units={"speed": "m/s"},
                        inputs={**{n: describe(frame, n) for n in CHANNELS},
                                **{f"reference {n}": describe(frame, n, "reference") for n in frame.reference}})

@@ -41,4 +41,5 @@ class UNGMTask(Task):
         z = np.where(ch.valid[:, None], ch.values, np.nan)
         x0 = np.asarray(meta.get("initial_state", [0.0]), float)
         return Problem(model, z, x0, np.array([[self.p0]]), frame.t, ref.values, ref.valid.copy(),
-                       (0,), ("x",), params={"q": q, "r": r, "growth": g, "p0": self.p0})
+                       (0,), ("x",), params={"q": q, "r": r, "growth": g, "p0": self.p0},
+                       position_unit="1")  # UNGM is dimensionless

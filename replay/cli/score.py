@@ -1,0 +1,180 @@
+"""``replay score REFERENCE ESTIMATE...``: score recorded trajectories as evo_ape / evo_rpe do.
+
+Registered in :mod:`replay.cli.main` (``main.add_command(score_cmd)``). The numbers come from
+:mod:`replay.trajectory`; the CSV has the leaderboard schema of :mod:`replay.summary`.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+
+from replay.util.errors import ReplayError
+
+ALIGN_TITLES = {"none": "(not aligned)", "se3": "(with SE(3) Umeyama alignment)",
+                "sim3": "(with Sim(3) Umeyama alignment)", "scale": "(scale corrected)",
+                "yaw": "(with yaw-only (4-DoF) alignment)"}
+REL_TITLES = {"trans": "translation part", "rot": "rotation part", "full": "full transformation",
+              "angle_deg": "rotation angle in degrees", "angle_rad": "rotation angle in radians",
+              "point_distance": "point distance", "point_distance_error_ratio": "point distance error ratio"}
+DELTA_UNITS = {"f": "frames", "m": "m", "d": "deg", "r": "rad", "s": "s"}
+
+
+def _resolve_align(align, a_flag, s_flag) -> str:
+    flags = "sim3" if a_flag and s_flag else "se3" if a_flag else "scale" if s_flag else None
+    if align and flags and align != flags:
+        given = "-as" if a_flag and s_flag else "-a" if a_flag else "-s"
+        raise ReplayError(f"--align {align} and {given} ({flags}) disagree: give one")
+    return align or flags or "none"
+
+
+def _name(spec: str, taken: set) -> str:
+    from replay.trajectory.io import split
+
+    path, topic = split(spec)
+    base = topic.lstrip("/") if topic else path.stem
+    name, k = base, 2
+    while name in taken:
+        name, k = f"{base}#{k}", k + 1
+    taken.add(name)
+    return name
+
+
+def _block(title: str, stats: dict) -> str:
+    return title + "\n\n" + "".join(f"{k:>10}\t{v:.6f}\n" for k, v in sorted(stats.items()))
+
+
+def _title(kind: str, rel: str, opts: dict) -> str:
+    from replay.trajectory.pose_error import UNITS
+
+    unit = UNITS[rel] or "unit-less"
+    t = f"{kind} w.r.t. {REL_TITLES[rel]} ({unit})"
+    if kind == "RPE":
+        t += (f"\nfor delta = {opts['delta']:g} ({DELTA_UNITS[opts['delta_unit']]}) using "
+              f"{'all' if opts['all_pairs'] else 'consecutive'} pairs")
+    if not (opts["align"] == "none" and opts["align_origin"]):
+        t += "\n" + ALIGN_TITLES[opts["align"]]
+    if opts["align"] != "none" and opts["n_to_align"]:
+        t += f" (aligned poses: {opts['n_to_align']})"
+    if opts["align_origin"]:
+        t += "\n(with origin alignment)"
+    return t
+
+
+@click.command("score")
+@click.argument("reference")
+@click.argument("estimates", nargs=-1, required=True)
+@click.option("--align", type=click.Choice(["none", "yaw", "se3", "sim3", "scale"]), default=None,
+              help="Alignment of each estimate onto the reference: none (default, as evo), yaw (4-DoF), se3, "
+                   "sim3, scale (scale only).")
+@click.option("-a", "a_flag", is_flag=True, help="evo's -a: SE(3) alignment (-as: Sim(3)).")
+@click.option("-s", "--correct-scale", "--correct_scale", "s_flag", is_flag=True,
+              help="evo's -s: correct the scale (alone: scale only; with -a: Sim(3)).")
+@click.option("--n-to-align", "--n_to_align", "n_to_align", type=click.IntRange(1), default=None,
+              help="Fit the alignment on the first N matched poses only (default: all).")
+@click.option("--align-origin", "--align_origin", "align_origin", is_flag=True,
+              help="Move each estimate so that its first pose is the reference's first pose.")
+@click.option("--t-max-diff", "--t_max_diff", "t_max_diff", type=click.FloatRange(0), default=0.01,
+              show_default=True, help="Largest stamp difference (s) of an associated pose pair.")
+@click.option("--t-offset", "--t_offset", "t_offset", type=float, default=0.0, show_default=True,
+              help="Constant offset (s) added to the estimates' stamps before association.")
+@click.option("-r", "--pose-relation", "--pose_relation", "relations", multiple=True,
+              type=click.Choice(["trans", "rot", "full", "angle_deg", "angle_rad", "point_distance",
+                                 "point_distance_error_ratio", "trans_part", "rot_part"]),
+              help="Pose relation (repeatable; default trans): evo's -r.")
+@click.option("--rpe", is_flag=True, help="Also compute the RPE (implied by --delta).")
+@click.option("-d", "--delta", type=click.FloatRange(0, min_open=True), default=None,
+              help="RPE pose distance (default 1) in --delta-unit.")
+@click.option("-u", "--delta-unit", "--delta_unit", "delta_unit", type=click.Choice(["f", "m", "d", "r", "s"]),
+              default="f", show_default=True, help="f frames, m metres, d degrees, r radians, s seconds.")
+@click.option("-t", "--delta-tol", "--delta_tol", "delta_tol", type=click.FloatRange(0), default=0.1,
+              show_default=True, help="Relative delta tolerance of --all-pairs (m, d, r, s).")
+@click.option("--all-pairs", "--all_pairs", "all_pairs", is_flag=True,
+              help="RPE over all pairs at the delta instead of consecutive ones.")
+@click.option("--pairs-from-reference", "--pairs_from_reference", "pairs_from_reference", is_flag=True,
+              help="Choose the RPE pairs on the reference instead of the estimate.")
+@click.option("--format", "fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,
+              help="Format of the trajectory files (default: from the extension and the first line).")
+@click.option("--kitti-times", type=click.Path(dir_okay=False), default=None,
+              help="Stamps of KITTI poses, one per line (default: times.txt beside them).")
+@click.option("--columns", default=None,
+              help="Columns of a plain CSV, e.g. t=time,x=px,y=py,z=pz,qx=qx,qy=qy,qz=qz,qw=qw (or roll/pitch/yaw).")
+@click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default="s", show_default=True,
+              help="Unit of the CSV time column.")
+@click.option("--lost-threshold", type=click.FloatRange(0, min_open=True), default=None,
+              help="Count the track as lost when the unaligned position error exceeds this (m) ...")
+@click.option("--lost-steps", type=click.IntRange(1), default=10, show_default=True,
+              help="... for this many consecutive matched poses.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Write a trajectory + error plot (png, pdf, svg).")
+@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
+              help="Write the leaderboard CSV (the schema of replay eval).")
+def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
+              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, fmt, kitti_times, columns, time_unit,
+              lost_threshold, lost_steps, plot_path, out):
+    """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
+
+    Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
+    directory or .mcap and a topic of nav_msgs/Odometry, PoseStamped, PoseWithCovarianceStamped,
+    TransformStamped, nav_msgs/Path (last message) or NavSatFix), or RECORDING:tf:PARENT->CHILD.
+    """
+    import replay
+    from replay.pipeline import config_hash
+    from replay.summary import columns as leaderboard_columns
+    from replay.trajectory import io, row_metrics, score
+    from replay.util.files import check_writable, refuse_overlap, write_csv
+
+    method = _resolve_align(align, a_flag, s_flag)
+    relations = list(dict.fromkeys(relations or ["trans"]))
+    want_rpe = rpe or delta is not None or all_pairs
+    if "point_distance_error_ratio" in relations and not want_rpe:
+        raise ReplayError("-r point_distance_error_ratio is an RPE relation: add --rpe")
+    inputs = [io.split(s)[0] for s in (reference, *estimates)] + ([Path(kitti_times)] if kitti_times else [])
+    for path, what in ((out, "--out"), (plot_path, "--plot")):
+        if path:
+            refuse_overlap(path, inputs, what)
+            check_writable(path, what)
+    opts = dict(fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
+    taken = set()
+    names = [_name(reference, set())] + [_name(spec, taken) for spec in estimates]
+    ref, *ests = io.load_all([reference, *estimates], names=names, **opts)
+    scores, rows = {}, []
+    settings = dict(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
+                    t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
+                    delta_unit=delta_unit, all_pairs=all_pairs, rel_tol=delta_tol,
+                    pairs_from_reference=pairs_from_reference)
+    for spec, name, est in zip(estimates, names[1:], ests):
+        s = score(ref, est, **settings)
+        scores[name] = s
+        click.echo(f"{name} vs {ref.name}: {len(s.reference)} of {len(est)} poses matched (reference: {len(ref)} "
+                   f"poses; t_max_diff {t_max_diff:g} s{f', t_offset {t_offset:g} s' if t_offset else ''})"
+                   + (f"; scale {s.transform[2]:.6f}" if method in ("sim3", "scale") else ""))
+        for rel in s.ape:
+            click.echo(_block(_title("APE", rel, settings), s.stats("ape", rel)))
+        for rel in s.rpe:
+            click.echo(_block(_title("RPE", rel, settings), s.stats("rpe", rel)))
+        cfg = {"reference": reference, "estimate": spec, **settings}
+        row = {"dataset": io.label(reference), "task": "trajectory", "filter": f"recorded:{name}",
+               "label": f"recorded:{name}", "params": json.dumps({"source": spec}, sort_keys=True),
+               "runs": 1, "diverged": 0, "failed": 0, "seed": "", "first": ""}
+        row.update(row_metrics(s, lost_threshold=lost_threshold, lost_steps=lost_steps))
+        row.update(us_per_step=math.nan, alignment=method + ("+origin" if align_origin else ""),
+                   version=replay.__version__, config_hash=config_hash(cfg))
+        rows.append(row)
+    if len(rows) > 1:
+        rel = relations[0]
+        click.echo(f"{'estimate':<24} {'matched':>8} {'APE ' + rel + ' rmse':>22}"
+                   + (f" {'RPE ' + rel + ' rmse':>22}" if want_rpe else ""))
+        for row in rows:
+            click.echo(f"{row['filter'][9:]:<24} {row['matched']:>8} {row.get(f'ape_{rel}_rmse', math.nan):>22.6f}"
+                       + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if want_rpe else ""))
+    if out:
+        write_csv(rows, Path(out), leaderboard_columns(rows))
+        click.echo(f"leaderboard: {out}")
+    if plot_path:
+        from replay.trajectory import plot
+
+        plot.write(plot_path, ref, scores, relation=relations[0])
+        click.echo(f"plot: {plot_path}")

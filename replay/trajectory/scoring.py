@@ -1,0 +1,150 @@
+"""Score an estimated trajectory against a reference: association, alignment, APE/RPE, row metrics.
+
+:func:`score` runs, in evo's order: time association
+(:func:`replay.trajectory.associate.associate`), alignment of the matched estimate onto the
+matched reference (:func:`replay.align.align`: ``none``, ``yaw``, ``se3``, ``sim3`` or
+``scale``, fitted on the first ``n_to_align`` pairs; or origin alignment, which excludes the
+others as in evo), then the APE for each pose relation and, when ``delta`` is given, the RPE
+(:mod:`replay.trajectory.pose_error`).
+
+:func:`row_metrics` turns a result into leaderboard cells with the meaning they have for the
+offline filters (:mod:`replay.summary`, one run): ``pos_rmse``, ``x_rmse``..``z_rmse``,
+``final_err``, ``drift_pct``, ``nees`` and ``lost`` on the estimate **as recorded** (matched
+poses, no alignment), ``ate`` = translation APE RMSE **after** the alignment; and beside
+them evo's statistics ``ape_<relation>_<stat>``, ``rpe_<relation>_<stat>``, per-axis RMSE after
+alignment ``ape_x_rmse``.., ``rpe_drift_pct`` (mean over pairs of the RPE translation as % of
+the reference path length of the pair), ``matched``, ``scale`` (Sim(3)/scale alignment).
+Where the estimate records a covariance, ``nees`` is the mean position NEES e' P^-1 e over
+matched poses and ``anees*`` its 95 % chi-square(3) band and share of poses inside
+(:func:`replay.metrics.consistency`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from replay import align as alignment
+from replay import metrics
+from replay.trajectory import pose_error, quat
+from replay.trajectory.associate import T_MAX_DIFF, associate
+from replay.trajectory.base import Trajectory
+from replay.util.errors import ReplayError
+
+
+@dataclass
+class Score:
+    reference: Trajectory  # matched poses
+    estimate: Trajectory  # matched poses, as recorded
+    aligned: Trajectory  # matched poses after alignment
+    transform: tuple  # (R, t, c) applied to the estimate
+    options: dict
+    ape: dict = field(default_factory=dict)  # relation -> errors (n,)
+    ape_axes: np.ndarray | None = None  # (n, 3) after alignment
+    rpe: dict = field(default_factory=dict)  # relation -> errors
+    rpe_pairs: tuple | None = None  # (i, j)
+    rpe_axes: np.ndarray | None = None
+    unmatched: int = 0  # estimate poses left without a reference pose
+
+    def stats(self, kind: str = "ape", relation: str = "trans") -> dict:
+        return pose_error.statistics((self.ape if kind == "ape" else self.rpe)[relation])
+
+
+def _align(ref: Trajectory, est: Trajectory, method: str, n_to_align, origin: bool):
+    if origin and method not in ("none", "scale"):
+        raise ReplayError(f"origin alignment and {method} alignment exclude each other (as in evo): choose one")
+    R, t, c = alignment.align(est.p, ref.p, method, n_to_align=n_to_align, strict=method != "none")
+    moved = est.transformed(R, t, c) if method != "none" else est
+    if origin:
+        if moved.q is not None and ref.q is not None:
+            R0, t0, _ = alignment.origin(quat.to_matrix(moved.q[0]), moved.p[0], quat.to_matrix(ref.q[0]), ref.p[0])
+        else:
+            R0, t0 = np.eye(3), ref.p[0] - moved.p[0]
+        moved = moved.transformed(R0, t0)
+        R, t, c = R0 @ R, R0 @ t + t0, c
+    return moved, (R, t, c)
+
+
+def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: int | None = None,
+          align_origin: bool = False, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
+          relations=("trans",), delta: float | None = None, delta_unit: str = "f", all_pairs: bool = False,
+          rel_tol: float = 0.1, pairs_from_reference: bool = False) -> Score:
+    """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring."""
+    relations = [pose_error.relation(r) for r in relations]
+    for tr in (ref, est):
+        if tr.q is None:
+            need = [f"APE {r}" for r in relations if r in pose_error.ROTATION_RELATIONS]
+            if delta is not None:
+                need += [f"RPE {r}" for r in relations if r in pose_error.RPE_NEEDS_ORIENTATION]
+                need += [f"an RPE delta in {delta_unit}"] if delta_unit in ("d", "r") else []
+            if need:
+                raise ReplayError(f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
+                                  "orientations: use -r trans for the APE and -r point_distance for the RPE")
+    i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
+    r, e = ref.take(i_ref), est.take(i_est)
+    moved, transform = _align(r, e, align, n_to_align, align_origin)
+    options = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
+                   t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
+                   rel_tol=rel_tol, pairs_from_reference=pairs_from_reference)
+    out = Score(r, e, moved, transform, options, unmatched=len(est) - len(np.unique(i_est)))
+    for rel in relations:
+        if rel != "point_distance_error_ratio":
+            out.ape[rel] = pose_error.ape(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, relation=rel)
+    out.ape_axes = pose_error.ape_axes(p_ref=r.p, p_est=moved.p)
+    if delta is not None:
+        base = r if pairs_from_reference else moved
+        i, j = pose_error.pairs(p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs,
+                                rel_tol=rel_tol)
+        out.rpe_pairs = (i, j)
+        for rel in relations:
+            out.rpe[rel], axes = pose_error.rpe(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, i=i, j=j,
+                                                relation=rel)
+            if axes is not None:
+                out.rpe_axes = axes
+    return out
+
+
+def _rmse(x) -> float:
+    x = np.asarray(x, float)
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def row_metrics(s: Score, *, lost_threshold: float | None = None, lost_steps: int = 10) -> dict:
+    """Leaderboard cells of one scored estimate (module docstring)."""
+    err = s.estimate.p - s.reference.p
+    norm = np.linalg.norm(err, axis=1)
+    dist = metrics.path_length(s.reference.p)
+    row = {"pos_rmse": _rmse(norm), "x_rmse": _rmse(err[:, 0]), "y_rmse": _rmse(err[:, 1]), "z_rmse": _rmse(err[:, 2]),
+           "ate": _rmse(np.linalg.norm(s.ape_axes, axis=1)), "final_err": float(norm[-1]),
+           "drift_pct": 100.0 * float(norm[-1]) / dist if dist > 0 else float("nan"), "nees": float("nan"),
+           "nis": float("nan")}
+    row["pos_rmse_median"] = row["pos_rmse"]
+    lost = metrics.lost_track(norm, lost_threshold, lost_steps)
+    row["lost"] = "" if lost is None else int(lost)
+    row["lost_share"] = float("nan") if lost is None else float(lost)
+    cov = s.estimate.cov
+    if cov is not None:
+        nees = metrics.nees(err, cov[:, :3, :3])
+        if np.isfinite(nees).any():
+            row["nees"] = float(np.nanmean(nees))
+        row.update({k: v for k, v in metrics.consistency(nees[None, :], 3, "anees").items()})
+    for rel, e in s.ape.items():
+        row.update({f"ape_{rel}_{k}": v for k, v in pose_error.statistics(e).items()})
+    for axis, k in zip("xyz", range(3)):
+        row[f"ape_{axis}_rmse"] = _rmse(s.ape_axes[:, k])
+    for rel, e in s.rpe.items():
+        row.update({f"rpe_{rel}_{k}": v for k, v in pose_error.statistics(e).items()})
+    if s.rpe_axes is not None:
+        for axis, k in zip("xyz", range(3)):
+            row[f"rpe_{axis}_rmse"] = _rmse(s.rpe_axes[:, k])
+        i, j = s.rpe_pairs
+        D = pose_error.accumulated_distances(s.reference.p)
+        seg = D[j] - D[i]
+        ok = seg > 0
+        row["rpe_drift_pct"] = float(np.mean(100.0 * np.linalg.norm(s.rpe_axes[ok], axis=1) / seg[ok])) \
+            if ok.any() else float("nan")
+    row["matched"] = len(s.reference)
+    row["unmatched"] = s.unmatched
+    row["scale"] = float(s.transform[2])
+    row["scored"], row["masked"] = len(s.reference), 0
+    return row
