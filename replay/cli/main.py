@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 import replay
+from replay.cli.examples import add_examples
 from replay.util.errors import ReplayError
 
 
@@ -179,6 +180,7 @@ def _register_optional():
 
 
 _register_optional()
+add_examples(main)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
