@@ -25,6 +25,7 @@ import numpy as np
 
 import replay
 from replay import registry, score, summary
+from replay.util.progress import particle_weight
 from replay.filters import make_filter
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
@@ -92,7 +93,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
              task_params: dict | None = None, filter_params: dict | None = None,
              dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
              divergence_threshold: float | None = None, baseline: str | None = None,
-             batch: int = BATCH, recorded=()) -> Evaluation:
+             batch: int = BATCH, recorded=(), progress=None) -> Evaluation:
     """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring).
 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
@@ -124,11 +125,17 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
     results = []
+    if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
+        progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
+                       sum(particle_weight(c.filter_params, 1 if is_recorded(c.filter) else runs) for c in configs))
     for cfg in configs:
         c, h = cfg.as_dict(), config_hash(cfg.as_dict())
         recs = []
         for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
-            recs += run_block(c, list(range(start, min(runs, start + batch))), data_dir, keep=True, strict=True)
+            block = list(range(start, min(runs, start + batch)))
+            recs += run_block(c, block, data_dir, keep=True, strict=True)
+            if progress is not None:
+                progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
         results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
                                     [r["errors"] for r in recs], [r["estimates"] for r in recs],
                                     config_hash=h, config=c, records=recs))

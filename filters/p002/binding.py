@@ -83,11 +83,12 @@ def bind(kernels):
         end = text.index("\n", at)
         text = text[:at] + "\n".join(lines) + text[end:]
         model = hashlib.sha256(repr(places).encode()).hexdigest()[:8]
-        _bound[key] = _load(f"{PREFIX}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text)
+        label = ", ".join(sorted({m.rsplit(".", 1)[-1].removesuffix("_kernels") for m, _ in places}))
+        _bound[key] = _load(f"{PREFIX}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text, label)
     return _bound[key]
 
 
-def _load(name: str, text: str):
+def _load(name: str, text: str, label: str = "a model"):
     """Import the copy ``name`` (``replay_compiled_<model>_<digest>``) holding ``text``: written
     when absent, written again when its content does not hash to ``<digest>``; older copies of
     the model pruned (module docstring)."""
@@ -103,6 +104,9 @@ def _load(name: str, text: str):
         CACHE_REPORT["rewritten"] += 1
         _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
     _prune(directory, name)
+    if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
+        _log.info("compiling the paper-002 filter kernels for %s (about 20-40 s, once per machine; "
+                  "cached for later runs)", label)
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module

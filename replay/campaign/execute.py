@@ -31,6 +31,7 @@ from pathlib import Path
 
 from replay.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
+from replay.util.progress import particle_weight
 
 from . import board
 from .lock import locked
@@ -200,7 +201,8 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
             backend, counts["backend"] = _nullcontext(_serial), "serial"
         else:
             backend, counts["backend"] = _processes(min(workers, len(jobs))), f"processes({min(workers, len(jobs))})"
-        progress = Progress(total, quiet, progress_stream)
+        weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs}
+        progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
         try:
             with backend as mapper:
                 for job, results in mapper(jobs):
@@ -208,7 +210,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
-                    progress.update(len(results), bad)
+                    progress.update(len(results), bad, weight=weights.get((job.config_hash, tuple(job.runs)), len(results)))
         finally:
             progress.close()
     counts["rows"] = board.summarise(out, hashes)

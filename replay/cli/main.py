@@ -28,6 +28,30 @@ class Main(click.Group):
 @click.version_option(replay.__version__, prog_name="replay")
 def main():
     """Replay navigation logs through state-estimation filters and score them."""
+    _notes_to_stderr()
+
+
+def _quiet(quiet: bool) -> None:
+    """``-q``: the library's notes (logger ``replay``) down to warnings."""
+    if quiet:
+        import logging
+
+        logging.getLogger("replay").setLevel(logging.WARNING)
+
+
+def _notes_to_stderr() -> None:
+    """One-line notices of the library (logger ``replay``: e.g. a one-time kernel compilation) on
+    stderr, as ``replay: note: ...``; ``-q`` of a command raises the level to warnings."""
+    import logging
+
+    log = logging.getLogger("replay")
+    if not any(getattr(h, "_replay_cli", False) for h in log.handlers):
+        h = logging.StreamHandler(sys.stderr)
+        h.setFormatter(logging.Formatter("replay: note: %(message)s"))
+        h._replay_cli = True
+        log.addHandler(h)
+        log.propagate = False
+    log.setLevel(logging.INFO)
 
 
 @main.command("eval")
@@ -45,6 +69,7 @@ def main():
                    "with runs/<dataset>/<task>/latest pointing to it).")
 @click.option("--force", is_flag=True, help="Replace --out if it holds an earlier replay eval output "
               "(never anything else).")
+@click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option("--param", "-p", "params", multiple=True,
@@ -68,7 +93,7 @@ def main():
               help="Position error (m) beyond which a run counts as diverged (default: none).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False):
+             divergence_threshold=None, force=False, quiet=False):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
@@ -102,12 +127,20 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         from replay.cli.bags import check_eval_exports
 
         check_eval_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
-    ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
-                  data_dir=data_dir, filter_params=fparams,
-                  task_params=tparams, adapter=adapter,
-                  dataset_params=dparams or None, alignment=alignment,
-                  divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded)
-    for note in ev.frame_meta.get("task_notes", []):
+    from replay.util.progress import Progress
+
+    _quiet(quiet)
+    progress = Progress(0, quiet, label="eval", unit="run")
+    try:
+        ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
+                      data_dir=data_dir, filter_params=fparams,
+                      task_params=tparams, adapter=adapter,
+                      dataset_params=dparams or None, alignment=alignment,
+                      divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded,
+                      progress=progress)
+    finally:
+        progress.close()
+    for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
         click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
     for note in ev.notes:
