@@ -2,8 +2,36 @@
 
 Every filter runs on the model protocol of :mod:`replay.model` and knows
 nothing of files, datasets or the CLI.
+
+``FILTERS`` is a :class:`replay.util.plugins.Registry`: the built-in filters below,
+filters registered in this session (``FILTERS.register``), the ``replay.filters``
+entry points of installed distributions, and any ``"module:Class"`` name. A plugin
+filter is a subclass of :class:`replay.filters.base.Filter` implementing ``engine``
+or the per-run ``predict``/``update``, with valid ``PARAMS`` (``docs/plugins.md``).
 """
-FILTERS = {
+from replay.util.params import Param  # for plugins: from replay.filters import Filter, Param
+from replay.util.plugins import Registry, class_problem
+
+PROTOCOL = ("Estimates", "Filter", "State")  # replay.filters.base, importable from here (plugins)
+__all__ = ["FILTERS", "Param", "make_filter", *PROTOCOL]
+
+
+def __getattr__(name):
+    if name in PROTOCOL:
+        from replay.filters import base
+
+        return getattr(base, name)
+    raise AttributeError(f"module 'replay.filters' has no attribute {name!r}")
+
+
+def _check(obj):
+    """What keeps ``obj`` from being a filter, or None."""
+    from replay.filters.base import Filter
+
+    return class_problem(obj, Filter, "replay.filters.base.Filter", (("engine",), ("predict", "update")))
+
+
+FILTERS = Registry("filter", {
     "kf": "replay.filters.kalman:KalmanFilter",
     "ekf": "replay.filters.kalman:EKF",
     "ukf": "replay.filters.sigma:UKF",
@@ -20,7 +48,7 @@ FILTERS = {
     "pso-cpf": "replay.filters.p002.igwo_stcpf:PSOCPF",
     "aukf": "replay.filters.p001.aukf:AUKF",
     "wf-pf": "replay.filters.p003.wfpf:WeightFactorPF",
-}
+}, check=_check)
 
 
 def make_filter(name: str, **params):

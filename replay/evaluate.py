@@ -64,6 +64,30 @@ class Evaluation:
     notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
     units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.score.units)
 
+    def leaderboard(self):
+        """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.tables`)."""
+        from replay import tables
+
+        return tables.leaderboard(self)
+
+    def estimates(self, filter: str, *, run: int | None = None):
+        """A filter's estimates as a DataFrame, one row per run and step (:mod:`replay.tables`)."""
+        from replay import tables
+
+        return tables.estimates(self, filter, run=run)
+
+    def errors(self, filter: str, *, run: int | None = None):
+        """A filter's errors against the reference as a DataFrame, one row per run and step (:mod:`replay.tables`)."""
+        from replay import tables
+
+        return tables.errors(self, filter, run=run)
+
+    def plot_errors(self, **options):
+        """Position error over time, RMSE across runs per filter: a matplotlib Figure (:mod:`replay.plots`)."""
+        from replay import plots
+
+        return plots.plot_errors(self, **options)
+
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
         evaluation (a run's seeds and numbers depend only on (seed, run))."""

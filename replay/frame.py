@@ -163,6 +163,12 @@ class Frame:
     report: Report = field(default_factory=Report)
     estimates: dict[str, RecordedEstimate] = field(default_factory=dict)
 
+    def to_pandas(self, *, reference: bool = False, masks: bool = False, time: str = "relative"):
+        """The sensor channels (``reference=True``: the reference) as a DataFrame (:mod:`replay.util.dataframes`)."""
+        from replay.util.dataframes import frame_table
+
+        return frame_table(self, reference=reference, masks=masks, time=time)
+
     def __post_init__(self):
         self.t = np.asarray(self.t, dtype=float)
         if self.t.ndim != 1:

@@ -78,7 +78,8 @@ def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
     (above: the covariance is too small), ``pessimistic`` (below) or ``collapsed``.
 
     *Collapsed*: the mean exceeds ``COLLAPSED`` times the degrees of freedom (errors of
-    more than 100 standard deviations on average) or is not finite. The covariance then
+    more than 100 standard deviations on average), is negative (a covariance that is not
+    positive definite) or is not finite. The covariance then
     says nothing about the error; its value (1e+235 has been seen) is not a measurement of
     anything, so ``<prefix>`` is set to NaN and only the flag remains.
     """
@@ -99,7 +100,7 @@ def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
         mean = float(avg.mean())
     out.update({prefix: mean, f"{prefix}_lo": float(blo), f"{prefix}_hi": float(bhi),
                 f"{prefix}_inside": float(np.mean((avg >= lo) & (avg <= hi)))})
-    if not np.isfinite(mean) or mean > COLLAPSED * d0:
+    if not np.isfinite(mean) or mean > COLLAPSED * d0 or mean < 0:  # < 0: P not positive definite
         out.update({prefix: np.nan, f"{prefix}_flag": "collapsed"})
     else:
         out[f"{prefix}_flag"] = "optimistic" if mean > bhi else "pessimistic" if mean < blo else "consistent"

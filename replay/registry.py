@@ -81,8 +81,30 @@ def manifests_dir() -> Path:
 
 
 def all_datasets(directory: str | Path | None = None) -> dict[str, Dataset]:
-    """Every dataset of every manifest, by id (manifests read once, then cached)."""
-    return dict(_read_manifests(str(Path(directory) if directory else manifests_dir())))
+    """Every dataset of every manifest, by id (manifests read once, then cached); without
+    ``directory``, also those of the ``replay.datasets`` entry points (:mod:`replay.plugins`)."""
+    out = dict(_read_manifests(str(Path(directory) if directory else manifests_dir())))
+    if directory is None:
+        out.update(_plugins()[0])
+    return out
+
+
+def plugin_problems() -> list[str]:
+    """One line per dataset plugin that cannot be used (``replay list`` prints them)."""
+    return _plugins()[1]
+
+
+def _plugins() -> tuple[dict, list]:
+    from replay.plugins import dataset_entries
+
+    entries, _, problems = dataset_entries(_read_manifests(str(manifests_dir())))
+    out, problems = {}, list(problems)
+    for ds_id, where, entry in entries:
+        try:
+            out[ds_id] = _make_dataset(where, dict(entry))
+        except ReplayError as err:
+            problems.append(str(err))
+    return out, problems
 
 
 @functools.lru_cache(maxsize=None)
@@ -147,6 +169,11 @@ def get(dataset_id: str) -> Dataset:
     known = all_datasets()
     if dataset_id in known:
         return known[dataset_id]
+    from replay.plugins import dataset_entries
+
+    conflict = dataset_entries()[1].get(dataset_id)
+    if conflict:
+        raise ReplayError(conflict)
     raise ReplayError(f"unknown dataset {dataset_id!r}{_suggest(dataset_id, known)}; "
                       "`replay datasets list` shows them all")
 
@@ -328,10 +355,10 @@ def _looks_like_lake_log(path: Path) -> bool:
 
 
 def _adapter(name: str):
-    from replay.adapters import get_adapter
+    from replay.plugins import ADAPTERS  # the built-in adapters and the plugins
 
     try:
-        return get_adapter(name)
+        return ADAPTERS.load(name)
     except ImportError as e:
         raise ReplayError(f"adapter {name} is not available: {e}") from None
 

@@ -151,6 +151,8 @@ def test_consistency_flags_collapsed_covariance_and_hides_its_number():
     assert out["anees_flag"] == "consistent" and abs(out["anees"] - 3) < 0.1
     assert consistency(good * 4, 3, "anees")["anees_flag"] == "optimistic"
     assert consistency(good / 4, 3, "anees")["anees_flag"] == "pessimistic"
+    neg = consistency(-good * 1e279, 3, "anees")           # P not positive definite: -4e+279 seen
+    assert neg["anees_flag"] == "collapsed" and np.isnan(neg["anees"])
     bad = consistency(good * 1e230, 3, "anees")            # P shrunk to nothing: 1e+230-size NEES
     assert bad["anees_flag"] == "collapsed" and np.isnan(bad["anees"])
     edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")   # just below 1e4 per dof

@@ -1,10 +1,16 @@
-"""``replay list filters|tasks|adapters|datasets|reproductions [NAME]``: what is registered, with parameters.
+"""``replay list filters|tasks|adapters|datasets|reproductions|plugins [NAME]``: what is registered.
 
 One line per entry (its name and the first sentence of its documentation, as
 plain text), then one indented line per parameter from its declaration
 (:meth:`replay.util.params.Param.describe`: ``name = default [unit]: what it
 accepts. doc``). Adapters declare no parameters: their options are read from
 the signature of their ``load`` function.
+
+Entries of other distributions (entry points, :mod:`replay.util.plugins`) end their
+line with their origin, ``(plugin: <distribution> <version>)``; a plugin that cannot be
+used is left out and named in one warning line on stderr (the others are listed).
+``replay list filters pkg.module:Class`` shows a filter that is not registered.
+``replay list plugins`` lists every plugin of the four groups and every problem.
 """
 from __future__ import annotations
 
@@ -14,7 +20,7 @@ import sys
 
 import click
 
-KINDS = ("filters", "tasks", "adapters", "datasets", "reproductions")
+KINDS = ("filters", "tasks", "adapters", "datasets", "reproductions", "plugins")
 INDENT = "    "
 
 
@@ -60,36 +66,59 @@ def _signature(func, skip=("path",)) -> list[str]:
     return lines
 
 
-def entries(kind: str) -> list[tuple[str, str, list[str]]]:
-    """``(name, one-line doc, parameter lines)`` of every entry of ``kind``."""
+def entries(kind: str, problems: list | None = None, extra: str | None = None) -> list[tuple[str, str, list[str]]]:
+    """``(name, one-line doc, parameter lines)`` of every entry of ``kind``. Plugins that cannot
+    be used are left out and their one-line problems appended to ``problems``; ``extra``: a
+    ``module:Class`` name to show too."""
+    from replay.util.errors import ReplayError
     from replay.util.lookup import resolve
 
+    problems = [] if problems is None else problems
     if kind == "datasets":
-        return _datasets()
+        return _datasets(problems)
+    if kind == "plugins":
+        return _plugins(problems)
+    if kind == "reproductions":
+        from replay.reproduce import REPRODUCTIONS
+
+        return [(n, summary(sys.modules[resolve(REPRODUCTIONS, n, "reproduction").__module__], n), [])
+                for n in sorted(REPRODUCTIONS)]
+    table, describe = _table(kind)
+    names = sorted(table) + ([extra] if extra and extra not in set(table) and extra in table else [])
+    out = []
+    for name in names:
+        try:
+            obj = resolve(table, name, kind[:-1])
+            doc, params = summary(obj, name), describe(obj)
+        except ReplayError as err:
+            if name in table.builtin:
+                raise
+            problems.append(str(err))
+            continue
+        if name not in table.builtin:
+            origin = f"plugin: {table.origin(name)}" if table.is_plugin(name) else table.origin(name)
+            doc = f"{doc} ({origin})".lstrip()
+        out.append((name, doc, params))
+    problems += [p for p in table.problems() if p not in problems]
+    return out
+
+
+def _table(kind):
+    """The registry of ``kind`` and how to list an entry's parameters."""
     if kind == "filters":
-        from replay.cli.params import filter_declarations
         from replay.filters import FILTERS
 
-        out = []
-        for name in sorted(FILTERS):
-            cls = resolve(FILTERS, name, "filter")
-            out.append((name, summary(cls, name), _declared(filter_declarations(name))))
-        return out
+        return FILTERS, lambda cls: _declared(cls.PARAMS)
     if kind == "tasks":
-        from replay.tasks import TASKS, task_class
+        from replay.tasks import TASKS
 
-        return [(n, summary(task_class(n), n), _declared(task_class(n).PARAMS)) for n in sorted(TASKS)]
-    if kind == "adapters":
-        from replay.adapters import ADAPTERS
+        return TASKS, lambda cls: _declared(cls.PARAMS)
+    from replay.plugins import ADAPTERS
 
-        return [(n, summary(f := resolve(ADAPTERS, n, "adapter"), n), _signature(f)) for n in sorted(ADAPTERS)]
-    from replay.reproduce import REPRODUCTIONS
-
-    return [(n, summary(sys.modules[resolve(REPRODUCTIONS, n, "reproduction").__module__], n), [])
-            for n in sorted(REPRODUCTIONS)]
+    return ADAPTERS, _signature
 
 
-def _datasets():
+def _datasets(problems):
     from replay import registry
 
     out = []
@@ -98,20 +127,42 @@ def _datasets():
             lines = _declared(registry.generator(ds).PARAMS)
         else:
             lines = [f"{INDENT}(a recording read by the {ds.adapter} adapter: `replay list adapters`)"]
-        out.append((ds.id, plain_text(ds.description), lines))
+        doc = plain_text(ds.description)
+        if ds.manifest.startswith("entry point of "):
+            doc += f" (plugin: {ds.manifest[len('entry point of '):].split(', ')[0]})"
+        out.append((ds.id, doc, lines))
+    problems += registry.plugin_problems()
     return out
 
 
-def render(kind: str, name: str | None = None) -> list[str]:
-    """The lines ``replay list KIND [NAME]`` prints."""
+def _plugins(problems):
+    from replay.api import plugin_rows
+
+    out = []
+    for row in plugin_rows():
+        if row["problem"]:
+            problems.append(row["problem"])
+        else:
+            out.append((row["name"], f"{row['kind']} from {row['origin']} ({row['target']})", []))
+    return out
+
+
+def render(kind: str, name: str | None = None, problems: list | None = None) -> list[str]:
+    """The lines ``replay list KIND [NAME]`` prints; the plugins' problems are appended to ``problems``."""
     from replay.util.errors import ReplayError
 
-    rows = entries(kind)
+    problems = [] if problems is None else problems
+    rows = entries(kind, problems, extra=name if name and ":" in name and kind in ("filters", "tasks") else None)
     if name is not None:
         rows = [r for r in rows if r[0] == name]
         if not rows:
             known = ", ".join(r[0] for r in entries(kind))
-            raise ReplayError(f"replay list {kind}: no {kind[:-1]} {name!r} (known: {known})")
+            mine = next((p for p in problems if repr(name) in p), None)  # a broken plugin of that name
+            if mine:
+                problems.remove(mine)
+            raise ReplayError(mine or f"replay list {kind}: no {kind[:-1]} {name!r} (known: {known or 'none'})")
+    if not rows:
+        return ["(no plugin installed)"] if kind == "plugins" else []
     width = max(len(r[0]) for r in rows) + 2
     lines = []
     for entry, doc, params in rows:
@@ -124,9 +175,17 @@ def render(kind: str, name: str | None = None) -> list[str]:
 @click.argument("what", type=click.Choice(KINDS))
 @click.argument("name", required=False)
 def list_cmd(what, name):
-    """List the registered filters, tasks, adapters, datasets or reproductions, with their parameters.
+    """List the registered filters, tasks, adapters, datasets, reproductions or plugins, with their parameters.
 
-    NAME shows one of them.
+    NAME shows one of them (for filters and tasks also a module:Class name). Entries of other
+    installed distributions show their origin; a plugin that cannot be used is named in one
+    warning line on stderr, and the others are listed.
     """
-    for line in render(what, name):
+    problems: list = []
+    try:
+        lines = render(what, name, problems)
+    finally:
+        for line in dict.fromkeys(problems):
+            click.echo(f"replay: warning: {line}", err=True)
+    for line in lines:
         click.echo(line)

@@ -97,7 +97,7 @@ def filter_params(items, filters) -> dict:
     out: dict = {}
     for item in items:
         key, value = parse(item, "-p")
-        name, dot, param = key.rpartition(".") if key.startswith("recorded:") else key.partition(".")
+        name, dot, param = key.rpartition(".") if ":" in key else key.partition(".")  # recorded:NAME, module:Class
         if not dot or not name or not param:
             raise ReplayError(f"-p {item}: expected FILTER.NAME=VALUE, e.g. "
                               f"{(filters or ['pf'])[0]}.{param or key}={_text(value)}")

@@ -1,5 +1,10 @@
 """Named plugins: the registries of filters, tasks, adapters and reproductions map
-a name to ``"module:attribute"``; modules are imported only when used."""
+a name to ``"module:attribute"``; modules are imported only when used.
+
+The registries of filters, tasks and adapters are :class:`replay.util.plugins.Registry`
+objects: besides their built-in entries they hold the entry points of other installed
+distributions and resolve ``"module:Class"`` names; :func:`resolve` defers to them.
+"""
 from __future__ import annotations
 
 from importlib import import_module
@@ -7,8 +12,10 @@ from importlib import import_module
 from replay.util.errors import ReplayError
 
 
-def resolve(table: dict, name: str, kind: str):
+def resolve(table, name: str, kind: str):
     """The object registered as ``name`` in ``table``; unknown names -> one-line ReplayError."""
+    if hasattr(table, "load"):  # a plugin registry (replay.util.plugins.Registry)
+        return table.load(name)
     try:
         module, attr = table[name].split(":")
     except KeyError:
@@ -16,7 +23,7 @@ def resolve(table: dict, name: str, kind: str):
     return getattr(import_module(module), attr)
 
 
-def instantiate(table: dict, name: str, kind: str, **params):
+def instantiate(table, name: str, kind: str, **params):
     """``resolve(...)(**params)``; a wrong parameter name -> one-line ReplayError."""
     cls = resolve(table, name, kind)
     try:

@@ -1,0 +1,228 @@
+"""The Python API, re-exported by ``replay`` (``import replay``; docs/python.md).
+
+Every function takes its subject first and the rest by keyword only. Results are the
+library's objects (:class:`replay.frame.Frame`, :class:`replay.evaluate.Evaluation`),
+with DataFrame views (:mod:`replay.tables`, :mod:`replay.util.dataframes`) and
+matplotlib figures (:mod:`replay.plots`); errors are one-line
+:class:`replay.util.errors.ReplayError`.
+
+Filters may be given as names (built-in, plugin, ``"module:Class"``), as
+:class:`replay.filters.Filter` subclasses or as instances (their declared parameters
+are used): a class is registered for this session under its ``name`` attribute (or its
+class name in lower case). Such a filter runs in this process (``evaluate``); a
+campaign's worker processes need a packaged plugin or a ``"module:Class"`` name.
+"""
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+
+from replay import registry, tables
+from replay.evaluate import DEFAULT_FILTERS
+from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
+from replay.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
+from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
+from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
+from replay.util.errors import ReplayError
+from replay.util.plugins import NAME
+
+__all__ = ["campaign_results", "evaluate", "export_mcap", "frame_table", "list_plugins", "load_frame",
+           "load_trajectory", "make_filter", "make_task", "plot_errors", "plot_paired", "plot_rmse", "plot_track",
+           "refresh_plugins", "register_filter", "register_task", "report_table", "run_campaign", "score"]
+
+
+def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, adapter: str | None = None,
+               **params):
+    """A dataset id (``"bohai/20220822_0_6"``, ``"sim/auv-sonar"``) or a file as a Frame.
+
+    ``seed`` (an int or a ``numpy.random.Generator``) draws a simulated dataset;
+    ``params`` are the simulator's parameters or the adapter's options (``replay list``).
+    """
+    return registry.load_frame(dataset, data_dir=data_dir, rng=seed, first=first, adapter=adapter, **params)
+
+
+def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, **options):
+    """Run ``filters`` on ``dataset`` and score them: an :class:`replay.evaluate.Evaluation`.
+
+    ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
+    docstring). ``options``: those of :func:`replay.evaluate.evaluate` (``task``, ``runs``,
+    ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
+    ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``.
+    """
+    from replay.evaluate import evaluate as run
+
+    names, params = filter_names(filters, filter_params)
+    return run(dataset, filters=names, filter_params=params, **options)
+
+
+def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict]:
+    """(names, filter_params) of ``filters`` given as names, classes or instances."""
+    if isinstance(filters, str):
+        filters = [f.strip() for f in filters.split(",") if f.strip()]
+    names, params = [], {k: dict(v) for k, v in (filter_params or {}).items()}
+    for item in filters:
+        if isinstance(item, str):
+            names.append(item)
+            continue
+        cls = item if inspect.isclass(item) else type(item)
+        name = register_filter(cls)
+        if not inspect.isclass(item):  # an instance: its declared parameters
+            if name in names:
+                raise ReplayError(f"filter {name!r} is given twice: evaluate runs one configuration per filter "
+                                  "(a parameter grid is a campaign: replay.run_campaign)")
+            params[name] = {**item.params(), **params.get(name, {})}
+        names.append(name)
+    return names, params
+
+
+def _register(registry_, obj, name):
+    if name is None:
+        own = obj.__dict__.get("name") if inspect.isclass(obj) else None
+        name = own if isinstance(own, str) and NAME.fullmatch(own) else obj.__name__.lower().replace("_", "-")
+    try:
+        if name in registry_ and registry_.load(name) is obj:  # already registered (built-in, plugin, session)
+            return name
+    except ReplayError:
+        pass
+    if name in registry_ and registry_.origin(name) == "registered in this session":
+        registry_.unregister(name)  # replaced (a notebook cell run again)
+    return registry_.register(name, obj)
+
+
+def register_filter(cls, *, name: str | None = None) -> str:
+    """Register a :class:`replay.filters.Filter` subclass for this session; returns its name
+    (``name``, else the class's own ``name`` attribute, else its class name in lower case)."""
+    return _register(FILTERS, cls, name)
+
+
+def register_task(cls, *, name: str | None = None) -> str:
+    """Register a :class:`replay.tasks.Task` subclass for this session; returns its name."""
+    return _register(TASKS, cls, name)
+
+
+def run_campaign(campaign, *, out, workers: int | None = None, data_dir=None, quiet: bool = True,
+                 retry_failed: bool = False):
+    """Run a campaign file (TOML, ``campaigns/example.toml``) into ``out``: its leaderboard as a
+    DataFrame (one row per configuration; ``df.attrs["counts"]``: units computed, failed, ...)."""
+    from pathlib import Path
+
+    from replay.campaign import execute, spec
+    from replay.util.files import check_writable, refuse_overlap
+
+    c = spec.load(campaign)
+    refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
+    check_writable(Path(out), "out")
+    counts = execute.run(c, Path(out), workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
+    df = _rows(counts.pop("rows"))
+    df.attrs["counts"] = counts
+    return df
+
+
+def campaign_results(out, *, runs: bool = False):
+    """A result directory (a campaign's, or a ``replay eval`` output) as one DataFrame: its
+    leaderboard rows; ``runs=True``: one row per configuration and run (a campaign's units)."""
+    from replay.campaign import board
+
+    if not runs:
+        return _rows(board.read_dir(out))
+    import pandas as pd
+
+    from replay.campaign.store import Store
+
+    store, rows = Store(out), []
+    for h, cfg in store.configs():
+        for rec in store.records(h):
+            rows.append({"dataset": cfg["dataset"], "task": cfg["task"], "filter": cfg["filter"],
+                         "params": cfg["filter_params"], "config_hash": h, "run": rec["run"],
+                         "status": rec["status"], **(rec.get("metrics") or {})})
+    return pd.DataFrame(rows)
+
+
+def _rows(rows):
+    import pandas as pd
+
+    from replay import summary
+
+    return pd.DataFrame(rows, columns=summary.columns(rows) if rows else None)
+
+
+def score(reference, estimate, **options):
+    """Score an estimated trajectory against a reference (APE, RPE): :func:`replay.trajectory.score`."""
+    from replay.trajectory import score as run
+
+    return run(reference, estimate, **options)
+
+
+def load_trajectory(source, **options):
+    """A trajectory from a file or a bag topic: :func:`replay.trajectory.load`."""
+    from replay.trajectory import load
+
+    return load(source, **options)
+
+
+def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
+    """Write run ``run`` of an evaluation (reference, each filter's track and error, the sensors)
+    as a Foxglove MCAP file; returns the number of messages. ``data_dir``: where the dataset
+    was found (the frame is read again). An existing file is replaced only if replay wrote it."""
+    from replay.outputs.export_mcap import write_mcap
+    from replay.outputs.export_safety import check_target, dataset_inputs
+    from replay.pipeline import load_frame as frame_of_run
+
+    cfg = evaluation.results[0].config
+    check_target(path, dataset_inputs(cfg["dataset"], (cfg.get("dataset_params") or {}).get("mapping"), data_dir),
+                 "mcap")
+    frame = frame_of_run(cfg, run, data_dir)
+    problem = tables.result(evaluation, evaluation.results[0].name).records[run]["problem"]
+    estimates = {}
+    for res in evaluation.results:
+        est = res.estimates[run]
+        estimates[res.name] = {"t": evaluation.t[:len(est.x)], "x": est.x, "err": res.errors[run]["position"],
+                               "P": np.diagonal(est.P, axis1=1, axis2=2)}  # as read from estimates/*.csv.gz
+    return write_mcap(path, frame, problem, estimates)
+
+
+def list_plugins():
+    """Every plugin (entry point) of the four groups, and every problem: a DataFrame with
+    ``kind, name, origin, target, problem`` (``replay list plugins`` prints the same)."""
+    import pandas as pd
+
+    return pd.DataFrame(plugin_rows(), columns=["kind", "name", "origin", "target", "problem"])
+
+
+def plugin_rows() -> list[dict]:
+    from replay.plugins import ADAPTERS, dataset_entries
+
+    rows = []
+    for kind, reg in (("filter", FILTERS), ("task", TASKS), ("adapter", ADAPTERS)):
+        for name in reg:
+            if reg.is_plugin(name):
+                try:
+                    reg.load(name)
+                    problem = ""
+                except ReplayError as err:
+                    problem = str(err)
+                rows.append({"kind": kind, "name": name, "origin": reg.origin(name), "target": reg[name],
+                             "problem": problem})
+        rows += [{"kind": kind, "name": "", "origin": "", "target": "", "problem": p} for p in reg.problems()
+                 if not any(r["problem"] == p for r in rows)]
+    found = registry.all_datasets()
+    for ds_id, where, fields in dataset_entries()[0]:
+        if ds_id in found:
+            rows.append({"kind": "dataset", "name": ds_id, "origin": where.split(", ")[0][len("entry point of "):],
+                         "target": fields.get("generator") or fields.get("file", ""), "problem": ""})
+    rows += [{"kind": "dataset", "name": "", "origin": "", "target": "", "problem": p}
+             for p in registry.plugin_problems()]
+    return rows
+
+
+def refresh_plugins() -> None:
+    """Discover the installed plugins again (after ``pip install`` in a running session)."""
+    import importlib
+
+    from replay import plugins
+
+    importlib.invalidate_caches()
+    FILTERS.refresh()
+    TASKS.refresh()
+    plugins.refresh()
