@@ -1,8 +1,10 @@
 """Export of a run: Foxglove MCAP (read back, validated by ../shared/tools/mcap-validate
 when node and its node_modules are present) and ROS 2 bag (read back); the streamed
 MCAP writer gives the same messages and chunk layout as the whole-file writer it
-replaced (a digest recorded from that writer); positions of north-east-down tasks
-are exported in east-north-up."""
+replaced (a digest recorded from that writer), and keeps those channels' messages
+unchanged now that frame transforms and covariance ellipsoids are added; positions of
+north-east-down tasks are exported in east-north-up. The new channels themselves:
+tests/test_export_foxglove.py."""
 import os
 import shutil
 import subprocess
@@ -73,6 +75,70 @@ def test_ros2_bag_read_back(run):
     est = read_estimates(run / "run" / "estimates" / "ekf.csv.gz")
     assert np.array_equal(f.channels["ekf"].values[f.channels["ekf"].valid], est["x"][:, :3])
     assert {t.type for t in bags.read(run / "ros2", []).topics.values()} == {"nav_msgs/msg/Odometry"}
+
+
+def rosbags_odometry(bag) -> dict:
+    """{topic: (n, 3) positions} of a bag's nav_msgs/Odometry messages, read and deserialised by rosbags."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    ts, got = get_typestore(Stores.ROS2_HUMBLE), {}
+    with Reader(bag) as reader:
+        for conn, _, raw in reader.messages():
+            p = ts.deserialize_cdr(raw, conn.msgtype).pose.pose.position
+            got.setdefault(conn.topic, []).append((p.x, p.y, p.z))
+    return {k: np.array(v) for k, v in got.items()}
+
+
+def uncompressed_size(run_dir, tmp_path) -> int:
+    """The size of the same odometry bag with uncompressed chunks, as the export wrote it before issue 16."""
+    from replay.adapters.bags.writer import BagOut
+    from replay.outputs.export_ros2 import _write_run
+    from replay.outputs.run_data import load_run
+
+    _write_run(BagOut(tmp_path / "plain", compression=None), load_run(run_dir))
+    return sum(p.stat().st_size for p in (tmp_path / "plain").iterdir())
+
+
+def check_compressed_bag(bag, run_dir, tmp_path, ratio=3) -> tuple[int, int]:
+    """zstd chunks and rosbag2 metadata as `ros2 bag record -s mcap` writes them, the positions read
+    back by rosbags, and at most 1/``ratio`` of the uncompressed size; returns (size, uncompressed)."""
+    from mcap.reader import make_reader
+    from ruamel.yaml import YAML
+
+    with open(bag / f"{bag.name}.mcap", "rb") as fh:
+        s = make_reader(fh).get_summary()
+    assert s.chunk_indexes and {c.compression for c in s.chunk_indexes} == {"zstd"}
+    info = YAML(typ="safe").load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert (info["storage_identifier"], info["compression_format"], info["compression_mode"]) == ("mcap", "", "")
+    got = rosbags_odometry(bag)
+    for name in [n for n in ("ekf", "ukf") if f"/replay/{n}/odom" in got]:
+        est = read_estimates(run_dir / "estimates" / f"{name}.csv.gz")
+        ok = np.isfinite(est["x"][:, :2]).all(axis=1)
+        np.testing.assert_array_equal(got[f"/replay/{name}/odom"][:, :2], est["x"][ok, :2])
+    size, plain = sum(p.stat().st_size for p in bag.iterdir()), uncompressed_size(run_dir, tmp_path)
+    assert size * ratio <= plain, (size, plain)
+    return size, plain
+
+
+def test_ros2_bag_compressed_as_ros2_bag_writes_it(run, tmp_path):
+    check_compressed_bag(run / "ros2", run / "run", tmp_path)
+
+
+@pytest.mark.slow
+def test_test1_ros2_bag_a_third_of_the_uncompressed_size(shared_dir, tmp_path):
+    """The issue's acceptance: the test1 export (robot_localization, gps-odom) reads back with rosbags
+    and is at most 1/3 of the size the export had before (uncompressed chunks, 51.9 MB with the four
+    default filters); measured: 5.0 MB."""
+    bag = shared_dir / "datasets" / "bags" / "robot_localization" / "test1.bag"
+    mapping = Path(__file__).resolve().parents[1] / "docs" / "mappings" / "rl_test1.toml"
+    res = CliRunner().invoke(main, ["eval", str(bag), "--mapping", str(mapping), "--task", "gps-odom", "-f", "ekf",
+                                    "-o", str(tmp_path / "r"), "--ros2-bag", str(tmp_path / "bag")],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    size, plain = check_compressed_bag(tmp_path / "bag", tmp_path / "r", tmp_path)
+    assert plain > 10e6 and size < plain / 5
+    validate(tmp_path / "bag" / "bag.mcap")
 
 
 def test_geodetic_export_location_fix(shared_dir, tmp_path):
@@ -153,18 +219,38 @@ def record_digest(path) -> str:
     return h.hexdigest()
 
 
-# recorded from the whole-file writer (commit 58d5cb4, before the export was streamed):
-# write_mcap(synthetic_run()) with 64 KiB zstd chunks, 21,530 messages in 44 chunks
-REFERENCE_DIGEST = "d837e632b5254277d97a36d4b7d835ff99657914150a6fd41704d53213fbac9b"
+def old_channels_digest(path) -> str:
+    """sha256 of the messages (topic, times, bytes, in file order) of the channels an export had
+    before the frame-transform and covariance channels (issue 16)."""
+    import hashlib
+
+    from mcap.reader import make_reader
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for _, ch, m in make_reader(fh).iter_messages(log_time_order=False):
+            if not ch.topic.endswith(("/tf", "/covariance", "/tf_static")):
+                h.update(b"%s,%d,%d,%d," % (ch.topic.encode(), m.log_time, m.publish_time, len(m.data)) + m.data)
+    return h.hexdigest()
+
+
+# write_mcap(synthetic_run()) with 64 KiB zstd chunks: the messages of the channels an export
+# had before issue 16 (pose, path, error, sensors; 21,530), recorded at commit ae9ecba, whose
+# record digest equalled that of the whole-file writer (commit 58d5cb4)
+OLD_CHANNELS_DIGEST = "c767eaea1642e144982ed393c02fe13c0a6c3e8e244702b73b086ecc5fd1ffb6"
+# and the whole file with the tf, covariance and /tf_static channels (40,243 messages, 89 chunks),
+# recorded when they were added: the streamed writer must keep giving it for any window
+REFERENCE_DIGEST = "f23a9000f5d6a6729fc2e182a5e62928ed86e4bf9de60414c6c9054fee9ff973"
 
 
 @pytest.mark.parametrize("window", [1 << 16, 500])
-def test_streamed_export_matches_the_whole_file_writer(tmp_path, window):
+def test_streamed_export_keeps_the_old_channels_and_the_file(tmp_path, window):
     from replay.outputs.export_mcap import write_mcap
 
     frame, problem, est = synthetic_run()
     path = tmp_path / "s.mcap"
-    assert write_mcap(path, frame, problem, est, chunk_size=1 << 16, window=window) == 21530
+    assert write_mcap(path, frame, problem, est, chunk_size=1 << 16, window=window) == 40243
+    assert old_channels_digest(path) == OLD_CHANNELS_DIGEST
     assert record_digest(path) == REFERENCE_DIGEST
     assert [p.name for p in tmp_path.iterdir()] == ["s.mcap"]  # no temporary left
 
@@ -184,8 +270,8 @@ def test_window_does_not_change_the_file_and_bounds_what_is_held(tmp_path, monke
     monkeypatch.setattr(mcap_bulk.BulkWriter, "flush", spy)
     write_mcap(tmp_path / "win.mcap", frame, problem, est, window=2000)
     assert (tmp_path / "win.mcap").read_bytes() == (tmp_path / "whole.mcap").read_bytes()
-    assert sum(held) == 21530 and len(held) > 10
-    assert max(held) <= 2000 + 9 * 26  # a window, plus at most 9 messages per channel (window cut times)
+    assert sum(held) == 40243 and len(held) > 10
+    assert max(held) <= 2000 + 9 * 21  # a window, plus at most 9 messages per channel (21; window cut times)
 
 
 def test_ned_task_exported_in_enu():

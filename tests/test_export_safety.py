@@ -134,7 +134,7 @@ def test_file_size_limit_refused_in_one_line_old_kept(plain_run, tmp_path, flag,
     target = tmp_path / name
     assert_ok(["export", plain_run, flag, target])
     before = digest(target)
-    res = child("", ["export", plain_run, flag, target], limit=30_000)
+    res = child("", ["export", plain_run, flag, target], limit=10_000)  # the zstd bag: 27 kB
     lines = res.stderr.strip().splitlines()
     assert res.returncode == 2 and len(lines) == 1, res.stderr
     assert f"replay: error: {flag} {target}: cannot write: File too large" in lines[0]

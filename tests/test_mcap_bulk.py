@@ -169,3 +169,23 @@ def test_bulk_writer_refuses_going_back_in_time(tmp_path):
     with pytest.raises(ValueError, match="before the first flush"):
         w.register_channel("/y", "json", 1)
     w.close()
+
+
+def test_bulk_writer_metadata_indexed(tmp_path):
+    path = tmp_path / "m.mcap"
+    w = BulkWriter(path)
+    cid = w.register_channel("/x", "json", w.register_schema("s", "jsonschema", b"{}"), {"sigma": "3"})
+    w.add_metadata("replay.manifest", {"manifest.json": '{"é": 1}\n'})
+    w.add_messages(cid, [10, 20], [b"{}", b"{}"])
+    assert w.finish() == 2
+    with open(path, "rb") as fh:
+        reader = make_reader(fh)
+        s = reader.get_summary()
+        assert s.statistics.metadata_count == 1 and [m.name for m in s.metadata_indexes] == ["replay.manifest"]
+        assert [(m.name, m.metadata) for m in reader.iter_metadata()] == [("replay.manifest",
+                                                                          {"manifest.json": '{"é": 1}\n'})]
+        assert s.channels[cid].metadata == {"sigma": "3"}
+        fh.seek(0)
+        kinds = [type(r).__name__ for r in StreamReader(fh, validate_crcs=True).records]
+    assert kinds.index("Metadata") < kinds.index("Message") and "MetadataIndex" in kinds
+    validate(path)

@@ -24,12 +24,18 @@ class BagOut:
     ``path`` must not exist: nothing is ever replaced here (an export writes into a
     hidden temporary directory and swaps it in, ``replay.outputs.export_safety``).
     ``custom_data`` (str -> str) goes into ``metadata.yaml`` (rosbag2 ``custom_data``).
+    ``compression="zstd"``: the MCAP chunks are zstd-compressed, as ``ros2 bag record -s mcap``
+    writes them (the storage's own compression: ``metadata.yaml`` keeps an empty
+    ``compression_format``/``compression_mode``, any MCAP reader opens the file); ``None``:
+    uncompressed chunks.
     """
 
-    def __init__(self, path, custom_data: dict | None = None):
-        from rosbags.rosbag2 import StoragePlugin, Writer
+    def __init__(self, path, custom_data: dict | None = None, compression: str | None = None):
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
         from rosbags.rosbag2.errors import WriterError
 
+        if compression not in (None, "zstd"):
+            raise ValueError(f"compression {compression!r}: zstd or None")
         path = Path(path)
         if path.exists() or path.is_symlink():
             raise ReplayError(f"{path}: exists; a ROS 2 bag is written to a new directory only")
@@ -38,6 +44,8 @@ class BagOut:
         self.T = self.ts.types
         try:
             self.w = Writer(path, version=8, storage_plugin=StoragePlugin.MCAP)
+            if compression:
+                self.w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             for key, value in (custom_data or {}).items():
                 self.w.set_custom_data(key, value)
             self.w.open()

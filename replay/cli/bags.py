@@ -69,40 +69,68 @@ def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_
         check_export_targets(mcap_out, ros2_out, [out_dir] + dataset_inputs(dataset, mapping, data_dir))
 
 
-def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None) -> None:
-    """Export an evaluation directory as a Foxglove MCAP and/or a ROS 2 bag.
+def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: int = 0, select=None,
+                   sigma=None) -> None:
+    """Export one run of an evaluation directory (or of a campaign's configurations chosen by
+    ``select``) as a Foxglove MCAP and/or a ROS 2 bag.
 
     Both targets are checked before the run is loaded (once, for both exports), and
     again against the dataset file the load resolved; each is written to a hidden
     temporary beside it and moved into place when complete.
     """
-    from replay.outputs.export_mcap import write_mcap
+    from replay.outputs.export_mcap import write_run_mcap
     from replay.outputs.export_ros2 import write_run_ros2
     from replay.outputs.export_safety import run_inputs
     from replay.outputs.run_data import load_run
 
     inputs = run_inputs(run_dir, data_dir)
     check_export_targets(mcap_out, ros2_out, inputs)
-    run = load_run(run_dir, data_dir)
-    check_export_targets(mcap_out, ros2_out, inputs + [run["frame"].meta.get("path")])
+    loaded = load_run(run_dir, data_dir, run=run, select=select)
+    check_export_targets(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
+    tracks = ", ".join(loaded["estimates"])
     if mcap_out:
-        n = write_mcap(mcap_out, run["frame"], run["problem"], run["estimates"])
-        click.echo(f"wrote {mcap_out} ({n} messages)")
+        n = write_run_mcap(loaded, mcap_out, sigma=sigma)
+        click.echo(f"wrote {mcap_out} ({n} messages; run {loaded['run']}: {tracks})")
     if ros2_out:
-        n = write_run_ros2(run, ros2_out)
-        click.echo(f"wrote {ros2_out}/ ({n} messages)")
+        n = write_run_ros2(loaded, ros2_out)
+        click.echo(f"wrote {ros2_out}/ ({n} messages; run {loaded['run']}: {tracks})")
 
 
-@click.command("export")
+EXAMPLES = """\b
+Examples:
+  replay export runs/sim_auv-sonar/sonar --mcap sonar.mcap
+  replay export runs/test1 --run 0 --mcap test1.mcap --ros2-bag test1_bag --sigma 2
+  replay export runs/campaign-example --dataset sim/auv-sonar --run 3 --mcap auv-run3.mcap
+  replay export runs/campaign-example --dataset bohai/20220822_0_6 --filter ekf,ukf --ros2-bag bohai_bag
+"""
+
+
+@click.command("export", epilog=EXAMPLES)
 @click.argument("run_dir", type=click.Path())
 @click.option("--mcap", "mcap_out", default=None, type=click.Path(),
-              help="Foxglove MCAP to write (poses, paths, errors, sensor data); replaces only an MCAP replay wrote.")
+              help="Foxglove MCAP to write (poses, paths, frame transforms, covariance ellipsoids, errors, sensor "
+                   "data, the manifest as metadata); replaces only an MCAP replay wrote.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
-              help="ROS 2 bag directory (MCAP storage) with nav_msgs/Odometry per filter and the reference; "
-                   "replaces only a bag replay wrote.")
+              help="ROS 2 bag directory (MCAP storage, zstd chunks) with nav_msgs/Odometry per filter and the "
+                   "reference; replaces only a bag replay wrote.")
+@click.option("--run", "run", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Which Monte Carlo run to export (a recorded estimate has run 0 only, shown in every run).")
+@click.option("--dataset", default=None, help="Campaign: the configurations of this dataset id (comma-separated list).")
+@click.option("--task", default=None, help="Campaign: the configurations of this task.")
+@click.option("--filter", "filter_", default=None, help="Campaign: only these filters (comma-separated).")
+@click.option("--config", default=None,
+              help="Campaign: only the configurations whose hash (units/<hash>) starts with one of these (comma-separated).")
+@click.option("--sigma", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
-def export_cmd(run_dir, mcap_out, ros2_out, data_dir):
-    """Export a `replay eval` output directory for Foxglove (MCAP) or `ros2 bag play`."""
+def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir):
+    """Export one run of a `replay eval` output directory, or of a campaign's result directory, for
+    Foxglove (MCAP) or `ros2 bag play`.
+
+    A campaign export holds the configurations that ran on the same measurements (one dataset and
+    task); choose them with --dataset, --task, --filter and --config when it holds several.
+    """
     if not (mcap_out or ros2_out):
         raise ReplayError("export: give --mcap FILE and/or --ros2-bag DIR")
-    export_outputs(run_dir, mcap_out, ros2_out, data_dir=data_dir)
+    export_outputs(run_dir, mcap_out, ros2_out, data_dir=data_dir, run=run, sigma=sigma,
+                   select={"dataset": dataset, "task": task, "filter": filter_, "config": config})

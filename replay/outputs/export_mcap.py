@@ -1,6 +1,7 @@
-"""Export an evaluation (``replay eval`` output directory) as one Foxglove MCAP.
+"""Export an evaluation (``replay eval`` output directory, or one configuration set and run
+of a campaign) as one Foxglove MCAP.
 
-Reads the run with ``replay.outputs.run_data.load_run`` (manifest, run 0 of the
+Reads the run with ``replay.outputs.run_data.load_run`` (the manifest, one run of the
 estimates, the dataset reloaded and the task problem rebuilt for the reference; no
 filter is run again).
 
@@ -13,11 +14,21 @@ publish time = the sample's time, ``meta["t0_ns"]`` or ``epoch`` + ``t``):
 | ``/replay/<filter>/path`` | foxglove.PosesInFrame | the whole estimated trajectory, one message at the first time |
 | ``/replay/<filter>/fix`` | foxglove.LocationFix | the estimate in WGS 84 (geodetic data only: meta crs + origin) |
 | ``/replay/<filter>/error`` | JSON ``{ex, ey[, ez], norm}`` | position error vs the reference (m), scored steps |
-| ``/replay/reference/pose``, ``/path``, ``/fix`` | as above | the reference where valid |
+| ``/replay/<filter>/tf`` | foxglove.FrameTransform | ``map -> <filter>/base_link`` at every pose |
+| ``/replay/<filter>/covariance`` | foxglove.SceneUpdate | the position covariance ellipsoid (sigma scale in the channel metadata) |
+| ``/replay/reference/pose``, ``/path``, ``/fix``, ``/tf`` | as above | the reference where valid |
 | ``/sensors/<channel>`` | JSON ``{<component>: value}`` | every sensor channel of the frame at its valid samples |
+| ``/tf_static`` | foxglove.FrameTransform | identity ``map -> enu``, once at the first time |
 
-Frame id of poses and paths: ``"enu"`` (the local east-north-up frame; a
-north-east-down task's positions and heading are converted, ``run_data.enu_axes``).
+Frames (``replay.outputs.foxglove_scene``): ``map`` is the root, the local east-north-up
+frame; the pose, path and fix channels keep their frame id ``"enu"``, the same frame
+(``/tf_static``); each track's body is ``<track>/base_link``. A north-east-down task's
+positions and heading are converted (``run_data.enu_axes``). A recorded estimate
+(``recorded:<name>``) is exported as a filter (position only).
+
+Metadata records: ``replay.manifest`` holds the run's manifest as written
+(``manifest.json``; for a campaign, ``campaign.toml`` and each selected ``config.json``),
+``replay.export`` what was exported (source, run, tracks, sigma scale, frames).
 
 Messages are encoded many at a time (``replay.outputs.pb_columns`` for protobuf,
 ``json_rows`` for JSON) and written by ``replay.outputs.mcap_bulk.BulkWriter``
@@ -32,11 +43,11 @@ import json
 
 import numpy as np
 
-from replay.outputs.run_data import (enu_axes, enu_yaw, heading_index, load_run, ned, read_estimates, time_ns,
-                                     to_enu)
+from replay.outputs.run_data import (enu_axes, enu_yaw, load_run, ned, read_estimates, time_ns, to_enu,
+                                     track_index)
 from replay.util.errors import ReplayError
 
-__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap"]
+__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap", "write_run_mcap"]
 
 FRAME_ID = "enu"
 
@@ -79,11 +90,11 @@ class McapOut:
         self.schemas, self.channels, self.count, self.window = {}, {}, 0, window
         self.plans: list[tuple] = []  # (channel id, sorted times, message order, encode)
 
-    def proto_channel(self, topic, message_class) -> int:
+    def proto_channel(self, topic, message_class, metadata=None) -> int:
         name = message_class.DESCRIPTOR.full_name
         if name not in self.schemas:
             self.schemas[name] = self.w.register_schema(name, "protobuf", file_descriptor_set(message_class))
-        return self._channel(topic, self.schemas[name], "protobuf")
+        return self._channel(topic, self.schemas[name], "protobuf", metadata)
 
     def json_channel(self, topic, properties: list[str]) -> int:
         key = "json:" + ",".join(properties)
@@ -92,10 +103,10 @@ class McapOut:
             self.schemas[key] = self.w.register_schema("replay.Values", "jsonschema", json.dumps(schema).encode())
         return self._channel(topic, self.schemas[key], "json")
 
-    def _channel(self, topic, schema_id, encoding) -> int:
+    def _channel(self, topic, schema_id, encoding, metadata=None) -> int:
         if topic in self.channels:
             raise ReplayError(f"export: topic {topic} written twice")
-        self.channels[topic] = self.w.register_channel(topic, encoding, schema_id)
+        self.channels[topic] = self.w.register_channel(topic, encoding, schema_id, metadata)
         return self.channels[topic]
 
     def plan(self, channel_id, t_ns, encode, big: bool = False) -> None:
@@ -150,6 +161,12 @@ def _quat_yaw(yaw):
     return np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)])
 
 
+def _yaw_quat(yaw):
+    """Quaternions of yaws; a NaN yaw (none estimated) -> identity."""
+    y = np.asarray(yaw, float)
+    return _quat_yaw(np.where(np.isfinite(y), y, 0.0))
+
+
 def _stamp(ns) -> dict:
     sec, nanos = np.divmod(np.asarray(ns, np.int64), 1_000_000_000)
     return {"timestamp.seconds": sec, "timestamp.nanos": nanos}
@@ -164,8 +181,9 @@ def _pose_fields(pos3, quat, prefix="") -> dict:
 PATH_BLOCK = 1 << 14  # poses encoded at a time into a path message
 
 
-def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
-    """Pose, path and (geodetic data) fix channels of one track at rows ``ok``.
+def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None) -> None:
+    """Pose, path, (geodetic data) fix and (``body``: a frame name) transform channels of one
+    track at rows ``ok``.
 
     ``pos(rows)``, ``yaw(rows)``: ENU positions (n, 3) and yaws (NaN: none) of those
     rows, taken when a window is written (no copy of the whole track is kept).
@@ -183,9 +201,7 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     t = ns[idx]
 
     def rows(sel):  # ENU positions and yaw quaternions of messages sel
-        p = pos(idx[sel])
-        y = np.asarray(yaw(idx[sel]), float)
-        return p, _quat_yaw(np.where(np.isfinite(y), y, 0.0))
+        return pos(idx[sel]), _yaw_quat(yaw(idx[sel]))
 
     def poses(sel):
         p, q = rows(sel)
@@ -213,6 +229,10 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta) -> None:
     out.plan(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], path, big=True)
     if geo_meta:
         out.plan(out.proto_channel(f"{prefix}/fix", LocationFix), t, fixes)
+    if body:
+        from replay.outputs.foxglove_scene import plan_transforms
+
+        plan_transforms(out, f"{prefix}/tf", body, ns, pos, lambda rows: _yaw_quat(yaw(rows)), ok)
 
 
 def json_rows(values, names) -> list[bytes]:
@@ -249,8 +269,9 @@ def _error_rows(err):
     return get
 
 
-def export_run(run_dir, mcap_path, data_dir=None) -> int:
-    """Write the run in ``run_dir`` as a Foxglove MCAP; returns the number of messages.
+def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sigma=None) -> int:
+    """Write one run of ``run_dir`` (an eval output or a campaign, ``select``: see
+    ``run_data.load_run``) as a Foxglove MCAP; returns the number of messages.
 
     Refused before anything is read or written: a target that is an input of the run
     (or inside one), or an existing file not written by replay (``export_safety``).
@@ -259,38 +280,73 @@ def export_run(run_dir, mcap_path, data_dir=None) -> int:
 
     inputs = run_inputs(run_dir, data_dir)
     check_target(mcap_path, inputs, "mcap")
-    run = load_run(run_dir, data_dir)
-    check_target(mcap_path, inputs + [run["frame"].meta.get("path")], "mcap")
-    return write_mcap(mcap_path, run["frame"], run["problem"], run["estimates"])
+    loaded = load_run(run_dir, data_dir, run=run, select=select)
+    check_target(mcap_path, inputs + [loaded["frame"].meta.get("path")], "mcap")
+    return write_run_mcap(loaded, mcap_path, sigma=sigma)
+
+
+def write_run_mcap(run: dict, mcap_path, sigma=None) -> int:
+    """The MCAP of a loaded run (``run_data.load_run``), with its manifest as metadata."""
+    return write_mcap(mcap_path, run["frame"], run["problem"], run["estimates"], sigma=sigma,
+                      metadata={"replay.manifest": run.get("manifest", {}),
+                                "replay.export": export_info(run, sigma)})
+
+
+def export_info(run: dict, sigma=None) -> dict:
+    """The ``replay.export`` metadata: what was exported from where."""
+    import replay
+    from replay.outputs.foxglove_scene import ROOT, SIGMA
+
+    return {"source": str(run.get("source", "")), "run": str(run.get("run", 0)),
+            "tracks": json.dumps(["reference", *run["estimates"]]), "sigma": f"{sigma or SIGMA:g}",
+            "frames": json.dumps({"root": ROOT, "poses": FRAME_ID, "body": "<track>/base_link"}),
+            "replay_version": replay.__version__}
 
 
 def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str = "zstd",
-               chunk_size: int = 4 << 20, window: int = 1 << 16) -> int:
-    """Estimates ``{filter: {t, x, err}}`` of one run, the reference and the sensors -> MCAP.
+               chunk_size: int = 4 << 20, window: int = 1 << 16, sigma=None, metadata=None) -> int:
+    """Estimates ``{filter: {t, x, P, err}}`` of one run, the reference and the sensors -> MCAP.
 
+    ``sigma``: the scale of the covariance ellipsoids (default ``foxglove_scene.SIGMA``);
+    ``metadata``: ``{record name: {key: text}}`` written as MCAP Metadata records.
     Written to a hidden temporary file beside ``mcap_path`` and renamed over it when
     complete; an existing ``mcap_path`` is replaced only if replay wrote it.
     """
+    from replay.outputs import foxglove_scene as scene
     from replay.outputs.export_safety import staged_file
 
+    sigma = scene.SIGMA if sigma is None else float(sigma)
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ReplayError(f"export: --sigma {sigma:g}: the ellipsoid scale must be a positive number")
     geo = frame.meta if frame.meta.get("crs") and frame.meta.get("origin") else None
     ns_frame = time_ns(frame, frame.t)
-    pidx = list(problem.position_index)
-    hidx, axes_enu, is_ned = heading_index(problem), enu_axes(problem), ned(problem)
+    axes_enu, is_ned = enu_axes(problem), ned(problem)
+    colours = scene.colours(estimates)
     with staged_file(mcap_path, "--mcap") as tmp:
         out = McapOut(tmp, compression=compression, chunk_size=chunk_size, window=window, name=mcap_path)
+        for name, data in (metadata or {}).items():
+            out.w.add_metadata(name, data)
+        starts = [ns_frame[:1]] + [time_ns(frame, e["t"][:1]) for e in estimates.values()]
+        scene.plan_static(out, int(np.concatenate(starts).min()), FRAME_ID)
         ref = np.asarray(problem.truth_position, float)
         ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
         no_yaw = lambda rows: np.full(len(rows), np.nan)  # noqa: E731
-        _plan_track(out, "/replay/reference", ns_frame, lambda rows: to_enu(ref[rows], axes_enu), no_yaw, ok, geo)
+        _plan_track(out, "/replay/reference", ns_frame, lambda rows: to_enu(ref[rows], axes_enu), no_yaw, ok, geo,
+                    scene.body_frame("reference"))
         axes = [f"e{a}" for a in problem.axis_names]
         for name, est in estimates.items():
             ns = time_ns(frame, est["t"])
             x = est["x"]
-            yaw = (lambda rows, x=x: enu_yaw(x[rows, hidx], is_ned)) if hidx is not None else no_yaw
-            _plan_track(out, f"/replay/{name}", ns, lambda rows, x=x: to_enu(x[rows][:, pidx], axes_enu), yaw,
-                        np.isfinite(x[:, pidx]).all(axis=1), geo)
-            err = est["err"][:, :len(pidx)]
+            pidx, hidx = track_index(name, problem)
+            yaw = (lambda rows, x=x, h=hidx: enu_yaw(x[rows, h], is_ned)) if hidx is not None else no_yaw
+            pos = lambda rows, x=x, p=pidx: to_enu(x[rows][:, p], axes_enu)  # noqa: E731
+            finite = np.isfinite(x[:, pidx]).all(axis=1)
+            _plan_track(out, f"/replay/{name}", ns, pos, yaw, finite, geo, scene.body_frame(name))
+            P = est["P"]  # the variances, taken per window (no copy of the track's)
+            scene.plan_ellipsoids(out, f"/replay/{name}/covariance", name, ns, pos,
+                                  lambda rows, P=P, p=pidx: scene.enu_covariance(P[rows][:, p], axes_enu),
+                                  finite & (P[:, pidx] >= 0).all(axis=1), sigma, colours[name])
+            err = est["err"][:, :len(axes_enu)]
             _plan_values(out, f"/replay/{name}/error", ns, _error_rows(err), np.isfinite(err).all(axis=1),
                          axes + ["norm"])
         for cname, ch in frame.channels.items():

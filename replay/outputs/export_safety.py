@@ -57,9 +57,19 @@ def dataset_inputs(dataset, mapping=None, data_dir=None) -> list[Path]:
 
 
 def run_inputs(run_dir, data_dir=None) -> list[Path]:
-    """What exporting ``run_dir`` reads: the run directory, its dataset and mapping (from the manifest)."""
+    """What exporting ``run_dir`` reads: the run directory, its dataset and mapping (from the manifest;
+    for a campaign's directory, those of every stored configuration)."""
     run_dir = Path(run_dir)
     path = run_dir / "manifest.json"
+    if (run_dir / "units").is_dir() and not path.exists():  # a campaign: every configuration's dataset
+        from replay.campaign.store import Store
+
+        found = [run_dir]
+        for _, cfg in Store(run_dir).configs():
+            params = cfg.get("dataset_params")
+            found += dataset_inputs(cfg.get("dataset"), params.get("mapping") if isinstance(params, dict) else None,
+                                    data_dir)
+        return list(dict.fromkeys(found))
     try:
         man = json.loads(path.read_text())
         cfg = man["config"]

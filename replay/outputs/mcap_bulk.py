@@ -17,10 +17,12 @@ windows, the file is the same byte for byte:
   ``chunk_size`` (about ``chunk_size`` uncompressed bytes per chunk); each chunk
   (compressed in one call) is followed by its Message Index records (per channel:
   log time and offset of every message in the chunk);
-- Header, Schema, Channel, Chunk, Chunk Index, Data End, Statistics, Summary Offset
-  and Footer records are written with the ``mcap`` library's own record classes
-  (``mcap.records``), laid out as ``mcap.writer.Writer.finish`` does (schemas and
-  channels repeated in the summary, CRCs of chunks, data section and summary).
+- Header, Schema, Channel, Metadata, Chunk, Chunk Index, Metadata Index, Data End,
+  Statistics, Summary Offset and Footer records are written with the ``mcap`` library's
+  own record classes (``mcap.records``), laid out as ``mcap.writer.Writer.finish`` does
+  (schemas and channels repeated in the summary, CRCs of chunks, data section and
+  summary); Metadata records (:meth:`BulkWriter.add_metadata`) follow the channels at
+  the start of the data section, indexed in the summary.
 
 Record layout (MCAP specification, "Message" op 0x05): opcode u8, record length u64,
 channel id u16, sequence u32, log time u64, publish time u64, data. Publish time =
@@ -38,8 +40,8 @@ import zlib
 import numpy as np
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema, Statistics,
-                          SummaryOffset)
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema,
+                          Statistics, SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 
 from replay.util.errors import ReplayError
@@ -100,6 +102,8 @@ class BulkWriter:
         self.name = name if name is not None else path
         self.schemas: list[Schema] = []
         self.channels: list[Channel] = []
+        self.metadata: list[Metadata] = []
+        self.metadata_indexes: list[MetadataIndex] = []
         self.parts: list[tuple] = []  # buffered: (channel id, log times, payload bytes, payload lengths)
         self.fh = None
         self.offset = 0  # bytes written to the file
@@ -124,6 +128,11 @@ class BulkWriter:
         self.channels.append(Channel(id=len(self.channels) + 1, topic=topic, message_encoding=message_encoding,
                                      metadata=dict(metadata or {}), schema_id=schema_id))
         return self.channels[-1].id
+
+    def add_metadata(self, name: str, data: dict) -> None:
+        """A Metadata record (name, str -> str map), written after the channels and indexed."""
+        self._not_started()
+        self.metadata.append(Metadata(name=name, metadata={str(k): str(v) for k, v in data.items()}))
 
     def _not_started(self):
         if self.fh is not None:
@@ -160,6 +169,11 @@ class BulkWriter:
         for c in self.channels:
             c.write(rb)
         self._write(MCAP0_MAGIC + rb.end())
+        for m in self.metadata:
+            m.write(rb)
+            start = self.offset
+            self._write(rb.end())
+            self.metadata_indexes.append(MetadataIndex(offset=start, length=self.offset - start, name=m.name))
 
     def flush(self) -> None:
         """Write the buffered messages in log-time order (none may be earlier than one already written)."""
@@ -276,9 +290,9 @@ class BulkWriter:
         groups = [(Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
                   (Opcode.STATISTICS, [Statistics(
                       message_count=self.n, schema_count=len(self.schemas), channel_count=len(self.channels),
-                      attachment_count=0, metadata_count=0, chunk_count=len(self.chunk_indexes),
+                      attachment_count=0, metadata_count=len(self.metadata), chunk_count=len(self.chunk_indexes),
                       message_start_time=self.t_min, message_end_time=self.t_max, channel_message_counts=counts)]),
-                  (Opcode.CHUNK_INDEX, self.chunk_indexes)]
+                  (Opcode.CHUNK_INDEX, self.chunk_indexes), (Opcode.METADATA_INDEX, self.metadata_indexes)]
         for opcode, records in groups:
             if not records:
                 continue

@@ -26,31 +26,148 @@ import numpy as np
 from replay.util.errors import DataError, ReplayError
 
 
-def load_run(run_dir, data_dir=None) -> dict:
-    """The manifest's config, run-0 estimates per filter, the frame and the rebuilt problem."""
-    from replay import registry
-    from replay.tasks import make_task
-    from replay.util.seeds import rng_for
+RECORDED = "recorded:"  # replay.pipeline.RECORDED, not imported: that would load every filter (~50 MB)
 
+
+def is_recorded(name) -> bool:
+    """Whether a track is a recorded estimate (``recorded:<name>``; one run, position only)."""
+    return isinstance(name, str) and name.startswith(RECORDED)
+
+
+def is_campaign(path) -> bool:
+    """Whether ``path`` is a campaign's result directory (``units/``, no eval manifest)."""
+    path = Path(path)
+    return (path / "units").is_dir() and not (path / "manifest.json").exists()
+
+
+def load_run(run_dir, data_dir=None, run: int = 0, select=None) -> dict:
+    """``{config, frame, problem, estimates, run, source, manifest}`` of one run of an eval
+    output directory (``select`` must be empty) or of a campaign (``select``: see
+    :func:`load_campaign_run`). ``manifest``: the metadata to
+    export, ``{file name: its text}``."""
+    if is_campaign(run_dir):
+        return load_campaign_run(run_dir, data_dir, run, select or {})
+    if any((select or {}).values()):
+        flags = ", ".join(f"--{k}" for k, v in select.items() if v)
+        raise ReplayError(f"export: {flags} choose among a campaign's configurations; {run_dir} is a `replay eval` "
+                          "output (every filter of it is exported; --run picks the run)")
     run_dir = Path(run_dir)
     path = run_dir / "manifest.json"
     try:
-        cfg = json.loads(path.read_text())["config"]
-        dataset, seed, names = cfg["dataset"], cfg["seed"], list(cfg["filters"])
-        dparams, tparams = dict(cfg.get("dataset_params") or {}), dict(cfg.get("task_params") or {})
+        text = path.read_text()
+        cfg = json.loads(text)["config"]
+        names, runs = list(cfg["filters"]), cfg.get("runs")
+        cfg["dataset"], cfg["seed"], cfg["task"]  # noqa: B018 -- present
     except FileNotFoundError:
-        raise DataError(path, "no such file: not a `replay eval` output directory") from None
+        raise DataError(path, "no such file: not a `replay eval` output directory (nor a campaign's: no units/)") \
+            from None
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise DataError(path, f"not a replay manifest ({e})") from None
     for name in names:
         if not isinstance(name, str) or not name or Path(name).name != name or name.startswith("."):
             raise DataError(path, f"filter name {name!r} is not a plain name")
-    # the simulator's generator is seeded as in run 0
-    frame = registry.load_frame(dataset, data_dir=data_dir, rng=rng_for(seed, 0, 0), first=cfg.get("first"),
-                                adapter=cfg.get("adapter"), **dparams)
-    problem = make_task(cfg["task"], **tparams).build(frame, rng_for(seed, 0, 1))
-    estimates = {name: read_estimates(run_dir / "estimates" / f"{name}.csv.gz") for name in names}
-    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates}
+    check_run(run, runs, path)
+    frame, problem = frame_and_problem(cfg, run, data_dir)
+    estimates = {name: read_estimates(run_dir / "estimates" / f"{name}.csv.gz", 0 if is_recorded(name) else run)
+                 for name in names}
+    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates, "run": run,
+            "source": run_dir, "manifest": {"manifest.json": text}}
+
+
+def check_run(run, runs, where) -> None:
+    if isinstance(run, bool) or not isinstance(run, int) or run < 0 or (isinstance(runs, int) and run >= runs):
+        have = f"runs 0 to {runs - 1}" if isinstance(runs, int) and runs > 0 else "no such run"
+        raise ReplayError(f"{where}: --run {run}: it holds {have}")
+
+
+def frame_and_problem(cfg: dict, run: int, data_dir=None):
+    """The frame of ``run`` (a simulator draws it from the run's data stream) and the task problem
+    rebuilt on the run's task stream, as the evaluation did."""
+    from replay import registry
+    from replay.tasks import make_task
+    from replay.util.seeds import DATA, TASK, rng_for
+
+    dparams, tparams = dict(cfg.get("dataset_params") or {}), dict(cfg.get("task_params") or {})
+    frame = registry.load_frame(cfg["dataset"], data_dir=data_dir, rng=rng_for(cfg["seed"], run, DATA),
+                                first=cfg.get("first"), adapter=cfg.get("adapter"), **dparams)
+    return frame, make_task(cfg["task"], **tparams).build(frame, rng_for(cfg["seed"], run, TASK))
+
+
+def _split(value) -> list[str]:
+    if not value:
+        return []
+    items = value if isinstance(value, (list, tuple)) else [value]
+    return [x.strip() for item in items for x in str(item).split(",") if x.strip()]
+
+
+def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
+    """One run of the configurations of campaign directory ``out`` chosen by ``select``
+    (``{dataset, task, filter, config}``: names, comma-separated lists; ``config``: hash
+    prefixes). They must share the measurements (``replay.summary.group_key``); each is
+    a track named by its leaderboard label (the filter, plus the parameters that differ).
+    A configuration whose run is not stored (or damaged, or failed) is refused."""
+    from replay import summary
+    from replay.campaign.store import RERUN_HINT, Store
+
+    select, store = {k: _split(v) for k, v in (select or {}).items()}, Store(out)
+    chosen = [(h, c) for h, c in store.configs()
+              if (not select.get("dataset") or c["dataset"] in select["dataset"])
+              and (not select.get("task") or c["task"] in select["task"])
+              and (not select.get("filter") or c["filter"] in select["filter"])
+              and (not select.get("config") or any(h.startswith(p) for p in select["config"]))]
+    if not chosen:
+        asked = " ".join(f"--{k} {','.join(v)}" for k, v in select.items() if v) or "(all)"
+        known = "; ".join(sorted({f"{c['dataset']} {c['task']} {c['filter']} {h[:8]}" for h, c in store.configs()}))
+        raise ReplayError(f"{out}: no stored configuration matches {asked}; stored: {known or 'none'}")
+    groups: dict = {}
+    for h, c in chosen:
+        groups.setdefault(summary.group_key(c), []).append((h, c))
+    if len(groups) > 1:
+        kinds = "; ".join(f"{g[0][1]['dataset']} task={g[0][1]['task']} seed={g[0][1]['seed']} "
+                          f"first={g[0][1]['first']} ({len(g)} configurations, e.g. --config {g[0][0][:8]})"
+                          for g in groups.values())
+        raise ReplayError(f"{out}: the selection spans {len(groups)} datasets/tasks ({kinds}); one export holds "
+                          "one: choose with --dataset, --task, --filter or --config")
+    chosen.sort(key=lambda hc: (hc[1]["filter"], json.dumps(hc[1]["filter_params"], sort_keys=True), hc[0]))
+    rows = summary.label([{"filter": c["filter"], "params": json.dumps(c["filter_params"], sort_keys=True,
+                                                                      separators=(",", ":"))} for _, c in chosen])
+    names = [r["label"].replace(" ", "") for r in rows]
+    names = [n if names.count(n) == 1 else f"{n}@{h[:8]}" for n, (h, _) in zip(names, chosen)]
+    check_run(run, None, out)
+    estimates, manifest = {}, {}
+    if (Path(out) / "campaign.toml").is_file():
+        manifest["campaign.toml"] = (Path(out) / "campaign.toml").read_text()
+    for name, (h, c) in zip(names, chosen):
+        r = 0 if is_recorded(c["filter"]) else run
+        unit = store.units / h
+        rec, problem = Store._read_record(unit / f"{r}.json", r, h)  # checked as Store.scan does, one run only
+        if problem is None and rec["status"] != "done":
+            problem = f"{unit / f'{r}.json'}: run {r} failed ({rec.get('error', 'no error recorded')})"
+        elif problem is None:
+            problem = Store._check_table(unit / f"{r}.parquet", rec.get("table"))[0]
+        if problem is not None:
+            stored = sorted(store.stored_runs(h, include_failed=False))
+            hint = f"stored runs: {stored[0]} to {stored[-1]}" if stored else RERUN_HINT
+            if not (unit / f"{r}.json").exists():
+                problem = f"{unit}: run {r} of {name} is not stored"
+            raise ReplayError(f"{problem}; {hint}")
+        cols = store.series(h, r)
+        nx = sum(1 for k in cols if k[:1] == "x" and k[1:].isdigit())
+        estimates[name] = {"t": cols["t"], "x": np.column_stack([cols[f"x{i}"] for i in range(nx)]),
+                           "P": np.column_stack([cols[f"P{i}{i}"] for i in range(nx)]),
+                           "err": {k[4:]: v for k, v in cols.items() if k.startswith("err_")}}
+        manifest[f"units/{h}/config.json"] = (unit / "config.json").read_text()
+    cfg = chosen[0][1]
+    frame, problem = frame_and_problem(cfg, run, data_dir)
+    for name, est in estimates.items():  # the position errors, in the task's axis order
+        try:
+            est["err"] = np.column_stack([est["err"][str(a)] for a in problem.axis_names])
+        except KeyError as e:
+            raise ReplayError(f"{out}: the table of {name} has no position error column err_{e.args[0]}; "
+                              f"{RERUN_HINT}") from None
+    manifest["selection"] = json.dumps({"run": run, "tracks": {n: h for n, (h, _) in zip(names, chosen)}})
+    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates, "run": run,
+            "source": Path(out), "manifest": manifest}
 
 
 def _run_rows(fh, run: int):
@@ -110,6 +227,14 @@ def heading_index(problem):
             return problem.angle_index[name]
     angles = getattr(problem.model, "x_angles", ())
     return angles[0] if len(angles) == 1 else None
+
+
+def track_index(name: str, problem) -> tuple[list[int], int | None]:
+    """(position components, heading component or None) of a track's state: the task's, or for a
+    recorded estimate (``recorded:<name>``: its position only) the first d components."""
+    if is_recorded(name):
+        return list(range(len(problem.position_index))), None
+    return list(problem.position_index), heading_index(problem)
 
 
 _SLOT = {"x": (0, 1), "east": (0, 1), "y": (1, 1), "north": (1, 1), "z": (2, 1), "up": (2, 1),
