@@ -32,6 +32,22 @@ def test_gm11_continuous_response_is_eq12_and_biased():
     assert abs(eq12 - 2.0 * 1.07**31) > 1e-3  # why the discrete response is the default
 
 
+def test_gm11_printed_eq12_factor_is_about_the_negated_prediction():
+    """Eq. 12 as printed, (1 - e^-a), is the derived response times -e^-a: the grey particles of
+    GPF with grey_response=printed land near -z (why 'continuous' uses the derived factor)."""
+    k = np.arange(1, 31)
+    z = 2.0 * 1.07**k  # above the shift floor: no conditioning shift
+    a, _ = gm11_fit(z)
+    cont = gm11_predict(z, response="continuous")
+    assert gm11_predict(z, response="printed") == pytest.approx(-np.exp(-a) * cont, rel=1e-12)
+    assert gm11_predict(np.full(30, 3.7), response="printed") == 3.7  # a constant predicts itself
+    ramp = 5.0 + 0.01 * k  # a slow trend far from 0: tiny a, so the printed response is about -z
+    assert gm11_predict(ramp, response="printed") == pytest.approx(-5.31, rel=0.01)
+    assert make_filter("gpf", grey_response="printed").params()["grey_response"] == "printed"
+    with pytest.raises(ReplayError, match="grey_response"):
+        make_filter("gpf", grey_response="eq12")
+
+
 @pytest.mark.parametrize("value", [3.7, 0.0, -2.5, 1e-3])
 def test_gm11_constant_exactly(value):
     assert gm11_predict(np.full(30, value)) == value
@@ -197,12 +213,13 @@ def test_score_reports_speed_as_extra(problem):
     assert m["speed_rmse"] == pytest.approx(np.sqrt(np.mean((est.x[ok, 1] - truth_v[ok]) ** 2)))
 
 
-def test_reproduction_verdicts():
-    from replay.reproduce.p000 import _verdict
+def test_reproduction_status_of_paired_intervals():
+    from replay.reproduce.p000_cells import status
 
-    assert _verdict(np.array([-0.1, -0.12, -0.09, -0.11]))[0] == "confirmed"
-    assert _verdict(np.array([0.1, 0.12, 0.09, 0.11]))[0] == "refuted"
-    assert _verdict(np.array([-0.1, 0.1, -0.05, 0.05]))[0] == "inconclusive"
+    assert status([(-0.1, 0.05), (-0.2, 0.1)]) == "holds"  # both intervals below 0
+    assert status([(-0.1, 0.05), (0.2, 0.1)]) == "fails"  # one interval above 0
+    assert status([(-0.1, 0.05), (0.05, 0.1)]) == "unresolved"  # one interval holds 0
+    assert status([(-0.1, float("nan")), (-0.2, 0.1)]) == "unresolved"
 
 
 # ---------------------------------------------------------------- PFs against the EKF
@@ -258,18 +275,3 @@ def test_gpf_estimate_is_weighted_mean_before_resampling(near_linear):
     assert xk[:2] == pytest.approx(w @ P[:, :2], abs=1e-12)
     assert xk[2] == pytest.approx(np.arctan2(w @ np.sin(P[:, 2]), w @ np.cos(P[:, 2])), abs=1e-12)
     assert np.ptp(state.w) > 0  # still weighted: resampling happens in the next predict
-
-
-def test_reproduction_readings_convert_only_the_pitch_entries():
-    from replay.reproduce.p000 import PRIMARY, READINGS
-    from replay.sim.lake_depth import base_for_rms
-
-    assert READINGS[PRIMARY][:2] == ({}, {})
-    deg = np.deg2rad(1.0)
-    for name in ("degrees", "degrees, sensors at R"):
-        task, _, _ = READINGS[name]
-        np.testing.assert_allclose(np.diag(task["Q"]), [0.2**2, 1.0, (0.5 * deg) ** 2], rtol=1e-12)
-        np.testing.assert_allclose(np.diag(task["R"]), [0.2**2, 25.0, (0.5 * deg) ** 2], rtol=1e-12)
-    assert READINGS["degrees"][1] == {}
-    np.testing.assert_allclose(READINGS["degrees, sensors at R"][1]["base_sigma"],
-                               base_for_rms([0.2, 5.0, 0.5 * deg]), rtol=1e-12)

@@ -31,8 +31,11 @@ Choices made here (the paper does not say):
   R positive on a quantised, constant sensor.
 * The weights are the likelihood alone (eq. 23), as printed: the mixture
   proposal (model + grey) is not corrected for in the weights.
-* Ablations: ``grey=False`` (no grey particles: a bootstrap PF with wavelet R)
-  and ``wavelet=False`` (the model's fixed R, as EKF and MMPF).
+* Ablations: ``grey=False`` (no grey particles: a bootstrap PF with wavelet R),
+  ``wavelet=False`` (the model's fixed R, as EKF and MMPF) and ``grey_response``
+  (the GM(1,1) time response: the fitted discrete equation's, the default; eq. 12
+  derived from eq. 11; eq. 12 with its printed factor, see
+  :mod:`replay.filters.p000.grey`). ``replay reproduce 000`` runs them.
 """
 from __future__ import annotations
 
@@ -47,7 +50,7 @@ from replay.model import remap_indices
 from .. import particles
 from ..base import Filter
 from ..resampling import SCHEMES
-from .grey import GreyPredictor
+from .grey import RESPONSES, GreyPredictor
 from .wavelet_noise import WaveletNoise
 
 
@@ -65,8 +68,9 @@ class GreyParticleFilter(Filter):
         Param("grey", bool, True, "draw grey particles (false: a bootstrap PF with the wavelet R)"),
         Param("wavelet", bool, True, "estimate R by wavelets (false: the model's fixed R)"),
         Param("grey_alpha", float, 0.5, "GM(1,1) background weight alpha (eq. 10)", low=0.0, high=1.0),
-        Param("grey_response", str, "discrete", "GM(1,1) time response: of the fitted discrete equation, "
-              "or eq. 12 as printed", choices=("discrete", "continuous")),
+        Param("grey_response", str, "discrete", "GM(1,1) time response: of the fitted discrete equation; "
+              "eq. 12 derived from eq. 11, (1 - e^a); or eq. 12 with the printed factor (1 - e^-a), about the "
+              "negated prediction (filters/p000/grey.py)", choices=RESPONSES),
         Param("grey_floor", float, 1.0, "GM(1,1) conditioning shift applies when the window dips below this "
               "(null: never)", optional=True),
         Param("grey_shift_ratio", float, 100.0, "GM(1,1) conditioning shift: max(floor, ratio * span) - min",

@@ -21,9 +21,14 @@ Choices made here (the paper is silent or ambiguous):
       z0^(n+1) = (b - a z1(n)) / (1 + alpha a)
 
   It is exact for exponential (and constant) series and agrees with eq. 12 to
-  first order in ``a``. ``response="continuous"`` is eq. 12 as printed (the
-  OCR'd print reads (1 - e^-a); the derivation from eq. 11 gives (1 - e^a),
-  which is what is used).
+  first order in ``a``. ``response="continuous"`` is eq. 12 as derived from
+  eq. 11, z1^(n+1) - z1^(n) = (1 - e^a)(z0(1) - b/a) e^(-a n).
+  ``response="printed"`` is eq. 12 with the factor the paper prints,
+  (1 - e^-a)(z0(1) - b/a) e^(-a n): since (1 - e^-a) = -e^-a (1 - e^a), it is
+  the continuous response times -e^-a, i.e. about the *negated* prediction for
+  the small |a| of these windows (limit -b at a = 0); with the conditioning shift
+  c it lands near -(z + 2c). Kept only to show what the print does; the
+  printed factor is taken for a typesetting slip.
 * **Conditioning shift** (the digest's request). GM(1,1) fits an exponential
   and is ill-conditioned for data near zero or negative (depth at the surface,
   pitch around 0). When the window's minimum is below ``floor``, the window is
@@ -34,7 +39,8 @@ Choices made here (the paper is silent or ambiguous):
   error is about 1/40 of a step; with 10 it is 1/4 of a step). Constant
   series stay exact (a = 0, b = the constant).
 * ``a = 0`` (a constant series) is handled by the discrete response without
-  dividing by ``a``; the continuous response takes its limit ``b``.
+  dividing by ``a``; the continuous response takes its limit ``b`` (the
+  printed one ``-b``). A constant window predicts itself under every response.
 
 All functions work along axis 0 on arrays of shape (n, ...): several channels
 (or Monte Carlo runs) are predicted at once.
@@ -46,6 +52,7 @@ import numpy as np
 from replay.util.errors import ReplayError
 
 ALPHA = 0.5  # background weight of eq. 10 ("generally 0.5")
+RESPONSES = ("discrete", "continuous", "printed")  # time response (module docstring)
 
 
 def gm11_fit(z0: np.ndarray, alpha: float = ALPHA):
@@ -88,8 +95,8 @@ class GreyPredictor:
                  floor: float | None = 1.0, shift_ratio: float = 100.0):
         if n < 3:
             raise ReplayError(f"GM(1,1) needs at least 3 samples (got {n})")
-        if response not in ("discrete", "continuous"):
-            raise ReplayError(f"GM(1,1) response must be 'discrete' or 'continuous' (got {response!r})")
+        if response not in RESPONSES:
+            raise ReplayError(f"GM(1,1) response must be one of {', '.join(RESPONSES)} (got {response!r})")
         self.n, self.alpha, self.response = n, float(alpha), response
         self.floor, self.shift_ratio = floor, float(shift_ratio)
         m = n - 1
@@ -118,8 +125,12 @@ class GreyPredictor:
         b = r[2 * m + 1] + a * r[2 * m]
         if self.response == "discrete":
             pred = (b - a * r[2 * m + 2]) / (1.0 + self.alpha * a)
-        else:  # eq. 12, limit b at a = 0
+        else:  # eq. 12 (derived: 1 - e^a, limit b; printed: 1 - e^-a, limit -b)
             small = np.abs(a) < 1e-12
             a_s = np.where(small, 1.0, a)
-            pred = np.where(small, b, (1.0 - np.exp(a_s)) * (x[0] - b / a_s) * np.exp(-a_s * self.n))
+            if self.response == "continuous":
+                factor, limit = 1.0 - np.exp(a_s), b
+            else:
+                factor, limit = 1.0 - np.exp(-a_s), -b
+            pred = np.where(small, limit, factor * (x[0] - b / a_s) * np.exp(-a_s * self.n))
         return np.where(const, z0[-1], pred - shift)

@@ -14,6 +14,12 @@ z_k = z_{k-1} + v_{k-1} sin(phi_{k-1}) T (pitch positive nose down).
 ``meta["maneuvers"]`` lists the segments with a non-zero pitch command (plus
 ``settle`` = 1.5 s after each), labelled.
 
+``profile_seed`` (default null: the fixed :data:`PROFILE`) replaces the schedule by
+a random one, :func:`random_profile`, drawn from its own generator seeded by
+``profile_seed`` alone: every Monte Carlo run of a configuration follows the same
+trajectory (only the sensor noise changes with the run), and two configurations
+with the same ``profile_seed`` share it.
+
 Sensor noise (white, Gaussian) with a standard deviation that changes over time:
 
     sigma_c(t) = base_c * regime(t) * (1 + drift * t / duration)
@@ -21,6 +27,10 @@ Sensor noise (white, Gaussian) with a standard deviation that changes over time:
 ``regime`` is piecewise constant over equal parts of the run
 (``regimes`` = (1, 3, 0.5, 2)); ``drift`` = 0.5 is the slow rise;
 ``base`` = (0.05 m, 0.05 m/s, 0.5 deg). ``meta["noise"]`` records them.
+``noise_rms`` (default null) sets the level instead of ``base_sigma``: the
+root-mean-square over the run of each sensor's sigma_c(t) (:func:`base_for_rms`),
+the regimes and drift varying around it. Paper 000's reproduction uses it to put
+the sensors at a multiple of the baselines' fixed R (``noise_rms`` = rho * sqrt(diag R)).
 
 The reference is the truth at every sensor sample, unless ``ref_every`` > 1
 (reference at a lower rate) or ``ref_gaps`` (list of [t0, t1) seconds without
@@ -57,21 +67,67 @@ PITCH_CONVENTION = "pitch positive nose down (depth grows with positive pitch)"
 EXAMPLE = {"ref_every": 2, "ref_gaps": [[30.0, 30.3], [60.0, 62.0]]}
 
 
-def commands(t: np.ndarray):
+def random_profile(seed: int, duration: float = 90.0, depth0: float = 3.0) -> tuple:
+    """A random maneuvering schedule in the form of :data:`PROFILE`, from ``seed`` alone.
+
+    Drawn from ``numpy.random.default_rng(seed)`` (not from a run's stream: the same
+    seed gives the same schedule in every run). Level first for U(5, 10) s at a
+    speed U(1.2, 2.0) m/s; then, until ``duration``, a maneuver and a level run
+    U(4, 12) s, each maneuver one of (equally likely)
+
+    * ``dive`` / ``climb``: pitch U(8, 25) deg nose down / up for U(5, 12) s;
+    * ``pitch steps``: 2-4 steps of alternating sign, U(5, 15) deg, U(2, 4) s each;
+
+    and each segment a new commanded speed U(1.0, 2.2) m/s. A climb that would
+    take the vehicle above 2 m, or a dive below 60 m (depth reckoned from the
+    commands, v sin(pitch) times the segment's length), is turned the other way.
+    The pitch is still rate-limited and lagged by :func:`trajectory`.
+    """
+    rng = np.random.default_rng(int(seed))
+    u = rng.uniform
+    t, depth = 0.0, float(depth0)
+    first = u(5.0, 10.0)
+    segs = [(0.0, first, 0.0, u(1.2, 2.0), "level")]
+    t = first
+    while t < duration:
+        kind = ("dive", "climb", "pitch steps")[int(rng.integers(3))]
+        if kind == "pitch steps":
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            for _ in range(int(rng.integers(2, 5))):
+                d, p, v = u(2.0, 4.0), sign * u(5.0, 15.0), u(1.0, 2.2)
+                segs.append((t, t + d, p, v, "pitch steps"))
+                depth += v * np.sin(np.deg2rad(p)) * d
+                t, sign = t + d, -sign
+        else:
+            d, p, v = u(5.0, 12.0), u(8.0, 25.0), u(1.0, 2.2)
+            climb = kind == "climb"
+            change = v * np.sin(np.deg2rad(p)) * d
+            if (climb and depth - change < 2.0) or (not climb and depth + change > 60.0):
+                climb = not climb
+            segs.append((t, t + d, -p if climb else p, v, "climb" if climb else "dive"))
+            depth += -change if climb else change
+            t += d
+        d = u(4.0, 12.0)
+        segs.append((t, t + d, 0.0, u(1.0, 2.2), "level"))
+        t += d
+    return tuple((round(a, 6), round(b, 6), round(p, 6), round(v, 6), lab) for a, b, p, v, lab in segs)
+
+
+def commands(t: np.ndarray, profile=PROFILE):
     """Commanded pitch (rad) and speed (m/s) at times ``t`` (level after the profile)."""
     pitch = np.zeros_like(t)
-    speed = np.full_like(t, PROFILE[-1][3])
-    for t0, t1, p, v, _ in PROFILE:
+    speed = np.full_like(t, profile[-1][3])
+    for t0, t1, p, v, _ in profile:
         sel = (t >= t0) & (t < t1)
         pitch[sel] = np.deg2rad(p)
         speed[sel] = v
     return pitch, speed
 
 
-def maneuvers(duration: float, settle: float = 1.5) -> list[list]:
+def maneuvers(duration: float, settle: float = 1.5, profile=PROFILE) -> list[list]:
     """[[t0, t1, label], ...]: segments with a non-zero pitch command, merged, plus settling."""
     out: list[list] = []
-    for t0, t1, p, _, label in PROFILE:
+    for t0, t1, p, _, label in profile:
         if p == 0.0 or t0 >= duration:
             continue
         end = min(t1 + settle, duration)
@@ -85,10 +141,10 @@ def maneuvers(duration: float, settle: float = 1.5) -> list[list]:
 
 
 def trajectory(n: int, dt: float = T, depth0: float = 3.0, tau_pitch: float = 0.5,
-               max_pitch_rate: float = 15.0, tau_speed: float = 2.0) -> np.ndarray:
+               max_pitch_rate: float = 15.0, tau_speed: float = 2.0, profile=PROFILE) -> np.ndarray:
     """True states [depth, speed, pitch] (n, 3) at t = 0, dt, ..., following the profile."""
     t = dt * np.arange(n)
-    pc, vc = commands(t)
+    pc, vc = commands(t, profile)
     x = np.empty((n, 3))
     z, v, phi = depth0, vc[0], pc[0]
     rate = np.deg2rad(max_pitch_rate) * dt
@@ -116,7 +172,8 @@ def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=REGIMES,
     """
     t = dt * np.arange(int(round(duration / dt)))
     f = noise_sigma(t, duration, (1.0,), regimes, drift)[:, 0]
-    return tuple(float(v) for v in np.asarray(target, float) / np.sqrt(np.mean(f * f)))
+    rms = float(np.sqrt(np.mean(f * f)))
+    return tuple(float(v) / rms if rms > 0 else 0.0 for v in np.asarray(target, float))
 
 
 PARAMS = (
@@ -126,20 +183,28 @@ PARAMS = (
     Numbers("base_sigma", list, (0.05, 0.05, float(np.deg2rad(0.5))),
             "base noise standard deviations of the depth, speed and pitch sensors", unit="m, m/s, rad",
             length=3, low=0),
+    Numbers("noise_rms", list, None, "RMS over the run of each sensor's noise std (depth, speed, pitch), "
+            "replacing base_sigma; regimes and drift vary around it (null: base_sigma)", unit="m, m/s, rad",
+            length=3, low=0, optional=True),
     Numbers("regimes", list, REGIMES, "noise factor of each equal part of the run", low=0),
     Param("drift", float, DRIFT, "slow rise of the noise: factor 1 + drift t / duration", low=0),
+    Param("profile_seed", int, None, "seed of a random maneuvering schedule (random_profile); null: the "
+          "fixed PROFILE", low=0, optional=True),
     Param("ref_every", int, 1, "reference at every ref_every-th sample", low=1),
     Intervals("ref_gaps", list, (), "[t0, t1) spans without reference", unit="s"),
 )
 
 
 @generator(PARAMS)
-def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, regimes, drift, ref_every,
-               ref_gaps) -> Frame:
+def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, noise_rms, regimes, drift,
+               profile_seed, ref_every, ref_gaps) -> Frame:
     """A synthetic lake-trial frame: sensors in ``channels``, truth in ``reference``."""
     n = int(round(duration / dt))
     t = dt * np.arange(n)
-    x = trajectory(n, dt, depth0)
+    profile = PROFILE if profile_seed is None else random_profile(profile_seed, duration, depth0)
+    x = trajectory(n, dt, depth0, profile=profile)
+    if noise_rms is not None:
+        base_sigma = base_for_rms(noise_rms, duration, dt, regimes, drift)
     sigma = noise_sigma(t, duration, base_sigma, regimes, drift)
     z = x + sigma * rng.standard_normal((n, 3))
     ref_ok = np.zeros(n, bool)
@@ -158,8 +223,10 @@ def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, re
         reference[name] = Channel(np.where(ref_ok, x[:, i], np.nan), unit, frame, ref_ok, (name,),
                                   angles, conv, f"true {name} (synthetic external reference)")
     meta = {"source": "synthetic: replay.sim.lake_depth", "synthetic": True, "dt": dt,
-            "maneuvers": maneuvers(duration), "pitch_convention": PITCH_CONVENTION,
-            "noise": {"base_sigma": list(base_sigma), "regimes": list(regimes), "drift": drift},
+            "maneuvers": maneuvers(duration, profile=profile), "pitch_convention": PITCH_CONVENTION,
+            "profile_seed": profile_seed, "profile": [list(seg) for seg in profile],
+            "noise": {"base_sigma": list(base_sigma), "noise_rms": None if noise_rms is None else list(noise_rms),
+                      "regimes": list(regimes), "drift": drift},
             "columns": {"depth": "depth", "speed": "speed", "pitch": "pitch"},
             "ref_every": int(ref_every), "ref_gaps": [list(g) for g in ref_gaps]}
     return Frame(t, channels, reference, None, meta)
