@@ -222,6 +222,14 @@ def command_line(config: dict) -> str:
         if key != "mapping" and (key not in defaults or defaults[key] != value):
             text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
             parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
+    try:  # the task parameters that differ from their declared defaults
+        tdefaults = plain(make_task(config["task"]).params())
+    except Exception:  # noqa: BLE001 — a task no longer registered: name them all
+        tdefaults = {}
+    for key, value in (config.get("task_params") or {}).items():
+        if key not in tdefaults or tdefaults[key] != value:
+            text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
+            parts += ["--task-param", shlex.quote(f"{key}={text}")]
     for name, params in (config.get("filter_params") or {}).items():  # those that differ from the defaults
         try:
             defaults = ({p.name: p.default for p in RECORDED_PARAMS} if is_recorded(name)
