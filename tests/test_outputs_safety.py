@@ -227,7 +227,7 @@ def test_kill_9_while_replay_eval_writes(tmp_path):
                    capture_output=True, env=env)
     data = hashlib.sha256(log.read_bytes()).hexdigest()
     out = tmp_path / "out"
-    args = [*cli, "eval", log, "--filters", "ekf", "-o", out]
+    args = [*cli, "eval", log, "--filters", "ekf", "-o", out, "--force"]
     subprocess.run([*args, "--runs", "1"], check=True, capture_output=True, env=env)
     before = tree(out)
     proc = subprocess.Popen([*args, "--runs", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
