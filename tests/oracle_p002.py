@@ -85,11 +85,12 @@ def entropy_weights(f, eps=1e-12, xi=1e-4):
 
 
 def gwo_optimize(X, fitness, rng, t_max=20, improved=True, a_start=2.0, a_end=0.0, b_start=1.0, b_end=0.5,
-                 xi=1e-4, eps=1e-12):
+                 xi=1e-4, eps=1e-12, form="centred", movable=None):
     """``t_max`` GWO (``improved=False``) or IGWO iterations on wolves X (N, d), or M swarms (M, N, d) with M
     generators. Per wolf and leader L (alpha, beta, delta: fitness order, ties by index), A = a (2 r1 - 1),
     C = 2 r2: X_L' = X_L - A |C X_L - X|; X <- sum_L w_L X_L' (w_L = 1/3, or the entropy weights);
-    the leaders stay (elitism). Returns wolves, fitness, best fitness before and after each iteration."""
+    the leaders stay (elitism); ``movable`` (M, d) bool: only those components move.
+    Returns wolves, fitness, best fitness before and after each iteration."""
     X, rngs, fitness, _, single = gwo.as_runs(X, rng, fitness, None)
     M, n, d = X.shape
     rows = np.arange(M)[:, None]
@@ -97,7 +98,7 @@ def gwo_optimize(X, fitness, rng, t_max=20, improved=True, a_start=2.0, a_end=0.
     best = np.empty((M, t_max + 1))
     best[:, 0] = f.min(axis=1)
     k = min(3, n)
-    a = gwo.schedule(t_max, improved, a_start, a_end, b_start, b_end)
+    a = gwo.schedule(t_max, improved, a_start, a_end, b_start, b_end, form)
     r = gwo.draws(rngs, (t_max, 2, k, n, d))
     A = a[:, None, None, None] * (2.0 * r[:, :, 0] - 1.0)
     C = 2.0 * r[:, :, 1]
@@ -110,6 +111,8 @@ def gwo_optimize(X, fitness, rng, t_max=20, improved=True, a_start=2.0, a_end=0.
         XL = X[rows, lead][:, :, None, :]
         Y = XL - A[:, t] * np.abs(C[:, t] * XL - X[:, None])
         Xn = np.einsum("mk,mknd->mnd", w, Y)
+        if movable is not None:
+            Xn = np.where(np.asarray(movable)[:, None, :], Xn, X)
         Xn[rows, lead] = XL[:, :, 0]
         fn = fitness(Xn)
         fn[rows, lead] = fl
@@ -161,12 +164,17 @@ class CubatureOracle:
             self.X = propagate(m, self.X, k, self.active_rngs())
             return
         self.fx = m.f(self.X, k)
-        self.P_prev = self.P
-        pts, _ = self.points(self.X, self.P, self.L)
-        Y = m.f(pts, k)
-        self.mean = circular_mean(Y, m.x_angles)
-        D = fast_residual(Y, self.mean[..., None, :], m.x_angles)
-        self.Pm = np.swapaxes(D, -1, -2) @ D / D.shape[-2] + self.Qk
+        if getattr(self.flt, "prior_cov", "propagated") == "transition":  # N(f(x), Q) of the fixed sample
+            self.P_prev = np.zeros_like(self.P)
+            self.mean = wrap_components(self.fx, m.x_angles)
+            self.Pm = np.broadcast_to(self.Qk, self.P.shape).copy()
+        else:
+            self.P_prev = self.P
+            pts, _ = self.points(self.X, self.P, self.L)
+            Y = m.f(pts, k)
+            self.mean = circular_mean(Y, m.x_angles)
+            D = fast_residual(Y, self.mean[..., None, :], m.x_angles)
+            self.Pm = np.swapaxes(D, -1, -2) @ D / D.shape[-2] + self.Qk
         if self.flt.proposal == "stckf":
             self.F = self.jacobian(m.F, m.f, self.X, k, m.x_angles)
 
@@ -249,6 +257,7 @@ class CubatureOracle:
         self.updated = True
         w, self.logw = particles.normalise(self.logw)
         x, P = particles.estimate(self.X, w, self.model.x_angles)
+        self.record_ess(w)
         self.resample(w)
         return x, P
 
@@ -260,6 +269,10 @@ class OracleEngine(CubatureOracle, Engine):
 class OracleSwarmEngine(CubatureOracle, SwarmEngine):
     """The swarm filters with the numpy GWO/IGWO move (:func:`gwo_optimize`); PSO is the library's."""
 
+    def step(self, k, Z, finite):
+        self.ancestors(k)
+        return CubatureOracle.step(self, k, Z, finite)
+
     def move(self, zz, k, mask, meas, weigh):
         flt, m = self.flt, self.model
         if flt.optimizer == "pso":
@@ -267,14 +280,23 @@ class OracleSwarmEngine(CubatureOracle, SwarmEngine):
         w, self.logw = particles.normalise(self.logw)
         c = particles.estimate(self.X, w, m.x_angles)[0][:, None, :]
         fit = residual_fitness(m, zz, k, mask, meas)
+        if self.Fx is None:
+            def fitness(Y):
+                return fit(c + Y)
+        else:  # posterior-type fitness
+            def fitness(Y):
+                return fit(c + Y) + self.transition_term(c + Y, k)
         Xr = residual(self.X, c, m.x_angles)
-        Xr, _, best = gwo_optimize(Xr, lambda Y: fit(c + Y), self.active_rngs(), flt.t_max,
-                                   flt.optimizer == "igwo", flt.a_start, flt.a_end, flt.b_start, flt.b_end, flt.xi)
+        Xr, _, best = gwo_optimize(Xr, fitness, self.active_rngs(), flt.t_max,
+                                   flt.optimizer == "igwo", flt.a_start, flt.a_end, flt.b_start, flt.b_end, flt.xi,
+                                   form=flt.a_form, movable=self.movable(k, mask))
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1
         self.X = wrap_components(c + Xr, m.x_angles)
         if weigh:
             self.logw = self.loglik(zz, self.X, k, mask, meas)
+            if self.Fx is not None:
+                self.logw = self.logw - 0.5 * self.transition_term(self.X, k)
         self.relocated = True
 
 

@@ -61,7 +61,8 @@ def test_sonar_jacobian_kernel_is_zero_at_the_sonar():
     assert not Jh.any()
 
 
-@pytest.mark.parametrize("params", [{}, {"proposal": "ckf"}, {"m_form": "printed"}, {"scale_prior": False}])
+@pytest.mark.parametrize("params", [{}, {"proposal": "ckf"}, {"m_form": "printed"}, {"scale_prior": False},
+                                    {"prior_cov": "transition"}, {"prior_cov": "transition", "m_form": "printed"}])
 @pytest.mark.slow
 def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
     """STCPF / CPF: the compiled step and the numpy engine agree to rounding over 100 steps.
@@ -77,16 +78,27 @@ def test_compiled_cubature_particle_filter_equals_numpy(sonar, params):
     np.testing.assert_allclose(a.P, b.P, rtol=1e-5 if printed else 1e-7, atol=1e-6 if printed else 1e-9)
     if "lambda_mean" in b.info:
         assert a.info["lambda_mean"] == pytest.approx(b.info["lambda_mean"], rel=1e-5 if printed else 1e-10)
-        assert b.info["lambda_mean"] > 1.0  # the fading factor acts: the STCKF branch is exercised
+        if params.get("prior_cov") == "transition" and not printed:  # propagated M = 0: lambda = 1
+            assert a.info["lambda_mean"] == 1.0
+        else:
+            assert b.info["lambda_mean"] > 1.0  # the fading factor acts: the STCKF branch is exercised
+    np.testing.assert_allclose(a.info["ess"], b.info["ess"], rtol=1e-6 if printed else 1e-7)
 
 
-@pytest.mark.parametrize("name", ["igwo-stcpf", "igwo-pf", "gwo-pf"])
+ABLATIONS = [("igwo-stcpf", {"move_components": "observed"}), ("igwo-stcpf", {"fitness": "posterior"}),
+             ("igwo-stcpf", {"a_form": "printed"}), ("igwo-stcpf", {"prior_cov": "transition"}),
+             ("gwo-pf", {"fitness": "posterior", "move_components": "observed"}),
+             ("pso-cpf", {"fitness": "posterior", "move_components": "observed"})]
+
+
+@pytest.mark.parametrize("name,params", [("igwo-stcpf", {}), ("igwo-pf", {}), ("gwo-pf", {})] + ABLATIONS)
 @pytest.mark.slow
-def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name):
+def test_compiled_swarm_equals_numpy_until_rounding_flips_a_leader(sonar, name, params):
     """The swarm collapses onto near-ties, so rounding eventually picks another leader and the
-    runs part; before that (the first 10 steps) they agree to 1e-8."""
-    a = make_filter(name).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
-    b = oracle_filter(name).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    runs part; before that (the first 10 steps) they agree to 1e-8. Also the ablations'
+    parameters (moved components, posterior-type fitness, printed a(t), transition prior)."""
+    a = make_filter(name, **params).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
+    b = oracle_filter(name, **params).run(sonar.model, sonar.z[:10], sonar.x0, sonar.P0, np.random.default_rng(5))
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-8)
     assert a.info["mean_fitness_gain"] == pytest.approx(b.info["mean_fitness_gain"], rel=1e-6)
     assert a.info["mean_fitness_gain"] > 0
@@ -237,13 +249,40 @@ def test_swarm_kernel_keeps_the_elite_and_matches_the_oracle():
     raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
     a = gwo.schedule(8, True)
     Xk, f, best = X.copy(), np.empty(30), np.empty(9)
-    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), raw, a, True, 1e-4, 1e-12,
-                f, best, 3)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), np.zeros(3, bool), None, None,
+                None, raw, a, True, 1e-4, 1e-12, f, best, 3)
     assert np.all(np.diff(best) <= 0) and best[-1] < best[0]
     Xn, fn, bn = gwo_optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
                               np.random.default_rng(2), t_max=8, improved=True)
     np.testing.assert_allclose(Xk, Xn, rtol=0, atol=1e-12)
     np.testing.assert_allclose(best, bn, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_swarm_kernel_moves_only_the_movable_components_and_adds_the_transition_term():
+    """move_components=observed: a component outside ``mov`` keeps every wolf's value; fitness=posterior:
+    the transition term of each wolf's own ancestor; both as the oracle's reading."""
+    bound = binding.bind(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
+    X = np.random.default_rng(1).normal(size=(30, 3)) * 3
+    z = np.array([0.5, -1.0, 2.0])
+    Ri = np.linalg.inv(np.diag([1.0, 2.0, 4.0]))
+    fx = np.random.default_rng(3).normal(size=(30, 3))
+    Qi = np.eye(3) * 0.5
+    mov = np.array([True, True, False])
+    raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
+    a = gwo.schedule(8, True)
+    Xk, f, best = X.copy(), np.empty(30), np.empty(9)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), np.zeros(3, bool), mov, fx,
+                Qi, raw, a, True, 1e-4, 1e-12, f, best, 3)
+    assert np.array_equal(Xk[:, 2], X[:, 2]) and not np.array_equal(Xk[:, :2], X[:, :2])
+
+    def fit(Y):
+        d = Y - fx
+        return np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y) + np.einsum("...i,ij,...j->...", d, Qi, d)
+
+    Xn, fn, bn = gwo_optimize(X, fit, np.random.default_rng(2), t_max=8, improved=True, movable=mov[None])
+    np.testing.assert_allclose(Xk, Xn, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f, fn, rtol=1e-12)
 
 
 @pytest.mark.slow

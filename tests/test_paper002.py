@@ -236,6 +236,27 @@ def test_entropy_weights_sum_to_one_and_respect_floor():
             assert w.sum() == pytest.approx(1.0) and np.all(w >= xi / 3)
 
 
+def test_entropy_weights_invert_the_leader_order():
+    """002 §3.2.2 as printed: w = 1 - E with E = -p log p peaking at p = 1/e, so the weights are not
+    monotone in the fitness: f = [1, 1.5, 10] gives the worst leader the largest weight (the kernel's
+    own function, equal to the oracle's numpy reading)."""
+    from replay.filters.p002 import compiled_util
+
+    f, w = np.array([1.0, 1.5, 10.0]), np.empty(3)
+    compiled_util.entropy_weights(f, 1e-12, 1e-4, w)
+    np.testing.assert_allclose(w, [0.316, 0.294, 0.390], atol=5e-4)
+    assert w[2] > w[0] > w[1]  # delta (f = 10) > alpha (f = 1) > beta (f = 1.5)
+    np.testing.assert_allclose(w, entropy_weights(f), rtol=1e-14)
+    assert w.min() > 0.28 and w.max() < 0.40  # 1 - E in [1 - 1/e, 1]: close to GWO's 1/3
+
+
+def test_printed_convergence_factor_starts_at_the_midpoint_and_falls_fastest_first():
+    a = gwo.schedule(20, True, form="printed")
+    assert a[0] == pytest.approx(1.0) and a[-1] == pytest.approx(0.0, abs=1e-6)
+    assert np.argmax(-np.diff(a)) == 0  # the steepest fall is the first step, not a late one
+    assert gwo.schedule(20, True)[0] == pytest.approx(2.0, abs=0.02)
+
+
 def test_convergence_factor_is_slow_early_fast_late():
     a = [gwo.a_sigmoid(t, 20) for t in range(20)]
     lin = [gwo.a_linear(t, 20) for t in range(20)]
@@ -361,5 +382,77 @@ def test_short_bohai_position_experiment():
 def test_committed_reproduction_document_is_whole_lines():
     """docs/reproduction/002.md is generated: its notes section is lines, not one character per line."""
     text = (Path(__file__).resolve().parents[1] / "docs" / "reproduction" / "002.md").read_text(encoding="utf-8")
-    assert "## Where we do not match, and what was tried" in text.splitlines()
+    assert "## Choices and notes" in text.splitlines() and text.startswith("# Reproduction of paper 002")
     assert sum(len(line) == 1 for line in text.splitlines()) < 5
+
+
+# --- issue 13: STCKF as printed, ablation parameters, ESS, reproducibility ------------------
+def test_stckf_as_printed_diverges_without_a_repair_and_runs_with_one():
+    """M = H Phi H' and the unscaled prior (as printed): the posterior covariance turns indefinite and
+    the run counts as diverged; with repair=true it runs, the repairs counted; the printed M with the
+    scaled prior overflows, a divergence too, never an exception."""
+    pb = sonar_problem()
+    printed = dict(m_form="printed", scale_prior=False)
+    assert STCKF(**printed).run(pb.model, pb.z, pb.x0, pb.P0).diverged
+    fixed = STCKF(**printed, repair=True).run(pb.model, pb.z, pb.x0, pb.P0)
+    assert not fixed.diverged and fixed.info["covariance_repairs"] > 0
+    assert np.mean(fixed.info["lambda"] > 1.0) > 0.3 and len(fixed.info["lambda"]) == len(pb.z)
+    assert STCKF(m_form="printed").run(pb.model, pb.z, pb.x0, pb.P0).diverged
+    default = STCKF(repair=True).run(pb.model, pb.z, pb.x0, pb.P0)
+    assert np.array_equal(default.x, STCKF().run(pb.model, pb.z, pb.x0, pb.P0).x)  # nothing to repair
+
+
+@pytest.mark.slow
+def test_swarm_filter_with_printed_m_counts_as_divergence_not_a_crash():
+    """-p igwo-stcpf.m_form=printed: particles overflow; the swarm's fitness is then not finite, which is
+    the run's divergence (it used to fail the elitism assertion and crash replay eval)."""
+    ev = evaluate("sim/auv-sonar", task="sonar", filters=("igwo-stcpf", "stcpf"), runs=2,
+                  filter_params={"igwo-stcpf": {"m_form": "printed", "t_max": 3, "n_particles": 20},
+                                 "stcpf": {"m_form": "printed", "n_particles": 20}})
+    for r in ev.results:
+        assert all(m["diverged"] for m in r.runs), r.name
+
+
+def test_truth_without_process_noise_keeps_the_sonar_noise():
+    """truth_noise=false: the truth follows f exactly from x0, and each run's sonar noise is the same
+    draws as with the noisy truth (the variants are paired)."""
+    from replay.models.auv_sonar import AUVSonar
+
+    a = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3))
+    b = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3), truth_noise=False)
+    m = AUVSonar()
+    x = np.asarray(b.meta["initial_state"])
+    truth = np.column_stack([b.reference["position"].values, b.reference["speed"].values,
+                             b.reference["attitude"].values])
+    for k in range(len(truth)):
+        x = m.f(x, k)
+        np.testing.assert_allclose(truth[k, :4], x[:4], atol=1e-9)
+    va = a.channels["sonar"].values - m.h(np.column_stack([a.reference["position"].values, np.zeros((100, 3))]), 0)
+    vb = b.channels["sonar"].values - m.h(np.column_stack([b.reference["position"].values, np.zeros((100, 3))]), 0)
+    np.testing.assert_allclose(va[:, 0], vb[:, 0], atol=1e-9)
+
+
+@pytest.mark.slow
+def test_ablation_parameters_change_what_they_say():
+    """move_components=observed leaves pitch and yaw to the proposal (their error falls); the
+    transition prior raises the STCPF's effective sample size; ESS is recorded every step."""
+    kw = dict(task="sonar", runs=3, seed=0, dataset_params={"steps": 40})
+    ev = evaluate("sim/auv-sonar", filters=("igwo-stcpf",), **kw)
+    obs = evaluate("sim/auv-sonar", filters=("igwo-stcpf",), filter_params={"igwo-stcpf": {
+        "move_components": "observed"}}, **kw)
+    assert obs.rows[0]["pitch_rmse"] < 0.5 * ev.rows[0]["pitch_rmse"]
+    prop = evaluate("sim/auv-sonar", filters=("stcpf",), **kw).results[0]
+    trans = evaluate("sim/auv-sonar", filters=("stcpf",), filter_params={"stcpf": {"prior_cov": "transition"}},
+                     **kw).results[0]
+    for r in (prop, trans):
+        for est in r.estimates:
+            assert len(est.info["ess"]) == 40 and np.all((est.info["ess"] >= 1 - 1e-9) & (est.info["ess"] <= 100))
+    med = [np.median(np.concatenate([e.info["ess"] for e in r.estimates])) for r in (prop, trans)]
+    assert med[0] < 50 and med[1] > 2 * med[0]
+
+
+def test_chaotic_swarm_filters_declare_a_rerun_tolerance():
+    for name in ("igwo-stcpf", "gwo-pf", "igwo-pf", "pso-pf", "pso-cpf"):
+        assert 0 < type(make_filter(name)).RERUN_RTOL < 0.5, name
+    for name in ("stcpf", "pf", "ckf", "stckf"):
+        assert getattr(type(make_filter(name)), "RERUN_RTOL", 0.0) == 0.0, name

@@ -39,7 +39,8 @@ import numba as nb
 import numpy as np
 
 from replay.filters.p002.compiled_util import (
-    chol_solve_rows, cubature_points, factor, gram, leaders, matmul, moments, normalise, quad, weighted_mean, wrap)
+    chol_solve_rows, cubature_points, entropy_weights, factor, gram, leaders, matmul, moments, normalise, quad,
+    weighted_mean, wrap)
 
 # MODEL KERNELS: replay.filters.p002.binding puts here the import of one model's f, h, F, H
 
@@ -71,13 +72,18 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     (0 without a measurement) + log p(x | x_prev) - log q(x); lam[m, i] <- the
     fading factor (1 for a CKF); repairs[m, i] <- covariances repaired.
     ``opts`` = [have_L, have_V, stckf, rho, beta, propagated, scale_prior,
-    log det Q, log det R, nz of the model]. The STCKF choices are those of
-    :mod:`replay.filters.p002.stckf`. Particles are independent: callers may
-    split the index range among threads (the function releases the GIL).
+    log det Q, log det R, nz of the model, transition]. The STCKF choices are those of
+    :mod:`replay.filters.p002.stckf`. ``transition`` (the ``prior_cov`` parameter of
+    :class:`replay.filters.p002.stcpf.CubatureParticleFilter`): the prediction of particle i
+    is the transition density of its fixed sample, (f(x^i), Q), instead of the cubature
+    prediction of (x^i, P^i) (mean f of the points, F P^i F' + Q); the propagated M of the
+    fading factor is then 0 (P_k = 0), so lambda = 1 unless M is the printed H Phi H'.
+    Particles are independent: callers may split the index range among threads (the
+    function releases the GIL).
     """
     have_L, have_V, stckf = opts[0] != 0, opts[1] != 0, opts[2] != 0
     rho, beta, propagated, scale_prior = opts[3], opts[4], opts[5] != 0, opts[6] != 0
-    logdet_Q, logdet_R, nzf = opts[7], opts[8], int(opts[9])
+    logdet_Q, logdet_R, nzf, transition = opts[7], opts[8], int(opts[9]), opts[10] != 0
     M, N, n = X.shape
     nz = zang.shape[0]  # measured components (0: predict only)
     c = 2 * n
@@ -108,18 +114,23 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         f(x, pf, fx)  # f(x_prev), for p(x | x_prev)
         # --- predict (002 §2.2.1), shared by the update and the predict-only step: cubature points
         # X_j = x ± sqrt(n) L e_j through f; m- their (circular) mean; P- = 1/2n sum_j D_j D_j' + Q
-        if have_L:
-            Lp[:, :] = L[m, i]
+        if transition:  # the fixed sample's transition density N(f(x), Q)
+            mean[:] = fx
+            wrap(mean, xang)
+            Pm[:, :] = Q
         else:
-            repairs[m, i] = factor(P[m, i], Lp)
-        cubature_points(x, Lp, s, pts)
-        for j in range(c):
-            f(pts[j], pf, Y[j])
-        moments(Y, xang, mean, Dx)
-        gram(Dx, Pm)
-        for a in range(n):
-            for b in range(n):
-                Pm[a, b] += Q[a, b]
+            if have_L:
+                Lp[:, :] = L[m, i]
+            else:
+                repairs[m, i] = factor(P[m, i], Lp)
+            cubature_points(x, Lp, s, pts)
+            for j in range(c):
+                f(pts[j], pf, Y[j])
+            moments(Y, xang, mean, Dx)
+            gram(Dx, Pm)
+            for a in range(n):
+                for b in range(n):
+                    Pm[a, b] += Q[a, b]
         g = 1.0
         if Z is None:  # predict only: the importance density is the prediction
             mpost[:] = mean
@@ -164,7 +175,9 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
                 matmul(Hj, Q, HQ)
                 matmul(Hj, Fj, HF)
                 trN -= np.sum(HQ * Hj)
-                if propagated:  # tr(H F P F' H') = sum((H F P) * (H F))
+                if propagated and transition:  # P_k = 0: nothing propagated
+                    trM = 0.0
+                elif propagated:  # tr(H F P F' H') = sum((H F P) * (H F))
                     matmul(HF, P[m, i], HFP)
                     trM = np.sum(HFP * HF)
                 else:  # tr(H F H') as printed
@@ -248,11 +261,15 @@ def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, z
 
 
 @nb.njit(cache=True)
-def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, out, skip, zf):
+def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
     """out[i] = (z - h(c + Xr[i]))' R^-1 (z - h(c + Xr[i])) for rows i not in ``skip`` (wrapped angle
-    residuals; the measured components ``zidx`` of h, ``zf`` a buffer of the whole h)."""
+    residuals; the measured components ``zidx`` of h, ``zf`` a buffer of the whole h); with ``fx``
+    (N, n) (the ``fitness="posterior"`` parameter) plus the transition term
+    (x - fx[i])' Q^-1 (x - fx[i]) of the particle's own ancestor, fx[i] = f(x^i_{k-1}) (``xang``
+    components wrapped). ``fx`` None: the residual alone (numba prunes the branch)."""
     n, nz = Xr.shape[1], z.shape[0]
     x = np.empty(n)
+    dx = np.empty(n)
     zh, d = np.empty(nz), np.empty(nz)
     for i in range(Xr.shape[0]):
         if skip[i]:
@@ -267,14 +284,23 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, out, skip, zf):
             d[a] = z[a] - zh[a]
         wrap(d, zang)
         out[i] = quad(d, Ri)
+        if fx is not None:
+            for a in range(n):
+                dx[a] = x[a] - fx[i, a]
+            wrap(dx, xang)
+            out[i] += quad(dx, Qi)
 
 
 @nb.njit(cache=True, nogil=True)
-def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, raw, a, improved, xi, eps, logdet_R, nzf, best, start, stop):
+def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, improved, xi, eps, logdet_R, nzf,
+               best, start, stop):
     """The relocation of :class:`replay.filters.p002.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
     for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
     log weights, log p(z | x) of the measured components ``zidx`` (Z (M, len(zidx)); R^-1 and
-    ``zang`` theirs; ``nzf`` the model's nz).
+    ``zang`` theirs; ``nzf`` the model's nz). ``movable`` (M, n) bool: the components the wolves
+    move in (None: all; the ``move_components`` parameter); ``Fx`` (M, N, n): each particle's
+    f(x_{k-1}) for the posterior-type fitness with Q^-1 = ``Qi`` (None: the residual alone),
+    then the new log weights are -f / 2 with that fitness.
 
     Per run: normalised weights from ``logw``; their weighted (circular) mean c;
     the wolves X - c (wrapped); :func:`swarm` with the uniforms ``raw`` (M,
@@ -296,7 +322,10 @@ def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, raw, a, improved, xi, eps, 
             for q in range(n):
                 Xr[i, q] = X[m, i, q] - c[q]
             wrap(Xr[i], xang)
-        swarm(ph, Xr, c, Z[m], zidx, Ri, zang, raw[m - start], a, improved, xi, eps, f, best[m], nzf)
+        mov = None if movable is None else movable[m]
+        fx = None if Fx is None else Fx[m]
+        swarm(ph, Xr, c, Z[m], zidx, Ri, zang, xang, mov, fx, Qi, raw[m - start], a, improved, xi, eps, f, best[m],
+              nzf)
         for i in range(N):
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]
@@ -305,7 +334,7 @@ def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, raw, a, improved, xi, eps, 
 
 
 @nb.njit(cache=True)
-def swarm(ph, X, c, z, zidx, Ri, zang, raw, a, improved, xi, eps, fm, best, nzf):
+def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, eps, fm, best, nzf):
     """``t_max = len(a)`` GWO (``improved`` False) or IGWO iterations (002 §3.1–3.2) of one swarm, in place.
 
     X (N, n) are the wolves as deviations from the centre c (n,); the fitness
@@ -316,7 +345,9 @@ def swarm(ph, X, c, z, zidx, Ri, zang, raw, a, improved, xi, eps, fm, best, nzf)
     iteration. The leaders are not moved (elitism); the candidates are
     X_L - A |C X_L - X| with A = a (2 r1 - 1), C = 2 r2, combined with weights
     1/k (GWO) or the entropy weights of the leaders' fitness (IGWO,
-    002 §3.2.2, equations in :mod:`replay.filters.p002.gwo`).
+    002 §3.2.2, :func:`replay.filters.p002.compiled_util.entropy_weights`). ``mov`` (n,) bool:
+    only these components move (None: all); ``fx``, ``Qi``: the posterior-type fitness
+    (:func:`fitness_rows`).
     """
     N, n = X.shape
     k = raw.shape[2]
@@ -328,7 +359,7 @@ def swarm(ph, X, c, z, zidx, Ri, zang, raw, a, improved, xi, eps, fm, best, nzf)
     fl = np.empty(k)
     XL = np.empty((k, n))
     zf = np.empty(nzf)
-    fitness_rows(ph, c, X, z, zidx, Ri, zang, fm, none, zf)
+    fitness_rows(ph, c, X, z, zidx, Ri, zang, xang, fx, Qi, fm, none, zf)
     best[0] = fm.min()
     for t in range(t_max):
         leaders(fm, k, lead)
@@ -338,16 +369,7 @@ def swarm(ph, X, c, z, zidx, Ri, zang, raw, a, improved, xi, eps, fm, best, nzf)
             fl[j] = fm[lead[j]]
             XL[j] = X[lead[j]]
         if improved:  # entropy weights (002 §3.2.2)
-            sinv = 0.0
-            for j in range(k):
-                sinv += 1.0 / (fl[j] + eps)
-            sw = 0.0
-            for j in range(k):
-                p = (1.0 / (fl[j] + eps)) / sinv
-                w[j] = max(1.0 + p * np.log(p + eps), xi)
-                sw += w[j]
-            for j in range(k):
-                w[j] /= sw
+            entropy_weights(fl, eps, xi, w)
         else:
             w[:] = 1.0 / k
         at = a[t]
@@ -355,12 +377,14 @@ def swarm(ph, X, c, z, zidx, Ri, zang, raw, a, improved, xi, eps, fm, best, nzf)
             if is_lead[i]:
                 continue
             for q in range(n):
+                if mov is not None and not mov[q]:
+                    continue
                 acc = 0.0
                 for j in range(k):
                     A = ((raw[t, 0, j, i, q] + 0.5) * U32 * 2.0 - 1.0) * at
                     Cq = (raw[t, 1, j, i, q] + 0.5) * U32 * 2.0
                     acc += w[j] * (XL[j, q] - np.abs(Cq * XL[j, q] - X[i, q]) * A)
                 X[i, q] = acc
-        fitness_rows(ph, c, X, z, zidx, Ri, zang, fm, is_lead, zf)
+        fitness_rows(ph, c, X, z, zidx, Ri, zang, xang, fx, Qi, fm, is_lead, zf)
         best[t + 1] = fm.min()
 

@@ -11,7 +11,8 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 * :func:`factor` (Cholesky with an eigenvalue-floor repair), :func:`gram`;
 * :func:`cubature_points`, :func:`moments` — the cubature points and their
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
-* :func:`leaders` — the alpha, beta, delta wolves of GWO;
+* :func:`leaders` — the alpha, beta, delta wolves of GWO; :func:`entropy_weights` — the IGWO
+  leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
 * :func:`normalise`, :func:`weighted_mean`, :func:`estimate` — the particle
   bookkeeping of :mod:`replay.filters.particles` (log-domain normalisation,
   circular weighted mean, covariance with wrapped deviations).
@@ -135,6 +136,28 @@ def leaders(f, k, out):
             if best < 0 or f[i] < f[best]:
                 best = i
         out[j] = best
+
+
+@nb.njit(cache=True)
+def entropy_weights(fl, eps, xi, w):
+    """IGWO entropy weights (002 §3.2.2) of the leaders' fitness ``fl`` (k,) into ``w`` (k,):
+    p_i = (1 / (f_i + eps)) / sum_j 1 / (f_j + eps), E_i = -p_i log(p_i + eps),
+    w_i = max(1 - E_i, xi), normalised to sum one.
+
+    Not monotone in the fitness: E = -p log p peaks at p = 1/e, so a leader whose share p
+    is near 1/e gets the smallest weight, e.g. f = [1, 1.5, 10] -> w = [0.316, 0.294, 0.390]
+    (the worst leader weighs most; docs/reproduction/002.md, tests/test_paper002.py)."""
+    k = fl.shape[0]
+    sinv = 0.0
+    for j in range(k):
+        sinv += 1.0 / (fl[j] + eps)
+    sw = 0.0
+    for j in range(k):
+        p = (1.0 / (fl[j] + eps)) / sinv
+        w[j] = max(1.0 + p * np.log(p + eps), xi)
+        sw += w[j]
+    for j in range(k):
+        w[j] /= sw
 
 
 @nb.njit(cache=True)

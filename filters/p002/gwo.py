@@ -43,7 +43,10 @@ Observation (not a choice): with the paper's entropy formula, E_i = -p_i log p_i
 is at most 1/e, so w*_i = 1 - E_i lies in [0.63, 1] and the floor xi never
 binds; the normalised weights stay between about 0.28 and 0.40. The IGWO
 leader weighting is therefore close to GWO's 1/3 each; most of the difference
-between GWO and IGWO comes from the convergence factor.
+between GWO and IGWO comes from the convergence factor. Nor is it monotone in
+the fitness: E peaks at p = 1/e, so the leader order can be inverted, e.g.
+f = [1, 1.5, 10] gives w = [0.316, 0.294, 0.390], the worst leader weighing most
+(:func:`replay.filters.p002.compiled_util.entropy_weights`).
 """
 from __future__ import annotations
 
@@ -56,7 +59,7 @@ def a_linear(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0) -> fl
 
 
 def a_sigmoid(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0,
-              b_start: float = 1.0, b_end: float = 0.5) -> float:
+              b_start: float = 1.0, b_end: float = 0.5, form: str = "centred") -> float:
     """IGWO nonlinear convergence factor (002, §3.2.1), as we read the garbled formula.
 
     Printed: a(t) = a_end + (a_start - a_end) / (1 + exp(10 b(t) (2t) / (T_max - 1))),
@@ -70,16 +73,24 @@ def a_sigmoid(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0,
     The paper gives no b_start, b_end; b(t) as printed runs from b_end at t = 0
     to b_start at T_max, and we take b_end = 0.5, b_start = 1.0 so that the
     sigmoid steepens as the iterations go on.
+
+    ``form="printed"`` evaluates the print literally, s = 10 b(t) 2t / (T_max - 1)
+    (a(0) = (a_start + a_end) / 2, fastest fall at t = 0): the ablation of
+    docs/reproduction/002.md (the filters' ``a_form`` parameter).
     """
     b = b_end + (b_start - b_end) * (t / t_max) ** 2
-    s = 10.0 * b * (2.0 * t / max(t_max - 1, 1) - 1.0)
+    if form == "printed":
+        s = 10.0 * b * (2.0 * t) / max(t_max - 1, 1)
+    else:
+        s = 10.0 * b * (2.0 * t / max(t_max - 1, 1) - 1.0)
     return a_end + (a_start - a_end) / (1.0 + np.exp(s))
 
 
-def schedule(t_max, improved, a_start=2.0, a_end=0.0, b_start=1.0, b_end=0.5) -> np.ndarray:
-    """The convergence factor a(t) of iterations t = 0 .. t_max - 1: sigmoid (IGWO) or linear (GWO)."""
+def schedule(t_max, improved, a_start=2.0, a_end=0.0, b_start=1.0, b_end=0.5, form="centred") -> np.ndarray:
+    """The convergence factor a(t) of iterations t = 0 .. t_max - 1: sigmoid (IGWO; ``form`` as in
+    :func:`a_sigmoid`) or linear (GWO)."""
     if improved:
-        return np.array([a_sigmoid(t, t_max, a_start, a_end, b_start, b_end) for t in range(t_max)])
+        return np.array([a_sigmoid(t, t_max, a_start, a_end, b_start, b_end, form) for t in range(t_max)])
     return np.array([a_linear(t, t_max, a_start, a_end) for t in range(t_max)])
 
 

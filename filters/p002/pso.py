@@ -36,8 +36,9 @@ def ramp(t: int, iterations: int, start: float, end: float) -> float:
 
 def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
              omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2,
-             c1=(2.0, 1.0), c2=(1.5, 2.0), project=None):
-    """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds.
+             c1=(2.0, 1.0), c2=(1.5, 2.0), project=None, movable=None):
+    """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds; ``movable``
+    (M, d) bool (None: all): the components the particles move in (velocity 0 in the others).
 
     Returns final positions, their fitness, and the swarm's best fitness before
     and after each iteration (non-increasing). Batched like
@@ -46,6 +47,7 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
     """
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
     M = len(X)
+    keep = None if movable is None else np.asarray(movable, float).reshape(M, 1, -1)
     if project is not None:
         X = project(X)
     f = fitness(X)
@@ -70,6 +72,8 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
         np.subtract(pbest[rows, g][:, None, :], X, out=t)
         t *= R2[:, i]
         V += t
+        if keep is not None:
+            V *= keep
         X = X + V
         if project is not None:
             X = project(X)
@@ -79,5 +83,7 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
         np.copyto(pf, f, where=better)
         g = np.argmin(pf, axis=1)
         best[:, i + 1] = pf[rows, g]
+    if not np.isfinite(best).all():  # a particle that is not finite: the run's numerical divergence
+        raise FloatingPointError("PSO fitness not finite (a particle's state is not finite)")
     assert np.all(np.diff(best, axis=1) <= 0), "PSO global best got worse"
     return (X[0], f[0], best[0]) if single else (X, f, best)

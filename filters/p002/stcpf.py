@@ -24,7 +24,16 @@ no kernels.
 
 Choices (002 leaves them open): the next step's cubature filter of particle i
 starts from its sample x^i_k (not from m^i) with covariance P^i; resampling
-copies x, P and V together. A predict-only step (no measurement) draws from the
+copies x, P and V together. That is the unscented-PF reading (van der Merwe et
+al. 2000): P^i is propagated as a filter covariance, F P^i F' + Q, although the
+transition from the fixed sample x^i has covariance Q alone, so the proposal is
+wider than the prior it is weighed against and the importance weights are
+uneven (ESS below N/2 at every step on sim/auv-sonar: docs/reproduction/002.md).
+``prior_cov="transition"`` predicts each particle with its transition density
+N(f(x^i), Q) instead (the Gaussian approximation of the optimal importance
+density p(x_k | x^i_{k-1}, z_k)); the fading factor's propagated M is then 0
+(lambda = 1). The ESS of the weights the estimate uses is recorded per step,
+``info["ess"]``. A predict-only step (no measurement) draws from the
 predicted (m^i-, P^i-) with weight p(x | x_prev) / q(x). Missing measurement
 components: the update uses the measured rows of h, R and S; the STCKF's V
 restarts when the set of measured components changes.
@@ -74,6 +83,9 @@ class CubatureParticleFilter(Filter):
         Param("proposal", str, "stckf", "importance density of each particle: its STCKF or CKF posterior, "
               "or the prior (bootstrap)", choices=PROPOSALS),
         *STCKF_PARAMS,
+        Param("prior_cov", str, "propagated", "prediction of each particle: the cubature prediction of "
+              "(x^i, P^i) (propagated, as the UPF) or the transition density N(f(x^i), Q) of the fixed "
+              "sample (transition)", choices=("propagated", "transition")),
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
         Param("ess_threshold", float, 1.0, "resample when ESS < threshold * N (1: every step)", low=0.0, high=1.0),
     )
@@ -114,6 +126,7 @@ class Engine:
         M = len(self.rngs)
         self.repairs, self.resampled = np.zeros(M, int), np.zeros(M, int)
         self.lam_sum, self.lam_n = np.zeros(M), np.zeros(M, int)
+        self.ess_log = []  # (active run ids, ESS of each) per step
 
     # --- the protocol -------------------------------------------------------------------
     def start(self, X0, P0):
@@ -156,6 +169,7 @@ class Engine:
         info["covariance_repairs"] = int(self.repairs[m])
         if self.lam_n[m]:
             info["lambda_mean"] = float(self.lam_sum[m] / self.lam_n[m])
+        info["ess"] = np.array([e[ids == m][0] for ids, e in self.ess_log if (ids == m).any()])  # per step
 
     # --- runs -------------------------------------------------------------------------------
     def active_rngs(self):
@@ -246,7 +260,8 @@ class Engine:
         rep = np.zeros((M, N), np.int64)
         pf, ph = m.kernel_params(k)
         st = (flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior) if stckf else (1.0, 1.0, True, True)
-        opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz], float)
+        transition = getattr(flt, "prior_cov", "propagated") == "transition"
+        opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz, transition], float)
         zang = self.zmask if full else self.zmask[zidx]
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
                 np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
@@ -274,8 +289,13 @@ class Engine:
         else:
             w, self.logw = particles.normalise(self.logw)
             x, P = particles.estimate(self.X, w, self.model.x_angles)
+        self.record_ess(w)
         self.resample(w)
         return x, P
+
+    def record_ess(self, w):
+        """The ESS of each active run's normalised weights ``w`` (those of the estimate): ``info["ess"]``."""
+        self.ess_log.append((self.ids.copy(), particles.ess(w)))
 
     def resample(self, w):
         """Resample each run whose ESS < ess_threshold N; x, P, L and V follow their ancestors."""

@@ -186,11 +186,23 @@ def rerun_cmd(manifest_file, data_dir, out):
 @click.option("--doc", default=None, type=click.Path(dir_okay=False),
               help="Markdown report to write (default: docs/reproduction/<paper>.md).")
 @click.option("--quick", is_flag=True, help="A short version (few runs) for a smoke check.")
-def reproduce_cmd(paper, runs, seed, data_dir, doc, quick):
+@click.option("--part", default=None, help="Only this part of a reproduction split into parts "
+              "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.")
+def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part):
     """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""
-    from replay.reproduce import run_reproduction
+    import inspect
 
-    run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick)
+    from replay.reproduce import REPRODUCTIONS, run_reproduction
+
+    extra = {}
+    if part:
+        from importlib import import_module
+
+        module, func = REPRODUCTIONS.get(paper.zfill(3), ":").split(":")
+        if not module or "part" not in inspect.signature(getattr(import_module(module), func)).parameters:
+            raise ReplayError(f"--part: the reproduction of paper {paper} is not split into parts")
+        extra["part"] = part
+    run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick, **extra)
 
 
 def _register_optional():

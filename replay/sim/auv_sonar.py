@@ -8,6 +8,14 @@ the sonar noise is Gaussian with covariance R, or the paper's mixed Gaussian
 
 The first sample is at t = T: the AUV starts at the sonar (range 0, bearing
 undefined), so the initial state x0 at t = 0 is metadata, not a measurement.
+
+Geometry (measured in docs/reproduction/002.md): with Table 2's Q the speed,
+pitch and yaw are random walks (pitch standard deviation 1 rad after 100 s)
+and the truth dives about 700 m in 100 s (v = 10 m/s at pitch pi/4), outside
+the paper's PSO box z in [-300, 0]. ``truth_noise=false`` gives the noiseless
+trajectory (the same draws are made, so the sonar noise of a run is unchanged;
+the filters still assume the task's Q); ``x0`` and ``steps`` change the pitch
+and the horizon.
 """
 from __future__ import annotations
 
@@ -36,12 +44,14 @@ PARAMS = (
           "(Table 6: 0.05)", low=0, high=1),
     Param("mixture_scale", float, 10.0, "outlier covariance as a multiple of R (Table 6: 10)",
           low=0, low_open=True),
+    Param("truth_noise", bool, True, "apply the process noise Q to the true trajectory (false: the "
+          "noiseless trajectory from x0; the sonar noise draws are unchanged)"),
 )
 
 
 @generator(PARAMS)
 def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixture_eps,
-               mixture_scale) -> Frame:
+               mixture_scale, truth_noise) -> Frame:
     """Simulate ``steps`` samples of truth and sonar measurements from ``rng``."""
     model = AUVSonar(Q=as_matrix(Q), R=as_matrix(R), dt=T, yaw_rate=yaw_rate)
     x0 = np.asarray(x0, float)
@@ -49,6 +59,8 @@ def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixtur
     Lr = np.linalg.cholesky(model.R)
     w = rng.standard_normal((steps, 6)) @ Lq.T
     v = rng.standard_normal((steps, 3)) @ Lr.T
+    if not truth_noise:
+        w[:] = 0.0
     if mixture_eps > 0:
         outlier = rng.random(steps) < mixture_eps
         v[outlier] *= np.sqrt(mixture_scale)
@@ -72,5 +84,6 @@ def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixtur
     meta = {"source": "synthetic: replay.sim.auv_sonar", "synthetic": True, "crs": None,
             "initial_state": x0.tolist(), "dt": T, "yaw_rate": yaw_rate,
             "Q": np.diag(model.Q).tolist(), "R": np.diag(model.R).tolist(),
-            "mixture_eps": mixture_eps, "mixture_scale": mixture_scale, "sonar_origin": [0.0, 0.0, 0.0]}
+            "mixture_eps": mixture_eps, "mixture_scale": mixture_scale, "truth_noise": truth_noise,
+            "sonar_origin": [0.0, 0.0, 0.0]}
     return Frame(t, {"sonar": sonar}, ref, None, meta)
