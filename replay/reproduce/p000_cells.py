@@ -23,8 +23,6 @@ rest.
 from __future__ import annotations
 
 import dataclasses
-import json
-import shlex
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,12 +90,9 @@ class Cell:
 
 
 def command(config: dict) -> str:
-    """The ``replay eval`` command of an evaluation (task parameters included)."""
-    text = command_line(config)
-    for key, value in (config.get("task_params") or {}).items():
-        if key == "Q" and value is not None:
-            text += " --task-param " + shlex.quote(f"{key}={json.dumps(list(value), separators=(',', ':'))}")
-    return text
+    """The ``replay eval`` command of an evaluation (task parameters that differ from their
+    defaults included by :func:`replay.evaluate.command_line`)."""
+    return command_line(config)
 
 
 def _segment_scores(records, mask_of) -> dict:
