@@ -210,3 +210,31 @@ def test_bad_guard_and_means_refused():
         AUKF(adapt_means="x")
     with pytest.raises(ReplayError, match="adapt_means"):
         AUKF(adapt_means=False)  # a string: one name per choice
+
+
+@pytest.mark.parametrize("means", ["both", "none"])
+def test_unobservable_drift_is_not_learnt(means):
+    """A drift c of an unmeasured state (the current in water track, docs/reproduction/001.md):
+    no innovation carries it, so q-hat does not learn it and the AUKF (the paper's, or Q-hat and
+    R-hat only) keeps the dead-reckoning error c*k like the UKF."""
+    A = np.array([[1.0, 1.0], [0.0, 1.0]])
+    C = np.array([[0.0, 1.0]])  # velocity measured, position not
+    Q, R, c, steps = np.diag([1e-4, 1e-4]), np.array([[0.01]]), 0.05, 2000
+    rng = np.random.default_rng(5)
+    x, xs = np.array([0.0, 1.0]), np.empty((steps, 2))
+    for k in range(steps):
+        x = A @ x + np.sqrt(np.diagonal(Q)) * rng.standard_normal(2) + [c, 0.0]
+        xs[k] = x
+    z = xs[:, 1:] + 0.1 * rng.standard_normal((steps, 1))
+    model = LinearGaussian(A, C, Q, R)
+    x0, P0 = np.array([0.0, 1.0]), np.diag([1e-4, 0.01])
+    a = AUKF(adapt_means=means, keep_history=True).run(model, z, x0, P0)
+    u = UKF().run(model, z, x0, P0)
+    drift = c * steps
+    assert xs[-1, 0] - u.x[-1, 0] == pytest.approx(drift, rel=0.05)
+    err = xs[-1, 0] - a.x[-1, 0]
+    if means == "none":  # Q-hat, R-hat only: the UKF's dead-reckoning error
+        assert err == pytest.approx(drift, rel=0.1)
+    else:  # the paper's: q-hat is no estimate of c (here of the opposite sign) and adds its own drift
+        assert abs(a.info["history"]["q"][-1000:, 0].mean() - c) > 0.5 * c
+        assert err > 1.2 * drift

@@ -12,7 +12,15 @@ without roughening) with two changes from 003, made in its weighting step:
 
   which lifts small weights and lowers large ones before resampling (the
   paper's eq. 28–32), keeping more distinct particles (less impoverishment).
-  α = 1 is the standard PF; α → 0 gives uniform weights.
+  α = 1 is the standard PF (with the floor; bit for bit the bootstrap PF
+  wherever the floor does not bind: tested); α → 0 gives uniform weights.
+
+With resampling at every step (``ess_threshold`` = 1, the paper's) the
+weights before eq. 27 are the normalised likelihoods, so the WF-PF weighs by
+p(z | x)^α: a PF with a flattened likelihood — for a Gaussian N(h(x), R),
+exactly the PF with R/α (tests/test_wfpf.py). With the exact likelihood the
+exponent is a mis-specification; docs/reproduction/003.md measures where, if
+anywhere, it helps.
 
 The paper prints 0.75 for an "influence factor" in both of its experiments;
 in §4.2 it is this α (our ``alpha``, default 0.75). The glint strength ε of
@@ -53,7 +61,9 @@ class WeightFactorPF(ParticleFilter):
 
     def weigh(self, logw, ll):
         l = np.maximum(logw + ll, np.log(self.weight_floor))  # floor 1e-99 (eq. 22)
-        _, l = particles.normalise(l)  # normalised (eq. 23)
+        w, l = particles.normalise(l)  # normalised (eq. 23)
+        if self.alpha == 1.0:  # eq. 27 is the identity: skip it, so that alpha = 1 is the PF bit for bit
+            return w, l
         return temper(l, self.alpha)  # eq. 27
 
 

@@ -188,20 +188,26 @@ def rerun_cmd(manifest_file, data_dir, out):
 @click.option("--quick", is_flag=True, help="A short version (few runs) for a smoke check.")
 @click.option("--part", default=None, help="Only this part of a reproduction split into parts "
               "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.")
-def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part):
+@click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
+def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part, quiet=False):
     """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""
     import inspect
 
     from replay.reproduce import REPRODUCTIONS, run_reproduction
 
-    extra = {}
-    if part:
-        from importlib import import_module
+    from importlib import import_module
 
-        module, func = REPRODUCTIONS.get(paper.zfill(3), ":").split(":")
-        if not module or "part" not in inspect.signature(getattr(import_module(module), func)).parameters:
+    extra = {}
+    module, func = REPRODUCTIONS.get(paper.zfill(3), ":").split(":")
+    accepts = inspect.signature(getattr(import_module(module), func)).parameters if module else {}
+    if part:
+        if "part" not in accepts:
             raise ReplayError(f"--part: the reproduction of paper {paper} is not split into parts")
         extra["part"] = part
+    if quiet:
+        _quiet(True)
+        if "quiet" in accepts:
+            extra["quiet"] = True
     run_reproduction(paper, runs=runs, seed=seed, data_dir=data_dir, doc=doc, quick=quick, **extra)
 
 

@@ -30,8 +30,21 @@ Not printed, ours: dive/climb pitch ±``dive_pitch_deg`` (20°), cruise of
 heading ``heading0_deg`` (45°), steps of T = 0.5 s.
 
 **Sensors** (001 §5): depth gauge 3 % of a ``depth_full_scale`` (50 m, ours)
-full scale, white; DVL 1 % of speed per axis (bottom lock: velocity over
-ground, in the body frame); accelerometers: bias 0.02 m/s² (1σ, constant over a
+full scale, white; DVL 1 % of speed per axis, in the body frame, with
+``dvl_track`` (the paper does not say which; ours):
+
+- ``"bottom"`` (default): bottom lock, velocity over ground. The current is
+  then *in* the measurement: a filter that integrates the DVL velocity sees
+  the current's effect on position, which is no model error at all.
+- ``"water"``: water track, velocity relative to the water (the through-water
+  velocity of the mission), 1 % of that speed. The current is then a true
+  unmodelled drift: the model of :mod:`replay.models.sauv` integrates the
+  body velocity it is given into position, no sensor measures position or the
+  current, so north/east carry the integral of the current as an error that
+  no filter with this sensor suite can observe (the accelerometers still
+  measure the over-ground acceleration, current's local acceleration included).
+
+Accelerometers: bias 0.02 m/s² (1σ, constant over a
 run) plus white 0.02 m/(s² √Hz); AHRS roll, pitch, heading: 2° (1σ) dynamic
 accuracy, a first-order Gauss–Markov error with correlation time ``ahrs_tau``
 (ours, 30 s; 0 = white). The gyro and magnetometer figures of Table 1 are
@@ -154,6 +167,9 @@ PARAMS = (
     Param("heading0_deg", float, 45.0, "initial heading, NED (ours)", unit="deg"),
     Param("depth_full_scale", float, 50.0, "depth gauge full scale; its noise is 3 % of it (ours)", unit="m",
           low=0, low_open=True),
+    Param("dvl_track", str, "bottom", "DVL reference: bottom lock (velocity over ground) or water track "
+          "(velocity through the water: the current becomes an unmodelled drift) (ours; 001 is silent)",
+          choices=("bottom", "water")),
     Param("dvl_percent", float, 1.0, "DVL noise standard deviation, percent of speed per axis (001 §5)",
           unit="%", low=0),
     Param("acc_bias", float, 0.02, "accelerometer bias standard deviation, constant over a run (001 §5)",
@@ -168,7 +184,7 @@ PARAMS = (
 
 @generator(PARAMS)
 def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, origin_en, dive_pitch_deg,
-               cruise_s, heading0_deg, depth_full_scale, dvl_percent, acc_bias, acc_noise_density,
+               cruise_s, heading0_deg, depth_full_scale, dvl_track, dvl_percent, acc_bias, acc_noise_density,
                ahrs_sigma_deg, ahrs_tau) -> Frame:
     """Simulate the A→G mission in the current field; sensors from ``rng``."""
     t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
@@ -205,8 +221,9 @@ def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, ori
 
     # sensors
     depth = pos[:, 2] + rng.standard_normal(n) * 0.03 * depth_full_scale
-    speed = np.linalg.norm(v_b, axis=1, keepdims=True)
-    dvl = v_b + rng.standard_normal((n, 3)) * (dvl_percent / 100.0) * np.maximum(speed, 0.05)
+    v_dvl = v_b if dvl_track == "bottom" else np.einsum("nji,nj->ni", Cnb, v_water)  # water track: Cnb^T v_water
+    speed = np.linalg.norm(v_dvl, axis=1, keepdims=True)
+    dvl = v_dvl + rng.standard_normal((n, 3)) * (dvl_percent / 100.0) * np.maximum(speed, 0.05)
     acc = a_b + acc_bias * rng.standard_normal(3) + rng.standard_normal((n, 3)) * acc_noise_density / np.sqrt(T)
     att_err = gauss_markov(rng, n, [ahrs_sigma_deg * DEG] * 3, ahrs_tau, T)
     # Bohai-style attitude: roll same sign as NED, pitch front-down positive, yaw ENU
@@ -218,7 +235,8 @@ def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, ori
     channels = {
         "depth": Channel(depth, "m", "positive down", description="depth gauge, 3 % of full scale"),
         "dvl_velocity": Channel(dvl, "m/s", body, components=("vx", "vy", "vz"),
-                                description="DVL bottom-lock velocity over ground, 1 %"),
+                                description="DVL bottom-lock velocity over ground, 1 %" if dvl_track == "bottom"
+                                else "DVL water-track velocity through the water, 1 %"),
         "accel": Channel(acc, "m/s^2", body, components=("ax", "ay", "az"),
                          description="AHRS accelerometers (kinematic acceleration, no gravity)"),
         "attitude": Channel(att_meas, "rad", "body", components=("roll", "pitch", "yaw"),
@@ -235,6 +253,6 @@ def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, ori
     }
     meta = {"source": "synthetic: replay.sim.sauv_current", "synthetic": True, "crs": None, "dt": T,
             "strength": strength, "length_scale": length_scale, "grid": grid,
-            "depth_full_scale": depth_full_scale, "ahrs_tau": ahrs_tau,
+            "depth_full_scale": depth_full_scale, "ahrs_tau": ahrs_tau, "dvl_track": dvl_track,
             "initial_state_ned": np.concatenate([pos[0], v_b[0], a_b[0], [heading[0]]]).tolist()}
     return Frame(t, channels, reference, None, meta)
