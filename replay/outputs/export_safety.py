@@ -20,7 +20,6 @@
 """
 from __future__ import annotations
 
-import ctypes
 import glob
 import json
 import os
@@ -30,7 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from replay.util.errors import DataError, ReplayError
-from replay.util.files import check_writable, refuse_overlap
+from replay.util.files import check_writable, exchange, refuse_overlap  # noqa: F401 (exchange: re-exported)
 
 MARK_KEY = "replay.output"  # custom_data key of the ROS 2 bags written through staged_bag
 MCAP_LIBRARY = "replay"  # the Header library string of the MCAP files replay writes
@@ -233,25 +232,6 @@ def staged_file(target, what: str = "output", kind: str = "mcap"):
     except BaseException:
         _remove(tmp)
         raise
-
-
-_RENAME_EXCHANGE = 2
-_AT_FDCWD = -100
-
-
-def exchange(a: Path, b: Path) -> bool:
-    """Swap two paths in one step (Linux renameat2 RENAME_EXCHANGE); False where unsupported."""
-    try:
-        fn = ctypes.CDLL(None, use_errno=True).renameat2
-    except (OSError, AttributeError):
-        return False
-    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (22, 38, 95):  # EINVAL, ENOSYS, EOPNOTSUPP: not on this file system / kernel
-        return False
-    raise OSError(err, os.strerror(err), str(b))
 
 
 def publish_dir(staged: Path, target: Path) -> None:

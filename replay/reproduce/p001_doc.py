@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common5 import combine, command, commands, plot_curves, rmse_curve, row, table
-from .p001_plan import ABLATION, B_SWEEP, STRENGTHS, TRACKS
+from .common5 import combine, command, commands, row, table
+from .p001_plan import ABLATION, B_SWEEP, STRENGTHS, TRACK, TRACKS
+from .p001_plots import plots
 from .verdict import Claim, anchor, result_rows, verdict_table
 
 METRICS = ("north", "east", "depth", "vx", "vy", "vz", "ax", "ay", "az")
@@ -13,7 +14,6 @@ CLAIMS = {"depth": "about equal", "north": "lower with AUKF", "east": "lower wit
           "vx": "lower with AUKF", "vy": "lower with AUKF", "vz": "lower with AUKF",
           "ax": "lower with AUKF", "ay": "lower with AUKF", "az": "lower with AUKF"}
 PAPER, QRL, UKF = "AUKF (paper: q̂, p̂, Q̂, R̂)", "AUKF (Q̂, R̂ only)", "UKF"
-TRACK = {"bottom": "bottom-lock DVL", "water": "water-track DVL"}
 S_OBS = "North and east are unobservable"
 S_B = "Forgetting factor b"
 S_ABL = "Ablation: which estimator, which guard"
@@ -360,52 +360,3 @@ def render(evs, runs, sweep_runs, seed, quick, doc) -> str:
           f"water track (Δ {fmt(d(best_paper['water']), 1)} m). On linear-Gaussian models with a known-structure "
           "error the same code recovers the truth and beats the UKF (tests/test_aukf.py).", ""]
     return "\n".join(L)
-
-
-def plots(evs, doc, strengths):
-    out = []
-    try:
-        for track in TRACKS:
-            ev, qr = evs[f"{track} 0.5"], evs[f"{track} 0.5 QR"]
-            curves = {}
-            for name, (e, i) in ((UKF, (ev, 0)), ("AUKF (paper)", (ev, 1)), ("AUKF (Q̂, R̂)", (qr, 0))):
-                errs = e.results[i].errors
-                pos = np.stack([x["position"] for x in errs])
-                c = {ax: rmse_curve(pos[:, :, j]) for j, ax in enumerate(("north", "east", "depth"))}
-                c["vx"] = rmse_curve(np.stack([x["vx"] for x in errs]))
-                curves[name] = c
-            png = doc.parent / f"001_{track}_0.5.png"
-            plot_curves(png, ev.t, curves, ["north", "east", "depth", "vx"], "RMSE",
-                        f"001: {TRACK[track]}, current 0.5 m/s")
-            out += [f"![RMSE over time, {TRACK[track]}]({png.name})", ""]
-        png = doc.parent / "001_traces.png"
-        plot_traces(png, evs["traces"].t, [e.info["history"] for e in evs["traces"].results[0].estimates])
-        out += [f"![p̂ and q̂ of the paper's AUKF over time]({png.name})", "",
-                "Traces of the paper's AUKF (bottom lock, 0.5 m/s), one line per run: p̂ of the depth gauge and "
-                "of the forward DVL, q̂ of north and east. Command: "
-                f"`{command(evs['traces'])}`.", ""]
-    except ImportError:
-        out += ["(plots skipped: matplotlib is not installed)", ""]
-    return ["## Plots", ""] + out
-
-
-def plot_traces(path, t, histories):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    panels = [("p", 0, "p̂ depth (m)"), ("p", 1, "p̂ vx (m/s)"), ("q", 0, "q̂ north (m/step)"),
-              ("q", 1, "q̂ east (m/step)")]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 8), sharex=True)
-    for ax, (key, j, label) in zip(axes, panels):
-        for h in histories[:10]:
-            v = h[key][:, j]
-            ax.plot(t[-len(v):], v, lw=0.7)
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].set_title("001: AUKF noise-mean estimates (bottom lock, 0.5 m/s)")
-    axes[-1].set_xlabel("t (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)

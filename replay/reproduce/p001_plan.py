@@ -4,6 +4,7 @@ from __future__ import annotations
 from .common5 import Job
 
 DS = "sim/sauv-current"
+TRACK = {"bottom": "bottom-lock DVL", "water": "water-track DVL"}
 TRACKS = ("bottom", "water")
 STRENGTHS = (0.5, 1.5)
 B_SWEEP = (0.95, 0.97, 0.99)  # 0.98 (the default) is the main table's row

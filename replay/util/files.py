@@ -271,7 +271,7 @@ _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 
 
-def _exchange(a: Path, b: Path) -> bool:
+def exchange(a: Path, b: Path) -> bool:
     """Swap two paths atomically (Linux renameat2 RENAME_EXCHANGE); False where not supported."""
     if os.environ.get("REPLAY_NO_EXCHANGE") == "1" or not sys.platform.startswith("linux"):
         return False
@@ -313,7 +313,7 @@ def publish_dir(staging, target) -> None:
         except OSError as e:  # created meanwhile by another writer: swap with it below
             if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
-    if not placed and _exchange(staging, target):
+    if not placed and exchange(staging, target):
         _fault("swapped")
         shutil.rmtree(staging, ignore_errors=True)
     elif not placed:
