@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import residual, wrap_components
-from replay.util import kernels
+from replay.util.angles import angle_mask, residual, wrap_components
+from replay.util import kalman_kernels as kernels
 from replay.model import remap_indices
 
 from .base import Filter
@@ -52,7 +52,7 @@ def not_pd(run: int) -> np.linalg.LinAlgError:
 
 def gain_nis(S, Pxz, y):
     """K = Pxz S^-1 (..., nx, nz) and the NIS y' S^-1 y (...), for one run (S (nz, nz)) or a
-    stack of runs (S (M, nz, nz)); compiled (:func:`replay.util.kernels.gain_nis`, one Cholesky
+    stack of runs (S (M, nz, nz)); compiled (:func:`replay.util.kalman_kernels.gain_nis`, one Cholesky
     factor of S per run). LinAlgError when an S is not positive definite."""
     one = S.ndim == 2
     S3, P3, y2 = stack_of(S, one), stack_of(Pxz, one), stack_of(y, one)
@@ -64,14 +64,25 @@ def gain_nis(S, Pxz, y):
 
 
 def kalman_update(x, P, y, H, R, x_angles=()):
-    """The Kalman update (module docstring) over any leading axes: returns x, P (Joseph form), NIS."""
-    PHt = P @ H.swapaxes(-1, -2)
-    S = H @ PHt + R
-    K, nis = gain_nis(S, PHt, y)
-    x = wrap_components(x + (K @ y[..., None])[..., 0], x_angles)
-    I_KH = np.eye(x.shape[-1]) - K @ H
-    P = I_KH @ P @ I_KH.swapaxes(-1, -2) + K @ R @ K.swapaxes(-1, -2)
-    return x, 0.5 * (P + P.swapaxes(-1, -2)), nis
+    """The Kalman update (module docstring) over one run (x (nx,)) or a stack (M, nx): returns
+    new x, P (Joseph form), NIS; compiled (:func:`replay.util.kalman_kernels.joseph_update`).
+    LinAlgError when an S is not positive definite."""
+    one = x.ndim == 1
+    x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
+    nis = np.empty(len(x2))
+    bad = kernels.joseph_update(x2, P3, stack_of(y, one), stack_of(H, one), np.ascontiguousarray(R, dtype=float),
+                                angle_mask(tuple(x_angles), x2.shape[1]), nis)
+    if bad >= 0:
+        raise not_pd(bad)
+    return (x2[0], P3[0], nis[0]) if one else (x2, P3, nis)
+
+
+def propagate_cov(F, P, Q):
+    """F P F' + Q for one run (P (nx, nx)) or a stack; compiled (:func:`replay.util.kalman_kernels.propagate_cov`)."""
+    one = P.ndim == 2
+    out = np.empty((1,) + P.shape if one else P.shape)
+    kernels.propagate_cov(stack_of(F, one), stack_of(P, one), np.ascontiguousarray(Q, dtype=float), out)
+    return out[0] if one else out
 
 
 def jacobians(fun, x, k, stacked=False):
@@ -135,7 +146,7 @@ class KalmanEngine:
         nis, dof = np.full(len(x), np.nan), np.zeros(len(x), int)
         for rows, mask in groups(finite):
             z = Z[rows] if mask is None else Z[rows][:, mask]
-            x[rows], P[rows], nis[rows] = self.update(x[rows], P[rows], z, k, mask)
+            x[rows], P[rows], nis[rows] = self.update(x[rows], P[rows], z, k, mask, rows)
             dof[rows] = z.shape[1]
         self.x, self.P = x, P
         return x, P, nis, dof
@@ -143,7 +154,8 @@ class KalmanEngine:
     def predict(self, x, P, k):
         raise NotImplementedError
 
-    def update(self, x, P, z, k, mask):
+    def update(self, x, P, z, k, mask, rows=None):
+        """The update of the runs ``rows`` (None: all active runs) of the predicted x, P."""
         raise NotImplementedError
 
 
@@ -154,9 +166,9 @@ class EKFEngine(KalmanEngine):
         m = self.model
         F = jacobians(m.F, x, k, m.vector_jacobians)
         x = wrap_components(m.f(x, k), m.x_angles)
-        return x, F @ P @ F.swapaxes(-1, -2) + m.process_cov(k)
+        return x, propagate_cov(F, P, m.process_cov(k))
 
-    def update(self, x, P, z, k, mask):
+    def update(self, x, P, z, k, mask, rows=None):
         m = self.model
         H = jacobians(m.H, x, k, m.vector_jacobians)
         zh = m.h(x, k)

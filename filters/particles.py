@@ -1,11 +1,10 @@
-"""Particle bookkeeping shared by every particle filter, over the leading run axis.
+"""Particle bookkeeping shared by every particle filter, over the leading run axis: one source.
 
 Arrays: particles ``X`` (M, N, nx), log-weights ``logw`` (M, N), normalised
 weights ``w`` (M, N), for M Monte Carlo runs of N particles each. Every
-function acts on each run's row alone (reductions along the particle axis,
-stacked matrix products, one generator per run), so run m's numbers do not
-depend on the other runs in the stack: M runs at once equal M runs of one,
-bit for bit.
+function acts on each run's row alone (one loop per run, reductions in
+particle order, one generator per run), so run m's numbers do not depend on
+the other runs in the stack: M runs at once equal M runs of one, bit for bit.
 
     normalise   w^i = exp(l^i - max_j l^j) / sum_j exp(l^j - max_j l^j)          (log domain)
                 log w^i = l^i - max_j l^j - log sum_j exp(l^j - max_j l^j)
@@ -16,52 +15,118 @@ bit for bit.
                 (threshold = 1: every step; 0: never)
     roughen     x^i_j += K E_j N^(-1/d) e^i_j,  e ~ N(0, 1),  E_j = max_i x^i_j - min_i x^i_j
                 (Gordon, Salmond & Smith 1993, §4; d = nx)
+
+The arithmetic is written once, as numba kernels (``*_rows``, :func:`weights`,
+:func:`moments`; the weighted mean is :func:`replay.util.kernels.point_mean`): plain loops, sums taken in particle order. Their un-jitted
+``py_func`` is the same code run by Python: the readable reference, equal to
+the compiled kernels bit for bit (``tests/test_particles.py``). The Python
+functions below (:func:`normalise`, :func:`estimate`, :func:`ess`,
+:func:`resample`, ...) are thin wrappers that allocate the outputs. Paper
+002's compiled kernels call the same kernels (re-exported by
+:mod:`replay.filters.p002.compiled_util`).
 """
 from __future__ import annotations
 
+import math
+
+import numba as nb
 import numpy as np
 
-from replay.util.angles import index, wrap
+from replay.util.angles import angle_mask
+from replay.util.kernels import point_mean as weighted_mean  # the w-weighted (circular) mean of rows
+from replay.util.kernels import wrap
 
 from .resampling import SCHEMES
 
 
+# --- the kernels (one run each, or a stack of runs) ---------------------------------------
+@nb.njit(cache=True)
+def weights(lw, w):
+    """One run: weights w (N,) proportional to exp(lw), summing to one; lw renormalised in place
+    to log w (the log-domain normalisation of the module docstring)."""
+    top = lw.max()
+    tot = 0.0
+    for i in range(lw.shape[0]):
+        w[i] = math.exp(lw[i] - top)
+        tot += w[i]
+    lt = math.log(tot)
+    for i in range(lw.shape[0]):
+        lw[i] = lw[i] - top - lt
+        w[i] /= tot
+
+
+@nb.njit(cache=True)
+def moments(X, w, xang, x, P):
+    """One run: weighted (circular) mean x (n,) of particles X (N, n) and covariance P (n, n)
+    of the deviations, angle deviations wrapped."""
+    N, n = X.shape
+    d = np.empty(n)
+    weighted_mean(X, w, xang, x)
+    for a in range(n):
+        for b in range(n):
+            P[a, b] = 0.0
+    for i in range(N):
+        for q in range(n):
+            d[q] = X[i, q] - x[q]
+        wrap(d, xang)
+        for a in range(n):
+            for b in range(a + 1):
+                P[a, b] += w[i] * d[a] * d[b]
+    for a in range(n):
+        for b in range(a):
+            P[b, a] = P[a, b]
+
+
+@nb.njit(cache=True, nogil=True)
+def normalise_rows(logw, w):
+    """Every run m: :func:`weights` of logw[m] into w[m] (logw renormalised in place)."""
+    for m in range(logw.shape[0]):
+        weights(logw[m], w[m])
+
+
+@nb.njit(cache=True, nogil=True)
+def moments_rows(X, w, xang, x, P):
+    """Every run m: :func:`moments` of X[m] (N, n) with weights w[m] into x[m], P[m]."""
+    for m in range(X.shape[0]):
+        moments(X[m], w[m], xang, x[m], P[m])
+
+
+@nb.njit(cache=True)
+def ess_rows(w, out):
+    """Every run m: ESS = 1 / sum_i w[m, i]^2 into out[m]."""
+    for m in range(w.shape[0]):
+        s = 0.0
+        for i in range(w.shape[1]):
+            s += w[m, i] * w[m, i]
+        out[m] = 1.0 / s
+
+
+# --- Python API: allocate, call the kernels ---------------------------------------------
 def normalise(logw: np.ndarray):
-    """Normalised weights and log-weights ``(w, logw)`` (M, N) of unnormalised log-weights (M, N)."""
-    a = logw - logw.max(axis=-1, keepdims=True)
-    w = np.exp(a)
-    s = w.sum(axis=-1, keepdims=True)
-    w /= s
-    a -= np.log(s)
+    """Normalised weights and log-weights ``(w, logw)`` (M, N) of unnormalised log-weights (M, N)
+    (new arrays; ``logw`` is not changed)."""
+    a = np.array(logw, dtype=float, order="C")
+    w = np.empty_like(a)
+    normalise_rows(a.reshape(-1, a.shape[-1]), w.reshape(-1, a.shape[-1]))
     return w, a
 
 
 def estimate(X: np.ndarray, w: np.ndarray, angles=()):
-    """Weighted mean ``x`` (M, nx) and covariance ``P`` (M, nx, nx) of particles X (M, N, nx).
-
-    Angle components (``angles``, indices along the last axis) get the circular
-    mean and wrapped residuals. (Elementwise work runs on (M N, nx) views:
-    numpy costs less on 2-d arrays than on 3-d ones.)
-    """
+    """Weighted mean ``x`` (M, nx) and covariance ``P`` (M, nx, nx) of particles X (M, N, nx)
+    with normalised weights w (M, N); angle components (``angles``, indices along the last
+    axis) get the circular mean and wrapped residuals."""
     M, N, nx = X.shape
-    wr = w[:, None, :]  # (M, 1, N): one stacked product per run
-    x = (wr @ X)[:, 0]
-    if angles:
-        i = index(tuple(angles))
-        Xa = X.reshape(M * N, nx)[:, i]
-        sin, cos = np.sin(Xa).reshape(M, N, -1), np.cos(Xa).reshape(M, N, -1)
-        x[:, i] = np.arctan2((wr @ sin)[:, 0], (wr @ cos)[:, 0])
-    D = X - x[:, None, :]
-    if angles:  # particles' angles are not kept wrapped: wrap every residual (no test first)
-        D2 = D.reshape(M * N, nx)
-        D2[:, i] = wrap(D2[:, i])
-    P = (D.swapaxes(-1, -2) * wr) @ D
+    x, P = np.empty((M, nx)), np.empty((M, nx, nx))
+    moments_rows(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float),
+                 angle_mask(tuple(angles), nx), x, P)
     return x, P
 
 
 def ess(w: np.ndarray) -> np.ndarray:
     """Effective sample size 1 / sum w^2 of each run (M,)."""
-    return 1.0 / (w[:, None, :] @ w[:, :, None])[:, 0, 0]
+    out = np.empty(len(w))
+    ess_rows(np.ascontiguousarray(w, dtype=float), out)
+    return out
 
 
 def resample(w: np.ndarray, rngs, scheme: str = "systematic", threshold: float = 1.0) -> dict:

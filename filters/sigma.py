@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util import kernels
-from replay.util.angles import angle_mask, residual, weighted_mean
+from replay.util import kalman_kernels as kernels
+from replay.util.angles import angle_mask
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -46,7 +46,7 @@ from .kalman import KalmanEngine, measurement, not_pd, stack_of
 # --- the step over a stack of runs -------------------------------------------------------
 def sigma_points(x, P, xi):
     """Points X_i = x + L xi_i (..., m, nx) and their deviations L xi_i from x (compiled:
-    :func:`replay.util.kernels.sigma_points`). LinAlgError when a P is not positive definite."""
+    :func:`replay.util.kalman_kernels.sigma_points`). LinAlgError when a P is not positive definite."""
     one = x.ndim == 1
     x2, P3 = stack_of(x, one), stack_of(P, one)
     X, dev = np.empty((len(x2),) + xi.shape), np.empty((len(x2),) + xi.shape)
@@ -57,32 +57,39 @@ def sigma_points(x, P, xi):
 
 
 def predict(model, x, P, k, xi, wm, wc):
-    """Predicted means (..., nx) and covariances (..., nx, nx) (the module docstring's predict)."""
+    """Predicted means (..., nx) and covariances (..., nx, nx) (the module docstring's predict;
+    the moments compiled: :func:`replay.util.kalman_kernels.sigma_moments`)."""
+    one = x.ndim == 1
     Y = on_points(model.f, sigma_points(x, P, xi)[0], k)
-    x = weighted_mean(Y, wm, model.x_angles)
-    D = residual(Y, x[..., None, :], model.x_angles)
-    return x, (D.swapaxes(-1, -2) * wc) @ D + model.process_cov(k)
+    Y3 = stack_of(Y, one)
+    xm, Pm = np.empty(Y3.shape[::2]), np.empty((len(Y3),) + (Y3.shape[2],) * 2)
+    kernels.sigma_moments(Y3, wm, wc, angle_mask(model.x_angles, Y3.shape[2]),
+                          np.ascontiguousarray(model.process_cov(k), dtype=float), xm, Pm)
+    return (xm[0], Pm[0]) if one else (xm, Pm)
 
 
 def innovation(model, x, P, z, k, mask, xi, wm, wc):
     """Innovations y (..., nzm), Pzz (..., nzm, nzm), Pxz (..., nx, nzm) and R (nzm, nzm).
 
-    ``z`` (..., nzm) holds the measured components ``mask`` (None: all) of each run.
+    ``z`` (..., nzm) holds the measured components ``mask`` (None: all) of each run (the
+    moments compiled: :func:`replay.util.kalman_kernels.innovation_moments`).
     """
+    one = x.ndim == 1
     X, dev = sigma_points(x, P, xi)
     Z = on_points(model.h, X, k)
     R, angles = measurement(model, k, mask)
     if mask is not None:
         Z = Z[..., mask]
-    zh = weighted_mean(Z, wm, angles)
-    Dz = residual(Z, zh[..., None, :], angles)
-    W = wc[:, None] * Dz
-    return residual(z, zh, angles), Dz.swapaxes(-1, -2) @ W, dev.swapaxes(-1, -2) @ W, R
+    Z3, D3, z2 = stack_of(Z, one), stack_of(dev, one), stack_of(z, one)
+    M, nz, nx = len(Z3), Z3.shape[2], D3.shape[2]
+    y, Pzz, Pxz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, nx, nz))
+    kernels.innovation_moments(Z3, D3, z2, wm, wc, angle_mask(angles, nz), y, Pzz, Pxz)
+    return (y[0], Pzz[0], Pxz[0], R) if one else (y, Pzz, Pxz, R)
 
 
 def correct(x, P, y, S, Pxz, x_angles=()):
     """x + K y (state angles wrapped), P - K Pxz' (symmetrised) and the NIS, K = Pxz S^-1: the
-    compiled :func:`replay.util.kernels.kalman_correct` on each run (new arrays returned).
+    compiled :func:`replay.util.kalman_kernels.kalman_correct` on each run (new arrays returned).
     LinAlgError when an S is not positive definite."""
     one = x.ndim == 1
     x3, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
@@ -95,18 +102,75 @@ def correct(x, P, y, S, Pxz, x_angles=()):
 
 
 class SigmaEngine(KalmanEngine):
-    """M runs of a UKF or CKF."""
+    """M runs of a UKF or CKF: the functions above fused into compiled calls, the same kernels
+    in the same order (so the same numbers as :func:`predict`, :func:`innovation` and
+    :func:`correct`). The engine keeps the points ``X`` (and their deviations ``dev``) of its
+    current means and covariances: made by :func:`replay.util.kalman_kernels.sigma_predict` with the
+    predicted moments and by :func:`replay.util.kalman_kernels.sigma_update` with the corrected ones,
+    so each step is f, one compiled call, h, one compiled call. A covariance without a
+    Cholesky factor raises LinAlgError where the points are used, as :func:`sigma_points` does."""
 
     def __init__(self, flt, model, rngs):
         super().__init__(flt, model, rngs)
-        self.pts = flt.points(model.nx)
+        self.xi, self.wm, self.wc = flt.points(model.nx)
+        self.xmask = angle_mask(model.x_angles, model.nx)
+
+    def start(self, X0, P0):
+        super().start(X0, P0)
+        self.X, self.dev = np.empty((len(X0),) + self.xi.shape), np.empty((len(X0),) + self.xi.shape)
+        self.missing = np.zeros(len(X0), bool)  # runs without points (no Cholesky factor)
+        self.unmade(kernels.sigma_points(stack_of(X0, False), stack_of(P0, False), self.xi, self.X, self.dev))
+
+    def unmade(self, bad, rows=None):
+        """Mark the runs from ``bad`` on (of ``rows``, or of all) as without points."""
+        if bad >= 0:
+            self.missing[slice(bad, None) if rows is None else rows[bad:]] = True
+        self.all_made = bad < 0 and (rows is None or self.all_made)
+
+    def keep(self, ok):
+        super().keep(ok)
+        self.X, self.dev, self.missing = self.X[ok], self.dev[ok], self.missing[ok]
+        self.all_made = not self.missing.any()
+
+    def points(self, rows):
+        """The points and deviations of the runs ``rows`` (None: all)."""
+        missing = self.missing if rows is None else self.missing[rows]
+        if not self.all_made and missing.any():
+            raise np.linalg.LinAlgError(f"covariance not positive definite (run {int(np.argmax(missing))} "
+                                        "of the stack)")
+        return (self.X, self.dev) if rows is None else (self.X[rows], self.dev[rows])
 
     def predict(self, x, P, k):
-        return predict(self.model, x, P, k, *self.pts)
+        one, m = x.ndim == 1, self.model
+        Y = on_points(m.f, self.points(None)[0], k)
+        M, p, nx = Y.shape
+        xm, Pm = np.empty((M, nx)), np.empty((M, nx, nx))
+        self.X, self.dev = np.empty(Y.shape), np.empty(Y.shape)
+        self.missing = np.zeros(M, bool)
+        self.unmade(kernels.sigma_predict(Y, self.wm, self.wc, self.xmask,
+                                          np.ascontiguousarray(m.process_cov(k), dtype=float), self.xi,
+                                          xm, Pm, self.X, self.dev))
+        return (xm[0], Pm[0]) if one else (xm, Pm)
 
-    def update(self, x, P, z, k, mask):
-        y, Pzz, Pxz, R = innovation(self.model, x, P, z, k, mask, *self.pts)
-        return correct(x, P, y, Pzz + R, Pxz, self.model.x_angles)
+    def update(self, x, P, z, k, mask, rows=None):
+        """In place on x, P (the fresh arrays of :meth:`predict`, or copies of their rows)."""
+        one, m = x.ndim == 1, self.model
+        X, dev = self.points(rows)
+        Z = on_points(m.h, X, k)
+        R, angles = measurement(m, k, mask)
+        if mask is not None:
+            Z = np.ascontiguousarray(Z[..., mask])
+        x3, P3 = (x[None], P[None]) if one else (x, P)
+        nis = np.empty(len(x3))
+        Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
+        bad = kernels.sigma_update(Z, dev, stack_of(z, one), self.wm, self.wc, angle_mask(angles, Z.shape[2]),
+                                   np.ascontiguousarray(R, dtype=float), x3, P3, self.xmask, nis, self.xi, Xn, devn)
+        if 0 <= bad < len(x3):
+            raise not_pd(bad)
+        if rows is not None:
+            self.X[rows], self.dev[rows] = Xn, devn
+        self.unmade(bad - len(x3), rows)
+        return (x, P, nis[0]) if one else (x, P, nis)
 
 
 # --- the filters -------------------------------------------------------------------------

@@ -25,10 +25,13 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
-from replay.util.angles import residual, wrap
+from replay.util import kernels
+from replay.util.angles import angle_mask, residual, wrap
 from replay.util.linalg import cholesky
+
+_LOG_2PI = float(np.log(2 * np.pi))
+_NO_FACTOR, _NO_VAR = np.eye(1), np.ones(1)  # unused operands of the compiled likelihood
 
 
 class Model:
@@ -117,15 +120,14 @@ class Model:
         if mask is not None:
             zh, z, R = zh[..., mask], z[mask], R[np.ix_(mask, mask)]
             angles = remap_indices(self.z_angles, mask)
-        d = residual(z, zh, angles)
         diagonal, L, inv_var, logdet = noise_factor(R)
-        if diagonal:
-            d *= d
-            maha = d @ inv_var
-        else:
-            u = solve_triangular(L, d.reshape(-1, d.shape[-1]).T, lower=True, check_finite=False)
-            maha = np.einsum("ij,ij->j", u, u).reshape(d.shape[:-1])
-        return -0.5 * (maha + logdet + len(z) * np.log(2 * np.pi))
+        nz = zh.shape[-1]
+        zh2 = np.ascontiguousarray(zh.reshape(-1, nz), dtype=float)
+        out = np.empty(len(zh2))
+        kernels.gauss_loglik(zh2, np.ascontiguousarray(z, dtype=float), angle_mask(tuple(angles), nz), diagonal,
+                             L if not diagonal else _NO_FACTOR, inv_var if diagonal else _NO_VAR,
+                             logdet + nz * _LOG_2PI, out)  # compiled (replay.util.kernels)
+        return out.reshape(zh.shape[:-1])
 
     # --- simulation ----------------------------------------------------------------
     def simulate_measurements(self, x: np.ndarray, rng: np.random.Generator, k0: int = 0) -> np.ndarray:

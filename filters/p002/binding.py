@@ -6,8 +6,9 @@ imports that copy: numba then caches the compiled code on disk beside it, and
 a new process loads it instead of compiling for about 20 s. (Passing the
 kernels as function arguments instead works, but numba cannot cache such
 signatures across processes.) The copy's name carries a hash of its text,
-which includes the kernels' source files and ``compiled_util.py`` (the
-model-free helpers it imports): a change to ``compiled.py``, to its helpers or
+which includes the kernels' source files and ``compiled_util.py``,
+``replay/filters/particles.py`` and ``replay/util/kernels.py`` (the model-free
+helpers it imports): a change to ``compiled.py``, to its helpers or
 to a model's kernels gives a new copy and a fresh compilation, never stale machine
 code. Copies live in ``$REPLAY_CACHE_DIR/kernels`` (default
 ``~/.cache/replay/kernels``). A model's kernels must be module-level
@@ -76,7 +77,11 @@ def bind(kernels):
         lines.append(f"# kernels' sources: sha256 {digest}")
         # numba's cache of this copy holds compiled_util's functions inlined but checks only this
         # file's stamp: the helpers' source in the name makes a change to them a new copy
-        helpers = Path(inspect.getsourcefile(compiled_util)).read_text(encoding="utf-8")
+        from replay.filters import particles
+        from replay.util import kernels as util_kernels
+
+        helpers = "".join(Path(inspect.getsourcefile(m)).read_text(encoding="utf-8")
+                          for m in (compiled_util, particles, util_kernels))
         lines.append(f"# compiled_util: sha256 {hashlib.sha256(helpers.encode()).hexdigest()[:16]}")
         text = Path(inspect.getsourcefile(compiled)).read_text(encoding="utf-8")
         at = text.index(MARKER)

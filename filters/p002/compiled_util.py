@@ -2,8 +2,8 @@
 
 :mod:`replay.filters.p002.compiled` (the kernels that call a model's ``f``,
 ``h``, ``F``, ``H``) imports these; they are usable directly too (the particle
-estimate :func:`estimate` needs no model). The particle bookkeeping ones
-mirror :mod:`replay.filters.particles` to rounding; the repair of :func:`factor`
+estimate :func:`estimate` needs no model). The particle bookkeeping is
+:mod:`replay.filters.particles`' (imported); the repair of :func:`factor`
 is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 
 * :func:`wrap`, :func:`cholesky`, :func:`chol_solve_rows`, :func:`matmul`, :func:`quad` — from
@@ -13,9 +13,9 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
 * :func:`leaders` — the alpha, beta, delta wolves of GWO; :func:`entropy_weights` — the IGWO
   leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
-* :func:`normalise`, :func:`weighted_mean`, :func:`estimate` — the particle
-  bookkeeping of :mod:`replay.filters.particles` (log-domain normalisation,
-  circular weighted mean, covariance with wrapped deviations).
+* :func:`normalise`, :func:`weighted_mean` — the particle bookkeeping kernels of
+  :mod:`replay.filters.particles` (log-domain normalisation, circular weighted mean),
+  re-exported; :func:`estimate` composes them with the covariance over a stack of runs.
 """
 from __future__ import annotations
 
@@ -24,6 +24,9 @@ import math
 import numba as nb
 import numpy as np
 
+from replay.filters.particles import moments as particle_moments  # the one particle bookkeeping
+from replay.filters.particles import weighted_mean  # noqa: F401 (re-exported)
+from replay.filters.particles import weights as normalise
 from replay.util.kernels import chol_solve_rows, cholesky, matmul, quad, wrap  # noqa: F401 (re-exported)
 
 TWO_PI = 2.0 * np.pi
@@ -160,56 +163,11 @@ def entropy_weights(fl, eps, xi, w):
         w[j] /= sw
 
 
-@nb.njit(cache=True)
-def normalise(lw, w):
-    """Weights w proportional to exp(lw), summing to one; lw renormalised in place (log w)."""
-    top = lw.max()
-    tot = 0.0
-    for i in range(lw.shape[0]):
-        w[i] = np.exp(lw[i] - top)
-        tot += w[i]
-    lt = np.log(tot)
-    for i in range(lw.shape[0]):
-        lw[i] = lw[i] - top - lt
-        w[i] /= tot
-
-
-@nb.njit(cache=True)
-def weighted_mean(X, w, xang, out):
-    """The w-weighted mean of the rows of X (N, n), circular for the ``xang`` components."""
-    N, n = X.shape
-    for q in range(n):
-        if xang[q]:
-            ss, cc = 0.0, 0.0
-            for i in range(N):
-                ss += w[i] * np.sin(X[i, q])
-                cc += w[i] * np.cos(X[i, q])
-            out[q] = np.arctan2(ss, cc)
-        else:
-            t = 0.0
-            for i in range(N):
-                t += w[i] * X[i, q]
-            out[q] = t
-
-
 @nb.njit(cache=True, nogil=True)
 def estimate(X, logw, xang, x, P, w):
-    """Weighted estimate of every run, as :func:`replay.filters.particles.estimate`: the
-    weights w (M, N) normalised from ``logw`` (which is renormalised in place), the weighted
-    (circular) mean x (M, n) and covariance P (M, n, n) with wrapped deviations."""
-    M, N, n = X.shape
-    d = np.empty(n)
-    for m in range(M):
+    """Weighted estimate of every run: the weights w (M, N) normalised from ``logw`` (which is
+    renormalised in place), the weighted (circular) mean x (M, n) and covariance P (M, n, n)
+    with wrapped deviations: the kernels of :mod:`replay.filters.particles`."""
+    for m in range(X.shape[0]):
         normalise(logw[m], w[m])
-        weighted_mean(X[m], w[m], xang, x[m])
-        P[m] = 0.0
-        for i in range(N):
-            for q in range(n):
-                d[q] = X[m, i, q] - x[m, q]
-            wrap(d, xang)
-            for a in range(n):
-                for b in range(a + 1):
-                    P[m, a, b] += w[m, i] * d[a] * d[b]
-        for a in range(n):
-            for b in range(a):
-                P[m, b, a] = P[m, a, b]
+        particle_moments(X[m], w[m], xang, x[m], P[m])

@@ -76,8 +76,8 @@ class KernelModel(Model):
         if forms is None:
             f, h, F, H = kernels = _module_kernels(self.kernel_module)  # not self.kernels(): a subclass
             # may hide its kernels from the filters and still compute with them
-            forms = _forms[type(self)] = (kernels, (array_form(f, False), array_form(h, False),
-                                                    array_form(F, True), array_form(H, True)))
+            forms = _forms[type(self)] = (kernels, tuple(array_form(k, m).ufunc for k, m in
+                                                         ((f, False), (h, False), (F, True), (H, True))))
         return forms
 
     def _apply(self, i, x, p, shape):

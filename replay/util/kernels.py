@@ -1,18 +1,20 @@
-"""Compiled (numba) small linear algebra and angle helpers: one source for every compiled step.
+"""Compiled (numba) small linear algebra, angle and weighted-moment helpers: the leaves of every
+compiled step.
 
 Written as plain loops over small matrices (3x3 to 20x20): at these sizes a
 loop beats a BLAS/LAPACK call, whose fixed cost (about 1 µs) is most of the work.
-Each function's un-jitted ``py_func`` is the same arithmetic in Python (tests
-compare them). Used by the Kalman-family correction (:func:`kalman_correct`,
-:func:`gain_nis`, wrapped in :mod:`replay.filters.kalman` and
-:mod:`replay.filters.sigma`) and by paper 002's kernels
-(:mod:`replay.filters.p002.compiled_util` re-exports them).
-
-Stacks: :func:`gain_nis` and :func:`kalman_correct` take a leading Monte Carlo
-run axis and treat each run alone with the same loops, so a run's numbers do
-not depend on the other runs of its stack (one run is a stack of one).
+Each function's un-jitted ``py_func`` is the same arithmetic in Python, the
+readable reference (tests run it with ``tests/pure.py`` and compare bits).
+Sums run in index order (no reassociation: numba compiles without fastmath),
+and the transcendental functions are :mod:`math`'s, which numba compiles to the
+same C library calls Python makes, so compiled and Python results are equal.
+The Kalman-family steps built on them are :mod:`replay.util.kalman_kernels`;
+paper 002's kernels use them through :mod:`replay.filters.p002.compiled_util`;
+the particle bookkeeping is :mod:`replay.filters.particles`.
 """
 from __future__ import annotations
+
+import math
 
 import numba as nb
 import numpy as np
@@ -120,75 +122,72 @@ def quad(d, W):
 
 
 @nb.njit(cache=True)
-def gain_nis(S, Pxz, y, K, nis):
-    """For each run m of the stacks S (M, nz, nz), Pxz (M, nx, nz), y (M, nz): the gain
-    K[m] = Pxz[m] S[m]^-1 and nis[m] = y[m]' S[m]^-1 y[m] (Bar-Shalom et al. 2001, eq. 5.2.3-14
-    and §5.4.2). Returns the first run whose S is not positive definite (its K and the later
-    runs' are not computed), or -1."""
-    M, nx, nz = Pxz.shape
-    L = np.empty((nz, nz))
-    for m in range(M):
-        if not cholesky(S[m], L):
-            return m
-        solve_rows(L, Pxz[m], K[m])
-        nis[m] = whitened_norm2(L, y[m])
-    return -1
-
-
-@nb.njit(cache=True)
-def kalman_correct(x, P, y, S, Pxz, xmask, nis):
-    """The Kalman correction with a cross-covariance, in place on each run m of the stacks
-    x (M, nx), P (M, nx, nx) (sigma-point filters, Wan & van der Merwe 2000, eq. 15-17):
-
-        K = Pxz S^-1,   x = x + K y   (``xmask`` components wrapped),
-        P = P - K Pxz'  (= P - K S K'), then symmetrised: P = (P + P') / 2,
-        nis = y' S^-1 y.
-
-    Returns the first run whose S is not positive definite (that run and the later ones are
-    left as they were), or -1."""
-    M, nx, nz = Pxz.shape
-    L = np.empty((nz, nz))
-    K = np.empty((nx, nz))
-    for m in range(M):
-        if not cholesky(S[m], L):
-            return m
-        solve_rows(L, Pxz[m], K)
-        nis[m] = whitened_norm2(L, y[m])
-        for i in range(nx):
-            t = 0.0
+def gauss_loglik(zh, z, zmask, diagonal, L, inv_var, const, out):
+    """Gaussian log-likelihoods out[i] = -0.5 (d_i' R^-1 d_i + c) of the rows zh (P, nz)
+    (predicted measurements), d_i = z - zh[i] with the ``zmask`` components wrapped; ``const``
+    = c = log det R + nz log 2 pi. R is given by its inverse variances ``inv_var`` (nz,) when
+    ``diagonal``, else by its lower Cholesky factor ``L`` (d' R^-1 d = |L^-1 d|^2)."""
+    P, nz = zh.shape
+    d = np.empty(nz)
+    for i in range(P):
+        for j in range(nz):
+            d[j] = z[j] - zh[i, j]
+        wrap(d, zmask)
+        if diagonal:
+            s = 0.0
             for j in range(nz):
-                t += K[i, j] * y[m, j]
-            x[m, i] += t
-        wrap(x[m], xmask)
-        for i in range(nx):
-            for j in range(nx):
-                t = 0.0
-                for q in range(nz):
-                    t += K[i, q] * Pxz[m, j, q]
-                P[m, i, j] -= t
-        for i in range(nx):
-            for j in range(i):
-                t = 0.5 * (P[m, i, j] + P[m, j, i])
-                P[m, i, j] = t
-                P[m, j, i] = t
-    return -1
+                s += d[j] * d[j] * inv_var[j]
+        else:
+            s = whitened_norm2(L, d)
+        out[i] = -0.5 * (s + const)
 
 
 @nb.njit(cache=True)
-def sigma_points(x, P, xi, X, dev):
-    """Sigma points of each run m of the stacks x (M, n), P (M, n, n): dev[m] = xi L' (the
-    deviations L xi_i of the unit points xi (p, n), L the lower Cholesky factor of P[m]) and
-    X[m] = x[m] + dev[m]. Returns the first run whose P is not positive definite, or -1."""
-    M, n = x.shape
-    L = np.empty((n, n))
-    for m in range(M):
-        if not cholesky(P[m], L):
-            return m
-        for i in range(xi.shape[0]):
-            for j in range(n):
-                t = 0.0
-                for q in range(j + 1):  # L lower triangular
-                    t += xi[i, q] * L[j, q]
-                dev[m, i, j] = t
-                X[m, i, j] = x[m, j] + t
-    return -1
+def point_mean(Y, w, mask, out):
+    """out = sum_i w_i Y[i] of points Y (p, n), weights w (p,) (may be negative; sum one); the
+    ``mask`` components get the circular mean atan2(sum w_i sin Y_i, sum w_i cos Y_i)."""
+    p, n = Y.shape
+    for q in range(n):
+        if mask[q]:
+            ss, cc = 0.0, 0.0
+            for i in range(p):
+                ss += w[i] * math.sin(Y[i, q])
+                cc += w[i] * math.cos(Y[i, q])
+            out[q] = math.atan2(ss, cc)
+        else:
+            t = 0.0
+            for i in range(p):
+                t += w[i] * Y[i, q]
+            out[q] = t
+
+
+@nb.njit(cache=True)
+def deviations(Y, mean, mask, D):
+    """D[i] = Y[i] - mean with the ``mask`` components wrapped to [-pi, pi)."""
+    for i in range(Y.shape[0]):
+        for q in range(Y.shape[1]):
+            D[i, q] = Y[i, q] - mean[q]
+        wrap(D[i], mask)
+
+
+@nb.njit(cache=True)
+def weighted_outer(A, B, w, out):
+    """out = sum_i w_i A[i]' B[i] = A' diag(w) B for A (p, na), B (p, nb): the weighted
+    cross-covariance of deviations (summed in point order)."""
+    for a in range(A.shape[1]):
+        for b in range(B.shape[1]):
+            t = 0.0
+            for i in range(A.shape[0]):
+                t += (w[i] * A[i, a]) * B[i, b]
+            out[a, b] = t
+
+
+@nb.njit(cache=True)
+def symmetrise(P):
+    """P = (P + P') / 2 in place (each pair of off-diagonal entries set to their mean)."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i):
+            t = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = t
+            P[j, i] = t

@@ -1,0 +1,231 @@
+"""Compiled (numba) steps of the Kalman family over a leading Monte Carlo run axis.
+
+The arithmetic of :mod:`replay.filters.kalman` (EKF: :func:`propagate_cov`,
+:func:`joseph_update`) and :mod:`replay.filters.sigma` (UKF, CKF:
+:func:`sigma_points`, :func:`sigma_moments`, :func:`innovation_moments`,
+:func:`kalman_correct`, and their fusions :func:`sigma_predict` and
+:func:`sigma_update`, one compiled call each per step), written once as loops
+over the leaves of :mod:`replay.util.kernels`. Every function takes stacks
+(x (M, n), P (M, n, n), points (M, p, n)) and treats each run alone with the
+same loops, so a run's numbers do not depend on the other runs of its stack
+(one run is a stack of one). Each function's un-jitted ``py_func`` is the
+readable reference (``tests/pure.py``: equal bit for bit).
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symmetrise, weighted_outer,
+                      whitened_norm2, wrap)
+
+
+@nb.njit(cache=True)
+def gain_nis(S, Pxz, y, K, nis):
+    """For each run m of the stacks S (M, nz, nz), Pxz (M, nx, nz), y (M, nz): the gain
+    K[m] = Pxz[m] S[m]^-1 and nis[m] = y[m]' S[m]^-1 y[m] (Bar-Shalom et al. 2001, eq. 5.2.3-14
+    and §5.4.2). Returns the first run whose S is not positive definite (its K and the later
+    runs' are not computed), or -1."""
+    M, nx, nz = Pxz.shape
+    L = np.empty((nz, nz))
+    for m in range(M):
+        if not cholesky(S[m], L):
+            return m
+        solve_rows(L, Pxz[m], K[m])
+        nis[m] = whitened_norm2(L, y[m])
+    return -1
+
+
+@nb.njit(cache=True)
+def kalman_correct(x, P, y, S, Pxz, xmask, nis):
+    """The Kalman correction with a cross-covariance, in place on each run m of the stacks
+    x (M, nx), P (M, nx, nx) (sigma-point filters, Wan & van der Merwe 2000, eq. 15-17):
+
+        K = Pxz S^-1,   x = x + K y   (``xmask`` components wrapped),
+        P = P - K Pxz'  (= P - K S K'), then symmetrised: P = (P + P') / 2,
+        nis = y' S^-1 y.
+
+    Returns the first run whose S is not positive definite (that run and the later ones are
+    left as they were), or -1."""
+    M, nx, nz = Pxz.shape
+    L = np.empty((nz, nz))
+    K = np.empty((nx, nz))
+    for m in range(M):
+        if not cholesky(S[m], L):
+            return m
+        solve_rows(L, Pxz[m], K)
+        nis[m] = whitened_norm2(L, y[m])
+        for i in range(nx):
+            t = 0.0
+            for j in range(nz):
+                t += K[i, j] * y[m, j]
+            x[m, i] += t
+        wrap(x[m], xmask)
+        for i in range(nx):
+            for j in range(nx):
+                t = 0.0
+                for q in range(nz):
+                    t += K[i, q] * Pxz[m, j, q]
+                P[m, i, j] -= t
+        symmetrise(P[m])
+    return -1
+
+
+@nb.njit(cache=True)
+def sigma_points(x, P, xi, X, dev):
+    """Sigma points of each run m of the stacks x (M, n), P (M, n, n): dev[m] = xi L' (the
+    deviations L xi_i of the unit points xi (p, n), L the lower Cholesky factor of P[m]) and
+    X[m] = x[m] + dev[m]. Returns the first run whose P is not positive definite, or -1."""
+    M, n = x.shape
+    L = np.empty((n, n))
+    for m in range(M):
+        if not cholesky(P[m], L):
+            return m
+        for i in range(xi.shape[0]):
+            for j in range(n):
+                t = 0.0
+                for q in range(j + 1):  # L lower triangular
+                    t += xi[i, q] * L[j, q]
+                dev[m, i, j] = t
+                X[m, i, j] = x[m, j] + t
+    return -1
+
+
+@nb.njit(cache=True)
+def sigma_moments(Y, wm, wc, mask, Q, mean, cov):
+    """The predicted moments of each run m of the points Y (M, p, n) (the unscented transform):
+    mean[m] = sum wm_i Y_i (circular for ``mask``), cov[m] = sum wc_i D_i D_i' + Q with
+    D_i = Y_i - mean[m] (``mask`` wrapped)."""
+    M, p, n = Y.shape
+    D = np.empty((p, n))
+    for m in range(M):
+        point_mean(Y[m], wm, mask, mean[m])
+        deviations(Y[m], mean[m], mask, D)
+        weighted_outer(D, D, wc, cov[m])
+        for a in range(n):
+            for b in range(n):
+                cov[m, a, b] += Q[a, b]
+
+
+@nb.njit(cache=True)
+def innovation_moments(Z, dev, z, wm, wc, mask, y, Pzz, Pxz):
+    """The measurement moments of each run m of the points' predictions Z (M, p, nz), their
+    state deviations ``dev`` (M, p, nx) and the measurements z (M, nz): the predicted
+    measurement zh = sum wm_i Z_i (circular for ``mask``), Dz_i = Z_i - zh (wrapped),
+    y = z - zh (wrapped), Pzz = sum wc_i Dz_i Dz_i', Pxz = sum wc_i dev_i Dz_i'."""
+    M, p, nz = Z.shape
+    zh = np.empty(nz)
+    Dz = np.empty((p, nz))
+    for m in range(M):
+        point_mean(Z[m], wm, mask, zh)
+        deviations(Z[m], zh, mask, Dz)
+        for q in range(nz):
+            y[m, q] = z[m, q] - zh[q]
+        wrap(y[m], mask)
+        weighted_outer(Dz, Dz, wc, Pzz[m])
+        weighted_outer(dev[m], Dz, wc, Pxz[m])
+
+
+@nb.njit(cache=True)
+def sigma_predict(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev):
+    """The sigma-point prediction of each run m and the points of the update (one call per step):
+    :func:`sigma_moments` of the propagated points Y (M, p, n) into mean, cov, then
+    :func:`sigma_points` of (mean, cov) into X, dev. Returns -1, or the first run whose
+    predicted covariance is not positive definite (its points, and later runs', not made)."""
+    sigma_moments(Y, wm, wc, xmask, Q, mean, cov)
+    return sigma_points(mean, cov, xi, X, dev)
+
+
+@nb.njit(cache=True)
+def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
+    """The sigma-point update of each run m, in place on x (M, n), P (M, n, n): the
+    :func:`innovation_moments` of the points' predictions Z (M, p, nz), then S = Pzz + R and
+    :func:`kalman_correct`; then the points X, Xdev (M, p, n) of the corrected (x, P)
+    (:func:`sigma_points`). Returns -1; or 0 <= m < M, the first run whose S is not positive
+    definite (x, P of runs >= m unchanged, no points); or M + m, the first run whose corrected
+    P has no Cholesky factor (its points, and later runs', not made)."""
+    M, p, nz = Z.shape
+    y, S, Pxz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, x.shape[1], nz))
+    innovation_moments(Z, dev, z, wm, wc, zmask, y, S, Pxz)
+    for m in range(M):
+        for a in range(nz):
+            for b in range(nz):
+                S[m, a, b] += R[a, b]
+    bad = kalman_correct(x, P, y, S, Pxz, xmask, nis)
+    if bad >= 0:
+        return bad
+    bad = sigma_points(x, P, xi, X, Xdev)
+    return -1 if bad < 0 else M + bad
+
+
+@nb.njit(cache=True)
+def propagate_cov(F, P, Q, out):
+    """out[m] = F[m] P[m] F[m]' + Q for each run m (the EKF's predicted covariance)."""
+    M, n = P.shape[0], P.shape[1]
+    FP = np.empty((n, n))
+    for m in range(M):
+        matmul(F[m], P[m], FP)
+        for i in range(n):
+            for j in range(n):
+                t = 0.0
+                for q in range(n):
+                    t += FP[i, q] * F[m, j, q]
+                out[m, i, j] = t + Q[i, j]
+
+
+@nb.njit(cache=True)
+def joseph_update(x, P, y, H, R, xmask, nis):
+    """The Kalman update in Joseph form, in place on each run m of x (M, n), P (M, n, n), with
+    innovations y (M, nz), measurement Jacobians H (M, nz, n) and R (nz, nz) (Bar-Shalom et al.
+    2001, §5.2):
+
+        S = H P H' + R,  K = P H' S^-1,  x = x + K y  (``xmask`` components wrapped),
+        P = (I - K H) P (I - K H)' + K R K',  symmetrised;  nis = y' S^-1 y.
+
+    Returns the first run whose S is not positive definite (that run and the later ones are
+    left as they were), or -1."""
+    M, n = x.shape
+    nz = y.shape[1]
+    PHt, S, K = np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
+    L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
+    for m in range(M):
+        for i in range(n):
+            for j in range(nz):
+                t = 0.0
+                for q in range(n):
+                    t += P[m, i, q] * H[m, j, q]
+                PHt[i, j] = t
+        matmul(H[m], PHt, S)
+        for i in range(nz):
+            for j in range(nz):
+                S[i, j] += R[i, j]
+        if not cholesky(S, L):
+            return m
+        solve_rows(L, PHt, K)
+        nis[m] = whitened_norm2(L, y[m])
+        for i in range(n):
+            t = 0.0
+            for j in range(nz):
+                t += K[i, j] * y[m, j]
+            x[m, i] += t
+        wrap(x[m], xmask)
+        for i in range(n):  # A = I - K H
+            for j in range(n):
+                t = 0.0
+                for q in range(nz):
+                    t += K[i, q] * H[m, q, j]
+                A[i, j] = (1.0 if i == j else 0.0) - t
+        matmul(A, P[m], AP)
+        matmul(K, R, KR)
+        for i in range(n):
+            for j in range(n):
+                t = 0.0
+                for q in range(n):
+                    t += AP[i, q] * A[j, q]
+                u = 0.0
+                for q in range(nz):
+                    u += KR[i, q] * K[j, q]
+                P[m, i, j] = t + u
+        symmetrise(P[m])
+    return -1
+
