@@ -176,8 +176,10 @@ def _check_dataset(cfg: dict, bad) -> None:
         raise bad("config.dataset_sha256", f"expected 64 lowercase hex digits, got {sha!r:.80}")
 
 
-def repeat(man: dict, data_dir=None):
-    """Run the manifest's configuration again: the :class:`replay.evaluate.Evaluation`."""
+def repeat(man: dict, data_dir=None, progress=None):
+    """Run the manifest's configuration again: the :class:`replay.evaluate.Evaluation`.
+
+    ``progress``: a :class:`replay.util.progress.Progress` told of each run done (as ``replay eval``'s)."""
     from replay.evaluate import evaluate
 
     cfg = man["config"]
@@ -185,7 +187,8 @@ def repeat(man: dict, data_dir=None):
                     seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
                     task_params=cfg["task_params"], filter_params=cfg["filter_params"],
                     dataset_params=cfg["dataset_params"], adapter=cfg["adapter"],
-                    alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"])
+                    alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"],
+                    progress=progress)
 
 
 def rerun_rtol(name: str) -> float:

@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from replay.util.errors import ReplayError
 from replay.util.progress import Progress, particle_weight
 
 
@@ -59,3 +60,75 @@ def test_eval_shows_a_bar_on_a_terminal_and_nothing_with_q(tmp_path):
     assert "eval: 100%|####" in text and "60/60 runs" in text  # the bar, weighted, with counts
     rc, text = _in_pty([*args, "-o", "b", "-q"], tmp_path)
     assert rc == 0 and "eval:" not in text and "%|" not in text and "pos_rmse" in text
+
+
+def test_export_counts_every_message_it_writes(tmp_path):
+    """The MCAP and ROS 2 bag writers announce their total before writing and report each message
+    once: the last line says N/N with N the number of messages the writer returns."""
+    from test_export_mcap import synthetic_run
+
+    from replay.outputs.export_mcap import write_mcap
+    from replay.outputs.export_ros2 import write_run_ros2
+
+    frame, problem, est = synthetic_run(n=800)
+    out = io.StringIO()
+    p = Progress(0, stream=out, label="export mcap", unit="message", every=1e9)
+    n = write_mcap(tmp_path / "r.mcap", frame, problem, est, window=2000, progress=p)
+    assert p.total == p.done == n > 800
+    lines = out.getvalue().splitlines()  # one line: the end (the next is due in 1e9 s)
+    assert len(lines) == 1 and lines[0].startswith(f"export mcap: {n}/{n} messages (100 % of the work)")
+    out = io.StringIO()
+    p = Progress(0, stream=out, label="export ros2 bag", unit="message", every=1e9)
+    n = write_run_ros2({"frame": frame, "problem": problem, "estimates": est}, tmp_path / "bag", progress=p)
+    assert p.total == p.done == n and out.getvalue().startswith(f"export ros2 bag: {n}/{n} messages")
+    q = io.StringIO()
+    n = write_mcap(tmp_path / "q.mcap", frame, problem, est, progress=Progress(0, quiet=True, stream=q))
+    assert n > 800 and q.getvalue() == ""
+
+
+def test_export_progress_stays_short_when_the_file_cannot_be_finished(tmp_path, monkeypatch):
+    """A write that fails at the end (a full disk when the last chunk is flushed) never says N/N."""
+    from test_export_mcap import synthetic_run
+
+    from replay.adapters.bags.writer import BagOut
+    from replay.outputs import mcap_bulk
+    from replay.outputs.export_mcap import write_mcap
+    from replay.outputs.export_ros2 import write_run_ros2
+
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    frame, problem, est = synthetic_run(n=800)
+    monkeypatch.setattr(mcap_bulk.BulkWriter, "finish", full)
+    out = io.StringIO()
+    p = Progress(0, stream=out, label="export mcap", unit="message", every=1e9)
+    with pytest.raises(ReplayError, match="No space left on device"):
+        write_mcap(tmp_path / "r.mcap", frame, problem, est, window=500, progress=p)
+    assert 0 < p.done < p.total and out.getvalue() == ""
+    monkeypatch.setattr(BagOut, "close", full)
+    p = Progress(0, stream=out, label="export ros2 bag", unit="message", every=1e9)
+    with pytest.raises(ReplayError, match="No space left on device"):
+        write_run_ros2({"frame": frame, "problem": problem, "estimates": est}, tmp_path / "bag", progress=p)
+    assert p.done < p.total and out.getvalue() == ""
+
+
+@pytest.mark.slow
+def test_rerun_and_export_show_a_bar_on_a_terminal_and_nothing_with_q(tmp_path):
+    args = ["eval", "sim/auv-sonar", "-f", "ekf,pf", "--runs", "3", "-p", "pf.n_particles=50", "-o", "run", "-q"]
+    done = subprocess.run([sys.executable, "-m", "replay.cli", *args], cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    rc, text = _in_pty(["rerun", "run/manifest.json"], tmp_path)
+    assert rc == 0, text
+    assert "rerun: 100%|####" in text and "6/6 runs" in text and "reproduced: every RMSE" in text
+    rc, text = _in_pty(["rerun", "run/manifest.json", "-q"], tmp_path)
+    assert rc == 0 and "rerun:" not in text and "%|" not in text and "reproduced: every RMSE" in text
+    rc, text = _in_pty(["export", "run", "--mcap", "a.mcap", "--ros2-bag", "a_bag"], tmp_path)
+    assert rc == 0, text
+    n_mcap = int(text.split("wrote a.mcap (")[1].split()[0])
+    n_bag = int(text.split("wrote a_bag/ (")[1].split()[0])
+    assert n_mcap > n_bag > 0
+    assert "export mcap: 100%|####" in text and f"{n_mcap}/{n_mcap} messages" in text
+    assert "export ros2 bag: 100%|####" in text and f"{n_bag}/{n_bag} messages" in text
+    rc, text = _in_pty(["export", "run", "--mcap", "a.mcap", "--ros2-bag", "a_bag", "-q"], tmp_path)
+    assert rc == 0 and f"wrote a.mcap ({n_mcap} messages" in text and f"wrote a_bag/ ({n_bag} messages" in text
+    assert "%|" not in text and "export mcap" not in text and "export ros2" not in text

@@ -68,3 +68,61 @@ def test_reproduce_001_quick(tmp_path):
     assert floor_w > 40 and floor_b < 6
     main = evs["bottom 0.5"].rows
     assert main[1]["pos_rmse"] > 3 * main[0]["pos_rmse"]  # the paper's AUKF loses in bottom lock
+
+
+# ---------------------------------------------------------------- figures (synthetic inputs, fast)
+
+def _fake_ev(runs=5, steps=40, seed=0, scale=1.0):
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    errors = [{"position": scale * rng.standard_normal((steps, 3)), "vx": 0.1 * scale * rng.standard_normal(steps)}
+              for _ in range(runs)]
+    return SimpleNamespace(results=[SimpleNamespace(errors=errors)] * 2)
+
+
+def test_error_figures_one_panel_per_filter_with_units_rmse_and_band():
+    from replay.outputs.palette import colour
+    from replay.reproduce.p001_plots import error_figures, run_errors
+
+    t = np.arange(40) * 0.5
+    ev, qr = _fake_ev(), _fake_ev(seed=1, scale=2.0)
+    errs = {"UKF": run_errors(ev, 0), "AUKF (paper)": run_errors(ev, 1), "AUKF (Q̂, R̂)": run_errors(qr, 0)}
+    signed = np.stack([e["position"] for e in qr.results[0].errors])
+    assert np.array_equal(errs["AUKF (Q̂, R̂)"]["east"], np.abs(signed[:, :, 1]))
+    figs = error_figures(t, errs, "bottom-lock DVL, current 0.5 m/s")
+    assert list(figs) == ["north", "east", "depth", "vx"]
+    for key, unit in (("north", "(m)"), ("depth", "(m)"), ("vx", "(m/s)")):
+        axes = [ax for ax in figs[key].axes if ax.get_visible()]
+        assert len(axes) == 3  # one panel per filter
+        assert axes[0].get_ylabel().endswith(unit) and axes[0].get_xlabel() == "t (s)"
+        assert [ax.get_title().split(":")[0] for ax in axes] == list(errs)
+        assert all("RMSE over 5 runs, band 5-95 %" in ax.get_title() for ax in axes)
+        assert "001, bottom-lock DVL, current 0.5 m/s" in figs[key]._suptitle.get_text()
+    # the Q̂R̂ panel: its line is the RMSE over the runs at each step, its band spans the runs' 5-95 %
+    ax = figs["east"].axes[2]
+    line = next(ln for ln in ax.get_lines() if ln.get_label() == "AUKF (Q̂, R̂)")
+    assert np.allclose(line.get_ydata(), np.sqrt(np.mean(signed[:, :, 1] ** 2, axis=0)))
+    ukf = next(ln for ln in figs["east"].axes[0].get_lines() if ln.get_label() == "UKF")
+    paper = next(ln for ln in figs["east"].axes[1].get_lines() if ln.get_label() == "AUKF (paper)")
+    assert ukf.get_color() == colour("ukf") and len({ukf.get_color(), paper.get_color(), line.get_color()}) == 3
+    band = [c for c in ax.collections if c.get_gid() == "AUKF (Q̂, R̂)"]
+    assert len(band) == 1
+    ys = band[0].get_paths()[0].vertices[:, 1]
+    lo, hi = np.percentile(np.abs(signed[:, :, 1]), (5, 95), axis=0)
+    assert np.isclose(ys.min(), lo.min()) and np.isclose(ys.max(), hi.max())
+
+
+def test_traces_figure_median_and_band_with_units():
+    from replay.reproduce.p001_plots import traces_figure
+
+    rng = np.random.default_rng(3)
+    hist = [{"p": rng.standard_normal((30, 2)), "q": rng.standard_normal((30, 3))} for _ in range(6)]
+    fig = traces_figure(np.arange(31.0), hist, "bottom lock, 0.5 m/s")
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert labels == ["p̂ depth (m)", "p̂ forward velocity (m/s)", "q̂ north (m/step)", "q̂ east (m/step)"]
+    line = next(ln for ln in fig.axes[2].get_lines() if ln.get_label() == "AUKF (paper)")
+    assert np.allclose(line.get_xdata(), np.arange(1.0, 31.0))  # the last 30 times
+    assert np.allclose(line.get_ydata(), np.median([h["q"][:, 0] for h in hist], axis=0))
+    assert len([c for c in fig.axes[2].collections if c.get_gid() == "AUKF (paper)"]) == 1  # the band
+    assert "6 runs" in fig._suptitle.get_text()

@@ -66,3 +66,42 @@ def test_reproduce_003_quick(tmp_path):
     # UKF and EKF are baselines of the printed setting, on the same runs as the PF
     assert [r.name for r in evs["printed"].results] == ["pf", "wf-pf", "ukf", "ekf"]
     assert all(r["diverged"] == 0 for r in evs["printed"].rows)
+
+
+def _fake_printed(runs=7, steps=30):
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(4)
+    signed = [rng.standard_normal((runs, steps, 4)) * (i + 1) for i in range(3)]
+    ev = SimpleNamespace(t=np.arange(float(steps)), results=[
+        SimpleNamespace(errors=[{"position": r[:, :2]} for r in s]) for s in signed])
+    return ev, signed
+
+
+def test_error_figures_one_panel_per_filter_with_units_and_band():
+    from replay.reproduce.common5 import rmse_curve
+    from replay.reproduce.p003_plots import FILTERS, error_figures, run_errors
+
+    ev, signed = _fake_printed()
+    errs = {label: run_errors(ev, i) for label, i in FILTERS}
+    # the peaks the document prints come from the same arrays: RMSE of |e| equals RMSE of e
+    assert np.array_equal(rmse_curve(errs["UKF"]["y"]), rmse_curve(signed[2][:, :, 1]))
+    fig = error_figures(ev.t, errs, "printed setting")["y"]
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title().split(":")[0] for ax in axes] == ["PF", "WF-PF", "UKF"]
+    assert axes[0].get_ylabel() == "y position error (m)" and axes[1].get_xlabel() == "t (s)"
+    line = next(ln for ln in axes[1].get_lines() if ln.get_label() == "WF-PF")
+    assert np.allclose(line.get_ydata(), np.sqrt(np.mean(signed[1][:, :, 1] ** 2, axis=0)))
+    assert len([c for c in axes[1].collections if c.get_gid() == "WF-PF"]) == 1  # the 5-95 % band
+    assert "7 runs" in fig._suptitle.get_text()
+
+
+def test_plots_write_one_png_per_axis(tmp_path):
+    from replay.reproduce.p003_plots import FILTERS, plots, run_errors
+
+    ev, _ = _fake_printed(runs=3, steps=10)
+    lines = plots(ev.t, {label: run_errors(ev, i) for label, i in FILTERS}, tmp_path / "doc" / "003.md",
+                  "printed setting")
+    assert lines[0] == "![x position error over time, printed setting](003_rmse_x.png)"
+    assert lines[2] == "![y position error over time, printed setting](003_rmse_y.png)"
+    assert sorted(p.name for p in (tmp_path / "doc").iterdir()) == ["003_rmse_x.png", "003_rmse_y.png"]

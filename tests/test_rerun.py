@@ -41,7 +41,7 @@ def test_changed_recorded_value_is_not_reproduced(manifest, tmp_path):
     was = man["results"]["ukf"]["pos_rmse"]
     man["results"]["ukf"]["pos_rmse"] = was + 1e-12
     path = _write(tmp_path, man)
-    assert_refused(["rerun", path], rf"{path}: not reproduced: ukf\.pos_rmse: {was + 1e-12!r} -> {was!r}$")
+    assert_refused(["rerun", "-q", path], rf"{path}: not reproduced: ukf\.pos_rmse: {was + 1e-12!r} -> {was!r}$")
 
 
 def test_rmse_deleted_with_its_interval_is_found_after_the_rerun(manifest, tmp_path):
@@ -50,7 +50,7 @@ def test_rmse_deleted_with_its_interval_is_found_after_the_rerun(manifest, tmp_p
     del man["results"]["ekf"]["yaw_rmse"], man["results"]["ekf"]["yaw_rmse_ci95"]
     path = _write(tmp_path, man)
     rerun.check(json.loads(path.read_text()), path)  # nothing visible before the rerun
-    assert_refused(["rerun", path], r"not reproduced: ekf\.yaw_rmse: not recorded \(deleted from the manifest\?\)")
+    assert_refused(["rerun", "-q", path], r"not reproduced: ekf\.yaw_rmse: not recorded \(deleted from the manifest\?\)")
 
 
 @pytest.mark.parametrize("key", list(rerun.CONFIG))
@@ -100,7 +100,7 @@ def test_changed_data_file_is_not_reproduced(tmp_path):
     last[-1] = last[-1].rstrip("\n") + "1\n"  # a digit more in the last row (outside --first 50)
     log.write_text("".join(lines[:-1]) + ",".join(last))
     pipeline._file_frame.cache_clear()  # a new process would read the file again
-    assert_refused(["rerun", path], rf"not reproduced: dataset checksum {sha} -> [0-9a-f]{{64}}$")
+    assert_refused(["rerun", "-q", path], rf"not reproduced: dataset checksum {sha} -> [0-9a-f]{{64}}$")
 
 
 def test_rerun_tolerance_comes_from_the_filter_class(monkeypatch):

@@ -70,42 +70,41 @@ def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_
 
 
 def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: int = 0, select=None,
-                   sigma=None) -> None:
+                   sigma=None, quiet: bool = False) -> None:
     """Export one run of an evaluation directory (or of a campaign's configurations chosen by
     ``select``) as a Foxglove MCAP and/or a ROS 2 bag.
 
     Both targets are checked before the run is loaded (once, for both exports), and
     again against the dataset file the load resolved; each is written to a hidden
-    temporary beside it and moved into place when complete.
+    temporary beside it and moved into place when complete. Progress over the messages
+    written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none if ``quiet``.
     """
     from replay.outputs.export_mcap import write_run_mcap
     from replay.outputs.export_ros2 import write_run_ros2
     from replay.outputs.export_safety import run_inputs
     from replay.outputs.run_data import load_run
+    from replay.util.progress import Progress
 
     inputs = run_inputs(run_dir, data_dir)
     check_export_targets(mcap_out, ros2_out, inputs)
     loaded = load_run(run_dir, data_dir, run=run, select=select)
     check_export_targets(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
     tracks = ", ".join(loaded["estimates"])
-    if mcap_out:
-        n = write_run_mcap(loaded, mcap_out, sigma=sigma)
-        click.echo(f"wrote {mcap_out} ({n} messages; run {loaded['run']}: {tracks})")
-    if ros2_out:
-        n = write_run_ros2(loaded, ros2_out)
-        click.echo(f"wrote {ros2_out}/ ({n} messages; run {loaded['run']}: {tracks})")
+    for target, write, label, slash in ((mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p),
+                                         "export mcap", ""),
+                                        (ros2_out, lambda p: write_run_ros2(loaded, ros2_out, progress=p),
+                                         "export ros2 bag", "/")):
+        if not target:
+            continue
+        progress = Progress(0, quiet, label=label, unit="message")
+        try:
+            n = write(progress)
+        finally:
+            progress.close()
+        click.echo(f"wrote {target}{slash} ({n} messages; run {loaded['run']}: {tracks})")
 
 
-EXAMPLES = """\b
-Examples:
-  replay export runs/sim_auv-sonar/sonar --mcap sonar.mcap
-  replay export runs/test1 --run 0 --mcap test1.mcap --ros2-bag test1_bag --sigma 2
-  replay export runs/campaign-example --dataset sim/auv-sonar --run 3 --mcap auv-run3.mcap
-  replay export runs/campaign-example --dataset bohai/20220822_0_6 --filter ekf,ukf --ros2-bag bohai_bag
-"""
-
-
-@click.command("export", epilog=EXAMPLES)
+@click.command("export")  # examples: replay.cli.examples
 @click.argument("run_dir", type=click.Path())
 @click.option("--mcap", "mcap_out", default=None, type=click.Path(),
               help="Foxglove MCAP to write (poses, paths, frame transforms, covariance ellipsoids, errors, sensor "
@@ -123,7 +122,8 @@ Examples:
 @click.option("--sigma", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
-def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir):
+@click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
+def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir, quiet=False):
     """Export one run of a `replay eval` output directory, or of a campaign's result directory, for
     Foxglove (MCAP) or `ros2 bag play`.
 
@@ -132,5 +132,9 @@ def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config,
     """
     if not (mcap_out or ros2_out):
         raise ReplayError("export: give --mcap FILE and/or --ros2-bag DIR")
-    export_outputs(run_dir, mcap_out, ros2_out, data_dir=data_dir, run=run, sigma=sigma,
+    if quiet:  # the library's notes (logger "replay") down to warnings, as replay eval -q does
+        import logging
+
+        logging.getLogger("replay").setLevel(logging.WARNING)
+    export_outputs(run_dir, mcap_out, ros2_out, data_dir=data_dir, run=run, sigma=sigma, quiet=quiet,
                    select={"dataset": dataset, "task": task, "filter": filter_, "config": config})

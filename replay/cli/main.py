@@ -152,22 +152,30 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     if mcap_out or ros2_out:
         from replay.cli.bags import export_outputs
 
-        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir)
+        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
 
 
 @main.command("rerun")
 @click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--data-dir", default=None, type=click.Path())
-@click.option("--out", "-o", default=None, type=click.Path())
-def rerun_cmd(manifest_file, data_dir, out):
+@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@click.option("--out", "-o", default=None, type=click.Path(),
+              help="Also write the rerun's leaderboard, manifest and estimates to this directory.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
+def rerun_cmd(manifest_file, data_dir, out, quiet=False):
     """Repeat the run recorded in a manifest.json and check that every RMSE is reproduced exactly."""
     from replay import rerun
     from replay.outputs.files import check_output, format_table, write_all
+    from replay.util.progress import Progress
 
     man = rerun.load(manifest_file)  # checked before any computation
     if out:
         check_output(Path(out), [manifest_file], "--out")
-    ev = rerun.repeat(man, data_dir)
+    _quiet(quiet)
+    progress = Progress(0, quiet, label="rerun", unit="run")
+    try:
+        ev = rerun.repeat(man, data_dir, progress=progress)
+    finally:
+        progress.close()
     click.echo(format_table(ev))
     if out:
         write_all(ev, Path(out))

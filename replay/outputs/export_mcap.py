@@ -133,10 +133,17 @@ class McapOut:
             cuts.append(cand[j[j < len(cand)]])
         return np.unique(np.concatenate(cuts)) if cuts else np.zeros(0, np.int64)
 
-    def close(self) -> int:
-        """Write every planned message, window by window, and finish the file; returns the count."""
+    def close(self, progress=None) -> int:
+        """Write every planned message, window by window, and finish the file; returns the count.
+
+        ``progress``: a :class:`replay.util.progress.Progress` told of the messages written; it
+        reaches its total only once the file is finished (a failure to finish leaves it short)."""
         bounds = self._bounds()
         edges = [np.r_[0, np.searchsorted(p[1], bounds, "left"), len(p[1])] for p in self.plans]
+        total = sum(len(p[1]) for p in self.plans)
+        told = 0
+        if progress is not None:
+            progress.start(total)
         try:
             for k in range(len(bounds) + 1):
                 # one instant: its messages keep the channel order when flushed channel by channel
@@ -146,12 +153,17 @@ class McapOut:
                     if b > a:
                         sel = np.arange(a, b) if order is None else order[a:b]
                         self.count += self.w.add_messages(cid, t[a:b], encode(sel))
+                        if progress is not None and self.count < total:
+                            progress.update(self.count - told)
+                            told = self.count
                         if instant:
                             self.w.flush()
                 self.w.flush()
             self.w.finish()
         finally:
             self.w.close()
+        if progress is not None:
+            progress.update(self.count - told)
         return self.count
 
 
@@ -269,7 +281,7 @@ def _error_rows(err):
     return get
 
 
-def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sigma=None) -> int:
+def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sigma=None, progress=None) -> int:
     """Write one run of ``run_dir`` (an eval output or a campaign, ``select``: see
     ``run_data.load_run``) as a Foxglove MCAP; returns the number of messages.
 
@@ -282,14 +294,14 @@ def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sig
     check_target(mcap_path, inputs, "mcap")
     loaded = load_run(run_dir, data_dir, run=run, select=select)
     check_target(mcap_path, inputs + [loaded["frame"].meta.get("path")], "mcap")
-    return write_run_mcap(loaded, mcap_path, sigma=sigma)
+    return write_run_mcap(loaded, mcap_path, sigma=sigma, progress=progress)
 
 
-def write_run_mcap(run: dict, mcap_path, sigma=None) -> int:
+def write_run_mcap(run: dict, mcap_path, sigma=None, progress=None) -> int:
     """The MCAP of a loaded run (``run_data.load_run``), with its manifest as metadata."""
     return write_mcap(mcap_path, run["frame"], run["problem"], run["estimates"], sigma=sigma,
                       metadata={"replay.manifest": run.get("manifest", {}),
-                                "replay.export": export_info(run, sigma)})
+                                "replay.export": export_info(run, sigma)}, progress=progress)
 
 
 def export_info(run: dict, sigma=None) -> dict:
@@ -304,11 +316,13 @@ def export_info(run: dict, sigma=None) -> dict:
 
 
 def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str = "zstd",
-               chunk_size: int = 4 << 20, window: int = 1 << 16, sigma=None, metadata=None) -> int:
+               chunk_size: int = 4 << 20, window: int = 1 << 16, sigma=None, metadata=None,
+               progress=None) -> int:
     """Estimates ``{filter: {t, x, P, err}}`` of one run, the reference and the sensors -> MCAP.
 
     ``sigma``: the scale of the covariance ellipsoids (default ``foxglove_scene.SIGMA``);
-    ``metadata``: ``{record name: {key: text}}`` written as MCAP Metadata records.
+    ``metadata``: ``{record name: {key: text}}`` written as MCAP Metadata records;
+    ``progress``: a :class:`replay.util.progress.Progress` told of the messages written.
     Written to a hidden temporary file beside ``mcap_path`` and renamed over it when
     complete; an existing ``mcap_path`` is replaced only if replay wrote it.
     """
@@ -352,4 +366,4 @@ def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str =
         for cname, ch in frame.channels.items():
             comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
             _plan_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)
-        return out.close()
+        return out.close(progress)

@@ -158,7 +158,7 @@ def ros_name(name: str) -> str:
     return f"f_{token}" if token[0].isdigit() else token
 
 
-def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None) -> int:
+def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None, progress=None) -> int:
     """nav_msgs/Odometry per filter and for the reference (one run) -> ROS 2 bag (MCAP storage).
 
     Refused before anything is read or written: a target that is an input of the run
@@ -171,16 +171,20 @@ def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None) -> 
     check_target(path, inputs, "ros2")
     loaded = load_run(run_dir, data_dir, run=run, select=select)
     check_target(path, inputs + [loaded["frame"].meta.get("path")], "ros2")
-    return write_run_ros2(loaded, path)
+    return write_run_ros2(loaded, path, progress=progress)
 
 
-def write_run_ros2(run: dict, path) -> int:
-    """The odometry bag of a loaded run (``run_data.load_run``), staged and swapped in at ``path``."""
+def write_run_ros2(run: dict, path, progress=None) -> int:
+    """The odometry bag of a loaded run (``run_data.load_run``), staged and swapped in at ``path``;
+    ``progress``: a :class:`replay.util.progress.Progress` told of the messages written."""
     with staged_dir(path, "--ros2-bag") as tmp:
-        return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}, compression="zstd"), run)
+        return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}, compression="zstd"), run, progress)
 
 
-def _write_run(out, run) -> int:
+PROGRESS_EVERY = 4096  # messages between two progress updates
+
+
+def _write_run(out, run, progress=None) -> int:
     from replay.outputs.run_data import enu_axes, enu_yaw, ned, time_ns, to_enu, track_index
 
     frame, problem = run["frame"], run["problem"]
@@ -199,11 +203,17 @@ def _write_run(out, run) -> int:
             if topic in topics:
                 raise ReplayError(f"--ros2-bag: tracks {topics[topic]!r} and {name!r} would both be {topic}")
             topics[topic] = name
-        for topic, (name, ns, pos, yaw, var, ok) in zip(topics, tracks):
+        rows = []
+        for name, ns, pos, yaw, var, ok in tracks:
             pos = to_enu(pos, axes)
             ok = np.isfinite(pos).all(axis=1) if ok is None else ok & np.isfinite(pos).all(axis=1)
+            rows.append((ns, pos, yaw, var, np.flatnonzero(ok)))
+        total, told = sum(len(r[-1]) for r in rows), 0
+        if progress is not None:
+            progress.start(total)
+        for topic, (ns, pos, yaw, var, idx) in zip(topics, rows):
             conn = out.connection(topic, "nav_msgs/msg/Odometry")
-            for i in np.flatnonzero(ok):
+            for i in idx:
                 y = float(yaw[i]) if yaw is not None and np.isfinite(yaw[i]) else 0.0
                 cov = np.zeros(36)
                 if var is not None:
@@ -211,6 +221,11 @@ def _write_run(out, run) -> int:
                 out.write(conn, int(ns[i]), out.odometry(int(ns[i]), "enu", "base_link", pos[i],
                                                           (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
                                                           (0, 0, 0), (0, 0, 0), cov))
+                if progress is not None and out.count - told >= PROGRESS_EVERY and out.count < total:
+                    progress.update(out.count - told)
+                    told = out.count
     finally:
         out.close()
+    if progress is not None:  # the total only once the bag is closed
+        progress.update(out.count - told)
     return out.count

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -150,25 +149,3 @@ def rmse_curve(err: np.ndarray) -> np.ndarray:
     """RMSE across runs at each step of errors (runs, n): sqrt(mean_runs e²), NaN-aware."""
     with np.errstate(invalid="ignore"):
         return np.sqrt(np.nanmean(err**2, axis=0))
-
-
-def plot_curves(path: Path, t, curves: dict, panels: list[str], ylabel: str, title: str) -> None:
-    """One panel per name in ``panels``; ``curves[filter][panel]`` is an (n,) RMSE curve."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 2.2 * len(panels)), sharex=True)
-    for ax, name in zip(np.atleast_1d(axes), panels):
-        for flt, c in curves.items():
-            ax.plot(t, c[name], label=flt, lw=1)
-        ax.set_ylabel(f"{name} {ylabel}")
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].legend(fontsize=8)
-    np.atleast_1d(axes)[0].set_title(title)
-    np.atleast_1d(axes)[-1].set_xlabel("t (s)")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)

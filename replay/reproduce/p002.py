@@ -33,7 +33,7 @@ from . import p002_ablations, p002_bohai, p002_checks, p002_sim
 from .p002_common import Settings, run_jobs
 
 PARTS = ("tables", "ablations", "bohai")
-DOC = Path(__file__).resolve().parents[2] / "docs" / "reproduction" / "002.md"
+DOC = Path("docs/reproduction/002.md")  # relative to the working directory, as 000, 001, 003
 
 
 def path_for(doc) -> Path:

@@ -5,8 +5,9 @@ import numpy as np
 
 from replay.metrics import paired
 
-from .common5 import combine, commands, paired_cell, plot_curves, rmse_curve, row, table
+from .common5 import combine, commands, paired_cell, rmse_curve, row, table
 from .p003_plan import ACCEL, CONTRAST, MISMATCH, N_BASE, N_PRINTED, N_SWEEP, ROUGHENING, likelihoods
+from .p003_plots import FILTERS, plots, run_errors
 from .verdict import Claim, anchor, verdict_table
 
 S_PRINTED = "Printed setting"
@@ -97,11 +98,8 @@ def render(evs, runs, seed, quick, doc) -> str:
     record(f"printed (N = {N_PRINTED}, σ₂/σ₁ = 2, ε = 0.75)", pr_alpha)
     where[-1][1]["paper"] = paper_pair(p)
     g_pf, g_wf = growth(p, 0), growth(p, 1)
-    curves = {}
-    for name, i in (("PF", 0), ("WF-PF", 1), ("UKF", 2)):
-        pos = np.stack([np.asarray(e["position"], float) for e in p.results[i].errors])
-        curves[name] = {"x": rmse_curve(pos[:, :, 0]), "y": rmse_curve(pos[:, :, 1])}
-    peak = {n: (float(np.nanmax(c["x"])), float(np.nanmax(c["y"]))) for n, c in curves.items()}
+    run_errs = {name: run_errors(p, i) for name, i in FILTERS}  # |x|, |y| errors per run: the peaks and plots
+    peak = {n: tuple(float(np.nanmax(rmse_curve(e[k]))) for k in ("x", "y")) for n, e in run_errs.items()}
 
     # ---- sweeps: baseline WF-PF α = 1 (the PF, same particle stream as the α < 1 rows)
     def sweep(key, label, extra=(), key_a1=None, key_half=None, alphas=(0.75, 0.5)):
@@ -235,12 +233,7 @@ def render(evs, runs, seed, quick, doc) -> str:
           f"{fmt((gw['diff'], gw['diff_ci95']))} | {fmt((gd['diff'], gd['diff_ci95']))} |",
           f"| UKF | {peak['UKF'][0]:.2f} / {peak['UKF'][1]:.2f} | "
           f"{fmt(_gr(growth(p, 2)))} | {paired_cell(growth(p, 2), g_pf, 2)} |", ""]
-    try:
-        png = doc.parent / "003_rmse.png"
-        plot_curves(png, p.t, curves, ["x", "y"], "RMSE (m)", "003: printed setting, RMSE over runs")
-        L += [f"![RMSE over time, printed setting]({png.name})", ""]
-    except ImportError:
-        L += ["(plot skipped: matplotlib is not installed)", ""]
+    L += plots(p.t, run_errs, doc, "printed setting")
 
     L += [f"## {S_WHY}", "",
           f"* The glint is nearly Gaussian: the bearing mixture's excess kurtosis is {kurtosis(2, 0.75):.2f} at "
