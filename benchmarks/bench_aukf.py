@@ -3,7 +3,7 @@
 Target (issue 5): AUKF at most 2x our UKF's time per step. The filters are
 timed alternately (best of ``repeat`` whole runs each), so a busy shared
 machine slows both alike. Run:
-    /work/venv/bin/python benchmarks/bench_aukf.py
+    python benchmarks/bench_aukf.py
 """
 import time
 

@@ -1,7 +1,7 @@
 """Bags/MCAP speed: read robot_localization/test1.bag into a frame (target < 2 s);
 export a 10,000-step run with five filters to a Foxglove MCAP (target < 3 s).
 
-    /work/venv/bin/python benchmarks/bench_bags.py [--repeat 3]
+    python benchmarks/bench_bags.py [--repeat 3]
 """
 from __future__ import annotations
 
