@@ -210,6 +210,15 @@ class Filter(Declared):
             _escalate(err, careful, M)
             diverged[0], errors[0], active, started = 0, err, active[:0], False
         clock = perf_counter
+        if not careful and started and finite.all() and hasattr(engine, "run_all"):
+            t0 = clock()
+            done = engine.run_all(Z)  # every step in one compiled loop, when the engine has one
+            if done is False:
+                raise _Careful
+            if done is not None:
+                X[:], P[:], nis[:] = done
+                dof[:], secs[:] = Z.shape[2], (clock() - t0) / (n * M)
+                active = active[:0]
         for k in range(n):
             na = len(active)
             if not na:

@@ -151,6 +151,13 @@ class KalmanEngine:
         self.x, self.P = x, P
         return x, P, nis, dof
 
+    def run_all(self, Z):
+        """Every step of the active runs at once, when every measurement is present: the same
+        kernels in one compiled loop (:func:`run_kernels`), returning (X, P, nis) stacks (M,
+        steps, ...), or False when a run failed (the caller redoes the steps one by one), or None
+        when there is no such loop for this filter or model."""
+        return None
+
     def predict(self, x, P, k):
         raise NotImplementedError
 
@@ -159,8 +166,61 @@ class KalmanEngine:
         raise NotImplementedError
 
 
+COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
+
+
+def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
+    """Run ``loop`` (:func:`replay.util.kalman_kernels.sigma_run` or ``ekf_run``, declared type
+    ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
+    kernels (typed as first-class functions, :func:`first_class`), its parameters, Q and R at
+    every step. None (the caller steps in Python, same numbers) when the model's array methods
+    are not its kernels, or when the loop is neither compiled nor cached and the job is smaller
+    than ``COMPILE_AT`` run-steps (choosing by problem size: a short first run does not pay the
+    compilation)."""
+    m = engine.model
+    ks = m.kernels()
+    M, steps, nz = Z.shape
+    if ks is None or not derived_from_kernels(m) or not kernels.loop_ready(loop, sig, M * steps >= COMPILE_AT):
+        return None
+    pars = [m.kernel_params(k) for k in range(steps)]
+    Pf, Ph = (np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
+    Q = np.ascontiguousarray([m.process_cov(k) for k in range(steps)], dtype=float)
+    R = np.ascontiguousarray([m.measurement_cov(k) for k in range(steps)], dtype=float)
+    x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
+    X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
+    fns = [first_class(ks[i], i >= 2) for i in kernels_needed]
+    bad = loop(*fns, x, P, np.ascontiguousarray(Z, dtype=float), Pf, Ph, Q, R, *args,
+               np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz)), X, PP, nis)
+    return (X, PP, nis) if bad < 0 else False
+
+
+def derived_from_kernels(model) -> bool:
+    """True when the model's f, h, F, H are those a KernelModel derives from its kernels."""
+    from replay.models.kernel_model import KernelModel
+
+    return all(getattr(type(model), n) is getattr(KernelModel, n) for n in ("f", "h", "F", "H"))
+
+
+_first_class: dict = {}
+
+
+def first_class(kernel, matrix: bool):
+    """The one-state ``kernel`` compiled for the declared first-class type of the run loops
+    (C-contiguous rows; cached on disk by numba like the kernel itself)."""
+    got = _first_class.get(kernel)
+    if got is None:
+        import numba as nb
+
+        sig = (kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL).signature
+        got = _first_class[kernel] = nb.njit(sig, cache=True)(kernel.py_func)
+    return got
+
+
 class EKFEngine(KalmanEngine):
     """The EKF's predict and update on one run or a stack of runs."""
+
+    def run_all(self, Z):
+        return run_kernels(self, Z, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
 
     def predict(self, x, P, k):
         m = self.model

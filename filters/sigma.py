@@ -40,6 +40,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from .base import PER_RUN, Filter, on_points
+from . import kalman
 from .kalman import KalmanEngine, measurement, not_pd, stack_of
 
 
@@ -131,6 +132,9 @@ class SigmaEngine(KalmanEngine):
         super().keep(ok)
         self.X, self.dev, self.missing = self.X[ok], self.dev[ok], self.missing[ok]
         self.all_made = not self.missing.any()
+
+    def run_all(self, Z):
+        return kalman.run_kernels(self, Z, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""

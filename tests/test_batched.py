@@ -281,3 +281,33 @@ def test_fast_path_equals_the_readable_reference(sonar_problems, name, monkeypat
     ref = run(flt)
     for a, b in zip(fast, ref):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
+
+
+@pytest.mark.slow  # compiles the two run loops when numba's cache lacks them (~12 s, once)
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
+def test_whole_run_loop_equals_the_step_by_step_engine(sonar_problems, name, monkeypatch):
+    """With every measurement present the engine runs all steps in one compiled loop
+    (kalman_kernels.sigma_run / ekf_run, the model's kernels as first-class functions); it
+    gives the numbers of the step-by-step engine bit for bit, NIS included."""
+    from replay.filters import kalman
+    from replay.util import kalman_kernels
+
+    for loop, sig in ((kalman_kernels.sigma_run, kalman_kernels.SIGMA_RUN),
+                      (kalman_kernels.ekf_run, kalman_kernels.EKF_RUN)):
+        assert kalman_kernels.loop_ready(loop, sig, True)
+    pbs = sonar_problems[:3]
+    Z = np.stack([pb.z for pb in pbs])
+    X0, P0 = np.stack([pb.x0 for pb in pbs]), np.stack([pb.P0 for pb in pbs])
+    flt = make_filter(name)
+    used, real = [], kalman.run_kernels
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: used.append(real(*a)) or used[-1])
+    fast = flt.run_batch(pbs[0].model, Z, X0, P0, [None] * 3)
+    one = flt.run(pbs[1].model, Z[1], X0[1], P0[1])
+    assert len(used) == 2 and all(isinstance(u, tuple) for u in used)  # the loop ran, both times
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: None)  # no loop: step by step
+    slow = flt.run_batch(pbs[0].model, Z, X0, P0, [None] * 3)
+    for a, b in zip(fast, slow):
+        assert np.isfinite(a.x).all()
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert np.array_equal(a.info["nis"], b.info["nis"])
+    assert np.array_equal(one.x, slow[1].x)

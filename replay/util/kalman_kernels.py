@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba import types
 
 from .kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symmetrise, weighted_outer,
                       whitened_norm2, wrap)
@@ -229,3 +230,104 @@ def joseph_update(x, P, y, H, R, xmask, nis):
         symmetrise(P[m])
     return -1
 
+
+
+# --- whole runs: the steps above in one compiled loop, the model's one-state kernels passed in ---
+# The kernels are first-class function arguments of one declared type, so that the loop is
+# compiled once per machine for every model (and cached), not once per model and process.
+_VEC, _MAT = types.float64[::1], types.float64[:, ::1]
+ROW_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _VEC))      # f, h: (x, p, out)
+JACOBIAN_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _MAT))  # F, H: (x, p, J)
+_S2, _S3, _S4 = types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
+_MASK = types.boolean[::1]
+_COMMON = (_S2, _S3, _S3, _S2, _S2, _S3, _S3)  # x, P, Z, Pf, Ph, Q, R
+_OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
+
+
+@nb.njit(cache=True)
+def apply_rows(fun, X, p, out):
+    """out[m, i] = fun(X[m, i]) for the one-state kernel ``fun(x, p, out)`` over a stack of points."""
+    for m in range(X.shape[0]):
+        for i in range(X.shape[1]):
+            fun(X[m, i], p, out[m, i])
+
+
+SIGMA_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
+EKF_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, JACOBIAN_KERNEL, JACOBIAN_KERNEL, *_COMMON, _MASK, _MASK, *_OUT)
+
+
+def loop_ready(loop, sig, compile_ok: bool) -> bool:
+    """Whether the run loop ``loop`` (:func:`sigma_run`, :func:`ekf_run`) can be called with
+    its declared signature ``sig``: compiled in this process, or loaded from numba's disk
+    cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
+    not at import: a short run never waits for it."""
+    if not loop.signatures:
+        if not compile_ok and loop._cache.load_overload(sig, loop.targetctx) is None:
+            return False
+        loop.compile(sig)
+        loop.disable_compile()  # one type for every model: the kernels convert to it
+    return True
+
+
+@nb.njit(cache=True)
+def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
+    """M runs of a UKF/CKF over every step, all measurements present: the steps of
+    :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
+    :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
+    Z (M, steps, nz); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k]. Writes
+    Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
+    a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    M, steps, nz = Z.shape
+    p, n = xi.shape
+    X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
+    z = np.empty((M, nz))
+    if sigma_points(x, P, xi, X, dev) >= 0:
+        return 0
+    for k in range(steps):
+        apply_rows(f, X, Pf[k], Y)
+        if sigma_predict(Y, wm, wc, xmask, Q[k], xi, x, P, X, dev) >= 0:
+            return k
+        apply_rows(h, X, Ph[k], Zp)
+        for m in range(M):
+            for q in range(nz):
+                z[m, q] = Z[m, k, q]
+        bad = sigma_update(Zp, dev, z, wm, wc, zmask, R[k], x, P, xmask, nis[:, k], xi, X, dev)
+        if 0 <= bad < M:
+            return k
+        Xout[:, k] = x
+        Pout[:, k] = P
+        if bad >= M and k + 1 < steps:
+            return k + 1
+    return -1
+
+
+@nb.njit(cache=True)
+def ekf_run(f, h, F, H, x, P, Z, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+    """M runs of the EKF over every step, all measurements present: the steps of
+    :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
+    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`)
+    in one loop. Arguments as :func:`sigma_run`. Returns -1, or the step at which S had no
+    Cholesky factor."""
+    M, steps, nz = Z.shape
+    n = x.shape[1]
+    Fj, Hj, xp, y = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
+    Pp, zh = np.empty((M, n, n)), np.empty(nz)
+    for k in range(steps):
+        for m in range(M):
+            F(x[m], Pf[k], Fj[m])
+            f(x[m], Pf[k], xp[m])
+            wrap(xp[m], xmask)
+        propagate_cov(Fj, P, Q[k], Pp)
+        for m in range(M):
+            H(xp[m], Ph[k], Hj[m])
+            h(xp[m], Ph[k], zh)
+            for q in range(nz):
+                y[m, q] = Z[m, k, q] - zh[q]
+            wrap(y[m], zmask)
+        if joseph_update(xp, Pp, y, Hj, R[k], xmask, nis[:, k]) >= 0:
+            return k
+        x[:] = xp
+        P[:] = Pp
+        Xout[:, k] = x
+        Pout[:, k] = P
+    return -1
