@@ -182,10 +182,13 @@ def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
     M, steps, nz = Z.shape
     if ks is None or not derived_from_kernels(m) or not kernels.loop_ready(loop, sig, M * steps >= COMPILE_AT):
         return None
-    pars = [m.kernel_params(k) for k in range(steps)]
-    Pf, Ph = (np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
-    Q = np.ascontiguousarray([m.process_cov(k) for k in range(steps)], dtype=float)
-    R = np.ascontiguousarray([m.measurement_cov(k) for k in range(steps)], dtype=float)
+    try:  # parameters of another shape at some step (ragged): no stack, step by step instead
+        pars = [m.kernel_params(k) for k in range(steps)]
+        Pf, Ph = (np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
+        Q = np.ascontiguousarray([m.process_cov(k) for k in range(steps)], dtype=float)
+        R = np.ascontiguousarray([m.measurement_cov(k) for k in range(steps)], dtype=float)
+    except ValueError:
+        return None
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     fns = [first_class(ks[i], i >= 2) for i in kernels_needed]
@@ -212,7 +215,7 @@ def first_class(kernel, matrix: bool):
         import numba as nb
 
         sig = (kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL).signature
-        got = _first_class[kernel] = nb.njit(sig, cache=True)(kernel.py_func)
+        got = _first_class[kernel] = nb.cfunc(sig, cache=True)(kernel.py_func)  # passed for less than a jit function
     return got
 
 
