@@ -36,7 +36,7 @@ import numpy as np
 
 from replay.util.angles import angle_mask, residual, wrap_components
 from replay.util import kalman_kernels as kernels
-from replay.model import remap_indices
+from replay.model import Model, remap_indices
 
 from .base import Filter
 
@@ -185,8 +185,9 @@ def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
     try:  # parameters of another shape at some step (ragged): no stack, step by step instead
         pars = [m.kernel_params(k) for k in range(steps)]
         Pf, Ph = (np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
-        Q = np.ascontiguousarray([m.process_cov(k) for k in range(steps)], dtype=float)
-        R = np.ascontiguousarray([m.measurement_cov(k) for k in range(steps)], dtype=float)
+        Q, R = (np.ascontiguousarray(getattr(m, c)[None] if getattr(type(m), f) is getattr(Model, f)
+                                     else [getattr(m, f)(k) for k in range(steps)], dtype=float)
+                for f, c in (("process_cov", "Q"), ("measurement_cov", "R")))  # constant: a stack of one
     except ValueError:
         return None
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))

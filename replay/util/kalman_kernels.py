@@ -274,7 +274,8 @@ def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout,
     """M runs of a UKF/CKF over every step, all measurements present: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
-    Z (M, steps, nz); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k]. Writes
+    Z (M, steps, nz); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k] (a stack of
+    one: the same at every step). Writes
     Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
     a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
     M, steps, nz = Z.shape
@@ -285,13 +286,13 @@ def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout,
         return 0
     for k in range(steps):
         apply_rows(f, X, Pf[k], Y)
-        if sigma_predict(Y, wm, wc, xmask, Q[k], xi, x, P, X, dev) >= 0:
+        if sigma_predict(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev) >= 0:
             return k
         apply_rows(h, X, Ph[k], Zp)
         for m in range(M):
             for q in range(nz):
                 z[m, q] = Z[m, k, q]
-        bad = sigma_update(Zp, dev, z, wm, wc, zmask, R[k], x, P, xmask, nis[:, k], xi, X, dev)
+        bad = sigma_update(Zp, dev, z, wm, wc, zmask, R[k % R.shape[0]], x, P, xmask, nis[:, k], xi, X, dev)
         if 0 <= bad < M:
             return k
         Xout[:, k] = x
@@ -317,14 +318,14 @@ def ekf_run(f, h, F, H, x, P, Z, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
             F(x[m], Pf[k], Fj[m])
             f(x[m], Pf[k], xp[m])
             wrap(xp[m], xmask)
-        propagate_cov(Fj, P, Q[k], Pp)
+        propagate_cov(Fj, P, Q[k % Q.shape[0]], Pp)
         for m in range(M):
             H(xp[m], Ph[k], Hj[m])
             h(xp[m], Ph[k], zh)
             for q in range(nz):
                 y[m, q] = Z[m, k, q] - zh[q]
             wrap(y[m], zmask)
-        if joseph_update(xp, Pp, y, Hj, R[k], xmask, nis[:, k]) >= 0:
+        if joseph_update(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k]) >= 0:
             return k
         x[:] = xp
         P[:] = Pp
