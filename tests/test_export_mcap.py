@@ -8,6 +8,7 @@ tests/test_export_foxglove.py."""
 import os
 import shutil
 import subprocess
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +33,12 @@ def validate(*paths):
     if shutil.which("node") is None or not (tool / "node_modules").is_dir():
         pytest.skip(f"MCAP validation skipped: node or {tool}/node_modules missing "
                     "(.ci/run installs it with npm ci)")
-    res = subprocess.run(["node", str(tool / "validate_mcap.js"), *map(str, paths)],
-                         capture_output=True, text=True, timeout=120)
+    cmd = ["node", str(tool / "validate_mcap.js"), *map(str, paths)]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:  # seen twice in CI runs, never alone (0.3 s a file): once more
+        warnings.warn(f"MCAP validator hung for 120 s on {[str(p) for p in paths]}; retried")
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert res.returncode == 0, res.stdout + res.stderr
     assert res.stdout.count("OK ") == len(paths)
 
