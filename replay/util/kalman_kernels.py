@@ -13,6 +13,8 @@ readable reference (``tests/pure.py``: equal bit for bit).
 """
 from __future__ import annotations
 
+import logging
+
 import numba as nb
 import numpy as np
 from numba import types
@@ -262,8 +264,12 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
     cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
     not at import: a short run never waits for it."""
     if not loop.signatures:
-        if not compile_ok and loop._cache.load_overload(sig, loop.targetctx) is None:
-            return False
+        if loop._cache.load_overload(sig, loop.targetctx) is None:
+            if not compile_ok:
+                return False
+            logging.getLogger("replay.kernels").info(
+                "compiling the Kalman-family run loop %s (about 12 s, once per machine; cached for later runs)",
+                loop.__name__)
         loop.compile(sig)
         loop.disable_compile()  # one type for every model: the kernels convert to it
     return True
