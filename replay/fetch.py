@@ -91,12 +91,13 @@ def default_dest(ds: Dataset) -> Path:
 
 def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | None = None,
           timeout: float = DEFAULT_TIMEOUT, deadline: float = DEFAULT_DEADLINE,
-          force: bool = False) -> FetchResult:
+          force: bool = False, progress=None) -> FetchResult:
     """Make sure ``dest_dir/<file>`` holds the dataset, downloading it if needed.
 
     ``force`` downloads again and replaces the copy in place (only once the new one
     passed every check). ``timeout``: seconds of silence allowed; ``deadline``:
-    seconds for the whole download.
+    seconds for the whole download. ``progress``: a :class:`replay.util.progress.Progress`
+    advanced in kB received, when the size is known (announced or registered).
     """
     ds = registry.get(ds) if isinstance(ds, str) else ds
     if ds.kind != "file":
@@ -131,7 +132,7 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
     except OSError as e:
         raise ReplayError(f"cannot create {dest}: {e.strerror or e}") from None
 
-    sha, size, announced, summary = _download(ds, src, dest, target, timeout, deadline, check)
+    sha, size, announced, summary = _download(ds, src, dest, target, timeout, deadline, check, progress)
     if ds.sha256:
         return FetchResult(target, sha, True, True,
                            f"{ds.id}: downloaded to {target}, size and sha256 verified{note}")
@@ -300,7 +301,8 @@ def _check_answer(ds: Dataset, resp, fail) -> int | None:
     return announced
 
 
-def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, deadline: float, check):
+def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, deadline: float, check,
+              progress=None):
     """Stream ``src`` into a temp file in ``dest``, check it, move it to ``target``.
 
     Returns (sha256, size, whether the server announced the size, content summary).
@@ -320,12 +322,19 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
                 resp, conn = _open(src, clock, timeout, fail)
                 try:
                     announced = _check_answer(ds, resp, fail)
+                    total = announced or ds.size
+                    kb = -(-total // 1024) if total else 0
+                    if progress is not None and total:
+                        progress.start(kb)
                     while chunk := resp.read1(1 << 16):
                         out.write(chunk)
                         h.update(chunk)
+                        done = size // 1024
                         size += len(chunk)
                         if ds.size and size > ds.size:
                             fail(f"the server sent more than the registered size of {ds.size} bytes")
+                        if progress is not None and total:  # 100 % only once every check passed
+                            progress.update(min(size // 1024, kb - 1) - min(done, kb - 1))
                 finally:
                     conn.close()
                 if clock.passed:
@@ -360,6 +369,8 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
             os.replace(tmp, target)
         except OSError as e:
             raise ReplayError(f"cannot put the download at {target}: {e.strerror or e}") from None
+        if progress is not None and total:
+            progress.update(kb - min(size // 1024, kb - 1))
         return sha, size, announced is not None, summary
     finally:
         clock.cancel()

@@ -375,3 +375,24 @@ def test_kill_during_download_leaves_no_final_file(tmp_path):
     assert result.path.read_bytes() == body
     server.shutdown()
     server.server_close()
+
+
+def test_fetch_progress_counts_kilobytes_to_the_size(upstream, tmp_path, bohai_dir):
+    """`replay datasets fetch` shows progress in kilobytes of the known size; it ends at the size."""
+    from replay.util.progress import Progress
+
+    root, _ = upstream
+    publish(root, "bohai/20220822_0_0", source=bohai_dir / "20220822_0_0.csv")
+    seen = []
+
+    class Spy(Progress):
+        def update(self, n=1, failed=0, weight=None):
+            seen.append(n)
+            super().update(n, failed, weight)
+
+    spy = Spy(0, quiet=True, unit="kilobyte")
+    fetch("bohai/20220822_0_0", tmp_path / "dest", progress=spy)
+    assert spy.total == -(-1071327 // 1024) == 1047
+    assert sum(seen) == 1047 and all(n >= 0 for n in seen)  # whole kilobytes, then the last partial one
+    res = invoke(["datasets", "fetch", "bohai/20220822_0_0", "--dest", tmp_path / "d2", "-q"])
+    assert res.exit_code == 0 and res.stderr == ""

@@ -84,7 +84,8 @@ def info_cmd(dataset_id, data_dir):
               help="Download again even if present; the copy is replaced only once the new one passed every check.")
 @click.option("--deadline", type=float, default=DEFAULT_DEADLINE,
               show_default=True, help="Seconds allowed for each whole download.")
-def fetch_cmd(dataset_ids, dest, fetch_all, force, deadline):
+@click.option("--quiet", "-q", is_flag=True, help="No progress display (results and errors still print).")
+def fetch_cmd(dataset_ids, dest, fetch_all, force, deadline, quiet=False):
     """Download datasets, checked by size and sha256 where registered upstream, else by content.
 
     Nothing reaches its final name before it passed its checks; a failed download leaves
@@ -96,17 +97,28 @@ def fetch_cmd(dataset_ids, dest, fetch_all, force, deadline):
     else:
         raise ReplayError("give dataset ids to fetch, or --all")
     if len(chosen) == 1:
-        click.echo(fetch_dataset(chosen[0], dest, deadline=deadline, force=force).message)
+        click.echo(_fetch_one(chosen[0], dest, deadline, force, quiet).message)
         return
     failed = []
     for ds in chosen:
         try:
-            click.echo(fetch_dataset(ds, dest, deadline=deadline, force=force).message)
+            click.echo(_fetch_one(ds, dest, deadline, force, quiet).message)
         except ReplayError as e:
             click.echo(f"failed: {e}")  # stdout: the one line on stderr is the summary below
             failed.append(ds.id)
     if failed:
         raise ReplayError(f"{len(failed)} of {len(chosen)} downloads failed: {', '.join(failed)}")
+
+
+def _fetch_one(ds, dest, deadline, force, quiet):
+    """One download with a progress bar in kilobytes (when its size is known)."""
+    from replay.util.progress import Progress
+
+    progress = Progress(0, quiet, label=f"fetch {ds.id}", unit="kilobyte")
+    try:
+        return fetch_dataset(ds, dest, deadline=deadline, force=force, progress=progress)
+    finally:
+        progress.close()
 
 
 @datasets.command("make")
