@@ -41,6 +41,7 @@ import numpy as np
 from replay.models import auv_sonar_kernels as K
 from replay.util.kernels import cholesky as _chol  # the library's leaves: the anchor measures the step
 from replay.util.kernels import point_mean as _mean  # without the Python between them
+from replay.util.kernels import solve_rows as _solve
 
 TWO_PI = 2.0 * np.pi
 
@@ -140,17 +141,7 @@ def _ukf_run_into(x0, P0, Z, Pf, Ph, xi, wm, wc, Q, R, xmask, zmask, Xout, Pout)
             y[j] = _wrap(d) if zmask[j] else d
         if not _chol(S, Ls):
             return k
-        for r in range(n):  # K[r] = Pxz[r] S^-1: forward then backward substitution
-            for i in range(nz):
-                t = Pxz[r, i]
-                for q in range(i):
-                    t -= Ls[i, q] * v[q]
-                v[i] = t / Ls[i, i]
-            for i in range(nz - 1, -1, -1):
-                t = v[i]
-                for q in range(i + 1, nz):
-                    t -= Ls[q, i] * Kg[r, q]
-                Kg[r, i] = t / Ls[i, i]
+        _solve(Ls, Pxz, Kg)  # K = Pxz S^-1 (the library's forward/backward substitution)
         for i in range(nz):  # NIS (kept: the product computes it)
             t = y[i]
             for q in range(i):
@@ -229,17 +220,7 @@ def ekf_run(x0, P0, Z, Pf, Ph, Q, R, xmask, zmask, Xout, Pout):
             y[j] = _wrap(d) if zmask[j] else d
         if not _chol(S, Ls):
             return k
-        for r in range(n):  # K[r] = PHt[r] S^-1
-            for i in range(nz):
-                t = PHt[r, i]
-                for q in range(i):
-                    t -= Ls[i, q] * v[q]
-                v[i] = t / Ls[i, i]
-            for i in range(nz - 1, -1, -1):
-                t = v[i]
-                for q in range(i + 1, nz):
-                    t -= Ls[q, i] * Kg[r, q]
-                Kg[r, i] = t / Ls[i, i]
+        _solve(Ls, PHt, Kg)  # K = PHt S^-1 (the library's forward/backward substitution)
         for i in range(nz):  # NIS
             t = y[i]
             for q in range(i):

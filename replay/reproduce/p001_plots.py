@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common5 import command
+from .common5 import command, rmse_figures
 from .p001_plan import TRACK, TRACKS
 
 # (key, axis name, unit): the quantities of the paper's Fig. 3-5 that the task scores
@@ -27,17 +27,8 @@ def run_errors(ev, i) -> dict[str, np.ndarray]:
 
 
 def error_figures(t, errors: dict[str, dict[str, np.ndarray]], what: str) -> dict:
-    """One figure per quantity: a panel per filter with the RMSE over runs at each step (the paper's
-    curve) and the 5-95 % band of the runs' absolute errors. ``errors``: {filter label: run_errors}."""
-    from replay.outputs.plots import mc_figure
-
-    figs = {}
-    for key, name, unit in QUANTITIES:
-        curves = {label: e[key] for label, e in errors.items()}
-        runs = min(len(v) for v in curves.values())
-        figs[key] = mc_figure(t, curves, name, unit, f"001, {what}: {name} over time, {runs} runs "
-                              "(line: RMSE over the runs; band: 5-95 % of the runs' |error|)", stat="rmse")
-    return figs
+    """One figure per quantity (:func:`replay.reproduce.common5.rmse_figures`). ``errors``: {filter label: run_errors}."""
+    return rmse_figures(t, errors, QUANTITIES, f"001, {what}")
 
 
 def traces_figure(t, histories: list[dict], what: str):

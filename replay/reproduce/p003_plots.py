@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .common5 import rmse_figures
+
 AXES = (("x", "x position error", "m"), ("y", "y position error", "m"))
 FILTERS = (("PF", 0), ("WF-PF", 1), ("UKF", 2))  # label, result index of the printed-setting evaluation
 
@@ -16,17 +18,8 @@ def run_errors(ev, i) -> dict[str, np.ndarray]:
 
 
 def error_figures(t, errors: dict[str, dict[str, np.ndarray]], what: str) -> dict:
-    """One figure per axis: a panel per filter with the RMSE over runs at each step (the paper's curve)
-    and the 5-95 % band of the runs' absolute errors. ``errors``: {filter label: run_errors}."""
-    from replay.outputs.plots import mc_figure
-
-    figs = {}
-    for key, name, unit in AXES:
-        curves = {label: e[key] for label, e in errors.items()}
-        runs = min(len(v) for v in curves.values())
-        figs[key] = mc_figure(t, curves, name, unit, f"003, {what}: {name} over time, {runs} runs "
-                              "(line: RMSE over the runs; band: 5-95 % of the runs' |error|)", stat="rmse")
-    return figs
+    """One figure per axis (:func:`replay.reproduce.common5.rmse_figures`). ``errors``: {filter label: run_errors}."""
+    return rmse_figures(t, errors, AXES, f"003, {what}")
 
 
 def plots(t, errors: dict, doc, what: str) -> list[str]:

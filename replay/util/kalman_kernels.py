@@ -24,6 +24,27 @@ from .kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symm
 
 
 @nb.njit(cache=True)
+def gain(S, B, y, L, K):
+    """The gain K = B S^-1 (B = Pxz, or P H') and the NIS y' S^-1 y through one Cholesky factor L
+    of S; returns the NIS, or -1.0 when S is not positive definite (K not computed)."""
+    if not cholesky(S, L):
+        return -1.0
+    solve_rows(L, B, K)
+    return whitened_norm2(L, y)
+
+
+@nb.njit(cache=True)
+def shift_mean(x, K, y, xmask):
+    """x = x + K y in place, the ``xmask`` components wrapped."""
+    for i in range(x.shape[0]):
+        t = 0.0
+        for j in range(y.shape[0]):
+            t += K[i, j] * y[j]
+        x[i] += t
+    wrap(x, xmask)
+
+
+@nb.njit(cache=True)
 def gain_nis(S, Pxz, y, K, nis):
     """For each run m of the stacks S (M, nz, nz), Pxz (M, nx, nz), y (M, nz): the gain
     K[m] = Pxz[m] S[m]^-1 and nis[m] = y[m]' S[m]^-1 y[m] (Bar-Shalom et al. 2001, eq. 5.2.3-14
@@ -32,10 +53,9 @@ def gain_nis(S, Pxz, y, K, nis):
     M, nx, nz = Pxz.shape
     L = np.empty((nz, nz))
     for m in range(M):
-        if not cholesky(S[m], L):
+        nis[m] = gain(S[m], Pxz[m], y[m], L, K[m])
+        if nis[m] < 0.0:
             return m
-        solve_rows(L, Pxz[m], K[m])
-        nis[m] = whitened_norm2(L, y[m])
     return -1
 
 
@@ -54,16 +74,11 @@ def kalman_correct(x, P, y, S, Pxz, xmask, nis):
     L = np.empty((nz, nz))
     K = np.empty((nx, nz))
     for m in range(M):
-        if not cholesky(S[m], L):
+        g = gain(S[m], Pxz[m], y[m], L, K)
+        if g < 0.0:
             return m
-        solve_rows(L, Pxz[m], K)
-        nis[m] = whitened_norm2(L, y[m])
-        for i in range(nx):
-            t = 0.0
-            for j in range(nz):
-                t += K[i, j] * y[m, j]
-            x[m, i] += t
-        wrap(x[m], xmask)
+        nis[m] = g
+        shift_mean(x[m], K, y[m], xmask)
         for i in range(nx):
             for j in range(nx):
                 t = 0.0
@@ -202,16 +217,11 @@ def joseph_update(x, P, y, H, R, xmask, nis):
         for i in range(nz):
             for j in range(nz):
                 S[i, j] += R[i, j]
-        if not cholesky(S, L):
+        g = gain(S, PHt, y[m], L, K)
+        if g < 0.0:
             return m
-        solve_rows(L, PHt, K)
-        nis[m] = whitened_norm2(L, y[m])
-        for i in range(n):
-            t = 0.0
-            for j in range(nz):
-                t += K[i, j] * y[m, j]
-            x[m, i] += t
-        wrap(x[m], xmask)
+        nis[m] = g
+        shift_mean(x[m], K, y[m], xmask)
         for i in range(n):  # A = I - K H
             for j in range(n):
                 t = 0.0
