@@ -12,8 +12,8 @@ M = 1). :meth:`Filter.engine` builds the engine of M runs (one
   dof 0 where the filter records no normalised innovation squared)
 * ``keep(ok (Ma,) bool)``: drop the runs that diverged
 * ``finish(m, info)``: diagnostics of run m (index among the M runs) into ``info``
-* optional ``run_all(Z (M, n, nz))``: every step of every run at once when no measurement is
-  missing (the careless pass), giving the numbers of the steps: ``(X, P, nis)`` stacks, or False
+* optional ``run_all(Z (M, n, nz), finite (M, n, nz))``: every step of every run at once
+  (the careless pass; ``finite``: the measured components), giving the numbers of the steps: ``(X, P, nis, dof)`` stacks, or False
   (a run failed: the loop redoes it step by step), or None (no such path for this model)
 
 :meth:`Filter.run_batch` is the one loop over steps (:meth:`Filter.run` is the
@@ -213,14 +213,14 @@ class Filter(Declared):
             _escalate(err, careful, M)
             diverged[0], errors[0], active, started = 0, err, active[:0], False
         clock = perf_counter
-        if not careful and started and finite.all() and hasattr(engine, "run_all"):
+        if not careful and started and hasattr(engine, "run_all"):
             t0 = clock()
-            done = engine.run_all(Z)  # every step in one compiled loop, when the engine has one
+            done = engine.run_all(Z, finite)  # every step in one compiled loop, when the engine has one
             if done is False:
                 raise _Careful
             if done is not None:
-                X[:], P[:], nis[:] = done
-                dof[:], secs[:] = Z.shape[2], (clock() - t0) / (n * M)
+                X[:], P[:], nis[:], dof[:] = done
+                secs[:] = (clock() - t0) / (n * M)
                 active = active[:0]
         for k in range(n):
             na = len(active)

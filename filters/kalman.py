@@ -39,6 +39,7 @@ from replay.util import kalman_kernels as kernels
 from replay.model import Model, remap_indices
 
 from .base import Filter
+from .loops import COMPILE_AT, derived_from_kernels, first_class, param_stacks
 
 
 def stack_of(a, one: bool):
@@ -151,9 +152,9 @@ class KalmanEngine:
         self.x, self.P = x, P
         return x, P, nis, dof
 
-    def run_all(self, Z):
+    def run_all(self, Z, finite):
         """Every step of the active runs at once, when every measurement is present: the same
-        kernels in one compiled loop (:func:`run_kernels`), returning (X, P, nis) stacks (M,
+        kernels in one compiled loop (:func:`run_kernels`), returning (X, P, nis, dof) stacks (M,
         steps, ...), or False when a run failed (the caller redoes the steps one by one), or None
         when there is no such loop for this filter or model."""
         return None
@@ -166,65 +167,41 @@ class KalmanEngine:
         raise NotImplementedError
 
 
-COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
-
-
 def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
     """Run ``loop`` (:func:`replay.util.kalman_kernels.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
-    kernels (typed as first-class functions, :func:`first_class`), its parameters, Q and R at
-    every step. None (the caller steps in Python, same numbers) when the model's array methods
-    are not its kernels, or when the loop is neither compiled nor cached and the job is smaller
-    than ``COMPILE_AT`` run-steps (choosing by problem size: a short first run does not pay the
-    compilation)."""
+    kernels (typed as first-class functions, :func:`replay.filters.loops.first_class`), its
+    parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
+    model's array methods are not its kernels, or when the loop is neither compiled nor cached
+    and the job is smaller than ``COMPILE_AT`` run-steps (:mod:`replay.filters.loops`)."""
     m = engine.model
     ks = m.kernels()
     M, steps, nz = Z.shape
     if ks is None or not derived_from_kernels(m) or not kernels.loop_ready(loop, sig, M * steps >= COMPILE_AT):
         return None
-    try:  # parameters of another shape at some step (ragged): no stack, step by step instead
-        pars = [m.kernel_params(k) for k in range(steps)]
-        Pf, Ph = (np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
+    stacks = param_stacks(m, steps)
+    try:  # Q, R of another shape at some step (ragged): no stack, step by step instead
         Q, R = (np.ascontiguousarray(getattr(m, c)[None] if getattr(type(m), f) is getattr(Model, f)
                                      else [getattr(m, f)(k) for k in range(steps)], dtype=float)
                 for f, c in (("process_cov", "Q"), ("measurement_cov", "R")))  # constant: a stack of one
     except ValueError:
         return None
+    if stacks is None:
+        return None
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     fns = [first_class(ks[i], i >= 2) for i in kernels_needed]
-    bad = loop(*fns, x, P, np.ascontiguousarray(Z, dtype=float), Pf, Ph, Q, R, *args,
+    bad = loop(*fns, x, P, np.ascontiguousarray(Z, dtype=float), *stacks, Q, R, *args,
                np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz)), X, PP, nis)
-    return (X, PP, nis) if bad < 0 else False
-
-
-def derived_from_kernels(model) -> bool:
-    """True when the model's f, h, F, H are those a KernelModel derives from its kernels."""
-    from replay.models.kernel_model import KernelModel
-
-    return all(getattr(type(model), n) is getattr(KernelModel, n) for n in ("f", "h", "F", "H"))
-
-
-_first_class: dict = {}
-
-
-def first_class(kernel, matrix: bool):
-    """The one-state ``kernel`` compiled for the declared first-class type of the run loops
-    (C-contiguous rows; cached on disk by numba like the kernel itself)."""
-    got = _first_class.get(kernel)
-    if got is None:
-        import numba as nb
-
-        sig = (kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL).signature
-        got = _first_class[kernel] = nb.cfunc(sig, cache=True)(kernel.py_func)  # a cfunc: ~15 µs to pass, a jit function ~50
-    return got
+    return (X, PP, nis, np.full((M, steps), nz)) if bad < 0 else False
 
 
 class EKFEngine(KalmanEngine):
     """The EKF's predict and update on one run or a stack of runs."""
 
-    def run_all(self, Z):
-        return run_kernels(self, Z, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
+    def run_all(self, Z, finite):
+        if finite.all():
+            return run_kernels(self, Z, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
 
     def predict(self, x, P, k):
         m = self.model

@@ -36,7 +36,7 @@ import numpy as np
 from replay.model import Model, noise_factor
 from replay.util.params import Param
 
-from . import particles
+from . import particles, pf_loop
 from .base import Filter, on_points
 from .resampling import SCHEMES
 
@@ -115,6 +115,11 @@ class PFEngine:
         x, P = particles.estimate(self.X, self.w, self.model.x_angles)
         self.resample()
         return x, P, *self.no_nis
+
+    def run_all(self, Z, finite):
+        """Every step of every run in one compiled loop when it computes what the steps compute
+        (:mod:`replay.filters.pf_loop`), else None (the steps below run)."""
+        return pf_loop.run(self, Z, finite)
 
     def propagate(self, k):
         """x^i ~ p(x_k | x^i_{k-1}) for every active run (:func:`propagate`)."""

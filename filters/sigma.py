@@ -133,8 +133,9 @@ class SigmaEngine(KalmanEngine):
         self.X, self.dev, self.missing = self.X[ok], self.dev[ok], self.missing[ok]
         self.all_made = not self.missing.any()
 
-    def run_all(self, Z):
-        return kalman.run_kernels(self, Z, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
+    def run_all(self, Z, finite):
+        if finite.all():
+            return kalman.run_kernels(self, Z, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""

@@ -269,7 +269,7 @@ EKF_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, JACOBIAN_KERNEL, JACOBIAN_KERNEL, 
 
 
 def loop_ready(loop, sig, compile_ok: bool) -> bool:
-    """Whether the run loop ``loop`` (:func:`sigma_run`, :func:`ekf_run`) can be called with
+    """Whether the run loop ``loop`` (:func:`sigma_run`, :func:`ekf_run`, the PF's ``pf_run``) can be called with
     its declared signature ``sig``: compiled in this process, or loaded from numba's disk
     cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
     not at import: a short run never waits for it."""
@@ -278,7 +278,7 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
             if not compile_ok:
                 return False
             logging.getLogger("replay.kernels").info(
-                "compiling the Kalman-family run loop %s (about 12 s, once per machine; cached for later runs)",
+                "compiling the run loop %s (about 12 s, once per machine; cached for later runs)",
                 loop.__name__)
         loop.compile(sig)
         loop.disable_compile()  # one type for every model: the kernels convert to it

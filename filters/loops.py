@@ -1,0 +1,51 @@
+"""Whole-run loops: what the compiled run loops of every filter family share.
+
+A run loop (:func:`replay.util.kalman_kernels.sigma_run`, ``ekf_run``,
+:func:`replay.filters.pf_loop.pf_run`) runs every step of a run in one
+compiled call. It calls the same step kernels as the step-by-step engine, and
+the model's one-state kernels are passed to it as first-class functions of one
+declared type: one compilation (cached on disk by numba) serves every model.
+A loop is used only for the model's own kernels (:func:`derived_from_kernels`)
+and only when it is compiled already, or cached, or the job is big enough to
+pay for its compilation (choosing by problem size: a short first run never
+waits for it).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+COMPILE_AT = 200_000  # Kalman run-steps from which a missing run loop is compiled (~10 s, once per machine)
+
+
+def derived_from_kernels(model) -> bool:
+    """True when the model's f, h, F, H are those a KernelModel derives from its kernels."""
+    from replay.models.kernel_model import KernelModel
+
+    return all(getattr(type(model), n) is getattr(KernelModel, n) for n in ("f", "h", "F", "H"))
+
+
+_first_class: dict = {}
+
+
+def first_class(kernel, matrix: bool):
+    """The one-state ``kernel`` compiled for the declared first-class type of the run loops
+    (C-contiguous rows; cached on disk by numba like the kernel itself)."""
+    got = _first_class.get(kernel)
+    if got is None:
+        import numba as nb
+
+        from replay.util import kalman_kernels as kernels
+
+        sig = (kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL).signature
+        got = _first_class[kernel] = nb.cfunc(sig, cache=True)(kernel.py_func)  # a cfunc: ~15 µs to pass, a jit function ~50
+    return got
+
+
+def param_stacks(model, steps: int):
+    """The kernels' parameters of every step, ``(Pf, Ph)`` stacks (steps, p), or None when they
+    change shape from step to step (ragged: the caller steps in Python, same numbers)."""
+    try:
+        pars = [model.kernel_params(k) for k in range(steps)]
+        return tuple(np.ascontiguousarray([p[i] for p in pars], dtype=float) for i in (0, 1))
+    except ValueError:
+        return None

@@ -1,0 +1,148 @@
+"""The bootstrap PF's whole run in one compiled loop: the steps of :class:`replay.filters.pf.PFEngine`.
+
+For one run, every step k (module docstring of :mod:`replay.filters.pf`)::
+
+    propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (Q diagonal)
+    weight      l^i <- l^i + log N(z_k; h(x^i), R)          (replay.util.kernels.gauss_loglik)
+    normalise   w, l <- particles.weights(l)                   (log domain)
+    estimate    x_k, P_k <- particles.moments(x, w)          (circular means for angles)
+    resample    when ESS = 1 / sum w^2 < threshold * N: systematic (resampling.invert_sorted),
+                then roughening (x^i_j += K E_j N^(-1/d) e^i_j) when K > 0
+
+The same kernels as the step-by-step engine, and the same draws from the same
+``numpy.random.Generator`` in the same order (numba draws from a NumPy
+generator with NumPy's own algorithms, sharing its state): the loop gives the
+numbers of the steps bit for bit, and leaves the generator where the steps
+leave it (``tests/test_pf_loop.py``). The steps remain the readable reference
+and the general path: partly missing measurements, models that draw their own noise,
+a non-diagonal Q, time-varying Q or R, other resampling schemes and subclasses
+that change the weighting all step in Python.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+from numba import types
+
+from replay.model import Model, noise_factor
+from replay.util import kalman_kernels
+from replay.util.angles import angle_mask
+from replay.util.kernels import gauss_loglik
+
+from .loops import derived_from_kernels, first_class, param_stacks
+from .particles import moments, weights
+from .resampling import invert_sorted
+
+COMPILE_AT = 20_000_000  # particle-steps from which the missing loop is compiled (~5 s, once per machine)
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@nb.njit(cache=True)
+def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, xmask, zmask,
+           limit, rough, shrink, logw0, Xout, Pout):
+    """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
+    w (N,) their log-weights and weights (all changed in place); Z (steps, nz), ``seen[k]``
+    whether z_k is there (else no weighting at k); Pf[k], Ph[k] the
+    kernels' parameters; qsd (n,) the process noise's standard deviations; R as ``gauss_loglik``
+    takes it (rdiag, rL, rinv, rconst); ``limit`` = threshold * N; roughening constant
+    ``rough`` = K and ``shrink`` = N^(-1/n); ``logw0`` = -log N. Writes Xout (steps, n), Pout
+    (steps, n, n). Returns the number of resampling steps."""
+    N, n = X.shape
+    steps, nz = Z.shape
+    Y, zh, ll = np.empty((N, n)), np.empty((N, nz)), np.empty(N)
+    a, sd = np.empty(N, np.int64), np.empty(n)
+    count = 0
+    for k in range(steps):
+        for i in range(N):  # propagate: f on every particle, then the noise row by row
+            f(X[i], Pf[k], Y[i])
+        for i in range(N):
+            for q in range(n):
+                Y[i, q] += g.standard_normal() * qsd[q]
+        X, Y = Y, X
+        if seen[k]:  # weight (no measurement: the weights stay)
+            for i in range(N):
+                h(X[i], Ph[k], zh[i])
+            gauss_loglik(zh, Z[k], zmask, rdiag, rL, rinv, rconst, ll)
+            for i in range(N):
+                logw[i] += ll[i]
+            weights(logw, w)
+        moments(X, w, xmask, Xout[k], Pout[k])  # estimate before resampling
+        s = 0.0
+        for i in range(N):
+            s += w[i] * w[i]
+        if 1.0 / s < limit:  # resample (ESS below the threshold)
+            invert_sorted(w, g.random(), a)
+            for i in range(N):
+                for q in range(n):
+                    Y[i, q] = X[a[i], q]
+            X, Y = Y, X
+            if rough > 0.0:
+                for q in range(n):
+                    lo, hi = X[0, q], X[0, q]
+                    for i in range(1, N):
+                        lo, hi = min(lo, X[i, q]), max(hi, X[i, q])
+                    sd[q] = rough * (hi - lo) * shrink
+                for i in range(N):
+                    for q in range(n):
+                        X[i, q] += g.standard_normal() * sd[q]
+            for i in range(N):
+                w[i] = 1.0 / N
+                logw[i] = logw0
+            count += 1
+    return count
+
+
+_GEN = nb.typeof(np.random.default_rng(0))
+_V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
+PF_RUN = types.int64(kalman_kernels.ROW_KERNEL, kalman_kernels.ROW_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
+                     _M, _M,
+                     _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
+                     types.float64, types.float64, types.float64, types.float64, _M, _M3)
+
+
+def run(engine, Z, finite):
+    """Every step of the engine's runs (:meth:`replay.filters.pf.PFEngine.run_all`): ``(X, P,
+    nis, dof)`` stacks, or None when the loop does not apply (module docstring) or is not
+    compiled and the job is smaller than ``COMPILE_AT`` particle-steps. The particles are the
+    engine's, the runs' generators advance as the steps would advance them."""
+    m, flt = engine.model, engine.flt
+    M, steps, nz = Z.shape
+    N = flt.n_particles
+    seen = finite.all(axis=2)
+    if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
+        return None
+    if not applies(engine, m) or not kalman_kernels.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT):
+        return None
+    qdiag, qsd, _, _ = noise_factor(m.Q)
+    stacks = param_stacks(m, steps)
+    if not qdiag or stacks is None:
+        return None
+    rdiag, rL, rinv, logdet = noise_factor(m.R)
+    rL = np.ascontiguousarray(np.zeros((0, 0)) if rdiag else rL)
+    rinv = np.ascontiguousarray(rinv if rdiag else np.zeros(0))
+    f, h = (first_class(k, False) for k in m.kernels()[:2])
+    xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
+    X, P = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx))
+    Z = np.ascontiguousarray(Z, dtype=float)
+    for j in range(M):
+        Xj, lw, w = (np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w))
+        engine.resampled[engine.ids[j]] += pf_run(
+            f, h, engine.active[j], Xj, lw, w, Z[j], seen[j], *stacks, np.ascontiguousarray(qsd), rdiag, rL, rinv,
+            logdet + nz * _LOG_2PI, xmask, zmask, flt.ess_threshold * N, float(flt.roughening),
+            N ** (-1.0 / m.nx), float(engine.logw0), X[j], P[j])
+    return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
+
+
+def applies(engine, model) -> bool:
+    """Whether the loop computes what the steps compute for this engine and model: the plain
+    bootstrap engine and weighting, systematic resampling, the model's own kernels, its noise
+    drawn by the filter (no ``sample_f`` of its own), Q and R constant."""
+    from .pf import ParticleFilter, PFEngine
+
+    flt = engine.flt
+    return (type(engine) is PFEngine and type(flt).weigh is ParticleFilter.weigh and flt.resampling == "systematic"
+            and model.kernels() is not None and derived_from_kernels(model)
+            and type(model).sample_f is Model.sample_f and type(model).process_cov is Model.process_cov
+            and type(model).measurement_cov is Model.measurement_cov)

@@ -1,0 +1,82 @@
+"""The bootstrap PF's compiled whole-run loop (replay.filters.pf_loop) gives the numbers of the
+step-by-step engine bit for bit, and leaves every run's generator where the steps leave it."""
+import numpy as np
+import pytest
+
+from replay import registry
+from replay.filters import make_filter, pf_loop
+from replay.models.random_walk import RandomWalkPosition
+from replay.tasks import make_task
+from replay.util import kalman_kernels
+from replay.util.seeds import rng_for
+
+pytestmark = pytest.mark.slow  # compiles the loop (about 2 s) when numba's cache does not have it
+
+
+@pytest.fixture(scope="module")
+def sonar():
+    task = make_task("sonar")
+    pbs = [task.build(registry.load_frame("sim/auv-sonar", rng=rng_for(7, r, 0), steps=40), rng_for(7, r, 1))
+           for r in range(3)]
+    return pbs[0].model, np.stack([p.z for p in pbs]), np.stack([p.x0 for p in pbs]), np.stack([p.P0 for p in pbs])
+
+
+def walk(missing_rows=True):
+    """A 3-D random walk observed directly, 60 steps of 3 runs; some steps without measurement."""
+    rng = np.random.default_rng(3)
+    model = RandomWalkPosition(0.5 * np.eye(3), np.diag([1.0, 2.0, 0.5]))
+    Z = np.cumsum(rng.normal(size=(3, 60, 3)), axis=1)
+    if missing_rows:
+        Z[0, 10:14] = np.nan
+        Z[2, 30] = np.nan
+    return model, Z, Z[:, 0] + 0.1, np.stack([np.eye(3)] * 3)
+
+
+def both(flt, model, Z, X0, P0, monkeypatch):
+    """(loop, steps, generator ends) for the same runs: the loop used, then the loop refused."""
+    assert kalman_kernels.loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
+    used, real = [], pf_loop.run
+    monkeypatch.setattr(pf_loop, "run", lambda *a: used.append(real(*a)) or used[-1])
+    gs = [np.random.default_rng(10 + m) for m in range(len(Z))]
+    fast = flt.run_batch(model, Z, X0, P0, gs)
+    fast_end = [g.random() for g in gs]
+    monkeypatch.setattr(pf_loop, "run", lambda *a: None)
+    gs = [np.random.default_rng(10 + m) for m in range(len(Z))]
+    slow = flt.run_batch(model, Z, X0, P0, gs)
+    return used, fast, slow, fast_end, [g.random() for g in gs]
+
+
+@pytest.mark.parametrize("params", [{"n_particles": 150}, {"n_particles": 150, "roughening": 0.2},
+                                    {"n_particles": 120, "ess_threshold": 0.3}])
+def test_loop_equals_the_steps_on_the_sonar_model(sonar, params, monkeypatch):
+    used, fast, slow, e1, e2 = both(make_filter("pf", **params), *sonar, monkeypatch)
+    assert len(used) == 1 and isinstance(used[0], tuple)  # the loop ran
+    for a, b in zip(fast, slow):
+        assert np.isfinite(a.x).all()
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert a.info["resampled"] == b.info["resampled"]
+        assert np.array_equal(a.info["nis_dof"], b.info["nis_dof"]) and np.isnan(a.info["nis"]).all()
+    assert e1 == e2  # the generators were advanced by the same draws
+    if params.get("ess_threshold", 1.0) < 1.0:
+        assert 0 < fast[0].info["resampled"] < 40  # the threshold was exercised both ways
+
+
+def test_steps_without_measurement_keep_the_weights(monkeypatch):
+    model, Z, X0, P0 = walk()
+    used, fast, slow, e1, e2 = both(make_filter("pf", n_particles=200, ess_threshold=0.5), model, Z, X0, P0,
+                                    monkeypatch)
+    assert isinstance(used[0], tuple)
+    for a, b in zip(fast, slow):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert a.info["resampled"] == b.info["resampled"]
+    assert e1 == e2
+
+
+def test_what_the_loop_does_not_compute_steps_in_python(monkeypatch):
+    model, Z, X0, P0 = walk(missing_rows=False)
+    Z[1, 5, 0] = np.nan  # partly missing: the steps mask the component
+    used, fast, slow, _, _ = both(make_filter("pf", n_particles=50), model, Z, X0, P0, monkeypatch)
+    assert used == [None]
+    for name, params in (("pf", {"resampling": "multinomial"}), ("wf-pf", {})):
+        used, *_ = both(make_filter(name, n_particles=50, **params), *walk(), monkeypatch)
+        assert used == [None]
