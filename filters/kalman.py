@@ -153,7 +153,8 @@ class KalmanEngine:
         return x, P, nis, dof
 
     def run_all(self, Z, finite):
-        """Every step of the active runs at once, when every measurement is present: the same
+        """Every step of the active runs at once, when each step has all measurements of every run or
+        none (a missing row, the same for every run): the same
         kernels in one compiled loop (:func:`run_kernels`), returning (X, P, nis, dof) stacks (M,
         steps, ...), or False when a run failed (the caller redoes the steps one by one), or None
         when there is no such loop for this filter or model."""
@@ -167,7 +168,7 @@ class KalmanEngine:
         raise NotImplementedError
 
 
-def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
+def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     """Run ``loop`` (:func:`replay.util.kalman_kernels.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
     kernels (typed as first-class functions, :func:`replay.filters.loops.first_class`), its
@@ -177,6 +178,9 @@ def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
     m = engine.model
     ks = m.kernels()
     M, steps, nz = Z.shape
+    seen = finite[0].all(axis=1)
+    if not (finite == seen[None, :, None]).all():  # missing for some runs, or some components: steps
+        return None
     if ks is None or not derived_from_kernels(m) or not kernels.loop_ready(loop, sig, M * steps >= COMPILE_AT):
         return None
     stacks = param_stacks(m, steps)
@@ -191,17 +195,16 @@ def run_kernels(engine, Z, kernels_needed, loop, sig, *args):
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     fns = [first_class(ks[i], i >= 2) for i in kernels_needed]
-    bad = loop(*fns, x, P, np.ascontiguousarray(Z, dtype=float), *stacks, Q, R, *args,
+    bad = loop(*fns, x, P, np.ascontiguousarray(Z, dtype=float), seen, *stacks, Q, R, *args,
                np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz)), X, PP, nis)
-    return (X, PP, nis, np.full((M, steps), nz)) if bad < 0 else False
+    return (X, PP, nis, np.where(seen, nz, 0)[None].repeat(M, axis=0)) if bad < 0 else False
 
 
 class EKFEngine(KalmanEngine):
     """The EKF's predict and update on one run or a stack of runs."""
 
     def run_all(self, Z, finite):
-        if finite.all():
-            return run_kernels(self, Z, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
+        return run_kernels(self, Z, finite, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
 
     def predict(self, x, P, k):
         m = self.model

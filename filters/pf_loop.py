@@ -35,7 +35,7 @@ from .loops import derived_from_kernels, first_class, param_stacks
 from .particles import moments, weights
 from .resampling import invert_sorted
 
-COMPILE_AT = 20_000_000  # particle-steps from which the missing loop is compiled (~5 s, once per machine)
+COMPILE_AT = 10_000_000  # particle-steps from which the missing loop is compiled (~2 s, once per machine; saves 0.2-0.4 µs per particle-step)
 _LOG_2PI = math.log(2.0 * math.pi)
 
 

@@ -134,8 +134,7 @@ class SigmaEngine(KalmanEngine):
         self.all_made = not self.missing.any()
 
     def run_all(self, Z, finite):
-        if finite.all():
-            return kalman.run_kernels(self, Z, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
+        return kalman.run_kernels(self, Z, finite, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""

@@ -311,3 +311,33 @@ def test_whole_run_loop_equals_the_step_by_step_engine(sonar_problems, name, mon
         assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
         assert np.array_equal(a.info["nis"], b.info["nis"])
     assert np.array_equal(one.x, slow[1].x)
+
+
+@pytest.mark.slow  # compiles the two run loops when numba's cache lacks them (~12 s, once)
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
+def test_whole_run_loop_skips_the_update_of_missing_rows(sonar_problems, name, monkeypatch):
+    """Rows missing for every run (a gap in a log) are predicted only, in the loop as in the steps
+    (NIS NaN, dof 0 there); a gap in one run only, or in one component, leaves the loop out."""
+    from replay.filters import kalman
+
+    pbs = sonar_problems[:3]
+    Z = np.stack([pb.z for pb in pbs])
+    Z[:, 5:9] = np.nan
+    Z[:, 20] = np.nan
+    X0, P0 = np.stack([pb.x0 for pb in pbs]), np.stack([pb.P0 for pb in pbs])
+    flt = make_filter(name)
+    used, real = [], kalman.run_kernels
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: used.append(real(*a)) or used[-1])
+    fast = flt.run_batch(pbs[0].model, Z, X0, P0, [None] * 3)
+    Z1 = Z.copy()
+    Z1[1, 30, 0] = np.nan
+    flt.run_batch(pbs[0].model, Z1, X0, P0, [None] * 3)
+    assert isinstance(used[0], tuple) and used[1] is None
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: None)
+    slow = flt.run_batch(pbs[0].model, Z, X0, P0, [None] * 3)
+    for a, b in zip(fast, slow):
+        assert np.isfinite(a.x).all()
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert np.array_equal(a.info["nis"], b.info["nis"], equal_nan=True)
+        assert np.array_equal(a.info["nis_dof"], b.info["nis_dof"]) and a.info["nis_dof"][6] == 0
+        assert np.isnan(a.info["nis"][20]) and np.isfinite(a.info["nis"][21])

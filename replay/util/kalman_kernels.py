@@ -252,7 +252,7 @@ ROW_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _VEC))      # f, h: (x, p
 JACOBIAN_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _MAT))  # F, H: (x, p, J)
 _S2, _S3, _S4 = types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
 _MASK = types.boolean[::1]
-_COMMON = (_S2, _S3, _S3, _S2, _S2, _S3, _S3)  # x, P, Z, Pf, Ph, Q, R
+_COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
 
 
@@ -286,12 +286,13 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
 
 
 @nb.njit(cache=True)
-def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
-    """M runs of a UKF/CKF over every step, all measurements present: the steps of
+def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
+    """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
-    Z (M, steps, nz); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k] (a stack of
-    one: the same at every step). Writes
+    Z (M, steps, nz), every component present at the steps k where ``seen[k]``, none at the
+    others (no update there: the prediction is the estimate, its NIS NaN); per step k: Pf[k],
+    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step). Writes
     Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
     a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
     M, steps, nz = Z.shape
@@ -304,6 +305,11 @@ def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout,
         apply_rows(f, X, Pf[k], Y)
         if sigma_predict(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev) >= 0:
             return k
+        if not seen[k]:
+            Xout[:, k] = x
+            Pout[:, k] = P
+            nis[:, k] = np.nan
+            continue
         apply_rows(h, X, Ph[k], Zp)
         for m in range(M):
             for q in range(nz):
@@ -319,8 +325,8 @@ def sigma_run(f, h, x, P, Z, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout,
 
 
 @nb.njit(cache=True)
-def ekf_run(f, h, F, H, x, P, Z, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
-    """M runs of the EKF over every step, all measurements present: the steps of
+def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+    """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
     :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
     :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`)
     in one loop. Arguments as :func:`sigma_run`. Returns -1, or the step at which S had no
@@ -335,6 +341,13 @@ def ekf_run(f, h, F, H, x, P, Z, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
             f(x[m], Pf[k], xp[m])
             wrap(xp[m], xmask)
         propagate_cov(Fj, P, Q[k % Q.shape[0]], Pp)
+        if not seen[k]:
+            x[:] = xp
+            P[:] = Pp
+            Xout[:, k] = x
+            Pout[:, k] = P
+            nis[:, k] = np.nan
+            continue
         for m in range(M):
             H(xp[m], Ph[k], Hj[m])
             h(xp[m], Ph[k], zh)
