@@ -12,9 +12,12 @@ waits for it).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 COMPILE_AT = 200_000  # Kalman run-steps from which a missing run loop is compiled (~10 s, once per machine)
+THREAD_WORK_US = 1000.0  # work per thread at least (waking a thread costs tens of µs)
 
 
 def derived_from_kernels(model) -> bool:
@@ -39,6 +42,24 @@ def first_class(kernel, matrix: bool):
         fty = kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL
         got = _first_class[kernel] = nb.cfunc(fty.signature, cache=True)(kernel.py_func)
         got._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
+    return got
+
+
+def grain(us_per_run: float) -> int:
+    """Runs per thread at least, for runs of about ``us_per_run`` µs each (:data:`THREAD_WORK_US`)."""
+    return max(1, math.ceil(THREAD_WORK_US / max(us_per_run, 1e-3)))
+
+
+_bound: dict = {}
+
+
+def bound(loop, *fns):
+    """``loop`` with its first arguments ``fns`` (the model's kernels as first-class functions),
+    called through its compiled entry point once typed (:class:`Kernel`)."""
+    key = (loop, fns)
+    got = _bound.get(key)
+    if got is None:
+        got = _bound[key] = Kernel(loop, *fns)
     return got
 
 
@@ -79,3 +100,30 @@ def fingerprint(model, steps: int):
         else:
             return None
     return tuple(parts)
+
+
+def _key(args):
+    """What numba's typing of ``args`` depends on: dtype, dimensions and layout (C, F or neither) of
+    arrays, the type of anything else."""
+    return tuple((a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray)
+                 else type(a) for a in args)
+
+
+class Kernel:
+    """``Kernel(dispatcher, fn1, fn2, ...)(*args)`` = ``dispatcher(fn1, fn2, ..., *args)``, typed once."""
+
+    def __init__(self, dispatcher, *fns):
+        self.dispatcher, self.fns = dispatcher, fns
+        self.key, self.entry = None, None
+
+    def __call__(self, *args):
+        key = _key(args)
+        if key == self.key:
+            return self.entry(*self.fns, *args)
+        out = self.dispatcher(*self.fns, *args)
+        d = self.dispatcher
+        sig = tuple(d.typeof_pyval(a) for a in (*self.fns, *args))
+        cres = d.overloads.get(sig)
+        if cres is not None:
+            self.key, self.entry = key, cres.entry_point
+        return out

@@ -291,7 +291,7 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
 _READY: set = set()
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
     """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
@@ -330,7 +330,7 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
     return -1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
     """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
     :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
