@@ -118,8 +118,11 @@ class PFEngine:
 
     def run_all(self, Z, finite):
         """Every step of every run in one compiled loop when it computes what the steps compute
-        (:mod:`replay.filters.pf_loop`), else None (the steps below run)."""
-        return pf_loop.run(self, Z, finite)
+        (:mod:`replay.filters.pf_loop`), else None (the steps below run): this engine itself (not a
+        subclass) with the bootstrap weighting."""
+        if type(self) is PFEngine and type(self.flt).weigh is ParticleFilter.weigh:
+            return pf_loop.run(self, Z, finite)
+        return None
 
     def propagate(self, k):
         """x^i ~ p(x_k | x^i_{k-1}) for every active run (:func:`propagate`)."""

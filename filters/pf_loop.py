@@ -142,13 +142,11 @@ def run(engine, Z, finite):
 
 
 def applies(engine, model) -> bool:
-    """Whether the loop computes what the steps compute for this engine and model: the plain
-    bootstrap engine and weighting, systematic resampling, the model's own kernels, its noise
-    drawn by the filter (no ``sample_f`` of its own), Q and R constant."""
-    from .pf import ParticleFilter, PFEngine
-
-    flt = engine.flt
-    return (type(engine) is PFEngine and type(flt).weigh is ParticleFilter.weigh and flt.resampling == "systematic"
+    """Whether the loop computes what the steps compute for this model (the engine is the plain
+    bootstrap one, :meth:`replay.filters.pf.PFEngine.run_all`): systematic resampling, the
+    model's own kernels, its noise drawn by the filter (no ``sample_f`` of its own), Q and R
+    constant."""
+    return (engine.flt.resampling == "systematic"
             and model.kernels() is not None and derived_from_kernels(model)
             and type(model).sample_f is Model.sample_f and type(model).process_cov is Model.process_cov
             and type(model).measurement_cov is Model.measurement_cov)
