@@ -33,6 +33,7 @@ session's group priority for the measurement only:
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -127,7 +128,6 @@ def bench_campaign(repeat=1, runs=200):
 
     The load average is printed beside the figures: on 2 cores shared with other
     work the wall-time ratio says little; the CPU columns show the work done."""
-    import os
     import resource
 
     import pyarrow.parquet  # noqa: F401  (import cost out of the first timing)
@@ -156,18 +156,24 @@ def bench_campaign(repeat=1, runs=200):
           f"speed-up {r:.2f}x [{'PASS' if r >= 1.6 else 'MISS'} ~2x on 2 cores]")
 
 
-def example_wall(workers: int, out: Path) -> tuple[float, str | None]:
-    """Wall seconds of ``replay campaign run campaigns/example.toml --out OUT --workers W -q`` (the
-    ``replay`` script of this interpreter, from the repository root); the error's last line if it failed."""
+def example_wall(workers: int, out: Path) -> tuple[float, float, str | None]:
+    """Wall and CPU seconds (user + system of the process and its workers) of ``replay campaign run
+    campaigns/example.toml --out OUT --workers W -q`` (the ``replay`` script of this interpreter, from
+    the repository root); the error's last line if it failed."""
+    import resource
+
     root = Path(__file__).resolve().parents[1]
     script = Path(sys.executable).with_name("replay")
     if not script.exists():
         raise SystemExit("bench_campaign: no replay script beside this interpreter (pip install -e .)")
     cmd = [str(script), "campaign", "run", "campaigns/example.toml", "--out", str(out), "--workers", str(workers), "-q"]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     wall = time.perf_counter() - t0
-    return wall, None if p.returncode == 0 else (p.stderr.strip().splitlines() or ["?"])[-1]
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime
+    return wall, cpu, None if p.returncode == 0 else (p.stderr.strip().splitlines() or ["?"])[-1]
 
 
 def bench_example(repeat: int):
@@ -175,12 +181,13 @@ def bench_example(repeat: int):
     walls = []
     with tempfile.TemporaryDirectory(prefix="bench-campaign-") as d:
         for k in range(repeat):
-            wall, err = example_wall(2, Path(d) / f"example{k}")
+            wall, cpu, err = example_wall(2, Path(d) / f"example{k}")
             if err:
                 print(f"example campaign FAILED after {wall:.1f} s: {err}")
                 return "MISS"
             walls.append(wall)
-            print(f"  example campaign, --workers 2: {wall:.2f} s", flush=True)
+            print(f"  example campaign, --workers 2: {wall:.2f} s, CPU {cpu:.2f} s (user + system, the "
+                  f"process and its workers; load average {os.getloadavg()[0]:.1f})", flush=True)
     w = min(walls)
     base = EXAMPLE_BASELINE_S
     sp = base / w if base else float("nan")

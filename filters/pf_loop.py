@@ -33,7 +33,7 @@ from replay.util.kernels import gauss_loglik
 
 from .loops import bound, derived_from_kernels, first_class, grain, param_stacks
 from .particles import moments, weights
-from .resampling import invert_sorted
+from .resampling import SCHEMES, invert_sorted, systematic
 from .threads import split
 
 COMPILE_AT = 10_000_000  # particle-steps from which the missing loop is compiled (~2 s, once per machine; saves 0.2-0.4 µs per particle-step)
@@ -146,7 +146,7 @@ def applies(engine, model) -> bool:
     bootstrap one, :meth:`replay.filters.pf.PFEngine.run_all`): systematic resampling, the
     model's own kernels, its noise drawn by the filter (no ``sample_f`` of its own), Q and R
     constant."""
-    return (engine.flt.resampling == "systematic"
+    return (SCHEMES.get(engine.flt.resampling) is systematic  # the scheme the loop computes, not a replacement
             and model.kernels() is not None and derived_from_kernels(model)
             and type(model).sample_f is Model.sample_f and type(model).process_cov is Model.process_cov
             and type(model).measurement_cov is Model.measurement_cov)

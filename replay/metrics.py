@@ -36,7 +36,6 @@ separate intervals suggest.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 from replay import score
 from replay.align import align, apply
@@ -51,17 +50,52 @@ def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
     if ok.any():
         try:
             u = np.linalg.solve(P[ok], e[ok][..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            u = np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(P[ok], e[ok])])
+        except np.linalg.LinAlgError:  # a singular P: least squares, every row
+            u = lstsq_rows(P[ok], e[ok])
         out[ok] = np.einsum("...i,...i->...", e[ok], u)
     return out
+
+
+def lstsq_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.lstsq(A[i], b[i], rcond=None)[0]`` for every i of stacked ``A`` (k, d, d) and
+    ``b`` (k, d), bit for bit, in one call of the gufunc that ``lstsq`` calls on its one matrix
+    (the same LAPACK routine on each matrix; ``lstsq`` costs 15-30 µs a call, and a long run
+    whose covariance is singular somewhere has thousands of rows). Where numpy has no such
+    gufunc, the loop. Raises ``LinAlgError`` as ``lstsq`` does."""
+    A, b = np.asarray(A, float), np.asarray(b, float)
+    if not len(A):
+        return np.zeros(b.shape)
+    try:
+        from numpy.linalg import _umath_linalg
+        from numpy.linalg._linalg import _raise_linalgerror_lstsq
+        gufunc = _umath_linalg.lstsq
+    except (ImportError, AttributeError):  # numpy 1.x
+        return np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(A, b)])
+    m, n = A.shape[-2:]
+    rcond = np.finfo(np.float64).eps * max(n, m)  # lstsq's rcond=None
+    with np.errstate(call=_raise_linalgerror_lstsq, invalid="call", over="ignore", divide="ignore",
+                     under="ignore"):
+        x = gufunc(A, b[..., None], rcond, signature="ddd->ddid")[0]
+    return x[..., 0]
+
+
+def chi2_ppf(q, df):
+    """``scipy.stats.chi2.ppf(q, df)`` for 0 < q < 1 (NaN where df <= 0), bit for bit: the
+    function it evaluates, 2 gammaincinv(df / 2, q), without importing scipy.stats (0.5-1 s,
+    which every campaign paid at start-up; :mod:`scipy.special` costs a fraction of it)."""
+    from scipy.special import gammaincinv
+
+    df = np.asarray(df, float)
+    with np.errstate(invalid="ignore"):
+        out = np.where(df > 0, 2 * gammaincinv(df / 2, q), np.nan)
+    return out[()] if out.ndim == 0 else out
 
 
 def chi2_band(dof, runs: int, p: float = 0.95):
     """Two-sided ``p`` band of the average of ``runs`` chi-square(``dof``) variables."""
     dof = np.asarray(dof, float) * runs
     a = (1 - p) / 2
-    return stats.chi2.ppf(a, dof) / runs, stats.chi2.ppf(1 - a, dof) / runs
+    return chi2_ppf(a, dof) / runs, chi2_ppf(1 - a, dof) / runs
 
 
 COLLAPSED = 1e4  # a mean NEES/NIS above 1e4 per degree of freedom: the covariance has collapsed
@@ -157,10 +191,13 @@ def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
     return bool(longest >= min(int(steps), len(e)))
 
 
-def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None):
-    """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``."""
-    m = score.score_run(problem, est)
-    err = score.errors(problem, est)["position"]
+def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None,
+                errors: dict | None = None):
+    """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``;
+    ``errors``: the run's :func:`replay.score.errors`, when computed already."""
+    errors = score.errors(problem, est) if errors is None else errors
+    m = score.score_run(problem, est, errors)
+    err = errors["position"]
     pos = list(problem.position_index)
     P = est.P[:, pos][:, :, pos]
     nees_k = nees(err, P)

@@ -122,25 +122,39 @@ def resolve(dataset: str):
 
 
 def is_sim(dataset: str) -> bool:
-    ds = resolve(dataset)
-    return ds is not None and ds.kind == "sim"
+    return (ds := resolve(dataset)) is not None and ds.kind == "sim"
 
 
 @functools.lru_cache(maxsize=4)
-def _file_frame(dataset, first, data_dir, adapter, params_json):
-    """A file dataset's frame, read once per process (the same for every run)."""
+def _file_frame(dataset, first, data_dir, adapter, params_json, state=()):
+    """A file dataset's frame, read once per process (the same for every run) while the file is
+    unchanged: ``state`` (:func:`_file_state`) is part of the key, so an edited file is read again."""
     return registry.load_frame(dataset, data_dir=data_dir, first=first, adapter=adapter,
                                **json.loads(params_json))
 
 
-def load_frame(config: Config | dict, run: int, data_dir=None):
-    """The frame of ``run``: drawn from the run's data stream for a simulator, read once for a file."""
+def _file_state(target, data_dir) -> tuple:
+    """(path, size, mtime, inode) of the file a file dataset reads (of each file of a bag
+    directory); () when it is not found (the registry then refuses in its own words)."""
+    try:
+        path = registry.locate(target, data_dir) if isinstance(target, registry.Dataset) else Path(target).expanduser()
+        files = [] if path is None else sorted(path.iterdir()) if path.is_dir() else [path]
+        return tuple((str(f), st.st_size, st.st_mtime_ns, st.st_ino) for f in files for st in [f.stat()])
+    except (OSError, ReplayError):
+        return ()
+
+
+def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
+    """The frame of ``run``: drawn from the run's data stream for a simulator, read once for a file
+    (``ds``: the dataset's registry entry, :func:`resolve`, when the caller has it already)."""
     c = config.as_dict() if isinstance(config, Config) else config
-    if is_sim(c["dataset"]):
-        return registry.load_frame(c["dataset"], data_dir=data_dir, rng=rng_for(c["seed"], run, DATA),
+    ds = resolve(c["dataset"]) if ds is False else ds
+    if ds is not None and ds.kind == "sim":  # the entry itself: the registry looks it up no more
+        return registry.load_frame(ds, data_dir=data_dir, rng=rng_for(c["seed"], run, DATA),
                                    first=c["first"], adapter=c.get("adapter"), **c["dataset_params"])
-    return _file_frame(c["dataset"], c["first"], None if data_dir is None else str(data_dir), c.get("adapter"),
-                       json.dumps(c["dataset_params"], sort_keys=True))
+    data_dir = None if data_dir is None else str(data_dir)
+    return _file_frame(c["dataset"], c["first"], data_dir, c.get("adapter"), json.dumps(c["dataset_params"],
+                       sort_keys=True), _file_state(c["dataset"] if ds is None else ds, data_dir))
 
 
 def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
@@ -153,10 +167,10 @@ def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, datas
     return load_frame(cfg, 0, data_dir).meta.get("default_task", "position")
 
 
-def build_problem(config: Config | dict, run: int, data_dir=None):
+def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     """The Problem of ``run`` under ``config`` (frame, then the task on the run's task stream)."""
     c = config.as_dict() if isinstance(config, Config) else config
-    frame = load_frame(c, run, data_dir)
+    frame = load_frame(c, run, data_dir, ds)
     task = make_task(c["task"], **c["task_params"])
     problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
     # the manifest's "dataset" section: the frame's metadata plus what the task used and noted
@@ -195,10 +209,7 @@ def same_model(a, b) -> bool:
     """True when two models are the same equations (same class, equal attributes)."""
     if a is b:
         return True
-    if type(a) is not type(b):
-        return False
-    va, vb = vars(a), vars(b)
-    if va.keys() != vb.keys():
+    if type(a) is not type(b) or (va := vars(a)).keys() != (vb := vars(b)).keys():
         return False
     for k in va:
         x, y = va[k], vb[k]
@@ -220,9 +231,13 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
     if is_recorded(c["filter"]):
         return [_recorded_run(c, run, data_dir, keep, strict) for run in runs_of(c, runs)]
     results, problems = [], {}
+    try:
+        ds = resolve(c["dataset"])  # once for the block
+    except Exception:  # noqa: BLE001 — each run fails with the error (build_problem)
+        ds = False
     for run in runs:
         try:
-            problems[run] = build_problem(c, run, data_dir)
+            problems[run] = build_problem(c, run, data_dir, ds)
         except Exception as err:  # recorded; the other runs go on
             if strict:
                 raise
@@ -264,13 +279,11 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
 
 def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> dict:
     """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
-    m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"])
     err = score.errors(problem, est)
+    m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
-    for i in range(est.x.shape[1]):
-        cols[f"x{i}"] = est.x[:, i]
-    for i in range(est.x.shape[1]):
-        cols[f"P{i}{i}"] = est.P[:, i, i]
+    cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
+    cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})
     for j, axis in enumerate(problem.axis_names):
         cols[f"ref_{axis}"] = np.where(problem.truth_valid, problem.truth_position[:, j], np.nan)
         cols[f"err_{axis}"] = err["position"][:, j]

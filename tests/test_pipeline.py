@@ -140,3 +140,33 @@ def test_manifest_command_repeats_the_evaluation(tmp_path):
     res = CliRunner().invoke(main, again, catch_exceptions=False)
     assert res.exit_code == 0, res.output
     assert _rows(tmp_path / "a" / "leaderboard.csv") == _rows(tmp_path / "b" / "leaderboard.csv")
+
+
+def test_a_file_frame_is_read_again_when_the_file_changes(tmp_path, monkeypatch):
+    """A file's frame is read once per process while the file is unchanged; an edit (size, or
+    mtime with the same size) or a replacement (new inode) reads it again."""
+    import os
+
+    from replay import pipeline, registry
+
+    reads = []
+    monkeypatch.setattr(registry, "load_frame", lambda dataset, **kw: reads.append(Path(dataset).read_text()) or
+                        len(reads))
+    pipeline._file_frame.cache_clear()
+    path = tmp_path / "log.csv"
+    path.write_text("a,b\n1,2\n")
+    cfg = {"dataset": str(path), "dataset_params": {}, "first": None, "seed": 0}
+    assert [pipeline.load_frame(cfg, r) for r in range(3)] == [1, 1, 1]
+    path.write_text("a,b\n1,2\n3,4\n")  # longer
+    assert pipeline.load_frame(cfg, 3) == 2
+    st = path.stat()
+    path.write_text("a,b\n1,2\n5,6\n")  # as long; another mtime
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
+    assert pipeline.load_frame(cfg, 4) == 3
+    new = tmp_path / "new.csv"
+    new.write_text("a,b\n1,2\n7,8\n")
+    os.utime(new, ns=(st.st_atime_ns, path.stat().st_mtime_ns))
+    os.replace(new, path)  # same size and mtime, another file
+    assert pipeline.load_frame(cfg, 5) == 4 and pipeline.load_frame(cfg, 6) == 4
+    assert reads[-1] == "a,b\n1,2\n7,8\n"
+    pipeline._file_frame.cache_clear()

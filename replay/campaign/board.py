@@ -30,18 +30,22 @@ def _collect(store: Store):
     return configs, records
 
 
-def campaign_rows(out, order=None, baseline: str | None = None) -> list[dict]:
+def campaign_rows(out, order=None, baseline: str | None = None, *, store: Store | None = None,
+                  collected=None) -> list[dict]:
     """One leaderboard row per stored configuration of the campaign directory ``out``
     (:func:`replay.summary.config_row`, the schema of ``replay eval``), in ``order`` (config
-    hashes, e.g. the campaign file's order) when given, else sorted; with paired columns."""
-    store = Store(out)
-    configs, records = _collect(store)
+    hashes, e.g. the campaign file's order) when given, else sorted; with paired columns.
+    ``store``: the :class:`Store` of ``out`` that wrote the units (it keeps what it wrote);
+    ``collected``: its ``(configs, records)`` (:func:`_collect`) when read already."""
+    store = store or Store(out)
+    configs, records = collected or _collect(store)
     rows = []
     for h, cfg in configs.items():
         recs = records[h]
+        sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
         try:
-            rows.append(summary.config_row(cfg, h, recs, lambda run, cols, h=h: store.series(h, run, cols),
-                                           recs[0].get("version", "") if recs else ""))
+            rows.append(summary.config_row(cfg, h, recs, lambda run, cols, h=h, sha=sha: store.series(
+                h, run, cols, sha.get(run)), recs[0].get("version", "") if recs else ""))
         except (KeyError, TypeError, ValueError, IndexError) as err:  # records edited by hand
             raise ReplayError(f"{store.units / h}: unit records lack what the leaderboard needs "
                               f"({type(err).__name__}: {err}); remove the directory and run "
@@ -56,9 +60,9 @@ def campaign_rows(out, order=None, baseline: str | None = None) -> list[dict]:
     return summary.add_paired(rows, configs, records, baseline)
 
 
-def paired_rows(out, rows, metric_names=("pos_rmse", "ate")) -> list[dict]:
+def paired_rows(out, rows, metric_names=("pos_rmse", "ate"), *, collected=None) -> list[dict]:
     """Paired comparisons of every two configurations on one dataset and task (``rows``: the leaderboard)."""
-    configs, records = _collect(Store(out))
+    configs, records = collected or _collect(Store(out))
     return summary.paired_rows(rows, configs, records, metric_names)
 
 
@@ -70,13 +74,16 @@ def _write(rows, path, cols):
     write_csv(rows, path, cols)
 
 
-def summarise(out, order=None) -> list[dict]:
-    """Write ``leaderboard.csv`` and ``paired.csv`` into the campaign directory; return the rows."""
+def summarise(out, order=None, store: Store | None = None) -> list[dict]:
+    """Write ``leaderboard.csv`` and ``paired.csv`` into the campaign directory; return the rows.
+    ``store``: the :class:`Store` that wrote the units (see :func:`campaign_rows`)."""
     out = Path(out)
+    store = store or Store(out)
+    collected = _collect(store)  # every unit read and checked once, for both files
     with np.errstate(all="ignore"):
-        rows = campaign_rows(out, order)
+        rows = campaign_rows(out, order, store=store, collected=collected)
         _write(rows, out / "leaderboard.csv", columns(rows))
-        _write(paired_rows(out, rows), out / "paired.csv", PAIRED)
+        _write(paired_rows(out, rows, collected=collected), out / "paired.csv", PAIRED)
     return rows
 
 

@@ -24,6 +24,7 @@ fixed blocks of runs.
 """
 from __future__ import annotations
 
+import gc
 import os
 import sys
 from contextlib import contextmanager
@@ -37,7 +38,7 @@ from . import board
 from .lock import locked
 from .progress import Progress
 from .spec import Campaign
-from .store import Store, pack, write_bytes
+from .store import WRITERS, Store, pack, write_bytes
 from .units import Job, execute_job
 from .workers import connect_scheduler, init_worker
 
@@ -51,11 +52,14 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
     """(jobs, damaged, stored): the jobs; ``(config_hash, run, problem)`` of each damaged unit
     found (``problem`` one line naming the file), which the jobs compute again, and of a
     damaged ``config.json`` (run None; rewritten here); the number of units stored intact."""
+    from concurrent.futures import ThreadPoolExecutor
+
     jobs, damaged, stored = [], [], 0
-    for cfg in campaign.configs:
-        c = cfg.as_dict()
-        h = config_hash(c)
-        problem = store.save_config(h, c)
+    cfgs = [cfg.as_dict() for cfg in campaign.configs]
+    hashes = [config_hash(c) for c in cfgs]
+    with ThreadPoolExecutor(max(1, min(WRITERS, len(cfgs)))) as pool:  # side by side: their flushes share commits
+        saved = list(pool.map(store.save_config, hashes, cfgs))
+    for c, h, problem in zip(cfgs, hashes, saved):
         if problem is not None:
             damaged.append((h, None, problem))
         good, bad = store.scan(h)
@@ -90,6 +94,9 @@ def _processes(workers: int):
     method = "fork" if "fork" in mp.get_all_start_methods() and sys.platform == "linux" else "spawn"
     if method == "fork":  # imported once here rather than in every worker
         import pyarrow.parquet  # noqa: F401
+    frozen = method == "fork" and not gc.get_freeze_count()
+    if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
+        gc.freeze()
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method), initializer=init_worker,
                                initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // workers)))
 
@@ -102,6 +109,8 @@ def _processes(workers: int):
         yield run
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        if frozen:
+            gc.unfreeze()
 
 
 @contextmanager
@@ -202,6 +211,8 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         else:
             backend, counts["backend"] = _processes(min(workers, len(jobs))), f"processes({min(workers, len(jobs))})"
         weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs}
+        if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
+            jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
         progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
         try:
             with backend as mapper:
@@ -213,7 +224,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
                     progress.update(len(results), bad, weight=weights.get((job.config_hash, tuple(job.runs)), len(results)))
         finally:
             progress.close()
-    counts["rows"] = board.summarise(out, hashes)
+    counts["rows"] = board.summarise(out, hashes, store)
     return counts
 
 
