@@ -13,6 +13,8 @@ beside the kernels from the same generators and compares step by step.
   draws from the prediction;
 * :func:`gwo_optimize` — t_max GWO / IGWO iterations (002 §3.1–3.2) with
   :func:`entropy_weights` and elitism;
+* :func:`pso_optimize` — the numpy PSO that :func:`replay.filters.p002.pso.optimize` was
+  before its array passes were compiled (same operations, same order: equal bit for bit);
 * :func:`oracle_filter` — a registered filter (stcpf, igwo-stcpf, gwo-pf, ...)
   whose engine runs this numpy code instead of the kernels.
 
@@ -26,7 +28,7 @@ import numpy as np
 
 from replay.filters import make_filter
 from replay.filters import particles
-from replay.filters.p002 import gwo
+from replay.filters.p002 import gwo, pso
 from replay.filters.p002.igwo_stcpf import SwarmEngine, residual_fitness
 from replay.filters.p002.stack import fast_residual
 from replay.filters.p002.stckf import fading_factor, next_V
@@ -119,6 +121,51 @@ def gwo_optimize(X, fitness, rng, t_max=20, improved=True, a_start=2.0, a_end=0.
         X, f = Xn, fn
         best[:, t + 1] = f.min(axis=1)
     assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated"
+    return (X[0], f[0], best[0]) if single else (X, f, best)
+
+
+def pso_optimize(X, fitness, rng, iterations=20, omega_max=0.9, omega_min=0.4, alpha=0.2, c1=(2.0, 1.0),
+                 c2=(1.5, 2.0), project=None, movable=None):
+    """PSO (002 §4.1) as numpy array operations: V = w V + c1 r1 (pbest - X) + c2 r2 (g - X), X = X + V,
+    projected; the arguments and returns of :func:`replay.filters.p002.pso.optimize`."""
+    X, rngs, fitness, project, single = gwo.as_runs(X, rng, fitness, project)
+    M = len(X)
+    keep = None if movable is None else np.asarray(movable, float).reshape(M, 1, -1)
+    if project is not None:
+        X = project(X)
+    f = fitness(X)
+    pbest, pf = X.copy(), f.copy()
+    rows = np.arange(M)
+    g = np.argmin(pf, axis=1)
+    V = np.zeros_like(X)
+    best = np.empty((M, iterations + 1))
+    best[:, 0] = pf[rows, g]
+    t = np.arange(1, iterations + 1)
+    w = pso.inertia(t, omega_max, omega_min, alpha)
+    a1, a2 = pso.ramp(t, iterations, *c1), pso.ramp(t, iterations, *c2)
+    r = gwo.draws(rngs, (iterations, 2) + X.shape[1:])  # (M, iterations, 2, N, d)
+    R1, R2 = r[:, :, 0], r[:, :, 1]
+    R1 *= a1[:, None, None]
+    R2 *= a2[:, None, None]
+    for i in range(iterations):
+        V *= w[i]
+        t = pbest - X
+        t *= R1[:, i]
+        V += t
+        np.subtract(pbest[rows, g][:, None, :], X, out=t)
+        t *= R2[:, i]
+        V += t
+        if keep is not None:
+            V *= keep
+        X = X + V
+        if project is not None:
+            X = project(X)
+        f = fitness(X)
+        better = f < pf
+        np.copyto(pbest, X, where=better[..., None])
+        np.copyto(pf, f, where=better)
+        g = np.argmin(pf, axis=1)
+        best[:, i + 1] = pf[rows, g]
     return (X[0], f[0], best[0]) if single else (X, f, best)
 
 

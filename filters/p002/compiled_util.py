@@ -8,9 +8,12 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 
 * :func:`wrap`, :func:`cholesky`, :func:`chol_solve_rows`, :func:`matmul`, :func:`quad` — from
   :mod:`replay.util.kernels` (the one compiled linear algebra of the project), re-exported;
+* :func:`wrap_rows` (:func:`wrap` of every row of a stack: the numpy code's angle wrap);
 * :func:`factor` (Cholesky with an eigenvalue-floor repair), :func:`gram`;
 * :func:`cubature_points`, :func:`moments` — the cubature points and their
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
+* :func:`scaled_uniforms`, :func:`pso_velocity`, :func:`pso_best` — the array passes of one PSO
+  iteration (:func:`replay.filters.p002.pso.optimize`, which calls the fitness between them);
 * :func:`leaders` — the alpha, beta, delta wolves of GWO; :func:`entropy_weights` — the IGWO
   leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
 * :func:`normalise`, :func:`weighted_mean` — the particle bookkeeping kernels of
@@ -32,6 +35,18 @@ from replay.util.kernels import chol_solve_rows, cholesky, matmul, quad, wrap  #
 TWO_PI = 2.0 * np.pi
 SIN_TAYLOR = tuple(1.0 / math.factorial(k) for k in (15, 13, 11, 9, 7, 5, 3))  # sin d = d - d^3 (1/3! - ...)
 COS_TAYLOR = tuple(1.0 / math.factorial(k) for k in (16, 14, 12, 10, 8, 6, 4, 2))  # cos d = 1 - d^2 (1/2! - ...)
+
+
+@nb.njit(cache=True)
+def wrap_rows(X, mask):
+    """:func:`wrap` of each row of X (rows, n) in place: the ``mask`` components into [-pi, pi).
+    A row whose masked components are all below 3 < pi - 0.14 in size is left as it is: there
+    floor(x / 2 pi + 0.5) = 0 exactly, so the wrap would give x itself (most rows, cheaper)."""
+    for r in range(X.shape[0]):
+        for i in range(X.shape[1]):
+            if mask[i] and not abs(X[r, i]) < 3.0:
+                wrap(X[r], mask)
+                break
 
 
 @nb.njit(cache=True)
@@ -122,6 +137,59 @@ def moments(Y, mask, mean, D):
         for i in range(m):
             D[j, i] = Y[j, i] - mean[i]
         wrap(D[j], mask)
+
+
+@nb.njit(cache=True)
+def scaled_uniforms(raw, scales, out):
+    """out[t, c, j] = (raw[t, c, j] + 0.5) 2^-32 scales[t, c]: 32-bit integers to uniforms in (0, 1)
+    (:func:`replay.filters.p002.gwo.uniforms`), times a coefficient per iteration t and kind c."""
+    for t in range(raw.shape[0]):
+        for c in range(raw.shape[1]):
+            s = scales[t, c]
+            for j in range(raw.shape[2]):
+                out[t, c, j] = ((raw[t, c, j] + 0.5) * 2.0**-32) * s
+
+
+@nb.njit(cache=True)
+def pso_velocity(V, X, pbest, g, R, it, w, keep):
+    """One PSO move of every particle in place (002 §4.1): V = w V + c1 r1 (pbest - X) + c2 r2 (g - X),
+    times ``keep`` (M, d) (None: all components move), then X = X + V. ``R[m, it, 0]`` holds
+    c1 r1, ``R[m, it, 1]`` c2 r2; ``g`` (M,) the index of each swarm's best. Sums in that order."""
+    M, N, d = X.shape
+    for m in range(M):
+        b = g[m]
+        for i in range(N):
+            for q in range(d):
+                x = X[m, i, q]
+                v = V[m, i, q] * w
+                v = v + (pbest[m, i, q] - x) * R[m, it, 0, i, q]
+                v = v + (pbest[m, b, q] - x) * R[m, it, 1, i, q]
+                if keep is not None:
+                    v = v * keep[m, q]
+                V[m, i, q] = v
+                X[m, i, q] = x + v
+
+
+@nb.njit(cache=True)
+def pso_best(X, f, pbest, pf, g, best):
+    """The personal bests (pbest, pf) of the positions X with fitness f (where f < pf), each swarm's
+    best index g (``np.argmin``: the first minimum, or the first NaN) and its fitness into ``best`` (M,)."""
+    M, N, d = X.shape
+    for m in range(M):
+        for i in range(N):
+            if f[m, i] < pf[m, i]:
+                pf[m, i] = f[m, i]
+                for q in range(d):
+                    pbest[m, i, q] = X[m, i, q]
+        k, lo = 0, pf[m, 0]
+        if not np.isnan(lo):
+            for i in range(1, N):
+                if not pf[m, i] >= lo:
+                    k, lo = i, pf[m, i]
+                    if np.isnan(lo):
+                        break
+        g[m] = k
+        best[m] = lo
 
 
 @nb.njit(cache=True)

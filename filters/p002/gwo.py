@@ -36,7 +36,7 @@ Where it is computed: the move itself (leaders, candidates, entropy weights,
 elitism) is the compiled :func:`replay.filters.p002.compiled.swarm`, the
 library's only GWO/IGWO move; this module holds what it is given: the
 convergence-factor schedule (:func:`schedule`) and the uniforms (:func:`raw_draws`,
-shared with PSO). A numpy reading of the move is kept as the test oracle
+:func:`scaled_draws` for PSO). A numpy reading of the move is kept as the test oracle
 ``tests/oracle_p002.py``.
 
 Observation (not a choice): with the paper's entropy formula, E_i = -p_i log p_i
@@ -52,6 +52,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled_util import scaled_uniforms
+from .parallel import Kernel
+
+_scaled = Kernel(scaled_uniforms)
 
 def a_linear(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0) -> float:
     """Standard GWO convergence factor: linear from ``a_start`` (t = 0) toward ``a_end``."""
@@ -124,6 +128,19 @@ def uniforms(raw):
     r += 0.5
     r *= 2.0**-32
     return r
+
+
+def scaled_draws(rngs, shape, scales) -> np.ndarray:
+    """(M, *shape) uniforms of :func:`draws` (the same draws, the same bits) each times
+    ``scales[t, c]`` (shape = (T, C, ...)), in one compiled pass per run
+    (:func:`replay.filters.p002.compiled_util.scaled_uniforms`): PSO's c1(t) r1 and c2(t) r2."""
+    shape = tuple(shape)
+    scales = np.ascontiguousarray(scales, dtype=float)
+    out = np.empty((len(rngs),) + shape)
+    flat = shape[:2] + (-1,)
+    for j, g in enumerate(rngs):
+        _scaled(raw_draws([g], shape)[0].reshape(flat), scales, out[j].reshape(flat))
+    return out
 
 
 def draws(rngs, shape):

@@ -312,7 +312,10 @@ class SwarmEngine(Engine):
             for j in range(start, stop):
                 self.k_swarm(*args, gwo.raw_draws([rngs[j]], shape), *opts, j, j + 1)
 
-        split(runs, M)
+        if M == 1:  # one run: no thread to wake
+            runs(0, 1)
+        else:
+            split(runs, M)
         if not np.isfinite(best).all():  # a particle that is not finite: the run's numerical divergence
             raise FloatingPointError("GWO fitness not finite (a particle's state is not finite)")
         assert np.all(np.diff(best, axis=1) <= 0), "GWO elitism violated: best fitness got worse"

@@ -17,7 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gwo import as_runs, draws
+from .compiled_util import pso_best, pso_velocity
+from .gwo import as_runs, scaled_draws
+from .parallel import Kernel
+
+_velocity, _best = Kernel(pso_velocity), Kernel(pso_best)
 
 # 002, §4.1: bounds of the search for the AUV state [x, y, z, v, pitch, yaw].
 LB_002 = (-300.0, -300.0, -300.0, 0.0, -np.pi / 2, -np.pi)
@@ -43,47 +47,40 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
     Returns final positions, their fitness, and the swarm's best fitness before
     and after each iteration (non-increasing). Batched like
     the GWO move: ``X`` (M, N, d) with M generators.
-    Each swarm draws its (iterations, 2, N, d) uniforms in one call.
+    Each swarm draws its (iterations, 2, N, d) uniforms in one call. The array passes of an
+    iteration are compiled (:func:`replay.filters.p002.compiled_util.pso_velocity`,
+    :func:`replay.filters.p002.compiled_util.pso_best`: numpy's operations in numpy's order, so
+    the numbers of the numpy reading kept as the test oracle ``tests/oracle_p002.py``, bit for
+    bit); ``fitness`` and ``project`` are called between them.
     """
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
     M = len(X)
-    keep = None if movable is None else np.asarray(movable, float).reshape(M, 1, -1)
+    keep = None if movable is None else np.ascontiguousarray(np.asarray(movable, float).reshape(M, -1))
     if project is not None:
         X = project(X)
-    f = fitness(X)
+    X = np.array(X, dtype=float, order="C")  # moved in place: never the caller's array
+    f = _fit(fitness, X)
     pbest, pf = X.copy(), f.copy()
-    rows = np.arange(M)
-    g = np.argmin(pf, axis=1)
+    g = np.empty(M, np.int64)
     V = np.zeros_like(X)
-    best = np.empty((M, iterations + 1))
-    best[:, 0] = pf[rows, g]
+    best = np.empty((iterations + 1, M))  # rows: contiguous for the kernel; transposed on return
+    _best(X, f, pbest, pf, g, best[0])  # f = pf: only the swarm's best
     t = np.arange(1, iterations + 1)
     w = inertia(t, omega_max, omega_min, alpha)
-    a1, a2 = ramp(t, iterations, *c1), ramp(t, iterations, *c2)
-    r = draws(rngs, (iterations, 2) + X.shape[1:])  # (M, iterations, 2, N, d)
-    R1, R2 = r[:, :, 0], r[:, :, 1]  # in place: c1(t) r1, c2(t) r2 for all iterations
-    R1 *= a1[:, None, None]
-    R2 *= a2[:, None, None]
-    for i in range(iterations):  # in place, same arithmetic order as V = w V + R1 (p - X) + R2 (g - X)
-        V *= w[i]
-        t = pbest - X
-        t *= R1[:, i]
-        V += t
-        np.subtract(pbest[rows, g][:, None, :], X, out=t)
-        t *= R2[:, i]
-        V += t
-        if keep is not None:
-            V *= keep
-        X = X + V
+    scales = np.stack([ramp(t, iterations, *c1), ramp(t, iterations, *c2)], axis=1)  # (iterations, 2)
+    R = scaled_draws(rngs, (iterations, 2) + X.shape[1:], scales)  # (M, iterations, 2, N, d): c1(t) r1, c2(t) r2
+    for i in range(iterations):  # V = w V + c1 r1 (pbest - X) + c2 r2 (g - X); X = X + V
+        _velocity(V, X, pbest, g, R, i, float(w[i]), keep)
         if project is not None:
-            X = project(X)
-        f = fitness(X)
-        better = f < pf
-        np.copyto(pbest, X, where=better[..., None])
-        np.copyto(pf, f, where=better)
-        g = np.argmin(pf, axis=1)
-        best[:, i + 1] = pf[rows, g]
+            X = np.ascontiguousarray(project(X), dtype=float)
+        f = _fit(fitness, X)
+        _best(X, f, pbest, pf, g, best[i + 1])
+    best = best.T
     if not np.isfinite(best).all():  # a particle that is not finite: the run's numerical divergence
         raise FloatingPointError("PSO fitness not finite (a particle's state is not finite)")
     assert np.all(np.diff(best, axis=1) <= 0), "PSO global best got worse"
     return (X[0], f[0], best[0]) if single else (X, f, best)
+
+
+def _fit(fitness, X):
+    return np.ascontiguousarray(fitness(X), dtype=float)

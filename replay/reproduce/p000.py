@@ -39,15 +39,14 @@ leaderboard rows with its ``replay eval`` commands.
 """
 from __future__ import annotations
 
-import os
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from .p000_cells import ABLATIONS, MAIN, Cell, GENERATED_RMS, R_STD, compute
 from .p000_claims import claims, conditions
 from .p000_doc import (ablation_table, advantage_table, cost_table, every_cell, grid_table, maneuver_tables, plot,
                        profile_table, reading, tuned_table)
+from .pool import pool, run_longest_first, workers as pool_workers
 from .verdict import Stopwatch, footer, verdict_table, write_document
 
 NOISES = (None, 0.03, 0.3, 1.0)  # None: the generator's sensors as they are
@@ -81,27 +80,12 @@ def plan(runs: int | None = None, quick: bool = False) -> dict:
 
 
 def _execute(jobs, seed, workers, quiet):
-    """Run the jobs (longest first) and yield their results, one progress line each on stderr."""
-    order = sorted(range(len(jobs)), key=lambda i: -len(jobs[i][1]) * jobs[i][2])
-    args = [(jobs[i][0], jobs[i][1], jobs[i][2], seed, jobs[i][3], jobs[i][4]) for i in order]
-    sw, n = Stopwatch(), len(args)
-
-    def note(i, a):
-        if not quiet:
-            print(f"[{i}/{n}] {a[0].name}: {', '.join(a[1])} ({a[2]} runs) done at {sw.seconds:.0f} s",
-                  file=sys.stderr, flush=True)
-
-    if workers <= 1:
-        for i, a in enumerate(args, 1):
-            out = compute(a)
-            note(i, a)
-            yield out
-        return
-    with ProcessPoolExecutor(workers) as pool:
-        futures = {pool.submit(compute, a): a for a in args}
-        for i, fut in enumerate(as_completed(futures), 1):
-            out = fut.result()
-            note(i, futures[fut])
+    """Run the jobs in ``workers`` processes (:mod:`replay.reproduce.pool`: the most filters x runs
+    first) and yield their results, one progress line each on stderr."""
+    args = [(j[0], j[1], j[2], seed, j[3], j[4]) for j in jobs]
+    labels = [f"{a[0].name}: {', '.join(a[1])} ({a[2]} runs)" for a in args]
+    with pool(workers) as ex:
+        for _, out in run_longest_first(compute, args, [len(j[1]) * j[2] for j in jobs], labels, ex, quiet):
             yield out
 
 
@@ -109,7 +93,7 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     sw = Stopwatch()
     p = plan(runs, quick)
     doc = Path(doc) if doc else Path("docs/reproduction/000.md")
-    workers = max(1, int(os.environ.get("REPLAY_WORKERS", 2)))
+    workers = pool_workers()
     results, commands, timeline = {}, {}, {}
     for out in _execute(p["jobs"], seed, workers, quiet):
         c = out["cell"]

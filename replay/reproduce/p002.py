@@ -31,6 +31,7 @@ from replay.util.files import write_atomic
 
 from . import p002_ablations, p002_bohai, p002_checks, p002_sim
 from .p002_common import Settings, run_jobs
+from .pool import pool, workers
 
 PARTS = ("tables", "ablations", "bohai")
 DOC = Path("docs/reproduction/002.md")  # relative to the working directory, as 000, 001, 003
@@ -45,17 +46,18 @@ def first_runs(ev, n: int):
     return ev.first(n)
 
 
-def compute(part: str, s: Settings) -> tuple[list[str], list[Claim]]:
-    """Run the jobs of ``part`` and render it: (Markdown lines, claims)."""
+def compute(part: str, s: Settings, executor=None) -> tuple[list[str], list[Claim]]:
+    """Run the jobs of ``part`` (in ``executor``'s worker processes, or here when None) and render
+    it: (Markdown lines, claims)."""
     if part == "tables":
-        evs = run_jobs(p002_sim.jobs(s) + p002_checks.jobs(s), s, part)
+        evs = run_jobs(p002_sim.jobs(s) + p002_checks.jobs(s), s, part, executor)
         lines, claims, ctx = p002_sim.render(evs, s)
         more, claims2 = p002_checks.render(evs, s, ctx)
         return lines + more, claims + claims2
     if part == "ablations":
-        return p002_ablations.render(run_jobs(p002_ablations.jobs(s), s, part), s)
+        return p002_ablations.render(run_jobs(p002_ablations.jobs(s), s, part, executor), s)
     if part == "bohai":
-        return p002_bohai.render(run_jobs(p002_bohai.jobs(s), s, part), s)
+        return p002_bohai.render(run_jobs(p002_bohai.jobs(s), s, part, executor), s)
     raise ReplayError(f"reproduce 002: unknown part {part!r} (one of {', '.join(PARTS)})")
 
 
@@ -84,13 +86,16 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, pa
     store_path = doc.with_name(f"{doc.stem}_parts.json")
     store = load_parts(store_path) if part not in (None, "all") else {}
     watch = Stopwatch()
-    for p in todo:
-        w = Stopwatch()
-        lines, claims = compute(p, s)
-        store[p] = {"markdown": "\n".join(lines), "claims": [asdict(c) for c in claims],
-                    "command": command(p, runs, seed, data_dir, quick), "seconds": round(w.seconds, 1)}
-        if not quiet:
-            print(f"part {p}: {w.seconds:.0f} s", flush=True)
+    n = workers()
+    with pool(n) as ex:  # one pool for every part: the workers start once
+        for p in todo:
+            w = Stopwatch()
+            lines, claims = compute(p, s, ex)
+            store[p] = {"markdown": "\n".join(lines), "claims": [asdict(c) for c in claims],
+                        "command": command(p, runs, seed, data_dir, quick), "seconds": round(w.seconds, 1),
+                        "workers": n}
+            if not quiet:
+                print(f"part {p}: {w.seconds:.0f} s ({n} worker processes)", flush=True)
     text = json.dumps({"parts": store}, indent=1, ensure_ascii=False)
     check_portable(text, str(store_path))
     doc.parent.mkdir(parents=True, exist_ok=True)
@@ -118,10 +123,13 @@ def assemble(store: dict, cmd: str, seconds: float) -> str:
             out += [store[p]["markdown"], ""]
     out += ["## Parts and timing", "",
             "`replay reproduce 002` runs every part; `--part tables|ablations|bohai` runs one and keeps the others' "
-            "sections (from `002_parts.json` beside this file). Wall time on the project's 2-core machine:", "",
-            "| part | command | seconds |", "|---|---|---|"]
-    out += [f"| {p} | `{store[p]['command']}` | {store[p]['seconds']:.0f} |" for p in PARTS if p in store]
-    out += [f"| all | | {sum(store[p]['seconds'] for p in PARTS if p in store):.0f} |", ""] + NOTES.splitlines()
+            "sections (from `002_parts.json` beside this file). Wall time on the project's 2-core machine, the "
+            "evaluations of a part computed in `REPLAY_WORKERS` worker processes (default 2), the costliest first "
+            "(each evaluation draws from its own seeded streams: the numbers do not depend on the workers):", "",
+            "| part | command | worker processes | seconds |", "|---|---|---|---|"]
+    out += [f"| {p} | `{store[p]['command']}` | {store[p].get('workers', 1)} | {store[p]['seconds']:.0f} |"
+            for p in PARTS if p in store]
+    out += [f"| all | | | {sum(store[p]['seconds'] for p in PARTS if p in store):.0f} |", ""] + NOTES.splitlines()
     return "\n".join(out) + "\n" + footer(cmd, seconds)
 
 

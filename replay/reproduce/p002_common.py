@@ -2,14 +2,14 @@
 
 A part (:mod:`.p002_sim`, :mod:`.p002_ablations`, :mod:`.p002_bohai`) first lists
 its configurations as :class:`Job` s, each one :func:`replay.evaluate.evaluate`
-call (the pipeline of ``replay eval``); :func:`run_jobs` computes them with one
-progress line per configuration on stderr (``[3/17] sonar pso-pf unbounded``)
+call (the pipeline of ``replay eval``); :func:`run_jobs` computes them in the
+reproduction's worker processes (:mod:`replay.reproduce.pool`, ``REPLAY_WORKERS``,
+the costliest first), with one progress line per configuration on stderr as it
+finishes (``[3/17] tables: Table 5: pso-pf, pso-cpf unbounded (100 runs) done at 41 s``),
 and the part renders Markdown and verdict claims from the evaluations.
 """
 from __future__ import annotations
 
-import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +17,8 @@ import numpy as np
 
 from replay import registry
 from replay.evaluate import evaluate
+
+from .pool import run_longest_first
 
 # --- the paper's numbers (../shared/seeds/README.md, paper 002) ---------------------------
 UNGM_PAPER = {1.0: {"gwo-pf": 2.4984, "igwo-pf": 2.1829}, 10.0: {"gwo-pf": 5.2923, "igwo-pf": 4.1794}}
@@ -92,20 +94,42 @@ class Job:
     first: int | None = None
     data_dir: bool = False  # a file dataset: pass the settings' data_dir
 
+    @property
+    def cost(self) -> float:
+        """Rough CPU cost (ms on one core): runs x steps x the filters' :data:`STEP_MS`, for
+        :func:`run_jobs` to start the longest first."""
+        steps = self.first or self.dataset_params.get("steps", 100)
+        per_step = 0.0
+        for f in self.filters:
+            p = self.filter_params.get(f, {})
+            ms = STEP_MS.get(f, 0.1) * p.get("n_particles", 1000 if f == "pf" else 100) / 100
+            per_step += ms * (0.4 + 0.6 * p.get("t_max", 20) / 20 if "gwo" in f or "pso" in f else 1.0)
+        return self.runs * steps * per_step
 
-def run_jobs(jobs: list[Job], s: Settings, part: str) -> dict:
-    """Compute the jobs in order; ``{key: Evaluation}``. One progress line per job on stderr."""
-    out = {}
-    for i, j in enumerate(jobs, 1):
-        if not s.quiet:
-            print(f"[{i}/{len(jobs)}] {part}: {j.label} ({j.runs} runs) ...", end="", file=sys.stderr, flush=True)
-        t0 = time.perf_counter()
-        out[j.key] = evaluate(j.dataset, task=j.task, filters=j.filters, runs=j.runs, seed=s.seed, first=j.first,
-                              data_dir=s.data_dir if j.data_dir else None, filter_params=j.filter_params or None,
-                              dataset_params=j.dataset_params or None, task_params=j.task_params or None)
-        if not s.quiet:
-            print(f" {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
-    return out
+
+# CPU ms per run-step of each filter on sim/auv-sonar with N = 100 (one core, batches of 10 runs; for the
+# longest-first order of run_jobs only: no number depends on it)
+STEP_MS = {"stckf": 0.1, "ckf": 0.005, "pf": 0.03, "stcpf": 0.45, "igwo-stcpf": 0.85, "gwo-pf": 0.15,
+           "igwo-pf": 0.15, "pso-pf": 0.5, "pso-cpf": 1.0}
+
+
+def _evaluate(args):
+    """One job's evaluation (what a worker process runs)."""
+    j, seed, data_dir = args
+    return evaluate(j.dataset, task=j.task, filters=j.filters, runs=j.runs, seed=seed, first=j.first,
+                    data_dir=data_dir if j.data_dir else None, filter_params=j.filter_params or None,
+                    dataset_params=j.dataset_params or None, task_params=j.task_params or None)
+
+
+def run_jobs(jobs: list[Job], s: Settings, part: str, executor=None) -> dict:
+    """Compute the jobs, the costliest first, in ``executor`` (a pool of :func:`replay.reproduce.pool.pool`;
+    None: in this process): ``{key: Evaluation}`` in the jobs' order, one progress line per job on stderr.
+    Every job draws from its own seeded streams: the numbers do not depend on the workers."""
+    done = {}
+    for i, ev in run_longest_first(_evaluate, [(j, s.seed, s.data_dir) for j in jobs], [j.cost for j in jobs],
+                                   [f"{j.label} ({j.runs} runs)" for j in jobs], executor, s.quiet, f"{part}: "):
+        done[i] = ev
+    return {j.key: done[i] for i, j in enumerate(jobs)}
 
 
 def bohai_sequences(data_dir) -> list[str]:

@@ -1,0 +1,89 @@
+"""The evaluations of a reproduction in worker processes: one runner for every paper.
+
+A reproduction lists independent evaluations (``replay eval`` configurations);
+:func:`run_longest_first` computes them in ``REPLAY_WORKERS`` processes (default
+2, :func:`workers`), the most expensive first so that the last ones to finish are
+short (the workers end together), and yields ``(index, result)`` as each one
+finishes, with one progress line each on stderr. One worker runs them in this
+process, in the same order. Every evaluation draws from its own seeded streams
+(``replay.util.seeds``: (seed, run, stream)), so where and in which order it runs
+changes no number: the results equal those of the serial run.
+
+Workers are forked where the platform allows (they start with everything
+imported) and end with the process that started them
+(:func:`replay.campaign.workers.init_worker`); each gets cores // workers BLAS and
+compiled-kernel threads (``REPLAY_THREADS``), so two workers on two cores do
+not run four threads.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+
+from replay.campaign.workers import init_worker
+from replay.util.errors import ReplayError
+
+from .verdict import Stopwatch
+
+
+def workers() -> int:
+    """Worker processes of a reproduction: ``REPLAY_WORKERS`` (default 2), at least 1."""
+    raw = os.environ.get("REPLAY_WORKERS", "2")
+    try:
+        n = int(raw)
+    except ValueError:
+        raise ReplayError(f"REPLAY_WORKERS must be a whole number of worker processes (got {raw!r})") from None
+    return max(1, n)
+
+
+def longest_first(costs) -> list[int]:
+    """Indices of ``costs`` from the largest down (ties: list order)."""
+    return sorted(range(len(costs)), key=lambda i: -costs[i])
+
+
+@contextmanager
+def pool(n: int):
+    """A process pool of ``n`` workers (None for one: the caller's process computes)."""
+    if n <= 1:
+        yield None
+        return
+    method = "fork" if sys.platform == "linux" and "fork" in mp.get_all_start_methods() else "spawn"
+    ex = ProcessPoolExecutor(n, mp_context=mp.get_context(method), initializer=init_worker,
+                             initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
+    try:
+        yield ex
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+
+
+def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, quiet: bool = False,
+                      prefix: str = ""):
+    """``fn(args[i])`` for every i, the largest ``costs`` first, in ``executor`` (a pool of
+    :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes,
+    with the line ``[done/total] <prefix><labels[i]> done at <s> s`` on stderr unless ``quiet``."""
+    order = longest_first(costs)
+    sw, n = Stopwatch(), len(order)
+
+    def note(k, i):
+        if not quiet:
+            print(f"[{k}/{n}] {prefix}{labels[i]} done at {sw.seconds:.0f} s", file=sys.stderr, flush=True)
+
+    if executor is None:
+        for k, i in enumerate(order, 1):
+            out = fn(args[i])
+            note(k, i)
+            yield i, out
+        return
+    futures = {executor.submit(fn, args[i]): i for i in order}
+    try:
+        for k, fut in enumerate(as_completed(futures), 1):
+            i = futures[fut]
+            out = fut.result()
+            note(k, i)
+            yield i, out
+    finally:
+        for fut in futures:
+            fut.cancel()

@@ -1,0 +1,75 @@
+"""The reproductions' worker pool (replay.reproduce.pool): the costliest evaluation first, the serial
+results whatever the workers, ``REPLAY_WORKERS`` read in one line; paper 002's jobs through it."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from replay.reproduce import pool
+from replay.reproduce.p002_common import Job, Settings, run_jobs
+from replay.util.errors import ReplayError
+
+
+def square_and_pid(x):
+    return x * x, os.getpid()
+
+
+def test_longest_first_orders_by_cost_ties_in_list_order():
+    assert pool.longest_first([3.0, 10.0, 3.0, 0.5, 10.0]) == [1, 4, 0, 2, 3]
+
+
+def test_workers_from_the_environment(monkeypatch):
+    monkeypatch.delenv("REPLAY_WORKERS", raising=False)
+    assert pool.workers() == 2
+    monkeypatch.setenv("REPLAY_WORKERS", "0")
+    assert pool.workers() == 1
+    monkeypatch.setenv("REPLAY_WORKERS", "two")
+    with pytest.raises(ReplayError, match=r"^REPLAY_WORKERS must be a whole number of worker processes \(got 'two'\)$"):
+        pool.workers()
+
+
+def test_serial_runner_goes_longest_first_and_reports_each(capsys):
+    got = list(pool.run_longest_first(square_and_pid, [1, 2, 3], [1.0, 5.0, 2.0], ["a", "b", "c"], prefix="p: "))
+    assert [i for i, _ in got] == [1, 2, 0] and [r[0] for _, r in got] == [4, 9, 1]
+    assert {r[1] for _, r in got} == {os.getpid()}  # one worker: this process
+    err = capsys.readouterr().err.splitlines()
+    assert [line.split(" done at")[0] for line in err] == ["[1/3] p: b", "[2/3] p: c", "[3/3] p: a"]
+
+
+@pytest.mark.slow
+def test_pool_runs_in_other_processes_with_the_serial_results():
+    costs = [float(c) for c in (3, 9, 1, 7, 5, 2)]
+    with pool.pool(2) as ex:
+        got = dict(pool.run_longest_first(square_and_pid, list(range(6)), costs, list("abcdef"), ex, quiet=True))
+    assert {i: r[0] for i, r in got.items()} == {i: i * i for i in range(6)}
+    assert os.getpid() not in {r[1] for r in got.values()}
+
+
+def without_timing(ev):
+    """The rows (NaN as a string, so that equal rows compare equal) without the timing, and the estimates."""
+    rows = [{k: "nan" if isinstance(v, float) and np.isnan(v) else v for k, v in r.items()
+             if "us_per_step" not in k and "seconds" not in k} for r in ev.rows]
+    return rows, [[e.x for e in res.estimates] for res in ev.results]
+
+
+@pytest.mark.slow
+def test_p002_jobs_in_two_workers_equal_the_serial_run():
+    """Two small evaluations of the paper-002 reproduction, serial and in a pool of two: the same
+    leaderboard rows and estimates (each evaluation draws from its own seeded streams), keyed in job order."""
+    jobs = [Job("u", "UNGM igwo-pf", "sim/ungm", "ungm", ("igwo-pf", "pf"), 2, {"igwo-pf": {"t_max": 3},
+                "pf": {"n_particles": 50}}),
+            Job("s", "sonar stcpf", "sim/auv-sonar", "sonar", ("stcpf", "pso-pf"), 2,
+                {"stcpf": {"n_particles": 20}, "pso-pf": {"n_particles": 20, "t_max": 3}}, {"steps": 15})]
+    s = Settings(seed=3, quiet=True)
+    serial = run_jobs(jobs, s, "test")
+    with pool.pool(2) as ex:
+        parallel = run_jobs(jobs, s, "test", ex)
+    assert list(serial) == list(parallel) == ["u", "s"]
+    for key in serial:
+        a, b = without_timing(serial[key]), without_timing(parallel[key])
+        assert a[0] == b[0]
+        for xa, xb in zip(a[1], b[1]):
+            assert all(np.array_equal(u, v, equal_nan=True) for u, v in zip(xa, xb))
+    assert jobs[1].cost < jobs[0].cost * 100  # both costs are finite numbers
