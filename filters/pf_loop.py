@@ -104,8 +104,9 @@ PF_RUN = types.int64(kalman_kernels.ROW_KERNEL, kalman_kernels.ROW_KERNEL, _GEN,
 
 def run(engine, Z, finite):
     """Every step of the engine's runs (:meth:`replay.filters.pf.PFEngine.run_all`): ``(X, P,
-    nis, dof)`` stacks, or None when the loop does not apply (module docstring) or is not
-    compiled and the job is smaller than ``COMPILE_AT`` particle-steps. The particles are the
+    nis, dof)`` stacks, or None when the loop does not apply (module docstring; also a generator
+    that is not a ``numpy.random.Generator``, a legacy ``RandomState``) or is not compiled and the
+    job is smaller than ``COMPILE_AT`` particle-steps. The particles are the
     engine's, the runs' generators advance as the steps would advance them."""
     m, flt = engine.model, engine.flt
     M, steps, nz = Z.shape
@@ -113,13 +114,16 @@ def run(engine, Z, finite):
     seen = finite.all(axis=2)
     if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
         return None
-    if not applies(engine, m) or not kalman_kernels.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT):
+    if (not applies(engine, m) or not all(isinstance(g, np.random.Generator) for g in engine.active)
+            or not kalman_kernels.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
         return None
-    qdiag, qsd, _, _ = noise_factor(m.Q)
+    try:  # a covariance without a factor: the steps meet it and record the divergence
+        (qdiag, qsd, _, _), (rdiag, rL, rinv, logdet) = noise_factor(m.Q), noise_factor(m.R)
+    except np.linalg.LinAlgError:
+        return None
     stacks = param_stacks(m, steps)
     if not qdiag or stacks is None:
         return None
-    rdiag, rL, rinv, logdet = noise_factor(m.R)
     rL = np.ascontiguousarray(np.zeros((0, 0)) if rdiag else rL)
     rinv = np.ascontiguousarray(rinv if rdiag else np.zeros(0))
     call = bound(pf_run, *(first_class(k, False) for k in m.kernels()[:2]))

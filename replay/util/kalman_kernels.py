@@ -273,7 +273,7 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
     be called with its declared signature ``sig``: compiled in this process, or loaded from numba's disk
     cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
     not at import: a short run never waits for it."""
-    if (loop, sig) in _READY:  # numba's own ``loop.signatures`` costs 35 µs a call
+    if (loop, id(sig)) in _READY:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
         return True
     if not loop.signatures:
         if loop._cache.load_overload(sig, loop.targetctx) is None:
@@ -284,7 +284,7 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
                 loop.__name__)
         loop.compile(sig)
         loop.disable_compile()  # one type for every model: the kernels convert to it
-    _READY.add((loop, sig))
+    _READY.add((loop, id(sig)))  # the declared signatures are module constants
     return True
 
 
