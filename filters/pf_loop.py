@@ -105,7 +105,7 @@ PF_RUN = types.int64(kalman_kernels.ROW_KERNEL, kalman_kernels.ROW_KERNEL, _GEN,
 def run(engine, Z, finite):
     """Every step of the engine's runs (:meth:`replay.filters.pf.PFEngine.run_all`): ``(X, P,
     nis, dof)`` stacks, or None when the loop does not apply (module docstring; also a generator
-    that is not a ``numpy.random.Generator``, a legacy ``RandomState``) or is not compiled and the
+    that is not a ``numpy.random.Generator``) or is not compiled and the
     job is smaller than ``COMPILE_AT`` particle-steps. The particles are the
     engine's, the runs' generators advance as the steps would advance them."""
     m, flt = engine.model, engine.flt

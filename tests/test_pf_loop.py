@@ -105,7 +105,7 @@ def test_the_loops_give_the_same_numbers_on_any_thread_count(sonar, name, params
 
 def test_any_bit_generator_gives_the_numbers_of_the_steps(monkeypatch):
     """numba draws with NumPy's algorithms from the generator's own bit generator: MT19937 and
-    Philox streams too; a legacy RandomState leaves the loop out."""
+    Philox streams too."""
     model, Z, X0, P0 = walk()
     flt = make_filter("pf", n_particles=80, roughening=0.1)
     assert kalman_kernels.loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
@@ -118,5 +118,3 @@ def test_any_bit_generator_gives_the_numbers_of_the_steps(monkeypatch):
         monkeypatch.setattr(pf_loop, "run", lambda *a: used.append(real(*a)) or used[-1])
         assert isinstance(used[-1], tuple)
         assert all(np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P) for a, b in zip(fast, slow))
-    legacy = flt.run_batch(model, Z, X0, P0, [np.random.RandomState(m) for m in range(3)])
-    assert used[-1] is None and np.isfinite(legacy[0].x).all()
