@@ -197,11 +197,6 @@ class Filter(Declared):
         dropping each run where it diverges (_Redo: run by run, after an exception)."""
         M, n = Z.shape[:2]
         nx = model.nx
-        X = np.full((M, n, nx), np.nan)
-        P = np.full((M, n, nx, nx), np.nan)
-        secs = np.full((M, n), np.nan)
-        nis = np.full((M, n), np.nan)
-        dof = np.zeros((M, n), int)
         diverged, errors = [None] * M, {}
         finite = np.isfinite(Z)
         active = np.arange(M)
@@ -213,15 +208,19 @@ class Filter(Declared):
             _escalate(err, careful, M)
             diverged[0], errors[0], active, started = 0, err, active[:0], False
         clock = perf_counter
+        done = None
         if not careful and started and hasattr(engine, "run_all"):
             t0 = clock()
             done = engine.run_all(Z, finite)  # every step in one compiled loop, when the engine has one
             if done is False:
                 raise _Careful
-            if done is not None:
-                X[:], P[:], nis[:], dof[:] = done
-                secs[:] = (clock() - t0) / (n * M)
-                active = active[:0]
+        if done is not None:  # its arrays are the results: nothing to fill or copy
+            X, P, nis, dof = done
+            secs = np.full((M, n), (clock() - t0) / (n * M))
+            active = active[:0]
+        else:
+            X, P = np.full((M, n, nx), np.nan), np.full((M, n, nx, nx), np.nan)
+            secs, nis, dof = np.full((M, n), np.nan), np.full((M, n), np.nan), np.zeros((M, n), int)
         for k in range(n):
             na = len(active)
             if not na:
