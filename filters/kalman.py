@@ -36,6 +36,7 @@ import numpy as np
 
 from replay.util.angles import angle_mask, residual, wrap_components
 from replay.util import kalman_kernels as kernels
+from replay.util import kalman_loops
 from replay.model import Model, remap_indices
 
 from .base import Filter
@@ -170,7 +171,7 @@ class KalmanEngine:
 
 
 def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
-    """Run ``loop`` (:func:`replay.util.kalman_kernels.sigma_run` or ``ekf_run``, declared type
+    """Run ``loop`` (:func:`replay.util.kalman_loops.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
     kernels (typed as first-class functions, :func:`replay.filters.loops.first_class`), its
     parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
@@ -182,7 +183,7 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     seen = finite[0].all(axis=1)
     if not (finite == seen[None, :, None]).all():  # missing for some runs, or some components: steps
         return None
-    if ks is None or not derived_from_kernels(m) or not kernels.loop_ready(loop, sig, M * steps >= COMPILE_AT):
+    if ks is None or not derived_from_kernels(m) or not kalman_loops.loop_ready(loop, sig, M * steps >= COMPILE_AT):
         return None
     stacks = param_stacks(m, steps)
     try:  # Q, R of another shape at some step (ragged): no stack, step by step instead
@@ -212,7 +213,7 @@ class EKFEngine(KalmanEngine):
     """The EKF's predict and update on one run or a stack of runs."""
 
     def run_all(self, Z, finite):
-        return run_kernels(self, Z, finite, (0, 1, 2, 3), kernels.ekf_run, kernels.EKF_RUN)
+        return run_kernels(self, Z, finite, (0, 1, 2, 3), kalman_loops.ekf_run, kalman_loops.EKF_RUN)
 
     def predict(self, x, P, k):
         m = self.model

@@ -1,6 +1,6 @@
 """Whole-run loops: what the compiled run loops of every filter family share.
 
-A run loop (:func:`replay.util.kalman_kernels.sigma_run`, ``ekf_run``,
+A run loop (:func:`replay.util.kalman_loops.sigma_run`, ``ekf_run``,
 :func:`replay.filters.pf_loop.pf_run`) runs every step of a run in one
 compiled call. It calls the same step kernels as the step-by-step engine, and
 the model's one-state kernels are passed to it as first-class functions of one
@@ -37,7 +37,7 @@ def first_class(kernel, matrix: bool):
     if got is None:
         import numba as nb
 
-        from replay.util import kalman_kernels as kernels
+        from replay.util import kalman_loops as kernels
 
         fty = kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL
         got = _first_class[kernel] = nb.cfunc(fty.signature, cache=True)(kernel.py_func)

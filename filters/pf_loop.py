@@ -27,7 +27,7 @@ import numpy as np
 from numba import types
 
 from replay.model import Model, noise_factor
-from replay.util import kalman_kernels
+from replay.util import kalman_loops
 from replay.util.angles import angle_mask
 from replay.util.kernels import gauss_loglik
 
@@ -97,7 +97,7 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
 
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-PF_RUN = types.int64(kalman_kernels.ROW_KERNEL, kalman_kernels.ROW_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1], _M, _M,
+PF_RUN = types.int64(kalman_loops.ROW_KERNEL, kalman_loops.ROW_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1], _M, _M,
                      _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
                      types.float64, types.float64, types.float64, types.float64, _M, _M3)
 
@@ -115,7 +115,7 @@ def run(engine, Z, finite):
     if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
         return None
     if (not applies(engine, m) or not all(isinstance(g, np.random.Generator) for g in engine.active)
-            or not kalman_kernels.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
+            or not kalman_loops.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
         return None
     try:  # a covariance without a factor: the steps meet it and record the divergence
         (qdiag, qsd, _, _), (rdiag, rL, rinv, logdet) = noise_factor(m.Q), noise_factor(m.R)

@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util import kalman_kernels as kernels
+from replay.util import kalman_loops
 from replay.util.angles import angle_mask
 from replay.util.errors import ReplayError
 from replay.util.params import Param
@@ -134,7 +135,7 @@ class SigmaEngine(KalmanEngine):
         self.all_made = not self.missing.any()
 
     def run_all(self, Z, finite):
-        return kalman.run_kernels(self, Z, finite, (0, 1), kernels.sigma_run, kernels.SIGMA_RUN, self.xi, self.wm, self.wc)
+        return kalman.run_kernels(self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN, self.xi, self.wm, self.wc)
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""

@@ -287,14 +287,14 @@ def test_fast_path_equals_the_readable_reference(sonar_problems, name, monkeypat
 @pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
 def test_whole_run_loop_equals_the_step_by_step_engine(sonar_problems, name, monkeypatch):
     """With every measurement present the engine runs all steps in one compiled loop
-    (kalman_kernels.sigma_run / ekf_run, the model's kernels as first-class functions); it
+    (kalman_loops.sigma_run / ekf_run, the model's kernels as first-class functions); it
     gives the numbers of the step-by-step engine bit for bit, NIS included."""
     from replay.filters import kalman
-    from replay.util import kalman_kernels
+    from replay.util import kalman_loops
 
-    for loop, sig in ((kalman_kernels.sigma_run, kalman_kernels.SIGMA_RUN),
-                      (kalman_kernels.ekf_run, kalman_kernels.EKF_RUN)):
-        assert kalman_kernels.loop_ready(loop, sig, True)
+    for loop, sig in ((kalman_loops.sigma_run, kalman_loops.SIGMA_RUN),
+                      (kalman_loops.ekf_run, kalman_loops.EKF_RUN)):
+        assert kalman_loops.loop_ready(loop, sig, True)
     pbs = sonar_problems[:3]
     Z = np.stack([pb.z for pb in pbs])
     X0, P0 = np.stack([pb.x0 for pb in pbs]), np.stack([pb.P0 for pb in pbs])

@@ -7,7 +7,7 @@ from replay import registry
 from replay.filters import make_filter, pf_loop
 from replay.models.random_walk import RandomWalkPosition
 from replay.tasks import make_task
-from replay.util import kalman_kernels
+from replay.util import kalman_loops as kalman_kernels  # the loops and loop_ready
 from replay.util.seeds import rng_for
 
 pytestmark = pytest.mark.slow  # compiles the loop (about 2 s) when numba's cache does not have it
@@ -88,7 +88,7 @@ def test_the_loops_give_the_same_numbers_on_any_thread_count(sonar, name, params
     """Runs are split over threads in contiguous ranges, each run from its own generator: one
     thread or three give the same numbers bit for bit (the grain lowered so that 3 runs split)."""
     from replay.filters import loops
-    from replay.util import kalman_kernels as kk
+    from replay.util import kalman_loops as kk
 
     for loop, sig in ((kk.sigma_run, kk.SIGMA_RUN), (kk.ekf_run, kk.EKF_RUN), (pf_loop.pf_run, pf_loop.PF_RUN)):
         assert kk.loop_ready(loop, sig, True)

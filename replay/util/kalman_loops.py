@@ -1,0 +1,151 @@
+"""The Kalman family's whole runs: every step of M runs in one compiled loop (no Python between steps).
+
+:func:`sigma_run` (UKF, CKF) and :func:`ekf_run` call the step kernels of
+:mod:`replay.util.kalman_kernels` in the order the step-by-step engines call them
+(:class:`replay.filters.sigma.SigmaEngine`, :class:`replay.filters.kalman.EKFEngine`),
+with work arrays allocated once per call, so they give the engines' numbers bit for bit
+(``tests/test_batched.py``). The model's one-state kernels are first-class function
+arguments of one declared type: one compilation (cached by numba) serves every model.
+:func:`loop_ready` compiles a loop lazily (also the PF's, :mod:`replay.filters.pf_loop`).
+"""
+from __future__ import annotations
+
+import logging
+
+import numba as nb
+import numpy as np
+from numba import types
+
+from .kalman_kernels import (joseph_update_into, propagate_cov_into, sigma_points_into, sigma_predict_into,
+                             sigma_update_into)
+from .kernels import wrap
+
+
+# --- whole runs: the steps above in one compiled loop, the model's one-state kernels passed in ---
+# The kernels are first-class function arguments of one declared type, so that the loop is
+# compiled once per machine for every model (and cached), not once per model and process.
+_VEC, _MAT = types.float64[::1], types.float64[:, ::1]
+ROW_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _VEC))      # f, h: (x, p, out)
+JACOBIAN_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _MAT))  # F, H: (x, p, J)
+_S2, _S3, _S4 = types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
+_MASK = types.boolean[::1]
+_COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
+_OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
+
+
+@nb.njit(cache=True)
+def apply_rows(fun, X, p, out):
+    """out[m, i] = fun(X[m, i]) for the one-state kernel ``fun(x, p, out)`` over a stack of points."""
+    for m in range(X.shape[0]):
+        for i in range(X.shape[1]):
+            fun(X[m, i], p, out[m, i])
+
+
+SIGMA_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
+EKF_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, JACOBIAN_KERNEL, JACOBIAN_KERNEL, *_COMMON, _MASK, _MASK, *_OUT)
+
+
+def loop_ready(loop, sig, compile_ok: bool) -> bool:
+    """Whether the run loop ``loop`` (:func:`sigma_run`, :func:`ekf_run`, the PF's ``pf_run``) can
+    be called with its declared signature ``sig``: compiled in this process, or loaded from numba's disk
+    cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
+    not at import: a short run never waits for it."""
+    if (loop, id(sig)) in _READY:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
+        return True
+    if not loop.signatures:
+        if loop._cache.load_overload(sig, loop.targetctx) is None:
+            if not compile_ok:
+                return False
+            logging.getLogger("replay.kernels").info(
+                "compiling the run loop %s (about 12 s, once per machine; cached for later runs)",
+                loop.__name__)
+        loop.compile(sig)
+        loop.disable_compile()  # one type for every model: the kernels convert to it
+    _READY.add((loop, id(sig)))  # the declared signatures are module constants
+    return True
+
+
+_READY: set = set()
+
+
+@nb.njit(cache=True, nogil=True)
+def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
+    """M runs of a UKF/CKF over every step: the steps of
+    :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
+    :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
+    Z (M, steps, nz), every component present at the steps k where ``seen[k]``, none at the
+    others (no update there: the prediction is the estimate, its NIS NaN); per step k: Pf[k],
+    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step). Writes
+    Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
+    a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    M, steps, nz = Z.shape
+    p, n = xi.shape
+    X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
+    z = np.empty((M, nz))
+    D, L, Lz, K = np.empty((p, n)), np.empty((n, n)), np.empty((nz, nz)), np.empty((n, nz))
+    y, S, Pxz, zh, Dz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz))
+    if sigma_points_into(x, P, xi, X, dev, L) >= 0:
+        return 0
+    for k in range(steps):
+        apply_rows(f, X, Pf[k], Y)
+        if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L) >= 0:
+            return k
+        if not seen[k]:
+            Xout[:, k] = x
+            Pout[:, k] = P
+            nis[:, k] = np.nan
+            continue
+        apply_rows(h, X, Ph[k], Zp)
+        for m in range(M):
+            for q in range(nz):
+                z[m, q] = Z[m, k, q]
+        bad = sigma_update_into(Zp, dev, z, wm, wc, zmask, R[k % R.shape[0]], x, P, xmask, nis[:, k], xi, X, dev,
+                                y, S, Pxz, zh, Dz, Lz, K, L)
+        if 0 <= bad < M:
+            return k
+        Xout[:, k] = x
+        Pout[:, k] = P
+        if bad >= M and k + 1 < steps:
+            return k + 1
+    return -1
+
+
+@nb.njit(cache=True, nogil=True)
+def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+    """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
+    :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
+    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`)
+    in one loop. Arguments as :func:`sigma_run`. Returns -1, or the step at which S had no
+    Cholesky factor."""
+    M, steps, nz = Z.shape
+    n = x.shape[1]
+    Fj, Hj, xp, y = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
+    Pp, zh = np.empty((M, n, n)), np.empty(nz)
+    FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
+    L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
+    for k in range(steps):
+        for m in range(M):
+            F(x[m], Pf[k], Fj[m])
+            f(x[m], Pf[k], xp[m])
+            wrap(xp[m], xmask)
+        propagate_cov_into(Fj, P, Q[k % Q.shape[0]], Pp, FP)
+        if not seen[k]:
+            x[:] = xp
+            P[:] = Pp
+            Xout[:, k] = x
+            Pout[:, k] = P
+            nis[:, k] = np.nan
+            continue
+        for m in range(M):
+            H(xp[m], Ph[k], Hj[m])
+            h(xp[m], Ph[k], zh)
+            for q in range(nz):
+                y[m, q] = Z[m, k, q] - zh[q]
+            wrap(y[m], zmask)
+        if joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR) >= 0:
+            return k
+        x[:] = xp
+        P[:] = Pp
+        Xout[:, k] = x
+        Pout[:, k] = P
+    return -1
