@@ -40,7 +40,7 @@ from replay.util import kalman_loops
 from replay.model import Model, remap_indices
 
 from .base import Filter
-from .loops import COMPILE_AT, bound, derived_from_kernels, first_class, grain, param_stacks
+from .loops import COMPILE_AT, bound, derived_from_kernels, grain, param_stacks, row_kernels
 from .threads import split
 
 
@@ -173,7 +173,7 @@ class KalmanEngine:
 def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     """Run ``loop`` (:func:`replay.util.kalman_loops.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
-    kernels (typed as first-class functions, :func:`replay.filters.loops.first_class`), its
+    kernels (their rows forms, first-class functions: :func:`replay.filters.loops.row_kernels`), its
     parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
     model's array methods are not its kernels, or when the loop is neither compiled nor cached
     and the job is smaller than ``COMPILE_AT`` run-steps (:mod:`replay.filters.loops`)."""
@@ -196,7 +196,7 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
         return None
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
-    call = bound(loop, *(first_class(ks[i], i >= 2) for i in kernels_needed))
+    call = bound(loop, *row_kernels(m, kernels_needed))
     Z = np.ascontiguousarray(Z, dtype=float)
     masks = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
 

@@ -3,8 +3,10 @@
 A run loop (:func:`replay.util.kalman_loops.sigma_run`, ``ekf_run``,
 :func:`replay.filters.pf_loop.pf_run`) runs every step of a run in one
 compiled call. It calls the same step kernels as the step-by-step engine, and
-the model's one-state kernels are passed to it as first-class functions of one
-declared type: one compilation (cached on disk by numba) serves every model.
+the model's kernels are passed to it in their rows forms (:mod:`replay.filters.rows`
+bound to the model, :func:`row_kernels`: one call per stack of states) as
+first-class functions of one declared type: one compilation of the loop (cached
+on disk by numba) serves every model.
 A loop is used only for the model's own kernels (:func:`derived_from_kernels`)
 and only when it is compiled already, or cached, or the job is big enough to
 pay for its compilation (choosing by problem size: a short first run never
@@ -27,23 +29,37 @@ def derived_from_kernels(model) -> bool:
     return all(getattr(type(model), n) is getattr(KernelModel, n) for n in ("f", "h", "F", "H"))
 
 
-_first_class: dict = {}
+_rows: dict = {}  # (kernels, index) -> cfunc
+_copies: dict = {}  # kernels -> bound copy of replay.filters.rows
 
 
-def first_class(kernel, matrix: bool):
-    """The one-state ``kernel`` compiled for the declared first-class type of the run loops
-    (C-contiguous rows; cached on disk by numba like the kernel itself)."""
-    got = _first_class.get(kernel)
-    if got is None:
-        import numba as nb
+def row_kernels(model, needed=(0, 1, 2, 3)):
+    """The rows forms ``f_rows, h_rows, F_rows, H_rows`` (:mod:`replay.filters.rows`) of the model's
+    kernels, those of indices ``needed``, as cfuncs of the declared first-class types of the run
+    loops: the template bound to the model (:mod:`replay.filters.binding`), compiled once per
+    machine and cached on disk by numba beside the bound copy."""
+    from replay.util import kalman_loops as kernels
 
-        from replay.util import kalman_loops as kernels
+    from . import binding, rows
 
-        fty = kernels.JACOBIAN_KERNEL if matrix else kernels.ROW_KERNEL
-        got = _first_class[kernel] = nb.cfunc(fty.signature, cache=True)(kernel.py_func)
-        got._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
-        address = got.address
-        got.__wrapper_address__ = lambda: address  # the protocol numba asks first: no signature comparison
+    ks = model.kernels()
+    got = []
+    for i in needed:
+        key = (tuple(id(k) for k in ks), i)
+        fn = _rows.get(key)
+        if fn is None:
+            import numba as nb
+
+            mod = _copies.get(key[0])
+            if mod is None:
+                mod = _copies[key[0]] = binding.bound_copy(rows, ks, (), "replay_rows_",
+                                                           "the run loops' rows kernels (about 2 s)")
+            fty = kernels.JACOBIAN_ROWS if i >= 2 else kernels.ROWS_KERNEL
+            py = getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]).py_func
+            fn = _rows[key] = nb.cfunc(fty.signature, cache=True)(py)
+            fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
+            fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
+        got.append(fn)
     return got
 
 

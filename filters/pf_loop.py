@@ -31,7 +31,7 @@ from replay.util import kalman_loops
 from replay.util.angles import angle_mask
 from replay.util.kernels import gauss_loglik
 
-from .loops import bound, derived_from_kernels, first_class, grain, param_stacks
+from .loops import bound, derived_from_kernels, grain, param_stacks, row_kernels
 from .particles import moments, weights
 from .resampling import SCHEMES, invert_sorted, systematic
 from .threads import split
@@ -56,15 +56,13 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
     a, sd = np.empty(N, np.int64), np.empty(n)
     count = 0
     for k in range(steps):
-        for i in range(N):  # propagate: f on every particle, then the noise row by row
-            f(X[i], Pf[k], Y[i])
+        f(X, Pf[k], Y)  # propagate: f on every particle, then the noise row by row
         for i in range(N):
             for q in range(n):
                 Y[i, q] += g.standard_normal() * qsd[q]
         X, Y = Y, X
         if seen[k]:  # weight (no measurement: the weights stay)
-            for i in range(N):
-                h(X[i], Ph[k], zh[i])
+            h(X, Ph[k], zh)
             gauss_loglik(zh, Z[k], zmask, rdiag, rL, rinv, rconst, ll)
             for i in range(N):
                 logw[i] += ll[i]
@@ -97,7 +95,7 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
 
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-PF_RUN = types.int64(kalman_loops.ROW_KERNEL, kalman_loops.ROW_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1], _M, _M,
+PF_RUN = types.int64(kalman_loops.ROWS_KERNEL, kalman_loops.ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1], _M, _M,
                      _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
                      types.float64, types.float64, types.float64, types.float64, _M, _M3)
 
@@ -126,7 +124,7 @@ def run(engine, Z, finite):
         return None
     rL = np.ascontiguousarray(np.zeros((0, 0)) if rdiag else rL)
     rinv = np.ascontiguousarray(rinv if rdiag else np.zeros(0))
-    call = bound(pf_run, *(first_class(k, False) for k in m.kernels()[:2]))
+    call = bound(pf_run, *row_kernels(m, (0, 1)))
     xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
     X, P = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx))
     Z = np.ascontiguousarray(Z, dtype=float)

@@ -11,6 +11,7 @@ import sys
 import numpy as np
 import pytest
 
+from replay.filters import binding as mechanism
 from replay.filters.p002 import binding
 from replay.models.random_walk import RandomWalkPosition
 
@@ -22,7 +23,7 @@ def cache(tmp_path, monkeypatch):
     """An empty kernel cache; binding's process state restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(binding, "_bound", {})
-    monkeypatch.setattr(binding, "CACHE_REPORT", {"rewritten": 0, "pruned": 0})
+    monkeypatch.setattr(mechanism, "CACHE_REPORT", {"rewritten": 0, "pruned": 0})
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:
@@ -51,10 +52,10 @@ def test_tampered_copy_is_rewritten_and_its_numba_cache_dropped(cache):
     stale = _numba_files(cache, name)
     mod = binding._load(name, text)
     assert mod.VALUE == 1 and (cache / f"{name}.py").read_text() == text
-    assert binding.CACHE_REPORT == {"rewritten": 1, "pruned": 0}
+    assert mechanism.CACHE_REPORT == {"rewritten": 1, "pruned": 0}
     assert not any(f.exists() for f in stale)
     binding._load(name, text)  # intact now: imported as it is
-    assert binding.CACHE_REPORT["rewritten"] == 1
+    assert mechanism.CACHE_REPORT["rewritten"] == 1
 
 
 def test_truncated_copy_is_rewritten(cache):
@@ -63,7 +64,7 @@ def test_truncated_copy_is_rewritten(cache):
     cache.mkdir(parents=True)
     (cache / f"{name}.py").write_text(text[:9])
     assert binding._load(name, text).OTHER == 3
-    assert binding.CACHE_REPORT["rewritten"] == 1
+    assert mechanism.CACHE_REPORT["rewritten"] == 1
 
 
 def test_old_copies_of_the_model_are_pruned_others_kept(cache):
@@ -79,7 +80,7 @@ def test_old_copies_of_the_model_are_pruned_others_kept(cache):
     assert binding._load(_name(text), text).VALUE == 5
     assert sorted(p.name for p in cache.glob("*.py")) == sorted([f"{_name(text)}.py", f"{other_model}.py"])
     assert not any(f.exists() for f in old_cache) and all(f.exists() for f in kept_cache)
-    assert binding.CACHE_REPORT == {"rewritten": 0, "pruned": 2}
+    assert mechanism.CACHE_REPORT == {"rewritten": 0, "pruned": 2}
 
 
 def test_bound_model_copy_is_verified_before_import(cache):
@@ -94,4 +95,4 @@ def test_bound_model_copy_is_verified_before_import(cache):
     binding._bound.clear()
     again = binding.bind(m.kernels())
     assert again.__name__ == first.__name__ and path.read_text() == text
-    assert binding.CACHE_REPORT["rewritten"] == 1
+    assert mechanism.CACHE_REPORT["rewritten"] == 1

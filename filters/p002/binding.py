@@ -1,4 +1,5 @@
-"""The kernels of :mod:`replay.filters.p002.compiled` bound to one model's ``f``, ``h``, ``F``, ``H``.
+"""The kernels of :mod:`replay.filters.p002.compiled` bound to one model's ``f``, ``h``, ``F``, ``H``
+(the mechanism: :mod:`replay.filters.binding`).
 
 ``compiled.py`` calls the model's kernels as module globals. :func:`bind`
 writes a copy of it with one model's imports at its MODEL KERNELS line and
@@ -28,131 +29,30 @@ give them separate ``REPLAY_CACHE_DIR``.
 """
 from __future__ import annotations
 
-import hashlib
-import importlib.util
-import inspect
-import logging
-import os
 import re
-import sys
-from pathlib import Path
 
-from replay.util.errors import ReplayError
+from replay.filters.binding import CACHE_REPORT, MARKER, bound_copy, cache_dir, load  # noqa: F401
 
-MARKER = "# MODEL KERNELS:"
 PREFIX = "replay_compiled_"
 LEGACY = re.compile(r"^replay_compiled_[0-9a-f]{20}$")  # names before the model key
 _bound: dict = {}
-CACHE_REPORT = {"rewritten": 0, "pruned": 0}  # copies of this process: rewritten (mismatch), removed (old)
-_log = logging.getLogger("replay.kernels")
-
-
-def cache_dir() -> Path:
-    root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "replay")
-    return Path(root) / "kernels"
-
-
-def _where(fn):
-    """(module, name) of a module-level numba function."""
-    py = getattr(fn, "py_func", None)
-    mod = sys.modules.get(py.__module__) if py is not None else None
-    if mod is None or getattr(mod, py.__name__, None) is not fn:
-        raise ReplayError(f"model kernel {fn!r} is not a module-level numba function of an importable module")
-    return py.__module__, py.__name__
+WHAT = "the paper-002 filter kernels (about 20-40 s)"
 
 
 def bind(kernels):
     """The copy of :mod:`replay.filters.p002.compiled` bound to the model kernels ``(f, h, F, H)``."""
     key = tuple(id(k) for k in kernels)
     if key not in _bound:
-        from . import compiled, compiled_util
-
-        places = [_where(k) for k in kernels]
-        lines = [f"from {mod} import {name} as {alias}  # noqa: E402"
-                 for (mod, name), alias in zip(places, ("f", "h", "F", "H"))]
-        kernel_sources = "".join(Path(inspect.getsourcefile(sys.modules[m])).read_text(encoding="utf-8")
-                                 for m in sorted({m for m, _ in places}))
-        digest = hashlib.sha256(kernel_sources.encode()).hexdigest()[:16]
-        lines.append(f"# kernels' sources: sha256 {digest}")
-        # numba's cache of this copy holds compiled_util's functions inlined but checks only this
-        # file's stamp: the helpers' source in the name makes a change to them a new copy
         from replay.filters import particles
         from replay.util import kernels as util_kernels
 
-        helpers = "".join(Path(inspect.getsourcefile(m)).read_text(encoding="utf-8")
-                          for m in (compiled_util, particles, util_kernels))
-        lines.append(f"# compiled_util: sha256 {hashlib.sha256(helpers.encode()).hexdigest()[:16]}")
-        text = Path(inspect.getsourcefile(compiled)).read_text(encoding="utf-8")
-        at = text.index(MARKER)
-        end = text.index("\n", at)
-        text = text[:at] + "\n".join(lines) + text[end:]
-        model = hashlib.sha256(repr(places).encode()).hexdigest()[:8]
-        label = ", ".join(sorted({m.rsplit(".", 1)[-1].removesuffix("_kernels") for m, _ in places}))
-        _bound[key] = _load(f"{PREFIX}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text, label)
+        from . import compiled, compiled_util
+
+        _bound[key] = bound_copy(compiled, kernels, (compiled_util, particles, util_kernels), PREFIX, WHAT,
+                                 helpers_tag="compiled_util", legacy=LEGACY)
     return _bound[key]
 
 
 def _load(name: str, text: str, label: str = "a model"):
-    """Import the copy ``name`` (``replay_compiled_<model>_<digest>``) holding ``text``: written
-    when absent, written again when its content does not hash to ``<digest>``; older copies of
-    the model pruned (module docstring)."""
-    directory = cache_dir()
-    directory.mkdir(parents=True, exist_ok=True)
-    path = directory / f"{name}.py"
-    digest = name.rsplit("_", 1)[1]
-    if not path.exists():
-        _write(directory, name, text)
-    elif not _matches(path, digest):
-        _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
-        _write(directory, name, text)
-        CACHE_REPORT["rewritten"] += 1
-        _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
-    _prune(directory, name)
-    if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
-        _log.info("compiling the paper-002 filter kernels for %s (about 20-40 s, once per machine; "
-                  "cached for later runs)", label)
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-def _matches(path: Path, digest: str) -> bool:
-    """Whether the file's content hashes to ``digest`` (the name's hash of the text)."""
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return False
-    return hashlib.sha256(data).hexdigest()[:len(digest)] == digest
-
-
-def _write(directory: Path, name: str, text: str) -> None:
-    tmp = directory / f".{name}.{os.getpid()}.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, directory / f"{name}.py")  # atomic: concurrent processes write the same text
-
-
-def _drop_numba_cache(directory: Path, name: str) -> int:
-    """Remove numba's cache (index, machine code) and the bytecode of copy ``name``."""
-    n = 0
-    cache = directory / "__pycache__"
-    if cache.is_dir():
-        for p in cache.iterdir():
-            if p.name.startswith(name + "."):
-                p.unlink(missing_ok=True)
-                n += 1
-    return n
-
-
-def _prune(directory: Path, current: str) -> None:
-    """Remove the other copies of ``current``'s model (another digest) and copies named
-    before the model key, with their numba caches."""
-    model = current[:current.rindex("_") + 1]
-    for p in directory.glob(f"{PREFIX}*.py"):
-        stem = p.stem
-        if stem != current and (stem.startswith(model) or LEGACY.match(stem)):
-            p.unlink(missing_ok=True)
-            _drop_numba_cache(directory, stem)
-            CACHE_REPORT["pruned"] += 1
+    """:func:`replay.filters.binding.load` for paper 002's copies."""
+    return load(name, text, label, WHAT, LEGACY)

@@ -24,10 +24,10 @@ from .kernels import wrap
 # --- whole runs: the steps above in one compiled loop, the model's one-state kernels passed in ---
 # The kernels are first-class function arguments of one declared type, so that the loop is
 # compiled once per machine for every model (and cached), not once per model and process.
-_VEC, _MAT = types.float64[::1], types.float64[:, ::1]
-ROW_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _VEC))      # f, h: (x, p, out)
-JACOBIAN_KERNEL = types.FunctionType(types.void(_VEC, _VEC, _MAT))  # F, H: (x, p, J)
-_S2, _S3, _S4 = types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
+_VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
+# the rows forms of the model's kernels (replay.filters.rows): a stack of states in one call
+ROWS_KERNEL = types.FunctionType(types.void(_S2, _VEC, _S2))      # f, h: (X, p, out)
+JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))    # F, H: (X, p, J)
 _MASK = types.boolean[::1]
 _COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
@@ -35,14 +35,13 @@ _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
 
 @nb.njit(cache=True)
 def apply_rows(fun, X, p, out):
-    """out[m, i] = fun(X[m, i]) for the one-state kernel ``fun(x, p, out)`` over a stack of points."""
+    """out[m] = fun(X[m]) for the rows kernel ``fun(X, p, out)`` over the points of every run."""
     for m in range(X.shape[0]):
-        for i in range(X.shape[1]):
-            fun(X[m, i], p, out[m, i])
+        fun(X[m], p, out[m])
 
 
-SIGMA_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
-EKF_RUN = types.int64(ROW_KERNEL, ROW_KERNEL, JACOBIAN_KERNEL, JACOBIAN_KERNEL, *_COMMON, _MASK, _MASK, *_OUT)
+SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
+EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
 
 
 def loop_ready(loop, sig, compile_ok: bool) -> bool:
@@ -120,13 +119,13 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
     M, steps, nz = Z.shape
     n = x.shape[1]
     Fj, Hj, xp, y = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
-    Pp, zh = np.empty((M, n, n)), np.empty(nz)
+    Pp, zh = np.empty((M, n, n)), np.empty((M, nz))
     FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
     L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
     for k in range(steps):
+        F(x, Pf[k], Fj)
+        f(x, Pf[k], xp)
         for m in range(M):
-            F(x[m], Pf[k], Fj[m])
-            f(x[m], Pf[k], xp[m])
             wrap(xp[m], xmask)
         propagate_cov_into(Fj, P, Q[k % Q.shape[0]], Pp, FP)
         if not seen[k]:
@@ -136,11 +135,11 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
             Pout[:, k] = P
             nis[:, k] = np.nan
             continue
+        H(xp, Ph[k], Hj)
+        h(xp, Ph[k], zh)
         for m in range(M):
-            H(xp[m], Ph[k], Hj[m])
-            h(xp[m], Ph[k], zh)
             for q in range(nz):
-                y[m, q] = Z[m, k, q] - zh[q]
+                y[m, q] = Z[m, k, q] - zh[m, q]
             wrap(y[m], zmask)
         if joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR) >= 0:
             return k
