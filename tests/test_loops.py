@@ -1,6 +1,7 @@
 """Shared plumbing of the run loops (replay.filters.loops): the kernels' parameter stacks are kept
 per model, and a model changed in any way (in place included) gets fresh ones."""
 import numpy as np
+import pytest
 
 from replay.filters import loops
 from replay.models.auv_sonar import AUVSonar
@@ -27,3 +28,27 @@ def test_a_model_with_an_attribute_of_unknown_kind_is_never_kept():
     assert loops.fingerprint(m, 4) is None
     a, b = loops.param_stacks(m, 4), loops.param_stacks(m, 4)
     assert a[0] is not b[0] and np.array_equal(a[0], b[0])
+
+
+@pytest.mark.slow  # compiles the rows forms of two models' kernels when numba's cache lacks them (~2 s)
+def test_rows_forms_equal_the_models_array_methods_bit_for_bit():
+    """The run loops' rows kernels (replay.filters.rows bound to the model) give the numbers of
+    the model's own f, h, F, H on a stack of states; each is its own function (four addresses)."""
+    import numba as nb
+
+    from replay.models.random_walk import RandomWalkPosition
+
+    @nb.njit
+    def call(g, X, p, out):
+        g(X, p, out)
+
+    for m in (AUVSonar(), RandomWalkPosition(np.eye(3), np.eye(3))):
+        fns = loops.row_kernels(m)
+        assert len({fn.address for fn in fns}) == 4 and [fn.__wrapper_address__() for fn in fns] == \
+            [fn.address for fn in fns]
+        X = np.random.default_rng(0).normal(size=(40, m.nx)) * 3.0
+        pf, ph = m.kernel_params(0)
+        for fn, ref, p in zip(fns, (m.f(X, 0), m.h(X, 0), m.F(X, 0), m.H(X, 0)), (pf, ph, pf, ph)):
+            out = np.full(ref.shape, np.nan)
+            call(fn, X, p, out)
+            assert np.array_equal(out, ref)
