@@ -160,6 +160,7 @@ def _silent_listener():
     return sock
 
 
+@pytest.mark.slow  # waits out deadlines (over 1 s): the full suite runs it
 def test_scheduler_that_accepts_and_never_answers_is_refused_in_time():
     """A fake scheduler that accepts the connection and sends nothing: one line naming the
     address and the timeout (before: `campaign run` hung for ever in the Dask handshake)."""

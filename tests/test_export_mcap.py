@@ -248,6 +248,7 @@ OLD_CHANNELS_DIGEST = "c767eaea1642e144982ed393c02fe13c0a6c3e8e244702b73b086ecc5
 REFERENCE_DIGEST = "f23a9000f5d6a6729fc2e182a5e62928ed86e4bf9de60414c6c9054fee9ff973"
 
 
+@pytest.mark.slow  # over 1 s for the small window: the full suite runs it
 @pytest.mark.parametrize("window", [1 << 16, 500])
 def test_streamed_export_keeps_the_old_channels_and_the_file(tmp_path, window):
     from replay.outputs.export_mcap import write_mcap

@@ -179,6 +179,7 @@ def server(tmp_path):
     srv.server_close()
 
 
+@pytest.mark.slow  # waits out deadlines (over 1 s): the full suite runs it
 @pytest.mark.parametrize("case", list(CASES))
 def test_hostile_answer_is_refused(case, server, tmp_path):
     srv, base = server
@@ -194,6 +195,7 @@ def test_hostile_answer_is_refused(case, server, tmp_path):
         assert srv.dripped < DRIP
 
 
+@pytest.mark.slow  # waits out deadlines (over 1 s): the full suite runs it
 def test_tls_handshake_drip_ends_at_the_deadline(tmp_path):
     """An https server that answers the TLS ClientHello with a record header announcing 16 KB and
     then one byte every 0.2 s (each byte resets the 30 s silence timeout): the 1 s deadline ends it,
