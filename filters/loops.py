@@ -30,6 +30,7 @@ def derived_from_kernels(model) -> bool:
 
 
 _rows: dict = {}  # (kernels, index) -> cfunc
+_sets: dict = {}  # (kernels, indices) -> [cfunc, ...]
 _copies: dict = {}  # kernels -> bound copy of replay.filters.rows
 
 
@@ -43,9 +44,13 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
     from . import binding, rows
 
     ks = model.kernels()
+    ids = tuple(id(k) for k in ks)
+    got = _sets.get((ids, needed))
+    if got is not None:
+        return got
     got = []
     for i in needed:
-        key = (tuple(id(k) for k in ks), i)
+        key = (ids, i)
         fn = _rows.get(key)
         if fn is None:
             import numba as nb
@@ -60,6 +65,7 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
             fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
             fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
         got.append(fn)
+    _sets[(ids, needed)] = got
     return got
 
 

@@ -32,6 +32,8 @@ same functions on one run.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from replay.util import kalman_kernels as kernels
@@ -244,14 +246,7 @@ class UKF(SigmaPointFilter):
         if not n + self.kappa > 0:
             raise ReplayError(f"{self.owner()}: kappa must be > -{n} for a state of dimension {n} "
                               f"(got {self.kappa:g})")
-        lam = self.alpha**2 * (n + self.kappa) - n
-        c = np.sqrt(n + lam)
-        xi = np.vstack([np.zeros(n), c * np.eye(n), -c * np.eye(n)])
-        wm = np.full(2 * n + 1, 0.5 / (n + lam))
-        wc = wm.copy()
-        wm[0] = lam / (n + lam)
-        wc[0] = wm[0] + 1 - self.alpha**2 + self.beta
-        return xi, wm, wc
+        return tuple(a.copy() for a in _unscented(n, float(self.alpha), float(self.beta), float(self.kappa)))
 
 
 class CKF(SigmaPointFilter):
@@ -264,6 +259,25 @@ class CKF(SigmaPointFilter):
     PARAMS = ()
 
     def points(self, n):
-        xi = np.sqrt(n) * np.vstack([np.eye(n), -np.eye(n)])
-        w = np.full(2 * n, 0.5 / n)
+        xi, w = (a.copy() for a in _cubature(n))
         return xi, w, w
+
+
+@lru_cache(maxsize=32)
+def _unscented(n, alpha, beta, kappa):
+    """The unscented points and weights of :class:`UKF` (kept per dimension and parameters: the
+    engine of every run asks for them; callers get copies)."""
+    lam = alpha**2 * (n + kappa) - n
+    c = np.sqrt(n + lam)
+    xi = np.vstack([np.zeros(n), c * np.eye(n), -c * np.eye(n)])
+    wm = np.full(2 * n + 1, 0.5 / (n + lam))
+    wc = wm.copy()
+    wm[0] = lam / (n + lam)
+    wc[0] = wm[0] + 1 - alpha**2 + beta
+    return xi, wm, wc
+
+
+@lru_cache(maxsize=32)
+def _cubature(n):
+    """The cubature points and their (equal) weights of :class:`CKF` (kept per dimension)."""
+    return np.sqrt(n) * np.vstack([np.eye(n), -np.eye(n)]), np.full(2 * n, 0.5 / n)
