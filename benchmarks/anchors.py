@@ -46,22 +46,12 @@ from replay.util.kernels import solve_rows as _solve
 TWO_PI = 2.0 * np.pi
 
 
-# --- unit points (as the product's UKF and CKF; van der Merwe 2004, Arasaratnam & Haykin 2009) ---
-def unscented_points(n, alpha=0.5, beta=2.0, kappa=0.0):
-    lam = alpha**2 * (n + kappa) - n
-    c = np.sqrt(n + lam)
-    xi = np.vstack([np.zeros(n), c * np.eye(n), -c * np.eye(n)])
-    wm = np.full(2 * n + 1, 0.5 / (n + lam))
-    wc = wm.copy()
-    wm[0] = lam / (n + lam)
-    wc[0] = wm[0] + 1 - alpha**2 + beta
-    return xi, wm, wc
+# --- unit points: the product's own (UKF with its defaults, CKF) ---------------------------------
+def unit_points(kind, n):
+    """Unit points (m, n), mean and covariance weights of the product's ``kind`` filter."""
+    from replay.filters import make_filter
 
-
-def cubature_points(n):
-    xi = np.sqrt(n) * np.vstack([np.eye(n), -np.eye(n)])
-    w = np.full(2 * n, 0.5 / n)
-    return xi, w, w.copy()
+    return make_filter(kind).points(n)
 
 
 # --- compiled pieces ---------------------------------------------------------------------------
@@ -421,7 +411,7 @@ def time_kalman(pb, kind="ukf", repeat=20):
 
         best, X = _best(run, repeat)
         return best / T, X
-    xi, wm, wc = unscented_points(n) if kind == "ukf" else cubature_points(n)
+    xi, wm, wc = unit_points(kind, n)
 
     def run():
         ukf_run(a["x0"], a["P0"], a["Z"], a["Pf"], a["Ph"], xi, wm, wc, a["Q"], a["R"], a["xmask"], a["zmask"], X, P)
@@ -448,7 +438,7 @@ def time_batch(pbs, kind="ukf", repeat=5, steps=None):
 
         best, X = _best(run, repeat)
         return best / (M * T), X
-    xi, wm, wc = unscented_points(n) if kind == "ukf" else cubature_points(n)
+    xi, wm, wc = unit_points(kind, n)
 
     def run():
         ukf_batch(X0, P0, Z, a["Pf"], a["Ph"], xi, wm, wc, a["Q"], a["R"], a["xmask"], a["zmask"], X, P, bad)
