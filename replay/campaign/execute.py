@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import gc
 import os
-import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -40,7 +39,7 @@ from .progress import Progress
 from .spec import Campaign
 from .store import WRITERS, Store, pack, write_bytes
 from .units import Job, execute_job
-from .workers import connect_scheduler, init_worker
+from .workers import connect_scheduler, process_pool, start_method
 
 
 def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
@@ -87,18 +86,15 @@ def _serial(jobs):
 
 @contextmanager
 def _processes(workers: int):
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    # fork (Linux) starts workers with everything imported; spawn elsewhere
-    method = "fork" if "fork" in mp.get_all_start_methods() and sys.platform == "linux" else "spawn"
+    method = start_method()
     if method == "fork":  # imported once here rather than in every worker
         import pyarrow.parquet  # noqa: F401
     frozen = method == "fork" and not gc.get_freeze_count()
     if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
         gc.freeze()
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method), initializer=init_worker,
-                               initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // workers)))
+    pool = process_pool(workers)
 
     def run(jobs):
         futures = {pool.submit(execute_packed, job): job for job in jobs}

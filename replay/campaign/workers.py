@@ -81,6 +81,24 @@ def init_worker(parent_pid: int, blas_threads: int | None = None, poll: float = 
         os._exit(1)
 
 
+def start_method() -> str:
+    """fork on Linux (workers start with everything the parent imported), spawn elsewhere."""
+    import multiprocessing as mp
+
+    return "fork" if sys.platform == "linux" and "fork" in mp.get_all_start_methods() else "spawn"
+
+
+def process_pool(n: int):
+    """A process pool of ``n`` of our workers (:func:`init_worker`): each ends with this process
+    and gets cores // n BLAS and compiled-kernel threads, so n workers on n cores do not run
+    n² threads. Campaigns and reproductions both start theirs here."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context(start_method()), initializer=init_worker,
+                               initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
+
+
 def connect_scheduler(address: str, timeout: float):
     """A ``distributed.Client`` of the scheduler at ``address``, or a one-line ReplayError
     naming the address and ``timeout`` (seconds) when it does not answer within it.

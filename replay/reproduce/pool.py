@@ -17,13 +17,12 @@ not run four threads.
 """
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from contextlib import contextmanager
 
-from replay.campaign.workers import init_worker
+from replay.campaign.workers import process_pool
 from replay.util.errors import ReplayError
 
 from .verdict import Stopwatch
@@ -50,9 +49,7 @@ def pool(n: int):
     if n <= 1:
         yield None
         return
-    method = "fork" if sys.platform == "linux" and "fork" in mp.get_all_start_methods() else "spawn"
-    ex = ProcessPoolExecutor(n, mp_context=mp.get_context(method), initializer=init_worker,
-                             initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
+    ex = process_pool(n)
     try:
         yield ex
     finally:
