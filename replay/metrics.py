@@ -65,17 +65,23 @@ def lstsq_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     A, b = np.asarray(A, float), np.asarray(b, float)
     if not len(A):
         return np.zeros(b.shape)
+    def loop():
+        return np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(A, b)])
+
     try:
         from numpy.linalg import _umath_linalg
         from numpy.linalg._linalg import _raise_linalgerror_lstsq
         gufunc = _umath_linalg.lstsq
     except (ImportError, AttributeError):  # numpy 1.x
-        return np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(A, b)])
+        return loop()
     m, n = A.shape[-2:]
     rcond = np.finfo(np.float64).eps * max(n, m)  # lstsq's rcond=None
-    with np.errstate(call=_raise_linalgerror_lstsq, invalid="call", over="ignore", divide="ignore",
-                     under="ignore"):
-        x = gufunc(A, b[..., None], rcond, signature="ddd->ddid")[0]
+    try:
+        with np.errstate(call=_raise_linalgerror_lstsq, invalid="call", over="ignore", divide="ignore",
+                         under="ignore"):
+            x = gufunc(A, b[..., None], rcond, signature="ddd->ddid")[0]
+    except TypeError:  # a numpy whose private gufunc has another signature: the public call, row by row
+        return loop()
     return x[..., 0]
 
 
