@@ -30,7 +30,6 @@ def derived_from_kernels(model) -> bool:
 
 
 _rows: dict = {}  # (kernels, index) -> cfunc
-_sets: dict = {}  # (kernels, indices) -> [cfunc, ...]
 _copies: dict = {}  # kernels -> bound copy of replay.filters.rows
 
 
@@ -45,9 +44,6 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
 
     ks = model.kernels()
     ids = tuple(id(k) for k in ks)
-    got = _sets.get((ids, needed))
-    if got is not None:
-        return got
     got = []
     for i in needed:
         key = (ids, i)
@@ -65,7 +61,6 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
             fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
             fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
         got.append(fn)
-    _sets[(ids, needed)] = got
     return got
 
 
@@ -91,8 +86,9 @@ def param_stacks(model, steps: int):
     """The kernels' parameters of every step, ``(Pf, Ph)`` stacks (steps, p), or None when they
     change shape from step to step (ragged: the caller steps in Python, same numbers).
 
-    Shared (the loops only read them) and kept for the last few models, keyed by the model's class, ``steps`` and the bytes of every
-    attribute (:func:`fingerprint`): a model changed in any way, in place included, misses."""
+    Shared (the loops only read them) and kept for the last few models, keyed by the model's
+    class, ``steps`` and the bytes of every attribute (:func:`fingerprint`): a model changed in
+    any way, in place included, misses."""
     key = fingerprint(model, steps)
     if key is not None and key in _stacks:
         return _stacks[key]
