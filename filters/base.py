@@ -13,8 +13,9 @@ M = 1). :meth:`Filter.engine` builds the engine of M runs (one
 * ``keep(ok (Ma,) bool)``: drop the runs that diverged
 * ``finish(m, info)``: diagnostics of run m (index among the M runs) into ``info``
 * optional ``run_all(Z (M, n, nz), finite (M, n, nz))``: every step of every run at once
-  (the careless pass; ``finite``: the measured components), giving the numbers of the steps: ``(X, P, nis, dof)`` stacks, or False
-  (a run failed: the loop redoes it step by step), or None (no such path for this model)
+  (the careless pass; ``finite``: the measured components), giving the numbers of the steps:
+  ``(X, P, nis, dof)`` stacks, or False (a run failed: the loop redoes it step by step), or
+  None (no such path for this model or these measurements)
 
 :meth:`Filter.run_batch` is the one loop over steps (:meth:`Filter.run` is the
 batch of one). Time convention: ``x0, P0`` describe the state one step before

@@ -137,7 +137,8 @@ class SigmaEngine(KalmanEngine):
         self.all_made = not self.missing.any()
 
     def run_all(self, Z, finite):
-        return kalman.run_kernels(self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN, self.xi, self.wm, self.wc)
+        return kalman.run_kernels(self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN,
+                                  self.xi, self.wm, self.wc)
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""
