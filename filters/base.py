@@ -15,7 +15,8 @@ M = 1). :meth:`Filter.engine` builds the engine of M runs (one
 * optional ``run_all(Z (M, n, nz), finite (M, n, nz))``: every step of every run at once
   (the careless pass; ``finite``: the measured components), giving the numbers of the steps:
   ``(X, P, nis, dof)`` stacks, or False (a run failed: the loop redoes it step by step), or
-  None (no such path for this model or these measurements)
+  None (no such path for this model or these measurements); it may set ``engine.seconds``, the
+  time of its computation alone (not the one-time loading of compiled code), for the time per step
 
 :meth:`Filter.run_batch` is the one loop over steps (:meth:`Filter.run` is the
 batch of one). Time convention: ``x0, P0`` describe the state one step before
@@ -217,7 +218,7 @@ class Filter(Declared):
                 raise _Careful
         if done is not None:  # its arrays are the results: nothing to fill or copy
             X, P, nis, dof = done
-            secs = np.full((M, n), (clock() - t0) / (n * M))
+            secs = np.full((M, n), getattr(engine, "seconds", clock() - t0) / (n * M))
             active = active[:0]
         else:
             X, P = np.full((M, n, nx), np.nan), np.full((M, n, nx, nx), np.nan)

@@ -21,6 +21,7 @@ that change the weighting all step in Python.
 from __future__ import annotations
 
 import math
+from time import perf_counter
 
 import numba as nb
 import numpy as np
@@ -140,7 +141,9 @@ def run(engine, Z, finite):
         return [call(engine.active[j], *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
                      Z[j], seen[j], *stacks, qsd, *fixed, X[j], P[j]) for j in range(lo, hi)]
 
+    t0 = perf_counter()
     counts = [c for part in split(runs, M, grain=grain(0.15 * steps * N)) for c in part]
+    engine.seconds = perf_counter() - t0  # the computation, without loading the compiled code
     for j, c in enumerate(counts):
         engine.resampled[engine.ids[j]] += c
     return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
