@@ -178,7 +178,7 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
     for res in evaluation.results:
         est = res.estimates[run]
         estimates[res.name] = {"t": evaluation.t[:len(est.x)], "x": est.x, "err": res.errors[run]["position"],
-                               "P": np.diagonal(est.P, axis1=1, axis2=2)}  # as read from estimates/*.csv.gz
+                               "P": est.P}
     return write_mcap(path, frame, problem, estimates)
 
 

@@ -63,6 +63,12 @@ class Evaluation:
     baseline: str | None = None
     notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
     units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.score.units)
+    position_index: tuple = (0, 1, 2)  # the state components holding the scored position
+
+    def position_components(self, name: str) -> tuple:
+        """The state components of filter ``name`` holding the scored position (a recorded
+        estimate's state is its position)."""
+        return tuple(range(len(self.axis_names))) if is_recorded(name) else self.position_index
 
     def leaderboard(self):
         """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.tables`)."""
@@ -177,7 +183,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
-                      score.units(p0))
+                      score.units(p0), tuple(int(i) for i in p0.position_index))
 
 
 def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):

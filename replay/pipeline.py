@@ -56,6 +56,7 @@ from replay.align import ALIGNMENTS, align, apply
 from replay.filters import make_filter
 from replay.filters.base import Estimates
 from replay.tasks import make_task, source_of
+from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.params import Param, validate
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
@@ -284,6 +285,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
     cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
     cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})
+    cols.update(covcols.covariance_columns(est.P, range(est.x.shape[1])))  # the whole state's covariance
     for j, axis in enumerate(problem.axis_names):
         cols[f"ref_{axis}"] = np.where(problem.truth_valid, problem.truth_position[:, j], np.nan)
         cols[f"err_{axis}"] = err["position"][:, j]

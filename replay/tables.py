@@ -19,6 +19,7 @@ import numpy as np
 
 from replay import summary
 from replay.score import rmse_over_time as _rmse_over_time
+from replay.util import covcols
 from replay.util.errors import ReplayError
 
 
@@ -64,7 +65,8 @@ def _runs(res, run):
 
 
 def estimates(ev, name: str, *, run: int | None = None):
-    """Filter ``name``'s estimates: index (run, k); columns t, x0.., P00.. (``run``: one run, index k)."""
+    """Filter ``name``'s estimates: index (run, k); columns t, x0.., P00.., P{i}_{j} (the covariances
+    among the position components) (``run``: one run, index k)."""
     pd = _pd()
     res = result(ev, name)
     runs = _runs(res, run)
@@ -74,6 +76,8 @@ def estimates(ev, name: str, *, run: int | None = None):
     var = np.concatenate([np.diagonal(e.P, axis1=1, axis2=2) for e in est])
     t = np.concatenate([ev.t[:len(e.x)] for e in est])
     data = {"t": t, **{f"x{i}": x[:, i] for i in range(nx)}, **{f"P{i}{i}": var[:, i] for i in range(nx)}}
+    pidx = ev.position_components(name)  # the covariances of estimates/<filter>.csv.gz: the position's
+    data.update(covcols.covariance_columns(np.concatenate([e.P for e in est]), pidx))
     df = pd.DataFrame(data, index=_index(runs, [len(e.x) for e in est]))
     return df.droplevel("run") if run is not None else df
 

@@ -18,6 +18,7 @@ from test_export_mcap import synthetic_run, validate
 from replay.cli import main
 from replay.outputs import foxglove_scene as scene
 from replay.outputs.run_data import read_estimates
+from replay.util import covcols
 
 
 def cli(*args, code=0):
@@ -36,6 +37,17 @@ def summary(path):
         reader = make_reader(fh)
         s = reader.get_summary()
         return s, {m.name: m.metadata for m in reader.iter_metadata()}
+
+
+def ellipsoid_matrix(sphere, k):
+    """The covariance drawn by a SpherePrimitive: R diag((size / 2k)^2) R^T, R its orientation."""
+    q = sphere.pose.orientation
+    x, y, z, w = q.x, q.y, q.z, q.w
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    s = np.array([sphere.size.x, sphere.size.y, sphere.size.z]) / (2 * k)
+    return R @ np.diag(s ** 2) @ R.T
 
 
 @pytest.fixture(scope="module")
@@ -90,12 +102,15 @@ def test_ellipsoid_axes_are_the_sigma_scaled_standard_deviations(run, sigma):
     assert len(ups) == len(est["t"]) == 400
     size = np.array([[u.entities[0].spheres[0].size.x, u.entities[0].spheres[0].size.y,
                       u.entities[0].spheres[0].size.z] for _, u in ups])
-    # sim/auv-bag: a diagonal covariance of east, north, up; eigenvalues = the variances
-    np.testing.assert_allclose(size, 2 * k * np.sqrt(est["P"][:, :3]), rtol=1e-12)
+    # sim/auv-bag: an isotropic covariance of east, north, up (off-diagonal ~1e-30): sizes = the variances
+    np.testing.assert_allclose(np.sort(size, axis=1),
+                               np.sort(2 * k * np.sqrt(np.diagonal(est["P"], axis1=1, axis2=2)[:, :3]), axis=1),
+                               rtol=1e-12)
+    np.testing.assert_allclose(np.array([ellipsoid_matrix(u.entities[0].spheres[0], k) for _, u in ups]),
+                               est["P"][:, :3, :3], rtol=1e-9, atol=1e-9 * est["P"][:, :3, :3].max())
     e = ups[7][1].entities[0]
     assert (e.id, e.frame_id) == ("ukf", "map") and len(ups[7][1].entities) == 1
     sph = e.spheres[0]
-    assert (sph.pose.orientation.x, sph.pose.orientation.w) == (0.0, 1.0)
     assert sph.pose.position == poses[7][1].pose.position and e.timestamp == poses[7][1].timestamp
     assert (sph.color.r, sph.color.g, sph.color.b) == pytest.approx(scene.rgba("#ff7f0e")[:3])  # the report's ukf
     s, _ = summary(path)
@@ -245,7 +260,10 @@ def test_campaign_export_one_dataset_and_run(campaign):
     np.testing.assert_array_equal(got, np.column_stack([want["x0"], want["x1"]]))
     ups = messages(campaign / "c.mcap", "/replay/ekf/covariance", SceneUpdate)
     ekf = store.series(hashes["ekf"], 1)
-    assert ups[3][1].entities[0].spheres[0].size.x == pytest.approx(2 * scene.SIGMA * np.sqrt(ekf["P00"][3]))
+    P, full = covcols.matrices(ekf, 6)
+    assert full and abs(P[3, 0, 2]) > 0.1 * np.sqrt(P[3, 0, 0] * P[3, 2, 2])  # sonar: x and z correlated
+    np.testing.assert_allclose(ellipsoid_matrix(ups[3][1].entities[0].spheres[0], scene.SIGMA), P[3, :3, :3],
+                               rtol=1e-9, atol=1e-12)
     _, meta = summary(campaign / "c.mcap")
     man = meta["replay.manifest"]
     assert man["campaign.toml"] == (out / "campaign.toml").read_text()

@@ -234,7 +234,7 @@ def old_channels_digest(path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for _, ch, m in make_reader(fh).iter_messages(log_time_order=False):
-            if not ch.topic.endswith(("/tf", "/covariance", "/tf_static")):
+            if not ch.topic.endswith(("/tf", "/covariance", "/tf_static", "/position_covariance")):
                 h.update(b"%s,%d,%d,%d," % (ch.topic.encode(), m.log_time, m.publish_time, len(m.data)) + m.data)
     return h.hexdigest()
 
@@ -243,9 +243,10 @@ def old_channels_digest(path) -> str:
 # had before issue 16 (pose, path, error, sensors; 21,530), recorded at commit ae9ecba, whose
 # record digest equalled that of the whole-file writer (commit 58d5cb4)
 OLD_CHANNELS_DIGEST = "c767eaea1642e144982ed393c02fe13c0a6c3e8e244702b73b086ecc5fd1ffb6"
-# and the whole file with the tf, covariance and /tf_static channels (40,243 messages, 89 chunks),
+# and the whole file with the tf, covariance and /tf_static channels (40,243 messages, 89 chunks,
+# digest f23a9000...), and since issue 24 the position_covariance channels too (48,380 messages),
 # recorded when they were added: the streamed writer must keep giving it for any window
-REFERENCE_DIGEST = "f23a9000f5d6a6729fc2e182a5e62928ed86e4bf9de60414c6c9054fee9ff973"
+REFERENCE_DIGEST = "74b3166a0cf5655770b20f26c4fd881c343af19dddefa00bfb33e3d18757b706"
 
 
 @pytest.mark.slow  # over 1 s for the small window: the full suite runs it
@@ -255,7 +256,7 @@ def test_streamed_export_keeps_the_old_channels_and_the_file(tmp_path, window):
 
     frame, problem, est = synthetic_run()
     path = tmp_path / "s.mcap"
-    assert write_mcap(path, frame, problem, est, chunk_size=1 << 16, window=window) == 40243
+    assert write_mcap(path, frame, problem, est, chunk_size=1 << 16, window=window) == 48380
     assert old_channels_digest(path) == OLD_CHANNELS_DIGEST
     assert record_digest(path) == REFERENCE_DIGEST
     assert [p.name for p in tmp_path.iterdir()] == ["s.mcap"]  # no temporary left
@@ -276,7 +277,7 @@ def test_window_does_not_change_the_file_and_bounds_what_is_held(tmp_path, monke
     monkeypatch.setattr(mcap_bulk.BulkWriter, "flush", spy)
     write_mcap(tmp_path / "win.mcap", frame, problem, est, window=2000)
     assert (tmp_path / "win.mcap").read_bytes() == (tmp_path / "whole.mcap").read_bytes()
-    assert sum(held) == 40243 and len(held) > 10
+    assert sum(held) == 48380 and len(held) > 10
     assert max(held) <= 2000 + 9 * 21  # a window, plus at most 9 messages per channel (21; window cut times)
 
 

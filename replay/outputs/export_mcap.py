@@ -43,6 +43,7 @@ import json
 
 import numpy as np
 
+from replay.util import covcols
 from replay.outputs.run_data import (enu_axes, enu_yaw, load_run, ned, read_estimates, time_ns, to_enu,
                                      track_index)
 from replay.util.errors import ReplayError
@@ -356,10 +357,14 @@ def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str =
             pos = lambda rows, x=x, p=pidx: to_enu(x[rows][:, p], axes_enu)  # noqa: E731
             finite = np.isfinite(x[:, pidx]).all(axis=1)
             _plan_track(out, f"/replay/{name}", ns, pos, yaw, finite, geo, scene.body_frame(name))
-            P = est["P"]  # the variances, taken per window (no copy of the track's)
-            scene.plan_ellipsoids(out, f"/replay/{name}/covariance", name, ns, pos,
-                                  lambda rows, P=P, p=pidx: scene.enu_covariance(P[rows][:, p], axes_enu),
-                                  finite & (P[:, pidx] >= 0).all(axis=1), sigma, colours[name])
+            P = covcols.as_matrices(est["P"])  # (n, nx, nx), taken per window (no copy of the track's)
+            cov = lambda rows, P=P, p=pidx: scene.enu_covariance(P[rows][:, p][:, :, p], axes_enu)  # noqa: E731
+            has_cov = finite & (np.diagonal(P, axis1=1, axis2=2)[:, pidx] >= 0).all(axis=1) \
+                & np.isfinite(P[:, pidx][:, :, pidx]).all(axis=(1, 2))
+            scene.plan_ellipsoids(out, f"/replay/{name}/covariance", name, ns, pos, cov, has_cov, sigma,
+                                  colours[name])
+            _plan_values(out, f"/replay/{name}/position_covariance", ns, lambda rows, cov=cov: scene.upper(cov(rows)),
+                         has_cov, scene.UPPER_NAMES)
             err = est["err"][:, :len(axes_enu)]
             _plan_values(out, f"/replay/{name}/error", ns, _error_rows(err), np.isfinite(err).all(axis=1),
                          axes + ["norm"])

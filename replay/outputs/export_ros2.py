@@ -11,7 +11,8 @@
   campaign's configurations, ``run_data.load_run``) for ``ros2 bag play``:
   ``/replay/<filter>/odom`` and ``/replay/reference/odom`` (nav_msgs/Odometry,
   frame ``enu``, child ``base_link``; position, heading as a yaw quaternion when
-  the task estimates one; pose covariance from the estimate's variances; a
+  the task estimates one; the pose covariance of position and heading from the estimate's
+  full covariance (:func:`pose_covariance`); a
   north-east-down task converted to east-north-up, ``run_data.enu_axes``). A name
   that is not a valid ROS 2 topic token (``igwo-stcpf``, ``recorded:gps``) is written
   with its other characters as ``_`` (:func:`ros_name`).
@@ -37,6 +38,7 @@ import numpy as np
 from replay.adapters import rosmsg
 from replay.adapters.bags.writer import BagOut
 from replay.outputs.export_safety import MARK_KEY, staged_dir
+from replay.util import covcols
 from replay.util.errors import ReplayError
 
 
@@ -181,6 +183,21 @@ def write_run_ros2(run: dict, path, progress=None) -> int:
         return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}, compression="zstd"), run, progress)
 
 
+def pose_covariance(P, pidx, hidx, axes, is_ned: bool) -> np.ndarray:
+    """(n, 36) row-major 6 x 6 pose covariances (x, y, z, rotation about x, y, z; ENU) of the
+    state covariances ``P`` (n, nx, nx): ``S P S^T`` with ``S`` taking the position components
+    ``pidx`` to their ENU slots (``axes``, signs included) and the heading ``hidx`` to the
+    rotation about z (its sign flipped for a clockwise-from-north heading). The rotations
+    about x and y are not estimated: their rows are 0, as before (variances only)."""
+    P = covcols.as_matrices(P)
+    S = np.zeros((6, P.shape[-1]))
+    for i, (slot, sign) in zip(pidx, axes):
+        S[slot, i] = sign
+    if hidx is not None:
+        S[5, hidx] = -1.0 if is_ned else 1.0
+    return (S @ P @ S.T).reshape(len(P), 36)
+
+
 PROGRESS_EVERY = 4096  # messages between two progress updates
 
 
@@ -189,14 +206,14 @@ def _write_run(out, run, progress=None) -> int:
 
     frame, problem = run["frame"], run["problem"]
     axes, is_ned = enu_axes(problem), ned(problem)
-    diag = [7 * slot for slot, _ in axes]  # the ENU variances in the 6 x 6 pose covariance
     try:
         tracks = [("reference", time_ns(frame, frame.t), problem.truth_position, None, None,
                    problem.truth_valid)]
         for name, est in run["estimates"].items():
             pidx, hidx = track_index(name, problem)
             tracks.append((name, time_ns(frame, est["t"]), est["x"][:, pidx],
-                           enu_yaw(est["x"][:, hidx], is_ned) if hidx is not None else None, est["P"][:, pidx], None))
+                           enu_yaw(est["x"][:, hidx], is_ned) if hidx is not None else None,
+                           pose_covariance(est["P"], pidx, hidx, axes, is_ned), None))
         topics = {}
         for name, *_ in tracks:
             topic = f"/replay/{ros_name(name)}/odom"
@@ -215,9 +232,7 @@ def _write_run(out, run, progress=None) -> int:
             conn = out.connection(topic, "nav_msgs/msg/Odometry")
             for i in idx:
                 y = float(yaw[i]) if yaw is not None and np.isfinite(yaw[i]) else 0.0
-                cov = np.zeros(36)
-                if var is not None:
-                    cov[diag] = var[i]
+                cov = np.zeros(36) if var is None else var[i]
                 out.write(conn, int(ns[i]), out.odometry(int(ns[i]), "enu", "base_link", pos[i],
                                                           (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
                                                           (0, 0, 0), (0, 0, 0), cov))

@@ -24,6 +24,7 @@ import numpy as np
 
 from replay.evaluate import Evaluation, manifest
 from replay.summary import columns, consistency_cell, lost_cell
+from replay.util import covcols
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
 from replay.score import rmse_over_time
 
@@ -78,8 +79,9 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
     est_dir.mkdir(parents=True, exist_ok=True)
     for r in ev.results:
         nx = r.estimates[0].x.shape[1]
-        head = ["run", "k", "t"] + [f"x{i}" for i in range(nx)] + [f"P{i}{i}" for i in range(nx)]
-        head += [f"err_{axis}" for axis in ev.axis_names]
+        pidx = ev.position_components(r.name)
+        head = ["run", "k", "t"] + [f"x{i}" for i in range(nx)] + covcols.variance_names(nx)
+        head += [f"err_{axis}" for axis in ev.axis_names] + covcols.covariance_names(pidx)
         with open(est_dir / f"{r.name}.csv.gz", "wb") as raw, \
                 gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz, \
                 io.TextIOWrapper(gz, newline="") as fh:  # mtime 0: the same run gives the same bytes
@@ -87,7 +89,8 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
             for run, (est, err) in enumerate(zip(r.estimates, r.errors)):
                 n = len(est.x)
                 block = np.column_stack([np.full(n, run), np.arange(n), ev.t[:n], est.x,
-                                         np.diagonal(est.P, axis1=1, axis2=2), err["position"]])
+                                         np.diagonal(est.P, axis1=1, axis2=2), err["position"],
+                                         *covcols.covariance_columns(est.P, pidx).values()])
                 np.savetxt(fh, block, delimiter=",", fmt="%.10g")
         curve = rmse_over_time([e["position"] for e in r.errors])
         np.savetxt(est_dir / f"{r.name}_rmse_over_time.csv", np.column_stack([ev.t, curve]),

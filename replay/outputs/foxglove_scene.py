@@ -18,7 +18,11 @@ eigenvectors of the position covariance (in ENU) and its diameters ``2 * sigma *
 of the eigenvalues (``sigma``: the scale, default 3, in the channel's metadata). An
 axis the task does not estimate (z of a 2-D task) gets a thin diameter, :data:`THIN` of
 the largest, so that the ellipse is drawn as a flat disc. The colour is the filter's
-colour in the report (:mod:`replay.outputs.palette`), translucent.
+colour in the report (:mod:`replay.outputs.palette`), translucent. The covariance itself
+(ENU, m², the thin variance of an absent axis included) is on
+``/replay/<filter>/position_covariance``: its upper triangle ``ee, en, eu, nn, nu, uu``
+at the same times. Both come from the full position covariance of the estimate (the
+variances alone only for an output written before the covariances were kept).
 """
 from __future__ import annotations
 
@@ -63,6 +67,16 @@ def enu_covariance(var, axes) -> np.ndarray:
         for slot in np.flatnonzero(absent):
             out[:, slot, slot] = THIN ** 2 * biggest
     return out
+
+
+UPPER_NAMES = ["ee", "en", "eu", "nn", "nu", "uu"]  # the ENU covariance's upper triangle, row by row
+
+
+def upper(cov) -> np.ndarray:
+    """(m, 6) upper triangles (:data:`UPPER_NAMES`) of (m, 3, 3) covariances: what the
+    ``/replay/<filter>/position_covariance`` channel carries, the matrix of the ellipsoid."""
+    i, j = np.triu_indices(3)
+    return np.asarray(cov, float)[:, i, j]
 
 
 def quat_from_matrix(R) -> np.ndarray:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.util import covcols
 from replay.util.errors import DataError, ReplayError
 
 
@@ -153,8 +154,9 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
             raise ReplayError(f"{problem}; {hint}")
         cols = store.series(h, r)
         nx = sum(1 for k in cols if k[:1] == "x" and k[1:].isdigit())
+        P, full = covcols.matrices(cols, nx)
         estimates[name] = {"t": cols["t"], "x": np.column_stack([cols[f"x{i}"] for i in range(nx)]),
-                           "P": np.column_stack([cols[f"P{i}{i}"] for i in range(nx)]),
+                           "P": P, "full_covariance": full,
                            "err": {k[4:]: v for k, v in cols.items() if k.startswith("err_")}}
         manifest[f"units/{h}/config.json"] = (unit / "config.json").read_text()
     cfg = chosen[0][1]
@@ -207,9 +209,14 @@ def read_estimates(path, run: int = 0) -> dict:
                         f"{data.shape[1]} columns for the {len(head)} of the header")
     if not np.array_equal(data[:, 1], np.arange(len(data))):
         raise DataError(path, f"the rows of run {run} are not its steps 0, 1, 2, ... in order")
-    n_err = data.shape[1] - 3 - 2 * nx
-    return {"t": data[:, 2], "x": data[:, 3:3 + nx], "P": data[:, 3 + nx:3 + 2 * nx],
-            "err": data[:, 3 + 2 * nx:3 + 2 * nx + n_err]}
+    cols = dict(zip(head, data.T))
+    missing = [h for h in ["t"] + [f"x{i}" for i in range(nx)] + covcols.variance_names(nx) if h not in cols]
+    if missing:
+        raise DataError(path, f"no column {missing[0]} in the header")
+    P, full = covcols.matrices(cols, nx)
+    err = [h for h in head if h.startswith("err_")]
+    return {"t": cols["t"], "x": data[:, 3:3 + nx], "P": P, "full_covariance": full,
+            "err": np.column_stack([cols[h] for h in err]) if err else np.zeros((len(data), 0))}
 
 
 def time_ns(frame, t) -> np.ndarray:
