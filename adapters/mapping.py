@@ -54,7 +54,8 @@ from .rosmsg import KINDS, kind_of, normalize_type
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role", "frame", "child"}
+ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise"}
+FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
@@ -85,6 +86,7 @@ class Entry:
     child: str | None = None  # TF pair: child frame
     estimate: bool = False  # an [estimates] entry
     params: dict = field(default_factory=dict)  # [estimates]: t_max_diff, t_offset
+    fusion: dict = field(default_factory=dict)  # [channels]: fuse, differential, noise (the fusion task)
 
     @property
     def group(self) -> str:
@@ -123,11 +125,18 @@ class Mapping:
                                                                ("frame", e.frame), ("child", e.child)) if v)
                 extra += "".join(f", {k} = {v!r}" if not isinstance(v, str) else f', {k} = "{v}"'
                                  for k, v in e.params.items())
+                extra += "".join(f", {k} = {_toml_value(v)}" for k, v in e.fusion.items())
                 key = e.name if re.fullmatch(r"[A-Za-z0-9_-]+", e.name) else f'"{e.name}"'
                 lines.append(f'{key} = {{ topic = "{e.topic}"{extra} }}')
         if self.params:
             lines += ["", "[params]"] + [f"{k} = {v!r}" for k, v in self.params.items()]
         return "\n".join(lines) + "\n"
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {x!r}" for k, x in v.items()) + " }"
+    return "[" + ", ".join(f'"{x}"' for x in v) + "]"
 
 
 def load_mapping(path) -> Mapping:
@@ -199,11 +208,42 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
             if role is not None and typ is not None and pose_like(kind_of(typ)) not in ROLE_KINDS[role]:
                 raise ReplayError(f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
                                   f"{role!r} (it takes {kinds_for(role)})")
-            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role, frame, child))
+            fusion = _fusion(source, name, spec, ref)
+            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role, frame, child,
+                                 fusion=fusion))
     if not entries:
         raise ReplayError(f"{source}: maps no topic ([channels] and [reference] are empty)"
                           + ("; recorded [estimates] need a [reference] to be scored against" if estimates else ""))
     return Mapping(entries, time, float(until) if until is not None else None, allow, params, source, estimates)
+
+
+def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
+    """The fusion task's settings of a [channels] entry: ``fuse`` and ``differential`` (lists of
+    fields), ``noise`` (a table field = variance, in the field's unit squared)."""
+    out = {}
+    for key in ("fuse", "differential", "noise"):
+        if key not in spec:
+            continue
+        if ref:
+            raise ReplayError(f"{source}: [reference] {name}: {key} is for [channels] entries (the fusion task)")
+        value = spec[key]
+        fields = list(value) if isinstance(value, (list, dict)) else None
+        if fields is None or not all(isinstance(f, str) for f in fields):
+            raise ReplayError(f"{source}: [channels] {name}: {key} must be "
+                              + ("a table of field = variance" if key == "noise" else "a list of field names")
+                              + f" (fields: {', '.join(FUSION_FIELDS)})")
+        bad = [f for f in fields if f not in FUSION_FIELDS]
+        if bad:
+            raise ReplayError(f"{source}: [channels] {name}: {key}: unknown field {bad[0]!r} "
+                              f"(fields: {', '.join(FUSION_FIELDS)})")
+        if key == "noise":
+            for f, v in value.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf"):
+                    raise ReplayError(f"{source}: [channels] {name}: noise.{f} must be a positive variance "
+                                      f"(got {v!r})")
+            value = {f: float(v) for f, v in value.items()}
+        out[key] = value
+    return out
 
 
 def _pair(source: str, group: str, name: str, spec: dict):

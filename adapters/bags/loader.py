@@ -10,7 +10,7 @@ import numpy as np
 
 from replay.adapters.geodesy import Geo, plausible_latlon
 from replay.frame import Channel, Frame, Report
-from replay.util.errors import DataError
+from replay.util.errors import DataError, ReplayError
 
 from .. import rosmsg
 from ..mapping import Mapping, from_dict, load_mapping, propose, role_of
@@ -152,9 +152,14 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
         if role and role != "none":
             names = {f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
                      for f in ROLE_FIELDS[role] if f in fields[src]}
+            for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
+                for f in value:
+                    if f not in fields[src]:
+                        raise ReplayError(f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
+                                          f"{topic.type} lacks (it has: {', '.join(fields[src])})")
             roles.setdefault(role, []).append({
                 "entry": e.name, "source": f"{e.topic} ({topic.type})", "declared": e.role is not None,
-                "channels": names})
+                "channels": names, **e.fusion})
         primary = fields[src][rosmsg.PRIMARY[kind]][1]
         report.add("info", e.name, len(idx), f"{e.topic} ({topic.type}): {len(idx)} messages at their "
                                              f"{time} stamps; not valid at the other {n - len(idx)} samples")

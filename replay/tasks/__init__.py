@@ -42,6 +42,7 @@ TASKS = Registry("task", {
     "depth": "replay.tasks.depth:DepthTask",
     "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
     "formation": "replay.tasks.formation:FormationTask",
+    "fusion": "replay.tasks.fusion:FusionTask",
 }, check=_check)
 
 

@@ -1,0 +1,114 @@
+"""Kinematic vehicle models of the ``fusion`` task: constant body velocity and body rates.
+
+In the spirit of robot_localization's ``ekf_localization_node`` (its 2-D mode and its
+full 3-D state without accelerations), on the frame's own, irregular time axis:
+
+**2-D** (``Kinematic2D``), state ``x = [east, north, yaw, u, v, r]`` — position (m, local
+ENU), yaw (rad, anticlockwise from east, wrapped), body velocity forward ``u`` and left
+``v`` (m/s), yaw rate ``r`` (rad/s)::
+
+    east_k  = east + (u cos yaw - v sin yaw) dt      yaw_k = yaw + r dt
+    north_k = north + (u sin yaw + v cos yaw) dt     u, v, r constant
+
+**3-D** (``Kinematic3D``), state ``x = [east, north, up, roll, pitch, yaw, u, v, w, p, q, r]``
+— REP-103 axes (body x forward, y left, z up; roll about x, pitch about y: positive
+nose down, yaw about z), body velocity ``u, v, w`` and body rates ``p, q, r``::
+
+    position_k = position + R(roll, pitch, yaw) [u, v, w] dt,  R = Rz(yaw) Ry(pitch) Rx(roll)
+    roll_k  = roll + (p + (q sin roll + r cos roll) tan pitch) dt
+    pitch_k = pitch + (q cos roll - r sin roll) dt
+    yaw_k   = yaw + (q sin roll + r cos roll) / cos pitch dt     (the Euler-angle rates)
+
+Process noise ``Q_k = diag(q) dt`` (per-second spectral densities, random walks on the
+velocities and rates). Measurements select state components, with a sign (depth = -up):
+``h(x) = x[:, index] * sign`` — linear, ``H`` a signed selection matrix. The measurement
+covariance may change from step to step (recorded per-message covariances):
+``measurement_cov(k)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.model import Model
+from replay.util.angles import wrap
+
+
+class Kinematic(Model):
+    """Shared part: the measurement selection and the time-varying Q and R."""
+
+    STATE: tuple = ()
+    ANGLES: tuple = ()
+
+    def __init__(self, dt, q, index, sign, z_angles, R_steps):
+        self.nx, self.nz = len(self.STATE), len(index)
+        self.x_angles = tuple(self.ANGLES)
+        self.z_angles = tuple(z_angles)
+        self.dt = np.asarray(dt, float)
+        self.q = np.asarray(q, float)
+        self.index = np.asarray(index, int)
+        self.sign = np.asarray(sign, float)
+        self._H = np.zeros((self.nz, self.nx))
+        self._H[np.arange(self.nz), self.index] = self.sign
+        self.R_steps = np.asarray(R_steps, float)  # (n, nz) variances per step
+        self.R = np.diag(np.nanmedian(self.R_steps, axis=0)) if len(self.R_steps) else np.eye(self.nz)
+        self.Q = np.diag(self.q * max(float(np.median(self.dt)) if len(self.dt) else 1.0, 1e-6))
+
+    def process_cov(self, k):
+        return np.diag(self.q * max(self.dt[k], 1e-9))
+
+    def measurement_cov(self, k):
+        return np.diag(self.R_steps[k])
+
+    def h(self, x, k):
+        return x[..., self.index] * self.sign
+
+    def H(self, x, k):
+        return self._H
+
+
+class Kinematic2D(Kinematic):
+    STATE = ("east", "north", "yaw", "u", "v", "r")
+    ANGLES = (2,)
+
+    def f(self, x, k):
+        dt = self.dt[k]
+        e, n, yaw, u, v, r = np.moveaxis(x, -1, 0)
+        c, s = np.cos(yaw), np.sin(yaw)
+        return np.stack([e + (u * c - v * s) * dt, n + (u * s + v * c) * dt, wrap(yaw + r * dt), u, v, r],
+                        axis=-1)
+
+    def F(self, x, k):
+        dt = self.dt[k]
+        yaw, u, v = x[2], x[3], x[4]
+        c, s = np.cos(yaw), np.sin(yaw)
+        J = np.eye(6)
+        J[0, 2], J[0, 3], J[0, 4] = (-u * s - v * c) * dt, c * dt, -s * dt
+        J[1, 2], J[1, 3], J[1, 4] = (u * c - v * s) * dt, s * dt, c * dt
+        J[2, 5] = dt
+        return J
+
+
+def rotation(roll, pitch, yaw) -> np.ndarray:
+    """(..., 3, 3) body-to-ENU rotations Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+                     np.stack([-sp, cp * sr, cp * cr], -1)], -2)
+
+
+class Kinematic3D(Kinematic):
+    STATE = ("east", "north", "up", "roll", "pitch", "yaw", "u", "v", "w", "p", "q", "r")
+    ANGLES = (3, 4, 5)
+
+    def f(self, x, k):
+        dt = self.dt[k]
+        roll, pitch, yaw = x[..., 3], x[..., 4], x[..., 5]
+        vel, rates = x[..., 6:9], x[..., 9:12]
+        p, q, r = rates[..., 0], rates[..., 1], rates[..., 2]
+        pos = x[..., 0:3] + np.einsum("...ij,...j->...i", rotation(roll, pitch, yaw), vel) * dt
+        sr, cr = np.sin(roll), np.cos(roll)
+        cp = np.cos(pitch)
+        a = q * sr + r * cr
+        att = np.stack([wrap(roll + (p + a * np.tan(pitch)) * dt), wrap(pitch + (q * cr - r * sr) * dt),
+                        wrap(yaw + a / cp * dt)], axis=-1)
+        return np.concatenate([pos, att, vel, rates], axis=-1)

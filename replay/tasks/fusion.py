@@ -1,0 +1,215 @@
+"""``fusion``: the recording's own sensors, fused by a kinematic model — no synthetic measurement.
+
+What robot_localization's ``ekf_localization_node`` does on a robot, run offline with every
+filter of ``replay`` and scored against the recording's reference. Configured by the
+mapping (``docs/bags.md``, "The fusion task"):
+
+* **State**: 2-D ``[east, north, yaw, u, v, r]`` or 3-D ``[east, north, up, roll, pitch, yaw,
+  u, v, w, p, q, r]`` (:mod:`replay.models.kinematic`); ``dims = "auto"`` takes 3-D when the
+  recording has a depth input, else 2-D. The choice is printed in the notes and recorded.
+* **Inputs**: every sensor input of the frame (:mod:`replay.tasks.fusion_inputs`), each field
+  used absolutely or differentially, at its own messages' times (the frame's time axis is
+  the union of all messages: at a step, the components of the messages that arrived there
+  are measured, the others are missing; gaps are predicted through).
+* **Noise**: a NavSatFix's recorded ``position_covariance`` (its ``_sigma`` channel) where
+  present and positive, else the entry's declared ``noise`` or the task's default per field
+  (``r_*``); the manifest's notes say which was used for every input.
+* **Reference**: the frame's ``position`` reference, for scoring only. When it is the same
+  topic as a ``gps`` input (the fix track is the only external position), every
+  ``gps_every``-th fix is fed and the others are held out for scoring, as ``gps-odom`` does.
+* **Prior**: the first fed absolute position (and attitude) where there is one. Without any
+  absolute position input (dead reckoning: DVL + IMU + depth, odometry + IMU), nothing
+  fixes the origin: the start position is the reference's first valid sample (the known
+  start of a dead-reckoning run), and a note says so; no later reference sample reaches a
+  filter. Heading: the first attitude measurement, else the direction between the first
+  fed fixes at least 2 m apart, else the reference's first attitude (noted).
+
+Refused in one line: a frame with no sensor input (naming the tasks that would run), no
+reference (nothing to score against: how to declare one), an unknown field, a differential
+field with fewer than two messages.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.models.kinematic import Kinematic2D, Kinematic3D
+from replay.util.errors import ReplayError
+from replay.util.params import Param
+
+from . import Problem, Task, describe, source_of
+from .fusion_inputs import (NOISE_PARAM, components, configured, differential, field_channel, has_absolute_position,
+                            inputs)
+
+POS = dict(low=0, low_open=True)
+
+
+class FusionTask(Task):
+    name = "fusion"
+    LOST_M = 20.0  # lost-track threshold (m): GPS-scale; dead reckoning is judged by its drift
+    # Noise defaults: those of gps-odom (set on the first 60 s of test1.bag: skid-steer odometry,
+    # a ground robot's turns), plain engineering choices like them, every one a task parameter.
+    PARAMS = (
+        Param("dims", str, "auto", "state dimension: 2 (planar), 3, or auto (3 with a depth input)",
+              choices=("auto", "2", "3")),
+        Param("gps_every", int, 5, "when the reference is a gps input's topic, every gps_every-th fix is fed, "
+              "the others are held out for scoring", low=1),
+        Param("q_position", float, 0.01, "process noise of each position axis, per second", unit="m^2/s", **POS),
+        Param("q_attitude", float, 0.01, "process noise of each attitude angle, per second", unit="rad^2/s",
+              **POS),
+        Param("q_velocity", float, 0.5, "process noise of each body velocity, per second", unit="(m/s)^2/s",
+              **POS),
+        Param("q_rate", float, 0.5, "process noise of each body rate, per second", unit="(rad/s)^2/s", **POS),
+        Param("r_position", float, 1.0, "position measurement variance per axis (default of an input)",
+              unit="m^2", **POS),
+        Param("r_attitude", float, 0.01, "attitude measurement variance per angle", unit="rad^2", **POS),
+        Param("r_velocity", float, 0.04, "body velocity measurement variance per axis", unit="(m/s)^2", **POS),
+        Param("r_rate", float, 0.01, "body rate (gyro, odometry twist) measurement variance per axis",
+              unit="(rad/s)^2", **POS),
+        Param("r_depth", float, 0.01, "depth measurement variance", unit="m^2", **POS),
+        Param("p0_position", float, 1.0, "prior variance of each position axis", unit="m^2", **POS),
+        Param("p0_attitude", float, 0.25, "prior variance of each attitude angle", unit="rad^2", **POS),
+        Param("p0_velocity", float, 1.0, "prior variance of each body velocity", unit="(m/s)^2", **POS),
+        Param("p0_rate", float, 0.1, "prior variance of each body rate", unit="(rad/s)^2", **POS),
+    )
+
+    def build(self, frame, rng):
+        where = source_of(frame)
+        found = inputs(frame)
+        if not found:
+            raise ReplayError(f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
+                              "pose; docs/bags.md); tasks that need none: position, sonar (synthetic "
+                              "measurements from the reference)")
+        ref = frame.reference.get("position")
+        if ref is None or not ref.valid.any():
+            raise ReplayError(f"{where}: task fusion: nothing to score against: the recording has no valid "
+                              "position reference; declare one in the mapping ([reference] position = { topic = "
+                              "\"/ground_truth\" }, or a GPS, pose or TF topic; docs/bags.md)")
+        dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
+        n, t = len(frame.t), np.asarray(frame.t, float)
+        cols, rows_R, index, sign, z_angles = [], [], [], [], []
+        used, notes, fed_gps, holdout = {}, [f"task fusion: {dims}-D state"], None, False
+        absolute_pos, attitude_at = None, None
+        absolute = has_absolute_position(found)
+        for role, entry in found:
+            key = f"[channels] {entry['entry']}"
+            fuse, diff, noise = configured(entry, role, f"{where}: {key}", absolute)
+            if role == "imu" and "attitude" not in fuse and not entry.get("fuse"):
+                notes.append(f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
+                             "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)")
+            for fld in fuse + diff:
+                name = field_channel(frame, entry, fld)
+                if name is None:
+                    raise ReplayError(f"{where}: {key}: no field {fld!r} in {entry['source']} "
+                                      f"(it has: {', '.join(sorted(entry['channels']))})")
+                ch = frame.channels[name]
+                vals = np.asarray(ch.values, float).reshape(n, -1)
+                valid = ch.valid & np.isfinite(vals).all(axis=1)
+                is_diff, label = fld in diff, fld
+                if is_diff:
+                    att_name = field_channel(frame, entry, "attitude")
+                    att = frame.channels[att_name].values if att_name else None
+                    rows, derived = differential(t, vals, valid, att, fld, f"{where}: {key}")
+                    vals = np.full((n, 3), np.nan)
+                    vals[rows] = derived
+                    valid = np.zeros(n, bool)
+                    valid[rows] = True
+                    fld = "velocity" if fld == "position" else "rate"
+                if role == "gps" and fld == "position" and ref.description == ch.description:
+                    idx = np.flatnonzero(valid)
+                    fed = np.zeros(n, bool)
+                    fed[idx[:: self.gps_every]] = True
+                    valid, fed_gps, holdout = fed, fed, True
+                comps = [c for c in components(fld, dims, role) if c[0] < vals.shape[1]]
+                if not comps or not valid.any():
+                    notes.append(f"task fusion: {key} {label}: " + ("not used in a 2-D state" if not comps
+                                                                  else "no valid sample"))
+                    continue
+                var, how = self._variance(frame, entry, fld, noise, n, valid)
+                for col, state, sgn, ang in comps:
+                    z = np.where(valid, vals[:, col], np.nan)
+                    if ang:
+                        z_angles.append(len(index))
+                    cols.append(z)
+                    rows_R.append(var)
+                    index.append(state)
+                    sign.append(sgn)
+                used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
+                notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "")
+                             + f": noise {how}")
+                if fld == "position" and absolute_pos is None:
+                    absolute_pos = (np.flatnonzero(valid)[0], vals, comps, valid)
+                if fld == "attitude" and attitude_at is None:
+                    attitude_at = (np.flatnonzero(valid)[0], vals, comps)
+        if not index:
+            raise ReplayError(f"{where}: task fusion: none of the inputs has a valid sample")
+        Z = np.column_stack(cols)
+        R = np.column_stack(rows_R)
+        model_cls = Kinematic3D if dims == 3 else Kinematic2D
+        nx = len(model_cls.STATE)
+        dt = np.diff(t, prepend=t[0])
+        q = self._per_state(dims, self.q_position, self.q_attitude, self.q_velocity, self.q_rate)
+        model = model_cls(dt, q, index, sign, z_angles, R)
+        x0, notes = self._prior(frame, ref, dims, nx, absolute_pos, attitude_at, notes)
+        P0 = np.diag(self._per_state(dims, self.p0_position, self.p0_attitude, self.p0_velocity, self.p0_rate))
+        d = 3 if dims == 3 and ref.values.shape[1] >= 3 else 2
+        valid_ref = ref.valid & np.isfinite(ref.values[:, :d]).all(axis=1)
+        if holdout:
+            valid_ref &= ~fed_gps
+        used["reference"] = describe(frame, "position", "reference")
+        params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(holdout))
+        axes = ("x", "y", "z")[:d]
+        angle_index = {"yaw": 5 if dims == 3 else 2}
+        return Problem(model, Z, x0, P0, t, np.asarray(ref.values[:, :d], float), valid_ref, tuple(range(d)), axes,
+                       angle_index=angle_index, params=params, inputs=used, notes=notes)
+
+    @staticmethod
+    def _per_state(dims, pos, att, vel, rate):
+        return np.array([pos] * 2 + [att] + [vel] * 2 + [rate]) if dims == 2 else \
+            np.array([pos] * 3 + [att] * 3 + [vel] * 3 + [rate] * 3)
+
+    def _variance(self, frame, entry, fld, noise, n, valid):
+        """(n,) variance per step of a field, and how it was chosen (for the notes)."""
+        if fld in noise:
+            v = float(noise[fld])
+            return np.full(n, v), f"declared {v:g}"
+        sigma = frame.channels.get(f"{entry['entry']}_sigma")
+        if fld == "position" and sigma is not None:
+            s = np.asarray(sigma.values, float).reshape(n, -1)[:, 0]
+            good = sigma.valid & np.isfinite(s) & (s > 0)
+            if good[valid].all():
+                return np.where(good, s ** 2, np.nan), "recorded position_covariance"
+        v = getattr(self, NOISE_PARAM[fld])
+        return np.full(n, v), f"default {NOISE_PARAM[fld]} = {v:g}"
+
+    def _prior(self, frame, ref, dims, nx, absolute_pos, attitude_at, notes):
+        x0 = np.zeros(nx)
+        yaw_i = 5 if dims == 3 else 2
+        if absolute_pos is not None:
+            k, vals, comps, valid = absolute_pos
+            for col, state, sgn, _ in comps:
+                x0[state] = sgn * vals[k, col]
+        else:
+            k = int(np.flatnonzero(ref.valid)[0])
+            x0[:min(dims, ref.values.shape[1])] = ref.values[k, :dims]
+            notes = notes + ["task fusion: no absolute position input (dead reckoning): the start position is "
+                             f"the reference's first valid sample (t = {frame.t[k]:.3f} s); no other reference "
+                             "sample reaches a filter"]
+        if attitude_at is not None:
+            k, vals, comps = attitude_at
+            for col, state, sgn, _ in comps:
+                x0[state] = sgn * vals[k, col]
+        elif absolute_pos is not None:
+            k, vals, comps, valid = absolute_pos
+            idx = np.flatnonzero(valid)
+            p0 = vals[idx[0], :2]
+            far = [i for i in idx if np.hypot(*(vals[i, :2] - p0)) >= 2.0]
+            if far:
+                d = vals[far[0], :2] - p0
+                x0[yaw_i] = np.arctan2(d[1], d[0])
+        else:
+            att = frame.reference.get("position_attitude")
+            if att is not None and att.valid.any():
+                k = int(np.flatnonzero(att.valid)[0])
+                x0[yaw_i] = att.values[k, 2]
+                notes = notes + ["task fusion: no attitude input: the start heading is the reference's first"]
+        return x0, notes

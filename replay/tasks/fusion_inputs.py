@@ -1,0 +1,107 @@
+"""The inputs of the ``fusion`` task: which channel measures which state components.
+
+Every sensor input of the frame (``meta["roles"]``: declared in a bag mapping or detected
+from the message type; role ``none`` is never an input) is read through its *fields*
+(the channels of one topic: ``position``, ``attitude``, ``velocity``, ``rate``, ``gyro``,
+``depth``). By default a role fuses what its message type carries for navigation
+(:data:`DEFAULT_FUSE`), as robot_localization's per-sensor ``*_config`` would be set for
+it; a mapping entry may say otherwise (``fuse = [...]``, ``differential = [...]``,
+``noise = {field = variance}``; ``docs/bags.md``).
+
+A field maps to state components of the 2-D or 3-D kinematic state
+(:mod:`replay.models.kinematic`) with a sign (depth = -up) and, for angles, a wrap:
+:func:`components`. A *differential* field (pose deltas of an odometry) becomes a
+body-velocity (position) or a yaw-rate (attitude) measurement at the later message:
+``v_body = R(yaw_prev)^T (p_k - p_prev) / (t_k - t_prev)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from replay.util.angles import wrap
+from replay.util.errors import ReplayError
+
+FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")
+DEFAULT_FUSE = {"gps": ("position",), "odometry": ("velocity", "rate"), "imu": ("gyro", "attitude"),
+                "depth": ("depth",), "velocity": ("velocity",), "pose": ("position", "attitude")}
+# the default noise variance of a field, by its task parameter (per component)
+NOISE_PARAM = {"position": "r_position", "attitude": "r_attitude", "velocity": "r_velocity", "rate": "r_rate",
+               "gyro": "r_rate", "depth": "r_depth"}
+
+
+def components(field: str, dims: int, role: str) -> list[tuple[int, int, float, bool]]:
+    """``(channel column, state component, sign, angle)`` of a field in the 2-D or 3-D state."""
+    if dims == 2:
+        table = {"position": [(0, 0, 1.0, False), (1, 1, 1.0, False)],
+                 "attitude": [(2, 2, 1.0, True)],
+                 "velocity": [(0, 3, 1.0, False), (1, 4, 1.0, False)],
+                 "rate": [(2, 5, 1.0, False)], "gyro": [(2, 5, 1.0, False)], "depth": []}
+    else:
+        table = {"position": [(0, 0, 1.0, False), (1, 1, 1.0, False)] + ([] if role == "gps" else [(2, 2, 1.0, False)]),
+                 "attitude": [(i, 3 + i, 1.0, True) for i in range(3)],
+                 "velocity": [(i, 6 + i, 1.0, False) for i in range(3)],
+                 "rate": [(i, 9 + i, 1.0, False) for i in range(3)], "gyro": [(i, 9 + i, 1.0, False) for i in range(3)],
+                 "depth": [(0, 2, -1.0, False)]}
+    return table[field]
+
+
+def field_channel(frame, entry: dict, field: str) -> str | None:
+    """The channel holding ``field`` of a role entry (its declared channel, or ``<entry>_<field>``,
+    or the entry's primary channel when that is the field), or None."""
+    for name in (entry["channels"].get(field), f"{entry['entry']}_{field}", entry["entry"]):
+        ch = frame.channels.get(name) if name else None
+        if ch is not None and (name == entry["channels"].get(field) or str(ch.description).endswith(f" {field}")
+                               or name == f"{entry['entry']}_{field}"):
+            return name
+    return None
+
+
+def has_absolute_position(found) -> bool:
+    """Whether an input gives absolute positions (a gps or pose input, or a declared one)."""
+    for role, entry in found:
+        fuse = entry.get("fuse") or DEFAULT_FUSE[role]
+        if "position" in fuse and "position" not in (entry.get("differential") or ()):
+            return True
+    return False
+
+
+def inputs(frame) -> list[tuple[str, dict]]:
+    """``(role, entry)`` of every sensor input of the frame, roles in a fixed order."""
+    roles = frame.meta.get("roles") or {}
+    return [(role, e) for role in DEFAULT_FUSE for e in roles.get(role, [])]
+
+
+def configured(entry: dict, role: str, where: str, absolute: bool = False) -> tuple[tuple, tuple, dict]:
+    """(fused fields, differential fields, noise) of an entry: its declaration or the role's default.
+
+    An IMU's attitude is fused by default only where no absolute position input exists (dead
+    reckoning, where it is the only heading reference): beside GPS fixes in a projected frame
+    its yaw is in the IMU's own world frame (magnetic north, an arbitrary start), as on
+    robot_localization's test1.bag, where it differs from the course over ground by about
+    150-180 degrees. Declare ``fuse = ["gyro", "attitude"]`` when it is east-north-up."""
+    default = DEFAULT_FUSE[role]
+    if role == "imu" and absolute:
+        default = ("gyro",)
+    fuse = tuple(entry.get("fuse") or default)
+    diff = tuple(entry.get("differential") or ())
+    for f in fuse + diff:
+        if f not in FIELDS:
+            raise ReplayError(f"{where}: unknown field {f!r} (known: {', '.join(FIELDS)})")
+    return tuple(f for f in fuse if f not in diff), diff, dict(entry.get("noise") or {})
+
+
+def differential(t, values, valid, attitude, field: str, where: str):
+    """(rows, (m, 3) derived measurements) of a differential field: body velocity from position
+    deltas (rotated by the previous message's attitude), or body rates from attitude deltas."""
+    idx = np.flatnonzero(valid & np.isfinite(values).all(axis=1))
+    if len(idx) < 2:
+        raise ReplayError(f"{where}: a differential {field} needs at least 2 messages (got {len(idx)})")
+    prev, cur = idx[:-1], idx[1:]
+    dt = (t[cur] - t[prev])[:, None]
+    if field == "attitude":
+        return cur, wrap(values[cur] - values[prev]) / dt
+    from replay.models.kinematic import rotation
+
+    att = attitude[prev] if attitude is not None else np.zeros((len(prev), 3))
+    R = rotation(att[:, 0], att[:, 1], att[:, 2])
+    return cur, np.einsum("kji,kj->ki", R, values[cur] - values[prev]) / dt
