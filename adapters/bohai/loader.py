@@ -93,10 +93,20 @@ def _roles(channels, meta) -> dict:
     if "gps_position" in channels:
         roles["gps"] = [{"entry": "gps_position", "source": "columns lat_gps, lon_gps", "declared": False,
                          "channels": {"position": "gps_position"}}]
+    imu = {}
     if "gyro" in channels and meta.get("gyro_attitude", {}).get("wz_yaw", 0.0) >= 0.3:
-        roles["imu"] = [{"entry": "gyro", "source": "columns wx, wy, wz", "declared": False,
-                         "channels": {"gyro": "gyro"}}]
+        imu["gyro"] = "gyro"
+    if "attitude" in channels:  # the AHRS attitude (roll, pitch, yaw in the frame's ENU convention)
+        imu["attitude"] = "attitude"
+    if imu:
+        # its yaw is east-north-up when it follows the course over ground (the adapter's yaw check)
+        enu = meta.get("yaw_course", {}).get("median_abs_rad", np.inf) < 0.5
+        roles["imu"] = [{"entry": "gyro" if "gyro" in imu else "attitude", "declared": False, "channels": imu,
+                         "source": "columns " + ", ".join(COLUMNS_OF[f] for f in imu), "attitude_enu": bool(enu)}]
     return roles
+
+
+COLUMNS_OF = {"gyro": "wx, wy, wz", "attitude": "roll, pitch, yaw"}
 
 
 def _sensor_channels(cols, t, vel, lines, report, meta) -> dict:

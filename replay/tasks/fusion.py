@@ -19,9 +19,10 @@ mapping (``docs/bags.md``, "The fusion task"):
   ``gps_every``-th fix is fed and the others are held out for scoring, as ``gps-odom`` does.
 * **Prior**: the first fed absolute position (and attitude) where there is one. Without any
   absolute position input (dead reckoning: DVL + IMU + depth, odometry + IMU), nothing
-  fixes the origin: the start position is the reference's first valid sample (the known
-  start of a dead-reckoning run), and a note says so; no later reference sample reaches a
-  filter. Heading: the first attitude measurement, else the direction between the first
+  fixes the origin: the start position is the reference's sample nearest the first sensor
+  message (the known start of a dead-reckoning run, variance ``p0_known``), and a note says
+  so; no other reference sample reaches a filter. Before the first sensor message the state
+  is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else the direction between the first
   fed fixes at least 2 m apart, else the reference's first attitude (noted).
 
 Refused in one line: a frame with no sensor input (naming the tasks that would run), no
@@ -70,6 +71,8 @@ class FusionTask(Task):
         Param("p0_attitude", float, 0.25, "prior variance of each attitude angle", unit="rad^2", **POS),
         Param("p0_velocity", float, 1.0, "prior variance of each body velocity", unit="(m/s)^2", **POS),
         Param("p0_rate", float, 0.1, "prior variance of each body rate", unit="(rad/s)^2", **POS),
+        Param("p0_known", float, 1e-4, "prior variance of a start position axis or heading taken from the "
+              "reference (dead reckoning: the known start)", unit="m^2 or rad^2", **POS),
     )
 
     def build(self, frame, rng):
@@ -93,7 +96,7 @@ class FusionTask(Task):
         for role, entry in found:
             key = f"[channels] {entry['entry']}"
             fuse, diff, noise = configured(entry, role, f"{where}: {key}", absolute)
-            if role == "imu" and "attitude" not in fuse and not entry.get("fuse"):
+            if role == "imu" and "attitude" not in fuse and not entry.get("fuse") and "attitude" in entry["channels"]:
                 notes.append(f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
                              "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)")
             for fld in fuse + diff:
@@ -147,10 +150,14 @@ class FusionTask(Task):
         model_cls = Kinematic3D if dims == 3 else Kinematic2D
         nx = len(model_cls.STATE)
         dt = np.diff(t, prepend=t[0])
+        first = int(np.flatnonzero(np.isfinite(Z).any(axis=1))[0])  # the first sensor message
+        dt[:first + 1] = 0.0  # before it nothing is known of the motion: the state is held at the start
         q = self._per_state(dims, self.q_position, self.q_attitude, self.q_velocity, self.q_rate)
         model = model_cls(dt, q, index, sign, z_angles, R)
-        x0, notes = self._prior(frame, ref, dims, nx, absolute_pos, attitude_at, notes)
-        P0 = np.diag(self._per_state(dims, self.p0_position, self.p0_attitude, self.p0_velocity, self.p0_rate))
+        x0, notes, known = self._prior(frame, ref, dims, nx, absolute_pos, attitude_at, notes, first)
+        p0 = self._per_state(dims, self.p0_position, self.p0_attitude, self.p0_velocity, self.p0_rate)
+        p0[known] = self.p0_known  # the start taken from the reference: known, as dead reckoning assumes
+        P0 = np.diag(p0)
         d = 3 if dims == 3 and ref.values.shape[1] >= 3 else 2
         valid_ref = ref.valid & np.isfinite(ref.values[:, :d]).all(axis=1)
         if holdout:
@@ -181,18 +188,25 @@ class FusionTask(Task):
         v = getattr(self, NOISE_PARAM[fld])
         return np.full(n, v), f"default {NOISE_PARAM[fld]} = {v:g}"
 
-    def _prior(self, frame, ref, dims, nx, absolute_pos, attitude_at, notes):
-        x0 = np.zeros(nx)
+    @staticmethod
+    def _nearest_valid(valid, k):
+        idx = np.flatnonzero(valid)
+        return int(idx[np.argmin(np.abs(idx - k))])
+
+    def _prior(self, frame, ref, dims, nx, absolute_pos, attitude_at, notes, first):
+        x0, known = np.zeros(nx), []
         yaw_i = 5 if dims == 3 else 2
         if absolute_pos is not None:
             k, vals, comps, valid = absolute_pos
             for col, state, sgn, _ in comps:
                 x0[state] = sgn * vals[k, col]
         else:
-            k = int(np.flatnonzero(ref.valid)[0])
-            x0[:min(dims, ref.values.shape[1])] = ref.values[k, :dims]
+            k = self._nearest_valid(ref.valid, first)
+            d = min(dims, ref.values.shape[1])
+            x0[:d] = ref.values[k, :d]
+            known += list(range(d))
             notes = notes + ["task fusion: no absolute position input (dead reckoning): the start position is "
-                             f"the reference's first valid sample (t = {frame.t[k]:.3f} s); no other reference "
+                             f"the reference's sample nearest the first sensor message (t = {frame.t[k]:.3f} s); no other reference "
                              "sample reaches a filter"]
         if attitude_at is not None:
             k, vals, comps = attitude_at
@@ -209,7 +223,9 @@ class FusionTask(Task):
         else:
             att = frame.reference.get("position_attitude")
             if att is not None and att.valid.any():
-                k = int(np.flatnonzero(att.valid)[0])
+                k = self._nearest_valid(att.valid, first)
                 x0[yaw_i] = att.values[k, 2]
-                notes = notes + ["task fusion: no attitude input: the start heading is the reference's first"]
-        return x0, notes
+                known.append(yaw_i)
+                notes = notes + ["task fusion: no attitude input: the start heading is the reference's (nearest the first "
+                                 "sensor message)"]
+        return x0, notes, known

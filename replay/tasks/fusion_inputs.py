@@ -78,9 +78,10 @@ def configured(entry: dict, role: str, where: str, absolute: bool = False) -> tu
     reckoning, where it is the only heading reference): beside GPS fixes in a projected frame
     its yaw is in the IMU's own world frame (magnetic north, an arbitrary start), as on
     robot_localization's test1.bag, where it differs from the course over ground by about
-    150-180 degrees. Declare ``fuse = ["gyro", "attitude"]`` when it is east-north-up."""
+    150-180 degrees. Declare ``fuse = ["gyro", "attitude"]`` when it is east-north-up; an
+    adapter that has checked it (Bohai: yaw against the course) marks it ``attitude_enu``."""
     default = DEFAULT_FUSE[role]
-    if role == "imu" and absolute:
+    if role == "imu" and absolute and not entry.get("attitude_enu"):
         default = ("gyro",)
     fuse = tuple(entry.get("fuse") or default)
     diff = tuple(entry.get("differential") or ())
