@@ -158,9 +158,9 @@ def check(man, path, allow_modules=()) -> None:
         extra = sorted(set(cfg[key]) - set(filters))
         if extra:
             raise bad(f"config.{key}", f"{', '.join(extra)} not among config.filters ({', '.join(filters)})")
+    _check_dataset(cfg, bad)
     for name in filters:
         _check_filter(cfg, results, name, bad)
-    _check_dataset(cfg, bad)
 
 
 def check_sources(cfg: dict, path, allow_modules=()) -> None:
@@ -289,7 +289,7 @@ def differences(man: dict, ev) -> list[str]:
         for k in sorted(set(old) - set(new)):
             out.append(f"{r.name}.{k}: {_show(old[k])} -> not computed")
         rtol = rerun_rtol(r.name)
-        for k in sorted(set(old) & set(new)):
+        for k in [k for k in old if k in new]:  # in the leaderboard's order: the headline columns first
             if not same(old[k], new[k], rtol):
                 out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}"
                            + (f" (beyond its rerun tolerance {rtol:g})" if rtol and _real(old[k], new[k]) else ""))
