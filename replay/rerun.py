@@ -42,9 +42,10 @@ reproduced: the recorded numbers are then those of the edited configuration too.
 Values are compared exactly (NaN equals NaN), except for a filter whose class
 declares ``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's
 swarm filters: another CPU's floating-point reductions give another trajectory of
-the swarm), whose real-valued columns must agree to that relative tolerance;
-its counts (``runs``, ``lost``, ``diverged``, ...), flags and every other column stay
-exact. The tolerance comes from the code, not from the manifest (which records it
+the swarm), whose real-valued columns must agree to that relative tolerance (a
+paired column ``<m>_vs_<baseline>``, a difference of two means, to the sum of both
+means' tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
+...), flags and every other column stay exact. The tolerance comes from the code, not from the manifest (which records it
 for the reader, under ``results.<filter>.rerun_rtol``), so an edited manifest
 cannot loosen it.
 """
@@ -288,22 +289,41 @@ def differences(man: dict, ev) -> list[str]:
             out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {_show(new[k])}")
         for k in sorted(set(old) - set(new)):
             out.append(f"{r.name}.{k}: {_show(old[k])} -> not computed")
-        rtol = rerun_rtol(r.name)
         for k in [k for k in old if k in new]:  # in the leaderboard's order: the headline columns first
-            if not same(old[k], new[k], rtol):
+            rtol, atol = _tolerance(man["results"], r.name, k)
+            if not same(old[k], new[k], rtol, atol):
+                loose = f"{rtol:g}" if rtol else f"±{atol:g}" if atol else ""
                 out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}"
-                           + (f" (beyond its rerun tolerance {rtol:g})" if rtol and _real(old[k], new[k]) else ""))
+                           + (f" (beyond its rerun tolerance {loose})" if loose and _real(old[k], new[k]) else ""))
     return out
 
 
-def same(recorded, rerun, rtol: float = 0.0) -> bool:
+def _tolerance(results: dict, name: str, key: str) -> tuple[float, float]:
+    """(relative, absolute) tolerance of the column ``key`` of filter ``name``'s row: its filter's
+    ``rerun_rtol``; for a paired column ``<m>_vs_<baseline>[_ci95]``, a difference of two means
+    each within its filter's tolerance, the absolute bound ``rtol_row |m_row| + rtol_base |m_base|``."""
+    metric, vs, rest = key.partition("_vs_")
+    if not vs:
+        return rerun_rtol(name), 0.0
+    label = rest[:-5] if rest.endswith("_ci95") else rest
+    base = next((f for f, row in results.items() if isinstance(row, dict) and row.get("label") == label), None)
+    atol = 0.0
+    for f in (name, base):
+        value = results.get(f, {}).get(metric) if f is not None else None
+        if _is(value, _NUM) and value == value and rerun_rtol(f) > 0:
+            atol += rerun_rtol(f) * abs(value)
+    return 0.0, atol
+
+
+def same(recorded, rerun, rtol: float = 0.0, atol: float = 0.0) -> bool:
     """Whether a rerun's value reproduces the recorded one: two numbers of equal value (NaN
-    equals NaN; a bool is no number), or, both real (not integers: counts are exact) and
-    ``rtol`` > 0, within that relative tolerance; anything else equal and of one type."""
+    equals NaN; a bool is no number), or, both real (not integers: counts are exact), within
+    ``rtol`` relative plus ``atol`` absolute tolerance (both 0: exact); anything else equal
+    and of one type."""
     if _is(recorded, _NUM) and _is(rerun, _NUM):
         if recorded == rerun or (recorded != recorded and rerun != rerun):
             return True
-        return rtol > 0 and _real(recorded, rerun) and abs(rerun - recorded) <= rtol * abs(recorded)
+        return _real(recorded, rerun) and abs(rerun - recorded) <= rtol * abs(recorded) + atol
     return type(recorded) is type(rerun) and recorded == rerun
 
 

@@ -309,3 +309,32 @@ def test_allowed_module_is_rerun(tmp_path, monkeypatch):
     assert "replay_plug_ekf" not in sys.modules
     res = assert_ok(["rerun", "-q", path, "--allow-module", "replay_plug_ekf"])
     assert "reproduced: every recorded result" in res.stdout
+
+
+def test_tolerance_of_a_chaotic_filter_spares_no_count(monkeypatch):
+    """A filter declaring RERUN_RTOL: its real columns to that relative tolerance, a paired
+    column to the sum of both means' tolerances, its counts exactly; other filters exactly."""
+    from types import SimpleNamespace
+
+    from replay.filters.kalman import EKF
+
+    monkeypatch.setattr(EKF, "RERUN_RTOL", 0.1, raising=False)
+    results = {"ekf": {"label": "ekf", "config_hash": "a", "pos_rmse": 2.0, "pos_rmse_vs_ekf": "", "lost": 1},
+               "ukf": {"label": "ukf", "config_hash": "b", "pos_rmse": 1.9, "pos_rmse_vs_ekf": -0.1, "lost": 0}}
+    assert rerun._tolerance(results, "ekf", "pos_rmse") == (0.1, 0.0)
+    assert rerun._tolerance(results, "ukf", "pos_rmse") == (0.0, 0.0)
+    assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf") == (0.0, pytest.approx(0.2))
+    assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf_ci95") == (0.0, pytest.approx(0.2))
+    man = {"config": {"dataset_sha256": None, "config_hashes": {"ekf": "a", "ukf": "b"}}, "results": results}
+
+    def ev(ekf, ukf):
+        return SimpleNamespace(config={"dataset_sha256": None}, results=[
+            SimpleNamespace(name="ekf", config_hash="a", summary=dict(results["ekf"], **ekf)),
+            SimpleNamespace(name="ukf", config_hash="b", summary=dict(results["ukf"], **ukf))])
+
+    assert rerun.differences(man, ev({"pos_rmse": 2.19}, {"pos_rmse_vs_ekf": -0.29})) == []
+    assert rerun.differences(man, ev({"pos_rmse": 2.21, "lost": 2}, {"pos_rmse": 1.9000001})) == [
+        "ekf.pos_rmse: 2.0 -> 2.21 (beyond its rerun tolerance 0.1)", "ekf.lost: 1 -> 2",
+        "ukf.pos_rmse: 1.9 -> 1.9000001"]
+    assert rerun.differences(man, ev({}, {"pos_rmse_vs_ekf": -0.31})) == [
+        "ukf.pos_rmse_vs_ekf: -0.1 -> -0.31 (beyond its rerun tolerance ±0.2)"]
