@@ -338,3 +338,17 @@ def test_tolerance_of_a_chaotic_filter_spares_no_count(monkeypatch):
         "ukf.pos_rmse: 1.9 -> 1.9000001"]
     assert rerun.differences(man, ev({}, {"pos_rmse_vs_ekf": -0.31})) == [
         "ukf.pos_rmse_vs_ekf: -0.1 -> -0.31 (beyond its rerun tolerance ±0.2)"]
+
+
+register("rerun-module-dataset")
+
+
+def test_dataset_named_like_a_module_imports_nothing(manifest, tmp_path, monkeypatch):
+    """Only registered datasets name a generator; any other id is a file path."""
+    name = "replay_evil_dataset"
+    marker = _evil(tmp_path, monkeypatch, name)
+    m = copy.deepcopy(manifest)
+    m["config"].update(dataset=f"{name}:Evil", dataset_sha256="0" * 64)
+    path = _write(tmp_path, rehash(m))
+    assert_refused(["rerun", "-q", path], rf"{name}:Evil")
+    assert not marker.exists() and name not in sys.modules
