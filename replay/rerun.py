@@ -45,9 +45,9 @@ swarm filters: another CPU's floating-point reductions give another trajectory o
 the swarm), whose real-valued columns must agree to that relative tolerance (a
 paired column ``<m>_vs_<baseline>``, a difference of two means, to the sum of both
 means' tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
-...), flags and every other column stay exact. The tolerance comes from the code, not from the manifest (which records it
-for the reader, under ``results.<filter>.rerun_rtol``), so an edited manifest
-cannot loosen it.
+...), flags and every other column stay exact. The tolerance comes from the code,
+not from the manifest (which records it for the reader, under
+``results.<filter>.rerun_rtol``), so an edited manifest cannot loosen it.
 """
 from __future__ import annotations
 
