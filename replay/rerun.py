@@ -25,7 +25,8 @@ the manifest and the key:
 
 :func:`repeat` runs the configuration again (:func:`replay.evaluate.evaluate`),
 and :func:`verify` compares: the same dataset checksum, the same configuration
-(every key of :data:`CONFIG` but the checksum and hashes, compared on their own),
+(every key of :data:`CONFIG` but the checksum and hashes, compared on their own, and
+the ``baseline`` of the paired columns, null for the first filter),
 the same configuration hashes, and each filter's whole leaderboard row
 (:mod:`replay.summary`): the same set of columns and every value equal to the
 recorded one — results (RMSEs, ``ate``, ``lost``, ``lost_share``, ``diverged``,
@@ -150,6 +151,9 @@ def check(man, path, allow_modules=()) -> None:
             raise bad("config.filters", f"expected filter names, got {name!r}")
     if len(set(filters)) != len(filters):
         raise bad("config.filters", f"a filter is listed twice ({', '.join(filters)})")
+    baseline = cfg.get("baseline")  # recorded since the paired columns are compared; null: the first filter
+    if baseline is not None and baseline not in filters:
+        raise bad("config.baseline", f"{baseline!r:.60} is not among config.filters ({', '.join(filters)})")
     check_sources(cfg, path, allow_modules)
     extra = sorted(set(results) - set(filters))
     if extra:
@@ -254,7 +258,7 @@ def repeat(man: dict, data_dir=None, progress=None):
                     task_params=cfg["task_params"], filter_params=cfg["filter_params"],
                     dataset_params=cfg["dataset_params"], adapter=cfg["adapter"],
                     alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"],
-                    progress=progress)
+                    baseline=cfg.get("baseline"), progress=progress)
 
 
 def rerun_rtol(name: str) -> float:
@@ -275,7 +279,7 @@ def differences(man: dict, ev) -> list[str]:
     if cfg["dataset_sha256"] != ev.config.get("dataset_sha256"):
         out.append(f"dataset checksum {cfg['dataset_sha256']} -> {ev.config.get('dataset_sha256')}")
     again = _as_written(ev.config)
-    for key in CONFIG:
+    for key in [*CONFIG, "baseline"]:
         if key not in ("dataset_sha256", "config_hashes") and again.get(key) != cfg.get(key):
             out.append(f"config.{key}: {_show(cfg.get(key))} -> {_show(again.get(key))}")
     for r in ev.results:

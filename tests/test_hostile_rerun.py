@@ -162,6 +162,7 @@ PARAMETERS = {
     "seed": (_set("seed", 1), "ekf.pos_rmse"),
     "runs": (_set("runs", 3), "ekf.runs"),
     "filters-order": (_set("filters", ["ukf", "ekf"]), "ekf.pos_rmse_vs_ukf"),
+    "baseline": (_set("baseline", "ukf"), "ekf.pos_rmse_vs_ukf"),
     "task.lost_threshold": (_set("task_params", "lost_threshold", 20.0), "ekf.lost"),
     "task.lost_steps": (_set("task_params", "lost_steps", 40), "ekf.lost"),
     "task.Q": (_set("task_params", "Q", [2.0, 2.0, 2.0, 0.2, 0.02, 0.02]), "ekf.pos_rmse"),
@@ -352,3 +353,17 @@ def test_dataset_named_like_a_module_imports_nothing(manifest, tmp_path, monkeyp
     path = _write(tmp_path, rehash(m))
     assert_refused(["rerun", "-q", path], rf"{name}:Evil")
     assert not marker.exists() and name not in sys.modules
+
+
+def test_manifest_with_a_baseline_is_reproduced(tmp_path):
+    """--baseline fixes the paired columns: recorded, repeated and compared."""
+    assert_ok(["eval", "sim/auv-sonar", "-f", "ekf,ukf", "--runs", "2", "--first", "30", "--baseline", "ukf",
+               "-o", tmp_path / "ev", "-q"])
+    path = tmp_path / "ev" / "manifest.json"
+    man = json.loads(path.read_text())
+    assert man["config"]["baseline"] == "ukf" and "--baseline ukf" in man["command"]
+    assert isinstance(man["results"]["ekf"]["pos_rmse_vs_ukf"], float)
+    assert "reproduced: every recorded result" in assert_ok(["rerun", "-q", path]).stdout
+    man["config"]["baseline"] = "pf"
+    path.write_text(json.dumps(man))
+    assert_refused(["rerun", "-q", path], r"config\.baseline: 'pf' is not among config\.filters \(ekf, ukf\)$")
