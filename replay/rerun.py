@@ -43,9 +43,10 @@ reproduced: the recorded numbers are then those of the edited configuration too.
 Values are compared exactly (NaN equals NaN), except for a filter whose class
 declares ``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's
 swarm filters: another CPU's floating-point reductions give another trajectory of
-the swarm), whose real-valued columns must agree to that relative tolerance (a
-paired column ``<m>_vs_<baseline>``, a difference of two means, to the sum of both
-means' tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
+the swarm), whose real-valued columns must agree to that relative tolerance (an
+interval ``<m>_ci95`` also to that share of its mean ``m``; a paired column
+``<m>_vs_<baseline>``, a difference of two means, to the sum of both means'
+tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
 ...), flags and every other column stay exact. The tolerance comes from the code,
 not from the manifest (which records it for the reader, under
 ``results.<filter>.rerun_rtol``), so an edited manifest cannot loosen it.
@@ -304,11 +305,18 @@ def differences(man: dict, ev) -> list[str]:
 
 def _tolerance(results: dict, name: str, key: str) -> tuple[float, float]:
     """(relative, absolute) tolerance of the column ``key`` of filter ``name``'s row: its filter's
-    ``rerun_rtol``; for a paired column ``<m>_vs_<baseline>[_ci95]``, a difference of two means
-    each within its filter's tolerance, the absolute bound ``rtol_row |m_row| + rtol_base |m_base|``."""
+    ``rerun_rtol``, plus ``rtol |m|`` for the interval ``<m>_ci95`` of a mean ``m`` (a half-width
+    estimated from few runs moves on the scale of its mean: IGWO-STCPF's ``pitch_rmse_ci95``,
+    20 runs, moved 40 % where ``pitch_rmse`` moved 19 % when P0 was nudged by 1e-12); for a
+    paired column ``<m>_vs_<baseline>[_ci95]``, a difference of two means each within its
+    filter's tolerance, the absolute bound ``rtol_row |m_row| + rtol_base |m_base|``."""
     metric, vs, rest = key.partition("_vs_")
     if not vs:
-        return rerun_rtol(name), 0.0
+        rtol = rerun_rtol(name)
+        mean = results.get(name, {}).get(key[:-5]) if key.endswith("_ci95") and rtol > 0 else None
+        if _is(mean, _NUM) and mean == mean:  # an interval moves on the scale of its mean
+            return rtol, rtol * abs(mean)
+        return rtol, 0.0
     label = rest[:-5] if rest.endswith("_ci95") else rest
     base = next((f for f, row in results.items() if isinstance(row, dict) and row.get("label") == label), None)
     atol = 0.0

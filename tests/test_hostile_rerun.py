@@ -323,6 +323,8 @@ def test_tolerance_of_a_chaotic_filter_spares_no_count(monkeypatch):
     results = {"ekf": {"label": "ekf", "config_hash": "a", "pos_rmse": 2.0, "pos_rmse_vs_ekf": "", "lost": 1},
                "ukf": {"label": "ukf", "config_hash": "b", "pos_rmse": 1.9, "pos_rmse_vs_ekf": -0.1, "lost": 0}}
     assert rerun._tolerance(results, "ekf", "pos_rmse") == (0.1, 0.0)
+    assert rerun._tolerance(results, "ekf", "pos_rmse_ci95") == (0.1, pytest.approx(0.2))
+    assert rerun._tolerance(results, "ukf", "pos_rmse_ci95") == (0.0, 0.0)
     assert rerun._tolerance(results, "ukf", "pos_rmse") == (0.0, 0.0)
     assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf") == (0.0, pytest.approx(0.2))
     assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf_ci95") == (0.0, pytest.approx(0.2))
