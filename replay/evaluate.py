@@ -177,7 +177,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "filters": filters, "filter_params": {r.name: r.params for r in results},
         "runs": runs, "seed": seed, "first": first, "dataset_params": configs[0].dataset_params,
         "adapter": adapter, "alignment": alignment, "divergence_threshold": divergence_threshold,
-        "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
+        "baseline": baseline, "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
         "config_hashes": {r.name: r.config_hash for r in results},
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
@@ -218,6 +218,8 @@ def command_line(config: dict) -> str:
         parts += ["--first", str(config["first"])]
     if config.get("adapter"):
         parts += ["--adapter", config["adapter"]]
+    if config.get("baseline"):
+        parts += ["--baseline", config["baseline"]]
     if (config.get("dataset_params") or {}).get("mapping"):
         parts += ["--mapping", str(config["dataset_params"]["mapping"])]
     try:  # name only the dataset parameters that differ from their declared defaults

@@ -1,4 +1,4 @@
-"""``replay rerun MANIFEST``: repeat a recorded ``replay eval`` and check every RMSE.
+"""``replay rerun MANIFEST``: repeat a recorded ``replay eval`` and check every recorded result.
 
 A manifest is accepted only when it can be trusted to describe a run
 (:func:`load`), checked before any computation, each problem one line naming
@@ -11,19 +11,44 @@ the manifest and the key:
   (:func:`replay.pipeline.config_hash`), equals the recorded one
   (``config.config_hashes`` and the result's ``config_hash``): an edited
   configuration is not the one whose numbers are recorded;
-* every filter has its recorded result, with its RMSE values (numbers);
+* it names no code to import (:func:`check_sources`): each filter, the task and the
+  adapter is a built-in, an installed entry point (``replay.filters``, ...) or a name
+  of this session; a ``package.module:Class`` name is refused, before anything is
+  imported, unless its module is allowed (``replay rerun --allow-module package.module``);
+* every filter of ``config.filters`` has its recorded result and no other filter
+  has one, with its RMSE values (numbers), and the columns that repeat the
+  configuration (``dataset``, ``task``, ``filter``, ``params``, ``seed``, ``first``,
+  ``alignment``) agree with it;
 * the dataset's checksum is recorded (``dataset_sha256``, 64 hex digits); it may
   be null only for a simulated dataset, which the simulator and its recorded
   parameters identify.
 
 :func:`repeat` runs the configuration again (:func:`replay.evaluate.evaluate`),
 and :func:`verify` compares: the same dataset checksum, the same configuration
-hashes, the same set of RMSE keys, and every RMSE equal to the recorded value
-(exactly; NaN equals NaN) — except for a filter whose class declares
-``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's swarm
-filters: another CPU's floating-point reductions give another trajectory of the
-swarm), whose values must agree to that relative tolerance. The tolerance comes
-from the code, not from the manifest (which records it for the reader, under
+(every key of :data:`CONFIG` but the checksum and hashes, compared on their own, and
+the ``baseline`` of the paired columns, null for the first filter),
+the same configuration hashes, and each filter's whole leaderboard row
+(:mod:`replay.summary`): the same set of columns and every value equal to the
+recorded one — results (RMSEs, ``ate``, ``lost``, ``lost_share``, ``diverged``,
+``failed``, ``nees``, ``nis``, ``final_err``, ``drift_pct``, medians, ``*_ci95``,
+ANEES/ANIS and their flags, ``scored``, ``masked``, the paired columns, ...) and the
+columns that repeat the configuration — except :data:`NOT_COMPARED`: timing
+(``us_per_step``), the package ``version`` and ``rerun_rtol`` (recorded for the
+reader). Any parameter that changes a result therefore fails the rerun even when
+the manifest's hashes were recomputed after editing it: the rerun of the edited
+configuration does not give the recorded numbers. (An edit that changes no recorded
+number, such as a ``lost_threshold`` that classifies every run as before, is
+reproduced: the recorded numbers are then those of the edited configuration too.)
+
+Values are compared exactly (NaN equals NaN), except for a filter whose class
+declares ``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's
+swarm filters: another CPU's floating-point reductions give another trajectory of
+the swarm), whose real-valued columns must agree to that relative tolerance (an
+interval ``<m>_ci95`` also to that share of its mean ``m``; a paired column
+``<m>_vs_<baseline>``, a difference of two means, to the sum of both means'
+tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
+...), flags and every other column stay exact. The tolerance comes from the code,
+not from the manifest (which records it for the reader, under
 ``results.<filter>.rerun_rtol``), so an edited manifest cannot loosen it.
 """
 from __future__ import annotations
@@ -33,12 +58,16 @@ import re
 from pathlib import Path
 
 from replay.align import ALIGNMENTS
-from replay.pipeline import Config, config_hash, is_sim
+from replay.pipeline import Config, config_hash, is_recorded, is_sim
+from replay.summary import TIMING
 from replay.util.errors import ReplayError
+from replay.util.plugins import TARGET
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
 HASH = re.compile(r"^[0-9a-f]{16}$")
 _NUM = (int, float)
+NOT_COMPARED = frozenset(TIMING) | {"version", "rerun_rtol"}  # row columns a rerun does not compare
+ECHOES = ("dataset", "task", "filter", "seed", "first", "alignment")  # row columns that repeat the configuration
 
 
 def _is(value, kinds) -> bool:
@@ -67,8 +96,10 @@ CONFIG = {
 }
 
 
-def load(path) -> dict:
-    """The manifest at ``path``, checked (module docstring); raises a one-line :class:`ReplayError`."""
+def load(path, allow_modules=()) -> dict:
+    """The manifest at ``path``, checked (module docstring); raises a one-line :class:`ReplayError`.
+
+    ``allow_modules``: modules a ``module:Class`` name of the manifest may import (:func:`check_sources`)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -82,11 +113,11 @@ def load(path) -> dict:
         raise ReplayError(f"{path}: not a replay manifest (not UTF-8 text)") from None
     except ValueError as err:
         raise ReplayError(f"{path}: not a replay manifest (not valid JSON: {str(err).splitlines()[0]})") from None
-    check(man, path)
+    check(man, path, allow_modules)
     return man
 
 
-def check(man, path) -> None:
+def check(man, path, allow_modules=()) -> None:
     """Refuse, in one line, a manifest that cannot be trusted (module docstring)."""
     def bad(key, what):
         return ReplayError(f"{path}: {key}: {what}")
@@ -121,13 +152,40 @@ def check(man, path) -> None:
             raise bad("config.filters", f"expected filter names, got {name!r}")
     if len(set(filters)) != len(filters):
         raise bad("config.filters", f"a filter is listed twice ({', '.join(filters)})")
+    baseline = cfg.get("baseline")  # recorded since the paired columns are compared; null: the first filter
+    if baseline is not None and baseline not in filters:
+        raise bad("config.baseline", f"{baseline!r:.60} is not among config.filters ({', '.join(filters)})")
+    check_sources(cfg, path, allow_modules)
+    extra = sorted(set(results) - set(filters))
+    if extra:
+        raise bad("results", f"{', '.join(map(str, extra))} not among config.filters ({', '.join(filters)}): "
+                             "a result the rerun would not check")
     for key in ("filter_params", "config_hashes"):
         extra = sorted(set(cfg[key]) - set(filters))
         if extra:
             raise bad(f"config.{key}", f"{', '.join(extra)} not among config.filters ({', '.join(filters)})")
+    _check_dataset(cfg, bad)
     for name in filters:
         _check_filter(cfg, results, name, bad)
-    _check_dataset(cfg, bad)
+
+
+def check_sources(cfg: dict, path, allow_modules=()) -> None:
+    """Refuse a manifest whose filter, task or adapter is a ``module:attribute`` name of a
+    module not in ``allow_modules``: resolving it would import that module (run its code).
+
+    Built-in names, installed entry points (their distributions were installed by the user)
+    and names registered in this session are resolved without such a name; nothing is
+    imported here. A manifest received from elsewhere thus runs only code already chosen."""
+    allowed = {allow_modules} if isinstance(allow_modules, str) else set(allow_modules or ())
+    named = [("config.filters", "filter", n) for n in cfg["filters"] if not is_recorded(n)]
+    named += [("config.task", "task", cfg["task"]), ("config.adapter", "adapter", cfg["adapter"])]
+    for key, kind, name in named:
+        if isinstance(name, str) and TARGET.fullmatch(name):
+            module = name.partition(":")[0]
+            if module not in allowed:
+                raise ReplayError(f"{path}: {key}: {name!r:.120} would import the module {module}: a rerun loads "
+                                  f"only built-in and installed (entry-point) {kind}s; if you trust that module, "
+                                  f"pass --allow-module {module}")
 
 
 def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
@@ -153,6 +211,7 @@ def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
     if res.get("config_hash") != recorded:
         raise bad(f"results.{name}.config_hash", f"{res.get('config_hash')!r} is not the configuration's "
                                                  f"hash {recorded}")
+    _check_echoes(cfg, res, name, bad)
     expected = ["pos_rmse"] + [k[:-5] for k in res if k.endswith("_rmse_ci95")]  # each mean beside its interval
     for key in expected:
         if key not in res:
@@ -160,6 +219,18 @@ def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
     for key, value in res.items():
         if key.endswith("_rmse") and not _is(value, _NUM):
             raise bad(f"results.{name}.{key}", f"expected a number, got {type(value).__name__} {value!r:.40}")
+
+
+def _check_echoes(cfg: dict, res: dict, name: str, bad) -> None:
+    """The result's columns that repeat the configuration agree with it (a hand edit of one side)."""
+    wants = {key: (name if key == "filter" else cfg[key]) for key in ECHOES}
+    wants["first"] = cfg["first"] or ""  # as the leaderboard writes it
+    wants["params"] = json.dumps(cfg["filter_params"][name], sort_keys=True, separators=(",", ":"))
+    for key, want in wants.items():
+        if key in res and res[key] != want:  # a deleted column is found by the rerun
+            where = {"filter": "config.filters", "params": f"config.filter_params.{name}"}.get(key, f"config.{key}")
+            raise bad(f"results.{name}.{key}", f"{res[key]!r:.80} does not repeat {where} ({want!r:.80}): "
+                                               "the manifest was edited or damaged")
 
 
 def _check_dataset(cfg: dict, bad) -> None:
@@ -188,7 +259,7 @@ def repeat(man: dict, data_dir=None, progress=None):
                     task_params=cfg["task_params"], filter_params=cfg["filter_params"],
                     dataset_params=cfg["dataset_params"], adapter=cfg["adapter"],
                     alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"],
-                    progress=progress)
+                    baseline=cfg.get("baseline"), progress=progress)
 
 
 def rerun_rtol(name: str) -> float:
@@ -203,32 +274,91 @@ def rerun_rtol(name: str) -> float:
 
 
 def differences(man: dict, ev) -> list[str]:
-    """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything)."""
+    """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything):
+    the dataset checksum, the configuration, the hashes and every compared column (module docstring)."""
     cfg, out = man["config"], []
     if cfg["dataset_sha256"] != ev.config.get("dataset_sha256"):
         out.append(f"dataset checksum {cfg['dataset_sha256']} -> {ev.config.get('dataset_sha256')}")
+    again = _as_written(ev.config)
+    for key in [*CONFIG, "baseline"]:
+        if key not in ("dataset_sha256", "config_hashes") and again.get(key) != cfg.get(key):
+            out.append(f"config.{key}: {_show(cfg.get(key))} -> {_show(again.get(key))}")
     for r in ev.results:
         was = man["results"][r.name]
         if r.config_hash != cfg["config_hashes"][r.name]:
             out.append(f"{r.name}: configuration {cfg['config_hashes'][r.name]} -> {r.config_hash} "
                        f"(this version fills in other parameters)")
-        new = {k: v for k, v in r.summary.items() if k.endswith("_rmse")}
-        old = {k: v for k, v in was.items() if k.endswith("_rmse")}
+        new = {k: v for k, v in _as_written(r.summary).items() if k not in NOT_COMPARED}
+        old = {k: v for k, v in was.items() if k not in NOT_COMPARED}
         for k in sorted(set(new) - set(old)):
-            out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {new[k]}")
+            out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {_show(new[k])}")
         for k in sorted(set(old) - set(new)):
-            out.append(f"{r.name}.{k}: {old[k]} -> not computed")
-        rtol = rerun_rtol(r.name)
-        for k in sorted(set(old) & set(new)):
-            v, w = new[k], old[k]
-            if not (v == w or (v != v and w != w) or (rtol > 0 and abs(v - w) <= rtol * abs(w))):
-                out.append(f"{r.name}.{k}: {w} -> {v}" + (f" (beyond its rerun tolerance {rtol:g})" if rtol else ""))
+            out.append(f"{r.name}.{k}: {_show(old[k])} -> not computed")
+        for k in [k for k in old if k in new]:  # in the leaderboard's order: the headline columns first
+            rtol, atol = _tolerance(man["results"], r.name, k)
+            if not same(old[k], new[k], rtol, atol):
+                loose = f"{rtol:g}" if rtol else f"±{atol:g}" if atol else ""
+                out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}"
+                           + (f" (beyond its rerun tolerance {loose})" if loose and _real(old[k], new[k]) else ""))
     return out
+
+
+def _tolerance(results: dict, name: str, key: str) -> tuple[float, float]:
+    """(relative, absolute) tolerance of the column ``key`` of filter ``name``'s row: its filter's
+    ``rerun_rtol``, plus ``rtol |m|`` for the interval ``<m>_ci95`` of a mean ``m`` (a half-width
+    estimated from few runs moves on the scale of its mean: IGWO-STCPF's ``pitch_rmse_ci95``,
+    20 runs, moved 40 % where ``pitch_rmse`` moved 19 % when P0 was nudged by 1e-12); for a
+    paired column ``<m>_vs_<baseline>[_ci95]``, a difference of two means each within its
+    filter's tolerance, the absolute bound ``rtol_row |m_row| + rtol_base |m_base|``."""
+    metric, vs, rest = key.partition("_vs_")
+    if not vs:
+        rtol = rerun_rtol(name)
+        mean = results.get(name, {}).get(key[:-5]) if key.endswith("_ci95") and rtol > 0 else None
+        if _is(mean, _NUM) and mean == mean:  # an interval moves on the scale of its mean
+            return rtol, rtol * abs(mean)
+        return rtol, 0.0
+    label = rest[:-5] if rest.endswith("_ci95") else rest
+    base = next((f for f, row in results.items() if isinstance(row, dict) and row.get("label") == label), None)
+    atol = 0.0
+    for f in (name, base):
+        value = results.get(f, {}).get(metric) if f is not None else None
+        if _is(value, _NUM) and value == value and rerun_rtol(f) > 0:
+            atol += rerun_rtol(f) * abs(value)
+    return 0.0, atol
+
+
+def same(recorded, rerun, rtol: float = 0.0, atol: float = 0.0) -> bool:
+    """Whether a rerun's value reproduces the recorded one: two numbers of equal value (NaN
+    equals NaN; a bool is no number), or, both real (not integers: counts are exact), within
+    ``rtol`` relative plus ``atol`` absolute tolerance (both 0: exact); anything else equal
+    and of one type."""
+    if _is(recorded, _NUM) and _is(rerun, _NUM):
+        if recorded == rerun or (recorded != recorded and rerun != rerun):
+            return True
+        return _real(recorded, rerun) and abs(rerun - recorded) <= rtol * abs(recorded) + atol
+    return type(recorded) is type(rerun) and recorded == rerun
+
+
+def _real(a, b) -> bool:
+    """Both are JSON real numbers (floats; the counts are integers and compared exactly)."""
+    return type(a) is float and type(b) is float
+
+
+def _as_written(obj):
+    """``obj`` as the manifest records it (JSON, as :func:`replay.outputs.files.write_all` writes it)."""
+    return json.loads(json.dumps(obj, default=str))
+
+
+def _show(value) -> str:
+    """A value for the one-line verdict (strings quoted, long values cut)."""
+    text = repr(value) if isinstance(value, str) else str(value)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def verify(man: dict, ev, path) -> None:
     """Raise a one-line :class:`ReplayError` unless ``ev`` reproduces the manifest exactly."""
     diff = differences(man, ev)
     if diff:
-        more = f" (and {len(diff) - 5} more)" if len(diff) > 5 else ""
+        more = (f" (and {len(diff) - 5} more: {', '.join(d.partition(':')[0] for d in diff[5:])})"
+                if len(diff) > 5 else "")
         raise ReplayError(f"{path}: not reproduced: " + "; ".join(diff[:5]) + more)

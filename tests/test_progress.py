@@ -119,9 +119,9 @@ def test_rerun_and_export_show_a_bar_on_a_terminal_and_nothing_with_q(tmp_path):
     assert done.returncode == 0, done.stderr
     rc, text = _in_pty(["rerun", "run/manifest.json"], tmp_path)
     assert rc == 0, text
-    assert "rerun: 100%|####" in text and "6/6 runs" in text and "reproduced: every RMSE" in text
+    assert "rerun: 100%|####" in text and "6/6 runs" in text and "reproduced: every recorded result" in text
     rc, text = _in_pty(["rerun", "run/manifest.json", "-q"], tmp_path)
-    assert rc == 0 and "rerun:" not in text and "%|" not in text and "reproduced: every RMSE" in text
+    assert rc == 0 and "rerun:" not in text and "%|" not in text and "reproduced: every recorded result" in text
     rc, text = _in_pty(["export", "run", "--mcap", "a.mcap", "--ros2-bag", "a_bag"], tmp_path)
     assert rc == 0, text
     n_mcap = int(text.split("wrote a.mcap (")[1].split()[0])
