@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.evaluate import Evaluation, manifest
+from replay.util.errors import ReplayError
 from replay.summary import columns, consistency_cell, lost_cell
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
 from replay.score import rmse_over_time
@@ -116,6 +117,46 @@ def legacy_output(path: Path) -> bool:
     return True
 
 
+CLAIM = ".replay-claim"  # in a numbered directory being computed: its process's pid, locked (outputs/rundirs.py)
+
+
+def claim_holder(path) -> int | None:
+    """The pid of the live process computing into ``path`` (a directory holding only its claim;
+    -1 when the pid is not yet written), None if it is not a claimed directory or its process died."""
+    from replay.campaign.lock import held, holder
+
+    try:
+        if os.listdir(path) != [CLAIM]:
+            return None
+    except OSError:
+        return None
+    pid = holder(Path(path) / CLAIM)
+    if pid == str(os.getpid()):
+        return os.getpid()
+    if not held(Path(path) / CLAIM):
+        return None
+    return int(pid) if pid.isdigit() else -1
+
+
+def refuse_claimed(path, what: str = "--out") -> None:
+    """Refuse (one line naming its pid) a directory another live process has claimed."""
+    pid = claim_holder(path)
+    if pid is not None and pid != os.getpid():
+        raise ReplayError(f"{what} {path}: another replay eval process (pid {pid if pid > 0 else 'unknown'}) "
+                          f"is computing into it; choose another {what}")
+
+
+def owned(path: Path) -> bool:
+    """The ownership test of a directory without a marker (:func:`check_output`): a ``replay eval``
+    output written before markers, or a directory holding only a claim of this process or of a
+    dead one. Another live process's claim is refused in one line naming its pid."""
+    refuse_claimed(path)
+    try:
+        return os.listdir(path) == [CLAIM] or legacy_output(path)
+    except OSError:
+        return False
+
+
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
@@ -133,7 +174,36 @@ def check_output(out, inputs=(), what: str = "--out") -> Path:
     """Before computing: refuse (one line) an output directory that is, holds or lies inside an
     input, is not writable, is on a read-only or full file system, or exists and is not a whole
     ``replay eval`` output. Returns it resolved."""
-    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=legacy_output)
+    check_name_lengths(out, what)
+    refuse_claimed(out, what)
+    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=owned)
+
+
+def check_location(out, inputs=(), what: str = "--out") -> Path:
+    """:func:`check_output` but for the contents: for a numbered directory about to be claimed."""
+    check_name_lengths(out, what)
+    return check_output_dir(out, inputs, kind=None, what=what)
+
+
+def check_name_lengths(out, what: str = "output", room: int = 17) -> None:
+    """Refuse a path with a component longer than the file system allows (NAME_MAX; the last one
+    less ``room`` characters for the staging name ``.<name>.staging-<pid>``) or too long as a whole."""
+    p = Path(os.path.abspath(out))
+    probe = next((q for q in p.parents if os.path.isdir(q)), Path("/"))
+    try:
+        name_max, path_max = os.pathconf(probe, "PC_NAME_MAX"), os.pathconf(probe, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    shown = str(out) if len(str(out)) <= 60 else f"{str(out)[:40]}...{str(out)[-12:]}"
+    for i, part in enumerate(p.parts):
+        limit = name_max - (room if i == len(p.parts) - 1 else 0)
+        if len(os.fsencode(part)) > limit:
+            raise ReplayError(f"{what} {shown}: a name of {len(os.fsencode(part))} bytes "
+                              f"({part[:20]}...); at most {limit} fit here")
+    if len(os.fsencode(str(p))) + 64 > path_max:
+        raise ReplayError(f"{what} {shown}: the path is {len(os.fsencode(str(p)))} bytes; at most "
+                          f"{path_max - 64} fit here (with the files written inside)")
+
 
 
 def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
@@ -146,7 +216,7 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
     out = Path(out)
     mapping = (ev.config.get("dataset_params") or {}).get("mapping")
     check_output(out, [ev.frame_meta.get("path"), mapping], what)
-    with staged_dir(out, kind=KIND, what=what, legacy=legacy_output) as stage:
+    with staged_dir(out, kind=KIND, what=what, legacy=owned) as stage:
         write_leaderboard(leaderboard_rows(ev), stage / "leaderboard.csv")
         write_estimates(ev, stage)
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
@@ -163,24 +233,3 @@ def readable_name(dataset: str) -> str:
     else:
         name = dataset.replace("/", "_").replace("\\", "_")
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._") or "dataset"
-
-
-def new_run_dir(dataset: str, task: str, root: Path = Path("runs")) -> Path:
-    """The next numbered directory ``runs/<dataset>/<task>/NNN`` (001, 002, ...): a new run never
-    replaces an earlier one. ``latest`` beside them points to the newest (see :func:`mark_latest`)."""
-    base = root / readable_name(dataset) / task
-    taken = [int(p.name) for p in base.glob("[0-9][0-9][0-9]*") if p.name.isdigit()] if base.is_dir() else []
-    return base / f"{max(taken, default=0) + 1:03d}"
-
-
-def mark_latest(out: Path) -> None:
-    """Point ``<out's parent>/latest`` at ``out`` (a relative symbolic link, swapped atomically)."""
-    link = out.parent / "latest"
-    tmp = out.parent / f".latest.{os.getpid()}.tmp"
-    try:
-        if tmp.is_symlink():
-            tmp.unlink()
-        os.symlink(out.name, tmp)
-        os.replace(tmp, link)
-    except OSError:  # a file system without symbolic links: the numbered directory is enough
-        tmp.unlink(missing_ok=True)
