@@ -97,16 +97,24 @@ def _notes_to_stderr() -> None:
               help="Alignment of the estimate onto the reference for the ATE column.")
 @click.option("--divergence-threshold", default=None, type=click.FloatRange(0, min_open=True),
               help="Position error (m) beyond which a run counts as diverged (default: none).")
+@click.option("--min-scored-share", default=None, type=float,
+              help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
+                   "the rest is masked).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False, wait=False):
+             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
     from replay.pipeline import default_task
+    from replay.registry import check_data_dir
+    from replay.summary import MIN_SCORED_SHARE
 
+    check_data_dir(data_dir, "--data-dir")
+    min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
+                                              else min_scored_share, "--min-scored-share")
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
     if baseline is not None and baseline not in names + (recorded or []) and not (
             recorded is None and baseline.startswith("recorded:")):
@@ -148,7 +156,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
                           task_params=tparams, adapter=adapter,
                           dataset_params=dparams or None, alignment=alignment,
                           divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded,
-                          progress=progress)
+                          progress=progress, min_scored_share=min_scored_share)
         finally:
             progress.close()
         for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):

@@ -24,7 +24,7 @@ import numpy as np
 
 from replay.evaluate import Evaluation, manifest
 from replay.util.errors import ReplayError
-from replay.summary import columns, consistency_cell, lost_cell
+from replay.summary import MIN_SCORED_SHARE, columns, consistency_cell, lost_cell, scored_cell, scored_share
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
 from replay.score import rmse_over_time
 
@@ -33,21 +33,40 @@ def leaderboard_rows(ev: Evaluation) -> list[dict]:
     return ev.rows
 
 
+def distinct_runs(result) -> int:
+    """How many different runs a filter's result holds (its per-run numbers compared exactly, timing
+    aside): 1 for a deterministic filter on data without synthesised noise, whatever ``--runs``."""
+    keys = [k for k in (result.runs[0] if result.runs else {}) if k not in ("us_per_step", "seconds")]
+    return len({tuple(repr(run.get(k)) for k in keys) for run in result.runs})
+
+
 def format_table(ev: Evaluation) -> str:
     """The table ``replay eval`` prints."""
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
-    head = ["filter"] + metrics[:1] + ["median"] + metrics[1:] + ["anees", "us/step", "diverged", "lost"]
-    body = []
+    head = (["filter"] + metrics[:1] + ["median"] + metrics[1:]
+            + ["anees", "us/step", "diverged", "lost", "scored"])
+    minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
+    distinct = {r.name: distinct_runs(r) for r in ev.results}
+    body, warnings = [], []
     for row in rows:
         cells = [row["filter"]]
+        same = row["runs"] > 1 and distinct.get(row["filter"]) == 1
         for k in metrics:
             v, c = row.get(k, np.nan), row.get(f"{k}_ci95", np.nan)
-            cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) else ""))
+            cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) and not same else ""))
             if k == metrics[0]:
                 cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
-        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}", lost_cell(row)]
+        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}",
+                  lost_cell(row), scored_cell(row, minimum)]
         body.append(cells)
+        if same:
+            warnings.append(f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical; "
+                            "no interval)")
+        if scored_share(row) < minimum:
+            warnings.append(f"{row['filter']}: scored on {row['scored']} of {row['scored'] + row['masked']} reference "
+                            f"samples ({scored_cell(row, 0)}; the rest masked), under min_scored_share={minimum:g}: "
+                            "its numbers describe only the samples scored")
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)
                                    for i, (c, w) in enumerate(zip(cells, widths)))
@@ -65,8 +84,10 @@ def format_table(ev: Evaluation) -> str:
             "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
             f"diverged: numerical failure (left out of the means); lost: the track was lost "
             f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
-            "kept in the means); * = lost runs make up most of the mean")
-    return "\n".join([title, line(head), *(line(b) for b in body), note])
+            "kept in the means); * = lost runs make up most of the mean\n"
+            "scored: share of the reference samples scored (the rest masked); ! = under min_scored_share "
+            f"({minimum:g})")
+    return "\n".join([title, line(head), *(line(b) for b in body), *warnings, note])
 
 
 def write_leaderboard(rows: list[dict], path: Path) -> None:
