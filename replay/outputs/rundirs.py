@@ -64,7 +64,7 @@ def _clean(base: Path) -> None:
 @contextmanager
 def claimed_run_dir(dataset: str, task: str, root: Path = Path("runs")):
     """Claim the next numbered directory ``runs/<dataset>/<task>/NNN`` for the block (module
-    docstring); on an error inside the block the claimed directory is removed."""
+    docstring); if no set was published into it by the end of the block, it is removed."""
     base = root / readable_name(dataset) / task
     with ExitStack() as stack:
         try:
@@ -84,10 +84,9 @@ def claimed_run_dir(dataset: str, task: str, root: Path = Path("runs")):
             raise ReplayError(f"{base}: cannot create a run directory ({err.strerror})") from None
         try:
             yield d
-        except BaseException:
+        finally:  # nothing published (an error, or no set written): the claim goes
             if os.path.isdir(d) and os.listdir(d) == [CLAIM]:
                 shutil.rmtree(d, ignore_errors=True)
-            raise
 
 
 def finished(path: Path) -> bool:
