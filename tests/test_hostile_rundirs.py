@@ -121,14 +121,15 @@ def test_live_claim_is_not_taken_and_a_dead_one_is_cleaned(tmp_path, monkeypatch
 
 
 def test_crash_leftovers_do_not_break_later_runs(tmp_path):
-    """A claim of a dead process, an empty numbered directory and a dead staging directory are
-    removed by the next run, which publishes a complete set."""
+    """A claim of a dead process, an empty numbered directory, a dead staging directory and a
+    half-made ``latest`` link are removed by the next run, which publishes a complete set."""
     base = tmp_path / BASE
     (base / "001").mkdir(parents=True)
     (base / "001" / ".replay-claim").write_text("999999999\n")  # nobody holds its lock
     (base / "002").mkdir()
     (base / ".002.staging-999999999").mkdir()
     (base / ".002.staging-999999999" / "leaderboard.csv").write_text("half")
+    os.symlink("002", base / ".latest.999999999.tmp")  # killed between making the link and renaming it
     assert_ok(["eval", *SIM, "--runs", 1], cwd=tmp_path)
     assert sorted(os.listdir(base)) == ["001", "latest"]
     _complete(base / "001")

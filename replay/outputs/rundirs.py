@@ -28,6 +28,7 @@ from replay.outputs.files import CLAIM, KIND, claim_holder, legacy_output, reada
 from replay.util.errors import ReplayError
 from replay.util.files import read_marker, recover
 
+
 def _numbered(base: Path) -> list[Path]:
     try:
         names = os.listdir(base)
@@ -48,10 +49,13 @@ def _base_locked(base: Path):
 
 
 def _clean(base: Path) -> None:
-    """Remove what dead runs left in ``base``: staging directories, claims of dead processes."""
+    """Remove what dead runs left in ``base`` (under its lock): staging directories, claims of dead
+    processes, empty numbered directories, a half-made ``latest`` link."""
     for name in os.listdir(base):
         if m := re.match(r"^\.(\d+)\.(staging|old)-\d+$", name):
             recover(base / m.group(1))
+        elif re.match(r"^\.latest\.\d+\.tmp$", name):  # made and renamed only under the lock: a leftover
+            (base / name).unlink(missing_ok=True)
     for d in _numbered(base):
         try:
             entries = os.listdir(d)
