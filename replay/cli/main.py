@@ -207,6 +207,9 @@ def rerun_cmd(manifest_file, data_dir, out, quiet=False):
     from replay.outputs.files import check_output, format_table, write_all
     from replay.util.progress import Progress
 
+    from replay.registry import check_data_dir
+
+    check_data_dir(data_dir, "--data-dir")
     man = rerun.load(manifest_file)  # checked before any computation
     if out:
         check_output(Path(out), [manifest_file], "--out")
