@@ -123,12 +123,17 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
              task_params: dict | None = None, filter_params: dict | None = None,
              dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
              divergence_threshold: float | None = None, baseline: str | None = None,
-             batch: int = BATCH, recorded=(), progress=None) -> Evaluation:
+             batch: int = BATCH, recorded=(), progress=None,
+             min_scored_share: float = summary.MIN_SCORED_SHARE.default) -> Evaluation:
     """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring).
 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
     more by name, or, when None, every estimate the frame holds that ``filters`` does not name.
+    ``min_scored_share`` (:data:`replay.summary.MIN_SCORED_SHARE`) is recorded in the configuration:
+    the printed table flags rows scored on less of the reference.
     """
+    min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
+    registry.check_data_dir(data_dir)
     filters = list(filters)
     filter_params = filter_params or {}
     offline = [n for n in filters if not is_recorded(n)]
@@ -179,6 +184,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "adapter": adapter, "alignment": alignment, "divergence_threshold": divergence_threshold,
         "baseline": baseline, "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
         "config_hashes": {r.name: r.config_hash for r in results},
+        "min_scored_share": min_scored_share,
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,

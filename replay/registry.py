@@ -212,6 +212,20 @@ def search_roots(data_dir: str | Path | None = None) -> list[Path]:
     return list(dict.fromkeys(roots))
 
 
+def check_data_dir(data_dir, what: str = "data_dir") -> None:
+    """Refuse, in one line, a ``data_dir`` that is given but is not a directory (for every dataset,
+    simulated ones too: a mistyped path is never silently ignored)."""
+    if data_dir is None:
+        return
+    if not isinstance(data_dir, (str, os.PathLike)) or not str(data_dir):
+        raise ReplayError(f"{what} {data_dir!r}: expected the path of a directory")
+    p = Path(data_dir).expanduser()
+    if not p.exists():
+        raise ReplayError(f"{what} {data_dir}: no such directory")
+    if not p.is_dir():
+        raise ReplayError(f"{what} {data_dir}: is a file, not a directory")
+
+
 def candidates(ds: Dataset, root: Path) -> list[Path]:
     """Where in one root the file may be: flat, upstream layout, and both under <prefix>/."""
     rels = [ds.file] + ([ds.upstream_path] if ds.upstream_path else [])
@@ -248,6 +262,7 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
     if first is not None and (isinstance(first, bool) or not isinstance(first, (int, np.integer))
                               or first < 1):
         raise ReplayError(f"first must be a positive number of samples (got {first!r})")
+    check_data_dir(data_dir)
     params = check_params(dataset, params, adapter=adapter)
     if isinstance(dataset, Dataset):
         ds = dataset

@@ -45,6 +45,7 @@ import json
 import numpy as np
 
 from replay import metrics, score
+from replay.util.params import Param
 
 HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
         "first"]
@@ -95,6 +96,31 @@ def lost_cell(row) -> str:
     except (TypeError, ValueError):
         mark = ""
     return f"{'?' if lost in ('', None) else int(float(lost))}/{int(float(runs))}{mark}"
+
+
+MIN_SCORED_SHARE = Param(
+    "min_scored_share", float, 0.5, "a row scored on a smaller share of the reference samples "
+    "(scored / (scored + masked)) is flagged in the printed table: its numbers describe only the samples scored",
+    low=0.0, high=1.0)
+
+
+def scored_share(row) -> float:
+    """``scored / (scored + masked)``: the share of the reference samples the row was scored on (NaN if none)."""
+    try:
+        scored, masked = float(row.get("scored")), float(row.get("masked"))
+    except (TypeError, ValueError):
+        return float("nan")
+    return scored / (scored + masked) if scored + masked > 0 else float("nan")
+
+
+def scored_cell(row, minimum: float) -> str:
+    """The printed share scored, ``!`` when under ``minimum`` (e.g. ``0.4%!``)."""
+    share = scored_share(row)
+    if share != share:
+        return "?"
+    text = ("100%" if share == 1 else f"{min(100 * share, 99.9):.1f}%" if share >= 0.001  # never 100.0% when not all
+            else f"{100 * share:.2g}%")
+    return text + ("!" if share < minimum else "")
 
 
 def consistency_cell(row, prefix: str = "anees") -> str:

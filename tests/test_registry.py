@@ -169,6 +169,7 @@ def test_cache_dir_follows_xdg(monkeypatch, tmp_path):
 # ---------------------------------------------------------------- loading
 
 def test_missing_dataset_error_is_one_actionable_line(clean_env):
+    (clean_env / "nowhere").mkdir()  # an existing directory without the file (a missing one is refused first)
     with pytest.raises(ReplayError) as err:
         registry.load_frame("bohai/20220822_0_7", data_dir=clean_env / "nowhere")
     msg = str(err.value)

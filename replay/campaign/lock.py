@@ -7,7 +7,9 @@ refuses in one line naming the lock file and the holder's pid, or, with
 ``wait=True`` (``--wait``), blocks until the first has finished. The kernel
 releases the lock when its holder exits, even on SIGKILL, so a crashed run
 never leaves a stale lock; the file itself stays (removing it would race with a
-process about to lock it).
+process about to lock it). :func:`lock_file` is the same lock on any file (or
+directory): ``replay eval`` holds it on its ``--out`` and its numbered run directories
+(:mod:`replay.outputs.rundirs`).
 """
 from __future__ import annotations
 
@@ -33,27 +35,57 @@ def holder(path: Path) -> str:
 @contextmanager
 def locked(out, wait: bool = False):
     """Hold the campaign lock of result directory ``out`` (which must exist) for the block."""
+    path = Path(out) / LOCK_NAME
+    with lock_file(path, wait, busy=f"{path}: another campaign process (pid {{pid}}) is writing to {out}; "
+                                    "wait for it to finish or pass --wait", what="the campaign lock") as p:
+        yield p
+
+
+@contextmanager
+def lock_file(path, wait: bool = False, *, busy: str, what: str = "the lock"):
+    """Hold an exclusive ``flock`` on ``path`` for the block (created if absent; the holder's pid
+    written into it). Held by another process: ``ReplayError(busy.format(pid=...))``, or with
+    ``wait`` block until it is released. A directory ``path`` is locked itself (no pid recorded)."""
     import fcntl
 
-    path = Path(out) / LOCK_NAME
+    path = Path(path)
+    is_dir = path.is_dir()
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY) if is_dir else os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as err:
-        raise ReplayError(f"{path}: cannot open the campaign lock ({err.strerror})") from None
+        raise ReplayError(f"{path}: cannot open {what} ({err.strerror})") from None
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except OSError as err:
             if err.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise ReplayError(f"{path}: cannot lock ({err.strerror})") from None
-            raise ReplayError(f"{path}: another campaign process (pid {holder(path)}) is writing to "
-                              f"{out}; wait for it to finish or pass --wait") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            raise ReplayError(busy.format(pid=holder(path))) from None
+        if not is_dir:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         try:
             yield path
         finally:
-            os.ftruncate(fd, 0)
+            if not is_dir:
+                os.ftruncate(fd, 0)
             fcntl.flock(fd, fcntl.LOCK_UN)
     finally:
         os.close(fd)
+
+
+def held(path) -> bool:
+    """Whether another process holds the lock of ``path`` (an existing lock file; False if absent)."""
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as err:
+        return err.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+    finally:
+        os.close(fd)  # closing releases a lock this probe took
+    return False

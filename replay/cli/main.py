@@ -73,6 +73,8 @@ def _notes_to_stderr() -> None:
                    "with runs/<dataset>/<task>/latest pointing to it).")
 @click.option("--force", is_flag=True, help="Replace --out if it holds an earlier replay eval output "
               "(never anything else).")
+@click.option("--wait", is_flag=True, help="If another replay eval is writing to --out, wait for it to "
+              "finish instead of refusing.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
@@ -95,15 +97,24 @@ def _notes_to_stderr() -> None:
               help="Alignment of the estimate onto the reference for the ATE column.")
 @click.option("--divergence-threshold", default=None, type=click.FloatRange(0, min_open=True),
               help="Position error (m) beyond which a run counts as diverged (default: none).")
+@click.option("--min-scored-share", default=None, type=float,
+              help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
+                   "the rest is masked).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False):
+             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
-    from replay.outputs.files import check_output, eval_inputs, format_table, mark_latest, new_run_dir, write_all
+    from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
+    from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
     from replay.pipeline import default_task
+    from replay.registry import check_data_dir
+    from replay.summary import MIN_SCORED_SHARE
 
+    check_data_dir(data_dir, "--data-dir")
+    min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
+                                              else min_scored_share, "--min-scored-share")
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
     if baseline is not None and baseline not in names + (recorded or []) and not (
             recorded is None and baseline.startswith("recorded:")):
@@ -118,11 +129,54 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                 dataset_params=dparams, seed=seed)
     numbered = out is None
-    out = new_run_dir(dataset, task) if numbered else Path(out)
-    check_output(out, eval_inputs(dataset, data_dir, mapping), "--out")  # inputs, ownership, space
-    if not numbered and not force and out.is_dir() and any(out.iterdir()):
-        raise ReplayError(f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
-                          "or leave out --out for a new numbered directory")
+    inputs = eval_inputs(dataset, data_dir, mapping)
+    if numbered:  # the location, before claiming a number in it
+        check_location(new_run_dir(dataset, task), inputs, "--out")
+    else:
+        check_output(Path(out), inputs, "--out")
+        _fresh(Path(out), force)
+    _check_exports(new_run_dir(dataset, task) if numbered else Path(out), mcap_out, ros2_out, dataset, mapping,
+                   data_dir)
+    from contextlib import ExitStack
+
+    with ExitStack() as held:  # a claimed numbered directory, or --out's lock, until published
+        out = held.enter_context(claimed_run_dir(dataset, task)) if numbered else Path(out)
+        if not numbered:
+            held.enter_context(out_locked(out, wait))
+        check_output(out, inputs, "--out")  # again, now that no other replay eval writes there
+        _fresh(out, numbered or force)
+        _check_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
+        from replay.util.progress import Progress
+
+        _quiet(quiet)
+        progress = Progress(0, quiet, label="eval", unit="run")
+        try:
+            ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
+                          data_dir=data_dir, filter_params=fparams,
+                          task_params=tparams, adapter=adapter,
+                          dataset_params=dparams or None, alignment=alignment,
+                          divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded,
+                          progress=progress, min_scored_share=min_scored_share)
+        finally:
+            progress.close()
+        for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
+            click.echo(f"replay: note: {note}", err=True)
+        click.echo(format_table(ev))
+        for note in ev.notes:
+            click.echo(note)
+        _fresh(out, numbered or force)  # again at publication
+        paths = write_all(ev, out, what="--out")
+        if numbered:
+            mark_latest(out)
+        click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+        if mcap_out or ros2_out:
+            from replay.cli.bags import export_outputs
+
+            export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+
+
+def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
+    """--mcap and --ros2-bag: not inside or around the output directory, writable (before computing)."""
     for opt, path in (("--mcap", mcap_out), ("--ros2-bag", ros2_out)):
         if path and (Path(path).resolve().is_relative_to(out.resolve())
                      or out.resolve().is_relative_to(Path(path).resolve())):
@@ -131,32 +185,14 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         from replay.cli.bags import check_eval_exports
 
         check_eval_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
-    from replay.util.progress import Progress
 
-    _quiet(quiet)
-    progress = Progress(0, quiet, label="eval", unit="run")
-    try:
-        ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
-                      data_dir=data_dir, filter_params=fparams,
-                      task_params=tparams, adapter=adapter,
-                      dataset_params=dparams or None, alignment=alignment,
-                      divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded,
-                      progress=progress)
-    finally:
-        progress.close()
-    for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
-        click.echo(f"replay: note: {note}", err=True)
-    click.echo(format_table(ev))
-    for note in ev.notes:
-        click.echo(note)
-    paths = write_all(ev, out, what="--out")
-    if numbered:
-        mark_latest(out)
-    click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
-    if mcap_out or ros2_out:
-        from replay.cli.bags import export_outputs
 
-        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+def _fresh(out: Path, replace: bool) -> None:
+    """Without --force, refuse an --out that holds an output (checked at the start and again
+    before publication, under --out's lock)."""
+    if not replace and out.is_dir() and any(out.iterdir()):
+        raise ReplayError(f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
+                          "or leave out --out for a new numbered directory")
 
 
 @main.command("rerun")
@@ -174,6 +210,9 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
     from replay.outputs.files import check_output, format_table, write_all
     from replay.util.progress import Progress
 
+    from replay.registry import check_data_dir
+
+    check_data_dir(data_dir, "--data-dir")
     man = rerun.load(manifest_file, allow_modules)  # checked before any computation or import
     if out:
         check_output(Path(out), [manifest_file], "--out")

@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from replay.evaluate import Evaluation, manifest
-from replay.summary import columns, consistency_cell, lost_cell
+from replay.summary import MIN_SCORED_SHARE, columns, consistency_cell, lost_cell, scored_cell, scored_share
 from replay.util import covcols
+from replay.util.errors import ReplayError
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
 from replay.score import rmse_over_time
 
@@ -33,21 +34,40 @@ def leaderboard_rows(ev: Evaluation) -> list[dict]:
     return ev.rows
 
 
+def distinct_runs(result) -> int:
+    """How many different runs a filter's result holds (its per-run numbers compared exactly, timing
+    aside): 1 for a deterministic filter on data without synthesised noise, whatever ``--runs``."""
+    keys = [k for k in (result.runs[0] if result.runs else {}) if k not in ("us_per_step", "seconds")]
+    return len({tuple(repr(run.get(k)) for k in keys) for run in result.runs})
+
+
 def format_table(ev: Evaluation) -> str:
     """The table ``replay eval`` prints."""
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
-    head = ["filter"] + metrics[:1] + ["median"] + metrics[1:] + ["anees", "us/step", "diverged", "lost"]
-    body = []
+    head = (["filter"] + metrics[:1] + ["median"] + metrics[1:]
+            + ["anees", "us/step", "diverged", "lost", "scored"])
+    minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
+    distinct = {r.name: distinct_runs(r) for r in ev.results}
+    body, warnings = [], []
     for row in rows:
         cells = [row["filter"]]
+        same = row["runs"] > 1 and distinct.get(row["filter"]) == 1
         for k in metrics:
             v, c = row.get(k, np.nan), row.get(f"{k}_ci95", np.nan)
-            cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) else ""))
+            cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) and not same else ""))
             if k == metrics[0]:
                 cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
-        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}", lost_cell(row)]
+        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}",
+                  lost_cell(row), scored_cell(row, minimum)]
         body.append(cells)
+        if same:
+            warnings.append(f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical; "
+                            "no interval)")
+        if scored_share(row) < minimum:
+            warnings.append(f"{row['filter']}: scored on {row['scored']} of {row['scored'] + row['masked']} reference "
+                            f"samples ({scored_cell(row, 0)}; the rest masked), under min_scored_share={minimum:g}: "
+                            "its numbers describe only the samples scored")
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)
                                    for i, (c, w) in enumerate(zip(cells, widths)))
@@ -65,8 +85,10 @@ def format_table(ev: Evaluation) -> str:
             "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
             f"diverged: numerical failure (left out of the means); lost: the track was lost "
             f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
-            "kept in the means); * = lost runs make up most of the mean")
-    return "\n".join([title, line(head), *(line(b) for b in body), note])
+            "kept in the means); * = lost runs make up most of the mean\n"
+            "scored: share of the reference samples scored (the rest masked); ! = under min_scored_share "
+            f"({minimum:g})")
+    return "\n".join([title, line(head), *(line(b) for b in body), *warnings, note])
 
 
 def write_leaderboard(rows: list[dict], path: Path) -> None:
@@ -119,6 +141,46 @@ def legacy_output(path: Path) -> bool:
     return True
 
 
+CLAIM = ".replay-claim"  # in a numbered directory being computed: its process's pid, locked (outputs/rundirs.py)
+
+
+def claim_holder(path) -> int | None:
+    """The pid of the live process computing into ``path`` (a directory holding only its claim;
+    -1 when the pid is not yet written), None if it is not a claimed directory or its process died."""
+    from replay.campaign.lock import held, holder
+
+    try:
+        if os.listdir(path) != [CLAIM]:
+            return None
+    except OSError:
+        return None
+    pid = holder(Path(path) / CLAIM)
+    if pid == str(os.getpid()):
+        return os.getpid()
+    if not held(Path(path) / CLAIM):
+        return None
+    return int(pid) if pid.isdigit() else -1
+
+
+def refuse_claimed(path, what: str = "--out") -> None:
+    """Refuse (one line naming its pid) a directory another live process has claimed."""
+    pid = claim_holder(path)
+    if pid is not None and pid != os.getpid():
+        raise ReplayError(f"{what} {path}: another replay eval process (pid {pid if pid > 0 else 'unknown'}) "
+                          f"is computing into it; choose another {what}")
+
+
+def owned(path: Path) -> bool:
+    """The ownership test of a directory without a marker (:func:`check_output`): a ``replay eval``
+    output written before markers, or a directory holding only a claim of this process or of a
+    dead one. Another live process's claim is refused in one line naming its pid."""
+    refuse_claimed(path)
+    try:
+        return os.listdir(path) == [CLAIM] or legacy_output(path)
+    except OSError:
+        return False
+
+
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
@@ -136,7 +198,36 @@ def check_output(out, inputs=(), what: str = "--out") -> Path:
     """Before computing: refuse (one line) an output directory that is, holds or lies inside an
     input, is not writable, is on a read-only or full file system, or exists and is not a whole
     ``replay eval`` output. Returns it resolved."""
-    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=legacy_output)
+    check_name_lengths(out, what)
+    refuse_claimed(out, what)
+    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=owned)
+
+
+def check_location(out, inputs=(), what: str = "--out") -> Path:
+    """:func:`check_output` but for the contents: for a numbered directory about to be claimed."""
+    check_name_lengths(out, what)
+    return check_output_dir(out, inputs, kind=None, what=what)
+
+
+def check_name_lengths(out, what: str = "output", room: int = 17) -> None:
+    """Refuse a path with a component longer than the file system allows (NAME_MAX; the last one
+    less ``room`` characters for the staging name ``.<name>.staging-<pid>``) or too long as a whole."""
+    p = Path(os.path.abspath(out))
+    probe = next((q for q in p.parents if os.path.isdir(q)), Path("/"))
+    try:
+        name_max, path_max = os.pathconf(probe, "PC_NAME_MAX"), os.pathconf(probe, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    shown = str(out) if len(str(out)) <= 60 else f"{str(out)[:40]}...{str(out)[-12:]}"
+    for i, part in enumerate(p.parts):
+        limit = name_max - (room if i == len(p.parts) - 1 else 0)
+        if len(os.fsencode(part)) > limit:
+            raise ReplayError(f"{what} {shown}: a name of {len(os.fsencode(part))} bytes "
+                              f"({part[:20]}...); at most {limit} fit here")
+    if len(os.fsencode(str(p))) + 64 > path_max:
+        raise ReplayError(f"{what} {shown}: the path is {len(os.fsencode(str(p)))} bytes; at most "
+                          f"{path_max - 64} fit here (with the files written inside)")
+
 
 
 def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
@@ -149,7 +240,7 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
     out = Path(out)
     mapping = (ev.config.get("dataset_params") or {}).get("mapping")
     check_output(out, [ev.frame_meta.get("path"), mapping], what)
-    with staged_dir(out, kind=KIND, what=what, legacy=legacy_output) as stage:
+    with staged_dir(out, kind=KIND, what=what, legacy=owned) as stage:
         write_leaderboard(leaderboard_rows(ev), stage / "leaderboard.csv")
         write_estimates(ev, stage)
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
@@ -166,24 +257,3 @@ def readable_name(dataset: str) -> str:
     else:
         name = dataset.replace("/", "_").replace("\\", "_")
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name).strip("._") or "dataset"
-
-
-def new_run_dir(dataset: str, task: str, root: Path = Path("runs")) -> Path:
-    """The next numbered directory ``runs/<dataset>/<task>/NNN`` (001, 002, ...): a new run never
-    replaces an earlier one. ``latest`` beside them points to the newest (see :func:`mark_latest`)."""
-    base = root / readable_name(dataset) / task
-    taken = [int(p.name) for p in base.glob("[0-9][0-9][0-9]*") if p.name.isdigit()] if base.is_dir() else []
-    return base / f"{max(taken, default=0) + 1:03d}"
-
-
-def mark_latest(out: Path) -> None:
-    """Point ``<out's parent>/latest`` at ``out`` (a relative symbolic link, swapped atomically)."""
-    link = out.parent / "latest"
-    tmp = out.parent / f".latest.{os.getpid()}.tmp"
-    try:
-        if tmp.is_symlink():
-            tmp.unlink()
-        os.symlink(out.name, tmp)
-        os.replace(tmp, link)
-    except OSError:  # a file system without symbolic links: the numbered directory is enough
-        tmp.unlink(missing_ok=True)

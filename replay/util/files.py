@@ -236,7 +236,8 @@ def check_output_dir(out, inputs=(), *, kind: str, what: str = "output", legacy=
     target = refuse_overlap(out, inputs, what)
     check_space(out, what)
     check_writable(out, what)
-    check_replaceable(target, kind, what, legacy, shown=out)
+    if kind is not None:  # None: the location only (a directory claimed later)
+        check_replaceable(target, kind, what, legacy, shown=out)
     return target
 
 
