@@ -4,10 +4,12 @@ Every function takes one matrix (n, n) or a stack (M, n, n) (a leading Monte
 Carlo run axis) and acts on each matrix alone. For the 3x3 to 20x20 matrices
 of a filter step the per-call overhead of ``numpy.linalg`` (about 5 µs) is
 most of the cost, so one matrix, or a stack of one, goes straight to LAPACK
-(``dpotrf``, ``dgesv`` of SciPy) and a stack of several to numpy's stacked
-LAPACK, which calls the same routines once per matrix: each matrix of a stack
-gets the numbers it gets alone, bit for bit (tests/test_batched.py asserts
-it). Results are column-major per matrix, as LAPACK returns one matrix,
+(``dpotrf``, ``dgesv`` of SciPy). A stack's Cholesky factors are SciPy's
+``dpotrf`` of each matrix too, not numpy's stacked LAPACK: numpy and SciPy
+wheels may bundle different OpenBLAS builds, whose factors of the same 11x11
+matrix differ in the last bit (numpy 2.4.6 with SciPy 1.17.1), and each matrix of
+a stack must get the numbers it gets alone, bit for bit (tests/test_batched.py
+asserts it). Results are column-major per matrix, as LAPACK returns one matrix,
 whatever M: a matrix product's rounding depends on its operands' memory
 layout (BLAS transposition flags), so a stack must have the layout of one.
 
@@ -42,9 +44,10 @@ def cholesky(P: np.ndarray) -> np.ndarray:
     """Lower Cholesky factor of a symmetric positive-definite matrix (n, n) or stack (M, n, n)."""
     if P.ndim == 2:
         return _potrf(P)
-    if len(P) == 1:
-        return _potrf(P[0])[None]
-    return _column_major(np.linalg.cholesky(P))
+    out = np.empty(P.shape[::-1]).T  # column-major per matrix, as LAPACK returns one
+    for m in range(len(P)):  # SciPy's dpotrf on each: numpy's stacked LAPACK may be another build
+        out[m] = _potrf(P[m])
+    return out
 
 
 def require_spd(M, name: str) -> np.ndarray:
