@@ -33,11 +33,11 @@ from replay.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
 from replay.util.progress import particle_weight
 
-from . import board
+from . import board, index
 from .lock import locked
 from .progress import Progress
 from .spec import Campaign
-from .store import WRITERS, Store, pack, write_bytes
+from .store import Store, pack, sync_dir, write_bytes
 from .units import Job, execute_job
 from .workers import connect_scheduler, process_pool, start_method
 
@@ -49,18 +49,31 @@ def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=
 
 def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None):
     """(jobs, damaged, stored): the jobs; ``(config_hash, run, problem)`` of each damaged unit
-    found (``problem`` one line naming the file), which the jobs compute again, and of a
-    damaged ``config.json`` (run None; rewritten here); the number of units stored intact."""
-    from concurrent.futures import ThreadPoolExecutor
+    found (``problem`` one line naming the file), which the jobs compute again, of a damaged
+    ``config.json`` or index (run None; rewritten here) and of a configuration the index lists
+    whose directory is gone (run -1; computed again); the number of units stored intact.
 
+    Up front, only the index (:mod:`.index`: one file, one flush) and the missing ``units/``
+    directories (no flush each) are written; each ``config.json`` comes with its first units."""
     jobs, damaged, stored = [], [], 0
     cfgs = [cfg.as_dict() for cfg in campaign.configs]
     hashes = [config_hash(c) for c in cfgs]
-    with ThreadPoolExecutor(max(1, min(WRITERS, len(cfgs)))) as pool:  # side by side: their flushes share commits
-        saved = list(pool.map(store.save_config, hashes, cfgs))
-    for c, h, problem in zip(cfgs, hashes, saved):
-        if problem is not None:
-            damaged.append((h, None, problem))
+    listed, dirs, damaged_index = index.read(store.out)
+    if damaged_index is not None:
+        damaged.append((None, None, damaged_index))
+    made = False
+    for c, h in zip(cfgs, hashes):
+        d = store.units / h
+        if not d.is_dir():
+            if h in listed:
+                damaged.append((h, -1, f"{d}: missing (listed in {store.out / index.NAME})"))
+            d.mkdir(parents=True, exist_ok=True)
+            made = True
+        elif (d / "config.json").exists():
+            cfg, problem = store.read_config(h)
+            if problem is not None:
+                store.save_config(h, c)
+                damaged.append((h, None, problem))
         good, bad = store.scan(h)
         stored += len(good)
         have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
@@ -71,6 +84,13 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
                     if r in wanted and r not in have]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
+    if made:
+        sync_dir(store.units)
+    where = data_dir or campaign.data_dir
+    new_dirs = {c["dataset"]: str(Path(where).resolve()) for c in cfgs} if where else {}
+    new = {**listed, **dict(zip(hashes, cfgs))}
+    if new != listed or {**dirs, **new_dirs} != dirs or damaged_index is not None:
+        index.write(store.out, new, {**dirs, **new_dirs})
     return jobs, damaged, stored
 
 
@@ -180,7 +200,9 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
     store = Store(out)
     hashes = [config_hash(c.as_dict()) for c in campaign.configs]
     stored_before = 0
-    for h, _ in store.configs(skip=hashes):  # other campaign files' configurations: not recomputed here
+    listed, _, bad_index = index.read(out)
+    for h, _ in store.configs(skip=hashes, listed=listed if bad_index is None else {}):  # other campaign
+        # files' configurations: not recomputed here (a unit directory that is a file: refused)
         good, bad = store.scan(h)
         if bad:
             raise ReplayError(f"{bad[min(bad)]}; this configuration is not in {campaign.path}: run the "
@@ -196,6 +218,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
     total = sum(len(j.runs) for j in jobs)
     counts = {"jobs": len(jobs), "units": total, "done": 0, "failed": 0,
               "damaged": [what for h, r, what in damaged if r is not None and (h, r) in scheduled],
+              "missing": [what for h, r, what in damaged if r == -1],
               "rewritten": [what for h, r, what in damaged if r is None],
               "stored_before": stored_before, "backend": "none"}
     if jobs:
@@ -210,9 +233,13 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
         progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
+        saved = set()
         try:
             with backend as mapper:
                 for job, results in mapper(jobs):
+                    if job.config_hash not in saved:  # config.json with the configuration's first units
+                        saved.add(job.config_hash)
+                        store.save_config(job.config_hash, job.config)
                     store.write_job(job.config_hash, results)
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad

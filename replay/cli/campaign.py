@@ -41,6 +41,7 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
                          retry_failed=retry_failed, data_dir=data_dir, wait=wait)
     for key, what in (("rewritten", "rewrote {n} damaged configuration file{s}"),
+                      ("missing", "recomputed {n} missing configuration{s}"),
                       ("damaged", "recomputed {n} damaged unit{s}")):
         found = counts[key]
         if found:
