@@ -31,6 +31,7 @@ from pathlib import Path
 
 from replay.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
+from replay.util.files import check_space
 from replay.util.progress import particle_weight
 
 from . import board, index
@@ -42,19 +43,24 @@ from .units import Job, execute_job
 from .workers import connect_scheduler, process_pool, start_method
 
 
+PLAN_PROGRESS = 1000  # configurations from which checking the stored units shows its progress
+UNIT_BYTES = 8192  # the least a stored unit takes on disk: a record and a table, a 4 KiB block each
+
+
 def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
     """Jobs for every unit not yet stored intact, in blocks of ``campaign.batch`` runs."""
     return _plan(campaign, store, retry_failed, data_dir)[0]
 
 
-def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None):
+def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None, progress=None):
     """(jobs, damaged, stored): the jobs; ``(config_hash, run, problem)`` of each damaged unit
     found (``problem`` one line naming the file), which the jobs compute again, of a damaged
     ``config.json`` or index (run None; rewritten here) and of a configuration the index lists
     whose directory is gone (run -1; computed again); the number of units stored intact.
 
     Up front, only the index (:mod:`.index`: one file, one flush) and the missing ``units/``
-    directories (no flush each) are written; each ``config.json`` comes with its first units."""
+    directories (no flush each) are written; each ``config.json`` comes with its first units.
+    ``progress``: a :class:`Progress` over the configurations checked."""
     jobs, damaged, stored = [], [], 0
     cfgs = [cfg.as_dict() for cfg in campaign.configs]
     hashes = [config_hash(c) for c in cfgs]
@@ -84,6 +90,8 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
                     if r in wanted and r not in have]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
+        if progress is not None:
+            progress.update(1)
     if made:
         sync_dir(store.units)
     where = data_dir or campaign.data_dir
@@ -189,10 +197,20 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
     line each, naming the file).
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    with locked(out, wait=wait):
-        return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
-                           limit, connect_timeout, progress_stream)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with locked(out, wait=wait):
+            return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
+                               limit, connect_timeout, progress_stream)
+    except OSError as err:  # a full or read-only disk, a name too long: the stored units are intact
+        for name in ("leaderboard.csv", "paired.csv"):
+            try:
+                (out / f".{name}.{os.getpid()}.tmp").unlink(missing_ok=True)
+            except OSError:
+                pass
+        where = err.filename or out
+        raise ReplayError(f"{where}: cannot write ({err.strerror or type(err).__name__}); the units stored "
+                          f"in {out} before are intact: free space and run the campaign again") from None
 
 
 def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir, limit,
@@ -210,7 +228,15 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         stored_before += len(good)
     if campaign.path.resolve() != (out / "campaign.toml").resolve():
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
-    jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir)
+    checking = None
+    if len(campaign.configs) >= PLAN_PROGRESS:  # what it does before the first unit, and how far
+        checking = Progress(len(campaign.configs), quiet, progress_stream, total_weight=None)
+        checking.label, checking.unit = "campaign: checking stored units", "configuration"
+    try:
+        jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir, checking)
+    finally:
+        if checking is not None:
+            checking.close()
     stored_before += stored
     if limit is not None:
         jobs = jobs[:limit]
@@ -222,6 +248,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
               "rewritten": [what for h, r, what in damaged if r is None],
               "stored_before": stored_before, "backend": "none"}
     if jobs:
+        check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
         workers = workers or os.cpu_count() or 1
         if scheduler or dask_local:
             backend, counts["backend"] = _dask(scheduler, dask_local, connect_timeout), "dask"

@@ -1,6 +1,7 @@
 """``replay campaign run``, ``replay leaderboard``, ``replay report``."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -12,6 +13,18 @@ from replay.util.files import check_writable, refuse_overlap
 @click.group("campaign")
 def campaign():
     """Evaluation campaigns: datasets x tasks x filters x parameters x runs, resumable."""
+
+
+NAME_MAX = 255  # bytes of one file name (Linux, macOS, Windows file systems)
+
+
+def check_names(out, what: str) -> None:
+    """Refuse a path with a name longer than file systems allow, before any work."""
+    for part in Path(out).parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            shown = str(out) if len(str(out)) <= 80 else str(out)[:60] + "..."
+            raise ReplayError(f"{what} {shown}: a name in it is {len(os.fsencode(part))} bytes long "
+                              f"(file systems allow {NAME_MAX})")
 
 
 @campaign.command("run")
@@ -36,6 +49,7 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
     c = spec.load(file)
     out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
+    check_names(out, "--out")
     refuse_overlap(out, [c.data_dir, data_dir], "--out")  # never onto or inside the data
     check_writable(out, "--out")
     counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
