@@ -142,7 +142,8 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise ReplayError("Dask is not installed: pip install 'replay-nav[campaign]'") from None
+        raise ReplayError("Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
+                          "(it adds dask[distributed])") from None
     import logging
 
     logging.getLogger("distributed").setLevel(logging.ERROR)

@@ -4,11 +4,14 @@ Layout of ``OUT``::
 
     campaign.toml                      copy of the campaign file last run here
     campaign.lock                      held (flock) by the campaign process writing here; its pid
+    configs.json                       every configuration and the data_dir of each dataset
+                                       (:mod:`replay.campaign.index`), with its SHA-256
     units/<config_hash>/config.json    the configuration (dataset, task, filter, parameters, seed, ...)
     units/<config_hash>/<run>.parquet  per-step table: k, t, x<i>, P<ii>, ref_<axis>, err_<axis>,
                                        err_<angle>, nees, nis, nis_dof
-    units/<config_hash>/<run>.json     status (done/failed), metrics or error, version, and the
-                                       table's rows, columns, size and SHA-256 — written last
+    units/<config_hash>/<run>.json     status (done/failed), metrics or error, version, the
+                                       table's rows, columns, size and SHA-256, and the SHA-256
+                                       of the record itself (:mod:`.records`) — written last
     leaderboard.csv, paired.csv        summaries (replay.campaign.board)
 
 A unit counts as stored when its ``.json`` exists. Every file is written to a
@@ -23,14 +26,15 @@ computed again. A run killed at any instant leaves at worst a stray ``*.tmp`` or
 a table without record: the unit is computed again.
 
 A stored unit is **checked** whenever it is read (:meth:`Store.scan`): a record
-that is empty, not JSON or not a unit record, a table that is missing, empty,
+that is empty, not JSON, not a unit record or not what its checksum says, a table that is missing, empty,
 truncated (no Parquet footer), of other columns or rows than its record says,
 or whose bytes differ from the recorded checksum, makes the unit *damaged*.
 ``replay campaign run`` computes damaged units again (and says which);
 ``replay leaderboard`` and ``replay report`` refuse in one line naming the file
 (:meth:`Store.records`). Records written before the table was described in them
 are checked for the columns the leaderboard reads and for the row count of the
-configuration's other units.
+configuration's other units; records without their own checksum, for the metrics the
+table determines (:func:`.records.legacy_problem`).
 """
 from __future__ import annotations
 
@@ -281,11 +285,11 @@ class Store:
                 raise ReplayError(f"{problem}; run `replay campaign run` on its campaign file again to rewrite it")
         return out
 
-    def data_dir(self, dataset: str) -> str | None:
-        """The ``data_dir`` the campaign ran ``dataset`` with (None: none, or an older store)."""
+    def data_dirs(self) -> dict:
+        """{dataset id: the ``data_dir`` the campaign ran it with} (empty for an older store)."""
         from . import index
 
-        return index.read(self.out)[1].get(dataset)
+        return index.read(self.out)[1]
 
     def series(self, config_hash: str, run: int, columns=None, sha256: str | None = None):
         """The per-step table of a unit as a dict of numpy arrays (``columns``: those only).

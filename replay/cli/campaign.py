@@ -84,7 +84,7 @@ def leaderboard(dirs, sort, out):
     rows = board.merge(dirs, sort)
     click.echo(board.format_rows(rows))
     if out:
-        board._write(rows, Path(out), board.columns(rows))
+        board._write(rows, Path(out), board.merged_columns(rows))
         click.echo(f"wrote {out}")
 
 
