@@ -39,7 +39,7 @@ params = { alpha = 0.5 }
 HINT = "run `replay campaign run` on its campaign file again"
 
 STORES = ["store-edited-metric", "store-legacy-record-edited", "store-unit-dir-is-file", "store-unit-dir-missing",
-          "store-index-edited"]
+          "store-index-edited", "store-config-json-removed"]
 CAMPAIGN_FILES = {  # id: ((old, new, ...) edits of CAMPAIGN, expected refusal)
     "campaign-seed-negative": (("seed = 1", "seed = -1"), r"c\.toml:4: seed: \[campaign\]: seed must be an integer "
                                                           r">= 0 \(got -1\)"),
@@ -120,6 +120,10 @@ def test_damaged_store_refused_by_readers_and_repaired_by_run(case, store, tmp_p
         problem = (rf"{unit}: missing: configuration sim/auv-sonar sonar ukf, listed in {out / 'configs.json'}, "
                    r"has no units directory")
         repair = f"recomputed 1 missing configuration: {unit}: missing (listed in {out / 'configs.json'})"
+    elif case == "store-config-json-removed":
+        (unit / "config.json").unlink()
+        problem = rf"{unit / 'config.json'}: missing; run `replay campaign run` on its campaign file again"
+        repair = f"rewrote 1 damaged configuration file: {unit / 'config.json'}: missing"
     else:
         index = out / "configs.json"
         index.write_text(index.read_text().replace('"alpha": 0.5', '"alpha": 0.25'))

@@ -75,12 +75,12 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
                 damaged.append((h, -1, f"{d}: missing (listed in {store.out / index.NAME})"))
             d.mkdir(parents=True, exist_ok=True)
             made = True
-        elif (d / "config.json").exists():
-            cfg, problem = store.read_config(h)
+        good, bad = store.scan(h)
+        if (good or bad) or (d / "config.json").exists():  # stored units come with their config.json
+            _, problem = store.read_config(h)
             if problem is not None:
                 store.save_config(h, c)
                 damaged.append((h, None, problem))
-        good, bad = store.scan(h)
         stored += len(good)
         have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
         damaged.extend((h, r, bad[r]) for r in sorted(bad))

@@ -279,8 +279,9 @@ class Store:
             cfg, problem = self.read_config(d.name)
             if problem is None:
                 out.append((d.name, cfg))
-            elif problem.endswith(": missing") and d.name in listed:
-                out.append((d.name, listed[d.name]))  # written with its first units (index)
+            elif problem.endswith(": missing") and d.name in listed and not any(RUN_FILE.match(p.name)
+                                                                                for p in d.iterdir()):
+                out.append((d.name, listed[d.name]))  # no units yet: config.json comes with the first
             elif (d / "config.json").exists() or any(RUN_FILE.match(p.name) for p in d.iterdir()):
                 raise ReplayError(f"{problem}; run `replay campaign run` on its campaign file again to rewrite it")
         return out
