@@ -20,23 +20,9 @@ from types import SimpleNamespace
 
 import pytest
 from hostile import assert_ok, assert_refused, register
-
-CAMPAIGN = """\
-[campaign]
-name = "hostile2"
-runs = 3
-seed = 1
-batch = 1
-
-[[dataset]]
-id = "sim/auv-sonar"
-params = { steps = 20 }
-
-[[filter]]
-name = "ukf"
-params = { alpha = 0.5 }
-"""
-HINT = "run `replay campaign run` on its campaign file again"
+from test_hostile_campaign import CAMPAIGN
+from test_hostile_campaign import _rows  # the leaderboard less its timing and version columns
+from test_hostile_campaign import store  # noqa: F401 -- the fixture: a computed campaign of 3 units
 
 STORES = ["store-edited-metric", "store-legacy-record-edited", "store-unit-dir-is-file", "store-unit-dir-missing",
           "store-index-edited", "store-config-json-removed"]
@@ -46,10 +32,10 @@ CAMPAIGN_FILES = {  # id: ((old, new, ...) edits of CAMPAIGN, expected refusal)
     "campaign-runs-billion": (("runs = 3", "runs = 1000000000"),
                               r"c\.toml:3: runs: \[campaign\]: runs must be an integer in \[1, 100000\] "
                               r"\(got 1000000000\)"),
-    "campaign-divergence-negative": (("batch = 1", "batch = 1\ndivergence_threshold = -5.0"),
+    "campaign-divergence-negative": (("batch = 3", "batch = 3\ndivergence_threshold = -5.0"),
                                      r"c\.toml:6: divergence_threshold: \[campaign\]: divergence_threshold must be "
                                      r"a finite number > 0"),
-    "campaign-name-300-chars": (('name = "hostile2"', f'name = "{"n" * 300}"'),
+    "campaign-name-300-chars": (('name = "hostile"', f'name = "{"n" * 300}"'),
                                 r"c\.toml:2: name: 'n{40}\.\.\.' is not a plain name \(it is 300 bytes long, at "
                                 r"most 240"),
     "campaign-too-many-units": (("runs = 3", "runs = 100000", "params = { alpha = 0.5 }",
@@ -61,20 +47,6 @@ CAMPAIGN_FILES = {  # id: ((old, new, ...) edits of CAMPAIGN, expected refusal)
 register(*STORES, *CAMPAIGN_FILES, "campaign-binary-file", "campaign-out-300-chars", "campaign-disk-full",
          "campaign-disk-too-small", "campaign-grid-no-flush-per-config", "campaign-export-reuses-data-dir",
          "leaderboard-source-column", "campaign-dask-hint")
-
-
-@pytest.fixture(scope="module")
-def store(tmp_path_factory):
-    """A computed campaign directory (3 units, one per job) and its leaderboard rows."""
-    d = tmp_path_factory.mktemp("store2")
-    (d / "c.toml").write_text(CAMPAIGN)
-    assert_ok(["campaign", "run", d / "c.toml", "-o", d / "out", "-w", "1", "-q"])
-    return d, _rows(d / "out")
-
-
-def _rows(out):
-    with open(Path(out) / "leaderboard.csv") as fh:
-        return [{k: v for k, v in r.items() if k not in ("us_per_step", "version")} for r in csv.DictReader(fh)]
 
 
 def _copy(store, tmp_path):
@@ -94,7 +66,7 @@ def _edit_digit(path: Path) -> None:
 
 
 @pytest.mark.parametrize("case", STORES)
-def test_damaged_store_refused_by_readers_and_repaired_by_run(case, store, tmp_path):
+def test_damaged_store_refused_by_readers_and_repaired_by_run(case, store, tmp_path):  # noqa: F811
     c, out, unit, rows = _copy(store, tmp_path)
     if case == "store-edited-metric":
         _edit_digit(unit / "1.json")
@@ -141,7 +113,7 @@ def test_damaged_store_refused_by_readers_and_repaired_by_run(case, store, tmp_p
     assert_ok(["leaderboard", out])
 
 
-def test_records_are_sealed_over_their_canonical_json(store):
+def test_records_are_sealed_over_their_canonical_json(store):  # noqa: F811
     from replay.campaign import records
 
     d, _ = store
@@ -176,7 +148,7 @@ def test_binary_campaign_file_and_long_out_refused(tmp_path):
                                                          r"allow 255\)")
 
 
-def test_full_disk_stops_in_one_line_with_the_stored_units_intact(store, tmp_path, monkeypatch):
+def test_full_disk_stops_in_one_line_with_the_stored_units_intact(store, tmp_path, monkeypatch):  # noqa: F811
     from replay.campaign.store import Store
 
     d, rows = store
@@ -201,7 +173,7 @@ def test_full_disk_stops_in_one_line_with_the_stored_units_intact(store, tmp_pat
     assert _rows(out) == rows
 
 
-def test_disk_too_small_for_the_units_refused_before_work(store, tmp_path, monkeypatch):
+def test_disk_too_small_for_the_units_refused_before_work(store, tmp_path, monkeypatch):  # noqa: F811
     d, _ = store
     out = tmp_path / "out"
     monkeypatch.setattr(os, "statvfs", lambda p: SimpleNamespace(f_flag=0, f_bfree=2, f_bavail=2, f_frsize=4096))
@@ -223,7 +195,7 @@ def test_grid_writes_one_index_not_a_flushed_file_per_configuration(tmp_path, mo
     synced, real = [], os.fsync
     monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(os.readlink(f"/proc/self/fd/{fd}")), real(fd))[1])
     jobs = execute.plan(c, Store(tmp_path / "out"))
-    assert len(jobs) == 120 and len(synced) == 2  # configs.json and units/
+    assert len(jobs) == 40 and len(synced) == 2  # configs.json and units/
     assert not list((tmp_path / "out" / "units").glob("*/config.json"))
     monkeypatch.setattr(execute, "PLAN_PROGRESS", 10)
     from io import StringIO
@@ -231,7 +203,7 @@ def test_grid_writes_one_index_not_a_flushed_file_per_configuration(tmp_path, mo
     stream = StringIO()
     counts = execute.run(c, tmp_path / "out", workers=1, limit=1, progress_stream=stream)
     assert "campaign: checking stored units: 40/40 configurations" in stream.getvalue()
-    assert counts["done"] == 1 and len(list((tmp_path / "out" / "units").glob("*/config.json"))) == 1
+    assert counts["done"] == 3 and len(list((tmp_path / "out" / "units").glob("*/config.json"))) == 1
     listed = json.loads((tmp_path / "out" / "configs.json").read_text())["configs"]
     assert sorted(listed) == sorted(p.name for p in (tmp_path / "out" / "units").iterdir())
 
@@ -248,7 +220,7 @@ def test_campaign_export_reuses_the_data_dir_it_ran_with(bohai_dir, tmp_path):
     assert f"wrote {tmp_path / 'b.mcap'}" in res.stdout and (tmp_path / "b.mcap").stat().st_size > 0
 
 
-def test_merged_leaderboard_names_each_row_source(store, tmp_path):
+def test_merged_leaderboard_names_each_row_source(store, tmp_path):  # noqa: F811
     d, _ = store
     ev = tmp_path / "ev"
     assert_ok(["eval", "sim/auv-sonar", "-f", "ukf", "-p", "ukf.alpha=0.5", "--runs", "2", "--seed", "1",
