@@ -37,9 +37,12 @@ with the mapping's association settings as its parameters; it has one unit (run 
 a recorded estimate is deterministic). A campaign may have no ``[[filter]]`` when it
 scores recorded estimates only.
 
-Everything is checked before any work starts (:func:`load`): an unknown
-section, key, dataset, task, filter or parameter, a parameter of the wrong type
-or out of the bounds its declaration states (:mod:`replay.util.params`), or an
+Everything is checked before any work starts (:func:`load`): a file that is not
+UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
+``[campaign]`` value or a parameter of the wrong type or out of the bounds its
+declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
+and ``batch`` at most :data:`MAX_RUNS`, ``seed`` >= 0, ``divergence_threshold`` > 0),
+more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
 an absolute path: it would place the output outside the output root) raises
 :class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key. Each configuration stores its parameters with
