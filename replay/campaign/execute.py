@@ -38,7 +38,7 @@ from . import board, index
 from .lock import locked
 from .progress import Progress
 from .spec import Campaign
-from .store import Store, pack, sync_dir, write_bytes
+from .store import Store, pack, sync_dir, write_bytes, write_json
 from .units import Job, execute_job
 from .workers import connect_scheduler, process_pool, start_method
 
@@ -98,7 +98,7 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
     new_dirs = {c["dataset"]: str(Path(where).resolve()) for c in cfgs} if where else {}
     new = {**listed, **dict(zip(hashes, cfgs))}
     if new != listed or {**dirs, **new_dirs} != dirs or damaged_index is not None:
-        index.write(store.out, new, {**dirs, **new_dirs})
+        write_json(store.out / index.NAME, index.document(new, {**dirs, **new_dirs}))
     return jobs, damaged, stored
 
 

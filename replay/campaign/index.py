@@ -54,11 +54,9 @@ def read(out) -> tuple[dict, dict, str | None]:
     return configs, {k: v for k, v in dirs.items() if isinstance(v, str)}, None
 
 
-def write(out, configs: dict, data_dirs: dict) -> None:
-    from .store import write_json
-
-    write_json(Path(out) / NAME, {"configs": configs, "data_dirs": data_dirs,
-                                  "sha256": _checksum(configs, data_dirs)})
+def document(configs: dict, data_dirs: dict) -> dict:
+    """What the index file holds (written by :func:`replay.campaign.store.write_json`)."""
+    return {"configs": configs, "data_dirs": data_dirs, "sha256": _checksum(configs, data_dirs)}
 
 
 def describe(cfg: dict) -> str:
