@@ -144,8 +144,8 @@ def test_binary_campaign_file_and_long_out_refused(tmp_path):
                    rf"{path}: not a campaign file \(not UTF-8 text: byte 128\)")
     path.write_text(CAMPAIGN)
     out = tmp_path / ("o" * 300)
-    assert_refused(["campaign", "run", path, "-o", out], r"--out .*: a name in it is 300 bytes long \(file systems "
-                                                         r"allow 255\)")
+    for args in (["campaign", "run", path], ["leaderboard", tmp_path], ["report", tmp_path]):
+        assert_refused([*args, "-o", out], r"--out .*: a name in it is 300 bytes long \(file systems allow 255\)")
 
 
 def test_full_disk_stops_in_one_line_with_the_stored_units_intact(store, tmp_path, monkeypatch):  # noqa: F811

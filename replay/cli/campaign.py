@@ -79,6 +79,7 @@ def leaderboard(dirs, sort, out):
     from replay.campaign import board
 
     if out:
+        check_names(out, "--out")
         refuse_overlap(out, dirs, "--out")
         check_writable(out, "--out")
     rows = board.merge(dirs, sort)
@@ -96,6 +97,8 @@ def report(dir, out):
     """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report
 
+    if out:
+        check_names(out, "--out")
     path = make_report(Path(dir), Path(out) if out else None)
     click.echo(f"wrote {path}")
 
