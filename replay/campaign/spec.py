@@ -52,6 +52,7 @@ configuration, with the same hash.
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import re
 import tomllib
@@ -279,6 +280,10 @@ def load(path) -> Campaign:
             for v in values:
                 check_params(where, f"filter {name!r}", declared, {key: v})
         keys = list(grid)
+        combos = math.prod(len(grid[k]) for k in keys)
+        if (len(flt_entries) + combos) * runs > MAX_UNITS:  # before building them (a grid multiplies)
+            raise where.error(keys[0] if keys else "filter", f"{len(flt_entries) + combos} filter configurations x "
+                              f"{runs} runs, more than a campaign may hold ({MAX_UNITS} units); split it")
         for combo in itertools.product(*(grid[k] for k in keys)):
             params = {**base, **dict(zip(keys, combo))}
             try:
