@@ -16,7 +16,9 @@ Backends:
 * ``dask`` — a Dask distributed cluster, ``--scheduler tcp://host:port``, or a
   LocalCluster of N single-threaded worker processes on 127.0.0.1
   (``--dask-local N``). A scheduler that does not answer within
-  ``connect_timeout`` seconds raises a one-line ReplayError.
+  ``connect_timeout`` seconds raises a one-line ReplayError. A remote worker imports
+  replay and reads the dataset files itself: it needs the same replay installed and
+  the data at the same paths as this machine (the jobs carry the data directory).
 
 The numbers do not depend on the backend, the number of workers or the order
 in which jobs finish: every run draws from its own seed streams and jobs are
