@@ -41,8 +41,14 @@ CAMPAIGN_FILES = {  # id: ((old, new, ...) edits of CAMPAIGN, expected refusal)
     "campaign-too-many-units": (("runs = 3", "runs = 100000", "params = { alpha = 0.5 }",
                                  "params = { alpha = 0.5 }\n[[filter]]\nname = \"pf\"\ngrid = { n_particles = ["
                                  + ", ".join(str(100 + i) for i in range(100)) + "] }"),
-                                r"c\.toml:3: runs: 101 configurations x 100000 runs = 10100000 units, more than a "
-                                r"campaign may hold \(10000000\)"),
+                                r"c\.toml:16: n_particles: 101 filter configurations x 100000 runs, more than a "
+                                r"campaign may hold \(10000000 units\)"),
+    "campaign-too-many-units-datasets": (("runs = 3", "runs = 100000", "params = { alpha = 0.5 }",
+                                          "params = { alpha = 0.5 }\n[[filter]]\nname = \"pf\"\ngrid = { n_particles "
+                                          "= [" + ", ".join(str(100 + i) for i in range(51)) + "] }\n[[dataset]]\n"
+                                          "id = \"sim/auv-sonar\"\nparams = { steps = 30 }"),
+                                         r"c\.toml:3: runs: 104 configurations x 100000 runs = 10400000 units, more "
+                                         r"than a campaign may hold \(10000000\)"),
 }
 register(*STORES, *CAMPAIGN_FILES, "campaign-binary-file", "campaign-out-300-chars", "campaign-disk-full",
          "campaign-disk-too-small", "campaign-grid-no-flush-per-config", "campaign-export-reuses-data-dir",
