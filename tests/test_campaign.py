@@ -213,7 +213,7 @@ def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpa = [0.5, 1.0] }"), 18, "no parameter 'alpa'"),
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpha = [] }"), 18, "empty grid"),
     (("n_particles = 60", 'n_particles = "many"'), 22, "n_particles must be an integer >= 1 (got 'many')"),
-    (("runs = 6", 'runs = "6"'), 3, "runs: expected int"),
+    (("runs = 6", 'runs = "6"'), 3, "runs must be an integer in [1, 100000] (got '6')"),
     (("batch = 3", "bacth = 3"), 5, "bacth: unknown key"),
 ])
 def test_bad_campaign_refused_before_work_with_file_and_line(tmp_path, edit, line, needle):
@@ -297,9 +297,10 @@ def test_records_without_a_table_description_are_checked_against_the_others(tmp_
     s = Store(tmp_path)
     (s.units / "h").mkdir(parents=True)
     s.write_job("h", [_unit(0), _unit(1), _unit(2, n=3)])
-    for run in (0, 1, 2):  # as written before: no "table" in the record
+    for run in (0, 1, 2):  # as written before: no "table" (nor checksum) in the record
         p = s.units / "h" / f"{run}.json"
-        p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items() if k != "table"}))
+        p.write_text(json.dumps({k: v for k, v in json.loads(p.read_text()).items()
+                                 if k not in ("table", "record_sha256")}))
     good, bad = s.scan("h")
     assert sorted(good) == [0, 1] and list(bad) == [2]
     assert bad[2] == f"{s.units / 'h' / '2.parquet'}: 3 rows, the configuration's other units have 4"

@@ -109,15 +109,20 @@ def read_dir(d) -> list[dict]:
 
 
 def merge(dirs, sort: str | None = None) -> list[dict]:
-    """Rows of several result directories, one per configuration hash, optionally sorted by a metric."""
+    """Rows of several result directories, optionally sorted by a metric; each row's ``source``
+    is the directory (or leaderboard file) it came from, as given. A configuration is listed
+    once per number of runs (the first directory that holds it with that many): a 5-run
+    evaluation and a 50-run campaign of one configuration are two rows, told apart by
+    ``source`` and ``runs``."""
     rows, seen = [], set()
     for d in dirs:
         for row in read_dir(d):
-            key = (row.get("config_hash"), row.get("filter"), row.get("dataset"), row.get("task"))
+            key = (row.get("config_hash"), row.get("filter"), row.get("dataset"), row.get("task"),
+                   _num(row.get("runs")))
             if key in seen:
                 continue
             seen.add(key)
-            rows.append(row)
+            rows.append({"source": str(d), **row})
     if sort:
         if rows and sort not in rows[0] and not any(sort in r for r in rows):
             known = ", ".join(k for k in columns(rows) if k.endswith(("_rmse", "ate", "err", "pct", "nees", "nis")))
@@ -133,18 +138,27 @@ def _num(v) -> float:
         return float("nan")
 
 
+def merged_columns(rows) -> list[str]:
+    """The columns of a merged leaderboard: ``source``, then those of :func:`columns`."""
+    return ["source"] + [c for c in columns(rows) if c != "source"]
+
+
 def format_rows(rows) -> str:
-    """A compact text table of the main columns."""
-    head = ["dataset", "task", "filter", "pos_rmse", "median", "ate", "anees", "diverged", "lost", "us/step"]
+    """A compact text table of the main columns (and first the source of merged rows)."""
+    sourced = any("source" in r for r in rows)
+    head = ["source"] * sourced + ["dataset", "task", "filter", "pos_rmse", "median", "ate", "anees", "diverged",
+                                   "lost", "us/step"]
     body = []
     for r in rows:
         pm, pc = _num(r.get("pos_rmse")), _num(r.get("pos_rmse_ci95"))
-        body.append([str(r.get("dataset", "")), str(r.get("task", "")), str(r.get("label") or r.get("filter")),
+        body.append([str(r.get("source", ""))] * sourced + [
+                     str(r.get("dataset", "")), str(r.get("task", "")), str(r.get("label") or r.get("filter")),
                      f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
                      f"{_num(r.get('pos_rmse_median')):.4f}", f"{_num(r.get('ate')):.4f}",
                      summary.consistency_cell(r, "anees"),
                      f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}", summary.lost_cell(r),
                      f"{_num(r.get('us_per_step')):.1f}"])
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+    fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 + sourced else c.rjust(w)
+                                  for i, (c, w) in enumerate(zip(cells, widths)))
     return "\n".join([fmt(head), *(fmt(b) for b in body)])

@@ -16,7 +16,9 @@ Backends:
 * ``dask`` — a Dask distributed cluster, ``--scheduler tcp://host:port``, or a
   LocalCluster of N single-threaded worker processes on 127.0.0.1
   (``--dask-local N``). A scheduler that does not answer within
-  ``connect_timeout`` seconds raises a one-line ReplayError.
+  ``connect_timeout`` seconds raises a one-line ReplayError. A remote worker imports
+  replay and reads the dataset files itself: it needs the same replay installed and
+  the data at the same paths as this machine (the jobs carry the data directory).
 
 The numbers do not depend on the backend, the number of workers or the order
 in which jobs finish: every run draws from its own seed streams and jobs are
@@ -31,15 +33,20 @@ from pathlib import Path
 
 from replay.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
+from replay.util.files import check_space
 from replay.util.progress import particle_weight
 
-from . import board
+from . import board, index
 from .lock import locked
 from .progress import Progress
 from .spec import Campaign
-from .store import WRITERS, Store, pack, write_bytes
+from .store import Store, pack, sync_dir, write_bytes, write_json
 from .units import Job, execute_job
 from .workers import connect_scheduler, process_pool, start_method
+
+
+PLAN_PROGRESS = 1000  # configurations from which checking the stored units shows its progress
+UNIT_BYTES = 8192  # the least a stored unit takes on disk: a record and a table, a 4 KiB block each
 
 
 def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None) -> list[Job]:
@@ -47,21 +54,35 @@ def plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=
     return _plan(campaign, store, retry_failed, data_dir)[0]
 
 
-def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None):
+def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir=None, progress=None):
     """(jobs, damaged, stored): the jobs; ``(config_hash, run, problem)`` of each damaged unit
-    found (``problem`` one line naming the file), which the jobs compute again, and of a
-    damaged ``config.json`` (run None; rewritten here); the number of units stored intact."""
-    from concurrent.futures import ThreadPoolExecutor
+    found (``problem`` one line naming the file), which the jobs compute again, of a damaged
+    ``config.json`` or index (run None; rewritten here) and of a configuration the index lists
+    whose directory is gone (run -1; computed again); the number of units stored intact.
 
+    Up front, only the index (:mod:`.index`: one file, one flush) and the missing ``units/``
+    directories (no flush each) are written; each ``config.json`` comes with its first units.
+    ``progress``: a :class:`Progress` over the configurations checked."""
     jobs, damaged, stored = [], [], 0
     cfgs = [cfg.as_dict() for cfg in campaign.configs]
     hashes = [config_hash(c) for c in cfgs]
-    with ThreadPoolExecutor(max(1, min(WRITERS, len(cfgs)))) as pool:  # side by side: their flushes share commits
-        saved = list(pool.map(store.save_config, hashes, cfgs))
-    for c, h, problem in zip(cfgs, hashes, saved):
-        if problem is not None:
-            damaged.append((h, None, problem))
+    listed, dirs, damaged_index = index.read(store.out)
+    if damaged_index is not None:
+        damaged.append((None, None, damaged_index))
+    made = False
+    for c, h in zip(cfgs, hashes):
+        d = store.units / h
+        if not d.is_dir():
+            if h in listed:
+                damaged.append((h, -1, f"{d}: missing (listed in {store.out / index.NAME})"))
+            d.mkdir(parents=True, exist_ok=True)
+            made = True
         good, bad = store.scan(h)
+        if (good or bad) or (d / "config.json").exists():  # stored units come with their config.json
+            _, problem = store.read_config(h)
+            if problem is not None:
+                store.save_config(h, c)
+                damaged.append((h, None, problem))
         stored += len(good)
         have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
         damaged.extend((h, r, bad[r]) for r in sorted(bad))
@@ -71,6 +92,15 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
                     if r in wanted and r not in have]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
+        if progress is not None:
+            progress.update(1)
+    if made:
+        sync_dir(store.units)
+    where = data_dir or campaign.data_dir
+    new_dirs = {c["dataset"]: str(Path(where).resolve()) for c in cfgs} if where else {}
+    new = {**listed, **dict(zip(hashes, cfgs))}
+    if new != listed or {**dirs, **new_dirs} != dirs or damaged_index is not None:
+        write_json(store.out / index.NAME, index.document(new, {**dirs, **new_dirs}))
     return jobs, damaged, stored
 
 
@@ -114,7 +144,8 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise ReplayError("Dask is not installed: pip install 'replay-nav[campaign]'") from None
+        raise ReplayError("Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
+                          "(it adds dask[distributed])") from None
     import logging
 
     logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -169,10 +200,20 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
     line each, naming the file).
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    with locked(out, wait=wait):
-        return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
-                           limit, connect_timeout, progress_stream)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with locked(out, wait=wait):
+            return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
+                               limit, connect_timeout, progress_stream)
+    except OSError as err:  # a full or read-only disk, a name too long: the stored units are intact
+        for name in ("leaderboard.csv", "paired.csv"):
+            try:
+                (out / f".{name}.{os.getpid()}.tmp").unlink(missing_ok=True)
+            except OSError:
+                pass
+        where = err.filename or out
+        raise ReplayError(f"{where}: cannot write ({err.strerror or type(err).__name__}); the units stored "
+                          f"in {out} before are intact: free space and run the campaign again") from None
 
 
 def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir, limit,
@@ -180,7 +221,9 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
     store = Store(out)
     hashes = [config_hash(c.as_dict()) for c in campaign.configs]
     stored_before = 0
-    for h, _ in store.configs(skip=hashes):  # other campaign files' configurations: not recomputed here
+    listed, _, bad_index = index.read(out)
+    for h, _ in store.configs(skip=hashes, listed=listed if bad_index is None else {}):  # other campaign
+        # files' configurations: not recomputed here (a unit directory that is a file: refused)
         good, bad = store.scan(h)
         if bad:
             raise ReplayError(f"{bad[min(bad)]}; this configuration is not in {campaign.path}: run the "
@@ -188,7 +231,15 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         stored_before += len(good)
     if campaign.path.resolve() != (out / "campaign.toml").resolve():
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
-    jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir)
+    checking = None
+    if len(campaign.configs) >= PLAN_PROGRESS:  # what it does before the first unit, and how far
+        checking = Progress(len(campaign.configs), quiet, progress_stream, total_weight=None)
+        checking.label, checking.unit = "campaign: checking stored units", "configuration"
+    try:
+        jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir, checking)
+    finally:
+        if checking is not None:
+            checking.close()
     stored_before += stored
     if limit is not None:
         jobs = jobs[:limit]
@@ -196,9 +247,11 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
     total = sum(len(j.runs) for j in jobs)
     counts = {"jobs": len(jobs), "units": total, "done": 0, "failed": 0,
               "damaged": [what for h, r, what in damaged if r is not None and (h, r) in scheduled],
+              "missing": [what for h, r, what in damaged if r == -1],
               "rewritten": [what for h, r, what in damaged if r is None],
               "stored_before": stored_before, "backend": "none"}
     if jobs:
+        check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
         workers = workers or os.cpu_count() or 1
         if scheduler or dask_local:
             backend, counts["backend"] = _dask(scheduler, dask_local, connect_timeout), "dask"
@@ -210,9 +263,13 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
         progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
+        saved = set()
         try:
             with backend as mapper:
                 for job, results in mapper(jobs):
+                    if job.config_hash not in saved:  # config.json with the configuration's first units
+                        saved.add(job.config_hash)
+                        store.save_config(job.config_hash, job.config)
                     store.write_job(job.config_hash, results)
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad

@@ -37,9 +37,12 @@ with the mapping's association settings as its parameters; it has one unit (run 
 a recorded estimate is deterministic). A campaign may have no ``[[filter]]`` when it
 scores recorded estimates only.
 
-Everything is checked before any work starts (:func:`load`): an unknown
-section, key, dataset, task, filter or parameter, a parameter of the wrong type
-or out of the bounds its declaration states (:mod:`replay.util.params`), or an
+Everything is checked before any work starts (:func:`load`): a file that is not
+UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
+``[campaign]`` value or a parameter of the wrong type or out of the bounds its
+declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
+and ``batch`` at most :data:`MAX_RUNS`, ``seed`` >= 0, ``divergence_threshold`` > 0),
+more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
 an absolute path: it would place the output outside the output root) raises
 :class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key. Each configuration stores its parameters with
@@ -49,6 +52,7 @@ configuration, with the same hash.
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import re
 import tomllib
@@ -57,11 +61,25 @@ from pathlib import Path
 
 from replay.align import ALIGNMENTS
 from replay.util.errors import ReplayError
+from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
 
-CAMPAIGN_KEYS = {"name": str, "runs": int, "seed": int, "batch": int, "alignment": str,
-                 "divergence_threshold": float, "data_dir": str}
+MAX_RUNS = 100_000  # Monte Carlo runs per configuration (each a stored unit: two files)
+MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
+MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
+CAMPAIGN_PARAMS = (  # the [campaign] table, checked by replay.util.params
+    Param("name", str, None, "names the default result directory runs/campaign-<name>", optional=True),
+    Param("runs", int, 1, "Monte Carlo runs per configuration", low=1, high=MAX_RUNS),
+    Param("seed", int, 0, "master seed (streams as in replay.evaluate)", low=0),
+    Param("batch", int, 25, "runs per job (one batched filter call)", low=1, high=MAX_RUNS),
+    Param("alignment", str, "se3", "ATE alignment", choices=tuple(ALIGNMENTS)),
+    Param("divergence_threshold", float, None, "a run whose position error exceeds it counts as diverged",
+          unit="m", low=0, low_open=True, optional=True),
+    Param("data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)",
+          optional=True),
+)
+CAMPAIGN_KEYS = {p.name: p.type for p in CAMPAIGN_PARAMS}
 DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
 FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
 
@@ -106,9 +124,12 @@ def check_name(where, name: str) -> None:
            "it is an absolute path" if os.path.isabs(name) else
            "it contains a path separator" if any(c in name for c in seps) else
            "it is . or .." if name in (".", "..") else
-           "it contains a control character" if any(ord(c) < 32 or ord(c) == 127 for c in name) else None)
+           "it contains a control character" if any(ord(c) < 32 or ord(c) == 127 for c in name) else
+           f"it is {len(name.encode())} bytes long, at most {MAX_NAME_BYTES}" if len(name.encode()) > MAX_NAME_BYTES
+           else None)
     if bad:
-        raise where.error("name", f"{name!r} is not a plain name ({bad}; the output would not be "
+        shown = name if len(name) <= 60 else name[:40] + "..."
+        raise where.error("name", f"{shown!r} is not a plain name ({bad}; the output would not be "
                                   f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'", name)
 
 
@@ -158,6 +179,9 @@ def load(path) -> Campaign:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise ReplayError(f"{path}: cannot read campaign file: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise ReplayError(f"{path}: not a campaign file (not UTF-8 text: byte {e.start}); a campaign "
+                          "is a TOML file") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -167,17 +191,17 @@ def load(path) -> Campaign:
         if key not in ("campaign", "dataset", "task", "filter"):
             raise where.error(key, "unknown section (known: campaign, dataset, task, filter)")
     head = doc.get("campaign", {})
-    _check_keys(where, head, CAMPAIGN_KEYS, "[campaign]")
+    if not isinstance(head, dict):
+        raise where.error("campaign", "expected a table [campaign]")
+    for key in head:
+        if key not in CAMPAIGN_KEYS:
+            raise where.error(key, f"unknown key in [campaign] (known: {', '.join(sorted(CAMPAIGN_KEYS))})")
+    check_params(where, "[campaign]", CAMPAIGN_PARAMS, head)
     check_name(where, head.get("name", path.stem))
     runs, seed, batch = head.get("runs", 1), head.get("seed", 0), head.get("batch", 25)
-    if runs < 1:
-        raise where.error("runs", f"must be at least 1 (got {runs})")
-    if batch < 1:
-        raise where.error("batch", f"must be at least 1 (got {batch})")
     alignment = head.get("alignment", "se3")
-    if alignment not in ALIGNMENTS:
-        raise where.error("alignment", f"{alignment!r} is not one of {', '.join(ALIGNMENTS)}", alignment)
     threshold = head.get("divergence_threshold")
+    threshold = float(threshold) if threshold is not None else None
     data_dir = head.get("data_dir")
     if data_dir is not None:
         data_dir = str((path.parent / data_dir).resolve())
@@ -256,6 +280,10 @@ def load(path) -> Campaign:
             for v in values:
                 check_params(where, f"filter {name!r}", declared, {key: v})
         keys = list(grid)
+        combos = math.prod(len(grid[k]) for k in keys)
+        if (len(flt_entries) + combos) * runs > MAX_UNITS:  # before building them (a grid multiplies)
+            raise where.error(keys[0] if keys else "filter", f"{len(flt_entries) + combos} filter configurations x "
+                              f"{runs} runs, more than a campaign may hold ({MAX_UNITS} units); split it")
         for combo in itertools.product(*(grid[k] for k in keys)):
             params = {**base, **dict(zip(keys, combo))}
             try:
@@ -281,6 +309,9 @@ def load(path) -> Campaign:
             for name, fp in rows:
                 configs.append(Config(ds_id, ds_params, first, t, canonical, name, fp, seed,
                                       alignment, threshold))
+    if len(configs) * runs > MAX_UNITS:
+        raise where.error("runs", f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
+                                  f"more than a campaign may hold ({MAX_UNITS}); split it")
     return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs)
 
 

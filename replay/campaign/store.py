@@ -4,11 +4,14 @@ Layout of ``OUT``::
 
     campaign.toml                      copy of the campaign file last run here
     campaign.lock                      held (flock) by the campaign process writing here; its pid
+    configs.json                       every configuration and the data_dir of each dataset
+                                       (:mod:`replay.campaign.index`), with its SHA-256
     units/<config_hash>/config.json    the configuration (dataset, task, filter, parameters, seed, ...)
     units/<config_hash>/<run>.parquet  per-step table: k, t, x<i>, P<ii>, ref_<axis>, err_<axis>,
                                        err_<angle>, nees, nis, nis_dof
-    units/<config_hash>/<run>.json     status (done/failed), metrics or error, version, and the
-                                       table's rows, columns, size and SHA-256 — written last
+    units/<config_hash>/<run>.json     status (done/failed), metrics or error, version, the
+                                       table's rows, columns, size and SHA-256, and the SHA-256
+                                       of the record itself (:mod:`.records`) — written last
     leaderboard.csv, paired.csv        summaries (replay.campaign.board)
 
 A unit counts as stored when its ``.json`` exists. Every file is written to a
@@ -23,14 +26,15 @@ computed again. A run killed at any instant leaves at worst a stray ``*.tmp`` or
 a table without record: the unit is computed again.
 
 A stored unit is **checked** whenever it is read (:meth:`Store.scan`): a record
-that is empty, not JSON or not a unit record, a table that is missing, empty,
+that is empty, not JSON, not a unit record or not what its checksum says, a table that is missing, empty,
 truncated (no Parquet footer), of other columns or rows than its record says,
 or whose bytes differ from the recorded checksum, makes the unit *damaged*.
 ``replay campaign run`` computes damaged units again (and says which);
 ``replay leaderboard`` and ``replay report`` refuse in one line naming the file
 (:meth:`Store.records`). Records written before the table was described in them
 are checked for the columns the leaderboard reads and for the row count of the
-configuration's other units.
+configuration's other units; records without their own checksum, for the metrics the
+table determines (:func:`.records.legacy_problem`).
 """
 from __future__ import annotations
 
@@ -47,6 +51,7 @@ import numpy as np
 import replay
 from replay.util.errors import ReplayError
 
+from . import records as sealing
 from .encode import (SUMMARY_COLUMNS, describe, footer as _footer, pack, parquet_bytes,  # noqa: F401 (re-exported)
                      summary_columns, to_arrow, to_numpy)
 
@@ -75,12 +80,16 @@ def write_bytes(path: Path, data: bytes, sync: bool = True) -> None:
     """``data`` into ``path``: a temporary file beside it, flushed to disk (``sync``), then an
     atomic rename."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        if sync:
-            fh.flush()
-            os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            if sync:
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, an interruption: no partial temporary left behind
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_json(path: Path, obj) -> None:
@@ -121,6 +130,8 @@ class Store:
                 problem, rows = self._check_table(d / f"{run}.parquet", rec.get("table"))
                 if problem is None and rows is not None:
                     legacy[run] = rows
+                if problem is None:  # a record without its checksum: its metrics against the table
+                    problem = sealing.legacy_problem(d / name, rec, lambda cols: self.series(config_hash, run, cols))
             if problem is None:
                 good[run] = rec
             else:
@@ -157,7 +168,8 @@ class Store:
             return None, f"{path}: unit record belongs to configuration {rec.get('config_hash')!r}"
         if rec["status"] == "done" and not isinstance(rec.get("metrics"), dict):
             return None, f"{path}: unit record has no metrics"
-        return rec, None
+        sealed = sealing.problem(path, rec)
+        return (None, sealed) if sealed else (rec, None)
 
     @staticmethod
     def _check_table(path: Path, table):
@@ -238,21 +250,47 @@ class Store:
             return None, f"{path}: does not hold configuration {config_hash} (edited or damaged)"
         return cfg, None
 
-    def configs(self, skip=()):
-        """(config_hash, config) of every stored configuration but those in ``skip``; a damaged
-        ``config.json`` (or unit records without one) raises a :class:`ReplayError` naming it."""
-        if not self.units.is_dir():
-            return []
+    def configs(self, skip=(), listed: dict | None = None):
+        """(config_hash, config) of every stored configuration but those in ``skip``: those the
+        index names (:mod:`.index`) and those of the ``units/`` directories. A damaged index or
+        ``config.json`` (or unit records without one), an entry of ``units/`` that is not a
+        directory, or a configuration of the index without its directory raises a
+        :class:`ReplayError` naming it. ``listed``: the index's configurations, when read already."""
+        from . import index
+
+        problem = None
+        if listed is None:
+            listed, _, problem = index.read(self.out)
+        if problem is not None:
+            raise ReplayError(f"{problem}; run `replay campaign run` on its campaign file again to rewrite it")
+        entries = sorted(self.units.iterdir()) if self.units.is_dir() else []
+        for d in entries:
+            if not d.is_dir() and not d.name.startswith("."):
+                raise ReplayError(f"{d}: not a directory (the units of configuration {d.name} belong there); "
+                                  "move it away and run `replay campaign run` on its campaign file again")
+        for h, cfg in listed.items():
+            if h not in skip and not (self.units / h).is_dir():
+                raise ReplayError(f"{self.units / h}: missing: configuration {index.describe(cfg)}, listed in "
+                                  f"{self.out / index.NAME}, has no units directory; {RERUN_HINT}")
         out = []
-        for d in sorted(self.units.iterdir()):
+        for d in entries:
             if not d.is_dir() or d.name in skip:
                 continue
             cfg, problem = self.read_config(d.name)
             if problem is None:
                 out.append((d.name, cfg))
+            elif problem.endswith(": missing") and d.name in listed and not any(RUN_FILE.match(p.name)
+                                                                                for p in d.iterdir()):
+                out.append((d.name, listed[d.name]))  # no units yet: config.json comes with the first
             elif (d / "config.json").exists() or any(RUN_FILE.match(p.name) for p in d.iterdir()):
                 raise ReplayError(f"{problem}; run `replay campaign run` on its campaign file again to rewrite it")
         return out
+
+    def data_dirs(self) -> dict:
+        """{dataset id: the ``data_dir`` the campaign ran it with} (empty for an older store)."""
+        from . import index
+
+        return index.read(self.out)[1]
 
     def series(self, config_hash: str, run: int, columns=None, sha256: str | None = None):
         """The per-step table of a unit as a dict of numpy arrays (``columns``: those only).
@@ -308,7 +346,7 @@ class Store:
             write_bytes(d / f"{run}.parquet", data, sync=False)  # its record's checksum vouches for it
             self._keep(config_hash, run, record["table"]["sha256"], result["summary"] if "summary" in result
                        else summary_columns(result.get("series", {})))
-        write_json(d / f"{run}.json", record)
+        write_json(d / f"{run}.json", sealing.seal(record, _default))
         if sync:
             sync_dir(d)
 

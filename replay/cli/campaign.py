@@ -1,6 +1,7 @@
 """``replay campaign run``, ``replay leaderboard``, ``replay report``."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -12,6 +13,18 @@ from replay.util.files import check_writable, refuse_overlap
 @click.group("campaign")
 def campaign():
     """Evaluation campaigns: datasets x tasks x filters x parameters x runs, resumable."""
+
+
+NAME_MAX = 255  # bytes of one file name (Linux, macOS, Windows file systems)
+
+
+def check_names(out, what: str) -> None:
+    """Refuse a path with a name longer than file systems allow, before any work."""
+    for part in Path(out).parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            shown = str(out) if len(str(out)) <= 80 else str(out)[:60] + "..."
+            raise ReplayError(f"{what} {shown}: a name in it is {len(os.fsencode(part))} bytes long "
+                              f"(file systems allow {NAME_MAX})")
 
 
 @campaign.command("run")
@@ -36,11 +49,13 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
     c = spec.load(file)
     out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
+    check_names(out, "--out")
     refuse_overlap(out, [c.data_dir, data_dir], "--out")  # never onto or inside the data
     check_writable(out, "--out")
     counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
                          retry_failed=retry_failed, data_dir=data_dir, wait=wait)
     for key, what in (("rewritten", "rewrote {n} damaged configuration file{s}"),
+                      ("missing", "recomputed {n} missing configuration{s}"),
                       ("damaged", "recomputed {n} damaged unit{s}")):
         found = counts[key]
         if found:
@@ -64,12 +79,13 @@ def leaderboard(dirs, sort, out):
     from replay.campaign import board
 
     if out:
+        check_names(out, "--out")
         refuse_overlap(out, dirs, "--out")
         check_writable(out, "--out")
     rows = board.merge(dirs, sort)
     click.echo(board.format_rows(rows))
     if out:
-        board._write(rows, Path(out), board.columns(rows))
+        board._write(rows, Path(out), board.merged_columns(rows))
         click.echo(f"wrote {out}")
 
 
@@ -81,6 +97,8 @@ def report(dir, out):
     """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report
 
+    if out:
+        check_names(out, "--out")
     path = make_report(Path(dir), Path(out) if out else None)
     click.echo(f"wrote {path}")
 

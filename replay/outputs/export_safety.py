@@ -63,11 +63,12 @@ def run_inputs(run_dir, data_dir=None) -> list[Path]:
     if (run_dir / "units").is_dir() and not path.exists():  # a campaign: every configuration's dataset
         from replay.campaign.store import Store
 
-        found = [run_dir]
-        for _, cfg in Store(run_dir).configs():
+        found, store = [run_dir], Store(run_dir)
+        dirs = store.data_dirs()
+        for _, cfg in store.configs():
             params = cfg.get("dataset_params")
             found += dataset_inputs(cfg.get("dataset"), params.get("mapping") if isinstance(params, dict) else None,
-                                    data_dir)
+                                    data_dir or dirs.get(cfg.get("dataset")))  # the campaign's
         return list(dict.fromkeys(found))
     try:
         man = json.loads(path.read_text())

@@ -160,7 +160,7 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
                            "err": {k[4:]: v for k, v in cols.items() if k.startswith("err_")}}
         manifest[f"units/{h}/config.json"] = (unit / "config.json").read_text()
     cfg = chosen[0][1]
-    frame, problem = frame_and_problem(cfg, run, data_dir)
+    frame, problem = frame_and_problem(cfg, run, data_dir or store.data_dirs().get(cfg["dataset"]))  # the campaign's
     for name, est in estimates.items():  # the position errors, in the task's axis order
         try:
             est["err"] = np.column_stack([est["err"][str(a)] for a in problem.axis_names])
