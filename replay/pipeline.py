@@ -159,13 +159,20 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
 
 
 def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
-    """The task a dataset is scored with when none is named: the registry's, else the adapter's choice."""
+    """The task a dataset is scored with when none is named: the registry's, else the adapter's
+    choice, else for a recording with sensor inputs (``meta["roles"]``) the ``fusion`` task over
+    them — never a task that synthesises measurements from the reference while the recording has
+    sensors of its own. A recording without any sensor input gets ``position`` (its rows are
+    marked ``synthetic``; recorded estimates are scored the same way)."""
     ds = resolve(dataset)
     if ds is not None and ds.default_task:
         return ds.default_task
     cfg = {"dataset": dataset, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
            "adapter": adapter}
-    return load_frame(cfg, 0, data_dir).meta.get("default_task", "position")
+    meta = load_frame(cfg, 0, data_dir).meta
+    if meta.get("default_task"):
+        return meta["default_task"]
+    return "fusion" if any(e for role, e in (meta.get("roles") or {}).items() if role != "none") else "position"
 
 
 def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):

@@ -52,7 +52,11 @@ HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "los
 RUN_METRICS = ["pos_rmse", "x_rmse", "y_rmse", "z_rmse", "ate", "final_err", "drift_pct", "nees", "nis"]
 ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anees_flag",
             "anis", "anis_lo", "anis_hi", "anis_inside", "anis_flag"]
-TAIL = ["scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
+TAIL = ["measurements", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
+# what the filters of a row were given (issue 24): "sensors" (the recording's own), "synthetic"
+# (a recording's reference plus the task's noise: a number about the task's noise generator, not
+# about the vehicle), "simulated" (a simulated dataset), "recorded" (a recorded estimate: no filter)
+SYNTHETIC = "synthetic"
 TIMING = ("us_per_step",)
 
 
@@ -73,9 +77,22 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row["lost_share"] = lost_share([r["metrics"] for r in ok])
         dof = ok[0]["metrics"].get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
         row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
-    row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=agg["us_per_step"],
+    row.update(measurements=measurements(cfg), scored=agg["scored"], masked=agg["masked"],
+               us_per_step=agg["us_per_step"],
                alignment=cfg["alignment"], version=version, config_hash=h)
     return row
+
+
+def measurements(cfg: dict) -> str:
+    """What the filters of configuration ``cfg`` were given (:data:`TAIL`'s ``measurements``)."""
+    from replay import registry
+    from replay.tasks import task_class
+
+    if str(cfg["filter"]).startswith("recorded:"):
+        return "recorded"
+    if cfg["dataset"] in registry.all_datasets() and registry.get(cfg["dataset"]).kind == "sim":
+        return "simulated"
+    return SYNTHETIC if getattr(task_class(cfg["task"]), "SYNTHETIC", False) else "sensors"
 
 
 def lost_share(run_metrics: list[dict]) -> float:

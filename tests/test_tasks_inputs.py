@@ -99,12 +99,16 @@ def test_legacy_frames_without_roles_use_the_role_names():
     assert role_input(frame, "gps", "t") is None  # an adapter that declares roles: by role only
 
 
-def test_bohai_roles_gps_and_gyro_only_when_it_follows_the_yaw(bohai_dir):
+def test_bohai_roles_gps_gyro_only_when_it_follows_the_yaw_and_attitude(bohai_dir):
     roles = load_bohai(bohai_dir / "20220822_0_6.csv").meta["roles"]
     assert roles["gps"][0]["channels"] == {"position": "gps_position"}
-    assert roles["imu"][0]["channels"] == {"gyro": "gyro"}
+    assert roles["imu"][0]["channels"] == {"gyro": "gyro", "attitude": "attitude"}
+    assert roles["imu"][0]["attitude_enu"]  # its yaw follows the course over ground (0.11 rad)
     f0 = load_bohai(bohai_dir / "20220822_0_0.csv")  # wz does not follow the yaw rate (correlation -0.03)
-    assert f0.meta["gyro_attitude"]["wz_yaw"] < 0.3 and "imu" not in f0.meta["roles"]
+    assert f0.meta["gyro_attitude"]["wz_yaw"] < 0.3
+    # and its yaw is 1.45 rad off the course: the attitude alone, not marked east-north-up
+    assert f0.meta["roles"]["imu"][0]["channels"] == {"attitude": "attitude"}
+    assert not f0.meta["roles"]["imu"][0]["attitude_enu"]
 
 
 def test_bag_meta_roles(tmp_path):

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.evaluate import Evaluation, manifest
-from replay.summary import MIN_SCORED_SHARE, columns, consistency_cell, lost_cell, scored_cell, scored_share
+from replay.summary import MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell, scored_share
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
@@ -76,6 +76,9 @@ def format_table(ev: Evaluation) -> str:
                      if k in cfg["task_params"])
     title = (f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}"
              + (f"  first={cfg['first']}" if cfg["first"] else ""))
+    if any(r.get("measurements") == SYNTHETIC for r in ev.rows):
+        title += (f"\nsynthetic measurements: task {cfg['task']} draws them from the reference plus its own "
+                  "noise, not from the recording's sensors (task fusion reads the sensors)")
     unit = ev.units or {}
     shown = ", ".join(f"{k} {unit[k]}" for k in metrics if k in unit)
     note = ("RMSE: mean over runs of per-run RMSE, ± half-width of the 95 % interval; median: "

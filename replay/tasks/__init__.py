@@ -83,6 +83,9 @@ class Task(Declared):
     KIND = "task"
     name = "task"
     LOST_M: float = 10.0
+    # True when the task draws its measurements from the reference (plus its own noise) instead of
+    # reading the recording's sensors: never a recording's default, its rows marked "synthetic"
+    SYNTHETIC: bool = False
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

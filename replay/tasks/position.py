@@ -25,6 +25,7 @@ POSITIVE = dict(low=0, low_open=True)
 
 class PositionTask(Task):
     name = "position"
+    SYNTHETIC = True  # measurements drawn from the reference (the paper's protocol)
     LOST_M = 10.0  # lost-track threshold (m): navigation-solution reference; working filters stay near 1-2 m
     PARAMS = (
         Param("q", float, 1.0, "process noise variance per axis and sample (Q = q I3)", unit="m^2", **POSITIVE),

@@ -26,6 +26,7 @@ from . import Problem, Task, describe, reference_position_3d
 
 class SonarTask(Task):
     name = "sonar"
+    SYNTHETIC = True  # measurements drawn from the reference (the paper's protocol)
     LOST_M = 20.0  # lost-track threshold (m): range noise std 1.4 m; working filters stay near 2-3 m
     PARAMS = (
         Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance the filters assume "
