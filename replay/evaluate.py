@@ -27,6 +27,7 @@ import replay
 from replay import registry, score, summary
 from replay.util.progress import particle_weight
 from replay.filters import make_filter
+from replay.filters.base import Estimates
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
@@ -148,6 +149,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
+    _check_memory(configs, runs, batch, data_dir)
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
         progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
@@ -157,7 +159,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         recs = []
         for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
             block = list(range(start, min(runs, start + batch)))
-            recs += run_block(c, block, data_dir, keep=True, strict=True)
+            recs += [_filled(r) for r in run_block(c, block, data_dir, keep=True, strict=True)]
             if progress is not None:
                 progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
         results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
@@ -178,6 +180,43 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
                       score.units(p0))
+
+
+def _check_memory(configs: list, runs: int, batch: int, data_dir) -> None:
+    """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.resources`),
+    sized on run 0's problem."""
+    from replay.pipeline import build_problem
+    from replay.resources import available_memory, check_kept, check_particles
+
+    offline = [c for c in configs if not is_recorded(c.filter)]
+    if not offline or (avail := available_memory()) is None:
+        return
+    p = build_problem(offline[0], 0, data_dir)
+    for c in offline:
+        check_particles(c.filter, c.filter_params, min(runs, batch), p.model.nx, avail)
+    check_kept(len(offline), runs, len(p.z), p.model.nx, avail)
+
+
+def _filled(rec: dict) -> dict:
+    """A run's record; a failed run (the filter failed: :mod:`replay.failures`) with NaN estimates
+    and errors on the problem's steps, so every table keeps one entry per run."""
+    if rec["status"] != "failed":
+        return rec
+    p = rec["problem"]
+    n, nx = len(p.z), p.model.nx
+    est = Estimates(np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None,
+                    {"error": rec["error"]})
+    return dict(rec, estimates=est, errors=score.errors(p, est), metrics={}, series={})
+
+
+def failures(ev: Evaluation) -> dict:
+    """``{filter: {"runs": [failed runs], "error": the first error}}`` of the filters that failed."""
+    out = {}
+    for res in ev.results:
+        bad = [r for r in res.records if r["status"] == "failed"]
+        if bad:
+            out[res.name] = {"runs": [r["run"] for r in bad], "error": bad[0]["error"]}
+    return out
 
 
 def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):
@@ -246,7 +285,8 @@ def command_line(config: dict) -> str:
 def manifest(ev: Evaluation) -> dict:
     return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
             "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
-            "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results}}
+            "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results},
+            **({"failures": f} if (f := failures(ev)) else {})}
 
 
 def _tolerance(name: str) -> dict:

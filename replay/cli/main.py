@@ -157,6 +157,20 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         from replay.cli.bags import export_outputs
 
         export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+    _failed_filters(ev)
+
+
+def _failed_filters(ev) -> None:
+    """A filter that failed (a plugin's bug, sys.exit, memory, a broken protocol): one warning line
+    each, after the other filters' results are written, and exit status 1."""
+    from replay.evaluate import failures
+
+    bad = failures(ev)
+    for name, f in bad.items():
+        click.echo(f"replay: warning: filter {name!r}: {len(f['runs'])} of {ev.config['runs']} runs failed "
+                   f"({f['error']}); recorded in the leaderboard's failed column and the manifest", err=True)
+    if bad:
+        sys.exit(1)
 
 
 @main.command("rerun")
