@@ -31,6 +31,7 @@ from replay.filters.base import Estimates
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
+from replay.eval_options import validate_eval_options
 from replay.util.errors import ReplayError
 
 
@@ -124,8 +125,13 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
     more by name, or, when None, every estimate the frame holds that ``filters`` does not name.
     """
-    filters = list(filters)
-    filter_params = filter_params or {}
+    opts = validate_eval_options({"task": task, "runs": runs, "seed": seed, "first": first, "data_dir": data_dir,
+                                  "adapter": adapter, "task_params": task_params, "dataset_params": dataset_params,
+                                  "alignment": alignment, "divergence_threshold": divergence_threshold,
+                                  "baseline": baseline, "batch": batch})
+    runs, seed, first, divergence_threshold, batch = (opts[k] for k in ("runs", "seed", "first",
+                                                                         "divergence_threshold", "batch"))
+    filters, filter_params = _check_filters(filters, filter_params, recorded)
     offline = [n for n in filters if not is_recorded(n)]
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
@@ -180,6 +186,20 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
                       score.units(p0))
+
+
+def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
+    """``filters`` (names), ``filter_params`` ({name: {parameter: value}}) and ``recorded`` checked: one line."""
+    if isinstance(filters, str) or not isinstance(filters, (list, tuple)) or not all(
+            isinstance(f, str) and f.strip() for f in filters):
+        raise ReplayError(f"filters must be a list of filter names (got {filters!r:.80})")
+    if filter_params is not None and not (isinstance(filter_params, dict) and all(
+            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
+        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} (got {filter_params!r:.80})")
+    if recorded is not None and (isinstance(recorded, str) or not isinstance(recorded, (list, tuple))
+                                 or not all(isinstance(r, str) for r in recorded)):
+        raise ReplayError(f"recorded must be a list of recorded estimate names or null (got {recorded!r:.80})")
+    return list(filters), filter_params or {}
 
 
 def _check_memory(configs: list, runs: int, batch: int, data_dir) -> None:

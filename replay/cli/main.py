@@ -65,9 +65,9 @@ def _notes_to_stderr() -> None:
               help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
                    "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
                    "as recorded:<name>, or recorded:none for none).")
-@click.option("--runs", "-n", default=1, show_default=True, type=click.IntRange(1), help="Monte Carlo runs.")
-@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
-@click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
+@click.option("--runs", "-n", default=1, show_default=True, type=int, help="Monte Carlo runs (1 to 1000000).")
+@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed (an integer >= 0).")
+@click.option("--first", default=None, type=int, help="Use only the first N samples.")
 @click.option("--out", "-o", default=None, type=click.Path(),
               help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
                    "with runs/<dataset>/<task>/latest pointing to it).")
@@ -91,19 +91,22 @@ def _notes_to_stderr() -> None:
               help="Also export the run as a Foxglove MCAP file.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
-@click.option("--alignment", default="se3", show_default=True, type=click.Choice(["none", "yaw", "se3", "sim3"]),
-              help="Alignment of the estimate onto the reference for the ATE column.")
-@click.option("--divergence-threshold", default=None, type=click.FloatRange(0, min_open=True),
+@click.option("--alignment", default="se3", show_default=True,
+              help="Alignment of the estimate onto the reference for the ATE column: none, yaw, se3, sim3.")
+@click.option("--divergence-threshold", default=None, type=float,
               help="Position error (m) beyond which a run counts as diverged (default: none).")
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
              divergence_threshold=None, force=False, quiet=False):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
+    from replay.eval_options import validate_eval_options
     from replay.evaluate import evaluate
     from replay.outputs.files import check_output, eval_inputs, format_table, mark_latest, new_run_dir, write_all
     from replay.pipeline import default_task
 
+    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment,
+                           "divergence_threshold": divergence_threshold})  # the API's declarations and messages
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
     if baseline is not None and baseline not in names + (recorded or []) and not (
             recorded is None and baseline.startswith("recorded:")):
