@@ -226,7 +226,7 @@ class Filter(Declared):
         if done is not None:  # its arrays are the results: nothing to fill or copy
             X, P, nis, dof = done
             if getattr(X, "shape", None) != (M, n, nx) or getattr(P, "shape", None) != (M, n, nx, nx):
-                raise shape_error(self.name, "run_all()", (M, n, nx), X, P)
+                raise shape_error(self, "run_all()", (M, n, nx), X, P)
             secs = np.full((M, n), getattr(engine, "seconds", clock() - t0) / (n * M))
             active = active[:0]
         else:
@@ -246,7 +246,7 @@ class Filter(Declared):
                 break
             dt = (clock() - t0) / na
             if getattr(xk, "shape", None) != (na, nx) or getattr(Pk, "shape", None) != (na, nx, nx):
-                raise shape_error(self.name, "its engine's step()", (na, nx), xk, Pk)
+                raise shape_error(self, "its engine's step()", (na, nx), xk, Pk)
             if not careful or _all_fine(xk, Pk):
                 X[rows, k], P[rows, k], secs[rows, k], nis[rows, k], dof[rows, k] = xk, Pk, dt, nk, dk
                 continue
@@ -272,10 +272,13 @@ class Filter(Declared):
         return out
 
 
-def shape_error(name: str, where: str, want: tuple, x, P) -> ProtocolError:
-    """One line naming the filter and the shapes expected and got (the protocol boundary)."""
+def shape_error(flt, where: str, want: tuple, x, P) -> ProtocolError:
+    """One line naming the filter (a name, or its class when it has no ``name`` of its own) and the
+    shapes expected and got (the protocol boundary)."""
     got = f"a state of shape {np.shape(x)} and a covariance of shape {np.shape(P)}"
-    return ProtocolError(f"filter {name!r}: {where} returned {got}; expected {want} and {want + want[-1:]} "
+    cls = flt if isinstance(flt, type) else type(flt)
+    who = repr(flt) if isinstance(flt, str) else repr(cls.name) if "name" in vars(cls) else cls.__name__
+    return ProtocolError(f"filter {who}: {where} returned {got}; expected {want} and {want + want[-1:]} "
                          f"(a state of {want[-1]} components)")
 
 
@@ -346,7 +349,7 @@ class PerRunEngine:
                     flt.update(state, Z[j], k, f)
                 xe, Pe = flt.estimate(state)
                 if np.shape(xe) != (nx,) or np.shape(Pe) != (nx, nx):
-                    raise shape_error(flt.name, "estimate()", (nx,), xe, Pe)
+                    raise shape_error(flt, "estimate()", (nx,), xe, Pe)
                 x[j], P[j] = xe, Pe
             except Exception as err:
                 if not numerical(err):
