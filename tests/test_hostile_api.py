@@ -45,28 +45,29 @@ def bad_values(decl) -> list:
 
 
 @pytest.fixture(scope="module")
-def subjects():
-    """A declaration-valid call of each public function: (args, kwargs)."""
+def subjects(tmp_path_factory):
+    """A declaration-valid call of each public function: (args, kwargs); paths in a temporary directory."""
     from replay.filters.kalman import EKF
     from replay.tasks import TASKS
     from replay.trajectory.base import make
 
     ev = replay.evaluate("sim/auv-sonar", filters=["ekf"], runs=1, **SONAR)
     frame = replay.load_frame("sim/auv-sonar", seed=0, steps=10)
+    tmp = tmp_path_factory.mktemp("api")
     t = np.arange(5.0)
     traj = make(t, np.column_stack([t, t, t]), source="t")
     return {
         "evaluate": (("sim/auv-sonar",), {"filters": ["ekf"], **SONAR}),
         "load_frame": (("sim/auv-sonar",), {}),
-        "campaign_results": (("somewhere",), {}),
-        "export_mcap": ((ev, "x.mcap"), {}),
+        "campaign_results": ((tmp / "somewhere",), {}),
+        "export_mcap": ((ev, tmp / "x.mcap"), {}),
         "frame_table": ((frame,), {}), "report_table": ((frame,), {}),
         "make_filter": (("ekf",), {}), "make_task": (("sonar",), {}),
         "plot_errors": ((ev,), {}), "plot_paired": ((ev,), {}), "plot_rmse": ((ev,), {}),
         "plot_track": ((ev,), {}),
         "register_filter": ((EKF,), {}), "register_task": ((TASKS.load("sonar"),), {}),
-        "run_campaign": (("c.toml",), {"out": "o"}),
-        "load_trajectory": (("x.txt",), {}),
+        "run_campaign": ((tmp / "c.toml",), {"out": tmp / "o"}),
+        "load_trajectory": ((tmp / "x.txt",), {}),
         "score": ((traj, traj), {}),
         "list_plugins": ((), {}), "refresh_plugins": ((), {}),
     }
