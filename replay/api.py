@@ -66,6 +66,10 @@ def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict
             isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters):
         raise ReplayError(f"filters must be filter names (\"ekf,ukf\" or a list), Filter classes or instances "
                           f"(got {filters!r:.80})")
+    if filter_params is not None and not (isinstance(filter_params, dict) and all(
+            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
+        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
+                          f"(got {filter_params!r:.80})")
     names, params = [], {k: dict(v) for k, v in (filter_params or {}).items()}
     for item in filters:
         if isinstance(item, str):

@@ -35,16 +35,34 @@ class Kind:
     def check(self, value, owner: str = ""):
         import importlib
 
-        module, _, attr = self.of.partition(":")
-        want = getattr(importlib.import_module(module), attr)
-        ok = (value is None and self.optional) or (
-            inspect.isclass(value) and issubclass(value, want) if self.cls else isinstance(value, want))
+        wants = [getattr(importlib.import_module(m), a) for m, _, a in (o.partition(":") for o in self.of.split("|"))]
+        ok = (value is None and self.optional) or any(
+            inspect.isclass(value) and issubclass(value, w) if self.cls else isinstance(value, w) for w in wants)
         if not ok:
-            what = f"a subclass of {attr}" if self.cls else f"{'an' if attr[0] in 'AEIOU' else 'a'} {attr}"
+            what = " or ".join(f"a subclass of {w.__name__}" if self.cls
+                               else f"{'an' if w.__name__[0] in 'AEIOU' else 'a'} {w.__name__}" for w in wants)
             shown = value.__name__ if inspect.isclass(value) else type(value).__name__
             raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be {what}"
                               f"{' (or None)' if self.optional else ''} (got {shown})")
         return value
+
+
+@dataclass(frozen=True)
+class Either:
+    """An argument that one of several declarations accepts (``seed``: an integer or a Generator)."""
+
+    name: str
+    options: tuple
+
+    def check(self, value, owner: str = ""):
+        for d in self.options:
+            try:
+                return d.check(value, owner)
+            except ReplayError:
+                pass
+        what = " or ".join(d.accepts() if isinstance(d, Param) else d.doc for d in self.options)
+        shown = repr(value) if isinstance(value, (int, float, str, bytes, type(None))) else type(value).__name__
+        raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be {what} (got {shown:.60})")
 
 
 def _p(name, type_, doc, **kw):
@@ -61,11 +79,15 @@ def TRAJ(name):  # noqa: N802 — a declaration
 
 NAME = _p("name", str, "a registered name", optional=True)
 
+SEED = Either("seed", (EVAL["seed"], Kind("seed", "numpy.random:Generator", "a numpy.random.Generator (or None)",
+                                              optional=True)))
+SOURCE = Kind("source", "replay.evaluate:Evaluation|replay.frame:Frame", "an evaluation or a frame")
+
 ARGS: dict[str, dict] = {
     "evaluate": {"dataset": DATASET, **{k: v for k, v in EVAL.items() if k != "batch"},
                  "batch": EVAL["batch"], "filter_params": _p("filter_params", dict, "{filter: {name: value}}",
                                                              optional=True)},
-    "load_frame": {"dataset": DATASET, "data_dir": EVAL["data_dir"], "first": EVAL["first"],
+    "load_frame": {"dataset": DATASET, "data_dir": EVAL["data_dir"], "seed": SEED, "first": EVAL["first"],
                    "adapter": EVAL["adapter"]},
     "campaign_results": {"out": PATH(name="out", doc="a result directory"),
                          "runs": _p("runs", bool, "one row per run", default=False)},
@@ -83,7 +105,7 @@ ARGS: dict[str, dict] = {
     "plot_errors": {"ev": EVALUATION},
     "plot_paired": {"ev": EVALUATION, "metric": _p("metric", str, "a leaderboard metric", default="pos_rmse")},
     "plot_rmse": {"ev": EVALUATION, "metric": _p("metric", str, "a leaderboard metric", default="pos_rmse")},
-    "plot_track": {"utm": _p("utm", bool, "UTM axes", default=True),
+    "plot_track": {"source": SOURCE, "utm": _p("utm", bool, "UTM axes", default=True),
                    "run": _p("run", int, "the run drawn", default=0, low=0)},
     "register_filter": {"cls": Kind("cls", "replay.filters.base:Filter", "a Filter subclass", cls=True),
                         "name": NAME},
@@ -108,6 +130,30 @@ ARGS: dict[str, dict] = {
     "list_plugins": {},
     "refresh_plugins": {},
 }
+# the functions whose keyword options are all declared: an unknown one is refused with the known ones
+CLOSED = {"evaluate": ("recorded", "progress"), "score": ()}
+
+
+def _run_in(source, run, owner):
+    """``run`` must be a run of the evaluation (a frame has one)."""
+    n = len(source.results[0].records) if hasattr(source, "results") and source.results else 1
+    if run >= n:
+        raise ReplayError(f"{owner}: run {run}: the evaluation has runs 0..{n - 1}")
+
+
+def _metric_in(ev, metric, owner):
+    known = sorted({k for r in ev.rows for k, v in r.items() if isinstance(v, (int, float))})
+    if metric not in known:
+        raise ReplayError(f"{owner}: metric {metric!r} is not a leaderboard column (numeric columns: "
+                          f"{', '.join(known[:12])}, ...)")
+
+
+# relations between arguments, checked after each alone: {function: check(arguments, owner)}
+RELATIONS = {
+    "export_mcap": lambda a, o: _run_in(a["evaluation"], a.get("run", 0), o),
+    "plot_track": lambda a, o: _run_in(a["source"], a.get("run", 0), o),
+    "plot_rmse": lambda a, o: _metric_in(a["ev"], a.get("metric", "pos_rmse"), o),
+}
 GUARDED = (TypeError, ValueError, IndexError, KeyError, AttributeError, OSError)
 
 
@@ -124,9 +170,14 @@ def checked(name: str, fn):
         for key, value in list(bound.arguments.items()):
             kind = sig.parameters[key].kind
             if kind is inspect.Parameter.VAR_KEYWORD:
+                if name in CLOSED and (bad := [k for k in value if k not in decl and k not in CLOSED[name]]):
+                    known = [k for k in (*decl, *CLOSED[name]) if k not in sig.parameters or k == key]
+                    raise ReplayError(f"replay.{name}: unknown option {bad[0]!r} (known: {', '.join(known)})")
                 bound.arguments[key] = {k: decl[k].check(v) if k in decl else v for k, v in value.items()}
             elif key in decl:
                 bound.arguments[key] = decl[key].check(value)
+        if name in RELATIONS:
+            RELATIONS[name](bound.arguments, f"replay.{name}")
         try:
             return fn(*bound.args, **bound.kwargs)
         except ReplayError:

@@ -134,6 +134,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     filters, filter_params = _check_filters(filters, filter_params, recorded)
     offline = [n for n in filters if not is_recorded(n)]
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
+    if adapter is not None:
+        registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
     task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
@@ -195,7 +197,8 @@ def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
         raise ReplayError(f"filters must be a list of filter names (got {filters!r:.80})")
     if filter_params is not None and not (isinstance(filter_params, dict) and all(
             isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
-        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} (got {filter_params!r:.80})")
+        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
+                          f"(got {filter_params!r:.80})")
     if recorded is not None and (isinstance(recorded, str) or not isinstance(recorded, (list, tuple))
                                  or not all(isinstance(r, str) for r in recorded)):
         raise ReplayError(f"recorded must be a list of recorded estimate names or null (got {recorded!r:.80})")

@@ -11,7 +11,7 @@ import pytest
 
 import replay
 from hostile import assert_refused, register
-from replay.api_args import ARGS, Kind
+from replay.api_args import ARGS, Either, Kind
 from replay.eval_options import EVAL_OPTIONS, validate_eval_options
 from replay.util.errors import ReplayError
 
@@ -19,7 +19,9 @@ SONAR = {"dataset_params": {"steps": 10}}
 
 
 def bad_values(decl) -> list:
-    """Wrong types and out-of-range values of a declaration (Param or Kind)."""
+    """Wrong types and out-of-range values of a declaration (Param, Kind, or Either: those no option accepts)."""
+    if isinstance(decl, Either):
+        return [v for d in decl.options for v in bad_values(d) if not _accepted(decl, v)]
     if isinstance(decl, Kind):
         return [3, "x", object()] + ([] if decl.optional else [None])
     t, out = decl.type, ([] if decl.optional else [None])
@@ -42,6 +44,14 @@ def bad_values(decl) -> list:
     elif t is list:
         out += [3, "x", ["a"]]
     return out
+
+
+def _accepted(decl, value) -> bool:
+    try:
+        decl.check(value)
+        return True
+    except ReplayError:
+        return False
 
 
 @pytest.fixture(scope="module")
@@ -151,6 +161,27 @@ def test_api_normalises_options_as_the_cli_does():
     b = replay.evaluate("sim/auv-sonar", filters=["ekf"], divergence_threshold=50.0, seed=2, **SONAR)
     assert a.results[0].config_hash == b.results[0].config_hash
     assert a.rows[0]["pos_rmse"] == b.rows[0]["pos_rmse"] and not math.isnan(a.rows[0]["pos_rmse"])
+
+
+def test_relations_unknown_options_and_names(subjects):
+    ev = subjects["plot_rmse"][0][0]
+    for call, match in [
+        (lambda: replay.plot_track(ev, run=5), r"^replay\.plot_track: run 5: the evaluation has runs 0\.\.0$"),
+        (lambda: replay.export_mcap(ev, "never.mcap", run=1), r"^replay\.export_mcap: run 1: "),
+        (lambda: replay.plot_rmse(ev, metric="nosuch"), r"^replay\.plot_rmse: metric 'nosuch' is not a leaderboard"),
+        (lambda: replay.evaluate("sim/auv-sonar", filters=["ekf"], sed=1), r"^replay\.evaluate: unknown option 'sed' "
+                                                                           r"\(known: task, runs, seed,"),
+        (lambda: replay.evaluate("sim/auv-sonar", filters=["ekf"], adapter="nosuch"), r"^unknown adapter 'nosuch'"),
+        (lambda: replay.evaluate("sim/auv-sonar", filters=["ekf"], filter_params={"ekf": 3}), r"^filter_params must"),
+        (lambda: replay.load_frame("sim/auv-sonar", seed=-1), r"^seed must be an integer in \[0, 9223372036854775807\] "
+                                                               r"or a numpy\.random\.Generator"),
+    ]:
+        with pytest.raises(ReplayError, match=match) as err:
+            call()
+        assert "\n" not in str(err.value)
+    assert not os.path.exists("never.mcap")
+    frame = replay.load_frame("sim/auv-sonar", seed=np.random.default_rng(1), steps=5)  # a Generator is a seed
+    assert len(frame.t) == 5
 
 
 register("api-generated-bad-arguments", "api-runs-0", "eval-seed-minus-1", "api-seed-minus-1",

@@ -72,9 +72,10 @@ CASES = {
 def plugin(tmp_path, monkeypatch):
     (tmp_path / "badplug.py").write_text(textwrap.dedent(PLUGIN))
     monkeypatch.syspath_prepend(str(tmp_path))
+    before = set(FILTERS._session)  # noqa: SLF001
     yield
     sys.modules.pop("badplug", None)
-    for name in [n for n in FILTERS._session if n.startswith("badplug")]:  # noqa: SLF001
+    for name in set(FILTERS._session) - before:  # noqa: SLF001 — the classes registered by evaluate(filters=[cls])
         FILTERS.unregister(name)
 
 
