@@ -33,6 +33,7 @@ from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, def
 from replay.tasks import make_task
 from replay.eval_options import validate_eval_options
 from replay.util.errors import ReplayError
+from replay.util.lookup import params_of
 
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
@@ -153,7 +154,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     the_task = make_task(task_name, **(task_params or {}))
     base = (dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()))
     tail = (seed, alignment, divergence_threshold, adapter)
-    configs = [Config(*base, name, plain(f.params()), *tail) for name, f in zip(offline, instances)]
+    configs = [Config(*base, name, plain(params_of(f, "filter", name)), *tail)
+               for name, f in zip(offline, instances)]
     configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]

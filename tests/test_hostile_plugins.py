@@ -51,6 +51,18 @@ class FewerRuns(Walk):
     def run_batch(self, model, Z, X0, P0, rngs):
         return super().run_batch(model, Z, X0, P0, rngs)[:1]
 
+class ExitsAtInit(Walk):
+    def __init__(self, **params):
+        sys.exit(0)
+
+class RaisesAtInit(Walk):
+    def __init__(self, **params):
+        raise RuntimeError("no licence")
+
+class BadParams(Walk):
+    def params(self):
+        raise KeyError("gain")
+
 class BatchHungry(Walk):
     '''Runs out of memory with more than one run at once: redone run by run (the same numbers).'''
     def engine(self, model, rngs):
@@ -140,6 +152,26 @@ def test_runs_whose_estimates_cannot_be_kept_are_refused(tmp_path):
     check_kept(4, 100, 100, 6, avail=10 ** 9)
 
 
+@pytest.mark.parametrize("cls,match", [
+    ("ExitsAtInit", r"filter 'badplug:ExitsAtInit': its constructor failed: SystemExit: 0$"),
+    ("RaisesAtInit", r"filter 'badplug:RaisesAtInit': its constructor failed: RuntimeError: no licence$"),
+    ("BadParams", r"filter 'badplug:BadParams': params\(\) failed: KeyError: 'gain'$")])
+def test_a_plugin_failing_before_any_run_is_refused_in_one_line(plugin, tmp_path, cls, match):
+    assert_refused(["eval", "sim/auv-sonar", "--filters", f"ekf,badplug:{cls}", "-o", tmp_path / "o"], match)
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatch, tmp_path):
+    import replay.evaluate as module
+
+    def hungry(*a, **k):
+        raise MemoryError("Unable to allocate 9.1 TiB")
+
+    monkeypatch.setattr(module, "evaluate", hungry)
+    assert_refused(["eval", "sim/auv-sonar", "--filters", "ekf", "-o", tmp_path / "o"],
+                   r"^replay: error: out of memory \(Unable to allocate 9\.1 TiB\)$")
+
+
 def test_keyboard_interrupt_is_not_a_failed_run():
     from replay.failures import ends_run
 
@@ -148,4 +180,5 @@ def test_keyboard_interrupt_is_not_a_failed_run():
 
 
 register("plugin-typeerror", "plugin-sys-exit-0", "plugin-wrong-covariance-shape", "plugin-memory-error",
-         "plugin-fewer-runs", "pf-n-particles-1e12")
+         "plugin-fewer-runs", "pf-n-particles-1e12", "plugin-sys-exit-in-constructor", "plugin-params-raise",
+         "eval-memory-error")

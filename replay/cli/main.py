@@ -22,6 +22,9 @@ class Main(click.Group):
         except ReplayError as err:
             click.echo(f"replay: error: {err}", err=True)
             ctx.exit(2)
+        except MemoryError as err:  # not predicted (replay.resources): said as such, never "diverged"
+            click.echo(f"replay: error: out of memory{f' ({err})' if str(err) else ''}", err=True)
+            ctx.exit(2)
         finally:
             import gc
 
