@@ -159,7 +159,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
-    _check_memory(configs, runs, batch, data_dir)
+    built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
         progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
@@ -169,7 +169,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         recs = []
         for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
             block = list(range(start, min(runs, start + batch)))
-            recs += [_filled(r) for r in run_block(c, block, data_dir, keep=True, strict=True)]
+            recs += [_filled(r) for r in run_block(c, block, data_dir, keep=True, strict=True,
+                                                   built=built if cfg is configs[0] else None)]
             if progress is not None:
                 progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
         results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
@@ -207,9 +208,9 @@ def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
     return list(filters), filter_params or {}
 
 
-def _check_memory(configs: list, runs: int, batch: int, data_dir) -> None:
+def _check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None:
     """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.resources`),
-    sized on run 0's problem."""
+    sized on run 0's problem of the first configuration, which is returned ({0: problem}: not built twice)."""
     from replay.pipeline import build_problem
     from replay.resources import available_memory, check_kept, check_particles
 
@@ -220,6 +221,7 @@ def _check_memory(configs: list, runs: int, batch: int, data_dir) -> None:
     for c in offline:
         check_particles(c.filter, c.filter_params, min(runs, batch), p.model.nx, avail)
     check_kept(len(offline), runs, len(p.z), p.model.nx, avail)
+    return {0: p} if offline[0] is configs[0] else None
 
 
 def _filled(rec: dict) -> dict:

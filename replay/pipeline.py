@@ -215,10 +215,12 @@ def same_model(a, b) -> bool:
     return True
 
 
-def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False) -> list[dict]:
+def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False,
+              built: dict | None = None) -> list[dict]:
     """Compute and score runs ``runs`` of ``config`` (module docstring); one record per run, in run order.
 
-    ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``).
+    ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``);
+    ``built``: {run: problem} already built by :func:`build_problem` for this configuration.
     Numerical exceptions inside a filter's step are that run's divergence; any other failure of the
     filter (a bug, ``sys.exit``, memory, a broken protocol) is its runs' failure (:mod:`replay.failures`).
     """
@@ -232,7 +234,7 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
         ds = False
     for run in runs:
         try:
-            problems[run] = build_problem(c, run, data_dir, ds)
+            problems[run] = built[run] if built and run in built else build_problem(c, run, data_dir, ds)
         except Exception as err:  # recorded; the other runs go on
             if strict:
                 raise
