@@ -6,8 +6,9 @@ evaluation are those of :mod:`replay.eval_options`, shared with ``replay eval`` 
 campaign files); objects (an Evaluation, a Frame, a class) are :class:`Kind`. A bad
 argument, a wrong number of arguments or an unknown keyword raises one-line
 :class:`~replay.util.errors.ReplayError`, the CLI's message. As a last guard, a TypeError,
-ValueError, IndexError, KeyError, AttributeError or OSError escaping a public function is
-raised as a ReplayError naming the function (the original chained as its cause).
+ValueError, IndexError, KeyError, AttributeError, OSError or MemoryError ("out of memory")
+escaping a public function is raised as a ReplayError naming the function (the original
+chained as its cause).
 """
 from __future__ import annotations
 
@@ -182,8 +183,9 @@ def checked(name: str, fn):
             return fn(*bound.args, **bound.kwargs)
         except ReplayError:
             raise
-        except GUARDED as err:
-            text = f"{type(err).__name__}: {err}".splitlines()[0][:300] if str(err) else type(err).__name__
-            raise ReplayError(f"replay.{name}: {text}") from err
+        except GUARDED + (MemoryError,) as err:
+            from replay.failures import describe
+
+            raise ReplayError(f"replay.{name}: {describe(err)[:300]}") from err
 
     return call

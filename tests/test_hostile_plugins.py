@@ -170,6 +170,8 @@ def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatc
     monkeypatch.setattr(module, "evaluate", hungry)
     assert_refused(["eval", "sim/auv-sonar", "--filters", "ekf", "-o", tmp_path / "o"],
                    r"^replay: error: out of memory \(Unable to allocate 9\.1 TiB\)$")
+    with pytest.raises(ReplayError, match=r"^replay\.evaluate: out of memory \(MemoryError: Unable to allocate"):
+        replay.evaluate("sim/auv-sonar", filters=["ekf"])
 
 
 def test_keyboard_interrupt_is_not_a_failed_run():
