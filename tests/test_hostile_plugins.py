@@ -174,6 +174,18 @@ def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatc
         replay.evaluate("sim/auv-sonar", filters=["ekf"])
 
 
+@pytest.mark.parametrize("cls", ["Exits", "TypeErr", "NoMemory"])
+def test_a_campaign_unit_records_the_plugins_failure(plugin, cls):
+    from replay.pipeline import Config, run_block
+
+    cfg = Config("sim/auv-sonar", {"steps": 30}, None, "sonar", {}, f"badplug:{cls}", {}, 0)
+    recs = run_block(cfg, [0, 1, 2])  # a campaign's job: never raises for one run
+    assert [r["status"] for r in recs] == ["failed"] * 3 and [r["run"] for r in recs] == [0, 1, 2]
+    import re
+
+    assert all(re.search(CASES[cls], r["error"]) for r in recs)
+
+
 def test_keyboard_interrupt_is_not_a_failed_run():
     from replay.failures import ends_run
 
