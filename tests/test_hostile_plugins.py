@@ -73,8 +73,8 @@ class BatchHungry(Walk):
 CASES = {
     "TypeErr": "TypeError: boom in predict",
     "Exits": r"the filter called sys.exit\(0\)",
-    "WrongShape": r"filter WrongShape: estimate\(\) returned a state of shape \(6,\) and a covariance of shape \(1, 1\); "
-                  r"expected \(6,\) and \(6, 6\)",
+    "WrongShape": r"filter WrongShape: estimate\(\) returned a state of shape \(6,\) and a covariance of "
+                  r"shape \(1, 1\); expected \(6,\) and \(6, 6\)",
     "NoMemory": "out of memory",
     "FewerRuns": r"run_batch\(\) returned 1 results for 2 runs",
 }
