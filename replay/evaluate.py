@@ -94,6 +94,9 @@ class Evaluation:
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
         evaluation (a run's seeds and numbers depend only on (seed, run))."""
+        from replay.eval_options import BY_NAME
+
+        n = BY_NAME["runs"].check(n)
         if n >= self.config["runs"]:
             return self
         results = [FilterResult(r.name, r.params, r.runs[:n], r.errors[:n], r.estimates[:n],

@@ -180,6 +180,9 @@ def test_relations_unknown_options_and_names(subjects):
             call()
         assert "\n" not in str(err.value)
     assert not os.path.exists("never.mcap")
+    for n in (0, 1.5, True, None):
+        with pytest.raises(ReplayError, match=r"^runs must be an integer in \[1, 1000000\]"):
+            ev.first(n)
     frame = replay.load_frame("sim/auv-sonar", seed=np.random.default_rng(1), steps=5)  # a Generator is a seed
     assert len(frame.t) == 5
 
