@@ -54,7 +54,7 @@ from time import perf_counter
 
 import numpy as np
 
-from replay.util.errors import ReplayError
+from replay.util.errors import ProtocolError, ReplayError
 from replay.util.params import Declared
 
 PER_RUN = ("start", "predict", "update", "estimate", "finish")
@@ -99,14 +99,18 @@ class _Careful(Exception):
 
 
 def numerical(err: BaseException) -> bool:
-    """True when ``err`` is a numerical failure of a run (counted as divergence)."""
-    return isinstance(err, Exception) and not isinstance(err, NOT_NUMERICAL)
+    """True when ``err`` is a numerical failure of a run (counted as divergence); an exhausted
+    memory is not (it is the run's failure, "out of memory")."""
+    return isinstance(err, Exception) and not isinstance(err, NOT_NUMERICAL + (MemoryError,))
 
 
 def _escalate(err: Exception, careful: bool, active: int) -> None:
     """What an exception raised by an engine means: a program or user error is raised as it is;
     in the careless pass, redo carefully (_Careful); with several runs active, redo them one by
-    one (_Redo); returns only when it is the divergence of the one active run."""
+    one (_Redo: also after a MemoryError, as one run needs less); returns only when it is the
+    divergence of the one active run."""
+    if isinstance(err, MemoryError) and active > 1:
+        raise _Redo from err
     if not numerical(err):
         raise err
     if not careful:
@@ -202,7 +206,10 @@ class Filter(Declared):
         diverged, errors = [None] * M, {}
         finite = np.isfinite(Z)
         active = np.arange(M)
-        engine = self.engine(model, rngs)
+        try:
+            engine = self.engine(model, rngs)
+        except MemoryError as err:
+            _escalate(err, careful, M)
         started = True
         try:
             engine.start(X0, P0)
@@ -218,6 +225,8 @@ class Filter(Declared):
                 raise _Careful
         if done is not None:  # its arrays are the results: nothing to fill or copy
             X, P, nis, dof = done
+            if getattr(X, "shape", None) != (M, n, nx) or getattr(P, "shape", None) != (M, n, nx, nx):
+                raise shape_error(self, "run_all()", (M, n, nx), X, P)
             secs = np.full((M, n), getattr(engine, "seconds", clock() - t0) / (n * M))
             active = active[:0]
         else:
@@ -236,6 +245,8 @@ class Filter(Declared):
                 diverged[active[0]], errors[active[0]] = k, err
                 break
             dt = (clock() - t0) / na
+            if getattr(xk, "shape", None) != (na, nx) or getattr(Pk, "shape", None) != (na, nx, nx):
+                raise shape_error(self, "its engine's step()", (na, nx), xk, Pk)
             if not careful or _all_fine(xk, Pk):
                 X[rows, k], P[rows, k], secs[rows, k], nis[rows, k], dof[rows, k] = xk, Pk, dt, nk, dk
                 continue
@@ -259,6 +270,30 @@ class Filter(Declared):
                 info["error"] = f"{type(errors[m]).__name__}: {errors[m]}"
             out.append(Estimates(X[m], P[m], secs[m], diverged[m], info))
         return out
+
+
+def shape_error(flt, where: str, want: tuple, x, P) -> ProtocolError:
+    """One line naming the filter (a name, or its class when it has no ``name`` of its own) and the
+    shapes expected and got (the protocol boundary)."""
+    got = f"a state of shape {np.shape(x)} and a covariance of shape {np.shape(P)}"
+    cls = flt if isinstance(flt, type) else type(flt)
+    who = repr(flt) if isinstance(flt, str) else repr(cls.name) if "name" in vars(cls) else cls.__name__
+    return ProtocolError(f"filter {who}: {where} returned {got}; expected {want} and {want + want[-1:]} "
+                         f"(a state of {want[-1]} components)")
+
+
+def check_batch(name: str, out, problems) -> None:
+    """What ``run_batch`` returned for ``problems``: one :class:`Estimates` per run, means (n, nx) and
+    covariances (n, nx, nx) at most as long as the measurements (else one-line ProtocolError)."""
+    if not isinstance(out, (list, tuple)) or len(out) != len(problems):
+        got = f"{len(out)} results" if isinstance(out, (list, tuple)) else f"a {type(out).__name__}"
+        raise ProtocolError(f"filter {name!r}: run_batch() returned {got} for {len(problems)} runs "
+                            "(expected one Estimates per run)")
+    for est, p in zip(out, problems):
+        n, nx = len(p.z), p.model.nx
+        x, P = getattr(est, "x", None), getattr(est, "P", None)
+        if np.ndim(x) != 2 or len(x) > n or np.shape(x)[1:] != (nx,) or np.shape(P) != (len(x), nx, nx):
+            raise shape_error(name, "run_batch()", (n, nx), x, P)
 
 
 def on_points(fun, X, k):
@@ -312,7 +347,10 @@ class PerRunEngine:
                     flt.update(state, Z[j], k, None)
                 elif f.any():
                     flt.update(state, Z[j], k, f)
-                x[j], P[j] = flt.estimate(state)
+                xe, Pe = flt.estimate(state)
+                if np.shape(xe) != (nx,) or np.shape(Pe) != (nx, nx):
+                    raise shape_error(flt, "estimate()", (nx,), xe, Pe)
+                x[j], P[j] = xe, Pe
             except Exception as err:
                 if not numerical(err):
                     raise

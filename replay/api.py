@@ -60,6 +60,16 @@ def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict
     """(names, filter_params) of ``filters`` given as names, classes or instances."""
     if isinstance(filters, str):
         filters = [f.strip() for f in filters.split(",") if f.strip()]
+    from replay.filters.base import Filter
+
+    if not isinstance(filters, (list, tuple)) or not all(
+            isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters):
+        raise ReplayError(f"filters must be filter names (\"ekf,ukf\" or a list), Filter classes or instances "
+                          f"(got {filters!r:.80})")
+    if filter_params is not None and not (isinstance(filter_params, dict) and all(
+            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
+        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
+                          f"(got {filter_params!r:.80})")
     names, params = [], {k: dict(v) for k, v in (filter_params or {}).items()}
     for item in filters:
         if isinstance(item, str):
@@ -226,3 +236,14 @@ def refresh_plugins() -> None:
     FILTERS.refresh()
     TASKS.refresh()
     plugins.refresh()
+
+
+def _checked() -> None:
+    """Every public function with its arguments checked first (:mod:`replay.api_args`)."""
+    from replay.api_args import checked
+
+    for name in __all__:
+        globals()[name] = checked(name, globals()[name])
+
+
+_checked()

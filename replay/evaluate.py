@@ -27,10 +27,13 @@ import replay
 from replay import registry, score, summary
 from replay.util.progress import particle_weight
 from replay.filters import make_filter
+from replay.filters.base import Estimates
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
+from replay.eval_options import validate_eval_options
 from replay.util.errors import ReplayError
+from replay.util.lookup import params_of
 
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
@@ -97,6 +100,9 @@ class Evaluation:
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
         evaluation (a run's seeds and numbers depend only on (seed, run))."""
+        from replay.eval_options import BY_NAME
+
+        n = BY_NAME["runs"].check(n)
         if n >= self.config["runs"]:
             return self
         results = [FilterResult(r.name, r.params, r.runs[:n], r.errors[:n], r.estimates[:n],
@@ -134,10 +140,17 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     """
     min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
     registry.check_data_dir(data_dir)
-    filters = list(filters)
-    filter_params = filter_params or {}
+    opts = validate_eval_options({"task": task, "runs": runs, "seed": seed, "first": first, "data_dir": data_dir,
+                                  "adapter": adapter, "task_params": task_params, "dataset_params": dataset_params,
+                                  "alignment": alignment, "divergence_threshold": divergence_threshold,
+                                  "baseline": baseline, "batch": batch})
+    runs, seed, first, divergence_threshold, batch = (opts[k] for k in ("runs", "seed", "first",
+                                                                         "divergence_threshold", "batch"))
+    filters, filter_params = _check_filters(filters, filter_params, recorded)
     offline = [n for n in filters if not is_recorded(n)]
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
+    if adapter is not None:
+        registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
     task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
@@ -155,10 +168,12 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     the_task = make_task(task_name, **(task_params or {}))
     base = (dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()))
     tail = (seed, alignment, divergence_threshold, adapter)
-    configs = [Config(*base, name, plain(f.params()), *tail) for name, f in zip(offline, instances)]
+    configs = [Config(*base, name, plain(params_of(f, "filter", name)), *tail)
+               for name, f in zip(offline, instances)]
     configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
+    built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
         progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
@@ -168,7 +183,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         recs = []
         for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
             block = list(range(start, min(runs, start + batch)))
-            recs += run_block(c, block, data_dir, keep=True, strict=True)
+            recs += [_filled(r) for r in run_block(c, block, data_dir, keep=True, strict=True,
+                                                   built=built if cfg is configs[0] else None)]
             if progress is not None:
                 progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
         results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
@@ -190,6 +206,59 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
                       score.units(p0), tuple(int(i) for i in p0.position_index))
+
+
+def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
+    """``filters`` (names), ``filter_params`` ({name: {parameter: value}}) and ``recorded`` checked: one line."""
+    if isinstance(filters, str) or not isinstance(filters, (list, tuple)) or not all(
+            isinstance(f, str) and f.strip() for f in filters):
+        raise ReplayError(f"filters must be a list of filter names (got {filters!r:.80})")
+    if filter_params is not None and not (isinstance(filter_params, dict) and all(
+            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
+        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
+                          f"(got {filter_params!r:.80})")
+    if recorded is not None and (isinstance(recorded, str) or not isinstance(recorded, (list, tuple))
+                                 or not all(isinstance(r, str) for r in recorded)):
+        raise ReplayError(f"recorded must be a list of recorded estimate names or null (got {recorded!r:.80})")
+    return list(filters), filter_params or {}
+
+
+def _check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None:
+    """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.resources`),
+    sized on run 0's problem of the first configuration, which is returned ({0: problem}: not built twice)."""
+    from replay.pipeline import build_problem
+    from replay.resources import available_memory, check_kept, check_particles
+
+    offline = [c for c in configs if not is_recorded(c.filter)]
+    if not offline or (avail := available_memory()) is None:
+        return
+    p = build_problem(offline[0], 0, data_dir)
+    for c in offline:
+        check_particles(c.filter, c.filter_params, min(runs, batch), p.model.nx, avail)
+    check_kept(len(offline), runs, len(p.z), p.model.nx, avail)
+    return {0: p} if offline[0] is configs[0] else None
+
+
+def _filled(rec: dict) -> dict:
+    """A run's record; a failed run (the filter failed: :mod:`replay.failures`) with NaN estimates
+    and errors on the problem's steps, so every table keeps one entry per run."""
+    if rec["status"] != "failed":
+        return rec
+    p = rec["problem"]
+    n, nx = len(p.z), p.model.nx
+    est = Estimates(np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None,
+                    {"error": rec["error"]})
+    return dict(rec, estimates=est, errors=score.errors(p, est), metrics={}, series={})
+
+
+def failures(ev: Evaluation) -> dict:
+    """``{filter: {"runs": [failed runs], "error": the first error}}`` of the filters that failed."""
+    out = {}
+    for res in ev.results:
+        bad = [r for r in res.records if r["status"] == "failed"]
+        if bad:
+            out[res.name] = {"runs": [r["run"] for r in bad], "error": bad[0]["error"]}
+    return out
 
 
 def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):
@@ -260,7 +329,8 @@ def command_line(config: dict) -> str:
 def manifest(ev: Evaluation) -> dict:
     return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
             "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
-            "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results}}
+            "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results},
+            **({"failures": f} if (f := failures(ev)) else {})}
 
 
 def _tolerance(name: str) -> dict:

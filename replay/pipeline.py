@@ -44,7 +44,6 @@ import copy
 import functools
 import hashlib
 import json
-import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
@@ -53,8 +52,9 @@ import numpy as np
 
 from replay import metrics, registry, score
 from replay.align import ALIGNMENTS, align, apply
+from replay.failures import ends_run, failed
 from replay.filters import make_filter
-from replay.filters.base import Estimates
+from replay.filters.base import Estimates, check_batch
 from replay.tasks import make_task, source_of
 from replay.util import covcols
 from replay.util.errors import ReplayError
@@ -190,12 +190,6 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     return problem
 
 
-def failed(run: int, err: BaseException) -> dict:
-    return {"run": run, "status": "failed",
-            "error": f"{type(err).__name__}: {err}".splitlines()[0][:500],
-            "traceback": "".join(traceback.format_exception(err))[-4000:]}
-
-
 def _groups(runs, problems):
     """Runs that can share one batched call: same model equations, same measurement shape and
     the same pattern of missing measurements."""
@@ -229,11 +223,14 @@ def same_model(a, b) -> bool:
     return True
 
 
-def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False) -> list[dict]:
+def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False,
+              built: dict | None = None) -> list[dict]:
     """Compute and score runs ``runs`` of ``config`` (module docstring); one record per run, in run order.
 
-    ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``).
-    Exceptions inside a filter's numeric step are never raised: they are that run's divergence.
+    ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``);
+    ``built``: {run: problem} already built by :func:`build_problem` for this configuration.
+    Numerical exceptions inside a filter's step are that run's divergence; any other failure of the
+    filter (a bug, ``sys.exit``, memory, a broken protocol) is its runs' failure (:mod:`replay.failures`).
     """
     c = config.as_dict() if isinstance(config, Config) else config
     if is_recorded(c["filter"]):
@@ -245,7 +242,7 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
         ds = False
     for run in runs:
         try:
-            problems[run] = build_problem(c, run, data_dir, ds)
+            problems[run] = built[run] if built and run in built else build_problem(c, run, data_dir, ds)
         except Exception as err:  # recorded; the other runs go on
             if strict:
                 raise
@@ -265,10 +262,11 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
         try:
             out = flt.run_batch(ps[0].model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]),
                                 np.stack([p.P0 for p in ps]), [filter_rng(c["seed"], r, c["filter"]) for r in group])
-        except Exception as err:  # a failure outside the filter's numeric steps
-            if strict:
+            check_batch(c["filter"], out, ps)
+        except BaseException as err:  # the filter's failure (any, sys.exit too): its runs failed
+            if ends_run(err, strict):
                 raise
-            results += [failed(r, err) for r in group]
+            results += [dict(failed(r, err), **({"problem": problems[r]} if keep else {})) for r in group]
             continue
         dt = (perf_counter() - t0) / len(group)
         for r, est in zip(group, out):

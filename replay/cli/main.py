@@ -22,6 +22,9 @@ class Main(click.Group):
         except ReplayError as err:
             click.echo(f"replay: error: {err}", err=True)
             ctx.exit(2)
+        except MemoryError as err:  # not predicted (replay.resources): said as such, never "diverged"
+            click.echo(f"replay: error: out of memory{f' ({err})' if str(err) else ''}", err=True)
+            ctx.exit(2)
         finally:
             import gc
 
@@ -65,9 +68,9 @@ def _notes_to_stderr() -> None:
               help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
                    "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
                    "as recorded:<name>, or recorded:none for none).")
-@click.option("--runs", "-n", default=1, show_default=True, type=click.IntRange(1), help="Monte Carlo runs.")
-@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed.")
-@click.option("--first", default=None, type=click.IntRange(1), help="Use only the first N samples.")
+@click.option("--runs", "-n", default=1, show_default=True, type=int, help="Monte Carlo runs (1 to 1000000).")
+@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed (an integer >= 0).")
+@click.option("--first", default=None, type=int, help="Use only the first N samples.")
 @click.option("--out", "-o", default=None, type=click.Path(),
               help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
                    "with runs/<dataset>/<task>/latest pointing to it).")
@@ -93,9 +96,9 @@ def _notes_to_stderr() -> None:
               help="Also export the run as a Foxglove MCAP file.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
-@click.option("--alignment", default="se3", show_default=True, type=click.Choice(["none", "yaw", "se3", "sim3"]),
-              help="Alignment of the estimate onto the reference for the ATE column.")
-@click.option("--divergence-threshold", default=None, type=click.FloatRange(0, min_open=True),
+@click.option("--alignment", default="se3", show_default=True,
+              help="Alignment of the estimate onto the reference for the ATE column: none, yaw, se3, sim3.")
+@click.option("--divergence-threshold", default=None, type=float,
               help="Position error (m) beyond which a run counts as diverged (default: none).")
 @click.option("--min-scored-share", default=None, type=float,
               help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
@@ -105,6 +108,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
+    from replay.eval_options import validate_eval_options
     from replay.evaluate import evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
@@ -115,6 +119,8 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     check_data_dir(data_dir, "--data-dir")
     min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
                                               else min_scored_share, "--min-scored-share")
+    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment,
+                           "divergence_threshold": divergence_threshold})  # the API's declarations and messages
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
     if baseline is not None and baseline not in names + (recorded or []) and not (
             recorded is None and baseline.startswith("recorded:")):
@@ -173,6 +179,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
             from replay.cli.bags import export_outputs
 
             export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+    _failed_filters(ev)
 
 
 def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
@@ -193,6 +200,19 @@ def _fresh(out: Path, replace: bool) -> None:
     if not replace and out.is_dir() and any(out.iterdir()):
         raise ReplayError(f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
                           "or leave out --out for a new numbered directory")
+
+
+def _failed_filters(ev) -> None:
+    """A filter that failed (a plugin's bug, sys.exit, memory, a broken protocol): one warning line
+    each, after the other filters' results are written, and exit status 1."""
+    from replay.evaluate import failures
+
+    bad = failures(ev)
+    for name, f in bad.items():
+        click.echo(f"replay: warning: filter {name!r}: {len(f['runs'])} of {ev.config['runs']} runs failed "
+                   f"({f['error']}); recorded in the leaderboard's failed column and the manifest", err=True)
+    if bad:
+        sys.exit(1)
 
 
 @main.command("rerun")

@@ -184,6 +184,7 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     from replay import registry
     from replay.filters import make_filter
     from replay.tasks import make_task
+    from replay.util.lookup import params_of
 
     filters = [n for n in filters if not n.startswith("recorded:")]  # recorded: checked with the frame
     extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
@@ -194,5 +195,6 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
         ds = dataset if isinstance(dataset, registry.Dataset) else registry.get(dataset)
         task = ds.default_task or None
     tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
-    fparams = {name: make_filter(name, **(filter_params or {}).get(name, {})).params() for name in filters}
+    fparams = {name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name)
+               for name in filters}
     return Checked(task, tparams, fparams, dparams)

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.util.errors import ReplayError
+
 
 def column_names(name: str, channel) -> list[str]:
     """The columns of one channel (module docstring)."""
@@ -34,7 +36,7 @@ def frame_table(frame, *, reference: bool = False, masks: bool = False, time: st
     import pandas as pd
 
     if time not in ("relative", "utc"):
-        raise ValueError(f"time must be 'relative' or 'utc' (got {time!r})")
+        raise ReplayError(f"time must be 'relative' or 'utc' (got {time!r})")
     group = frame.reference if reference else frame.channels
     n = len(frame.t)
     data, units, frames = {}, {}, {}
@@ -49,7 +51,7 @@ def frame_table(frame, *, reference: bool = False, masks: bool = False, time: st
     index = pd.Index(np.asarray(frame.t, float), name="t")
     if time == "utc":
         if frame.epoch is None:
-            raise ValueError("time='utc': this frame has no epoch (its source records no absolute time)")
+            raise ReplayError("time='utc': this frame has no epoch (its source records no absolute time)")
         index = pd.DatetimeIndex(pd.to_datetime(frame.epoch + index.to_numpy(), unit="s", utc=True), name="utc")
     df = pd.DataFrame(data, index=index)
     meta = getattr(frame, "meta", {}) or {}

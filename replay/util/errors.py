@@ -17,3 +17,9 @@ class DataError(ReplayError):
         self.row = row
         where = self.source if row is None else f"{self.source}, row {row}"
         super().__init__(f"{where}: {what}")
+
+
+class ProtocolError(ReplayError):
+    """A filter broke the filter protocol (``filters/base.py``): it returned a state or a
+    covariance of the wrong shape, or the wrong number of runs. That filter's runs are
+    failed (their error recorded); the other filters' results stand."""

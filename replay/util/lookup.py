@@ -24,9 +24,26 @@ def resolve(table, name: str, kind: str):
 
 
 def instantiate(table, name: str, kind: str, **params):
-    """``resolve(...)(**params)``; a wrong parameter name -> one-line ReplayError."""
+    """``resolve(...)(**params)``; a wrong parameter name, or any failure of a (plugin's)
+    constructor, ``sys.exit`` included -> one-line ReplayError naming it."""
     cls = resolve(table, name, kind)
     try:
         return cls(**params)
+    except (ReplayError, KeyboardInterrupt):
+        raise
     except TypeError as err:
         raise ReplayError(f"{kind} {name!r}: {err}") from None
+    except BaseException as err:  # noqa: BLE001 — a plugin's constructor: its error, in one line
+        raise ReplayError(f"{kind} {name!r}: its constructor failed: "
+                          + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]) from err
+
+
+def params_of(obj, kind: str, name: str) -> dict:
+    """``obj.params()`` (a plugin's); its failure -> one-line ReplayError naming it."""
+    try:
+        return obj.params()
+    except (ReplayError, KeyboardInterrupt):
+        raise
+    except BaseException as err:  # noqa: BLE001 — a plugin's params(): its error, in one line
+        raise ReplayError(f"{kind} {name!r}: params() failed: "
+                          + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]) from err

@@ -14,6 +14,7 @@ accepts and the value given:
 * ``bool`` accepts ``true``/``false`` only;
 * ``str`` accepts strings, one of ``choices`` when given;
 * ``list`` accepts a list (or tuple) of numbers, of ``length`` when given;
+* ``dict`` accepts a mapping with string keys; ``os.PathLike`` a non-empty path (a string or a path);
 * ``low``/``high`` bound numbers (inclusive unless ``low_open``/``high_open``);
 * ``optional=True`` also accepts ``None``.
 
@@ -23,12 +24,13 @@ Classes declare ``PARAMS`` (a tuple of :class:`Param`) and inherit from
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
 from typing import Any
 
 from replay.util.errors import ReplayError
 
-TYPES = (int, float, bool, str, list)
+TYPES = (int, float, bool, str, list, dict, os.PathLike)
 
 
 @dataclass(frozen=True)
@@ -62,19 +64,23 @@ class Param:
             text = ("one of " + ", ".join(map(str, self.choices))) if self.choices else "a string"
         elif self.type is list:
             text = "a list of numbers" + (f" of length {self.length}" if self.length else "")
+        elif self.type is dict:
+            text = "an object (a dict with string keys)"
+        elif self.type is os.PathLike:
+            text = "a path (a non-empty string or a pathlib.Path)"
         else:
             text = ("an integer" if self.type is int else "a finite number" if self.finite else "a number")
             text += self.bounds_text()
         return text + (" (or null)" if self.optional else "")
 
     def bounds_text(self) -> str:
-        lo, hi = self.low, self.high
-        if lo is not None and hi is not None:
-            return f" in {'(' if self.low_open else '['}{lo:g}, {hi:g}{')' if self.high_open else ']'}"
-        if lo is not None:
-            return f" {'>' if self.low_open else '>='} {lo:g}"
-        if hi is not None:
-            return f" {'<' if self.high_open else '<='} {hi:g}"
+        lo, hi = _bound(self.low), _bound(self.high)
+        if self.low is not None and self.high is not None:
+            return f" in {'(' if self.low_open else '['}{lo}, {hi}{')' if self.high_open else ']'}"
+        if self.low is not None:
+            return f" {'>' if self.low_open else '>='} {lo}"
+        if self.high is not None:
+            return f" {'<' if self.high_open else '<='} {hi}"
         return ""
 
     def describe(self) -> str:
@@ -98,6 +104,11 @@ class Param:
             return isinstance(v, bool), v
         if self.type is str:
             return isinstance(v, str) and (self.choices is None or v in self.choices), v
+        if self.type is dict:
+            return isinstance(v, dict) and all(isinstance(k, str) for k in v), v
+        if self.type is os.PathLike:
+            return isinstance(v, (str, os.PathLike)) and str(os.fspath(v)).strip() != "" and "\0" not in str(
+                os.fspath(v)), v
         if self.type is list:
             if not isinstance(v, (list, tuple)) or (self.length is not None and len(v) != self.length):
                 return False, v
@@ -122,6 +133,11 @@ class Param:
         if self.high is not None and (v > self.high or (self.high_open and v == self.high)):
             return False
         return True
+
+
+def _bound(x) -> str:
+    """A bound in words: an integer exactly (2**63 - 1 in full), a float as ``:g``."""
+    return "" if x is None else str(x) if isinstance(x, int) else f"{x:g}"
 
 
 def _is_number(v) -> bool:

@@ -1,0 +1,191 @@
+"""The arguments of every public API function (``replay.__all__``), declared once, and
+:func:`checked`, which validates them before the function runs.
+
+Scalars and paths are :class:`replay.util.params.Param` declarations (the options of an
+evaluation are those of :mod:`replay.eval_options`, shared with ``replay eval`` and
+campaign files); objects (an Evaluation, a Frame, a class) are :class:`Kind`. A bad
+argument, a wrong number of arguments or an unknown keyword raises one-line
+:class:`~replay.util.errors.ReplayError`, the CLI's message. As a last guard, a TypeError,
+ValueError, IndexError, KeyError, AttributeError, OSError or MemoryError ("out of memory")
+escaping a public function is raised as a ReplayError naming the function (the original
+chained as its cause).
+"""
+from __future__ import annotations
+
+import functools
+import inspect
+import os
+from dataclasses import dataclass
+
+from replay.eval_options import BY_NAME as EVAL
+from replay.util.errors import ReplayError
+from replay.util.params import Param
+
+
+@dataclass(frozen=True)
+class Kind:
+    """An argument that must be an instance (or, ``cls=True``, a subclass) of ``of``, given as
+    ``"module:Class"`` (imported when checked)."""
+
+    name: str
+    of: str
+    doc: str
+    cls: bool = False
+    optional: bool = False
+
+    def check(self, value, owner: str = ""):
+        import importlib
+
+        wants = [getattr(importlib.import_module(m), a) for m, _, a in (o.partition(":") for o in self.of.split("|"))]
+        ok = (value is None and self.optional) or any(
+            inspect.isclass(value) and issubclass(value, w) if self.cls else isinstance(value, w) for w in wants)
+        if not ok:
+            what = " or ".join(f"a subclass of {w.__name__}" if self.cls
+                               else f"{'an' if w.__name__[0] in 'AEIOU' else 'a'} {w.__name__}" for w in wants)
+            shown = value.__name__ if inspect.isclass(value) else type(value).__name__
+            raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be {what}"
+                              f"{' (or None)' if self.optional else ''} (got {shown})")
+        return value
+
+
+@dataclass(frozen=True)
+class Either:
+    """An argument that one of several declarations accepts (``seed``: an integer or a Generator)."""
+
+    name: str
+    options: tuple
+
+    def check(self, value, owner: str = ""):
+        for d in self.options:
+            try:
+                return d.check(value, owner)
+            except ReplayError:
+                pass
+        what = " or ".join(d.accepts() if isinstance(d, Param) else d.doc for d in self.options)
+        shown = repr(value) if isinstance(value, (int, float, str, bytes, type(None))) else type(value).__name__
+        raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be {what} (got {shown:.60})")
+
+
+def _p(name, type_, doc, **kw):
+    return Param(name, type_, kw.pop("default", None), doc, **kw)
+
+
+PATH = functools.partial(_p, type_=os.PathLike)
+DATASET = _p("dataset", str, "a dataset id (replay datasets list) or a file path")
+EVALUATION = Kind("ev", "replay.evaluate:Evaluation", "an evaluation (replay.evaluate)")
+FRAME = Kind("frame", "replay.frame:Frame", "a frame (replay.load_frame)")
+def TRAJ(name):  # noqa: N802 — a declaration
+    return Kind(name, "replay.trajectory.base:Trajectory", "a trajectory (replay.load_trajectory)")
+
+
+NAME = _p("name", str, "a registered name", optional=True)
+
+SEED = Either("seed", (EVAL["seed"], Kind("seed", "numpy.random:Generator", "a numpy.random.Generator (or None)",
+                                              optional=True)))
+SOURCE = Kind("source", "replay.evaluate:Evaluation|replay.frame:Frame", "an evaluation or a frame")
+
+ARGS: dict[str, dict] = {
+    "evaluate": {"dataset": DATASET, **{k: v for k, v in EVAL.items() if k != "batch"},
+                 "batch": EVAL["batch"], "filter_params": _p("filter_params", dict, "{filter: {name: value}}",
+                                                             optional=True)},
+    "load_frame": {"dataset": DATASET, "data_dir": EVAL["data_dir"], "seed": SEED, "first": EVAL["first"],
+                   "adapter": EVAL["adapter"]},
+    "campaign_results": {"out": PATH(name="out", doc="a result directory"),
+                         "runs": _p("runs", bool, "one row per run", default=False)},
+    "export_mcap": {"evaluation": Kind("evaluation", "replay.evaluate:Evaluation", "an evaluation"),
+                    "path": PATH(name="path", doc="the MCAP file to write"),
+                    "run": _p("run", int, "the run exported", default=0, low=0),
+                    "data_dir": EVAL["data_dir"]},
+    "frame_table": {"frame": FRAME, "reference": _p("reference", bool, "reference channels", default=False),
+                    "masks": _p("masks", bool, "mask columns", default=False),
+                    "time": _p("time", str, "time column", default="relative",
+                               choices=("relative", "utc"))},
+    "report_table": {"frame": FRAME},
+    "make_filter": {"name": _p("name", str, "a filter name (replay list filters)")},
+    "make_task": {"name": _p("name", str, "a task name (replay list tasks)")},
+    "plot_errors": {"ev": EVALUATION},
+    "plot_paired": {"ev": EVALUATION, "metric": _p("metric", str, "a leaderboard metric", default="pos_rmse")},
+    "plot_rmse": {"ev": EVALUATION, "metric": _p("metric", str, "a leaderboard metric", default="pos_rmse")},
+    "plot_track": {"source": SOURCE, "utm": _p("utm", bool, "UTM axes", default=True),
+                   "run": _p("run", int, "the run drawn", default=0, low=0)},
+    "register_filter": {"cls": Kind("cls", "replay.filters.base:Filter", "a Filter subclass", cls=True),
+                        "name": NAME},
+    "register_task": {"cls": Kind("cls", "replay.tasks:Task", "a Task subclass", cls=True), "name": NAME},
+    "run_campaign": {"campaign": PATH(name="campaign", doc="a campaign file (TOML)"),
+                     "out": PATH(name="out", doc="the result directory"),
+                     "workers": _p("workers", int, "worker processes", low=1, high=4096, optional=True),
+                     "data_dir": EVAL["data_dir"], "quiet": _p("quiet", bool, "no progress", default=True),
+                     "retry_failed": _p("retry_failed", bool, "compute failed units again", default=False)},
+    "load_trajectory": {"source": PATH(name="source", doc="a trajectory file or BAG:topic")},
+    "score": {"reference": TRAJ("reference"), "estimate": TRAJ("estimate"),
+              "align": _p("align", str, "alignment", default="none", choices=("none", "yaw", "se3", "sim3", "scale")),
+              "n_to_align": _p("n_to_align", int, "poses aligned", low=1, optional=True),
+              "align_origin": _p("align_origin", bool, "align the first poses", default=False),
+              "t_max_diff": _p("t_max_diff", float, "association tolerance", default=0.01, unit="s", low=0.0),
+              "t_offset": _p("t_offset", float, "added to the estimate's stamps", default=0.0, unit="s"),
+              "delta": _p("delta", float, "RPE pose distance", low=0.0, low_open=True, optional=True),
+              "delta_unit": _p("delta_unit", str, "unit of delta", default="f", choices=("f", "m", "d", "r", "s")),
+              "rel_tol": _p("rel_tol", float, "delta tolerance", default=0.1, low=0.0, low_open=True),
+              "all_pairs": _p("all_pairs", bool, "every pair at delta", default=False),
+              "pairs_from_reference": _p("pairs_from_reference", bool, "pairs from the reference", default=False)},
+    "list_plugins": {},
+    "refresh_plugins": {},
+}
+# the functions whose keyword options are all declared: an unknown one is refused with the known ones
+CLOSED = {"evaluate": ("recorded", "progress"), "score": ()}
+
+
+def _run_in(source, run, owner):
+    """``run`` must be a run of the evaluation (a frame has one)."""
+    n = len(source.results[0].records) if hasattr(source, "results") and source.results else 1
+    if run >= n:
+        raise ReplayError(f"{owner}: run {run}: the evaluation has runs 0..{n - 1}")
+
+
+def _metric_in(ev, metric, owner):
+    known = sorted({k for r in ev.rows for k, v in r.items() if isinstance(v, (int, float))})
+    if metric not in known:
+        raise ReplayError(f"{owner}: metric {metric!r} is not a leaderboard column (numeric columns: "
+                          f"{', '.join(known[:12])}, ...)")
+
+
+# relations between arguments, checked after each alone: {function: check(arguments, owner)}
+RELATIONS = {
+    "export_mcap": lambda a, o: _run_in(a["evaluation"], a.get("run", 0), o),
+    "plot_track": lambda a, o: _run_in(a["source"], a.get("run", 0), o),
+    "plot_rmse": lambda a, o: _metric_in(a["ev"], a.get("metric", "pos_rmse"), o),
+}
+GUARDED = (TypeError, ValueError, IndexError, KeyError, AttributeError, OSError)
+
+
+def checked(name: str, fn):
+    """``fn`` (the public function ``name``) with its declared arguments (:data:`ARGS`) checked first."""
+    sig, decl = inspect.signature(fn), ARGS[name]
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        try:
+            bound = sig.bind(*args, **kwargs)
+        except TypeError as err:
+            raise ReplayError(f"replay.{name}: {err}") from None
+        for key, value in list(bound.arguments.items()):
+            kind = sig.parameters[key].kind
+            if kind is inspect.Parameter.VAR_KEYWORD:
+                if name in CLOSED and (bad := [k for k in value if k not in decl and k not in CLOSED[name]]):
+                    known = [k for k in (*decl, *CLOSED[name]) if k not in sig.parameters or k == key]
+                    raise ReplayError(f"replay.{name}: unknown option {bad[0]!r} (known: {', '.join(known)})")
+                bound.arguments[key] = {k: decl[k].check(v) if k in decl else v for k, v in value.items()}
+            elif key in decl:
+                bound.arguments[key] = decl[key].check(value)
+        if name in RELATIONS:
+            RELATIONS[name](bound.arguments, f"replay.{name}")
+        try:
+            return fn(*bound.args, **bound.kwargs)
+        except ReplayError:
+            raise
+        except GUARDED + (MemoryError,) as err:
+            from replay.failures import describe
+
+            raise ReplayError(f"replay.{name}: {describe(err)[:300]}") from err
+
+    return call

@@ -1,0 +1,48 @@
+"""The options of an evaluation, declared once: ``replay eval``, :func:`replay.evaluate` and
+campaign files validate them with :func:`validate_eval_options` (same one-line messages).
+
+Each is a :class:`replay.util.params.Param` (type, default, bounds, unit, doc); the API's
+argument declarations (:mod:`replay.api_args`) reuse them, and the hostile API test
+generates its bad calls from them.
+"""
+from __future__ import annotations
+
+import os
+
+from replay.align import ALIGNMENTS
+from replay.util.errors import ReplayError
+from replay.util.params import Param
+
+MAX_RUNS = 1_000_000  # beyond, a run count is a typo; what fits in memory is checked too (replay.resources)
+MAX_SEED = 2 ** 63 - 1  # a TOML / JSON integer
+
+EVAL_OPTIONS = (
+    Param("task", str, None, "task (default: the dataset's default task)", optional=True),
+    Param("runs", int, 1, "Monte Carlo runs", unit="runs", low=1, high=MAX_RUNS),
+    Param("seed", int, 0, "master seed of every run's random streams", low=0, high=MAX_SEED),
+    Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True),
+    Param("data_dir", os.PathLike, None, "where to look for dataset files first", optional=True),
+    Param("adapter", str, None, "adapter for a plain file (default: chosen from the file)", optional=True),
+    Param("task_params", dict, None, "task parameters (replay list tasks)", optional=True),
+    Param("dataset_params", dict, None, "dataset parameters (replay list datasets)", optional=True),
+    Param("alignment", str, "se3", "alignment of the estimate onto the reference for the ATE column",
+          choices=ALIGNMENTS),
+    Param("divergence_threshold", float, None, "position error beyond which a run counts as diverged (null: none)",
+          unit="m", low=0.0, low_open=True, optional=True),
+    Param("baseline", str, None, "row the paired columns compare with (default: the first)", optional=True),
+    Param("batch", int, 25, "runs computed at once (a block)", unit="runs", low=1, high=MAX_RUNS),
+)
+BY_NAME = {p.name: p for p in EVAL_OPTIONS}
+
+
+def validate_eval_options(options: dict, where: str = "") -> dict:
+    """``options`` checked against :data:`EVAL_OPTIONS` and normalised (ints of float options as
+    floats, numpy integers as ints); only the names given are returned. An unknown name or a
+    value outside its declaration raises one line, prefixed by ``where`` (a campaign file) when given."""
+    prefix = f"{where}: " if where else ""
+    out = {}
+    for name, value in options.items():
+        if name not in BY_NAME:
+            raise ReplayError(f"{prefix}unknown option {name!r} (known: {', '.join(BY_NAME)})")
+        out[name] = BY_NAME[name].check(value, where)
+    return out
