@@ -213,7 +213,7 @@ def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpa = [0.5, 1.0] }"), 18, "no parameter 'alpa'"),
     (("grid = { alpha = [0.5, 1.0] }", "grid = { alpha = [] }"), 18, "empty grid"),
     (("n_particles = 60", 'n_particles = "many"'), 22, "n_particles must be an integer >= 1 (got 'many')"),
-    (("runs = 6", 'runs = "6"'), 3, "runs must be an integer in [1, 100000] (got '6')"),
+    (("runs = 6", 'runs = "6"'), 3, "runs must be an integer in [1, 1000000] (got '6')"),
     (("batch = 3", "bacth = 3"), 5, "bacth: unknown key"),
 ])
 def test_bad_campaign_refused_before_work_with_file_and_line(tmp_path, edit, line, needle):

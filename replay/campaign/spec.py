@@ -41,7 +41,7 @@ Everything is checked before any work starts (:func:`load`): a file that is not
 UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
 ``[campaign]`` value or a parameter of the wrong type or out of the bounds its
 declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
-and ``batch`` at most :data:`MAX_RUNS`, ``seed`` >= 0, ``divergence_threshold`` > 0),
+and ``batch`` at most :data:`replay.eval_options.MAX_RUNS` (one declaration with ``replay eval``), ``seed`` >= 0, ``divergence_threshold`` > 0),
 more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
 an absolute path: it would place the output outside the output root) raises
@@ -59,23 +59,18 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.align import ALIGNMENTS
+from replay.eval_options import EVAL_OPTIONS, MAX_RUNS
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
 
-MAX_RUNS = 100_000  # Monte Carlo runs per configuration (each a stored unit: two files)
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
+_EVAL = {p.name: p for p in EVAL_OPTIONS}  # one declaration with replay eval and the API
 CAMPAIGN_PARAMS = (  # the [campaign] table, checked by replay.util.params
     Param("name", str, None, "names the default result directory runs/campaign-<name>", optional=True),
-    Param("runs", int, 1, "Monte Carlo runs per configuration", low=1, high=MAX_RUNS),
-    Param("seed", int, 0, "master seed (streams as in replay.evaluate)", low=0),
-    Param("batch", int, 25, "runs per job (one batched filter call)", low=1, high=MAX_RUNS),
-    Param("alignment", str, "se3", "ATE alignment", choices=tuple(ALIGNMENTS)),
-    Param("divergence_threshold", float, None, "a run whose position error exceeds it counts as diverged",
-          unit="m", low=0, low_open=True, optional=True),
+    _EVAL["runs"], _EVAL["seed"], _EVAL["batch"], _EVAL["alignment"], _EVAL["divergence_threshold"],
     Param("data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)",
           optional=True),
 )
