@@ -99,7 +99,8 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels", le
     from . import kernel_files
 
     directory = cache_dir()
-    why = kernel_files.private_dir(directory, "REPLAY_CACHE_DIR" if os.environ.get("REPLAY_CACHE_DIR") else None)
+    why = kernel_files.private_dir(directory, next((v for v in ("REPLAY_CACHE_DIR", "XDG_CACHE_HOME")
+                                                    if os.environ.get(v)), None))
     path = directory / f"{name}.py"
     digest = name.rsplit("_", 1)[1]
     try:

@@ -186,15 +186,18 @@ def cfunc(sig, py, cached: bool):
 def private_dir(directory: Path, variable: str | None) -> str | None:
     """Make ``directory`` (and its ``__pycache__``) an owner-only directory of this user:
     None when done, else why it cannot be used (one line naming ``variable``, the environment
-    variable it came from, or the directory)."""
-    where = f"{variable}={directory.parent}" if variable else f"kernel cache {directory}"
+    variable the cache's root ``directory.parent`` came from, or the directory)."""
+    if variable == "REPLAY_CACHE_DIR":
+        where = f"{variable}={directory.parent}"
+    else:
+        where = f"kernel cache {directory}" + (f" (from {variable})" if variable else "")
     try:
         directory.mkdir(parents=True, exist_ok=True, mode=0o700)
         for d in (directory, directory / "__pycache__"):
             d.mkdir(mode=0o700, exist_ok=True)
             st = os.stat(d, follow_symlinks=False)
             if not stat.S_ISDIR(st.st_mode):
-                return f"{where}: {d.name} is not a directory"
+                return f"{where}: {d} is not a directory"
             if st.st_uid != os.getuid():
                 return f"{where}: {d} belongs to another user"
             if st.st_mode & 0o077:
@@ -206,10 +209,10 @@ def private_dir(directory: Path, variable: str | None) -> str | None:
         probe = directory / f".probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
         probe.touch(mode=0o600)
         probe.unlink()
-    except FileExistsError:
-        return f"{where}: not a directory"
-    except NotADirectoryError:
-        return f"{where}: not a directory"
+    except (FileExistsError, NotADirectoryError):
+        culprit = next((p for p in (directory / "__pycache__", directory, *directory.parents)
+                        if p.exists() and not p.is_dir()), directory)
+        return f"{where}: " + ("not a directory" if culprit == directory.parent else f"{culprit} is not a directory")
     except OSError as e:
         return f"{where}: {e.strerror or e} (read-only or not writable)"
     return None

@@ -25,7 +25,7 @@ from replay.models.random_walk import RandomWalkPosition
 
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
          "kcache-dir-open-to-others", "kcache-dir-is-a-file", "kcache-dir-read-only", "kcache-cli-dir-is-a-file",
-         "kcache-cli-stcpf-damaged")
+         "kcache-cli-stcpf-damaged", "kcache-fetch-dir-is-a-file")
 
 MODEL = RandomWalkPosition(np.eye(2), np.diag([1.0, 2.0]))
 X = np.arange(6.0).reshape(3, 2)
@@ -214,3 +214,13 @@ def test_cli_stcpf_damaged_cache_gives_the_undamaged_numbers(tmp_path):
     a, b = (pd.read_csv(tmp_path / d / "leaderboard.csv").drop(columns="us_per_step") for d in "ab")
     assert b["diverged"].tolist() == [0] and b["pos_rmse"].tolist()[0] > 0
     pd.testing.assert_frame_equal(a, b)
+
+
+def test_fetch_into_a_cache_dir_that_is_a_file_names_the_variable(tmp_path):
+    from hostile import assert_refused
+
+    root = tmp_path / "cache"
+    root.write_text("x")
+    env = {"REPLAY_CACHE_DIR": str(root), "REPLAY_DATASET_BASE_URL": "http://127.0.0.1:9"}  # refused before any request
+    line = assert_refused(["datasets", "fetch", "bohai/20220822_0_6"], r"from REPLAY_CACHE_DIR\)", env=env)
+    assert "is a file, not a directory" in line and root.read_text() == "x"
