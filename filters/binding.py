@@ -21,7 +21,11 @@ live and ``<digest>`` the SHA-256 of the copy's text; a copy whose content
 does not hash to its name (edited, truncated, another version's) is written
 again and its numba cache (``__pycache__/<name>.*``) removed, so it is
 compiled afresh — counted in :data:`CACHE_REPORT` and noted once on the
-``replay.kernels`` logger. Older copies of the same model and template
+``replay.kernels`` logger. A copy is executed from its verified text (no
+byte-code file is read), and numba's cache files of its functions are sealed
+and checked before they are unpickled (:mod:`replay.filters.kernel_files`,
+which also keeps the directory owner-only; a directory that cannot be used
+means compiling in memory, nothing cached). Older copies of the same model and template
 (another digest) are removed with their numba cache files: the cache keeps one
 copy per model and template. Two checkouts of different versions sharing one
 cache directory therefore recompile each other's copies; give them separate
