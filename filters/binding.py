@@ -127,8 +127,12 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels", le
     if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
         _log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
     module = _exec(name, text, str(path))  # the verified text: no byte-code file read
-    kernel_files.guard(module, label)
+    kernel_files.guard(module, label, _count_damaged)
     return module
+
+
+def _count_damaged(n: int) -> None:
+    CACHE_REPORT["damaged"] = CACHE_REPORT.get("damaged", 0) + n
 
 
 def _exec(name: str, text: str, filename: str):

@@ -69,11 +69,12 @@ def write_private(path, data: bytes) -> None:
         raise
 
 
-def _count(n: int, what: str) -> None:
-    """Count ``n`` damaged files of ``what`` (removed) in ``CACHE_REPORT``; say it in one line."""
-    from replay.filters import binding
+_counter = {"count": lambda n: None}  # set by guard(): binding's CACHE_REPORT counts damaged files
 
-    binding.CACHE_REPORT["damaged"] = binding.CACHE_REPORT.get("damaged", 0) + n
+
+def _count(n: int, what: str) -> None:
+    """Count ``n`` damaged files of ``what`` (removed); say it in one line."""
+    _counter["count"](n)
     _log.warning("kernel cache: %d damaged file%s of %s removed and compiled again", n, "s" * (n != 1), what)
 
 
@@ -144,9 +145,10 @@ def seal_cache(cache) -> None:
         cache._cache_file.__class__ = SealedCacheFile
 
 
-def guard(module, label: str) -> int:
+def guard(module, label: str, count) -> int:
     """Seal the numba caches of the copy ``module``'s functions, and before any is called remove
-    its numba cache files whose seal does not match (counted, one line). Returns how many."""
+    its numba cache files whose seal does not match (``count(n)``, one line). Returns how many."""
+    _counter["count"] = count  # also for the damage found when a function is first called
     dirs = set()
     for fn in _functions(module):
         seal_cache(fn._cache)
