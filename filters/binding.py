@@ -127,6 +127,7 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels", le
     if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
         _log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
     module = _exec(name, text, str(path))  # the verified text: no byte-code file read
+    module.LABEL = label
     kernel_files.guard(module, label, _count_damaged)
     return module
 
@@ -150,7 +151,8 @@ def cfunc(sig, fn):
     """A cfunc of the copy's function ``fn`` (a dispatcher), cached (sealed) beside the copy when it is."""
     from . import kernel_files
 
-    return kernel_files.cfunc(sig, fn.py_func, getattr(sys.modules.get(fn.py_func.__module__), "CACHED", False))
+    mod = sys.modules.get(fn.py_func.__module__)
+    return kernel_files.cfunc(sig, fn.py_func, getattr(mod, "CACHED", False), getattr(mod, "LABEL", "a model"))
 
 
 def _matches(path: Path, digest: str) -> bool:

@@ -82,19 +82,21 @@ class SealedCacheFile(IndexDataCacheFile):
     """numba's index and data files of one function, written sealed and read only when the seal
     matches (the class of a copy's functions' ``_cache._cache_file``, set by :func:`guard`)."""
 
+    label = "a model"  # the copy's model, named in the note
+
     def _read_sealed(self, path) -> bytes | None:
         with open(path, "rb") as f:
             raw = f.read()
         payload = unseal(raw)
         if payload is None:  # damaged: never unpickled; removed, compiled again
             Path(path).unlink(missing_ok=True)
-            _count(1, os.path.basename(path).split(".", 1)[0])
+            _count(1, self.label)
         return payload
 
     def _load_index(self):
         try:
             payload = self._read_sealed(self._index_path)
-        except FileNotFoundError:
+        except OSError:  # absent (or unreadable): nothing cached
             return {}
         if payload is None:
             return {}
@@ -139,10 +141,11 @@ def _functions(module):
             if isinstance(v, Dispatcher) and getattr(v.py_func, "__module__", None) == module.__name__]
 
 
-def seal_cache(cache) -> None:
+def seal_cache(cache, label: str) -> None:
     """Make numba's ``cache`` of one function (a dispatcher's or cfunc's ``_cache``) sealed."""
     if isinstance(cache, Cache) and type(cache._cache_file) is IndexDataCacheFile:
         cache._cache_file.__class__ = SealedCacheFile
+        cache._cache_file.label = label
 
 
 def guard(module, label: str, count) -> int:
@@ -151,7 +154,7 @@ def guard(module, label: str, count) -> int:
     _counter["count"] = count  # also for the damage found when a function is first called
     dirs = set()
     for fn in _functions(module):
-        seal_cache(fn._cache)
+        seal_cache(fn._cache, label)
         if isinstance(fn._cache, Cache):
             dirs.add(Path(fn._cache.cache_path))
     damaged = 0
@@ -165,14 +168,14 @@ def guard(module, label: str, count) -> int:
                     damaged += 1
                 elif p.stat().st_mode & 0o077:
                     p.chmod(0o600)
-            except FileNotFoundError:
-                continue  # replaced meanwhile by another process
+            except OSError:
+                continue  # removed meanwhile by another process, or unreadable: numba's load skips it
     if damaged:
         _count(damaged, label)
     return damaged
 
 
-def cfunc(sig, py, cached: bool):
+def cfunc(sig, py, cached: bool, label: str = "a model"):
     """``numba.cfunc(sig, cache=cached)(py)`` with its cache sealed before it is read."""
     from numba.core import sigutils
     from numba.core.ccallback import CFunc
@@ -180,7 +183,7 @@ def cfunc(sig, py, cached: bool):
     res = CFunc(py, sigutils.normalize_signature(sig), locals={}, options={})
     if cached:
         res.enable_caching()
-        seal_cache(res._cache)
+        seal_cache(res._cache, label)
     res.compile()
     return res
 

@@ -25,7 +25,8 @@ from replay.models.random_walk import RandomWalkPosition
 
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
          "kcache-dir-open-to-others", "kcache-dir-is-a-file", "kcache-dir-read-only", "kcache-cli-dir-is-a-file",
-         "kcache-cli-stcpf-damaged", "kcache-fetch-dir-is-a-file")
+         "kcache-cli-stcpf-damaged", "kcache-fetch-dir-is-a-file",
+         "kcache-nbc-damaged-after-import")
 
 MODEL = RandomWalkPosition(np.eye(2), np.diag([1.0, 2.0]))
 X = np.arange(6.0).reshape(3, 2)
@@ -89,6 +90,19 @@ def test_nbi_pickle_that_runs_code_is_never_unpickled(cache, tmp_path):
     got, hits = _f_rows(_copy())
     assert not marker.exists()
     assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 1
+
+
+def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cache, caplog):
+    """Files damaged between the copy's import (checked then) and its first call (another process,
+    a bad disk): the check at unpickling catches them too."""
+    want, _ = _f_rows(_copy())
+    mod = _copy()
+    assert binding.CACHE_REPORT["damaged"] == 0
+    for f in _files(cache, ".nbc"):
+        f.write_bytes(b"\x80\x04garbage")
+    got, hits = _f_rows(mod)
+    assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 1
+    assert "1 damaged file of random_walk removed" in caplog.text
 
 
 def test_truncated_index_and_unsealed_plain_numba_files_are_recompiled(cache):
