@@ -108,19 +108,17 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels", le
     path = directory / f"{name}.py"
     digest = name.rsplit("_", 1)[1]
     try:
-        if why is not None:
-            pass
-        elif not path.exists():
+        if why is None and not path.exists():
             _write(directory, name, text)
-        elif not _matches(path, digest):
+        elif why is None and not _matches(path, digest):
             _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
             _write(directory, name, text)
             CACHE_REPORT["rewritten"] += 1
             _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
     except OSError as e:  # e.g. a full disk
         why = f"kernel cache {directory}: cannot write {path.name} ({e.strerror or e})"
-    if why is not None:
-        kernel_files._note_once(f"{why}; kernels compiled in memory for this process, not cached")
+    if why is not None:  # the templates' decorators without numba's disk cache: same machine code
+        kernel_files.note_once(f"{why}; kernels compiled in memory for this process, not cached")
         _log.info("compiling %s for %s (in memory)", what, label)
         return _exec(name, text.replace("cache=True", "cache=False"), f"<replay kernels {name}>")
     _prune(directory, name, legacy)

@@ -125,10 +125,10 @@ class SealedCacheFile(IndexDataCacheFile):
         try:
             write_private(path, seal(payload))
         except OSError as e:  # e.g. a full disk: the compiled code runs, only not cached
-            _note_once(f"kernel cache: cannot write {os.path.basename(path)} ({e.strerror}); not cached")
+            note_once(f"kernel cache: cannot write {os.path.basename(path)} ({e.strerror}); not cached")
 
 
-def _note_once(msg: str) -> None:
+def note_once(msg: str) -> None:
     if msg not in _noted:
         _noted.add(msg)
         _log.warning(msg)
@@ -207,7 +207,7 @@ def private_dir(directory: Path, variable: str | None) -> str | None:
                 return f"{where}: {d} belongs to another user"
             if st.st_mode & 0o077:
                 os.chmod(d, 0o700)
-                _note_once(f"kernel cache {d}: was open to others; made owner-only (0700)")
+                note_once(f"kernel cache {d}: was open to others; made owner-only (0700)")
         parent = os.stat(directory.parent)
         if parent.st_mode & 0o002 and not parent.st_mode & stat.S_ISVTX:
             return f"{where}: {directory.parent} is writable by anyone (no sticky bit)"

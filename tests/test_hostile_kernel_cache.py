@@ -26,7 +26,7 @@ from replay.models.random_walk import RandomWalkPosition
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
          "kcache-dir-open-to-others", "kcache-dir-is-a-file", "kcache-dir-read-only", "kcache-cli-dir-is-a-file",
          "kcache-cli-stcpf-damaged", "kcache-fetch-dir-is-a-file",
-         "kcache-nbc-damaged-after-import")
+         "kcache-nbc-damaged-after-import", "kcache-full-disk")
 
 MODEL = RandomWalkPosition(np.eye(2), np.diag([1.0, 2.0]))
 X = np.arange(6.0).reshape(3, 2)
@@ -103,6 +103,24 @@ def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cac
     got, hits = _f_rows(mod)
     assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 1
     assert "1 damaged file of random_walk removed" in caplog.text
+
+
+def test_full_disk_means_not_cached_not_an_error(cache, monkeypatch, caplog):
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(kernel_files, "_noted", set())
+    mod = _copy()  # the copy's text written; numba's files next, on a full disk
+    monkeypatch.setattr(kernel_files, "write_private", full)
+    out, hits = _f_rows(mod)
+    assert hits == 0 and np.array_equal(out, X) and not _files(cache, ".nb?")
+    assert "cannot write" in caplog.text and "No space left on device); not cached" in caplog.text
+    mod2 = _copy()  # and the copy itself cannot be written: compiled in memory
+    (cache / f"{mod2.__name__}.py").unlink()
+    del sys.modules[mod2.__name__]
+    mod3 = _copy()
+    assert not mod3.CACHED and np.array_equal(_f_rows(mod3)[0], X)
+    assert "kernels compiled in memory for this process" in caplog.text
 
 
 def test_truncated_index_and_unsealed_plain_numba_files_are_recompiled(cache):
