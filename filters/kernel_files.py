@@ -98,7 +98,9 @@ class SealedCacheFile(IndexDataCacheFile):
             payload = self._read_sealed(self._index_path)
         except OSError:  # absent (or unreadable): nothing cached
             return {}
-        if payload is None:
+        if payload is None:  # its data files are orphans now: removed, or a new index could name them
+            for p in Path(self._cache_path).glob(self._index_name[:-len("nbi")] + "*.nbc"):
+                p.unlink(missing_ok=True)
             return {}
         f = io.BytesIO(payload)
         if pickle.load(f) != self._version:
@@ -125,7 +127,7 @@ class SealedCacheFile(IndexDataCacheFile):
         try:
             write_private(path, seal(payload))
         except OSError as e:  # e.g. a full disk: the compiled code runs, only not cached
-            note_once(f"kernel cache: cannot write {os.path.basename(path)} ({e.strerror}); not cached")
+            note_once(f"kernel cache {os.path.dirname(path)}: cannot write ({e.strerror or e}); compiled code not cached")
 
 
 def note_once(msg: str) -> None:
@@ -160,12 +162,15 @@ def guard(module, label: str, count) -> int:
     damaged = 0
     prefix = module.__name__ + "."
     for d in dirs:
-        for p in d.glob(prefix + "*.nb[ic]"):
+        for p in sorted(d.glob(prefix + "*.nb[ic]"), key=lambda p: p.suffix != ".nbi"):  # indexes first
             try:
                 raw = p.read_bytes()
                 if unseal(raw) is None:
                     p.unlink()
                     damaged += 1
+                    if p.suffix == ".nbi":  # its data files are orphans: removed unread
+                        for q in d.glob(p.name[:-len("nbi")] + "*.nbc"):
+                            q.unlink(missing_ok=True)
                 elif p.stat().st_mode & 0o077:
                     p.chmod(0o600)
             except OSError:
