@@ -26,7 +26,8 @@ from replay.models.random_walk import RandomWalkPosition
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
          "kcache-dir-open-to-others", "kcache-dir-is-a-file", "kcache-dir-read-only", "kcache-cli-dir-is-a-file",
          "kcache-cli-stcpf-damaged", "kcache-fetch-dir-is-a-file",
-         "kcache-nbc-damaged-after-import", "kcache-full-disk")
+         "kcache-nbc-damaged-after-import", "kcache-full-disk",
+         "kcache-dir-of-another-user")
 
 MODEL = RandomWalkPosition(np.eye(2), np.diag([1.0, 2.0]))
 X = np.arange(6.0).reshape(3, 2)
@@ -176,6 +177,16 @@ def test_cache_directory_is_owner_only(cache):
     _copy()
     assert stat.S_IMODE(cache.stat().st_mode) == stat.S_IMODE((cache / "__pycache__").stat().st_mode) == 0o700
     assert stat.S_IMODE(_files(cache, ".nbc")[0].stat().st_mode) == 0o600
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0, reason="needs root to give a directory away")
+def test_cache_dir_of_another_user_is_not_used(cache, monkeypatch, caplog):
+    monkeypatch.setattr(kernel_files, "_noted", set())
+    cache.mkdir(parents=True, mode=0o700)
+    os.chown(cache, 65534, 65534)
+    mod = _copy()
+    assert not mod.CACHED and np.array_equal(_f_rows(mod)[0], X) and not list(cache.iterdir())
+    assert f"REPLAY_CACHE_DIR={cache.parent}: {cache} belongs to another user; kernels compiled in memory" in caplog.text
 
 
 @pytest.mark.parametrize("where", ["file", "read-only"])
