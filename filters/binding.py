@@ -21,7 +21,11 @@ live and ``<digest>`` the SHA-256 of the copy's text; a copy whose content
 does not hash to its name (edited, truncated, another version's) is written
 again and its numba cache (``__pycache__/<name>.*``) removed, so it is
 compiled afresh — counted in :data:`CACHE_REPORT` and noted once on the
-``replay.kernels`` logger. Older copies of the same model and template
+``replay.kernels`` logger. A copy is executed from its verified text (no
+byte-code file is read), and numba's cache files of its functions are sealed
+and checked before they are unpickled (:mod:`replay.filters.kernel_files`,
+which also keeps the directory owner-only; a directory that cannot be used
+means compiling in memory, nothing cached). Older copies of the same model and template
 (another digest) are removed with their numba cache files: the cache keeps one
 copy per model and template. Two checkouts of different versions sharing one
 cache directory therefore recompile each other's copies; give them separate
@@ -30,24 +34,25 @@ cache directory therefore recompile each other's copies; give them separate
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import inspect
 import logging
 import os
 import sys
+import types
 from pathlib import Path
 
 from replay.util.errors import ReplayError
 
 MARKER = "# MODEL KERNELS:"
-CACHE_REPORT = {"rewritten": 0, "pruned": 0}  # copies of this process: rewritten (mismatch), removed (old)
+CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (mismatch), removed
+# (old), numba cache files removed (seal did not match)
 _log = logging.getLogger("replay.kernels")
 
 
 def cache_dir() -> Path:
     root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "replay")
-    return Path(root) / "kernels"
+        os.environ.get("XDG_CACHE_HOME") or "~/.cache", "replay")
+    return Path(root).expanduser() / "kernels"
 
 
 def where(fn):
@@ -75,6 +80,8 @@ def bound_copy(template, kernels, helpers, prefix: str, what: str, helpers_tag: 
     lines.append(f"# kernels' sources: sha256 {hashlib.sha256(kernel_sources.encode()).hexdigest()[:16]}")
     # numba's cache of this copy holds the helpers' functions inlined but checks only this
     # file's stamp: the helpers' source in the name makes a change to them a new copy
+    lines.append("# numba's cache files of this copy are sealed (replay.filters.kernel_files, format 1)")  # a new
+    # format, a new name: the former unsealed files are pruned unread, not counted as damaged
     text = "".join(_source(m) for m in helpers)
     lines.append(f"# {helpers_tag}: sha256 {hashlib.sha256(text.encode()).hexdigest()[:16]}")
     text = _source(template)
@@ -89,26 +96,61 @@ def bound_copy(template, kernels, helpers, prefix: str, what: str, helpers_tag: 
 def load(name: str, text: str, label: str = "a model", what: str = "kernels", legacy=None):
     """Import the copy ``name`` (``<prefix><model>_<digest>``) holding ``text``: written when
     absent, written again when its content does not hash to ``<digest>``; older copies of the
-    model pruned (module docstring), and the names matching ``legacy`` (a regular expression)."""
+    model pruned (module docstring), and the names matching ``legacy`` (a regular expression).
+    Its numba cache files are checked before any is read (:func:`replay.filters.kernel_files.guard`).
+    A cache directory that cannot be used (a file, read-only, another user's): compiled in memory,
+    nothing written (one note)."""
+    from . import kernel_files
+
     directory = cache_dir()
-    directory.mkdir(parents=True, exist_ok=True)
+    why = kernel_files.private_dir(directory, next((v for v in ("REPLAY_CACHE_DIR", "XDG_CACHE_HOME")
+                                                    if os.environ.get(v)), None))
     path = directory / f"{name}.py"
     digest = name.rsplit("_", 1)[1]
-    if not path.exists():
-        _write(directory, name, text)
-    elif not _matches(path, digest):
-        _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
-        _write(directory, name, text)
-        CACHE_REPORT["rewritten"] += 1
-        _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
+    try:
+        if why is None and not path.exists():
+            _write(directory, name, text)
+        elif why is None and not _matches(path, digest):
+            _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
+            _write(directory, name, text)
+            CACHE_REPORT["rewritten"] += 1
+            _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
+    except OSError as e:  # e.g. a full disk
+        why = f"kernel cache {directory}: cannot write {path.name} ({e.strerror or e})"
+    if why is not None:  # the templates' decorators without numba's disk cache: same machine code
+        kernel_files.note_once(f"{why}; kernels compiled in memory for this process, not cached")
+        _log.info("compiling %s for %s (in memory)", what, label)
+        return _exec(name, text.replace("cache=True", "cache=False"), f"<replay kernels {name}>")
     _prune(directory, name, legacy)
     if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
-        _log.info("compiling %s for %s (once per machine; cached for later runs)", what, label)
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
+        _log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
+    module = _exec(name, text, str(path))  # the verified text: no byte-code file read
+    module.LABEL = label
+    kernel_files.guard(module, label, _count_damaged)
     return module
+
+
+def _count_damaged(n: int) -> None:
+    CACHE_REPORT["damaged"] = CACHE_REPORT.get("damaged", 0) + n
+
+
+def _exec(name: str, text: str, filename: str):
+    """The module ``name`` executed from ``text`` (registered in ``sys.modules``: numba finds its
+    functions there), its functions' source file ``filename``."""
+    module = types.ModuleType(name)
+    module.__file__ = filename
+    module.CACHED = not filename.startswith("<")
+    sys.modules[name] = module
+    exec(compile(text, filename, "exec"), module.__dict__)
+    return module
+
+
+def cfunc(sig, fn):
+    """A cfunc of the copy's function ``fn`` (a dispatcher), cached (sealed) beside the copy when it is."""
+    from . import kernel_files
+
+    mod = sys.modules.get(fn.py_func.__module__)
+    return kernel_files.cfunc(sig, fn.py_func, getattr(mod, "CACHED", False), getattr(mod, "LABEL", "a model"))
 
 
 def _matches(path: Path, digest: str) -> bool:
@@ -121,9 +163,9 @@ def _matches(path: Path, digest: str) -> bool:
 
 
 def _write(directory: Path, name: str, text: str) -> None:
-    tmp = directory / f".{name}.{os.getpid()}.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, directory / f"{name}.py")  # atomic: concurrent processes write the same text
+    from .kernel_files import write_private
+
+    write_private(directory / f"{name}.py", text.encode("utf-8"))  # atomic: concurrent processes write the same text
 
 
 def _drop_numba_cache(directory: Path, name: str) -> int:

@@ -49,15 +49,12 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
         key = (ids, i)
         fn = _rows.get(key)
         if fn is None:
-            import numba as nb
-
             mod = _copies.get(key[0])
             if mod is None:
                 mod = _copies[key[0]] = binding.bound_copy(rows, ks, (), "replay_rows_",
                                                            "the run loops' rows kernels (about 2 s)")
             fty = kernels.JACOBIAN_ROWS if i >= 2 else kernels.ROWS_KERNEL
-            py = getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]).py_func
-            fn = _rows[key] = nb.cfunc(fty.signature, cache=True)(py)
+            fn = _rows[key] = binding.cfunc(fty.signature, getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]))
             fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
             fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
         got.append(fn)

@@ -125,8 +125,10 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
     src = download_url(ds, url)
     if urllib.parse.urlsplit(src).scheme not in ("https", "http"):
         raise ReplayError(f"cannot download {ds.id}: only http(s) URLs are supported (url {src})")
-    check_writable(dest, "download destination")
-    check_space(dest, "download destination", need=ds.size)
+    what = "download destination" + (f" (from {registry.cache_variable()})"
+                                      if not dest_dir and registry.cache_variable() else "")
+    check_writable(dest, what)
+    check_space(dest, what, need=ds.size)
     try:
         dest.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -203,6 +203,12 @@ def cache_dir() -> Path:
     return base / "replay"
 
 
+def cache_variable() -> str | None:
+    """The environment variable the user cache comes from (REPLAY_CACHE_DIR, XDG_CACHE_HOME), if any:
+    named in refusals about the cache's directory."""
+    return next((v for v in ("REPLAY_CACHE_DIR", "XDG_CACHE_HOME") if os.environ.get(v)), None)
+
+
 def search_roots(data_dir: str | Path | None = None) -> list[Path]:
     """The directories searched, in order: data_dir, $REPLAY_DATA_DIR, the user cache."""
     roots = [Path(data_dir).expanduser()] if data_dir else []

@@ -23,7 +23,7 @@ def cache(tmp_path, monkeypatch):
     """An empty kernel cache; binding's process state restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(binding, "_bound", {})
-    monkeypatch.setattr(mechanism, "CACHE_REPORT", {"rewritten": 0, "pruned": 0})
+    monkeypatch.setattr(mechanism, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:
@@ -52,7 +52,7 @@ def test_tampered_copy_is_rewritten_and_its_numba_cache_dropped(cache):
     stale = _numba_files(cache, name)
     mod = binding._load(name, text)
     assert mod.VALUE == 1 and (cache / f"{name}.py").read_text() == text
-    assert mechanism.CACHE_REPORT == {"rewritten": 1, "pruned": 0}
+    assert mechanism.CACHE_REPORT == {"rewritten": 1, "pruned": 0, "damaged": 0}
     assert not any(f.exists() for f in stale)
     binding._load(name, text)  # intact now: imported as it is
     assert mechanism.CACHE_REPORT["rewritten"] == 1
@@ -80,7 +80,7 @@ def test_old_copies_of_the_model_are_pruned_others_kept(cache):
     assert binding._load(_name(text), text).VALUE == 5
     assert sorted(p.name for p in cache.glob("*.py")) == sorted([f"{_name(text)}.py", f"{other_model}.py"])
     assert not any(f.exists() for f in old_cache) and all(f.exists() for f in kept_cache)
-    assert mechanism.CACHE_REPORT == {"rewritten": 0, "pruned": 2}
+    assert mechanism.CACHE_REPORT == {"rewritten": 0, "pruned": 2, "damaged": 0}
 
 
 def test_bound_model_copy_is_verified_before_import(cache):

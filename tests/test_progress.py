@@ -132,3 +132,59 @@ def test_rerun_and_export_show_a_bar_on_a_terminal_and_nothing_with_q(tmp_path):
     rc, text = _in_pty(["export", "run", "--mcap", "a.mcap", "--ros2-bag", "a_bag", "-q"], tmp_path)
     assert rc == 0 and f"wrote a.mcap ({n_mcap} messages" in text and f"wrote a_bag/ ({n_bag} messages" in text
     assert "%|" not in text and "export mcap" not in text and "export ros2" not in text
+
+
+def test_eta_leaves_out_the_time_spent_compiling_kernels(monkeypatch):
+    """The issue's case: a first run's ETA (1243 s for a run of 80 s) extrapolated the one-time
+    compilation of its kernels. 80 s elapsed of which 70 compiling, 10 % of the work done."""
+    from replay.util import progress
+
+    monkeypatch.setitem(progress._CLOCK, "total", 5.0)  # compiled before this progress: not counted
+    monkeypatch.setitem(progress._CLOCK, "depth", 0)
+    out = io.StringIO()
+    p = Progress(10, stream=out, total_weight=100.0, every=0.0, label="eval", unit="run")
+    p.t0 -= 80.0
+    progress._CLOCK["total"] += 70.0
+    p.update(1, weight=10.0)
+    assert p.eta(p.t0 + 80.0) == pytest.approx(90.0)  # (80 - 70) s per 10 -> 90 s for the 90 left, not 720
+    assert out.getvalue().rstrip().endswith("elapsed 80 s, 70 s compiling kernels, ETA 90 s")
+    monkeypatch.setitem(progress._CLOCK, "depth", 1)  # compiling now: the bar says so instead of an ETA
+    monkeypatch.setitem(progress._CLOCK, "start", p.t0 + 80.0)
+    tty = _Tty()
+    bar = Progress(10, stream=tty, total_weight=100.0)
+    bar._draw(final=True)
+    assert "compiling kernels (one time, cached)...]" in tty.getvalue() and "ETA" not in tty.getvalue()
+    bar.close()
+
+
+class _Tty(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_numba_compilations_are_timed_and_notes_erase_the_bar():
+    import logging
+
+    import numba as nb
+
+    from replay.util import progress
+
+    progress._listen()
+    before = progress.compile_seconds()
+
+    @nb.njit
+    def fresh(x):  # compiled at its first call below (not cached)
+        return x * 3.0 + 1.0
+
+    assert fresh(2.0) == 7.0
+    assert progress.compile_seconds() > before and not progress.compiling()
+    tty = _Tty()
+    bar = Progress(4, stream=tty)
+    bar.update(1)
+    h = progress.NoteHandler(tty)
+    h.emit(logging.LogRecord("replay", logging.INFO, __file__, 1, "a note", None, None))
+    text = tty.getvalue()
+    assert "1/4 units" in text and text.endswith("]\r\033[Ka note\n")  # the bar erased, the note on its own line
+    bar.update(1)
+    assert tty.getvalue()[len(text):].startswith("\r") and "2/4 units" in tty.getvalue()[len(text):]
+    bar.close()

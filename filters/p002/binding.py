@@ -21,7 +21,9 @@ kernels live and ``<digest>`` the SHA-256 of the copy's text; a copy whose
 content does not hash to its name (edited, truncated, another version's) is
 written again and its numba cache (``__pycache__/<name>.*``) removed, so it
 is compiled afresh — counted in :data:`CACHE_REPORT` and noted once on the
-``replay.kernels`` logger. Older copies of the same model (another digest, or
+``replay.kernels`` logger; numba's cache files beside it are sealed with their
+SHA-256 and checked before they are unpickled (:mod:`replay.filters.kernel_files`).
+Older copies of the same model (another digest, or
 the former ``replay_compiled_<digest>`` names) are removed with their numba
 cache files: the cache keeps one copy per model. Two checkouts of different
 versions sharing one cache directory therefore recompile each other's copies;

@@ -53,7 +53,9 @@ def _notes_to_stderr() -> None:
 
     log = logging.getLogger("replay")
     if not any(getattr(h, "_replay_cli", False) for h in log.handlers):
-        h = logging.StreamHandler(sys.stderr)
+        from replay.util.progress import NoteHandler  # a live progress bar is erased first
+
+        h = NoteHandler(sys.stderr)
         h.setFormatter(logging.Formatter("replay: note: %(message)s"))
         h._replay_cli = True
         log.addHandler(h)

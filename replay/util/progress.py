@@ -2,12 +2,75 @@
 
 Work comes in items of unequal cost: each item carries a weight (its expected cost,
 e.g. runs x particles), and the ETA extrapolates the time per unit of weight done so
-far to the weight left — heavy items last do not make it lie.
+far to the weight left — heavy items last do not make it lie. Time spent compiling
+numba kernels (once per machine, then cached: tens of seconds on a first run) is no
+work done: it is left out of that rate (:func:`compile_seconds`) and shown apart; while
+it lasts the bar says so instead of an ETA. Notes logged meanwhile (:class:`NoteHandler`)
+take their own line, not the bar's.
 """
 from __future__ import annotations
 
+import logging
 import sys
+import threading
 import time
+
+_CLOCK = {"depth": 0, "start": 0.0, "total": 0.0, "listening": False}  # numba's outermost compilations
+_LOCK = threading.Lock()
+_BAR: dict = {"live": None}  # the Progress whose bar is on the terminal
+
+
+def _listen() -> None:
+    """Time numba's compilations from now on (its ``numba:compile`` events, outermost only), once
+    numba is imported (never imported here: a download's progress does not load it)."""
+    if _CLOCK["listening"] or "numba" not in sys.modules:
+        return
+    from numba.core import event
+
+    class _Clock(event.Listener):
+        def on_start(self, ev):
+            with _LOCK:
+                first = _CLOCK["depth"] == 0
+                if first:
+                    _CLOCK["start"] = time.monotonic()
+                _CLOCK["depth"] += 1
+            bar = _BAR["live"]
+            if first and bar is not None:
+                bar._draw(final=True)  # "compiling kernels..." instead of an ETA
+
+        def on_end(self, ev):
+            with _LOCK:
+                _CLOCK["depth"] = max(0, _CLOCK["depth"] - 1)
+                if _CLOCK["depth"] == 0:
+                    _CLOCK["total"] += time.monotonic() - _CLOCK["start"]
+
+    event.register("numba:compile", _Clock())
+    _CLOCK["listening"] = True
+
+
+def compile_seconds(now: float | None = None) -> float:
+    """Seconds this process has spent compiling numba kernels since :func:`_listen` (a compilation
+    under way counted up to ``now``)."""
+    with _LOCK:
+        running = (now or time.monotonic()) - _CLOCK["start"] if _CLOCK["depth"] else 0.0
+        return _CLOCK["total"] + max(0.0, running)
+
+
+def compiling() -> bool:
+    """Whether numba is compiling now (in any thread of this process)."""
+    return _CLOCK["depth"] > 0
+
+
+class NoteHandler(logging.StreamHandler):
+    """A logging handler for one-line notes: a live progress bar is erased first (it is drawn again
+    at the next update), so a note never lands on the bar's line."""
+
+    def emit(self, record):
+        bar = _BAR["live"]
+        if bar is not None and bar.stream is self.stream and bar._drawn:
+            self.stream.write("\r\033[K")
+            bar._drawn = 0.0
+        super().emit(record)
 
 
 def particle_weight(params: dict, runs: int) -> float:
@@ -32,6 +95,7 @@ class Progress:
         self.done = self.failed = 0
         self.weight_done = 0.0
         self.t0 = self.last = time.monotonic()
+        self.c0 = compile_seconds(self.t0)
         self.bar = None
         self._open()
 
@@ -39,11 +103,14 @@ class Progress:
         """Set the amount of work once it is known (before the first update)."""
         self.total = total
         self.total_weight = float(total_weight if total_weight is not None else total)
+        _listen()  # the work's modules are imported by now: numba too if it compiles
         self._open()
 
     def _open(self) -> None:
         self.bar = bool(not self.quiet and self.total and getattr(self.stream, "isatty", lambda: False)())
         self._drawn = 0.0
+        if self.bar:
+            _BAR["live"] = self
 
     def _draw(self, final: bool = False) -> None:
         """The bar on one terminal line, redrawn in place (at most 5 times a second)."""
@@ -58,7 +125,8 @@ class Progress:
         eta = self.eta(now)
         fail = f", {self.failed} failed" if self.failed else ""
         tail = (f" {self.done}/{self.total} {self.unit}s{fail} [{now - self.t0:.0f} s"
-                + (f", ETA {eta:.0f} s]" if eta == eta else "]"))
+                + (", compiling kernels (one time, cached)...]" if compiling() else
+                   self._compiling(now) + (f", ETA {eta:.0f} s]" if eta == eta else "]")))
         head = f"{self.label}: {100 * frac:3.0f}%|"
         width = max(10, cols - len(head) - len(tail) - 2)
         fill = int(round(frac * width))
@@ -82,19 +150,27 @@ class Progress:
             self.stream.flush()
 
     def eta(self, now=None) -> float:
-        """Seconds left: elapsed time per unit of weight done, times the weight left."""
-        el = (now or time.monotonic()) - self.t0
+        """Seconds left: elapsed time per unit of weight done, times the weight left; the time spent
+        compiling kernels (once per machine) is not counted as work done."""
+        now = now or time.monotonic()
+        el = max(0.0, now - self.t0 - (compile_seconds(now) - self.c0))
         if self.weight_done <= 0:
             return float("nan")
         return el / self.weight_done * max(0.0, self.total_weight - self.weight_done)
+
+    def _compiling(self, now) -> str:
+        """``", N s compiling kernels"`` when some of the elapsed time was (one-time) compilation."""
+        c = compile_seconds(now) - self.c0
+        return f", {c:.0f} s compiling kernels" if c >= 0.5 else ""
 
     def line(self, now=None) -> str:
         now = now or time.monotonic()
         el = now - self.t0
         pct = 100.0 * self.weight_done / self.total_weight if self.total_weight else 100.0
         fail = f", {self.failed} failed" if self.failed else ""
+        eta = self.eta(now)
         return (f"{self.label}: {self.done}/{self.total} {self.unit}s ({pct:.0f} % of the work){fail}, "
-                f"elapsed {el:.0f} s, ETA {self.eta(now):.0f} s")
+                f"elapsed {el:.0f} s{self._compiling(now)}" + (f", ETA {eta:.0f} s" if eta == eta else ""))
 
     def close(self) -> None:
         if self.bar and self.done:
@@ -102,3 +178,5 @@ class Progress:
             self.stream.write("\n")
             self.stream.flush()
         self.bar = False
+        if _BAR["live"] is self:
+            _BAR["live"] = None
