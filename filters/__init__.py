@@ -48,6 +48,7 @@ FILTERS = Registry("filter", {
     "pso-cpf": "replay.filters.p002.igwo_stcpf:PSOCPF",
     "aukf": "replay.filters.p001.aukf:AUKF",
     "wf-pf": "replay.filters.p003.wfpf:WeightFactorPF",
+    "measurements": "replay.filters.measurements:Measurements",
 }, check=_check)
 
 

@@ -28,7 +28,7 @@ from replay import registry, score, summary
 from replay.util.progress import particle_weight
 from replay.filters import make_filter
 from replay.filters.base import Estimates
-from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, config_hash, default_task, is_recorded, is_sim,
+from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
 from replay.eval_options import validate_eval_options
@@ -120,8 +120,9 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
                                          lambda run, cols, s=series: {k: s[run][k] for k in cols},
                                          replay.__version__)
     rows = summary.label([r.summary for r in results])
-    return summary.add_paired(rows, {r.config_hash: r.config for r in results},
+    rows = summary.add_paired(rows, {r.config_hash: r.config for r in results},
                               {r.config_hash: r.records for r in results}, baseline)
+    return summary.against_measurements(rows)
 
 
 def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,
@@ -174,6 +175,11 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
     built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
+    if configs and MEASUREMENTS not in filters:
+        built = built or {0: build_problem(configs[0], 0, data_dir)}
+        if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat
+            configs.append(Config(*base, MEASUREMENTS, {}, *tail))
+            filters = filters + [MEASUREMENTS]
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
         progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
@@ -206,6 +212,21 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
                       score.units(p0), tuple(int(i) for i in p0.position_index))
+
+
+MEASUREMENTS = "measurements"  # replay.filters.measurements
+
+
+def observes_position(problem) -> bool:
+    """Whether every position component of the problem's state is observed directly (a fix):
+    then the ``measurements`` row (the raw observations, scored alike) is added to the table."""
+    from replay.filters.measurements import direct_rows
+
+    if problem.z.shape[0] == 0:
+        return False
+    seen = {i for j, i, _ in direct_rows(problem.model, problem.x0)
+            if np.isfinite(problem.z[:, j]).any()}
+    return set(int(i) for i in problem.position_index) <= seen
 
 
 def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:

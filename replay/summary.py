@@ -95,6 +95,22 @@ def measurements(cfg: dict) -> str:
     return SYNTHETIC if getattr(task_class(cfg["task"]), "SYNTHETIC", False) else "sensors"
 
 
+def against_measurements(rows: list[dict]) -> list[dict]:
+    """With a ``measurements`` row (the raw observations, :mod:`replay.filters.measurements`):
+    ``worse_than_measurements`` on every filter row of its dataset and task — true when the
+    filter's mean position RMSE exceeds that of the input it reads (its lost runs included)."""
+    meas = {(r["dataset"], r["task"]): r for r in rows if r["filter"] == "measurements"}
+    for r in rows:
+        m = meas.get((r["dataset"], r["task"]))
+        if m is None or r is m or str(r["filter"]).startswith("recorded:"):
+            continue
+        try:
+            r["worse_than_measurements"] = bool(float(r["pos_rmse"]) > float(m["pos_rmse"]))
+        except (TypeError, ValueError, KeyError):
+            r["worse_than_measurements"] = ""
+    return rows
+
+
 def lost_share(run_metrics: list[dict]) -> float:
     """The share of the summed per-run ``pos_rmse`` that comes from lost runs: above 0.5, the
     mean is dominated by lost tracks (the printed tables mark such rows)."""

@@ -76,6 +76,10 @@ def format_table(ev: Evaluation) -> str:
                      if k in cfg["task_params"])
     title = (f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}"
              + (f"  first={cfg['first']}" if cfg["first"] else ""))
+    worse = [r["label"] for r in ev.rows if r.get("worse_than_measurements") is True]
+    if worse:
+        title += ("\nworse than its own measurements (the measurements row: the raw observations, scored "
+                  "alike): " + ", ".join(worse))
     if any(r.get("measurements") == SYNTHETIC for r in ev.rows):
         title += (f"\nsynthetic measurements: task {cfg['task']} draws them from the reference plus its own "
                   "noise, not from the recording's sensors (task fusion reads the sensors)")
