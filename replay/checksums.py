@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import tempfile
 from datetime import datetime, timezone
@@ -277,6 +278,16 @@ def check_loaded(ds, path: Path, frame) -> None:
         if why:
             frame.report.add("flagged", path.name, 1, f"not the file the upstream listing declares: {why}")
     frame.meta.update(path=str(path), sha256=sha, checksum=status, content_checked=checked)
+    if not checked and (ds.id, sha) not in _NOTED:  # once per file and process
+        _NOTED.add((ds.id, sha))
+        why = {"mismatch": "its sha256 is not the registered one", "changed": "it was edited since its download"
+               }.get(status, "it contradicts the rows or span its listing declares" if declares(ds) else
+                     "no registered checksum, no declared rows or span")
+        logging.getLogger("replay").info(f"{ds.id}: {path} is not confirmed as the published file ({why}): "
+                                         "leaderboard rows on it say content_checked=False")
+
+
+_NOTED: set = set()
 
 
 # adapter -> content check of a downloaded file (summary, or ValueError with the reason)
