@@ -44,9 +44,9 @@ def check_url(url: str, where: str) -> str:
         parts = urllib.parse.urlsplit(url)
         parts.port  # noqa: B018 — raises ValueError for a port out of range or not a number
     except ValueError as e:
-        raise ReplayError(f"{where} {printable(url)!r} is not a valid URL ({printable(e)})") from None
+        raise ReplayError(f"{where} '{printable(url)}' is not a valid URL ({printable(e)})") from None
     if parts.scheme not in ("http", "https") or not parts.hostname:
-        raise ReplayError(f"{where} {printable(url)!r} is not an http(s) URL with a host "
+        raise ReplayError(f"{where} '{printable(url)}' is not an http(s) URL with a host "
                           "(e.g. https://mirror.example.org/data)")
     return url
 
