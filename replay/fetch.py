@@ -219,7 +219,11 @@ def _open(src: str, clock: Deadline, timeout: float, fail):
     """(response, connection) of a 200 answer for ``src``, following redirects."""
     url, seen = src, [src]
     while True:
-        parts = urllib.parse.urlsplit(url)
+        try:
+            parts = urllib.parse.urlsplit(url)
+            parts.port  # noqa: B018 — a port out of range raises ValueError
+        except ValueError as e:
+            fail(f"redirected to {url}, which is not a valid URL ({e})")
         if parts.scheme not in ("http", "https") or not parts.hostname:
             fail(f"redirected to {url}, which is not an http(s) URL")
         conn, path = _connect(parts, clock, timeout)
@@ -239,7 +243,10 @@ def _open(src: str, clock: Deadline, timeout: float, fail):
         conn.close()
         if not location:
             fail(f"HTTP {resp.status} redirect without a Location")
-        nxt = urllib.parse.urljoin(url, location)
+        try:
+            nxt = urllib.parse.urljoin(url, location)
+        except ValueError as e:
+            fail(f"redirected to {location}, which is not a valid URL ({e})")
         if nxt in seen:
             fail(f"redirect loop: back to {nxt} at redirect {len(seen)}")
         if len(seen) > MAX_REDIRECTS:

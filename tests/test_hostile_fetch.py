@@ -205,6 +205,10 @@ RAW = {
     "fetch-encoding-header-escape": (
         lambda h: answer(h, b"x", Content_Encoding="\x1b]0;pwned\x07"),
         r"the server sent \\x1b\]0;pwned\\x07-encoded content"),
+    "fetch-redirect-to-bad-ipv6": (
+        lambda h: answer(h, b"", status=302, Location="http://[::1/x\x1b[2J"),
+        r"cannot download bohai/20220822_0_7: redirected to http://\[::1/x\\x1b\[2J, which is not a valid URL "
+        r"\(Invalid IPv6 URL\) \(url"),
     "fetch-latin1-reason": (
         lambda h: h.wfile.write(b"HTTP/1.0 500 Fehler \xe4\xf6\r\n\r\n"), r"HTTP 500 Fehler \\xe4\\xf6 \(url"),
 }
