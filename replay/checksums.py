@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import tempfile
 from datetime import datetime, timezone
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+from replay.util.downloads import part_prefix
 from replay.util.errors import ReplayError
 
 CHECKSUMS_FILE = "checksums.json"
@@ -109,10 +111,11 @@ def check_file(ds, path: Path) -> tuple[str, str]:
     return got, "unknown"
 
 
-def record_download(dest: Path, ds, sha: str, size: int, src: str) -> Path:
+def record_download(dest: Path, ds, sha: str, size: int, src: str, declared: bool = False) -> Path:
     """Keep what was seen of a content-checked download in ``dest/checksums.json`` (atomically).
 
     ``content_checked`` marks it; it is what the file was at download, not a registered checksum.
+    ``declared``: its rows and span matched what the manifest declares.
     """
     path = dest / CHECKSUMS_FILE
     try:
@@ -120,10 +123,11 @@ def record_download(dest: Path, ds, sha: str, size: int, src: str) -> Path:
     except ReplayError:  # our own record file, damaged: start it again
         data = {}
     data[ds.file] = {"dataset": ds.id, "sha256": sha, "size": size, "url": src, "content_checked": True,
-                     "registered": False, "fetched": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+                     "declared_checked": declared, "registered": False,
+                     "fetched": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=dest, prefix=f".{CHECKSUMS_FILE}.", suffix=".part")
+        fd, tmp = tempfile.mkstemp(dir=dest, prefix=part_prefix(CHECKSUMS_FILE), suffix=".part")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=2, sort_keys=True)
             f.write("\n")
@@ -139,12 +143,25 @@ def record_download(dest: Path, ds, sha: str, size: int, src: str) -> Path:
     return path
 
 
-def bohai_csv(path: Path) -> str:
-    """Content check of a Bohai CSV: a summary when it holds a whole table, else ValueError(reason).
+@dataclass(frozen=True)
+class Content:
+    """What a content check found in a whole file; ``str()`` is its one-line summary."""
+
+    layout: int  # Bohai header layout: 36 or 31 columns
+    rows: int  # data rows
+    span: float | None  # s, last minus first readable time value (None: no time read)
+
+    def __str__(self) -> str:
+        return f"{self.layout}-column Bohai CSV, {self.rows} row{'s' if self.rows != 1 else ''}"
+
+
+def bohai_csv(path: Path) -> Content:
+    """Content check of a Bohai CSV: what it holds when it is a whole table, else ValueError(reason).
 
     The first line must name every column of one Bohai layout (as the adapter requires),
     every other non-blank line must have as many fields, there must be a data row, and the
-    file must end with a line end (a body cut inside its last line has none).
+    file must end with a line end (a body cut inside its last line has none). The rows and
+    the span of the ``time`` column are counted for :func:`declared_mismatch`.
     """
     from replay.adapters.bohai import COLS31, COLS36
 
@@ -160,23 +177,117 @@ def bohai_csv(path: Path) -> str:
             text = first.decode("utf-8-sig")
         except UnicodeDecodeError:
             raise ValueError(f"the first line is not UTF-8 text (starts with {first[:16]!r})") from None
-        cols = {c.strip() for c in text.strip().split(",")}
-        layout = 36 if cols >= set(COLS36) else 31 if cols >= set(COLS31) else 0
+        names = [c.strip() for c in text.strip().split(",")]
+        layout = 36 if set(names) >= set(COLS36) else 31 if set(names) >= set(COLS31) else 0
         if not layout:
             raise ValueError(f"the first line is not a Bohai CSV header (starts with {text.strip()[:40]!r})")
-        fields, rows, number, last = text.count(",") + 1, 0, 1, first
+        fields, rows, number, last, at = text.count(",") + 1, 0, 1, first, names.index("time")
+        times = []
         for number, last in enumerate(f, start=2):
             if not last.strip():
                 continue
-            if last.count(b",") + 1 != fields:
-                raise ValueError(f"line {number} has {last.count(b',') + 1} fields, the header {fields}: "
+            cells = last.split(b",")
+            if len(cells) != fields:
+                raise ValueError(f"line {number} has {len(cells)} fields, the header {fields}: "
                                  "the body was cut short or is not a Bohai CSV")
             rows += 1
+            times.append(cells[at])
     if not rows:
         raise ValueError("header only, no data rows")
     if not last.endswith(b"\n"):
         raise ValueError(f"the last line ({number}) has no line end: the body was cut short")
-    return f"{layout}-column Bohai CSV, {rows} row{'s' if rows != 1 else ''}"
+    return Content(layout, rows, _span(times))
+
+
+def _span(cells: list[bytes]) -> float | None:
+    """Last minus first finite value of a column's cells (None when fewer than one)."""
+    values = []
+    for cell in (cells, cells[::-1]):
+        for c in cell:
+            try:
+                v = float(c)
+            except ValueError:
+                continue
+            if v == v and abs(v) != float("inf"):
+                values.append(v)
+                break
+    return values[1] - values[0] if len(values) == 2 else None
+
+
+SPAN_TOLERANCE = 0.5  # s: listings give a sequence's span rounded to the second
+
+
+def declares(ds) -> bool:
+    """Whether the manifest declares what the whole file holds (``rows``, ``span_s``)."""
+    return ds.rows is not None or ds.span_s is not None
+
+
+def declared_mismatch(ds, content: Content) -> str | None:
+    """Why ``content`` is not the file the upstream listing declares (its ``rows`` and its
+    ``span_s`` within :data:`SPAN_TOLERANCE`), or None; only what is declared is compared."""
+    problems = []
+    if ds.rows is not None and content.rows != ds.rows:
+        problems.append(f"{content.rows} rows, the upstream listing declares {ds.rows}")
+    if ds.span_s is not None and (content.span is None or abs(content.span - ds.span_s) > SPAN_TOLERANCE):
+        got = "no readable time" if content.span is None else f"a time span of {content.span:.1f} s"
+        problems.append(f"{got}, the upstream listing declares {ds.span_s:g} s")
+    return "; ".join(problems) or None
+
+
+def identical_to(ds, sha: str, directory: Path | None = None) -> str | None:
+    """Another sequence whose checksum is ``sha`` (its registered one, or the one recorded at its
+    download in ``directory/checksums.json``), named with where that checksum comes from; or None.
+    A file with that checksum is that sequence, not ``ds``."""
+    for other, (_, _, registered) in REGISTERED.items():
+        if registered == sha and other != ds.id:
+            return f"{other} (its registered sha256)"
+    try:
+        recorded = read_checksums(directory) if directory is not None else {}
+    except ReplayError:
+        recorded = {}
+    for entry in recorded.values():
+        other = entry.get("dataset") if isinstance(entry, dict) else None
+        if other and other != ds.id and entry.get("sha256") == sha:
+            return f"{other} (its sha256 recorded at download in {CHECKSUMS_FILE})"
+    return None
+
+
+def check_loaded(ds, path: Path, frame) -> None:
+    """The checks of a located file dataset that loads: ``frame.meta`` gets its ``sha256``,
+    ``checksum`` status and ``content_checked`` (True: the registered checksum matched, or the
+    row count and time span the manifest declares; False: nothing published confirms the file).
+    A file byte-identical to another sequence is refused; an edited file (checksum ``mismatch``
+    or ``changed``) and one that contradicts the declared rows or span are flagged in the report."""
+    sha, status = check_file(ds, path)
+    other = None if status == "verified" else identical_to(ds, sha, path.parent)
+    if other:
+        raise ReplayError(f"{path}: this file is byte-identical to {other}, so it is not {ds.id} "
+                          f"(sha256 {sha}); fetch it again with `replay datasets fetch {ds.id} --force`")
+    checked = status == "verified"
+    if status in ("mismatch", "changed"):
+        expected = ds.sha256 or "the checksum recorded at download"
+        frame.report.add("flagged", path.name, 1,
+                         f"sha256 {sha} differs from {expected}: the file was edited or is "
+                         "another version; results may not compare with published ones")
+    elif not checked and declares(ds) and ds.adapter in CONTENT_CHECKS:
+        try:
+            why = declared_mismatch(ds, CONTENT_CHECKS[ds.adapter](path))
+        except ValueError as e:
+            why = str(e)
+        checked = why is None
+        if why:
+            frame.report.add("flagged", path.name, 1, f"not the file the upstream listing declares: {why}")
+    frame.meta.update(path=str(path), sha256=sha, checksum=status, content_checked=checked)
+    if not checked and (ds.id, sha) not in _NOTED:  # once per file and process
+        _NOTED.add((ds.id, sha))
+        why = {"mismatch": "its sha256 is not the registered one", "changed": "it was edited since its download"
+               }.get(status, "it contradicts the rows or span its listing declares" if declares(ds) else
+                     "no registered checksum, no declared rows or span")
+        logging.getLogger("replay").info(f"{ds.id}: {path} is not confirmed as the published file ({why}): "
+                                         "leaderboard rows on it say content_checked=False")
+
+
+_NOTED: set = set()
 
 
 # adapter -> content check of a downloaded file (summary, or ValueError with the reason)

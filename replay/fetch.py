@@ -1,10 +1,11 @@
 """Download file datasets: bounded in time, checked, written atomically.
 
-The file is streamed into a temporary ``.<file>.*.part`` in the destination
-directory and hashed while it is written. Only a file that passed every check
-is moved (``os.replace``) to its final name, so a final name never holds a
-partial or unchecked file, and a failed download leaves no temporary file (and
-an existing copy untouched, also with ``force``).
+The file is streamed into a temporary ``.<file>.<pid>@<host>.*.part`` in the destination
+directory and hashed while it is written. Only a file that passed every check is moved
+(``os.replace``) to its final name, so a final name never holds a partial or unchecked file,
+and a failed download leaves no temporary file (and an existing copy untouched, also with
+``force``); those of killed downloads are removed by the next download into the directory
+(:func:`replay.util.downloads.remove_stale_parts`), and counted in its message.
 
 Checks, in order; the first that fails refuses the download in one line naming
 the dataset and the URL:
@@ -14,14 +15,15 @@ the dataset and the URL:
   not empty, the announced ``Content-Length`` equal to the registered size;
 * the body: as many bytes as ``Content-Length`` announced;
 * with a registered checksum (``replay/checksums.py``): the size and the sha256;
+* a sha256 that is another sequence's (registered, or recorded at its download): refused;
 * without one: the adapter's content check (``checksums.CONTENT_CHECKS``; a Bohai CSV
   needs a header of one of the two Bohai layouts, the same number of fields on
-  every line and a final line end, so a body cut short is refused even when the
-  server gave no size). A dataset whose adapter has no content check is not
-  downloaded at all. The sha256 seen is kept in ``checksums.json`` beside the
-  file with ``content_checked``, never as a registered checksum; loading it
-  reports ``checksum: not registered upstream (content-checked)``. Known limit:
-  a body cut exactly at a line end, from a server that gave no size, passes.
+  every line and a final line end), then the row count and time span the manifest
+  declares (``rows``, ``span_s``), where it declares them. A dataset whose adapter has
+  no content check is not downloaded at all. The sha256 seen is kept in ``checksums.json``
+  beside the file, never as a registered checksum. Known limit: with nothing declared, a
+  body cut exactly at a line end, from a server that gave no size, passes; it is then
+  ``content_checked`` false in every leaderboard row that uses it (``checksums.check_loaded``).
 
 Time: ``timeout`` bounds each wait for the server (connect, each read), and
 ``deadline`` the whole download, redirects included: when it passes, the open
@@ -42,8 +44,6 @@ import os
 import socket
 import ssl
 import tempfile
-import threading
-import time
 import urllib.parse
 import urllib.request
 from dataclasses import dataclass
@@ -51,8 +51,10 @@ from pathlib import Path
 
 import replay
 from replay import registry
-from replay.checksums import CONTENT_CHECKS, record_download
+from replay.checksums import CONTENT_CHECKS, declared_mismatch, declares, identical_to, record_download
 from replay.registry import Dataset
+from replay.util.downloads import (Deadline, check_url, network_reason, part_prefix, printable,
+                                   remove_stale_parts)
 from replay.util.errors import ReplayError
 from replay.util.files import check_space, check_writable
 
@@ -73,15 +75,17 @@ class FetchResult:
 
 
 def download_url(ds: Dataset, url: str | None = None) -> str:
-    """``url``, else ``$REPLAY_DATASET_BASE_URL/<upstream_path>``, else the manifest url."""
+    """``url``, else ``$REPLAY_DATASET_BASE_URL/<upstream_path>``, else the manifest url; an
+    absolute http(s) URL, else refused in one line naming where it came from."""
     if url:
-        return url
+        return check_url(url, "download url")
     base = os.environ.get("REPLAY_DATASET_BASE_URL")
     if base:
+        check_url(base, "$REPLAY_DATASET_BASE_URL")
         return base.rstrip("/") + "/" + urllib.parse.quote(ds.upstream_path or ds.file)
     if not ds.url:
         raise ReplayError(f"dataset {ds.id} has no download url in {ds.manifest}")
-    return ds.url
+    return check_url(ds.url, f"{ds.manifest}: dataset {ds.id}: url")
 
 
 def default_dest(ds: Dataset) -> Path:
@@ -128,21 +132,26 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
     what = "download destination" + (f" (from {registry.cache_variable()})"
                                       if not dest_dir and registry.cache_variable() else "")
     check_writable(dest, what)
-    check_space(dest, what, need=ds.size)
     try:
         dest.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ReplayError(f"cannot create {dest}: {e.strerror or e}") from None
+    stale, freed = remove_stale_parts(dest)  # .part files of downloads whose process is gone
+    if stale:
+        note += f"; removed {stale} partial file{'s' if stale != 1 else ''} of interrupted downloads ({freed} bytes)"
+    check_space(dest, what, need=ds.size)  # after the stale files are gone
 
     sha, size, announced, summary = _download(ds, src, dest, target, timeout, deadline, check, progress)
     if ds.sha256:
         return FetchResult(target, sha, True, True,
                            f"{ds.id}: downloaded to {target}, size and sha256 verified{note}")
-    record = record_download(dest, ds, sha, size, src)
+    record = record_download(dest, ds, sha, size, src, declared=declares(ds))
     told = "as announced by the server" if announced else "no size announced by the server"
+    how = ("rows and time span as the upstream listing declares" if declares(ds) else
+           "nothing published to check it against: rows using it say content_checked=false")
     return FetchResult(target, sha, False, True,
                        f"{ds.id}: downloaded to {target} ({size} bytes, {told}); checksum not registered "
-                       f"upstream; content-checked: {summary}; sha256 {sha} kept in {record}{note}",
+                       f"upstream; content-checked: {summary}; {how}; sha256 {sha} kept in {record}{note}",
                        content_checked=True)
 
 
@@ -155,59 +164,17 @@ def _present(ds: Dataset, target: Path, check) -> FetchResult | str:
         return "; the local copy did not match the registered checksum and was replaced"
     try:
         summary = check(target)
+        sha, status = registry.check_file(ds, target)
+        why = declared_mismatch(ds, summary) or identical_to(ds, sha, target.parent)
     except (ValueError, OSError) as e:
         return f"; the local copy failed the content check ({e}) and was replaced"
-    sha, status = registry.check_file(ds, target)
+    if why:
+        return f"; the local copy was not {ds.id} ({why}) and was replaced"
     how = {registry.CONTENT_CHECKED: "the file downloaded and content-checked",
            "changed": "passes the content check but differs from the file downloaded"}.get(
         status, "passes the content check")
     return FetchResult(target, sha, False, False, f"{ds.id}: already present at {target} (checksum not "
                        f"registered upstream; {how}: {summary})", content_checked=True)
-
-
-class _Deadline:
-    """The wall-clock budget of one download: when it passes, the watched socket is shut down,
-    which ends any wait on it (connect, TLS, headers, body)."""
-
-    def __init__(self, seconds: float):
-        self.seconds, self.expired, self._sock = seconds, False, None
-        self.end = time.monotonic() + seconds
-        self._lock = threading.Lock()
-        self._timer = threading.Timer(seconds, self._expire)
-        self._timer.daemon = True
-        self._timer.start()
-
-    def _expire(self):
-        with self._lock:
-            self.expired, sock = True, self._sock
-        if sock is not None:
-            _shutdown(sock)
-
-    def watch(self, sock):
-        with self._lock:
-            self._sock, expired = sock, self.expired
-        if expired:
-            _shutdown(sock)
-
-    @property
-    def passed(self) -> bool:
-        return self.expired or time.monotonic() >= self.end
-
-    def left(self) -> float:
-        """Seconds left (a connect attempt is not allowed to wait longer)."""
-        if self.passed:
-            raise TimeoutError
-        return self.end - time.monotonic()
-
-    def cancel(self):
-        self._timer.cancel()
-
-
-def _shutdown(sock):
-    try:
-        sock.shutdown(socket.SHUT_RDWR)
-    except OSError:
-        pass
 
 
 class _TLS(http.client.HTTPSConnection):
@@ -226,7 +193,7 @@ class _TLS(http.client.HTTPSConnection):
         self.sock.do_handshake()
 
 
-def _connect(parts, clock: _Deadline, timeout: float) -> tuple[http.client.HTTPConnection, str]:
+def _connect(parts, clock: Deadline, timeout: float) -> tuple[http.client.HTTPConnection, str]:
     """A connection for ``parts`` (through the environment's proxy, if any) and the request target;
     every socket it opens is under the deadline."""
     host, port = parts.hostname, parts.port
@@ -252,11 +219,15 @@ def _connect(parts, clock: _Deadline, timeout: float) -> tuple[http.client.HTTPC
     return conn, path
 
 
-def _open(src: str, clock: _Deadline, timeout: float, fail):
+def _open(src: str, clock: Deadline, timeout: float, fail):
     """(response, connection) of a 200 answer for ``src``, following redirects."""
     url, seen = src, [src]
     while True:
-        parts = urllib.parse.urlsplit(url)
+        try:
+            parts = urllib.parse.urlsplit(url)
+            parts.port  # noqa: B018 — a port out of range raises ValueError
+        except ValueError as e:
+            fail(f"redirected to {url}, which is not a valid URL ({e})")
         if parts.scheme not in ("http", "https") or not parts.hostname:
             fail(f"redirected to {url}, which is not an http(s) URL")
         conn, path = _connect(parts, clock, timeout)
@@ -276,7 +247,10 @@ def _open(src: str, clock: _Deadline, timeout: float, fail):
         conn.close()
         if not location:
             fail(f"HTTP {resp.status} redirect without a Location")
-        nxt = urllib.parse.urljoin(url, location)
+        try:
+            nxt = urllib.parse.urljoin(url, location)
+        except ValueError as e:
+            fail(f"redirected to {location}, which is not a valid URL ({e})")
         if nxt in seen:
             fail(f"redirect loop: back to {nxt} at redirect {len(seen)}")
         if len(seen) > MAX_REDIRECTS:
@@ -309,14 +283,14 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
 
     Returns (sha256, size, whether the server announced the size, content summary).
     """
-    def fail(reason):
-        raise ReplayError(f"cannot download {ds.id}: {reason} (url {src})")
+    def fail(reason):  # the reason may quote the server: made printable, bounded
+        raise ReplayError(f"cannot download {ds.id}: {printable(reason, 300)} (url {printable(src, 300)})")
 
     try:
-        fd, tmp = tempfile.mkstemp(dir=dest, prefix=f".{ds.file}.", suffix=".part")
+        fd, tmp = tempfile.mkstemp(dir=dest, prefix=part_prefix(ds.file), suffix=".part")
     except OSError as e:
         raise ReplayError(f"cannot write into {dest}: {e.strerror or e}") from None
-    clock = _Deadline(deadline)
+    clock = Deadline(deadline)
     try:
         h, size = hashlib.sha256(), 0
         with os.fdopen(fd, "wb") as out:
@@ -348,7 +322,7 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
                     raise ReplayError(f"cannot write {target}: {e.strerror}; the download was discarded") from None
                 if clock.passed:
                     fail(f"not complete within the deadline of {deadline:g} s ({size} bytes received)")
-                fail(_reason(e, timeout))
+                fail(network_reason(e, timeout))
             finally:
                 clock.cancel()
         if announced is not None and size != announced:
@@ -358,15 +332,22 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
         if ds.size and size != ds.size:
             fail(f"got {size} bytes, the registered size is {ds.size}")
         sha = h.hexdigest()
+        other = None if sha == ds.sha256 else identical_to(ds, sha, dest)
         if ds.sha256 and sha != ds.sha256:
-            raise ReplayError(f"checksum mismatch for {ds.id}: expected {ds.sha256}, got {sha}; "
-                              f"the download was discarded (url {src})")
+            raise ReplayError(f"checksum mismatch for {ds.id}: expected {ds.sha256}, got {sha}"
+                              f"{f', the checksum of {other}' if other else ''}; the download was discarded "
+                              f"(url {printable(src, 300)})")
+        if other:
+            fail(f"the body is byte-identical to {other}, not {ds.id}; the download was discarded")
         summary = ""
         if check is not None:
             try:
                 summary = check(Path(tmp))
+                why = declared_mismatch(ds, summary)
             except ValueError as e:
                 fail(f"the content check failed: {e}; the download was discarded")
+            if why:
+                fail(f"the body holds {why}: cut short or another file; the download was discarded")
         try:
             os.replace(tmp, target)
         except OSError as e:
@@ -377,17 +358,3 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
     finally:
         clock.cancel()
         Path(tmp).unlink(missing_ok=True)  # gone already after a successful replace
-
-
-def _reason(e: Exception, timeout: float) -> str:
-    """A short one-line reason for a network failure."""
-    if isinstance(e, TimeoutError):
-        return f"timed out after {timeout:g} s"
-    if isinstance(e, http.client.IncompleteRead):
-        return "connection closed before the end of the body"
-    if isinstance(e, http.client.RemoteDisconnected):
-        return "the server closed the connection without an answer"
-    if isinstance(e, http.client.HTTPException):
-        return f"not a valid HTTP answer ({type(e).__name__}: {' '.join(str(e).split())[:80]})"
-    text = getattr(e, "strerror", None) or str(e) or type(e).__name__
-    return " ".join(str(text).split())

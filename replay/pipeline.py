@@ -299,6 +299,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     cols.update(series)
     m["seconds"] = wall
     rec = {"run": run, "status": "done", "metrics": m, "series": cols}
+    rec.update({k: v for k, v in getattr(problem, "frame_meta", {}).items() if k == "content_checked"})
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
     if keep:

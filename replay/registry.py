@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import replay
-from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, read_checksums,  # noqa: F401
-                              sha256_file, with_registered)
+from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, check_loaded,  # noqa: F401
+                              read_checksums, sha256_file, with_registered)
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import validate
 
@@ -402,13 +402,7 @@ def _load_file(ds: Dataset, data_dir, params: dict):
         raise ReplayError(f"dataset {ds.id} not found in {where}; "
                           f"run `replay datasets fetch {ds.id}` or pass --data-dir")
     frame = _adapter(ds.adapter)(path, **params)
-    sha, status = check_file(ds, path)
-    frame.meta.update(path=str(path), sha256=sha, checksum=status)
-    if status in ("mismatch", "changed"):
-        expected = ds.sha256 or "the checksum recorded at download"
-        frame.report.add("flagged", path.name, 1,
-                         f"sha256 {sha} differs from {expected}: the file was edited or is "
-                         "another version; results may not compare with published ones")
+    check_loaded(ds, path, frame)  # sha256, checksum status, content_checked; flags; another sequence refused
     return frame
 
 

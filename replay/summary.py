@@ -34,6 +34,10 @@ ensemble consistency (:func:`replay.metrics.consistency`); the flag is ``consist
 ``optimistic``, ``pessimistic`` or ``collapsed`` (then ``anees`` is empty: a collapsed
 covariance gives no number worth printing);
 
+``content_checked`` (rows on a registered recording only) — whether anything published confirms
+the file: its registered checksum, or the rows and time span its upstream listing declares
+(:func:`replay.checksums.check_loaded`); False flags a file accepted on its structure alone;
+
 ``scored, masked`` — reference samples scored and skipped (masked reference),
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
 over the batch); ``alignment, version, config_hash``.
@@ -80,6 +84,9 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     row.update(measurements=measurements(cfg), scored=agg["scored"], masked=agg["masked"],
                us_per_step=agg["us_per_step"],
                alignment=cfg["alignment"], version=version, config_hash=h)
+    checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
+    if checked:
+        row["content_checked"] = all(checked)
     return row
 
 

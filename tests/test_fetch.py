@@ -172,10 +172,12 @@ def test_unregistered_download_is_content_checked_not_registered(upstream, tmp_p
     assert result.path.read_bytes() == body
     assert result.sha256 == registry.sha256_file(result.path)
     assert (f"({len(body)} bytes, as announced by the server); checksum not registered upstream; "
-            "content-checked: 36-column Bohai CSV, 4 rows; sha256 " + result.sha256) in result.message
+            "content-checked: 36-column Bohai CSV, 4 rows; nothing published to check it against: rows using it "
+            "say content_checked=false; sha256 " + result.sha256) in result.message
     recorded = json.loads((dest / "checksums.json").read_text())["20220822_0_7.csv"]
     assert recorded["sha256"] == result.sha256 and recorded["size"] == len(body)
     assert recorded["content_checked"] is True and recorded["registered"] is False
+    assert recorded["declared_checked"] is False  # the manifest declares no rows nor span of 0_7
     assert recorded["dataset"] == "bohai/20220822_0_7"
     assert recorded["url"] == base + "/20220822/0/20220822_0_7.csv"
     assert leftovers(dest) == []
@@ -313,16 +315,20 @@ def test_cli_fetch(upstream, tmp_path):
 
 
 def test_info_and_manifest_say_not_registered_content_checked(upstream, tmp_path, bohai_dir):
-    """A content-checked download loads with checksum "not registered upstream (content-checked)"."""
+    """A content-checked download loads with checksum "not registered upstream (content-checked)",
+    and content_checked False: nothing published (no checksum, no declared rows or span) confirms it."""
     root, _ = upstream
-    publish(root, "bohai/20220822_0_7", source=bohai_dir / "20220822_0_0.csv")  # an unregistered id
+    lines = (bohai_dir / "20220822_0_0.csv").read_bytes().splitlines(keepends=True)
+    publish(root, "bohai/20220822_0_7", data=b"".join(lines[:2001]))  # 0_0's first 2000 rows as 0_7
     dest = tmp_path / "dest"
     fetch("bohai/20220822_0_7", dest)
     frame = registry.load_frame("bohai/20220822_0_7", data_dir=dest, first=10)
     assert frame.meta["checksum"] == "not registered upstream (content-checked)"
+    assert frame.meta["content_checked"] is False
     assert not [e for e in frame.report.find("flagged") if e.what == "20220822_0_7.csv"]  # no checksum flag
     info = assert_ok(["datasets", "info", "bohai/20220822_0_7", "--data-dir", dest]).stdout
     assert "  checksum: not registered upstream (content-checked)" in info.splitlines()
+    assert "  content_checked: False" in info.splitlines()
 
 
 @pytest.mark.slow
@@ -373,6 +379,7 @@ def test_kill_during_download_leaves_no_final_file(tmp_path):
     state["slow"] = False
     result = fetch("bohai/20220822_0_7", dest, url=env["REPLAY_DATASET_BASE_URL"] + "/x.csv")
     assert result.path.read_bytes() == body
+    assert leftovers(dest) == [] and "; removed 1 partial file of interrupted downloads (" in result.message
     server.shutdown()
     server.server_close()
 

@@ -45,11 +45,29 @@ def list_cmd(data_dir):
 
 
 @datasets.command("info")
-@click.argument("dataset_id")
+@click.argument("dataset")
 @DATA_DIR
-def info_cmd(dataset_id, data_dir):
-    """Manifest fields, location and, when present, what loading it gives."""
-    ds = registry.get(dataset_id)
+@click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
+@click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
+@click.option("--dataset-param", "dataset_params", multiple=True,
+              help="Dataset parameter NAME=VALUE (repeatable; as for `replay eval`).")
+def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=()):
+    """Manifest fields, location and, when present, what loading it gives.
+
+    DATASET is what `replay eval` takes: a registered id, or a file (a CSV, a ROS 1 .bag, a
+    ROS 2 bag directory, an .mcap with --mapping), read the same way."""
+    from replay.cli.params import dataset_inputs
+    from replay.pipeline import load_frame
+
+    dparams = registry.check_params(dataset, dataset_inputs(dataset_params, mapping), adapter=adapter)
+    config = {"dataset": dataset, "dataset_params": dparams, "first": None, "seed": 0, "adapter": adapter}
+    if registry.is_path(dataset):
+        frame = load_frame(config, 0, data_dir)  # as `replay eval` reads it
+        click.echo(f"{'path:':15s} {dataset}")
+        _describe(frame)
+        return
+    ds = registry.get(dataset)
     for key, value in ds.__dict__.items():
         if value not in (None, ""):
             click.echo(f"{key + ':':15s} {value}")
@@ -62,7 +80,11 @@ def info_cmd(dataset_id, data_dir):
         click.echo(f"{'searched:':15s} {roots}")
         click.echo(f"run `replay datasets fetch {ds.id}` or pass --data-dir")
         return
-    frame = registry.load_frame(ds, data_dir=data_dir, rng=0)
+    _describe(load_frame(config, 0, data_dir))
+
+
+def _describe(frame) -> None:
+    """What loading gave: the frame's summary, the adapter's report and the metadata."""
     click.echo("summary:")
     for line in frame.summary():
         click.echo(f"  {line}")

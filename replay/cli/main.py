@@ -129,9 +129,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
     fparams = cli_params.filter_params(params, names + (recorded or []))
     tparams = cli_params.task_params(task_params, task)
-    dparams = cli_params.dataset_params(dataset_params)
-    if mapping:
-        dparams["mapping"] = str(Path(mapping).resolve())
+    dparams = cli_params.dataset_inputs(dataset_params, mapping)
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
     # the output set is checked before the computation (inputs, writable, space, ownership)
     task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,

@@ -146,6 +146,17 @@ def dataset_params(items, dataset=None, adapter: str | None = None, option: str 
     return {k: full[k] for k in given}
 
 
+def dataset_inputs(items, mapping=None) -> dict:
+    """The dataset parameters of ``replay eval`` and ``replay datasets info``: ``--dataset-param``
+    assignments, plus ``--mapping`` (a bag's or MCAP's topic mapping) as its absolute path."""
+    from pathlib import Path
+
+    given = dataset_params(items)
+    if mapping:
+        given["mapping"] = str(Path(mapping).resolve())
+    return given
+
+
 def check_one(declarations, name: str, value, owner: str):
     """One value checked (and normalised) by the declaration of ``name``."""
     from replay.util.params import validate
