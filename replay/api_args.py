@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass
 
 from replay.eval_options import BY_NAME as EVAL
+from replay.summary import MIN_SCORED_SHARE
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -87,7 +88,8 @@ SOURCE = Kind("source", "replay.evaluate:Evaluation|replay.frame:Frame", "an eva
 ARGS: dict[str, dict] = {
     "evaluate": {"dataset": DATASET, **{k: v for k, v in EVAL.items() if k != "batch"},
                  "batch": EVAL["batch"], "filter_params": _p("filter_params", dict, "{filter: {name: value}}",
-                                                             optional=True)},
+                                                             optional=True),
+                 "min_scored_share": MIN_SCORED_SHARE},
     "load_frame": {"dataset": DATASET, "data_dir": EVAL["data_dir"], "seed": SEED, "first": EVAL["first"],
                    "adapter": EVAL["adapter"]},
     "campaign_results": {"out": PATH(name="out", doc="a result directory"),

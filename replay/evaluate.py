@@ -175,7 +175,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
     built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
-    if configs and MEASUREMENTS not in filters:
+    if offline and MEASUREMENTS not in filters:  # beside filters only: nothing to compare otherwise
         built = built or {0: build_problem(configs[0], 0, data_dir)}
         if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat
             configs.append(Config(*base, MEASUREMENTS, {}, *tail))

@@ -23,7 +23,7 @@ def test_eval_sim_writes_leaderboard_and_manifest(tmp_path):
     for name in ("ekf", "ukf", "ckf", "pf"):
         assert f"\n{name} " in res.output
     rows = list(csv.DictReader(open(out / "leaderboard.csv")))
-    assert [r["filter"] for r in rows] == ["ekf", "ukf", "ckf", "pf"]
+    assert [r["filter"] for r in rows] == ["ekf", "ukf", "ckf", "pf"]  # range and bearing: no measurements row
     assert all(r["runs"] == "3" and r["seed"] == "5" and r["task"] == "sonar" for r in rows)
     # The Kalman-type filters track the simulated AUV to a few metres on Table 2's setup.
     for r in rows[:3]:
@@ -82,13 +82,15 @@ def test_eval_bohai_position_first_1000(bohai_dir, tmp_path):
                                     "-p", "pf.n_particles=300"])
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(open(out / "leaderboard.csv")))
-    assert [r["filter"] for r in rows] == ["ekf", "ukf", "ckf", "pf"]
+    assert [r["filter"] for r in rows] == ["ekf", "ukf", "ckf", "pf", "measurements"]  # the raw fixes' row
     for r in rows:
-        assert r["first"] == "1000" and r["runs"] == "3"
+        assert r["first"] == "1000" and r["runs"] == "3" and int(r["scored"]) + int(r["masked"]) == 1000
+    for r in rows[:4]:
         # Random walk Q = I observed with R = 2 I: the steady-state posterior sd per axis is
         # about 0.8 m, so the 3-D RMSE sits near 1.4 m; masked reference samples are skipped.
-        assert 1.2 < float(r["pos_rmse"]) < 1.7
-        assert int(r["scored"]) + int(r["masked"]) == 1000
+        assert 1.2 < float(r["pos_rmse"]) < 1.7 and r["worse_than_measurements"] == "False"
+    # the measurements themselves: sqrt(3 * 2) = 2.449 m
+    assert 2.3 < float(rows[4]["pos_rmse"]) < 2.6 and rows[4]["measurements"] == "synthetic"
     # Linear-Gaussian task: the three Kalman variants agree to rounding.
     assert rows[0]["pos_rmse"] == rows[1]["pos_rmse"] == rows[2]["pos_rmse"]
     man = json.loads((out / "manifest.json").read_text())

@@ -124,7 +124,7 @@ def test_metadata_holds_the_manifest(run):
     assert meta["replay.manifest"] == {"manifest.json": text}
     assert json.loads(meta["replay.manifest"]["manifest.json"]) == json.loads(text)
     info = meta["replay.export"]
-    assert info["run"] == "0" and json.loads(info["tracks"]) == ["reference", "ekf", "ukf"]
+    assert info["run"] == "0" and json.loads(info["tracks"]) == ["reference", "ekf", "ukf", "measurements"]
     assert float(info["sigma"]) == scene.SIGMA
 
 

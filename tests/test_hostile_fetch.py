@@ -132,9 +132,10 @@ def test_cut_at_a_line_end_without_declaration_is_flagged_not_good(server, tmp_p
     assert "nothing published to check it against: rows using it say content_checked=false" in out
     assert json.loads((dest / "checksums.json").read_text())["20220822_0_7.csv"]["declared_checked"] is False
     ev = replay.evaluate(UNREG, filters=["ekf"], first=100, data_dir=dest)
-    assert ev.frame_meta["content_checked"] is False and [r["content_checked"] for r in ev.rows] == [False]
+    assert ev.frame_meta["content_checked"] is False and {r["filter"]: r["content_checked"] for r in ev.rows} == {
+        "ekf": False, "measurements": False}
     ev = replay.evaluate("bohai/20220822_0_6", filters=["ekf"], first=100, data_dir=bohai_dir)
-    assert [r["content_checked"] for r in ev.rows] == [True]
+    assert [r["content_checked"] for r in ev.rows] == [True, True]  # ekf, measurements
     assert "content_checked" not in replay.evaluate("sim/ungm", filters=["ekf"], runs=1).rows[0]
 
 

@@ -36,7 +36,7 @@ GROUPS = [
         "gpf": {"n_particles": 200, "n_grey": 20}, "mmpf": {"n_particles": 150},
     }),
     ("sim/sauv-current", {}, 80, "dead-reckoning", {
-        "aukf": {"forgetting": 0.95},
+        "aukf": {"forgetting": 0.95}, "measurements": {},
     }),
 ]
 RUNS, SEED = 3, 5
