@@ -17,8 +17,11 @@ Per run (:func:`run_metrics`, on top of :func:`replay.score.score_run`):
   (:class:`replay.tasks.Task`; None when the problem carries no rule). A lost run
   is a result, kept in the means, and counted beside ``diverged``;
 * ``diverged`` — the filter's own divergence (non-finite or non-positive
-  covariance, :attr:`Estimates.diverged_at`) or, when a
-  ``divergence_threshold`` (m) is given, a position error beyond it.
+  covariance, :attr:`Estimates.diverged_at`) or a position error beyond the
+  ``divergence_threshold`` (m) at any scored sample: the one given, else the task's
+  default, ``DIVERGE_FACTOR`` (100) times its lost threshold — an estimate 1.5e7 m off
+  with a finite covariance is a divergence, even where too few samples are scored to
+  call it lost.
 
 Over a Monte Carlo ensemble of M runs (:func:`consistency`), at each step the
 average NEES over runs is compared with the two-sided 95 % chi-square band for
@@ -220,6 +223,8 @@ def run_metrics(problem, est, alignment: str = "none", divergence_threshold: flo
     nis_dof = np.asarray(est.info.get("nis_dof", np.zeros(len(err), int)))
     m["nees"] = float(np.nanmean(nees_k)) if np.isfinite(nees_k).any() else float("nan")
     m["nis"] = float(np.nanmean(nis_k)) if np.isfinite(nis_k).any() else float("nan")
+    if divergence_threshold is None:  # the task's default: far beyond a lost track (replay.tasks.DIVERGE_FACTOR)
+        divergence_threshold = getattr(problem, "divergence_threshold", None)
     big = divergence_threshold is not None and np.nanmax(np.linalg.norm(err, axis=1), initial=0) > divergence_threshold
     m["diverged"] = bool(est.diverged or big)
     m["lost"] = None if m["diverged"] else lost_track(np.linalg.norm(err, axis=1), getattr(

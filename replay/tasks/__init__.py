@@ -46,6 +46,11 @@ TASKS = Registry("task", {
 }, check=_check)
 
 
+# the default divergence threshold of every task, times its lost threshold (replay.metrics): an
+# error that large is no lost track but a filter gone numerically wrong with a finite covariance
+DIVERGE_FACTOR = 100.0
+
+
 @dataclass
 class Problem:
     """Everything a run needs. Filters get ``model, z, x0, P0``; the scorer gets the rest."""
@@ -65,6 +70,7 @@ class Problem:
     truth_extra: dict = field(default_factory=dict)  # name -> ((n,) truth, NaN = not scored; state index)
     lost_threshold: float | None = None  # m: the task's rule for a lost track (None: not judged)
     lost_steps: int = 10
+    divergence_threshold: float | None = None  # m: an error beyond it at any scored sample is a divergence
     inputs: dict = field(default_factory=dict)  # what the task used: input -> "channel (source)"
     notes: list = field(default_factory=list)  # one-line notices (e.g. an optional input not found)
     position_unit: str = "m"  # unit of the position axes ("1": dimensionless, e.g. UNGM)
@@ -101,6 +107,7 @@ class Task(Declared):
     def judge(self, problem: Problem) -> Problem:
         """``problem`` with this task's lost-track rule attached (the scorer applies it)."""
         problem.lost_threshold, problem.lost_steps = self.lost_threshold, self.lost_steps
+        problem.divergence_threshold = DIVERGE_FACTOR * self.lost_threshold
         return problem
 
     def build(self, frame, rng: np.random.Generator) -> Problem:
