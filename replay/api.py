@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import inspect
 
-import numpy as np
 
 from replay import registry, tables
 from replay.evaluate import DEFAULT_FILTERS

@@ -55,7 +55,7 @@ from replay.align import ALIGNMENTS, align, apply
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
 from replay.filters.base import Estimates, check_batch
-from replay.tasks import make_task, source_of
+from replay.tasks import make_task, reference_present, source_of
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.params import Param, validate
@@ -159,20 +159,16 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
 
 
 def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
-    """The task a dataset is scored with when none is named: the registry's, else the adapter's
-    choice, else for a recording with sensor inputs (``meta["roles"]``) the ``fusion`` task over
-    them — never a task that synthesises measurements from the reference while the recording has
-    sensors of its own. A recording without any sensor input gets ``position`` (its rows are
-    marked ``synthetic``; recorded estimates are scored the same way)."""
+    """The task when none is named: the registry's, the adapter's, else ``fusion`` for a recording
+    with sensor inputs (``meta["roles"]``), ``position`` (rows marked ``synthetic``) without."""
     ds = resolve(dataset)
     if ds is not None and ds.default_task:
         return ds.default_task
     cfg = {"dataset": dataset, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
            "adapter": adapter}
     meta = load_frame(cfg, 0, data_dir).meta
-    if meta.get("default_task"):
-        return meta["default_task"]
-    return "fusion" if any(e for role, e in (meta.get("roles") or {}).items() if role != "none") else "position"
+    sensors = any(e for role, e in (meta.get("roles") or {}).items() if role != "none")
+    return meta.get("default_task") or ("fusion" if sensors else "position")
 
 
 def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
@@ -186,6 +182,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
                               task_notes=getattr(problem, "notes", []))
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
+    problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
     problem.source = source_of(frame)
     return problem
 
@@ -326,14 +323,9 @@ def runs_of(config: dict, runs) -> list:
 
 
 def associate(t_ref, t_est, t_max_diff: float = 0.01, t_offset: float = 0.0):
-    """Pairs ``(i_ref, i_est)`` of reference and estimate stamps, as evo associates trajectories.
-
-    ``t_offset`` is added to the estimate's stamps. The shorter of the two drives: each of
-    its stamps is paired with the nearest stamp of the other (the earlier on a tie) when
-    they differ by at most ``t_max_diff`` (evo's ``sync.associate_trajectories``; the
-    matching is :func:`replay.trajectory.associate.matching_indices`, shared with
-    ``replay score``). Both stamp arrays strictly increase.
-    """
+    """Pairs ``(i_ref, i_est)`` of strictly increasing stamps as evo's ``sync.associate_trajectories``
+    (``t_offset`` added to the estimate's; the shorter drives, nearest within ``t_max_diff``, the
+    earlier on a tie: :func:`replay.trajectory.associate.matching_indices`, shared with ``replay score``)."""
     from replay.trajectory.associate import matching_indices
 
     a, b = np.asarray(t_ref, float), np.asarray(t_est, float)

@@ -54,7 +54,8 @@ def score_run(problem, est, err: dict | None = None) -> dict:
         a = err[name][np.isfinite(err[name])]
         m[f"{name}_rmse"] = float(np.sqrt(np.mean(a**2))) if len(a) else np.nan
     m["scored"] = int(ok.sum())
-    m["masked"] = int((~problem.truth_valid).sum())
+    present = getattr(problem, "truth_present", None)  # where the reference has a sample at all
+    m["masked"] = int((~problem.truth_valid if present is None else present & ~problem.truth_valid).sum())
     m["us_per_step"] = est.us_per_step
     m["diverged"] = bool(est.diverged)
     return m

@@ -59,7 +59,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.eval_options import EVAL_OPTIONS, MAX_RUNS
+from replay.eval_options import EVAL_OPTIONS
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params

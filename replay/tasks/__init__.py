@@ -212,3 +212,13 @@ def reference_position_3d(frame, z0: float | None = None, task: str = "this"):
     if p.shape[1] == 2:
         p = np.column_stack([p, np.full(len(p), 0.0 if z0 is None else z0)])
     return p, ref.valid.copy()
+
+
+def reference_present(frame, n: int):
+    """(n,) where the reference has a sample at all (a message of its topic, masked or not), or None
+    (every sample): on a recording's union time axis the reference is absent at the other topics'
+    stamps, which are not *masked* reference samples (the ``masked`` column counts only those)."""
+    t = frame.reference.get("position_log_time")
+    if t is None or len(t.valid) != n:
+        return None
+    return np.asarray(t.valid, bool)
