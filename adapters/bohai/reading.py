@@ -5,6 +5,7 @@ and :func:`_drop` (a column not passed on).
 """
 from __future__ import annotations
 
+import csv
 import io
 import re
 from pathlib import Path
@@ -31,7 +32,7 @@ def _read_bytes(path: Path) -> bytes:
         data = path.read_bytes()
     except OSError as err:
         raise DataError(path, f"cannot read: {err.strerror or err}") from None
-    if not data.strip():
+    if not data or data.isspace():  # (strip() would copy the whole file)
         raise DataError(path, "file is empty")
     return data
 
@@ -48,6 +49,11 @@ def _parse(path, data: bytes):
     except (UnicodeDecodeError, ValueError) as err:
         raise DataError(path, f"not a readable CSV table: {err}") from None
     table.columns = [str(c).strip() for c in table.columns]
+    header = next(csv.reader([data.split(b"\n", 1)[0].decode("utf-8-sig", errors="replace")]), [])
+    header = [c.strip() for c in header]  # (pandas renames a repeated name to NAME.1)
+    twice = [c for i, c in enumerate(header) if c in header[:i]]
+    if twice:
+        raise DataError(path, f"column {twice[0]!r} appears twice in the header", row=1)
     if len(table) == 0:
         raise DataError(path, "header only, no data rows")
     lines = np.arange(len(table)) + 2  # header is line 1; blank lines stay rows
@@ -94,20 +100,25 @@ def _clean_rows(path, table, names, lines, report, meta):
     Returns the layout's columns (name -> float array) and the kept rows' line numbers.
     """
     n_read = len(lines)
-    empty = table.isna().to_numpy().all(axis=1)
-    table = table[list(names)]
-    values = table.to_numpy(dtype=float)
+    empty = np.ones(n_read, bool)
+    for j in range(table.shape[1]):  # column by column: no table-sized temporary
+        empty &= table.iloc[:, j].isna().to_numpy()
+    names = list(names)
+    values = np.empty((n_read, len(names)))  # one copy of the layout's columns, row-major
+    for j, c in enumerate(names):
+        values[:, j] = table[c].to_numpy(dtype=float)
     if empty.any():
         report.add("dropped", "rows", int(empty.sum()),
                    f"empty or all-NaN rows at {_rows(lines, empty)}")
-    no_time = ~empty & ~np.isfinite(table["time"].to_numpy())
+    no_time = ~empty & ~np.isfinite(values[:, names.index("time")])
     if no_time.any():
         report.add("dropped", "rows", int(no_time.sum()), f"no time value at {_rows(lines, no_time)}")
     keep = ~empty & ~no_time
-    values, lines = values[keep], lines[keep]
+    if not keep.all():
+        values, lines = values[keep], lines[keep]
     if len(lines) == 0:
         raise DataError(path, "no data rows with a time value")
-    time = values[:, list(table.columns).index("time")]
+    time = values[:, names.index("time")]
     same = np.r_[False, np.diff(time) == 0]
     if same.any():
         prev = np.r_[values[:1], values[:-1]]
@@ -127,7 +138,7 @@ def _clean_rows(path, table, names, lines, report, meta):
     if len(lines) < 2:
         raise DataError(path, "fewer than 2 usable data rows")
     meta["rows"] = {"read": n_read, "kept": len(lines), "dropped": n_read - len(lines)}
-    return {c: values[:, j] for j, c in enumerate(table.columns)}, lines
+    return {c: values[:, j] for j, c in enumerate(names)}, lines
 
 
 def _time_axis(t, lines, report, gap_factor) -> dict:

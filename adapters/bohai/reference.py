@@ -32,6 +32,9 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
     displaced stretch that comes back (out and back) is masked as a whole; at
     a step that persists, the samples next to the step are masked until the
     rest is reachable at ``max_speed``. Nothing else is masked.
+
+    Linear time (:func:`_best_chain`): a block that continues the best chain so
+    far is decided without looking further back.
     """
     t = np.asarray(t, float)
     p = np.asarray(p, float)
@@ -41,17 +44,7 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
         return np.ones(n, bool)
     starts = np.union1d(np.arange(0, n, block), jumps)
     ends = np.r_[starts[1:], n] - 1
-    best = np.zeros(len(starts))
-    prev = np.full(len(starts), -1)
-    for k in range(len(starts)):
-        if k:
-            d = np.hypot(*(p[ends[:k]] - p[starts[k]]).T)
-            ok = d <= _reach(t[starts[k]] - t[ends[:k]], jump_threshold, max_speed)
-            if ok.any():
-                cand = np.where(ok, best[:k], -1.0)
-                prev[k] = k - 1 - int(np.argmax(cand[::-1]))  # the latest among equals
-                best[k] = best[prev[k]]
-        best[k] += ends[k] - starts[k] + 1
+    prev, best = _best_chain(t, p, starts, ends, np.isin(starts, jumps), jump_threshold, max_speed)
     keep = np.zeros(n, bool)
     k = len(starts) - 1 - int(np.argmax(best[::-1]))
     while k >= 0:
@@ -59,6 +52,60 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
         k = prev[k]
     _regrow(t, p, keep, jump_threshold, max_speed)
     return keep
+
+
+def _best_chain(t, p, starts, ends, at_jump, jump_threshold, max_speed, chunk=64):
+    """The dynamic programme of :func:`mask_jumps`: for each block k, ``best[k]`` the most
+    samples in a compatible chain of blocks ending with k, and ``prev[k]`` the block before
+    it (the latest among equals; -1 for none).
+
+    ``best[k]`` is the best over the earlier blocks j whose last sample is compatible with
+    k's first. Two shortcuts give the same answer as trying every j: (1) when block k-1
+    holds the largest ``best`` so far and k does not start at a jump (consecutive samples
+    without a jump are compatible), j = k-1 is the answer, and the chain stays on top
+    until the next jump: such runs of blocks are filled at once; (2) otherwise the earlier
+    blocks are tried backwards in chunks, and the search stops where the running maximum
+    of ``best`` can no longer beat what was found (no earlier block can win).
+    """
+    m = len(starts)
+    size = (ends - starts + 1).astype(float)
+    best = np.zeros(m)
+    prev = np.full(m, -1)
+    top = np.zeros(m)  # running maximum of best[:k + 1]
+    after = np.flatnonzero(at_jump)  # blocks that start at a jump: never continue k-1 as such
+    k = 0
+    while k < m:
+        if k and best[k - 1] == top[k - 1] and not at_jump[k]:
+            # (1) the chain on top continues up to the next block that starts at a jump
+            stop = after[np.searchsorted(after, k)] if after[-1] >= k else m
+            run = np.arange(k, stop)
+            prev[run] = run - 1
+            best[run] = best[k - 1] + np.cumsum(size[run])
+            top[run] = best[run]
+            k = stop
+            continue
+        found, v = -1, -1.0
+        hi = k
+        width = chunk
+        while hi > 0 and top[hi - 1] > v:
+            lo = max(0, hi - width)
+            j = np.arange(lo, hi)
+            d = np.hypot(*(p[ends[j]] - p[starts[k]]).T)
+            ok = d <= _reach(t[starts[k]] - t[ends[j]], jump_threshold, max_speed)
+            if ok.any():
+                cand = np.where(ok, best[j], -1.0)
+                i = len(j) - 1 - int(np.argmax(cand[::-1]))
+                if cand[i] > v:
+                    found, v = lo + i, float(cand[i])
+            hi = lo
+            width *= 2
+        if found >= 0:
+            prev[k] = found
+            best[k] = best[found]
+        best[k] += size[k]
+        top[k] = max(top[k - 1], best[k]) if k else best[k]
+        k += 1
+    return prev, best
 
 
 def _regrow(t, p, keep, jump_threshold, max_speed):
