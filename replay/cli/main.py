@@ -99,6 +99,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
              divergence_threshold=None, force=False, quiet=False):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
+    _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
     from replay.evaluate import evaluate
     from replay.outputs.files import check_output, eval_inputs, format_table, mark_latest, new_run_dir, write_all
@@ -133,7 +134,6 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         check_eval_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
     from replay.util.progress import Progress
 
-    _quiet(quiet)
     progress = Progress(0, quiet, label="eval", unit="run")
     try:
         ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
