@@ -176,4 +176,5 @@ def _refuse(path, kind, s, wrong, cols, units):
         raise DataError(path, f"columns {sensor} and {other}: {text}the declared units of the two disagree")
     col, unit = cols[(wrong, kind)], units[(wrong, kind)]
     guess = likely_unit(kind, unit, abs(s) if wrong else 1 / abs(s))
-    raise DataError(path, f"column {col}: {text}{col} is not in {unit}" + (f" (it looks like {guess})" if guess else ""))
+    raise DataError(path, f"column {col}: {text}{col} is not in {unit}"
+                    + (f" (it looks like {guess})" if guess else ""))
