@@ -1,7 +1,6 @@
 """``load``: one Bohai CSV log into a :class:`~replay.frame.Frame` (see the package docstring)."""
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ from .cells import mask_infinite, mask_isolated, time_unit
 from .checks import _gyro_check, _speed_check, _yaw_check, track_velocity
 from .columns import COLS31, COLS36, COLUMNS, GROUPS, check_columns
 from .gps import _fresh_alt, _gps_fixes, _time_of_day
-from .reading import _clean_rows, _drop, _layout, _parse, _read_bytes, _rows, _time_axis
+from .reading import _clean_rows, _drop, _layout, _read, _rows, _time_axis
 from .reference import _reference_mask
 
 
@@ -31,12 +30,8 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
     ``gap_factor`` which time steps are flagged as gaps (> factor x median).
     """
     path = Path(path)
-    load_stage("reading the file", 0.0)
-    data = _read_bytes(path)
-    sha256 = hashlib.sha256(data).hexdigest()
-    load_stage("parsing the table", 0.1)
-    table, lines = _parse(path, data)
-    del data  # the bytes are as large as the table: not kept while the rest is computed
+    load_stage("reading the table", 0.0)
+    table, lines, sha256 = _read(path)
     load_stage("checking the cells", 0.3)
     layout = _layout(path, list(table.columns))
     report = Report()
