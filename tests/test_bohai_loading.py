@@ -1,5 +1,6 @@
 """Loading long logs (issue 23): the linear mask_jumps against the quadratic one it replaced, on
 synthetic tracks with many jumps and on every real Bohai file; the heartbeat of a long load."""
+import functools
 import io
 import logging
 import time
@@ -54,8 +55,18 @@ def track(rng, n, jumps, kind):
     return t, p
 
 
+@pytest.fixture(params=["default", "small-groups"])
+def groups(request, monkeypatch):
+    """The linear programme as it is, and with tiny chunks and coarse groups, so that small
+    tracks go through every shortcut (the group boxes start 4 groups back)."""
+    if request.param == "small-groups":
+        monkeypatch.setattr(reference, "_best_chain",
+                            functools.partial(reference._best_chain, chunk=2, coarse=3))
+    return request.param
+
+
 @pytest.mark.parametrize("kind", ["step", "spike", "noise"])
-def test_mask_jumps_equals_the_quadratic_oracle_with_many_jumps(kind):
+def test_mask_jumps_equals_the_quadratic_oracle_with_many_jumps(kind, groups):
     rng = np.random.default_rng({"step": 1, "spike": 2, "noise": 3}[kind])
     masked = 0
     for _ in range(8):
@@ -68,13 +79,16 @@ def test_mask_jumps_equals_the_quadratic_oracle_with_many_jumps(kind):
     assert masked > 500  # the cases do mask
 
 
-def test_a_persistent_far_step_and_repeated_seams_equal_the_oracle():
+def test_a_persistent_far_step_and_repeated_seams_equal_the_oracle(groups):
     # the slow shapes: a track that never comes back (its first half is what the chain keeps),
     # and a track repeated with seams (the benchmark's long log, in small)
     rng = np.random.default_rng(4)
     t, p = track(rng, 1200, 0, "step")
     p[500:] += 5000.0
     assert np.array_equal(mask_jumps(t, p), oracle_mask_jumps(t, p))
+    far = np.concatenate([p[:600], p[600:] + 1e6, p[:600] + 3.0])  # away for good, then back near
+    far_t = np.cumsum(np.full(len(far), 0.1))
+    assert np.array_equal(mask_jumps(far_t, far), oracle_mask_jumps(far_t, far))
     seams = np.concatenate([p[:300]] * 5)
     ts = np.cumsum(np.full(len(seams), 0.1))
     keep = mask_jumps(ts, seams)
