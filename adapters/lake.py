@@ -30,10 +30,12 @@ What :func:`load` does (everything counted in ``frame.report``):
 
 * sensor rows need a finite, strictly increasing time (others are dropped and
   counted); ``inf`` cells are missing values (masked and counted per column);
-  values outside plausible ranges (:data:`RANGES`) are masked;
-* a median time step outside :data:`STEP_RANGE` (1 ms .. 10 s) contradicts the time unit: refused;
-* pitch in radians whose values pass pi/2 is refused (the column is in degrees);
-  pitch in degrees that never leaves +-0.5 deg is flagged (possibly radians);
+  a few values outside plausible ranges (:data:`RANGES`) are masked;
+* every declared unit is checked against the values (:mod:`replay.adapters.lake_units`): a
+  median time step outside :data:`STEP_RANGE` (1 ms .. 10 s), a column mostly outside its
+  kind's range, pitch in radians beyond pi/2, depth changes that do not match speed x
+  sin(pitch) (``depth_cm`` holding metres), a sensor and its reference a factor apart: refused
+  with the likely unit; pitch in degrees that never leaves +-0.5 deg is flagged;
 * the reference is **aligned** to the sensor times without inventing samples:
   a sensor sample at a reference time takes it; between two reference samples
   at most ``max_gap`` seconds apart (default 0.5 s) it is linearly
@@ -55,22 +57,14 @@ import pandas as pd
 
 from replay.util.angles import wrap
 from replay.util.errors import DataError, ReplayError
+from replay.adapters.lake_units import (RANGES, SI, STEP_RANGE, UNITS, check_range,  # noqa: F401
+                                        check_step, check_units)
 from replay.frame import Channel, Frame, Report
 
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
-STEP_RANGE = (1e-3, 10.0)  # s: plausible median step of a sensor log (1 kHz .. 0.1 Hz)
 KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
          "speed": "speed", "velocity": "speed", "pitch": "pitch"}
 REF_PREFIXES = ("ref_", "ref.", "ref ", "reference_", "ext_", "external_")
-UNITS = {  # kind -> {unit spelling: factor to SI}
-    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3},
-    "depth": {"m": 1.0, "cm": 1e-2, "mm": 1e-3},
-    "speed": {"m/s": 1.0, "mps": 1.0, "m_s": 1.0, "ms-1": 1.0, "cm/s": 1e-2, "cmps": 1e-2,
-              "kn": 0.514444, "knots": 0.514444, "kt": 0.514444},
-    "pitch": {"rad": 1.0, "deg": np.pi / 180, "degrees": np.pi / 180, "°": np.pi / 180},
-}
-SI = {"time": "s", "depth": "m", "speed": "m/s", "pitch": "rad"}
-RANGES = {"depth": (-10.0, 11000.0), "speed": (-2.0, 20.0), "pitch": (-np.pi / 2, np.pi / 2)}
 FRAMES = {"depth": "down", "speed": "body forward", "pitch": "body"}
 DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",
                "pitch": "pitch sensor, positive nose down"}
@@ -262,11 +256,12 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
     t_abs = time[keep]
     t0 = float(t_abs[0])
     t = t_abs - t0
-    _check_step(path, cols[(False, "time")], parse_column(cols[(False, "time")], units_line)[2], np.diff(t_abs))
+    unit = {key: parse_column(col, units_line)[2] for key, col in cols.items()}
+    check_step(path, cols[(False, "time")], unit[(False, "time")], np.diff(t_abs))
     channels = {}
     for kind in sensors:
         v = si(False, kind)[keep]
-        channels[kind] = _channel(path, cols[(False, kind)], kind, v, report, header, units_line,
+        channels[kind] = _channel(path, cols[(False, kind)], kind, unit[(False, kind)], v, report,
                                   f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})")
     reference = {}
     alignment = {}
@@ -291,7 +286,7 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
         if tr[-1] < t_abs[0] or tr[0] > t_abs[-1]:
             raise DataError(path, f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
                             f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s")
-        vv = _check_range(path, col, kind, vv, report, header, units_line)
+        vv = check_range(path, col, kind, unit[(True, kind)], vv, report)
         vals, valid, counts = align(t_abs, tr, vv, max_gap, angle=(kind == "pitch"))
         valid &= np.isfinite(vals)
         alignment[kind] = dict(counts, column=col, max_gap=max_gap)
@@ -307,6 +302,7 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
         reference[kind] = Channel(vals, SI[kind], FRAMES[kind], valid, (kind,), (0,) if kind == "pitch" else (),
                                   "positive nose down" if kind == "pitch" else "",
                                   f"external reference {kind} (column {col})")
+    check_units(path, t, channels, reference, cols, unit, report)
     step = np.diff(t)
     meta = {"source": str(path), "adapter": "lake", "comments": comments, "header": header,
             "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
@@ -326,43 +322,13 @@ def _lines(rows, mask, most=5) -> str:
     return ("line " if len(sel) == 1 else "lines ") + ", ".join(map(str, sel[:most])) + more
 
 
-def _check_step(path, col, unit, steps) -> None:
-    """Refuse a median time step that contradicts the declared unit (module docstring)."""
-    med, (lo, hi), seconds = float(np.median(steps)), STEP_RANGE, UNITS["time"][unit] == 1.0
-    if not lo <= med <= hi:
-        guess = ("milliseconds (name it time_ms)" if med > hi and seconds else
-                 "seconds (name it time_s)" if med < lo and not seconds else "another unit")
-        raise DataError(path, f"column {col}: median time step {med:.4g} s is implausible for a sensor log "
-                              f"(expected {lo:g}-{hi:g} s): are the times in {guess}?")
-
-
-def _channel(path, col, kind, v, report, header, units_line, description) -> Channel:
+def _channel(path, col, kind, unit, v, report, description) -> Channel:
     missing = ~np.isfinite(v)
     if missing.any():
         report.add("masked", kind, int(missing.sum()), f"{col}: missing values (empty or infinite cells)")
-    v = _check_range(path, col, kind, v, report, header, units_line)
+    v = check_range(path, col, kind, unit, v, report)
     return Channel(v, SI[kind], FRAMES[kind], None, (kind,), (0,) if kind == "pitch" else (),
                    "positive nose down" if kind == "pitch" else "", description)
-
-
-def _check_range(path, col, kind, v, report, header, units_line) -> np.ndarray:
-    lo, hi = RANGES[kind]
-    fin = np.isfinite(v)
-    if kind == "pitch" and fin.any():
-        peak = float(np.abs(v[fin]).max())
-        declared = parse_column(col, units_line)[2]
-        if UNITS["pitch"][declared] == 1.0 and peak > np.pi / 2:
-            raise DataError(path, f"column {col}: values reach {peak:.3g}, beyond pi/2 rad: "
-                            "the column looks like degrees (name it pitch_deg)")
-        if UNITS["pitch"][declared] != 1.0 and peak < np.deg2rad(0.5):
-            report.add("flagged", col, int(fin.sum()), f"declared degrees but never beyond "
-                       f"{np.rad2deg(peak):.3g} deg: is it radians?")
-    out = fin & ((v < lo) | (v > hi))
-    if out.any():
-        report.add("masked", col, int(out.sum()), f"outside the plausible {kind} range "
-                   f"[{lo:g}, {hi:g}] {SI[kind]}")
-        v = np.where(out, np.nan, v)
-    return v
 
 
 def _parse_maneuvers(text: str, t0: float) -> list[list]:

@@ -33,6 +33,7 @@ from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, check
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import validate
+from replay.util.progress import Loading
 
 # Adapter used for a plain file path, by extension.
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
@@ -346,12 +347,24 @@ def _adapter(name: str):
         raise ReplayError(f"adapter {name} is not available: {e}") from None
 
 
+def _read(adapter: str, path: Path, params: dict):
+    """The adapter's frame of ``path``, with a heartbeat on stderr when reading takes more than a few
+    seconds (:class:`replay.util.progress.Loading`; quiet under ``-q``)."""
+    load = _adapter(adapter)
+    try:
+        size = sum(f.stat().st_size for f in path.iterdir()) if path.is_dir() else path.stat().st_size
+    except OSError:
+        size = None
+    with Loading(path.name, size):
+        return load(path, **params)
+
+
 def _load_path(path: Path, adapter: str | None, params: dict):
     path = path.expanduser()
     bag_dir = path.is_dir() and (path / "metadata.yaml").is_file()  # a ROS 2 bag is a directory
     if not (path.is_file() or bag_dir):
         raise DataError(path, "no such file")
-    frame = _adapter(adapter or adapter_for(path))(path, **params)
+    frame = _read(adapter or adapter_for(path), path, params)
     sha = frame.meta.get("sha256") if bag_dir else sha256_file(path)
     frame.meta.update(dataset=str(path), path=str(path), sha256=sha, checksum="unknown")
     return frame
@@ -363,7 +376,7 @@ def _load_file(ds: Dataset, data_dir, params: dict):
         where = ", ".join(str(r) for r in search_roots(data_dir))
         raise ReplayError(f"dataset {ds.id} not found in {where}; "
                           f"run `replay datasets fetch {ds.id}` or pass --data-dir")
-    frame = _adapter(ds.adapter)(path, **params)
+    frame = _read(ds.adapter, path, params)
     check_loaded(ds, path, frame)  # sha256, checksum status, content_checked; flags; another sequence refused
     return frame
 

@@ -129,6 +129,8 @@ BOHAI_REFUSED = [  # id, edit of the table (or of the text lines), task, message
      r"task dead-reckoning needs an attitude channel .*: the adapter dropped roll \(400 samples: all zero\)"),
     ("bohai-no-gps-gps-odom", lambda t: _set("lon_gps", range(ROWS), 0.0)(_set("lat_gps", range(ROWS), 0.0)(t)),
      "gps-odom", r"task gps-odom needs a gps input .*: the adapter dropped lat_gps \(400 samples: all zero\)"),
+    ("bohai-repeated-header-name", lambda t: t.rename(columns={"height": "lat"}), "position",
+     r"row 1: column 'lat' appears twice in the header"),  # pandas would read the second as lat.1
 ]
 
 BOHAI_REPAIRED = [  # id, edit, (action, what, reason text, count)
@@ -196,6 +198,13 @@ def _cell(j, value, every=None, rows=()):
     return edit
 
 
+def _column(j, value):
+    def edit(i, cells):
+        cells[j] = f"{value(float(cells[j])):.10g}" if cells[j].strip() else cells[j]
+        return cells
+    return edit
+
+
 LAKE_REFUSED = [
     ("lake-time-ms-named-s", dict(row_edit=lambda i, c: [f"{float(c[0]) * 1000:g}"] + c[1:]),
      r"column time_s: median time step 50 s is implausible .*milliseconds \(name it time_ms\)"),
@@ -208,6 +217,20 @@ LAKE_REFUSED = [
      r"column depth_ft: unit 'ft' not recognised for depth"),
     ("lake-non-numeric", dict(row_edit=_cell(1, lambda v: "deep", rows=(10,))),
      r"row 13: column depth_m: non-numeric value 'deep'"),
+    # issue 23: units checked against the values (depth against speed x sin(pitch), sensor against reference)
+    ("lake-depths-m-named-cm", dict(header=lambda h: h.replace("depth_m", "depth_cm")),
+     r"column depth_cm: depth changes are 0\.01 x what speed_mps and pitch_deg imply .*not in cm "
+     r"\(it looks like m\)$"),
+    ("lake-ref-depth-m-named-mm", dict(header=lambda h: h.replace("ref_depth_m", "ref_depth_mm")),
+     r"column ref_depth_mm: depth changes are 0\.001 x .*\(it looks like m\)$"),
+    ("lake-speed-m-named-cm", dict(header=lambda h: h.replace("speed_mps,pitch", "speed_cmps,pitch")),
+     r"column speed_cmps: ref_speed_mps is [\d.]+ x speed_cmps .*not in cmps \(it looks like m/s\)"),
+    ("lake-ref-speed-m-named-kn", dict(header=lambda h: h.replace("ref_speed_mps", "ref_speed_cmps")),
+     r"column ref_speed_cmps: .*\(it looks like m/s\)"),
+    ("lake-speed-cm-named-m", dict(row_edit=_column(2, lambda v: v * 100)),
+     r"column speed_mps: 1800 of 1800 values are outside the plausible speed range .*the values fit cm/s"),
+    ("lake-ref-pitch-rad-named-deg", dict(row_edit=_column(6, np.deg2rad)),
+     r"columns pitch_deg and ref_pitch_deg: ref_pitch_deg is 0\.01\d+ x pitch_deg .*units of the two disagree"),
 ]
 LAKE_REPAIRED = [
     ("lake-inf-depth", _cell(1, lambda v: "inf", every=30), ("masked", "depth_m", "infinite values", 60)),

@@ -29,14 +29,13 @@ EARTH_M_PER_DEG = 111_320.0
 
 def mask_infinite(table, lines, report):
     """Infinite cells as NaN (the table is changed in place), one "masked" entry per column."""
-    values = table.to_numpy(dtype=float)
-    inf = np.isinf(values)
-    for j in np.flatnonzero(inf.any(axis=0)):
-        c = table.columns[j]
-        bad = inf[:, j]
-        report.add("masked", c, int(bad.sum()),
-                   f"infinite values (inf) at {_rows(lines, bad)}: treated as missing")
-        table[c] = np.where(bad, np.nan, values[:, j])
+    for j, c in enumerate(table.columns):  # column by column: no table-sized temporary
+        x = table.iloc[:, j].to_numpy(dtype=float)
+        bad = np.isinf(x)
+        if bad.any():
+            report.add("masked", c, int(bad.sum()),
+                       f"infinite values (inf) at {_rows(lines, bad)}: treated as missing")
+            table.isetitem(j, np.where(bad, np.nan, x))
 
 
 def mask_isolated(cols, lines, report):

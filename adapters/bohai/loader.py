@@ -1,7 +1,6 @@
 """``load``: one Bohai CSV log into a :class:`~replay.frame.Frame` (see the package docstring)."""
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -10,12 +9,13 @@ import pyproj
 from replay.adapters.geodesy import plausible_latlon, project, utm_epsg
 from replay.frame import Channel, Frame, Report
 from replay.util.errors import DataError
+from replay.util.progress import load_stage
 
 from .cells import mask_infinite, mask_isolated, time_unit
 from .checks import _gyro_check, _speed_check, _yaw_check, track_velocity
 from .columns import COLS31, COLS36, COLUMNS, GROUPS, check_columns
 from .gps import _fresh_alt, _gps_fixes, _time_of_day
-from .reading import _clean_rows, _drop, _layout, _parse, _read_bytes, _rows, _time_axis
+from .reading import _clean_rows, _drop, _layout, _read, _rows, _time_axis
 from .reference import _reference_mask
 
 
@@ -30,18 +30,20 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
     ``gap_factor`` which time steps are flagged as gaps (> factor x median).
     """
     path = Path(path)
-    data = _read_bytes(path)
-    table, lines = _parse(path, data)
+    load_stage("reading the table", 0.0)
+    table, lines, sha256 = _read(path)
+    load_stage("checking the cells", 0.3)
     layout = _layout(path, list(table.columns))
     report = Report()
     mask_infinite(table, lines, report)
-    meta = {"source": str(path), "sha256": hashlib.sha256(data).hexdigest(),
+    meta = {"source": str(path), "sha256": sha256,
             "layout": layout, "adapter": "bohai-csv", "dropped_columns": {}}
     names = COLS36 if layout == 36 else COLS31
     for c in table.columns:
         if c not in names:
             _drop(report, meta, c, len(table), f"not a column of the {layout}-column layout")
     cols, lines = _clean_rows(path, table, names, lines, report, meta)
+    del table
     time = time_unit(path, cols["time"], cols, lines, report, meta, max_speed)
     mask_isolated(cols, lines, report)
     t = time - time[0]
@@ -56,11 +58,13 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
     if (~geo_ok).any():
         report.add("masked", "position", int((~geo_ok).sum()),
                    f"lat/lon missing or impossible at {_rows(lines, ~geo_ok)}")
+    load_stage("projecting and checking the GPS fixes", 0.45)
     epsg = utm_epsg(lat[geo_ok], lon[geo_ok])
     to_utm = pyproj.Transformer.from_crs("EPSG:4326", epsg, always_xy=True)
     utm = project(to_utm, lat, lon, geo_ok)
     gps = _gps_fixes(cols, t, to_utm, lines, report, meta, jump_threshold, max_speed) \
         if layout == 36 else None
+    load_stage("masking the jumps of the navigation solution", 0.55)
     valid = _reference_mask(t, utm, geo_ok, gps, lines, report, meta,
                             jump_threshold, max_speed, gps_tolerance)
     origin = utm[int(np.argmax(valid if valid.any() else geo_ok))].copy()
@@ -72,6 +76,7 @@ def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
     vel = track_velocity(t, pos, valid)
     meta["speed"] = _speed_check(vel, report)
 
+    load_stage("checking the sensor columns", 0.7)
     channels = _sensor_channels(cols, t, vel, lines, report, meta)
     if gps is not None:
         channels["gps_position"] = Channel(gps["utm"] - origin, "m", "ENU local", gps["valid"],

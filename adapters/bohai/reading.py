@@ -5,6 +5,8 @@ and :func:`_drop` (a column not passed on).
 """
 from __future__ import annotations
 
+import csv
+import hashlib
 import io
 import re
 from pathlib import Path
@@ -22,24 +24,53 @@ def _drop(report, meta, column, count, reason):
     report.add("dropped", column, count, reason)
 
 
-def _read_bytes(path: Path) -> bytes:
+class _Hashing(io.RawIOBase):
+    """A binary file read through a SHA-256: what the parser reads is what is hashed."""
+
+    def __init__(self, fh):
+        self.fh, self.sha = fh, hashlib.sha256()
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:
+        n = self.fh.readinto(buf)
+        if n:
+            self.sha.update(memoryview(buf)[:n])
+        return n
+
+
+def _read(path: Path):
+    """The table (:func:`_parse`), its line numbers and the SHA-256 of the file. The bytes stream
+    through the hash into the parser: the file is never held whole in memory beside the table."""
     if not path.exists():
         raise DataError(path, "file not found")
     if not path.is_file():
         raise DataError(path, "not a file")
     try:
-        data = path.read_bytes()
+        with open(path, "rb") as fh:
+            first = fh.readline()
+            blank = not first.strip()
+            while blank and (chunk := fh.read(1 << 20)):  # up to the first non-blank byte
+                blank = not chunk.strip()
+        if blank:
+            raise DataError(path, "file is empty")
+        with open(path, "rb", buffering=0) as fh:
+            stream = _Hashing(fh)
+            table, lines = _parse(path, io.BufferedReader(stream, 1 << 20), first)
+            while stream.read(1 << 20):  # the rest, if the parser stopped short of the end
+                pass
     except OSError as err:
         raise DataError(path, f"cannot read: {err.strerror or err}") from None
-    if not data.strip():
-        raise DataError(path, "file is empty")
-    return data
+    return table, lines, stream.sha.hexdigest()
 
 
-def _parse(path, data: bytes):
-    """The table as floats and, per row, its 1-based line number in the file."""
+def _parse(path, source, first: bytes):
+    """The table as floats and, per row, its 1-based line number in the file (``first``: its first line)."""
     try:
-        table = pd.read_csv(io.BytesIO(data), skip_blank_lines=False, encoding="utf-8-sig")
+        table = pd.read_csv(source, skip_blank_lines=False, encoding="utf-8-sig")
+    except pd.errors.EmptyDataError:
+        raise DataError(path, "file is empty") from None
     except pd.errors.ParserError as err:
         last = str(err).strip().splitlines()[-1]
         line = re.search(r"line (\d+)", last)
@@ -48,6 +79,11 @@ def _parse(path, data: bytes):
     except (UnicodeDecodeError, ValueError) as err:
         raise DataError(path, f"not a readable CSV table: {err}") from None
     table.columns = [str(c).strip() for c in table.columns]
+    header = next(csv.reader([first.decode("utf-8-sig", errors="replace")]), [])
+    header = [c.strip() for c in header]  # (pandas renames a repeated name to NAME.1)
+    twice = [c for i, c in enumerate(header) if c in header[:i]]
+    if twice:
+        raise DataError(path, f"column {twice[0]!r} appears twice in the header", row=1)
     if len(table) == 0:
         raise DataError(path, "header only, no data rows")
     lines = np.arange(len(table)) + 2  # header is line 1; blank lines stay rows
@@ -94,20 +130,25 @@ def _clean_rows(path, table, names, lines, report, meta):
     Returns the layout's columns (name -> float array) and the kept rows' line numbers.
     """
     n_read = len(lines)
-    empty = table.isna().to_numpy().all(axis=1)
-    table = table[list(names)]
-    values = table.to_numpy(dtype=float)
+    empty = np.ones(n_read, bool)
+    for j in range(table.shape[1]):  # column by column: no table-sized temporary
+        empty &= table.iloc[:, j].isna().to_numpy()
+    names = list(names)
+    values = np.empty((n_read, len(names)))  # one copy of the layout's columns, row-major
+    for j, c in enumerate(names):
+        values[:, j] = table[c].to_numpy(dtype=float)
     if empty.any():
         report.add("dropped", "rows", int(empty.sum()),
                    f"empty or all-NaN rows at {_rows(lines, empty)}")
-    no_time = ~empty & ~np.isfinite(table["time"].to_numpy())
+    no_time = ~empty & ~np.isfinite(values[:, names.index("time")])
     if no_time.any():
         report.add("dropped", "rows", int(no_time.sum()), f"no time value at {_rows(lines, no_time)}")
     keep = ~empty & ~no_time
-    values, lines = values[keep], lines[keep]
+    if not keep.all():
+        values, lines = values[keep], lines[keep]
     if len(lines) == 0:
         raise DataError(path, "no data rows with a time value")
-    time = values[:, list(table.columns).index("time")]
+    time = values[:, names.index("time")]
     same = np.r_[False, np.diff(time) == 0]
     if same.any():
         prev = np.r_[values[:1], values[:-1]]
@@ -127,7 +168,7 @@ def _clean_rows(path, table, names, lines, report, meta):
     if len(lines) < 2:
         raise DataError(path, "fewer than 2 usable data rows")
     meta["rows"] = {"read": n_read, "kept": len(lines), "dropped": n_read - len(lines)}
-    return {c: values[:, j] for j, c in enumerate(table.columns)}, lines
+    return {c: values[:, j] for j, c in enumerate(names)}, lines
 
 
 def _time_axis(t, lines, report, gap_factor) -> dict:

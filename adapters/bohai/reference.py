@@ -32,6 +32,9 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
     displaced stretch that comes back (out and back) is masked as a whole; at
     a step that persists, the samples next to the step are masked until the
     rest is reachable at ``max_speed``. Nothing else is masked.
+
+    Linear time (:func:`_best_chain`): a block that continues the best chain so
+    far is decided without looking further back.
     """
     t = np.asarray(t, float)
     p = np.asarray(p, float)
@@ -41,17 +44,7 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
         return np.ones(n, bool)
     starts = np.union1d(np.arange(0, n, block), jumps)
     ends = np.r_[starts[1:], n] - 1
-    best = np.zeros(len(starts))
-    prev = np.full(len(starts), -1)
-    for k in range(len(starts)):
-        if k:
-            d = np.hypot(*(p[ends[:k]] - p[starts[k]]).T)
-            ok = d <= _reach(t[starts[k]] - t[ends[:k]], jump_threshold, max_speed)
-            if ok.any():
-                cand = np.where(ok, best[:k], -1.0)
-                prev[k] = k - 1 - int(np.argmax(cand[::-1]))  # the latest among equals
-                best[k] = best[prev[k]]
-        best[k] += ends[k] - starts[k] + 1
+    prev, best = _best_chain(t, p, starts, ends, np.isin(starts, jumps), jump_threshold, max_speed)
     keep = np.zeros(n, bool)
     k = len(starts) - 1 - int(np.argmax(best[::-1]))
     while k >= 0:
@@ -59,6 +52,86 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
         k = prev[k]
     _regrow(t, p, keep, jump_threshold, max_speed)
     return keep
+
+
+def _best_chain(t, p, starts, ends, at_jump, jump_threshold, max_speed, chunk=64, coarse=256):
+    """The dynamic programme of :func:`mask_jumps`: for each block k, ``best[k]`` the most
+    samples in a compatible chain of blocks ending with k, and ``prev[k]`` the block before
+    it (the latest among equals; -1 for none).
+
+    ``best[k]`` is the best over the earlier blocks j whose last sample is compatible with
+    k's first. Three shortcuts give the same answer as trying every j: (1) when block k-1
+    holds the largest ``best`` so far and k does not start at a jump (consecutive samples
+    without a jump are compatible), j = k-1 is the answer, and the chain stays on top
+    until the next jump: such runs of blocks are filled at once; (2) otherwise the earlier
+    blocks are tried backwards in chunks, and the search stops where the running maximum
+    of ``best`` can no longer beat what was found (no earlier block can win); (3) beyond the
+    last few ``coarse`` groups of blocks, a group is tried only when its best can beat what
+    was found and the box around its blocks' last samples is within reach (a track that
+    moved far away and stays there does not make every later block look at every earlier one).
+    """
+    m = len(starts)
+    size = (ends - starts + 1).astype(float)
+    best = np.zeros(m)
+    prev = np.full(m, -1)
+    top = np.zeros(m)  # running maximum of best[:k + 1]
+    group_best = np.full(-(-m // coarse), -1.0)  # max of best over each coarse group so far
+    first = np.arange(0, m, coarse)
+    e = p[ends]
+    box = [f.reduceat(e[:, i], first) for i in (0, 1) for f in (np.minimum, np.maximum)]
+    after = np.flatnonzero(at_jump)  # blocks that start at a jump: never continue k-1 as such
+
+    def scan(k, lo, hi, found, v):
+        """(found, v) updated with the latest best compatible block among lo .. hi-1."""
+        j = np.arange(lo, hi)
+        d = np.hypot(*(e[j] - p[starts[k]]).T)
+        ok = d <= _reach(t[starts[k]] - t[ends[j]], jump_threshold, max_speed)
+        if ok.any():
+            cand = np.where(ok, best[j], -1.0)
+            i = len(j) - 1 - int(np.argmax(cand[::-1]))
+            if cand[i] > v:
+                return lo + i, float(cand[i])
+        return found, v
+
+    k = 0
+    while k < m:
+        if k and best[k - 1] == top[k - 1] and not at_jump[k]:
+            # (1) the chain on top continues up to the next block that starts at a jump
+            stop = after[np.searchsorted(after, k)] if after[-1] >= k else m
+            run = np.arange(k, stop)
+            prev[run] = run - 1
+            best[run] = best[k - 1] + np.cumsum(size[run])
+            top[run] = best[run]
+            np.maximum.at(group_best, run // coarse, best[run])
+            k = stop
+            continue
+        found, v = -1, -1.0
+        near = max(0, (k // coarse - 4) * coarse)  # (2) elementwise down to here, (3) below
+        hi, width = k, chunk
+        while hi > near and top[hi - 1] > v:
+            lo = max(near, hi - width)
+            found, v = scan(k, lo, hi, found, v)
+            hi, width = lo, width * 2
+        if hi == near and near > 0 and top[near - 1] > v:
+            g = near // coarse
+            x, y = p[starts[k]]
+            dx = np.maximum(np.maximum(box[0][:g] - x, x - box[1][:g]), 0.0)
+            dy = np.maximum(np.maximum(box[2][:g] - y, y - box[3][:g]), 0.0)
+            reach = _reach(t[starts[k]] - t[ends[first[:g]]], jump_threshold, max_speed)
+            maybe = (group_best[:g] > v) & (np.hypot(dx, dy) <= reach * (1 + 1e-9) + 1e-9)
+            for c in np.flatnonzero(maybe)[::-1]:
+                if top[(c + 1) * coarse - 1] <= v:
+                    break
+                if group_best[c] > v:
+                    found, v = scan(k, c * coarse, (c + 1) * coarse, found, v)
+        if found >= 0:
+            prev[k] = found
+            best[k] = best[found]
+        best[k] += size[k]
+        top[k] = max(top[k - 1], best[k]) if k else best[k]
+        group_best[k // coarse] = max(group_best[k // coarse], best[k])
+        k += 1
+    return prev, best
 
 
 def _regrow(t, p, keep, jump_threshold, max_speed):

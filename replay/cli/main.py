@@ -109,6 +109,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
              divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
+    _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
     from replay.eval_options import validate_eval_options
     from replay.evaluate import evaluate

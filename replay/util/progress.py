@@ -180,3 +180,95 @@ class Progress:
         self.bar = False
         if _BAR["live"] is self:
             _BAR["live"] = None
+
+
+class Loading:
+    """A heartbeat while one file is read (``with Loading(label, size):`` around the adapter's call).
+
+    Silent for the first ``after`` seconds: short loads print nothing. Then, on ``stream`` (stderr),
+    a live line on a terminal or one plain line every ``every`` seconds: the file, its size, the
+    elapsed time and the stage the adapter last named (:func:`load_stage`; with its share of the
+    work, when it gives one, and the ETA from it), and a closing line. Quiet when ``quiet`` is
+    true; None means "the notes of the logger ``replay`` are off" (the CLI's ``-q``; a library
+    caller sees nothing unless it enables that logger at level INFO).
+    """
+
+    active: list = []  # the loads in progress, innermost last (load_stage talks to the last)
+
+    def __init__(self, label: str, size: int | None = None, quiet: bool | None = None, stream=None,
+                 after: float = 3.0, every: float = 10.0):
+        if quiet is None:
+            import logging
+
+            quiet = not logging.getLogger("replay").isEnabledFor(logging.INFO)
+        self.label, self.size, self.quiet, self.after, self.every = label, size, quiet, after, every
+        self.stream = stream or sys.stderr
+        self.stage, self.share = "", None
+        self.shown = False
+        self.t0 = time.monotonic()
+        self._thread = self._stop = None
+
+    def __enter__(self):
+        Loading.active.append(self)
+        if not self.quiet:
+            import threading
+
+            self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._beat, name="replay-loading", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, kind, *_):
+        if self in Loading.active:
+            Loading.active.remove(self)
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            if self.shown:
+                el = time.monotonic() - self.t0
+                end = "done" if kind is None else "stopped"
+                self._write(f"{self._head()}: {end} in {el:.0f} s", final=True)
+        return False
+
+    def _head(self) -> str:
+        size = "" if self.size is None else f" ({_bytes(self.size)})"
+        return f"load {self.label}{size}"
+
+    def line(self, now=None) -> str:
+        el = (now or time.monotonic()) - self.t0
+        text = f"{self._head()}: {el:.0f} s"
+        if self.stage:
+            text += f", {self.stage}"
+        if self.share:
+            text += f" ({100 * self.share:.0f} % of the work, ETA {el / self.share * (1 - self.share):.0f} s)"
+        return text
+
+    def _write(self, text: str, final: bool = False) -> None:
+        if self.tty:
+            self.stream.write("\r" + text.ljust(getattr(self, "_width", 0)) + ("\n" if final else ""))
+            self._width = len(text)
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def _beat(self) -> None:
+        wait = self.after
+        while not self._stop.wait(wait):
+            self._write(self.line())
+            self.shown = True
+            wait = 1.0 if self.tty else self.every
+
+
+def load_stage(stage: str, share: float | None = None) -> None:
+    """Name what the adapter is doing now (and the share of its work done before it, 0-1) for the
+    heartbeat of the innermost :class:`Loading`; nothing when none is active."""
+    if Loading.active:
+        Loading.active[-1].stage, Loading.active[-1].share = stage, share
+
+
+def _bytes(n: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
