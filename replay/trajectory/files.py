@@ -20,22 +20,21 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.trajectory import quat
+from replay.trajectory import layout, quat
 from replay.trajectory.base import Trajectory, make
+from replay.trajectory.layout import TIME_UNITS
 from replay.util.errors import DataError
+from replay.util.regular import read_bytes
 
 FORMATS = ("tum", "kitti", "euroc", "csv")
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 ROT_TOL = 1e-3
 
 
 def _text(path: Path) -> str:
     try:
-        raw = path.read_bytes()
+        raw = read_bytes(path, "a trajectory file")
     except FileNotFoundError:
         raise DataError(path, "no such file") from None
-    except IsADirectoryError:
-        raise DataError(path, "a directory, not a trajectory file") from None
     except OSError as e:
         raise DataError(path, f"cannot read ({e.strerror or e})") from None
     if not raw.strip():
@@ -177,13 +176,15 @@ def parse_columns(spec) -> dict:
     return out
 
 
-def read_csv(path, *, columns, time_unit: str = "s", name: str = "") -> Trajectory:
+def read_csv(path, *, columns, time_unit: str | None = None, name: str = "", header_unit: str | None = None) -> Trajectory:
+    """A CSV (``,`` or ``;``; or whitespace) of declared ``columns``; stamps in ``time_unit``, else in the
+    unit the header names (``header_unit``), else seconds where they can be (:func:`layout.seconds`)."""
     path = Path(path)
     cols = parse_columns(columns)
-    if time_unit not in TIME_UNITS:
+    if time_unit is not None and time_unit not in TIME_UNITS:
         raise DataError(path, f"time unit {time_unit!r}: expected one of {', '.join(TIME_UNITS)}")
     text = _text(path)
-    sep = "," if text.count(",") >= text.count(";") else ";"
+    sep = layout.sniff(text).sep
     numbers, tokens, head = _rows(path, sep, header=True)
     m = _matrix(path, numbers, tokens, None, "every line as many columns as the first")
     index = {}
@@ -208,40 +209,29 @@ def read_csv(path, *, columns, time_unit: str = "s", name: str = "") -> Trajecto
         zero = np.zeros(len(m))
         q = rpy_to_quat(np.column_stack([col("roll") if "roll" in index else zero,
                                          col("pitch") if "pitch" in index else zero, col("yaw")]))
-    return make(col("t") * TIME_UNITS[time_unit], p, q, source=path, name=name, rows=numbers)
+    tname = head[index["t"]] if head is not None and index["t"] < len(head) else f"column {index['t'] + 1}"
+    factor = layout.seconds(path, col("t"), tname, header_unit, time_unit)
+    return make(col("t") * factor, p, q, source=path, name=name, rows=numbers)
 
 
-def detect(path: Path) -> str:
-    """The format of a trajectory file, from its extension and first data line."""
-    ext = path.suffix.lower()
-    if ext in (".tum",):
-        return "tum"
-    if ext in (".kitti",):
-        return "kitti"
-    text = _text(path)
-    first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
-    head = next((ln.strip() for ln in text.splitlines() if ln.lstrip().startswith("#")), "")
-    if "," in first:
-        if "p_RS_R_x" in head or (head.lower().startswith("#timestamp") and len(first.split(",")) >= 8):
-            return "euroc"
-        return "csv"
-    n = len(first.split())
-    if n == 8:
-        return "tum"
-    if n == 12:
-        return "kitti"
-    raise DataError(path, f"cannot tell the format ({n} columns on the first data line: TUM has 8, KITTI 12; "
-                          "a CSV needs --columns); name it with --format")
-
-
-def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str = "s",
+def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None,
          name: str = "") -> Trajectory:
-    """Read a trajectory file of format ``fmt`` (detected when None; ``csv`` when ``columns`` are given)."""
+    """Read a trajectory file of format ``fmt`` (``csv`` when ``columns`` are given; else decided by
+    :func:`replay.trajectory.layout.decide`: the header's names, then the layouts TUM and KITTI
+    have alone; an ambiguous file is refused naming the choices). ``time_unit``: of a CSV's stamps
+    (default: the unit its header names, else seconds)."""
     path = Path(path)
     if not path.exists():
         raise DataError(path, "no such file")
-    if fmt is None:
-        fmt = "csv" if columns else detect(path)
+    if fmt is not None and fmt not in FORMATS:
+        raise DataError(path, f"format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    header_unit = None
+    if fmt is None and columns is not None:
+        fmt = "csv"
+    if fmt is None and path.suffix.lower() in (".tum", ".kitti"):
+        fmt = path.suffix.lower()[1:]
+    if fmt != "kitti" and columns is None:
+        fmt, columns, header_unit = layout.decide(path, _text(path), fmt)
     if fmt == "csv" and columns is None:
         raise DataError(path, "a plain CSV needs its columns declared (--columns t=...,x=...,y=...,z=...,qx=...)")
     if fmt == "tum":
@@ -250,9 +240,7 @@ def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_u
         return read_kitti(path, times=kitti_times, name=name)
     if fmt == "euroc":
         return read_euroc(path, name=name)
-    if fmt == "csv":
-        return read_csv(path, columns=columns, time_unit=time_unit, name=name)
-    raise DataError(path, f"format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    return read_csv(path, columns=columns, time_unit=time_unit, name=name, header_unit=header_unit)
 
 
 def write_tum(path, traj: Trajectory) -> None:
