@@ -33,6 +33,7 @@ from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, read_
                               sha256_file, with_registered)
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import validate
+from replay.util.regular import check_regular
 
 # Adapter used for a plain file path, by extension.
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
@@ -324,7 +325,9 @@ def _looks_like_path(text: str) -> bool:
 
 
 def adapter_for(path: Path) -> str:
-    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags)."""
+    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags); a FIFO or a
+    device is refused before anything reads it (it may never end)."""
+    check_regular(path, "a dataset", dir_ok=True)
     if path.is_dir() and (path / "metadata.yaml").is_file():
         return "bags"
     if path.suffix.lower() in (".csv", ".tsv", ".txt") and _looks_like_lake_log(path):
@@ -366,6 +369,7 @@ def _adapter(name: str):
 def _load_path(path: Path, adapter: str | None, params: dict):
     path = path.expanduser()
     bag_dir = path.is_dir() and (path / "metadata.yaml").is_file()  # a ROS 2 bag is a directory
+    check_regular(path, "a dataset", dir_ok=True)
     if not (path.is_file() or bag_dir):
         raise DataError(path, "no such file")
     frame = _adapter(adapter or adapter_for(path))(path, **params)

@@ -100,7 +100,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              divergence_threshold=None, force=False, quiet=False):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     from replay.cli import params as cli_params
-    from replay.evaluate import evaluate
+    from replay.evaluate import check_recorded, evaluate
     from replay.outputs.files import check_output, eval_inputs, format_table, mark_latest, new_run_dir, write_all
     from replay.pipeline import default_task
 
@@ -114,6 +114,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     if mapping:
         dparams["mapping"] = str(Path(mapping).resolve())
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
+    check_recorded(dataset, recorded or [], dparams)  # before any recording is read
     # the output set is checked before the computation (inputs, writable, space, ownership)
     task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                 dataset_params=dparams, seed=seed)
