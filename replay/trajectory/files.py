@@ -5,7 +5,11 @@
 | ``tum`` | ``t x y z qx qy qz qw`` per line, separated by spaces (or tabs); ``#`` comments | seconds |
 | ``kitti`` | 12 numbers per line: the rows of the 3x4 matrix [R p] (R maps body to world) | a times file: one stamp (s) per line, ``times.txt`` beside the poses or named (``kitti_times``); without one the file is refused |
 | ``euroc`` | CSV ``#timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z, ...`` (``state_groundtruth_estimate0/data.csv``, at least 8 columns; quaternion w first) | nanoseconds |
-| ``csv`` | a CSV with a header; ``columns`` maps ``t, x, y, z`` and either ``qx, qy, qz, qw`` or ``roll, pitch, yaw`` (rad; or ``yaw`` alone) to header names or 0-based indices; ``z`` may be absent (0) | ``time_unit``: s (default), ms, us, ns |
+| ``csv`` | a CSV (``,`` ``;`` or spaces); ``columns`` maps ``t, x, y, z`` and either ``qx, qy, qz, qw`` or ``roll, pitch, yaw`` (rad; or ``yaw`` alone) to header names or 0-based indices; ``z`` may be absent (0); without ``columns``, the header's names (:mod:`.layout`) | ``time_unit`` (s, ms, us, ns), else the header's unit, else s |
+
+Which format and column order a file has is decided by :func:`replay.trajectory.layout.decide`:
+the header's names first, never the position of the columns alone; an ambiguous file is refused.
+A FIFO or a device is refused before it is read (:mod:`replay.util.regular`).
 
 Every data line must have the format's number of columns (error: the line number and the
 counts); numbers must parse; then :func:`replay.trajectory.base.make` checks stamps and
