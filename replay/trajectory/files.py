@@ -180,7 +180,8 @@ def parse_columns(spec) -> dict:
     return out
 
 
-def read_csv(path, *, columns, time_unit: str | None = None, name: str = "", header_unit: str | None = None) -> Trajectory:
+def read_csv(path, *, columns, time_unit: str | None = None, name: str = "",
+             header_unit: str | None = None) -> Trajectory:
     """A CSV (``,`` or ``;``; or whitespace) of declared ``columns``; stamps in ``time_unit``, else in the
     unit the header names (``header_unit``), else seconds where they can be (:func:`layout.seconds`)."""
     path = Path(path)

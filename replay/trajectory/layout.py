@@ -72,6 +72,15 @@ def _split(line: str, sep):
     return [c.strip() for c in line.split(sep)] if sep else line.split()
 
 
+def _lines(text: str):
+    start = 0
+    while start < len(text):
+        end = text.find("\n", start)
+        end = len(text) if end < 0 else end
+        yield text[start:end]
+        start = end + 1
+
+
 def role(name: str):
     """(field or ``"angle"`` or None, time unit or None) of one header name."""
     base = name.strip().lstrip("#").strip().lower()
@@ -102,9 +111,9 @@ def role(name: str):
 
 def sniff(text: str) -> Layout:
     """The :class:`Layout` of a trajectory file's text."""
-    lines = [ln.strip() for ln in text.splitlines()]
     first, before = None, []
-    for ln in lines:
+    for ln in _lines(text):  # lazily: only the lines up to the first data line are looked at
+        ln = ln.strip()
         if not ln:
             continue
         if ln.startswith("#") or not _numeric(_split(ln, "," if "," in ln else ";" if ";" in ln else None)[0]):
