@@ -115,6 +115,10 @@ def test_space_separated_w_first_header_is_not_read_as_tum(files, poses):
     assert rotation_rmse([files / "ref.tum", files / "est.txt"]) == tum
     assert_refused(["score", files / "ref.tum", files / "est.txt", "--format", "tum"],
                    r"est\.txt: --format tum reads .* but the header names t, x, y, z, qw")
+    (files / "est.txt").rename(files / "w.tum")
+    assert_refused(["score", files / "ref.tum", files / "w.tum"],
+                   r"w\.tum: the extension \.tum reads .* but the header names t, x, y, z, qw.*give --format csv")
+    assert rotation_rmse([files / "w.tum", files / "w.tum", "--format", "csv"]) == 0
 
 
 def test_stamps_in_nanoseconds_need_their_unit(files, poses):

@@ -233,10 +233,11 @@ def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_u
     header_unit = None
     if fmt is None and columns is not None:
         fmt = "csv"
+    by = "--format"
     if fmt is None and path.suffix.lower() in (".tum", ".kitti"):
-        fmt = path.suffix.lower()[1:]
+        fmt, by = path.suffix.lower()[1:], f"the extension {path.suffix}"
     if fmt != "kitti" and columns is None:
-        fmt, columns, header_unit = layout.decide(path, _text(path), fmt)
+        fmt, columns, header_unit = layout.decide(path, _text(path), fmt, by)
     if fmt == "csv" and columns is None:
         raise DataError(path, "a plain CSV needs its columns declared (--columns t=...,x=...,y=...,z=...,qx=...)")
     if fmt == "tum":

@@ -155,27 +155,32 @@ def sniff(text: str) -> Layout:
     return lay
 
 
-def decide(path, text: str, fmt: str | None):
+READS = {"tum": "'t x y z qx qy qz qw' separated by spaces, stamps in s",
+         "euroc": "'timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z' separated by commas"}
+
+
+def decide(path, text: str, fmt: str | None, by: str = "--format"):
     """(format, columns or None, time unit the header names or None) of a TUM, EuRoC or CSV file
-    (module docstring); ``fmt`` the format the user named (None: none). Refusals are one line."""
+    (module docstring); ``fmt`` the format named by ``by`` (``--format``, or the file's extension;
+    None: none). A header whose names decide the layout overrides nothing: a named format that
+    contradicts it is refused. Refusals are one line."""
     lay = sniff(text)
-    if lay.problem:
+    if lay.problem and fmt not in ("tum", "euroc"):
         raise DataError(path, f"{lay.problem}: declare the columns with --columns t=...,x=...,y=...,z=...,"
                               "qx=...,qy=...,qz=...,qw=... (names or 0-based indices)")
     cols, unit = lay.columns, lay.time_unit
-    if cols:
+    if cols and not lay.problem:
         tum = cols == TUM_ORDER and lay.sep is None and lay.ncols == 8 and unit in (None, "s")
-        euroc = cols == EUROC_ORDER and lay.sep == "," and (unit == "ns" or (unit is None and lay.euroc_names))
-        if fmt == "tum" and not tum:
-            raise DataError(path, f"--format tum reads 't x y z qx qy qz qw' separated by spaces, but the header "
-                                  f"names {lay.shown}: leave out --format to read the columns by their names")
-        if fmt == "euroc" and not (cols == EUROC_ORDER and lay.sep == "," and unit in (None, "ns")):
-            raise DataError(path, f"--format euroc reads 'timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z', "
-                                  f"but the header names {lay.shown}: leave out --format to read the columns by "
-                                  "their names")
+        euroc = cols == EUROC_ORDER and lay.sep == "," and unit in (None, "ns")
+        if (fmt == "tum" and not tum) or (fmt == "euroc" and not euroc):
+            who, how = (f"--format {fmt}", "leave out --format") if by == "--format" else (by, "give --format csv")
+            raise DataError(path, f"{who} reads {READS[fmt]}, but the header names {lay.shown}: {how} to "
+                                  "read the columns by their names")
         if fmt in ("tum", "euroc"):
             return fmt, None, None
-        return ("tum", None, None) if tum else ("euroc", None, None) if euroc else ("csv", cols, unit)
+        if euroc and not (unit is None and not lay.euroc_names):  # unit-less: EuRoC's own names say ns
+            return "euroc", None, None
+        return ("tum", None, None) if tum else ("csv", cols, unit)
     if fmt is not None:
         return fmt, None, None
     if lay.sep is None:
