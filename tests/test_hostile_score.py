@@ -27,7 +27,7 @@ register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score
          "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-time-unit-contradicts-header",
          "score-header-duplicate-column", "score-header-euler-angles", "score-plot-docx", "score-plot-no-extension",
          "score-plot-unwritable", "score-plot-parent-is-file", "score-out-new-directory", "score-out-long-name",
-         "score-fifo", "score-char-device", "eval-dataset-fifo", "eval-mapping-fifo", "eval-mapping-char-device",
+         "score-fifo", "score-char-device", "score-fifo-in-bag-directory", "eval-dataset-fifo", "eval-mapping-fifo", "eval-mapping-char-device",
          "eval-recorded-unknown-before-reading", "mapping-channel-path", "mapping-channel-newline",
          "mapping-estimate-newline", "mapping-estimate-none")
 
@@ -204,6 +204,11 @@ def test_fifo_trajectory_mapping_and_dataset_refused_unread(files):
                        r"fifo\.csv: a FIFO \(named pipe\), not a regular file: refusing to read it as a dataset")
         assert_refused(["eval", files / "x.bag", "--mapping", files / "map.toml", "--filters", "none",
                         "--out", files / "o"], r"map\.toml: a FIFO \(named pipe\), not a regular file")
+        (files / "bag").mkdir()
+        (files / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+        os.mkfifo(files / "bag" / "bag_0.mcap")
+        assert_refused(["score", f"{files / 'bag'}:/ref", f"{files / 'bag'}:/est"],
+                       r"bag_0\.mcap: a FIFO \(named pipe\), not a regular file: refusing to read it as a file of")
 
 
 def test_char_device_refused_unread(files):
