@@ -84,6 +84,12 @@ def test_x_first_csv_is_read_by_its_header_names(files, poses):
     assert wrong > 10
 
 
+def test_header_after_a_comment_line_is_found(files, poses):
+    t, _, _, pe, qe = poses
+    (files / "est.csv").write_text("# exported by a tool, v1\ntimestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, pe, qe))
+    assert rotation_rmse([files / "ref.tum", files / "est.csv"]) == rotation_rmse([files / "ref.tum", files / "est.tum"])
+
+
 def test_euroc_names_keep_w_first_and_nanoseconds(files, poses):
     t, _, _, pe, qe = poses
     head = "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n"

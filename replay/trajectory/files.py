@@ -50,19 +50,23 @@ def _text(path: Path) -> str:
 
 
 def _rows(path: Path, sep: str | None, comment: str = "#", header: bool = False):
-    """(line numbers, list of token lists, header tokens or None) of the data lines."""
+    """(line numbers, list of token lists, header tokens or None) of the data lines. With ``header``,
+    non-numeric lines before the first data line are header candidates too; the header is the last
+    candidate with as many names as the first data line has columns, else the first candidate."""
     lines = _text(path).splitlines()
-    numbers, tokens, head = [], [], None
+    numbers, tokens, before = [], [], []
     for k, line in enumerate(lines, start=1):
         s = line.strip()
         if not s:
             continue
-        if s.startswith(comment) or (header and head is None and not numbers and not _numeric(s, sep)):
-            if head is None and not numbers:
-                head = [c.strip() for c in s.lstrip(comment).split(sep)]
+        if s.startswith(comment) or (header and not numbers and not _numeric(s, sep)):
+            if not numbers:
+                before.append([c.strip() for c in s.lstrip(comment).split(sep)])
             continue
         numbers.append(k)
         tokens.append([c.strip() for c in s.split(sep)] if sep else s.split())
+    width = len(tokens[0]) if tokens else -1
+    head = next((h for h in reversed(before) if len(h) == width), before[0] if before else None)
     return np.array(numbers), tokens, head
 
 
