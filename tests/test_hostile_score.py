@@ -25,7 +25,8 @@ from hostile import assert_ok, assert_refused, register
 
 register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score-format-contradicts-header",
          "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-time-unit-contradicts-header",
-         "score-header-duplicate-column", "score-header-euler-angles", "score-plot-docx", "score-plot-no-extension",
+         "score-header-duplicate-column", "score-header-euler-angles", "score-header-millimetres",
+         "score-header-unknown-time-unit", "score-plot-docx", "score-plot-no-extension",
          "score-plot-unwritable", "score-plot-parent-is-file", "score-out-new-directory", "score-out-long-name",
          "score-fifo", "score-char-device", "score-fifo-in-bag-directory", "eval-dataset-fifo", "eval-mapping-fifo", "eval-mapping-char-device",
          "eval-recorded-unknown-before-reading", "mapping-channel-path", "mapping-channel-newline",
@@ -144,6 +145,8 @@ def test_stamps_in_nanoseconds_need_their_unit(files, poses):
 @pytest.mark.parametrize("head,match", [
     ("t,x,y,z,x,y,z,w", r"the header names 'x' twice"),
     ("time,x,y,z,roll,pitch,yaw,extra", r"the header names angles \(roll, pitch, yaw\).*--columns"),
+    ("t,x [mm],y [mm],z [mm],qx,qy,qz,qw", r"the header's position column 'x \[mm\]' is not in metres"),
+    ("time [h],x,y,z,qx,qy,qz,qw", r"the header's time column 'time \[h\]' gives the unknown unit 'h'"),
 ])
 def test_header_that_cannot_decide_is_refused(files, poses, head, match):
     t, _, _, pe, qe = poses

@@ -134,12 +134,16 @@ def test_format_detection_refuses_unknown_layout(tmp_path):
     ("time_ms;pose.position.x;pose.position.y;pose.position.z;pose.orientation.x;pose.orientation.y;"
      "pose.orientation.z;pose.orientation.w", "csv", "01234567", "ms"),
     ("qw,qx,qy,qz,x,y,z,stamp", "csv", "74561230", None),
+    ("t_s,x_m,y_m,z_m,qx,qy,qz,qw", "csv", "01234567", "s"),
+    ("%time,field.header.stamp,field.pose.position.x,field.pose.position.y,field.pose.position.z,"
+     "field.pose.orientation.x,field.pose.orientation.y,field.pose.orientation.z,field.pose.orientation.w", "csv",
+     "12345678", None),
 ])
 def test_layout_is_read_from_the_header_names(header, fmt, columns, unit):
     from replay.trajectory.layout import FIELDS, decide
 
     sep = "," if "," in header else ";" if ";" in header else " "
-    got = decide("f", header + "\n" + sep.join(["1"] * 8) + "\n", None)
+    got = decide("f", header + "\n" + sep.join(["1"] * len(header.lstrip("#").split(sep.strip() or None))) + "\n", None)
     want = {f: int(c) for f, c in zip(FIELDS, columns)} if columns else None
     assert got == (fmt, want, unit)
 

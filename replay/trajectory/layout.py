@@ -37,6 +37,7 @@ QUAT_WORDS = {"q", "quat", "quaternion", "orientation", "ori", "rot", "rotation"
 ANGLE_WORDS = {"roll", "pitch", "yaw", "heading", "phi", "theta", "psi"}
 UNITS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s", "ms": "ms", "us": "us",
          "µs": "us", "ns": "ns", "nsec": "ns", "nsecs": "ns"}
+LENGTHS = ("m", "mm", "cm", "km")  # a position column's unit: only m (or none) is read as is
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 NOT_SECONDS = 1e11  # s: a stamp beyond this (year 5138 as Unix time) is not in seconds
 CHOICES = ("--format euroc (t [ns], x, y, z, qw, qx, qy, qz), or --columns "
@@ -82,30 +83,31 @@ def _lines(text: str):
 
 
 def role(name: str):
-    """(field or ``"angle"`` or None, time unit or None) of one header name."""
+    """(field or ``"angle"`` or None, the unit the name gives or None) of one header name."""
     base = name.strip().lstrip("#").strip().lower()
     unit = None
     m = re.search(r"[\[(]\s*([^\])]*?)\s*[\])]", base)
     if m:
-        unit = UNITS.get(m.group(1).replace(" ", ""))
+        unit = m.group(1).replace(" ", "") or None
         base = (base[:m.start()] + base[m.end():]).strip()
     parts = [p for p in re.split(r"[\s_.:/\-]+", base) if p]
     if len(parts) == 1 and re.fullmatch(r"[qpt][xyzw]", parts[0]):
         parts = [parts[0][0], parts[0][1]]
+    if len(parts) > 1 and ((parts[-1] in UNITS and parts[-2] in TIME_WORDS)
+                           or (parts[-1] in LENGTHS and parts[-2] in ("x", "y", "z"))):
+        unit, parts = parts[-1], parts[:-1]
     if not parts:
         return None, None
-    if len(parts) > 1 and parts[-1] in UNITS and parts[-2] in TIME_WORDS:
-        unit, parts = UNITS[parts[-1]], parts[:-1]
     last, before = parts[-1], set(parts[:-1])
-    if last in TIME_WORDS and len(parts) <= 2 and not (before & (QUAT_WORDS | POSITION_WORDS - {"t"})):
+    if last in TIME_WORDS and not (before & (QUAT_WORDS | POSITION_WORDS - {"t"})):
         return "t", unit
     if last in ANGLE_WORDS:
-        return "angle", None
+        return "angle", unit
     if last in ("x", "y", "z", "w"):
         if before & QUAT_WORDS or (not before and last == "w"):
             return "q" + last, None
         if not before or before & POSITION_WORDS:
-            return (last if last != "w" else None), None
+            return (last if last != "w" else None), unit
     return None, None
 
 
@@ -130,19 +132,24 @@ def sniff(text: str) -> Layout:
     lay = Layout(sep, ncols, names)
     if names is None:
         return lay
-    found: dict = {}
-    unit = None
+    found, units = {}, {}
     for i, n in enumerate(names):
         r, u = role(n)
         if r is not None:
             found.setdefault(r, []).append(i)
-        if r == "t":
-            unit = u
+            units.setdefault(r, u)
+    unit = units.get("t")
+    badpos = next((names[found[f][0]] for f in "xyz" if units.get(f) not in (None, "m") and f in found), None)
     twice = next((f for f in FIELDS if len(found.get(f, ())) > 1), None)
     quat = [f for f in FIELDS[4:] if f in found]
     if not all(f in found for f in ("t", "x", "y")):
         return lay
-    if twice:
+    if unit is not None and unit not in UNITS:
+        lay.problem = f"the header's time column {names[found['t'][0]]!r} gives the unknown unit {unit!r}"
+    elif badpos is not None:
+        lay.problem = (f"the header's position column {badpos!r} is not in metres, which replay reads: "
+                       "convert the file to metres")
+    elif twice:
         lay.problem = f"the header names {twice!r} twice ({', '.join(names[i] for i in found[twice])})"
     elif quat and len(quat) != 4:
         lay.problem = f"the header names part of a quaternion ({', '.join(names[found[f][0]] for f in quat)})"
@@ -150,7 +157,7 @@ def sniff(text: str) -> Layout:
         lay.problem = f"the header names angles ({', '.join(names[i] for i in found['angle'])}), not a quaternion"
     else:
         lay.columns = {f: found[f][0] for f in FIELDS if f in found}
-        lay.time_unit = unit
+        lay.time_unit = UNITS.get(unit)
         lay.euroc_names = any("p_rs_r_" in n.lower() or "q_rs_" in n.lower() for n in names)
     return lay
 
@@ -166,8 +173,8 @@ def decide(path, text: str, fmt: str | None, by: str = "--format"):
     contradicts it is refused. Refusals are one line."""
     lay = sniff(text)
     if lay.problem and fmt not in ("tum", "euroc"):
-        raise DataError(path, f"{lay.problem}: declare the columns with --columns t=...,x=...,y=...,z=...,"
-                              "qx=...,qy=...,qz=...,qw=... (names or 0-based indices)")
+        raise DataError(path, lay.problem if "metres" in lay.problem else f"{lay.problem}: declare the columns "
+                        "with --columns t=...,x=...,y=...,z=...,qx=...,qy=...,qz=...,qw=... (names or 0-based indices)")
     cols, unit = lay.columns, lay.time_unit
     if cols and not lay.problem:
         tum = cols == TUM_ORDER and lay.sep is None and lay.ncols == 8 and unit in (None, "s")
