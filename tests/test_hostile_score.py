@@ -27,7 +27,8 @@ register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score
          "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-time-unit-contradicts-header",
          "score-header-duplicate-column", "score-header-euler-angles", "score-header-millimetres",
          "score-header-unknown-time-unit", "score-plot-docx", "score-plot-no-extension",
-         "score-plot-unwritable", "score-plot-parent-is-file", "score-out-new-directory", "score-out-long-name",
+         "score-plot-unwritable", "score-plot-parent-is-file", "score-out-new-directory", "score-out-long-name", "score-out-device-link", "score-out-fifo",
+         "score-out-symlink-kept",
          "score-fifo", "score-char-device", "score-fifo-in-bag-directory", "eval-dataset-fifo", "eval-mapping-fifo", "eval-mapping-char-device",
          "eval-recorded-unknown-before-reading", "mapping-channel-path", "mapping-channel-newline",
          "mapping-estimate-newline", "mapping-estimate-none")
@@ -169,7 +170,14 @@ def test_plot_extension_refused_before_computing(files, name, match):
 def test_unwritable_locations_refused_before_computing(files):
     if os.path.isdir("/proc"):
         assert_refused(["score", files / "ref.tum", files / "est.tum", "--plot", "/proc/x.png"],
-                       r"--plot /proc/x\.png: cannot create a file in /proc")
+                       r"--plot /proc/x\.png: lies in /proc \(devices and kernel files\), not a place for an output")
+    (files / "null.csv").symlink_to(os.devnull)  # as -o /dev/stdout: a rename would replace the link itself
+    assert_refused(["score", files / "ref.tum", files / "est.tum", "-o", files / "null.csv"],
+                   r"--out .*null\.csv: lies in /dev")
+    assert (files / "null.csv").is_symlink()
+    os.mkfifo(files / "pipe.csv")
+    assert_refused(["score", files / "ref.tum", files / "est.tum", "-o", files / "pipe.csv"],
+                   r"--out .*pipe\.csv: a FIFO \(named pipe\), not a regular file: refusing to replace it")
     assert_refused(["score", files / "ref.tum", files / "est.tum", "-o", files / "ref.tum" / "x.csv"],
                    r"--out .*ref\.tum/x\.csv: .*ref\.tum is not a directory")
     assert_refused(["score", files / "ref.tum", files / "est.tum", "-o", "a" * 300 + ".csv"],
@@ -183,6 +191,10 @@ def test_output_parents_are_created_and_files_written_whole(files):
     assert rows[0].startswith("dataset,task,filter") and "recorded:est" in rows[1] and len(rows) == 2
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(os.listdir(out.parent)) == ["board.csv"] and sorted(os.listdir(plot.parent)) == ["p.png"]
+    (files / "kept.csv").write_text("old\n")
+    (files / "link.csv").symlink_to("kept.csv")  # a link keeps pointing where it did; its target is replaced
+    assert_ok(["score", files / "ref.tum", files / "est.tum", "-o", files / "link.csv"])
+    assert (files / "link.csv").is_symlink() and (files / "kept.csv").read_text() == out.read_text()
 
 
 # ---------------------------------------------------------------- item 12: FIFOs, devices, early refusals
