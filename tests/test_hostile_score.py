@@ -23,7 +23,8 @@ from scipy.spatial.transform import Rotation
 
 from hostile import assert_ok, assert_refused, register
 
-register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score-format-contradicts-header",
+register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score-columns-contradict-header",
+         "score-columns-misread-euroc-reference", "score-format-contradicts-header",
          "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-time-unit-contradicts-header",
          "score-header-duplicate-column", "score-header-euler-angles", "score-header-millimetres",
          "score-header-unknown-time-unit", "score-plot-docx", "score-plot-no-extension",
@@ -79,11 +80,24 @@ def test_x_first_csv_is_read_by_its_header_names(files, poses):
     assert 0.03 < tum < 0.2  # the 0.05-degree class of the case, not 143 degrees
     assert csv == tum
     # the same file read w first (what the EuRoC sniffing did) is the wrong answer this guards against
-    from replay.trajectory import load, score
+    from replay.trajectory import load, make, score
 
-    w_first = load(str(files / "est.csv"), columns="t=0,x=1,y=2,z=3,qw=4,qx=5,qy=6,qz=7")
+    w_first = make(t, pe, qe[:, [1, 2, 3, 0]], source="w-first")  # columns 4..7 taken as w, x, y, z
     wrong = score(load(str(files / "ref.tum")), w_first, relations=["angle_deg"]).stats("ape", "angle_deg")["rmse"]
     assert wrong > 10
+    # and --columns by index that contradict the header's names are refused, not followed
+    assert_refused(["score", files / "ref.tum", files / "est.csv", "--columns", "t=0,x=1,y=2,z=3,qw=4,qx=5,qy=6,qz=7"],
+                   r"est\.csv: --columns qw=4, but the header names column 4 'qx' and qw 'qw'")
+
+
+def test_one_columns_option_cannot_misread_an_euroc_reference(files, poses):
+    t, p, q, pe, qe = poses
+    head = "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n"
+    (files / "gt.csv").write_text(head + lines(t, p, q, w_first=True, stamp=lambda v: f"{round(v * 1e9)}"))
+    (files / "est.csv").write_text(lines(t, pe, qe))  # no header: x first, but nothing says so
+    assert_refused(["score", files / "gt.csv", files / "est.csv"], r"est\.csv: cannot tell the column order")
+    assert_refused(["score", files / "gt.csv", files / "est.csv", "--columns", "t=0,x=1,y=2,z=3,qx=4,qy=5,qz=6,qw=7"],
+                   r"gt\.csv: --columns qx=4, but the header names column 4 'q_RS_w \[\]' and qx 'q_RS_x \[\]'")
 
 
 def test_header_after_a_comment_line_is_found(files, poses):

@@ -242,6 +242,8 @@ def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_u
         fmt, by = path.suffix.lower()[1:], f"the extension {path.suffix}"
     if fmt != "kitti" and columns is None:
         fmt, columns, header_unit = layout.decide(path, _text(path), fmt, by)
+    elif fmt == "csv":
+        header_unit = layout.check_columns(path, _text(path), parse_columns(columns))
     if fmt == "csv" and columns is None:
         raise DataError(path, "a plain CSV needs its columns declared (--columns t=...,x=...,y=...,z=...,qx=...)")
     if fmt == "tum":

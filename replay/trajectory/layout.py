@@ -204,6 +204,29 @@ def decide(path, text: str, fmt: str | None, by: str = "--format"):
     return "csv", None, None
 
 
+def check_columns(path, text: str, columns: dict) -> str | None:
+    """Refuse ``--columns`` given by index that contradict the file's header names (e.g. x-first
+    indices on an EuRoC file whose header puts ``q_RS_w`` first): one ``--columns`` for several
+    files must not silently misread one of them. Returns the time unit the header names for the
+    declared time column (None: none)."""
+    lay = sniff(text)
+    if not lay.columns or lay.problem:
+        return None
+    field_of = {i: f for f, i in lay.columns.items()}
+    for f, c in columns.items():
+        if not isinstance(c, int) or f not in FIELDS:
+            continue
+        if (f in lay.columns and lay.columns[f] != c) or field_of.get(c, f) != f:
+            named = lay.names[c] if c < len(lay.names) else "nothing"
+            raise DataError(path, f"--columns {f}={c}, but the header names column {c} {named!r}"
+                                  + (f" and {f} {lay.names[lay.columns[f]]!r}" if f in lay.columns else "")
+                                  + ": give the columns by name (--columns t=NAME,...) or leave out --columns "
+                                    "to read this file by its header")
+    t = columns.get("t")
+    t = lay.names.index(t) if isinstance(t, str) and t in lay.names else t
+    return lay.time_unit if t == lay.columns["t"] else None
+
+
 def seconds(path, t, name: str, header_unit, given) -> float:
     """The factor to seconds of a time column: ``given`` (``--time-unit``) or the header's unit (they
     must agree), else seconds, refused where the stamps cannot be seconds."""
