@@ -25,7 +25,7 @@ from hostile import assert_ok, assert_refused, register
 
 register("score-csv-x-first-by-header", "score-csv-headerless-ambiguous", "score-columns-contradict-header",
          "score-columns-misread-euroc-reference", "score-format-contradicts-header",
-         "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-time-unit-contradicts-header",
+         "score-tum-w-first-header", "score-ns-stamps-without-unit", "score-boot-stamps-without-unit", "score-time-unit-contradicts-header",
          "score-header-duplicate-column", "score-header-euler-angles", "score-header-millimetres",
          "score-header-unknown-time-unit", "score-plot-docx", "score-plot-no-extension",
          "score-plot-unwritable", "score-plot-parent-is-file", "score-out-new-directory", "score-out-long-name", "score-out-device-link", "score-out-fifo",
@@ -143,15 +143,20 @@ def test_space_separated_w_first_header_is_not_read_as_tum(files, poses):
     assert rotation_rmse([files / "w.tum", files / "w.tum", "--format", "csv"]) == 0
 
 
-def test_stamps_in_nanoseconds_need_their_unit(files, poses):
+def test_time_unit_from_the_header_or_unix_time_else_refused(files, poses):
     t, p, q, pe, qe = poses
     ns = lambda v: f"{round(v * 1e9)}"  # noqa: E731
-    (files / "ref.csv").write_text("timestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, p, q, stamp=ns))
-    (files / "est.csv").write_text("timestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, pe, qe, stamp=ns))
-    assert_refused(["score", files / "ref.csv", files / "est.csv"],
+    tum = rotation_rmse([files / "ref.tum", files / "est.tum"])
+    # the case: x-first CSV, '#timestamp' without unit, Unix time in ns, against a TUM reference
+    (files / "est.csv").write_text("#timestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, pe, qe, stamp=ns))
+    assert rotation_rmse([files / "ref.tum", files / "est.csv"]) == pytest.approx(tum, rel=1e-9)
+    # stamps since boot in ns (2e4 s): no unit says so and they are not Unix time: refused
+    boot = lambda v: f"{round((v - T0 + 2e4) * 1e9)}"  # noqa: E731
+    (files / "ref.csv").write_text("timestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, p, q, stamp=boot))
+    (files / "boot.csv").write_text("timestamp,x,y,z,qx,qy,qz,qw\n" + lines(t, pe, qe, stamp=boot))
+    assert_refused(["score", files / "ref.csv", files / "boot.csv"],
                    r"ref\.csv: the time column 'timestamp' names no unit .* give --time-unit")
-    assert rotation_rmse([files / "ref.csv", files / "est.csv", "--time-unit", "ns"]) == pytest.approx(
-        rotation_rmse([files / "ref.tum", files / "est.tum"]), rel=1e-9)
+    assert rotation_rmse([files / "ref.csv", files / "boot.csv", "--time-unit", "ns"]) == pytest.approx(tum, rel=1e-9)
     (files / "est2.csv").write_text("timestamp [ns],x,y,z,qx,qy,qz,qw\n" + lines(t, pe, qe, stamp=ns))
     assert_refused(["score", files / "est2.csv", files / "est2.csv", "--time-unit", "s"],
                    r"est2\.csv: --time-unit s, but the header's time column 'timestamp \[ns\]' says ns")

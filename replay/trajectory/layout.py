@@ -26,6 +26,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from replay.util.errors import DataError
 
 FIELDS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
@@ -40,6 +42,8 @@ UNITS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s", "ms":
 LENGTHS = ("m", "mm", "cm", "km")  # a position column's unit: only m (or none) is read as is
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 NOT_SECONDS = 1e11  # s: a stamp beyond this (year 5138 as Unix time) is not in seconds
+EPOCH = (1e8, 1e10)  # s: Unix time from 1973 to 2286, what a stamp of unstated unit is taken for
+STEP = (1e-5, 1e3)  # s: ... when the median step between poses is then plausible too
 CHOICES = ("--format euroc (t [ns], x, y, z, qw, qx, qy, qz), or --columns "
            "t=0,x=1,y=2,z=3,qx=4,qy=5,qz=6,qw=7 (x first; --time-unit), or a header line naming the columns")
 
@@ -229,11 +233,18 @@ def check_columns(path, text: str, columns: dict) -> str | None:
 
 def seconds(path, t, name: str, header_unit, given) -> float:
     """The factor to seconds of a time column: ``given`` (``--time-unit``) or the header's unit (they
-    must agree), else seconds, refused where the stamps cannot be seconds."""
+    must agree); else the one unit in which the stamps are Unix time (1973-2286: seconds ~1.7e9,
+    ms ~1.7e12, us ~1.7e15, ns ~1.7e18; the ranges do not overlap) with a median step between
+    10 us and 1000 s; else seconds, refused where the stamps cannot be seconds."""
     if given is not None and header_unit is not None and given != header_unit:
         raise DataError(path, f"--time-unit {given}, but the header's time column {name!r} says {header_unit}")
     unit = given or header_unit
-    if unit is None and len(t) and abs(t).max() >= NOT_SECONDS:
-        raise DataError(path, f"the time column {name!r} names no unit and its stamps reach {abs(t).max():.4g}, "
-                              "which are not seconds: give --time-unit ms, us or ns")
+    top = float(abs(t).max()) if len(t) else 0.0
+    step = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    if unit is None:
+        unit = next((u for u, f in TIME_UNITS.items()
+                     if EPOCH[0] <= top * f <= EPOCH[1] and STEP[0] <= step * f <= STEP[1]), None)
+    if unit is None and top >= NOT_SECONDS:
+        raise DataError(path, f"the time column {name!r} names no unit and its stamps reach {top:.4g}, which are "
+                              "neither seconds nor Unix time in ms, us or ns: give --time-unit")
     return TIME_UNITS[unit or "s"]
