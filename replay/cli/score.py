@@ -103,7 +103,8 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("--columns", default=None,
               help="Columns of a plain CSV, e.g. t=time,x=px,y=py,z=pz,qx=qx,qy=qy,qz=qz,qw=qw (or roll/pitch/yaw).")
 @click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default=None,
-              help="Unit of the CSV time column (default: the unit its header names, else s).")
+              help="Unit of the CSV time column (default: the unit its header names, else the one in which "
+                   "the stamps are Unix time, else s).")
 @click.option("--lost-threshold", type=click.FloatRange(0, min_open=True), default=None,
               help="Count the track as lost when the unaligned position error exceeds this (m) ...")
 @click.option("--lost-steps", type=click.IntRange(1), default=10, show_default=True,
