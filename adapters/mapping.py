@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from replay.util.errors import DataError, ReplayError
+from replay.util.regular import read_bytes
 
 from .rosmsg import KINDS, kind_of, normalize_type
 
@@ -59,7 +60,8 @@ FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  #
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
-ESTIMATE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")  # it names a row and a file
+ESTIMATE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")  # it names a row and a file (fullmatch)
+CHANNEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")  # a frame channel and a topic token /sensors/<name>
 
 # role -> the message kinds (rosmsg.KINDS) that can supply it
 ROLE_KINDS = {
@@ -143,9 +145,11 @@ def load_mapping(path) -> Mapping:
     """Read and check a mapping file; errors name the file and the key."""
     path = Path(path)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = tomllib.loads(read_bytes(path, "a mapping").decode("utf-8"))
     except FileNotFoundError:
         raise DataError(path, "no such mapping file") from None
+    except IsADirectoryError:
+        raise DataError(path, "a directory, not a mapping file") from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise DataError(path, f"cannot read mapping: {e}") from None
     return from_dict(doc, str(path))
@@ -182,6 +186,10 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
             raise ReplayError(f"{source}: [{group}] must be a table of name = topic")
         keys = ESTIMATE_KEYS if group == "estimates" else ENTRY_KEYS
         for name, spec in table.items():
+            if group != "estimates" and not CHANNEL_NAME.fullmatch(name):
+                raise ReplayError(f"{source}: [{group}] {name!r}: a channel name is a letter, then letters, "
+                                  "digits and _ (at most 64; it names the frame channel and the exported topic "
+                                  "/sensors/<name>)")
             if isinstance(spec, str):
                 spec = {"topic": spec}
             if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str) or not spec["topic"]:
@@ -259,9 +267,10 @@ def _pair(source: str, group: str, name: str, spec: dict):
 
 def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
     """One ``[estimates]`` entry, checked (name, message kind, association defaults)."""
-    if not ESTIMATE_NAME.match(name):
-        raise ReplayError(f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - "
-                          "(it names the leaderboard row recorded:<name> and its files)")
+    if not ESTIMATE_NAME.fullmatch(name) or name == "none":
+        raise ReplayError(f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - (at most 64, "
+                          "starting with a letter or digit, not 'none'; it names the leaderboard row "
+                          "recorded:<name> and its files)")
     if typ is not None and kind_of(typ) not in ESTIMATE_KINDS:
         raise ReplayError(f"{source}: [estimates] {name}: a {normalize_type(typ)} is not a trajectory "
                           "(an estimate is an Odometry, PoseStamped, PoseWithCovarianceStamped, TFMessage / "
@@ -349,7 +358,8 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
         entries.append(reference)
         if kind_of(reference.type) != "navsatfix":  # a ground truth: the other poses are estimates to score
             for e in entries:
-                est = re.sub(r"[^A-Za-z0-9_.+-]", "_", e.topic.strip("/")).lstrip("_.+-") or e.name
+                est = re.sub(r"[^A-Za-z0-9_.+-]", "_", e.topic.strip("/")).lstrip("_.+-")[:64] or e.name
+                est = est if est != "none" else "none_"  # recorded:none means no estimate
                 if not e.reference and kind_of(e.type) == "pose" and est not in {x.name for x in estimates}:
                     estimates.append(Entry(est, e.topic, e.type, estimate=True))
     return Mapping(entries, estimates=estimates)

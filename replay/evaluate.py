@@ -153,6 +153,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
+    check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()],
+                   dataset_params)
     task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
     names, estimates = _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir)
@@ -280,6 +282,23 @@ def failures(ev: Evaluation) -> dict:
         if bad:
             out[res.name] = {"runs": [r["run"] for r in bad], "error": bad[0]["error"]}
     return out
+
+
+def check_recorded(dataset, names, dataset_params) -> None:
+    """Refuse, before any recording is read, a ``recorded:<name>`` of ``names`` that the mapping given
+    in ``dataset_params`` does not declare in its ``[estimates]`` (without a mapping, the proposed one is
+    known only from the recording: :func:`_recorded` checks after reading it)."""
+    wanted = [n[len(RECORDED):] for n in names if is_recorded(n)]
+    mapping = (dataset_params or {}).get("mapping")
+    if not wanted or mapping is None:
+        return
+    from replay.adapters.bags import resolve_mapping
+
+    declared = [e.name for e in resolve_mapping(mapping).estimates]
+    unknown = [n for n in wanted if n not in declared]
+    if unknown:
+        raise ReplayError(f"{dataset}: no recorded estimate {unknown[0]!r} (the mapping's [estimates] "
+                          f"declare: {', '.join(declared) or 'none'})")
 
 
 def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):

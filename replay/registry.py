@@ -34,6 +34,7 @@ from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, sea
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import validate
 from replay.util.progress import Loading
+from replay.util.regular import check_regular
 
 # Adapter used for a plain file path, by extension.
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
@@ -308,7 +309,9 @@ def _looks_like_path(text: str) -> bool:
 
 
 def adapter_for(path: Path) -> str:
-    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags)."""
+    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags); a FIFO or a
+    device is refused before anything reads it (it may never end)."""
+    check_regular(path, "a dataset", dir_ok=True)
     if path.is_dir() and (path / "metadata.yaml").is_file():
         return "bags"
     if path.suffix.lower() in (".csv", ".tsv", ".txt") and _looks_like_lake_log(path):
@@ -362,6 +365,7 @@ def _read(adapter: str, path: Path, params: dict):
 def _load_path(path: Path, adapter: str | None, params: dict):
     path = path.expanduser()
     bag_dir = path.is_dir() and (path / "metadata.yaml").is_file()  # a ROS 2 bag is a directory
+    check_regular(path, "a dataset", dir_ok=True)
     if not (path.is_file() or bag_dir):
         raise DataError(path, "no such file")
     frame = _read(adapter or adapter_for(path), path, params)

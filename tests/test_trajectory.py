@@ -123,6 +123,31 @@ def test_format_detection_refuses_unknown_layout(tmp_path):
         load(str(tmp_path / "missing.tum"))
 
 
+@pytest.mark.parametrize("header,fmt,columns,unit", [
+    ("#timestamp,x,y,z,qx,qy,qz,qw", "csv", "01234567", None),
+    ("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []", "euroc",
+     None, None),
+    ("#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z", "euroc", None, None),
+    ("# timestamp tx ty tz qx qy qz qw", "tum", None, None),
+    ("# timestamp(s) tx ty tz qx qy qz qw", "tum", None, None),
+    ("# t x y z qw qx qy qz", "csv", "01235674", None),
+    ("time_ms;pose.position.x;pose.position.y;pose.position.z;pose.orientation.x;pose.orientation.y;"
+     "pose.orientation.z;pose.orientation.w", "csv", "01234567", "ms"),
+    ("qw,qx,qy,qz,x,y,z,stamp", "csv", "74561230", None),
+    ("t_s,x_m,y_m,z_m,qx,qy,qz,qw", "csv", "01234567", "s"),
+    ("%time,field.header.stamp,field.pose.position.x,field.pose.position.y,field.pose.position.z,"
+     "field.pose.orientation.x,field.pose.orientation.y,field.pose.orientation.z,field.pose.orientation.w", "csv",
+     "12345678", None),
+])
+def test_layout_is_read_from_the_header_names(header, fmt, columns, unit):
+    from replay.trajectory.layout import FIELDS, decide
+
+    sep = "," if "," in header else ";" if ";" in header else " "
+    got = decide("f", header + "\n" + sep.join(["1"] * len(header.lstrip("#").split(sep.strip() or None))) + "\n", None)
+    want = {f: int(c) for f, c in zip(FIELDS, columns)} if columns else None
+    assert got == (fmt, want, unit)
+
+
 # ---------------------------------------------------------------- association
 
 

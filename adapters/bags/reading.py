@@ -5,6 +5,7 @@ import re
 from pathlib import Path
 
 from replay.util.errors import DataError
+from replay.util.regular import check_regular
 
 from .. import rosmsg
 from .mcap_reader import _read_mcap
@@ -36,6 +37,9 @@ def read(path, topics=None, until: float | None = None, first_only: bool = False
     path = Path(path).expanduser()
     if not path.exists():
         raise DataError(path, "no such file or directory")
+    check_regular(path, "a recording", dir_ok=True)  # a FIFO or a device never ends
+    for entry in sorted(path.iterdir()) if path.is_dir() else ():  # nor inside a ROS 2 bag directory
+        check_regular(entry, "a file of a ROS 2 bag", dir_ok=True)
     kind = recording_kind(path)
     if path.is_file() and path.stat().st_size == 0:
         raise DataError(path, "empty file (0 bytes): not a recording")

@@ -112,7 +112,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
     from replay.eval_options import validate_eval_options
-    from replay.evaluate import evaluate
+    from replay.evaluate import check_recorded, evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
     from replay.pipeline import default_task
@@ -132,6 +132,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     tparams = cli_params.task_params(task_params, task)
     dparams = cli_params.dataset_inputs(dataset_params, mapping)
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
+    check_recorded(dataset, recorded or [], dparams)  # before any recording is read
     # the output set is checked before the computation (inputs, writable, space, ownership)
     task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
                                 dataset_params=dparams, seed=seed)

@@ -96,21 +96,23 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("--pairs-from-reference", "--pairs_from_reference", "pairs_from_reference", is_flag=True,
               help="Choose the RPE pairs on the reference instead of the estimate.")
 @click.option("--format", "fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,
-              help="Format of the trajectory files (default: from the extension and the first line).")
+              help="Format of the trajectory files (default: from the header's column names, else the "
+                   "extension and the column count; a CSV whose order they cannot tell is refused).")
 @click.option("--kitti-times", type=click.Path(dir_okay=False), default=None,
               help="Stamps of KITTI poses, one per line (default: times.txt beside them).")
 @click.option("--columns", default=None,
               help="Columns of a plain CSV, e.g. t=time,x=px,y=py,z=pz,qx=qx,qy=qy,qz=qz,qw=qw (or roll/pitch/yaw).")
-@click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default="s", show_default=True,
-              help="Unit of the CSV time column.")
+@click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default=None,
+              help="Unit of the CSV time column (default: the unit its header names, else the one in which "
+                   "the stamps are Unix time, else s).")
 @click.option("--lost-threshold", type=click.FloatRange(0, min_open=True), default=None,
               help="Count the track as lost when the unaligned position error exceeds this (m) ...")
 @click.option("--lost-steps", type=click.IntRange(1), default=10, show_default=True,
               help="... for this many consecutive matched poses.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Write a trajectory + error plot (png, pdf, svg).")
+              help="Write a trajectory + error plot (png, pdf, svg, eps; missing directories are created).")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
-              help="Write the leaderboard CSV (the schema of replay eval).")
+              help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
               rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, fmt, kitti_times, columns, time_unit,
               lost_threshold, lost_steps, plot_path, out):
@@ -124,7 +126,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     from replay.pipeline import config_hash
     from replay.summary import columns as leaderboard_columns
     from replay.trajectory import io, row_metrics, score
-    from replay.util.files import check_writable, refuse_overlap, write_csv
+    from replay.trajectory.plot import FORMATS as PLOT_FORMATS
+    from replay.util import outfile
+    from replay.util.files import refuse_overlap, write_csv
 
     method = _resolve_align(align, a_flag, s_flag)
     relations = list(dict.fromkeys(relations or ["trans"]))
@@ -132,10 +136,10 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     if "point_distance_error_ratio" in relations and not want_rpe:
         raise ReplayError("-r point_distance_error_ratio is an RPE relation: add --rpe")
     inputs = [io.split(s)[0] for s in (reference, *estimates)] + ([Path(kitti_times)] if kitti_times else [])
-    for path, what in ((out, "--out"), (plot_path, "--plot")):
+    for path, what, suffixes in ((out, "--out", None), (plot_path, "--plot", PLOT_FORMATS)):
         if path:
             refuse_overlap(path, inputs, what)
-            check_writable(path, what)
+            outfile.check(path, what, suffixes)
     opts = dict(fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
     taken = set()
     names = [_name(reference, set())] + [_name(spec, taken) for spec in estimates]
@@ -171,7 +175,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
             click.echo(f"{row['filter'][9:]:<24} {row['matched']:>8} {row.get(f'ape_{rel}_rmse', math.nan):>22.6f}"
                        + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if want_rpe else ""))
     if out:
-        write_csv(rows, Path(out), leaderboard_columns(rows))
+        outfile.write(out, "--out", lambda tmp: write_csv(rows, tmp, leaderboard_columns(rows)))
         click.echo(f"leaderboard: {out}")
     if plot_path:
         from replay.trajectory import plot

@@ -5,7 +5,11 @@
 | ``tum`` | ``t x y z qx qy qz qw`` per line, separated by spaces (or tabs); ``#`` comments | seconds |
 | ``kitti`` | 12 numbers per line: the rows of the 3x4 matrix [R p] (R maps body to world) | a times file: one stamp (s) per line, ``times.txt`` beside the poses or named (``kitti_times``); without one the file is refused |
 | ``euroc`` | CSV ``#timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z, ...`` (``state_groundtruth_estimate0/data.csv``, at least 8 columns; quaternion w first) | nanoseconds |
-| ``csv`` | a CSV with a header; ``columns`` maps ``t, x, y, z`` and either ``qx, qy, qz, qw`` or ``roll, pitch, yaw`` (rad; or ``yaw`` alone) to header names or 0-based indices; ``z`` may be absent (0) | ``time_unit``: s (default), ms, us, ns |
+| ``csv`` | a CSV (``,`` ``;`` or spaces); ``columns`` maps ``t, x, y, z`` and either ``qx, qy, qz, qw`` or ``roll, pitch, yaw`` (rad; or ``yaw`` alone) to header names or 0-based indices; ``z`` may be absent (0); without ``columns``, the header's names (:mod:`.layout`) | ``time_unit`` (s, ms, us, ns), else the header's unit, else s |
+
+Which format and column order a file has is decided by :func:`replay.trajectory.layout.decide`:
+the header's names first, never the position of the columns alone; an ambiguous file is refused.
+A FIFO or a device is refused before it is read (:mod:`replay.util.regular`).
 
 Every data line must have the format's number of columns (error: the line number and the
 counts); numbers must parse; then :func:`replay.trajectory.base.make` checks stamps and
@@ -20,22 +24,21 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.trajectory import quat
+from replay.trajectory import layout, quat
 from replay.trajectory.base import Trajectory, make
+from replay.trajectory.layout import TIME_UNITS
 from replay.util.errors import DataError
+from replay.util.regular import read_bytes
 
 FORMATS = ("tum", "kitti", "euroc", "csv")
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 ROT_TOL = 1e-3
 
 
 def _text(path: Path) -> str:
     try:
-        raw = path.read_bytes()
+        raw = read_bytes(path, "a trajectory file")
     except FileNotFoundError:
         raise DataError(path, "no such file") from None
-    except IsADirectoryError:
-        raise DataError(path, "a directory, not a trajectory file") from None
     except OSError as e:
         raise DataError(path, f"cannot read ({e.strerror or e})") from None
     if not raw.strip():
@@ -47,19 +50,23 @@ def _text(path: Path) -> str:
 
 
 def _rows(path: Path, sep: str | None, comment: str = "#", header: bool = False):
-    """(line numbers, list of token lists, header tokens or None) of the data lines."""
+    """(line numbers, list of token lists, header tokens or None) of the data lines. With ``header``,
+    non-numeric lines before the first data line are header candidates too; the header is the last
+    candidate with as many names as the first data line has columns, else the first candidate."""
     lines = _text(path).splitlines()
-    numbers, tokens, head = [], [], None
+    numbers, tokens, before = [], [], []
     for k, line in enumerate(lines, start=1):
         s = line.strip()
         if not s:
             continue
-        if s.startswith(comment) or (header and head is None and not numbers and not _numeric(s, sep)):
-            if head is None and not numbers:
-                head = [c.strip() for c in s.lstrip(comment).split(sep)]
+        if s.startswith(comment) or (header and not numbers and not _numeric(s, sep)):
+            if not numbers:
+                before.append([c.strip() for c in s.lstrip(comment).split(sep)])
             continue
         numbers.append(k)
         tokens.append([c.strip() for c in s.split(sep)] if sep else s.split())
+    width = len(tokens[0]) if tokens else -1
+    head = next((h for h in reversed(before) if len(h) == width), before[0] if before else None)
     return np.array(numbers), tokens, head
 
 
@@ -177,13 +184,16 @@ def parse_columns(spec) -> dict:
     return out
 
 
-def read_csv(path, *, columns, time_unit: str = "s", name: str = "") -> Trajectory:
+def read_csv(path, *, columns, time_unit: str | None = None, name: str = "",
+             header_unit: str | None = None) -> Trajectory:
+    """A CSV (``,`` or ``;``; or whitespace) of declared ``columns``; stamps in ``time_unit``, else in the
+    unit the header names (``header_unit``), else seconds where they can be (:func:`layout.seconds`)."""
     path = Path(path)
     cols = parse_columns(columns)
-    if time_unit not in TIME_UNITS:
+    if time_unit is not None and time_unit not in TIME_UNITS:
         raise DataError(path, f"time unit {time_unit!r}: expected one of {', '.join(TIME_UNITS)}")
     text = _text(path)
-    sep = "," if text.count(",") >= text.count(";") else ";"
+    sep = layout.sniff(text).sep
     numbers, tokens, head = _rows(path, sep, header=True)
     m = _matrix(path, numbers, tokens, None, "every line as many columns as the first")
     index = {}
@@ -208,40 +218,32 @@ def read_csv(path, *, columns, time_unit: str = "s", name: str = "") -> Trajecto
         zero = np.zeros(len(m))
         q = rpy_to_quat(np.column_stack([col("roll") if "roll" in index else zero,
                                          col("pitch") if "pitch" in index else zero, col("yaw")]))
-    return make(col("t") * TIME_UNITS[time_unit], p, q, source=path, name=name, rows=numbers)
+    tname = head[index["t"]] if head is not None and index["t"] < len(head) else f"column {index['t'] + 1}"
+    factor = layout.seconds(path, col("t"), tname, header_unit, time_unit)
+    return make(col("t") * factor, p, q, source=path, name=name, rows=numbers)
 
 
-def detect(path: Path) -> str:
-    """The format of a trajectory file, from its extension and first data line."""
-    ext = path.suffix.lower()
-    if ext in (".tum",):
-        return "tum"
-    if ext in (".kitti",):
-        return "kitti"
-    text = _text(path)
-    first = next((ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
-    head = next((ln.strip() for ln in text.splitlines() if ln.lstrip().startswith("#")), "")
-    if "," in first:
-        if "p_RS_R_x" in head or (head.lower().startswith("#timestamp") and len(first.split(",")) >= 8):
-            return "euroc"
-        return "csv"
-    n = len(first.split())
-    if n == 8:
-        return "tum"
-    if n == 12:
-        return "kitti"
-    raise DataError(path, f"cannot tell the format ({n} columns on the first data line: TUM has 8, KITTI 12; "
-                          "a CSV needs --columns); name it with --format")
-
-
-def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str = "s",
+def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None,
          name: str = "") -> Trajectory:
-    """Read a trajectory file of format ``fmt`` (detected when None; ``csv`` when ``columns`` are given)."""
+    """Read a trajectory file of format ``fmt`` (``csv`` when ``columns`` are given; else decided by
+    :func:`replay.trajectory.layout.decide`: the header's names, then the layouts TUM and KITTI
+    have alone; an ambiguous file is refused naming the choices). ``time_unit``: of a CSV's stamps
+    (default: the unit its header names, else seconds)."""
     path = Path(path)
     if not path.exists():
         raise DataError(path, "no such file")
-    if fmt is None:
-        fmt = "csv" if columns else detect(path)
+    if fmt is not None and fmt not in FORMATS:
+        raise DataError(path, f"format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    header_unit = None
+    if fmt is None and columns is not None:
+        fmt = "csv"
+    by = "--format"
+    if fmt is None and path.suffix.lower() in (".tum", ".kitti"):
+        fmt, by = path.suffix.lower()[1:], f"the extension {path.suffix}"
+    if fmt != "kitti" and columns is None:
+        fmt, columns, header_unit = layout.decide(path, _text(path), fmt, by)
+    elif fmt == "csv":
+        header_unit = layout.check_columns(path, _text(path), parse_columns(columns))
     if fmt == "csv" and columns is None:
         raise DataError(path, "a plain CSV needs its columns declared (--columns t=...,x=...,y=...,z=...,qx=...)")
     if fmt == "tum":
@@ -250,9 +252,7 @@ def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_u
         return read_kitti(path, times=kitti_times, name=name)
     if fmt == "euroc":
         return read_euroc(path, name=name)
-    if fmt == "csv":
-        return read_csv(path, columns=columns, time_unit=time_unit, name=name)
-    raise DataError(path, f"format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    return read_csv(path, columns=columns, time_unit=time_unit, name=name, header_unit=header_unit)
 
 
 def write_tum(path, traj: Trajectory) -> None:

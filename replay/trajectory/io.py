@@ -41,7 +41,7 @@ def split(spec: str):
     return whole, None
 
 
-def load(spec, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str = "s",
+def load(spec, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None,
          name: str = "", rec=None) -> Trajectory:
     """The trajectory of ``spec`` (module docstring); ``fmt``, ``kitti_times``, ``columns`` and
     ``time_unit`` apply to files (:func:`replay.trajectory.files.read`); ``rec``: the recording,

@@ -13,6 +13,7 @@ import numpy as np
 
 from replay.trajectory.pose_error import UNITS
 
+FORMATS = ("png", "pdf", "svg", "eps")  # the extensions --plot writes
 NAMES = {"trans": "translation", "rot": "rotation part", "full": "full pose", "angle_deg": "rotation angle",
          "angle_rad": "rotation angle", "point_distance": "point distance",
          "point_distance_error_ratio": "point distance error ratio"}
@@ -63,8 +64,11 @@ def figure(reference, scores: dict, *, relation: str | None = None):
     return fig
 
 
-def write(path, reference, scores: dict, *, relation: str | None = None) -> Path:
-    """Save :func:`figure` to ``path`` (format from the extension: png, pdf, svg)."""
-    path = Path(path)
-    figure(reference, scores, relation=relation).savefig(path, dpi=120)
-    return path
+def write(path, reference, scores: dict, *, relation: str | None = None, what: str = "--plot") -> Path:
+    """Save :func:`figure` to ``path`` (format from the extension: :data:`FORMATS`), atomically,
+    creating missing parent directories; an unsupported extension or a write error is one line."""
+    from replay.util import outfile
+
+    path = outfile.check(path, what, FORMATS)
+    fig = figure(reference, scores, relation=relation)
+    return outfile.write(path, what, lambda tmp: fig.savefig(tmp, dpi=120, format=path.suffix.lower()[1:]))
