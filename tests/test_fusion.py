@@ -144,3 +144,23 @@ def test_bohai_fusion_runs_through_its_sensor_columns(bohai_dir):
     prob = ev.results[0].records[0]["problem"]
     assert set(prob.inputs) == {"gps_position.position", "gyro.gyro", "gyro.attitude", "reference"}
     assert np.isfinite(ev.rows[0]["pos_rmse"])
+
+
+def test_tf_estimate_composed_through_the_tree_equals_replay_score(shared_dir, tmp_path):
+    """nav2_turtlebot.mcap records map -> odom (AMCL) and odom -> base_link (odometry), never
+    map -> base_link: the [estimates] entry is composed through the tree, as `replay score
+    BAG:tf:map->base_link` composes it, and scores the same against /amcl_pose."""
+    from replay.trajectory import score
+
+    mcap = shared_dir / "datasets" / "bags" / "evo" / "nav2_turtlebot.mcap"
+    mp = tmp_path / "m.toml"
+    mp.write_text((MAPPINGS / "nav2_turtlebot_fusion.toml").read_text().split("[estimates]")[0]
+                  + '[estimates]\nlocalised = { topic = "/tf", frame = "map", child = "base_link" }\n')
+    ev = replay.evaluate(str(mcap), task="fusion", filters=["ekf"], runs=1, recorded=None,
+                         dataset_params={"mapping": str(mp)})
+    row = next(r for r in ev.rows if r["filter"] == "recorded:localised")
+    ref = replay.load_trajectory(f"{mcap}:/amcl_pose")
+    est = replay.load_trajectory(f"{mcap}:tf:map->base_link")
+    ape = score(ref, est).ape["trans"]  # evo-style APE, translation, not aligned
+    assert len(ape) == row["scored"] == 83
+    assert row["pos_rmse"] == pytest.approx(float(np.sqrt(np.mean(ape ** 2))), rel=1e-5)  # 0.0435333 m

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.util import tf_tree
 from replay.util.errors import DataError
 
 from .. import rosmsg
@@ -36,6 +37,8 @@ def messages(rec: Recording, entry) -> tuple[list, list, str]:
                                       f"pair with frame = \"parent\" and child = \"child\" in the entry "
                                       f"(pairs: {_pairs_text(seen)})")
         msgs, logs, _ = rosmsg.tf_pair(topic.msgs, topic.log_ns, entry.frame, entry.child)
+        if not msgs and many:  # not recorded as one pair: composed through the tree (map -> odom -> base_link)
+            msgs, logs = composed(rec, entry, where, seen)
         if not msgs:
             raise DataError(rec.path, f"{where}: no transform {entry.frame} -> {entry.child} "
                                       f"(pairs: {_pairs_text(seen)})")
@@ -48,6 +51,28 @@ def messages(rec: Recording, entry) -> tuple[list, list, str]:
             raise DataError(rec.path, f"{where}: its last nav_msgs/Path message holds no pose")
         return msgs, logs, "pose"
     return topic.msgs, topic.log_ns, pose_like(kind)
+
+
+def composed(rec: Recording, entry, where: str, seen) -> tuple[list, list]:
+    """The poses ``entry.frame -> entry.child`` composed through the recording's TF tree (every
+    TFMessage topic read, ``/tf_static`` among them when mapped) at the stamps of its most frequent
+    dynamic edge (:func:`replay.util.tf_tree.compose`, as ``replay score BAG:tf:PARENT->CHILD``);
+    their "log times" are those stamps. ([], []) when the frames are not joined."""
+    tf_topics = [name for name, t in rec.topics.items() if t.type.endswith("TFMessage")]
+    edges = tf_tree.tf_edges(rec, tf_topics)
+    steps = tf_tree.path_between(edges, rosmsg.frame_name(entry.frame), rosmsg.frame_name(entry.child))
+    if not steps:
+        return [], []
+    try:
+        times, p, q = tf_tree.compose(edges, steps)
+    except ValueError as err:
+        raise DataError(rec.path, f"{where}: {entry.frame} -> {entry.child}: {err}") from None
+    ns = np.round(times * 1e9).astype(np.int64)
+    head = [rosmsg._Plain(stamp=rosmsg._Plain(sec=int(t // 1_000_000_000), nanosec=int(t % 1_000_000_000)),
+                          frame_id=entry.frame) for t in ns]
+    poses = [rosmsg._Pose(h, rosmsg._Plain(x=a[0], y=a[1], z=a[2]), rosmsg._Plain(x=b[0], y=b[1], z=b[2], w=b[3]))
+             for h, a, b in zip(head, p.tolist(), q.tolist())]
+    return poses, list(ns)
 
 
 def stamps(rec: Recording, entry, msgs: list, log_ns, time: str) -> tuple[np.ndarray, np.ndarray]:

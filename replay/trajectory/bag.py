@@ -22,14 +22,14 @@ edges only is a constant transform, not a trajectory, and is refused.
 """
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
-from replay.trajectory import quat
 from replay.trajectory.base import Trajectory, make
 from replay.util.errors import DataError
+from replay.util.tf_tree import compose, path_between, tf_edges
+from replay.util.tf_tree import seconds as _seconds, xyz as _xyz, xyzw as _xyzw
 
 POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
               "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Path", "sensor_msgs/msg/NavSatFix")
@@ -48,18 +48,6 @@ def _read(path: Path, topics):
     if rec.truncated:
         raise DataError(path, f"truncated or corrupted: {rec.truncated}")
     return rec
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _xyz(v) -> tuple:
-    return (v.x, v.y, v.z)
-
-
-def _xyzw(q) -> tuple:
-    return (q.x, q.y, q.z, q.w)
 
 
 def _find(rec, topic: str):
@@ -154,89 +142,22 @@ def parse_tf(spec: str):
     return parent, child
 
 
-def _edges(rec):
-    """{(parent, child): (t, p, q, static)} of every recorded transform."""
-    raw = {}
-    for topic in rec.topics.values():
-        if topic.name not in TF_TOPICS or topic.type != "tf2_msgs/msg/TFMessage":
-            continue
-        static = topic.name.lstrip("/") == "tf_static"
-        for m in topic.msgs:
-            for tr in m.transforms:
-                key = (str(tr.header.frame_id).lstrip("/"), str(tr.child_frame_id).lstrip("/"))
-                e = raw.setdefault(key, ([], [], [], static))
-                e[0].append(_seconds(tr.header.stamp))
-                e[1].append(_xyz(tr.transform.translation))
-                e[2].append(_xyzw(tr.transform.rotation))
-    out = {}
-    for key, (t, p, q, static) in raw.items():
-        t, p, q = np.array(t), np.array(p, float), quat.normalize(np.array(q, float))
-        order = np.argsort(t, kind="stable")
-        t, p, q = t[order], p[order], q[order]
-        keep = np.concatenate([np.diff(t) > 0, [True]])  # a repeated stamp: the last one sent
-        out[key] = (t[keep], p[keep], q[keep], static)
-    return out
-
-
-def _path(edges, parent: str, child: str):
-    """[(edge key, forward)] from parent to child through the undirected tree, or None."""
-    nbr = {}
-    for a, b in edges:
-        nbr.setdefault(a, []).append((b, (a, b), True))
-        nbr.setdefault(b, []).append((a, (a, b), False))
-    prev, todo = {parent: None}, deque([parent])
-    while todo:
-        f = todo.popleft()
-        for g, key, fwd in nbr.get(f, []):
-            if g not in prev:
-                prev[g] = (f, key, fwd)
-                todo.append(g)
-    if child not in prev:
-        return None
-    steps, f = [], child
-    while prev[f] is not None:
-        f, key, fwd = prev[f]
-        steps.append((key, fwd))
-    return steps[::-1]
-
-
-def _at(edge, times):
-    """Edge transform (p, q) at ``times`` (interpolated; static edges: their one value)."""
-    t, p, q, static = edge
-    if static or len(t) == 1:
-        return np.repeat(p[-1:], len(times), 0), np.repeat(q[-1:], len(times), 0)
-    k = np.clip(np.searchsorted(t, times, side="right"), 1, len(t) - 1)
-    f = (times - t[k - 1]) / (t[k] - t[k - 1])
-    return p[k - 1] + f[:, None] * (p[k] - p[k - 1]), quat.slerp(q[k - 1], q[k], f)
-
-
 def read_tf(path, parent: str, child: str, *, name: str = "", rec=None) -> Trajectory:
     """The transform ``parent -> child`` over time (module docstring)."""
     path = Path(path)
     rec = rec if rec is not None else _read(path, list(TF_TOPICS))
     src = f"{path}:tf:{parent}->{child}"
-    edges = _edges(rec)
+    edges = tf_edges(rec, TF_TOPICS)
     if not edges:
         raise DataError(path, "no tf messages (/tf, /tf_static)")
-    steps = _path(edges, parent, child)
+    steps = path_between(edges, parent, child)
     if steps is None:
         frames = sorted({f for key in edges for f in key})
         missing = [f for f in (parent, child) if f not in frames]
         what = f"frame {missing[0]!r} is not in the tf tree" if missing else "the frames are not connected"
         raise DataError(src, f"{what} (frames: {', '.join(frames[:30])}{' ...' if len(frames) > 30 else ''})")
-    dynamic = [key for key, _ in steps if not edges[key][3] and len(edges[key][0]) > 1]
-    if not dynamic:
-        raise DataError(src, "only static transforms join these frames: a constant pose, not a trajectory")
-    lead = max(dynamic, key=lambda key: len(edges[key][0]))
-    times = edges[lead][0]
-    for key in dynamic:
-        t = edges[key][0]
-        times = times[(times >= t[0]) & (times <= t[-1])]
-    p, q = np.zeros((len(times), 3)), np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1))
-    for key, fwd in steps:
-        ep, eq = _at(edges[key], times)
-        if not fwd:  # inverse: (R', -R' p)
-            eq = quat.conjugate(eq)
-            ep = -quat.rotate(eq, ep)
-        p, q = p + quat.rotate(q, ep), quat.multiply(q, eq)
+    try:
+        times, p, q = compose(edges, steps)
+    except ValueError as err:
+        raise DataError(src, str(err)) from None
     return make(times, p, q, source=src, name=name or f"tf:{parent}->{child}", unit="stamp")
