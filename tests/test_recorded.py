@@ -235,7 +235,7 @@ def test_beside_filters_choose_and_override(rec, tmp_path):
     assert float(r["recorded:rot"]["ate"]) < 1e-9  # aligned
     assert r["recorded:slam"]["pos_rmse_vs_ekf"] != ""  # paired on run 0
     res = cli("eval", mcap, "--mapping", m, "--filters", "ekf,recorded:none", "--first", "20", "-o", tmp_path / "b")
-    assert res.exit_code == 0 and list(rows_of(tmp_path / "b")) == ["ekf"]
+    assert res.exit_code == 0 and list(rows_of(tmp_path / "b")) == ["ekf", "measurements"]
 
 
 def test_navsatfix_estimate_projected_like_the_fixes(rec, tmp_path):
