@@ -48,8 +48,22 @@ def array_form(kernel, matrix: bool):
     of ``x`` (..., n) and ``out`` (..., m) (or (..., m, n) when ``matrix``); ``p`` is shared."""
     import numba as nb
 
+    if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT=1: the plain-Python kernel, state by state
+        return _Loop(kernel)
     sig, layout = _MATRIX if matrix else _VECTOR
     return nb.guvectorize([sig], layout, writable_args=(2,), cache=True)(kernel.py_func)
+
+
+class _Loop:
+    """The array form of a kernel when numba's JIT is disabled: the same Python function over
+    the leading axes (plain Python must always run; the numbers are the kernel's)."""
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+
+    def ufunc(self, x, p, out):
+        for idx in np.ndindex(x.shape[:-1]):
+            self.kernel(x[idx], p, out[idx])
 
 
 _forms: dict = {}  # model class -> array forms of its kernels (f, h, F, H)

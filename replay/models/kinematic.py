@@ -24,16 +24,20 @@ velocities and rates). Measurements select state components, with a sign (depth 
 ``h(x) = x[:, index] * sign`` — linear, ``H`` a signed selection matrix. The measurement
 covariance may change from step to step (recorded per-message covariances):
 ``measurement_cov(k)``.
+
+The equations are written once, as numba kernels of one state
+(:mod:`replay.models.kinematic2_kernels`, :mod:`replay.models.kinematic3_kernels`,
+:mod:`replay.models.kinematic_select`); the array methods are derived from them
+(:mod:`replay.models.kernel_model`), and the compiled filters of paper 002 run on them.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from replay.model import Model
-from replay.util.angles import wrap
+from replay.models.kernel_model import KernelModel
 
 
-class Kinematic(Model):
+class Kinematic(KernelModel):
     """Shared part: the measurement selection and the time-varying Q and R."""
 
     STATE: tuple = ()
@@ -47,11 +51,14 @@ class Kinematic(Model):
         self.q = np.asarray(q, float)
         self.index = np.asarray(index, int)
         self.sign = np.asarray(sign, float)
-        self._H = np.zeros((self.nz, self.nx))
-        self._H[np.arange(self.nz), self.index] = self.sign
+        self._p_h = np.concatenate([[len(index)], self.index, self.sign]).astype(float)
+        self._p_f = self.dt.reshape(-1, 1).copy()  # p_f of step k: [dt_k]
         self.R_steps = np.asarray(R_steps, float)  # (n, nz) variances per step
         self.R = np.diag(np.nanmedian(self.R_steps, axis=0)) if len(self.R_steps) else np.eye(self.nz)
         self.Q = np.diag(self.q * max(float(np.median(self.dt)) if len(self.dt) else 1.0, 1e-6))
+
+    def kernel_params(self, k):
+        return self._p_f[k], self._p_h
 
     def process_cov(self, k):
         return np.diag(self.q * max(self.dt[k], 1e-9))
@@ -59,56 +66,23 @@ class Kinematic(Model):
     def measurement_cov(self, k):
         return np.diag(self.R_steps[k])
 
-    def h(self, x, k):
-        return x[..., self.index] * self.sign
-
-    def H(self, x, k):
-        return self._H
-
 
 class Kinematic2D(Kinematic):
     STATE = ("east", "north", "yaw", "u", "v", "r")
     ANGLES = (2,)
-
-    def f(self, x, k):
-        dt = self.dt[k]
-        e, n, yaw, u, v, r = np.moveaxis(x, -1, 0)
-        c, s = np.cos(yaw), np.sin(yaw)
-        return np.stack([e + (u * c - v * s) * dt, n + (u * s + v * c) * dt, wrap(yaw + r * dt), u, v, r],
-                        axis=-1)
-
-    def F(self, x, k):
-        dt = self.dt[k]
-        yaw, u, v = x[2], x[3], x[4]
-        c, s = np.cos(yaw), np.sin(yaw)
-        J = np.eye(6)
-        J[0, 2], J[0, 3], J[0, 4] = (-u * s - v * c) * dt, c * dt, -s * dt
-        J[1, 2], J[1, 3], J[1, 4] = (u * c - v * s) * dt, s * dt, c * dt
-        J[2, 5] = dt
-        return J
-
-
-def rotation(roll, pitch, yaw) -> np.ndarray:
-    """(..., 3, 3) body-to-ENU rotations Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-                     np.stack([-sp, cp * sr, cp * cr], -1)], -2)
+    kernel_module = "replay.models.kinematic2_kernels"
 
 
 class Kinematic3D(Kinematic):
     STATE = ("east", "north", "up", "roll", "pitch", "yaw", "u", "v", "w", "p", "q", "r")
     ANGLES = (3, 4, 5)
+    kernel_module = "replay.models.kinematic3_kernels"
 
-    def f(self, x, k):
-        dt = self.dt[k]
-        roll, pitch, yaw = x[..., 3], x[..., 4], x[..., 5]
-        vel, rates = x[..., 6:9], x[..., 9:12]
-        p, q, r = rates[..., 0], rates[..., 1], rates[..., 2]
-        pos = x[..., 0:3] + np.einsum("...ij,...j->...i", rotation(roll, pitch, yaw), vel) * dt
-        sr, cr = np.sin(roll), np.cos(roll)
-        cp = np.cos(pitch)
-        a = q * sr + r * cr
-        att = np.stack([wrap(roll + (p + a * np.tan(pitch)) * dt), wrap(pitch + (q * cr - r * sr) * dt),
-                        wrap(yaw + a / cp * dt)], axis=-1)
-        return np.concatenate([pos, att, vel, rates], axis=-1)
+
+def rotation(roll, pitch, yaw) -> np.ndarray:
+    """(..., 3, 3) body-to-ENU rotations Rz(yaw) Ry(pitch) Rx(roll) (the differential inputs'
+    rotation into the body frame; the model's own is in its kernels)."""
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+                     np.stack([-sp, cp * sr, cp * cr], -1)], -2)
