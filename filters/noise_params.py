@@ -122,10 +122,9 @@ def matrix(value, n: int, who: str, name: str) -> np.ndarray:
     if M.ndim == 0:
         return float(M) * np.eye(n)
     if len(M) != n:
-        shape = f"{len(M)} numbers" if M.ndim == 1 else f"a {len(M)}x{len(M)} matrix"
         raise ReplayError(f"{who}: {name} must be {n}x{n} (this task's model has {n} "
                           f"{'state' if name != 'R' else 'measurement'} components), or its diagonal "
-                          f"({n} numbers), or a number; got {shape}")
+                          f"({n} numbers), or a number; got size {len(M)}")
     return np.diag(M) if M.ndim == 1 else M
 
 
