@@ -122,48 +122,6 @@ def test_time_varying_model_scaled_at_every_step_and_replacement_refused():
         check(make_filter("ukf", R=2.0), m)
 
 
-@pytest.mark.parametrize("params, message", [
-    ({"q_scale": 0}, "filter 'kf': q_scale must be a finite number > 0 (got 0)"),
-    ({"p0_scale": -1.0}, "filter 'kf': p0_scale must be a finite number > 0 (got -1.0)"),
-    ({"r_scale": float("inf")}, "filter 'kf': r_scale must be a finite number > 0 (got inf)"),
-    ({"Q": [[1, 2], [2, 1]]}, "filter 'kf': Q must be a symmetric positive-definite matrix"),
-    ({"Q": [[1, 0.5], [0.4, 1]]}, "filter 'kf': Q must be a symmetric positive-definite matrix"),
-    ({"R": [1, 0, 2]}, "filter 'kf': R must be a symmetric positive-definite matrix"),
-    ({"P0": -2}, "filter 'kf': P0 must be a symmetric positive-definite matrix"),
-    ({"Q": "big"}, "filter 'kf': Q must be a symmetric positive-definite matrix"),
-])
-def test_bad_settings_refused_in_one_line(params, message):
-    with pytest.raises(ReplayError) as err:
-        make_filter("kf", **params)
-    assert str(err.value).startswith(message) and "\n" not in str(err.value)
-
-
-@pytest.mark.parametrize("param, value, size", [("Q", [1.0, 1.0], "3x3 (this task's model has 3 state"),
-                                                ("R", [[1, 0], [0, 2]], "3x3 (this task's model has 3 measurement"),
-                                                ("P0", [1.0] * 4, "3x3 (this task's model has 3 state")])
-def test_wrong_size_refused_before_any_run(tmp_path, param, value, size):
-    """The size is known once the task is built: eval refuses it before any filter runs (exit 2)."""
-    res = CliRunner().invoke(main, ["eval", "sim/auv-sonar", "--task", "position", "--dataset-param", "steps=20",
-                                    "--filters", "ekf,kf", "-p", f"kf.{param}={json.dumps(value)}",
-                                    "--out", str(tmp_path / "o")])
-    assert res.exit_code == 2, res.output
-    line = res.output.strip().splitlines()[-1]
-    assert line.startswith(f"replay: error: filter 'kf': {param} must be {size}"), line
-    assert not (tmp_path / "o").exists()
-
-
-def test_a_model_that_draws_its_own_noise_without_refresh_is_refused():
-    """Formation (paper 003) draws its process noise through Qa and weighs by its glint mixture."""
-    p = build_problem(dict(_cfg({}), dataset="sim/uav-formation", dataset_params={}, task="formation",
-                           task_params={}), 0)
-    with pytest.raises(ReplayError, match=r"^filter 'pf': model Formation computes its own sample_f from its "
-                                          r"noise; Q and q_scale cannot change it"):
-        check(make_filter("pf", q_scale=2.0), p.model)
-    with pytest.raises(ReplayError, match=r"^filter 'pf': model Formation computes its own loglik"):
-        check(make_filter("pf", r_scale=2.0), p.model)
-    check(make_filter("pf", p0_scale=2.0), p.model)  # the prior is the filter's alone
-
-
 def test_depth_model_draws_with_the_scaled_q():
     """The depth model (paper 000) draws its own process noise: its factor follows the new Q."""
     from replay.models.depth import DepthModel
