@@ -123,7 +123,7 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     rows = summary.label([r.summary for r in results])
     rows = summary.add_paired(rows, {r.config_hash: r.config for r in results},
                               {r.config_hash: r.records for r in results}, baseline)
-    return summary.against_measurements(rows)
+    return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
 
 
 def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,

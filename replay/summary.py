@@ -102,13 +102,15 @@ def measurements(cfg: dict) -> str:
     return SYNTHETIC if getattr(task_class(cfg["task"]), "SYNTHETIC", False) else "sensors"
 
 
-def against_measurements(rows: list[dict]) -> list[dict]:
+def against_measurements(rows: list[dict], configs: dict) -> list[dict]:
     """With a ``measurements`` row (the raw observations, :mod:`replay.filters.measurements`):
-    ``worse_than_measurements`` on every filter row of its dataset and task — true when the
-    filter's mean position RMSE exceeds that of the input it reads (its lost runs included)."""
-    meas = {(r["dataset"], r["task"]): r for r in rows if r["filter"] == "measurements"}
+    ``worse_than_measurements`` on every filter row run on the same measurements (:func:`group_key`;
+    ``configs``: config hash -> configuration) — true when the filter's mean position RMSE
+    exceeds that of the input it reads (its lost runs included)."""
+    key = lambda r: group_key(configs[r["config_hash"]])  # noqa: E731
+    meas = {key(r): r for r in rows if r["filter"] == "measurements"}
     for r in rows:
-        m = meas.get((r["dataset"], r["task"]))
+        m = meas.get(key(r))
         if m is None or r is m or str(r["filter"]).startswith("recorded:"):
             continue
         try:

@@ -33,10 +33,10 @@ GROUPS = [
         "kf": {}, "gwo-pf": {"n_particles": 30, "t_max": 3}, "igwo-pf": {"n_particles": 30, "t_max": 4},
     }),
     ("sim/lake-depth", {}, 60, "depth", {
-        "gpf": {"n_particles": 200, "n_grey": 20}, "mmpf": {"n_particles": 150},
+        "gpf": {"n_particles": 200, "n_grey": 20}, "mmpf": {"n_particles": 150}, "measurements": {},
     }),
     ("sim/sauv-current", {}, 80, "dead-reckoning", {
-        "aukf": {"forgetting": 0.95}, "measurements": {},
+        "aukf": {"forgetting": 0.95},
     }),
 ]
 RUNS, SEED = 3, 5

@@ -57,7 +57,7 @@ def campaign_rows(out, order=None, baseline: str | None = None, *, store: Store 
     else:
         rows.sort(key=lambda r: (r["dataset"], r["task"], r["filter"], r["params"]))
     summary.label(rows)
-    return summary.add_paired(rows, configs, records, baseline)
+    return summary.against_measurements(summary.add_paired(rows, configs, records, baseline), configs)
 
 
 def paired_rows(out, rows, metric_names=("pos_rmse", "ate"), *, collected=None) -> list[dict]:
