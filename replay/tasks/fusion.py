@@ -179,13 +179,17 @@ class FusionTask(Task):
         if fld in noise:
             v = float(noise[fld])
             return np.full(n, v), f"declared {v:g}"
+        v = getattr(self, NOISE_PARAM[fld])
         sigma = frame.channels.get(f"{entry['entry']}_sigma")
         if fld == "position" and sigma is not None:
-            s = np.asarray(sigma.values, float).reshape(n, -1)[:, 0]
-            good = sigma.valid & np.isfinite(s) & (s > 0)
-            if good[valid].all():
-                return np.where(good, s ** 2, np.nan), "recorded position_covariance"
-        v = getattr(self, NOISE_PARAM[fld])
+            s = np.asarray(sigma.values, float).reshape(n, -1)[:, :2]
+            good = sigma.valid & np.isfinite(s).all(axis=1) & (s > 0).all(axis=1)
+            var = np.where(good, np.max(s, axis=1) ** 2, v)  # per message; the larger axis (a diagonal R)
+            bad = int((valid & ~good).sum())
+            if bad < valid.sum():
+                return var, "recorded position_covariance" + (
+                    f" ({bad} of {int(valid.sum())} messages had none usable: not positive or not finite; "
+                    f"{NOISE_PARAM[fld]} = {v:g} used there)" if bad else "")
         return np.full(n, v), f"default {NOISE_PARAM[fld]} = {v:g}"
 
     @staticmethod
