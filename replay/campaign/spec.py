@@ -64,6 +64,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
+from replay.views import VIEW_PARAMS
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
@@ -248,7 +249,7 @@ def load(path) -> Campaign:
         if isinstance(ds_params.get("mapping"), str) and (path.parent / ds_params["mapping"]).is_file():
             ds_params["mapping"] = str((path.parent / ds_params["mapping"]).resolve())  # relative to this file
         if ds.kind == "sim":
-            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, ds_params)
+            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS + VIEW_PARAMS, ds_params)
         try:
             ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
         except ReplayError as e:
