@@ -23,10 +23,19 @@ they are part of ``dataset_params``: of the configuration hash, the manifest,
   channel. The report counts per channel the valid samples not taken
   (``dropped``), the grid points masked and the largest time shift.
 
-Order: window, then segment, then rate. The cut frame is re-based to start at
-``t = 0`` (the frame convention); ``meta["view"]`` keeps the original offset
-(``offset_s``), the original sample range, and the grid. ``epoch`` moves with
-the offset. Recorded estimates keep their own stamps (re-based, cut to the span).
+Order: window, then segment, then rate. The cut frame's times are re-based by
+the offset of its first sample from the original first sample, so it starts
+where the original started (``t = 0`` for a recording: the frame convention);
+the grid starts there too. ``meta["view"]`` keeps the offset (``offset_s``), the
+original sample range and the grid; ``epoch`` moves with the offset. Recorded
+estimates keep their own stamps (re-based alike, cut to the kept span).
+
+A simulation whose task starts from its simulated first state and steps at
+its generation step (``meta["initial_state"]``, ``dt``: ``sim/ungm``,
+``sim/auv-sonar``, ...) takes only views that keep its first sample and its
+step (a window ``:END``, a segment ``0:B``); the others are refused in one line
+(the task's model would not describe the frame). Its training and test data
+differ by seed (:mod:`replay.splits`).
 """
 from __future__ import annotations
 
@@ -135,13 +144,33 @@ def apply(frame, views: dict, source: str = "dataset"):
         _need(keep, f"the segment {views['segment']}", frame, source, span)
     idx = np.flatnonzero(keep)
     offset = float(t[idx[0]] - t[0])
+    _check_simulation(frame, views, offset, source)
     view = dict(views, offset_s=offset, samples=[int(idx[0]), int(idx[-1]) + 1], of=n0)
-    out = _rebuild(frame, t[idx] - t[idx[0]], {k: c.take(idx) for k, c in frame.channels.items()},
+    out = _rebuild(frame, t[idx] - offset, {k: c.take(idx) for k, c in frame.channels.items()},
                    {k: c.take(idx) for k, c in frame.reference.items()}, offset, view)
     if "window" in views or "segment" in views:
         out.report.add("dropped", "samples", n0 - len(idx), f"outside the view {_describe(views)} "
                        f"(kept samples {idx[0]}..{idx[-1]} of {n0}, times re-based by {offset:.3f} s)")
     return resample(out, views["rate"]) if "rate" in views else out
+
+
+def _check_simulation(frame, views, offset, source):
+    """A simulation whose task starts from its simulated state at the first sample and steps at the
+    generation step (``meta["initial_state"]``, ``meta["dt"]``) cannot be cut at its start or resampled:
+    its task's model would no longer describe the frame. One line instead of a wrong number."""
+    meta = frame.meta
+    if not ({"initial_state", "initial_state_ned"} & meta.keys()):
+        return
+    dt = meta.get("dt")
+    if offset > 0:
+        why = f"{_describe(views)} starts {offset:g} s after the first sample"
+    elif "rate" in views and not (isinstance(dt, (int, float)) and abs(views["rate"] * dt - 1) < 1e-12):
+        why = f"rate {views['rate']:g} Hz resamples a simulation generated every {dt} s"
+    else:
+        return
+    raise ReplayError(f"{source}: {why}, but its task starts from the simulated state at the first sample and "
+                      "steps at the generation step; simulate what you need with the generator's own parameters "
+                      f"(replay list datasets), cut its end with --first or a window ':END'")
 
 
 def _need(keep, what, frame, source, span):
@@ -158,12 +187,12 @@ def _describe(views: dict) -> str:
 def _rebuild(frame, t, channels, reference, offset, view, report=None):
     from replay.frame import Frame, Report
 
-    end = float(t[-1]) if len(t) else 0.0
+    start, end = float(t[0]), float(t[-1])
     estimates = {}
     for name, e in frame.estimates.items():
         shifted = type(e)(e.t - offset, e.position, e.orientation, e.covariance, e.frame, e.child, e.description,
                           dict(e.params))
-        keep = (shifted.t >= -1e-9) & (shifted.t <= end + 1e-9)
+        keep = (shifted.t >= start - 1e-9) & (shifted.t <= end + 1e-9)
         pick = (lambda a: None if a is None else a[keep])
         estimates[name] = type(e)(shifted.t[keep], shifted.position[keep], pick(shifted.orientation),
                                   pick(shifted.covariance), e.frame, e.child, e.description, dict(e.params))
@@ -198,7 +227,7 @@ def resample(frame, rate: float):
     report = Report(list(frame.report.entries))  # the input frame's report stays as it was
     t = frame.t - frame.t[0]
     n_grid = int(grid_index(t[-1:], rate)[0]) + 1
-    grid = np.arange(n_grid) / rate
+    grid = np.arange(n_grid) / rate  # from the first sample; the frame's own origin is kept below
     groups = []
     for group in (frame.channels, frame.reference):
         out = {}
@@ -223,4 +252,4 @@ def resample(frame, rate: float):
     view.setdefault("offset_s", 0.0)
     view.setdefault("samples", [0, len(frame.t)])
     view.setdefault("of", len(frame.t))
-    return _rebuild(frame, grid, groups[0], groups[1], 0.0, view, report)
+    return _rebuild(frame, frame.t[0] + grid, groups[0], groups[1], 0.0, view, report)
