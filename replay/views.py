@@ -92,6 +92,8 @@ def _parse_window(text: str, where: str) -> tuple[bool, float | None, float | No
         raise ReplayError(f"{where}window {text!r}: sample indices after '#' must be whole numbers")
     if any(b is not None and not math.isfinite(b) for b in (lo, hi)):
         raise ReplayError(f"{where}window {text!r}: the bounds must be finite")
+    if lo is None and hi is None:
+        raise ReplayError(f"{where}window {text!r} keeps everything: give a bound, or no window")
     if lo is not None and hi is not None and hi <= lo:
         raise ReplayError(f"{where}window {text!r}: the end must be after the start")
     return index, lo, hi
@@ -104,6 +106,8 @@ def _parse_segment(text: str, where: str) -> tuple[float, float]:
     if m is None or not 0 <= lo < hi <= 1:
         raise ReplayError(f"{where}segment must be A:B with 0 <= A < B <= 1, shares of the recording's duration "
                           f"(e.g. 0:0.6, 0.6:1) (got {text!r})")
+    if (lo, hi) == (0, 1):
+        raise ReplayError(f"{where}segment {text!r} keeps everything: give a share, or no segment")
     return lo, hi
 
 
@@ -226,7 +230,12 @@ def resample(frame, rate: float):
 
     report = Report(list(frame.report.entries))  # the input frame's report stays as it was
     t = frame.t - frame.t[0]
-    n_grid = int(grid_index(t[-1:], rate)[0]) + 1
+    n_grid = int(min(t[-1] * rate + 0.5, 2.0 ** 62)) + 1
+    if not 2 <= n_grid <= 10 * len(t) + 10:
+        shown = frame.meta.get("dataset") or frame.meta.get("source") or "dataset"
+        raise ReplayError(f"{shown}: rate {rate:g} Hz gives {n_grid} grid point(s) over the {t[-1]:g} s of "
+                          f"{len(t)} samples; " + ("2 at least are needed" if n_grid < 2 else
+                                                   "more than 10 per sample would be nearly all masked"))
     grid = np.arange(n_grid) / rate  # from the first sample; the frame's own origin is kept below
     groups = []
     for group in (frame.channels, frame.reference):

@@ -116,6 +116,7 @@ def test_segments_split_the_duration_without_a_shared_sample():
     ({"window": "-5:9"}, "window must be START:END"),
     ({"segment": "0.6:0.2"}, "segment must be A:B with 0 <= A < B <= 1"),
     ({"segment": "0:1.5"}, "segment must be A:B"),
+    ({"segment": ":"}, "segment .:. keeps everything"),
     ({"segment": 0.6}, "segment must be a string"),
 ])
 def test_bad_views_are_refused_in_one_line_naming_the_parameter(params, message):
