@@ -52,7 +52,7 @@ VIEW_PARAMS = (
           "grid point within half a period, else masked (no sample invented or averaged)", unit="Hz",
           low=0.0, low_open=True, optional=True),
     Param("window", str, None, "keep START <= t < END, seconds from the first sample (either bound may be empty, "
-          "e.g. 60:, :120.5), or #I:J sample indices; times re-based to 0", optional=True),
+          "e.g. 60:, :120.5), or #I:J sample indices; times shifted back by the start", optional=True),
     Param("segment", str, None, "keep the share A:B of the duration (0 <= A < B <= 1, e.g. 0:0.6, 0.6:1); "
           "applied after window", optional=True),
 )

@@ -14,7 +14,7 @@ A campaign is a TOML file::
     [[dataset]]
     id = "sim/auv-sonar"
     tasks = ["sonar"]         # default: the dataset's default task
-    params = { steps = 100 }  # passed to the generator or adapter
+    params = { steps = 100 }  # passed to the generator or adapter; views (rate, window, segment) for any
     first = 2000              # optional: only the first N samples
 
     [task.sonar]              # optional task parameters, for every dataset using the task
