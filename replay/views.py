@@ -202,7 +202,8 @@ def _rebuild(frame, t, channels, reference, offset, view, report=None):
                                   pick(shifted.covariance), e.frame, e.child, e.description, dict(e.params))
     meta = dict(frame.meta, view=view)
     epoch = None if frame.epoch is None else frame.epoch + offset
-    return Frame(t, channels, reference, epoch, meta, report if report is not None else Report(list(frame.report.entries)), estimates)
+    report = report if report is not None else Report(list(frame.report.entries))
+    return Frame(t, channels, reference, epoch, meta, report, estimates)
 
 
 def grid_index(t: np.ndarray, rate: float) -> np.ndarray:
