@@ -45,3 +45,15 @@ def test_views_of_a_plain_file_through_the_cli(tmp_path):
     assert res.exit_code == 0 and "view: {'rate': 2.0, 'segment': '0.5:1'" in res.output, res.output
     res = runner.invoke(main, ["eval", str(log), "--window", "500:600", "--filters", "ekf"])
     assert res.exit_code == 2 and "the window 500:600 holds no sample of the 89.95 s recording" in res.output
+
+
+def test_a_campaign_refuses_a_view_before_any_unit(tmp_path):
+    camp = tmp_path / "c.toml"
+    camp.write_text('[campaign]\nname = "v"\nruns = 2\n\n[[dataset]]\nid = "sim/auv-sonar"\n'
+                    'params = { steps = 30, window = "10:" }\n\n[[filter]]\nname = "ekf"\n')
+    res = CliRunner().invoke(main, ["campaign", "run", str(camp), "-o", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 2 and "sim/auv-sonar: window 10: starts 10 s after the first sample" in res.output
+    assert not (tmp_path / "out" / "units").exists()
+    camp.write_text(camp.read_text().replace('window = "10:"', "rate = 0"))
+    res = CliRunner().invoke(main, ["campaign", "run", str(camp), "-o", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 2 and "rate must be a finite number > 0" in res.output

@@ -64,7 +64,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
-from replay.views import VIEW_PARAMS
+from replay.views import NAMES as VIEW_NAMES, VIEW_PARAMS
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
@@ -254,6 +254,8 @@ def load(path) -> Campaign:
             ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
         except ReplayError as e:
             raise where.error(next(iter(ds_params), "params"), str(e)) from None
+        if ds.kind == "sim" and VIEW_NAMES & ds_params.keys():  # a view the simulation cannot take: now
+            _load_once(where, ds_id, ds_params, first, data_dir)
         recorded = _recorded(where, entry, ds_id, ds_params, first, data_dir, ds.adapter)
         ds_entries.append((ds_id, ds_params, first, tasks, recorded))
 
@@ -326,6 +328,17 @@ def _recording(where, path: Path, ds_id: str):
     except ReplayError as e:
         raise where.error("id", str(e), ds_id) from None
     return registry.Dataset(id=str(file), kind="file", adapter=adapter, file=str(file))
+
+
+def _load_once(where, ds_id, ds_params: dict, first, data_dir):
+    """Run 0's frame, so that a view it cannot take is refused before any unit."""
+    from replay.pipeline import load_frame
+
+    try:
+        return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
+                           "adapter": None}, 0, data_dir)
+    except ReplayError as e:
+        raise where.error("params", str(e)) from None
 
 
 def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapter) -> dict:
