@@ -132,7 +132,9 @@ def apply(frame, views: dict, source: str = "dataset"):
     if not views:
         return frame
     n0, t = len(frame.t), frame.t
-    span = float(t[-1] - t[0]) if n0 else 0.0
+    if n0 < 2:
+        raise ReplayError(f"{source}: a view needs 2 samples at least; the recording has {n0}")
+    span = float(t[-1] - t[0])
     keep = np.ones(n0, bool)
     if "window" in views:
         index, lo, hi = _parse_window(views["window"], "")
@@ -252,11 +254,10 @@ def resample(frame, rate: float):
             n_valid, kept = int(ch.valid.sum()), int(taken.sum())
             kind = "reference" if group is frame.reference else "channel"
             report.add("dropped", name, n_valid - kept,
-                             f"{kind} at {rate:g} Hz: {kept} of its {n_valid} valid samples taken (the nearest to "
-                             f"each grid point within ±{0.5 / rate:g} s; largest shift {shift:.3f} s), the rest "
-                             "not taken")
-            report.add("masked", name, n_grid - kept, f"{kind} at {rate:g} Hz: grid points of the {n_grid} "
-                             "with no valid sample within half a period")
+                       f"{kind} at {rate:g} Hz: {kept} of its {n_valid} valid samples taken (the nearest to each "
+                       f"grid point within ±{0.5 / rate:g} s; largest shift {shift:.3f} s), the rest not taken")
+            report.add("masked", name, n_grid - kept,
+                       f"{kind} at {rate:g} Hz: grid points of the {n_grid} with no valid sample within half a period")
         groups.append(out)
     view = dict(frame.meta.get("view") or {}, rate=rate, grid=n_grid)
     view.setdefault("offset_s", 0.0)
