@@ -14,7 +14,9 @@ dicts a tune adds to its configurations:
   from ``(seed, run, stream)`` (:mod:`replay.util.seeds`), so two different master
   seeds give disjoint sets of Monte Carlo runs whatever the run ranges: the test
   runs ``0..N-1`` under ``S + 1`` are not the training runs ``0..N-1`` under ``S``.
-  Both seeds must be integers ``>= 0``.
+  Both seeds must be integers ``>= 0``. For simulated datasets only: a recording's
+  samples are the same under every seed (:func:`check_disjoint` with ``dataset``
+  refuses it).
 
 :func:`check_disjoint` refuses, in one line, a training and a test set that
 share data: the same sequence with overlapping views (time segments or windows
@@ -87,7 +89,9 @@ def _overlap(train: dict, test: dict, dataset) -> str | None:
     if "seed" in train or "seed" in test:
         if train.get("seed") == test.get("seed"):
             return f"both use master seed {train.get('seed')}"
-        return None
+        recorded = [d for d in train.get("datasets", [dataset]) + test.get("datasets", [dataset])
+                    if d is not None and not _simulated(d)]
+        return f"{recorded[0]} is a recording: its samples are the same under every seed" if recorded else None
     common = [d for d in train.get("datasets", [dataset]) if d in test.get("datasets", [dataset])]
     if not common:
         return None
@@ -97,6 +101,12 @@ def _overlap(train: dict, test: dict, dataset) -> str | None:
         return None
     shown = ", ".join(str(d) for d in common if d is not None) or "the dataset"
     return f"{shown} in both" + (f" ({_text(a)} and {_text(b)})" if a or b else "")
+
+
+def _simulated(dataset: str) -> bool:
+    from replay import registry
+
+    return dataset in registry.all_datasets() and registry.get(dataset).kind == "sim"
 
 
 def _apart(a: dict, b: dict) -> bool:

@@ -232,3 +232,9 @@ def test_check_disjoint():
     assert "in both" in check_disjoint({"datasets": ["a"]}, {"datasets": ["a"]}, allow_overlap=True)
     with pytest.raises(ReplayError, match="overlap"):  # a window and a segment of one log: not provably apart
         check_disjoint({"window": "0:10"}, {"segment": "0.9:1"})
+
+
+def test_a_seed_split_of_a_recording_is_an_overlap():
+    assert check_disjoint({"seed": 1}, {"seed": 2}, dataset="sim/ungm") is None
+    with pytest.raises(ReplayError, match="bohai/20220822_0_6 is a recording: its samples are the same"):
+        check_disjoint({"seed": 1}, {"seed": 2}, dataset="bohai/20220822_0_6")
