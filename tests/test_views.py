@@ -169,6 +169,7 @@ def test_eval_and_campaign_give_the_same_rows_with_a_view_and_rerun_repeats_it(t
     ev, cp = _rows(tmp_path / "eval" / "leaderboard.csv"), _rows(tmp_path / "camp" / "leaderboard.csv")
     assert {k: ev["ekf"][k] for k in cp["ekf"]} == cp["ekf"] and float(ev["ekf"]["depth_rmse"]) > 0
     assert cp["ekf"]["config_hash"] == ev["ekf"]["config_hash"]  # the view is in the hash of both
+    assert ev["ekf"]["view"] == "rate=4 window=10:70"
     res = runner.invoke(main, ["rerun", str(tmp_path / "eval" / "manifest.json"), "-q"], catch_exceptions=False)
     assert res.exit_code == 0 and "reproduced" in res.output, res.output
     # without the view the numbers differ: the view is what was repeated
