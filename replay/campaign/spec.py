@@ -249,7 +249,9 @@ def load(path) -> Campaign:
         if isinstance(ds_params.get("mapping"), str) and (path.parent / ds_params["mapping"]).is_file():
             ds_params["mapping"] = str((path.parent / ds_params["mapping"]).resolve())  # relative to this file
         if ds.kind == "sim":
-            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS + VIEW_PARAMS, ds_params)
+            own = {k: v for k, v in ds_params.items() if k not in VIEW_NAMES}  # the views: checked below
+            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, own)
+            check_params(where, f"dataset {ds_id!r}", VIEW_PARAMS, {k: v for k, v in ds_params.items() if k not in own})
         try:
             ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
         except ReplayError as e:
