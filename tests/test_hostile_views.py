@@ -41,6 +41,7 @@ def test_views_of_a_plain_file_through_the_cli(tmp_path):
     cut = registry.load_frame(str(log), window="#100:500", rate=5)
     assert cut.meta["view"]["samples"] == [100, 500] and len(cut) == 101  # 19.95 s at 5 Hz: grid 0 .. 20 s
     np.testing.assert_array_equal(cut.channels["depth"].values[:3], whole.channels["depth"].values[100:112:4])
+    assert len(registry.load_frame(str(log), window="#100:500", rate=5, first=30)) == 30  # first: after the view
     res = runner.invoke(main, ["datasets", "info", str(log), "--segment", "0.5:1", "--rate", "2"])
     assert res.exit_code == 0 and "view: {'rate': 2.0, 'segment': '0.5:1'" in res.output, res.output
     res = runner.invoke(main, ["eval", str(log), "--window", "500:600", "--filters", "ekf"])
