@@ -12,6 +12,7 @@ import click
 
 import replay
 from replay.cli.examples import add_examples
+from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 
 
@@ -105,9 +106,11 @@ def _notes_to_stderr() -> None:
 @click.option("--min-scored-share", default=None, type=float,
               help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
                    "the rest is masked).")
+@view_options
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None):
+             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None,
+             rate=None, window=None, segment=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
@@ -130,7 +133,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
     fparams = cli_params.filter_params(params, names + (recorded or []))
     tparams = cli_params.task_params(task_params, task)
-    dparams = cli_params.dataset_inputs(dataset_params, mapping)
+    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), rate, window, segment)
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
     check_recorded(dataset, recorded or [], dparams)  # before any recording is read
     # the output set is checked before the computation (inputs, writable, space, ownership)
