@@ -53,7 +53,8 @@ def ellipsoid_matrix(sphere, k):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("fox")
-    cli("eval", "sim/auv-bag", "-f", "ekf,ukf", "--first", "400", "--runs", "2", "-o", out / "run",
+    cli("eval", "sim/auv-bag", "--task", "position", "-f", "ekf,ukf", "--first", "400", "--runs", "2",
+        "-o", out / "run",
         "--mcap", out / "run.mcap")
     return out
 
