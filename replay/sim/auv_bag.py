@@ -144,4 +144,6 @@ def make_frame(rng: np.random.Generator, **params):
         raise ReplayError(f"sim/auv-bag: cannot write its temporary bag in {tempfile.gettempdir()} "
                           f"({err.strerror or err})") from None
     frame.meta["generator"] = "replay.sim.auv_bag:make_frame"
+    frame.meta["source"] = "sim/auv-bag"  # not the temporary bag's path (gone, and machine-specific)
+    frame.meta.pop("path", None)
     return frame
