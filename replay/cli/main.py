@@ -300,6 +300,9 @@ def _register_optional():
     from replay.cli.score import score_cmd
 
     main.add_command(score_cmd)
+    from replay.cli.tune import tune_cmd
+
+    main.add_command(tune_cmd)
     from replay.cli.campaign import COMMANDS as campaign_commands
 
     for cmd in campaign_commands:

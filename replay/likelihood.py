@@ -1,0 +1,68 @@
+"""Negative log-likelihood of a Kalman filter's innovations, on a linear-Gaussian model.
+
+For a Kalman filter on x_k = F x_{k-1} + w (Q), z_k = H x_k + v (R), the innovation
+y_k is N(0, S_k) with S_k = H (F P_{k-1} F' + Q) H' + R, so a run's
+
+    nll = 1/2 sum_k (y_k' S_k^-1 y_k + log det S_k + d_k log 2 pi)
+
+over the steps with a measurement (d_k components). The first term is the NIS the
+filter records; S_k is rebuilt here from the filter's own posterior covariances P_{k-1}
+(P0 at the first step) and the model: exact for ``kf``, ``ekf``, ``ukf`` and ``ckf``
+on a linear model (all four are the Kalman filter there), so nothing in the filters
+changes. Other filters or models: no ``nll`` (``replay tune`` refuses the objective).
+A filter given its own noise settings (issue 25 item 2) has another Q or R than the
+model: no ``nll`` either, until those settings are read here.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+NLL_FILTERS = ("kf", "ekf", "ukf", "ckf")  # exact Kalman filters on a linear model
+NOISE_PARAMS = {"q_scale": 1.0, "r_scale": 1.0, "p0_scale": 1.0, "Q": None, "R": None, "P0": None}
+
+
+def linear_matrices(model):
+    """(F, H, Q, R) of a linear model with constant matrices, else None."""
+    from replay.model import LinearGaussian
+    from replay.models.random_walk import RandomWalkPosition
+
+    if type(model) is RandomWalkPosition:
+        n = model.nx
+        return np.eye(n), np.eye(n), model.Q, model.R
+    if type(model) is LinearGaussian:
+        return model.A, model.C, model.Q, model.R
+    return None
+
+
+def provides(filter_name: str, filter_params: dict) -> str | None:
+    """None when the filter's runs get an ``nll``; else why not (one phrase)."""
+    if filter_name not in NLL_FILTERS:
+        return f"only {', '.join(NLL_FILTERS)} record it (the Kalman filters exact on a linear model)"
+    own = [k for k, d in NOISE_PARAMS.items() if k in filter_params and filter_params[k] != d]
+    if own:
+        return f"the filter's own noise settings ({', '.join(own)}) are not read by the likelihood yet"
+    return None
+
+
+def innovation_nll(problem, est, nis, dof) -> float:
+    """A run's nll (module docstring), or NaN when the model is not linear or nothing was measured."""
+    mats = linear_matrices(problem.model)
+    if mats is None or est.diverged:
+        return float("nan")
+    F, H, Q, R = mats
+    n = len(est.x)
+    prev = np.concatenate([np.asarray(problem.P0, float)[None], est.P[:n - 1]])
+    S = H @ (F @ prev @ F.T + Q) @ H.T + R  # (n, nz, nz)
+    z = np.asarray(problem.z[:n], float)
+    total, used = 0.0, 0
+    for k in np.flatnonzero(np.asarray(dof[:n]) > 0):
+        seen = np.isfinite(z[k])
+        Sk = S[k][np.ix_(seen, seen)]
+        sign, logdet = np.linalg.slogdet(Sk)
+        if sign <= 0 or not np.isfinite(nis[k]):
+            return float("nan")
+        total += 0.5 * (nis[k] + logdet + seen.sum() * math.log(2 * math.pi))
+        used += 1
+    return float(total) if used else float("nan")
