@@ -171,7 +171,7 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
             rows.append({
                 "dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": name,
                 "label": f"{name} ({kind})", "params": json.dumps({**c["filter_params"], **{
-                    f"task.{k}": v for k, v in params.items() if k.startswith("task.")}}, sort_keys=True),
+                    k: v for k, v in params.items() if k.startswith("task.")}}, sort_keys=True),
                 "tuned_on": t.split.tuned_on if kind == "tuned" else "defaults (not tuned)",
                 "tested_on": t.split.tested_on, "objective": t.objective,
                 "trials": len(studies.complete(st)[:t.trials]) if kind == "tuned" else 0,

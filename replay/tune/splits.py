@@ -39,7 +39,7 @@ def _fraction(text: str) -> float:
 
 
 def _describe(parts, seed) -> str:
-    text = " + ".join(d + "".join(f" {k}={v}" for k, v in sorted(p.items()) if k in VIEW_KEYS) for d, p in parts)
+    text = " + ".join(d + "".join(f" {k}={v}" for k, v in sorted(p.items())) for d, p in parts)
     return text + (f" (seed {seed})" if seed is not None else "")
 
 
