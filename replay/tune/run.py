@@ -113,9 +113,9 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with locked(out, wait=wait):
-        write_json(out / "tune.json", _asked(t))
         store = studies.storage(out)
         opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db") for f in t.filters}
+        write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
