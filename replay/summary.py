@@ -34,6 +34,7 @@ ensemble consistency (:func:`replay.metrics.consistency`); the flag is ``consist
 ``optimistic``, ``pessimistic`` or ``collapsed`` (then ``anees`` is empty: a collapsed
 covariance gives no number worth printing);
 
+``view`` (rows on a view of the dataset only: ``rate=1 window=60:``, :mod:`replay.views`);
 ``content_checked`` (rows on a registered recording only) — whether anything published confirms
 the file: its registered checksum, or the rows and time span its upstream listing declares
 (:func:`replay.checksums.check_loaded`); False flags a file accepted on its structure alone;
@@ -50,6 +51,7 @@ import numpy as np
 
 from replay import metrics, score
 from replay.util.params import Param
+from replay.views import NAMES as VIEWS
 
 HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
         "first"]
@@ -87,6 +89,9 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)
+    view = [(k, cfg["dataset_params"][k]) for k in VIEWS if k in (cfg.get("dataset_params") or {})]
+    if view:  # a view of the dataset (replay/views.py): rows of one dataset at two rates are told apart
+        row["view"] = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in view)
     return row
 
 

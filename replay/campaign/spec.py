@@ -14,7 +14,7 @@ A campaign is a TOML file::
     [[dataset]]
     id = "sim/auv-sonar"
     tasks = ["sonar"]         # default: the dataset's default task
-    params = { steps = 100 }  # passed to the generator or adapter
+    params = { steps = 100 }  # passed to the generator or adapter; views (rate, window, segment) for any
     first = 2000              # optional: only the first N samples
 
     [task.sonar]              # optional task parameters, for every dataset using the task
@@ -64,6 +64,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.pipeline import RECORDED, Config, recorded_params
 from replay.pipeline import plain as _plain
+from replay.views import NAMES as VIEW_NAMES, VIEW_PARAMS
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
@@ -248,11 +249,13 @@ def load(path) -> Campaign:
         if isinstance(ds_params.get("mapping"), str) and (path.parent / ds_params["mapping"]).is_file():
             ds_params["mapping"] = str((path.parent / ds_params["mapping"]).resolve())  # relative to this file
         if ds.kind == "sim":
-            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, ds_params)
+            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS + VIEW_PARAMS, ds_params)
         try:
             ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
         except ReplayError as e:
             raise where.error(next(iter(ds_params), "params"), str(e)) from None
+        if ds.kind == "sim" and VIEW_NAMES & ds_params.keys():  # a view the simulation cannot take: now
+            _load_once(where, ds_id, ds_params, first, data_dir)
         recorded = _recorded(where, entry, ds_id, ds_params, first, data_dir, ds.adapter)
         ds_entries.append((ds_id, ds_params, first, tasks, recorded))
 
@@ -325,6 +328,17 @@ def _recording(where, path: Path, ds_id: str):
     except ReplayError as e:
         raise where.error("id", str(e), ds_id) from None
     return registry.Dataset(id=str(file), kind="file", adapter=adapter, file=str(file))
+
+
+def _load_once(where, ds_id, ds_params: dict, first, data_dir):
+    """Run 0's frame, so that a view it cannot take is refused before any unit."""
+    from replay.pipeline import load_frame
+
+    try:
+        return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
+                           "adapter": None}, 0, data_dir)
+    except ReplayError as e:
+        raise where.error("params", str(e)) from None
 
 
 def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapter) -> dict:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from replay import registry
+from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 from replay.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
 
@@ -52,7 +53,8 @@ def list_cmd(data_dir):
               help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
 @click.option("--dataset-param", "dataset_params", multiple=True,
               help="Dataset parameter NAME=VALUE (repeatable; as for `replay eval`).")
-def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=()):
+@view_options
+def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), rate=None, window=None, segment=None):
     """Manifest fields, location and, when present, what loading it gives.
 
     DATASET is what `replay eval` takes: a registered id, or a file (a CSV, a ROS 1 .bag, a
@@ -60,7 +62,8 @@ def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=()):
     from replay.cli.params import dataset_inputs
     from replay.pipeline import load_frame
 
-    dparams = registry.check_params(dataset, dataset_inputs(dataset_params, mapping), adapter=adapter)
+    dparams = registry.check_params(dataset, with_views(dataset_inputs(dataset_params, mapping), rate, window,
+                                                        segment), adapter=adapter)
     config = {"dataset": dataset, "dataset_params": dparams, "first": None, "seed": 0, "adapter": adapter}
     if registry.is_path(dataset):
         frame = load_frame(config, 0, data_dir)  # as `replay eval` reads it

@@ -120,6 +120,7 @@ def _table(kind):
 
 def _datasets(problems):
     from replay import registry
+    from replay.views import VIEW_PARAMS
 
     out = []
     for ds in registry.all_datasets().values():
@@ -127,6 +128,7 @@ def _datasets(problems):
             lines = _declared(registry.generator(ds).PARAMS)
         else:
             lines = [f"{INDENT}(a recording read by the {ds.adapter} adapter: `replay list adapters`)"]
+        lines += [line + " (a view: every dataset)" for line in _declared(VIEW_PARAMS)]
         doc = plain_text(ds.description)
         if ds.manifest.startswith("entry point of "):
             doc += f" (plugin: {ds.manifest[len('entry point of '):].split(', ')[0]})"

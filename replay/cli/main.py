@@ -12,6 +12,7 @@ import click
 
 import replay
 from replay.cli.examples import add_examples
+from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 
 
@@ -107,9 +108,11 @@ def _notes_to_stderr() -> None:
                    "the rest is masked).")
 @click.option("--tuned", default=None, type=click.Path(exists=True, dir_okay=False),
               help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.")
+@view_options
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None, tuned=None):
+             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None,
+             rate=None, window=None, segment=None, tuned=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
@@ -140,7 +143,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         names = names if given else t_names
         fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
         tparams = {**t_tparams, **tparams}
-    dparams = cli_params.dataset_inputs(dataset_params, mapping)
+    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), rate, window, segment)
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
     check_recorded(dataset, recorded or [], dparams)  # before any recording is read
     # the output set is checked before the computation (inputs, writable, space, ownership)
