@@ -57,6 +57,8 @@ import numpy as np
 from replay.util.errors import ProtocolError, ReplayError
 from replay.util.params import Declared
 
+from . import noise_params
+
 PER_RUN = ("start", "predict", "update", "estimate", "finish")
 # errors of the user or of the program: raised, never counted as a divergence
 NOT_NUMERICAL = (ReplayError, TypeError, AttributeError, NameError, NotImplementedError, AssertionError)
@@ -124,10 +126,24 @@ class Filter(Declared):
 
     KIND = "filter"
     name = "filter"
-    PARAMS = ()
+    PARAMS = noise_params.NOISE_PARAMS
+    q_scale = r_scale = p0_scale = 1.0  # the defaults, for filters with a constructor of their own
+    Q = R = P0 = None
+
+    def __init_subclass__(cls, **kwargs):
+        """Every filter, built-in or plugin, takes the per-filter noise settings
+        (:mod:`replay.filters.noise_params`): added to its ``PARAMS``, taken from the keywords
+        of a constructor of its own, reported by a ``params()`` of its own."""
+        super().__init_subclass__(**kwargs)
+        cls.PARAMS = noise_params.declared(cls)
+        if "__init__" in vars(cls):
+            cls.__init__ = noise_params.taking_settings(cls.__init__)
+        if "params" in vars(cls):
+            cls.params = noise_params.reporting_settings(cls.params)
 
     def params(self) -> dict:
-        """The filter's parameters, for manifests and leaderboards.
+        """The filter's parameters, for manifests and leaderboards; the noise settings only
+        where they differ from the defaults (the hash of a configuration without them unchanged).
 
         A filter whose own constructor sets public attributes that are not in
         ``PARAMS`` (not declared) reports its public attributes.
@@ -135,8 +151,8 @@ class Filter(Declared):
         public = {k: v for k, v in vars(self).items() if not k.startswith("_")}
         names = {p.name for p in self.PARAMS}
         if set(public) <= names and all(hasattr(self, n) for n in names):
-            return super().params()
-        return public
+            public = super().params()
+        return noise_params.reported(public, self)
 
     # --- the engine of M runs (override for filters written over the run axis) --------
     def engine(self, model, rngs):

@@ -27,6 +27,7 @@ import replay
 from replay import registry, score, summary
 from replay.util.progress import particle_weight
 from replay.filters import make_filter
+from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded, is_sim,
                              load_frame, plain, recorded_params, run_block)
@@ -177,6 +178,10 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
     built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
+    if any(noise_settings(f) for f in instances):  # their sizes, known once the task is built: before any run
+        built = built or {0: build_problem(configs[0], 0, data_dir)}
+        for f in instances:
+            check_noise(f, built[0].model)
     if offline and MEASUREMENTS not in filters:  # beside filters only: nothing to compare otherwise
         built = built or {0: build_problem(configs[0], 0, data_dir)}
         if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat

@@ -1,10 +1,8 @@
 """The one evaluation pipeline: a configuration and a block of runs -> one scored record per run.
 
-Everything that prints or stores a number goes through here: ``replay eval``
-(:func:`replay.evaluate.evaluate`, an in-memory campaign with one
-configuration per filter), ``replay campaign run`` (a job is a block of runs of
-one configuration, :func:`replay.campaign.units.execute_job`), ``replay
-reproduce`` and ``replay rerun`` (both through ``evaluate``).
+Everything that prints or stores a number goes through here: ``replay eval`` (:func:`replay.evaluate.evaluate`,
+an in-memory campaign with one configuration per filter), ``replay campaign run`` (a job is a block of runs
+of one configuration, :func:`replay.campaign.units.execute_job`), ``replay reproduce`` and ``replay rerun``.
 
 A :class:`Config` is one dataset x task x filter x parameters x seed; its
 hash (:func:`config_hash`) names it everywhere (leaderboards, campaign
@@ -16,12 +14,11 @@ filled in, so ``{}`` and the defaults are the same configuration.
 1. each run's problem (:func:`build_problem`): the frame (a simulator draws it
    from the run's data stream; a file is read once), then the task builds the
    measurements and prior from the task stream (seed streams: :mod:`replay.util.seeds`);
-2. the filter runs every run of the block in one call of
-   :meth:`replay.filters.base.Filter.run_batch` (runs sharing one model and one
-   pattern of missing measurements; otherwise in groups that do). Every filter
-   is written over the Monte Carlo run axis and each run draws only from its own
-   generator, so a run's numbers do not depend on which runs share its block:
-   eval and campaign agree by construction (``tests/test_pipeline.py``);
+2. the filter runs every run of the block in one call of :meth:`replay.filters.base.Filter.run_batch`
+   (runs sharing one model and one pattern of missing measurements; otherwise in groups that do), on the
+   model and priors under its own noise settings (:mod:`replay.filters.noise_params`). Every filter is
+   written over the Monte Carlo run axis and each run draws only from its own generator, so a run's
+   numbers do not depend on which runs share its block: eval and campaign agree by construction;
 3. each run is scored by :func:`replay.metrics.run_metrics` (RMSE per axis and
    angle, ATE, drift, NEES/NIS) into a record ``{"run", "status", "metrics",
    "series"}``; ``keep=True`` also keeps the problem, the estimates and the
@@ -55,6 +52,7 @@ from replay.align import ALIGNMENTS, align, apply
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
 from replay.filters.base import Estimates, check_batch
+from replay.filters.noise_params import apply as apply_noise
 from replay.tasks import make_task, reference_present, source_of
 from replay.util import covcols
 from replay.util.errors import ReplayError
@@ -247,19 +245,21 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
             results.append(failed(run, err))
     if not problems:
         return results
-    try:
+    groups = _groups(list(problems), problems)
+    try:  # the filter; each group's model and priors under its noise settings, checked before any run
         flt = make_filter(c["filter"], **c["filter_params"])
+        noisy = [apply_noise(flt, problems[g[0]].model, np.stack([problems[r].P0 for r in g])) for g in groups]
     except Exception as err:
         if strict:
             raise
         return results + [failed(run, err) for run in problems]
     estimates, wall = {}, {}
-    for group in _groups(list(problems), problems):
+    for group, (model, P0) in zip(groups, noisy):
         ps = [problems[r] for r in group]
         t0 = perf_counter()
         try:
-            out = flt.run_batch(ps[0].model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]),
-                                np.stack([p.P0 for p in ps]), [filter_rng(c["seed"], r, c["filter"]) for r in group])
+            out = flt.run_batch(model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]), P0,
+                                [filter_rng(c["seed"], r, c["filter"]) for r in group])
             check_batch(c["filter"], out, ps)
         except BaseException as err:  # the filter's failure (any, sys.exit too): its runs failed
             if ends_run(err, strict):

@@ -38,6 +38,7 @@ from replay.util.progress import particle_weight
 
 from . import board, index
 from .lock import locked
+from .noise_check import check_noise
 from .progress import Progress
 from .spec import Campaign
 from .store import Store, pack, sync_dir, write_bytes, write_json
@@ -251,6 +252,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
               "rewritten": [what for h, r, what in damaged if r is None],
               "stored_before": stored_before, "backend": "none"}
     if jobs:
+        check_noise(jobs, campaign.path)  # per-filter Q, R, P0 of the task model's size: before any unit
         check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
         backend, counts["backend"] = open_backend(workers, scheduler, dask_local, connect_timeout, len(jobs))
         weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs}

@@ -62,6 +62,11 @@ class DepthModel(Model):
         self.Q = paper_Q()[0] if Q is None else np.asarray(Q, float)
         self.R = np.asarray(R, float)
         self.dt = np.asarray(dt, float)
+        self.refresh_noise()
+
+    def refresh_noise(self) -> None:
+        """Recompute the factor of ``self.Q`` that :meth:`sample_f` draws with (after Q changed:
+        a filter's own noise settings, :mod:`replay.filters.noise_params`)."""
         self._LQ = cholesky(self.Q)
         self._Qdiag = is_diagonal(self.Q)
 
