@@ -10,8 +10,9 @@ filter records; S_k is rebuilt here from the filter's own posterior covariances 
 (P0 at the first step) and the model: exact for ``kf``, ``ekf``, ``ukf`` and ``ckf``
 on a linear model (all four are the Kalman filter there), so nothing in the filters
 changes. Other filters or models: no ``nll`` (``replay tune`` refuses the objective).
-A filter given its own noise settings (issue 25 item 2) has another Q or R than the
-model: no ``nll`` either, until those settings are read here.
+A filter with its own noise settings (``q_scale``, ``R``, ...: :mod:`replay.filters.noise_params`)
+ran on the model and P0 under those settings: ``model`` and ``P0`` here are those (the pipeline
+passes them), so the likelihood is that of the filter that ran.
 """
 from __future__ import annotations
 
@@ -20,7 +21,6 @@ import math
 import numpy as np
 
 NLL_FILTERS = ("kf", "ekf", "ukf", "ckf")  # exact Kalman filters on a linear model
-NOISE_PARAMS = {"q_scale": 1.0, "r_scale": 1.0, "p0_scale": 1.0, "Q": None, "R": None, "P0": None}
 
 
 def linear_matrices(model):
@@ -36,24 +36,23 @@ def linear_matrices(model):
     return None
 
 
-def provides(filter_name: str, filter_params: dict) -> str | None:
+def provides(filter_name: str) -> str | None:
     """None when the filter's runs get an ``nll``; else why not (one phrase)."""
     if filter_name not in NLL_FILTERS:
         return f"only {', '.join(NLL_FILTERS)} record it (the Kalman filters exact on a linear model)"
-    own = [k for k, d in NOISE_PARAMS.items() if k in filter_params and filter_params[k] != d]
-    if own:
-        return f"the filter's own noise settings ({', '.join(own)}) are not read by the likelihood yet"
     return None
 
 
-def innovation_nll(problem, est, nis, dof) -> float:
-    """A run's nll (module docstring), or NaN when the model is not linear or nothing was measured."""
-    mats = linear_matrices(problem.model)
+def innovation_nll(problem, est, nis, dof, model=None, P0=None) -> float:
+    """A run's nll (module docstring), or NaN when the model is not linear or nothing was measured;
+    ``model``, ``P0``: what the filter ran on (default: the problem's)."""
+    model = problem.model if model is None else model
+    mats = linear_matrices(model)
     if mats is None or est.diverged:
         return float("nan")
     F, H, Q, R = mats
     n = len(est.x)
-    prev = np.concatenate([np.asarray(problem.P0, float)[None], est.P[:n - 1]])
+    prev = np.concatenate([np.asarray(problem.P0 if P0 is None else P0, float)[None], est.P[:n - 1]])
     S = H @ (F @ prev @ F.T + Q) @ H.T + R  # (n, nz, nz)
     z = np.asarray(problem.z[:n], float)
     total, used = 0.0, 0

@@ -285,8 +285,9 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
     err = score.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
-    if nll.provides(c["filter"], c["filter_params"]) is None and nll.linear_matrices(problem.model) is not None:
-        m["nll"] = nll.innovation_nll(problem, est, series["nis"], series["nis_dof"])  # replay tune's objective
+    if nll.provides(c["filter"]) is None and nll.linear_matrices(problem.model) is not None:
+        model, P0 = apply_noise(make_filter(c["filter"], **c["filter_params"]), problem.model, problem.P0[None])
+        m["nll"] = nll.innovation_nll(problem, est, series["nis"], series["nis_dof"], model, P0[0])  # replay tune
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
     cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
     cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})

@@ -14,7 +14,7 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
     from replay import registry
     from replay.eval_options import validate_eval_options
     from replay.filters import make_filter
-    from replay.pipeline import default_task, is_sim, plain
+    from replay.pipeline import default_task, plain
     from replay.tasks import make_task
 
     if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
@@ -33,7 +33,7 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
     weights = objectives.parse(objective)
     view = {k: v for k, v in (view or {}).items() if v is not None}
     s = splits.make(dataset, {**(dataset_params or {}), **view}, train_segment=train_segment, train=train,
-                    test=test, split=split, seed=seed, allow_overlap=allow_overlap, is_sim=is_sim)
+                    test=test, split=split, seed=seed, allow_overlap=allow_overlap)
     checked = []
     for d, p in s.train + s.test:  # every dataset and its view parameters, canonical
         checked.append((d, plain(registry.check_params(d, p))))
@@ -55,11 +55,10 @@ def _check_nll(t: Tune) -> None:
     from replay.pipeline import build_problem
 
     for name in t.filters:
-        noisy = [d.key for d in t.dims[name] if d.name in likelihood.NOISE_PARAMS]
-        why = likelihood.provides(name, {d.name: 0 for d in t.dims[name] if d.name in likelihood.NOISE_PARAMS})
-        if why is not None or noisy:
+        why = likelihood.provides(name)
+        if why is not None:
             raise ReplayError(f"--objective {t.objective}: filter {name!r} cannot provide the innovations' "
-                              f"likelihood ({why or 'its own noise settings ' + ', '.join(noisy) + ' are not read by it yet'})")
+                              f"likelihood ({why})")
     problem = build_problem(t.configs("train", t.filters[0], {})[0], 0, t.data_dir)
     if likelihood.linear_matrices(problem.model) is None:
         raise ReplayError(f"--objective {t.objective}: task {t.task!r} has a nonlinear model "

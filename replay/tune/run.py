@@ -69,10 +69,11 @@ class Tune:
     def defaults(self, name: str) -> dict | None:
         """{key: default} of filter ``name``'s searched parameters, or None when a default lies outside
         the space (the first trial of a study is the defaults, so tuning never ends worse on training)."""
-        from replay.filters import make_filter
         from replay.tasks import make_task
 
-        have = {**{f"{name}.{k}": v for k, v in make_filter(name).params().items()},
+        from .space import _declared
+
+        have = {**{f"{name}.{p.name}": p.default for p in _declared(name)},  # params() leaves out default noise
                 **{f"task.{k}": v for k, v in make_task(self.task, **self.task_params).params().items()}}
         out = {d.key: have.get(d.key) for d in self.dims[name]}
         inside = all(v in d.choices if d.kind == "choice" else
@@ -176,7 +177,7 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
                 "tested_on": t.split.tested_on, "objective": t.objective,
                 "trials": len(studies.complete(st)[:t.trials]) if kind == "tuned" else 0,
                 "train_score": train_score, "test_score": test_score,
-                "overlap": "OVERLAP: train and test share data" if t.split.overlap else "",
+                "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
                 "runs": t.runs, "seed": test[0].seed,
                 **{k: row0.get(k, "") for k in ("pos_rmse", "pos_rmse_median", "lost", "diverged", "anees")},
                 "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),

@@ -187,6 +187,7 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
 
 
 def _declared(name: str):
+    """The declared parameters of filter ``name``."""
     from replay.util.lookup import resolve
     from replay.filters import FILTERS
 

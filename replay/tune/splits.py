@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 from replay.util.errors import ReplayError
 
-VIEW_KEYS = ("rate", "window", "segment")
-
 
 @dataclass
 class Split:
@@ -25,7 +23,7 @@ class Split:
     test_seed: int | None
     tuned_on: str
     tested_on: str
-    overlap: bool = False
+    overlap: str | None = None  # what train and test share (allowed with --allow-overlap)
 
 
 def _fraction(text: str) -> float:
@@ -44,7 +42,7 @@ def _describe(parts, seed) -> str:
 
 
 def make(dataset: str | None, view: dict, *, train_segment=None, train=None, test=None, split=None,
-         seed: int = 0, allow_overlap: bool = False, is_sim=None) -> Split:
+         seed: int = 0, allow_overlap: bool = False) -> Split:
     """The split the options ask for (exactly one way), checked for overlap."""
     ways = [w for w, v in (("--train-segment", train_segment), ("--train/--test", train or test),
                            ("--split", split)) if v]
@@ -54,11 +52,12 @@ def make(dataset: str | None, view: dict, *, train_segment=None, train=None, tes
     if train_segment is not None:
         if not dataset:
             raise ReplayError("--train-segment needs a DATASET")
-        f = _fraction(train_segment)
+        from replay.splits import split_views
+
         if "segment" in view:
             raise ReplayError("--train-segment: the dataset view already has a segment; give one or the other")
-        a = [(dataset, {**view, "segment": f"0:{f:g}"})]
-        b = [(dataset, {**view, "segment": f"{f:g}:1"})]
+        tr, te = split_views({"segment": _fraction(train_segment)})
+        a, b = [(dataset, {**view, **tr})], [(dataset, {**view, **te})]
         s = Split(a, b, None, None, _describe(a, None), _describe(b, None))
     elif train or test:
         if not (train and test):
@@ -71,49 +70,28 @@ def make(dataset: str | None, view: dict, *, train_segment=None, train=None, tes
     else:
         if split != "seeds":
             raise ReplayError(f"--split {split!r}: the only split by option is 'seeds' (simulated data)")
-        if not dataset or (is_sim is not None and not is_sim(dataset)):
-            raise ReplayError(f"--split seeds: {dataset or 'no DATASET'} is not a simulated dataset (its runs would "
-                              "share the same recording); use --train-segment or --train/--test")
+        if not dataset:
+            raise ReplayError("--split seeds needs a DATASET (simulated)")
         a, b = [(dataset, dict(view))], [(dataset, dict(view))]
         s = Split(a, b, seed, seed + 1, _describe(a, seed), _describe(b, seed + 1))
-    s.overlap = overlaps(s)
+    s.overlap = overlap(s, dataset)
     if s.overlap and not allow_overlap:
-        raise ReplayError(f"training data ({s.tuned_on}) and test data ({s.tested_on}) overlap: a filter would be "
-                          "scored on data it was tuned on; pass --allow-overlap to do it anyway (every row says so)")
+        raise ReplayError(f"training data ({s.tuned_on}) and test data ({s.tested_on}) overlap: {s.overlap}; a "
+                          "filter would be scored on data it was tuned on (pass --allow-overlap to tune anyway: "
+                          "every row is then flagged)")
     return s
 
 
-def overlaps(s: Split) -> bool:
-    """Whether some training data is test data (the views' own check when present)."""
-    if s.train_seed is not None and s.train_seed != s.test_seed:
-        return False
-    try:
-        from replay.splits import check_disjoint  # issue 25 item 1 (views)
-    except ImportError:
-        check_disjoint = None
+def overlap(s: Split, dataset) -> str | None:
+    """What the training and test data share (:func:`replay.splits.check_disjoint`), or None."""
+    from replay.splits import check_disjoint
+
+    if s.train_seed is not None:
+        return check_disjoint({"seed": s.train_seed}, {"seed": s.test_seed}, allow_overlap=True, dataset=dataset)
+    found = []
     for d, p in s.train:
         for e, q in s.test:
-            if d != e:
-                continue
-            if check_disjoint is not None:
-                try:
-                    check_disjoint([(d, p)], [(e, q)])
-                    continue
-                except ReplayError:
-                    return True
-                except TypeError:
-                    pass
-            if not _segments_apart(p, q):
-                return True
-    return False
-
-
-def _segments_apart(p: dict, q: dict) -> bool:
-    """Two views of one log apart by their segments (``"A:B"`` fractions), other view keys equal."""
-    if {k: v for k, v in p.items() if k != "segment"} != {k: v for k, v in q.items() if k != "segment"}:
-        return False  # another window or rate: cannot tell here; treated as overlapping
-    try:
-        (a0, a1), (b0, b1) = (tuple(float(x) for x in str(v.get("segment", "0:1")).split(":")) for v in (p, q))
-    except ValueError:
-        return False
-    return a1 <= b0 or b1 <= a0
+            what = check_disjoint({"datasets": [d], **p}, {"datasets": [e], **q}, allow_overlap=True)
+            if what:
+                found.append(what)
+    return "; ".join(found) or None
