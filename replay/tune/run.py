@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
@@ -123,7 +125,7 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
         progress = Progress(sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune",
                             unit="trial")
         try:
-            with ctx as mapper:
+            with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
                 run = Runner(t, out, mapper)
                 for name, st in opened.items():
                     for _ in range(todo[name]):
