@@ -112,6 +112,8 @@ def test_eval_tuned_gives_the_held_out_row(tmp_path):
     for col in ("pos_rmse", "pos_rmse_median", "x_rmse", "ate", "final_err", "nees", "nis", "anees", "scored"):
         assert float(ev["kf"][col]) == pytest.approx(float(held[col]), rel=1e-12, abs=0), col
     assert float(row["pos_rmse"]) == pytest.approx(float(ev["kf"]["pos_rmse"]), rel=1e-5)
+    again = CliRunner().invoke(main, ["rerun", str(tmp_path / "e" / "manifest.json"), "-q"])
+    assert again.exit_code == 0 and "reproduced" in again.output, again.output  # replay rerun repeats it
     camp = subprocess.run([sys.executable, "-m", "replay.cli", "campaign", "run", str(tmp_path / "t" / "tuned-kf.toml"),
                            "--out", str(tmp_path / "c"), "-q", "--workers", "1"], capture_output=True, text=True)
     assert camp.returncode == 0, camp.stderr  # a campaign file too
@@ -158,3 +160,14 @@ def test_nll_tune_recovers_the_true_q_and_r_within_their_sampling_error(tmp_path
     assert 0.03 < se_q < 0.25 and 0.01 < se_r < 0.1  # the test can fail: the errors are this tight
     default = [x for x in rows if x["label"] == "kf (default)"][0]
     assert float(row["test_score"]) < float(default["test_score"])
+
+
+def test_report_of_a_tune_directory(tmp_path):
+    tune(tmp_path / "t")
+    res = CliRunner().invoke(main, ["report", str(tmp_path / "t")])
+    assert res.exit_code == 0, res.output
+    rep = tmp_path / "t" / "report"
+    assert {p.name for p in rep.iterdir()} >= {"report.html", "history_kf.png", "history_ekf.png",
+                                               "importance_kf.png", "importance_ekf.png"}
+    page = (rep / "report.html").read_text()
+    assert "Train versus test" in page and "kf (tuned)" in page and page.count("<img") == 4

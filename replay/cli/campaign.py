@@ -96,9 +96,12 @@ def leaderboard(dirs, sort, out):
 def report(dir, out):
     """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report
+    from replay.tune import report as tune_report
 
     if out:
         check_names(out, "--out")
+    if tune_report.is_tune_dir(Path(dir)):  # replay tune: history, importances, train-versus-test gap
+        make_report = tune_report.make_report
     path = make_report(Path(dir), Path(out) if out else None)
     click.echo(f"wrote {path}")
 
