@@ -155,8 +155,6 @@ def _asked(t: Tune) -> dict:
 
 
 def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
-    from replay import summary
-
     rows = []
     for name, st in opened.items():
         best = studies.best(st, t.trials)
@@ -167,10 +165,8 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
             test_recs = run.records(test)
             test_score = float(sum(objectives.value(t.weights, r) for r in test_recs) / len(test_recs))
             progress.update(1)
-            c, h = test[0].as_dict(), config_hash(test[0].as_dict())
-            sha = {r["run"]: r["table"].get("sha256") for r in test_recs[0] if isinstance(r.get("table"), dict)}
-            row0 = summary.config_row(c, h, test_recs[0], lambda run_, cols: run.store.series(
-                h, run_, cols, sha.get(run_)), test_recs[0][0].get("version", "") if test_recs[0] else "")
+            per = [_row(run.store, x, recs) for x, recs in zip(test, test_recs)]  # one per test dataset
+            c = test[0].as_dict()
             rows.append({
                 "dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": name,
                 "label": f"{name} ({kind})", "params": json.dumps({**c["filter_params"], **{
@@ -181,11 +177,35 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
                 "train_score": train_score, "test_score": test_score,
                 "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
                 "runs": t.runs, "seed": test[0].seed,
-                **{k: row0.get(k, "") for k in ("pos_rmse", "pos_rmse_median", "lost", "diverged", "anees")},
+                **_pooled(per),
                 "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
                 "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
                 "_test": test, "_params": params})
     return rows
+
+
+def _row(store, cfg: Config, recs) -> dict:
+    """The leaderboard row (:func:`replay.summary.config_row`) of a configuration's stored records."""
+    from replay import summary
+
+    c, h = cfg.as_dict(), config_hash(cfg.as_dict())
+    sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
+    return summary.config_row(c, h, recs, lambda run_, cols: store.series(h, run_, cols, sha.get(run_)),
+                              recs[0].get("version", "") if recs else "")
+
+
+def _pooled(rows) -> dict:
+    """The test columns over the test datasets: means of ``pos_rmse``, ``pos_rmse_median`` and
+    ``anees`` (one dataset: its own), sums of ``lost`` and ``diverged``."""
+    def num(r, k):
+        try:
+            return float(r.get(k))
+        except (TypeError, ValueError):
+            return float("nan")
+
+    out = {k: float(np.mean([num(r, k) for r in rows])) for k in ("pos_rmse", "pos_rmse_median", "anees")}
+    out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
+    return out
 
 
 def write_tuned(t: Tune, out: Path, rows) -> dict:
