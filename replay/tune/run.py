@@ -176,7 +176,7 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
                 "trials": len(studies.complete(st)[:t.trials]) if kind == "tuned" else 0,
                 "train_score": train_score, "test_score": test_score,
                 "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
-                "runs": t.runs, "seed": test[0].seed,
+                "runs": t.runs * len(test), "seed": test[0].seed,
                 **_pooled(per),
                 "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
                 "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
