@@ -171,3 +171,28 @@ def test_report_of_a_tune_directory(tmp_path):
                                                "importance_kf.png", "importance_ekf.png"}
     page = (rep / "report.html").read_text()
     assert "Train versus test" in page and "kf (tuned)" in page and page.count("<img") == 4
+
+
+def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
+    """A campaign's [tune] table runs the tune of each dataset x task with the campaign's runs and
+    seed: the same rows as `replay tune` with those options; its units in OUT/tune/units."""
+    camp = tmp_path / "c.toml"
+    camp.write_text('[campaign]\nruns = 2\nseed = 0\n[[dataset]]\nid = "sim/linear"\nparams = { steps = 60 }\n'
+                    '[[filter]]\nname = "kf"\n[[filter]]\nname = "ekf"\n'
+                    '[tune]\ntrials = 6\nsplit = { seeds = 0 }\n'
+                    'space = { "task.q" = "log[0.01,10]", "task.r" = "log[0.1,20]" }\n')
+    res = CliRunner().invoke(main, ["campaign", "run", str(camp), "--out", str(tmp_path / "o"), "-q", "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    tuned = tmp_path / "o" / "tune" / "sim_linear_linear"
+    assert (tmp_path / "o" / "tune" / "units").is_dir() and not (tuned / "units").exists()
+    tune(tmp_path / "t")  # replay tune with the same data, runs, seed, space and trials
+    strip = lambda rows: [{k: v for k, v in r.items() if k not in ("tuned_on", "tested_on")} for r in rows]
+    assert strip(board(tuned)) == strip(board(tmp_path / "t"))
+    bad = tmp_path / "bad.toml"
+    bad.write_text(camp.read_text().replace("trials = 6", "trials = 6\nbudget = 3"))
+    res = CliRunner().invoke(main, ["campaign", "run", str(bad), "--out", str(tmp_path / "b"), "-q"])
+    assert res.exit_code == 2 and "bad.toml:" in res.output and "budget: unknown key in [tune]" in res.output
+    assert not (tmp_path / "b").exists()  # before any unit
+    bad.write_text(camp.read_text().replace('"task.q" = "log[0.01,10]"', '"task.q" = "log[0,10]"'))
+    res = CliRunner().invoke(main, ["campaign", "run", str(bad), "--out", str(tmp_path / "b"), "-q"])
+    assert res.exit_code == 2 and "a log range needs positive bounds" in res.output and not (tmp_path / "b").exists()

@@ -110,12 +110,19 @@ class Runner:
 
 
 def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=False, progress_stream=None,
-         connect_timeout: float = 5.0, wait: bool = False) -> dict:
+         connect_timeout: float = 5.0, wait: bool = False, store_dir=None) -> dict:
     """Run (or resume) every filter's study, score default and tuned configurations on the test
-    data, write ``leaderboard.csv`` and ``tuned.toml``; returns {"rows", "budget", "paths"}."""
+    data, write ``leaderboard.csv`` and ``tuned.toml``; returns {"rows", "budget", "paths"}.
+    ``store_dir``: where the units are stored (default ``out``; a campaign's tunes share one)."""
+    from contextlib import ExitStack
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    with locked(out, wait=wait):
+    units = Path(store_dir) if store_dir is not None else out
+    with ExitStack() as held:
+        held.enter_context(locked(out, wait=wait))
+        if units != out:
+            held.enter_context(locked(units, wait=wait))
         store = studies.storage(out)
         opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db") for f in t.filters}
         write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
@@ -126,7 +133,7 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
                             unit="trial")
         try:
             with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
-                run = Runner(t, out, mapper)
+                run = Runner(t, units, mapper)
                 for name, st in opened.items():
                     for _ in range(todo[name]):
                         trial, params = studies.next_trial(st, t.dims[name], t.seed, name, t.defaults(name))
