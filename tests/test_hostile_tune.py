@@ -106,3 +106,11 @@ def test_space_file(tmp_path):
     refused(tmp_path, "--space", str(f), match="expected FILTER.PARAM = SPEC")
     f.write_text('[pf\n')
     refused(tmp_path, "--space", str(f), match="not a TOML file")
+
+
+def test_out_that_is_not_a_tune_directory(tmp_path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "precious.txt").write_text("keep")
+    res = CliRunner().invoke(main, ["tune", *BASE, "-p", "task.q=log[0.1,1]", "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "not a replay tune output" in res.output
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["precious.txt"]

@@ -56,11 +56,19 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
     entries = (space.entries_from_file(space_file) if space_file else []) + space.entries_from_cli(space_params)
     if not entries:
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")
+    d = Path(out)
+    if d.is_dir() and any(d.iterdir()) and not (d / "study.db").is_file():
+        raise ReplayError(f"--out {out}: a non-empty directory that is not a replay tune output (no study.db); "
+                          "give a new or a tune directory")
+    if d.exists() and not d.is_dir():
+        raise ReplayError(f"--out {out}: not a directory")
+    parallel = workers or dask_local or (scheduler and 4)
     t = check.prepare(dataset, filters=filters.split(","), entries=entries, trials=trials, objective=objective,
                       runs=runs, seed=seed, task=task, task_params=cli_params.task_params(task_params, task),
                       dataset_params=cli_params.dataset_params(dataset_params), view={"rate": rate, "window": window},
                       first=first, data_dir=data_dir, train_segment=train_segment, train=train, test=test,
-                      split=split, allow_overlap=allow_overlap)
+                      split=split, allow_overlap=allow_overlap,
+                      batch=-(-runs // parallel) if parallel and runs > 0 else None)  # a trial's runs over the workers
     check_names(out, "--out")
     refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file],
                    "--out")
