@@ -196,3 +196,9 @@ def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
     bad.write_text(camp.read_text().replace('"task.q" = "log[0.01,10]"', '"task.q" = "log[0,10]"'))
     res = CliRunner().invoke(main, ["campaign", "run", str(bad), "--out", str(tmp_path / "b"), "-q"])
     assert res.exit_code == 2 and "a log range needs positive bounds" in res.output and not (tmp_path / "b").exists()
+
+
+def test_local_pool_gives_the_serial_rows(tmp_path):
+    tune(tmp_path / "serial")
+    tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes
+    assert board(tmp_path / "pool") == board(tmp_path / "serial")
