@@ -55,13 +55,30 @@ def innovation_nll(problem, est, nis, dof, model=None, P0=None) -> float:
     prev = np.concatenate([np.asarray(problem.P0 if P0 is None else P0, float)[None], est.P[:n - 1]])
     S = H @ (F @ prev @ F.T + Q) @ H.T + R  # (n, nz, nz)
     z = np.asarray(problem.z[:n], float)
-    total, used = 0.0, 0
-    for k in np.flatnonzero(np.asarray(dof[:n]) > 0):
-        seen = np.isfinite(z[k])
-        Sk = S[k][np.ix_(seen, seen)]
-        sign, logdet = np.linalg.slogdet(Sk)
-        if sign <= 0 or not np.isfinite(nis[k]):
-            return float("nan")
-        total += 0.5 * (nis[k] + logdet + seen.sum() * math.log(2 * math.pi))
-        used += 1
-    return float(total) if used else float("nan")
+    seen = np.isfinite(z)
+    steps = np.flatnonzero(np.asarray(dof[:n]) > 0)
+    full = steps[seen[steps].all(axis=1)]
+    part = steps[~seen[steps].all(axis=1)]
+    sign, logdet = np.linalg.slogdet(S[full]) if len(full) else (np.ones(0), np.zeros(0))  # one batched call
+    for k in part:  # a partial measurement: its components' block of S
+        sk, lk = np.linalg.slogdet(S[k][np.ix_(seen[k], seen[k])])
+        sign, logdet = np.append(sign, sk), np.append(logdet, lk)
+    used = np.concatenate([full, part])
+    if not len(used):
+        return float("nan")
+    nis = np.asarray(nis, float)[used]
+    if (sign <= 0).any() or not np.isfinite(nis).all():
+        return float("nan")
+    return 0.5 * float(np.sum(nis + logdet + seen[used].sum(axis=1) * math.log(2 * math.pi)))
+
+
+def of_run(config: dict, problem, est, series) -> dict:
+    """``{"nll": ...}`` of one run of ``config`` (a configuration dict) for a filter and model that
+    give it, computed under the filter's noise settings; ``{}`` otherwise."""
+    if provides(config["filter"]) is not None or linear_matrices(problem.model) is None:
+        return {}
+    from replay.filters import make_filter
+    from replay.filters.noise_params import apply
+
+    model, P0 = apply(make_filter(config["filter"], **config["filter_params"]), problem.model, problem.P0[None])
+    return {"nll": innovation_nll(problem, est, series["nis"], series["nis_dof"], model, P0[0])}

@@ -47,7 +47,7 @@ from time import perf_counter
 
 import numpy as np
 
-from replay import metrics, registry, score
+from replay import likelihood, metrics, registry, score
 from replay.align import ALIGNMENTS, align, apply
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
@@ -58,7 +58,6 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.params import Param, validate
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
-from replay import likelihood as nll
 
 RECORDED = "recorded:"  # the filter name of a recorded estimate's configuration: recorded:<name>
 RECORDED_PARAMS = (
@@ -285,9 +284,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
     err = score.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
-    if nll.provides(c["filter"]) is None and nll.linear_matrices(problem.model) is not None:
-        model, P0 = apply_noise(make_filter(c["filter"], **c["filter_params"]), problem.model, problem.P0[None])
-        m["nll"] = nll.innovation_nll(problem, est, series["nis"], series["nis_dof"], model, P0[0])  # replay tune
+    m.update(likelihood.of_run(c, problem, est, series))  # replay tune's likelihood objective, where it exists
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
     cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
     cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})

@@ -202,3 +202,28 @@ def test_local_pool_gives_the_serial_rows(tmp_path):
     tune(tmp_path / "serial")
     tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes
     assert board(tmp_path / "pool") == board(tmp_path / "serial")
+
+
+@pytest.mark.parametrize("fparams", [{}, {"q_scale": 0.3, "r_scale": 2.0}])
+def test_nll_is_the_textbook_kalman_likelihood(fparams):
+    """The recorded nll against an independent Kalman filter's innovation likelihood (numpy loop),
+    with the task's noise and under the filter's own noise settings."""
+    from replay.pipeline import build_problem, run_block
+
+    cfg = {"dataset": "sim/linear", "dataset_params": {"steps": 40, "q": 0.3, "r": 2.0}, "first": None,
+           "task": "linear", "task_params": {"q": 1.0, "r": 1.0, "p0": 1.0, "lost_threshold": 20.0, "lost_steps": 10},
+           "filter": "kf", "filter_params": fparams, "seed": 4, "alignment": "se3", "divergence_threshold": None}
+    rec = run_block(cfg, [0])[0]
+    p = build_problem(cfg, 0)
+    q, r = fparams.get("q_scale", 1.0), fparams.get("r_scale", 1.0)
+    x, P, total = np.asarray(p.x0, float), np.asarray(p.P0, float), 0.0
+    for z in p.z:
+        P = P + q * np.eye(3)
+        S = P + r * np.eye(3)
+        y = z - x
+        total += 0.5 * (y @ np.linalg.solve(S, y) + np.linalg.slogdet(S)[1] + 3 * math.log(2 * math.pi))
+        K = P @ np.linalg.inv(S)
+        x, P = x + K @ y, (np.eye(3) - K) @ P
+    assert rec["metrics"]["nll"] == pytest.approx(total, rel=1e-10)
+    rec_pf = run_block({**cfg, "filter": "pf", "filter_params": {"n_particles": 50}}, [0])[0]
+    assert "nll" not in rec_pf["metrics"]  # a particle filter gives none
