@@ -130,7 +130,7 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
         n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
         progress = Progress(sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune",
-                            unit="trial")
+                            unit="step")  # the trials, then each filter's default and tuned held-out scoring
         try:
             with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
                 run = Runner(t, units, mapper)
