@@ -1,7 +1,6 @@
 """``replay tune``: each filter at its best on training data, scored on held-out data."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import click
@@ -74,7 +73,7 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
                    "--out")
     check_writable(out, "--out")
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet)
-    click.echo(format_board(res["rows"]))
+    click.echo(run.format_board(res["rows"]))
     budget = res["budget"]
     same = len(set(budget.values())) == 1
     click.echo(f"budget: {next(iter(budget.values()))} trials per filter, the same for every filter" if same else
@@ -82,27 +81,3 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
     if t.split.overlap:
         click.echo("warning: training and test data overlap (--allow-overlap): test scores are not held out")
     click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))
-
-
-def format_board(rows) -> str:
-    head = ["filter", "tuned_on", "objective", "trials", "train", "test", "pos_rmse", "lost", "params"]
-    body = []
-    for r in rows:
-        body.append([r["label"], r["tuned_on"], r["objective"], str(r["trials"]), _num(r["train_score"]),
-                     _num(r["test_score"]), _num(r["pos_rmse"]), f"{r['lost']}/{r['runs']}", _short(r)])
-    widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
-    return "\n".join([line(head), *(line(b) for b in body)])
-
-
-def _short(r) -> str:
-    p = r.get("_params") or {}
-    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items()) or "defaults"
-
-
-def _num(v) -> str:
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return str(v)
-    return f"{v:.4f}" if math.isfinite(v) else str(v)

@@ -270,3 +270,28 @@ def _val(v) -> str:
 
 def _inline(d: dict) -> str:
     return "{ " + ", ".join(f"{json.dumps(k)} = {_val(v)}" for k, v in d.items() if v is not None) + " }"
+
+
+def format_board(rows) -> str:
+    """The leaderboard as printed: one line per row (default and tuned of each filter)."""
+    head = ["filter", "tuned_on", "objective", "trials", "train", "test", "pos_rmse", "lost", "params"]
+    body = []
+    for r in rows:
+        body.append([r["label"], r["tuned_on"], r["objective"], str(r["trials"]), _num(r["train_score"]),
+                     _num(r["test_score"]), _num(r["pos_rmse"]), f"{r['lost']}/{r['runs']}", _short(r)])
+    widths = [max(len(x) for x in col) for col in zip(head, *body)]
+    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
+    return "\n".join([line(head), *(line(b) for b in body)])
+
+
+def _short(r) -> str:
+    p = r.get("_params") or {}
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items()) or "defaults"
+
+
+def _num(v) -> str:
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    return f"{v:.4f}" if math.isfinite(v) else str(v)
