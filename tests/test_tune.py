@@ -31,7 +31,9 @@ def board(out):
 def test_same_seed_twice_same_best_and_rows(tmp_path):
     a, b = tune(tmp_path / "a"), tune(tmp_path / "b")
     ra, rb = board(tmp_path / "a"), board(tmp_path / "b")
-    assert [r["label"] for r in ra] == ["kf (default)", "kf (tuned)", "ekf (default)", "ekf (tuned)"]
+    assert [r["label"] for r in ra] == ["kf (default)", "kf (tuned)", "ekf (default)", "ekf (tuned)",
+                                        "measurements (raw observations)"]
+    assert ra[-1]["train_score"] == "" and float(ra[-1]["test_score"]) == float(ra[-1]["pos_rmse"]) > 2
     assert ra == rb
     assert a.output.replace("/a/", "/b/") == b.output
     for f in ("tuned-kf.toml", "tuned-ekf.toml"):  # tuned to other task parameters: one file each

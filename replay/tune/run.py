@@ -188,7 +188,29 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
                 "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
                 "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
                 "_test": test, "_params": params})
-    return rows
+    return rows + _measurements_row(t, run)
+
+
+def _measurements_row(t: Tune, run: Runner) -> list[dict]:
+    """The raw observations scored on the test data (the ``measurements`` row of ``replay eval``),
+    where the task observes every position component directly: a filter worse than its input shows."""
+    from replay.evaluate import observes_position
+    from replay.pipeline import build_problem
+
+    test = [t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
+            for d, p in t.split.test]
+    if not observes_position(build_problem(test[0], 0, t.data_dir)):
+        return []
+    recs = run.records(test)
+    score = float(sum(objectives.value(t.weights, r) for r in recs) / len(recs))
+    return [{"dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": "measurements",
+             "label": "measurements (raw observations)", "params": "{}", "tuned_on": "", "tested_on": t.split.tested_on,
+             "objective": t.objective, "trials": 0, "train_score": "", "test_score": score if math.isfinite(score) else "",
+             "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "", "runs": t.runs * len(test),
+             "seed": test[0].seed,
+             **_pooled([_row(run.store, x, r) for x, r in zip(test, recs)]),
+             "train_config_hashes": "", "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
+             "_test": test, "_params": None}]
 
 
 def _row(store, cfg: Config, recs) -> dict:
@@ -285,7 +307,9 @@ def format_board(rows) -> str:
 
 
 def _short(r) -> str:
-    p = r.get("_params") or {}
+    if r.get("_params") is None:
+        return "-"
+    p = r["_params"]
     return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items()) or "defaults"
 
 
