@@ -114,3 +114,8 @@ def test_out_that_is_not_a_tune_directory(tmp_path):
     res = CliRunner().invoke(main, ["tune", *BASE, "-p", "task.q=log[0.1,1]", "--out", str(tmp_path / "out")])
     assert res.exit_code == 2 and "not a replay tune output" in res.output
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["precious.txt"]
+
+
+def test_task_parameters_of_a_synthetic_task(tmp_path):
+    base = ["sim/auv-sonar", "--filters", "ekf", "--split", "seeds", "--runs", "1", "--trials", "1", "-q"]
+    refused(tmp_path, "-p", "task.yaw_rate=[0.0,0.5]", base=base, match="draws its measurements from the reference")

@@ -173,6 +173,10 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
             raise ReplayError(f"{where}: given twice")
         seen.add(key)
         if owner == "task":
+            if getattr(task_class(task), "SYNTHETIC", False):  # its parameters also draw the measurements
+                raise ReplayError(f"{where}: task {task!r} draws its measurements from the reference with its own "
+                                  "parameters: searching them would score every trial on other data; search the "
+                                  "filters' noise settings instead (FILTER.q_scale, FILTER.r_scale, ...)")
             dim = make_dim(f"task {task!r}", name, raw, task_class(task).PARAMS, where)
             for f in filters:
                 per[f].append(Dim("task", name, dim.kind, dim.low, dim.high, dim.choices))
