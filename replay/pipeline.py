@@ -47,7 +47,7 @@ from time import perf_counter
 
 import numpy as np
 
-from replay import metrics, registry, score
+from replay import likelihood, metrics, registry, score
 from replay.align import ALIGNMENTS, align, apply
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
@@ -284,6 +284,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
     err = score.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
+    m.update(likelihood.of_run(c, problem, est, series))  # replay tune's likelihood objective, where it exists
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
     cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
     cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})

@@ -254,13 +254,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
     if jobs:
         check_noise(jobs, campaign.path)  # per-filter Q, R, P0 of the task model's size: before any unit
         check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
-        workers = workers or os.cpu_count() or 1
-        if scheduler or dask_local:
-            backend, counts["backend"] = _dask(scheduler, dask_local, connect_timeout), "dask"
-        elif workers == 1 or len(jobs) == 1:
-            backend, counts["backend"] = _nullcontext(_serial), "serial"
-        else:
-            backend, counts["backend"] = _processes(min(workers, len(jobs))), f"processes({min(workers, len(jobs))})"
+        backend, counts["backend"] = open_backend(workers, scheduler, dask_local, connect_timeout, len(jobs))
         weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs}
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
@@ -269,10 +263,7 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         try:
             with backend as mapper:
                 for job, results in mapper(jobs):
-                    if job.config_hash not in saved:  # config.json with the configuration's first units
-                        saved.add(job.config_hash)
-                        store.save_config(job.config_hash, job.config)
-                    store.write_job(job.config_hash, results)
+                    store_job(store, job, results, saved)
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
@@ -281,6 +272,24 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
             progress.close()
     counts["rows"] = board.summarise(out, hashes, store)
     return counts
+
+
+def open_backend(workers, scheduler, dask_local, connect_timeout: float, n_jobs: int):
+    """(a context manager giving the job mapper, its name): Dask, a local pool, or this process."""
+    workers = workers or os.cpu_count() or 1
+    if scheduler or dask_local:
+        return _dask(scheduler, dask_local, connect_timeout), "dask"
+    if workers == 1 or n_jobs == 1:
+        return _nullcontext(_serial), "serial"
+    return _processes(min(workers, n_jobs)), f"processes({min(workers, n_jobs)})"
+
+
+def store_job(store: Store, job: Job, results, saved: set) -> None:
+    """A finished job's units into ``store`` (its ``config.json`` with the configuration's first units)."""
+    if job.config_hash not in saved:
+        saved.add(job.config_hash)
+        store.save_config(job.config_hash, job.config)
+    store.write_job(job.config_hash, results)
 
 
 @contextmanager

@@ -89,6 +89,8 @@ class Campaign:
     batch: int
     data_dir: str | None
     configs: list[Config] = field(default_factory=list)
+    tune: dict | None = None  # the [tune] table, checked by replay.tune.campaign (replay tune at scale)
+    where: object = None  # finds a key's line for messages about the file
 
 
 class _Where:
@@ -184,8 +186,10 @@ def load(path) -> Campaign:
         raise ReplayError(f"{path}: not valid TOML: {e}") from None
     where = _Where(path, text)
     for key in doc:
-        if key not in ("campaign", "dataset", "task", "filter"):
-            raise where.error(key, "unknown section (known: campaign, dataset, task, filter)")
+        if key not in ("campaign", "dataset", "task", "filter", "tune"):
+            raise where.error(key, "unknown section (known: campaign, dataset, task, filter, tune)")
+    if "tune" in doc and not isinstance(doc["tune"], dict):
+        raise where.error("tune", "expected a table [tune]")
     head = doc.get("campaign", {})
     if not isinstance(head, dict):
         raise where.error("campaign", "expected a table [campaign]")
@@ -312,7 +316,7 @@ def load(path) -> Campaign:
     if len(configs) * runs > MAX_UNITS:
         raise where.error("runs", f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
                                   f"more than a campaign may hold ({MAX_UNITS}); split it")
-    return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs)
+    return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs, doc.get("tune"), where)
 
 
 def _recording(where, path: Path, ds_id: str):

@@ -48,6 +48,9 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
     c = spec.load(file)
+    from replay.tune import campaign as tune_campaign
+
+    tunes = tune_campaign.plan(c, data_dir)  # a [tune] table: checked before any unit too
     out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
     check_names(out, "--out")
     refuse_overlap(out, [c.data_dir, data_dir], "--out")  # never onto or inside the data
@@ -68,6 +71,14 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     else:
         click.echo(f"{counts['done']} units computed, {counts['failed']} failed ({counts['backend']}); "
                    f"wrote {out / 'leaderboard.csv'}, {out / 'paired.csv'}")
+    for name, t in tunes:  # replay tune at scale: every tune's units in one store, OUT/tune
+        from replay.tune import run as tune_run
+
+        res = tune_run.tune(t, out / "tune" / name, store_dir=out / "tune", workers=workers, scheduler=scheduler,
+                            dask_local=dask_local, quiet=quiet, wait=wait)
+        click.echo(f"tune {name} ({t.split.tuned_on} -> {t.split.tested_on}; {t.trials} trials per filter):")
+        click.echo(tune_run.format_board(res["rows"]))
+        click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))
 
 
 @click.command("leaderboard")
@@ -96,9 +107,12 @@ def leaderboard(dirs, sort, out):
 def report(dir, out):
     """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report
+    from replay.tune import report as tune_report
 
     if out:
         check_names(out, "--out")
+    if tune_report.is_tune_dir(Path(dir)):  # replay tune: history, importances, train-versus-test gap
+        make_report = tune_report.make_report
     path = make_report(Path(dir), Path(out) if out else None)
     click.echo(f"wrote {path}")
 

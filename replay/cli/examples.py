@@ -37,6 +37,12 @@ EXAMPLES: dict[str, list[str]] = {
     "campaign run": ["replay campaign run campaigns/example.toml --out runs/campaign-example",
                      "replay campaign run campaigns/example.toml --workers 2 -q",
                      "replay campaign run campaigns/example.toml --dask-local 2"],
+    "tune": ["replay tune sim/linear --filters kf --split seeds -p 'kf.q_scale=log[0.01,10]' "
+             "-p 'kf.r_scale=log[0.1,20]' --objective nll --trials 40 --runs 5 --out runs/tune-linear",
+             f"replay tune bohai/20220822_0_6 {BOHAI} --task position --rate 1 --filters ekf,ukf,pf "
+             "--space campaigns/tune_space.toml --train-segment 0.6 --trials 50 --out runs/tune-0_6",
+             f"replay tune --train bohai/20220822_0_3,bohai/20220822_0_4 --test bohai/20220822_0_5,bohai/20220822_0_6 "
+             f"{BOHAI} --task position --rate 1 --space campaigns/tune_space.toml --out runs/tune-seq"],
     "datasets list": [f"replay datasets list {BOHAI}", "replay datasets list"],
     "datasets info": [f"replay datasets info bohai/20220822_0_6 {BOHAI}", "replay datasets info sim/auv-sonar"],
     "datasets fetch": ["replay datasets fetch bohai/20220822_0_6", "replay datasets fetch bohai/20220822_0_6 --force"],

@@ -106,11 +106,13 @@ def _notes_to_stderr() -> None:
 @click.option("--min-scored-share", default=None, type=float,
               help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
                    "the rest is masked).")
+@click.option("--tuned", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.")
 @view_options
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
              dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
              divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None,
-             rate=None, window=None, segment=None):
+             rate=None, window=None, segment=None, tuned=None):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
@@ -133,6 +135,14 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
     fparams = cli_params.filter_params(params, names + (recorded or []))
     tparams = cli_params.task_params(task_params, task)
+    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
+        from replay.tune.tuned import tuned_params
+
+        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
+        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
+        names = names if given else t_names
+        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
+        tparams = {**t_tparams, **tparams}
     dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), rate, window, segment)
     cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
     check_recorded(dataset, recorded or [], dparams)  # before any recording is read
@@ -303,6 +313,9 @@ def _register_optional():
     from replay.cli.score import score_cmd
 
     main.add_command(score_cmd)
+    from replay.cli.tune import tune_cmd
+
+    main.add_command(tune_cmd)
     from replay.cli.campaign import COMMANDS as campaign_commands
 
     for cmd in campaign_commands:

@@ -38,6 +38,7 @@ TASKS = Registry("task", {
     "position": "replay.tasks.position:PositionTask",
     "sonar": "replay.tasks.sonar:SonarTask",
     "ungm": "replay.tasks.ungm:UNGMTask",
+    "linear": "replay.tasks.linear:LinearTask",
     "gps-odom": "replay.tasks.gps_odom:GpsOdomTask",
     "depth": "replay.tasks.depth:DepthTask",
     "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",

@@ -1,0 +1,65 @@
+"""Everything ``replay tune`` is given, checked before any trial (one line each, ReplayError)."""
+from __future__ import annotations
+
+from replay.util.errors import ReplayError
+
+from . import objectives, space, splits
+from .run import Tune
+
+
+def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=None, task_params=None,
+            dataset_params=None, view=None, first=None, data_dir=None, train_segment=None, train=None, test=None,
+            split=None, allow_overlap=False, alignment="se3", batch=None) -> Tune:
+    """The checked :class:`Tune` (no trial run, no file written)."""
+    from replay import registry
+    from replay.eval_options import validate_eval_options
+    from replay.filters import make_filter
+    from replay.pipeline import default_task, plain
+    from replay.tasks import make_task
+
+    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
+        raise ReplayError(f"--trials {trials}: at least 1 trial per filter")
+    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment})
+    registry.check_data_dir(data_dir)
+    names = [f.strip() for f in filters if f.strip()]
+    if not names:
+        raise ReplayError("--filters: no filter named")
+    for n in names:
+        if n == "measurements" or n.startswith("recorded:"):
+            raise ReplayError(f"--filters {n}: nothing to tune (no filter parameters)")
+        make_filter(n)  # unknown: one line naming the known ones
+    if len(set(names)) < len(names):
+        raise ReplayError(f"--filters {','.join(names)}: a filter named twice")
+    weights = objectives.parse(objective)
+    view = {k: v for k, v in (view or {}).items() if v is not None}
+    s = splits.make(dataset, {**(dataset_params or {}), **view}, train_segment=train_segment, train=train,
+                    test=test, split=split, seed=seed, allow_overlap=allow_overlap)
+    checked = []
+    for d, p in s.train + s.test:  # every dataset and its view parameters, canonical
+        checked.append((d, plain(registry.check_params(d, p))))
+    s.train, s.test = checked[:len(s.train)], checked[len(s.train):]
+    first_ds, first_p = s.train[0]
+    task = task or default_task(first_ds, first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
+    make_task(task, **(task_params or {}))
+    dims = space.build(entries, names, task)
+    t = Tune(task, names, dims, trials, objective, weights, s, runs, seed, dict(task_params or {}), first,
+             alignment, data_dir, batch or 25)
+    if "nll" in weights:
+        _check_nll(t)
+    return t
+
+
+def _check_nll(t: Tune) -> None:
+    """The likelihood objective only where the runs record it (:mod:`replay.likelihood`)."""
+    from replay import likelihood
+    from replay.pipeline import build_problem
+
+    for name in t.filters:
+        why = likelihood.provides(name)
+        if why is not None:
+            raise ReplayError(f"--objective {t.objective}: filter {name!r} cannot provide the innovations' "
+                              f"likelihood ({why})")
+    problem = build_problem(t.configs("train", t.filters[0], {})[0], 0, t.data_dir)
+    if likelihood.linear_matrices(problem.model) is None:
+        raise ReplayError(f"--objective {t.objective}: task {t.task!r} has a nonlinear model "
+                          f"({type(problem.model).__name__}); the likelihood is computed on linear models only")

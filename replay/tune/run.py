@@ -1,0 +1,321 @@
+"""``replay tune``: trials as campaign units, the held-out scoring, the leaderboard and ``tuned.toml``.
+
+Layout of ``DIR``: a campaign result directory (``configs.json``, ``units/<hash>/...``:
+every trial's configuration on the training data, and the default and tuned
+configurations on the test data; :mod:`replay.campaign.store`), ``study.db`` (the
+Optuna studies, :mod:`.study`), ``tune.json`` (what was asked), ``leaderboard.csv``
+(one row per filter with its default parameters and one with its tuned ones),
+``tuned.toml`` (the tuned configurations on the test data, a campaign file).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from replay.campaign import execute
+from replay.campaign.lock import locked
+from replay.campaign.spec import Campaign
+from replay.campaign.store import Store, write_bytes, write_json
+from replay.pipeline import Config, config_hash, plain
+from replay.util.errors import ReplayError
+from replay.util.progress import Progress
+
+from . import objectives, study as studies
+from .splits import Split
+
+COLUMNS = ["dataset", "task", "filter", "label", "params", "tuned_on", "tested_on", "objective", "trials",
+           "train_score", "test_score", "overlap", "runs", "seed", "pos_rmse", "pos_rmse_median", "lost",
+           "diverged", "anees", "train_config_hashes", "test_config_hashes"]
+
+
+@dataclass
+class Tune:
+    """What ``replay tune`` was asked (checked by :func:`replay.tune.cli_check.check`)."""
+
+    task: str
+    filters: list
+    dims: dict  # filter -> [space.Dim]
+    trials: int
+    objective: str
+    weights: dict
+    split: Split
+    runs: int
+    seed: int
+    task_params: dict = field(default_factory=dict)
+    first: int | None = None
+    alignment: str = "se3"
+    data_dir: str | None = None
+    batch: int = 25
+
+    def config(self, dataset, dparams, seed, name, fparams, tparams) -> Config:
+        from replay.filters import make_filter
+        from replay.tasks import make_task
+
+        task = plain(make_task(self.task, **{**self.task_params, **tparams}).params())
+        return Config(dataset, plain(dparams), self.first, self.task, task, name,
+                      plain(make_filter(name, **fparams).params()), seed, self.alignment, None)
+
+    def configs(self, part: str, name: str, params: dict) -> list[Config]:
+        """The configurations of filter ``name`` with the searched ``params`` ({key: value}) on
+        the training (``part`` = train) or test data."""
+        fp = {k.split(".", 1)[1]: v for k, v in params.items() if k.split(".", 1)[0] == name}
+        tp = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("task.")}
+        seed = self.split.train_seed if part == "train" else self.split.test_seed
+        return [self.config(d, p, seed if seed is not None else self.seed, name, fp, tp)
+                for d, p in (self.split.train if part == "train" else self.split.test)]
+
+    def defaults(self, name: str) -> dict | None:
+        """{key: default} of filter ``name``'s searched parameters, or None when a default lies outside
+        the space (the first trial of a study is the defaults, so tuning never ends worse on training)."""
+        from replay.tasks import make_task
+
+        from .space import _declared
+
+        have = {**{f"{name}.{p.name}": p.default for p in _declared(name)},  # params() leaves out default noise
+                **{f"task.{k}": v for k, v in make_task(self.task, **self.task_params).params().items()}}
+        out = {d.key: have.get(d.key) for d in self.dims[name]}
+        inside = all(v in d.choices if d.kind == "choice" else
+                     isinstance(v, (int, float)) and not isinstance(v, bool) and d.low <= v <= d.high
+                     for d, v in zip(self.dims[name], out.values()))
+        return out if inside else None
+
+    def fingerprint(self, name: str) -> dict:
+        return plain({"train": self.split.train, "train_seed": self.split.train_seed, "task": self.task,
+                      "task_params": self.task_params, "objective": self.objective,
+                      "space": {d.key: d.text() for d in self.dims[name]}, "runs": self.runs, "seed": self.seed,
+                      "first": self.first, "alignment": self.alignment})
+
+
+class Runner:
+    """Computes configurations as campaign units in ``out`` on one backend, kept open."""
+
+    def __init__(self, t: Tune, out: Path, backend):
+        self.t, self.out, self.store, self.mapper, self.saved = t, out, Store(out), backend, set()
+
+    def records(self, cfgs: list[Config]) -> list[list[dict]]:
+        camp = Campaign(None, "tune", self.t.runs, 0, self.t.batch, self.t.data_dir, list(cfgs))
+        jobs = execute.plan(camp, self.store, data_dir=self.t.data_dir)
+        for job, results in self.mapper(jobs):
+            execute.store_job(self.store, job, results, self.saved)
+        return [self.store.records(config_hash(c.as_dict())) for c in cfgs]
+
+    def score(self, cfgs: list[Config]) -> float:
+        """The objective over ``cfgs`` (the mean of each dataset's)."""
+        vals = [objectives.value(self.t.weights, recs) for recs in self.records(cfgs)]
+        return float(sum(vals) / len(vals))
+
+
+def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=False, progress_stream=None,
+         connect_timeout: float = 5.0, wait: bool = False, store_dir=None) -> dict:
+    """Run (or resume) every filter's study, score default and tuned configurations on the test
+    data, write ``leaderboard.csv`` and ``tuned.toml``; returns {"rows", "budget", "paths"}.
+    ``store_dir``: where the units are stored (default ``out``; a campaign's tunes share one)."""
+    from contextlib import ExitStack
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    units = Path(store_dir) if store_dir is not None else out
+    with ExitStack() as held:
+        held.enter_context(locked(out, wait=wait))
+        if units != out:
+            held.enter_context(locked(units, wait=wait))
+        store = studies.storage(out)
+        opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db") for f in t.filters}
+        write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
+        todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
+        n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
+        ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
+        progress = Progress(sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune",
+                            unit="step")  # the trials, then each filter's default and tuned held-out scoring
+        try:
+            with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
+                run = Runner(t, units, mapper)
+                for name, st in opened.items():
+                    for _ in range(todo[name]):
+                        trial, params = studies.next_trial(st, t.dims[name], t.seed, name, t.defaults(name))
+                        value = run.score(t.configs("train", name, params))
+                        st.tell(trial, value)
+                        progress.update(1, 0 if math.isfinite(value) else 1)
+                rows = _board(t, run, opened, progress)
+        finally:
+            progress.close()
+        from replay.util.files import write_csv
+
+        write_csv(rows, out / "leaderboard.csv", COLUMNS)
+        paths = {"leaderboard": out / "leaderboard.csv", "study": out / "study.db"}
+        paths.update(write_tuned(t, out, rows))
+    return {"rows": rows, "budget": {f: min(t.trials, len(studies.complete(s))) for f, s in opened.items()},
+            "paths": paths}
+
+
+def _asked(t: Tune) -> dict:
+    return plain({"task": t.task, "filters": t.filters, "trials": t.trials, "objective": t.objective,
+                  "space": {f: {d.key: d.text() for d in ds} for f, ds in t.dims.items()},
+                  "train": t.split.train, "test": t.split.test, "train_seed": t.split.train_seed,
+                  "test_seed": t.split.test_seed, "tuned_on": t.split.tuned_on, "tested_on": t.split.tested_on,
+                  "overlap": t.split.overlap, "runs": t.runs, "seed": t.seed, "task_params": t.task_params,
+                  "first": t.first, "alignment": t.alignment})
+
+
+def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
+    rows = []
+    for name, st in opened.items():
+        best = studies.best(st, t.trials)
+        kinds = [("default", {})] + ([("tuned", dict(best.params))] if best is not None else [])
+        for kind, params in kinds:
+            train, test = t.configs("train", name, params), t.configs("test", name, params)
+            train_score = run.score(train)
+            test_recs = run.records(test)
+            test_score = float(sum(objectives.value(t.weights, r) for r in test_recs) / len(test_recs))
+            progress.update(1)
+            per = [_row(run.store, x, recs) for x, recs in zip(test, test_recs)]  # one per test dataset
+            c = test[0].as_dict()
+            rows.append({
+                "dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": name,
+                "label": f"{name} ({kind})", "params": json.dumps({**c["filter_params"], **{
+                    k: v for k, v in params.items() if k.startswith("task.")}}, sort_keys=True),
+                "tuned_on": t.split.tuned_on if kind == "tuned" else "defaults (not tuned)",
+                "tested_on": t.split.tested_on, "objective": t.objective,
+                "trials": len(studies.complete(st)[:t.trials]) if kind == "tuned" else 0,
+                "train_score": train_score, "test_score": test_score,
+                "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
+                "runs": t.runs * len(test), "seed": test[0].seed,
+                **_pooled(per),
+                "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
+                "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
+                "_test": test, "_params": params})
+    return rows + _measurements_row(t, run)
+
+
+def _measurements_row(t: Tune, run: Runner) -> list[dict]:
+    """The raw observations scored on the test data (the ``measurements`` row of ``replay eval``),
+    where the task observes every position component directly: a filter worse than its input shows."""
+    from replay.evaluate import observes_position
+    from replay.pipeline import build_problem
+
+    test = [t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
+            for d, p in t.split.test]
+    if not observes_position(build_problem(test[0], 0, t.data_dir)):
+        return []
+    recs = run.records(test)
+    score = float(sum(objectives.value(t.weights, r) for r in recs) / len(recs))
+    return [{"dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": "measurements",
+             "label": "measurements (raw observations)", "params": "{}", "tuned_on": "", "tested_on": t.split.tested_on,
+             "objective": t.objective, "trials": 0, "train_score": "", "test_score": score if math.isfinite(score) else "",
+             "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "", "runs": t.runs * len(test),
+             "seed": test[0].seed,
+             **_pooled([_row(run.store, x, r) for x, r in zip(test, recs)]),
+             "train_config_hashes": "", "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
+             "_test": test, "_params": None}]
+
+
+def _row(store, cfg: Config, recs) -> dict:
+    """The leaderboard row (:func:`replay.summary.config_row`) of a configuration's stored records."""
+    from replay import summary
+
+    c, h = cfg.as_dict(), config_hash(cfg.as_dict())
+    sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
+    return summary.config_row(c, h, recs, lambda run_, cols: store.series(h, run_, cols, sha.get(run_)),
+                              recs[0].get("version", "") if recs else "")
+
+
+def _pooled(rows) -> dict:
+    """The test columns over the test datasets: means of ``pos_rmse``, ``pos_rmse_median`` and
+    ``anees`` (one dataset: its own), sums of ``lost`` and ``diverged``."""
+    def num(r, k):
+        try:
+            return float(r.get(k))
+        except (TypeError, ValueError):
+            return float("nan")
+
+    out = {k: float(np.mean([num(r, k) for r in rows])) for k in ("pos_rmse", "pos_rmse_median", "anees")}
+    out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
+    return out
+
+
+def write_tuned(t: Tune, out: Path, rows) -> dict:
+    """``tuned.toml``: the tuned configurations on the test data as a campaign file (``replay
+    campaign run`` and ``replay eval --tuned`` take it). Filters tuned to different task
+    parameters cannot share one file: then one ``tuned-<filter>.toml`` each."""
+    tuned = [r for r in rows if r["label"].endswith("(tuned)")]
+    if not tuned:
+        return {}
+    groups: dict = {}
+    for r in tuned:
+        key = json.dumps(r["_test"][0].task_params, sort_keys=True)
+        groups.setdefault(key, []).append(r)
+    files = {}
+    for i, (key, rs) in enumerate(groups.items()):
+        path = out / ("tuned.toml" if len(groups) == 1 else f"tuned-{rs[0]['filter']}.toml")
+        write_bytes(path, _toml(t, rs, json.loads(key)).encode())
+        files["tuned" if len(groups) == 1 else f"tuned-{rs[0]['filter']}"] = path
+    return files
+
+
+def _toml(t: Tune, rows, task_params: dict) -> str:
+    lines = ["# written by replay tune: the tuned configurations on the held-out data",
+             f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
+             + ", ".join(f"{r['filter']} {r['trials']}" for r in rows),
+             "[campaign]", 'name = "tuned"', f"runs = {t.runs}", f"seed = {rows[0]['_test'][0].seed}",
+             f'alignment = "{t.alignment}"']
+    if t.data_dir:
+        lines.append(f"data_dir = {json.dumps(str(Path(t.data_dir).resolve()))}")
+    for d, p in t.split.test:
+        lines += ["", "[[dataset]]", f"id = {json.dumps(d)}", f"tasks = [{json.dumps(t.task)}]"]
+        if p:
+            lines.append("params = " + _inline(p))
+        if t.first is not None:
+            lines.append(f"first = {t.first}")
+    lines += ["", f"[task.{json.dumps(t.task)}]"] + [f"{k} = {_val(v)}" for k, v in task_params.items()
+                                                      if v is not None]
+    for r in rows:
+        lines += ["", "[[filter]]", f"name = {json.dumps(r['filter'])}",
+                  "params = " + _inline(r["_test"][0].filter_params)]
+    return "\n".join(lines) + "\n"
+
+
+def _val(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf") if not math.isnan(v) else "nan"
+    if isinstance(v, dict):
+        return _inline(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_val(x) for x in v) + "]"
+    return json.dumps(v)
+
+
+def _inline(d: dict) -> str:
+    return "{ " + ", ".join(f"{json.dumps(k)} = {_val(v)}" for k, v in d.items() if v is not None) + " }"
+
+
+def format_board(rows) -> str:
+    """The leaderboard as printed: one line per row (default and tuned of each filter)."""
+    head = ["filter", "tuned_on", "objective", "trials", "train", "test", "pos_rmse", "lost", "params"]
+    body = []
+    for r in rows:
+        body.append([r["label"], r["tuned_on"], r["objective"], str(r["trials"]), _num(r["train_score"]),
+                     _num(r["test_score"]), _num(r["pos_rmse"]), f"{r['lost']}/{r['runs']}", _short(r)])
+    widths = [max(len(x) for x in col) for col in zip(head, *body)]
+    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
+    return "\n".join([line(head), *(line(b) for b in body)])
+
+
+def _short(r) -> str:
+    if r.get("_params") is None:
+        return "-"
+    p = r["_params"]
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items()) or "defaults"
+
+
+def _num(v) -> str:
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    return f"{v:.4f}" if math.isfinite(v) else str(v)
