@@ -69,7 +69,7 @@ def test_all_bohai_sequences_and_sim_listed():
                           + ds.upstream_path)
         assert ds.upstream_path.endswith(ds.file)
         assert ds.license == "CC0-1.0" and "Electronics" in ds.citation
-        assert ds.default_task == "position" and ds.description and ds.site
+        assert ds.default_task == "fusion" and ds.description and ds.site
 
 
 def test_sim_entry():
