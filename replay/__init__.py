@@ -16,7 +16,7 @@ import importlib as _importlib
 import sys as _sys
 import types as _types
 
-__version__ = "0.1.0"
+from replay.util.version import __version__  # noqa: E402,F401  (a leaf: importlib.metadata)
 
 __all__ = ["campaign_results", "evaluate", "export_mcap", "frame_table", "list_plugins", "load_frame",
            "load_trajectory", "make_filter", "make_task", "plot_errors", "plot_paired", "plot_rmse",

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-import replay
 from replay import registry, score, summary
 from replay.util.progress import particle_weight
+from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
@@ -119,7 +119,7 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
         series = {r["run"]: r["series"] for r in res.records}
         res.summary = summary.config_row(res.config, res.config_hash, res.records,
                                          lambda run, cols, s=series: {k: s[run][k] for k in cols},
-                                         replay.__version__)
+                                         __version__)
     rows = summary.label([r.summary for r in results])
     rows = summary.add_paired(rows, {r.config_hash: r.config for r in results},
                               {r.config_hash: r.records for r in results}, baseline)
@@ -211,7 +211,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
         "filters": filters, "filter_params": {r.name: r.params for r in results},
         "runs": runs, "seed": seed, "first": first, "dataset_params": configs[0].dataset_params,
         "adapter": adapter, "alignment": alignment, "divergence_threshold": divergence_threshold,
-        "baseline": baseline, "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": replay.__version__,
+        "baseline": baseline, "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": __version__,
         "config_hashes": {r.name: r.config_hash for r in results},
         "min_scored_share": min_scored_share,
     }
@@ -325,7 +325,7 @@ def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, 
 def versions() -> dict:
     import scipy
 
-    return {"replay": replay.__version__, "python": platform.python_version(),
+    return {"replay": __version__, "python": platform.python_version(),
             "numpy": np.__version__, "scipy": scipy.__version__, "platform": platform.platform()}
 
 

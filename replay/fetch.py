@@ -49,7 +49,6 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-import replay
 from replay import registry
 from replay.checksums import CONTENT_CHECKS, declared_mismatch, declares, identical_to, record_download
 from replay.registry import Dataset
@@ -57,6 +56,7 @@ from replay.util.downloads import (Deadline, check_url, network_reason, part_pre
                                    remove_stale_parts)
 from replay.util.errors import ReplayError
 from replay.util.files import check_space, check_writable
+from replay.util.version import __version__
 
 DEFAULT_TIMEOUT = 30.0  # s of silence from the server (connect, each read)
 DEFAULT_DEADLINE = 300.0  # s for a whole download (the Bohai files are 0.3-4 MB)
@@ -232,7 +232,7 @@ def _open(src: str, clock: Deadline, timeout: float, fail):
             fail(f"redirected to {url}, which is not an http(s) URL")
         conn, path = _connect(parts, clock, timeout)
         try:
-            conn.request("GET", path, headers={"User-Agent": f"replay-nav/{replay.__version__}",
+            conn.request("GET", path, headers={"User-Agent": f"replay-nav/{__version__}",
                                                "Accept-Encoding": "identity"})
             resp = conn.getresponse()
         except BaseException:

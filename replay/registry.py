@@ -27,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-import replay
 from replay import views
 from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, check_loaded,  # noqa: F401
                               read_checksums, sha256_file, with_registered)
@@ -76,7 +75,7 @@ MANIFEST_KEYS = {f.name for f in fields(Dataset)} - {"kind", "manifest"}
 
 def manifests_dir() -> Path:
     """Where the ``*.toml`` manifests are: the source tree first, then the install prefix."""
-    repo = Path(replay.__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[1]
     source = repo / "datasets"
     if (repo / "pyproject.toml").is_file() and any(source.glob("*.toml")):
         return source

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-import replay
+from replay.util.version import __version__
 from replay.util.errors import ReplayError
 
 from . import records as sealing
@@ -339,7 +339,7 @@ class Store:
         d = self.units / config_hash
         run = result["run"]
         record = {k: v for k, v in result.items() if k not in ("series", "parquet", "summary")}
-        record.update(key=f"{config_hash}/{run}", config_hash=config_hash, version=replay.__version__)
+        record.update(key=f"{config_hash}/{run}", config_hash=config_hash, version=__version__)
         if result["status"] == "done":
             data = result["parquet"] if "parquet" in result else parquet_bytes(result["series"])
             record["table"] = describe(data)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import click
 
-import replay
 from replay.cli.examples import add_examples
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
+from replay.util.version import __version__
 
 
 class Main(click.Group):
@@ -33,7 +33,7 @@ class Main(click.Group):
 
 
 @click.group(cls=Main)
-@click.version_option(replay.__version__, prog_name="replay")
+@click.version_option(__version__, prog_name="replay")
 def main():
     """Replay navigation logs through state-estimation filters and score them."""
     _notes_to_stderr()

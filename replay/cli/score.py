@@ -122,7 +122,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     directory or .mcap and a topic of nav_msgs/Odometry, PoseStamped, PoseWithCovarianceStamped,
     TransformStamped, nav_msgs/Path (last message) or NavSatFix), or RECORDING:tf:PARENT->CHILD.
     """
-    import replay
+    from replay.util.version import __version__
     from replay.pipeline import config_hash
     from replay.summary import columns as leaderboard_columns
     from replay.trajectory import io, row_metrics, score
@@ -165,7 +165,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
                "runs": 1, "diverged": 0, "failed": 0, "seed": "", "first": ""}
         row.update(row_metrics(s, lost_threshold=lost_threshold, lost_steps=lost_steps))
         row.update(us_per_step=math.nan, alignment=method + ("+origin" if align_origin else ""),
-                   version=replay.__version__, config_hash=config_hash(cfg))
+                   version=__version__, config_hash=config_hash(cfg))
         rows.append(row)
     if len(rows) > 1:
         rel = relations[0]

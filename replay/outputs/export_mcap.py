@@ -307,13 +307,13 @@ def write_run_mcap(run: dict, mcap_path, sigma=None, progress=None) -> int:
 
 def export_info(run: dict, sigma=None) -> dict:
     """The ``replay.export`` metadata: what was exported from where."""
-    import replay
+    from replay.util.version import __version__
     from replay.outputs.foxglove_scene import ROOT, SIGMA
 
     return {"source": str(run.get("source", "")), "run": str(run.get("run", 0)),
             "tracks": json.dumps(["reference", *run["estimates"]]), "sigma": f"{sigma or SIGMA:g}",
             "frames": json.dumps({"root": ROOT, "poses": FRAME_ID, "body": "<track>/base_link"}),
-            "replay_version": replay.__version__}
+            "replay_version": __version__}
 
 
 def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str = "zstd",
