@@ -1,7 +1,7 @@
 """The Python API, re-exported by ``replay`` (``import replay``; docs/python.md).
 
 Every function takes its subject first and the rest by keyword only. Results are the
-library's objects (:class:`replay.frame.Frame`, :class:`replay.evaluate.Evaluation`),
+library's objects (:class:`replay.frame.Frame`, :class:`replay.evaluation.Evaluation`),
 with DataFrame views (:mod:`replay.tables`, :mod:`replay.util.dataframes`) and
 matplotlib figures (:mod:`replay.plots`); errors are one-line
 :class:`replay.util.errors.ReplayError`.
@@ -18,7 +18,7 @@ import inspect
 
 
 from replay import registry, tables
-from replay.evaluate import DEFAULT_FILTERS
+from replay.evaluation import DEFAULT_FILTERS
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
@@ -42,14 +42,14 @@ def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, a
 
 
 def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, **options):
-    """Run ``filters`` on ``dataset`` and score them: an :class:`replay.evaluate.Evaluation`.
+    """Run ``filters`` on ``dataset`` and score them: an :class:`replay.evaluation.Evaluation`.
 
     ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
-    docstring). ``options``: those of :func:`replay.evaluate.evaluate` (``task``, ``runs``,
+    docstring). ``options``: those of :func:`replay.evaluation.evaluate` (``task``, ``runs``,
     ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
     ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``.
     """
-    from replay.evaluate import evaluate as run
+    from replay.evaluation import evaluate as run
 
     names, params = filter_names(filters, filter_params)
     return run(dataset, filters=names, filter_params=params, **options)

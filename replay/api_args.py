@@ -73,7 +73,7 @@ def _p(name, type_, doc, **kw):
 
 PATH = functools.partial(_p, type_=os.PathLike)
 DATASET = _p("dataset", str, "a dataset id (replay datasets list) or a file path")
-EVALUATION = Kind("ev", "replay.evaluate:Evaluation", "an evaluation (replay.evaluate)")
+EVALUATION = Kind("ev", "replay.evaluation:Evaluation", "an evaluation (replay.evaluate)")
 FRAME = Kind("frame", "replay.frame:Frame", "a frame (replay.load_frame)")
 def TRAJ(name):  # noqa: N802 — a declaration
     return Kind(name, "replay.trajectory.base:Trajectory", "a trajectory (replay.load_trajectory)")
@@ -83,7 +83,7 @@ NAME = _p("name", str, "a registered name", optional=True)
 
 SEED = Either("seed", (EVAL["seed"], Kind("seed", "numpy.random:Generator", "a numpy.random.Generator (or None)",
                                               optional=True)))
-SOURCE = Kind("source", "replay.evaluate:Evaluation|replay.frame:Frame", "an evaluation or a frame")
+SOURCE = Kind("source", "replay.evaluation:Evaluation|replay.frame:Frame", "an evaluation or a frame")
 
 ARGS: dict[str, dict] = {
     "evaluate": {"dataset": DATASET, **{k: v for k, v in EVAL.items() if k != "batch"},
@@ -94,7 +94,7 @@ ARGS: dict[str, dict] = {
                    "adapter": EVAL["adapter"]},
     "campaign_results": {"out": PATH(name="out", doc="a result directory"),
                          "runs": _p("runs", bool, "one row per run", default=False)},
-    "export_mcap": {"evaluation": Kind("evaluation", "replay.evaluate:Evaluation", "an evaluation"),
+    "export_mcap": {"evaluation": Kind("evaluation", "replay.evaluation:Evaluation", "an evaluation"),
                     "path": PATH(name="path", doc="the MCAP file to write"),
                     "run": _p("run", int, "the run exported", default=0, low=0),
                     "data_dir": EVAL["data_dir"]},

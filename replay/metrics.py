@@ -1,6 +1,6 @@
 """Metrics beyond RMSE: consistency (NEES, NIS), ATE with alignment, drift, final error, pairs.
 
-Per run (:func:`run_metrics`, on top of :func:`replay.score.score_run`):
+Per run (:func:`run_metrics`, on top of :func:`replay.scorer.score_run`):
 
 * ``ate`` — absolute trajectory error: the position RMSE after aligning the
   estimate to the reference with ``alignment`` (``none``, ``yaw``, ``se3``,
@@ -32,7 +32,7 @@ band (about 0.95 for a consistent filter). NIS likewise with its degrees of
 freedom (measured components) per step.
 
 Pairs (:func:`paired`): two filters run on the same measurements (common
-random numbers, see :mod:`replay.evaluate`) are compared run by run; the mean
+random numbers, see :mod:`replay.evaluation`) are compared run by run; the mean
 difference and its 95 % Student-t interval are much tighter than the two
 separate intervals suggest.
 """
@@ -40,9 +40,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay import score
+from replay import scorer
 from replay.align import align, apply
-from replay.score import ci95
+from replay.scorer import ci95
 
 
 def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -203,9 +203,9 @@ def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
 def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None,
                 errors: dict | None = None):
     """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``;
-    ``errors``: the run's :func:`replay.score.errors`, when computed already."""
-    errors = score.errors(problem, est) if errors is None else errors
-    m = score.score_run(problem, est, errors)
+    ``errors``: the run's :func:`replay.scorer.errors`, when computed already."""
+    errors = scorer.errors(problem, est) if errors is None else errors
+    m = scorer.score_run(problem, est, errors)
     err = errors["position"]
     pos = list(problem.position_index)
     P = est.P[:, pos][:, :, pos]

@@ -1,6 +1,6 @@
 """The one evaluation pipeline: a configuration and a block of runs -> one scored record per run.
 
-Everything that prints or stores a number goes through here: ``replay eval`` (:func:`replay.evaluate.evaluate`,
+Everything that prints or stores a number goes through here: ``replay eval`` (:func:`replay.evaluation.evaluate`,
 an in-memory campaign with one configuration per filter), ``replay campaign run`` (a job is a block of runs
 of one configuration, :func:`replay.campaign.units.execute_job`), ``replay reproduce`` and ``replay rerun``.
 
@@ -47,7 +47,7 @@ from time import perf_counter
 
 import numpy as np
 
-from replay import likelihood, metrics, registry, score
+from replay import likelihood, metrics, registry, scorer
 from replay.align import ALIGNMENTS, align, apply
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
@@ -282,7 +282,7 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
 
 def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> dict:
     """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
-    err = score.errors(problem, est)
+    err = scorer.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
     m.update(likelihood.of_run(c, problem, est, series))  # replay tune's likelihood objective, where it exists
     cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}

@@ -23,7 +23,7 @@ the manifest and the key:
   be null only for a simulated dataset, which the simulator and its recorded
   parameters identify.
 
-:func:`repeat` runs the configuration again (:func:`replay.evaluate.evaluate`),
+:func:`repeat` runs the configuration again (:func:`replay.evaluation.evaluate`),
 and :func:`verify` compares: the same dataset checksum, the same configuration
 (every key of :data:`CONFIG` but the checksum and hashes, compared on their own, and
 the ``baseline`` of the paired columns, null for the first filter),
@@ -248,10 +248,10 @@ def _check_dataset(cfg: dict, bad) -> None:
 
 
 def repeat(man: dict, data_dir=None, progress=None):
-    """Run the manifest's configuration again: the :class:`replay.evaluate.Evaluation`.
+    """Run the manifest's configuration again: the :class:`replay.evaluation.Evaluation`.
 
     ``progress``: a :class:`replay.util.progress.Progress` told of each run done (as ``replay eval``'s)."""
-    from replay.evaluate import evaluate
+    from replay.evaluation import evaluate
 
     cfg = man["config"]
     return evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],

@@ -49,7 +49,7 @@ import json
 
 import numpy as np
 
-from replay import metrics, score
+from replay import metrics, scorer
 from replay.util.params import Param
 from replay.views import NAMES as VIEWS
 
@@ -76,7 +76,7 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
            "runs": len(done), "diverged": len(done) - len(ok), "failed": len(records) - len(done),
            "seed": cfg["seed"], "first": cfg["first"] or ""}
     with np.errstate(all="ignore"):
-        agg = score.aggregate([r["metrics"] for r in done], RUN_METRICS)
+        agg = scorer.aggregate([r["metrics"] for r in done], RUN_METRICS)
         row.update({k: v for k, v in agg.items()
                     if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")})
         row["lost"] = agg["lost"] if any(r["metrics"].get("lost") is not None for r in ok) or not ok else ""

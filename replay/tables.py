@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay import summary
-from replay.score import rmse_over_time as _rmse_over_time
+from replay.scorer import rmse_over_time as _rmse_over_time
 from replay.util import covcols
 from replay.util.errors import ReplayError
 
@@ -30,7 +30,7 @@ def _pd():
 
 
 def result(ev, name: str):
-    """The :class:`replay.evaluate.FilterResult` of filter ``name`` (its name or its label)."""
+    """The :class:`replay.evaluation.FilterResult` of filter ``name`` (its name or its label)."""
     for r in ev.results:
         if name in (r.name, r.summary.get("label")):
             return r

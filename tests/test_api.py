@@ -51,14 +51,23 @@ def test_public_api_is_keyword_only_after_the_subject():
         assert not loose, (name, loose)
 
 
-def test_evaluate_and_score_are_modules_and_functions():
-    import replay.evaluate as module
+def test_evaluate_and_score_are_plain_functions_beside_their_modules():
+    import types
 
-    assert module.Evaluation.__name__ == "Evaluation" and callable(replay.evaluate)
+    import replay.evaluation as module
+    import replay.scorer  # noqa: F401  (loading the submodules must not shadow the functions)
+
+    assert module.Evaluation.__name__ == "Evaluation"
+    for name in ("evaluate", "score"):
+        assert isinstance(getattr(replay, name), types.FunctionType), name
+    assert replay.evaluate is replay.api.evaluate and replay.score is replay.api.score
     assert "dataset" in inspect.signature(replay.evaluate).parameters
-    from replay import score
+    from replay import evaluate, score, scorer
 
-    assert callable(score.score_run)  # the module replay.score, as the library imports it
+    assert evaluate is replay.api.evaluate and score is replay.api.score and callable(scorer.score_run)
+    import pkgutil
+
+    assert not {m.name for m in pkgutil.iter_modules(replay.__path__)} & set(replay.__all__)  # would shadow
     from replay.trajectory import make
 
     t = np.arange(20.0)

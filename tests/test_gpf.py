@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay import registry, score
+from replay import registry, scorer
 from replay.util.errors import ReplayError
 from replay.filters import make_filter
 from replay.filters.p000.grey import GreyPredictor, gm11_fit, gm11_predict
@@ -166,7 +166,7 @@ def test_gpf_runs_reproducibly_and_uses_both_parts(problem):
     assert not a.diverged
     assert a.info["grey_steps"] == len(problem.z) - 30  # grey particles once L = 30 samples exist
     assert a.info["wavelet_steps"] == len(problem.z) - 49
-    m = score.score_run(problem, a)
+    m = scorer.score_run(problem, a)
     sensor = np.sqrt(np.nanmean((problem.z[:, 0] - problem.truth_position[:, 0]) ** 2))
     assert m["depth_rmse"] < 1.5 * sensor  # no worse than the raw gauge by much
     assert set(m) >= {"depth_rmse", "speed_rmse", "pitch_rmse"}
@@ -207,7 +207,7 @@ def test_mmpf_mode_switching(problem):
 
 def test_score_reports_speed_as_extra(problem):
     est = make_filter("ekf").run(problem.model, problem.z, problem.x0, problem.P0)
-    m = score.score_run(problem, est)
+    m = scorer.score_run(problem, est)
     truth_v = problem.truth_extra["speed"][0]
     ok = np.isfinite(est.x[:, 1])
     assert m["speed_rmse"] == pytest.approx(np.sqrt(np.mean((est.x[ok, 1] - truth_v[ok]) ** 2)))

@@ -50,7 +50,7 @@ def test_an_error_far_beyond_lost_is_a_divergence_even_with_a_finite_covariance(
     a finite covariance. Default threshold: 100 x the task's lost threshold (1000 m -> 1e5 m)."""
     import numpy as np
 
-    from replay import metrics, score
+    from replay import metrics, scorer
     from replay.filters.base import Estimates
     from replay.model import LinearGaussian
     from replay.tasks import Problem, make_task
@@ -66,8 +66,8 @@ def test_an_error_far_beyond_lost_is_a_divergence_even_with_a_finite_covariance(
     x = np.zeros((n, 2))
     x[10] = [1.5e7, 0.0]
     est = Estimates(x, np.tile(np.eye(2), (n, 1, 1)), np.zeros(n), None, {})
-    m, _ = metrics.run_metrics(prob, est, "none", None, score.errors(prob, est))
+    m, _ = metrics.run_metrics(prob, est, "none", None, scorer.errors(prob, est))
     assert m["diverged"] is True and m["lost"] is None
     x[10] = [5e4, 0.0]  # beyond lost, within the divergence threshold: a result (lost: all 3 needed)
-    m, _ = metrics.run_metrics(prob, est, "none", None, score.errors(prob, est))
+    m, _ = metrics.run_metrics(prob, est, "none", None, scorer.errors(prob, est))
     assert m["diverged"] is False

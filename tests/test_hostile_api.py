@@ -91,7 +91,7 @@ def generated_calls():
 
 
 def test_every_public_function_is_declared_and_its_declarations_are_its_arguments():
-    from replay.evaluate import evaluate as full
+    from replay.evaluation import evaluate as full
     from replay.trajectory import score as full_score
 
     assert set(ARGS) == set(replay.__all__)

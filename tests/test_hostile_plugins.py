@@ -162,7 +162,7 @@ def test_a_plugin_failing_before_any_run_is_refused_in_one_line(plugin, tmp_path
 
 
 def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatch, tmp_path):
-    import replay.evaluate as module
+    import replay.evaluation as module
 
     def hungry(*a, **k):
         raise MemoryError("Unable to allocate 9.1 TiB")

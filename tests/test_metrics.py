@@ -130,7 +130,7 @@ def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
 def test_lost_tracks_are_counted_not_reported_as_success():
     """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
     176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""
-    from replay.evaluate import evaluate
+    from replay.evaluation import evaluate
 
     ev = evaluate("sim/auv-sonar", filters=("ekf", "pf"), runs=20, seed=0)
     ekf, pf = ev.rows

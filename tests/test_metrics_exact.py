@@ -2,7 +2,7 @@
 
 * :func:`replay.metrics.lstsq_rows` (one gufunc call) and ``np.linalg.lstsq`` row by row
   (the NEES of a run whose position covariance is singular somewhere);
-* :func:`replay.metrics.chi2_ppf` and :func:`replay.score.t_ppf` (scipy.special) and
+* :func:`replay.metrics.chi2_ppf` and :func:`replay.scorer.t_ppf` (scipy.special) and
   ``scipy.stats.chi2.ppf`` / ``scipy.stats.t.ppf``, which the scoring modules no longer
   import (0.5-1 s at the start of every campaign).
 """
@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from replay import metrics, score
+from replay import metrics, scorer
 
 
 def _stacks(d: int, k: int = 400):
@@ -59,28 +59,28 @@ def test_quantiles_are_scipy_stats_bit_for_bit(q):
     from scipy import stats
 
     assert np.array_equal(metrics.chi2_ppf(q, DOFS), stats.chi2.ppf(q, DOFS))
-    assert np.array_equal(score.t_ppf(q, DOFS), stats.t.ppf(q, DOFS))
+    assert np.array_equal(scorer.t_ppf(q, DOFS), stats.t.ppf(q, DOFS))
     for df in (1, 2.0, 49, 150.0, np.int64(75)):  # scalars stay numpy scalars
         for ours, theirs in ((metrics.chi2_ppf(q, df), stats.chi2.ppf(q, df)),
-                             (score.t_ppf(q, df), stats.t.ppf(q, df))):
+                             (scorer.t_ppf(q, df), stats.t.ppf(q, df))):
             assert ours == theirs and type(ours) is type(theirs)
     for df in (0, -1.0, np.nan):
         assert np.isnan(metrics.chi2_ppf(q, df)) and np.isnan(stats.chi2.ppf(q, df))
-        assert np.isnan(score.t_ppf(q, df)) and np.isnan(stats.t.ppf(q, df))
+        assert np.isnan(scorer.t_ppf(q, df)) and np.isnan(stats.t.ppf(q, df))
 
 
 def test_ci95_and_consistency_band_known_values():
     # t(0.975, 3) = 3.18245; the band of 50 runs of a 3-D NEES is the example campaign's [2.35969, 3.71601]
-    assert score.ci95([1.0, 2.0, 3.0, 4.0]) == pytest.approx(3.1824463 * np.std([1, 2, 3, 4], ddof=1) / 2)
+    assert scorer.ci95([1.0, 2.0, 3.0, 4.0]) == pytest.approx(3.1824463 * np.std([1, 2, 3, 4], ddof=1) / 2)
     lo, hi = metrics.chi2_band(3, 50)
     assert (lo, hi) == (pytest.approx(2.359690, abs=1e-6), pytest.approx(3.716009, abs=1e-6))
 
 
 def test_campaign_modules_do_not_import_scipy_stats():
     code = ("import sys\n"
-            "import replay.campaign.execute, replay.summary, replay.metrics, replay.score\n"
-            "from replay import metrics, score\n"
-            "metrics.chi2_band(3, 10); score.ci95([1.0, 2.0])\n"
+            "import replay.campaign.execute, replay.summary, replay.metrics, replay.scorer\n"
+            "from replay import metrics, scorer\n"
+            "metrics.chi2_band(3, 10); scorer.ci95([1.0, 2.0])\n"
             "print('scipy.stats' in sys.modules)\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr

@@ -11,7 +11,7 @@ import pytest
 
 from replay import registry
 from replay.util.errors import ReplayError
-from replay.evaluate import evaluate
+from replay.evaluation import evaluate
 from replay.filters import make_filter
 from replay.filters.p002 import gwo, pso
 from replay.filters.sigma import CKF

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay.evaluate import evaluate
+from replay.evaluation import evaluate
 
 
 def test_plan_covers_the_regimes_where_alpha_could_matter():

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay import score
+from replay import scorer
 from replay.filters.base import Estimates
 from replay.tasks import Problem
 
@@ -22,7 +22,7 @@ def test_rmse_known_values_and_masking():
     x[:, 1] = [4.0, 0.0, 0.0, 0.0]
     valid = np.array([True, True, True, False])
     est = Estimates(x, np.tile(np.eye(5), (4, 1, 1)), np.full(4, 1e-5))
-    m = score.score_run(make_problem(truth, valid), est)
+    m = scorer.score_run(make_problem(truth, valid), est)
     assert m["pos_rmse"] == pytest.approx(np.sqrt(25 / 3))
     assert m["x_rmse"] == pytest.approx(np.sqrt(9 / 3))
     assert m["y_rmse"] == pytest.approx(np.sqrt(16 / 3))
@@ -37,7 +37,7 @@ def test_angle_error_is_wrapped():
     x[:, 3] = [np.pi - 0.01, -np.pi + 0.02]
     yaw_truth = np.array([-np.pi + 0.01, np.pi - 0.02])
     est = Estimates(x, np.tile(np.eye(5), (2, 1, 1)), np.ones(2))
-    m = score.score_run(make_problem(truth, np.ones(2, bool), {"yaw": yaw_truth}), est)
+    m = scorer.score_run(make_problem(truth, np.ones(2, bool), {"yaw": yaw_truth}), est)
     assert m["yaw_rmse"] == pytest.approx(np.sqrt((0.02**2 + 0.04**2) / 2))
 
 
@@ -45,7 +45,7 @@ def test_aggregate_mean_of_runs_and_interval():
     runs = [{"pos_rmse": v, "us_per_step": 1.0, "scored": 10, "masked": 0, "diverged": False}
             for v in (1.0, 2.0, 3.0)]
     runs.append({"pos_rmse": np.nan, "us_per_step": 1.0, "scored": 3, "masked": 0, "diverged": True})
-    a = score.aggregate(runs)
+    a = scorer.aggregate(runs)
     assert a["runs"] == 4 and a["diverged"] == 1
     assert a["pos_rmse"] == pytest.approx(2.0)
     # t(0.975, 2) = 4.302652729749464; sd = 1; n = 3
@@ -55,6 +55,6 @@ def test_aggregate_mean_of_runs_and_interval():
 def test_rmse_over_time_across_runs():
     e1 = np.array([[1.0, 0, 0], [np.nan, np.nan, np.nan]])
     e2 = np.array([[3.0, 0, 0], [0.0, 2.0, 0]])
-    curve = score.rmse_over_time([e1, e2])
+    curve = scorer.rmse_over_time([e1, e2])
     assert curve[0] == pytest.approx(np.sqrt(5.0))
     assert curve[1] == pytest.approx(2.0)  # the masked run is left out at that step

@@ -15,7 +15,7 @@ from hostile import assert_ok
 from replay.adapters import bags
 from replay.adapters.bohai import load as load_bohai
 from replay.adapters.mapping import from_dict, role_of
-from replay.evaluate import evaluate
+from replay.evaluation import evaluate
 from replay.frame import Channel, Frame
 from replay.noise import Covariance
 from replay.tasks import TASKS, make_task, role_input, task_class, why_missing

@@ -74,7 +74,7 @@ def test_glint_logpdf_integrates_to_one_1d():
 
 
 def test_formation_end_to_end_and_diagonal_fast_path():
-    from replay.evaluate import evaluate
+    from replay.evaluation import evaluate
 
     g = Glint(np.diag([25.0, 1e-4]), np.diag([25.0, 4e-4]), eps=0.75)
     e = np.random.default_rng(0).standard_normal((7, 2)) * [5, 0.01]

@@ -117,7 +117,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
     from replay.eval_options import validate_eval_options
-    from replay.evaluate import check_recorded, evaluate
+    from replay.evaluation import check_recorded, evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
     from replay.pipeline import default_task
@@ -220,7 +220,7 @@ def _fresh(out: Path, replace: bool) -> None:
 def _failed_filters(ev) -> None:
     """A filter that failed (a plugin's bug, sys.exit, memory, a broken protocol): one warning line
     each, after the other filters' results are written, and exit status 1."""
-    from replay.evaluate import failures
+    from replay.evaluation import failures
 
     bad = failures(ev)
     for name, f in bad.items():

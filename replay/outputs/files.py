@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.evaluate import Evaluation, manifest
+from replay.evaluation import Evaluation, manifest
 from replay.summary import MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell, scored_share
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
-from replay.score import rmse_over_time
+from replay.scorer import rmse_over_time
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:
     """The evaluation's leaderboard rows (:mod:`replay.summary`), in ``--filters`` order."""

@@ -2,7 +2,7 @@
 
 A reproduction is a list of :class:`Job` (one ``replay eval`` configuration
 each: dataset parameters, filters and their parameters, task parameters),
-computed by :func:`run_jobs` through :func:`replay.evaluate.evaluate` with one
+computed by :func:`run_jobs` through :func:`replay.evaluation.evaluate` with one
 progress line per job. Tables combine rows of several jobs (:func:`combine`):
 the leaderboard rows of the evaluations, relabelled, with the paired columns
 recomputed over the union by :func:`replay.summary.add_paired` (the code of
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from replay import summary
-from replay.evaluate import Evaluation, command_line, evaluate
+from replay.evaluation import Evaluation, command_line, evaluate
 from replay.metrics import paired
 
 from .verdict import cell, result_rows
@@ -138,7 +138,7 @@ def paired_cell(a, b, digits: int = 3) -> str:
 
 
 def mean_ci(values, digits: int = 3) -> str:
-    from replay.score import ci95
+    from replay.scorer import ci95
 
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]

@@ -13,10 +13,10 @@ A **cell** is one configuration of the synthetic lake trial and of the filters' 
 
 Every cell runs with the same master seed, so cells differ only by what they sweep
 (the same noise draws, scaled: common random numbers across cells as well as across
-filters). :func:`compute` runs one cell's filters with :func:`replay.evaluate.evaluate`
+filters). :func:`compute` runs one cell's filters with :func:`replay.evaluation.evaluate`
 (the pipeline of ``replay eval``) and keeps, per filter, the leaderboard row and the
 per-run RMSE of each channel; the maneuver / level split scores each run again with
-the pipeline's scorer (:func:`replay.score.score_run`) on the same estimates, the
+the pipeline's scorer (:func:`replay.scorer.score_run`) on the same estimates, the
 reference restricted to the maneuver segments (``frame.meta["maneuvers"]``) or to the
 rest.
 """
@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from replay import metrics, score
-from replay.evaluate import command_line, evaluate
+from replay import metrics, scorer
+from replay.evaluation import command_line, evaluate
 from replay.models.depth import R_FIXED, paper_Q
 from replay.pipeline import plain
 from replay.sim.lake_depth import base_for_rms, make_frame
@@ -91,7 +91,7 @@ class Cell:
 
 def command(config: dict) -> str:
     """The ``replay eval`` command of an evaluation (task parameters that differ from their
-    defaults included by :func:`replay.evaluate.command_line`)."""
+    defaults included by :func:`replay.evaluation.command_line`)."""
     return command_line(config)
 
 
@@ -100,7 +100,7 @@ def _segment_scores(records, mask_of) -> dict:
     out = {ch: [] for ch, _ in CHANNELS}
     for rec in records:
         p, est = rec["problem"], rec["estimates"]
-        m = score.score_run(dataclasses.replace(p, truth_valid=p.truth_valid & mask_of(p)), est)
+        m = scorer.score_run(dataclasses.replace(p, truth_valid=p.truth_valid & mask_of(p)), est)
         for ch, _ in CHANNELS:
             out[ch].append(np.nan if rec["metrics"]["diverged"] else m[f"{ch}_rmse"])
     return {ch: np.asarray(v, float) for ch, v in out.items()}
@@ -132,9 +132,9 @@ def compute(job) -> dict:
              "man": _segment_scores(res.records, maneuver_mask),
              "level": _segment_scores(res.records, lambda p: ~maneuver_mask(p))}
         if want_curves:
-            f["curves"] = {"depth": score.rmse_over_time([e["position"] for e in res.errors]),
-                           "speed": score.rmse_over_time([e["speed"] for e in res.errors]),
-                           "pitch": score.rmse_over_time([e["pitch"] for e in res.errors])}
+            f["curves"] = {"depth": scorer.rmse_over_time([e["position"] for e in res.errors]),
+                           "speed": scorer.rmse_over_time([e["speed"] for e in res.errors]),
+                           "pitch": scorer.rmse_over_time([e["pitch"] for e in res.errors])}
         out["filters"][lab] = f
     return out
 

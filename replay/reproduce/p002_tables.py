@@ -1,6 +1,6 @@
 """Tables of the paper-002 reproduction: one row per filter configuration, from ``replay eval``'s pipeline.
 
-Every number here is read from an :class:`replay.evaluate.Evaluation` (the
+Every number here is read from an :class:`replay.evaluation.Evaluation` (the
 leaderboard rows of :mod:`replay.summary` and the per-run records and errors of
 :func:`replay.pipeline.run_block`): mean ± 95 % half-width, median, ``lost k/N``,
 ``diverged k/N``, the paired difference against a reference row
@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from replay import summary
-from replay.evaluate import command_line
+from replay.evaluation import command_line
 from replay.reproduce.verdict import cell as text_cell
 from replay.reproduce.verdict import mean_ci
-from replay.score import ci95
+from replay.scorer import ci95
 from replay.summary import lost_cell
 
 
@@ -83,8 +83,8 @@ class Entry:
 
     name: str
     row: dict  # the leaderboard row (replay.summary)
-    result: object  # replay.evaluate.FilterResult
-    ev: object  # replay.evaluate.Evaluation
+    result: object  # replay.evaluation.FilterResult
+    ev: object  # replay.evaluation.Evaluation
     paper: float | None = None
     paired: tuple | None = None
     extra: dict = field(default_factory=dict)

@@ -194,7 +194,7 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
 def _measurements_row(t: Tune, run: Runner) -> list[dict]:
     """The raw observations scored on the test data (the ``measurements`` row of ``replay eval``),
     where the task observes every position component directly: a filter worse than its input shows."""
-    from replay.evaluate import observes_position
+    from replay.evaluation import observes_position
     from replay.pipeline import build_problem
 
     test = [t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})

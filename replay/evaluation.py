@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from replay import registry, score, summary
+from replay import registry, scorer, summary
 from replay.util.progress import particle_weight
 from replay.util.version import __version__
 from replay.filters import make_filter
@@ -66,7 +66,7 @@ class Evaluation:
     rows: list = field(default_factory=list)  # leaderboard rows, in --filters order
     baseline: str | None = None
     notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
-    units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.score.units)
+    units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.scorer.units)
     position_index: tuple = (0, 1, 2)  # the state components holding the scored position
 
     def position_components(self, name: str) -> tuple:
@@ -218,7 +218,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
                       [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
-                      score.units(p0), tuple(int(i) for i in p0.position_index))
+                      scorer.units(p0), tuple(int(i) for i in p0.position_index))
 
 
 MEASUREMENTS = "measurements"  # replay.filters.measurements
@@ -276,7 +276,7 @@ def _filled(rec: dict) -> dict:
     n, nx = len(p.z), p.model.nx
     est = Estimates(np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None,
                     {"error": rec["error"]})
-    return dict(rec, estimates=est, errors=score.errors(p, est), metrics={}, series={})
+    return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
 
 
 def failures(ev: Evaluation) -> dict:
