@@ -24,7 +24,7 @@ positive.
 Depth from FluidPressure (REP: ``fluid_pressure`` in Pa):
 ``depth = (p - p_atm) / (rho * g)`` with ``water_density`` rho (kg/m^3),
 ``atmospheric_pressure`` p_atm (Pa) and ``gravity`` g (m/s^2) as parameters.
-"""
+"""  # noqa: E501 (Markdown tables)
 from __future__ import annotations
 
 import numpy as np

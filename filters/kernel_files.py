@@ -127,7 +127,8 @@ class SealedCacheFile(IndexDataCacheFile):
         try:
             write_private(path, seal(payload))
         except OSError as e:  # e.g. a full disk: the compiled code runs, only not cached
-            note_once(f"kernel cache {os.path.dirname(path)}: cannot write ({e.strerror or e}); compiled code not cached")
+            note_once(f"kernel cache {os.path.dirname(path)}: cannot write ({e.strerror or e}); "
+                      "compiled code not cached")
 
 
 def note_once(msg: str) -> None:

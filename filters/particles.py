@@ -17,7 +17,8 @@ the other runs in the stack: M runs at once equal M runs of one, bit for bit.
                 (Gordon, Salmond & Smith 1993, §4; d = nx)
 
 The arithmetic is written once, as numba kernels (``*_rows``, :func:`weights`,
-:func:`moments`; the weighted mean is :func:`replay.util.kernels.point_mean`): plain loops, sums taken in particle order. Their un-jitted
+:func:`moments`; the weighted mean is :func:`replay.util.kernels.point_mean`): plain loops,
+sums taken in particle order. Their un-jitted
 ``py_func`` is the same code run by Python: the readable reference, equal to
 the compiled kernels bit for bit (``tests/test_particles.py``). The Python
 functions below (:func:`normalise`, :func:`estimate`, :func:`ess`,

@@ -29,8 +29,8 @@ from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
-from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded, is_sim,
-                             load_frame, plain, recorded_params, run_block)
+from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded,
+                             is_sim, load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
 from replay.eval_options import validate_eval_options
 from replay.util.errors import ReplayError

@@ -192,7 +192,8 @@ def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
     if name not in cfg["filter_params"]:
         raise bad(f"config.filter_params.{name}", "missing: the filter's parameters are not recorded")
     if not isinstance(cfg["filter_params"][name], dict):
-        raise bad(f"config.filter_params.{name}", f"expected an object, got {type(cfg['filter_params'][name]).__name__}")
+        raise bad(f"config.filter_params.{name}",
+                  f"expected an object, got {type(cfg['filter_params'][name]).__name__}")
     recorded = cfg["config_hashes"].get(name)
     if not isinstance(recorded, str) or not HASH.match(recorded):
         raise bad(f"config.config_hashes.{name}", f"expected 16 hex digits, got {recorded!r}")

@@ -264,7 +264,8 @@ class Engine:
         opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz, transition], float)
         zang = self.zmask if full else self.zmask[zidx]
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
-                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts, lam, rep)
+                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts,
+                lam, rep)
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
             self.k_threads(*args, chunks)

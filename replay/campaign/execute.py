@@ -255,7 +255,8 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         check_noise(jobs, campaign.path)  # per-filter Q, R, P0 of the task model's size: before any unit
         check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
         backend, counts["backend"] = open_backend(workers, scheduler, dask_local, connect_timeout, len(jobs))
-        weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs}
+        weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs))
+                   for j in jobs}
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
         progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
@@ -267,7 +268,8 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
-                    progress.update(len(results), bad, weight=weights.get((job.config_hash, tuple(job.runs)), len(results)))
+                    progress.update(len(results), bad,
+                                    weight=weights.get((job.config_hash, tuple(job.runs)), len(results)))
         finally:
             progress.close()
     counts["rows"] = board.summarise(out, hashes, store)

@@ -41,11 +41,13 @@ Everything is checked before any work starts (:func:`load`): a file that is not
 UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
 ``[campaign]`` value or a parameter of the wrong type or out of the bounds its
 declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
-and ``batch`` at most :data:`replay.eval_options.MAX_RUNS` (one declaration with ``replay eval``), ``seed`` >= 0, ``divergence_threshold`` > 0),
+and ``batch`` at most :data:`replay.eval_options.MAX_RUNS` (one declaration with ``replay eval``),
+``seed`` >= 0, ``divergence_threshold`` > 0),
 more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
 an absolute path: it would place the output outside the output root) raises
-:class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key. Each configuration stores its parameters with
+:class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key.
+Each configuration stores its parameters with
 every default filled in (canonical), so ``{}`` and the defaults are the same
 configuration, with the same hash.
 """

@@ -118,7 +118,8 @@ def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: in
 @click.option("--task", default=None, help="Campaign: the configurations of this task.")
 @click.option("--filter", "filter_", default=None, help="Campaign: only these filters (comma-separated).")
 @click.option("--config", default=None,
-              help="Campaign: only the configurations whose hash (units/<hash>) starts with one of these (comma-separated).")
+              help="Campaign: only the configurations whose hash (units/<hash>) starts with one of these "
+                   "(comma-separated).")
 @click.option("--sigma", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")

@@ -31,7 +31,8 @@ EXAMPLES: dict[str, list[str]] = {
                 "replay inspect ../shared/datasets/bags/evo/ROS_example.bag"],
     "list": ["replay list filters", "replay list filters pf", "replay list tasks position",
              "replay list datasets sim/ungm"],
-    "score": ["replay score gt.tum est.tum -a", "replay score gt.tum est.tum --rpe --delta 1 --delta-unit m --plot rpe.png",
+    "score": ["replay score gt.tum est.tum -a",
+              "replay score gt.tum est.tum --rpe --delta 1 --delta-unit m --plot rpe.png",
               "replay score ../shared/datasets/bags/evo/ROS_example.bag:groundtruth "
               "../shared/datasets/bags/evo/ROS_example.bag:ORB-SLAM -a"],
     "campaign run": ["replay campaign run campaigns/example.toml --out runs/campaign-example",

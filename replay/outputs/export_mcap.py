@@ -36,7 +36,7 @@ Messages are encoded many at a time (``replay.outputs.pb_columns`` for protobuf,
 holds one window, not the file (``McapOut``). The file goes to a hidden temporary
 name beside the target and is renamed over it when complete
 (``replay.outputs.export_safety``).
-"""
+"""  # noqa: E501 (Markdown tables)
 from __future__ import annotations
 
 import json
@@ -48,7 +48,8 @@ from replay.outputs.run_data import (enu_axes, enu_yaw, load_run, ned, read_esti
                                      track_index)
 from replay.util.errors import ReplayError
 
-__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap", "write_run_mcap"]
+__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap",
+           "write_run_mcap"]
 
 FRAME_ID = "enu"
 

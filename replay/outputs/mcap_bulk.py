@@ -146,7 +146,8 @@ class BulkWriter:
             raise ValueError(f"channel {channel_id}: {len(t)} times for {len(lens)} payloads")
         if len(t) and t.min() < 0:
             topic = self.channels[channel_id - 1].topic
-            raise ReplayError(f"{self.name}: topic {topic}: time {t.min()} ns before 1970 (MCAP log times are unsigned)")
+            raise ReplayError(f"{self.name}: topic {topic}: time {t.min()} ns before 1970 "
+                              "(MCAP log times are unsigned)")
         if len(t):
             self.parts.append((channel_id, t, buf, lens))
         return len(t)

@@ -52,7 +52,8 @@ ABLATIONS = {  # GPF with one part changed (same filter stream as GPF: common ra
 }
 VARIANTS = {**MAIN, **ABLATIONS}
 # sim/lake-depth's default sensors: their RMS over a 90 s run (base_sigma times the regimes' RMS factor)
-GENERATED_RMS = tuple(float(b) / f for b, f in zip(next(p.default for p in make_frame.PARAMS if p.name == "base_sigma"), base_for_rms((1.0, 1.0, 1.0))))
+GENERATED_RMS = tuple(float(b) / f for b, f in zip(next(p.default for p in make_frame.PARAMS if p.name == "base_sigma"),
+                                                   base_for_rms((1.0, 1.0, 1.0))))
 
 
 def tidy(x: float) -> float:

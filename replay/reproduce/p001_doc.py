@@ -190,7 +190,8 @@ def render(evs, runs, sweep_runs, seed, quick, doc) -> str:
                      a_abl if cause else anchor(s_main("bottom")), cause=cause)
 
     ne_what = ("north/east are unobservable (no measurement depends on them), so what the estimators add there "
-               "is never corrected; q̂'s drift is there without any current ([" + S_Q.lower() + "](" + anchor(S_Q) + "))")
+               "is never corrected; q̂'s drift is there without any current (["
+               + S_Q.lower() + "](" + anchor(S_Q) + "))")
     measured = ("the state is measured; the estimators that make it worse take the model's disagreement with "
                 "the sensors for noise or bias")
     claims = [verdict(("depth",), measured, paper="about equal (Fig. 3)"),
@@ -291,7 +292,8 @@ def render(evs, runs, sweep_runs, seed, quick, doc) -> str:
                 items += [("paper b = 0.98", row(base, "aukf")),
                           ("Q̂R̂ b = 0.98", row(evs[f"{track} 0.5 QR"].first(sweep_runs)))]
             elif f"{track} b={b}" in evs:
-                items += [(f"paper b = {b}", row(evs[f"{track} b={b}"])), (f"Q̂R̂ b = {b}", row(evs[f"{track} b={b} QR"]))]
+                items += [(f"paper b = {b}", row(evs[f"{track} b={b}"])),
+                          (f"Q̂R̂ b = {b}", row(evs[f"{track} b={b} QR"]))]
         rows = combine(items, metrics=ALL)
         best[track] = min(rows[1:], key=lambda r: r["pos_rmse"])
         best_paper[track] = min((r for r in rows if r["label"].startswith("paper")), key=lambda r: r["pos_rmse"])

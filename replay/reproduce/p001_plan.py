@@ -51,8 +51,8 @@ def plan(quick: bool, sweep_runs: int) -> list[Job]:
         jobs += [Job(f"{track} ablation {name}", DS, ("aukf",), data(track, 0.5), {"aukf": p}, runs=sweep_runs)
                  for name, p in ABLATION if track == "bottom" or name in ABLATION_WATER]
     # where q-hat points without any current (is its drift an estimate of the current?)
-    jobs.append(Job("no current ablation q̂ only", DS, ("aukf",), data("bottom", 0.0), {"aukf": dict(ABLATION)["q̂ only"]},
-                    runs=sweep_runs))
+    jobs.append(Job("no current ablation q̂ only", DS, ("aukf",), data("bottom", 0.0),
+                    {"aukf": dict(ABLATION)["q̂ only"]}, runs=sweep_runs))
     jobs.append(Job("traces", DS, ("aukf",), data("bottom", 0.5), {"aukf": {"keep_history": True}},
                     runs=min(TRACE_RUNS, sweep_runs)))
     return jobs

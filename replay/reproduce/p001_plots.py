@@ -27,7 +27,8 @@ def run_errors(ev, i) -> dict[str, np.ndarray]:
 
 
 def error_figures(t, errors: dict[str, dict[str, np.ndarray]], what: str) -> dict:
-    """One figure per quantity (:func:`replay.reproduce.common5.rmse_figures`). ``errors``: {filter label: run_errors}."""
+    """One figure per quantity (:func:`replay.reproduce.common5.rmse_figures`).
+    ``errors``: {filter label: run_errors}."""
     return rmse_figures(t, errors, QUANTITIES, f"001, {what}")
 
 

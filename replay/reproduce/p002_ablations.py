@@ -222,7 +222,8 @@ def render(evs, s) -> tuple[list[str], list[Claim]]:
             "part). The same happens here when the prior covariance P0 is multiplied by 1 + 1e-12 "
             "(`--task-param P0=...`, `--task-param p0=...`): largest relative change over the RMSE columns "
             f"(position, X, Y, Z, pitch, yaw) after the first {n_small} and all {s.mc} runs, against "
-            "`RERUN_RTOL`, the tolerance `replay rerun` applies to the filter (`filters/p002/igwo_stcpf.py`; 0: exact):", "",
+            "`RERUN_RTOL`, the tolerance `replay rerun` applies to the filter "
+            "(`filters/p002/igwo_stcpf.py`; 0: exact):", "",
             f"| problem | filter | first {n_small} runs: position / largest | {s.mc} runs: position / largest | "
             "RERUN_RTOL |", "|---|---|---|---|---|"]
     for e in nudged:

@@ -98,7 +98,8 @@ def render(evs, s, sim) -> tuple[list[str], list[Claim]]:
             "state's uncertainty (tr(H Φ Hᵀ) is O(1) in the range row, O(1/r²) in the bearing rows); with the "
             "scaled prior it multiplies P by λ every step until P overflows, and the update as printed "
             "(P = P⁻ − K S Kᵀ with only P_zz, P_xz scaled) turns indefinite within a few steps. Our default uses "
-            "the propagated M = H Φ P Φᵀ Hᵀ and scales the prior too (`filters/p002/stckf.py`). Rows: the default, the print "
+            "the propagated M = H Φ P Φᵀ Hᵀ and scales the prior too (`filters/p002/stckf.py`). "
+            "Rows: the default, the print "
             "(with and without an eigenvalue-floor repair of the posterior covariance, `-p stckf.repair=true`), "
             "and the CKF (λ ≡ 1) as the baseline. λ statistics over every update of every run (until divergence); "
             "a run whose covariance is not positive definite counts as diverged (left out of the means).", ""]

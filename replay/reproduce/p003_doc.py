@@ -62,8 +62,8 @@ def fmt(dh, digits=2):
 
 
 def block(title, rows, intro, metrics=("pos_rmse",)):
-    return [f"## {title}", "", intro, "", table(rows, metrics=metrics, base_name="the setting's PF"), "", "Commands (one per row):", "",
-            commands(rows), ""]
+    return [f"## {title}", "", intro, "", table(rows, metrics=metrics, base_name="the setting's PF"), "",
+            "Commands (one per row):", "", commands(rows), ""]
 
 
 A1, BOOT = "PF = WF-PF α = 1 (baseline)", "PF (bootstrap, own particle stream)"
@@ -280,7 +280,8 @@ def render(evs, runs, seed, quick, doc) -> str:
         best_mis[(ratio, eps)] = worst_best
         L.append(f"For reference, at σ₂/σ₁ = {ratio}, ε = {eps} the PF with the correct glint likelihood "
                  f"(section [{S_C.lower()}]({anchor(S_C)})) gets {r['pos_rmse']:.2f} ± {r['pos_rmse_ci95']:.2f} m "
-                 f"(lost {r['lost']}/{r['runs']}); the best row with a mismatched Gaussian ({worst_best[2].split(', filter ')[-1]}), "
+                 f"(lost {r['lost']}/{r['runs']}); the best row with a mismatched Gaussian "
+                 f"({worst_best[2].split(', filter ')[-1]}), "
                  f"{worst_best[1]}, gets {worst_best[0]:.2f} m.")
     L.append("")
 

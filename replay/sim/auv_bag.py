@@ -102,7 +102,8 @@ def make_bag(path, rng: np.random.Generator, **params) -> int:
             cov = np.zeros(36)
             cov[[0, 7, 14]] = sigma_dvl**2
             msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](
-                header=out.header(s, "dvl_link"), twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=cov))
+                header=out.header(s, "dvl_link"),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=cov))
             out.write(c, s + lat_ns, msg)
         idx, ns = at(4)
         c = out.connection("/pressure", "sensor_msgs/msg/FluidPressure")

@@ -22,8 +22,9 @@ mapping (``docs/bags.md``, "The fusion task"):
   fixes the origin: the start position is the reference's sample nearest the first sensor
   message (the known start of a dead-reckoning run, variance ``p0_known``), and a note says
   so; no other reference sample reaches a filter. Before the first sensor message the state
-  is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else the direction between the first
-  fed fixes at least 2 m apart, else the reference's first attitude (noted).
+  is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else
+  the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
+  (noted).
 
 Refused in one line: a frame with no sensor input (naming the tasks that would run), no
 reference (nothing to score against: how to declare one), an unknown field, a differential
@@ -210,8 +211,8 @@ class FusionTask(Task):
             x0[:d] = ref.values[k, :d]
             known += list(range(d))
             notes = notes + ["task fusion: no absolute position input (dead reckoning): the start position is "
-                             f"the reference's sample nearest the first sensor message (t = {frame.t[k]:.3f} s); no other reference "
-                             "sample reaches a filter"]
+                             f"the reference's sample nearest the first sensor message (t = {frame.t[k]:.3f} s); "
+                             "no other reference sample reaches a filter"]
         if attitude_at is not None:
             k, vals, comps = attitude_at
             for col, state, sgn, _ in comps:
@@ -230,6 +231,6 @@ class FusionTask(Task):
                 k = self._nearest_valid(att.valid, first)
                 x0[yaw_i] = att.values[k, 2]
                 known.append(yaw_i)
-                notes = notes + ["task fusion: no attitude input: the start heading is the reference's (nearest the first "
-                                 "sensor message)"]
+                notes = notes + ["task fusion: no attitude input: the start heading is the reference's "
+                                 "(nearest the first sensor message)"]
         return x0, notes, known

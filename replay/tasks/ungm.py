@@ -16,7 +16,8 @@ from . import Problem, Task
 
 class UNGMTask(Task):
     name = "ungm"
-    LOST_M = 10.0  # lost-track threshold (m): state units; the sign ambiguity of x^2/20 puts a wrong-mode estimate about 2|x| away
+    # lost-track threshold (m): state units; the sign ambiguity of x^2/20 puts a wrong-mode estimate about 2|x| away
+    LOST_M = 10.0
     PARAMS = (
         Param("q", float, None, "process noise variance the filters assume; null = the simulator's",
               low=0, low_open=True, optional=True),

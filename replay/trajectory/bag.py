@@ -19,7 +19,7 @@ stamps are those of the most frequent dynamic edge on the path; every other dyna
 edge is interpolated there (linear in position, slerp in orientation), and stamps
 outside its recorded span are dropped, as tf does not extrapolate. A path of static
 edges only is a constant transform, not a trajectory, and is refused.
-"""
+"""  # noqa: E501 (Markdown tables)
 from __future__ import annotations
 
 from pathlib import Path

@@ -17,7 +17,7 @@ quaternions. KITTI rotation matrices must be rotations (R'R = I within 1e-3, det
 stored as quaternions: the nearest rotation, so files printed with 6 digits are
 orthonormalised (evo keeps the printed matrices; rotation statistics then differ from
 evo's in about the 6th digit).
-"""
+"""  # noqa: E501 (Markdown tables)
 from __future__ import annotations
 
 from pathlib import Path

@@ -32,7 +32,7 @@ on the reference with ``pairs_from_reference``):
 
 **Statistics** (:func:`statistics`, evo's ``get_all_statistics``): rmse, mean, median,
 std (population, ddof = 0), min, max, sse (sum of squares).
-"""
+"""  # noqa: E501 (Markdown tables)
 from __future__ import annotations
 
 import math

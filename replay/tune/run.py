@@ -21,7 +21,6 @@ from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
 from replay.campaign.store import Store, write_bytes, write_json
 from replay.pipeline import Config, config_hash, plain
-from replay.util.errors import ReplayError
 from replay.util.progress import Progress
 
 from . import objectives, study as studies
@@ -205,7 +204,8 @@ def _measurements_row(t: Tune, run: Runner) -> list[dict]:
     score = float(sum(objectives.value(t.weights, r) for r in recs) / len(recs))
     return [{"dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": "measurements",
              "label": "measurements (raw observations)", "params": "{}", "tuned_on": "", "tested_on": t.split.tested_on,
-             "objective": t.objective, "trials": 0, "train_score": "", "test_score": score if math.isfinite(score) else "",
+             "objective": t.objective, "trials": 0, "train_score": "",
+             "test_score": score if math.isfinite(score) else "",
              "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "", "runs": t.runs * len(test),
              "seed": test[0].seed,
              **_pooled([_row(run.store, x, r) for x, r in zip(test, recs)]),

@@ -56,7 +56,8 @@ def open_study(store, name: str, fingerprint: dict, where: Path):
             raise ReplayError(f"{where}: study {name!r} was not made by replay tune (no {ATTR}); use another --out")
         study.set_user_attr(ATTR, fingerprint)
     elif had != json.loads(json.dumps(fingerprint)):
-        diff = sorted(k for k in set(had) | set(fingerprint) if had.get(k) != json.loads(json.dumps(fingerprint.get(k))))
+        diff = sorted(k for k in set(had) | set(fingerprint)
+                      if had.get(k) != json.loads(json.dumps(fingerprint.get(k))))
         raise ReplayError(f"{where}: study {name!r} belongs to another configuration (differs in: "
                           f"{', '.join(diff)}); use another --out, or the options it was made with")
     return study
