@@ -225,7 +225,7 @@ def entropy_weights(fl, eps, xi, w):
     sw = 0.0
     for j in range(k):
         p = (1.0 / (fl[j] + eps)) / sinv
-        w[j] = max(1.0 + p * np.log(p + eps), xi)
+        w[j] = max(1.0 + p * math.log(p + eps), xi)
         sw += w[j]
     for j in range(k):
         w[j] /= sw
