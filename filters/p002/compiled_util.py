@@ -126,7 +126,7 @@ def moments(Y, mask, mean, D):
                 sd, cd = sincos_small(d)
                 ss += sd
                 cc += cd
-            t = ref + np.arctan2(ss, cc)
+            t = ref + math.atan2(ss, cc)
             mean[i] = t - np.floor(t * (1.0 / TWO_PI) + 0.5) * TWO_PI
         else:
             t = 0.0
