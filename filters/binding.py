@@ -57,7 +57,9 @@ def cache_dir() -> Path:
 
 def where(fn):
     """(module, name) of a module-level numba function (a Python function when numba's JIT is disabled)."""
-    py = getattr(fn, "py_func", fn)
+    from numba.core import config
+
+    py = getattr(fn, "py_func", fn if config.DISABLE_JIT else None)
     mod = sys.modules.get(py.__module__) if py is not None else None
     if mod is None or getattr(mod, py.__name__, None) is not fn:
         raise ReplayError(f"model kernel {fn!r} is not a module-level numba function of an importable module")

@@ -16,8 +16,6 @@ import sys
 
 import pytest
 
-pytestmark = pytest.mark.slow  # two evaluations in fresh processes: ~4 s (numba's start-up, cached kernels)
-
 FILTERS = ("ekf", "ukf", "ckf", "pf")
 SCORES = ("pos_rmse", "x_rmse", "y_rmse", "z_rmse", "pitch_rmse", "yaw_rmse", "ate", "final_err", "nees")
 
@@ -34,6 +32,7 @@ def _eval(out, plain: bool) -> dict:
     return json.loads((out / "manifest.json").read_text())["results"]
 
 
+@pytest.mark.slow  # two evaluations in fresh processes: ~4 s (numba's start-up, cached kernels)
 def test_plain_python_equals_compiled(tmp_path):
     plain, compiled = _eval(tmp_path / "plain", True), _eval(tmp_path / "compiled", False)
     for name in FILTERS:
@@ -56,3 +55,20 @@ def _assert_same(p: dict, c: dict) -> None:
         a, b = p[k], c[k]
         same = a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))
         assert same, (k, a, b)
+
+
+def plain_kernel(x, p, out):  # a module-level Python function, not a numba one
+    out[0] = x[0]
+
+
+def test_plain_kernel_refused_when_compiling():
+    """Only with numba's JIT disabled may a kernel be a plain Python function: compiled, it is refused
+    with one line (not a numba typing error deep in a bound copy)."""
+    from numba.core import config
+
+    from replay.filters import binding
+    from replay.util.errors import ReplayError
+
+    assert not config.DISABLE_JIT
+    with pytest.raises(ReplayError, match="plain_kernel.* is not a module-level numba function"):
+        binding.where(plain_kernel)
