@@ -56,8 +56,10 @@ def cache_dir() -> Path:
 
 
 def where(fn):
-    """(module, name) of a module-level numba function."""
-    py = getattr(fn, "py_func", None)
+    """(module, name) of a module-level numba function (a Python function when numba's JIT is disabled)."""
+    from numba.core import config
+
+    py = getattr(fn, "py_func", fn if config.DISABLE_JIT else None)
     mod = sys.modules.get(py.__module__) if py is not None else None
     if mod is None or getattr(mod, py.__name__, None) is not fn:
         raise ReplayError(f"model kernel {fn!r} is not a module-level numba function of an importable module")
@@ -146,9 +148,12 @@ def _exec(name: str, text: str, filename: str):
 
 
 def cfunc(sig, fn):
-    """A cfunc of the copy's function ``fn`` (a dispatcher), cached (sealed) beside the copy when it is."""
+    """A cfunc of the copy's function ``fn`` (a dispatcher), cached (sealed) beside the copy when it is;
+    with numba's JIT disabled ``fn`` itself (a Python function)."""
     from . import kernel_files
 
+    if not hasattr(fn, "py_func"):
+        return fn
     mod = sys.modules.get(fn.py_func.__module__)
     return kernel_files.cfunc(sig, fn.py_func, getattr(mod, "CACHED", False), getattr(mod, "LABEL", "a model"))
 

@@ -55,8 +55,9 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
                                                            "the run loops' rows kernels (about 2 s)")
             fty = kernels.JACOBIAN_ROWS if i >= 2 else kernels.ROWS_KERNEL
             fn = _rows[key] = binding.cfunc(fty.signature, getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]))
-            fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
-            fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
+            if hasattr(fn, "address"):  # compiled (with numba's JIT disabled: the Python function)
+                fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
+                fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
         got.append(fn)
     return got
 
@@ -139,6 +140,8 @@ class Kernel:
             return self.entry(*self.fns, *args)
         out = self.dispatcher(*self.fns, *args)
         d = self.dispatcher
+        if not hasattr(d, "overloads"):  # numba's JIT disabled: the Python function, nothing to type
+            return out
         sig = tuple(d.typeof_pyval(a) for a in (*self.fns, *args))
         cres = d.overloads.get(sig)
         if cres is not None:

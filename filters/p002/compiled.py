@@ -34,6 +34,8 @@ cubature step 0.39 ms (~200 sin, cos, atan2, sqrt per particle), the swarm 0.25 
 """
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -252,7 +254,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         logdet_q = 0.0
         ee = 0.0
         for a in range(n):
-            logdet_q += np.log(Lq[a, a])
+            logdet_q += math.log(Lq[a, a])
             ee += e[a] * e[a]
         logw[m, i] += loglik + log_prior + 0.5 * (ee + 2.0 * logdet_q)
 

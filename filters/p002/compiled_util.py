@@ -126,7 +126,7 @@ def moments(Y, mask, mean, D):
                 sd, cd = sincos_small(d)
                 ss += sd
                 cc += cd
-            t = ref + np.arctan2(ss, cc)
+            t = ref + math.atan2(ss, cc)
             mean[i] = t - np.floor(t * (1.0 / TWO_PI) + 0.5) * TWO_PI
         else:
             t = 0.0
@@ -225,7 +225,7 @@ def entropy_weights(fl, eps, xi, w):
     sw = 0.0
     for j in range(k):
         p = (1.0 / (fl[j] + eps)) / sinv
-        w[j] = max(1.0 + p * np.log(p + eps), xi)
+        w[j] = max(1.0 + p * math.log(p + eps), xi)
         sw += w[j]
     for j in range(k):
         w[j] /= sw

@@ -27,6 +27,8 @@ plus additive noise w ~ N(0, Q), Q = diag(1, 1, 1, 0.1, 0.01, 0.01).
 """
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -67,8 +69,8 @@ def h(x, p, out):
     rho2 = dx * dx + dy * dy  # sqrt, not hypot: cheaper, and no overflow at sonar ranges
     rho = np.sqrt(rho2)
     out[0] = np.sqrt(rho2 + dz * dz)
-    out[1] = np.arctan2(dz, rho)
-    out[2] = np.arctan2(dy, dx)
+    out[1] = math.atan2(dz, rho)  # math, not np.arctan2: the same C library call when compiled, and
+    out[2] = math.atan2(dy, dx)  # in plain Python too (NumPy's own arctan2 differs in the last bit)
 
 
 @nb.njit(cache=True)

@@ -51,6 +51,8 @@ def loop_ready(loop, sig, compile_ok: bool) -> bool:
     not at import: a short run never waits for it."""
     if (loop, id(sig)) in _READY:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
         return True
+    if not hasattr(loop, "signatures"):  # numba's JIT disabled: the loop is its Python function
+        return True
     if not loop.signatures:
         if loop._cache.load_overload(sig, loop.targetctx) is None:
             if not compile_ok:
