@@ -85,7 +85,7 @@ def parse(spec: str) -> list:
             raise ReplayError(f"--lengths {spec}: {toks[k + 1]} is not on the step {step:g} from {toks[k - 1]}")
         if n > MAX_LENGTHS:
             break  # refused below
-        out += [(u1, a + m * step) for m in range(1, n)]
+        out += [(u1, b + m * step) for m in range(1, n)]
     if len(out) > MAX_LENGTHS:
         raise ReplayError(f"--lengths {spec}: {len(out)} lengths, at most {MAX_LENGTHS}")
     if len(set(out)) != len(out):
