@@ -83,11 +83,11 @@ def parse(spec: str) -> list:
         step, n = b - a, round((z - b) / (b - a))
         if abs(b + n * step - z) > 1e-9 * z:
             raise ReplayError(f"--lengths {spec}: {toks[k + 1]} is not on the step {step:g} from {toks[k - 1]}")
-        if n > MAX_LENGTHS:
-            break  # refused below
+        if len(out) + n > MAX_LENGTHS:
+            raise ReplayError(f"--lengths {spec}: more than {MAX_LENGTHS} lengths, at most {MAX_LENGTHS}")
         out += [(u1, b + m * step) for m in range(1, n)]
     if len(out) > MAX_LENGTHS:
-        raise ReplayError(f"--lengths {spec}: {len(out)} lengths, at most {MAX_LENGTHS}")
+        raise ReplayError(f"--lengths {spec}: {len(out)} lengths, at most {MAX_LENGTHS}")  # noqa
     if len(set(out)) != len(out):
         raise ReplayError(f"--lengths {spec}: a length is given twice")
     return out
