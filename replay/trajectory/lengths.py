@@ -87,7 +87,7 @@ def parse(spec: str) -> list:
             raise ReplayError(f"--lengths {spec}: more than {MAX_LENGTHS} lengths, at most {MAX_LENGTHS}")
         out += [(u1, b + m * step) for m in range(1, n)]
     if len(out) > MAX_LENGTHS:
-        raise ReplayError(f"--lengths {spec}: {len(out)} lengths, at most {MAX_LENGTHS}")  # noqa
+        raise ReplayError(f"--lengths {spec}: {len(out)} lengths, at most {MAX_LENGTHS}")
     if len(set(out)) != len(out):
         raise ReplayError(f"--lengths {spec}: a length is given twice")
     return out
