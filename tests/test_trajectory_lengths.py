@@ -84,22 +84,21 @@ def test_yaw_rate_bias_grows_linearly_with_length():
     assert y40 == pytest.approx(4 * y10, rel=1e-12)
 
 
-def _rpg_loop(p_gt, q_gt, p_es, q_es, dist, scale):
-    """rpg's definition re-stated with loops and 4x4 matrices (oracle)."""
-    D = [0.0]
-    for k in range(1, len(p_gt)):
-        D.append(D[-1] + math.sqrt(float(np.sum((p_gt[k] - p_gt[k - 1]) ** 2))))
+def _rpg_ends(p_gt, dist):
+    """rpg's comparison indices, re-stated with a loop over starts (oracle)."""
+    D = np.concatenate(([0.0], np.cumsum([math.sqrt(float(np.sum((p_gt[k] - p_gt[k - 1]) ** 2)))
+                                          for k in range(1, len(p_gt))])))
     ends = []
     for a in range(len(D)):
-        best, err = -1, 0.2 * dist
-        for k in range(a, len(D)):
-            if abs(D[k] - (D[a] + dist)) < err:
-                best, err = k, abs(D[k] - (D[a] + dist))
-        if best != -1:
-            ends.append(best)
-    if len(ends) < 2:
-        return []
+        err = np.abs(D[a:] - (D[a] + dist))
+        k = int(np.argmin(err))  # first of ties, as rpg's strict '<'
+        if err[k] < 0.2 * dist:
+            ends.append(a + k)
+    return ends if len(ends) >= 2 else []
 
+
+def _rpg_errors(p_gt, q_gt, p_es, q_es, ends, scale):
+    """rpg's error per (k, ends[k]) with 4x4 matrices (oracle)."""
     def T(q, p):
         M = np.eye(4)
         M[:3, :3] = Rotation.from_quat(q).as_matrix()
@@ -118,6 +117,10 @@ def _rpg_loop(p_gt, q_gt, p_es, q_es, dist, scale):
         rot = math.degrees(math.acos(min(1, max(-1, (np.trace(Ew[:3, :3]) - 1) / 2))))
         out.append((np.linalg.norm(Ew[:3, 3]), rot, abs(math.degrees(yaw)), math.degrees(math.hypot(pitch, roll))))
     return out
+
+
+def _rpg_loop(p_gt, q_gt, p_es, q_es, dist, scale):
+    return _rpg_errors(p_gt, q_gt, p_es, q_es, _rpg_ends(p_gt, dist), scale)
 
 
 def _random_pair(n=160, seed=3, gap=False):
@@ -214,3 +217,24 @@ def test_cli_one_call_prints_and_writes_one_row_per_length(tmp_path):
         assert float(row["rel_trans_perc_max"]) == pytest.approx(5.0, rel=1e-9)
         assert row["lengths_method"] == "rpg" and row["filter"] == "recorded:est"
     assert [int(row["rel_trans_num_samples"]) for row in rows] == [184, 168, 152, 136, 120]
+
+
+@pytest.mark.slow
+def test_ros_example_orb_slam_equals_rpg_definition(shared_dir):
+    """ROS_example.bag, ORB-SLAM against groundtruth, -a, 10-50 %: rpg's definition on real data."""
+    from replay.trajectory import io
+
+    bag = shared_dir / "datasets" / "bags" / "evo" / "ROS_example.bag"
+    ref, est = io.load_all([f"{bag}:groundtruth", f"{bag}:ORB-SLAM"], names=["groundtruth", "ORB-SLAM"])
+    s = score(ref, est, align="se3", lengths="10%,20%,30%,40%,50%")
+    total = float(L.distances(ref.p)[-1])
+    assert [e["length"] for e in s.lengths.values()] == [math.trunc(k / 10 * total * 100) / 100 for k in range(1, 6)]
+    assert [len(e["trans"]) for e in s.lengths.values()] == [2293, 2031, 1794, 1547, 1369]
+    r, e = s.reference, s.estimate
+    for entry in s.lengths.values():
+        ends = _rpg_ends(r.p, entry["length"])
+        np.testing.assert_array_equal(entry["pairs"][1], ends)
+        take = np.arange(0, len(ends), 25)
+        want = np.array(_rpg_errors(r.p, r.q, e.p, e.q, ends, 1.0))[take]
+        for k, col in (("trans", 0), ("rot", 1), ("yaw", 2), ("gravity", 3)):
+            np.testing.assert_allclose(entry[k][take], want[:, col], rtol=1e-9, atol=1e-9)
