@@ -22,7 +22,8 @@ def files(tmp_path):
     q = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
     write_tum(tmp_path / "gt.tum", make(t, p, q, source="gt"))
     write_tum(tmp_path / "est.tum", make(t, p * 1.01, q, source="est"))
-    (tmp_path / "pos.csv").write_text("t,x,y,z\n" + "".join(f"{a:.3f},{b},{c},0\n" for a, b, c in zip(t, p[:, 0], p[:, 1])))
+    rows = "".join(f"{a:.3f},{b},{c},0\n" for a, b, c in zip(t, p[:, 0], p[:, 1]))
+    (tmp_path / "pos.csv").write_text("t,x,y,z\n" + rows)
     return tmp_path
 
 

@@ -121,8 +121,8 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
-              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method, fmt, kitti_times, columns, time_unit,
-              lost_threshold, lost_steps, plot_path, out):
+              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method, fmt,
+              kitti_times, columns, time_unit, lost_threshold, lost_steps, plot_path, out):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag

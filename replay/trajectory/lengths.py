@@ -223,8 +223,8 @@ def statistics(e) -> dict:
 def table(result: dict, method: str) -> str:
     """The printed block: per length, one line per error with its statistics."""
     stats = ("rmse", "mean", "median", "std", "min", "max")
-    out = [f"Relative errors over lengths ({method}: {'rpg_trajectory_evaluation' if method == 'rpg' else 'KITTI devkit'}"
-           " sub-trajectories)"]
+    source = "rpg_trajectory_evaluation" if method == "rpg" else "KITTI devkit"
+    out = [f"Relative errors over lengths ({method}: {source} sub-trajectories)"]
     for name, entry in result.items():
         i, _ = entry["pairs"]
         out.append(f"\nlength {name} = {entry['length']:g} m: {len(i)} sub-trajectories"
