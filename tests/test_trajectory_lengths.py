@@ -238,3 +238,16 @@ def test_ros_example_orb_slam_equals_rpg_definition(shared_dir):
         want = np.array(_rpg_errors(r.p, r.q, e.p, e.q, ends, 1.0))[take]
         for k, col in (("trans", 0), ("rot", 1), ("yaw", 2), ("gravity", 3)):
             np.testing.assert_allclose(entry[k][take], want[:, col], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_rpg_ends_with_stationary_poses_and_ties(seed):
+    """Plateaus of the path length (stationary poses) and rounded positions (ties): first of ties, as rpg."""
+    ref, _ = _random_pair(seed=seed)
+    p = ref.p.copy()
+    for k in np.random.default_rng(seed).integers(1, len(p), 40):
+        p[k] = p[k - 1]
+    p = np.round(p, 1)
+    for dist in (1.0, 3.0, 10.0, 25.0):
+        _, j, _ = L.rpg_pairs(L.distances(p), dist, 0.2 * dist)
+        assert list(j) == _rpg_ends(p, dist)
