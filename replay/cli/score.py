@@ -95,6 +95,13 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="RPE over all pairs at the delta instead of consecutive ones.")
 @click.option("--pairs-from-reference", "--pairs_from_reference", "pairs_from_reference", is_flag=True,
               help="Choose the RPE pairs on the reference instead of the estimate.")
+@click.option("--lengths", "lengths", default=None,
+              help="Relative errors over sub-trajectory lengths, rpg_trajectory_evaluation / KITTI style: "
+                   "10%,20%,30%,40%,50% of the reference's path length, or metres (100,200,...,800).")
+@click.option("--lengths-method", "--lengths_method", "lengths_method", type=click.Choice(["rpg", "kitti"]),
+              default="rpg", show_default=True,
+              help="Sub-trajectories of --lengths: rpg (every start, end nearest to the length) or kitti "
+                   "(every 10th start, first end beyond the length).")
 @click.option("--format", "fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,
               help="Format of the trajectory files (default: from the header's column names, else the "
                    "extension and the column count; a CSV whose order they cannot tell is refused).")
@@ -114,8 +121,8 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
-              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, fmt, kitti_times, columns, time_unit,
-              lost_threshold, lost_steps, plot_path, out):
+              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method, fmt,
+              kitti_times, columns, time_unit, lost_threshold, lost_steps, plot_path, out):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
@@ -131,6 +138,10 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     from replay.util.files import refuse_overlap, write_csv
 
     method = _resolve_align(align, a_flag, s_flag)
+    if lengths is not None:
+        from replay.trajectory import lengths as by_length
+
+        lengths = by_length.parse(lengths)  # refused before any file is read
     relations = list(dict.fromkeys(relations or ["trans"]))
     want_rpe = rpe or delta is not None or all_pairs
     if "point_distance_error_ratio" in relations and not want_rpe:
@@ -144,11 +155,11 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     taken = set()
     names = [_name(reference, set())] + [_name(spec, taken) for spec in estimates]
     ref, *ests = io.load_all([reference, *estimates], names=names, **opts)
-    scores, rows = {}, []
+    scores, rows, summary = {}, [], []
     settings = dict(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                     t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
                     delta_unit=delta_unit, all_pairs=all_pairs, rel_tol=delta_tol,
-                    pairs_from_reference=pairs_from_reference)
+                    pairs_from_reference=pairs_from_reference, lengths=lengths, lengths_method=lengths_method)
     for spec, name, est in zip(estimates, names[1:], ests):
         s = score(ref, est, **settings)
         scores[name] = s
@@ -159,6 +170,8 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
             click.echo(_block(_title("APE", rel, settings), s.stats("ape", rel)))
         for rel in s.rpe:
             click.echo(_block(_title("RPE", rel, settings), s.stats("rpe", rel)))
+        if s.lengths:
+            click.echo(by_length.table(s.lengths, lengths_method))
         cfg = {"reference": reference, "estimate": spec, **settings}
         row = {"dataset": io.label(reference), "task": "trajectory", "filter": f"recorded:{name}",
                "label": f"recorded:{name}", "params": json.dumps({"source": spec}, sort_keys=True),
@@ -166,12 +179,13 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
         row.update(row_metrics(s, lost_threshold=lost_threshold, lost_steps=lost_steps))
         row.update(us_per_step=math.nan, alignment=method + ("+origin" if align_origin else ""),
                    version=__version__, config_hash=config_hash(cfg))
-        rows.append(row)
-    if len(rows) > 1:
+        summary.append(row)
+        rows += by_length.rows(row, s.lengths, lengths_method) if s.lengths else [row]
+    if len(summary) > 1:
         rel = relations[0]
         click.echo(f"{'estimate':<24} {'matched':>8} {'APE ' + rel + ' rmse':>22}"
                    + (f" {'RPE ' + rel + ' rmse':>22}" if want_rpe else ""))
-        for row in rows:
+        for row in summary:
             click.echo(f"{row['filter'][9:]:<24} {row['matched']:>8} {row.get(f'ape_{rel}_rmse', math.nan):>22.6f}"
                        + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if want_rpe else ""))
     if out:

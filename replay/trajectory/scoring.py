@@ -45,6 +45,7 @@ class Score:
     rpe_pairs: tuple | None = None  # (i, j)
     rpe_axes: np.ndarray | None = None
     unmatched: int = 0  # estimate poses left without a reference pose
+    lengths: dict = field(default_factory=dict)  # label -> relative errors over a length (trajectory.lengths)
 
     def stats(self, kind: str = "ape", relation: str = "trans") -> dict:
         return pose_error.statistics((self.ape if kind == "ape" else self.rpe)[relation])
@@ -68,7 +69,8 @@ def _align(ref: Trajectory, est: Trajectory, method: str, n_to_align, origin: bo
 def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: int | None = None,
           align_origin: bool = False, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
           relations=("trans",), delta: float | None = None, delta_unit: str = "f", all_pairs: bool = False,
-          rel_tol: float = 0.1, pairs_from_reference: bool = False) -> Score:
+          rel_tol: float = 0.1, pairs_from_reference: bool = False, lengths=None,
+          lengths_method: str = "rpg") -> Score:
     """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring."""
     relations = [pose_error.relation(r) for r in relations]
     for tr in (ref, est):
@@ -85,7 +87,8 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
     moved, transform = _align(r, e, align, n_to_align, align_origin)
     options = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                    t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
-                   rel_tol=rel_tol, pairs_from_reference=pairs_from_reference)
+                   rel_tol=rel_tol, pairs_from_reference=pairs_from_reference, lengths=lengths,
+                   lengths_method=lengths_method)
     out = Score(r, e, moved, transform, options, unmatched=len(est) - len(np.unique(i_est)))
     for rel in relations:
         if rel != "point_distance_error_ratio":
@@ -101,6 +104,13 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
                                                 relation=rel)
             if axes is not None:
                 out.rpe_axes = axes
+    if lengths:
+        from replay.trajectory import lengths as by_length
+
+        items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
+        out.lengths = by_length.relative_errors(
+            ref_path_length=float(by_length.distances(ref.p)[-1]), p_ref=r.p, q_ref=r.q, p_est=e.p, q_est=e.q,
+            items=items, method=lengths_method, scale=float(transform[2]))
     return out
 
 
