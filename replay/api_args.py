@@ -160,7 +160,7 @@ ARGS: dict[str, dict] = {
               "fmt": _p("fmt", str, "format of the files", choices=FORMATS, optional=True),
               "kitti_times": PATH(name="kitti_times", doc="stamps of KITTI poses", optional=True),
               "columns": Either("columns", (_p("columns", str, "columns of a plain CSV", optional=True),
-                                            _p("columns", dict, "columns of a plain CSV", optional=True))),
+                                            _p("columns", dict, "columns of a plain CSV"))),
               "time_unit": _p("time_unit", str, "unit of CSV stamps", choices=("s", "ms", "us", "ns"), optional=True),
               "lost_threshold": _p("lost_threshold", float, "lost above", unit="m", low=0.0, low_open=True,
                                    optional=True),
@@ -170,7 +170,7 @@ ARGS: dict[str, dict] = {
     "refresh_plugins": {},
 }
 # the functions whose keyword options are all declared: an unknown one is refused with the known ones
-CLOSED = {"evaluate": ("recorded", "progress"), "score": ()}
+CLOSED = {"evaluate": ("recorded", "progress")}
 
 
 def _run_in(source, run, owner):
