@@ -37,3 +37,5 @@ for d in bohai sonar example; do  # the plugin's row beside the built-ins' on ea
 done
 # the notebook, into a scratch copy (the committed one is left as it is)
 "$PY" examples/run_notebook.py examples/quickstart.ipynb -o "$tmp/quickstart.ipynb"
+# scoring from Python (replay.score on evo's ROS_example.bag), likewise into a scratch copy
+"$PY" examples/run_notebook.py examples/scoring.ipynb -o "$tmp/scoring.ipynb"
