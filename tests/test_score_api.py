@@ -244,3 +244,35 @@ def test_bag_topics_as_the_cli(shared_dir):
     for name in ("ORB-SLAM", "S-PTAM"):
         block = printed(output, name, "ape", "trans")
         assert {k: f"{s.loc[name, k]:.6f}" for k in STATS} == block
+
+
+NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "scoring.ipynb"
+
+
+def test_scoring_notebook_is_committed_executed_and_clean():
+    import json
+
+    from test_notebook import runner
+
+    nb = json.loads(NOTEBOOK.read_text())
+    code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+    assert [c["execution_count"] for c in code] == list(range(1, len(code) + 1))  # top to bottom, once
+    assert all(c["outputs"] for c in code) and all("execution" not in c["metadata"] for c in code)
+    assert not [o for c in code for o in c["outputs"] if o["output_type"] == "error" or o.get("name") == "stderr"]
+    assert runner().machine_paths(nb) == []
+    stats = next(c for c in code if c["source"][0].startswith("r = replay.score("))
+    table = "".join(stats["outputs"][0]["data"]["text/plain"])
+    assert "ORB-SLAM    ape    trans    m  2550  5.509938" in table  # evo_ape bag ... ORB-SLAM -a (docs/evo.md)
+
+
+@pytest.mark.slow  # a Jupyter kernel: about 10 s
+def test_scoring_notebook_runs_top_to_bottom(shared_dir, tmp_path, monkeypatch):
+    pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    from test_notebook import runner
+
+    monkeypatch.setenv("REPLAY_SHARED", str(shared_dir))
+    nb = runner().execute(NOTEBOOK, tmp_path / "run.ipynb", timeout=600)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert not [o for c in code for o in c.outputs if o.output_type == "error"]
+    assert "5.509938" in code[1].outputs[0]["data"]["text/plain"]
