@@ -19,30 +19,18 @@ import replay
 from replay.cli.main import main
 from replay.trajectory import Trajectory, load
 from replay.trajectory.base import make
-from replay.trajectory.files import write_tum
 from replay.util.errors import DataError, ReplayError
 from replay.util.files import fmt, write_csv
+from test_score_cli import files  # noqa: F401 — the fixture
 
 STATS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 
 
 @pytest.fixture
-def files(tmp_path, monkeypatch):
-    """gt.tum and two noisy, rotated, scaled estimates (stamps jittered), in the working directory."""
-    rng = np.random.default_rng(1)
-    n = 300
-    t = 20.0 + np.arange(n) * 0.1
-    s = np.arange(n) * 0.1
-    p = np.column_stack([8 * np.cos(s / 5), 8 * np.sin(s / 5), 0.1 * s])
-    q = Rotation.from_euler("xyz", np.column_stack([0.05 * np.sin(s), np.zeros(n), s / 5])).as_quat()
-    write_tum(tmp_path / "gt.tum", make(t, p, q, source="gt"))
-    R = Rotation.from_euler("z", 0.4).as_matrix()
-    for k, name in enumerate(("est.tum", "vo.tum")):
-        pe = (1.0 + 0.1 * k) * (p + np.cumsum(rng.normal(0, 0.02, (n, 3)), axis=0)) @ R.T + [k, 2, 0]
-        qe = Rotation.from_matrix(R) * Rotation.from_quat(q) * Rotation.from_rotvec(rng.normal(0, 0.01, (n, 3)))
-        write_tum(tmp_path / name, make(t + rng.uniform(-0.003, 0.003, n), pe, qe.as_quat(), source=name))
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
+def here(files, monkeypatch):
+    """gt.tum and two noisy, rotated, scaled estimates vo.tum, ekf.tum (test_score_cli), as the working directory."""
+    monkeypatch.chdir(files)
+    return files
 
 
 def cli(*args):
@@ -76,12 +64,12 @@ CASES = [
 
 
 @pytest.mark.parametrize("api,flags", CASES, ids=["se3", "sim3-rpe-m", "yaw-all-pairs", "origin-seconds"])
-def test_python_equals_the_cli_printed_statistics_and_csv(files, api, flags):
-    output = cli("gt.tum", "est.tum", "vo.tum", *flags, "-o", "cli.csv")
-    r = replay.score("gt.tum", ["est.tum", "vo.tum"], **api)
+def test_python_equals_the_cli_printed_statistics_and_csv(here, api, flags):
+    output = cli("gt.tum", "vo.tum", "ekf.tum", *flags, "-o", "cli.csv")
+    r = replay.score("gt.tum", ["vo.tum", "ekf.tum"], **api)
     stats = r.stats()
     rows = {row["filter"]: row for row in csv.DictReader(open("cli.csv"))}
-    assert list(stats["estimate"].unique()) == ["est", "vo"] and len(stats) == len(rows) * len(
+    assert list(stats["estimate"].unique()) == ["vo", "ekf"] and len(stats) == len(rows) * len(
         set(zip(stats["metric"], stats["relation"])))
     for _, row in stats.iterrows():
         block = printed(output, row["estimate"], row["metric"], row["relation"])
@@ -89,38 +77,38 @@ def test_python_equals_the_cli_printed_statistics_and_csv(files, api, flags):
             assert f"{row[k]:.6f}" == block[k], (row["estimate"], row["metric"], row["relation"], k)
             assert fmt(row[k]) == rows[f"recorded:{row['estimate']}"][f"{row['metric']}_{row['relation']}_{k}"]
     # the whole leaderboard: the CSV the CLI writes, byte for byte (configuration hashes included)
-    write_csv(r.rows, files / "api.csv", list(r.leaderboard().columns))
-    assert (files / "api.csv").read_text() == (files / "cli.csv").read_text()
+    write_csv(r.rows, here / "api.csv", list(r.leaderboard().columns))
+    assert (here / "api.csv").read_text() == (here / "cli.csv").read_text()
     lb = r.leaderboard()
     assert list(lb.columns) == next(csv.reader(open("cli.csv")))
     assert lb["ape_" + stats["relation"].iloc[0] + "_rmse"].tolist() == stats.loc[
         stats["metric"] == "ape", "rmse"].tolist()[::len(set(stats.loc[stats["metric"] == "ape", "relation"]))]
 
 
-def test_issue_acceptance_command_prints_the_cli_statistics(files):
+def test_issue_acceptance_command_prints_the_cli_statistics(here):
     """The issue's line, run as written (a wide terminal so that pandas prints every column)."""
-    code = "import replay; r = replay.score('gt.tum', ['est.tum'], align='se3'); print(r.stats())"
+    code = "import replay; r = replay.score('gt.tum', ['vo.tum'], align='se3'); print(r.stats())"
     env = {**os.environ, "COLUMNS": "250"}
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0 and res.stderr == "", res.stderr
     head, line = res.stdout.splitlines()
     assert head.split() == ["estimate", "metric", "relation", "unit", "n", *STATS]
     cells = line.split()
-    block = printed(cli("gt.tum", "est.tum", "-a", "-o", "cli.csv"), "est", "ape", "trans")
-    assert cells[1:6] == ["est", "ape", "trans", "m", "300"]
+    block = printed(cli("gt.tum", "vo.tum", "-a", "-o", "cli.csv"), "vo", "ape", "trans")
+    assert cells[1:6] == ["vo", "ape", "trans", "m", "300"]
     assert {k: f"{float(c):.6f}" for k, c in zip(STATS, cells[6:])} == block  # the six decimals the CLI prints
     row = next(csv.DictReader(open("cli.csv")))
     assert [float(c) for c in cells[6:]] == pytest.approx([float(row[f"ape_trans_{k}"]) for k in STATS], rel=5e-6)
 
 
-def test_one_path_traceback_of_the_issue_is_gone_and_inputs_mix(files):
-    one = replay.score("gt.tum", "est.tum")  # the call the issue reports ending in a traceback
-    assert list(one.scores) == ["est"] and one.stats()["n"].tolist() == [300]
-    ref, est = load("gt.tum"), load("est.tum")
-    by_path = replay.score(Path("gt.tum"), ["est.tum", "est.tum"], align="se3", rpe=True).stats()
+def test_one_path_traceback_of_the_issue_is_gone_and_inputs_mix(here):
+    one = replay.score("gt.tum", "vo.tum")  # the call the issue reports ending in a traceback
+    assert list(one.scores) == ["vo"] and one.stats()["n"].tolist() == [300]
+    ref, est = load("gt.tum"), load("vo.tum")
+    by_path = replay.score(Path("gt.tum"), ["vo.tum", "vo.tum"], align="se3", rpe=True).stats()
     mixed = replay.score(ref.to_pandas(), [est, est.to_pandas()], align="se3", rpe=True).stats()
-    assert list(by_path["estimate"].unique()) == ["est", "est#2"]
-    assert list(mixed["estimate"].unique()) == ["est.tum", "est.tum#2"]  # names of the objects
+    assert list(by_path["estimate"].unique()) == ["vo", "vo#2"]
+    assert list(mixed["estimate"].unique()) == ["vo.tum", "vo.tum#2"]  # names of the objects
     cols = ["metric", "relation", "n", *STATS]
     assert np.array_equal(by_path[cols].to_numpy(), mixed[cols].to_numpy())
     named = replay.score(ref, [est], names=["orb"])
@@ -141,8 +129,8 @@ def test_known_answer_offset_and_rigid_motion():
     assert s["rmse"].iloc[0] < 1e-9 and replay.score(ref, moved).stats()["rmse"].iloc[0] > 1.0
 
 
-def test_errors_per_pose_and_per_pair(files):
-    r = replay.score("gt.tum", ["est.tum", "vo.tum"], align="se3", pose_relation=["trans", "angle_deg"], delta=1)
+def test_errors_per_pose_and_per_pair(here):
+    r = replay.score("gt.tum", ["vo.tum", "ekf.tum"], align="se3", pose_relation=["trans", "angle_deg"], delta=1)
     ape, stats = r.errors(), r.stats().set_index(["estimate", "metric", "relation"])
     assert list(ape.columns) == ["estimate", "t", "t_estimate", "trans", "angle_deg", "err_x", "err_y", "err_z"]
     for name, part in ape.groupby("estimate", sort=False):
@@ -158,14 +146,14 @@ def test_errors_per_pose_and_per_pair(files):
     with pytest.raises(ReplayError, match=r"^errors: kind must be 'ape' or 'rpe'"):
         r.errors("nees")
     with pytest.raises(ReplayError, match=r"no RPE was computed"):
-        replay.score("gt.tum", "est.tum").errors("rpe")
+        replay.score("gt.tum", "vo.tum").errors("rpe")
 
 
 def test_errors_rpe_ratio_leaves_pairs_of_zero_distance_as_nan():
     t = np.arange(10.0)
     x = np.array([0, 1, 2, 2, 2, 3, 4, 5, 6, 7], float)  # stands still from 2 to 4
     ref = make(t, np.column_stack([x, 0 * x, 0 * x]), source="ref")
-    est = make(t, np.column_stack([1.1 * x, 0 * x, 0 * x]), source="est")
+    est = make(t, np.column_stack([1.1 * x, 0 * x, 0 * x]), source="vo")
     r = replay.score(ref, est, pose_relation=["point_distance", "point_distance_error_ratio"], rpe=True)
     e = r.errors("rpe")
     assert len(e) == 9 and e["point_distance_error_ratio"].isna().tolist() == [False] * 2 + [True] * 2 + [False] * 5
@@ -173,19 +161,19 @@ def test_errors_rpe_ratio_leaves_pairs_of_zero_distance_as_nan():
     assert r.stats().query("relation == 'point_distance_error_ratio'")["n"].tolist() == [7]
 
 
-def test_plot_draws_the_aligned_tracks(files):
+def test_plot_draws_the_aligned_tracks(here):
     from matplotlib.figure import Figure
 
-    r = replay.score("gt.tum", ["est.tum", "vo.tum"], align="sim3", rpe=True)
+    r = replay.score("gt.tum", ["vo.tum", "ekf.tum"], align="sim3", rpe=True)
     fig = r.plot()
     assert isinstance(fig, Figure) and len(fig.axes) == 3
     lines = fig.axes[0].get_lines()
-    assert [ln.get_label() for ln in lines] == ["reference (gt)", "est", "vo"]
-    assert np.array_equal(lines[2].get_xydata(), r["vo"].aligned.p[:, :2])
-    assert np.array_equal(fig.axes[1].get_lines()[0].get_ydata(), r["est"].ape["trans"])
+    assert [ln.get_label() for ln in lines] == ["reference (gt)", "vo", "ekf"]
+    assert np.array_equal(lines[2].get_xydata(), r["ekf"].aligned.p[:, :2])
+    assert np.array_equal(fig.axes[1].get_lines()[0].get_ydata(), r["vo"].ape["trans"])
     with pytest.raises(ReplayError, match=r"^plot: relation 'angle_deg' was not computed \(pose_relation: trans\)$"):
         r.plot(relation="angle_deg")
-    with pytest.raises(ReplayError, match=r"^no estimate named 'x' \(estimates: est, vo\)$"):
+    with pytest.raises(ReplayError, match=r"^no estimate named 'x' \(estimates: vo, ekf\)$"):
         r["x"]
 
 
@@ -213,19 +201,19 @@ def test_to_pandas_from_pandas_round_trip_and_refusals():
         assert "\n" not in str(err.value)
 
 
-def test_bad_calls_are_one_line(files):
+def test_bad_calls_are_one_line(here):
     tr = load("gt.tum")
     for kwargs, match in [
         (dict(estimates=[]), r"^estimates must be one item or a non-empty list \(got an empty list\)$"),
-        (dict(estimates=["est.tum", 3]), r"^estimates\[1\] must be a path .* or a Trajectory .* or a DataFrame"),
-        (dict(estimates="est.tum", names=["a", "b"]), r"^names: 2 names for 1 estimate$"),
-        (dict(estimates=["est.tum", "vo.tum"], names=["a", "a"]), r"^names: 'a' is given twice$"),
-        (dict(estimates="est.tum", pose_relation=["trans", "nope"]), r"^pose_relation\[1\] must be one of trans,"),
-        (dict(estimates="est.tum", pose_relation="point_distance_error_ratio"),
+        (dict(estimates=["vo.tum", 3]), r"^estimates\[1\] must be a path .* or a Trajectory .* or a DataFrame"),
+        (dict(estimates="vo.tum", names=["a", "b"]), r"^names: 2 names for 1 estimate$"),
+        (dict(estimates=["vo.tum", "ekf.tum"], names=["a", "a"]), r"^names: 'a' is given twice$"),
+        (dict(estimates="vo.tum", pose_relation=["trans", "nope"]), r"^pose_relation\[1\] must be one of trans,"),
+        (dict(estimates="vo.tum", pose_relation="point_distance_error_ratio"),
          r"^pose_relation point_distance_error_ratio is an RPE relation: add rpe=True"),
         (dict(estimates="nosuch.tum"), r"^nosuch\.tum: no such file$"),
-        (dict(estimates="est.tum", align="se3", align_origin=True), r"origin alignment and se3 alignment exclude"),
-        (dict(estimates="est.tum", relations=["trans"]),
+        (dict(estimates="vo.tum", align="se3", align_origin=True), r"origin alignment and se3 alignment exclude"),
+        (dict(estimates="vo.tum", relations=["trans"]),
          r"^replay\.score: got an unexpected keyword argument 'relations'$"),
     ]:
         est = kwargs.pop("estimates")
