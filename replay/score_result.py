@@ -174,8 +174,16 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
           delta_unit: str = "f", delta_tol: float = 0.1, all_pairs: bool = False,
           pairs_from_reference: bool = False, fmt=None, kitti_times=None, columns=None, time_unit=None,
           lost_threshold=None, lost_steps: int = 10, names=None) -> ScoreResult:
-    """Score ``estimates`` against ``reference`` as ``replay score`` does (module docstring); the
-    options are the CLI's (``pose_relation``: ``-r``, one or a list)."""
+    """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
+
+    ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
+    ``RECORDING:TOPIC``, ``RECORDING:tf:PARENT->CHILD``, a Trajectory or a DataFrame (``t, x, y, z``
+    and optionally ``qx, qy, qz, qw``). The options are the CLI's long options (docs/evo.md):
+    ``align`` none, yaw, se3 (evo's ``-a``), sim3 (``-as``) or scale (``-s``); ``pose_relation``
+    (``-r``, one or a list); ``rpe``, ``delta``, ``delta_unit``, ``delta_tol``, ``all_pairs``,
+    ``pairs_from_reference`` (the RPE); ``fmt``, ``kitti_times``, ``columns``, ``time_unit`` (files);
+    ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name).
+    """
     items = list(estimates) if isinstance(estimates, (list, tuple)) else [estimates]
     relations = list(dict.fromkeys([pose_relation] if isinstance(pose_relation, str) else pose_relation))
     want_rpe = rpe or delta is not None or all_pairs
