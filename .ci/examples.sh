@@ -2,7 +2,8 @@
 # The example plugin and the quickstart notebook (issue 15), against the shared data beside
 # the checkout: install examples/replay-plugin-example, run its filter next to the built-in
 # ones on a Bohai sequence, on sim/auv-sonar and on its own dataset (its rows on the same
-# leaderboard), then execute examples/quickstart.ipynb top to bottom (a failing cell fails).
+# leaderboard), then execute examples/quickstart.ipynb and examples/scoring.ipynb top to bottom
+# (a failing cell fails).
 # Uses the checkout's .venv (`.ci/run` makes it); the plugin is uninstalled again at the end
 # unless it was installed before.
 set -euo pipefail
@@ -37,3 +38,5 @@ for d in bohai sonar example; do  # the plugin's row beside the built-ins' on ea
 done
 # the notebook, into a scratch copy (the committed one is left as it is)
 "$PY" examples/run_notebook.py examples/quickstart.ipynb -o "$tmp/quickstart.ipynb"
+# scoring from Python (replay.score on evo's ROS_example.bag), likewise into a scratch copy
+"$PY" examples/run_notebook.py examples/scoring.ipynb -o "$tmp/scoring.ipynb"

@@ -21,6 +21,7 @@ from replay import registry, tables
 from replay.evaluation import DEFAULT_FILTERS
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
+from replay.score_result import ScoreResult, score  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError
@@ -154,13 +155,6 @@ def _rows(rows):
     from replay import summary
 
     return pd.DataFrame(rows, columns=summary.columns(rows) if rows else None)
-
-
-def score(reference, estimate, **options):
-    """Score an estimated trajectory against a reference (APE, RPE): :func:`replay.trajectory.score`."""
-    from replay.trajectory import score as run
-
-    return run(reference, estimate, **options)
 
 
 def load_trajectory(source, **options):

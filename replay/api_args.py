@@ -15,10 +15,12 @@ from __future__ import annotations
 import functools
 import inspect
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from replay.eval_options import BY_NAME as EVAL
 from replay.summary import MIN_SCORED_SHARE
+from replay.trajectory.files import FORMATS
+from replay.trajectory.pose_error import DELTA_UNITS, EVO_NAMES, RELATIONS
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -67,6 +69,26 @@ class Either:
         raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be {what} (got {shown:.60})")
 
 
+@dataclass(frozen=True)
+class Several:
+    """An argument that is one item or a non-empty list (or tuple) of items, each accepted by
+    ``item`` (a declaration of the same name): ``estimates``, ``pose_relation``."""
+
+    name: str
+    item: object
+    optional: bool = False
+
+    def check(self, value, owner: str = ""):
+        if value is None and self.optional:
+            return None
+        if not isinstance(value, (list, tuple)):
+            return self.item.check(value, owner)
+        if not value:
+            raise ReplayError(f"{owner + ': ' if owner else ''}{self.name} must be one item or a non-empty list "
+                              "(got an empty list)")
+        return [replace(self.item, name=f"{self.name}[{k}]").check(v, owner) for k, v in enumerate(value)]
+
+
 def _p(name, type_, doc, **kw):
     return Param(name, type_, kw.pop("default", None), doc, **kw)
 
@@ -75,8 +97,10 @@ PATH = functools.partial(_p, type_=os.PathLike)
 DATASET = _p("dataset", str, "a dataset id (replay datasets list) or a file path")
 EVALUATION = Kind("ev", "replay.evaluation:Evaluation", "an evaluation (replay.evaluate)")
 FRAME = Kind("frame", "replay.frame:Frame", "a frame (replay.load_frame)")
-def TRAJ(name):  # noqa: N802 — a declaration
-    return Kind(name, "replay.trajectory.base:Trajectory", "a trajectory (replay.load_trajectory)")
+def TRAJECTORY(name):  # noqa: N802 — a declaration
+    return Either(name, (PATH(name=name, doc="a trajectory file or BAG:topic"),
+                         Kind(name, "replay.trajectory.base:Trajectory", "a Trajectory (replay.load_trajectory)"),
+                         Kind(name, "pandas:DataFrame", "a DataFrame with columns t, x, y, z[, qx, qy, qz, qw]")))
 
 
 NAME = _p("name", str, "a registered name", optional=True)
@@ -119,22 +143,34 @@ ARGS: dict[str, dict] = {
                      "data_dir": EVAL["data_dir"], "quiet": _p("quiet", bool, "no progress", default=True),
                      "retry_failed": _p("retry_failed", bool, "compute failed units again", default=False)},
     "load_trajectory": {"source": PATH(name="source", doc="a trajectory file or BAG:topic")},
-    "score": {"reference": TRAJ("reference"), "estimate": TRAJ("estimate"),
+    "score": {"reference": TRAJECTORY("reference"), "estimates": Several("estimates", TRAJECTORY("estimates")),
               "align": _p("align", str, "alignment", default="none", choices=("none", "yaw", "se3", "sim3", "scale")),
               "n_to_align": _p("n_to_align", int, "poses aligned", low=1, optional=True),
               "align_origin": _p("align_origin", bool, "align the first poses", default=False),
               "t_max_diff": _p("t_max_diff", float, "association tolerance", default=0.01, unit="s", low=0.0),
               "t_offset": _p("t_offset", float, "added to the estimate's stamps", default=0.0, unit="s"),
+              "pose_relation": Several("pose_relation", _p("pose_relation", str, "pose relation", default="trans",
+                                                           choices=(*RELATIONS, *EVO_NAMES))),
+              "rpe": _p("rpe", bool, "also the RPE", default=False),
               "delta": _p("delta", float, "RPE pose distance", low=0.0, low_open=True, optional=True),
-              "delta_unit": _p("delta_unit", str, "unit of delta", default="f", choices=("f", "m", "d", "r", "s")),
-              "rel_tol": _p("rel_tol", float, "delta tolerance", default=0.1, low=0.0, low_open=True),
+              "delta_unit": _p("delta_unit", str, "unit of delta", default="f", choices=DELTA_UNITS),
+              "delta_tol": _p("delta_tol", float, "relative delta tolerance", default=0.1, low=0.0),
               "all_pairs": _p("all_pairs", bool, "every pair at delta", default=False),
-              "pairs_from_reference": _p("pairs_from_reference", bool, "pairs from the reference", default=False)},
+              "pairs_from_reference": _p("pairs_from_reference", bool, "pairs from the reference", default=False),
+              "fmt": _p("fmt", str, "format of the files", choices=FORMATS, optional=True),
+              "kitti_times": PATH(name="kitti_times", doc="stamps of KITTI poses", optional=True),
+              "columns": Either("columns", (_p("columns", str, "columns of a plain CSV", optional=True),
+                                            _p("columns", dict, "columns of a plain CSV"))),
+              "time_unit": _p("time_unit", str, "unit of CSV stamps", choices=("s", "ms", "us", "ns"), optional=True),
+              "lost_threshold": _p("lost_threshold", float, "lost above", unit="m", low=0.0, low_open=True,
+                                   optional=True),
+              "lost_steps": _p("lost_steps", int, "consecutive poses", default=10, low=1),
+              "names": Several("names", _p("names", str, "names of the estimates"), optional=True)},
     "list_plugins": {},
     "refresh_plugins": {},
 }
 # the functions whose keyword options are all declared: an unknown one is refused with the known ones
-CLOSED = {"evaluate": ("recorded", "progress"), "score": ()}
+CLOSED = {"evaluate": ("recorded", "progress")}
 
 
 def _run_in(source, run, owner):

@@ -11,7 +11,7 @@ import pytest
 
 import replay
 from hostile import assert_refused, register
-from replay.api_args import ARGS, Either, Kind
+from replay.api_args import ARGS, Either, Kind, Several
 from replay.eval_options import EVAL_OPTIONS, validate_eval_options
 from replay.util.errors import ReplayError
 
@@ -22,6 +22,8 @@ def bad_values(decl) -> list:
     """Wrong types and out-of-range values of a declaration (Param, Kind, or Either: those no option accepts)."""
     if isinstance(decl, Either):
         return [v for d in decl.options for v in bad_values(d) if not _accepted(decl, v)]
+    if isinstance(decl, Several):  # a bad item alone and in a list, and an empty list
+        return [v for v in [*bad_values(decl.item), [], [bad_values(decl.item)[-1]]] if not _accepted(decl, v)]
     if isinstance(decl, Kind):
         return [3, "x", object()] + ([] if decl.optional else [None])
     t, out = decl.type, ([] if decl.optional else [None])
@@ -92,15 +94,14 @@ def generated_calls():
 
 def test_every_public_function_is_declared_and_its_declarations_are_its_arguments():
     from replay.evaluation import evaluate as full
-    from replay.trajectory import score as full_score
 
     assert set(ARGS) == set(replay.__all__)
     for fn, decls in ARGS.items():
         params = inspect.signature(getattr(replay, fn)).parameters
-        extra = {"evaluate": inspect.signature(full).parameters,
-                 "score": inspect.signature(full_score).parameters}.get(fn, {})
-        more = {"reference": 0, "estimate": 0} if fn == "score" else {}
-        assert set(decls) <= set(params) | set(extra) | set(more), (fn, set(decls) - set(params) - set(extra))
+        extra = {"evaluate": inspect.signature(full).parameters}.get(fn, {})
+        assert set(decls) <= set(params) | set(extra), (fn, set(decls) - set(params) - set(extra))
+    score = inspect.signature(replay.score).parameters  # every option of replay.score is declared
+    assert set(score) == set(ARGS["score"]), set(score) ^ set(ARGS["score"])
 
 
 @pytest.mark.parametrize("fn,arg,value", list(generated_calls()))

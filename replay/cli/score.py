@@ -5,7 +5,6 @@ Registered in :mod:`replay.cli.main` (``main.add_command(score_cmd)``). The numb
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -28,18 +27,6 @@ def _resolve_align(align, a_flag, s_flag) -> str:
         given = "-as" if a_flag and s_flag else "-a" if a_flag else "-s"
         raise ReplayError(f"--align {align} and {given} ({flags}) disagree: give one")
     return align or flags or "none"
-
-
-def _name(spec: str, taken: set) -> str:
-    from replay.trajectory.io import split
-
-    path, topic = split(spec)
-    base = topic.lstrip("/") if topic else path.stem
-    name, k = base, 2
-    while name in taken:
-        name, k = f"{base}#{k}", k + 1
-    taken.add(name)
-    return name
 
 
 def _block(title: str, stats: dict) -> str:
@@ -129,10 +116,10 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     directory or .mcap and a topic of nav_msgs/Odometry, PoseStamped, PoseWithCovarianceStamped,
     TransformStamped, nav_msgs/Path (last message) or NavSatFix), or RECORDING:tf:PARENT->CHILD.
     """
-    from replay.util.version import __version__
-    from replay.pipeline import config_hash
+    from replay.score_result import estimate_name, leaderboard_row
+    from replay.score_result import settings as score_settings
     from replay.summary import columns as leaderboard_columns
-    from replay.trajectory import io, row_metrics, score
+    from replay.trajectory import io, score
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
     from replay.util import outfile
     from replay.util.files import refuse_overlap, write_csv
@@ -153,13 +140,14 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
             outfile.check(path, what, suffixes)
     opts = dict(fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
     taken = set()
-    names = [_name(reference, set())] + [_name(spec, taken) for spec in estimates]
+    names = [estimate_name(reference, set())] + [estimate_name(spec, taken) for spec in estimates]
     ref, *ests = io.load_all([reference, *estimates], names=names, **opts)
     scores, rows, summary = {}, [], []
-    settings = dict(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
-                    t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
-                    delta_unit=delta_unit, all_pairs=all_pairs, rel_tol=delta_tol,
-                    pairs_from_reference=pairs_from_reference, lengths=lengths, lengths_method=lengths_method)
+    settings = score_settings(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
+                              t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
+                              delta_unit=delta_unit, delta_tol=delta_tol, all_pairs=all_pairs,
+                              pairs_from_reference=pairs_from_reference, lengths=lengths,
+                              lengths_method=lengths_method)
     for spec, name, est in zip(estimates, names[1:], ests):
         s = score(ref, est, **settings)
         scores[name] = s
@@ -172,13 +160,8 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
             click.echo(_block(_title("RPE", rel, settings), s.stats("rpe", rel)))
         if s.lengths:
             click.echo(by_length.table(s.lengths, lengths_method))
-        cfg = {"reference": reference, "estimate": spec, **settings}
-        row = {"dataset": io.label(reference), "task": "trajectory", "filter": f"recorded:{name}",
-               "label": f"recorded:{name}", "params": json.dumps({"source": spec}, sort_keys=True),
-               "runs": 1, "diverged": 0, "failed": 0, "seed": "", "first": ""}
-        row.update(row_metrics(s, lost_threshold=lost_threshold, lost_steps=lost_steps))
-        row.update(us_per_step=math.nan, alignment=method + ("+origin" if align_origin else ""),
-                   version=__version__, config_hash=config_hash(cfg))
+        row = leaderboard_row(s, reference=reference, dataset=io.label(reference), estimate=spec, name=name,
+                              settings=settings, lost_threshold=lost_threshold, lost_steps=lost_steps)
         summary.append(row)
         rows += by_length.rows(row, s.lengths, lengths_method) if s.lengths else [row]
     if len(summary) > 1:

@@ -20,6 +20,7 @@ import numpy as np
 from replay.util.errors import DataError
 
 MIN_POSES = 3
+QUAT_COLUMNS = ("qx", "qy", "qz", "qw")  # of to_pandas / from_pandas
 QUAT_TOL = 1e-3  # |‖q‖ - 1| allowed (printed quaternions carry 6-9 digits); larger is an error in the data
 
 
@@ -43,6 +44,44 @@ class Trajectory:
         """The poses at ``idx`` (indices or a boolean mask)."""
         return replace(self, t=self.t[idx], p=self.p[idx], q=None if self.q is None else self.q[idx],
                        cov=None if self.cov is None else self.cov[idx])
+
+    def to_pandas(self):
+        """The poses as a DataFrame: columns ``t`` (s), ``x, y, z`` (m) and, with an orientation,
+        ``qx, qy, qz, qw``; ``attrs``: ``name``, ``source`` (the covariance is left out)."""
+        import pandas as pd
+
+        cols = {"t": self.t, "x": self.p[:, 0], "y": self.p[:, 1], "z": self.p[:, 2]}
+        if self.q is not None:
+            cols.update(zip(QUAT_COLUMNS, self.q.T))
+        df = pd.DataFrame(cols)
+        df.attrs.update(name=self.name, source=self.source)
+        return df
+
+    @classmethod
+    def from_pandas(cls, df, *, name: str = "") -> Trajectory:
+        """A checked trajectory (:func:`make`) of a DataFrame with columns ``t, x, y, z`` and
+        optionally all of ``qx, qy, qz, qw`` (other columns are ignored); ``name``: default
+        ``df.attrs["name"]``. Messages name the DataFrame and the row (0-based position)."""
+        name = name or str(df.attrs.get("name") or "DataFrame")
+        source = f"DataFrame {name}"
+        missing = [c for c in ("t", "x", "y", "z") if c not in df.columns]
+        quat = [c for c in QUAT_COLUMNS if c in df.columns]
+        if missing or 0 < len(quat) < 4:
+            absent = missing or [c for c in QUAT_COLUMNS if c not in quat]
+            raise DataError(source, f"lacks column{'s' if len(absent) > 1 else ''} {', '.join(absent)}: expected t, "
+                            f"x, y, z (s, m) and optionally all of {', '.join(QUAT_COLUMNS)} "
+                            f"(columns: {', '.join(map(str, df.columns))[:120]})")
+        wanted = ["t", "x", "y", "z", *quat]
+        twice = [c for c in wanted if list(df.columns).count(c) > 1]
+        if twice:
+            raise DataError(source, f"column {twice[0]!r} appears twice")
+        bad = [c for c in wanted if df[c].dtype.kind not in "iuf"]
+        if bad:
+            raise DataError(source, f"column {bad[0]!r} is not numeric (dtype {df[bad[0]].dtype}): t in seconds, "
+                            "positions in metres")
+        values = df[wanted].to_numpy(float)
+        return make(values[:, 0], values[:, 1:4], values[:, 4:8] if quat else None, source=source, name=name,
+                    rows=np.arange(len(values)))
 
     def transformed(self, R: np.ndarray, t: np.ndarray, c: float = 1.0) -> Trajectory:
         """The trajectory moved by x -> c R x + t (orientations rotated by R, covariance by c R)."""

@@ -1,0 +1,225 @@
+"""``replay.score`` from Python (:func:`score`, :class:`ScoreResult`) and the leaderboard rows of
+``replay score`` (:func:`leaderboard_row`): one code path, so that the Python call and the
+command line give the same numbers.
+
+Inputs are sources as the CLI takes them (a TUM, KITTI, EuRoC or CSV file, ``BAG:topic``,
+``BAG:tf:PARENT->CHILD``), :class:`replay.trajectory.Trajectory` objects or pandas DataFrames
+(columns ``t, x, y, z`` and optionally ``qx, qy, qz, qw``: :meth:`Trajectory.from_pandas`).
+Each estimate is associated, aligned and scored by :func:`replay.trajectory.score` with the
+settings of :func:`settings` (those of ``replay score``); its leaderboard row is
+:func:`leaderboard_row`, the row ``replay score -o`` writes.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from replay.pipeline import config_hash
+from replay.trajectory import io, row_metrics
+from replay.trajectory import score as score_one
+from replay.trajectory.base import Trajectory
+from replay.trajectory.pose_error import UNITS, statistics
+from replay.util.errors import ReplayError
+
+
+def estimate_name(spec, taken: set) -> str:
+    """The name ``replay score`` gives a source (topic, else file stem), made unique in ``taken``."""
+    path, topic = io.split(spec)
+    return _unique(topic.lstrip("/") if topic else path.stem, taken)
+
+
+def _unique(base: str, taken: set) -> str:
+    name, k = base, 2
+    while name in taken:
+        name, k = f"{base}#{k}", k + 1
+    taken.add(name)
+    return name
+
+
+def settings(*, align: str, n_to_align, align_origin: bool, t_max_diff: float, t_offset: float, relations,
+             delta, delta_unit: str, delta_tol: float, all_pairs: bool, pairs_from_reference: bool,
+             lengths=None, lengths_method: str = "rpg") -> dict:
+    """The keyword arguments of :func:`replay.trajectory.score` (and of the configuration hash) for
+    the options of ``replay score``; ``delta``: None for no RPE; ``lengths``: the relative errors over
+    lengths (``--lengths``), in the settings only when asked for."""
+    out = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
+               t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
+               rel_tol=delta_tol, pairs_from_reference=pairs_from_reference)
+    if lengths:
+        out.update(lengths=lengths, lengths_method=lengths_method)
+    return out
+
+
+def leaderboard_row(s, *, reference: str, dataset: str, estimate: str, name: str, settings: dict,
+                    lost_threshold=None, lost_steps: int = 10) -> dict:
+    """The leaderboard row (:mod:`replay.summary` schema) of the score ``s`` of the estimate
+    ``estimate`` (its source) named ``name`` against ``reference`` (its source; ``dataset``: its label)."""
+    from replay.util.version import __version__
+
+    cfg = {"reference": reference, "estimate": estimate, **settings}
+    row = {"dataset": dataset, "task": "trajectory", "filter": f"recorded:{name}", "label": f"recorded:{name}",
+           "params": json.dumps({"source": estimate}, sort_keys=True), "runs": 1, "diverged": 0, "failed": 0,
+           "seed": "", "first": ""}
+    row.update(row_metrics(s, lost_threshold=lost_threshold, lost_steps=lost_steps))
+    row.update(us_per_step=math.nan, alignment=settings["align"] + ("+origin" if settings["align_origin"] else ""),
+               version=__version__, config_hash=config_hash(cfg))
+    return row
+
+
+class ScoreResult:
+    """The scores of one or more estimates against one reference (:func:`score`).
+
+    ``reference`` (the whole reference trajectory), ``scores`` ({name: :class:`replay.trajectory.Score`},
+    in the order given), ``rows`` (the leaderboard rows), ``settings``. ``result[name]`` is a Score.
+    """
+
+    def __init__(self, reference: Trajectory, scores: dict, rows: list, settings: dict):
+        self.reference, self.scores, self.rows, self.settings = reference, scores, rows, settings
+
+    def __getitem__(self, name):
+        if name not in self.scores:
+            raise ReplayError(f"no estimate named {name!r} (estimates: {', '.join(self.scores)})")
+        return self.scores[name]
+
+    def __repr__(self) -> str:
+        return (f"<ScoreResult: {', '.join(self.scores)} vs {self.reference.name} "
+                f"(align {self.settings['align']}; .stats(), .errors(), .leaderboard(), .plot())>")
+
+    def _repr_html_(self):
+        return self.stats()._repr_html_()
+
+    def stats(self):
+        """One row per estimate and metric (``ape``/``rpe``) and pose relation: ``estimate``, ``metric``,
+        ``relation``, ``unit``, ``n`` (poses or pairs), then ``rmse, mean, median, std, min, max, sse``:
+        the numbers ``replay score`` prints, and writes as ``<metric>_<relation>_<stat>``."""
+        import pandas as pd
+
+        rows = [{"estimate": name, "metric": kind, "relation": rel, "unit": UNITS[rel], "n": len(e), **statistics(e)}
+                for name, s in self.scores.items() for kind, errs in (("ape", s.ape), ("rpe", s.rpe))
+                for rel, e in errs.items()]
+        df = pd.DataFrame(rows)
+        df.attrs["settings"] = dict(self.settings)
+        return df
+
+    def errors(self, kind: str = "ape"):
+        """Per-pose errors (``kind="ape"``: ``t``, the reference stamp, ``t_estimate``, the
+        estimate's as recorded) or per-pair errors (``"rpe"``: ``t_i``, ``t_j``, reference stamps of
+        the pair), one column per pose relation (its unit: ``stats()``) and ``err_x, err_y, err_z``
+        (APE: aligned estimate minus reference; RPE: the translation error in the reference's frame
+        at i; absent for point distances), with an ``estimate`` column; pairs that a relation leaves
+        out (point_distance_error_ratio at zero distance) are NaN."""
+        import pandas as pd
+
+        if kind not in ("ape", "rpe"):
+            raise ReplayError(f"errors: kind must be 'ape' or 'rpe' (got {kind!r:.40})")
+        parts = []
+        for name, s in self.scores.items():
+            if kind == "ape":
+                cols = {"t": s.reference.t, "t_estimate": s.estimate.t, **s.ape}
+                axes = s.ape_axes
+            elif s.rpe_pairs is None:
+                continue
+            else:
+                i, j = s.rpe_pairs
+                cols = {"t_i": s.reference.t[i], "t_j": s.reference.t[j]}
+                for rel, e in s.rpe.items():
+                    if len(e) != len(i):  # only the pairs of non-zero reference distance
+                        full = np.full(len(i), np.nan)
+                        full[np.linalg.norm(s.reference.p[j] - s.reference.p[i], axis=1) != 0] = e
+                        e = full
+                    cols[rel] = e
+                axes = s.rpe_axes
+            if axes is not None:
+                cols.update(err_x=axes[:, 0], err_y=axes[:, 1], err_z=axes[:, 2])
+            parts.append(pd.DataFrame({"estimate": name, **cols}))
+        if not parts:
+            raise ReplayError("errors('rpe'): no RPE was computed (give rpe=True or a delta)")
+        return pd.concat(parts, ignore_index=True)
+
+    def leaderboard(self):
+        """The leaderboard rows as a DataFrame: the columns and values ``replay score -o`` writes
+        (every digit kept; the CSV rounds to 6 significant digits)."""
+        import pandas as pd
+
+        from replay.summary import columns
+
+        return pd.DataFrame(self.rows, columns=columns(self.rows))
+
+    def plot(self, *, relation: str | None = None):
+        """The figure of ``replay score --plot`` (:func:`replay.trajectory.plot.figure`): the tracks
+        aligned as scored, the APE (and RPE) of ``relation`` (default: the first) over time."""
+        from replay.trajectory import plot
+
+        rels = self.settings["relations"]
+        if relation is not None and relation not in {r for s in self.scores.values() for r in (*s.ape, *s.rpe)}:
+            raise ReplayError(f"plot: relation {relation!r} was not computed (pose_relation: {', '.join(rels)})")
+        return plot.figure(self.reference, self.scores, relation=relation)
+
+
+def _trajectory(item, name: str) -> Trajectory:
+    import dataclasses
+
+    if isinstance(item, Trajectory):
+        return dataclasses.replace(item, name=name)
+    return Trajectory.from_pandas(item, name=name)
+
+
+def _default_name(item, taken: set, k: int) -> str:
+    if isinstance(item, (str, os.PathLike)):
+        return estimate_name(os.fspath(item), taken)
+    own = item.name if isinstance(item, Trajectory) else item.attrs.get("name")
+    return _unique(str(own) if own else f"estimate{k}" if k else "reference", taken)
+
+
+def score(reference, estimates, *, align: str = "none", n_to_align=None, align_origin: bool = False,
+          t_max_diff: float = 0.01, t_offset: float = 0.0, pose_relation="trans", rpe: bool = False, delta=None,
+          delta_unit: str = "f", delta_tol: float = 0.1, all_pairs: bool = False,
+          pairs_from_reference: bool = False, fmt=None, kitti_times=None, columns=None, time_unit=None,
+          lost_threshold=None, lost_steps: int = 10, names=None) -> ScoreResult:
+    """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
+
+    ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
+    ``RECORDING:TOPIC``, ``RECORDING:tf:PARENT->CHILD``, a Trajectory or a DataFrame (``t, x, y, z``
+    and optionally ``qx, qy, qz, qw``). The options are the CLI's long options (docs/evo.md):
+    ``align`` none, yaw, se3 (evo's ``-a``), sim3 (``-as``) or scale (``-s``); ``pose_relation``
+    (``-r``, one or a list); ``rpe``, ``delta``, ``delta_unit``, ``delta_tol``, ``all_pairs``,
+    ``pairs_from_reference`` (the RPE); ``fmt``, ``kitti_times``, ``columns``, ``time_unit`` (files);
+    ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name).
+    """
+    items = list(estimates) if isinstance(estimates, (list, tuple)) else [estimates]
+    relations = list(dict.fromkeys([pose_relation] if isinstance(pose_relation, str) else pose_relation))
+    want_rpe = rpe or delta is not None or all_pairs
+    if "point_distance_error_ratio" in relations and not want_rpe:
+        raise ReplayError("pose_relation point_distance_error_ratio is an RPE relation: add rpe=True (or a delta)")
+    if names is not None:
+        names = [names] if isinstance(names, str) else list(names)
+        if len(names) != len(items):
+            raise ReplayError(f"names: {len(names)} name{'s' if len(names) != 1 else ''} for {len(items)} "
+                              f"estimate{'s' if len(items) != 1 else ''}")
+        if twice := [n for n in names if names.count(n) > 1]:
+            raise ReplayError(f"names: {twice[0]!r} is given twice")
+    taken = set()
+    ref_name = _default_name(reference, set(), 0)
+    names = names or [_default_name(item, taken, k + 1) for k, item in enumerate(items)]
+    sources = [reference, *items]
+    specs = [os.fspath(x) if isinstance(x, (str, os.PathLike)) else None for x in sources]
+    files = [k for k, spec in enumerate(specs) if spec is not None]
+    loaded = dict(zip(files, io.load_all([specs[k] for k in files], names=[([ref_name] + names)[k] for k in files],
+                                         fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)))
+    ref, *ests = [loaded[k] if k in loaded else _trajectory(x, ([ref_name] + names)[k]) for k, x in enumerate(sources)]
+    opts = settings(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
+                    t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
+                    delta_unit=delta_unit, delta_tol=delta_tol, all_pairs=all_pairs,
+                    pairs_from_reference=pairs_from_reference)
+    ref_spec = specs[0] or f"<{ref_name}>"
+    dataset = io.label(specs[0]) if specs[0] else ref_name
+    scores, rows = {}, []
+    for spec, name, est in zip(specs[1:], names, ests):
+        s = score_one(ref, est, **opts)
+        scores[name] = s
+        rows.append(leaderboard_row(s, reference=ref_spec, dataset=dataset, estimate=spec or f"<{name}>", name=name,
+                                    settings=opts, lost_threshold=lost_threshold, lost_steps=lost_steps))
+    return ScoreResult(ref, scores, rows, opts)
