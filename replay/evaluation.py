@@ -185,8 +185,10 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     if offline and MEASUREMENTS not in filters:  # beside filters only: nothing to compare otherwise
         built = built or {0: build_problem(configs[0], 0, data_dir)}
         if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat
-            configs.append(Config(*base, MEASUREMENTS, {}, *tail))
-            filters = filters + [MEASUREMENTS]
+            # after the offline filters, before the recorded estimates: the order the rows take when
+            # the configuration names it (a rerun passes it explicitly)
+            configs.insert(len(offline), Config(*base, MEASUREMENTS, {}, *tail))
+            filters = offline + [MEASUREMENTS] + names
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
         progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),

@@ -168,3 +168,16 @@ def test_tf_estimate_composed_through_the_tree_equals_replay_score(shared_dir, t
     ape = score(ref, est).ape["trans"]  # evo-style APE, translation, not aligned
     assert len(ape) == row["scored"] == 83
     assert row["pos_rmse"] == pytest.approx(float(np.sqrt(np.mean(ape ** 2))), rel=1e-5)  # 0.0435333 m
+
+
+def test_rerun_reproduces_a_fusion_eval_with_recorded_and_measurement_rows(test1, tmp_path):
+    """The measurements row sits after the offline filters and before the recorded estimates, the
+    order a rerun gives when the manifest names it."""
+    out = tmp_path / "o"
+    cli("eval", test1, "--mapping", MAPPINGS / "rl_test1_fusion.toml", "-f", "ekf", "--runs", 1, "--first", 2000,
+        "-o", out, "-q")
+    import csv
+
+    assert [r["filter"] for r in csv.DictReader(open(out / "leaderboard.csv"))] == [
+        "ekf", "measurements", "recorded:wheel_odometry"]
+    assert "reproduced" in cli("rerun", out / "manifest.json", "-q")

@@ -229,7 +229,7 @@ def test_beside_filters_choose_and_override(rec, tmp_path):
               "--first", "100", "-p", "recorded:rot.align=none", "-o", tmp_path / "a")
     assert res.exit_code == 0, res.output
     r = rows_of(tmp_path / "a")
-    assert list(r) == ["ekf", "recorded:slam", "recorded:rot", "measurements"]  # position: the raw observations too
+    assert list(r) == ["ekf", "measurements", "recorded:slam", "recorded:rot"]  # position: the raw observations too
     assert r["ekf"]["runs"] == "2" and r["recorded:slam"]["runs"] == "1"
     assert float(r["recorded:rot"]["pos_rmse"]) > 2.0  # raw: another frame
     assert float(r["recorded:rot"]["ate"]) < 1e-9  # aligned
