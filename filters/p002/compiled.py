@@ -5,10 +5,9 @@ For models that provide numba kernels of ``f``, ``h``, ``F``, ``H``
 points call the model's kernels as module globals ``f``, ``h``, ``F``, ``H``,
 which :mod:`replay.filters.p002.binding` supplies by writing a copy of this
 file with the model's imports at the MODEL KERNELS line (so that numba can cache
-the compiled code on disk; functions passed as arguments would be recompiled
-in every process). The helpers without model kernels (:func:`factor`,
-:func:`estimate`, ...) live in :mod:`replay.filters.p002.compiled_util`, which
-this file imports by its absolute name (the bound copy lives outside the package).
+the compiled code on disk; functions passed as arguments would be recompiled in every
+process). The helpers without model kernels (:func:`factor`, :func:`estimate`, ...) live in
+:mod:`replay.filters.p002.compiled_util`, imported by its absolute name (the copy lives elsewhere).
 
 * :func:`cubature_step` — one step of every particle's cubature filter (CKF or
   STCKF, 002 §2.2): the prediction, the update with the measured components
