@@ -24,16 +24,8 @@ NLL_FILTERS = ("kf", "ekf", "ukf", "ckf")  # exact Kalman filters on a linear mo
 
 
 def linear_matrices(model):
-    """(F, H, Q, R) of a linear model with constant matrices, else None."""
-    from replay.model import LinearGaussian
-    from replay.models.random_walk import RandomWalkPosition
-
-    if type(model) is RandomWalkPosition:
-        n = model.nx
-        return np.eye(n), np.eye(n), model.Q, model.R
-    if type(model) is LinearGaussian:
-        return model.A, model.C, model.Q, model.R
-    return None
+    """(F, H, Q, R) of a linear model with constant matrices, else None (:meth:`Model.linear_matrices`)."""
+    return model.linear_matrices()
 
 
 def provides(filter_name: str) -> str | None:

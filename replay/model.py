@@ -62,6 +62,11 @@ class Model:
         return self.R
 
     # --- Jacobians ---------------------------------------------------------------
+    def linear_matrices(self):
+        """``(F, H, Q, R)`` when the model is linear with constant matrices (every Kalman variant is
+        then exact and the innovations' likelihood is known: :mod:`replay.likelihood`), else None."""
+        return None
+
     def F(self, x: np.ndarray, k: int) -> np.ndarray:
         """Jacobian of f at a single state ``x`` (nx,) -> (nx, nx)."""
         return self._numeric_jacobian(self.f, x, k, self.x_angles)
@@ -161,6 +166,9 @@ class LinearGaussian(Model):
 
     def H(self, x, k):
         return self.C
+
+    def linear_matrices(self):
+        return self.A, self.C, self.Q, self.R
 
 
 def noise_factor(M: np.ndarray):

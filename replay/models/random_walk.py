@@ -23,3 +23,6 @@ class RandomWalkPosition(KernelModel):
 
     def kernel_params(self, k):
         return np.empty(0), np.empty(0)
+
+    def linear_matrices(self):
+        return np.eye(self.nx), np.eye(self.nx), self.Q, self.R
