@@ -10,8 +10,9 @@ from pathlib import Path
 
 
 def write_atomic(path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path`` and rename it into place (atomic)."""
-    path = Path(path)
+    """Write ``text`` to a temporary file beside ``path`` and rename it into place (atomic); a
+    symbolic link keeps its link and its target is replaced (as :func:`replay.util.outfile.write`)."""
+    path = Path(os.path.realpath(path)) if os.path.islink(path) else Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
