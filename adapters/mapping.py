@@ -38,8 +38,8 @@ nav_msgs/Path (its last message) or NavSatFix. They become
 ``Frame.estimates`` (leaderboard rows ``recorded:<name>``), never a filter's
 input; ``t_max_diff`` / ``t_offset`` (s) are the defaults of their time
 association with the reference, ``align`` (none, yaw, se3, sim3) of the fit that
-first moves them onto the reference (replay.pipeline.RECORDED_PARAMS). ``frame``/``child`` also select a TF pair in
-``[channels]`` and ``[reference]`` (a TF-only recording needs them).
+first moves them onto the reference (replay.trajectory.recorded.RECORDED_PARAMS).
+``frame``/``child`` also select a TF pair in ``[channels]`` and ``[reference]`` (a TF-only recording needs them).
 """
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
 ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise"}
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
-ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.align.ALIGNMENTS
+ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
 ESTIMATE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")  # it names a row and a file (fullmatch)
 CHANNEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")  # a frame channel and a topic token /sensors/<name>

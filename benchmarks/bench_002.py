@@ -51,8 +51,8 @@ import numpy as np
 
 import gauge as machine_gauge
 
-from replay import registry
-from replay.evaluation import evaluate
+from replay.data import registry
+from replay.run.evaluation import evaluate
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
 from replay.filters.p002 import gwo, parallel

@@ -63,7 +63,7 @@ def bench_export(repeat: int, n: int = 10_000, filters: int = 5) -> float:
 
 def validate(path) -> None:
     """Run mcap-validate (Foxglove's TypeScript readers) on the exported file when installed."""
-    from replay.registry import cache_dir
+    from replay.data.registry import cache_dir
 
     tool = Path(os.environ.get("REPLAY_MCAP_VALIDATE_DIR", cache_dir() / "mcap-validate"))
     if shutil.which("node") is None or not (tool / "node_modules").is_dir():

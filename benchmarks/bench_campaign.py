@@ -6,7 +6,7 @@
                                         [--skip-campaign | --campaign-only]   (older spellings of --only)
 
 1. ``poses``: scoring 100,000 poses: position error norms, attitude error angles
-   (quaternions, :func:`replay.metrics.pose_errors`) and the SE(3)-aligned ATE
+   (quaternions, :func:`replay.scoring.metrics.pose_errors`) and the SE(3)-aligned ATE
    (Umeyama). Target: < 0.3 s in total (best of 5).
 2. ``batched``: 100 UKF runs of the ``sim/auv-sonar`` problem (100 steps): one by one
    (``Filter.run``) against one batched call (:meth:`replay.filters.base.Filter.run_batch`).
@@ -68,7 +68,7 @@ def best(fn, repeat=5):
 def bench_poses(n):
     from scipy.spatial.transform import Rotation
 
-    from replay import metrics
+    from replay.scoring import metrics
 
     rng = np.random.default_rng(0)
     p_ref = np.cumsum(rng.normal(size=(n, 3)), axis=0)
@@ -87,7 +87,7 @@ def bench_poses(n):
 
 
 def bench_batched(runs):
-    from replay import registry
+    from replay.data import registry
     from replay.util.seeds import rng_for
     from replay.filters import make_filter
     from replay.tasks import make_task

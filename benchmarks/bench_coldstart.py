@@ -72,7 +72,7 @@ def fresh_copy(root: Path, dest: Path) -> Path:
     for src, target in layout(meta["tool"]["setuptools"]["package-dir"]):
         if (root / src).is_dir() and not (dest / target).exists():
             shutil.copytree(root / src, dest / target, ignore=ignore)
-    shutil.copytree(root / "datasets", dest / "datasets", ignore=ignore)  # manifests: replay.registry
+    shutil.copytree(root / "datasets", dest / "datasets", ignore=ignore)  # manifests: replay.data.registry
     shutil.copy2(root / "pyproject.toml", dest / "pyproject.toml")  # marks dest as a source tree
     return dest
 

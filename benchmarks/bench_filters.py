@@ -52,7 +52,7 @@ import numpy as np
 
 import anchors
 import gauge
-from replay import registry
+from replay.data import registry
 from replay.filters import make_filter
 from replay.sim.auv_sonar import make_frame
 from replay.tasks import make_task

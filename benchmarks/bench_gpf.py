@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from replay import registry
+from replay.data import registry
 from replay.filters import make_filter
 from replay.filters.p000.grey import GreyPredictor
 from replay.filters.p000.wavelet_noise import WaveletNoise

@@ -1,9 +1,9 @@
 """The Python API, re-exported by ``replay`` (``import replay``; docs/python.md).
 
 Every function takes its subject first and the rest by keyword only. Results are the
-library's objects (:class:`replay.frame.Frame`, :class:`replay.evaluation.Evaluation`),
-with DataFrame views (:mod:`replay.tables`, :mod:`replay.util.dataframes`) and
-matplotlib figures (:mod:`replay.plots`); errors are one-line
+library's objects (:class:`replay.frame.Frame`, :class:`replay.run.evaluation.Evaluation`),
+with DataFrame views (:mod:`replay.run.tables`, :mod:`replay.util.dataframes`) and
+matplotlib figures (:mod:`replay.run.plots`); errors are one-line
 :class:`replay.util.errors.ReplayError`.
 
 Filters may be given as names (built-in, plugin, ``"module:Class"``), as
@@ -17,11 +17,14 @@ from __future__ import annotations
 import inspect
 
 
-from replay import registry, tables
-from replay.evaluation import DEFAULT_FILTERS
+from replay.data import registry
+
+
+from replay.run import tables
+from replay.run.evaluation import DEFAULT_FILTERS
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
-from replay.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
-from replay.score_result import ScoreResult, score  # noqa: F401 — re-exported
+from replay.run.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
+from replay.run.score_result import ScoreResult, score  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError
@@ -43,14 +46,14 @@ def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, a
 
 
 def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, **options):
-    """Run ``filters`` on ``dataset`` and score them: an :class:`replay.evaluation.Evaluation`.
+    """Run ``filters`` on ``dataset`` and score them: an :class:`replay.run.evaluation.Evaluation`.
 
     ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
-    docstring). ``options``: those of :func:`replay.evaluation.evaluate` (``task``, ``runs``,
+    docstring). ``options``: those of :func:`replay.run.evaluation.evaluate` (``task``, ``runs``,
     ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
     ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``.
     """
-    from replay.evaluation import evaluate as run
+    from replay.run.evaluation import evaluate as run
 
     names, params = filter_names(filters, filter_params)
     return run(dataset, filters=names, filter_params=params, **options)
@@ -152,7 +155,7 @@ def campaign_results(out, *, runs: bool = False):
 def _rows(rows):
     import pandas as pd
 
-    from replay import summary
+    from replay.scoring import summary
 
     return pd.DataFrame(rows, columns=summary.columns(rows) if rows else None)
 
@@ -170,7 +173,7 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
     was found (the frame is read again). An existing file is replaced only if replay wrote it."""
     from replay.outputs.export_mcap import write_mcap
     from replay.outputs.export_safety import check_target, dataset_inputs
-    from replay.pipeline import load_frame as frame_of_run
+    from replay.run.pipeline import load_frame as frame_of_run
 
     cfg = evaluation.results[0].config
     check_target(path, dataset_inputs(cfg["dataset"], (cfg.get("dataset_params") or {}).get("mapping"), data_dir),
@@ -194,7 +197,7 @@ def list_plugins():
 
 
 def plugin_rows() -> list[dict]:
-    from replay.plugins import ADAPTERS, dataset_entries
+    from replay.data.plugins import ADAPTERS, dataset_entries
 
     rows = []
     for kind, reg in (("filter", FILTERS), ("task", TASKS), ("adapter", ADAPTERS)):
@@ -223,7 +226,7 @@ def refresh_plugins() -> None:
     """Discover the installed plugins again (after ``pip install`` in a running session)."""
     import importlib
 
-    from replay import plugins
+    from replay.data import plugins
 
     importlib.invalidate_caches()
     FILTERS.refresh()

@@ -2,7 +2,7 @@
 :func:`checked`, which validates them before the function runs.
 
 Scalars and paths are :class:`replay.util.params.Param` declarations (the options of an
-evaluation are those of :mod:`replay.eval_options`, shared with ``replay eval`` and
+evaluation are those of :mod:`replay.run.eval_options`, shared with ``replay eval`` and
 campaign files); objects (an Evaluation, a Frame, a class) are :class:`Kind`. A bad
 argument, a wrong number of arguments or an unknown keyword raises one-line
 :class:`~replay.util.errors.ReplayError`, the CLI's message. As a last guard, a TypeError,
@@ -17,8 +17,8 @@ import inspect
 import os
 from dataclasses import dataclass, replace
 
-from replay.eval_options import BY_NAME as EVAL
-from replay.summary import MIN_SCORED_SHARE
+from replay.run.eval_options import BY_NAME as EVAL
+from replay.scoring.summary import MIN_SCORED_SHARE
 from replay.trajectory.files import FORMATS
 from replay.trajectory.pose_error import DELTA_UNITS, EVO_NAMES, RELATIONS
 from replay.util.errors import ReplayError
@@ -95,7 +95,7 @@ def _p(name, type_, doc, **kw):
 
 PATH = functools.partial(_p, type_=os.PathLike)
 DATASET = _p("dataset", str, "a dataset id (replay datasets list) or a file path")
-EVALUATION = Kind("ev", "replay.evaluation:Evaluation", "an evaluation (replay.evaluate)")
+EVALUATION = Kind("ev", "replay.run.evaluation:Evaluation", "an evaluation (replay.evaluate)")
 FRAME = Kind("frame", "replay.frame:Frame", "a frame (replay.load_frame)")
 def TRAJECTORY(name):  # noqa: N802 — a declaration
     return Either(name, (PATH(name=name, doc="a trajectory file or BAG:topic"),
@@ -107,7 +107,7 @@ NAME = _p("name", str, "a registered name", optional=True)
 
 SEED = Either("seed", (EVAL["seed"], Kind("seed", "numpy.random:Generator", "a numpy.random.Generator (or None)",
                                               optional=True)))
-SOURCE = Kind("source", "replay.evaluation:Evaluation|replay.frame:Frame", "an evaluation or a frame")
+SOURCE = Kind("source", "replay.run.evaluation:Evaluation|replay.frame:Frame", "an evaluation or a frame")
 
 ARGS: dict[str, dict] = {
     "evaluate": {"dataset": DATASET, **{k: v for k, v in EVAL.items() if k != "batch"},
@@ -118,7 +118,7 @@ ARGS: dict[str, dict] = {
                    "adapter": EVAL["adapter"]},
     "campaign_results": {"out": PATH(name="out", doc="a result directory"),
                          "runs": _p("runs", bool, "one row per run", default=False)},
-    "export_mcap": {"evaluation": Kind("evaluation", "replay.evaluation:Evaluation", "an evaluation"),
+    "export_mcap": {"evaluation": Kind("evaluation", "replay.run.evaluation:Evaluation", "an evaluation"),
                     "path": PATH(name="path", doc="the MCAP file to write"),
                     "run": _p("run", int, "the run exported", default=0, low=0),
                     "data_dir": EVAL["data_dir"]},
@@ -222,7 +222,7 @@ def checked(name: str, fn):
         except ReplayError:
             raise
         except GUARDED + (MemoryError,) as err:
-            from replay.failures import describe
+            from replay.run.failures import describe
 
             raise ReplayError(f"replay.{name}: {describe(err)[:300]}") from err
 

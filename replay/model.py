@@ -64,7 +64,7 @@ class Model:
     # --- Jacobians ---------------------------------------------------------------
     def linear_matrices(self):
         """``(F, H, Q, R)`` when the model is linear with constant matrices (every Kalman variant is
-        then exact and the innovations' likelihood is known: :mod:`replay.likelihood`), else None."""
+        then exact and the innovations' likelihood is known: :mod:`replay.scoring.likelihood`), else None."""
         return None
 
     def F(self, x: np.ndarray, k: int) -> np.ndarray:

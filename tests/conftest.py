@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from replay.registry import cache_dir as _user_cache
+from replay.data.registry import cache_dir as _user_cache
 
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))

@@ -1,8 +1,8 @@
 """The Python API (``import replay``; docs/python.md): DataFrame views, plots, campaigns, exports.
 
 The tests at the end (section "methods") call ``Frame.to_pandas`` and ``Evaluation.leaderboard``
-/ ``.estimates`` / ``.errors`` / ``.plot_errors``: one-line methods over :mod:`replay.tables`,
-:mod:`replay.plots` and :mod:`replay.util.dataframes`.
+/ ``.estimates`` / ``.errors`` / ``.plot_errors``: one-line methods over :mod:`replay.run.tables`,
+:mod:`replay.run.plots` and :mod:`replay.util.dataframes`.
 """
 import csv
 import gzip
@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 import replay
-from replay import tables
+from replay.run import tables
 from replay.frame import Channel, Frame, Report
 from replay.util.errors import ReplayError
 from replay.util.files import fmt
@@ -54,16 +54,17 @@ def test_public_api_is_keyword_only_after_the_subject():
 def test_evaluate_and_score_are_plain_functions_beside_their_modules():
     import types
 
-    import replay.evaluation as module
-    import replay.scorer  # noqa: F401  (loading the submodules must not shadow the functions)
+    import replay.run.evaluation as module
+    import replay.scoring.scorer  # noqa: F401  (loading the submodules must not shadow the functions)
 
     assert module.Evaluation.__name__ == "Evaluation"
     for name in ("evaluate", "score"):
         assert isinstance(getattr(replay, name), types.FunctionType), name
     assert replay.evaluate is replay.api.evaluate and replay.score is replay.api.score
     assert "dataset" in inspect.signature(replay.evaluate).parameters
-    from replay import evaluate, score, scorer
+    from replay import evaluate, score
 
+    from replay.scoring import scorer
     assert evaluate is replay.api.evaluate and score is replay.api.score and callable(scorer.score_run)
     import pkgutil
 

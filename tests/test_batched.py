@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay import registry
+from replay.data import registry
 from replay.filters import make_filter
 from replay.model import LinearGaussian, Model
 from replay.tasks import make_task

@@ -76,7 +76,7 @@ def test_campaign_runs_every_unit_then_does_no_work(serial, tmp_path):
 
 def test_campaign_numbers_equal_replay_eval(serial):
     """The campaign's (batched) runs give `replay eval`'s (one-by-one) numbers."""
-    from replay.evaluation import evaluate
+    from replay.run.evaluation import evaluate
 
     out, _ = serial
     ev = evaluate("sim/auv-sonar", filters=["ekf", "ukf", "pf"], runs=6, seed=3, dataset_params={"steps": 30},
@@ -185,7 +185,7 @@ def test_exception_inside_a_filter_is_that_runs_divergence(tmp_path, monkeypatch
 
 def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     # A run whose problem cannot be built is recorded as failed, with its error; the rest go on.
-    from replay import pipeline
+    from replay.run import pipeline
 
     build = pipeline.build_problem
 
@@ -247,7 +247,7 @@ def test_paired_and_consistency_columns(serial):
     rows = {r["label"]: r for r in board_rows(out)}
     ukf = rows["ukf(alpha=0.5)"]
     lo, hi = float(ukf["anees_lo"]), float(ukf["anees_hi"])
-    from replay.metrics import chi2_band
+    from replay.scoring.metrics import chi2_band
 
     assert (lo, hi) == pytest.approx(chi2_band(3, 6))
     assert 0 <= float(ukf["anees_inside"]) <= 1 and float(ukf["anis"]) > 0

@@ -16,7 +16,7 @@ import pytest
 
 from replay.campaign import board, execute, spec, store
 from replay.campaign.store import Store, pack
-from replay.pipeline import config_hash
+from replay.run.pipeline import config_hash
 
 from test_campaign import SMALL, write
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from replay import registry
+from replay.data import registry
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
 from replay.filters.p002 import binding, compiled_util, gwo, parallel, stcpf

@@ -1,12 +1,12 @@
 """`replay datasets info` takes whatever `replay eval` takes (issue 23, item 13): a registered id, a
 CSV path, a ROS 1 .bag, a ROS 2 bag directory, an .mcap (with --mapping), with --adapter and
---dataset-param; the frame is read by eval's own reader (``replay.pipeline.load_frame``)."""
+--dataset-param; the frame is read by eval's own reader (``replay.run.pipeline.load_frame``)."""
 from pathlib import Path
 
 import pytest
 from hostile import assert_ok, assert_refused, register
 
-from replay.pipeline import load_frame
+from replay.run.pipeline import load_frame
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "docs" / "mappings"
 

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay.cli import main
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 
 
 def _eval(tmp_path, *args):

@@ -22,7 +22,7 @@ from replay.outputs.export_mcap import read_estimates
 
 def validator_dir():
     """Where mcap-validate is installed with node_modules ($REPLAY_MCAP_VALIDATE_DIR, else the cache)."""
-    from replay.registry import cache_dir
+    from replay.data.registry import cache_dir
 
     env = os.environ.get("REPLAY_MCAP_VALIDATE_DIR")
     return Path(env) if env else cache_dir() / "mcap-validate"

@@ -14,10 +14,10 @@ import threading
 
 import pytest
 
-from replay import registry
+from replay.data import registry
 from replay.adapters.bohai import COLS31, COLS36
-from replay.checksums import CONTENT_CHECKED, REGISTERED
-from replay.fetch import download_url, fetch
+from replay.data.checksums import CONTENT_CHECKED, REGISTERED
+from replay.data.fetch import download_url, fetch
 from replay.util.errors import ReplayError
 from hostile import assert_ok, assert_refused, invoke
 

@@ -17,7 +17,7 @@ from replay.filters.kalman import EKF
 from replay.filters.noise_params import NAMES, apply, check
 from replay.model import LinearGaussian
 from replay.models.random_walk import RandomWalkPosition
-from replay.pipeline import build_problem, config_hash, plain, run_block
+from replay.run.pipeline import build_problem, config_hash, plain, run_block
 from replay.tasks import make_task
 from replay.util.errors import ReplayError
 

@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-from replay import registry, scorer
+from replay.data import registry
+
+from replay.scoring import scorer
 from replay.util.errors import ReplayError
 from replay.filters import make_filter
 from replay.filters.p000.grey import GreyPredictor, gm11_fit, gm11_predict

@@ -50,7 +50,7 @@ def test_an_error_far_beyond_lost_is_a_divergence_even_with_a_finite_covariance(
     a finite covariance. Default threshold: 100 x the task's lost threshold (1000 m -> 1e5 m)."""
     import numpy as np
 
-    from replay import metrics, scorer
+    from replay.scoring import metrics, scorer
     from replay.filters.base import Estimates
     from replay.model import LinearGaussian
     from replay.tasks import Problem, make_task

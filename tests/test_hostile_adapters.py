@@ -37,7 +37,7 @@ def bohai_head(bohai_dir) -> pd.DataFrame:
 @pytest.fixture(scope="module")
 def lake_text(tmp_path_factory) -> str:
     """A synthetic lake-trial log (1800 rows at 20 Hz) as written by the lake writer."""
-    from replay import registry
+    from replay.data import registry
     from replay.adapters.lake import write
 
     path = tmp_path_factory.mktemp("lake") / "lake.csv"

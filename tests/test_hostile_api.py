@@ -12,7 +12,7 @@ import pytest
 import replay
 from hostile import assert_refused, register
 from replay.api_args import ARGS, Either, Kind, Several
-from replay.eval_options import EVAL_OPTIONS, validate_eval_options
+from replay.run.eval_options import EVAL_OPTIONS, validate_eval_options
 from replay.util.errors import ReplayError
 
 SONAR = {"dataset_params": {"steps": 10}}
@@ -93,7 +93,7 @@ def generated_calls():
 
 
 def test_every_public_function_is_declared_and_its_declarations_are_its_arguments():
-    from replay.evaluation import evaluate as full
+    from replay.run.evaluation import evaluate as full
 
     assert set(ARGS) == set(replay.__all__)
     for fn, decls in ARGS.items():

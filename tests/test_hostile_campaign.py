@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from hostile import assert_ok, assert_refused, register
 
-from replay.pipeline import Config, config_hash
+from replay.run.pipeline import Config, config_hash
 
 CAMPAIGN = """\
 [campaign]
@@ -135,7 +135,7 @@ def manifest(tmp_path_factory):
 
 @pytest.mark.parametrize("case", list(MANIFESTS))
 def test_hostile_manifest_refused_before_any_work(case, manifest, tmp_path, monkeypatch):
-    from replay import rerun
+    from replay.run import rerun
 
     monkeypatch.setattr(rerun, "repeat", lambda *a, **k: pytest.fail("computed despite a bad manifest"))
     edit, match = MANIFESTS[case]

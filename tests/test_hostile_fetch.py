@@ -16,8 +16,8 @@ import pytest
 from hostile import assert_ok, assert_refused, register
 from test_hostile_http import PATHS, UNREG, answer, csv_body, server  # noqa: F401 (server: the fixture)
 
-from replay import registry
-from replay.checksums import bohai_csv, declared_mismatch
+from replay.data import registry
+from replay.data.checksums import bohai_csv, declared_mismatch
 from replay.util import downloads
 
 OTHER = "bohai/20220822_0_8"  # a second sequence without a registered checksum

@@ -8,7 +8,7 @@ from click.testing import CliRunner
 from replay.cli import main
 from replay.filters import make_filter
 from replay.filters.noise_params import check
-from replay.pipeline import build_problem
+from replay.run.pipeline import build_problem
 from replay.util.errors import ReplayError
 
 FORMATION = dict(dataset="sim/uav-formation", dataset_params={}, first=None, task="formation", task_params={},

@@ -112,7 +112,7 @@ def _no_compute(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("computed although the output was refused")
 
-    monkeypatch.setattr("replay.evaluation.evaluate", boom)
+    monkeypatch.setattr("replay.run.evaluation.evaluate", boom)
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

@@ -14,7 +14,7 @@ import pytest
 import replay
 from hostile import assert_refused, invoke, register
 from replay.filters import FILTERS
-from replay.resources import check_kept, check_particles
+from replay.run.resources import check_kept, check_particles
 from replay.util.errors import ReplayError
 
 SONAR = {"runs": 2, "dataset_params": {"steps": 30}}
@@ -162,7 +162,7 @@ def test_a_plugin_failing_before_any_run_is_refused_in_one_line(plugin, tmp_path
 
 
 def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatch, tmp_path):
-    import replay.evaluation as module
+    import replay.run.evaluation as module
 
     def hungry(*a, **k):
         raise MemoryError("Unable to allocate 9.1 TiB")
@@ -176,7 +176,7 @@ def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatc
 
 @pytest.mark.parametrize("cls", ["Exits", "TypeErr", "NoMemory"])
 def test_a_campaign_unit_records_the_plugins_failure(plugin, cls):
-    from replay.pipeline import Config, run_block
+    from replay.run.pipeline import Config, run_block
 
     cfg = Config("sim/auv-sonar", {"steps": 30}, None, "sonar", {}, f"badplug:{cls}", {}, 0)
     recs = run_block(cfg, [0, 1, 2])  # a campaign's job: never raises for one run
@@ -187,7 +187,7 @@ def test_a_campaign_unit_records_the_plugins_failure(plugin, cls):
 
 
 def test_keyboard_interrupt_is_not_a_failed_run():
-    from replay.failures import ends_run
+    from replay.run.failures import ends_run
 
     assert ends_run(KeyboardInterrupt(), strict=False) and not ends_run(SystemExit(0), strict=True)
     assert ends_run(ReplayError("x"), strict=True) and not ends_run(ReplayError("x"), strict=False)

@@ -1,4 +1,4 @@
-"""Hostile manifests for ``replay rerun`` (corpus: tests/hostile.py; replay/rerun.py).
+"""Hostile manifests for ``replay rerun`` (corpus: tests/hostile.py; replay/run/rerun.py).
 
 An attacker (or a careless hand) edits a manifest and recomputes its configuration
 hashes. Every recorded result column and every parameter that changes a result is
@@ -16,8 +16,10 @@ import sys
 import pytest
 from hostile import assert_ok, assert_refused, register
 
-from replay import rerun, summary
-from replay.pipeline import Config, config_hash
+from replay.run import rerun
+
+from replay.scoring import summary
+from replay.run.pipeline import Config, config_hash
 from replay.util.errors import ReplayError
 
 # lost_threshold 1.5 m over 5 steps: one run of each filter lost (lost, lost_share not 0);

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from replay import registry
+from replay.data import registry
 from replay.cli import main
 from replay.util.errors import ReplayError
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from replay import align, metrics
+from replay.scoring import align, metrics
 from replay.filters import make_filter
 from replay.model import LinearGaussian
 
@@ -115,7 +115,7 @@ def test_paired_comparison_is_tighter_than_separate_intervals():
 
 
 def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
-    from replay.metrics import lost_track
+    from replay.scoring.metrics import lost_track
 
     e = np.array([1.0, 30, 30, 30, 1, 30, 30, np.nan, 30, 30, 1])
     assert lost_track(e, None, 3) is None  # no rule: not judged
@@ -130,7 +130,7 @@ def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
 def test_lost_tracks_are_counted_not_reported_as_success():
     """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
     176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""
-    from replay.evaluation import evaluate
+    from replay.run.evaluation import evaluate
 
     ev = evaluate("sim/auv-sonar", filters=("ekf", "pf"), runs=20, seed=0)
     ekf, pf = ev.rows
@@ -143,7 +143,7 @@ def test_lost_tracks_are_counted_not_reported_as_success():
 
 
 def test_consistency_flags_collapsed_covariance_and_hides_its_number():
-    from replay.metrics import consistency
+    from replay.scoring.metrics import consistency
 
     rng = np.random.default_rng(3)
     good = rng.chisquare(3, size=(50, 200))                 # a consistent filter: NEES ~ chi2(3)
@@ -160,7 +160,7 @@ def test_consistency_flags_collapsed_covariance_and_hides_its_number():
 
 
 def test_collapsed_consistency_printed_as_word():
-    from replay.summary import consistency_cell
+    from replay.scoring.summary import consistency_cell
 
     assert consistency_cell({"anees": float("nan"), "anees_flag": "collapsed"}) == "collapsed"
     assert consistency_cell({"anees": 3.14159, "anees_flag": "consistent"}) == "3.14"
@@ -168,7 +168,7 @@ def test_collapsed_consistency_printed_as_word():
 
 def test_anees_band_uses_the_tasks_position_dimension():
     """A 1-D task's NEES is chi2(1): its band and verdict use 1 degree of freedom, not 3."""
-    from replay.summary import ensemble
+    from replay.scoring.summary import ensemble
 
     rng = np.random.default_rng(4)
     cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)}

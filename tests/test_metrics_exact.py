@@ -1,8 +1,8 @@
 """The scoring's shortcuts give the numbers of the code they replace, bit for bit.
 
-* :func:`replay.metrics.lstsq_rows` (one gufunc call) and ``np.linalg.lstsq`` row by row
+* :func:`replay.scoring.metrics.lstsq_rows` (one gufunc call) and ``np.linalg.lstsq`` row by row
   (the NEES of a run whose position covariance is singular somewhere);
-* :func:`replay.metrics.chi2_ppf` and :func:`replay.scorer.t_ppf` (scipy.special) and
+* :func:`replay.scoring.metrics.chi2_ppf` and :func:`replay.scoring.scorer.t_ppf` (scipy.special) and
   ``scipy.stats.chi2.ppf`` / ``scipy.stats.t.ppf``, which the scoring modules no longer
   import (0.5-1 s at the start of every campaign).
 """
@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from replay import metrics, scorer
+from replay.scoring import metrics, scorer
 
 
 def _stacks(d: int, k: int = 400):
@@ -78,8 +78,8 @@ def test_ci95_and_consistency_band_known_values():
 
 def test_campaign_modules_do_not_import_scipy_stats():
     code = ("import sys\n"
-            "import replay.campaign.execute, replay.summary, replay.metrics, replay.scorer\n"
-            "from replay import metrics, scorer\n"
+            "import replay.campaign.execute, replay.scoring.summary, replay.scoring.metrics, replay.scoring.scorer\n"
+            "from replay.scoring import metrics, scorer\n"
             "metrics.chi2_band(3, 10); scorer.ci95([1.0, 2.0])\n"
             "print('scipy.stats' in sys.modules)\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

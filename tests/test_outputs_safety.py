@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 from replay.outputs.files import write_all
 from replay.util.errors import ReplayError
 from replay.util.files import MARKER, publish_dir, recover
@@ -143,7 +143,7 @@ def test_full_and_read_only_refused_before_computing(tmpfs, small, monkeypatch):
     out = tmpfs / "out"
     write_all(small, out)
     before = tree(out)
-    monkeypatch.setattr("replay.evaluation.evaluate", boom)
+    monkeypatch.setattr("replay.run.evaluation.evaluate", boom)
     args = ["eval", "sim/ungm", "--task", "ungm", "--filters", "ekf", "-o", out]
     fill(tmpfs, 64 * 1024)
     assert_refused(args, r"--out .*/fs/out: not enough space on the file system of .*/fs/out \(\d+ bytes free, "

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from replay import registry
+from replay.data import registry
 from replay.util.errors import ReplayError
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 from replay.filters import make_filter
 from replay.filters.p002 import gwo, pso
 from replay.filters.sigma import CKF

@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from replay import registry
-from replay.noise import Covariance, as_matrix
+from replay.data import registry
+from replay.models.noise import Covariance, as_matrix
 from replay.sim import Intervals, Numbers
 from replay.tasks import TASKS, make_task, task_class
 from replay.util.errors import ReplayError
@@ -311,7 +311,7 @@ def test_campaign_file_parameters_checked_against_declarations(tmp_path, dataset
 
 
 def test_campaign_configs_are_canonical(tmp_path):
-    from replay.pipeline import config_hash
+    from replay.run.pipeline import config_hash
 
     empty, _ = load_campaign(tmp_path)
     full, _ = load_campaign(tmp_path, "{ steps = 100, q = 1, r = 1.0, x0 = 0, growth = 2.5 }", "p0 = 1")
@@ -323,7 +323,7 @@ def test_campaign_configs_are_canonical(tmp_path):
 
 def test_campaign_filter_grid_values_checked_and_params_canonical(tmp_path):
     from replay.campaign import spec
-    from replay.pipeline import config_hash
+    from replay.run.pipeline import config_hash
 
     path = tmp_path / "c.toml"
     base = CAMPAIGN.format(dataset="{}", task="").replace('name = "ekf"', 'name = "pf"')

@@ -3,7 +3,7 @@ step-by-step engine bit for bit, and leaves every run's generator where the step
 import numpy as np
 import pytest
 
-from replay import registry
+from replay.data import registry
 from replay.filters import make_filter, pf_loop
 from replay.models.random_walk import RandomWalkPosition
 from replay.tasks import make_task

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from replay.cli import main
 from replay.filters import FILTERS
-from replay.pipeline import Config, config_hash, run_block
+from replay.run.pipeline import Config, config_hash, run_block
 
 # dataset, dataset params, first, task, {filter: non-default params}
 GROUPS = [
@@ -147,7 +147,10 @@ def test_a_file_frame_is_read_again_when_the_file_changes(tmp_path, monkeypatch)
     mtime with the same size) or a replacement (new inode) reads it again."""
     import os
 
-    from replay import pipeline, registry
+    from replay.run import pipeline
+
+
+    from replay.data import registry
 
     reads = []
     monkeypatch.setattr(registry, "load_frame", lambda dataset, **kw: reads.append(Path(dataset).read_text()) or

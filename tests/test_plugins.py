@@ -18,11 +18,11 @@ import pytest
 from click.testing import CliRunner
 
 import replay
-from replay import registry
+from replay.data import registry
 from replay.api import refresh_plugins
 from replay.cli import main
 from replay.filters import FILTERS, make_filter
-from replay.plugins import ADAPTERS
+from replay.data.plugins import ADAPTERS
 from replay.tasks import TASKS, make_task
 from replay.util.errors import ReplayError
 
@@ -124,7 +124,7 @@ def test_example_plugin_in_a_campaign(example, tmp_path):
 
 def test_example_filter_batch_equals_runs_of_one(example):
     """The exactness rule of the filter protocol: M runs at once give the numbers of M runs of one."""
-    from replay.pipeline import build_problem
+    from replay.run.pipeline import build_problem
 
     flt = make_filter("example-filter", iterations=3)
     problems = [build_problem({"dataset": "example/range-bearing", "dataset_params": {"steps": 60}, "first": None,

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from replay.adapters import bags
 from replay.cli import main
-from replay.pipeline import associate
+from replay.trajectory.associate import associate_times as associate
 
 REPO = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000 * 10**9

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from replay import registry
+from replay.data import registry
 from replay.util.errors import DataError, ReplayError
 from replay.frame import Channel, Frame
-from replay.registry import Dataset
+from replay.data.registry import Dataset
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("REPLAY_SHARED", REPO.parent / "shared"))
@@ -82,7 +82,7 @@ def test_sim_entry():
 
 
 def test_checksums_registered_for_the_ten_upstream_sums():
-    """10 of 17 registered (replay/checksums.py); the six local ones among them."""
+    """10 of 17 registered (replay/data/checksums.py); the six local ones among them."""
     known = registry.all_datasets()
     with_sha = sorted(i for i, ds in known.items() if ds.sha256)
     assert len(with_sha) == 10 and {f"bohai/{s}" for s in LOCAL} <= set(with_sha)

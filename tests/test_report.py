@@ -105,7 +105,7 @@ def test_error_bands_one_panel_per_filter(page):
 
 
 def test_chi2_band_on_every_nees_and_nis_plot(page):
-    from replay.metrics import chi2_band
+    from replay.scoring.metrics import chi2_band
 
     secs, pal, figs = page
     cons = [(i, n, f) for i, n, f in figs if n in ("nees", "nis")]

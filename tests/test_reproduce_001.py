@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 from replay.sim.sauv_current import make_frame
 
 NOISE_FREE = {"dvl_percent": 0.0, "ahrs_sigma_deg": 0.0, "acc_bias": 0.0, "acc_noise_density": 0.0}
@@ -31,7 +31,7 @@ def test_water_track_error_is_the_integrated_current():
     params = dict(NOISE_FREE, dvl_track="water", strength=0.5)
     ev = evaluate("sim/sauv-current", filters=("ukf",), runs=2, seed=0, dataset_params=params)
     for run in range(2):
-        from replay.pipeline import load_frame
+        from replay.run.pipeline import load_frame
 
         frame = load_frame(ev.results[0].config, run)
         cur = frame.reference["current"].values

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 from replay.reproduce import verdict
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))

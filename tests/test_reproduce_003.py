@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 
 
 def test_plan_covers_the_regimes_where_alpha_could_matter():
@@ -26,7 +26,7 @@ def test_alpha_one_is_the_bootstrap_pf():
     through ``replay eval`` the two differ by their filter streams, seeded by the filter's name)."""
     from replay.filters.p003.wfpf import WeightFactorPF
     from replay.filters.pf import ParticleFilter
-    from replay.pipeline import build_problem
+    from replay.run.pipeline import build_problem
 
     ev = evaluate("sim/uav-formation", filters=("pf",), runs=1, seed=2)
     pb = build_problem(ev.results[0].config, 0)

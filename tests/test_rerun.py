@@ -1,5 +1,5 @@
 """``replay rerun``: a manifest is checked before any work, then the run is repeated and
-every recorded result compared exactly (replay/rerun.py; hostile manifests: tests/test_hostile_campaign.py)."""
+every recorded result compared exactly (replay/run/rerun.py; hostile manifests: tests/test_hostile_campaign.py)."""
 from __future__ import annotations
 
 import copy
@@ -8,7 +8,7 @@ import json
 import pytest
 from hostile import assert_ok, assert_refused
 
-from replay import pipeline, rerun
+from replay.run import pipeline, rerun
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +107,7 @@ def test_rerun_tolerance_comes_from_the_filter_class(monkeypatch):
     """A filter declaring RERUN_RTOL is compared to that relative tolerance, others exactly."""
     from types import SimpleNamespace
 
-    from replay import rerun
+    from replay.run import rerun
     from replay.filters.kalman import EKF
 
     man = {"config": {"dataset_sha256": None, "config_hashes": {"ekf": "h"}},

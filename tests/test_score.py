@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from replay import scorer
+from replay.scoring import scorer
 from replay.filters.base import Estimates
 from replay.tasks import Problem
 

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from replay.cli.main import main
 from replay.cli.score import score_cmd
-from replay.summary import HEAD, TAIL
+from replay.scoring.summary import HEAD, TAIL
 from replay.trajectory import load, score
 from replay.trajectory.files import write_tum
 from replay.trajectory.base import make

@@ -15,9 +15,9 @@ from hostile import assert_ok
 from replay.adapters import bags
 from replay.adapters.bohai import load as load_bohai
 from replay.adapters.mapping import from_dict, role_of
-from replay.evaluation import evaluate
+from replay.run.evaluation import evaluate
 from replay.frame import Channel, Frame
-from replay.noise import Covariance
+from replay.models.noise import Covariance
 from replay.tasks import TASKS, make_task, role_input, task_class, why_missing
 from replay.util.errors import ReplayError
 from test_hostile_adapters import GOOD_MAP, make_bag

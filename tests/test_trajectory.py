@@ -11,7 +11,7 @@ import pytest
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
-from replay import align
+from replay.scoring import align
 from replay.trajectory import Trajectory, associate, load, make, pose_error, quat, row_metrics, score
 from replay.trajectory.files import write_tum
 from replay.util.errors import DataError, ReplayError

@@ -124,7 +124,7 @@ def test_eval_tuned_gives_the_held_out_row(tmp_path):
 
 
 def _nll(q, r, runs, steps, seed):
-    from replay.pipeline import Config, run_block
+    from replay.run.pipeline import Config, run_block
 
     c = Config("sim/linear", {"steps": steps, "q": 0.3, "r": 2.0}, None, "linear",
                {"q": 1.0, "r": 1.0, "p0": 1.0, "lost_threshold": 20.0, "lost_steps": 10}, "kf",
@@ -211,7 +211,7 @@ def test_local_pool_gives_the_serial_rows(tmp_path):
 def test_nll_is_the_textbook_kalman_likelihood(fparams):
     """The recorded nll against an independent Kalman filter's innovation likelihood (numpy loop),
     with the task's noise and under the filter's own noise settings."""
-    from replay.pipeline import build_problem, run_block
+    from replay.run.pipeline import build_problem, run_block
 
     cfg = {"dataset": "sim/linear", "dataset_params": {"steps": 40, "q": 0.3, "r": 2.0}, "first": None,
            "task": "linear", "task_params": {"q": 1.0, "r": 1.0, "p0": 1.0, "lost_threshold": 20.0, "lost_steps": 10},

@@ -1,4 +1,4 @@
-"""Views of a dataset (``rate``, ``window``, ``segment``: replay/views.py) and the splits of replay/splits.py."""
+"""Views of a dataset (``rate``, ``window``, ``segment``: replay/data/views.py) and the splits of replay/data/splits.py."""
 import csv
 import json
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from replay import registry, views
+from replay.data import registry, views
 from replay.cli import main
 from replay.frame import Channel, Frame, RecordedEstimate
-from replay.splits import check_disjoint, split_views
+from replay.data.splits import check_disjoint, split_views
 from replay.util.errors import ReplayError
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from replay.util.errors import ReplayError
 from replay.filters.p003.wfpf import WeightFactorPF, temper
-from replay.noise import Glint
+from replay.models.noise import Glint
 
 
 def test_alpha_one_leaves_weights_unchanged():
@@ -74,7 +74,7 @@ def test_glint_logpdf_integrates_to_one_1d():
 
 
 def test_formation_end_to_end_and_diagonal_fast_path():
-    from replay.evaluation import evaluate
+    from replay.run.evaluation import evaluate
 
     g = Glint(np.diag([25.0, 1e-4]), np.diag([25.0, 4e-4]), eps=0.75)
     e = np.random.default_rng(0).standard_normal((7, 2)) * [5, 0.01]

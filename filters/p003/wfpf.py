@@ -25,7 +25,7 @@ anywhere, it helps.
 The paper prints 0.75 for an "influence factor" in both of its experiments;
 in §4.2 it is this α (our ``alpha``, default 0.75). The glint strength ε of
 eq. 7, also printed as 0.75 (§4.1), is a parameter of the noise model
-(:class:`replay.noise.Glint`), not of this filter.
+(:class:`replay.models.noise.Glint`), not of this filter.
 
 Where the exponent applies: the paper applies eq. 27 "in the normalisation
 of the weights", before resampling, and estimates with eq. 25 after it. We

@@ -1,6 +1,6 @@
 """A campaign directory's leaderboard and paired comparisons; merging result directories.
 
-Rows have the one schema of :mod:`replay.summary` (the same as ``replay eval``),
+Rows have the one schema of :mod:`replay.scoring.summary` (the same as ``replay eval``),
 computed from the stored unit records. ``paired.csv``: ``dataset, task, a, b,
 metric, n, diff, diff_ci95, a_better`` for every two configurations on the same
 dataset and task (common random numbers): mean of a - b over the runs both
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from replay import summary
+from replay.scoring import summary
 from replay.util.errors import ReplayError
 from replay.util.files import write_csv
 
@@ -33,7 +33,7 @@ def _collect(store: Store):
 def campaign_rows(out, order=None, baseline: str | None = None, *, store: Store | None = None,
                   collected=None) -> list[dict]:
     """One leaderboard row per stored configuration of the campaign directory ``out``
-    (:func:`replay.summary.config_row`, the schema of ``replay eval``), in ``order`` (config
+    (:func:`replay.scoring.summary.config_row`, the schema of ``replay eval``), in ``order`` (config
     hashes, e.g. the campaign file's order) when given, else sorted; with paired columns.
     ``store``: the :class:`Store` of ``out`` that wrote the units (it keeps what it wrote);
     ``collected``: its ``(configs, records)`` (:func:`_collect`) when read already."""

@@ -31,7 +31,7 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
-from replay.pipeline import config_hash, runs_of
+from replay.run.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
 from replay.util.files import check_space
 from replay.util.progress import particle_weight

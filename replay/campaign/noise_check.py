@@ -11,7 +11,8 @@ import json
 
 from replay.filters import make_filter
 from replay.filters.noise_params import NAMES, check
-from replay.pipeline import build_problem, is_recorded
+from replay.run.pipeline import build_problem
+from replay.trajectory.recorded import is_recorded
 from replay.util.errors import ReplayError
 
 PROBLEM_KEYS = ("dataset", "dataset_params", "first", "task", "task_params", "seed", "adapter")

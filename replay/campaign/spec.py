@@ -41,7 +41,7 @@ Everything is checked before any work starts (:func:`load`): a file that is not
 UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
 ``[campaign]`` value or a parameter of the wrong type or out of the bounds its
 declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
-and ``batch`` at most :data:`replay.eval_options.MAX_RUNS` (one declaration with ``replay eval``),
+and ``batch`` at most :data:`replay.run.eval_options.MAX_RUNS` (one declaration with ``replay eval``),
 ``seed`` >= 0, ``divergence_threshold`` > 0),
 more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
@@ -61,12 +61,13 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.eval_options import EVAL_OPTIONS
+from replay.run.eval_options import EVAL_OPTIONS
 from replay.util.errors import ReplayError
 from replay.util.params import Param
-from replay.pipeline import RECORDED, Config, recorded_params
-from replay.pipeline import plain as _plain
-from replay.views import NAMES as VIEW_NAMES, VIEW_PARAMS
+from replay.run.pipeline import Config
+from replay.trajectory.recorded import RECORDED, recorded_params
+from replay.run.pipeline import plain as _plain
+from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
@@ -169,7 +170,7 @@ def _class_of(registry: dict, name: str):
 
 def load(path) -> Campaign:
     """Read and check a campaign file; returns its configurations (no work done)."""
-    from replay import registry
+    from replay.data import registry
     from replay.filters import FILTERS
     from replay.tasks import TASKS, make_task
     from replay.filters import make_filter
@@ -324,7 +325,7 @@ def load(path) -> Campaign:
 def _recording(where, path: Path, ds_id: str):
     """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): a
     stand-in Dataset (``manifest`` empty, ``file`` the absolute path); None for a registered id."""
-    from replay import registry
+    from replay.data import registry
 
     if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
         return None
@@ -340,7 +341,7 @@ def _recording(where, path: Path, ds_id: str):
 
 def _load_once(where, ds_id, ds_params: dict, first, data_dir):
     """Run 0's frame, so that a view it cannot take is refused before any unit."""
-    from replay.pipeline import load_frame
+    from replay.run.pipeline import load_frame
 
     try:
         return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
@@ -360,7 +361,7 @@ def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapt
 
                 declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
             else:  # the proposed mapping: read the recording
-                from replay.pipeline import load_frame
+                from replay.run.pipeline import load_frame
 
                 frame = load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
                                     "adapter": None}, 0, data_dir)

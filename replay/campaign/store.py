@@ -56,7 +56,7 @@ from .encode import (SUMMARY_COLUMNS, describe, footer as _footer, pack, parquet
                      summary_columns, to_arrow, to_numpy)
 
 RUN_FILE = re.compile(r"^(\d+)\.json$")
-LEGACY_COLUMNS = ("k", "t", "nees", "nis", "nis_dof")  # read by the leaderboard (replay.summary)
+LEGACY_COLUMNS = ("k", "t", "nees", "nis", "nis_dof")  # read by the leaderboard (replay.scoring.summary)
 KEPT_BYTES = 64 << 20  # at most this much of those columns kept in memory by a Store that wrote them
 WRITERS = 8  # threads writing a job's units (Store.write_job)
 RERUN_HINT = "run `replay campaign run` on its campaign file again to recompute it"
@@ -227,7 +227,7 @@ class Store:
     def read_config(self, config_hash: str) -> tuple[dict | None, str | None]:
         """(config, None) or (None, problem): ``config.json`` must be a JSON object whose
         configuration hash is its directory's name."""
-        from replay.pipeline import config_hash as hash_of
+        from replay.run.pipeline import config_hash as hash_of
 
         path = self.units / config_hash / "config.json"
         try:

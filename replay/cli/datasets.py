@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import click
 
-from replay import registry
+from replay.data import registry
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
-from replay.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
+from replay.data.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
 
 DATA_DIR = click.option("--data-dir", type=click.Path(file_okay=False), default=None,
                         help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).")
@@ -60,7 +60,7 @@ def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), r
     DATASET is what `replay eval` takes: a registered id, or a file (a CSV, a ROS 1 .bag, a
     ROS 2 bag directory, an .mcap with --mapping), read the same way."""
     from replay.cli.params import dataset_inputs
-    from replay.pipeline import load_frame
+    from replay.run.pipeline import load_frame
 
     dparams = registry.check_params(dataset, with_views(dataset_inputs(dataset_params, mapping), rate, window,
                                                         segment), adapter=adapter)

@@ -113,14 +113,14 @@ def _table(kind):
         from replay.tasks import TASKS
 
         return TASKS, lambda cls: _declared(cls.PARAMS)
-    from replay.plugins import ADAPTERS
+    from replay.data.plugins import ADAPTERS
 
     return ADAPTERS, _signature
 
 
 def _datasets(problems):
-    from replay import registry
-    from replay.views import VIEW_PARAMS
+    from replay.data import registry
+    from replay.data.views import VIEW_PARAMS
 
     out = []
     for ds in registry.all_datasets().values():

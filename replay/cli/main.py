@@ -23,7 +23,7 @@ class Main(click.Group):
         except ReplayError as err:
             click.echo(f"replay: error: {err}", err=True)
             ctx.exit(2)
-        except MemoryError as err:  # not predicted (replay.resources): said as such, never "diverged"
+        except MemoryError as err:  # not predicted (replay.run.resources): said as such, never "diverged"
             click.echo(f"replay: error: out of memory{f' ({err})' if str(err) else ''}", err=True)
             ctx.exit(2)
         finally:
@@ -116,13 +116,13 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
-    from replay.eval_options import validate_eval_options
-    from replay.evaluation import check_recorded, evaluate
+    from replay.run.eval_options import validate_eval_options
+    from replay.run.evaluation import check_recorded, evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
-    from replay.pipeline import default_task
-    from replay.registry import check_data_dir
-    from replay.summary import MIN_SCORED_SHARE
+    from replay.run.pipeline import default_task
+    from replay.data.registry import check_data_dir
+    from replay.scoring.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
     min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
@@ -220,7 +220,7 @@ def _fresh(out: Path, replace: bool) -> None:
 def _failed_filters(ev) -> None:
     """A filter that failed (a plugin's bug, sys.exit, memory, a broken protocol): one warning line
     each, after the other filters' results are written, and exit status 1."""
-    from replay.evaluation import failures
+    from replay.run.evaluation import failures
 
     bad = failures(ev)
     for name, f in bad.items():
@@ -241,11 +241,11 @@ def _failed_filters(ev) -> None:
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
     """Repeat the run recorded in a manifest.json and check that every recorded result is reproduced exactly."""
-    from replay import rerun
+    from replay.run import rerun
     from replay.outputs.files import check_output, format_table, write_all
     from replay.util.progress import Progress
 
-    from replay.registry import check_data_dir
+    from replay.data.registry import check_data_dir
 
     check_data_dir(data_dir, "--data-dir")
     man = rerun.load(manifest_file, allow_modules)  # checked before any computation or import

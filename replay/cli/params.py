@@ -16,7 +16,7 @@ option, the parameter, what it accepts and the value given:
 
 Recorded estimates (``[estimates]`` of a bag mapping) are named in ``--filters``
 as ``recorded:<name>`` (:func:`split_filters`) and take ``-p
-recorded:<name>.t_max_diff=...`` / ``t_offset`` (:data:`replay.pipeline.RECORDED_PARAMS`).
+recorded:<name>.t_max_diff=...`` / ``t_offset`` (:data:`replay.trajectory.recorded.RECORDED_PARAMS`).
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def split_filters(names) -> tuple[list, list | None]:
     estimates (``recorded:none``: none of them); without any, every estimate the
     mapping declares is scored (``None``).
     """
-    from replay.pipeline import RECORDED, is_recorded
+    from replay.trajectory.recorded import RECORDED, is_recorded
 
     names = list(names)
     if not names:
@@ -102,7 +102,7 @@ def filter_params(items, filters) -> dict:
             raise ReplayError(f"-p {item}: expected FILTER.NAME=VALUE, e.g. "
                               f"{(filters or ['pf'])[0]}.{param or key}={_text(value)}")
         if name.startswith("recorded:"):  # a recorded estimate: its association parameters
-            from replay.pipeline import RECORDED_PARAMS
+            from replay.trajectory.recorded import RECORDED_PARAMS
 
             if any(f.startswith("recorded:") for f in filters) and name not in filters:
                 raise ReplayError(f"-p {item}: {name!r} is not in --filters ({', '.join(filters)})")
@@ -137,7 +137,7 @@ def task_params(items, task: str | None = None) -> dict:
 def dataset_params(items, dataset=None, adapter: str | None = None, option: str = "--dataset-param") -> dict:
     """``["q=10", ...]`` -> ``{"q": 10.0}``; checked against ``dataset``'s declarations (a
     simulator's parameters, or its adapter's options) when it is given. Only the given ones."""
-    from replay import registry
+    from replay.data import registry
 
     given = _assignments(items, option)
     if dataset is None:
@@ -192,7 +192,7 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     parameters are checked too). A plain file without ``task`` gets its task
     from the frame: its task parameters are checked when the task is made.
     """
-    from replay import registry
+    from replay.data import registry
     from replay.filters import make_filter
     from replay.tasks import make_task
     from replay.util.lookup import params_of

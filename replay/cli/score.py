@@ -1,7 +1,7 @@
 """``replay score REFERENCE ESTIMATE...``: score recorded trajectories as evo_ape / evo_rpe do.
 
 Registered in :mod:`replay.cli.main` (``main.add_command(score_cmd)``). The numbers come from
-:mod:`replay.trajectory`; the CSV has the leaderboard schema of :mod:`replay.summary`.
+:mod:`replay.trajectory`; the CSV has the leaderboard schema of :mod:`replay.scoring.summary`.
 """
 from __future__ import annotations
 
@@ -116,9 +116,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     directory or .mcap and a topic of nav_msgs/Odometry, PoseStamped, PoseWithCovarianceStamped,
     TransformStamped, nav_msgs/Path (last message) or NavSatFix), or RECORDING:tf:PARENT->CHILD.
     """
-    from replay.score_result import estimate_name, leaderboard_row
-    from replay.score_result import settings as score_settings
-    from replay.summary import columns as leaderboard_columns
+    from replay.run.score_result import estimate_name, leaderboard_row
+    from replay.run.score_result import settings as score_settings
+    from replay.scoring.summary import columns as leaderboard_columns
     from replay.trajectory import io, score
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
     from replay.util import outfile

@@ -1,4 +1,4 @@
-"""``--rate``, ``--window``, ``--segment``: shorthand for the view dataset parameters (:mod:`replay.views`).
+"""``--rate``, ``--window``, ``--segment``: shorthand for the view dataset parameters (:mod:`replay.data.views`).
 
 ``replay eval D --rate 1`` is ``replay eval D --dataset-param rate=1``; both at once are refused.
 """

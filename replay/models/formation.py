@@ -22,7 +22,7 @@ leader broadcasts its GPS/INS position):
     r = sqrt((x_l − x)² + (y_l − y)²),  b = atan2(y_l − y, x_l − x)
 
 (the paper writes arctan((y_l − y)/(x_l − x)); atan2 keeps the quadrant).
-The noise is ``noise`` (e.g. :class:`replay.noise.Glint`, eq. 7–10): the PF
+The noise is ``noise`` (e.g. :class:`replay.models.noise.Glint`, eq. 7–10): the PF
 likelihood is its density, and R = its covariance for the Kalman family.
 """
 from __future__ import annotations

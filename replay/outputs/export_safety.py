@@ -40,7 +40,7 @@ _TMP = ".replay-tmp-"
 
 def dataset_inputs(dataset, mapping=None, data_dir=None) -> list[Path]:
     """The files a dataset id or path is read from (none for a simulator), and the mapping."""
-    from replay import registry
+    from replay.data import registry
 
     found = [Path(mapping)] if mapping else []
     try:

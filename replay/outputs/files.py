@@ -1,6 +1,6 @@
 """Outputs of an evaluation: the printed table, leaderboard CSV, estimates, manifest.
 
-The leaderboard has the one schema of :mod:`replay.summary` (the campaign's):
+The leaderboard has the one schema of :mod:`replay.scoring.summary` (the campaign's):
 one row per dataset x task x filter, with the paired columns against the
 baseline filter (the first listed unless ``--baseline`` names one).
 
@@ -22,15 +22,16 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.evaluation import Evaluation, manifest
-from replay.summary import MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell, scored_share
+from replay.run.evaluation import Evaluation, manifest
+from replay.scoring.summary import (MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell,
+                                    scored_share)
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
-from replay.scorer import rmse_over_time
+from replay.scoring.scorer import rmse_over_time
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:
-    """The evaluation's leaderboard rows (:mod:`replay.summary`), in ``--filters`` order."""
+    """The evaluation's leaderboard rows (:mod:`replay.scoring.summary`), in ``--filters`` order."""
     return ev.rows
 
 
@@ -191,7 +192,7 @@ def owned(path: Path) -> bool:
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
-    from replay import registry
+    from replay.data import registry
 
     paths = [Path(mapping)] if mapping else []
     if registry.is_path(dataset):

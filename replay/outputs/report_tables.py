@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from replay import summary
+from replay.scoring import summary
 from replay.outputs.palette import Palette
 
 TIE = 1e-6  # paired differences below this (m) are ties

@@ -23,16 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.trajectory.recorded import is_recorded
 from replay.util import covcols
 from replay.util.errors import DataError, ReplayError
-
-
-RECORDED = "recorded:"  # replay.pipeline.RECORDED, not imported: that would load every filter (~50 MB)
-
-
-def is_recorded(name) -> bool:
-    """Whether a track is a recorded estimate (``recorded:<name>``; one run, position only)."""
-    return isinstance(name, str) and name.startswith(RECORDED)
 
 
 def is_campaign(path) -> bool:
@@ -84,7 +77,7 @@ def check_run(run, runs, where) -> None:
 def frame_and_problem(cfg: dict, run: int, data_dir=None):
     """The frame of ``run`` (a simulator draws it from the run's data stream) and the task problem
     rebuilt on the run's task stream, as the evaluation did."""
-    from replay import registry
+    from replay.data import registry
     from replay.tasks import make_task
     from replay.util.seeds import DATA, TASK, rng_for
 
@@ -104,10 +97,10 @@ def _split(value) -> list[str]:
 def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     """One run of the configurations of campaign directory ``out`` chosen by ``select``
     (``{dataset, task, filter, config}``: names, comma-separated lists; ``config``: hash
-    prefixes). They must share the measurements (``replay.summary.group_key``); each is
+    prefixes). They must share the measurements (``replay.scoring.summary.group_key``); each is
     a track named by its leaderboard label (the filter, plus the parameters that differ).
     A configuration whose run is not stored (or damaged, or failed) is refused."""
-    from replay import summary
+    from replay.scoring import summary
     from replay.campaign.store import RERUN_HINT, Store
 
     select, store = {k: _split(v) for k, v in (select or {}).items()}, Store(out)

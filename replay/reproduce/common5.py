@@ -2,10 +2,10 @@
 
 A reproduction is a list of :class:`Job` (one ``replay eval`` configuration
 each: dataset parameters, filters and their parameters, task parameters),
-computed by :func:`run_jobs` through :func:`replay.evaluation.evaluate` with one
+computed by :func:`run_jobs` through :func:`replay.run.evaluation.evaluate` with one
 progress line per job. Tables combine rows of several jobs (:func:`combine`):
 the leaderboard rows of the evaluations, relabelled, with the paired columns
-recomputed over the union by :func:`replay.summary.add_paired` (the code of
+recomputed over the union by :func:`replay.scoring.summary.add_paired` (the code of
 ``replay eval``'s ``pos_rmse_vs_<baseline>``): jobs with the same seed, dataset
 and task parameters ran on the same measurements (common random numbers).
 """
@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from replay import summary
-from replay.evaluation import Evaluation, command_line, evaluate
-from replay.metrics import paired
+from replay.scoring import summary
+from replay.run.evaluation import Evaluation, command_line, evaluate
+from replay.scoring.metrics import paired
 
 from .verdict import cell, result_rows
 
@@ -130,7 +130,7 @@ def per_run(ev: Evaluation, i: int, metric: str) -> np.ndarray:
 
 
 def paired_cell(a, b, digits: int = 3) -> str:
-    """Paired mean of a − b over runs with its 95 % half-width (:func:`replay.metrics.paired`)."""
+    """Paired mean of a − b over runs with its 95 % half-width (:func:`replay.scoring.metrics.paired`)."""
     p = paired(a, b)
     if not np.isfinite(p["diff"]):
         return "n/a"
@@ -138,7 +138,7 @@ def paired_cell(a, b, digits: int = 3) -> str:
 
 
 def mean_ci(values, digits: int = 3) -> str:
-    from replay.scorer import ci95
+    from replay.scoring.scorer import ci95
 
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]

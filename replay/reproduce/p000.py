@@ -22,7 +22,7 @@ model follow every maneuver (nothing for GPF to fix). Cells
 * the GPF ablations (no grey particles, the fixed R, the GM(1,1) continuous response
   derived and as printed) on :data:`ABLATION_CELLS`.
 
-Every number comes from :func:`replay.evaluation.evaluate` (the pipeline of ``replay
+Every number comes from :func:`replay.run.evaluation.evaluate` (the pipeline of ``replay
 eval``), one call per cell and filter set, computed in ``REPLAY_WORKERS`` processes
 (default 2). Seeds: every cell uses the master seed, so a run's measurements are the
 same draws in every cell of one sensor level (and scaled across levels); the filters

@@ -13,10 +13,10 @@ A **cell** is one configuration of the synthetic lake trial and of the filters' 
 
 Every cell runs with the same master seed, so cells differ only by what they sweep
 (the same noise draws, scaled: common random numbers across cells as well as across
-filters). :func:`compute` runs one cell's filters with :func:`replay.evaluation.evaluate`
+filters). :func:`compute` runs one cell's filters with :func:`replay.run.evaluation.evaluate`
 (the pipeline of ``replay eval``) and keeps, per filter, the leaderboard row and the
 per-run RMSE of each channel; the maneuver / level split scores each run again with
-the pipeline's scorer (:func:`replay.scorer.score_run`) on the same estimates, the
+the pipeline's scorer (:func:`replay.scoring.scorer.score_run`) on the same estimates, the
 reference restricted to the maneuver segments (``frame.meta["maneuvers"]``) or to the
 rest.
 """
@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from replay import metrics, scorer
-from replay.evaluation import command_line, evaluate
+from replay.scoring import metrics, scorer
+from replay.run.evaluation import command_line, evaluate
 from replay.models.depth import R_FIXED, paper_Q
-from replay.pipeline import plain
+from replay.run.pipeline import plain
 from replay.sim.lake_depth import base_for_rms, make_frame
 
 DATASET, TASK = "sim/lake-depth", "depth"
@@ -92,7 +92,7 @@ class Cell:
 
 def command(config: dict) -> str:
     """The ``replay eval`` command of an evaluation (task parameters that differ from their
-    defaults included by :func:`replay.evaluation.command_line`)."""
+    defaults included by :func:`replay.run.evaluation.command_line`)."""
     return command_line(config)
 
 
@@ -143,7 +143,7 @@ def compute(job) -> dict:
 # ---------------------------------------------------------------- comparisons
 
 def paired(a, b) -> tuple[float, float]:
-    """Mean of the per-run differences a - b and its 95 % half-width (:func:`replay.metrics.paired`)."""
+    """Mean of the per-run differences a - b and its 95 % half-width (:func:`replay.scoring.metrics.paired`)."""
     p = metrics.paired(a, b)
     return p["diff"], p["diff_ci95"]
 

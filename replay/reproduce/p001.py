@@ -12,7 +12,7 @@ estimating only Q̂ and R̂ (``adapt_means=none``, the fair adaptive baseline);
 a sweep of the forgetting factor b over 0.95–0.99; the ablation of the
 estimators and guards; and the UKF with noise-free sensors, the floor that the
 unobservable north/east error cannot go below. Every row comes from
-:func:`replay.evaluation.evaluate`, comparisons paired on the same runs (common
+:func:`replay.run.evaluation.evaluate`, comparisons paired on the same runs (common
 random numbers). Everything not printed in the paper (time step, Q, R, P0,
 mission legs, current scale, AHRS error correlation, DVL mode) is documented
 in replay/sim/sauv_current.py and replay/models/sauv.py. Layout: :mod:`.p001_doc`.

@@ -1,6 +1,6 @@
 """``replay reproduce 002``: the IGWO-STCPF paper's claims beside ours, with baselines and ablations.
 
-Three parts, each a list of :func:`replay.evaluation.evaluate` calls (the pipeline
+Three parts, each a list of :func:`replay.run.evaluation.evaluate` calls (the pipeline
 of ``replay eval``; every table prints the ``replay eval`` commands that give
 its rows) rendered into sections and verdict claims:
 
@@ -42,7 +42,7 @@ def path_for(doc) -> Path:
 
 
 def first_runs(ev, n: int):
-    """The evaluation restricted to its first ``n`` runs (:meth:`replay.evaluation.Evaluation.first`)."""
+    """The evaluation restricted to its first ``n`` runs (:meth:`replay.run.evaluation.Evaluation.first`)."""
     return ev.first(n)
 
 
@@ -114,7 +114,7 @@ def assemble(store: dict, cmd: str, seconds: float) -> str:
            "Every claim of the paper with our number (mean over Monte Carlo runs ± half-width of the 95 % "
            "Student-t interval), the paper's, and the verdict; the evidence sections follow, each table with the "
            "`replay eval` commands that give its rows. All filters of a table run on the same noise in each run "
-           "(seeds (seed, run, stream), `replay/evaluation.py`): paired Δ columns have tight intervals.", "",
+           "(seeds (seed, run, stream), `replay/run/evaluation.py`): paired Δ columns have tight intervals.", "",
            "## Verdicts", "", verdict_table(claims), ""]
     if missing:
         out += [f"Parts not run yet: {', '.join(missing)} (`replay reproduce 002 --part NAME`).", ""]

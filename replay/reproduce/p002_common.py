@@ -1,7 +1,7 @@
 """What the parts of the paper-002 reproduction share: the paper's numbers, the settings, the job runner.
 
 A part (:mod:`.p002_sim`, :mod:`.p002_ablations`, :mod:`.p002_bohai`) first lists
-its configurations as :class:`Job` s, each one :func:`replay.evaluation.evaluate`
+its configurations as :class:`Job` s, each one :func:`replay.run.evaluation.evaluate`
 call (the pipeline of ``replay eval``); :func:`run_jobs` computes them in the
 reproduction's worker processes (:mod:`replay.reproduce.pool`, ``REPLAY_WORKERS``,
 the costliest first), with one progress line per configuration on stderr as it
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from replay import registry
-from replay.evaluation import evaluate
+from replay.data import registry
+from replay.run.evaluation import evaluate
 
 from .pool import run_longest_first
 
@@ -80,7 +80,7 @@ class Settings:
 
 @dataclass
 class Job:
-    """One :func:`replay.evaluation.evaluate` call: ``key`` names it among its part's jobs."""
+    """One :func:`replay.run.evaluation.evaluate` call: ``key`` names it among its part's jobs."""
 
     key: str
     label: str

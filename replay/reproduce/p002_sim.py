@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay.models.auv_sonar import R_TABLE2
-from replay.pipeline import load_frame
+from replay.run.pipeline import load_frame
 from replay.reproduce.verdict import Claim, anchor
 
 from .p002_common import (COLS, N_SWEEP, PSO_LB, PSO_UB, R_SWEEP, SONAR, TABLE4, TABLE5, TABLE6, UNBOUNDED, UNGM,

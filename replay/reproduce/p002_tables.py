@@ -1,10 +1,10 @@
 """Tables of the paper-002 reproduction: one row per filter configuration, from ``replay eval``'s pipeline.
 
-Every number here is read from an :class:`replay.evaluation.Evaluation` (the
-leaderboard rows of :mod:`replay.summary` and the per-run records and errors of
-:func:`replay.pipeline.run_block`): mean ± 95 % half-width, median, ``lost k/N``,
+Every number here is read from an :class:`replay.run.evaluation.Evaluation` (the
+leaderboard rows of :mod:`replay.scoring.summary` and the per-run records and errors of
+:func:`replay.run.pipeline.run_block`): mean ± 95 % half-width, median, ``lost k/N``,
 ``diverged k/N``, the paired difference against a reference row
-(:func:`replay.summary.add_paired`, common random numbers), and the mean 3-D
+(:func:`replay.scoring.summary.add_paired`, common random numbers), and the mean 3-D
 Euclidean error beside the 3-D RMSE (:func:`position_definitions`, from the
 scorer's per-step errors). :class:`Entry` is one row; :func:`table` renders rows.
 """
@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from replay import summary
-from replay.evaluation import command_line
+from replay.scoring import summary
+from replay.run.evaluation import command_line
 from replay.reproduce.verdict import cell as text_cell
 from replay.reproduce.verdict import mean_ci
-from replay.scorer import ci95
-from replay.summary import lost_cell
+from replay.scoring.scorer import ci95
+from replay.scoring.summary import lost_cell
 
 
 # --- numbers of one result -------------------------------------------------------------
@@ -82,9 +82,9 @@ class Entry:
     """One row of a table: a filter configuration of an evaluation, under a display name."""
 
     name: str
-    row: dict  # the leaderboard row (replay.summary)
-    result: object  # replay.evaluation.FilterResult
-    ev: object  # replay.evaluation.Evaluation
+    row: dict  # the leaderboard row (replay.scoring.summary)
+    result: object  # replay.run.evaluation.FilterResult
+    ev: object  # replay.run.evaluation.Evaluation
     paper: float | None = None
     paired: tuple | None = None
     extra: dict = field(default_factory=dict)
@@ -119,7 +119,7 @@ def find(rows: list[Entry], name: str) -> Entry:
 
 def add_paired(rows: list[Entry], reference: str) -> None:
     """Each row's paired difference of ``pos_rmse`` minus that of the row named ``reference`` in the
-    same runs (:func:`replay.summary.add_paired`; rows on other measurements get none)."""
+    same runs (:func:`replay.scoring.summary.add_paired`; rows on other measurements get none)."""
     copies = [dict(e.row, label=f"#{i}") for i, e in enumerate(rows)]
     ref = next(i for i, e in enumerate(rows) if e.name == reference)
     configs, records = {}, {}

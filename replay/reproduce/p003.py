@@ -12,7 +12,7 @@ probability ε, and a PF whose Gaussian likelihood is mismatched to the glint
 only). Baselines: the bootstrap PF (α = 1, no floor), the WF-PF with α = 1
 (the 1e−99 weight floor alone), a PF with roughening (the textbook remedy for
 impoverishment), UKF and EKF. Every row comes from
-:func:`replay.evaluation.evaluate`; comparisons are paired on the same runs
+:func:`replay.run.evaluation.evaluate`; comparisons are paired on the same runs
 (common random numbers). Table layout and plots: :mod:`.p003_doc`.
 """
 from __future__ import annotations

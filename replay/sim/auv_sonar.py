@@ -25,7 +25,7 @@ from replay.util.angles import wrap
 from replay.util.params import Param
 from replay.frame import Channel, Frame
 from replay.models.auv_sonar import AUVSonar, Q_TABLE2, R_TABLE2
-from replay.noise import Covariance, as_matrix, diagonal
+from replay.models.noise import Covariance, as_matrix, diagonal
 
 from . import Numbers, generator
 

@@ -3,7 +3,7 @@
 The paper's figures: leader starts at (520 m, 560 m) with velocity (50, 50)
 m/s; follower x₀ = [400 m, 400 m, 50 m/s, 50 m/s]; range σ = 5 m; bearing σ₁ =
 0.4π/180 (thermal) and σ₂ = 0.8π/180 (glint); glint strength ε = 0.75.
-Glint noise (:class:`replay.noise.Glint`): (1 − ε) N(0, diag(5², σ₁²)) +
+Glint noise (:class:`replay.models.noise.Glint`): (1 − ε) N(0, diag(5², σ₁²)) +
 ε N(0, diag(5², σ₂²)) on [range, bearing] (our reading: the 5 m range σ holds
 in both components, the glint widens the bearing).
 
@@ -25,7 +25,7 @@ import numpy as np
 from replay.util.angles import wrap
 from replay.frame import Channel, Frame
 from replay.models.formation import Formation
-from replay.noise import Glint
+from replay.models.noise import Glint
 from replay.util.params import Param
 
 from . import Numbers, generator

@@ -47,7 +47,7 @@ TASKS = Registry("task", {
 }, check=_check)
 
 
-# the default divergence threshold of every task, times its lost threshold (replay.metrics): an
+# the default divergence threshold of every task, times its lost threshold (replay.scoring.metrics): an
 # error that large is no lost track but a filter gone numerically wrong with a finite covariance
 DIVERGE_FACTOR = 100.0
 
@@ -81,7 +81,7 @@ class Problem:
 class Task(Declared):
     """A task: keyword-only parameters declared in ``PARAMS``; :meth:`build` makes the problem.
 
-    Every task also declares how a lost track is judged (:mod:`replay.metrics`): a run is
+    Every task also declares how a lost track is judged (:mod:`replay.scoring.metrics`): a run is
     *lost* when its position error exceeds ``lost_threshold`` metres for ``lost_steps``
     consecutive scored samples. Each task sets its default ``LOST_M`` from the scale of its
     problem; both are parameters (``--task-param lost_threshold=...``), recorded in the manifest.

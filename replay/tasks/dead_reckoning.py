@@ -36,7 +36,7 @@ import numpy as np
 from replay.util.angles import wrap
 from replay.util.params import Param
 from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
-from replay.noise import Covariance, as_matrix
+from replay.models.noise import Covariance, as_matrix
 
 from . import Problem, Task, describe, missing
 

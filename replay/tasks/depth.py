@@ -23,7 +23,7 @@ import numpy as np
 from replay.util.errors import DataError
 from replay.util.params import Param
 from replay.models.depth import R_FIXED, DepthModel, paper_Q
-from replay.noise import Covariance, as_matrix, diagonal
+from replay.models.noise import Covariance, as_matrix, diagonal
 
 from . import Problem, Task, describe, why_missing
 

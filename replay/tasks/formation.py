@@ -16,7 +16,7 @@ import numpy as np
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.models.formation import Formation
-from replay.noise import Covariance, as_matrix
+from replay.models.noise import Covariance, as_matrix
 from replay.sim.uav_formation import glint_003
 
 from . import Problem, Task

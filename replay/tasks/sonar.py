@@ -19,7 +19,7 @@ import numpy as np
 from replay.util.angles import wrap
 from replay.util.params import Param
 from replay.models.auv_sonar import P0_TABLE2, Q_TABLE2, R_TABLE2, AUVSonar
-from replay.noise import Covariance, as_matrix, diagonal
+from replay.models.noise import Covariance, as_matrix, diagonal
 
 from . import Problem, Task, describe, reference_position_3d
 

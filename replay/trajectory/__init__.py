@@ -5,7 +5,7 @@ Modules, bottom up: :mod:`.quat` (quaternion algebra, x y z w), :mod:`.base`
 :mod:`.bag` (bag / MCAP topics and tf), :mod:`.io` (:func:`load` of any source),
 :mod:`.associate` (time association), :mod:`.pose_error` (APE, RPE, pairs, statistics),
 :mod:`.scoring` (:func:`score`, leaderboard cells), :mod:`.plot` (``replay score --plot``).
-Alignment is :mod:`replay.align`, shared with the ATE column of the filters' leaderboard.
+Alignment is :mod:`replay.scoring.align`, shared with the ATE column of the filters' leaderboard.
 The library never imports evo; evo is the test oracle (``tests/test_trajectory_evo.py``).
 """
 from replay.trajectory.associate import associate

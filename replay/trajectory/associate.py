@@ -34,6 +34,19 @@ def matching_indices(short: np.ndarray, long: np.ndarray, max_diff: float):
     return np.flatnonzero(ok), np.where(take_ub, k, k - 1)[ok]
 
 
+def associate_times(t_ref, t_est, t_max_diff: float = 0.01, t_offset: float = 0.0):
+    """Pairs ``(i_ref, i_est)`` of strictly increasing stamps as evo's ``sync.associate_trajectories``
+    (``t_offset`` added to the estimate's; the shorter drives, nearest within ``t_max_diff``, the
+    earlier on a tie: :func:`matching_indices`, shared with ``replay score``)."""
+    a, b = np.asarray(t_ref, float), np.asarray(t_est, float)
+    if not len(a) or not len(b):
+        return np.zeros(0, int), np.zeros(0, int)
+    if len(b) > len(a):
+        return matching_indices(a, b + t_offset, t_max_diff)
+    j, i = matching_indices(b, a - t_offset, t_max_diff)
+    return i, j
+
+
 def associate(ref: Trajectory, est: Trajectory, *, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
               min_matches: int = MIN_MATCHES):
     """(ref indices, est indices) of the matched poses (module docstring)."""

@@ -2,13 +2,13 @@
 
 :func:`score` runs, in evo's order: time association
 (:func:`replay.trajectory.associate.associate`), alignment of the matched estimate onto the
-matched reference (:func:`replay.align.align`: ``none``, ``yaw``, ``se3``, ``sim3`` or
+matched reference (:func:`replay.scoring.align.align`: ``none``, ``yaw``, ``se3``, ``sim3`` or
 ``scale``, fitted on the first ``n_to_align`` pairs; or origin alignment, which excludes the
 others as in evo), then the APE for each pose relation and, when ``delta`` is given, the RPE
 (:mod:`replay.trajectory.pose_error`).
 
 :func:`row_metrics` turns a result into leaderboard cells with the meaning they have for the
-offline filters (:mod:`replay.summary`, one run): ``pos_rmse``, ``x_rmse``..``z_rmse``,
+offline filters (:mod:`replay.scoring.summary`, one run): ``pos_rmse``, ``x_rmse``..``z_rmse``,
 ``final_err``, ``drift_pct``, ``nees`` and ``lost`` on the estimate **as recorded** (matched
 poses, no alignment), ``ate`` = translation APE RMSE **after** the alignment; and beside
 them evo's statistics ``ape_<relation>_<stat>``, ``rpe_<relation>_<stat>``, per-axis RMSE after
@@ -16,7 +16,7 @@ alignment ``ape_x_rmse``.., ``rpe_drift_pct`` (mean over pairs of the RPE transl
 the reference path length of the pair), ``matched``, ``scale`` (Sim(3)/scale alignment).
 Where the estimate records a covariance, ``nees`` is the mean position NEES e' P^-1 e over
 matched poses and ``anees*`` its 95 % chi-square(3) band and share of poses inside
-(:func:`replay.metrics.consistency`).
+(:func:`replay.scoring.metrics.consistency`).
 """
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from replay import align as alignment
-from replay import metrics
+from replay.scoring import align as alignment
+from replay.scoring import metrics
 from replay.trajectory import pose_error, quat
 from replay.trajectory.associate import T_MAX_DIFF, associate
 from replay.trajectory.base import Trajectory

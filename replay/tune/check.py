@@ -11,10 +11,10 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
             dataset_params=None, view=None, first=None, data_dir=None, train_segment=None, train=None, test=None,
             split=None, allow_overlap=False, alignment="se3", batch=None) -> Tune:
     """The checked :class:`Tune` (no trial run, no file written)."""
-    from replay import registry
-    from replay.eval_options import validate_eval_options
+    from replay.data import registry
+    from replay.run.eval_options import validate_eval_options
     from replay.filters import make_filter
-    from replay.pipeline import default_task, plain
+    from replay.run.pipeline import default_task, plain
     from replay.tasks import make_task
 
     if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
@@ -50,9 +50,9 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
 
 
 def _check_nll(t: Tune) -> None:
-    """The likelihood objective only where the runs record it (:mod:`replay.likelihood`)."""
-    from replay import likelihood
-    from replay.pipeline import build_problem
+    """The likelihood objective only where the runs record it (:mod:`replay.scoring.likelihood`)."""
+    from replay.scoring import likelihood
+    from replay.run.pipeline import build_problem
 
     for name in t.filters:
         why = likelihood.provides(name)

@@ -3,7 +3,7 @@
 * ``mean_rmse`` — mean over runs of the per-run 3-D position RMSE (m), the leaderboard's ``pos_rmse``;
 * ``median_rmse`` — its median over runs;
 * ``lost`` — the number of runs that lost the track (the task's rule);
-* ``nll`` — mean over runs of the innovations' negative log-likelihood (:mod:`replay.likelihood`:
+* ``nll`` — mean over runs of the innovations' negative log-likelihood (:mod:`replay.scoring.likelihood`:
   ``kf``, ``ekf``, ``ukf``, ``ckf`` on a linear model only);
 * ``anees`` — distance of the NEES from consistency, ``|ANEES / d - 1|``, ANEES the mean over
   runs of each run's time-mean position NEES and d its degrees of freedom;

@@ -20,7 +20,7 @@ from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
 from replay.campaign.store import Store, write_bytes, write_json
-from replay.pipeline import Config, config_hash, plain
+from replay.run.pipeline import Config, config_hash, plain
 from replay.util.progress import Progress
 
 from . import objectives, study as studies
@@ -193,8 +193,8 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
 def _measurements_row(t: Tune, run: Runner) -> list[dict]:
     """The raw observations scored on the test data (the ``measurements`` row of ``replay eval``),
     where the task observes every position component directly: a filter worse than its input shows."""
-    from replay.evaluation import observes_position
-    from replay.pipeline import build_problem
+    from replay.run.evaluation import observes_position
+    from replay.run.pipeline import build_problem
 
     test = [t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
             for d, p in t.split.test]
@@ -214,8 +214,8 @@ def _measurements_row(t: Tune, run: Runner) -> list[dict]:
 
 
 def _row(store, cfg: Config, recs) -> dict:
-    """The leaderboard row (:func:`replay.summary.config_row`) of a configuration's stored records."""
-    from replay import summary
+    """The leaderboard row (:func:`replay.scoring.summary.config_row`) of a configuration's stored records."""
+    from replay.scoring import summary
 
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
     sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}

@@ -52,7 +52,7 @@ def make(dataset: str | None, view: dict, *, train_segment=None, train=None, tes
     if train_segment is not None:
         if not dataset:
             raise ReplayError("--train-segment needs a DATASET")
-        from replay.splits import split_views
+        from replay.data.splits import split_views
 
         if "segment" in view:
             raise ReplayError("--train-segment: the dataset view already has a segment; give one or the other")
@@ -83,8 +83,8 @@ def make(dataset: str | None, view: dict, *, train_segment=None, train=None, tes
 
 
 def overlap(s: Split, dataset) -> str | None:
-    """What the training and test data share (:func:`replay.splits.check_disjoint`), or None."""
-    from replay.splits import check_disjoint
+    """What the training and test data share (:func:`replay.data.splits.check_disjoint`), or None."""
+    from replay.data.splits import check_disjoint
 
     if s.train_seed is not None:
         return check_disjoint({"seed": s.train_seed}, {"seed": s.test_seed}, allow_overlap=True, dataset=dataset)

@@ -2,7 +2,7 @@
 and simulators' Q, R, P0) or, for a filter's own noise settings, a scalar times the identity.
 
 Kept in :mod:`replay.util` (no project import) so that tasks, simulators and filters declare
-covariances alike (:mod:`replay.noise` re-exports them).
+covariances alike (:mod:`replay.models.noise` re-exports them).
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Where datasets are looked for and kept: the user cache, the search roots, a ``data_dir`` checked.
 
 Plain path helpers (a leaf: nothing of replay but its errors), re-exported by
-:mod:`replay.registry`.
+:mod:`replay.data.registry`.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 Filters and tasks have their registries beside their built-ins (``replay.filters.FILTERS``,
 ``replay.tasks.TASKS``); the adapters' is :data:`ADAPTERS` here (the built-in
-``replay.adapters.ADAPTERS`` plus the plugins), used by :mod:`replay.registry`.
+``replay.adapters.ADAPTERS`` plus the plugins), used by :mod:`replay.data.registry`.
 
 A ``replay.datasets`` entry point names a dataset id (``"example/cv-target"``) and
 points at either
@@ -15,7 +15,7 @@ points at either
   ``url``, ``sha256``, ...) or a simulator (``generator``).
 
 :func:`dataset_entries` imports them (once per process) and returns their manifest
-fields; :mod:`replay.registry` makes them datasets beside the manifests'. Every
+fields; :mod:`replay.data.registry` makes them datasets beside the manifests'. Every
 problem is one line naming the plugin and its distribution (:mod:`replay.util.plugins`).
 """
 from __future__ import annotations

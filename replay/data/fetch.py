@@ -14,7 +14,7 @@ the dataset and the URL:
   https -> http), no ``Content-Encoding`` (none is asked for), not an HTML page,
   not empty, the announced ``Content-Length`` equal to the registered size;
 * the body: as many bytes as ``Content-Length`` announced;
-* with a registered checksum (``replay/checksums.py``): the size and the sha256;
+* with a registered checksum (``replay/data/checksums.py``): the size and the sha256;
 * a sha256 that is another sequence's (registered, or recorded at its download): refused;
 * without one: the adapter's content check (``checksums.CONTENT_CHECKS``; a Bohai CSV
   needs a header of one of the two Bohai layouts, the same number of fields on
@@ -49,9 +49,9 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from replay import registry
-from replay.checksums import CONTENT_CHECKS, declared_mismatch, declares, identical_to, record_download
-from replay.registry import Dataset
+from replay.data import registry
+from replay.data.checksums import CONTENT_CHECKS, declared_mismatch, declares, identical_to, record_download
+from replay.data.registry import Dataset
 from replay.util.downloads import (Deadline, check_url, network_reason, part_prefix, printable,
                                    remove_stale_parts)
 from replay.util.errors import ReplayError

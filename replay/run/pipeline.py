@@ -1,6 +1,6 @@
 """The one evaluation pipeline: a configuration and a block of runs -> one scored record per run.
 
-Everything that prints or stores a number goes through here: ``replay eval`` (:func:`replay.evaluation.evaluate`,
+Everything that prints or stores a number goes through here: ``replay eval`` (:func:`replay.run.evaluation.evaluate`,
 an in-memory campaign with one configuration per filter), ``replay campaign run`` (a job is a block of runs
 of one configuration, :func:`replay.campaign.units.execute_job`), ``replay reproduce`` and ``replay rerun``.
 
@@ -19,7 +19,7 @@ filled in, so ``{}`` and the defaults are the same configuration.
    model and priors under its own noise settings (:mod:`replay.filters.noise_params`). Every filter is
    written over the Monte Carlo run axis and each run draws only from its own generator, so a run's
    numbers do not depend on which runs share its block: eval and campaign agree by construction;
-3. each run is scored by :func:`replay.metrics.run_metrics` (RMSE per axis and
+3. each run is scored by :func:`replay.scoring.metrics.run_metrics` (RMSE per axis and
    angle, ATE, drift, NEES/NIS) into a record ``{"run", "status", "metrics",
    "series"}``; ``keep=True`` also keeps the problem, the estimates and the
    error series in memory (``replay eval`` writes and plots them).
@@ -29,15 +29,14 @@ scoring fails comes back as ``status = "failed"`` with its error.
 
 **Recorded estimates** (``Frame.estimates``: an onboard EKF's odometry, a SLAM
 system's poses) are configurations too: ``filter = "recorded:<name>"`` with the
-association parameters :data:`RECORDED_PARAMS` as its parameters. Nothing is
-filtered: :func:`recorded_estimates` associates the recorded poses with the task's
-reference (:func:`associate`) and the run is scored by the same
+association parameters as its parameters (:mod:`replay.trajectory.recorded`). Nothing is
+filtered: :func:`replay.trajectory.recorded.recorded_estimates` associates the recorded poses with
+the task's reference and the run is scored by the same
 :func:`score_record`. A recorded estimate is deterministic: it has one run, run 0
 (:func:`runs_of`), whatever the number of runs asked for.
 """
 from __future__ import annotations
 
-import copy
 import functools
 import hashlib
 import json
@@ -47,28 +46,17 @@ from time import perf_counter
 
 import numpy as np
 
-from replay import likelihood, metrics, registry, scorer
-from replay.align import ALIGNMENTS, align, apply
-from replay.failures import ends_run, failed
+from replay.data import registry
 from replay.filters import make_filter
-from replay.filters.base import Estimates, check_batch
+from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
+from replay.run.failures import ends_run, failed
+from replay.scoring import likelihood, metrics, scorer
 from replay.tasks import make_task, reference_present, source_of
+from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates
 from replay.util import covcols
 from replay.util.errors import ReplayError
-from replay.util.params import Param, validate
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
-
-RECORDED = "recorded:"  # the filter name of a recorded estimate's configuration: recorded:<name>
-RECORDED_PARAMS = (
-    Param("t_max_diff", float, 0.01, "a recorded pose and a reference sample are associated when their stamps "
-          "differ by at most this (nearest stamp, as evo's --t_max_diff)", unit="s", low=0.0),
-    Param("t_offset", float, 0.0, "added to the recorded stamps before association (evo's --t_offset)", unit="s"),
-    Param("align", str, "none", "the recorded trajectory is first moved onto the reference by this fit over "
-          "the associated poses (as evo's -a / --correct_scale): every column is then in the reference's frame",
-          choices=ALIGNMENTS),
-)
-
 
 @dataclass(frozen=True)
 class Config:
@@ -225,7 +213,7 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
     ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``);
     ``built``: {run: problem} already built by :func:`build_problem` for this configuration.
     Numerical exceptions inside a filter's step are that run's divergence; any other failure of the
-    filter (a bug, ``sys.exit``, memory, a broken protocol) is its runs' failure (:mod:`replay.failures`).
+    filter (a bug, ``sys.exit``, memory, a broken protocol) is its runs' failure (:mod:`replay.run.failures`).
     """
     c = config.as_dict() if isinstance(config, Config) else config
     if is_recorded(c["filter"]):
@@ -281,7 +269,7 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
 
 
 def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> dict:
-    """The record of one run: metrics (:func:`replay.metrics.run_metrics`) and the per-step table."""
+    """The record of one run: metrics (:func:`replay.scoring.metrics.run_metrics`) and the per-step table."""
     err = scorer.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
     m.update(likelihood.of_run(c, problem, est, series))  # replay tune's likelihood objective, where it exists
@@ -307,83 +295,9 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
 
 # ---------------------------------------------------------------- recorded estimates
 
-def is_recorded(name: str) -> bool:
-    """Whether a configuration's ``filter`` names a recorded estimate (``recorded:<name>``)."""
-    return isinstance(name, str) and name.startswith(RECORDED)
-
-
-def recorded_params(name: str, given: dict | None = None, defaults: dict | None = None) -> dict:
-    """The association parameters of ``recorded:<name>``: ``given`` over the mapping's ``defaults``
-    over the declared ones, checked (one line naming the parameter)."""
-    return validate(RECORDED_PARAMS, {**(defaults or {}), **(given or {})}, f"recorded estimate {name!r}")
-
-
 def runs_of(config: dict, runs) -> list:
     """The runs of ``runs`` a configuration computes: all, or only run 0 for a recorded estimate."""
     return [r for r in runs if r == 0] if is_recorded(config["filter"]) else list(runs)
-
-
-def associate(t_ref, t_est, t_max_diff: float = 0.01, t_offset: float = 0.0):
-    """Pairs ``(i_ref, i_est)`` of strictly increasing stamps as evo's ``sync.associate_trajectories``
-    (``t_offset`` added to the estimate's; the shorter drives, nearest within ``t_max_diff``, the
-    earlier on a tie: :func:`replay.trajectory.associate.matching_indices`, shared with ``replay score``)."""
-    from replay.trajectory.associate import matching_indices
-
-    a, b = np.asarray(t_ref, float), np.asarray(t_est, float)
-    if not len(a) or not len(b):
-        return np.zeros(0, int), np.zeros(0, int)
-    if len(b) > len(a):
-        return matching_indices(a, b + t_offset, t_max_diff)
-    j, i = matching_indices(b, a - t_offset, t_max_diff)
-    return i, j
-
-
-def recorded_estimates(problem, name: str, params: dict):
-    """(problem to score, Estimates, note): ``recorded:<name>`` on the problem's time axis.
-
-    Each associated pose is placed at its reference sample (its own stamp differs by at
-    most ``t_max_diff``); the other samples hold NaN and are not scored. Two poses on one
-    reference sample (the estimate denser there): the nearer is kept. The scored
-    position is the first d components (the task's axes); the covariance is the d x d
-    block where recorded and positive definite (NEES), NaN elsewhere. Fewer than 3
-    associated poses: one line naming the file and topic.
-    """
-    rec = getattr(problem, "recorded", {}).get(name)
-    src = getattr(problem, "source", "dataset")
-    if rec is None:
-        known = ", ".join(getattr(problem, "recorded", {})) or "none"
-        raise ReplayError(f"{src}: no recorded estimate {name!r} (the mapping's [estimates] declare: {known})")
-    d = len(problem.axis_names)
-    ref = np.flatnonzero(problem.truth_valid)
-    i, j = associate(problem.t[ref], rec.t, params["t_max_diff"], params["t_offset"])
-    k = ref[i]
-    dt = np.abs(problem.t[k] - rec.t[j] - params["t_offset"])
-    order = np.lexsort((dt, k))
-    first = np.r_[True, np.diff(k[order]) != 0] if len(k) else np.zeros(0, bool)
-    k, j, dup = k[order][first], j[order][first], int((~first).sum())
-    if len(k) < 3:
-        raise ReplayError(f"{src}: recorded estimate {name} ({rec.description}): {len(k)} pose(s) associated with "
-                          f"the reference within t_max_diff {params['t_max_diff']:g} s (t_offset "
-                          f"{params['t_offset']:g} s); at least 3 are needed: check the stamps, or raise "
-                          f"t_max_diff (-p recorded:{name}.t_max_diff=..., or in the mapping's [estimates])")
-    n = len(problem.t)
-    x, P = np.full((n, d), np.nan), np.full((n, d, d), np.nan)
-    R, t, c = align(rec.position[j, :d], problem.truth_position[k], params["align"])
-    x[k] = apply(R, t, c, rec.position[j, :d])
-    if rec.covariance is not None:
-        block = c * c * R @ rec.covariance[j][:, :d, :d] @ R.T
-        ok = np.isfinite(block).all(axis=(1, 2))
-        ok[ok] = np.all(np.linalg.eigvalsh(block[ok]) > 0, axis=1)
-        P[k[ok]] = block[ok]
-    est = Estimates(x, P, np.full(n, np.nan), None, {"recorded": name, "associated": int(len(k))})
-    scored = copy.copy(problem)  # the position only: a recorded state has no task-specific components
-    scored.position_index, scored.truth_angles, scored.angle_index, scored.truth_extra = tuple(range(d)), {}, {}, {}
-    note = (f"recorded:{name}: {len(k)} of its {len(rec)} poses associated with {len(ref)} reference samples "
-            f"(nearest stamp within {params['t_max_diff']:g} s, t_offset {params['t_offset']:g} s"
-            + (f"; moved onto the reference by a {params['align']} fit" if params["align"] != "none" else "")
-            + (f"; {dup} more pose(s) on an already associated sample left out" if dup else "")
-            + "); position scored, one run (a recorded estimate is deterministic)")
-    return scored, est, note
 
 
 def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> dict:

@@ -1,10 +1,10 @@
 """Metrics beyond RMSE: consistency (NEES, NIS), ATE with alignment, drift, final error, pairs.
 
-Per run (:func:`run_metrics`, on top of :func:`replay.scorer.score_run`):
+Per run (:func:`run_metrics`, on top of :func:`replay.scoring.scorer.score_run`):
 
 * ``ate`` — absolute trajectory error: the position RMSE after aligning the
   estimate to the reference with ``alignment`` (``none``, ``yaw``, ``se3``,
-  ``sim3``; :mod:`replay.align`), over the scored samples (m);
+  ``sim3``; :mod:`replay.scoring.align`), over the scored samples (m);
 * ``final_err`` — position error at the last scored sample (m);
 * ``drift_pct`` — ``final_err`` as a percentage of the distance travelled
   along the reference over the scored samples;
@@ -32,7 +32,7 @@ band (about 0.95 for a consistent filter). NIS likewise with its degrees of
 freedom (measured components) per step.
 
 Pairs (:func:`paired`): two filters run on the same measurements (common
-random numbers, see :mod:`replay.evaluation`) are compared run by run; the mean
+random numbers, see :mod:`replay.run.evaluation`) are compared run by run; the mean
 difference and its 95 % Student-t interval are much tighter than the two
 separate intervals suggest.
 """
@@ -40,9 +40,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay import scorer
-from replay.align import align, apply
-from replay.scorer import ci95
+from replay.scoring import scorer
+from replay.scoring.align import align, apply
+from replay.scoring.scorer import ci95
 
 
 def nees(e: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -203,7 +203,7 @@ def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
 def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None,
                 errors: dict | None = None):
     """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``;
-    ``errors``: the run's :func:`replay.scorer.errors`, when computed already."""
+    ``errors``: the run's :func:`replay.scoring.scorer.errors`, when computed already."""
     errors = scorer.errors(problem, est) if errors is None else errors
     m = scorer.score_run(problem, est, errors)
     err = errors["position"]

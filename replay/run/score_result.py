@@ -17,7 +17,7 @@ import os
 
 import numpy as np
 
-from replay.pipeline import config_hash
+from replay.run.pipeline import config_hash
 from replay.trajectory import io, row_metrics
 from replay.trajectory import score as score_one
 from replay.trajectory.base import Trajectory
@@ -55,7 +55,7 @@ def settings(*, align: str, n_to_align, align_origin: bool, t_max_diff: float, t
 
 def leaderboard_row(s, *, reference: str, dataset: str, estimate: str, name: str, settings: dict,
                     lost_threshold=None, lost_steps: int = 10) -> dict:
-    """The leaderboard row (:mod:`replay.summary` schema) of the score ``s`` of the estimate
+    """The leaderboard row (:mod:`replay.scoring.summary` schema) of the score ``s`` of the estimate
     ``estimate`` (its source) named ``name`` against ``reference`` (its source; ``dataset``: its label)."""
     from replay.util.version import __version__
 
@@ -144,7 +144,7 @@ class ScoreResult:
         (every digit kept; the CSV rounds to 6 significant digits)."""
         import pandas as pd
 
-        from replay.summary import columns
+        from replay.scoring.summary import columns
 
         return pd.DataFrame(self.rows, columns=columns(self.rows))
 

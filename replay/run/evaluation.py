@@ -1,16 +1,16 @@
 """``replay eval``: a campaign of one configuration per filter, computed in memory.
 
-``evaluate`` makes one :class:`replay.pipeline.Config` per filter (parameters
+``evaluate`` makes one :class:`replay.run.pipeline.Config` per filter (parameters
 validated against their declarations and stored with every default filled in)
-and computes its runs with :func:`replay.pipeline.run_block` in the blocks a
+and computes its runs with :func:`replay.run.pipeline.run_block` in the blocks a
 campaign uses (``batch`` runs each), so ``replay eval`` and ``replay campaign
-run`` give the same rows (:mod:`replay.summary`) for the same configuration.
+run`` give the same rows (:mod:`replay.scoring.summary`) for the same configuration.
 Seeds: :mod:`replay.util.seeds` (dataset, task and filter streams per run:
 every filter sees the same measurements in a run — common random numbers).
 
 Recorded estimates of the frame (``[estimates]`` of a bag mapping) are rows
 ``recorded:<name>`` beside the filters, through the same pipeline and summary
-(:func:`replay.pipeline.recorded_estimates`): one run each (deterministic), scored
+(:func:`replay.trajectory.recorded.recorded_estimates`): one run each (deterministic), scored
 on the task's reference; their notes (what was associated) are ``Evaluation.notes``.
 """
 from __future__ import annotations
@@ -23,16 +23,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from replay import registry, scorer, summary
+from replay.data import registry
+
+from replay.scoring import scorer, summary
 from replay.util.progress import particle_weight
 from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
-from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded,
-                             is_sim, load_frame, plain, recorded_params, run_block)
+from replay.run.pipeline import Config, build_problem, config_hash, default_task, is_sim, load_frame, plain, run_block
+from replay.trajectory.recorded import RECORDED, RECORDED_PARAMS, is_recorded, recorded_params
 from replay.tasks import make_task
-from replay.eval_options import validate_eval_options
+from replay.run.eval_options import validate_eval_options
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
 
@@ -48,10 +50,10 @@ class FilterResult:
     runs: list = field(default_factory=list)  # per-run metric dicts
     errors: list = field(default_factory=list)  # per-run error dicts
     estimates: list = field(default_factory=list)  # per-run Estimates
-    summary: dict = field(default_factory=dict)  # the leaderboard row (replay.summary)
+    summary: dict = field(default_factory=dict)  # the leaderboard row (replay.scoring.summary)
     config_hash: str = ""
-    config: dict = field(default_factory=dict)  # the configuration (replay.pipeline.Config)
-    records: list = field(default_factory=list)  # per-run records of replay.pipeline.run_block
+    config: dict = field(default_factory=dict)  # the configuration (replay.run.pipeline.Config)
+    records: list = field(default_factory=list)  # per-run records of replay.run.pipeline.run_block
 
 
 @dataclass
@@ -66,7 +68,7 @@ class Evaluation:
     rows: list = field(default_factory=list)  # leaderboard rows, in --filters order
     baseline: str | None = None
     notes: list = field(default_factory=list)  # one line per recorded estimate: what was associated
-    units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.scorer.units)
+    units: dict = field(default_factory=dict)  # RMSE metric -> unit (replay.scoring.scorer.units)
     position_index: tuple = (0, 1, 2)  # the state components holding the scored position
 
     def position_components(self, name: str) -> tuple:
@@ -75,33 +77,34 @@ class Evaluation:
         return tuple(range(len(self.axis_names))) if is_recorded(name) else self.position_index
 
     def leaderboard(self):
-        """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.tables`)."""
-        from replay import tables
+        """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.run.tables`)."""
+        from replay.run import tables
 
         return tables.leaderboard(self)
 
     def estimates(self, filter: str, *, run: int | None = None):
-        """A filter's estimates as a DataFrame, one row per run and step (:mod:`replay.tables`)."""
-        from replay import tables
+        """A filter's estimates as a DataFrame, one row per run and step (:mod:`replay.run.tables`)."""
+        from replay.run import tables
 
         return tables.estimates(self, filter, run=run)
 
     def errors(self, filter: str, *, run: int | None = None):
-        """A filter's errors against the reference as a DataFrame, one row per run and step (:mod:`replay.tables`)."""
-        from replay import tables
+        """A filter's errors against the reference as a DataFrame, one row per run and step
+        (:mod:`replay.run.tables`)."""
+        from replay.run import tables
 
         return tables.errors(self, filter, run=run)
 
     def plot_errors(self, **options):
-        """Position error over time, RMSE across runs per filter: a matplotlib Figure (:mod:`replay.plots`)."""
-        from replay import plots
+        """Position error over time, RMSE across runs per filter: a matplotlib Figure (:mod:`replay.run.plots`)."""
+        from replay.run import plots
 
         return plots.plot_errors(self, **options)
 
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
         evaluation (a run's seeds and numbers depend only on (seed, run))."""
-        from replay.eval_options import BY_NAME
+        from replay.run.eval_options import BY_NAME
 
         n = BY_NAME["runs"].check(n)
         if n >= self.config["runs"]:
@@ -137,7 +140,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
     more by name, or, when None, every estimate the frame holds that ``filters`` does not name.
-    ``min_scored_share`` (:data:`replay.summary.MIN_SCORED_SHARE`) is recorded in the configuration:
+    ``min_scored_share`` (:data:`replay.scoring.summary.MIN_SCORED_SHARE`) is recorded in the configuration:
     the printed table flags rows scored on less of the reference.
     """
     min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
@@ -254,10 +257,10 @@ def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
 
 
 def _check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None:
-    """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.resources`),
+    """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.run.resources`),
     sized on run 0's problem of the first configuration, which is returned ({0: problem}: not built twice)."""
-    from replay.pipeline import build_problem
-    from replay.resources import available_memory, check_kept, check_particles
+    from replay.run.pipeline import build_problem
+    from replay.run.resources import available_memory, check_kept, check_particles
 
     offline = [c for c in configs if not is_recorded(c.filter)]
     if not offline or (avail := available_memory()) is None:
@@ -270,7 +273,7 @@ def _check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None
 
 
 def _filled(rec: dict) -> dict:
-    """A run's record; a failed run (the filter failed: :mod:`replay.failures`) with NaN estimates
+    """A run's record; a failed run (the filter failed: :mod:`replay.run.failures`) with NaN estimates
     and errors on the problem's steps, so every table keeps one entry per run."""
     if rec["status"] != "failed":
         return rec

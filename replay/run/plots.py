@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay import tables
+from replay.run import tables
 
 
 def _axes(ax, size=(7.0, 4.0)):

@@ -1,8 +1,8 @@
 """Views of a dataset: a time window, a segment and a sampling rate, applied to any frame.
 
 Views are dataset parameters accepted by every dataset (simulated, registered,
-plain files, bags): :func:`replay.registry.check_params` checks them beside the
-generator's or adapter's own parameters and :func:`replay.registry.load_frame`
+plain files, bags): :func:`replay.data.registry.check_params` checks them beside the
+generator's or adapter's own parameters and :func:`replay.data.registry.load_frame`
 applies them to the frame the adapter or generator made, before ``first``. So
 they are part of ``dataset_params``: of the configuration hash, the manifest,
 ``replay rerun`` and campaign units, with nothing else to do.
@@ -35,7 +35,7 @@ its generation step (``meta["initial_state"]``, ``dt``: ``sim/ungm``,
 ``sim/auv-sonar``, ...) takes only views that keep its first sample and its
 step (a window ``:END``, a segment ``0:B``); the others are refused in one line
 (the task's model would not describe the frame). Its training and test data
-differ by seed (:mod:`replay.splits`).
+differ by seed (:mod:`replay.data.splits`).
 """
 from __future__ import annotations
 

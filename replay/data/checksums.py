@@ -1,7 +1,7 @@
 """Registered upstream checksums, and the checks of local copies of file datasets.
 
 Also the content checks by adapter (:data:`CONTENT_CHECKS`) that a download without a
-registered checksum must pass (``replay/fetch.py``).
+registered checksum must pass (``replay/data/fetch.py``).
 
 ``REGISTERED`` holds the SHA-256 and size (bytes) of every Bohai CSV that could be
 obtained from the upstream repository (nature1949/AUV_navigation_dataset, branch
@@ -12,7 +12,7 @@ download be verified all the same. Constants only: nothing is read at run time.
 The registry puts them on the manifest entries of the same id
 (:func:`with_registered`); a download of one of these is verified by size and
 checksum, the seven others are accepted only after a content check
-(``replay/fetch.py``) and reported as "not registered upstream (content-checked)".
+(``replay/data/fetch.py``) and reported as "not registered upstream (content-checked)".
 
 ``checksums.json`` beside a downloaded file records what `fetch` saw of a file
 without a registered checksum (its sha256, size, url, and that it passed the

@@ -96,7 +96,7 @@ def aggregate(run_metrics: list[dict], names=()) -> dict:
     """Monte Carlo summary of per-run metrics: ``runs``, ``diverged``, and for every ``*_rmse``
     metric and every metric in ``names`` the mean over non-diverged runs with the half-width of
     its 95 % interval (``<m>_ci95``); ``us_per_step`` (median), ``scored``/``masked`` (mean).
-    The one aggregation of every leaderboard (:func:`replay.summary.config_row`)."""
+    The one aggregation of every leaderboard (:func:`replay.scoring.summary.config_row`)."""
     ok = [m for m in run_metrics if not m["diverged"]]
     out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok),
            "lost": sum(1 for m in ok if m.get("lost"))}

@@ -1,7 +1,7 @@
 """An evaluation as pandas DataFrames (``Evaluation.leaderboard()``, ``.estimates(filter)``, ...).
 
 * :func:`leaderboard` — one row per filter, the columns and values of ``leaderboard.csv``
-  (:mod:`replay.summary`; the CSV rounds floats to 6 significant digits, the DataFrame
+  (:mod:`replay.scoring.summary`; the CSV rounds floats to 6 significant digits, the DataFrame
   keeps them whole; empty cells, such as the baseline's paired cells, are NaN).
 * :func:`estimates` — a filter's posterior means and variances, one row per run and step
   (index ``run, k``; columns ``t``, ``x0..``, ``P00..``: the columns of
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay import summary
-from replay.scorer import rmse_over_time as _rmse_over_time
+from replay.scoring import summary
+from replay.scoring.scorer import rmse_over_time as _rmse_over_time
 from replay.util import covcols
 from replay.util.errors import ReplayError
 
@@ -30,7 +30,7 @@ def _pd():
 
 
 def result(ev, name: str):
-    """The :class:`replay.evaluation.FilterResult` of filter ``name`` (its name or its label)."""
+    """The :class:`replay.run.evaluation.FilterResult` of filter ``name`` (its name or its label)."""
     for r in ev.results:
         if name in (r.name, r.summary.get("label")):
             return r

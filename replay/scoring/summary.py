@@ -1,7 +1,7 @@
 """Leaderboard rows: one schema for ``replay eval``, campaigns, reproductions and merges.
 
 One row per configuration (dataset x task x filter x parameters x seed), from
-its per-run records (:func:`replay.pipeline.run_block`), whether they are in
+its per-run records (:func:`replay.run.pipeline.run_block`), whether they are in
 memory (eval) or stored (a campaign directory).
 
 Columns (stable):
@@ -21,7 +21,7 @@ coming from lost runs (above 0.5 the mean is dominated by lost tracks);
 runs and the half-width of its 95 % Student-t interval: ``pos_rmse``,
 ``x_rmse``, ``y_rmse``, ``z_rmse`` (m), ``<angle>_rmse`` (rad, wrapped), ``ate``
 (m, after ``alignment``), ``final_err`` (m), ``drift_pct`` (%), ``nees``,
-``nis`` (per-run time means; see :mod:`replay.metrics`);
+``nis`` (per-run time means; see :mod:`replay.scoring.metrics`);
 
 ``pos_rmse_vs_<baseline>, pos_rmse_vs_<baseline>_ci95`` — paired comparison
 with the baseline configuration of the same dataset and task (the first, or the
@@ -30,14 +30,14 @@ baseline's in the same run (common random numbers) and its 95 % half-width;
 empty in the baseline's own row and where there is one configuration;
 
 ``anees, anees_lo, anees_hi, anees_inside, anees_flag`` and the same for ``anis`` — the
-ensemble consistency (:func:`replay.metrics.consistency`); the flag is ``consistent``,
+ensemble consistency (:func:`replay.scoring.metrics.consistency`); the flag is ``consistent``,
 ``optimistic``, ``pessimistic`` or ``collapsed`` (then ``anees`` is empty: a collapsed
 covariance gives no number worth printing);
 
-``view`` (rows on a view of the dataset only: ``rate=1 window=60:``, :mod:`replay.views`);
+``view`` (rows on a view of the dataset only: ``rate=1 window=60:``, :mod:`replay.data.views`);
 ``content_checked`` (rows on a registered recording only) — whether anything published confirms
 the file: its registered checksum, or the rows and time span its upstream listing declares
-(:func:`replay.checksums.check_loaded`); False flags a file accepted on its structure alone;
+(:func:`replay.data.checksums.check_loaded`); False flags a file accepted on its structure alone;
 
 ``scored, masked`` — reference samples scored and skipped (masked reference),
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
@@ -49,9 +49,9 @@ import json
 
 import numpy as np
 
-from replay import metrics, scorer
+from replay.scoring import metrics, scorer
 from replay.util.params import Param
-from replay.views import NAMES as VIEWS
+from replay.data.views import NAMES as VIEWS
 
 HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
         "first"]
@@ -90,14 +90,14 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     if checked:
         row["content_checked"] = all(checked)
     view = [(k, cfg["dataset_params"][k]) for k in VIEWS if k in (cfg.get("dataset_params") or {})]
-    if view:  # a view of the dataset (replay/views.py): rows of one dataset at two rates are told apart
+    if view:  # a view of the dataset (replay/data/views.py): rows of one dataset at two rates are told apart
         row["view"] = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in view)
     return row
 
 
 def measurements(cfg: dict) -> str:
     """What the filters of configuration ``cfg`` were given (:data:`TAIL`'s ``measurements``)."""
-    from replay import registry
+    from replay.data import registry
     from replay.tasks import task_class
 
     if str(cfg["filter"]).startswith("recorded:"):

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import os
 
-from replay.align import ALIGNMENTS
+from replay.scoring.align import ALIGNMENTS
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
-MAX_RUNS = 1_000_000  # beyond, a run count is a typo; what fits in memory is checked too (replay.resources)
+MAX_RUNS = 1_000_000  # beyond, a run count is a typo; what fits in memory is checked too (replay.run.resources)
 MAX_SEED = 2 ** 63 - 1  # a TOML / JSON integer
 
 EVAL_OPTIONS = (

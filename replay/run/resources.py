@@ -1,7 +1,7 @@
 """Memory a run will need, predicted before it starts and refused in one line when it cannot fit.
 
 Two predictable needs (the rest is reported as "out of memory" if it happens,
-:mod:`replay.failures`):
+:mod:`replay.run.failures`):
 
 * a particle filter holds ``n_particles x runs computed at once x state size x 8 bytes``
   (:func:`check_particles`; campaigns may call it for a unit's block too);

@@ -5,7 +5,7 @@ dicts a tune adds to its configurations:
 
 * ``{"segment": 0.6}`` (the training share of the duration, ``0 < share < 1``)
   -> ``({"segment": "0:0.6"}, {"segment": "0.6:1"})``: dataset parameters
-  (:mod:`replay.views`); the two segments share no sample (``[0, 0.6·D)`` and
+  (:mod:`replay.data.views`); the two segments share no sample (``[0, 0.6·D)`` and
   ``[0.6·D, D]``).
 * ``{"train": [ids], "test": [ids]}`` -> ``({"datasets": [...]}, {"datasets": [...]})``:
   whole sequences (dataset ids, or files), each list non-empty, no id twice.
@@ -26,7 +26,7 @@ instead (a tune then flags every row).
 """
 from __future__ import annotations
 
-from replay import views
+from replay.data import views
 from replay.util.errors import ReplayError
 
 SEED_MAX = 2 ** 63 - 1
@@ -104,7 +104,7 @@ def _overlap(train: dict, test: dict, dataset) -> str | None:
 
 
 def _simulated(dataset: str) -> bool:
-    from replay import registry
+    from replay.data import registry
 
     return dataset in registry.all_datasets() and registry.get(dataset).kind == "sim"
 

@@ -8,7 +8,7 @@ the manifest and the key:
   each of its type (``runs`` an integer >= 1, ``filters`` a non-empty list of
   distinct names, ``filter_params`` an object per filter, ...);
 * each filter's configuration hash, recomputed from the recorded configuration
-  (:func:`replay.pipeline.config_hash`), equals the recorded one
+  (:func:`replay.run.pipeline.config_hash`), equals the recorded one
   (``config.config_hashes`` and the result's ``config_hash``): an edited
   configuration is not the one whose numbers are recorded;
 * it names no code to import (:func:`check_sources`): each filter, the task and the
@@ -23,12 +23,12 @@ the manifest and the key:
   be null only for a simulated dataset, which the simulator and its recorded
   parameters identify.
 
-:func:`repeat` runs the configuration again (:func:`replay.evaluation.evaluate`),
+:func:`repeat` runs the configuration again (:func:`replay.run.evaluation.evaluate`),
 and :func:`verify` compares: the same dataset checksum, the same configuration
 (every key of :data:`CONFIG` but the checksum and hashes, compared on their own, and
 the ``baseline`` of the paired columns, null for the first filter),
 the same configuration hashes, and each filter's whole leaderboard row
-(:mod:`replay.summary`): the same set of columns and every value equal to the
+(:mod:`replay.scoring.summary`): the same set of columns and every value equal to the
 recorded one — results (RMSEs, ``ate``, ``lost``, ``lost_share``, ``diverged``,
 ``failed``, ``nees``, ``nis``, ``final_err``, ``drift_pct``, medians, ``*_ci95``,
 ANEES/ANIS and their flags, ``scored``, ``masked``, the paired columns, ...) and the
@@ -57,9 +57,9 @@ import json
 import re
 from pathlib import Path
 
-from replay.align import ALIGNMENTS
-from replay.pipeline import Config, config_hash, is_recorded, is_sim
-from replay.summary import TIMING
+from replay.scoring.align import ALIGNMENTS
+from replay.run.pipeline import Config, config_hash, is_recorded, is_sim
+from replay.scoring.summary import TIMING
 from replay.util.errors import ReplayError
 from replay.util.plugins import TARGET
 
@@ -249,10 +249,10 @@ def _check_dataset(cfg: dict, bad) -> None:
 
 
 def repeat(man: dict, data_dir=None, progress=None):
-    """Run the manifest's configuration again: the :class:`replay.evaluation.Evaluation`.
+    """Run the manifest's configuration again: the :class:`replay.run.evaluation.Evaluation`.
 
     ``progress``: a :class:`replay.util.progress.Progress` told of each run done (as ``replay eval``'s)."""
-    from replay.evaluation import evaluate
+    from replay.run.evaluation import evaluate
 
     cfg = man["config"]
     return evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],

@@ -1,0 +1,1 @@
+"""Scoring estimates against the reference: errors, alignment, metrics, leaderboard rows."""
