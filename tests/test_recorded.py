@@ -354,11 +354,16 @@ def test_ros_example_orb_slam_and_sptam_as_evo(bagdir, tmp_path):
     r = results_of(tmp_path / "o")
     orb, spt = r["recorded:ORB-SLAM"], r["recorded:S-PTAM"]
     # evo_ape bag ROS_example.bag groundtruth ORB-SLAM -a: rmse 5.509938 (2550 pairs); without -a: 8.508008
+    # the mapping declares align = "se3" (SLAM in its own frame): every column is of the aligned track
     assert float(orb["ate"]) == pytest.approx(5.509938, abs=1e-6) and orb["scored"] == 2550
-    assert float(orb["pos_rmse"]) == pytest.approx(8.508008, abs=1e-6)
-    # evo_ape bag ROS_example.bag groundtruth S-PTAM: rmse 10.344660 (1667 pairs)
-    assert float(spt["pos_rmse"]) == pytest.approx(10.344660, abs=1e-6) and spt["scored"] == 1667
+    assert float(orb["pos_rmse"]) == pytest.approx(5.509938, abs=1e-6)
+    assert float(orb["pos_rmse_unaligned"]) == pytest.approx(8.508008, abs=1e-6)
+    assert orb["lost"] == 0 and orb["lost_unaligned"] == 1  # aligned-good: not lost; as recorded: off by > 10 m
+    # evo_ape bag ROS_example.bag groundtruth S-PTAM: rmse 10.344660 (1667 pairs); with -a 6.316710
+    assert float(spt["pos_rmse_unaligned"]) == pytest.approx(10.344660, abs=1e-6) and spt["scored"] == 1667
     assert float(spt["ate"]) == pytest.approx(6.316710, abs=1e-6)
+    assert float(spt["pos_rmse"]) == pytest.approx(6.316710, abs=1e-6)
+    assert any(x.split()[:4] == ["filter", "pos_rmse", "median", "ate"] for x in res.output.splitlines())
 
 
 @pytest.mark.slow
@@ -367,10 +372,11 @@ def test_ros_example_first_samples(bagdir, tmp_path):
               "--filters", "none", "--first", "2000", "-o", tmp_path / "o")
     assert res.exit_code == 0, res.output
     r = results_of(tmp_path / "o")  # the first 2000 ground-truth samples (119.9 s)
-    assert float(r["recorded:ORB-SLAM"]["pos_rmse"]) == pytest.approx(1.33449152683659, rel=1e-9)
+    assert float(r["recorded:ORB-SLAM"]["pos_rmse_unaligned"]) == pytest.approx(1.33449152683659, rel=1e-9)
     assert float(r["recorded:ORB-SLAM"]["ate"]) == pytest.approx(0.628130603751518, rel=1e-9)
+    assert float(r["recorded:ORB-SLAM"]["pos_rmse"]) == pytest.approx(0.628130603751518, rel=1e-9)
     assert r["recorded:ORB-SLAM"]["scored"] == 372
-    assert float(r["recorded:S-PTAM"]["pos_rmse"]) == pytest.approx(1.802266407596184, rel=1e-9)
+    assert float(r["recorded:S-PTAM"]["pos_rmse_unaligned"]) == pytest.approx(1.802266407596184, rel=1e-9)
 
 
 def test_rl_recorded_odometry_against_held_out_fixes(bagdir, tmp_path):

@@ -46,7 +46,8 @@ def format_table(ev: Evaluation) -> str:
     """The table ``replay eval`` prints."""
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
-    head = (["filter"] + metrics[:1] + ["median"] + metrics[1:]
+    recorded = any(str(r["filter"]).startswith("recorded:") for r in rows)  # evo users compare the ATE
+    head = (["filter"] + metrics[:1] + ["median"] + (["ate"] if recorded else []) + metrics[1:]
             + ["anees", "us/step", "diverged", "lost", "scored"])
     minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
     distinct = {r.name: distinct_runs(r) for r in ev.results}
@@ -59,6 +60,8 @@ def format_table(ev: Evaluation) -> str:
             cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) and not same else ""))
             if k == metrics[0]:
                 cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
+                if recorded:
+                    cells.append(f"{row.get('ate', np.nan):.4f}")
         cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}",
                   lost_cell(row), scored_cell(row, minimum)]
         body.append(cells)
@@ -89,7 +92,10 @@ def format_table(ev: Evaluation) -> str:
     note = ("RMSE: mean over runs of per-run RMSE, ± half-width of the 95 % interval; median: "
             f"median over runs of the position RMSE ({unit.get('pos_rmse', 'm')})\n"
             f"units: {shown}{', ' if shown else ''}us/step µs per step (1 = dimensionless)\n"
-            "anees: mean position NEES over runs and steps (about the number of position axes if "
+            + ("ate: position RMSE after the --alignment fit (evo's APE with -a); a recorded estimate with an "
+               "align (mapping or -p recorded:NAME.align=se3) is scored after that fit, its numbers before it in "
+               "the *_unaligned columns\n" if recorded else "")
+            + "anees: mean position NEES over runs and steps (about the number of position axes if "
             "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
             f"diverged: numerical failure (left out of the means); lost: the track was lost "
             f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "

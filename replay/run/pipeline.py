@@ -53,7 +53,7 @@ from replay.filters.noise_params import apply as apply_noise
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, metrics, scorer
 from replay.tasks import make_task, reference_present, source_of
-from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates
+from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
@@ -306,6 +306,7 @@ def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> dict
         problem = build_problem(c, run, data_dir)
         scored, est, note = recorded_estimates(problem, c["filter"][len(RECORDED):], c["filter_params"])
         rec = score_record(c, scored, est, run, float("nan"), keep)
+        rec["metrics"].update(unaligned_metrics(scored, est, c["divergence_threshold"]))
     except Exception as err:
         if strict:
             raise

@@ -83,6 +83,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row["lost_share"] = lost_share([r["metrics"] for r in ok])
         dof = ok[0]["metrics"].get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
         row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
+    if len(done) == 1:  # a recorded estimate moved by its align fit: its numbers before the fit, named
+        row.update({k: ("" if v is None else v) for k, v in done[0]["metrics"].items() if k.endswith("_unaligned")})
     row.update(measurements=measurements(cfg), scored=agg["scored"], masked=agg["masked"],
                us_per_step=agg["us_per_step"],
                alignment=cfg["alignment"], version=version, config_hash=h)

@@ -21,8 +21,10 @@ RECORDED_PARAMS = (
           "differ by at most this (nearest stamp, as evo's --t_max_diff)", unit="s", low=0.0),
     Param("t_offset", float, 0.0, "added to the recorded stamps before association (evo's --t_offset)", unit="s"),
     Param("align", str, "none", "the recorded trajectory is first moved onto the reference by this fit over "
-          "the associated poses (as evo's -a / --correct_scale): every column is then in the reference's frame",
-          choices=ALIGNMENTS),
+          "the associated poses (as evo's -a / --correct_scale; for an estimate in its own frame, a SLAM map): "
+          "every column, the covariance (NEES) and the lost judgement are then of the aligned track, and "
+          "pos_rmse/nees/lost_unaligned give the numbers before it. none: scored as recorded (an estimate in the "
+          "reference's frame, whose offset is an error)", choices=ALIGNMENTS),
 )
 
 
@@ -76,7 +78,17 @@ def recorded_estimates(problem, name: str, params: dict):
         ok = np.isfinite(block).all(axis=(1, 2))
         ok[ok] = np.all(np.linalg.eigvalsh(block[ok]) > 0, axis=1)
         P[k[ok]] = block[ok]
-    est = Estimates(x, P, np.full(n, np.nan), None, {"recorded": name, "associated": int(len(k))})
+    info = {"recorded": name, "associated": int(len(k))}
+    if params["align"] != "none":  # the track as recorded, for the *_unaligned numbers (unaligned_metrics)
+        x0, P0 = np.full((n, d), np.nan), np.full((n, d, d), np.nan)
+        x0[k] = rec.position[j, :d]
+        if rec.covariance is not None:
+            raw = rec.covariance[j][:, :d, :d]
+            fine = np.isfinite(raw).all(axis=(1, 2))
+            fine[fine] = np.all(np.linalg.eigvalsh(raw[fine]) > 0, axis=1)
+            P0[k[fine]] = raw[fine]
+        info["unaligned"] = Estimates(x0, P0, np.full(n, np.nan), None, {"recorded": name})
+    est = Estimates(x, P, np.full(n, np.nan), None, info)
     scored = copy.copy(problem)  # the position only: a recorded state has no task-specific components
     scored.position_index, scored.truth_angles, scored.angle_index, scored.truth_extra = tuple(range(d)), {}, {}, {}
     note = (f"recorded:{name}: {len(k)} of its {len(rec)} poses associated with {len(ref)} reference samples "
@@ -85,3 +97,20 @@ def recorded_estimates(problem, name: str, params: dict):
             + (f"; {dup} more pose(s) on an already associated sample left out" if dup else "")
             + "); position scored, one run (a recorded estimate is deterministic)")
     return scored, est, note
+
+
+UNALIGNED = ("pos_rmse", "nees", "lost")
+
+
+def unaligned_metrics(problem, est, divergence_threshold=None) -> dict:
+    """``pos_rmse_unaligned``, ``nees_unaligned``, ``lost_unaligned``: the numbers of a recorded track
+    before its ``align`` fit (empty when it was not moved), beside the aligned ones of every column."""
+    from replay.scoring.metrics import run_metrics
+
+    raw = est.info.get("unaligned")
+    if raw is None:
+        return {}
+    m, _ = run_metrics(problem, raw, "none", divergence_threshold)
+    out = {f"{k}_unaligned": m[k] for k in UNALIGNED}
+    out["lost_unaligned"] = None if m["lost"] is None else int(m["lost"])  # as the lost count of one run
+    return out

@@ -9,8 +9,10 @@ others as in evo), then the APE for each pose relation and, when ``delta`` is gi
 
 :func:`row_metrics` turns a result into leaderboard cells with the meaning they have for the
 offline filters (:mod:`replay.scoring.summary`, one run): ``pos_rmse``, ``x_rmse``..``z_rmse``,
-``final_err``, ``drift_pct``, ``nees`` and ``lost`` on the estimate **as recorded** (matched
-poses, no alignment), ``ate`` = translation APE RMSE **after** the alignment; and beside
+``final_err``, ``drift_pct``, ``nees`` and ``lost`` of the **aligned** estimate (matched poses; the
+covariance rotated into the aligned frame, c² R P Rᵀ), ``ate`` = translation APE RMSE after the
+alignment, and, when an alignment moved the estimate, ``pos_rmse_unaligned``, ``nees_unaligned`` and
+``lost_unaligned`` of the estimate as recorded; and beside
 them evo's statistics ``ape_<relation>_<stat>``, ``rpe_<relation>_<stat>``, per-axis RMSE after
 alignment ``ape_x_rmse``.., ``rpe_drift_pct`` (mean over pairs of the RPE translation as % of
 the reference path length of the pair), ``matched``, ``scale`` (Sim(3)/scale alignment).
@@ -119,25 +121,35 @@ def _rmse(x) -> float:
     return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
 
 
-def row_metrics(s: Score, *, lost_threshold: float | None = None, lost_steps: int = 10) -> dict:
-    """Leaderboard cells of one scored estimate (module docstring)."""
-    err = s.estimate.p - s.reference.p
+def _track_cells(track: Trajectory, ref: Trajectory, lost_threshold, lost_steps) -> tuple[dict, np.ndarray]:
+    """pos_rmse, axes, final_err, drift_pct, lost and the position NEES of ``track`` against ``ref``."""
+    err = track.p - ref.p
     norm = np.linalg.norm(err, axis=1)
-    dist = metrics.path_length(s.reference.p)
-    row = {"pos_rmse": _rmse(norm), "x_rmse": _rmse(err[:, 0]), "y_rmse": _rmse(err[:, 1]), "z_rmse": _rmse(err[:, 2]),
-           "ate": _rmse(np.linalg.norm(s.ape_axes, axis=1)), "final_err": float(norm[-1]),
-           "drift_pct": 100.0 * float(norm[-1]) / dist if dist > 0 else float("nan"), "nees": float("nan"),
-           "nis": float("nan")}
-    row["pos_rmse_median"] = row["pos_rmse"]
+    dist = metrics.path_length(ref.p)
+    cells = {"pos_rmse": _rmse(norm), "x_rmse": _rmse(err[:, 0]), "y_rmse": _rmse(err[:, 1]),
+             "z_rmse": _rmse(err[:, 2]), "final_err": float(norm[-1]),
+             "drift_pct": 100.0 * float(norm[-1]) / dist if dist > 0 else float("nan"), "nees": float("nan")}
     lost = metrics.lost_track(norm, lost_threshold, lost_steps)
-    row["lost"] = "" if lost is None else int(lost)
-    row["lost_share"] = float("nan") if lost is None else float(lost)
-    cov = s.estimate.cov
-    if cov is not None:
-        nees = metrics.nees(err, cov[:, :3, :3])
+    cells["lost"] = "" if lost is None else int(lost)
+    nees = None
+    if track.cov is not None:
+        nees = metrics.nees(err, track.cov[:, :3, :3])
         if np.isfinite(nees).any():
-            row["nees"] = float(np.nanmean(nees))
+            cells["nees"] = float(np.nanmean(nees))
+    return cells, nees
+
+
+def row_metrics(s: Score, *, lost_threshold: float | None = None, lost_steps: int = 10) -> dict:
+    """Leaderboard cells of one scored estimate (module docstring): of the aligned track (its
+    covariance rotated with it), and, when an alignment moved it, ``*_unaligned`` of the track as recorded."""
+    row, nees = _track_cells(s.aligned, s.reference, lost_threshold, lost_steps)
+    row.update(ate=_rmse(np.linalg.norm(s.ape_axes, axis=1)), nis=float("nan"), pos_rmse_median=row["pos_rmse"])
+    row["lost_share"] = float("nan") if row["lost"] == "" else float(row["lost"])
+    if nees is not None:
         row.update({k: v for k, v in metrics.consistency(nees[None, :], 3, "anees").items()})
+    if s.aligned is not s.estimate:
+        raw, _ = _track_cells(s.estimate, s.reference, lost_threshold, lost_steps)
+        row.update({f"{k}_unaligned": raw[k] for k in ("pos_rmse", "nees", "lost")})
     for rel, e in s.ape.items():
         row.update({f"ape_{rel}_{k}": v for k, v in pose_error.statistics(e).items()})
     for axis, k in zip("xyz", range(3)):
