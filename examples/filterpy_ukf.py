@@ -1,6 +1,7 @@
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from replay.filters import Filter, Param
+from replay.model import remap_indices
 from replay.util.angles import residual, weighted_mean
 
 
@@ -13,17 +14,21 @@ class FilterPyUKF(Filter):
 
     def start(self, state, x0, P0):
         m = state.model
-        dx, dz = (lambda a, b: residual(a, b, m.x_angles)), (lambda a, b: residual(a, b, m.z_angles))
+        dx = lambda a, b: residual(a, b, m.x_angles)  # noqa: E731
         pts = MerweScaledSigmaPoints(m.nx, self.alpha, self.beta, 0.0, subtract=dx)
         state.ukf = UnscentedKalmanFilter(m.nx, m.nz, 1.0, m.h, lambda x, dt, k: m.f(x, k), pts, residual_x=dx,
-                                          residual_z=dz, x_mean_fn=lambda s, w: weighted_mean(s, w, m.x_angles),
-                                          z_mean_fn=lambda s, w: weighted_mean(s, w, m.z_angles))
+                                          x_mean_fn=lambda s, w: weighted_mean(s, w, m.x_angles))
         state.ukf.x, state.ukf.P = np.array(x0, float), np.array(P0, float)
 
     def predict(self, state, k):
         state.ukf.Q = state.model.process_cov(k)
         state.ukf.predict(k=k)
 
-    def update(self, state, z, k, mask):  # FilterPy's z has a fixed size: a partly missing z is skipped
-        if mask is None:
-            state.ukf.update(z, R=state.model.measurement_cov(k), k=k)
+    def update(self, state, z, k, mask):  # mask: the measured components when z is partly missing
+        m, ukf = state.model, state.ukf
+        keep = np.ones(m.nz, bool) if mask is None else np.asarray(mask, bool)
+        angles = remap_indices(m.z_angles, keep)  # the angles among the measured components
+        ukf.residual_z = lambda a, b: residual(a, b, angles)
+        ukf.z_mean = lambda s, w: weighted_mean(s, w, angles)
+        ukf.update(z[keep], R=m.measurement_cov(k)[np.ix_(keep, keep)], hx=lambda x, k: m.h(x, k)[keep], k=k)
+        state.innovation = (ukf.y, ukf.S)  # replay records the NIS of this step

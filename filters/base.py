@@ -44,7 +44,10 @@ the numbers of M runs of one, bit for bit.
 Filters written per run (a mutable :class:`State` per run) define
 ``start(state, x0, P0)``, ``predict(state, k)``, ``update(state, z, k, mask)``,
 ``estimate(state)`` and ``finish(state, info)``; the default :meth:`engine`
-loops over the runs calling them (:class:`PerRunEngine`).
+loops over the runs calling them (:class:`PerRunEngine`). Such an ``update`` reports its
+normalised innovation squared by setting ``state.innovation = (y, S)`` (the innovation of the
+components it used and its covariance): the engine records NIS = yᵀ S⁻¹ y with len(y) degrees
+of freedom for that step (NaN where it is not set).
 """
 from __future__ import annotations
 
@@ -355,14 +358,19 @@ class PerRunEngine:
         flt, nx = self.flt, self.model.nx
         Ma = len(self.ids)
         x, P = np.full((Ma, nx), np.nan), np.full((Ma, nx, nx), np.nan)
+        nis, dof = np.full(Ma, np.nan), np.zeros(Ma, int)
         for j, m in enumerate(self.ids):
             state, f = self.states[m], finite[j]
             try:
                 flt.predict(state, k)
+                state.innovation = None
                 if f.all():
                     flt.update(state, Z[j], k, None)
                 elif f.any():
                     flt.update(state, Z[j], k, f)
+                if state.innovation is not None:  # the filter reported (y, S): module docstring
+                    y, S = (np.asarray(a, float) for a in state.innovation)
+                    nis[j], dof[j] = float(y @ np.linalg.solve(S, y)), len(y)
                 xe, Pe = flt.estimate(state)
                 if np.shape(xe) != (nx,) or np.shape(Pe) != (nx, nx):
                     raise shape_error(flt, "estimate()", (nx,), xe, Pe)
@@ -371,7 +379,7 @@ class PerRunEngine:
                 if not numerical(err):
                     raise
                 self.errors[m] = err  # left NaN: the loop marks the run diverged at k
-        return x, P, np.full(Ma, np.nan), np.zeros(Ma, int)
+        return x, P, nis, dof
 
     def finish(self, m, info):
         self.flt.finish(self.states[m], info)

@@ -15,6 +15,7 @@ campaign's worker processes need a packaged plugin or a ``"module:Class"`` name.
 from __future__ import annotations
 
 import inspect
+import os
 
 
 from replay.data import registry
@@ -42,7 +43,7 @@ def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, a
     ``seed`` (an int or a ``numpy.random.Generator``) draws a simulated dataset;
     ``params`` are the simulator's parameters or the adapter's options (``replay list``).
     """
-    return registry.load_frame(dataset, data_dir=data_dir, rng=seed, first=first, adapter=adapter, **params)
+    return registry.load_frame(os.fspath(dataset), data_dir=data_dir, rng=seed, first=first, adapter=adapter, **params)
 
 
 def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, **options):
@@ -56,7 +57,7 @@ def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = N
     from replay.run.evaluation import evaluate as run
 
     names, params = filter_names(filters, filter_params)
-    return run(dataset, filters=names, filter_params=params, **options)
+    return run(os.fspath(dataset), filters=names, filter_params=params, **options)
 
 
 def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict]:

@@ -94,7 +94,7 @@ def _p(name, type_, doc, **kw):
 
 
 PATH = functools.partial(_p, type_=os.PathLike)
-DATASET = _p("dataset", str, "a dataset id (replay datasets list) or a file path")
+DATASET = PATH(name="dataset", doc="a dataset id (replay datasets list) or a file path (a string or a pathlib.Path)")
 EVALUATION = Kind("ev", "replay.run.evaluation:Evaluation", "an evaluation (replay.evaluate)")
 FRAME = Kind("frame", "replay.frame:Frame", "a frame (replay.load_frame)")
 def TRAJECTORY(name):  # noqa: N802 — a declaration
