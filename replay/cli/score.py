@@ -89,6 +89,21 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               default="rpg", show_default=True,
               help="Sub-trajectories of --lengths: rpg (every start, end nearest to the length) or kitti "
                    "(every 10th start, first end beyond the length).")
+@click.option("--sync-method", "--sync_method", "sync_method", type=click.Choice(["nearest", "interpolation"]),
+              default="nearest", show_default=True,
+              help="Association: the nearest stamp (evo's nearest_time), or interpolation: the denser trajectory "
+                   "resampled at the other's matched stamps (evo's --sync_method interpolation).")
+@click.option("--t-start", "--t_start", "t_start", type=float, default=None,
+              help="Score only poses stamped at or after this (s; the estimate's stamps with --t-offset).")
+@click.option("--t-end", "--t_end", "t_end", type=float, default=None, help="... and at or before this (s).")
+@click.option("--downsample", type=click.IntRange(2), default=None,
+              help="Keep N matched pose pairs, evenly spaced (evo's --downsample).")
+@click.option("--motion-filter", "--motion_filter", "motion_filter", type=(float, float), default=None,
+              help="DIST ANGLE: keep a pair when the reference moved DIST m or turned ANGLE deg since the last kept "
+                   "one (evo's --motion_filter).")
+@click.option("--project-to-plane", "--project_to_plane", "project_to_plane", type=click.Choice(["xy", "xz", "yz"]),
+              default=None, help="Project both trajectories onto this plane after the alignment (evo's "
+                                 "--project_to_plane).")
 @click.option("--format", "fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,
               help="Format of the trajectory files (default: from the header's column names, else the "
                    "extension and the column count; a CSV whose order they cannot tell is refused).")
@@ -100,7 +115,7 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="Unit of the CSV time column (default: the unit its header names, else the one in which "
                    "the stamps are Unix time, else s).")
 @click.option("--lost-threshold", type=click.FloatRange(0, min_open=True), default=None,
-              help="Count the track as lost when the unaligned position error exceeds this (m) ...")
+              help="Count the track as lost when its position error (after the alignment) exceeds this (m) ...")
 @click.option("--lost-steps", type=click.IntRange(1), default=10, show_default=True,
               help="... for this many consecutive matched poses.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
@@ -108,8 +123,9 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
-              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method, fmt,
-              kitti_times, columns, time_unit, lost_threshold, lost_steps, plot_path, out):
+              rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method,
+              sync_method, fmt, t_start, t_end, downsample, motion_filter, project_to_plane, kitti_times, columns,
+              time_unit, lost_threshold, lost_steps, plot_path, out):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
@@ -147,7 +163,8 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
                               t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
                               delta_unit=delta_unit, delta_tol=delta_tol, all_pairs=all_pairs,
                               pairs_from_reference=pairs_from_reference, lengths=lengths,
-                              lengths_method=lengths_method)
+                              lengths_method=lengths_method, sync_method=sync_method, t_start=t_start, t_end=t_end,
+                              downsample=downsample, motion_filter=motion_filter, project_to_plane=project_to_plane)
     for spec, name, est in zip(estimates, names[1:], ests):
         s = score(ref, est, **settings)
         scores[name] = s

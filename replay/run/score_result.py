@@ -41,16 +41,26 @@ def _unique(base: str, taken: set) -> str:
 
 def settings(*, align: str, n_to_align, align_origin: bool, t_max_diff: float, t_offset: float, relations,
              delta, delta_unit: str, delta_tol: float, all_pairs: bool, pairs_from_reference: bool,
-             lengths=None, lengths_method: str = "rpg") -> dict:
+             lengths=None, lengths_method: str = "rpg", **prepare) -> dict:
     """The keyword arguments of :func:`replay.trajectory.score` (and of the configuration hash) for
     the options of ``replay score``; ``delta``: None for no RPE; ``lengths``: the relative errors over
-    lengths (``--lengths``), in the settings only when asked for."""
+    lengths (``--lengths``), in the settings only when asked for; ``prepare``: evo's trajectory options
+    (:data:`PREPARE`: window, sync method, downsampling, motion filter, projection), in the settings
+    only where they differ from their defaults (so the hash of a plain call is unchanged)."""
     out = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
                rel_tol=delta_tol, pairs_from_reference=pairs_from_reference)
     if lengths:
         out.update(lengths=lengths, lengths_method=lengths_method)
+    if unknown := set(prepare) - set(PREPARE):
+        raise TypeError(f"settings: unknown option {sorted(unknown)[0]!r}")
+    out.update({k: v for k, v in prepare.items() if v != PREPARE[k]})
     return out
+
+
+# evo's trajectory options (replay.trajectory.prepare) and their defaults
+PREPARE = {"sync_method": "nearest", "t_start": None, "t_end": None, "downsample": None, "motion_filter": None,
+           "project_to_plane": None}
 
 
 def leaderboard_row(s, *, reference: str, dataset: str, estimate: str, name: str, settings: dict,
@@ -139,6 +149,19 @@ class ScoreResult:
             raise ReplayError("errors('rpe'): no RPE was computed (give rpe=True or a delta)")
         return pd.concat(parts, ignore_index=True)
 
+    def lengths(self):
+        """The relative errors over lengths (``lengths=``): one row per estimate and length, the columns
+        ``replay score --lengths -o`` writes (``length``, ``length_m``, ``rel_<error>_<stat>``)."""
+        import pandas as pd
+
+        from replay.trajectory import lengths as by_length
+
+        if "lengths" not in self.settings:
+            raise ReplayError("lengths(): no lengths were asked for (give lengths='10%,20%,...' or metres)")
+        rows = [r for row, s in zip(self.rows, self.scores.values())
+                for r in by_length.rows(row, s.lengths, self.settings["lengths_method"])]
+        return pd.DataFrame(rows)
+
     def leaderboard(self):
         """The leaderboard rows as a DataFrame: the columns and values ``replay score -o`` writes
         (every digit kept; the CSV rounds to 6 significant digits)."""
@@ -178,7 +201,9 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
           t_max_diff: float = 0.01, t_offset: float = 0.0, pose_relation="trans", rpe: bool = False, delta=None,
           delta_unit: str = "f", delta_tol: float = 0.1, all_pairs: bool = False,
           pairs_from_reference: bool = False, fmt=None, kitti_times=None, columns=None, time_unit=None,
-          lost_threshold=None, lost_steps: int = 10, names=None) -> ScoreResult:
+          lost_threshold=None, lost_steps: int = 10, names=None, lengths=None, lengths_method: str = "rpg",
+          sync_method: str = "nearest", t_start=None, t_end=None, downsample=None, motion_filter=None,
+          project_to_plane=None) -> ScoreResult:
     """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
 
     ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
@@ -187,8 +212,15 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
     ``align`` none, yaw, se3 (evo's ``-a``), sim3 (``-as``) or scale (``-s``); ``pose_relation``
     (``-r``, one or a list); ``rpe``, ``delta``, ``delta_unit``, ``delta_tol``, ``all_pairs``,
     ``pairs_from_reference`` (the RPE); ``fmt``, ``kitti_times``, ``columns``, ``time_unit`` (files);
-    ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name).
+    ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name);
+    ``lengths`` (``"10%,20%"`` or a list of those strings), ``lengths_method``: the relative errors over
+    lengths (``ScoreResult.lengths()``); evo's trajectory options ``sync_method``, ``t_start``, ``t_end``,
+    ``downsample``, ``motion_filter`` ((metres, degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`).
     """
+    if lengths is not None:
+        from replay.trajectory import lengths as by_length
+
+        lengths = by_length.parse(lengths if isinstance(lengths, str) else ",".join(f"{v:g}" for v in lengths))
     items = list(estimates) if isinstance(estimates, (list, tuple)) else [estimates]
     relations = list(dict.fromkeys([pose_relation] if isinstance(pose_relation, str) else pose_relation))
     want_rpe = rpe or delta is not None or all_pairs
@@ -213,7 +245,10 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
     opts = settings(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                     t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
                     delta_unit=delta_unit, delta_tol=delta_tol, all_pairs=all_pairs,
-                    pairs_from_reference=pairs_from_reference)
+                    pairs_from_reference=pairs_from_reference, lengths=lengths, lengths_method=lengths_method,
+                    sync_method=sync_method, t_start=t_start, t_end=t_end, downsample=downsample,
+                    motion_filter=None if motion_filter is None else tuple(motion_filter),
+                    project_to_plane=project_to_plane)
     ref_spec = specs[0] or f"<{ref_name}>"
     dataset = io.label(specs[0]) if specs[0] else ref_name
     scores, rows = {}, []

@@ -28,7 +28,7 @@ import numpy as np
 
 from replay.scoring import align as alignment
 from replay.scoring import metrics
-from replay.trajectory import pose_error, quat
+from replay.trajectory import pose_error, prepare, quat
 from replay.trajectory.associate import T_MAX_DIFF, associate
 from replay.trajectory.base import Trajectory
 from replay.util.errors import ReplayError
@@ -72,8 +72,10 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
           align_origin: bool = False, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
           relations=("trans",), delta: float | None = None, delta_unit: str = "f", all_pairs: bool = False,
           rel_tol: float = 0.1, pairs_from_reference: bool = False, lengths=None,
-          lengths_method: str = "rpg") -> Score:
-    """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring."""
+          lengths_method: str = "rpg", sync_method: str = "nearest", t_start=None, t_end=None,
+          downsample: int | None = None, motion_filter=None, project_to_plane: str | None = None) -> Score:
+    """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring and
+    :mod:`replay.trajectory.prepare` (time window, interpolation, downsampling, motion filter, projection)."""
     relations = [pose_error.relation(r) for r in relations]
     for tr in (ref, est):
         if tr.q is None:
@@ -84,13 +86,25 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
             if need:
                 raise ReplayError(f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
                                   "orientations: use -r trans for the APE and -r point_distance for the RPE")
+    if sync_method not in prepare.SYNC_METHODS:
+        raise ReplayError(f"sync_method {sync_method!r}: expected one of {', '.join(prepare.SYNC_METHODS)}")
+    ref, est = prepare.window(ref, t_start, t_end), prepare.window(est, t_start, t_end, t_offset)
     i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
     r, e = ref.take(i_ref), est.take(i_est)
+    if sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
+        r, e = (r, prepare.interpolate(est, r.t - t_offset)) if len(est) > len(ref) else \
+            (prepare.interpolate(ref, e.t + t_offset), e)
+    if downsample is not None or motion_filter is not None:
+        keep = prepare.thin(r, downsample, motion_filter)
+        r, e = r.take(keep), e.take(keep)
     moved, transform = _align(r, e, align, n_to_align, align_origin)
+    if project_to_plane is not None:  # after the alignment, as evo
+        r, e, moved = (prepare.project(x, project_to_plane) for x in (r, e, moved))
     options = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                    t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
                    rel_tol=rel_tol, pairs_from_reference=pairs_from_reference, lengths=lengths,
-                   lengths_method=lengths_method)
+                   lengths_method=lengths_method, sync_method=sync_method, t_start=t_start, t_end=t_end,
+                   downsample=downsample, motion_filter=motion_filter, project_to_plane=project_to_plane)
     out = Score(r, e, moved, transform, options, unmatched=len(est) - len(np.unique(i_est)))
     for rel in relations:
         if rel != "point_distance_error_ratio":
@@ -147,7 +161,7 @@ def row_metrics(s: Score, *, lost_threshold: float | None = None, lost_steps: in
     row["lost_share"] = float("nan") if row["lost"] == "" else float(row["lost"])
     if nees is not None:
         row.update({k: v for k, v in metrics.consistency(nees[None, :], 3, "anees").items()})
-    if s.aligned is not s.estimate:
+    if s.options["align"] != "none" or s.options["align_origin"]:
         raw, _ = _track_cells(s.estimate, s.reference, lost_threshold, lost_steps)
         row.update({f"{k}_unaligned": raw[k] for k in ("pos_rmse", "nees", "lost")})
     for rel, e in s.ape.items():
