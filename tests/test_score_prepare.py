@@ -107,3 +107,40 @@ def test_lengths_from_python_equal_the_cli(tmp_path):
         if col in cli:
             np.testing.assert_allclose(api[col].to_numpy(float), cli[col].to_numpy(float), rtol=1e-5)
     assert {"rel_trans_rmse", "length_m"} <= set(cli.columns)
+
+
+def test_per_file_columns_score_a_csv_against_a_tum_reference(tmp_path):
+    ref = _line(50, 0.1)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (50, 1))
+    np.savetxt(tmp_path / "gt.tum", np.c_[ref.t, ref.p, q], fmt="%.9f")
+    est = pd.DataFrame({"px": ref.p[:, 0] + 0.3, "time": ref.t, "py": ref.p[:, 1], "pz": ref.p[:, 2]})
+    est.to_csv(tmp_path / "est.csv", index=False)
+    gt, es = str(tmp_path / "gt.tum"), str(tmp_path / "est.csv")
+    bad = CliRunner().invoke(main, ["score", gt, es, "--columns", "t=time,x=px,y=py,z=pz"])
+    assert bad.exit_code == 2  # for every file: the TUM reference has no such header
+    res = CliRunner().invoke(main, ["score", gt, es, "--columns", "est.csv=t=time,x=px,y=py,z=pz", "-o",
+                                    str(tmp_path / "o.csv")])
+    assert res.exit_code == 0, res.output
+    assert pd.read_csv(tmp_path / "o.csv")["ape_trans_rmse"][0] == pytest.approx(0.3, rel=1e-6)
+
+
+def test_evo_spellings(tmp_path):
+    ref = _line(50, 0.1)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (50, 1))
+    np.savetxt(tmp_path / "gt.tum", np.c_[ref.t, ref.p, q], fmt="%.9f")
+    gt = str(tmp_path / "gt.tum")
+    assert CliRunner().invoke(main, ["score", gt, gt, "-v"]).exit_code == 0
+    res = CliRunner().invoke(main, ["score", gt, gt, "-p"])
+    assert res.exit_code == 2 and "--plot FILE" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(main, ["score", gt, gt, "--save_plot", str(tmp_path / "f.png")])
+    assert res.exit_code == 0 and (tmp_path / "f.png").stat().st_size > 1000
+
+
+def test_tf_spellings():
+    from replay.trajectory.bag import parse_tf
+    from replay.util.errors import DataError
+
+    for spec in ("map->base_link", "map,base_link", "map:base_link", "map.base_link", "/map->/base_link"):
+        assert parse_tf(spec) == ("map", "base_link")
+    with pytest.raises(DataError, match="redirection"):
+        parse_tf("map-")

@@ -109,8 +109,9 @@ def _title(kind: str, rel: str, opts: dict) -> str:
                    "extension and the column count; a CSV whose order they cannot tell is refused).")
 @click.option("--kitti-times", type=click.Path(dir_okay=False), default=None,
               help="Stamps of KITTI poses, one per line (default: times.txt beside them).")
-@click.option("--columns", default=None,
-              help="Columns of a plain CSV, e.g. t=time,x=px,y=py,z=pz,qx=qx,qy=qy,qz=qz,qw=qw (or roll/pitch/yaw).")
+@click.option("--columns", multiple=True,
+              help="Columns of a plain CSV, e.g. t=time,x=px,y=py,z=pz,qx=qx,qy=qy,qz=qz,qw=qw (or roll/pitch/yaw); "
+                   "FILE=t=time,... for one file only (repeatable), e.g. a CSV estimate against a TUM reference.")
 @click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default=None,
               help="Unit of the CSV time column (default: the unit its header names, else the one in which "
                    "the stamps are Unix time, else s).")
@@ -118,14 +119,17 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="Count the track as lost when its position error (after the alignment) exceeds this (m) ...")
 @click.option("--lost-steps", type=click.IntRange(1), default=10, show_default=True,
               help="... for this many consecutive matched poses.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+@click.option("-v", "--verbose", "verbose", is_flag=True,
+              help="Accepted for evo's -v: replay always prints the statistics and the association.")
+@click.option("-p", "p_flag", is_flag=True, help="evo's -p (a window): answered with --plot FILE.")
+@click.option("--plot", "--save-plot", "--save_plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write a trajectory + error plot (png, pdf, svg, eps; missing directories are created).")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
               rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method,
               sync_method, fmt, t_start, t_end, downsample, motion_filter, project_to_plane, kitti_times, columns,
-              time_unit, lost_threshold, lost_steps, plot_path, out):
+              time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, out):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
@@ -140,6 +144,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     from replay.util import outfile
     from replay.util.files import refuse_overlap, write_csv
 
+    if p_flag:
+        raise ReplayError("-p: replay never opens a window; write the figures with --plot FILE (png, pdf, svg; evo's "
+                          "--save_plot)")
     method = _resolve_align(align, a_flag, s_flag)
     if lengths is not None:
         from replay.trajectory import lengths as by_length
@@ -154,10 +161,11 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
         if path:
             refuse_overlap(path, inputs, what)
             outfile.check(path, what, suffixes)
+    columns, columns_of = io.split_columns(columns, [reference, *estimates])
     opts = dict(fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
     taken = set()
     names = [estimate_name(reference, set())] + [estimate_name(spec, taken) for spec in estimates]
-    ref, *ests = io.load_all([reference, *estimates], names=names, **opts)
+    ref, *ests = io.load_all([reference, *estimates], names=names, columns_of=columns_of, **opts)
     scores, rows, summary = {}, [], []
     settings = score_settings(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                               t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,

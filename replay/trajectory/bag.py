@@ -131,14 +131,21 @@ def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
 
 
 def parse_tf(spec: str):
-    """``PARENT->CHILD`` (or evo's ``PARENT.CHILD``) -> (parent, child)."""
-    if "->" in spec:
-        parent, child = spec.split("->", 1)
+    """``PARENT->CHILD``, or the spellings that need no shell quoting: ``PARENT,CHILD``, ``PARENT:CHILD``
+    and evo's ``PARENT.CHILD`` -> (parent, child)."""
+    if spec.endswith("-") and "->" not in spec:  # an unquoted A->B: the shell redirected stdout to a file B
+        raise DataError(f"tf:{spec}", "the shell took '>' for a redirection (and wrote a file named after the child "
+                        "frame): quote the argument ('REC:tf:map->base_link') or write REC:tf:map,base_link")
+    for sep in ("->", ",", ":", "."):
+        if sep in spec:
+            parent, child = spec.split(sep, 1)
+            break
     else:
-        parent, _, child = spec.partition(".")
+        parent, child = spec, ""
     parent, child = parent.strip().lstrip("/"), child.strip().lstrip("/")
     if not parent or not child:
-        raise DataError(f"tf:{spec}", "expected tf:PARENT->CHILD, e.g. tf:map->base_link")
+        raise DataError(f"tf:{spec}", "expected tf:PARENT->CHILD (quoted), tf:PARENT,CHILD or tf:PARENT.CHILD, "
+                        "e.g. tf:map,base_link")
     return parent, child
 
 

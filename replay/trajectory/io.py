@@ -58,8 +58,9 @@ def load(spec, *, fmt: str | None = None, kitti_times=None, columns=None, time_u
     return bag.read_topic(path, topic, name=name, rec=rec)
 
 
-def load_all(specs, *, names=None, **options) -> list:
-    """:func:`load` of every spec, reading each recording once for all its topics."""
+def load_all(specs, *, names=None, columns_of: dict | None = None, **options) -> list:
+    """:func:`load` of every spec, reading each recording once for all its topics; ``columns_of``:
+    {spec: columns} for the files whose columns differ from ``options["columns"]`` (per-file ``--columns``)."""
     wanted = {}
     for spec in specs:
         path, topic = split(spec)
@@ -69,9 +70,29 @@ def load_all(specs, *, names=None, **options) -> list:
     out = []
     for k, spec in enumerate(specs):
         path, topic = split(spec)
+        opts = dict(options, columns=columns_of[spec]) if columns_of and spec in columns_of else options
         out.append(load(spec, name=names[k] if names else "", rec=recs.get(path.resolve()) if topic else None,
-                        **options))
+                        **opts))
     return out
+
+
+def split_columns(values, specs) -> tuple:
+    """(columns for every file, {spec: columns}) of repeated ``--columns`` values: ``FILE=SPEC`` (FILE one
+    of ``specs`` as given, or its file name) declares one file's columns, a plain ``SPEC`` the others'."""
+    common, per = None, {}
+    names = {Path(str(s)).name: s for s in specs}
+    for value in values or ():
+        head, _, rest = str(value).partition("=")
+        spec = head if head in map(str, specs) else names.get(head)
+        if spec is not None and rest:
+            if spec in per:
+                raise DataError("--columns", f"{head}: given twice")
+            per[spec] = rest
+        elif common is not None:
+            raise DataError("--columns", f"{value!r}: a second --columns for every file (give FILE=SPEC for one file)")
+        else:
+            common = value
+    return common, per
 
 
 def label(spec) -> str:
