@@ -132,7 +132,7 @@ def rows_of(out):
 
 
 def results_of(out):
-    """The rows at full precision (the manifest's results; the CSV has 6 significant digits)."""
+    """The rows at full precision (the manifest's results)."""
     return json.loads((Path(out) / "manifest.json").read_text())["results"]
 
 

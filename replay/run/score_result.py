@@ -164,7 +164,7 @@ class ScoreResult:
 
     def leaderboard(self):
         """The leaderboard rows as a DataFrame: the columns and values ``replay score -o`` writes
-        (every digit kept; the CSV rounds to 6 significant digits)."""
+        (every digit kept, as in the CSV)."""
         import pandas as pd
 
         from replay.scoring.summary import columns

@@ -1,8 +1,7 @@
 """An evaluation as pandas DataFrames (``Evaluation.leaderboard()``, ``.estimates(filter)``, ...).
 
 * :func:`leaderboard` — one row per filter, the columns and values of ``leaderboard.csv``
-  (:mod:`replay.scoring.summary`; the CSV rounds floats to 6 significant digits, the DataFrame
-  keeps them whole; empty cells, such as the baseline's paired cells, are NaN).
+  (:mod:`replay.scoring.summary`; the CSV and the DataFrame keep every digit; empty cells, such as the baseline's paired cells, are NaN).
 * :func:`estimates` — a filter's posterior means and variances, one row per run and step
   (index ``run, k``; columns ``t``, ``x0..``, ``P00..``: the columns of
   ``estimates/<filter>.csv.gz``).

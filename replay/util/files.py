@@ -19,9 +19,10 @@ def write_atomic(path, text: str) -> None:
 
 
 def fmt(v) -> str:
-    """A CSV cell: floats with 6 significant digits ("nan" for non-finite), the rest as text."""
+    """A CSV cell: floats in full (the shortest text that reads back as the same float; "nan" for
+    non-finite), the rest as text."""
     if isinstance(v, float):
-        return f"{v:.6g}" if v == v and v not in (float("inf"), float("-inf")) else "nan"
+        return repr(v) if v == v and v not in (float("inf"), float("-inf")) else "nan"
     return str(v)
 
 
