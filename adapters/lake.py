@@ -56,10 +56,12 @@ import numpy as np
 import pandas as pd
 
 from replay.util.angles import wrap
-from replay.util.errors import DataError, ReplayError
+from replay.util.errors import DataError
 from replay.adapters.lake_units import (RANGES, SI, STEP_RANGE, UNITS, check_range,  # noqa: F401
                                         check_step, check_units)
+from replay.adapters.options import declare
 from replay.frame import Channel, Frame, Report
+from replay.util.params import Param
 
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
 KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
@@ -193,11 +195,11 @@ def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GA
 
 # ---------------------------------------------------------------- loading
 
-def load(path, *, max_gap: float = MAX_GAP) -> Frame:
+@declare("lake", Param("max_gap", float, MAX_GAP, "longest reference gap bridged by linear interpolation",
+                        unit="s", low=0.0, low_open=True))
+def load(path, *, max_gap) -> Frame:
     """Read a lake-trial depth log (module docstring) into a :class:`Frame`."""
     path = Path(path)
-    if not (isinstance(max_gap, (int, float)) and max_gap > 0):
-        raise ReplayError(f"lake adapter: max_gap must be a positive number of seconds (got {max_gap!r})")
     table, comments, header, units_line, first_line = _read_table(path)
     report = Report()
     cols: dict[tuple[bool, str], str] = {}

@@ -266,11 +266,9 @@ def generator(ds: Dataset):
     return make_frame
 
 
-def adapter_options(name: str) -> tuple[list[str], bool]:
-    """The options an adapter's ``load(path, **options)`` takes, and whether it takes others too."""
-    sig = inspect.signature(_adapter(name))
-    names = [p.name for p in sig.parameters.values() if p.kind == p.KEYWORD_ONLY]
-    return names, any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+def adapter_options(name: str):
+    """The options (Param) adapter ``name`` declares; None: a plugin's ``load`` declaring none."""
+    return getattr(_adapter(name), "PARAMS", None)
 
 
 def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
@@ -278,8 +276,8 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
     A sim dataset's are checked against its generator's declarations (unknown
     names, types, bounds) and returned with every default filled in. A file's
-    (a dataset id or a plain path) are its adapter's options: an unknown name is
-    refused with the adapter's known options; they are returned as given.
+    (a dataset id or a plain path) are its adapter's declared options, returned
+    checked (only those given: :mod:`replay.adapters.options`).
     Every dataset also takes the views (:data:`replay.views.VIEW_PARAMS`), returned
     canonical and only when given (so a configuration without them keeps its hash).
     """
@@ -298,11 +296,17 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
 
 def _check_options(adapter: str, params: dict) -> dict:
-    names, others = adapter_options(adapter)
+    """``params`` checked against ``adapter``'s declarations; a plugin declaring none: their names."""
+    from replay.adapters.options import check
+
+    declared = adapter_options(adapter)
+    if declared is not None:
+        return check(adapter, declared, params)
+    sig = inspect.signature(_adapter(adapter)).parameters.values()
+    names = [p.name for p in sig if p.kind == p.KEYWORD_ONLY]
     unknown = [k for k in params if k not in names]
-    if unknown and not others:
-        raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} "
-                          f"(known: {', '.join(names) or 'none'})")
+    if unknown and not any(p.kind == p.VAR_KEYWORD for p in sig):
+        raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} (known: {', '.join(names) or 'none'})")
     return params
 
 
