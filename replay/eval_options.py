@@ -33,6 +33,7 @@ EVAL_OPTIONS = (
     Param("batch", int, 25, "runs computed at once (a block)", unit="runs", low=1, high=MAX_RUNS),
 )
 BY_NAME = {p.name: p for p in EVAL_OPTIONS}
+DEFAULTS = {p.name: p.default for p in EVAL_OPTIONS}  # written once, in the declarations
 
 
 def validate_eval_options(options: dict, where: str = "") -> dict:

@@ -32,13 +32,13 @@ from replay.filters.base import Estimates
 from replay.pipeline import (RECORDED, RECORDED_PARAMS, Config, build_problem, config_hash, default_task, is_recorded,
                              is_sim, load_frame, plain, recorded_params, run_block)
 from replay.tasks import make_task
-from replay.eval_options import validate_eval_options
+from replay.eval_options import DEFAULTS, validate_eval_options
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
 
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
-BATCH = 25  # runs per block: the campaign default (``[campaign] batch``)
+BATCH = DEFAULTS["batch"]  # runs per block: the campaign default (``[campaign] batch``)
 
 
 @dataclass
@@ -126,10 +126,10 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
 
 
-def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,
-             seed: int = 0, first: int | None = None, data_dir=None,
+def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = DEFAULTS["runs"],
+             seed: int = DEFAULTS["seed"], first: int | None = None, data_dir=None,
              task_params: dict | None = None, filter_params: dict | None = None,
-             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
+             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = DEFAULTS["alignment"],
              divergence_threshold: float | None = None, baseline: str | None = None,
              batch: int = BATCH, recorded=(), progress=None,
              min_scored_share: float = summary.MIN_SCORED_SHARE.default) -> Evaluation:

@@ -49,6 +49,7 @@ import numpy as np
 
 from replay import likelihood, metrics, registry, scorer
 from replay.align import ALIGNMENTS, align, apply
+from replay.eval_options import DEFAULTS
 from replay.failures import ends_run, failed
 from replay.filters import make_filter
 from replay.filters.base import Estimates, check_batch
@@ -82,7 +83,7 @@ class Config:
     filter: str
     filter_params: dict
     seed: int
-    alignment: str = "se3"
+    alignment: str = DEFAULTS["alignment"]
     divergence_threshold: float | None = None
     adapter: str | None = None
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from replay.cli.examples import add_examples
+from replay.cli.run_options import run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 from replay.util.version import __version__
@@ -71,9 +72,9 @@ def _notes_to_stderr() -> None:
               help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
                    "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
                    "as recorded:<name>, or recorded:none for none).")
-@click.option("--runs", "-n", default=1, show_default=True, type=int, help="Monte Carlo runs (1 to 1000000).")
-@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed (an integer >= 0).")
-@click.option("--first", default=None, type=int, help="Use only the first N samples.")
+@run_option("runs", "-n")
+@run_option("seed", "-s")
+@run_option("first")
 @click.option("--out", "-o", default=None, type=click.Path(),
               help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
                    "with runs/<dataset>/<task>/latest pointing to it).")
@@ -99,10 +100,8 @@ def _notes_to_stderr() -> None:
               help="Also export the run as a Foxglove MCAP file.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
-@click.option("--alignment", default="se3", show_default=True,
-              help="Alignment of the estimate onto the reference for the ATE column: none, yaw, se3, sim3.")
-@click.option("--divergence-threshold", default=None, type=float,
-              help="Position error (m) beyond which a run counts as diverged (default: none).")
+@run_option("alignment")
+@run_option("divergence_threshold")
 @click.option("--min-scored-share", default=None, type=float,
               help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
                    "the rest is masked).")
@@ -110,13 +109,11 @@ def _notes_to_stderr() -> None:
               help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.")
 @view_options
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
-             dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None,
-             rate=None, window=None, segment=None, tuned=None):
+             dataset_params, baseline, mapping, mcap_out, ros2_out, alignment, divergence_threshold, force, quiet,
+             wait, min_scored_share, rate, window, segment, tuned):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.cli import params as cli_params
-    from replay.eval_options import validate_eval_options
     from replay.evaluation import check_recorded, evaluate
     from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
     from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
@@ -127,8 +124,6 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     check_data_dir(data_dir, "--data-dir")
     min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
                                               else min_scored_share, "--min-scored-share")
-    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment,
-                           "divergence_threshold": divergence_threshold})  # the API's declarations and messages
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
     if baseline is not None and baseline not in names + (recorded or []) and not (
             recorded is None and baseline.startswith("recorded:")):

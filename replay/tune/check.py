@@ -1,6 +1,7 @@
 """Everything ``replay tune`` is given, checked before any trial (one line each, ReplayError)."""
 from __future__ import annotations
 
+from replay.eval_options import DEFAULTS
 from replay.util.errors import ReplayError
 
 from . import objectives, space, splits
@@ -9,7 +10,7 @@ from .run import Tune
 
 def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=None, task_params=None,
             dataset_params=None, view=None, first=None, data_dir=None, train_segment=None, train=None, test=None,
-            split=None, allow_overlap=False, alignment="se3", batch=None) -> Tune:
+            split=None, allow_overlap=False, alignment=DEFAULTS["alignment"], batch=None) -> Tune:
     """The checked :class:`Tune` (no trial run, no file written)."""
     from replay import registry
     from replay.eval_options import validate_eval_options
