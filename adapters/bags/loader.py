@@ -65,11 +65,13 @@ CONVERSIONS = ("water_density", "atmospheric_pressure", "gravity")  # the mappin
           unit="s", low=0.0, low_open=True, optional=True),
     Param("allow_truncated", bool, None, "use what precedes a truncation, flagged (null: the mapping's)",
           optional=True),
-    Param("water_density", float, None, f"water density of the depth conversion (null: the mapping's, else {rosmsg.WATER_DENSITY:g})",
+    Param("water_density", float, None,
+          f"water density of the depth conversion (null: the mapping's, else {rosmsg.WATER_DENSITY:g})",
           unit="kg/m^3", low=0.0, low_open=True, optional=True),
     Param("atmospheric_pressure", float, None, "atmospheric pressure of the depth conversion (null: the "
           f"mapping's, else {rosmsg.ATMOSPHERIC_PRESSURE:g})", unit="Pa", low=0.0, low_open=True, optional=True),
-    Param("gravity", float, None, f"gravity of the depth conversion (null: the mapping's, else {rosmsg.GRAVITY:g})",
+    Param("gravity", float, None,
+          f"gravity of the depth conversion (null: the mapping's, else {rosmsg.GRAVITY:g})",
           unit="m/s^2", low=0.0, low_open=True, optional=True),
 )
 def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame:

@@ -57,32 +57,31 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
     check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
     if "id" not in entry:
         raise where.error("dataset", "every [[dataset]] needs an id")
-    ds = _dataset_of(where, path, entry["id"])
-    tasks = _tasks(where, entry.get("tasks", [ds.default_task or "position"]))
+    ref = _dataset_of(where, path, entry["id"])
+    tasks = _tasks(where, entry.get("tasks", [(ref.entry and ref.entry.default_task) or "position"]))
     first = entry.get("first")
     if first is not None and first < 1:
         raise where.error("first", f"must be at least 1 (got {first})")
-    from replay import registry
-
-    if ds.kind == "file" and ds.manifest and registry.locate(ds, data_dir) is None:
-        raise where.error("id", f"dataset {ds.id} not found (set data_dir in [campaign], pass "
-                                f"--data-dir, or run `replay datasets fetch {ds.id}`)", ds.id)
-    params = _dataset_params(where, path, ds, dict(entry.get("params", {})))
-    if ds.kind == "sim" and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
-        _load_once(where, ds.id, params, first, data_dir)
-    recorded = _recorded(where, entry, ds.id, params, first, data_dir, ds.adapter)
-    return DatasetEntry(ds.id, params, first, tasks, recorded)
+    if ref.kind == "file" and ref.locate(data_dir) is None:
+        raise where.error("id", f"dataset {ref.id} not found (set data_dir in [campaign], pass "
+                                f"--data-dir, or run `replay datasets fetch {ref.id}`)", ref.id)
+    params = _dataset_params(where, path, ref, dict(entry.get("params", {})))
+    if ref.is_sim and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
+        _load_once(where, ref.id, params, first, data_dir)
+    recorded = _recorded(where, entry, ref.id, params, first, data_dir, ref.adapter)
+    return DatasetEntry(ref.id, params, first, tasks, recorded)
 
 
 def _dataset_of(where, path: Path, ds_id: str):
-    """The Dataset of an id: a registered one, or a recording's path (relative to the campaign file)."""
-    from replay import registry
+    """The :class:`~replay.dataset_ref.DatasetRef` of an id: a registered one, or a recording's path
+    (relative to the campaign file; its id becomes the absolute path)."""
+    from replay import dataset_ref
 
-    ds = _recording(where, path, ds_id)
-    if ds is not None:
-        return ds
+    ref = _recording(where, path, ds_id)
+    if ref is not None:
+        return ref
     try:
-        return registry.get(ds_id)
+        return dataset_ref.resolve(ds_id)
     except ReplayError as e:
         raise where.error("id", str(e), ds_id) from None
 
@@ -98,27 +97,28 @@ def _tasks(where, tasks) -> list:
     return tasks
 
 
-def _dataset_params(where, path: Path, ds, params: dict) -> dict:
+def _dataset_params(where, path: Path, ref, params: dict) -> dict:
     """A dataset's parameters canonical: a mapping relative to the campaign file made absolute, a
     simulator's and the views checked line by line, an adapter's options checked."""
     from replay import registry
 
     if isinstance(params.get("mapping"), str) and (path.parent / params["mapping"]).is_file():
         params["mapping"] = str((path.parent / params["mapping"]).resolve())  # relative to this file
-    if ds.kind == "sim":
+    if ref.is_sim:
         own = {k: v for k, v in params.items() if k not in VIEW_NAMES}  # the views: checked below
-        check_params(where, f"dataset {ds.id!r}", registry.generator(ds).PARAMS, own)
-        check_params(where, f"dataset {ds.id!r}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
+        check_params(where, f"dataset {ref.id!r}", registry.generator(ref.entry).PARAMS, own)
+        check_params(where, f"dataset {ref.id!r}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
     try:
-        return _plain(registry.check_params(ds if ds.manifest else ds.file, params))
+        return _plain(registry.check_params(ref.target, params, adapter=ref.adapter if ref.is_path else None))
     except ReplayError as e:
         raise where.error(next(iter(params), "params"), str(e)) from None
 
 
 def _recording(where, path: Path, ds_id: str):
-    """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): a
-    stand-in Dataset (``manifest`` empty, ``file`` the absolute path); None for a registered id."""
+    """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): its reference
+    (the absolute path, the adapter chosen from the file); None for a registered id."""
     from replay import registry
+    from replay.dataset_ref import DatasetRef
 
     if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
         return None
@@ -129,7 +129,7 @@ def _recording(where, path: Path, ds_id: str):
         adapter = registry.adapter_for(file)
     except ReplayError as e:
         raise where.error("id", str(e), ds_id) from None
-    return registry.Dataset(id=str(file), kind="file", adapter=adapter, file=str(file))
+    return DatasetRef(str(file), "path", path=file, adapter=adapter)
 
 
 def _frame0(ds_id, ds_params: dict, first, data_dir):
