@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from replay.campaign.checks import check_keys, check_params
+from replay.eval_options import BY_NAME as EVAL
 from replay.pipeline import plain as _plain
 from replay.pipeline import recorded_params
 from replay.util.errors import ReplayError
@@ -60,8 +61,7 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
     ref = _dataset_of(where, path, entry["id"])
     tasks = _tasks(where, entry.get("tasks", [(ref.entry and ref.entry.default_task) or "position"]))
     first = entry.get("first")
-    if first is not None and first < 1:
-        raise where.error("first", f"must be at least 1 (got {first})")
+    check_params(where, "[[dataset]]", (EVAL["first"],), {"first": first})  # replay eval's declaration
     if ref.kind == "file" and ref.locate(data_dir) is None:
         raise where.error("id", f"dataset {ref.id} not found (set data_dir in [campaign], pass "
                                 f"--data-dir, or run `replay datasets fetch {ref.id}`)", ref.id)
