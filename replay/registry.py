@@ -32,11 +32,12 @@ from replay.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, check
                               read_checksums, sha256_file, with_registered)
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
 from replay.util.errors import DataError, ReplayError
-from replay.util.params import validate
+from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
 
 # Adapter used for a plain file path, by extension.
+FIRST = Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True)
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
 
 
@@ -229,9 +230,7 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
     loads (users may edit files) but gets a "flagged" entry in the frame report. ``adapter`` overrides
     the adapter chosen for a plain path.
     """
-    if first is not None and (isinstance(first, bool) or not isinstance(first, (int, np.integer))
-                              or first < 1):
-        raise ReplayError(f"first must be a positive number of samples (got {first!r})")
+    first = FIRST.check(first)
     check_data_dir(data_dir)
     shown = str(dataset.id if isinstance(dataset, Dataset) else dataset)
     chosen, params = views.split(check_params(dataset, params, adapter=adapter))
