@@ -264,8 +264,8 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 
 @main.command("reproduce")
 @click.argument("paper")
-@click.option("--runs", "-n", default=None, type=click.IntRange(1), help="Monte Carlo runs (default: the paper's).")
-@click.option("--seed", "-s", default=0, show_default=True, type=int)
+@run_option("runs", "-n", default=None, extra=" Default: the paper's.")
+@run_option("seed", "-s")
 @click.option("--data-dir", default=None, type=click.Path())
 @click.option("--doc", default=None, type=click.Path(dir_okay=False),
               help="Markdown report to write (default: docs/reproduction/<paper>.md).")

@@ -41,7 +41,7 @@ class Declared(click.ParamType):
 
 def help_text(p: Param, extra: str = "") -> str:
     """The ``--help`` line of a declared option: its doc, what it accepts and its unit."""
-    unit = f" [{p.unit}]" if p.unit else ""
+    unit = f" [{p.unit}]" if p.unit and p.unit not in p.doc.split() else ""
     return f"{p.doc[0].upper()}{p.doc[1:]}{unit}: {p.accepts()}.{extra}"
 
 
