@@ -200,7 +200,8 @@ def test_list_adapters_bohai_shows_typed_options():
     ]
     assert assert_ok(["list", "adapters", "bohai-csv"]).stdout.splitlines() == lines
     lake = assert_ok(["list", "adapters", "lake"]).stdout.splitlines()
-    assert lake[1] == "    max_gap = 0.5 [s]: a finite number > 0. longest reference gap bridged by linear interpolation"
+    assert lake[1] == ("    max_gap = 0.5 [s]: a finite number > 0. longest reference gap bridged by linear "
+                       "interpolation")
     assert_refused(["list", "adapters", "sim"], r"^replay: error: replay list adapters: no adapter 'sim'")
 
 
