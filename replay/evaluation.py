@@ -153,7 +153,8 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
-    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here
+    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
+    dataset = ref.id  # what the configurations and the manifest record
     dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
     check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()],
                    dataset_params)
