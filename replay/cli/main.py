@@ -113,39 +113,21 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
              wait, min_scored_share, rate, window, segment, tuned):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
-    from replay.cli import params as cli_params
-    from replay.evaluation import check_recorded, evaluate
-    from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
-    from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
-    from replay.pipeline import default_task
+    from replay.evaluation import evaluate
+    from replay.outputs.files import check_location, check_output, eval_inputs
+    from replay.outputs.rundirs import claimed_run_dir, new_run_dir, out_locked
     from replay.registry import check_data_dir
     from replay.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
     min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
                                               else min_scored_share, "--min-scored-share")
-    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
-    if baseline is not None and baseline not in names + (recorded or []) and not (
-            recorded is None and baseline.startswith("recorded:")):
-        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
-    fparams = cli_params.filter_params(params, names + (recorded or []))
-    tparams = cli_params.task_params(task_params, task)
-    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
-        from replay.tune.tuned import tuned_params
-
-        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
-        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
-        names = names if given else t_names
-        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
-        tparams = {**t_tparams, **tparams}
-    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), rate, window, segment)
-    cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
-    check_recorded(dataset, recorded or [], dparams)  # before any recording is read
+    ref, names, recorded, fparams, tparams, dparams, task = _configuration(
+        dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, (rate, window, segment),
+        adapter, first, data_dir, seed)
     # the output set is checked before the computation (inputs, writable, space, ownership)
-    task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
-                                dataset_params=dparams, seed=seed)
     numbered = out is None
-    inputs = eval_inputs(dataset, data_dir, mapping)
+    inputs = eval_inputs(ref, data_dir, mapping)
     if numbered:  # the location, before claiming a number in it
         check_location(new_run_dir(dataset, task), inputs, "--out")
     else:
@@ -167,7 +149,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         _quiet(quiet)
         progress = Progress(0, quiet, label="eval", unit="run")
         try:
-            ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
+            ev = evaluate(ref, task=task, filters=names, runs=runs, seed=seed, first=first,
                           data_dir=data_dir, filter_params=fparams,
                           task_params=tparams, adapter=adapter,
                           dataset_params=dparams or None, alignment=alignment,
@@ -175,21 +157,61 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
                           progress=progress, min_scored_share=min_scored_share)
         finally:
             progress.close()
-        for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
-            click.echo(f"replay: note: {note}", err=True)
-        click.echo(format_table(ev))
-        for note in ev.notes:
-            click.echo(note)
-        _fresh(out, numbered or force)  # again at publication
-        paths = write_all(ev, out, what="--out")
-        if numbered:
-            mark_latest(out)
-        click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
-        if mcap_out or ros2_out:
-            from replay.cli.bags import export_outputs
-
-            export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+        _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
     _failed_filters(ev)
+
+
+def _configuration(dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, views,
+                   adapter, first, data_dir, seed):
+    """``replay eval``'s configuration from its options, checked whole before any data is read:
+    (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
+    from replay import dataset_ref
+    from replay.cli import params as cli_params
+    from replay.evaluation import check_recorded
+    from replay.pipeline import default_task
+
+    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
+    if baseline is not None and baseline not in names + (recorded or []) and not (
+            recorded is None and baseline.startswith("recorded:")):
+        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
+    fparams = cli_params.filter_params(params, names + (recorded or []))
+    tparams = cli_params.task_params(task_params, task)
+    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
+        from replay.tune.tuned import tuned_params
+
+        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
+        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
+        names = names if given else t_names
+        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
+        tparams = {**t_tparams, **tparams}
+    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), *views)
+    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, handed down
+    cli_params.check_config(ref, task, names, fparams, tparams, dparams, adapter=adapter)
+    check_recorded(ref.id, recorded or [], dparams)  # before any recording is read
+    task = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams,
+                                seed=seed)
+    return ref, names, recorded, fparams, tparams, dparams, task
+
+
+def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, ros2_out, data_dir) -> None:
+    """Print the leaderboard and write the output set (then the exports) into ``out``."""
+    from replay.outputs.files import format_table, write_all
+    from replay.outputs.rundirs import mark_latest
+
+    for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
+        click.echo(f"replay: note: {note}", err=True)
+    click.echo(format_table(ev))
+    for note in ev.notes:
+        click.echo(note)
+    _fresh(out, numbered or force)  # again at publication
+    paths = write_all(ev, out, what="--out")
+    if numbered:
+        mark_latest(out)
+    click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+    if mcap_out or ros2_out:
+        from replay.cli.bags import export_outputs
+
+        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
 
 
 def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
