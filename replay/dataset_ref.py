@@ -61,6 +61,12 @@ class DatasetRef:
         return [*([found] if found is not None else []), *([Path(mapping)] if mapping else [])]
 
 
+def simulated(dataset) -> bool:
+    """Whether ``dataset`` names a registered simulator (False for a path or an unknown id: never raises)."""
+    return isinstance(dataset, str) and (entry := registry.all_datasets().get(dataset)) is not None \
+        and entry.kind == "sim"
+
+
 def resolve(dataset, adapter: str | None = None) -> DatasetRef:
     """``dataset`` (an id, a path, a registry entry or a reference) as a :class:`DatasetRef`.
 

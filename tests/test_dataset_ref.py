@@ -25,6 +25,8 @@ def test_registered_simulator_recording_and_path(tmp_path):
     assert path.inputs(tmp_path / "elsewhere") == [log] and path.sequence == "log.csv"
     assert dataset_ref.resolve(path) is path  # handed down, not parsed again
     assert dataset_ref.resolve(registry.get("sim/ungm")).kind == "sim"
+    assert [dataset_ref.simulated(d) for d in ("sim/ungm", "bohai/20220822_0_6", str(log), "nosuch/x", None)] == [
+        True, False, False, False, False]
 
 
 def test_unknown_id_is_one_line_with_close_matches():
