@@ -56,10 +56,12 @@ import numpy as np
 import pandas as pd
 
 from replay.util.angles import wrap
-from replay.util.errors import DataError, ReplayError
+from replay.util.errors import DataError
 from replay.adapters.lake_units import (RANGES, SI, STEP_RANGE, UNITS, check_range,  # noqa: F401
                                         check_step, check_units)
+from replay.adapters.options import declare
 from replay.frame import Channel, Frame, Report
+from replay.util.params import Param
 
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
 KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
@@ -193,13 +195,58 @@ def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GA
 
 # ---------------------------------------------------------------- loading
 
-def load(path, *, max_gap: float = MAX_GAP) -> Frame:
+@declare("lake", Param("max_gap", float, MAX_GAP, "longest reference gap bridged by linear interpolation",
+                        unit="s", low=0.0, low_open=True))
+def load(path, *, max_gap) -> Frame:
     """Read a lake-trial depth log (module docstring) into a :class:`Frame`."""
     path = Path(path)
-    if not (isinstance(max_gap, (int, float)) and max_gap > 0):
-        raise ReplayError(f"lake adapter: max_gap must be a positive number of seconds (got {max_gap!r})")
     table, comments, header, units_line, first_line = _read_table(path)
     report = Report()
+    cols = _columns(path, table, units_line, report)
+    sensors = [k for k in ("depth", "speed", "pitch") if (False, k) in cols]
+    rows = np.arange(len(table)) + first_line
+
+    def si(ref, kind):
+        col = cols[(ref, kind)]
+        unit = parse_column(col, units_line)[2]
+        v = _numeric(path, table, col, first_line) * UNITS[kind][unit]
+        if (inf := np.isinf(v)).any():
+            report.add("masked", col, int(inf.sum()), f"infinite values (inf) at {_lines(rows, inf)}: missing")
+        return np.where(inf, np.nan, v)
+
+    time = si(False, "time")
+    keep = _sensor_rows(path, table, cols, sensors, time, rows, report)
+    t_abs = time[keep]
+    t0 = float(t_abs[0])
+    t = t_abs - t0
+    unit = {key: parse_column(col, units_line)[2] for key, col in cols.items()}
+    check_step(path, cols[(False, "time")], unit[(False, "time")], np.diff(t_abs))
+    channels = {}
+    for kind in sensors:
+        channels[kind] = _channel(path, cols[(False, kind)], kind, unit[(False, kind)], si(False, kind)[keep], report,
+                                  f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})")
+    reference, alignment = {}, {}
+    rt = si(True, "time") if (True, "time") in cols else np.where(keep, time, np.nan)
+    for kind in [k for k in ("depth", "speed", "pitch") if (True, k) in cols]:
+        reference[kind], alignment[kind] = _reference(path, cols[(True, kind)], kind, unit[(True, kind)], rt,
+                                                      si(True, kind), t_abs, max_gap, report)
+    check_units(path, t, channels, reference, cols, unit, report)
+    step = np.diff(t)
+    meta = {"source": str(path), "adapter": "lake", "comments": comments, "header": header,
+            "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
+            "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
+            "time": {"offset": t0, "median_step": float(np.median(step)),
+                     "min_step": float(step.min()), "max_step": float(step.max())},
+            "dt": float(np.median(step)), "reference_alignment": alignment,
+            "pitch_convention": "pitch positive nose down", "default_task": "depth"}
+    if "maneuvers" in header:
+        meta["maneuvers"] = _parse_maneuvers(header["maneuvers"], t0)
+    return Frame(t, channels, reference, None, meta, report)
+
+
+def _columns(path, table, units_line, report) -> dict[tuple[bool, str], str]:
+    """{(reference?, kind): column} of the recognised columns (the others dropped, in the report);
+    a time column and a sensor column required, every unit known."""
     cols: dict[tuple[bool, str], str] = {}
     for col in table.columns:
         parsed = parse_column(col, units_line)
@@ -219,21 +266,13 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
         cols[(ref, kind)] = col
     if (False, "time") not in cols:
         raise DataError(path, f"no time column (expected e.g. 'time_s'; columns: {', '.join(table.columns)})")
-    sensors = [k for k in ("depth", "speed", "pitch") if (False, k) in cols]
-    if not sensors:
+    if not any((False, k) in cols for k in ("depth", "speed", "pitch")):
         raise DataError(path, "no sensor column (depth, speed or pitch) besides the time")
+    return cols
 
-    rows = np.arange(len(table)) + first_line
 
-    def si(ref, kind):
-        col = cols[(ref, kind)]
-        unit = parse_column(col, units_line)[2]
-        v = _numeric(path, table, col, first_line) * UNITS[kind][unit]
-        if (inf := np.isinf(v)).any():
-            report.add("masked", col, int(inf.sum()), f"infinite values (inf) at {_lines(rows, inf)}: missing")
-        return np.where(inf, np.nan, v)
-
-    time = si(False, "time")
+def _sensor_rows(path, table, cols, sensors, time, rows, report) -> np.ndarray:
+    """The rows kept as sensor samples: with a time, strictly increasing (the others counted)."""
     has_time = np.isfinite(time)
     empty = [table[cols[(False, k)]].str.strip().str.lower().isin(["", "nan", "na", "null"]) for k in sensors]
     no_time = ~has_time & ~np.logical_and.reduce([e.to_numpy() for e in empty])
@@ -253,67 +292,39 @@ def load(path, *, max_gap: float = MAX_GAP) -> Frame:
                    f"time not increasing (first at line {rows[np.argmax(dropped)]})")
     if keep.sum() < 2:
         raise DataError(path, f"column {cols[(False, 'time')]}: fewer than 2 valid sensor times")
-    t_abs = time[keep]
-    t0 = float(t_abs[0])
-    t = t_abs - t0
-    unit = {key: parse_column(col, units_line)[2] for key, col in cols.items()}
-    check_step(path, cols[(False, "time")], unit[(False, "time")], np.diff(t_abs))
-    channels = {}
-    for kind in sensors:
-        v = si(False, kind)[keep]
-        channels[kind] = _channel(path, cols[(False, kind)], kind, unit[(False, kind)], v, report,
-                                  f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})")
-    reference = {}
-    alignment = {}
-    ref_kinds = [k for k in ("depth", "speed", "pitch") if (True, k) in cols]
-    if (True, "time") in cols:
-        rt = si(True, "time")
-    else:
-        rt = np.where(keep, time, np.nan)
-    for kind in ref_kinds:
-        col = cols[(True, kind)]
-        vr = si(True, kind)
-        ok = np.isfinite(rt) & np.isfinite(vr)
-        tr, vv = rt[ok], vr[ok]
-        order = np.argsort(tr, kind="stable")
-        tr, vv = tr[order], vv[order]
-        dup = np.concatenate([[False], np.diff(tr) <= 0])
-        if dup.any():
-            report.add("dropped", col, int(dup.sum()), "repeated reference time")
-            tr, vv = tr[~dup], vv[~dup]
-        if len(tr) == 0:
-            raise DataError(path, f"column {col}: no reference sample with a time")
-        if tr[-1] < t_abs[0] or tr[0] > t_abs[-1]:
-            raise DataError(path, f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
-                            f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s")
-        vv = check_range(path, col, kind, unit[(True, kind)], vv, report)
-        vals, valid, counts = align(t_abs, tr, vv, max_gap, angle=(kind == "pitch"))
-        valid &= np.isfinite(vals)
-        alignment[kind] = dict(counts, column=col, max_gap=max_gap)
-        if counts["interpolated"]:
-            report.add("repaired", f"reference {kind}", counts["interpolated"],
-                       f"{col} interpolated linearly between reference samples at most {max_gap:g} s apart")
-        if counts["in_gaps"]:
-            report.add("masked", f"reference {kind}", counts["in_gaps"],
-                       f"{col}: {counts['gaps']} gap(s) longer than {max_gap:g} s")
-        if counts["outside"]:
-            report.add("masked", f"reference {kind}", counts["outside"],
-                       f"{col}: sensor samples outside the reference's time span")
-        reference[kind] = Channel(vals, SI[kind], FRAMES[kind], valid, (kind,), (0,) if kind == "pitch" else (),
-                                  "positive nose down" if kind == "pitch" else "",
-                                  f"external reference {kind} (column {col})")
-    check_units(path, t, channels, reference, cols, unit, report)
-    step = np.diff(t)
-    meta = {"source": str(path), "adapter": "lake", "comments": comments, "header": header,
-            "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
-            "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
-            "time": {"offset": t0, "median_step": float(np.median(step)),
-                     "min_step": float(step.min()), "max_step": float(step.max())},
-            "dt": float(np.median(step)), "reference_alignment": alignment,
-            "pitch_convention": "pitch positive nose down", "default_task": "depth"}
-    if "maneuvers" in header:
-        meta["maneuvers"] = _parse_maneuvers(header["maneuvers"], t0)
-    return Frame(t, channels, reference, None, meta, report)
+    return keep
+
+
+def _reference(path, col, kind, unit, rt, vr, t_abs, max_gap, report) -> tuple[Channel, dict]:
+    """A reference column on the sensor times (:func:`align`) and what the alignment did."""
+    ok = np.isfinite(rt) & np.isfinite(vr)
+    tr, vv = rt[ok], vr[ok]
+    order = np.argsort(tr, kind="stable")
+    tr, vv = tr[order], vv[order]
+    dup = np.concatenate([[False], np.diff(tr) <= 0])
+    if dup.any():
+        report.add("dropped", col, int(dup.sum()), "repeated reference time")
+        tr, vv = tr[~dup], vv[~dup]
+    if len(tr) == 0:
+        raise DataError(path, f"column {col}: no reference sample with a time")
+    if tr[-1] < t_abs[0] or tr[0] > t_abs[-1]:
+        raise DataError(path, f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
+                        f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s")
+    vv = check_range(path, col, kind, unit, vv, report)
+    vals, valid, counts = align(t_abs, tr, vv, max_gap, angle=(kind == "pitch"))
+    valid &= np.isfinite(vals)
+    if counts["interpolated"]:
+        report.add("repaired", f"reference {kind}", counts["interpolated"],
+                   f"{col} interpolated linearly between reference samples at most {max_gap:g} s apart")
+    if counts["in_gaps"]:
+        report.add("masked", f"reference {kind}", counts["in_gaps"],
+                   f"{col}: {counts['gaps']} gap(s) longer than {max_gap:g} s")
+    if counts["outside"]:
+        report.add("masked", f"reference {kind}", counts["outside"],
+                   f"{col}: sensor samples outside the reference's time span")
+    return (Channel(vals, SI[kind], FRAMES[kind], valid, (kind,), (0,) if kind == "pitch" else (),
+                    "positive nose down" if kind == "pitch" else "", f"external reference {kind} (column {col})"),
+            dict(counts, column=col, max_gap=max_gap))
 
 
 def _lines(rows, mask, most=5) -> str:

@@ -17,6 +17,7 @@ import inspect
 import os
 from dataclasses import dataclass, replace
 
+from replay.scoring.align import ALIGNMENTS
 from replay.run.eval_options import BY_NAME as EVAL
 from replay.scoring.summary import MIN_SCORED_SHARE
 from replay.trajectory.files import FORMATS
@@ -144,7 +145,7 @@ ARGS: dict[str, dict] = {
                      "retry_failed": _p("retry_failed", bool, "compute failed units again", default=False)},
     "load_trajectory": {"source": PATH(name="source", doc="a trajectory file or BAG:topic")},
     "score": {"reference": TRAJECTORY("reference"), "estimates": Several("estimates", TRAJECTORY("estimates")),
-              "align": _p("align", str, "alignment", default="none", choices=("none", "yaw", "se3", "sim3", "scale")),
+              "align": _p("align", str, "alignment", default="none", choices=(*ALIGNMENTS, "scale")),
               "n_to_align": _p("n_to_align", int, "poses aligned", low=1, optional=True),
               "align_origin": _p("align_origin", bool, "align the first poses", default=False),
               "t_max_diff": _p("t_max_diff", float, "association tolerance", default=0.01, unit="s", low=0.0),

@@ -63,10 +63,13 @@ def test_every_config_key_is_required(manifest, tmp_path, key, monkeypatch):
 
 
 @pytest.mark.parametrize("edit,match", [
-    (("runs", 0), r"config\.runs: expected an integer >= 1, got 0"),
-    (("first", 0), r"config\.first: expected an integer >= 1 or null, got 0"),
-    (("divergence_threshold", -1), r"config\.divergence_threshold: expected a number > 0 or null, got -1"),
-    (("alignment", "spin"), r"config\.alignment: 'spin' is not one of"),
+    (("runs", 0), r"config\.runs: expected an integer in \[1, 1000000\], got 0$"),
+    (("runs", 10 ** 7), r"config\.runs: expected an integer in \[1, 1000000\], got 10000000$"),
+    (("seed", -1), r"config\.seed: expected an integer in \[0, 9223372036854775807\], got -1$"),
+    (("first", 0), r"config\.first: expected an integer >= 1 \(or null\), got 0$"),
+    (("divergence_threshold", -1), r"config\.divergence_threshold: expected a finite number > 0 \(or null\), got -1$"),
+    (("divergence_threshold", float("inf")), r"config\.divergence_threshold: expected a finite number > 0"),
+    (("alignment", "spin"), r"config\.alignment: expected one of none, yaw, se3, sim3, got 'spin'$"),
     (("filters", []), r"config\.filters: empty"),
     (("filters", ["ekf", "ekf"]), r"config\.filters: a filter is listed twice"),
     (("task_params", None), r"config\.task_params: expected an object of task parameters, got NoneType"),

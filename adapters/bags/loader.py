@@ -4,13 +4,17 @@ from __future__ import annotations
 import difflib
 import hashlib
 import json
+import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from replay.adapters.geodesy import Geo, plausible_latlon
 from replay.frame import Channel, Frame, Report
+from replay.adapters.options import declare
 from replay.util.errors import DataError, ReplayError
+from replay.util.params import Param
 
 from .. import rosmsg
 from ..mapping import Mapping, from_dict, load_mapping, propose, role_of
@@ -34,14 +38,50 @@ def resolve_mapping(mapping) -> Mapping | None:
     return load_mapping(mapping)
 
 
-def load(path, *, mapping=None, time: str | None = None, until: float | None = None,
-         allow_truncated: bool | None = None, **params) -> Frame:
+@dataclass(frozen=True)
+class MappingParam(Param):
+    """The ``mapping`` option: a mapping file (a path), a dict of the same form or a Mapping."""
+
+    def accepts(self) -> str:
+        return "a mapping file (a path), a dict of the same form or a Mapping" + (" (or null)" if self.optional
+                                                                                  else "")
+
+    def _coerce(self, v):
+        if isinstance(v, (dict, Mapping)):
+            return True, v
+        return super()._coerce(v)
+
+
+CONVERSIONS = ("water_density", "atmospheric_pressure", "gravity")  # the mapping's [params]
+
+
+@declare(
+    "bags",
+    MappingParam("mapping", os.PathLike, None, "topic mapping (docs/bags.md; null: proposed from the topics)",
+                 optional=True),
+    Param("time", str, None, "time axis: header (header.stamp) or log (receive time); null: the mapping's",
+          choices=("header", "log"), optional=True),
+    Param("until", float, None, "only messages logged within this many s of the first one (null: the mapping's)",
+          unit="s", low=0.0, low_open=True, optional=True),
+    Param("allow_truncated", bool, None, "use what precedes a truncation, flagged (null: the mapping's)",
+          optional=True),
+    Param("water_density", float, None,
+          f"water density of the depth conversion (null: the mapping's, else {rosmsg.WATER_DENSITY:g})",
+          unit="kg/m^3", low=0.0, low_open=True, optional=True),
+    Param("atmospheric_pressure", float, None, "atmospheric pressure of the depth conversion (null: the "
+          f"mapping's, else {rosmsg.ATMOSPHERIC_PRESSURE:g})", unit="Pa", low=0.0, low_open=True, optional=True),
+    Param("gravity", float, None,
+          f"gravity of the depth conversion (null: the mapping's, else {rosmsg.GRAVITY:g})",
+          unit="m/s^2", low=0.0, low_open=True, optional=True),
+)
+def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame:
     """Read a bag or MCAP into a Frame (see the module docstring).
 
     ``mapping``: a mapping file path, a dict of the same form, or None (proposed).
-    ``time``, ``until``, ``allow_truncated`` and the conversion ``params``
+    ``time``, ``until``, ``allow_truncated`` and the conversion parameters
     (water_density, atmospheric_pressure, gravity) override the mapping's.
     """
+    params = {k: v for k, v in conversions.items() if v is not None}
     path = Path(path).expanduser()
     mp = resolve_mapping(mapping)
     proposed = []

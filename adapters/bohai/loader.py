@@ -6,9 +6,11 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
+from replay.adapters.options import declare
 from replay.adapters.geodesy import plausible_latlon, project, utm_epsg
 from replay.frame import Channel, Frame, Report
 from replay.util.errors import DataError
+from replay.util.params import Param
 from replay.util.progress import load_stage
 
 from .cells import mask_infinite, mask_isolated, time_unit
@@ -19,16 +21,19 @@ from .reading import _clean_rows, _drop, _layout, _read, _rows, _time_axis
 from .reference import _reference_mask
 
 
-def load(path, *, jump_threshold: float = 5.0, max_speed: float = 10.0,
-         gps_tolerance: float = 15.0, gap_factor: float = 5.0) -> Frame:
-    """Read one Bohai CSV log into a :class:`Frame`.
-
-    ``jump_threshold`` (m per 0.1 s) defines a jump of the navigation solution,
-    ``max_speed`` (m/s) the fastest plausible motion of the vehicle,
-    ``gps_tolerance`` (m) how far a fresh GPS fix may lie from the navigation
-    solution before it contradicts it (None: no GPS check), and
-    ``gap_factor`` which time steps are flagged as gaps (> factor x median).
-    """
+@declare(
+    "bohai-csv",
+    Param("jump_threshold", float, 5.0, "a step of the navigation solution longer than this is a jump",
+          unit="m per 0.1 s", low=0.0, low_open=True),
+    Param("max_speed", float, 10.0, "the fastest plausible motion of the vehicle", unit="m/s",
+          low=0.0, low_open=True),
+    Param("gps_tolerance", float, 15.0, "how far a fresh GPS fix may lie from the navigation solution "
+          "before it contradicts it (null: no GPS check)", unit="m", low=0.0, low_open=True, optional=True),
+    Param("gap_factor", float, 5.0, "a time step longer than this many median steps is flagged as a gap",
+          low=1.0, low_open=True),
+)
+def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame:
+    """Read one Bohai CSV log into a :class:`Frame`."""
     path = Path(path)
     load_stage("reading the table", 0.0)
     table, lines, sha256 = _read(path)

@@ -46,41 +46,36 @@ and ``batch`` at most :data:`replay.run.eval_options.MAX_RUNS` (one declaration 
 more than :data:`MAX_UNITS` units, a ``name`` over :data:`MAX_NAME_BYTES` bytes, or an
 empty grid, or a ``name`` that is not a plain name (a path separator, ``..``,
 an absolute path: it would place the output outside the output root) raises
-:class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key.
+:class:`~replay.util.errors.ReplayError` with one line naming the file, the line and the key
+(:mod:`replay.campaign.checks`; each entry: :mod:`replay.campaign.entries`).
 Each configuration stores its parameters with
 every default filled in (canonical), so ``{}`` and the defaults are the same
 configuration, with the same hash.
 """
 from __future__ import annotations
 
-import itertools
-import math
-import os
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.run.eval_options import EVAL_OPTIONS
+from replay.campaign import entries
+from replay.campaign.checks import MAX_NAME_BYTES, Where, check_name, check_params  # noqa: F401
+from replay.run.eval_options import BY_NAME as EVAL
+from replay.run.pipeline import Config
+from replay.trajectory.recorded import RECORDED
+from replay.run.pipeline import plain as _plain
 from replay.util.errors import ReplayError
 from replay.util.params import Param
-from replay.run.pipeline import Config
-from replay.trajectory.recorded import RECORDED, recorded_params
-from replay.run.pipeline import plain as _plain
-from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
-MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
-_EVAL = {p.name: p for p in EVAL_OPTIONS}  # one declaration with replay eval and the API
-CAMPAIGN_PARAMS = (  # the [campaign] table, checked by replay.util.params
+CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and the API, one declaration
     Param("name", str, None, "names the default result directory runs/campaign-<name>", optional=True),
-    _EVAL["runs"], _EVAL["seed"], _EVAL["batch"], _EVAL["alignment"], _EVAL["divergence_threshold"],
+    EVAL["runs"], EVAL["seed"], EVAL["batch"], EVAL["alignment"], EVAL["divergence_threshold"],
     Param("data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)",
           optional=True),
 )
-CAMPAIGN_KEYS = {p.name: p.type for p in CAMPAIGN_PARAMS}
-DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
-FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
+SECTIONS = ("campaign", "dataset", "task", "filter", "tune")
+_Where = Where  # the name it had
 
 
 @dataclass
@@ -96,86 +91,32 @@ class Campaign:
     where: object = None  # finds a key's line for messages about the file
 
 
-class _Where:
-    """Finds the line of a key in the campaign text for error messages."""
-
-    def __init__(self, path: Path, text: str):
-        self.path, self.lines = path, text.splitlines()
-
-    def line(self, key: str, value=None) -> int:
-        pats = []
-        if value is not None and isinstance(value, str):
-            pats.append(re.compile(re.escape(f'"{value}"') + "|" + re.escape(f"'{value}'")))
-        pats.append(re.compile(r"(^|[\s{,\[.])" + re.escape(str(key)) + r"\s*[=\]]"))
-        for pat in pats:
-            for i, text in enumerate(self.lines, 1):
-                if pat.search(text.split("#", 1)[0]):
-                    return i
-        return 1
-
-    def error(self, key: str, what: str, value=None) -> ReplayError:
-        return ReplayError(f"{self.path}:{self.line(key, value)}: {key}: {what}")
-
-
-def check_name(where, name: str) -> None:
-    """A campaign name must be a plain name: it becomes the directory ``runs/campaign-<name>``,
-    and a separator, ``..`` or an absolute path would place the output elsewhere."""
-    seps = {"/", "\\", os.sep} | ({os.altsep} if os.altsep else set())
-    bad = ("it is empty" if not name.strip() else
-           "it is an absolute path" if os.path.isabs(name) else
-           "it contains a path separator" if any(c in name for c in seps) else
-           "it is . or .." if name in (".", "..") else
-           "it contains a control character" if any(ord(c) < 32 or ord(c) == 127 for c in name) else
-           f"it is {len(name.encode())} bytes long, at most {MAX_NAME_BYTES}" if len(name.encode()) > MAX_NAME_BYTES
-           else None)
-    if bad:
-        shown = name if len(name) <= 60 else name[:40] + "..."
-        raise where.error("name", f"{shown!r} is not a plain name ({bad}; the output would not be "
-                                  f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'", name)
-
-
-def _check_type(where, key, value, typ):
-    ok = isinstance(value, typ) and not (typ in (int, float) and isinstance(value, bool))
-    if typ is float and isinstance(value, int) and not isinstance(value, bool):
-        ok = True
-    if not ok:
-        raise where.error(key, f"expected {typ.__name__}, got {type(value).__name__} {value!r}")
-
-
-def _check_keys(where, table: dict, allowed: dict, what: str):
-    for key, value in table.items():
-        if key not in allowed:
-            raise where.error(key, f"unknown key in {what} (known: {', '.join(sorted(allowed))})")
-        _check_type(where, key, value, allowed[key])
-
-
-def check_params(where, owner: str, declarations, params: dict) -> None:
-    """Each parameter against its declaration: an unknown name, a wrong type or a value out of
-    bounds -> ``file:line: key: message``."""
-    known = {p.name: p for p in declarations}
-    for key, value in params.items():
-        if key not in known:
-            raise where.error(key, f"{owner} has no parameter {key!r} (known: {', '.join(known) or 'none'})")
-        try:
-            known[key].check(value, owner)
-        except ReplayError as e:
-            raise where.error(key, str(e), value) from None
-
-
-def _class_of(registry: dict, name: str):
-    from replay.util.lookup import resolve
-
-    return resolve(registry, name, "component")
-
-
 def load(path) -> Campaign:
     """Read and check a campaign file; returns its configurations (no work done)."""
-    from replay.data import registry
-    from replay.filters import FILTERS
-    from replay.tasks import TASKS, make_task
-    from replay.filters import make_filter
-
     path = Path(path)
+    doc, where = _read(path)
+    head = _head(where, doc, path)
+    task_params = entries.task_tables(where, doc)
+    datasets, filters = _entry_lists(where, doc)
+    ds_entries = [entries.dataset(where, path, entry, head["data_dir"]) for entry in datasets]
+    flt_entries = entries.filters(where, filters, head["runs"], MAX_UNITS)
+    if not flt_entries and not any(e.recorded for e in ds_entries):
+        raise where.error("filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with "
+                                    "recorded estimates)")
+    configs = [Config(ds.id, ds.params, ds.first, t, canonical, name, fp, head["seed"], head["alignment"],
+                      head["divergence_threshold"])
+               for ds in ds_entries for t, canonical in _tasks(where, ds.tasks, task_params)
+               for name, fp in flt_entries + [(RECORDED + k, v) for k, v in ds.recorded.items()]]
+    runs = head["runs"]
+    if len(configs) * runs > MAX_UNITS:
+        raise where.error("runs", f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
+                                  f"more than a campaign may hold ({MAX_UNITS}); split it")
+    return Campaign(path, head["name"], runs, head["seed"], head["batch"], head["data_dir"], configs,
+                    doc.get("tune"), where)
+
+
+def _read(path: Path) -> tuple[dict, Where]:
+    """The parsed TOML of a campaign file and its :class:`Where`; unknown sections refused."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
@@ -187,36 +128,37 @@ def load(path) -> Campaign:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ReplayError(f"{path}: not valid TOML: {e}") from None
-    where = _Where(path, text)
+    where = Where(path, text)
     for key in doc:
-        if key not in ("campaign", "dataset", "task", "filter", "tune"):
-            raise where.error(key, "unknown section (known: campaign, dataset, task, filter, tune)")
+        if key not in SECTIONS:
+            raise where.error(key, f"unknown section (known: {', '.join(SECTIONS)})")
     if "tune" in doc and not isinstance(doc["tune"], dict):
         raise where.error("tune", "expected a table [tune]")
+    return doc, where
+
+
+def _head(where, doc: dict, path: Path) -> dict:
+    """The ``[campaign]`` table checked (:data:`CAMPAIGN_PARAMS`), every default filled in, ``name``
+    defaulting to the file's stem and ``data_dir`` made absolute (relative to the file)."""
     head = doc.get("campaign", {})
     if not isinstance(head, dict):
         raise where.error("campaign", "expected a table [campaign]")
+    known = sorted(p.name for p in CAMPAIGN_PARAMS)
     for key in head:
-        if key not in CAMPAIGN_KEYS:
-            raise where.error(key, f"unknown key in [campaign] (known: {', '.join(sorted(CAMPAIGN_KEYS))})")
+        if key not in known:
+            raise where.error(key, f"unknown key in [campaign] (known: {', '.join(known)})")
     check_params(where, "[campaign]", CAMPAIGN_PARAMS, head)
-    check_name(where, head.get("name", path.stem))
-    runs, seed, batch = head.get("runs", 1), head.get("seed", 0), head.get("batch", 25)
-    alignment = head.get("alignment", "se3")
-    threshold = head.get("divergence_threshold")
-    threshold = float(threshold) if threshold is not None else None
-    data_dir = head.get("data_dir")
-    if data_dir is not None:
-        data_dir = str((path.parent / data_dir).resolve())
+    out = {p.name: p.check(head[p.name]) if p.name in head else p.default for p in CAMPAIGN_PARAMS}
+    out["name"] = head.get("name", path.stem)
+    check_name(where, out["name"])
+    if out["data_dir"] is not None:
+        out["data_dir"] = str((path.parent / out["data_dir"]).resolve())
+    return out
 
-    task_params = doc.get("task", {})
-    for tname, tp in task_params.items():
-        if tname not in TASKS:
-            raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
-        if not isinstance(tp, dict):
-            raise where.error(tname, "expected a table of task parameters")
-        check_params(where, f"task {tname!r}", _class_of(TASKS, tname).PARAMS, tp)
 
+def _entry_lists(where, doc: dict) -> tuple[list, list]:
+    """The ``[[dataset]]`` and ``[[filter]]`` lists: at least one dataset, and a filter unless the
+    datasets may score recorded estimates alone."""
     datasets = doc.get("dataset", [])
     if not isinstance(datasets, list) or not datasets:
         raise where.error("dataset", "the campaign needs at least one [[dataset]]")
@@ -225,157 +167,17 @@ def load(path) -> Campaign:
                          for d in datasets)  # recorded estimates alone need no [[filter]]
     if not isinstance(filters, list) or not (filters or maybe_recorded):
         raise where.error("filter", "the campaign needs at least one [[filter]]")
+    return datasets, filters
 
-    ds_entries = []
-    for entry in datasets:
-        _check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
-        if "id" not in entry:
-            raise where.error("dataset", "every [[dataset]] needs an id")
-        ds_id = entry["id"]
-        ds = _recording(where, path, ds_id)
-        if ds is None:
-            try:
-                ds = registry.get(ds_id)
-            except ReplayError as e:
-                raise where.error("id", str(e), ds_id) from None
-        else:
-            ds_id = ds.id
-        tasks = entry.get("tasks", [ds.default_task or "position"])
-        if not tasks:
-            raise where.error("tasks", "empty list of tasks")
-        for t in tasks:
-            if not isinstance(t, str) or t not in TASKS:
-                raise where.error("tasks", f"unknown task {t!r} (known: {', '.join(sorted(TASKS))})", t)
-        first = entry.get("first")
-        if first is not None and first < 1:
-            raise where.error("first", f"must be at least 1 (got {first})")
-        if ds.kind == "file" and ds.manifest and registry.locate(ds, data_dir) is None:
-            raise where.error("id", f"dataset {ds_id} not found (set data_dir in [campaign], pass "
-                                    f"--data-dir, or run `replay datasets fetch {ds_id}`)", ds_id)
-        ds_params = dict(entry.get("params", {}))
-        if isinstance(ds_params.get("mapping"), str) and (path.parent / ds_params["mapping"]).is_file():
-            ds_params["mapping"] = str((path.parent / ds_params["mapping"]).resolve())  # relative to this file
-        if ds.kind == "sim":
-            own = {k: v for k, v in ds_params.items() if k not in VIEW_NAMES}  # the views: checked below
-            check_params(where, f"dataset {ds_id!r}", registry.generator(ds).PARAMS, own)
-            check_params(where, f"dataset {ds_id!r}", VIEW_PARAMS, {k: v for k, v in ds_params.items() if k not in own})
+
+def _tasks(where, tasks: list, task_params: dict) -> list[tuple[str, dict]]:
+    """(task, canonical parameters) of each task of a dataset entry."""
+    from replay.tasks import make_task
+
+    out = []
+    for t in tasks:
         try:
-            ds_params = _plain(registry.check_params(ds if ds.manifest else ds.file, ds_params))
+            out.append((t, _plain(make_task(t, **task_params.get(t, {})).params())))
         except ReplayError as e:
-            raise where.error(next(iter(ds_params), "params"), str(e)) from None
-        if ds.kind == "sim" and VIEW_NAMES & ds_params.keys():  # a view the simulation cannot take: now
-            _load_once(where, ds_id, ds_params, first, data_dir)
-        recorded = _recorded(where, entry, ds_id, ds_params, first, data_dir, ds.adapter)
-        ds_entries.append((ds_id, ds_params, first, tasks, recorded))
-
-    flt_entries = []
-    for entry in filters:
-        _check_keys(where, entry, FILTER_KEYS, "[[filter]]")
-        name = entry.get("name")
-        if name is None:
-            raise where.error("filter", "every [[filter]] needs a name")
-        if name not in FILTERS:
-            raise where.error("name", f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})", name)
-        declared = _class_of(FILTERS, name).PARAMS
-        base, grid = entry.get("params", {}), entry.get("grid", {})
-        check_params(where, f"filter {name!r}", declared, base)
-        for key, values in grid.items():
-            if not isinstance(values, list):
-                raise where.error(key, f"grid values must be a list, got {type(values).__name__}")
-            if not values:
-                raise where.error(key, "empty grid: give at least one value")
-            for v in values:
-                check_params(where, f"filter {name!r}", declared, {key: v})
-        keys = list(grid)
-        combos = math.prod(len(grid[k]) for k in keys)
-        if (len(flt_entries) + combos) * runs > MAX_UNITS:  # before building them (a grid multiplies)
-            raise where.error(keys[0] if keys else "filter", f"{len(flt_entries) + combos} filter configurations x "
-                              f"{runs} runs, more than a campaign may hold ({MAX_UNITS} units); split it")
-        for combo in itertools.product(*(grid[k] for k in keys)):
-            params = {**base, **dict(zip(keys, combo))}
-            try:
-                flt = make_filter(name, **params)
-            except ReplayError as e:
-                raise where.error(name, str(e), name) from None
-            except Exception as e:  # a constructor's own validation
-                raise where.error(name, f"filter {name!r}: {e}", name) from None
-            flt_entries.append((name, _plain(flt.params())))
-
-    if not flt_entries and not any(e[4] for e in ds_entries):
-        raise where.error("filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with "
-                                    "recorded estimates)")
-    configs = []
-    for ds_id, ds_params, first, tasks, recorded in ds_entries:
-        for t in tasks:
-            tp = task_params.get(t, {})
-            try:
-                canonical = _plain(make_task(t, **tp).params())
-            except ReplayError as e:
-                raise where.error(t, str(e), t) from None
-            rows = flt_entries + [(RECORDED + k, v) for k, v in recorded.items()]
-            for name, fp in rows:
-                configs.append(Config(ds_id, ds_params, first, t, canonical, name, fp, seed,
-                                      alignment, threshold))
-    if len(configs) * runs > MAX_UNITS:
-        raise where.error("runs", f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
-                                  f"more than a campaign may hold ({MAX_UNITS}); split it")
-    return Campaign(path, head.get("name", path.stem), runs, seed, batch, data_dir, configs, doc.get("tune"), where)
-
-
-def _recording(where, path: Path, ds_id: str):
-    """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): a
-    stand-in Dataset (``manifest`` empty, ``file`` the absolute path); None for a registered id."""
-    from replay.data import registry
-
-    if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
-        return None
-    file = (path.parent / ds_id).resolve()
-    if not file.exists():
-        raise where.error("id", f"no such recording {file}", ds_id)
-    try:
-        adapter = registry.adapter_for(file)
-    except ReplayError as e:
-        raise where.error("id", str(e), ds_id) from None
-    return registry.Dataset(id=str(file), kind="file", adapter=adapter, file=str(file))
-
-
-def _load_once(where, ds_id, ds_params: dict, first, data_dir):
-    """Run 0's frame, so that a view it cannot take is refused before any unit."""
-    from replay.run.pipeline import load_frame
-
-    try:
-        return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
-                           "adapter": None}, 0, data_dir)
-    except ReplayError as e:
-        raise where.error("params", str(e)) from None
-
-
-def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapter) -> dict:
-    """{name: association parameters} of the recorded estimates a dataset entry scores: those
-    named in ``recorded``, else every estimate its mapping declares (bags adapter only)."""
-    declared = {}
-    if adapter == "bags":
-        try:
-            if ds_params.get("mapping") is not None:
-                from replay.adapters.bags import resolve_mapping
-
-                declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
-            else:  # the proposed mapping: read the recording
-                from replay.run.pipeline import load_frame
-
-                frame = load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
-                                    "adapter": None}, 0, data_dir)
-                declared = {k: e.params for k, e in frame.estimates.items()}
-        except ReplayError as e:
-            raise where.error("params", str(e)) from None
-    chosen = entry.get("recorded", list(declared))
-    out = {}
-    for name in chosen:
-        if not isinstance(name, str) or name not in declared:
-            raise where.error("recorded", f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
-                                          f"declare: {', '.join(declared) or 'none'})", name)
-        try:
-            out[name] = _plain(recorded_params(name, None, declared[name]))
-        except ReplayError as e:
-            raise where.error("recorded", str(e), name) from None
+            raise where.error(t, str(e), t) from None
     return out

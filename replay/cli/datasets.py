@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import click
 
-from replay.data import registry
+from replay.data import dataset_ref, registry
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 from replay.data.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
@@ -62,15 +62,16 @@ def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), r
     from replay.cli.params import dataset_inputs
     from replay.run.pipeline import load_frame
 
-    dparams = registry.check_params(dataset, with_views(dataset_inputs(dataset_params, mapping), rate, window,
-                                                        segment), adapter=adapter)
+    ref = dataset_ref.resolve(dataset, adapter)
+    dparams = registry.check_params(ref.target, with_views(dataset_inputs(dataset_params, mapping), rate, window,
+                                                           segment), adapter=adapter)
     config = {"dataset": dataset, "dataset_params": dparams, "first": None, "seed": 0, "adapter": adapter}
-    if registry.is_path(dataset):
-        frame = load_frame(config, 0, data_dir)  # as `replay eval` reads it
+    if ref.is_path:
+        frame = load_frame(config, 0, data_dir, ds=None)  # as `replay eval` reads it
         click.echo(f"{'path:':15s} {dataset}")
         _describe(frame)
         return
-    ds = registry.get(dataset)
+    ds = ref.entry
     for key, value in ds.__dict__.items():
         if value not in (None, ""):
             click.echo(f"{key + ':':15s} {value}")

@@ -3,8 +3,9 @@
 One line per entry (its name and the first sentence of its documentation, as
 plain text), then one indented line per parameter from its declaration
 (:meth:`replay.util.params.Param.describe`: ``name = default [unit]: what it
-accepts. doc``). Adapters declare no parameters: their options are read from
-the signature of their ``load`` function.
+accepts. doc``). Adapters declare their options the same way
+(:mod:`replay.adapters.options`); a plugin adapter that declares none shows the
+keyword options of its ``load`` function.
 
 Entries of other distributions (entry points, :mod:`replay.util.plugins`) end their
 line with their origin, ``(plugin: <distribution> <version>)``; a plugin that cannot be
@@ -115,7 +116,7 @@ def _table(kind):
         return TASKS, lambda cls: _declared(cls.PARAMS)
     from replay.data.plugins import ADAPTERS
 
-    return ADAPTERS, _signature
+    return ADAPTERS, lambda load: _declared(load.PARAMS) if hasattr(load, "PARAMS") else _signature(load)
 
 
 def _datasets(problems):
@@ -155,6 +156,8 @@ def render(kind: str, name: str | None = None, problems: list | None = None) -> 
 
     problems = [] if problems is None else problems
     rows = entries(kind, problems, extra=name if name and ":" in name and kind in ("filters", "tasks") else None)
+    if name is not None and kind == "adapters" and name not in {r[0] for r in rows}:
+        name = _adapter_of(name) or name
     if name is not None:
         rows = [r for r in rows if r[0] == name]
         if not rows:
@@ -173,13 +176,23 @@ def render(kind: str, name: str | None = None, problems: list | None = None) -> 
     return lines
 
 
+def _adapter_of(family: str) -> str | None:
+    """The one adapter that reads the datasets ``family/...`` (``bohai`` -> bohai-csv), else None."""
+    from replay.data import registry
+
+    found = {ds.adapter for ds in registry.all_datasets().values()
+             if ds.kind == "file" and (ds.id == family or ds.id.startswith(family.rstrip("/") + "/"))}
+    return found.pop() if len(found) == 1 else None
+
+
 @click.command("list")
 @click.argument("what", type=click.Choice(KINDS))
 @click.argument("name", required=False)
 def list_cmd(what, name):
     """List the registered filters, tasks, adapters, datasets, reproductions or plugins, with their parameters.
 
-    NAME shows one of them (for filters and tasks also a module:Class name). Entries of other
+    NAME shows one of them (for filters and tasks also a module:Class name; for adapters also a
+    dataset family, e.g. bohai: the adapter of its datasets). Entries of other
     installed distributions show their origin; a plugin that cannot be used is named in one
     warning line on stderr, and the others are listed.
     """

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from replay.cli.examples import add_examples
+from replay.cli.run_options import run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 from replay.util.version import __version__
@@ -71,9 +72,9 @@ def _notes_to_stderr() -> None:
               help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
                    "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
                    "as recorded:<name>, or recorded:none for none).")
-@click.option("--runs", "-n", default=1, show_default=True, type=int, help="Monte Carlo runs (1 to 1000000).")
-@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed (an integer >= 0).")
-@click.option("--first", default=None, type=int, help="Use only the first N samples.")
+@run_option("runs", "-n")
+@run_option("seed", "-s")
+@run_option("first")
 @click.option("--out", "-o", default=None, type=click.Path(),
               help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
                    "with runs/<dataset>/<task>/latest pointing to it).")
@@ -99,10 +100,8 @@ def _notes_to_stderr() -> None:
               help="Also export the run as a Foxglove MCAP file.")
 @click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
               help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
-@click.option("--alignment", default="se3", show_default=True,
-              help="Alignment of the estimate onto the reference for the ATE column: none, yaw, se3, sim3.")
-@click.option("--divergence-threshold", default=None, type=float,
-              help="Position error (m) beyond which a run counts as diverged (default: none).")
+@run_option("alignment")
+@run_option("divergence_threshold")
 @click.option("--min-scored-share", default=None, type=float,
               help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
                    "the rest is masked).")
@@ -110,47 +109,25 @@ def _notes_to_stderr() -> None:
               help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.")
 @view_options
 def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
-             dataset_params=(), baseline=None, mapping=None, mcap_out=None, ros2_out=None, alignment="se3",
-             divergence_threshold=None, force=False, quiet=False, wait=False, min_scored_share=None,
-             rate=None, window=None, segment=None, tuned=None):
+             dataset_params, baseline, mapping, mcap_out, ros2_out, alignment, divergence_threshold, force, quiet,
+             wait, min_scored_share, rate, window, segment, tuned):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     _quiet(quiet)  # before default_task, which may load the file (its progress is a note)
-    from replay.cli import params as cli_params
-    from replay.run.eval_options import validate_eval_options
-    from replay.run.evaluation import check_recorded, evaluate
-    from replay.outputs.files import check_location, check_output, eval_inputs, format_table, write_all
-    from replay.outputs.rundirs import claimed_run_dir, mark_latest, new_run_dir, out_locked
-    from replay.run.pipeline import default_task
+    from replay.run.evaluation import evaluate
+    from replay.outputs.files import check_location, check_output, eval_inputs
+    from replay.outputs.rundirs import claimed_run_dir, new_run_dir, out_locked
     from replay.data.registry import check_data_dir
     from replay.scoring.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
     min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
                                               else min_scored_share, "--min-scored-share")
-    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment,
-                           "divergence_threshold": divergence_threshold})  # the API's declarations and messages
-    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
-    if baseline is not None and baseline not in names + (recorded or []) and not (
-            recorded is None and baseline.startswith("recorded:")):
-        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
-    fparams = cli_params.filter_params(params, names + (recorded or []))
-    tparams = cli_params.task_params(task_params, task)
-    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
-        from replay.tune.tuned import tuned_params
-
-        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
-        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
-        names = names if given else t_names
-        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
-        tparams = {**t_tparams, **tparams}
-    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), rate, window, segment)
-    cli_params.check_config(dataset, task, names, fparams, tparams, dparams, adapter=adapter)
-    check_recorded(dataset, recorded or [], dparams)  # before any recording is read
+    ref, names, recorded, fparams, tparams, dparams, task = _configuration(
+        dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, (rate, window, segment),
+        adapter, first, data_dir, seed)
     # the output set is checked before the computation (inputs, writable, space, ownership)
-    task = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
-                                dataset_params=dparams, seed=seed)
     numbered = out is None
-    inputs = eval_inputs(dataset, data_dir, mapping)
+    inputs = eval_inputs(ref, data_dir, mapping)
     if numbered:  # the location, before claiming a number in it
         check_location(new_run_dir(dataset, task), inputs, "--out")
     else:
@@ -172,7 +149,7 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         _quiet(quiet)
         progress = Progress(0, quiet, label="eval", unit="run")
         try:
-            ev = evaluate(dataset, task=task, filters=names, runs=runs, seed=seed, first=first,
+            ev = evaluate(ref, task=task, filters=names, runs=runs, seed=seed, first=first,
                           data_dir=data_dir, filter_params=fparams,
                           task_params=tparams, adapter=adapter,
                           dataset_params=dparams or None, alignment=alignment,
@@ -180,21 +157,61 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
                           progress=progress, min_scored_share=min_scored_share)
         finally:
             progress.close()
-        for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
-            click.echo(f"replay: note: {note}", err=True)
-        click.echo(format_table(ev))
-        for note in ev.notes:
-            click.echo(note)
-        _fresh(out, numbered or force)  # again at publication
-        paths = write_all(ev, out, what="--out")
-        if numbered:
-            mark_latest(out)
-        click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
-        if mcap_out or ros2_out:
-            from replay.cli.bags import export_outputs
-
-            export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
+        _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
     _failed_filters(ev)
+
+
+def _configuration(dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, views,
+                   adapter, first, data_dir, seed):
+    """``replay eval``'s configuration from its options, checked whole before any data is read:
+    (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
+    from replay.data import dataset_ref
+    from replay.cli import params as cli_params
+    from replay.run.evaluation import check_recorded
+    from replay.run.pipeline import default_task
+
+    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
+    if baseline is not None and baseline not in names + (recorded or []) and not (
+            recorded is None and baseline.startswith("recorded:")):
+        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
+    fparams = cli_params.filter_params(params, names + (recorded or []))
+    tparams = cli_params.task_params(task_params, task)
+    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
+        from replay.tune.tuned import tuned_params
+
+        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
+        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
+        names = names if given else t_names
+        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
+        tparams = {**t_tparams, **tparams}
+    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), *views)
+    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, handed down
+    cli_params.check_config(ref, task, names, fparams, tparams, dparams, adapter=adapter)
+    check_recorded(ref.id, recorded or [], dparams)  # before any recording is read
+    task = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams,
+                                seed=seed)
+    return ref, names, recorded, fparams, tparams, dparams, task
+
+
+def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, ros2_out, data_dir) -> None:
+    """Print the leaderboard and write the output set (then the exports) into ``out``."""
+    from replay.outputs.files import format_table, write_all
+    from replay.outputs.rundirs import mark_latest
+
+    for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
+        click.echo(f"replay: note: {note}", err=True)
+    click.echo(format_table(ev))
+    for note in ev.notes:
+        click.echo(note)
+    _fresh(out, numbered or force)  # again at publication
+    paths = write_all(ev, out, what="--out")
+    if numbered:
+        mark_latest(out)
+    click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+    if mcap_out or ros2_out:
+        from replay.cli.bags import export_outputs
+
+        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
 
 
 def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
@@ -269,8 +286,8 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 
 @main.command("reproduce")
 @click.argument("paper")
-@click.option("--runs", "-n", default=None, type=click.IntRange(1), help="Monte Carlo runs (default: the paper's).")
-@click.option("--seed", "-s", default=0, show_default=True, type=int)
+@run_option("runs", "-n", default=None, extra=" Default: the paper's.")
+@run_option("seed", "-s")
 @click.option("--data-dir", default=None, type=click.Path())
 @click.option("--doc", default=None, type=click.Path(dir_okay=False),
               help="Markdown report to write (default: docs/reproduction/<paper>.md).")

@@ -192,7 +192,7 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     parameters are checked too). A plain file without ``task`` gets its task
     from the frame: its task parameters are checked when the task is made.
     """
-    from replay.data import registry
+    from replay.data import dataset_ref, registry
     from replay.filters import make_filter
     from replay.tasks import make_task
     from replay.util.lookup import params_of
@@ -201,10 +201,10 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
     if extra:
         raise ReplayError(f"-p {extra[0]}: filter {extra[0]!r} is not in --filters ({', '.join(filters)})")
-    dparams = registry.check_params(dataset, dataset_params or {}, adapter=adapter)
-    if task is None and not (isinstance(dataset, str) and registry.is_path(dataset)):
-        ds = dataset if isinstance(dataset, registry.Dataset) else registry.get(dataset)
-        task = ds.default_task or None
+    ref = dataset_ref.resolve(dataset, adapter)
+    dparams = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)
+    if task is None and not ref.is_path:
+        task = ref.entry.default_task or None
     tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
     fparams = {name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name)
                for name in filters}

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.run_options import run_option
 from replay.util.errors import ReplayError
 
 
@@ -25,9 +26,9 @@ from replay.util.errors import ReplayError
 @click.option("--train", default=None, help="Training dataset ids, comma-separated (with --test).")
 @click.option("--test", default=None, help="Test dataset ids, comma-separated (with --train).")
 @click.option("--split", default=None, help="'seeds': simulated data, train on --seed, test on --seed + 1.")
-@click.option("--runs", "-n", default=20, show_default=True, type=int, help="Monte Carlo runs per configuration.")
-@click.option("--seed", "-s", default=0, show_default=True, type=int, help="Master seed (runs and sampler).")
-@click.option("--first", default=None, type=int, help="Use only the first N samples.")
+@run_option("runs", "-n", default=20, extra=" Per configuration.")
+@run_option("seed", "-s", extra=" Also the sampler's.")
+@run_option("first")
 @click.option("--rate", default=None, type=float, help="Dataset view: resample at this rate (Hz).")
 @click.option("--window", default=None, help="Dataset view: START:END seconds, or #i:j samples.")
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")

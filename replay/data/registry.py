@@ -32,11 +32,12 @@ from replay.data.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, 
                               read_checksums, sha256_file, with_registered)
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
 from replay.util.errors import DataError, ReplayError
-from replay.util.params import validate
+from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
 
 # Adapter used for a plain file path, by extension.
+FIRST = Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True)
 ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
 
 
@@ -229,9 +230,7 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
     loads (users may edit files) but gets a "flagged" entry in the frame report. ``adapter`` overrides
     the adapter chosen for a plain path.
     """
-    if first is not None and (isinstance(first, bool) or not isinstance(first, (int, np.integer))
-                              or first < 1):
-        raise ReplayError(f"first must be a positive number of samples (got {first!r})")
+    first = FIRST.check(first)
     check_data_dir(data_dir)
     shown = str(dataset.id if isinstance(dataset, Dataset) else dataset)
     chosen, params = views.split(check_params(dataset, params, adapter=adapter))
@@ -266,11 +265,9 @@ def generator(ds: Dataset):
     return make_frame
 
 
-def adapter_options(name: str) -> tuple[list[str], bool]:
-    """The options an adapter's ``load(path, **options)`` takes, and whether it takes others too."""
-    sig = inspect.signature(_adapter(name))
-    names = [p.name for p in sig.parameters.values() if p.kind == p.KEYWORD_ONLY]
-    return names, any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+def adapter_options(name: str):
+    """The options (Param) adapter ``name`` declares; None: a plugin's ``load`` declaring none."""
+    return getattr(_adapter(name), "PARAMS", None)
 
 
 def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
@@ -278,8 +275,8 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
     A sim dataset's are checked against its generator's declarations (unknown
     names, types, bounds) and returned with every default filled in. A file's
-    (a dataset id or a plain path) are its adapter's options: an unknown name is
-    refused with the adapter's known options; they are returned as given.
+    (a dataset id or a plain path) are its adapter's declared options, returned
+    checked (only those given: :mod:`replay.adapters.options`).
     Every dataset also takes the views (:data:`replay.data.views.VIEW_PARAMS`), returned
     canonical and only when given (so a configuration without them keeps its hash).
     """
@@ -298,11 +295,17 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
 
 def _check_options(adapter: str, params: dict) -> dict:
-    names, others = adapter_options(adapter)
+    """``params`` checked against ``adapter``'s declarations; a plugin declaring none: their names."""
+    from replay.adapters.options import check
+
+    declared = adapter_options(adapter)
+    if declared is not None:
+        return check(adapter, declared, params)
+    sig = inspect.signature(_adapter(adapter)).parameters.values()
+    names = [p.name for p in sig if p.kind == p.KEYWORD_ONLY]
     unknown = [k for k in params if k not in names]
-    if unknown and not others:
-        raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} "
-                          f"(known: {', '.join(names) or 'none'})")
+    if unknown and not any(p.kind == p.VAR_KEYWORD for p in sig):
+        raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} (known: {', '.join(names) or 'none'})")
     return params
 
 

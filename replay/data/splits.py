@@ -104,9 +104,9 @@ def _overlap(train: dict, test: dict, dataset) -> str | None:
 
 
 def _simulated(dataset: str) -> bool:
-    from replay.data import registry
+    from replay.data.dataset_ref import simulated
 
-    return dataset in registry.all_datasets() and registry.get(dataset).kind == "sim"
+    return simulated(dataset)
 
 
 def _apart(a: dict, b: dict) -> bool:

@@ -40,19 +40,14 @@ _TMP = ".replay-tmp-"
 
 def dataset_inputs(dataset, mapping=None, data_dir=None) -> list[Path]:
     """The files a dataset id or path is read from (none for a simulator), and the mapping."""
-    from replay.data import registry
+    from replay.data import dataset_ref
 
     found = [Path(mapping)] if mapping else []
     try:
-        if isinstance(dataset, (str, Path)) and registry.is_path(dataset):
-            found.append(Path(dataset).expanduser())
-        elif isinstance(dataset, str) and dataset in registry.all_datasets():
-            path = registry.locate(dataset, data_dir)
-            if path is not None:
-                found.append(path)
-    except (OSError, ValueError):
-        pass
-    return found
+        path = dataset_ref.resolve(dataset).locate(data_dir) if isinstance(dataset, (str, Path)) else None
+    except (OSError, ValueError, ReplayError):  # an unknown id: nothing of it is read
+        path = None
+    return found + ([path] if path is not None else [])
 
 
 def run_inputs(run_dir, data_dir=None) -> list[Path]:

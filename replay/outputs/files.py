@@ -198,14 +198,9 @@ def owned(path: Path) -> bool:
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
-    from replay.data import registry
+    from replay.data import dataset_ref
 
-    paths = [Path(mapping)] if mapping else []
-    if registry.is_path(dataset):
-        return [Path(dataset).expanduser(), *paths]
-    ds = registry.get(dataset)
-    found = registry.locate(ds, data_dir) if ds.kind == "file" else None
-    return [found, *paths] if found else paths
+    return dataset_ref.resolve(dataset).inputs(data_dir, mapping)
 
 
 def check_output(out, inputs=(), what: str = "--out") -> Path:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 from replay.scoring.align import ALIGNMENTS
+from replay.data.registry import FIRST
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -20,7 +21,7 @@ EVAL_OPTIONS = (
     Param("task", str, None, "task (default: the dataset's default task)", optional=True),
     Param("runs", int, 1, "Monte Carlo runs", unit="runs", low=1, high=MAX_RUNS),
     Param("seed", int, 0, "master seed of every run's random streams", low=0, high=MAX_SEED),
-    Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True),
+    FIRST,  # replay.data.registry.load_frame checks it too
     Param("data_dir", os.PathLike, None, "where to look for dataset files first", optional=True),
     Param("adapter", str, None, "adapter for a plain file (default: chosen from the file)", optional=True),
     Param("task_params", dict, None, "task parameters (replay list tasks)", optional=True),
@@ -33,6 +34,7 @@ EVAL_OPTIONS = (
     Param("batch", int, 25, "runs computed at once (a block)", unit="runs", low=1, high=MAX_RUNS),
 )
 BY_NAME = {p.name: p for p in EVAL_OPTIONS}
+DEFAULTS = {p.name: p.default for p in EVAL_OPTIONS}  # written once, in the declarations
 
 
 def validate_eval_options(options: dict, where: str = "") -> dict:

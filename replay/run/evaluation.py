@@ -23,24 +23,23 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from replay.data import registry
-
+from replay.data import dataset_ref, registry
 from replay.scoring import scorer, summary
 from replay.util.progress import particle_weight
 from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
-from replay.run.pipeline import Config, build_problem, config_hash, default_task, is_sim, load_frame, plain, run_block
+from replay.run.pipeline import Config, build_problem, config_hash, default_task, load_frame, plain, run_block
 from replay.trajectory.recorded import RECORDED, RECORDED_PARAMS, is_recorded, recorded_params
 from replay.tasks import make_task
-from replay.run.eval_options import validate_eval_options
+from replay.run.eval_options import DEFAULTS, validate_eval_options
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
 
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
-BATCH = 25  # runs per block: the campaign default (``[campaign] batch``)
+BATCH = DEFAULTS["batch"]  # runs per block: the campaign default (``[campaign] batch``)
 
 
 @dataclass
@@ -129,10 +128,10 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
 
 
-def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = 1,
-             seed: int = 0, first: int | None = None, data_dir=None,
+def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = DEFAULTS["runs"],
+             seed: int = DEFAULTS["seed"], first: int | None = None, data_dir=None,
              task_params: dict | None = None, filter_params: dict | None = None,
-             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = "se3",
+             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = DEFAULTS["alignment"],
              divergence_threshold: float | None = None, baseline: str | None = None,
              batch: int = BATCH, recorded=(), progress=None,
              min_scored_share: float = summary.MIN_SCORED_SHARE.default) -> Evaluation:
@@ -156,12 +155,14 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
-    dataset_params = registry.check_params(dataset, dataset_params or {}, adapter=adapter)  # canonical
+    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
+    dataset = ref.id  # what the configurations and the manifest record
+    dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
     check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()],
                    dataset_params)
-    task_name = task or default_task(dataset, first=first, data_dir=data_dir, adapter=adapter,
+    task_name = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
-    names, estimates = _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir)
+    names, estimates = _recorded(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir)
     filters = offline + names
     for name in filter_params:
         if name not in filters:
@@ -311,13 +312,14 @@ def check_recorded(dataset, names, dataset_params) -> None:
                           f"declare: {', '.join(declared) or 'none'})")
 
 
-def _recorded(dataset, filters, recorded, seed, first, dataset_params, adapter, data_dir):
+def _recorded(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir):
     """(``recorded:<name>`` rows to compute, {name: RecordedEstimate}) from the frame's estimates."""
     named = [n for n in filters if is_recorded(n)] + [n if is_recorded(n) else RECORDED + n for n in recorded or ()]
-    if not named and (recorded is not None or is_sim(dataset)):
+    if not named and (recorded is not None or ref.is_sim):
         return [], {}
+    dataset = ref.id
     cfg = {"dataset": dataset, "dataset_params": dataset_params, "first": first, "seed": seed, "adapter": adapter}
-    estimates = getattr(load_frame(cfg, 0, data_dir), "estimates", {})
+    estimates = getattr(load_frame(cfg, 0, data_dir, ds=ref.entry), "estimates", {})
     if recorded is None:
         named += [RECORDED + k for k in estimates if RECORDED + k not in named]
     for n in named:

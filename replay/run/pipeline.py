@@ -46,10 +46,11 @@ from time import perf_counter
 
 import numpy as np
 
-from replay.data import registry
+from replay.data import dataset_ref, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
+from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, metrics, scorer
 from replay.tasks import make_task, reference_present, source_of
@@ -70,7 +71,7 @@ class Config:
     filter: str
     filter_params: dict
     seed: int
-    alignment: str = "se3"
+    alignment: str = DEFAULTS["alignment"]
     divergence_threshold: float | None = None
     adapter: str | None = None
 
@@ -99,17 +100,13 @@ def plain(obj):
     return obj
 
 
-def resolve(dataset: str):
-    """The registry entry for a dataset id, or None for a plain file path."""
-    if dataset in registry.all_datasets():
-        return registry.get(dataset)
-    if Path(dataset).exists() or dataset.endswith((".csv", ".bag", ".mcap", ".tsv", ".db3")):
-        return None
-    return registry.get(dataset)
+def resolve(dataset):
+    """The registry entry for a dataset id, or None for a plain file path (:mod:`replay.data.dataset_ref`)."""
+    return dataset_ref.resolve(dataset).entry
 
 
-def is_sim(dataset: str) -> bool:
-    return (ds := resolve(dataset)) is not None and ds.kind == "sim"
+def is_sim(dataset) -> bool:
+    return dataset_ref.resolve(dataset).is_sim
 
 
 @functools.lru_cache(maxsize=4)
@@ -144,15 +141,16 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
                        sort_keys=True), _file_state(c["dataset"] if ds is None else ds, data_dir))
 
 
-def default_task(dataset: str, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
+def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
     """The task when none is named: the registry's, the adapter's, else ``fusion`` for a recording
-    with sensor inputs (``meta["roles"]``), ``position`` (rows marked ``synthetic``) without."""
-    ds = resolve(dataset)
-    if ds is not None and ds.default_task:
-        return ds.default_task
-    cfg = {"dataset": dataset, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
+    with sensor inputs (``meta["roles"]``), ``position`` (rows marked ``synthetic``) without.
+    ``dataset``: an id or a :class:`replay.data.dataset_ref.DatasetRef`."""
+    ref = dataset_ref.resolve(dataset)
+    if ref.entry is not None and ref.entry.default_task:
+        return ref.entry.default_task
+    cfg = {"dataset": ref.id, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
            "adapter": adapter}
-    meta = load_frame(cfg, 0, data_dir).meta
+    meta = load_frame(cfg, 0, data_dir, ds=ref.entry).meta
     sensors = any(e for role, e in (meta.get("roles") or {}).items() if role != "none")
     return meta.get("default_task") or ("fusion" if sensors else "position")
 

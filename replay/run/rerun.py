@@ -57,8 +57,9 @@ import json
 import re
 from pathlib import Path
 
-from replay.scoring.align import ALIGNMENTS
-from replay.run.pipeline import Config, config_hash, is_recorded, is_sim
+from replay.run.eval_options import BY_NAME as EVAL
+from replay.run.pipeline import Config, config_hash, is_sim
+from replay.trajectory.recorded import is_recorded
 from replay.scoring.summary import TIMING
 from replay.util.errors import ReplayError
 from replay.util.plugins import TARGET
@@ -77,6 +78,7 @@ def _is(value, kinds) -> bool:
     return isinstance(value, kinds)
 
 
+RUN_OPTIONS = ("runs", "seed", "first", "alignment", "divergence_threshold")  # replay.run.eval_options
 # key: (accepted types, may be null, description for the message)
 CONFIG = {
     "dataset": ((str,), False, "a dataset id or path"),
@@ -84,13 +86,13 @@ CONFIG = {
     "task_params": ((dict,), False, "an object of task parameters"),
     "filters": ((list,), False, "a list of filter names"),
     "filter_params": ((dict,), False, "an object of parameters per filter"),
-    "runs": ((int,), False, "an integer >= 1"),
-    "seed": ((int,), False, "an integer"),
-    "first": ((int,), True, "an integer >= 1 or null"),
+    "runs": ((int,), False, EVAL["runs"].accepts()),
+    "seed": ((int,), False, EVAL["seed"].accepts()),
+    "first": ((int,), True, EVAL["first"].accepts()),
     "dataset_params": ((dict,), False, "an object of dataset parameters"),
     "adapter": ((str,), True, "an adapter name or null"),
-    "alignment": ((str,), False, "an alignment name"),
-    "divergence_threshold": (_NUM, True, "a number > 0 or null"),
+    "alignment": ((str,), False, EVAL["alignment"].accepts()),
+    "divergence_threshold": (_NUM, True, EVAL["divergence_threshold"].accepts()),
     "dataset_sha256": ((str,), True, "64 hex digits (null only for a simulated dataset)"),
     "config_hashes": ((dict,), False, "an object of configuration hashes per filter"),
 }
@@ -136,14 +138,11 @@ def check(man, path, allow_modules=()) -> None:
         value = cfg[key]
         if not (value is None and nullable) and not _is(value, kinds):
             raise bad(f"config.{key}", f"expected {what}, got {type(value).__name__} {value!r:.60}")
-    if cfg["runs"] < 1:
-        raise bad("config.runs", f"expected an integer >= 1, got {cfg['runs']}")
-    if cfg["first"] is not None and cfg["first"] < 1:
-        raise bad("config.first", f"expected an integer >= 1 or null, got {cfg['first']}")
-    if cfg["divergence_threshold"] is not None and not cfg["divergence_threshold"] > 0:
-        raise bad("config.divergence_threshold", f"expected a number > 0 or null, got {cfg['divergence_threshold']}")
-    if cfg["alignment"] not in ALIGNMENTS:
-        raise bad("config.alignment", f"{cfg['alignment']!r:.40} is not one of {', '.join(ALIGNMENTS)}")
+    for key in RUN_OPTIONS:  # the declarations replay eval checked them with
+        try:
+            EVAL[key].check(cfg[key])
+        except ReplayError:
+            raise bad(f"config.{key}", f"expected {EVAL[key].accepts()}, got {cfg[key]!r:.60}") from None
     filters = cfg["filters"]
     if not filters:
         raise bad("config.filters", "empty: no filter to repeat")

@@ -1,7 +1,8 @@
 """An evaluation as pandas DataFrames (``Evaluation.leaderboard()``, ``.estimates(filter)``, ...).
 
 * :func:`leaderboard` — one row per filter, the columns and values of ``leaderboard.csv``
-  (:mod:`replay.scoring.summary`; the CSV and the DataFrame keep every digit; empty cells, such as the baseline's paired cells, are NaN).
+  (:mod:`replay.scoring.summary`; the CSV and the DataFrame keep every digit; empty cells, such as the
+  baseline's paired cells, are NaN).
 * :func:`estimates` — a filter's posterior means and variances, one row per run and step
   (index ``run, k``; columns ``t``, ``x0..``, ``P00..``: the columns of
   ``estimates/<filter>.csv.gz``).

@@ -99,12 +99,12 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
 
 def measurements(cfg: dict) -> str:
     """What the filters of configuration ``cfg`` were given (:data:`TAIL`'s ``measurements``)."""
-    from replay.data import registry
+    from replay.data.dataset_ref import simulated
     from replay.tasks import task_class
 
     if str(cfg["filter"]).startswith("recorded:"):
         return "recorded"
-    if cfg["dataset"] in registry.all_datasets() and registry.get(cfg["dataset"]).kind == "sim":
+    if simulated(cfg["dataset"]):
         return "simulated"
     return SYNTHETIC if getattr(task_class(cfg["task"]), "SYNTHETIC", False) else "sensors"
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import re
 
+from replay.run.eval_options import DEFAULTS
 from replay.util.errors import ReplayError
 
 from . import check, run
@@ -51,7 +52,8 @@ def plan(c, data_dir=None) -> list[tuple[str, run.Tune]]:
         raise c.where.error("split", "expected { segment = 0.6 }, { seeds = S } or { train = [ids], test = [ids] }")
     common = dict(filters=names, entries=entries, trials=tab.get("trials", 50), objective=tab.get("objective",
                   "mean_rmse"), runs=c.runs, allow_overlap=tab.get("allow_overlap", False),
-                  data_dir=data_dir or c.data_dir, alignment=c.configs[0].alignment if c.configs else "se3",
+                  data_dir=data_dir or c.data_dir,
+                  alignment=c.configs[0].alignment if c.configs else DEFAULTS["alignment"],
                   batch=c.batch)
     out = []
     try:

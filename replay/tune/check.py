@@ -1,6 +1,7 @@
 """Everything ``replay tune`` is given, checked before any trial (one line each, ReplayError)."""
 from __future__ import annotations
 
+from replay.run.eval_options import DEFAULTS
 from replay.util.errors import ReplayError
 
 from . import objectives, space, splits
@@ -9,9 +10,9 @@ from .run import Tune
 
 def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=None, task_params=None,
             dataset_params=None, view=None, first=None, data_dir=None, train_segment=None, train=None, test=None,
-            split=None, allow_overlap=False, alignment="se3", batch=None) -> Tune:
+            split=None, allow_overlap=False, alignment=DEFAULTS["alignment"], batch=None) -> Tune:
     """The checked :class:`Tune` (no trial run, no file written)."""
-    from replay.data import registry
+    from replay.data import dataset_ref, registry
     from replay.run.eval_options import validate_eval_options
     from replay.filters import make_filter
     from replay.run.pipeline import default_task, plain
@@ -34,16 +35,15 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
     view = {k: v for k, v in (view or {}).items() if v is not None}
     s = splits.make(dataset, {**(dataset_params or {}), **view}, train_segment=train_segment, train=train,
                     test=test, split=split, seed=seed, allow_overlap=allow_overlap)
-    checked = []
-    for d, p in s.train + s.test:  # every dataset and its view parameters, canonical
-        checked.append((d, plain(registry.check_params(d, p))))
+    refs = {d: dataset_ref.resolve(d) for d, _ in s.train + s.test}  # each id parsed once
+    checked = [(d, plain(registry.check_params(refs[d].target, p))) for d, p in s.train + s.test]  # canonical
     s.train, s.test = checked[:len(s.train)], checked[len(s.train):]
     first_ds, first_p = s.train[0]
-    task = task or default_task(first_ds, first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
+    task = task or default_task(refs[first_ds], first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
     make_task(task, **(task_params or {}))
     dims = space.build(entries, names, task)
     t = Tune(task, names, dims, trials, objective, weights, s, runs, seed, dict(task_params or {}), first,
-             alignment, data_dir, batch or 25)
+             alignment, data_dir, batch or DEFAULTS["batch"])
     if "nll" in weights:
         _check_nll(t)
     return t

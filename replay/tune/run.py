@@ -20,6 +20,7 @@ from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
 from replay.campaign.store import Store, write_bytes, write_json
+from replay.run.eval_options import DEFAULTS
 from replay.run.pipeline import Config, config_hash, plain
 from replay.util.progress import Progress
 
@@ -46,9 +47,9 @@ class Tune:
     seed: int
     task_params: dict = field(default_factory=dict)
     first: int | None = None
-    alignment: str = "se3"
+    alignment: str = DEFAULTS["alignment"]
     data_dir: str | None = None
-    batch: int = 25
+    batch: int = DEFAULTS["batch"]
 
     def config(self, dataset, dparams, seed, name, fparams, tparams) -> Config:
         from replay.filters import make_filter

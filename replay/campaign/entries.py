@@ -1,0 +1,223 @@
+"""The entries of a campaign file, each checked alone: ``[[dataset]]``, ``[[filter]]`` and ``[task.NAME]``.
+
+Every function raises ``file:line: key: message`` (:meth:`replay.campaign.spec._Where.error`)
+and returns the entry canonical (every default filled in), ready to become configurations.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from replay.campaign.checks import check_keys, check_params
+from replay.run.eval_options import BY_NAME as EVAL
+from replay.run.pipeline import plain as _plain
+from replay.trajectory.recorded import recorded_params
+from replay.util.errors import ReplayError
+from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
+
+DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
+FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
+
+
+@dataclass
+class DatasetEntry:
+    """One ``[[dataset]]``: its id (a recording's absolute path for a path), canonical parameters,
+    ``first``, tasks and recorded estimates ({name: association parameters})."""
+
+    id: str
+    params: dict
+    first: int | None
+    tasks: list
+    recorded: dict
+
+
+def _class_of(registry: dict, name: str):
+    from replay.util.lookup import resolve
+
+    return resolve(registry, name, "component")
+
+
+def task_tables(where, doc: dict) -> dict:
+    """The ``[task.NAME]`` tables: {task: parameters}, each checked against the task's declarations."""
+    from replay.tasks import TASKS
+
+    tables = doc.get("task", {})
+    for tname, tp in tables.items():
+        if tname not in TASKS:
+            raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
+        if not isinstance(tp, dict):
+            raise where.error(tname, "expected a table of task parameters")
+        check_params(where, f"task {tname!r}", _class_of(TASKS, tname).PARAMS, tp)
+    return tables
+
+
+def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntry:
+    """One ``[[dataset]]`` checked: its id, tasks, ``first``, parameters and recorded estimates."""
+    check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
+    if "id" not in entry:
+        raise where.error("dataset", "every [[dataset]] needs an id")
+    ref = _dataset_of(where, path, entry["id"])
+    tasks = _tasks(where, entry.get("tasks", [(ref.entry and ref.entry.default_task) or "position"]))
+    first = entry.get("first")
+    check_params(where, "[[dataset]]", (EVAL["first"],), {"first": first})  # replay eval's declaration
+    if ref.kind == "file" and ref.locate(data_dir) is None:
+        raise where.error("id", f"dataset {ref.id} not found (set data_dir in [campaign], pass "
+                                f"--data-dir, or run `replay datasets fetch {ref.id}`)", ref.id)
+    params = _dataset_params(where, path, ref, dict(entry.get("params", {})))
+    if ref.is_sim and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
+        _load_once(where, ref.id, params, first, data_dir)
+    recorded = _recorded(where, entry, ref.id, params, first, data_dir, ref.adapter)
+    return DatasetEntry(ref.id, params, first, tasks, recorded)
+
+
+def _dataset_of(where, path: Path, ds_id: str):
+    """The :class:`~replay.data.dataset_ref.DatasetRef` of an id: a registered one, or a recording's path
+    (relative to the campaign file; its id becomes the absolute path)."""
+    from replay.data import dataset_ref
+
+    ref = _recording(where, path, ds_id)
+    if ref is not None:
+        return ref
+    try:
+        return dataset_ref.resolve(ds_id)
+    except ReplayError as e:
+        raise where.error("id", str(e), ds_id) from None
+
+
+def _tasks(where, tasks) -> list:
+    from replay.tasks import TASKS
+
+    if not tasks:
+        raise where.error("tasks", "empty list of tasks")
+    for t in tasks:
+        if not isinstance(t, str) or t not in TASKS:
+            raise where.error("tasks", f"unknown task {t!r} (known: {', '.join(sorted(TASKS))})", t)
+    return tasks
+
+
+def _dataset_params(where, path: Path, ref, params: dict) -> dict:
+    """A dataset's parameters canonical: a mapping relative to the campaign file made absolute, a
+    simulator's and the views checked line by line, an adapter's options checked."""
+    from replay.data import registry
+
+    if isinstance(params.get("mapping"), str) and (path.parent / params["mapping"]).is_file():
+        params["mapping"] = str((path.parent / params["mapping"]).resolve())  # relative to this file
+    if ref.is_sim:
+        own = {k: v for k, v in params.items() if k not in VIEW_NAMES}  # the views: checked below
+        check_params(where, f"dataset {ref.id!r}", registry.generator(ref.entry).PARAMS, own)
+        check_params(where, f"dataset {ref.id!r}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
+    try:
+        return _plain(registry.check_params(ref.target, params, adapter=ref.adapter if ref.is_path else None))
+    except ReplayError as e:
+        raise where.error(next(iter(params), "params"), str(e)) from None
+
+
+def _recording(where, path: Path, ds_id: str):
+    """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): its reference
+    (the absolute path, the adapter chosen from the file); None for a registered id."""
+    from replay.data import registry
+    from replay.data.dataset_ref import DatasetRef
+
+    if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
+        return None
+    file = (path.parent / ds_id).resolve()
+    if not file.exists():
+        raise where.error("id", f"no such recording {file}", ds_id)
+    try:
+        adapter = registry.adapter_for(file)
+    except ReplayError as e:
+        raise where.error("id", str(e), ds_id) from None
+    return DatasetRef(str(file), "path", path=file, adapter=adapter)
+
+
+def _frame0(ds_id, ds_params: dict, first, data_dir):
+    from replay.run.pipeline import load_frame
+
+    return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
+                       "adapter": None}, 0, data_dir)
+
+
+def _load_once(where, ds_id, ds_params: dict, first, data_dir):
+    """Run 0's frame, so that a view it cannot take is refused before any unit."""
+    try:
+        return _frame0(ds_id, ds_params, first, data_dir)
+    except ReplayError as e:
+        raise where.error("params", str(e)) from None
+
+
+def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapter) -> dict:
+    """{name: association parameters} of the recorded estimates a dataset entry scores: those
+    named in ``recorded``, else every estimate its mapping declares (bags adapter only)."""
+    declared = {}
+    if adapter == "bags":
+        try:
+            if ds_params.get("mapping") is not None:
+                from replay.adapters.bags import resolve_mapping
+
+                declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
+            else:  # the proposed mapping: read the recording
+                declared = {k: e.params for k, e in _frame0(ds_id, ds_params, first, data_dir).estimates.items()}
+        except ReplayError as e:
+            raise where.error("params", str(e)) from None
+    chosen = entry.get("recorded", list(declared))
+    out = {}
+    for name in chosen:
+        if not isinstance(name, str) or name not in declared:
+            raise where.error("recorded", f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
+                                          f"declare: {', '.join(declared) or 'none'})", name)
+        try:
+            out[name] = _plain(recorded_params(name, None, declared[name]))
+        except ReplayError as e:
+            raise where.error("recorded", str(e), name) from None
+    return out
+
+
+def filters(where, entries: list, runs: int, max_units: int) -> list[tuple[str, dict]]:
+    """Every ``[[filter]]`` with its grid expanded: [(name, canonical parameters)]."""
+    out: list = []
+    for entry in entries:
+        out += _filter(where, entry, runs, len(out), max_units)
+    return out
+
+
+def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tuple[str, dict]]:
+    """One ``[[filter]]``: one configuration per combination of its grid (``held``: those before it)."""
+    from replay.filters import FILTERS
+
+    check_keys(where, entry, FILTER_KEYS, "[[filter]]")
+    name = entry.get("name")
+    if name is None:
+        raise where.error("filter", "every [[filter]] needs a name")
+    if name not in FILTERS:
+        raise where.error("name", f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})", name)
+    declared = _class_of(FILTERS, name).PARAMS
+    base, grid = entry.get("params", {}), entry.get("grid", {})
+    check_params(where, f"filter {name!r}", declared, base)
+    for key, values in grid.items():
+        if not isinstance(values, list):
+            raise where.error(key, f"grid values must be a list, got {type(values).__name__}")
+        if not values:
+            raise where.error(key, "empty grid: give at least one value")
+        for v in values:
+            check_params(where, f"filter {name!r}", declared, {key: v})
+    keys = list(grid)
+    combos = math.prod(len(grid[k]) for k in keys)
+    if (held + combos) * runs > max_units:  # before building them (a grid multiplies)
+        raise where.error(keys[0] if keys else "filter", f"{held + combos} filter configurations x {runs} runs, "
+                          f"more than a campaign may hold ({max_units} units); split it")
+    return [(name, _made(where, name, {**base, **dict(zip(keys, combo))}))
+            for combo in itertools.product(*(grid[k] for k in keys))]
+
+
+def _made(where, name: str, params: dict) -> dict:
+    """The canonical parameters of filter ``name`` made with ``params`` (its constructor checks relations)."""
+    from replay.filters import make_filter
+
+    try:
+        return _plain(make_filter(name, **params).params())
+    except ReplayError as e:
+        raise where.error(name, str(e), name) from None
+    except Exception as e:  # a constructor's own validation
+        raise where.error(name, f"filter {name!r}: {e}", name) from None

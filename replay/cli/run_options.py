@@ -1,0 +1,55 @@
+"""Click options made from the declared options of a run (:data:`replay.run.eval_options.EVAL_OPTIONS`).
+
+``@run_option("runs", "-n")`` is ``--runs/-n`` with the declaration's default, its help text
+(doc, what it accepts, unit) and its checking: the text is read as JSON (``1.5``, ``NaN``; a
+bare word stays a string) and checked by the declaration, so ``replay eval --runs 0`` and
+``replay.evaluate(runs=0)`` are refused with the same line.
+"""
+from __future__ import annotations
+
+import json
+
+import click
+
+from replay.run.eval_options import BY_NAME
+from replay.util.params import Param
+
+
+class Declared(click.ParamType):
+    """A click type that reads the text as JSON and checks it with a :class:`Param`."""
+
+    def __init__(self, param: Param):
+        self.param = param
+        self.name = param.type.__name__
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, str):  # a default, or given from Python
+            return self.param.check(value)
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        if self.param.type is float and isinstance(parsed, (int, str)) and not isinstance(parsed, bool):
+            try:
+                parsed = float(parsed)  # an integer, or nan / inf (not JSON): refused as numbers
+            except ValueError:
+                pass
+        elif self.param.type is str:
+            parsed = value
+        return self.param.check(parsed)
+
+
+def help_text(p: Param, extra: str = "") -> str:
+    """The ``--help`` line of a declared option: its doc, what it accepts and its unit."""
+    unit = f" [{p.unit}]" if p.unit and p.unit not in p.doc.split() else ""
+    return f"{p.doc[0].upper()}{p.doc[1:]}{unit}: {p.accepts()}.{extra}"
+
+
+def run_option(name: str, *short: str, default=..., extra: str = ""):
+    """The click option ``--<name>`` of the declared run option ``name`` (``default``: another one,
+    e.g. ``replay tune``'s run count)."""
+    p = BY_NAME[name]
+    default = p.default if default is ... else default
+    return click.option(f"--{name.replace('_', '-')}", *short, name, default=default, type=Declared(p),
+                        show_default=default is not None, metavar=p.type.__name__.upper(),
+                        help=help_text(p, extra))
