@@ -7,8 +7,7 @@ environment variable ``REPLAY_SHARED``. When it is absent those tests skip.
 The session runs with ``REPLAY_CACHE_DIR`` set to a fresh temporary directory
 (removed at the end), set here before any test module imports numba, so the
 registry's user cache is empty (tests name their data directories) and nothing
-is read from or written to the developer's cache. Subprocesses inherit it. Temporary
-files (``tmp_path``, that cache) are in memory when ``/dev/shm`` is a tmpfs (tests/ram_tmp.py).
+is read from or written to the developer's cache. Subprocesses inherit it.
 The compiled kernels (``filters/binding.py`` keeps them in ``$REPLAY_CACHE_DIR/kernels``)
 survive from one session to the next: the session's ``kernels`` directory starts
 as a copy of this checkout's test kernel store (``<user cache>/test-kernels/<hash
@@ -29,13 +28,8 @@ from pathlib import Path
 import pytest
 
 import kernel_store
-import ram_tmp
 from replay.registry import cache_dir as _user_cache
 
-# Temporary files in memory when /dev/shm is a tmpfs and TMPDIR is not set: tmp_path, the session cache,
-# subprocesses. The tests write and fsync thousands of small files (run directories, campaign stores,
-# Optuna's SQLite): on a disk that is most of some tests' time. REPLAY_TEST_RAM_TMP=0 keeps the disk.
-ram_tmp.use_ram_tmpdir()
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
