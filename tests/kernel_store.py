@@ -2,7 +2,9 @@
 
 Each session runs with a fresh temporary ``REPLAY_CACHE_DIR`` (tests/conftest.py). Its
 ``kernels`` directory starts as a copy of the store and replaces the store when the session
-ends, so a second run does not compile again what the first compiled. The store holds the
+ends (merged: a copy the session did not touch stays, one it compiled anew replaces the
+store's older copy of the same model and template), so a second run does not compile again
+what the first compiled; parallel workers (pytest-xdist) each merge theirs. The store holds the
 product's kernel cache as the product writes it: copies named by the SHA-256 of their text,
 checked against it before import, numba's files sealed and checked before they are read
 (``filters/binding.py``, ``filters/kernel_files.py``); a changed kernel is a new name and a new
@@ -48,18 +50,32 @@ def restore(store: Path, kernels: Path) -> bool:
     return True
 
 
+def _superseded(store: Path, kernels: Path) -> set:
+    """Names of the store's copies (``<prefix><model>_<digest>``) that the session has another
+    digest of: the same model and template, older or newer sources (pruned, as the product does)."""
+    mine = {p.stem.rsplit("_", 1)[0]: p.stem for p in kernels.glob("*.py")}
+    return {p.stem for p in store.glob("*.py") if mine.get(p.stem.rsplit("_", 1)[0], p.stem) != p.stem}
+
+
 def save(kernels: Path, store: Path) -> bool:
-    """Make the session's ``kernels`` directory the store: copied beside it, then renamed into
-    place (a crash or a concurrent session leaves an old or a new store, never a mix)."""
+    """Merge the session's ``kernels`` directory into the store: the store's copies that the session
+    did not replace (another worker's, another test selection's) and the session's, copied beside
+    the store and renamed into place (a crash or a concurrent session leaves an old or a new
+    store, never a mix)."""
     if not _private(kernels):
         return False
     parent = store.parent
     tag = f"{os.getpid()}.{uuid.uuid4().hex[:8]}"
     new, old = parent / f".new.{store.name}.{tag}", parent / f".old.{store.name}.{tag}"
+    skip = shutil.ignore_patterns(".probe.*", "*.tmp.*")
     try:
         parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         os.chmod(parent, 0o700)
-        shutil.copytree(kernels, new, symlinks=True, ignore=shutil.ignore_patterns(".probe.*", "*.tmp.*"))
+        if _private(store):
+            gone = _superseded(store, kernels)
+            shutil.copytree(store, new, symlinks=True, ignore=lambda d, names: set(skip(d, names)) | {
+                n for n in names if n.split(".", 1)[0] in gone or n.rsplit(".", 1)[0] in gone})
+        shutil.copytree(kernels, new, symlinks=True, ignore=skip, dirs_exist_ok=True)
         os.chmod(new, 0o700)
         if store.exists() or store.is_symlink():
             os.rename(store, old)

@@ -32,11 +32,18 @@ def test_saved_then_restored_with_times_and_replaced_whole(tmp_path):
     assert (again / "replay_rows_a_1.py").read_text() == "x = 1\n"
     assert (again / "replay_rows_a_1.py").stat().st_mtime == 1_000_000  # numba's index stays valid
     assert (again / "__pycache__" / "replay_rows_a_1.f-1.nbi").read_text() == "i"
-    # the next session pruned the old copy and compiled a new one: the store is that session's set
+    # the next session pruned the old copy and compiled a new one: it replaces the store's, with
+    # numba's files of the old one; a copy of another model that session did not use stays
     (again / "replay_rows_a_1.py").unlink()
+    (again / "__pycache__" / "replay_rows_a_1.f-1.nbi").unlink()
     (again / "replay_rows_a_2.py").write_text("x = 2\n")
+    (again / "__pycache__" / "replay_rows_a_2.f-1.nbi").write_text("j")
+    other = _kernels(tmp_path / "s3", {"replay_rows_b_7.py": "y = 7\n", "__pycache__/replay_rows_b_7.f-1.nbi": "k"})
+    assert kernel_store.save(other, store)
     assert kernel_store.save(again, store)
-    assert sorted(p.name for p in store.iterdir()) == ["__pycache__", "replay_rows_a_2.py"]
+    assert sorted(p.name for p in store.iterdir()) == ["__pycache__", "replay_rows_a_2.py", "replay_rows_b_7.py"]
+    assert sorted(p.name for p in (store / "__pycache__").iterdir()) == ["replay_rows_a_2.f-1.nbi",
+                                                                         "replay_rows_b_7.f-1.nbi"]
     assert not [p for p in store.parent.iterdir() if p.name.startswith(".")]  # no temporary left
 
 
