@@ -11,7 +11,8 @@ is read from or written to the developer's cache. Subprocesses inherit it.
 The compiled kernels (``filters/binding.py`` keeps them in ``$REPLAY_CACHE_DIR/kernels``)
 survive from one session to the next: the session's ``kernels`` directory starts
 as a copy of this checkout's test kernel store (``<user cache>/test-kernels/<hash
-of the checkout's path>``, owner-only) and replaces it at the end. The store is
+of the checkout's path>``, owner-only) and is merged into it at the end
+(tests/kernel_store.py; parallel workers each merge theirs). The store is
 the product's own cache, used as the product uses it: every copy is named by the
 hash of its text (the template, its helpers and the model's kernels), checked
 against it before it is imported, and numba's files are sealed and checked
