@@ -5,14 +5,21 @@ parent holds ``main/`` and ``shared/``), or the directory named by the
 environment variable ``REPLAY_SHARED``. When it is absent those tests skip.
 
 The session runs with ``REPLAY_CACHE_DIR`` set to a fresh temporary directory
-(removed at the end), set here before any test module imports numba: the
-paper-002 kernels (``filters/p002/binding.py`` writes them to
-``$REPLAY_CACHE_DIR/kernels``) are compiled once per session from the current
-sources and never read from a developer's cache, and the registry's user cache
-is empty (tests name their data directories). ``REPLAY_TEST_CACHE_DIR=DIR``
-keeps that cache in DIR across sessions instead. Subprocesses inherit it.
-Tests that compile the paper-002 filter kernels are marked ``slow``; ``pytest -m "not slow"`` compiles
-only the models' small gufuncs (replay/models/kernel_model.py, about 2 s once, cached by numba).
+(removed at the end), set here before any test module imports numba, so the
+registry's user cache is empty (tests name their data directories) and nothing
+is read from or written to the developer's cache. Subprocesses inherit it.
+The compiled kernels (``filters/binding.py`` keeps them in ``$REPLAY_CACHE_DIR/kernels``)
+survive from one session to the next: the session's ``kernels`` directory starts
+as a copy of this checkout's test kernel store (``<user cache>/test-kernels/<hash
+of the checkout's path>``, owner-only) and is merged into it at the end
+(tests/kernel_store.py; parallel workers each merge theirs). The store is
+the product's own cache, used as the product uses it: every copy is named by the
+hash of its text (the template, its helpers and the model's kernels), checked
+against it before it is imported, and numba's files are sealed and checked
+before they are read; an edit to a kernel gives a new name and a compilation,
+never stale machine code. ``REPLAY_TEST_CACHE_DIR=DIR`` keeps the whole cache in
+DIR across sessions instead (no store); ``REPLAY_TEST_FRESH_KERNELS=1`` starts the
+session with no kernels (every kernel compiled, as on a clean machine).
 """
 import os
 import shutil
@@ -21,17 +28,22 @@ from pathlib import Path
 
 import pytest
 
+import kernel_store
 from replay.data.registry import cache_dir as _user_cache
 
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
 SESSION_CACHE = Path(_KEEP).expanduser() if _KEEP else Path(tempfile.mkdtemp(prefix="replay-tests-"))
+KERNEL_STORE = kernel_store.store_for(_user_cache(), Path(__file__).resolve().parents[1])
+if not _KEEP and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
+    kernel_store.restore(KERNEL_STORE, SESSION_CACHE / "kernels")
 os.environ["REPLAY_CACHE_DIR"] = str(SESSION_CACHE)
 
 
 def pytest_unconfigure(config):
     if not _KEEP:
+        kernel_store.save(SESSION_CACHE / "kernels", KERNEL_STORE)
         shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
 

@@ -1,7 +1,8 @@
 """Helpers for the corpus of malformed and hostile inputs (``tests/test_hostile_*.py``).
 
 Every case asserts one of two outcomes: a **refusal** (exit status 2, exactly one
-non-empty line on stderr naming what is wrong, no traceback) or a **counted repair**
+non-empty line on stderr naming what is wrong, no traceback; the heartbeat of a slow
+load, ``load FILE: 3 s``, is progress, not part of the error, and is left out) or a **counted repair**
 (the command succeeds and the adapter's report counts what it dropped or repaired).
 ``CORPUS`` collects the case ids of every module so that a test can count them.
 """
@@ -14,6 +15,14 @@ from click.testing import CliRunner
 from replay.cli import main
 
 CORPUS: set[str] = set()
+# a line of the load heartbeat (replay.util.progress.Loading): printed on stderr when reading a file takes
+# over 3 s (a loaded machine), beside any error
+PROGRESS = re.compile(r"^load .+: (\d+ s(, .*)?|(done|stopped) in \d+ s)$")
+
+
+def message_lines(stderr: str) -> list[str]:
+    """The non-empty lines of ``stderr`` that are not load progress: an error must be exactly one."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not PROGRESS.match(ln.strip())]
 
 
 def register(*ids: str) -> None:
@@ -48,8 +57,8 @@ def assert_refused(args, match: str, *, cwd=None, env=None) -> str:
         raise AssertionError("traceback instead of a refusal:\n" + "".join(
             traceback.format_exception(res.exception)))
     assert res.exit_code == 2, f"exit {res.exit_code}\nstdout: {res.stdout}\nstderr: {res.stderr}"
-    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1, f"expected one line on stderr, got:\n{res.stderr}"
+    lines = message_lines(res.stderr)
+    assert len(lines) == 1, f"expected one line on stderr (besides load progress), got:\n{res.stderr}"
     assert "Traceback" not in res.stderr
     assert re.search(match, lines[0], re.IGNORECASE), f"{match!r} not in {lines[0]!r}"
     return lines[0]
