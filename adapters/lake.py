@@ -6,25 +6,11 @@ The format (also in README.md, "Lake-trial logs"): a CSV or TSV text file.
   kept in ``meta["header"]``; ``# units: depth=m, pitch=deg`` gives units of
   columns whose names carry none; ``# synthetic: true`` marks generated data.
 * One header row, then one row per internal-sensor sample (any fixed or
-  jittered rate). Columns, in any order, case-insensitive, unit in the name
-  (``pitch_deg``, ``pitch [deg]``, ``pitch (deg)``) or in the ``units`` line:
-
-  ============  ==========================  =====================================
-  column        units                       meaning
-  ============  ==========================  =====================================
-  ``time``      s, ms                       sensor time (required)
-  ``depth``     m, cm, mm                   depth gauge, positive down
-  ``speed``     m/s (mps), cm/s, kn         speed sensor, forward
-  ``pitch``     deg, rad                    pitch sensor, positive nose down
-  ``ref_time``  s, ms                       time of the reference samples (optional)
-  ``ref_depth`` m, cm, mm                   external-reference depth
-  ``ref_speed`` m/s, cm/s, kn               reference speed, where measured
-  ``ref_pitch`` deg, rad                    reference pitch, where measured
-  ============  ==========================  =====================================
-
-  With a ``ref_time`` column the reference is its own time series (rows may
-  hold only reference cells, or only sensor cells); without it a reference
-  cell belongs to the sensor time of its row. Empty cells are missing values.
+  jittered rate): ``time`` (required), ``depth``, ``speed``, ``pitch`` and the
+  reference's ``ref_time``, ``ref_depth``, ``ref_speed``, ``ref_pitch``, in any order,
+  case-insensitive, the unit in the name (``pitch_deg``, ``pitch [deg]``) or in the
+  ``units`` line; the table of columns and units is README.md's. Without ``ref_time``
+  a reference cell belongs to the sensor time of its row. Empty cells are missing.
 
 What :func:`load` does (everything counted in ``frame.report``):
 
@@ -63,10 +49,9 @@ from replay.adapters.options import declare
 from replay.frame import Channel, Frame, Report
 from replay.util.params import Param
 
-MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
-KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
-         "speed": "speed", "velocity": "speed", "pitch": "pitch"}
-REF_PREFIXES = ("ref_", "ref.", "ref ", "reference_", "ext_", "external_")
+from replay.adapters.lake_align import MAX_GAP, align
+from replay.adapters.lake_table import numeric, parse_column, read_table
+
 FRAMES = {"depth": "down", "speed": "body forward", "pitch": "body"}
 DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",
                "pitch": "pitch sensor, positive nose down"}
@@ -74,123 +59,8 @@ DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, fo
 
 # ---------------------------------------------------------------- columns
 
-def parse_column(name: str, units_line: dict):
-    """(is_reference, kind, unit) of a column name, or None when it is not a known column."""
-    low = name.strip().lower()
-    unit = None
-    m = re.match(r"^(.*?)\s*[\[(](.+?)[\])]\s*$", low)
-    if m:
-        low, unit = m.group(1).strip(), m.group(2).strip()
-    ref = low.startswith(REF_PREFIXES)
-    base = low
-    for p in REF_PREFIXES:
-        if base.startswith(p):
-            base = base[len(p):]
-            break
-    kind = KINDS.get(base)
-    if kind is None and unit is None and "_" in base:
-        head, _, tail = base.partition("_")
-        if head in KINDS:
-            kind, unit = KINDS[head], tail
-    if kind is None:
-        return None
-    key = ("ref_" if ref else "") + kind
-    if unit is None:
-        unit = units_line.get(key) or units_line.get(kind)
-    return ref, kind, unit
-
-
-def _comments(path, text: str):
-    lines = text.splitlines()
-    comments, i = [], 0
-    while i < len(lines) and (lines[i].lstrip().startswith("#") or not lines[i].strip()):
-        if lines[i].strip():
-            comments.append(lines[i].lstrip()[1:].strip())
-        i += 1
-    header, units = {}, {}
-    for c in comments:
-        key, sep, value = c.partition(":")
-        if sep and key.strip() and " " not in key.strip():
-            header[key.strip().lower()] = value.strip()
-    for item in re.split(r"[,;]", header.get("units", "")):
-        k, sep, v = item.partition("=")
-        if sep:
-            units[k.strip().lower()] = v.strip().lower()
-    return comments, header, units, i
-
-
-def _read_table(path: Path):
-    if not path.is_file():
-        raise DataError(path, "file not found")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
-        raise DataError(path, f"cannot read as text: {err}") from None
-    comments, header, units, skip = _comments(path, text)
-    body = text.splitlines()[skip:]
-    if not body:
-        raise DataError(path, "no header row (expected e.g. time_s,depth_m,speed_mps,pitch_deg,ref_depth_m)")
-    sep = "\t" if "\t" in body[0] else ("," if "," in body[0] else (";" if ";" in body[0] else ","))
-    try:
-        table = pd.read_csv(io.StringIO("\n".join(body)), sep=sep, dtype=str, skip_blank_lines=True,
-                            keep_default_na=False)
-    except (pd.errors.ParserError, ValueError) as err:
-        raise DataError(path, f"not a readable {'TSV' if sep == chr(9) else 'CSV'} table: "
-                        f"{str(err).strip().splitlines()[-1]}") from None
-    table.columns = [str(c).strip() for c in table.columns]
-    if len(table) == 0:
-        raise DataError(path, "header only, no data rows")
-    return table, comments, header, units, skip + 2  # file line of the first data row
-
-
-def _numeric(path, table, col, first_line) -> np.ndarray:
-    s = table[col].str.strip()
-    s = s.where(~s.str.lower().isin(["", "nan", "na", "null"]), None)
-    num = pd.to_numeric(s, errors="coerce")
-    bad = num.isna().to_numpy() & s.notna().to_numpy()
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise DataError(path, f"column {col}: non-numeric value {table[col].iloc[i]!r}", row=first_line + i)
-    return num.to_numpy(dtype=float)
-
 
 # ---------------------------------------------------------------- alignment
-
-def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GAP,
-          angle: bool = False, tol: float = 1e-6):
-    """Reference samples (tr, vr) on times ``t`` without inventing samples.
-
-    Returns ``(values, valid, counts)``: a time within ``tol`` of a reference
-    sample takes its value (``exact``); a time between two reference samples at
-    most ``max_gap`` apart is linearly interpolated (``interpolated``; angles by
-    their wrapped difference); a time inside a longer gap (``in_gaps``, with
-    ``gaps`` the number of such gaps that hold sensor samples) or outside
-    [tr[0], tr[-1]] (``outside``) is masked.
-    """
-    out = np.full(len(t), np.nan)
-    n = len(tr)
-    counts = {"exact": 0, "interpolated": 0, "in_gaps": 0, "gaps": 0, "outside": 0}
-    if n == 0:
-        counts["outside"] = len(t)
-        return out, np.zeros(len(t), bool), counts
-    j = np.searchsorted(tr, t)  # tr[j-1] < t <= tr[j]
-    hi = np.clip(j, 0, n - 1)
-    lo = np.clip(j - 1, 0, n - 1)
-    exact_hi = np.abs(tr[hi] - t) <= tol
-    exact_lo = np.abs(tr[lo] - t) <= tol
-    exact = exact_hi | exact_lo
-    out[exact_hi] = vr[hi[exact_hi]]
-    out[exact_lo & ~exact_hi] = vr[lo[exact_lo & ~exact_hi]]
-    inside = ~exact & (j > 0) & (j < n)
-    span = tr[hi] - tr[lo]
-    interp = inside & (span <= max_gap)
-    gap = inside & (span > max_gap)
-    frac = (t[interp] - tr[lo[interp]]) / span[interp]
-    d = vr[hi[interp]] - vr[lo[interp]]
-    out[interp] = vr[lo[interp]] + (wrap(d) if angle else d) * frac
-    counts.update(exact=int(exact.sum()), interpolated=int(interp.sum()), in_gaps=int(gap.sum()),
-                  gaps=int(len(np.unique(j[gap]))), outside=int((~exact & ~inside).sum()))
-    return out, exact | interp, counts
 
 
 # ---------------------------------------------------------------- loading
@@ -200,7 +70,7 @@ def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GA
 def load(path, *, max_gap) -> Frame:
     """Read a lake-trial depth log (module docstring) into a :class:`Frame`."""
     path = Path(path)
-    table, comments, header, units_line, first_line = _read_table(path)
+    table, comments, header, units_line, first_line = read_table(path)
     report = Report()
     cols = _columns(path, table, units_line, report)
     sensors = [k for k in ("depth", "speed", "pitch") if (False, k) in cols]
@@ -209,7 +79,7 @@ def load(path, *, max_gap) -> Frame:
     def si(ref, kind):
         col = cols[(ref, kind)]
         unit = parse_column(col, units_line)[2]
-        v = _numeric(path, table, col, first_line) * UNITS[kind][unit]
+        v = numeric(path, table, col, first_line) * UNITS[kind][unit]
         if (inf := np.isinf(v)).any():
             report.add("masked", col, int(inf.sum()), f"infinite values (inf) at {_lines(rows, inf)}: missing")
         return np.where(inf, np.nan, v)
@@ -353,24 +223,3 @@ def _parse_maneuvers(text: str, t0: float) -> list[list]:
 
 # ---------------------------------------------------------------- writing
 
-def write(frame: Frame, path, comments=(), pitch_unit: str = "deg") -> Path:
-    """Write a frame with depth/speed/pitch channels (and reference) as a lake-trial log.
-
-    Reference cells share the sensor row's time; invalid samples are empty cells.
-    """
-    path = Path(path)
-    scale = {"depth": 1.0, "speed": 1.0, "pitch": 1.0 / UNITS["pitch"][pitch_unit]}
-    suffix = {"depth": "m", "speed": "mps", "pitch": pitch_unit}
-    data = {"time_s": frame.t}
-    for prefix, group in (("", frame.channels), ("ref_", frame.reference)):
-        for kind in ("depth", "speed", "pitch"):
-            ch = group.get(kind)
-            if ch is not None:
-                data[f"{prefix}{kind}_{suffix[kind]}"] = np.where(ch.valid, ch.values * scale[kind], np.nan)
-    lines = [f"# {c}" for c in ["replay lake-trial depth log (format: README.md, 'Lake-trial logs')",
-                                *comments]]
-    table = pd.DataFrame(data)
-    body = table.to_csv(index=False, float_format="%.10g", na_rep="", lineterminator="\n")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n" + body, encoding="utf-8")
-    return path

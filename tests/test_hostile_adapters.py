@@ -38,7 +38,7 @@ def bohai_head(bohai_dir) -> pd.DataFrame:
 def lake_text(tmp_path_factory) -> str:
     """A synthetic lake-trial log (1800 rows at 20 Hz) as written by the lake writer."""
     from replay.data import registry
-    from replay.adapters.lake import write
+    from replay.adapters.lake_write import write
 
     path = tmp_path_factory.mktemp("lake") / "lake.csv"
     write(registry.load_frame("sim/lake-depth", rng=0), path)

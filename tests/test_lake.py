@@ -4,7 +4,9 @@ import pytest
 from click.testing import CliRunner
 
 from replay.data import registry
-from replay.adapters.lake import align, load, write
+from replay.adapters.lake import load
+from replay.adapters.lake_align import align
+from replay.adapters.lake_write import write
 from replay.cli import main
 from replay.util.errors import DataError, ReplayError
 from replay.sim.lake_depth import make_frame, maneuvers

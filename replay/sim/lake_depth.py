@@ -234,7 +234,7 @@ def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, no
 
 def write_example(path, rng: np.random.Generator, **params) -> Frame:
     """Write one synthetic lake-trial log (reference at half rate, one short and one long gap)."""
-    from replay.adapters.lake import write
+    from replay.adapters.lake_write import write
 
     frame = make_frame(rng, **{**EXAMPLE, **params})
     write(frame, path, comments=[
