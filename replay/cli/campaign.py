@@ -73,11 +73,12 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
                    f"wrote {out / 'leaderboard.csv'}, {out / 'paired.csv'}")
     for name, t in tunes:  # replay tune at scale: every tune's units in one store, OUT/tune
         from replay.tune import run as tune_run
+        from replay.tune.write import format_board
 
         res = tune_run.tune(t, out / "tune" / name, store_dir=out / "tune", workers=workers, scheduler=scheduler,
                             dask_local=dask_local, quiet=quiet, wait=wait)
         click.echo(f"tune {name} ({t.split.tuned_on} -> {t.split.tested_on}; {t.trials} trials per filter):")
-        click.echo(tune_run.format_board(res["rows"]))
+        click.echo(format_board(res["rows"]))
         click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))
 
 

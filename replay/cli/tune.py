@@ -49,6 +49,7 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
     from replay.cli import params as cli_params
     from replay.cli.campaign import check_names
     from replay.tune import check, run, space
+    from replay.tune.write import format_board
     from replay.util.files import check_writable, refuse_overlap
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
@@ -74,7 +75,7 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
                    "--out")
     check_writable(out, "--out")
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet)
-    click.echo(run.format_board(res["rows"]))
+    click.echo(format_board(res["rows"]))
     budget = res["budget"]
     same = len(set(budget.values())) == 1
     click.echo(f"budget: {next(iter(budget.values()))} trials per filter, the same for every filter" if same else

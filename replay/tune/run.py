@@ -19,13 +19,14 @@ import numpy as np
 from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
-from replay.campaign.store import Store, write_bytes, write_json
+from replay.campaign.store import Store, write_json
 from replay.run.eval_options import DEFAULTS
 from replay.run.pipeline import Config, config_hash, plain
 from replay.util.progress import Progress
 
 from . import objectives, study as studies
 from .splits import Split
+from replay.tune.write import write_tuned
 
 COLUMNS = ["dataset", "task", "filter", "label", "params", "tuned_on", "tested_on", "objective", "trials",
            "train_score", "test_score", "overlap", "runs", "seed", "pos_rmse", "pos_rmse_median", "lost",
@@ -238,85 +239,3 @@ def _pooled(rows) -> dict:
     return out
 
 
-def write_tuned(t: Tune, out: Path, rows) -> dict:
-    """``tuned.toml``: the tuned configurations on the test data as a campaign file (``replay
-    campaign run`` and ``replay eval --tuned`` take it). Filters tuned to different task
-    parameters cannot share one file: then one ``tuned-<filter>.toml`` each."""
-    tuned = [r for r in rows if r["label"].endswith("(tuned)")]
-    if not tuned:
-        return {}
-    groups: dict = {}
-    for r in tuned:
-        key = json.dumps(r["_test"][0].task_params, sort_keys=True)
-        groups.setdefault(key, []).append(r)
-    files = {}
-    for i, (key, rs) in enumerate(groups.items()):
-        path = out / ("tuned.toml" if len(groups) == 1 else f"tuned-{rs[0]['filter']}.toml")
-        write_bytes(path, _toml(t, rs, json.loads(key)).encode())
-        files["tuned" if len(groups) == 1 else f"tuned-{rs[0]['filter']}"] = path
-    return files
-
-
-def _toml(t: Tune, rows, task_params: dict) -> str:
-    lines = ["# written by replay tune: the tuned configurations on the held-out data",
-             f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
-             + ", ".join(f"{r['filter']} {r['trials']}" for r in rows),
-             "[campaign]", 'name = "tuned"', f"runs = {t.runs}", f"seed = {rows[0]['_test'][0].seed}",
-             f'alignment = "{t.alignment}"']
-    if t.data_dir:
-        lines.append(f"data_dir = {json.dumps(str(Path(t.data_dir).resolve()))}")
-    for d, p in t.split.test:
-        lines += ["", "[[dataset]]", f"id = {json.dumps(d)}", f"tasks = [{json.dumps(t.task)}]"]
-        if p:
-            lines.append("params = " + _inline(p))
-        if t.first is not None:
-            lines.append(f"first = {t.first}")
-    lines += ["", f"[task.{json.dumps(t.task)}]"] + [f"{k} = {_val(v)}" for k, v in task_params.items()
-                                                      if v is not None]
-    for r in rows:
-        lines += ["", "[[filter]]", f"name = {json.dumps(r['filter'])}",
-                  "params = " + _inline(r["_test"][0].filter_params)]
-    return "\n".join(lines) + "\n"
-
-
-def _val(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf") if not math.isnan(v) else "nan"
-    if isinstance(v, dict):
-        return _inline(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_val(x) for x in v) + "]"
-    return json.dumps(v)
-
-
-def _inline(d: dict) -> str:
-    return "{ " + ", ".join(f"{json.dumps(k)} = {_val(v)}" for k, v in d.items() if v is not None) + " }"
-
-
-def format_board(rows) -> str:
-    """The leaderboard as printed: one line per row (default and tuned of each filter)."""
-    head = ["filter", "tuned_on", "objective", "trials", "train", "test", "pos_rmse", "lost", "params"]
-    body = []
-    for r in rows:
-        body.append([r["label"], r["tuned_on"], r["objective"], str(r["trials"]), _num(r["train_score"]),
-                     _num(r["test_score"]), _num(r["pos_rmse"]), f"{r['lost']}/{r['runs']}", _short(r)])
-    widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
-    return "\n".join([line(head), *(line(b) for b in body)])
-
-
-def _short(r) -> str:
-    if r.get("_params") is None:
-        return "-"
-    p = r["_params"]
-    return ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items()) or "defaults"
-
-
-def _num(v) -> str:
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return str(v)
-    return f"{v:.4f}" if math.isfinite(v) else str(v)
