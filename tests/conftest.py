@@ -6,7 +6,7 @@ environment variable ``REPLAY_SHARED``. When it is absent those tests skip.
 
 The session runs with ``REPLAY_CACHE_DIR`` set to a fresh temporary directory
 (removed at the end), set here before any test module imports numba: the
-paper-002 kernels (``filters/p002/binding.py`` writes them to
+paper-002 kernels (``filters/compiled/copies.py`` writes them to
 ``$REPLAY_CACHE_DIR/kernels``) are compiled once per session from the current
 sources and never read from a developer's cache, and the registry's user cache
 is empty (tests name their data directories). ``REPLAY_TEST_CACHE_DIR=DIR``

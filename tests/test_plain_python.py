@@ -66,9 +66,9 @@ def test_plain_kernel_refused_when_compiling():
     with one line (not a numba typing error deep in a bound copy)."""
     from numba.core import config
 
-    from replay.filters import binding
+    from replay.filters.compiled import copies
     from replay.util.errors import ReplayError
 
     assert not config.DISABLE_JIT
     with pytest.raises(ReplayError, match="plain_kernel.* is not a module-level numba function"):
-        binding.where(plain_kernel)
+        copies.where(plain_kernel)

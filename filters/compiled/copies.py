@@ -1,65 +1,63 @@
 """Copies of a kernel template bound to one model's kernels ``f``, ``h``, ``F``, ``H``, cached on disk.
 
-A template module (paper 002's :mod:`replay.filters.p002.compiled`, the run
-loops' rows forms :mod:`replay.filters.rows`) calls the model's kernels as
-module globals. :func:`bound_copy` writes a copy of it with one model's
-imports at its MODEL KERNELS line and imports that copy: numba then caches the
-compiled code on disk beside it, and a new process loads it instead of
-compiling. (Passing the kernels as function arguments instead works, but
-numba cannot cache such signatures across processes, and calls through
-function pointers are not inlined.) The copy's name carries a hash of its
-text, which includes the kernels' source files and the model-free helpers the
-template imports: a change to the template, to its helpers or to a model's
-kernels gives a new copy and a fresh compilation, never stale machine code.
-Copies live in ``$REPLAY_CACHE_DIR/kernels`` (default
-``~/.cache/replay/kernels``). A model's kernels must be module-level functions
-of an importable module.
+A template module (paper 002's :mod:`replay.filters.p002.compiled`, the run loops' rows forms
+:mod:`replay.filters.compiled.rows`) calls the model's kernels as module globals. :func:`bind`
+writes a copy of it with one model's imports at its MODEL KERNELS line and imports that copy:
+numba then caches the compiled code on disk beside it, and a new process loads it instead of
+compiling. (Passing the kernels as function arguments instead works, but numba cannot cache
+such signatures across processes, and calls through function pointers are not inlined.)
 
-The cache is checked before it is imported (:func:`load`): a copy is named
-``<prefix><model>_<digest>``, ``<model>`` a hash of where the model's kernels
-live and ``<digest>`` the SHA-256 of the copy's text; a copy whose content
-does not hash to its name (edited, truncated, another version's) is written
-again and its numba cache (``__pycache__/<name>.*``) removed, so it is
-compiled afresh — counted in :data:`CACHE_REPORT` and noted once on the
-``replay.kernels`` logger. A copy is executed from its verified text (no
-byte-code file is read), and numba's cache files of its functions are sealed
-and checked before they are unpickled (:mod:`replay.filters.kernel_files`,
-which also keeps the directory owner-only; a directory that cannot be used
-means compiling in memory, nothing cached). Older copies of the same model and template
-(another digest) are removed with their numba cache files: the cache keeps one
-copy per model and template. Two checkouts of different versions sharing one
-cache directory therefore recompile each other's copies; give them separate
-``REPLAY_CACHE_DIR``.
+The copy's name ``replay_<template>_<model>_<digest>`` carries a hash of where the model's
+kernels live (``<model>``) and the SHA-256 of its text (``<digest>``); the text includes hashes
+of the kernels' source files and of every project module whose functions the template or the
+kernels call (found by following their globals: numba compiles those into the copy's cache but
+checks only the copy's own file). A change to any of them gives a new copy and a fresh
+compilation, never stale machine code. Copies live in ``$REPLAY_CACHE_DIR/kernels`` (default
+``~/.cache/replay/kernels``). A model's kernels must be module-level functions of an
+importable module.
+
+The cache is checked before it is imported (:func:`load`): a copy whose content does not hash
+to its name (edited, truncated, another version's) is written again and its numba cache
+(``__pycache__/<name>.*``) removed, so it is compiled afresh, counted in :data:`CACHE_REPORT`
+and noted once on the ``replay.kernels`` logger. A copy is executed from its verified text (no
+byte-code file is read), and numba's cache files of its functions are sealed and checked before
+they are unpickled (:mod:`.numba_internals`). A directory that cannot be used means compiling in
+memory, nothing cached (:func:`.files.private_dir`). Older copies of the same model and template
+(another digest) are removed with their numba cache files: the cache keeps one copy per model
+and template. Two checkouts of different versions sharing one cache directory therefore
+recompile each other's copies; give them separate ``REPLAY_CACHE_DIR``.
 """
 from __future__ import annotations
 
 import hashlib
 import inspect
-import logging
-import os
 import sys
 import types
 from pathlib import Path
 
 from replay.util.errors import ReplayError
 
+from . import numba_internals
+from .files import cache_dir, log, note_once, private_dir, write_private
+
 MARKER = "# MODEL KERNELS:"
 CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (mismatch), removed
 # (old), numba cache files removed (seal did not match)
-_log = logging.getLogger("replay.kernels")
+_bound: dict = {}  # (template, kernels) -> the imported copy
 
 
-def cache_dir() -> Path:
-    root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or "~/.cache", "replay")
-    return Path(root).expanduser() / "kernels"
+def bind(template, kernels, what: str = "kernels"):
+    """The copy of the module ``template`` bound to the model kernels ``(f, h, F, H)``, imported
+    (once per process); ``what`` says what its one-time compilation is."""
+    key = (template.__name__, tuple(id(k) for k in kernels))
+    if key not in _bound:
+        _bound[key] = _bound_copy(template, kernels, what)
+    return _bound[key]
 
 
 def where(fn):
     """(module, name) of a module-level numba function (a Python function when numba's JIT is disabled)."""
-    from numba.core import config
-
-    py = getattr(fn, "py_func", fn if config.DISABLE_JIT else None)
+    py = getattr(fn, "py_func", fn if numba_internals.jit_disabled() else None)
     mod = sys.modules.get(py.__module__) if py is not None else None
     if mod is None or getattr(mod, py.__name__, None) is not fn:
         raise ReplayError(f"model kernel {fn!r} is not a module-level numba function of an importable module")
@@ -70,65 +68,68 @@ def _source(module) -> str:
     return Path(inspect.getsourcefile(module)).read_text(encoding="utf-8")
 
 
-def bound_copy(template, kernels, helpers, prefix: str, what: str, helpers_tag: str = "helpers", legacy=None):
-    """The copy of the module ``template`` bound to the model kernels ``(f, h, F, H)``, imported:
-    ``helpers`` the model-free modules whose functions numba inlines into it (their source is
-    part of the copy's text, so a change to them makes a new copy), ``prefix`` the copies' names,
-    ``what`` how the compilation is announced."""
+def _callees(modules) -> list:
+    """The project's modules whose functions ``modules`` call, and theirs, and so on (not ``modules``)."""
+    seen, todo = {m.__name__ for m in modules}, list(modules)
+    found = []
+    while todo:
+        for v in list(vars(todo.pop()).values()):
+            py = getattr(v, "py_func", v)  # a numba function, or a Python one (also with the JIT disabled)
+            name = py.__module__ if inspect.isfunction(py) else ""
+            if name.startswith("replay.") and name not in seen and name in sys.modules:
+                seen.add(name)
+                found.append(sys.modules[name])
+                todo.append(sys.modules[name])
+    return sorted(found, key=lambda m: m.__name__)
+
+
+def _bound_copy(template, kernels, what: str):
     places = [where(k) for k in kernels]
     lines = [f"from {mod} import {name} as {alias}  # noqa: E402"
              for (mod, name), alias in zip(places, ("f", "h", "F", "H"))]
-    kernel_sources = "".join(_source(sys.modules[m]) for m in sorted({m for m, _ in places}))
-    lines.append(f"# kernels' sources: sha256 {hashlib.sha256(kernel_sources.encode()).hexdigest()[:16]}")
-    # numba's cache of this copy holds the helpers' functions inlined but checks only this
-    # file's stamp: the helpers' source in the name makes a change to them a new copy
-    lines.append("# numba's cache files of this copy are sealed (replay.filters.kernel_files, format 1)")  # a new
-    # format, a new name: the former unsealed files are pruned unread, not counted as damaged
-    text = "".join(_source(m) for m in helpers)
-    lines.append(f"# {helpers_tag}: sha256 {hashlib.sha256(text.encode()).hexdigest()[:16]}")
+    kernel_modules = [sys.modules[m] for m in sorted({m for m, _ in places})]
+    for tag, mods in (("kernels' sources", kernel_modules),
+                      ("the functions they call", _callees([template, *kernel_modules]))):
+        text = "".join(_source(m) for m in mods)
+        lines.append(f"# {tag}: sha256 {hashlib.sha256(text.encode()).hexdigest()[:16]}")
+    lines.append("# numba's cache files of this copy are sealed (replay.filters.compiled.numba_internals, format 1)")
     text = _source(template)
     at = text.index(MARKER)
-    end = text.index("\n", at)
-    text = text[:at] + "\n".join(lines) + text[end:]
+    text = text[:at] + "\n".join(lines) + text[text.index("\n", at):]
     model = hashlib.sha256(repr(places).encode()).hexdigest()[:8]
     label = ", ".join(sorted({m.rsplit(".", 1)[-1].removesuffix("_kernels") for m, _ in places}))
-    return load(f"{prefix}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text, label, what, legacy)
+    prefix = f"replay_{template.__name__.rsplit('.', 1)[-1]}_"
+    return load(f"{prefix}{model}_{hashlib.sha256(text.encode()).hexdigest()[:20]}", text, label, what)
 
 
-def load(name: str, text: str, label: str = "a model", what: str = "kernels", legacy=None):
+def load(name: str, text: str, label: str = "a model", what: str = "kernels"):
     """Import the copy ``name`` (``<prefix><model>_<digest>``) holding ``text``: written when
     absent, written again when its content does not hash to ``<digest>``; older copies of the
-    model pruned (module docstring), and the names matching ``legacy`` (a regular expression).
-    Its numba cache files are checked before any is read (:func:`replay.filters.kernel_files.guard`).
-    A cache directory that cannot be used (a file, read-only, another user's): compiled in memory,
-    nothing written (one note)."""
-    from . import kernel_files
-
+    model pruned (module docstring). Its numba cache files are checked before any is read
+    (:func:`.numba_internals.guard`). A cache directory that cannot be used (a file, read-only,
+    another user's): compiled in memory, nothing written (one note)."""
     directory = cache_dir()
-    why = kernel_files.private_dir(directory, next((v for v in ("REPLAY_CACHE_DIR", "XDG_CACHE_HOME")
-                                                    if os.environ.get(v)), None))
+    why = private_dir(directory)
     path = directory / f"{name}.py"
-    digest = name.rsplit("_", 1)[1]
     try:
-        if why is None and not path.exists():
-            _write(directory, name, text)
-        elif why is None and not _matches(path, digest):
-            _drop_numba_cache(directory, name)  # machine code compiled from the wrong text
-            _write(directory, name, text)
-            CACHE_REPORT["rewritten"] += 1
-            _log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
+        if why is None and not _matches(path, name.rsplit("_", 1)[1]):
+            if path.exists():  # machine code compiled from the wrong text
+                _drop_numba_cache(directory, name)
+                CACHE_REPORT["rewritten"] += 1
+                log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
+            write_private(path, text.encode("utf-8"))  # atomic: concurrent processes write the same text
     except OSError as e:  # e.g. a full disk
         why = f"kernel cache {directory}: cannot write {path.name} ({e.strerror or e})"
     if why is not None:  # the templates' decorators without numba's disk cache: same machine code
-        kernel_files.note_once(f"{why}; kernels compiled in memory for this process, not cached")
-        _log.info("compiling %s for %s (in memory)", what, label)
+        note_once(f"{why}; kernels compiled in memory for this process, not cached")
+        log.info("compiling %s for %s (in memory)", what, label)
         return _exec(name, text.replace("cache=True", "cache=False"), f"<replay kernels {name}>")
-    _prune(directory, name, legacy)
+    _prune(directory, name)
     if not any((directory / "__pycache__").glob(f"{name}.*.nbi")):  # numba's index: none yet
-        _log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
+        log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
     module = _exec(name, text, str(path))  # the verified text: no byte-code file read
     module.LABEL = label
-    kernel_files.guard(module, label, _count_damaged)
+    numba_internals.guard(module, label, _count_damaged)
     return module
 
 
@@ -147,15 +148,13 @@ def _exec(name: str, text: str, filename: str):
     return module
 
 
-def cfunc(sig, fn):
-    """A cfunc of the copy's function ``fn`` (a dispatcher), cached (sealed) beside the copy when it is;
-    with numba's JIT disabled ``fn`` itself (a Python function)."""
-    from . import kernel_files
-
-    if not hasattr(fn, "py_func"):
+def cfunc(fty, fn):
+    """A cfunc of the copy's function ``fn`` (a dispatcher) of the first-class function type ``fty``,
+    cached (sealed) beside the copy when it is; with numba's JIT disabled ``fn`` itself."""
+    if numba_internals.jit_disabled():
         return fn
     mod = sys.modules.get(fn.py_func.__module__)
-    return kernel_files.cfunc(sig, fn.py_func, getattr(mod, "CACHED", False), getattr(mod, "LABEL", "a model"))
+    return numba_internals.cfunc(fty, fn.py_func, getattr(mod, "CACHED", False), getattr(mod, "LABEL", "a model"))
 
 
 def _matches(path: Path, digest: str) -> bool:
@@ -167,37 +166,16 @@ def _matches(path: Path, digest: str) -> bool:
     return hashlib.sha256(data).hexdigest()[:len(digest)] == digest
 
 
-def _write(directory: Path, name: str, text: str) -> None:
-    from .kernel_files import write_private
-
-    write_private(directory / f"{name}.py", text.encode("utf-8"))  # atomic: concurrent processes write the same text
-
-
-def _drop_numba_cache(directory: Path, name: str) -> int:
+def _drop_numba_cache(directory: Path, name: str) -> None:
     """Remove numba's cache (index, machine code) and the bytecode of copy ``name``."""
-    n = 0
-    cache = directory / "__pycache__"
-    if cache.is_dir():
-        for p in cache.iterdir():
-            if p.name.startswith(name + "."):
-                p.unlink(missing_ok=True)
-                n += 1
-    return n
+    for p in (directory / "__pycache__").glob(name + ".*"):
+        p.unlink(missing_ok=True)
 
 
-def _prune(directory: Path, current: str, legacy=None) -> None:
-    """Remove the other copies of ``current``'s model and template (another digest), and the
-    copies whose names match ``legacy``, with their numba caches."""
-    model = current[:current.rindex("_") + 1]
-    for p in directory.glob(f"{model}*.py"):
-        stem = p.stem
-        if stem != current:
+def _prune(directory: Path, current: str) -> None:
+    """Remove the other copies of ``current``'s model and template (another digest), with their numba caches."""
+    for p in directory.glob(f"{current[:current.rindex('_') + 1]}*.py"):
+        if p.stem != current:
             p.unlink(missing_ok=True)
-            _drop_numba_cache(directory, stem)
-            CACHE_REPORT["pruned"] += 1
-    for p in directory.glob("*.py") if legacy is not None else ():
-        stem = p.stem
-        if stem != current and legacy.match(stem):
-            p.unlink(missing_ok=True)
-            _drop_numba_cache(directory, stem)
+            _drop_numba_cache(directory, p.stem)
             CACHE_REPORT["pruned"] += 1

@@ -1,25 +1,29 @@
 """Whole-run loops: what the compiled run loops of every filter family share.
 
-A run loop (:func:`replay.util.kalman_loops.sigma_run`, ``ekf_run``,
-:func:`replay.filters.pf_loop.pf_run`) runs every step of a run in one
-compiled call. It calls the same step kernels as the step-by-step engine, and
-the model's kernels are passed to it in their rows forms (:mod:`replay.filters.rows`
-bound to the model, :func:`row_kernels`: one call per stack of states) as
-first-class functions of one declared type: one compilation of the loop (cached
-on disk by numba) serves every model.
-A loop is used only for the model's own kernels (:func:`derived_from_kernels`)
-and only when it is compiled already, or cached, or the job is big enough to
-pay for its compilation (choosing by problem size: a short first run never
-waits for it).
+A run loop (:func:`replay.filters.kalman_loops.sigma_run`, ``ekf_run``,
+:func:`replay.filters.pf_loop.pf_run`) runs every step of a run in one compiled call. It calls
+the same step kernels as the step-by-step engine, and the model's kernels are passed to it in
+their rows forms (:mod:`.rows` bound to the model, :func:`row_kernels`: one call per stack of
+states) as first-class functions of one declared type (:data:`ROWS_KERNEL`,
+:data:`JACOBIAN_ROWS`): one compilation of the loop (cached on disk by numba) serves every
+model. A loop is used only for the model's own kernels (:func:`derived_from_kernels`) and only
+when it is compiled already, or cached, or the job is big enough to pay for its compilation
+(:func:`loop_ready`: a short first run never waits for it).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from numba import types
 
-COMPILE_AT = 200_000  # Kalman run-steps from which a missing run loop is compiled (~10 s, once per machine)
+from . import copies, numba_internals, rows
+from .files import log
+
 THREAD_WORK_US = 1000.0  # work per thread at least (waking a thread costs tens of µs)
+_VEC, _S2, _S3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
+ROWS_KERNEL = types.FunctionType(types.void(_S2, _VEC, _S2))      # f, h: (X, p, out)
+JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))    # F, H: (X, p, J)
 
 
 def derived_from_kernels(model) -> bool:
@@ -30,36 +34,47 @@ def derived_from_kernels(model) -> bool:
 
 
 _rows: dict = {}  # (kernels, index) -> cfunc
-_copies: dict = {}  # kernels -> bound copy of replay.filters.rows
 
 
 def row_kernels(model, needed=(0, 1, 2, 3)):
-    """The rows forms ``f_rows, h_rows, F_rows, H_rows`` (:mod:`replay.filters.rows`) of the model's
-    kernels, those of indices ``needed``, as cfuncs of the declared first-class types of the run
-    loops: the template bound to the model (:mod:`replay.filters.binding`), compiled once per
-    machine and cached on disk by numba beside the bound copy."""
-    from replay.util import kalman_loops as kernels
-
-    from . import binding, rows
-
+    """The rows forms ``f_rows, h_rows, F_rows, H_rows`` (:mod:`.rows`) of the model's kernels, those
+    of indices ``needed``, as cfuncs of the declared first-class types of the run loops: the
+    template bound to the model (:func:`.copies.bind`), compiled once per machine and cached on
+    disk beside the bound copy (with numba's JIT disabled: the Python functions)."""
     ks = model.kernels()
     ids = tuple(id(k) for k in ks)
     got = []
     for i in needed:
-        key = (ids, i)
-        fn = _rows.get(key)
+        fn = _rows.get((ids, i))
         if fn is None:
-            mod = _copies.get(key[0])
-            if mod is None:
-                mod = _copies[key[0]] = binding.bound_copy(rows, ks, (), "replay_rows_",
-                                                           "the run loops' rows kernels (about 2 s)")
-            fty = kernels.JACOBIAN_ROWS if i >= 2 else kernels.ROWS_KERNEL
-            fn = _rows[key] = binding.cfunc(fty.signature, getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]))
-            if hasattr(fn, "address"):  # compiled (with numba's JIT disabled: the Python function)
-                fn._numba_type_ = fty  # numba's typeof reads it: 5 µs to pass a cfunc, not 15 (a jit function: 50)
-                fn.__wrapper_address__ = lambda a=fn.address: a  # the protocol numba asks first: no signature check
+            mod = copies.bind(rows, ks, "the run loops' rows kernels (about 2 s)")
+            fn = _rows[ids, i] = copies.cfunc(JACOBIAN_ROWS if i >= 2 else ROWS_KERNEL,
+                                              getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]))
         got.append(fn)
     return got
+
+
+_ready: set = set()
+
+
+def loop_ready(loop, sig, compile_ok: bool) -> bool:
+    """Whether the run loop ``loop`` can be called with its declared signature ``sig``: compiled in
+    this process, or loaded from numba's disk cache, or (``compile_ok``) compiled now (about 10 s,
+    once per machine). Compiled lazily, not at import: a short run never waits for it. With
+    numba's JIT disabled the loop is its Python function: always ready."""
+    if (loop, id(sig)) in _ready:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
+        return True
+    if numba_internals.jit_disabled():
+        return True
+    if not loop.signatures:
+        if not numba_internals.from_cache(loop, sig):
+            if not compile_ok:
+                return False
+            log.info("compiling the run loop %s (about 12 s, once per machine; cached for later runs)", loop.__name__)
+        loop.compile(sig)
+        loop.disable_compile()  # one type for every model: the kernels convert to it
+    _ready.add((loop, id(sig)))  # the declared signatures are module constants
+    return True
 
 
 def grain(us_per_run: float) -> int:
@@ -72,12 +87,14 @@ _bound: dict = {}
 
 def bound(loop, *fns):
     """``loop`` with its first arguments ``fns`` (the model's kernels as first-class functions),
-    called through its compiled entry point once typed (:class:`Kernel`)."""
-    key = (loop, fns)
-    got = _bound.get(key)
+    called through its compiled entry point once typed (:class:`.numba_internals.Kernel`)."""
+    got = _bound.get((loop, fns))
     if got is None:
-        got = _bound[key] = Kernel(loop, *fns)
+        got = _bound[loop, fns] = numba_internals.Kernel(loop, *fns)
     return got
+
+
+_stacks: dict = {}
 
 
 def param_stacks(model, steps: int):
@@ -102,9 +119,6 @@ def param_stacks(model, steps: int):
     return got
 
 
-_stacks: dict = {}
-
-
 def fingerprint(model, steps: int):
     """A key that changes whenever anything the model's parameters may depend on changes: its class,
     ``steps`` and each attribute (arrays by dtype, shape and bytes); None (no cache) when an
@@ -118,32 +132,3 @@ def fingerprint(model, steps: int):
         else:
             return None
     return tuple(parts)
-
-
-def _key(args):
-    """What numba's typing of ``args`` depends on: dtype, dimensions and layout (C, F or neither) of
-    arrays, the type of anything else."""
-    return tuple((a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray)
-                 else type(a) for a in args)
-
-
-class Kernel:
-    """``Kernel(dispatcher, fn1, fn2, ...)(*args)`` = ``dispatcher(fn1, fn2, ..., *args)``, typed once."""
-
-    def __init__(self, dispatcher, *fns):
-        self.dispatcher, self.fns = dispatcher, fns
-        self.key, self.entry = None, None
-
-    def __call__(self, *args):
-        key = _key(args)
-        if key == self.key:
-            return self.entry(*self.fns, *args)
-        out = self.dispatcher(*self.fns, *args)
-        d = self.dispatcher
-        if not hasattr(d, "overloads"):  # numba's JIT disabled: the Python function, nothing to type
-            return out
-        sig = tuple(d.typeof_pyval(a) for a in (*self.fns, *args))
-        cres = d.overloads.get(sig)
-        if cres is not None:
-            self.key, self.entry = key, cres.entry_point
-        return out

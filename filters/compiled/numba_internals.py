@@ -1,40 +1,44 @@
-"""The files of the kernel cache (:mod:`replay.filters.binding`): an owner-only directory, and
-numba's cache files of the bound copies sealed with their SHA-256.
+"""Everything that reaches into numba's internals, in one file (numba is pinned to 0.68 in
+pyproject.toml; a new numba is tried here first).
 
-numba keeps a copy's machine code beside it as pickles: an index (``.nbi``)
-and one data file per compiled signature (``.nbc``), unpickled when a
-function is first called. For the copies' functions those files are written
-sealed: a fixed-length header holding the SHA-256 of the rest (a pickled
-string: plain numba reading such an index sees another version and
-recompiles; it never unpickles the rest). A file is read once, its hash
-checked, and only then unpickled; a file without a valid seal — damaged,
-truncated, or written by something else — is never unpickled: it is removed
-and the function compiled again (:func:`guard` counts them for the whole
-copy before the first call, one line on the ``replay.kernels`` logger).
-
-What this trusts: the owner's own files. The hashes detect damage (a bad
-disk, a truncated write, a stray edit); they do not stop an attacker who
-can write as the same user (who could as well edit the package). The
-directory is kept owner-only (0700, files 0600); one writable by others is
-made owner-only, one owned by another user is not used (:func:`private_dir`).
+* Sealed cache files. numba keeps a bound copy's machine code beside it as pickles: an index
+  (``.nbi``) and one data file per compiled signature (``.nbc``), unpickled when a function is
+  first called. For the copies' functions those files are written sealed: a fixed-length
+  header holding the SHA-256 of the rest (a pickled string: plain numba reading such an index
+  sees another version and recompiles; it never unpickles the rest). A file is read once, its
+  hash checked, and only then unpickled; a file without a valid seal (damaged, truncated, or
+  written by something else) is never unpickled: it is removed and the function compiled again
+  (:func:`guard` counts them for the whole copy before the first call, one line on the
+  ``replay.kernels`` logger). The hashes detect damage (a bad disk, a truncated write, a stray
+  edit); they do not stop an attacker who can write as the same user.
+* :func:`cfunc`: a cfunc of a copy's function, cached sealed, which numba types by its declared
+  first-class function type (5 µs to pass one to a run loop, not 15; a jit function: 50).
+* :class:`Kernel`: a dispatcher called through its compiled entry point once typed (numba types
+  every argument of every call: about 7 µs for each function argument).
+* :func:`from_cache`: a run loop's declared signature loaded from numba's disk cache, or None.
 """
 from __future__ import annotations
 
 import hashlib
 import io
-import logging
 import os
 import pickle
-import stat
-import uuid
 from pathlib import Path
 
+import numpy as np
+from numba.core import config
 from numba.core.caching import Cache, IndexDataCacheFile
+from numba.core.dispatcher import Dispatcher
+
+from .files import log, note_once, write_private
 
 SEAL = "replay-sha256:"
 _HEAD = len(pickle.dumps(SEAL + "0" * 64, protocol=4))  # the header's length: fixed
-_log = logging.getLogger("replay.kernels")
-_noted: set = set()
+
+
+def jit_disabled() -> bool:
+    """Whether numba's JIT is disabled (``NUMBA_DISABLE_JIT=1``: every kernel is its Python function)."""
+    return bool(config.DISABLE_JIT)
 
 
 def _header(payload: bytes) -> bytes:
@@ -52,35 +56,18 @@ def unseal(raw: bytes) -> bytes | None:
     return payload if len(raw) >= _HEAD and raw[:_HEAD] == _header(payload) else None
 
 
-def write_private(path, data: bytes) -> None:
-    """Write ``data`` to ``path`` owner-only (0600) and atomically: a crash leaves old or new."""
-    path = str(path)
-    tmp = f"{path}.tmp.{uuid.uuid4().hex[:16]}"
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-_counter = {"count": lambda n: None}  # set by guard(): binding's CACHE_REPORT counts damaged files
+_counter = {"count": lambda n: None}  # set by guard(): copies.CACHE_REPORT counts damaged files
 
 
 def _count(n: int, what: str) -> None:
     """Count ``n`` damaged files of ``what`` (removed); say it in one line."""
     _counter["count"](n)
-    _log.warning("kernel cache: %d damaged file%s of %s removed and compiled again", n, "s" * (n != 1), what)
+    log.warning("kernel cache: %d damaged file%s of %s removed and compiled again", n, "s" * (n != 1), what)
 
 
 class SealedCacheFile(IndexDataCacheFile):
     """numba's index and data files of one function, written sealed and read only when the seal
-    matches (the class of a copy's functions' ``_cache._cache_file``, set by :func:`guard`)."""
+    matches (the class of a copy's functions' cache file, set by :func:`guard`)."""
 
     label = "a model"  # the copy's model, named in the note
 
@@ -131,21 +118,8 @@ class SealedCacheFile(IndexDataCacheFile):
                       "compiled code not cached")
 
 
-def note_once(msg: str) -> None:
-    if msg not in _noted:
-        _noted.add(msg)
-        _log.warning(msg)
-
-
-def _functions(module):
-    from numba.core.dispatcher import Dispatcher
-
-    return [v for v in vars(module).values()
-            if isinstance(v, Dispatcher) and getattr(v.py_func, "__module__", None) == module.__name__]
-
-
-def seal_cache(cache, label: str) -> None:
-    """Make numba's ``cache`` of one function (a dispatcher's or cfunc's ``_cache``) sealed."""
+def _seal_cache(cache, label: str) -> None:
+    """Make numba's ``cache`` of one function (a dispatcher's or cfunc's) sealed."""
     if isinstance(cache, Cache) and type(cache._cache_file) is IndexDataCacheFile:
         cache._cache_file.__class__ = SealedCacheFile
         cache._cache_file.label = label
@@ -156,17 +130,16 @@ def guard(module, label: str, count) -> int:
     its numba cache files whose seal does not match (``count(n)``, one line). Returns how many."""
     _counter["count"] = count  # also for the damage found when a function is first called
     dirs = set()
-    for fn in _functions(module):
-        seal_cache(fn._cache, label)
-        if isinstance(fn._cache, Cache):
-            dirs.add(Path(fn._cache.cache_path))
+    for fn in vars(module).values():
+        if isinstance(fn, Dispatcher) and getattr(fn.py_func, "__module__", None) == module.__name__:
+            _seal_cache(fn._cache, label)
+            if isinstance(fn._cache, Cache):
+                dirs.add(Path(fn._cache.cache_path))
     damaged = 0
-    prefix = module.__name__ + "."
     for d in dirs:
-        for p in sorted(d.glob(prefix + "*.nb[ic]"), key=lambda p: p.suffix != ".nbi"):  # indexes first
+        for p in sorted(d.glob(module.__name__ + ".*.nb[ic]"), key=lambda p: p.suffix != ".nbi"):  # indexes first
             try:
-                raw = p.read_bytes()
-                if unseal(raw) is None:
+                if unseal(p.read_bytes()) is None:
                     p.unlink()
                     damaged += 1
                     if p.suffix == ".nbi":  # its data files are orphans: removed unread
@@ -181,49 +154,53 @@ def guard(module, label: str, count) -> int:
     return damaged
 
 
-def cfunc(sig, py, cached: bool, label: str = "a model"):
-    """``numba.cfunc(sig, cache=cached)(py)`` with its cache sealed before it is read."""
+def cfunc(fty, py, cached: bool, label: str = "a model"):
+    """``numba.cfunc(fty.signature, cache=cached)(py)`` with its cache sealed before it is read,
+    passed to a compiled function as the first-class function type ``fty`` without a check."""
     from numba.core import sigutils
     from numba.core.ccallback import CFunc
 
-    res = CFunc(py, sigutils.normalize_signature(sig), locals={}, options={})
+    res = CFunc(py, sigutils.normalize_signature(fty.signature), locals={}, options={})
     if cached:
         res.enable_caching()
-        seal_cache(res._cache, label)
+        _seal_cache(res._cache, label)
     res.compile()
+    res._numba_type_ = fty  # numba's typeof reads it
+    res.__wrapper_address__ = lambda a=res.address: a  # the protocol numba asks first: no signature check
     return res
 
 
-def private_dir(directory: Path, variable: str | None) -> str | None:
-    """Make ``directory`` (and its ``__pycache__``) an owner-only directory of this user:
-    None when done, else why it cannot be used (one line naming ``variable``, the environment
-    variable the cache's root ``directory.parent`` came from, or the directory)."""
-    if variable == "REPLAY_CACHE_DIR":
-        where = f"{variable}={directory.parent}"
-    else:
-        where = f"kernel cache {directory}" + (f" (from {variable})" if variable else "")
-    try:
-        directory.mkdir(parents=True, exist_ok=True, mode=0o700)
-        for d in (directory, directory / "__pycache__"):
-            d.mkdir(mode=0o700, exist_ok=True)
-            st = os.stat(d, follow_symlinks=False)
-            if not stat.S_ISDIR(st.st_mode):
-                return f"{where}: {d} is not a directory"
-            if st.st_uid != os.getuid():
-                return f"{where}: {d} belongs to another user"
-            if st.st_mode & 0o077:
-                os.chmod(d, 0o700)
-                note_once(f"kernel cache {d}: was open to others; made owner-only (0700)")
-        parent = os.stat(directory.parent)
-        if parent.st_mode & 0o002 and not parent.st_mode & stat.S_ISVTX:
-            return f"{where}: {directory.parent} is writable by anyone (no sticky bit)"
-        probe = directory / f".probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
-        probe.touch(mode=0o600)
-        probe.unlink()
-    except (FileExistsError, NotADirectoryError):
-        culprit = next((p for p in (directory / "__pycache__", directory, *directory.parents)
-                        if p.exists() and not p.is_dir()), directory)
-        return f"{where}: " + ("not a directory" if culprit == directory.parent else f"{culprit} is not a directory")
-    except OSError as e:
-        return f"{where}: {e.strerror or e} (read-only or not writable)"
-    return None
+def from_cache(loop, sig) -> bool:
+    """Whether numba's disk cache holds the dispatcher ``loop`` compiled for ``sig`` (then loaded)."""
+    return loop._cache.load_overload(sig, loop.targetctx) is not None
+
+
+def _key(args):
+    """What numba's typing of ``args`` depends on: dtype, dimensions and layout (C, F or neither) of
+    arrays, the type of anything else."""
+    return tuple((a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray)
+                 else type(a) for a in args)
+
+
+class Kernel:
+    """``Kernel(dispatcher, fn1, fn2, ...)(*args)`` = ``dispatcher(fn1, fn2, ..., *args)``: after the
+    first call (which compiles, or loads from the cache, and types) the compiled entry point is
+    called directly as long as the arguments keep their types (dtype, dimensions, layout; checked
+    on every call, a change goes back through the dispatcher). With numba's JIT disabled: the
+    Python function."""
+
+    def __init__(self, dispatcher, *fns):
+        self.dispatcher, self.fns = dispatcher, fns
+        self.key, self.entry = None, None
+
+    def __call__(self, *args):
+        key = _key(args)
+        if key == self.key:
+            return self.entry(*self.fns, *args)
+        out = self.dispatcher(*self.fns, *args)
+        d = self.dispatcher
+        if isinstance(d, Dispatcher):
+            cres = d.overloads.get(tuple(d.typeof_pyval(a) for a in (*self.fns, *args)))
+            if cres is not None:
+                self.key, self.entry = key, cres.entry_point
+        return out
