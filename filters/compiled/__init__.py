@@ -13,7 +13,7 @@ only calls it:
   declared types :data:`ROWS_KERNEL`, :data:`JACOBIAN_ROWS`), when a loop may run, and its call
   with the argument typing done once (:mod:`.loops`);
 * :class:`Kernel` — a kernel called through its compiled entry point once typed;
-* :func:`split`, :func:`threads`, :func:`grain` — index ranges on threads (:mod:`.threads`).
+* :func:`split`, :func:`threads`, :func:`grain` — index ranges on threads (:mod:`.threadpool`).
 
 Only :mod:`.numba_internals` reaches into numba's internals. Fallbacks (docs/architecture.md,
 "How a compiled step is called"): with ``NUMBA_DISABLE_JIT=1`` every kernel, copy, cfunc and
@@ -26,7 +26,7 @@ from .files import cache_dir
 from .loops import (JACOBIAN_ROWS, ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks,
                     row_kernels)
 from .numba_internals import Kernel
-from .threads import split, threads
+from .threadpool import split, threads
 
 __all__ = ["CACHE_REPORT", "JACOBIAN_ROWS", "Kernel", "ROWS_KERNEL", "bind", "bound", "cache_dir",
            "derived_from_kernels", "grain", "loop_ready", "param_stacks", "row_kernels", "split", "threads"]
