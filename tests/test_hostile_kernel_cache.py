@@ -37,7 +37,7 @@ X = np.arange(6.0).reshape(3, 2)
 def cache(tmp_path, monkeypatch):
     """An empty kernel cache of this test; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(copies, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
     monkeypatch.setattr(loops, "_rows", {})
     monkeypatch.setattr(copies, "_bound", {})
     before = set(sys.modules)
@@ -73,10 +73,10 @@ def test_random_bytes_over_nbc_detected_removed_counted_same_numbers(cache, capl
         f.write_bytes(os.urandom(4000))
     got, hits = _f_rows(_copy())
     assert hits == 0 and np.array_equal(got, want)
-    assert copies.CACHE_REPORT["damaged"] == 1
+    assert files.CACHE_REPORT["damaged"] == 1
     assert "kernel cache: 1 damaged file of random_walk removed and compiled again" in caplog.text
     assert all(numba_internals.unseal(f.read_bytes()) is not None for f in _files(cache, ".nb?"))  # sealed anew
-    assert _f_rows(_copy())[1] == 1 and copies.CACHE_REPORT["damaged"] == 1
+    assert _f_rows(_copy())[1] == 1 and files.CACHE_REPORT["damaged"] == 1
 
 
 def test_nbi_pickle_that_runs_code_is_never_unpickled(cache, tmp_path):
@@ -91,7 +91,7 @@ def test_nbi_pickle_that_runs_code_is_never_unpickled(cache, tmp_path):
         f.write_bytes(pickle.dumps(Hostile()))
     got, hits = _f_rows(_copy())
     assert not marker.exists()
-    assert hits == 0 and np.array_equal(got, want) and copies.CACHE_REPORT["damaged"] == 1
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 1
 
 
 def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cache, caplog):
@@ -99,11 +99,11 @@ def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cac
     a bad disk): the check at unpickling catches them too."""
     want, _ = _f_rows(_copy())
     mod = _copy()
-    assert copies.CACHE_REPORT["damaged"] == 0
+    assert files.CACHE_REPORT["damaged"] == 0
     for f in _files(cache, ".nbc"):
         f.write_bytes(b"\x80\x04garbage")
     got, hits = _f_rows(mod)
-    assert hits == 0 and np.array_equal(got, want) and copies.CACHE_REPORT["damaged"] == 1
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 1
     assert "1 damaged file of random_walk removed" in caplog.text
 
 
@@ -130,12 +130,12 @@ def test_truncated_index_and_unsealed_plain_numba_files_are_recompiled(cache):
     want, _ = _f_rows(_copy())
     nbi = _files(cache, ".nbi")[0]
     nbi.write_bytes(nbi.read_bytes()[:200])
-    assert np.array_equal(_f_rows(_copy())[0], want) and copies.CACHE_REPORT["damaged"] == 1
+    assert np.array_equal(_f_rows(_copy())[0], want) and files.CACHE_REPORT["damaged"] == 1
     # a file as plain numba writes it (no seal) is not read either
     nbc = _files(cache, ".nbc")[0]
     nbc.write_bytes(numba_internals.unseal(nbc.read_bytes()))
     got, hits = _f_rows(_copy())
-    assert hits == 0 and np.array_equal(got, want) and copies.CACHE_REPORT["damaged"] == 2
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 2
 
 
 def test_plain_numba_reading_a_sealed_index_sees_another_version():
@@ -154,8 +154,8 @@ def test_plain_numba_reading_a_sealed_index_sees_another_version():
 def test_rows_cfuncs_are_sealed_and_checked(cache):
     """loops.row_kernels' cfuncs share the copy's numba cache: written sealed, damage counted."""
     a = loops.row_kernels(MODEL, (0, 1))
-    files = _files(cache, ".nb?")
-    assert files and all(numba_internals.unseal(f.read_bytes()) is not None for f in files)
+    found = _files(cache, ".nb?")
+    assert found and all(numba_internals.unseal(f.read_bytes()) is not None for f in found)
     nbc = _files(cache, ".nbc")
     assert len(nbc) == 2  # f_rows, h_rows
     for f in nbc:
@@ -163,7 +163,7 @@ def test_rows_cfuncs_are_sealed_and_checked(cache):
     loops._rows.clear()
     copies._bound.clear()
     b = loops.row_kernels(MODEL, (0, 1))
-    assert copies.CACHE_REPORT["damaged"] == 2
+    assert files.CACHE_REPORT["damaged"] == 2
     assert [x._cache_hits for x in b] == [0, 0] and all(x.address for x in a + b)
 
 
@@ -171,8 +171,8 @@ def test_cache_directory_is_owner_only(cache):
     _f_rows(_copy())
     for d in (cache, cache / "__pycache__"):
         assert stat.S_IMODE(d.stat().st_mode) == 0o700
-    files = list(cache.glob("*.py")) + _files(cache, ".nb?")
-    assert files and all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in files)
+    written = list(cache.glob("*.py")) + _files(cache, ".nb?")
+    assert written and all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in written)
     cache.chmod(0o777)
     (cache / "__pycache__").chmod(0o775)
     _files(cache, ".nbc")[0].chmod(0o666)

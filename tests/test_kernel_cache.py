@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from replay.filters.compiled import copies
+from replay.filters.compiled import copies, files
 from replay.filters.p002 import stcpf
 from replay.models.random_walk import RandomWalkPosition
 
@@ -24,7 +24,7 @@ def cache(tmp_path, monkeypatch):
     """An empty kernel cache; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(copies, "_bound", {})
-    monkeypatch.setattr(copies, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:
@@ -53,10 +53,10 @@ def test_tampered_copy_is_rewritten_and_its_numba_cache_dropped(cache):
     stale = _numba_files(cache, name)
     mod = copies.load(name, text)
     assert mod.VALUE == 1 and (cache / f"{name}.py").read_text() == text
-    assert copies.CACHE_REPORT == {"rewritten": 1, "pruned": 0, "damaged": 0}
+    assert files.CACHE_REPORT == {"rewritten": 1, "pruned": 0, "damaged": 0}
     assert not any(f.exists() for f in stale)
     copies.load(name, text)  # intact now: imported as it is
-    assert copies.CACHE_REPORT["rewritten"] == 1
+    assert files.CACHE_REPORT["rewritten"] == 1
 
 
 def test_truncated_copy_is_rewritten(cache):
@@ -65,7 +65,7 @@ def test_truncated_copy_is_rewritten(cache):
     cache.mkdir(parents=True)
     (cache / f"{name}.py").write_text(text[:9])
     assert copies.load(name, text).OTHER == 3
-    assert copies.CACHE_REPORT["rewritten"] == 1
+    assert files.CACHE_REPORT["rewritten"] == 1
 
 
 def test_old_copies_of_the_model_are_pruned_others_kept(cache):
@@ -80,7 +80,7 @@ def test_old_copies_of_the_model_are_pruned_others_kept(cache):
     assert copies.load(_name(text), text).VALUE == 5
     assert sorted(p.name for p in cache.glob("*.py")) == sorted([f"{_name(text)}.py", f"{other_model}.py"])
     assert not any(f.exists() for f in old_cache) and all(f.exists() for f in kept_cache)
-    assert copies.CACHE_REPORT == {"rewritten": 0, "pruned": 1, "damaged": 0}
+    assert files.CACHE_REPORT == {"rewritten": 0, "pruned": 1, "damaged": 0}
 
 
 def test_bound_model_copy_is_verified_before_import(cache):
@@ -95,4 +95,4 @@ def test_bound_model_copy_is_verified_before_import(cache):
     copies._bound.clear()
     again = stcpf.bound_kernels(m.kernels())
     assert again.__name__ == first.__name__ and path.read_text() == text
-    assert copies.CACHE_REPORT["rewritten"] == 1
+    assert files.CACHE_REPORT["rewritten"] == 1

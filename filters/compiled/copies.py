@@ -18,7 +18,7 @@ importable module.
 
 The cache is checked before it is imported (:func:`load`): a copy whose content does not hash
 to its name (edited, truncated, another version's) is written again and its numba cache
-(``__pycache__/<name>.*``) removed, so it is compiled afresh, counted in :data:`CACHE_REPORT`
+(``__pycache__/<name>.*``) removed, so it is compiled afresh, counted in :data:`.files.CACHE_REPORT`
 and noted once on the ``replay.kernels`` logger. A copy is executed from its verified text (no
 byte-code file is read), and numba's cache files of its functions are sealed and checked before
 they are unpickled (:mod:`.numba_internals`). A directory that cannot be used means compiling in
@@ -37,12 +37,10 @@ from pathlib import Path
 
 from replay.util.errors import ReplayError
 
-from . import numba_internals
+from . import files, numba_internals
 from .files import cache_dir, log, note_once, private_dir, write_private
 
 MARKER = "# MODEL KERNELS:"
-CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (mismatch), removed
-# (old), numba cache files removed (seal did not match)
 _bound: dict = {}  # (template, kernels) -> the imported copy
 
 
@@ -115,7 +113,7 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels"):
         if why is None and not _matches(path, name.rsplit("_", 1)[1]):
             if path.exists():  # machine code compiled from the wrong text
                 _drop_numba_cache(directory, name)
-                CACHE_REPORT["rewritten"] += 1
+                files.CACHE_REPORT["rewritten"] += 1
                 log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
             write_private(path, text.encode("utf-8"))  # atomic: concurrent processes write the same text
     except OSError as e:  # e.g. a full disk
@@ -129,12 +127,8 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels"):
         log.info("compiling %s for %s (one time, cached for later runs)...", what, label)
     module = _exec(name, text, str(path))  # the verified text: no byte-code file read
     module.LABEL = label
-    numba_internals.guard(module, label, _count_damaged)
+    numba_internals.guard(module, label)
     return module
-
-
-def _count_damaged(n: int) -> None:
-    CACHE_REPORT["damaged"] = CACHE_REPORT.get("damaged", 0) + n
 
 
 def _exec(name: str, text: str, filename: str):
@@ -178,4 +172,4 @@ def _prune(directory: Path, current: str) -> None:
         if p.stem != current:
             p.unlink(missing_ok=True)
             _drop_numba_cache(directory, p.stem)
-            CACHE_REPORT["pruned"] += 1
+            files.CACHE_REPORT["pruned"] += 1

@@ -13,6 +13,8 @@ import uuid
 from pathlib import Path
 
 log = logging.getLogger("replay.kernels")
+CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (did not match
+# their hash), removed (old), numba cache files removed (seal did not match)
 _noted: set = set()
 
 

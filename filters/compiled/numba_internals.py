@@ -30,6 +30,7 @@ from numba.core import config
 from numba.core.caching import Cache, IndexDataCacheFile
 from numba.core.dispatcher import Dispatcher
 
+from . import files
 from .files import log, note_once, write_private
 
 SEAL = "replay-sha256:"
@@ -56,12 +57,9 @@ def unseal(raw: bytes) -> bytes | None:
     return payload if len(raw) >= _HEAD and raw[:_HEAD] == _header(payload) else None
 
 
-_counter = {"count": lambda n: None}  # set by guard(): copies.CACHE_REPORT counts damaged files
-
-
 def _count(n: int, what: str) -> None:
     """Count ``n`` damaged files of ``what`` (removed); say it in one line."""
-    _counter["count"](n)
+    files.CACHE_REPORT["damaged"] += n
     log.warning("kernel cache: %d damaged file%s of %s removed and compiled again", n, "s" * (n != 1), what)
 
 
@@ -125,10 +123,9 @@ def _seal_cache(cache, label: str) -> None:
         cache._cache_file.label = label
 
 
-def guard(module, label: str, count) -> int:
+def guard(module, label: str) -> int:
     """Seal the numba caches of the copy ``module``'s functions, and before any is called remove
-    its numba cache files whose seal does not match (``count(n)``, one line). Returns how many."""
-    _counter["count"] = count  # also for the damage found when a function is first called
+    its numba cache files whose seal does not match (counted, one line). Returns how many."""
     dirs = set()
     for fn in vars(module).values():
         if isinstance(fn, Dispatcher) and getattr(fn.py_func, "__module__", None) == module.__name__:
