@@ -67,14 +67,16 @@ def _source(module) -> str:
 
 
 def _callees(modules) -> list:
-    """The project's modules whose functions ``modules`` call, and theirs, and so on (not ``modules``)."""
+    """The modules whose functions ``modules`` call, and theirs, and so on (not ``modules``): those of
+    this project and of the packages ``modules`` belong to (a plugin's), not third-party libraries."""
     seen, todo = {m.__name__ for m in modules}, list(modules)
+    roots = {"replay"} | {m.__name__.split(".")[0] for m in modules}
     found = []
     while todo:
         for v in list(vars(todo.pop()).values()):
             py = getattr(v, "py_func", v)  # a numba function, or a Python one (also with the JIT disabled)
             name = py.__module__ if inspect.isfunction(py) else ""
-            if name.startswith("replay.") and name not in seen and name in sys.modules:
+            if name.split(".")[0] in roots and name not in seen and name in sys.modules:
                 seen.add(name)
                 found.append(sys.modules[name])
                 todo.append(sys.modules[name])
