@@ -1,7 +1,7 @@
 """NUMBA_DISABLE_JIT=1: a whole `replay eval` runs as plain Python and gives the compiled numbers.
 
 The same command twice in subprocesses (numba reads the variable at import), once with numba's
-JIT disabled (every kernel, binding, cfunc and whole-run loop falls back to its Python
+JIT disabled (every kernel, bound copy, cfunc and whole-run loop falls back to its Python
 function: docs/architecture.md, "How a compiled step is called") and once compiled. Kalman
 filters' metrics agree to 1e-12 relative, the PF's bit for bit (same draws from the same
 generator, same arithmetic; the kernels call the C library's functions in both modes).
