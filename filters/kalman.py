@@ -32,6 +32,7 @@ H and R).
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from time import perf_counter
 
 import numpy as np
@@ -219,8 +220,13 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
 
 def own_steps(engine) -> bool:
     """Whether the engine steps as the class whose ``run_all`` it has (its loop computes those steps)."""
-    owner = next(c for c in type(engine).__mro__ if "run_all" in vars(c))
-    return all(getattr(type(engine), n) is getattr(owner, n) for n in ("start", "step", "keep", "predict", "update"))
+    return _own_steps(type(engine))
+
+
+@lru_cache(maxsize=None)
+def _own_steps(cls) -> bool:
+    owner = next(c for c in cls.__mro__ if "run_all" in vars(c))
+    return all(getattr(cls, n) is getattr(owner, n) for n in ("start", "step", "keep", "predict", "update"))
 
 
 class EKFEngine(KalmanEngine):
