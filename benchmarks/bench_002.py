@@ -55,7 +55,8 @@ from replay.data import registry
 from replay.run.evaluation import evaluate
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
-from replay.filters.p002 import gwo, parallel
+from replay.filters import compiled
+from replay.filters.p002 import gwo
 from replay.reproduce import pool as reproduce_pool
 from replay.tasks import make_task
 
@@ -175,7 +176,7 @@ def main():
         print(f"{name:12s} {s * 1e3:16.3f} {b * 1e3:22.3f} {p * 1e3:14.3f} {p / ours:11.1f}")
     print(f"gauge: drawing IGWO's 72000 uniforms (32-bit) took {gauge_before * 1e3:.3f} ms before the per-step "
           f"timings and {gauge() * 1e3:.3f} ms after (0.09-0.10 when this machine is fast); compiled kernels "
-          f"on {parallel.threads()} thread(s) (REPLAY_THREADS)")
+          f"on {compiled.threads()} thread(s) (REPLAY_THREADS)")
     if "igwo-stcpf" in steps:
         s, b = steps["igwo-stcpf"]
         verdicts.append(("IGWO-STCPF N = 100, T_max = 20, one run, ms per step", s * 1e3,

@@ -805,12 +805,13 @@ def main(argv=None):
     print(f"numpy BLAS {env['numpy_blas']}")
     print(f"threadpoolctl {env['threadpoolctl']}")
     print(f"BLAS/thread environment {env['env'] or '{}'} (recorded, never changed)")
-    from replay.util import kalman_loops as kk
+    from replay.filters import kalman_loops as kk
+    from replay.filters.compiled import loop_ready
 
     t0 = time.perf_counter()
     for loop, sig in ((kk.sigma_run, kk.SIGMA_RUN), (kk.ekf_run, kk.EKF_RUN)):
-        kk.loop_ready(loop, sig, True)  # a short run uses the compiled run loops only when cached
-    print(f"Kalman run loops (replay.util.kalman_loops.sigma_run, ekf_run) loaded or compiled in "
+        loop_ready(loop, sig, True)  # a short run uses the compiled run loops only when cached
+    print(f"Kalman run loops (replay.filters.kalman_loops.sigma_run, ekf_run) loaded or compiled in "
           f"{time.perf_counter() - t0:.1f} s, before any timing")
     pb = build_problem(n)
     print(f"scenario: make_frame(default_rng(1), steps={n}), make_task('sonar').build(frame, "

@@ -32,18 +32,18 @@ H and R).
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from time import perf_counter
 
 import numpy as np
 
 from replay.util.angles import angle_mask, residual, wrap_components
-from replay.util import kalman_kernels as kernels
-from replay.util import kalman_loops
 from replay.model import Model, remap_indices
 
+from . import kalman_kernels as kernels
+from . import kalman_loops
 from .base import Filter
-from .loops import COMPILE_AT, bound, derived_from_kernels, grain, param_stacks, row_kernels
-from .threads import split
+from .compiled import bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
 
 
 def stack_of(a, one: bool):
@@ -57,7 +57,7 @@ def not_pd(run: int) -> np.linalg.LinAlgError:
 
 def gain_nis(S, Pxz, y):
     """K = Pxz S^-1 (..., nx, nz) and the NIS y' S^-1 y (...), for one run (S (nz, nz)) or a
-    stack of runs (S (M, nz, nz)); compiled (:func:`replay.util.kalman_kernels.gain_nis`, one Cholesky
+    stack of runs (S (M, nz, nz)); compiled (:func:`replay.filters.kalman_kernels.gain_nis`, one Cholesky
     factor of S per run). LinAlgError when an S is not positive definite."""
     one = S.ndim == 2
     S3, P3, y2 = stack_of(S, one), stack_of(Pxz, one), stack_of(y, one)
@@ -70,7 +70,7 @@ def gain_nis(S, Pxz, y):
 
 def kalman_update(x, P, y, H, R, x_angles=()):
     """The Kalman update (module docstring) over one run (x (nx,)) or a stack (M, nx): returns
-    new x, P (Joseph form), NIS; compiled (:func:`replay.util.kalman_kernels.joseph_update`).
+    new x, P (Joseph form), NIS; compiled (:func:`replay.filters.kalman_kernels.joseph_update`).
     LinAlgError when an S is not positive definite."""
     one = x.ndim == 1
     x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
@@ -83,7 +83,8 @@ def kalman_update(x, P, y, H, R, x_angles=()):
 
 
 def propagate_cov(F, P, Q):
-    """F P F' + Q for one run (P (nx, nx)) or a stack; compiled (:func:`replay.util.kalman_kernels.propagate_cov`)."""
+    """F P F' + Q for one run (P (nx, nx)) or a stack; compiled
+    (:func:`replay.filters.kalman_kernels.propagate_cov`)."""
     one = P.ndim == 2
     out = np.empty((1,) + P.shape if one else P.shape)
     kernels.propagate_cov(stack_of(F, one), stack_of(P, one), np.ascontiguousarray(Q, dtype=float), out)
@@ -173,19 +174,22 @@ class KalmanEngine:
 
 
 def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
-    """Run ``loop`` (:func:`replay.util.kalman_loops.sigma_run` or ``ekf_run``, declared type
+    """Run ``loop`` (:func:`replay.filters.kalman_loops.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
-    kernels (their rows forms, first-class functions: :func:`replay.filters.loops.row_kernels`), its
+    kernels (their rows forms, first-class functions: :func:`replay.filters.compiled.row_kernels`), its
     parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
-    model's array methods are not its kernels, or when the loop is neither compiled nor cached
-    and the job is smaller than ``COMPILE_AT`` run-steps (:mod:`replay.filters.loops`)."""
+    model's array methods are not its kernels, or a subclass of the engine (a plugin's) changes a
+    step, or when the loop is neither compiled nor cached and the job is smaller than
+    ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`)."""
+    if not own_steps(engine):
+        return None
     m = engine.model
     ks = m.kernels()
     M, steps, nz = Z.shape
     seen = finite[0].all(axis=1)
     if not (finite == seen[None, :, None]).all():  # missing for some runs, or some components: steps
         return None
-    if ks is None or not derived_from_kernels(m) or not kalman_loops.loop_ready(loop, sig, M * steps >= COMPILE_AT):
+    if ks is None or not derived_from_kernels(m) or not loop_ready(loop, sig, M * steps >= kalman_loops.COMPILE_AT):
         return None
     stacks = param_stacks(m, steps)
     try:  # Q, R of another shape at some step (ragged): no stack, step by step instead
@@ -212,6 +216,17 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     if bad >= 0:
         return False
     return X, PP, nis, np.where(seen, nz, 0)[None].repeat(M, axis=0)
+
+
+def own_steps(engine) -> bool:
+    """Whether the engine steps as the class whose ``run_all`` it has (its loop computes those steps)."""
+    return _own_steps(type(engine))
+
+
+@lru_cache(maxsize=None)
+def _own_steps(cls) -> bool:
+    owner = next(c for c in cls.__mro__ if "run_all" in vars(c))
+    return all(getattr(cls, n) is getattr(owner, n) for n in ("start", "step", "keep", "predict", "update"))
 
 
 class EKFEngine(KalmanEngine):

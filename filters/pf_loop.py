@@ -28,14 +28,12 @@ import numpy as np
 from numba import types
 
 from replay.model import Model, noise_factor
-from replay.util import kalman_loops
 from replay.util.angles import angle_mask
 from replay.util.kernels import gauss_loglik
 
-from .loops import bound, derived_from_kernels, grain, param_stacks, row_kernels
+from .compiled import ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
 from .particles import moments, weights
 from .resampling import SCHEMES, invert_sorted, systematic
-from .threads import split
 
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
 # 0.2-0.3 µs per particle-step against the steps: their Python and numpy calls per run and step)
@@ -98,7 +96,7 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
 
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-PF_RUN = types.int64(kalman_loops.ROWS_KERNEL, kalman_loops.ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
+PF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
                      _M, _M,
                      _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
                      types.float64, types.float64, types.float64, types.float64, _M, _M3)
@@ -117,7 +115,7 @@ def run(engine, Z, finite):
     if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
         return None
     if (not applies(engine, m) or not all(isinstance(g, np.random.Generator) for g in engine.active)
-            or not kalman_loops.loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
+            or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
         return None
     try:  # a covariance without a factor: the steps meet it and record the divergence
         (qdiag, qsd, _, _), (rdiag, rL, rinv, logdet) = noise_factor(m.Q), noise_factor(m.R)

@@ -36,21 +36,20 @@ from functools import lru_cache
 
 import numpy as np
 
-from replay.util import kalman_kernels as kernels
-from replay.util import kalman_loops
 from replay.util.angles import angle_mask
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from .base import PER_RUN, Filter, on_points
-from . import kalman
+from . import kalman, kalman_loops
+from . import kalman_kernels as kernels
 from .kalman import KalmanEngine, measurement, not_pd, stack_of
 
 
 # --- the step over a stack of runs -------------------------------------------------------
 def sigma_points(x, P, xi):
     """Points X_i = x + L xi_i (..., m, nx) and their deviations L xi_i from x (compiled:
-    :func:`replay.util.kalman_kernels.sigma_points`). LinAlgError when a P is not positive definite."""
+    :func:`replay.filters.kalman_kernels.sigma_points`). LinAlgError when a P is not positive definite."""
     one = x.ndim == 1
     x2, P3 = stack_of(x, one), stack_of(P, one)
     X, dev = np.empty((len(x2),) + xi.shape), np.empty((len(x2),) + xi.shape)
@@ -62,7 +61,7 @@ def sigma_points(x, P, xi):
 
 def predict(model, x, P, k, xi, wm, wc):
     """Predicted means (..., nx) and covariances (..., nx, nx) (the module docstring's predict;
-    the moments compiled: :func:`replay.util.kalman_kernels.sigma_moments`)."""
+    the moments compiled: :func:`replay.filters.kalman_kernels.sigma_moments`)."""
     one = x.ndim == 1
     Y = on_points(model.f, sigma_points(x, P, xi)[0], k)
     Y3 = stack_of(Y, one)
@@ -76,7 +75,7 @@ def innovation(model, x, P, z, k, mask, xi, wm, wc):
     """Innovations y (..., nzm), Pzz (..., nzm, nzm), Pxz (..., nx, nzm) and R (nzm, nzm).
 
     ``z`` (..., nzm) holds the measured components ``mask`` (None: all) of each run (the
-    moments compiled: :func:`replay.util.kalman_kernels.innovation_moments`).
+    moments compiled: :func:`replay.filters.kalman_kernels.innovation_moments`).
     """
     one = x.ndim == 1
     X, dev = sigma_points(x, P, xi)
@@ -93,7 +92,7 @@ def innovation(model, x, P, z, k, mask, xi, wm, wc):
 
 def correct(x, P, y, S, Pxz, x_angles=()):
     """x + K y (state angles wrapped), P - K Pxz' (symmetrised) and the NIS, K = Pxz S^-1: the
-    compiled :func:`replay.util.kalman_kernels.kalman_correct` on each run (new arrays returned).
+    compiled :func:`replay.filters.kalman_kernels.kalman_correct` on each run (new arrays returned).
     LinAlgError when an S is not positive definite."""
     one = x.ndim == 1
     x3, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
@@ -109,8 +108,8 @@ class SigmaEngine(KalmanEngine):
     """M runs of a UKF or CKF: the functions above fused into compiled calls, the same kernels
     in the same order (so the same numbers as :func:`predict`, :func:`innovation` and
     :func:`correct`). The engine keeps the points ``X`` (and their deviations ``dev``) of its
-    current means and covariances: made by :func:`replay.util.kalman_kernels.sigma_predict` with the
-    predicted moments and by :func:`replay.util.kalman_kernels.sigma_update` with the corrected ones,
+    current means and covariances: made by :func:`replay.filters.kalman_kernels.sigma_predict` with the
+    predicted moments and by :func:`replay.filters.kalman_kernels.sigma_update` with the corrected ones,
     so each step is f, one compiled call, h, one compiled call. A covariance without a
     Cholesky factor raises LinAlgError where the points are used, as :func:`sigma_points` does."""
 

@@ -8,7 +8,7 @@ The session runs with ``REPLAY_CACHE_DIR`` set to a fresh temporary directory
 (removed at the end), set here before any test module imports numba, so the
 registry's user cache is empty (tests name their data directories) and nothing
 is read from or written to the developer's cache. Subprocesses inherit it.
-The compiled kernels (``filters/binding.py`` keeps them in ``$REPLAY_CACHE_DIR/kernels``)
+The compiled kernels (``filters/compiled/copies.py`` keeps them in ``$REPLAY_CACHE_DIR/kernels``)
 survive from one session to the next: the session's ``kernels`` directory starts
 as a copy of this checkout's test kernel store (``<user cache>/test-kernels/<hash
 of the checkout's path>``, owner-only) and is merged into it at the end

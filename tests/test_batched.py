@@ -233,7 +233,7 @@ def test_stacked_linear_algebra_equals_one_matrix():
 
 def test_compiled_kernels_equal_their_python_source():
     """The compiled Kalman kernels and their un-jitted py_func (the readable source) agree to 1e-12."""
-    from replay.util import kalman_kernels as kernels
+    from replay.filters import kalman_kernels as kernels
 
     rng = np.random.default_rng(8)
     A = rng.standard_normal((3, 3, 3))
@@ -254,11 +254,12 @@ def test_compiled_kernels_equal_their_python_source():
 
 @pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
 def test_fast_path_equals_the_readable_reference(sonar_problems, name, monkeypatch):
-    """The Kalman family's compiled steps (replay.util.kalman_kernels, replay.util.kernels) equal
+    """The Kalman family's compiled steps (replay.filters.kalman_kernels, replay.util.kernels) equal
     their un-jitted Python (tests/pure.py) over whole runs, and the fused sigma-point engine
     equals the per-run functions predict / innovation / correct (the per-run State API)."""
     from pure import pure
-    from replay.util import kalman_kernels, kernels
+    from replay.filters import kalman_kernels
+    from replay.util import kernels
 
     pbs = sonar_problems[:3]
     Z = np.stack([pb.z for pb in pbs])[:, :40]
@@ -290,11 +291,12 @@ def test_whole_run_loop_equals_the_step_by_step_engine(sonar_problems, name, mon
     (kalman_loops.sigma_run / ekf_run, the model's kernels as first-class functions); it
     gives the numbers of the step-by-step engine bit for bit, NIS included."""
     from replay.filters import kalman
-    from replay.util import kalman_loops
+    from replay.filters import kalman_loops
+    from replay.filters.compiled import loop_ready
 
     for loop, sig in ((kalman_loops.sigma_run, kalman_loops.SIGMA_RUN),
                       (kalman_loops.ekf_run, kalman_loops.EKF_RUN)):
-        assert kalman_loops.loop_ready(loop, sig, True)
+        assert loop_ready(loop, sig, True)
     pbs = sonar_problems[:3]
     Z = np.stack([pb.z for pb in pbs])
     X0, P0 = np.stack([pb.x0 for pb in pbs]), np.stack([pb.P0 for pb in pbs])

@@ -8,7 +8,8 @@ import pytest
 from replay.data import registry
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
-from replay.filters.p002 import binding, compiled_util, gwo, parallel, stcpf
+from replay.filters.compiled import Kernel, copies
+from replay.filters.p002 import compiled_util, gwo, stcpf
 from replay.models.auv_sonar import AUVSonar
 from replay.models.random_walk import RandomWalkPosition
 from replay.models.ungm import UNGM
@@ -242,7 +243,7 @@ def test_factor_repairs_like_the_oracle():
 def test_swarm_kernel_keeps_the_elite_and_matches_the_oracle():
     """One swarm on a quadratic fitness (the random-walk model: h = identity on 3 states):
     the kernel and the oracle's gwo_optimize give the same wolves from the same 32-bit draws."""
-    bound = binding.bind(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
+    bound = stcpf.bound_kernels(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
     X = np.random.default_rng(1).normal(size=(30, 3)) * 3
     z = np.array([0.5, -1.0, 2.0])
     Ri = np.linalg.inv(np.diag([1.0, 2.0, 4.0]))
@@ -262,7 +263,7 @@ def test_swarm_kernel_keeps_the_elite_and_matches_the_oracle():
 def test_swarm_kernel_moves_only_the_movable_components_and_adds_the_transition_term():
     """move_components=observed: a component outside ``mov`` keeps every wolf's value; fitness=posterior:
     the transition term of each wolf's own ancestor; both as the oracle's reading."""
-    bound = binding.bind(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
+    bound = stcpf.bound_kernels(RandomWalkPosition(np.eye(3), np.diag([1.0, 2.0, 4.0])).kernels())  # h = identity
     X = np.random.default_rng(1).normal(size=(30, 3)) * 3
     z = np.array([0.5, -1.0, 2.0])
     Ri = np.linalg.inv(np.diag([1.0, 2.0, 4.0]))
@@ -287,7 +288,7 @@ def test_swarm_kernel_moves_only_the_movable_components_and_adds_the_transition_
 
 @pytest.mark.slow
 def test_kernel_call_falls_back_when_argument_types_change():
-    k = parallel.Kernel(compiled_util.estimate)
+    k = Kernel(compiled_util.estimate)
     X = np.random.default_rng(0).normal(size=(2, 5, 3))
     out = []
     for Xi in (X, np.asfortranarray(X), X[:, ::-1]):  # contiguous, then two layouts the first typing did not see
@@ -322,15 +323,15 @@ def test_circular_mean_of_points_across_the_wrap():
 def test_bound_kernels_are_cached_by_content(tmp_path, monkeypatch):
     """bind() writes compiled.py with the model's imports; the same kernels give the same file."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(binding, "_bound", {})
+    monkeypatch.setattr(copies, "_bound", {})
     m = RandomWalkPosition(np.eye(2), np.eye(2))
-    mod = binding.bind(m.kernels())
+    mod = stcpf.bound_kernels(m.kernels())
     files = list((tmp_path / "kernels").glob("replay_compiled_*.py"))
     assert len(files) == 1 and mod.__file__ == str(files[0])
     text = files[0].read_text()
     assert "from replay.models.random_walk_kernels import identity as h" in text
-    monkeypatch.setattr(binding, "_bound", {})
-    assert binding.bind(m.kernels()).__file__ == mod.__file__
+    monkeypatch.setattr(copies, "_bound", {})
+    assert stcpf.bound_kernels(m.kernels()).__file__ == mod.__file__
 
 
 def test_bind_refuses_kernels_that_are_not_module_level():
@@ -343,4 +344,4 @@ def test_bind_refuses_kernels_that_are_not_module_level():
         out[:] = x
 
     with pytest.raises(ReplayError, match="module-level"):
-        binding.bind((local, local, local, local))
+        stcpf.bound_kernels((local, local, local, local))

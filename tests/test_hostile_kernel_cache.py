@@ -1,7 +1,7 @@
 """A damaged or hostile kernel cache (``$REPLAY_CACHE_DIR/kernels``; corpus: tests/hostile.py).
 
 numba's cache files of a bound copy (``.nbi`` index, ``.nbc`` machine code: pickles) are sealed
-with their SHA-256 (replay/filters/kernel_files.py): a damaged one is never unpickled, it is
+with their SHA-256 (replay/filters/compiled/numba_internals.py): a damaged one is never unpickled, it is
 removed, counted and compiled again, and the numbers are those of the undamaged cache. A cache
 directory that cannot be used compiles in memory with one note. Each test has its own
 ``REPLAY_CACHE_DIR``; the small random-walk model's rows kernels compile in about a second.
@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 from hostile import register
 
-from replay.filters import binding, kernel_files, loops, rows
+from replay.filters.compiled import copies, files, loops, numba_internals, rows
 from replay.models.random_walk import RandomWalkPosition
 
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
@@ -37,9 +37,9 @@ X = np.arange(6.0).reshape(3, 2)
 def cache(tmp_path, monkeypatch):
     """An empty kernel cache of this test; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(binding, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
     monkeypatch.setattr(loops, "_rows", {})
-    monkeypatch.setattr(loops, "_copies", {})
+    monkeypatch.setattr(copies, "_bound", {})
     before = set(sys.modules)
     yield tmp_path / "cache" / "kernels"
     for name in set(sys.modules) - before:
@@ -49,7 +49,8 @@ def cache(tmp_path, monkeypatch):
 
 def _copy():
     """The rows copy of the random-walk model, imported afresh (a new process would do the same)."""
-    return binding.bound_copy(rows, MODEL.kernels(), (), "replay_rows_", "rows kernels")
+    copies._bound.clear()
+    return copies.bind(rows, MODEL.kernels(), "rows kernels")
 
 
 def _f_rows(mod):
@@ -72,10 +73,10 @@ def test_random_bytes_over_nbc_detected_removed_counted_same_numbers(cache, capl
         f.write_bytes(os.urandom(4000))
     got, hits = _f_rows(_copy())
     assert hits == 0 and np.array_equal(got, want)
-    assert binding.CACHE_REPORT["damaged"] == 1
+    assert files.CACHE_REPORT["damaged"] == 1
     assert "kernel cache: 1 damaged file of random_walk removed and compiled again" in caplog.text
-    assert all(kernel_files.unseal(f.read_bytes()) is not None for f in _files(cache, ".nb?"))  # sealed anew
-    assert _f_rows(_copy())[1] == 1 and binding.CACHE_REPORT["damaged"] == 1
+    assert all(numba_internals.unseal(f.read_bytes()) is not None for f in _files(cache, ".nb?"))  # sealed anew
+    assert _f_rows(_copy())[1] == 1 and files.CACHE_REPORT["damaged"] == 1
 
 
 def test_nbi_pickle_that_runs_code_is_never_unpickled(cache, tmp_path):
@@ -90,7 +91,7 @@ def test_nbi_pickle_that_runs_code_is_never_unpickled(cache, tmp_path):
         f.write_bytes(pickle.dumps(Hostile()))
     got, hits = _f_rows(_copy())
     assert not marker.exists()
-    assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 1
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 1
 
 
 def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cache, caplog):
@@ -98,11 +99,11 @@ def test_damage_after_the_import_is_caught_when_the_function_is_first_called(cac
     a bad disk): the check at unpickling catches them too."""
     want, _ = _f_rows(_copy())
     mod = _copy()
-    assert binding.CACHE_REPORT["damaged"] == 0
+    assert files.CACHE_REPORT["damaged"] == 0
     for f in _files(cache, ".nbc"):
         f.write_bytes(b"\x80\x04garbage")
     got, hits = _f_rows(mod)
-    assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 1
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 1
     assert "1 damaged file of random_walk removed" in caplog.text
 
 
@@ -110,9 +111,10 @@ def test_full_disk_means_not_cached_not_an_error(cache, monkeypatch, caplog):
     def full(*_a, **_k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(kernel_files, "_noted", set())
+    monkeypatch.setattr(files, "_noted", set())
     mod = _copy()  # the copy's text written; numba's files next, on a full disk
-    monkeypatch.setattr(kernel_files, "write_private", full)
+    monkeypatch.setattr(numba_internals, "write_private", full)
+    monkeypatch.setattr(copies, "write_private", full)
     out, hits = _f_rows(mod)
     assert hits == 0 and np.array_equal(out, X) and not _files(cache, ".nb?")
     assert caplog.text.count("cannot write (No space left on device); compiled code not cached") == 1
@@ -128,12 +130,12 @@ def test_truncated_index_and_unsealed_plain_numba_files_are_recompiled(cache):
     want, _ = _f_rows(_copy())
     nbi = _files(cache, ".nbi")[0]
     nbi.write_bytes(nbi.read_bytes()[:200])
-    assert np.array_equal(_f_rows(_copy())[0], want) and binding.CACHE_REPORT["damaged"] == 1
+    assert np.array_equal(_f_rows(_copy())[0], want) and files.CACHE_REPORT["damaged"] == 1
     # a file as plain numba writes it (no seal) is not read either
     nbc = _files(cache, ".nbc")[0]
-    nbc.write_bytes(kernel_files.unseal(nbc.read_bytes()))
+    nbc.write_bytes(numba_internals.unseal(nbc.read_bytes()))
     got, hits = _f_rows(_copy())
-    assert hits == 0 and np.array_equal(got, want) and binding.CACHE_REPORT["damaged"] == 2
+    assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 2
 
 
 def test_plain_numba_reading_a_sealed_index_sees_another_version():
@@ -141,9 +143,9 @@ def test_plain_numba_reading_a_sealed_index_sees_another_version():
     unpickles the rest (nor fails) should some numba cache of a copy not be sealed."""
     from numba.core.caching import IndexDataCacheFile
 
-    raw = kernel_files.seal(pickle.dumps("0.0") + pickle.dumps(("stamp", {"key": "x.1.nbc"})))
-    assert kernel_files.unseal(raw) is not None
-    assert kernel_files.unseal(raw[:-1] + b"!") is None and kernel_files.unseal(raw[:50]) is None
+    raw = numba_internals.seal(pickle.dumps("0.0") + pickle.dumps(("stamp", {"key": "x.1.nbc"})))
+    assert numba_internals.unseal(raw) is not None
+    assert numba_internals.unseal(raw[:-1] + b"!") is None and numba_internals.unseal(raw[:50]) is None
     plain = IndexDataCacheFile("/nonexistent", "x", "stamp")
     f = __import__("io").BytesIO(raw)
     assert pickle.load(f) != plain._version  # the version check numba makes first
@@ -152,16 +154,16 @@ def test_plain_numba_reading_a_sealed_index_sees_another_version():
 def test_rows_cfuncs_are_sealed_and_checked(cache):
     """loops.row_kernels' cfuncs share the copy's numba cache: written sealed, damage counted."""
     a = loops.row_kernels(MODEL, (0, 1))
-    files = _files(cache, ".nb?")
-    assert files and all(kernel_files.unseal(f.read_bytes()) is not None for f in files)
+    found = _files(cache, ".nb?")
+    assert found and all(numba_internals.unseal(f.read_bytes()) is not None for f in found)
     nbc = _files(cache, ".nbc")
     assert len(nbc) == 2  # f_rows, h_rows
     for f in nbc:
         f.write_bytes(os.urandom(100))
     loops._rows.clear()
-    loops._copies.clear()
+    copies._bound.clear()
     b = loops.row_kernels(MODEL, (0, 1))
-    assert binding.CACHE_REPORT["damaged"] == 2
+    assert files.CACHE_REPORT["damaged"] == 2
     assert [x._cache_hits for x in b] == [0, 0] and all(x.address for x in a + b)
 
 
@@ -169,8 +171,8 @@ def test_cache_directory_is_owner_only(cache):
     _f_rows(_copy())
     for d in (cache, cache / "__pycache__"):
         assert stat.S_IMODE(d.stat().st_mode) == 0o700
-    files = list(cache.glob("*.py")) + _files(cache, ".nb?")
-    assert files and all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in files)
+    written = list(cache.glob("*.py")) + _files(cache, ".nb?")
+    assert written and all(stat.S_IMODE(f.stat().st_mode) == 0o600 for f in written)
     cache.chmod(0o777)
     (cache / "__pycache__").chmod(0o775)
     _files(cache, ".nbc")[0].chmod(0o666)
@@ -181,7 +183,7 @@ def test_cache_directory_is_owner_only(cache):
 
 @pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0, reason="needs root to give a directory away")
 def test_cache_dir_of_another_user_is_not_used(cache, monkeypatch, caplog):
-    monkeypatch.setattr(kernel_files, "_noted", set())
+    monkeypatch.setattr(files, "_noted", set())
     cache.mkdir(parents=True, mode=0o700)
     os.chown(cache, 65534, 65534)
     mod = _copy()
@@ -204,10 +206,10 @@ def test_unusable_cache_dir_compiles_in_memory_with_one_note(where, tmp_path, mo
             (root / "kernels").rmdir()
             pytest.skip("/sys/fs is writable here")
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(root))
-    monkeypatch.setattr(kernel_files, "_noted", set())
+    monkeypatch.setattr(files, "_noted", set())
     # the process's row kernels compiled by earlier tests (cached on disk then) are not what is tested
     monkeypatch.setattr(loops, "_rows", {})
-    monkeypatch.setattr(loops, "_copies", {})
+    monkeypatch.setattr(copies, "_bound", {})
     mod = _copy()
     try:
         out, hits = _f_rows(mod)
@@ -218,7 +220,7 @@ def test_unusable_cache_dir_compiles_in_memory_with_one_note(where, tmp_path, mo
     finally:
         del sys.modules[mod.__name__]
         loops._rows.clear()
-        loops._copies.clear()
+        copies._bound.clear()
     notes = [r.getMessage() for r in caplog.records if "REPLAY_CACHE_DIR" in r.getMessage()]
     assert len(notes) == 1 and notes[0].startswith(f"REPLAY_CACHE_DIR={root}: ")
     assert "compiled in memory" in notes[0]

@@ -1,7 +1,7 @@
-"""The paper-002 kernel cache (filters/p002/binding.py): a cached copy is imported only when
+"""The kernel cache (filters/compiled/copies.py, here with paper 002's template): a cached copy is imported only when
 its content hashes to its name, and old copies of a model are pruned with their numba caches.
 
-These tests never compile a kernel: binding imports the copy (numba compiles on first call).
+These tests never compile a kernel: the copy is imported (numba compiles on first call).
 """
 from __future__ import annotations
 
@@ -11,23 +11,24 @@ import sys
 import numpy as np
 import pytest
 
-from replay.filters import binding as mechanism
-from replay.filters.p002 import binding
+from replay.filters.compiled import copies, files
+from replay.filters.p002 import stcpf
 from replay.models.random_walk import RandomWalkPosition
 
-MODEL = "replay_compiled_0badcafe_"
+PREFIX = "replay_compiled_"
+MODEL = PREFIX + "0badcafe_"
 
 
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
-    """An empty kernel cache; binding's process state restored afterwards."""
+    """An empty kernel cache; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(binding, "_bound", {})
-    monkeypatch.setattr(mechanism, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    monkeypatch.setattr(copies, "_bound", {})
+    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:
-        if name.startswith(binding.PREFIX):
+        if name.startswith(PREFIX):
             del sys.modules[name]
 
 
@@ -50,12 +51,12 @@ def test_tampered_copy_is_rewritten_and_its_numba_cache_dropped(cache):
     cache.mkdir(parents=True)
     (cache / f"{name}.py").write_text("VALUE = 666\n")  # same name, other content
     stale = _numba_files(cache, name)
-    mod = binding._load(name, text)
+    mod = copies.load(name, text)
     assert mod.VALUE == 1 and (cache / f"{name}.py").read_text() == text
-    assert mechanism.CACHE_REPORT == {"rewritten": 1, "pruned": 0, "damaged": 0}
+    assert files.CACHE_REPORT == {"rewritten": 1, "pruned": 0, "damaged": 0}
     assert not any(f.exists() for f in stale)
-    binding._load(name, text)  # intact now: imported as it is
-    assert mechanism.CACHE_REPORT["rewritten"] == 1
+    copies.load(name, text)  # intact now: imported as it is
+    assert files.CACHE_REPORT["rewritten"] == 1
 
 
 def test_truncated_copy_is_rewritten(cache):
@@ -63,36 +64,35 @@ def test_truncated_copy_is_rewritten(cache):
     name = _name(text)
     cache.mkdir(parents=True)
     (cache / f"{name}.py").write_text(text[:9])
-    assert binding._load(name, text).OTHER == 3
-    assert mechanism.CACHE_REPORT["rewritten"] == 1
+    assert copies.load(name, text).OTHER == 3
+    assert files.CACHE_REPORT["rewritten"] == 1
 
 
 def test_old_copies_of_the_model_are_pruned_others_kept(cache):
     cache.mkdir(parents=True)
     old = _name("VALUE = 0\n")
-    legacy = "replay_compiled_" + "a" * 20  # the names before the model key
     other_model = _name("VALUE = 0\n", "replay_compiled_12345678_")
-    for n in (old, legacy, other_model):
+    for n in (old, other_model):
         (cache / f"{n}.py").write_text("VALUE = 0\n")
-    old_cache = _numba_files(cache, old) + _numba_files(cache, legacy)
+    old_cache = _numba_files(cache, old)
     kept_cache = _numba_files(cache, other_model)
     text = "VALUE = 5\n"
-    assert binding._load(_name(text), text).VALUE == 5
+    assert copies.load(_name(text), text).VALUE == 5
     assert sorted(p.name for p in cache.glob("*.py")) == sorted([f"{_name(text)}.py", f"{other_model}.py"])
     assert not any(f.exists() for f in old_cache) and all(f.exists() for f in kept_cache)
-    assert mechanism.CACHE_REPORT == {"rewritten": 0, "pruned": 2, "damaged": 0}
+    assert files.CACHE_REPORT == {"rewritten": 0, "pruned": 1, "damaged": 0}
 
 
 def test_bound_model_copy_is_verified_before_import(cache):
     """bind() names the copy by model and content; an edited copy is replaced before import."""
     m = RandomWalkPosition(np.eye(2), np.eye(2))
-    first = binding.bind(m.kernels())
+    first = stcpf.bound_kernels(m.kernels())
     path = cache / f"{first.__name__}.py"
     text = path.read_text()
-    assert first.__name__.startswith(binding.PREFIX) and hashlib.sha256(text.encode()).hexdigest()[:20] == \
+    assert first.__name__.startswith(PREFIX) and hashlib.sha256(text.encode()).hexdigest()[:20] == \
         first.__name__.rsplit("_", 1)[1]
     path.write_text("import os  # injected\n" + text)
-    binding._bound.clear()
-    again = binding.bind(m.kernels())
+    copies._bound.clear()
+    again = stcpf.bound_kernels(m.kernels())
     assert again.__name__ == first.__name__ and path.read_text() == text
-    assert mechanism.CACHE_REPORT["rewritten"] == 1
+    assert files.CACHE_REPORT["rewritten"] == 1

@@ -1,9 +1,9 @@
-"""Shared plumbing of the run loops (replay.filters.loops): the kernels' parameter stacks are kept
+"""Shared plumbing of the run loops (replay.filters.compiled.loops): the kernels' parameter stacks are kept
 per model, and a model changed in any way (in place included) gets fresh ones."""
 import numpy as np
 import pytest
 
-from replay.filters import loops
+from replay.filters.compiled import JACOBIAN_ROWS, ROWS_KERNEL, loops
 from replay.models.auv_sonar import AUVSonar
 
 
@@ -32,8 +32,9 @@ def test_a_model_with_an_attribute_of_unknown_kind_is_never_kept():
 
 @pytest.mark.slow  # compiles the rows forms of two models' kernels when numba's cache lacks them (~2 s)
 def test_rows_forms_equal_the_models_array_methods_bit_for_bit():
-    """The run loops' rows kernels (replay.filters.rows bound to the model) give the numbers of
-    the model's own f, h, F, H on a stack of states; each is its own function (four addresses)."""
+    """The run loops' rows kernels (replay.filters.compiled.rows bound to the model) give the numbers of
+    the model's own f, h, F, H on a stack of states; each is its own function (four addresses),
+    typed by numba as the run loops' declared function types without a check."""
     import numba as nb
 
     from replay.models.random_walk import RandomWalkPosition
@@ -44,8 +45,8 @@ def test_rows_forms_equal_the_models_array_methods_bit_for_bit():
 
     for m in (AUVSonar(), RandomWalkPosition(np.eye(3), np.eye(3))):
         fns = loops.row_kernels(m)
-        assert len({fn.address for fn in fns}) == 4 and [fn.__wrapper_address__() for fn in fns] == \
-            [fn.address for fn in fns]
+        assert len({fn.address for fn in fns}) == 4
+        assert [nb.typeof(fn) for fn in fns] == [ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS]
         X = np.random.default_rng(0).normal(size=(40, m.nx)) * 3.0
         pf, ph = m.kernel_params(0)
         for fn, ref, p in zip(fns, (m.f(X, 0), m.h(X, 0), m.F(X, 0), m.H(X, 0)), (pf, ph, pf, ph)):

@@ -7,7 +7,7 @@ from replay.data import registry
 from replay.filters import make_filter, pf_loop
 from replay.models.random_walk import RandomWalkPosition
 from replay.tasks import make_task
-from replay.util import kalman_loops as kalman_kernels  # the loops and loop_ready
+from replay.filters.compiled import loop_ready
 from replay.util.seeds import rng_for
 
 pytestmark = pytest.mark.slow  # compiles the loop (about 2 s) when numba's cache does not have it
@@ -34,7 +34,7 @@ def walk(missing_rows=True):
 
 def both(flt, model, Z, X0, P0, monkeypatch):
     """(loop, steps, generator ends) for the same runs: the loop used, then the loop refused."""
-    assert kalman_kernels.loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
+    assert loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
     used, real = [], pf_loop.run
     monkeypatch.setattr(pf_loop, "run", lambda *a: used.append(real(*a)) or used[-1])
     gs = [np.random.default_rng(10 + m) for m in range(len(Z))]
@@ -87,11 +87,11 @@ def test_what_the_loop_does_not_compute_steps_in_python(monkeypatch):
 def test_the_loops_give_the_same_numbers_on_any_thread_count(sonar, name, params, monkeypatch):
     """Runs are split over threads in contiguous ranges, each run from its own generator: one
     thread or three give the same numbers bit for bit (the grain lowered so that 3 runs split)."""
-    from replay.filters import loops
-    from replay.util import kalman_loops as kk
+    from replay.filters import kalman_loops as kk
+    from replay.filters.compiled import loops
 
     for loop, sig in ((kk.sigma_run, kk.SIGMA_RUN), (kk.ekf_run, kk.EKF_RUN), (pf_loop.pf_run, pf_loop.PF_RUN)):
-        assert kk.loop_ready(loop, sig, True)
+        assert loop_ready(loop, sig, True)
     monkeypatch.setattr(loops, "THREAD_WORK_US", 1e-9)
     out = {}
     for n in ("1", "3"):
@@ -108,7 +108,7 @@ def test_any_bit_generator_gives_the_numbers_of_the_steps(monkeypatch):
     Philox streams too."""
     model, Z, X0, P0 = walk()
     flt = make_filter("pf", n_particles=80, roughening=0.1)
-    assert kalman_kernels.loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
+    assert loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
     used, real = [], pf_loop.run
     monkeypatch.setattr(pf_loop, "run", lambda *a: used.append(real(*a)) or used[-1])
     for bits in (np.random.MT19937, np.random.Philox):

@@ -1,7 +1,7 @@
 """NUMBA_DISABLE_JIT=1: a whole `replay eval` runs as plain Python and gives the compiled numbers.
 
 The same command twice in subprocesses (numba reads the variable at import), once with numba's
-JIT disabled (every kernel, binding, cfunc and whole-run loop falls back to its Python
+JIT disabled (every kernel, bound copy, cfunc and whole-run loop falls back to its Python
 function: docs/architecture.md, "How a compiled step is called") and once compiled. Kalman
 filters' metrics agree to 1e-12 relative, the PF's bit for bit (same draws from the same
 generator, same arithmetic; the kernels call the C library's functions in both modes).
@@ -66,9 +66,9 @@ def test_plain_kernel_refused_when_compiling():
     with one line (not a numba typing error deep in a bound copy)."""
     from numba.core import config
 
-    from replay.filters import binding
+    from replay.filters.compiled import copies
     from replay.util.errors import ReplayError
 
     assert not config.DISABLE_JIT
     with pytest.raises(ReplayError, match="plain_kernel.* is not a module-level numba function"):
-        binding.where(plain_kernel)
+        copies.where(plain_kernel)

@@ -4,10 +4,11 @@
 * :mod:`.stcpf` — the STCPF / CPF / bootstrap filter class and its engine over
   M runs x N particles; :mod:`.igwo_stcpf` — the swarm filters (IGWO-STCPF,
   GWO-PF, IGWO-PF, PSO-PF, PSO-CPF);
-* :mod:`.compiled` (template bound to a model's kernels by :mod:`.binding`) and
+* :mod:`.compiled` (template bound to a model's kernels by :func:`.stcpf.bound_kernels`,
+  through :mod:`replay.filters.compiled`, which also calls them and runs threads) and
   :mod:`.compiled_util` (model-free helpers) — the numba kernels, the only
   implementation of the per-particle cubature step, the importance draw and
-  weight, and the GWO/IGWO move; :mod:`.parallel` — calling them, threads;
+  weight, and the GWO/IGWO move;
 * :mod:`.gwo` — the GWO/IGWO convergence-factor schedule and the uniforms the
   kernels are given; :mod:`.pso` — PSO (numpy, its only implementation);
   :mod:`.stack` — angle helpers of the numpy code.

@@ -3,7 +3,7 @@
 For models that provide numba kernels of ``f``, ``h``, ``F``, ``H``
 (:meth:`replay.model.Model.kernels`). This file is a template: the entry
 points call the model's kernels as module globals ``f``, ``h``, ``F``, ``H``,
-which :mod:`replay.filters.p002.binding` supplies by writing a copy of this
+which :func:`replay.filters.compiled.bind` supplies by writing a copy of this
 file with the model's imports at the MODEL KERNELS line (so that numba can cache
 the compiled code on disk; functions passed as arguments would be recompiled in every
 process). The helpers without model kernels (:func:`factor`, :func:`estimate`, ...) live in
@@ -42,7 +42,7 @@ from replay.filters.p002.compiled_util import (
     chol_solve_rows, cubature_points, entropy_weights, factor, gram, leaders, matmul, moments, normalise, quad,
     weighted_mean, wrap)
 
-# MODEL KERNELS: replay.filters.p002.binding puts here the import of one model's f, h, F, H
+# MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H
 
 LOG2PI = np.log(2.0 * np.pi)
 U32 = 2.0**-32  # 32-bit integer u -> uniform (u + 0.5) 2^-32 in (0, 1)

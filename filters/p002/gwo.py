@@ -53,7 +53,7 @@ from __future__ import annotations
 import numpy as np
 
 from .compiled_util import scaled_uniforms
-from .parallel import Kernel
+from ..compiled import Kernel
 
 _scaled = Kernel(scaled_uniforms)
 

@@ -64,12 +64,11 @@ from replay.util.params import Param, without
 from replay.model import is_diagonal, remap_indices
 
 from .. import particles
+from ..compiled import Kernel, split
 from . import gwo, pso
-from .binding import bind
-from .parallel import Kernel, split
 from .stack import fast_residual, wrap_inplace
 from .stckf import STCKF_PARAMS
-from .stcpf import CubatureParticleFilter, Engine
+from .stcpf import CubatureParticleFilter, Engine, bound_kernels
 
 OPTIMIZERS = ("gwo", "igwo", "pso")
 GWO_PARAMS = (
@@ -211,7 +210,7 @@ class SwarmEngine(Engine):
         use = flt.optimizer == "pso" and flt.lower is not None and len(flt.lower) == n
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
         if flt.optimizer != "pso":
-            self.k_swarm = Kernel(bind(self.kern).swarm_move)
+            self.k_swarm = Kernel(bound_kernels(self.kern).swarm_move)
             self.schedule = gwo.schedule(flt.t_max, flt.optimizer == "igwo", flt.a_start, flt.a_end,
                                          flt.b_start, flt.b_end, flt.a_form)
         self.Fx = None

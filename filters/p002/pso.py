@@ -19,7 +19,7 @@ import numpy as np
 
 from .compiled_util import pso_best, pso_velocity
 from .gwo import as_runs, scaled_draws
-from .parallel import Kernel
+from ..compiled import Kernel
 
 _velocity, _best = Kernel(pso_velocity), Kernel(pso_best)
 

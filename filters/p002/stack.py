@@ -16,7 +16,7 @@ import numpy as np
 from replay.util.angles import TWO_PI, angle_mask, index
 
 from .compiled_util import wrap_rows
-from .parallel import Kernel
+from ..compiled import Kernel
 
 _wrap_rows = Kernel(wrap_rows)
 

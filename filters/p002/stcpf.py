@@ -58,9 +58,8 @@ from .. import particles
 from ..base import Filter
 from ..pf import propagate
 from ..resampling import SCHEMES
+from ..compiled import Kernel, bind, split, threads
 from . import compiled_util
-from .binding import bind
-from .parallel import Kernel, split, threads
 from .stack import fast_residual
 from .stckf import STCKF_PARAMS
 
@@ -68,6 +67,13 @@ PROPOSALS = ("prior", "ckf", "stckf")
 GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run
 GRAIN_RUNS = 1000  # the same for batched runs
 LOG2PI = np.log(2.0 * np.pi)
+
+
+def bound_kernels(kernels):
+    """:mod:`.compiled` bound to the model kernels ``(f, h, F, H)`` (:func:`replay.filters.compiled.bind`)."""
+    from . import compiled
+
+    return bind(compiled, kernels, "the paper-002 filter kernels (about 20-40 s)")
 
 
 class CubatureParticleFilter(Filter):
@@ -119,7 +125,7 @@ class Engine:
             self.zmask = self.angle_mask(model.z_angles, model.nz)
             self.cache = {}
         if not self.prior:
-            bound = bind(self.kern)  # compiled.py with this model's kernels (see .binding)
+            bound = bound_kernels(self.kern)
             self.k_cubature = Kernel(bound.cubature_step)
             self.k_threads = Kernel(bound.cubature_threads)
             self.k_estimate = Kernel(compiled_util.estimate)

@@ -12,7 +12,7 @@ protocol)::
 with ``(p_f, p_h) = model.kernel_params(k)``, float arrays of the model's
 parameters at step ``k``. A kernel writes every entry of its output (which
 starts uninitialised) and reads no more of ``x`` than its nx entries (they are
-not bounds-checked). The compiled filters (:mod:`replay.filters.p002.binding`)
+not bounds-checked). The compiled filters (:func:`replay.filters.compiled.bind`)
 call the kernels as they are; :class:`KernelModel` derives from them the array
 methods ``f``, ``h``, ``F``, ``H`` of the model protocol on states ``(..., nx)``
 (one state (nx,), or any stack of them): a stack through the kernel's

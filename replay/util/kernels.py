@@ -8,7 +8,7 @@ readable reference (tests run it with ``tests/pure.py`` and compare bits).
 Sums run in index order (no reassociation: numba compiles without fastmath),
 and the transcendental functions are :mod:`math`'s, which numba compiles to the
 same C library calls Python makes, so compiled and Python results are equal.
-The Kalman-family steps built on them are :mod:`replay.util.kalman_kernels`;
+The Kalman-family steps built on them are :mod:`replay.filters.kalman_kernels`;
 paper 002's kernels use them through :mod:`replay.filters.p002.compiled_util`;
 the particle bookkeeping is :mod:`replay.filters.particles`.
 """

@@ -10,7 +10,7 @@ over the leaves of :mod:`replay.util.kernels`. Every function takes stacks
 same loops, so a run's numbers do not depend on the other runs of its stack
 (one run is a stack of one). Each function's un-jitted ``py_func`` is the
 readable reference (``tests/pure.py``: equal bit for bit). The ``*_into`` forms take their
-work arrays from the caller (the whole-run loops of :mod:`replay.util.kalman_loops` allocate
+work arrays from the caller (the whole-run loops of :mod:`replay.filters.kalman_loops` allocate
 them once per run, not once per step); the plain forms allocate them and call the ``_into`` form.
 """
 from __future__ import annotations
@@ -18,8 +18,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symmetrise, weighted_outer,
-                      whitened_norm2, wrap)
+from replay.util.kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symmetrise,
+                                 weighted_outer, whitened_norm2, wrap)
 
 
 @nb.njit(cache=True)

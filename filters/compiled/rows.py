@@ -1,5 +1,5 @@
 """Rows forms of one model's kernels for the whole-run loops: a template, bound to a model by
-:func:`replay.filters.loops.row_kernels` (the mechanism: :mod:`replay.filters.binding`).
+:func:`replay.filters.compiled.row_kernels` (the mechanism: :mod:`replay.filters.compiled.copies`).
 
     f_rows(X (P, nx), p, out (P, nx))      out[i] = f(X[i], p)
     h_rows(X (P, nx), p, out (P, nz))      out[i] = h(X[i], p)
@@ -13,7 +13,7 @@ run), not one per state. The arithmetic of each state is the kernel's own.
 """
 import numba as nb
 
-# MODEL KERNELS: replay.filters.binding puts here the import of one model's f, h, F, H
+# MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H
 
 
 @nb.njit(cache=True)

@@ -1,33 +1,28 @@
 """The Kalman family's whole runs: every step of M runs in one compiled loop (no Python between steps).
 
 :func:`sigma_run` (UKF, CKF) and :func:`ekf_run` call the step kernels of
-:mod:`replay.util.kalman_kernels` in the order the step-by-step engines call them
+:mod:`replay.filters.kalman_kernels` in the order the step-by-step engines call them
 (:class:`replay.filters.sigma.SigmaEngine`, :class:`replay.filters.kalman.EKFEngine`),
 with work arrays allocated once per call, so they give the engines' numbers bit for bit
 (``tests/test_batched.py``). The model's one-state kernels are first-class function
-arguments of one declared type: one compilation (cached by numba) serves every model.
-:func:`loop_ready` compiles a loop lazily (also the PF's, :mod:`replay.filters.pf_loop`).
+arguments of one declared type (:data:`replay.filters.compiled.ROWS_KERNEL`, ``JACOBIAN_ROWS``):
+one compilation (cached by numba) serves every model. When a loop runs:
+:func:`replay.filters.compiled.loop_ready`.
 """
 from __future__ import annotations
-
-import logging
 
 import numba as nb
 import numpy as np
 from numba import types
 
+from replay.util.kernels import wrap
+
+from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
 from .kalman_kernels import (joseph_update_into, propagate_cov_into, sigma_points_into, sigma_predict_into,
                              sigma_update_into)
-from .kernels import wrap
 
-
-# --- whole runs: the steps above in one compiled loop, the model's one-state kernels passed in ---
-# The kernels are first-class function arguments of one declared type, so that the loop is
-# compiled once per machine for every model (and cached), not once per model and process.
+COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
-# the rows forms of the model's kernels (replay.filters.rows): a stack of states in one call
-ROWS_KERNEL = types.FunctionType(types.void(_S2, _VEC, _S2))      # f, h: (X, p, out)
-JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))    # F, H: (X, p, J)
 _MASK = types.boolean[::1]
 _COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
@@ -42,31 +37,6 @@ def apply_rows(fun, X, p, out):
 
 SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
 EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
-
-
-def loop_ready(loop, sig, compile_ok: bool) -> bool:
-    """Whether the run loop ``loop`` (:func:`sigma_run`, :func:`ekf_run`, the PF's ``pf_run``) can
-    be called with its declared signature ``sig``: compiled in this process, or loaded from numba's disk
-    cache, or (``compile_ok``) compiled now (about 10 s, once per machine). Compiled lazily,
-    not at import: a short run never waits for it."""
-    if (loop, id(sig)) in _READY:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
-        return True
-    if not hasattr(loop, "signatures"):  # numba's JIT disabled: the loop is its Python function
-        return True
-    if not loop.signatures:
-        if loop._cache.load_overload(sig, loop.targetctx) is None:
-            if not compile_ok:
-                return False
-            logging.getLogger("replay.kernels").info(
-                "compiling the run loop %s (about 12 s, once per machine; cached for later runs)",
-                loop.__name__)
-        loop.compile(sig)
-        loop.disable_compile()  # one type for every model: the kernels convert to it
-    _READY.add((loop, id(sig)))  # the declared signatures are module constants
-    return True
-
-
-_READY: set = set()
 
 
 @nb.njit(cache=True, nogil=True)
