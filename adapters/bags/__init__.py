@@ -3,7 +3,7 @@ directories (sqlite3 or MCAP storage), standalone ``.mcap`` (ROS 2 CDR, Foxglove
 JSON or protobuf channels).
 
 Which topic feeds which channel comes from a mapping (:mod:`.mapping`, a TOML
-file or a dict); without one, :func:`.mapping.propose` picks the obvious one.
+file or a dict); without one, :func:`replay.adapters.mapping_propose.propose` picks the obvious one.
 Messages become arrays by :mod:`.rosmsg`.
 
 **One time axis.** ``t`` is the sorted union of the stamps of every mapped

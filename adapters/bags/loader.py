@@ -17,7 +17,8 @@ from replay.util.errors import DataError, ReplayError
 from replay.util.params import Param
 
 from .. import rosmsg
-from ..mapping import Mapping, from_dict, load_mapping, propose, role_of
+from ..mapping import Mapping, from_dict, load_mapping, role_of
+from ..mapping_propose import propose
 from . import estimates as recorded
 from . import sources
 from .reading import read

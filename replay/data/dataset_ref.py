@@ -22,7 +22,7 @@ class DatasetRef:
     the data directories) or ``path`` (a plain file or bag directory); ``entry``: the registry's
     entry (None for a path); ``path``: the plain file (None otherwise); ``adapter``: the adapter
     reading a recording (None for a simulator, and for a path without ``--adapter``: the file
-    tells when it is read, :func:`replay.data.registry.adapter_for`).
+    tells when it is read, :func:`replay.data.formats.adapter_for`).
     """
 
     id: str

@@ -35,10 +35,10 @@ from replay.util.errors import DataError, ReplayError
 from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
+from replay.data.formats import adapter_for, looks_like_path
 
 # Adapter used for a plain file path, by extension.
 FIRST = Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True)
-ADAPTER_BY_SUFFIX = {".csv": "bohai-csv", ".bag": "bags", ".mcap": "bags", ".db3": "bags"}
 
 
 @dataclass(frozen=True)
@@ -247,7 +247,7 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
 
 def is_path(dataset) -> bool:
     """Whether ``dataset`` names a plain file (not a registered id)."""
-    return isinstance(dataset, Path) or (dataset not in all_datasets() and _looks_like_path(dataset))
+    return isinstance(dataset, Path) or (dataset not in all_datasets() and looks_like_path(dataset))
 
 
 # ---------------------------------------------------------------- parameters
@@ -307,44 +307,6 @@ def _check_options(adapter: str, params: dict) -> dict:
     if unknown and not any(p.kind == p.VAR_KEYWORD for p in sig):
         raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} (known: {', '.join(names) or 'none'})")
     return params
-
-
-def _looks_like_path(text: str) -> bool:
-    path = Path(text).expanduser()
-    return path.suffix.lower() in ADAPTER_BY_SUFFIX or path.exists()
-
-
-def adapter_for(path: Path) -> str:
-    """The adapter for a plain file, by extension (a ROS 2 bag directory -> bags); a FIFO or a
-    device is refused before anything reads it (it may never end)."""
-    check_regular(path, "a dataset", dir_ok=True)
-    if path.is_dir() and (path / "metadata.yaml").is_file():
-        return "bags"
-    if path.suffix.lower() in (".csv", ".tsv", ".txt") and _looks_like_lake_log(path):
-        return "lake"
-    try:
-        return ADAPTER_BY_SUFFIX[path.suffix.lower()]
-    except KeyError:
-        known = ", ".join(sorted(ADAPTER_BY_SUFFIX))
-        raise ReplayError(f"{path}: cannot tell the file format from its extension "
-                          f"{path.suffix or '(none)'!r} (known: {known})") from None
-
-
-def _looks_like_lake_log(path: Path) -> bool:
-    """A text log whose first non-comment line names a depth column and a time column,
-    or that starts with the lake-log banner (see README, 'Lake-trial logs')."""
-    try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            for _, line in zip(range(50), fh):
-                if line.startswith("# replay lake-trial"):
-                    return True
-                if line.strip() and not line.startswith("#"):
-                    cols = [c.strip().lower() for c in line.replace("\t", ",").split(",")]
-                    return (any(c.startswith("depth") for c in cols) and any(c.startswith("time") for c in cols)
-                            and not any(c.startswith(("lat", "lon")) for c in cols))
-    except OSError:
-        return False
-    return False
 
 
 def _adapter(name: str):
