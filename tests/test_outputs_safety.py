@@ -24,7 +24,7 @@ import pytest
 from replay.run.evaluation import evaluate
 from replay.outputs.files import write_all
 from replay.util.errors import ReplayError
-from replay.util.files import MARKER, publish_dir, recover
+from replay.util.staging import MARKER, publish_dir, recover
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +124,7 @@ def test_enospc_midway_leaves_old_set(tmpfs, small, big, monkeypatch):
     out = tmpfs / "out"
     write_all(small, out)
     before = tree(out)
-    monkeypatch.setattr("replay.util.files.MIN_FREE", 16 * 1024)  # the check before writing lets it start
+    monkeypatch.setattr("replay.util.staging.MIN_FREE", 16 * 1024)  # the check before writing lets it start
     fill(tmpfs, 96 * 1024)  # ... and the 170 kB set does not fit
     with pytest.raises(ReplayError, match=r"cannot write \(No space left on device\); the previous output"):
         write_all(big, out)

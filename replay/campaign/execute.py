@@ -33,7 +33,7 @@ from pathlib import Path
 
 from replay.run.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
-from replay.util.files import check_space
+from replay.util.staging import check_space
 from replay.util.progress import particle_weight
 
 from . import board, index

@@ -55,7 +55,8 @@ from replay.data.registry import Dataset
 from replay.util.downloads import (Deadline, check_url, network_reason, part_prefix, printable,
                                    remove_stale_parts)
 from replay.util.errors import ReplayError
-from replay.util.files import check_space, check_writable
+from replay.util.files import check_writable
+from replay.util.staging import check_space
 from replay.util.version import __version__
 
 DEFAULT_TIMEOUT = 30.0  # s of silence from the server (connect, each read)

@@ -29,7 +29,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from replay.util.errors import DataError, ReplayError
-from replay.util.files import check_writable, exchange, refuse_overlap  # noqa: F401 (exchange: re-exported)
+from replay.util.files import check_writable, refuse_overlap
+from replay.util.staging import exchange  # noqa: F401 (exchange: re-exported)
 
 MARK_KEY = "replay.output"  # custom_data key of the ROS 2 bags written through staged_bag
 MCAP_LIBRARY = "replay"  # the Header library string of the MCAP files replay writes

@@ -6,7 +6,7 @@ baseline filter (the first listed unless ``--baseline`` names one).
 
 The files are written as one set (:func:`write_all`): into a staging directory
 beside the output directory, then moved into place in one step
-(:func:`replay.util.files.staged_dir`), so that a full disk, a kill or an error
+(:func:`replay.util.staging.staged_dir`), so that a full disk, a kill or an error
 leaves the previous set or the new one, never a mix. An existing output
 directory is replaced only when it is a whole ``replay eval`` output (its marker,
 or a replay manifest and nothing else); it must not be, hold or lie inside an
@@ -27,7 +27,8 @@ from replay.scoring.summary import (MIN_SCORED_SHARE, SYNTHETIC, columns, consis
                                     scored_share)
 from replay.util import covcols
 from replay.util.errors import ReplayError
-from replay.util.files import check_output_dir, is_report_dir, staged_dir, write_atomic, write_csv
+from replay.util.files import write_atomic, write_csv
+from replay.util.staging import check_output_dir, is_report_dir, staged_dir
 from replay.scoring.scorer import rmse_over_time
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:

@@ -6,7 +6,7 @@ directory itself, held for milliseconds) the next number is created with ``mkdir
 one on a collision) and a claim file ``NNN/.replay-claim`` holding the pid is created and
 locked for the whole run. A directory holding only a claim is a run being computed: no other
 process takes or replaces it. The finished set replaces the claimed directory in one step
-(:func:`replay.util.files.publish_dir`), which checks the claim again. A claim whose process
+(:func:`replay.util.staging.publish_dir`), which checks the claim again. A claim whose process
 died (the kernel released its lock) and staging directories of dead processes are removed by
 the next claim. ``latest`` is swapped atomically (a new symbolic link renamed over it) to the
 highest-numbered finished directory, under the same lock.
@@ -26,7 +26,7 @@ from pathlib import Path
 from replay.campaign.lock import lock_file
 from replay.outputs.files import CLAIM, KIND, claim_holder, legacy_output, readable_name
 from replay.util.errors import ReplayError
-from replay.util.files import read_marker, recover
+from replay.util.staging import read_marker, recover
 
 
 def _numbered(base: Path) -> list[Path]:
