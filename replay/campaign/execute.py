@@ -41,7 +41,9 @@ from .lock import locked
 from .noise_check import check_noise
 from .progress import Progress
 from .spec import Campaign
-from .store import Store, pack, sync_dir, write_bytes, write_json
+from replay.util.files import sync_dir, write_bytes, write_json
+
+from .store import Store, pack
 from .units import Job, execute_job
 from .workers import connect_scheduler, process_pool, start_method
 

@@ -55,7 +55,7 @@ def read(out) -> tuple[dict, dict, str | None]:
 
 
 def document(configs: dict, data_dirs: dict) -> dict:
-    """What the index file holds (written by :func:`replay.campaign.store.write_json`)."""
+    """What the index file holds (written by :func:`replay.util.files.write_json`)."""
     return {"configs": configs, "data_dirs": data_dirs, "sha256": _checksum(configs, data_dirs)}
 
 

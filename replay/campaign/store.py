@@ -54,54 +54,13 @@ from replay.util.errors import ReplayError
 from . import records as sealing
 from .encode import (SUMMARY_COLUMNS, describe, footer as _footer, pack, parquet_bytes,  # noqa: F401 (re-exported)
                      summary_columns, to_arrow, to_numpy)
+from replay.util.files import json_default, sync_dir, write_bytes, write_json
 
 RUN_FILE = re.compile(r"^(\d+)\.json$")
 LEGACY_COLUMNS = ("k", "t", "nees", "nis", "nis_dof")  # read by the leaderboard (replay.scoring.summary)
 KEPT_BYTES = 64 << 20  # at most this much of those columns kept in memory by a Store that wrote them
 WRITERS = 8  # threads writing a job's units (Store.write_job)
 RERUN_HINT = "run `replay campaign run` on its campaign file again to recompute it"
-
-
-def sync_dir(d: Path) -> None:
-    """Flush a directory's entries (new names, renames) to disk."""
-    try:
-        fd = os.open(d, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def write_bytes(path: Path, data: bytes, sync: bool = True) -> None:
-    """``data`` into ``path``: a temporary file beside it, flushed to disk (``sync``), then an
-    atomic rename."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            if sync:
-                fh.flush()
-                os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:  # a full disk, an interruption: no partial temporary left behind
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def write_json(path: Path, obj) -> None:
-    write_bytes(path, json.dumps(obj, indent=1, default=_default).encode())
-
-
-def _default(v):
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    return str(v)
 
 
 class Store:
@@ -346,7 +305,7 @@ class Store:
             write_bytes(d / f"{run}.parquet", data, sync=False)  # its record's checksum vouches for it
             self._keep(config_hash, run, record["table"]["sha256"], result["summary"] if "summary" in result
                        else summary_columns(result.get("series", {})))
-        write_json(d / f"{run}.json", sealing.seal(record, _default))
+        write_json(d / f"{run}.json", sealing.seal(record, json_default))
         if sync:
             sync_dir(d)
 

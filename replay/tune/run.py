@@ -19,7 +19,8 @@ import numpy as np
 from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
-from replay.campaign.store import Store, write_json
+from replay.campaign.store import Store
+from replay.util.files import write_json
 from replay.run.eval_options import DEFAULTS
 from replay.run.pipeline import Config, config_hash, plain
 from replay.util.progress import Progress

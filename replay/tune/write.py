@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from replay.campaign.store import write_bytes
+from replay.util.files import write_bytes
 
 
 def write_tuned(t, out: Path, rows) -> dict:

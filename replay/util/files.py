@@ -2,18 +2,62 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 from io import StringIO
 from pathlib import Path
 
+import numpy as np
+
 
 def write_atomic(path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path`` and rename it into place (atomic); a
-    symbolic link keeps its link and its target is replaced (as :func:`replay.util.outfile.write`)."""
+    """``text`` (UTF-8) into ``path`` atomically, not flushed to disk (:func:`write_bytes`)."""
+    write_bytes(path, text.encode("utf-8"), sync=False)
+
+
+def sync_dir(d: Path) -> None:
+    """Flush a directory's entries (new names, renames) to disk."""
+    try:
+        fd = os.open(d, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes(path, data: bytes, sync: bool = True) -> None:
+    """``data`` into ``path``: a temporary file beside it, flushed to disk (``sync``), then an
+    atomic rename; a symbolic link keeps its link and its target is replaced (as
+    :func:`replay.util.outfile.write`)."""
     path = Path(os.path.realpath(path)) if os.path.islink(path) else Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            if sync:
+                fh.flush()
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, an interruption: no partial temporary left behind
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_json(path: Path, obj) -> None:
+    write_bytes(path, json.dumps(obj, indent=1, default=json_default).encode())
+
+
+def json_default(v):
+    """A JSON value for numpy scalars and arrays (their Python values), anything else as text."""
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
 
 
 def fmt(v) -> str:
