@@ -168,3 +168,15 @@ def test_a_diverged_run_is_the_worst_error_and_lost():
 def stats_wilcoxon_less(d):
     from scipy import stats
     return stats.wilcoxon(np.nan_to_num(np.asarray(d), posinf=1e300), alternative="less").pvalue
+
+
+def test_majority_rule_counts_holm_adjusted_comparisons():
+    ev = {"x": [mcnemar(6), mcnemar(6), mcnemar(1)]}  # Holm: 0.046875, 0.046875, 0.5
+    v, = decide([claim(Rule("x", "3 pairs", "lost runs", test="mcnemar", need="majority"))], ev)
+    assert [o.holds for o in v.deciding] == [True, True, False] and v.label == REPRODUCED
+    assert "more than half of the comparisons significant" in v.rule
+    v, = decide([claim(Rule("x", "3 pairs", "lost runs", test="mcnemar", need="majority"))],
+                {"x": [mcnemar(6), mcnemar(1), mcnemar(1)]})
+    assert v.label == NOT
+    with pytest.raises(ValueError, match="rule need"):
+        Rule("x", "c", "s", need="most")
