@@ -106,7 +106,7 @@ def spec_table(evs, n, metrics, paired, rows, cut, info) -> str:
     return "\n\n".join(out)
 
 
-def fields(evs, verdicts, runs, n, tuned, grid, quick, doc):
+def fields(evs, verdicts, runs, seed, n, tuned, grid, quick, doc):
     tl = f"UKF tuned (q × {tuned['q_scale']:g}, r × {tuned['r_scale']:g})"
     cells = [k for k in (plan.key(*c) for c in plan.CELLS) if k in evs]
     sect = {k: "### no current" if k == "no current" else f"### {TRACK[k.split()[0]]}, current {k.split()[1]} m/s"
@@ -119,7 +119,7 @@ def fields(evs, verdicts, runs, n, tuned, grid, quick, doc):
          "relabel": md(["claim", "old label", "new label", "deciding numbers (and the ablation's)"],
                        [[v.claim.id, OLD[v.claim.id], v.label, "; ".join(o.text() for o in v.deciding + v.support)]
                         for v in verdicts]),
-         "quick": " --quick" if quick else "", "plots": plots(evs, doc)}
+         "quick": " --quick" if quick else "", "seed": seed, "plots": plots(evs, doc)}
     return f | {name: spec_table(evs, n, *spec) for name, spec in plan.TABLES.items()}
 
 
@@ -133,7 +133,7 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, sw
     tuned, grid = pick(run_jobs(plan.tuning_jobs(runs), runs, seed + 1, data_dir, quiet))
     evs = run_jobs(plan.jobs(quick, n, tuned), runs, seed, data_dir, quiet)
     verdicts = decide(plan.CLAIMS, evidence(evs, n), seed=seed)
-    text = render("001", fields(evs, verdicts, runs, n, tuned, grid, quick, doc), verdicts)
+    text = render("001", fields(evs, verdicts, runs, seed, n, tuned, grid, quick, doc), verdicts)
     command = f"replay reproduce 001 --runs {runs} --seed {seed}" + (" --quick" if quick else "")
     write_document(doc, text + footer(command, watch.seconds))
     if not quiet:

@@ -101,9 +101,9 @@ TABLES = {
                           ("AUKF (R̂ only), R̂₀ = R × 100", "linear wrong R, R̂ only", 0)], False,
                [("final Q̂ (mean diagonal; truth 0.3)", "Q_hat", None, ".3g", False),
                 ("final R̂ (truth 2.0)", "R_hat", None, ".3g", False)]),
-    "qdir": ((), (), [("no current", "no current ablation q̂ only", 0),
-                      ("bottom lock, 0.5 m/s", "bottom ablation q̂ only", 0),
-                      ("water track, 0.5 m/s", "water ablation q̂ only", 0)], False,
+    "qdir": ((), (), [("q̂-only AUKF, no current", "no current ablation q̂ only", 0),
+                      ("q̂-only AUKF, bottom lock, 0.5 m/s", "bottom ablation q̂ only", 0),
+                      ("q̂-only AUKF, water track, 0.5 m/s", "water ablation q̂ only", 0)], False,
              [("final q̂ north (m/step)", "q_hat", 0, "+.3f", False),
               ("final q̂ east (m/step)", "q_hat", 1, "+.3f", False)]),
     **{f"sweep_{t}": (ALL[:5], POS, sweep_rows(t), True, []) for t in ("bottom", "water")},
@@ -112,7 +112,7 @@ TABLES = {
 }
 
 
-P = "bottom-lock DVL, current 0.5 m/s, 50 runs: the paper's AUKF against the UKF, both at the paper's shared Q, R"
+P = "bottom-lock DVL, current 0.5 m/s: the paper's AUKF against the UKF, both at the paper's shared Q, R"
 LOWER = "per-run RMSE of each channel, AUKF < UKF"
 WHY = ("bottom lock 0.5 m/s, the ablation's runs, on each channel: UKF < p̂-only AUKF, UKF < R̂-only AUKF (each "
        "estimator of the measured channels alone is worse) and Q̂-only AUKF < 1.2 × UKF (without them it is level)")
@@ -130,15 +130,15 @@ CLAIMS = [
           Rule("acceleration", P, LOWER, mechanism="acceleration why", mechanism_text=WHY), "#e-primary"),
     Claim("current", "the AUKF's virtual noise compensates the model error caused by the current (§3–5)",
           "compensated (Fig. 3–4)",
-          Rule("current", "water-track DVL (the current is a drift no sensor sees), 0.5 and 1.5 m/s, 50 runs",
+          Rule("current", "water-track DVL (the current is a drift no sensor sees), 0.5 and 1.5 m/s",
                "per-run position RMSE, AUKF < UKF", mechanism="current why",
                mechanism_text="the UKF with noise-free sensors, 0.5 m/s: bottom lock < water track (the current's "
                "integral, unobservable, is the error left)"), "#e-observability"),
     Claim("premise", "the on-line noise estimator absorbs wrong noise statistics (§3–4, the AUKF's premise)",
           "implied",
-          Rule("premise", "bottom lock 0.5 m/s, 50 runs, every filter given R × 100",
+          Rule("premise", "bottom lock 0.5 m/s, every filter given R × 100",
                "per-run position RMSE, AUKF < UKF", mechanism="premise why",
-               mechanism_text="sim/linear (3-D walk, 2000 steps, 50 runs): the UKF (the optimal filter there) < the "
+               mechanism_text="sim/linear (3-D walk, 2000 steps): the UKF (the optimal filter there) < the "
                "Q̂R̂ AUKF started at the true Q, R (joint drift); from R × 100, R̂-only AUKF < Q̂R̂ AUKF "
                "(one estimator alone recovers, jointly not)"), "#e-premise"),
 ]
