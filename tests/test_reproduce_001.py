@@ -84,6 +84,7 @@ def test_tuned_ukf_rule_breaks_rmse_ties_by_anees():
 
     from replay.reproduce import p001_plan as plan
     from replay.reproduce.p001 import pick
+    from replay.util.errors import ReplayError
 
     evs = {f"tune q{q} r{r}": SimpleNamespace(rows=[{"pos_rmse": 10.0 + q + r, "anees": 50.0}])
            for q in plan.Q_SCALES for r in plan.R_SCALES}
@@ -94,6 +95,12 @@ def test_tuned_ukf_rule_breaks_rmse_ties_by_anees():
     tuned, grid = pick(evs)
     assert tuned == {"q_scale": plan.Q_SCALES[-1], "r_scale": plan.R_SCALES[-1]}
     assert grid.count("**chosen**") == 1
+    evs[f"tune q{plan.Q_SCALES[2]} r{plan.R_SCALES[2]}"].rows[0].update(pos_rmse=1.0, diverged=1)  # not chosen
+    assert pick(evs)[0] == tuned
+    for ev in evs.values():
+        ev.rows[0]["pos_rmse"] = float("nan")
+    with pytest.raises(ReplayError, match="every grid point of the UKF diverged"):
+        pick(evs)
 
 
 # ---------------------------------------------------------------- figures (synthetic inputs, fast)

@@ -14,9 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.util.errors import ReplayError
+
 from . import p001_plan as plan
-from .p001_plots import TRACK, plots
 from .common5 import combine, commands, row, run_jobs, table
+from .p001_plots import TRACK, plots
 from .render import render, table as md
 from .rules import Comparison, decide, per_run
 from .verdict import Stopwatch, footer, write_document
@@ -29,8 +31,12 @@ OLD = {"depth": "deviation explained", "north": "deviation explained", "east": "
 def pick(evs) -> dict:
     """The tuned UKF's scales by the declared rule (:data:`.p001_plan.TUNE_TIE`) and the grid's rows."""
     grid = [(q, r, evs[f"tune q{q} r{r}"].rows[0]) for q in plan.Q_SCALES for r in plan.R_SCALES]
-    best = min(g[2]["pos_rmse"] for g in grid)
-    near = [g for g in grid if g[2]["pos_rmse"] <= (1 + plan.TUNE_TIE) * best]
+    score = {(q, r): x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf
+             for q, r, x in grid}  # as `replay tune`: a diverged run scores inf
+    best = min(score.values())
+    if not np.isfinite(best):
+        raise ReplayError("001 tuning: every grid point of the UKF diverged on the training seeds")
+    near = [g for g in grid if score[g[:2]] <= (1 + plan.TUNE_TIE) * best]
     q, r, _ = min(near, key=lambda g: abs(float(g[2]["anees"] or np.inf) - 3.0))
     rows = [[f"{a:g}", f"{b:g}", f"{x['pos_rmse']:.3f}", f"{float(x['anees'] or np.nan):.1f}",
              "**chosen**" if (a, b) == (q, r) else ""] for a, b, x in grid]
