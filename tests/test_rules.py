@@ -180,3 +180,18 @@ def test_majority_rule_counts_holm_adjusted_comparisons():
     assert v.label == NOT
     with pytest.raises(ValueError, match="rule need"):
         Rule("x", "c", "s", need="most")
+
+
+def test_a_condition_tried_and_not_met_is_printed_beside_the_verdict():
+    rng = np.random.default_rng(0)
+    base = rng.normal(1, 0.1, 12)
+    same = Comparison("paper's setting", base + rng.normal(0, 0.01, 12), base)
+    worse = Comparison("small Q", base + 0.5, base)
+    v, = decide([claim(Rule("p", "paper", "A - B", test="t", condition="q", condition_text="Q small",
+                            mechanism="m", mechanism_text="ablation"))], {"p": [same], "q": [worse], "m": [same]})
+    assert v.label == NOT and [o.comparison.name for o in v.tried["condition"]] == ["small Q"]
+    row = render.verdict_table([v]).splitlines()[2]
+    assert "Stated condition, not met: small Q: mean 0.5" in row and "Ablation, not shown: paper's setting" in row
+    v, = decide([claim(Rule("p", "paper", "A - B", test="t", condition="q", condition_text="Q small"))],
+                {"p": [same], "q": [Comparison("small Q", base - 0.5, base)]})
+    assert v.label == RECOVERED and v.tried == {}

@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.scoring.significance import pairs, t_interval
-
 from . import render
+from .render import fmt, pm
 from .p000_cells import ABLATIONS, CH, GENERATED_RMS, MAIN, ORACLE, R_STD, UNITS, Cell, compute
 from .pool import pool, run_longest_first, workers as pool_workers
 from .rules import Claim, Comparison, Rule, decide
@@ -90,21 +89,6 @@ def plan(runs=None, quick=False) -> dict:
 
 def _mean(v) -> float:
     return float(np.mean(v)) if len(v) else float("nan")
-
-
-def fmt(m: float, c: float | None = None) -> str:
-    """``m ± c``, two significant digits on the half-width (3 on ``m`` without one)."""
-    if not np.isfinite(m):
-        return "n/a"
-    if c is None or not np.isfinite(c) or c <= 0:
-        return f"{m:.3g}"
-    d = max(0, 1 - int(np.floor(np.log10(c))))
-    return f"{m:+.{d}f} ± {c:.{d}f}"
-
-
-def pm(a, b) -> str:
-    """Paired a − b: mean ± 95 % t half-width (the tables; verdicts use the rules' tests)."""
-    return fmt(*t_interval(np.subtract(*pairs(a, b))))
 
 
 def order(r: dict, ch: str) -> str:
@@ -240,8 +224,7 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
                   for R_or, s in ((R, seed), (T, seed + 1)) for c in R_or)}
     verdicts = decide([Claim(cid, w, pp, rule, EVIDENCE[cid]) for cid, w, pp, rule in CLAIMS], ev, seed)
     fields["relabelled"] = render.table(["claim", "before", "now", "the number behind it"], [
-        [v.claim.words, OLD[v.claim.id], v.label, "; ".join(o.text() for o in v.deciding + v.support)]
-        for v in verdicts])
+        [v.claim.words, OLD[v.claim.id], v.label, render.found(v)] for v in verdicts])
     fields["ess_paper"] = " ".join(
         f"{c.name}: mean ESS/N " + ", ".join(f"{lab} {100 * np.mean(R[c][lab]['ess']):.2g} %"
                                               for lab in ("GPF", "MMPF", "PF")) + "." for c in (PAPER, MISMATCH))

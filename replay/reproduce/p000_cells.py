@@ -1,17 +1,12 @@
 """Paper 000's experiments as data: the cells, the filters, and the one computation of a cell.
 
-A **cell** is one configuration of the synthetic lake trial and of the filters' model: the
-sensors' ``noise`` (None: ``sim/lake-depth`` as generated, RMS 0.119 m, 0.119 m/s, 0.0207
-rad; a number ρ: every sensor's RMS at ρ × the fixed R's std), ``kappa`` (Q = κ · diag(0.2²,
-1², 0.5²), κ = 1 the paper's) and ``profile`` (None: the fixed schedule; an integer: the random
-schedule of that ``profile_seed``). Cells of one sensor level draw the same noise (the master
-seed), so the filters of a cell and the cells of one level are paired run by run.
-
-:func:`compute` runs one cell's filters with :func:`replay.evaluation.evaluate` (the pipeline of
-``replay eval``) and keeps, per filter, the leaderboard row, the per-run RMSE of each channel
-(a diverged run +inf, lost: :func:`replay.reproduce.rules.per_run`), the same over the maneuver
-segments and over the rest (the pipeline's scorer with the reference restricted), and the
-mean effective sample size over the steps (before resampling) of the particle filters.
+A :class:`Cell`: the sensors' ``noise`` (None: ``sim/lake-depth`` as generated; ρ: every sensor's
+RMS at ρ × the fixed R's std), ``kappa`` (Q = κ · diag(0.2², 1², 0.5²), κ = 1 the paper's) and
+``profile`` (None: the fixed schedule; K: ``profile_seed`` K). Cells of one sensor level draw the
+same noise, so filters and cells of a level are paired run by run. :func:`compute` runs a cell
+through :func:`replay.evaluation.evaluate` and keeps per filter the leaderboard row, the per-run
+RMSE of each channel (diverged +inf, lost flags), the same over the maneuvers and the level runs,
+and the particle filters' mean ESS / N.
 """
 from __future__ import annotations
 
@@ -39,8 +34,7 @@ GENERATED_RMS = tuple(float(b) / f for b, f in zip(next(p.default for p in make_
                                                    base_for_rms((1.0, 1.0, 1.0))))
 
 
-def tidy(x: float) -> float:
-    """A float as a short decimal (0.006, not 0.006000000000000001) for commands and manifests."""
+def tidy(x: float) -> float:  # a short decimal for commands: 0.006, not 0.006000000000000001
     return float(f"{float(x):.10g}")
 
 
@@ -64,9 +58,9 @@ class Cell:
     profile: int | None = None  # profile_seed; None: the fixed schedule
 
     def dataset_params(self, duration: float | None = None) -> dict:
-        p = {} if self.noise is None else {"noise_rms": [tidy(self.noise * s) for s in R_STD]}
-        p.update({} if self.profile is None else {"profile_seed": int(self.profile)})
-        return p | ({} if duration is None else {"duration": float(duration)})
+        return ({} if self.noise is None else {"noise_rms": [tidy(self.noise * s) for s in R_STD]}) | (
+            {} if self.profile is None else {"profile_seed": int(self.profile)}) | (
+            {} if duration is None else {"duration": float(duration)})
 
     def task_params(self) -> dict:
         return {} if self.kappa == 1.0 else {"Q": [tidy(self.kappa * q) for q in Q_DIAG]}
@@ -77,8 +71,8 @@ class Cell:
 
     @property
     def name(self) -> str:
-        prof = "fixed profile" if self.profile is None else f"profile {self.profile}"
-        return f"sensors {self.noise_text}, κ = {self.kappa:g}, {prof}"
+        return f"sensors {self.noise_text}, κ = {self.kappa:g}, " + (
+            "fixed profile" if self.profile is None else f"profile {self.profile}")
 
 
 def maneuver_mask(problem) -> np.ndarray:
@@ -98,8 +92,7 @@ def _segment(res, div, keep) -> dict:
 
 
 def compute(job) -> dict:
-    """One cell: ``(cell, labels, runs, seed, duration)`` -> its filters' results (module docstring).
-    The labels' filters must differ (one ``evaluate``: ``filter_params`` by filter name)."""
+    """``(cell, labels, runs, seed, duration)`` -> the cell's results; the labels' filters differ."""
     cell, labels, runs, seed, duration = job
     ev = evaluate(DATASET, task=TASK, filters=[VARIANTS[lab][0] for lab in labels], runs=runs, seed=seed,
                   dataset_params=cell.dataset_params(duration), task_params=cell.task_params(),
@@ -108,9 +101,9 @@ def compute(job) -> dict:
            "t": np.asarray(ev.t, float), "maneuvers": plain(ev.frame_meta["maneuvers"])}
     for lab, res, row in zip(labels, ev.results, ev.rows):
         div = np.array([bool(m["diverged"]) for m in res.runs])
-        f = {"row": plain(row), "lost": per_run(res, "depth_rmse")[1],
-             "ess": np.array([e.info.get("mean_ess", np.nan) / N for e in res.estimates]),
-             "rmse": {ch: per_run(res, f"{ch}_rmse")[0] for ch in CH},
-             "man": _segment(res, div, maneuver_mask), "level": _segment(res, div, lambda p: ~maneuver_mask(p))}
-        out["filters"][lab] = f
+        out["filters"][lab] = {
+            "row": plain(row), "lost": per_run(res, "depth_rmse")[1], "rmse": {ch: per_run(res, f"{ch}_rmse")[0]
+                                                                               for ch in CH},
+            "ess": np.array([e.info.get("mean_ess", np.nan) / N for e in res.estimates]),
+            "man": _segment(res, div, maneuver_mask), "level": _segment(res, div, lambda p: ~maneuver_mask(p))}
     return out

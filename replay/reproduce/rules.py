@@ -156,13 +156,16 @@ class Outcome:
             body = f"{c.name}: {what} {g(self.estimate)} [{g(self.lo)}, {g(self.hi)}]"
         if self.test == "interval":
             return f"{body} vs paper {g(self.comparison.target)}"
-        return f"{body}, p_adj = {p_text(self.p_adj)}"
+        p = p_text(self.p_adj)
+        return f"{body}, p_adj {p if p.startswith('<') else '= ' + p}"
 
 
 @dataclass
 class Verdict:
     """A decided claim: its label, the rule text, the tests used, the deciding outcomes (and those
-    of the condition or ablation that decided), the residual gap of a :data:`RECOVERED` row."""
+    of the condition or ablation that decided), the residual gap of a :data:`RECOVERED` row, and
+    ``tried``: the outcomes of a declared condition or ablation that was tested and did not hold
+    (``{"condition": [...], "mechanism": [...]}``), printed so that a reader sees it was tried."""
 
     claim: Claim
     label: str
@@ -171,6 +174,7 @@ class Verdict:
     deciding: list = field(default_factory=list)
     support: list = field(default_factory=list)
     gap: str = ""
+    tried: dict = field(default_factory=dict)
 
 
 def per_run(result, metric: str = "pos_rmse") -> tuple[np.ndarray, np.ndarray]:
@@ -276,11 +280,14 @@ def _verdict(cl: Claim, out: dict) -> Verdict:
     v = Verdict(cl, NOT, r.text(), tests, deciding=dec)
     if _enough(dec, r.need):
         v.label = REPRODUCED
-    elif r.condition and _enough(out[r.condition], None):
-        v.label, v.support = RECOVERED, out[r.condition]
-        v.gap = "; ".join(o.text() for o in dec)
-    elif r.mechanism and _enough(out[r.mechanism], None):
-        v.label, v.support = MECHANISM, out[r.mechanism]
+        return v
+    for kind, key, label in (("condition", r.condition, RECOVERED), ("mechanism", r.mechanism, MECHANISM)):
+        if key and _enough(out[key], None):
+            v.label, v.support = label, out[key]
+            v.gap = "; ".join(o.text() for o in dec) if label == RECOVERED else ""
+            return v
+        if key:
+            v.tried[kind] = out[key]
     return v
 
 
