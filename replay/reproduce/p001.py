@@ -19,7 +19,7 @@ from replay.util.errors import ReplayError
 from . import p001_plan as plan
 from .common5 import combine, commands, row, run_jobs, table
 from .p001_plots import TRACK, plots
-from .render import render, table as md
+from .render import found, render, table as md
 from .rules import Comparison, decide, per_run
 from .verdict import Stopwatch, footer, write_document
 
@@ -122,9 +122,8 @@ def fields(evs, verdicts, runs, seed, n, tuned, grid, quick, doc):
          "primary": table(prim, metrics=plan.ALL), "nees": nees_table(prim), "commands": commands(prim),
          "cells": "\n\n".join(f"{sect[k]}\n\n" + table(r := cell_rows(evs, k, tl), metrics=plan.ALL) + "\n\n"
                               + nees_table(r) + "\n\nCommands:\n\n" + commands(r) for k in cells),
-         "relabel": md(["claim", "old label", "new label", "deciding numbers (and the ablation's)"],
-                       [[v.claim.id, OLD[v.claim.id], v.label, "; ".join(o.text() for o in v.deciding + v.support)]
-                        for v in verdicts]),
+         "relabel": md(["claim", "old label", "new label", "the numbers behind it"],
+                       [[v.claim.id, OLD[v.claim.id], v.label, found(v)] for v in verdicts]),
          "quick": " --quick" if quick else "", "seed": seed, "plots": plots(evs, doc)}
     return f | {name: spec_table(evs, n, *spec) for name, spec in plan.TABLES.items()}
 
