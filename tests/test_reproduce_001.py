@@ -48,18 +48,24 @@ def test_water_track_error_is_the_integrated_current():
 @pytest.mark.slow
 def test_reproduce_001_quick(tmp_path):
     from replay.reproduce.p001 import run
+    from replay.reproduce.rules import LABELS
     from replay.reproduce.verdict import check_portable
 
     doc = tmp_path / "001.md"
-    evs = run(quick=True, runs=2, doc=doc, quiet=True)
+    evs = run(quick=True, runs=3, doc=doc, quiet=True)
     text = doc.read_text(encoding="utf-8")
     assert text.startswith("# Reproduction of paper 001")
     head = text.split("## Setting")[0]
-    assert "## Verdict" in head and "(of 6 claims)" in head
-    for section in ("## North and east are unobservable", "## Bottom-lock DVL", "## Water-track DVL",
-                    "## Forgetting factor b", "## Ablation", "## What this implies"):
+    assert "## Verdict" in head and "(of 7 claims)" in head
+    assert "deviation explained" not in head  # the old vocabulary is gone
+    assert sum(head.count(f"**{lab}**") for lab in LABELS) == 7
+    for anchor in ("e-primary", "e-observability", "e-premise"):
+        assert f'<a id="{anchor}"></a>' in text and f"(#{anchor})" in head
+    for section in ("## North and east are unobservable", "## Baselines at their best", "## Every cell",
+                    "## The premise", "## Forgetting factor b", "## Ablation", "## Relabelled rows"):
         assert section in text
     assert "adapt_means=none" in text and "dvl_track=water" in text and "aukf.forgetting=0.95" in text
+    assert "ukf.r_scale=100.0" in text and "ANEES (position, 3 dof)" in text and "**chosen**" in text
     check_portable(text, "001.md")
     assert (tmp_path / "001_traces.png").exists()
     # the numbers behind the verdicts
@@ -68,6 +74,33 @@ def test_reproduce_001_quick(tmp_path):
     assert floor_w > 40 and floor_b < 6
     main = evs["bottom 0.5"].rows
     assert main[1]["pos_rmse"] > 3 * main[0]["pos_rmse"]  # the paper's AUKF loses in bottom lock
+    mis = evs["mistuned"].rows
+    assert mis[1]["pos_rmse"] > mis[0]["pos_rmse"] > 40  # R x 100: the AUKF does not help
+
+
+def test_tuned_ukf_rule_breaks_rmse_ties_by_anees():
+    """The declared rule: lowest mean position RMSE; within 1 % of it, the ANEES closest to 3."""
+    from types import SimpleNamespace
+
+    from replay.reproduce import p001_plan as plan
+    from replay.reproduce.p001 import pick
+    from replay.util.errors import ReplayError
+
+    evs = {f"tune q{q} r{r}": SimpleNamespace(rows=[{"pos_rmse": 10.0 + q + r, "anees": 50.0}])
+           for q in plan.Q_SCALES for r in plan.R_SCALES}
+    low = f"tune q{plan.Q_SCALES[0]} r{plan.R_SCALES[0]}"
+    evs[low].rows[0].update(pos_rmse=5.0, anees=400.0)
+    evs[f"tune q{plan.Q_SCALES[-1]} r{plan.R_SCALES[-1]}"].rows[0].update(pos_rmse=5.04, anees=3.5)  # within 1 %
+    evs[f"tune q{plan.Q_SCALES[1]} r{plan.R_SCALES[1]}"].rows[0].update(pos_rmse=5.06, anees=3.0)  # 1.2 %: out
+    tuned, grid = pick(evs)
+    assert tuned == {"q_scale": plan.Q_SCALES[-1], "r_scale": plan.R_SCALES[-1]}
+    assert grid.count("**chosen**") == 1
+    evs[f"tune q{plan.Q_SCALES[2]} r{plan.R_SCALES[2]}"].rows[0].update(pos_rmse=1.0, diverged=1)  # not chosen
+    assert pick(evs)[0] == tuned
+    for ev in evs.values():
+        ev.rows[0]["pos_rmse"] = float("nan")
+    with pytest.raises(ReplayError, match="every grid point of the UKF diverged"):
+        pick(evs)
 
 
 # ---------------------------------------------------------------- figures (synthetic inputs, fast)

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from .common5 import command, rmse_figures
-from .p001_plan import TRACK, TRACKS
+TRACK = {"bottom": "bottom-lock DVL", "water": "water-track DVL"}
+TRACKS = tuple(TRACK)
 
 # (key, axis name, unit): the quantities of the paper's Fig. 3-5 that the task scores
 QUANTITIES = (("north", "north error", "m"), ("east", "east error", "m"), ("depth", "depth error", "m"),
@@ -50,7 +51,7 @@ def traces_figure(t, histories: list[dict], what: str):
     return fig
 
 
-def plots(evs, doc, strengths):
+def plots(evs, doc):
     from replay.outputs.plots import save
 
     out = []
@@ -74,7 +75,4 @@ def plots(evs, doc, strengths):
                 f"`{command(traces)}`.", ""]
     except ImportError:
         out += ["(plots skipped: matplotlib is not installed)", ""]
-    return ["## Plots", "",
-            "Per quantity, one panel per filter: the RMSE over the runs at each step (the curve of the "
-            "paper's Fig. 3-5) and the 5-95 % band of the runs' absolute errors; grey: the other filters' "
-            "RMSE.", ""] + out
+    return "\n".join(out)
