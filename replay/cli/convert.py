@@ -11,7 +11,7 @@ import click
 @click.command("convert")
 @click.argument("source")
 @click.argument("out", type=click.Path(dir_okay=False))
-@click.option("--format", "fmt", type=click.Choice(["tum", "kitti", "euroc", "csv", "mcap"]), default=None,
+@click.option("--format", "fmt", metavar="tum|kitti|euroc|csv|mcap", default=None,
               help="Output format (default: from OUT's extension: .tum/.txt TUM, .kitti, .csv plain CSV, .mcap). "
                    "KITTI writes times.txt beside OUT.")
 @click.option("--in-format", "in_fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,

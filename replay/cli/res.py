@@ -17,7 +17,7 @@ from replay.util.errors import ReplayError
 @click.option("--table", "table", type=click.Choice(["stats", "trials"]), default="stats", show_default=True,
               help="stats: every estimate's APE/RPE (and per-length) statistics; trials: each trial set's "
                    "aggregation (mean, median, 95 % t-interval, lost).")
-@click.option("--format", "fmt", type=click.Choice(["csv", "md", "latex"]), default=None,
+@click.option("--format", "fmt", metavar="csv|md|latex", default=None,
               help="Table format (default: from the -o extension .csv/.md/.tex, else md).")
 @click.option("--digits", type=click.IntRange(1, 17), default=6, show_default=True,
               help="Significant digits of Markdown and LaTeX tables (CSV: every digit).")
@@ -31,6 +31,8 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
     from replay.util import outfile
     from replay.util.files import refuse_overlap
 
+    if fmt is not None and fmt not in res.FORMATS:
+        raise ReplayError(f"--format {fmt!r}: expected one of {', '.join(res.FORMATS)}")
     if fmt is None:
         suffix = Path(out).suffix.lower() if out else ""
         if out and suffix not in res.SUFFIXES:

@@ -181,6 +181,14 @@ class ScoreResult:
                          for r in (by_length.rows(row, s.lengths, self.settings["lengths_method"])
                                    if s.lengths else [row])])
 
+    def save(self, path):
+        """Write the results archive of ``replay score --save-results`` into the directory ``path``
+        (:mod:`replay.run.archive`; read back by ``replay res``); refused onto or inside an input."""
+        from replay.run import archive
+
+        archive.check(path, [io.split(spec)[0] for spec in getattr(self, "sources", ())])
+        return archive.save(self, path, reference=getattr(self, "reference_spec", None))
+
     def trials(self):
         """The trial sets (``trials=``): each trial's row and the aggregated row (``trial`` empty: mean over
         trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.run.trials`), one per length with ``lengths``."""
@@ -304,4 +312,6 @@ def score(reference, estimates=None, *, align: str = "none", n_to_align=None, al
                                     settings=opts, lost_threshold=lost_threshold, lost_steps=lost_steps))
     for row, (_, set_name, k, src) in zip(rows[len(rows) - len(members):], members):
         trial_sets.mark(row, set_name, k, src if isinstance(src, (str, os.PathLike)) else f"<{set_name}/{k}>")
-    return ScoreResult(ref, scores, rows, opts)
+    result = ScoreResult(ref, scores, rows, opts)
+    result.sources, result.reference_spec = [spec for spec in specs if spec], ref_spec
+    return result
