@@ -10,7 +10,7 @@ import click
 
 @click.command("convert")
 @click.argument("source")
-@click.argument("out", type=click.Path(dir_okay=False))
+@click.argument("out")
 @click.option("--format", "fmt", metavar="tum|kitti|euroc|csv|mcap", default=None,
               help="Output format (default: from OUT's extension: .tum/.txt TUM, .kitti, .csv plain CSV, .mcap). "
                    "KITTI writes times.txt beside OUT.")

@@ -133,7 +133,7 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 @click.option("--trials-plot", "trial_plot", type=click.Path(dir_okay=False), default=None,
               help="With --trials: boxplots of each trial set's errors, the APE and RPE and per --lengths length "
                    "(png, pdf, svg, eps).")
-@click.option("--save-results", "--save_results", "save_results", type=click.Path(file_okay=False), default=None,
+@click.option("--save-results", "--save_results", "save_results", default=None, metavar="DIR",
               help="Write a results archive into this directory (per-pose errors, alignment, settings; Parquet + "
                    "JSON), read back by replay res.")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
