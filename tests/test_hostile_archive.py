@@ -87,7 +87,8 @@ def test_convert_refusals(files):
     refused(["convert", files / "gt.tum", files / "o.tum", "--format", "ply"], "--format 'ply': expected one of")
     refused(["convert", files / "gt.tum", files / "gt.tum"], "is an input of this command")
     refused(["convert", files / "absent.tum", files / "o.tum"], "no such file")
-    refused(["convert", files / "gt.tum", files, "--format", "tum"], "is a directory")
+    (files / "d").mkdir()
+    refused(["convert", files / "gt.tum", files / "d", "--format", "tum"], "is a directory")
     assert not (files / "o.tum").exists()
 
 
