@@ -45,6 +45,13 @@ def test_trials_refusals(files):
     refused(["score", gt, files / "est1.tum", "--trials-plot", files / "b.png"], "give --trials")
     refused(["score", gt, "--trials", f"{files}/est*.tum", "--trials-plot", files / "b.gif"], "unsupported extension")
     assert not (files / "b.png").exists()
+    write_tum(files / "late.tum", make(100.0 + np.arange(5.0), np.eye(5, 3), np.tile([0.0, 0, 0, 1], (5, 1)),
+                                       source="late"))
+    r = CliRunner().invoke(main, ["score", str(gt), "--trials", f"orb={files}/est1.tum", "--trials",
+                                  f"orb={files}/late.tum", "-o", str(files / "lb.csv")])
+    last = r.output.strip().splitlines()[-1]  # after the line of the trial scored before it
+    assert r.exit_code == 2 and last.startswith("replay: error: trial orb/2 (") and "late.tum" in last, r.output
+    assert "do not overlap" in last and "Traceback" not in r.output and not (files / "lb.csv").exists()
 
 
 def test_save_results_refusals(files):

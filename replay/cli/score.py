@@ -200,7 +200,8 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
                               lengths_method=lengths_method, sync_method=sync_method, t_start=t_start, t_end=t_end,
                               downsample=downsample, motion_filter=motion_filter, project_to_plane=project_to_plane)
     for k, (spec, name, est) in enumerate(zip(sources, names[1:], ests)):
-        s = score(ref, est, **settings)
+        with trial_sets.naming(members[k - len(estimates)] if k >= len(estimates) else None):
+            s = score(ref, est, **settings)
         scores[name] = s
         click.echo(f"{name} vs {ref.name}: {len(s.reference)} of {len(est)} poses matched (reference: {len(ref)} "
                    f"poses; t_max_diff {t_max_diff:g} s{f', t_offset {t_offset:g} s' if t_offset else ''})"

@@ -305,8 +305,10 @@ def score(reference, estimates=None, *, align: str = "none", n_to_align=None, al
     ref_spec = specs[0] or f"<{ref_name}>"
     dataset = io.label(specs[0]) if specs[0] else ref_name
     scores, rows = {}, []
-    for spec, name, est in zip(specs[1:], names, ests):
-        s = score_one(ref, est, **opts)
+    first_trial = len(names) - len(members)
+    for k, (spec, name, est) in enumerate(zip(specs[1:], names, ests)):
+        with trial_sets.naming(members[k - first_trial] if k >= first_trial else None):
+            s = score_one(ref, est, **opts)
         scores[name] = s
         rows.append(leaderboard_row(s, reference=ref_spec, dataset=dataset, estimate=spec or f"<{name}>", name=name,
                                     settings=opts, lost_threshold=lost_threshold, lost_steps=lost_steps))

@@ -21,6 +21,7 @@ import glob
 import json
 import math
 import re
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -148,6 +149,17 @@ def _hash(parts) -> str:
 def members(sets: dict) -> list[tuple]:
     """``[(score name, set name, trial number, source)]`` of ``{name: [source, ...]}``; score names ``NAME/k``."""
     return [(f"{name}/{k}", name, k, src) for name, srcs in sets.items() for k, src in enumerate(srcs, start=1)]
+
+
+@contextmanager
+def naming(member):
+    """Errors of scoring the trial ``member`` (an item of :func:`members`; None: not a trial) name it."""
+    try:
+        yield
+    except ReplayError as e:
+        if member is None:
+            raise
+        raise ReplayError(f"trial {member[0]} ({member[3]}): {e}") from None
 
 
 def mark(row: dict, name: str, k: int, source) -> dict:
