@@ -198,3 +198,32 @@ def test_save_replaces_an_archive_whole(saved, tmp_path):
     res2.save(out)
     meta = json.loads((out / "results.json").read_text())
     assert [e["name"] for e in meta["estimates"]] == ["est_run3"] and not (out / "rpe.parquet").exists()
+
+
+def test_res_aggregates_recorded_estimates_across_eval_outputs(tmp_path):
+    """Three ``replay eval`` outputs of three recordings, each with a recorded:orb row: one trial each."""
+    from replay.scoring.summary import columns
+    from replay.util.files import MARKER, write_csv
+
+    dirs = []
+    for k, (rmse, ate) in enumerate(((1.0, 0.5), (2.0, 0.25), (4.5, 0.75))):
+        d = tmp_path / f"run{k}"
+        d.mkdir()
+        rows = [{"dataset": f"rec{k}.bag", "task": "recorded", "filter": "recorded:orb", "label": "recorded:orb",
+                 "params": "{}", "runs": 1, "diverged": 0, "lost": "", "failed": 0, "pos_rmse": rmse, "ate": ate,
+                 "scored": 100, "masked": 0},
+                {"dataset": f"rec{k}.bag", "task": "recorded", "filter": "ekf", "label": "ekf", "params": "{}",
+                 "runs": 1, "diverged": 0, "lost": "", "failed": 0, "pos_rmse": 9.0, "scored": 100, "masked": 0}]
+        write_csv(rows, d / "leaderboard.csv", columns(rows))
+        (d / MARKER).write_text(json.dumps({"tool": "replay", "kind": "replay eval", "files": ["leaderboard.csv"]}))
+        dirs.append(d)
+    r = run("res", *dirs, "--table", "trials", "--format", "csv")
+    assert r.exit_code == 0, r.output
+    got = {row["metric"]: row for row in csv.DictReader(r.output.splitlines())}
+    assert set(got) == {"pos_rmse", "ate"} and got["pos_rmse"]["estimate"] == "orb" and got["ate"]["trials"] == "3"
+    for metric, values in (("pos_rmse", (1.0, 2.0, 4.5)), ("ate", (0.5, 0.25, 0.75))):
+        mean, median, ci = _hand(values)
+        assert float(got[metric]["mean"]) == pytest.approx(mean, rel=1e-14)
+        assert float(got[metric]["median"]) == median and float(got[metric]["ci95"]) == pytest.approx(ci, rel=1e-12)
+    r = CliRunner().invoke(main, ["res", str(dirs[0])])
+    assert r.exit_code == 2 and "a replay eval or campaign output" in r.output and len(r.output.splitlines()) == 1

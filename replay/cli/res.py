@@ -26,7 +26,11 @@ from replay.util.errors import ReplayError
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write the APE over time and boxplots per estimate (png, pdf, svg, eps).")
 def res_cmd(dirs, table, fmt, digits, out, plot_path):
-    """Tables (CSV, Markdown, LaTeX) and plots of results saved by replay score --save-results DIR."""
+    """Tables (CSV, Markdown, LaTeX) and plots of results saved by replay score --save-results DIR.
+
+    Given replay eval or campaign outputs, --table trials aggregates their recorded estimates (recorded:NAME
+    rows) across the recordings, one trial per directory.
+    """
     from replay.run import archive, boxplots, res
     from replay.util import outfile
     from replay.util.files import refuse_overlap
@@ -42,8 +46,18 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
         if path:
             refuse_overlap(path, dirs, what)
             outfile.check(path, what, suffixes)
-    archives = [archive.load(d) for d in dirs]
-    text = res.render(res.rows(archives, table), fmt, digits)
+    archives, boards = [], []
+    for d in dirs:
+        if not (Path(d) / archive.META).exists() and _is_output(Path(d)):
+            from replay.campaign import board
+
+            boards.append((d, board.read_dir(d)))
+        else:
+            archives.append(archive.load(d))
+    if plot_path and boards:
+        raise ReplayError(f"--plot: {boards[0][0]} is a replay eval or campaign output; --plot draws results archives "
+                          "(replay report draws eval and campaign outputs)")
+    text = res.render(res.rows(archives, table, boards), fmt, digits)
     if out:
         outfile.write(out, "-o", lambda tmp: Path(tmp).write_text(text))
         click.echo(f"table: {out}")
@@ -52,3 +66,11 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
     if plot_path:
         boxplots.write_res(plot_path, archives)
         click.echo(f"plot: {plot_path}")
+
+
+def _is_output(d: Path) -> bool:
+    """A ``replay eval`` output or a campaign directory (its leaderboard is read by ``replay leaderboard``)."""
+    from replay.util.files import read_marker
+
+    mark = read_marker(d) if d.is_dir() else None
+    return (mark is not None and mark.get("kind") == "replay eval") or (d / "units").is_dir()

@@ -10,7 +10,9 @@ Two tables (:func:`rows`):
   the numbers ``replay score`` printed, every digit as saved;
 * ``trials`` — one row per trial set, length and aggregated metric: ``results``, ``estimate``, ``length``,
   ``metric`` (a leaderboard column such as ``ape_trans_rmse``), ``trials`` (N), ``mean``, ``median``,
-  ``ci95`` (half-width of the 95 % t-interval), ``lost`` (k trials, empty when not judged).
+  ``ci95`` (half-width of the 95 % t-interval), ``lost`` (k trials, empty when not judged); given
+  ``replay eval`` or campaign outputs, the ``recorded:<name>`` rows of one name and task across them
+  (one per recording) are aggregated the same way (:func:`across`).
 
 :func:`render` writes them as CSV (every digit, :func:`replay.util.files.fmt`), Markdown or LaTeX (numbers
 with ``digits`` significant digits).
@@ -79,11 +81,38 @@ def trials_rows(archives) -> list[dict]:
     return out
 
 
-def rows(archives, table: str = "stats") -> list[dict]:
-    """The rows of ``table`` (module docstring) over the archives, in the order given."""
+def across(boards) -> list[dict]:
+    """Trials-table rows of the recorded estimates of ``replay eval`` / campaign outputs: ``boards`` is
+    ``[(shown, leaderboard rows)]``; the ``recorded:<name>`` rows of one name and task in different
+    directories (one per recording) are aggregated as trials (:func:`replay.run.trials.aggregate`)."""
+    from replay.run.trials import aggregate, aggregated_keys
+
+    groups = {}
+    for shown, board in boards:
+        for row in board:
+            if str(row.get("filter", "")).startswith("recorded:"):
+                groups.setdefault((row["filter"], row.get("task", "")), []).append((shown, row))
+    out = []
+    for (name, _task), members in groups.items():
+        agg = aggregate([dict(r, params="{}") for _, r in members])
+        shown = "+".join(dict.fromkeys(s for s, _ in members))
+        for k in [k for k in aggregated_keys(members[0][1]) if not k.endswith(("_ci95", "_median"))]:
+            out.append({"results": shown, "estimate": name[len("recorded:"):], "length": "", "metric": k,
+                        "trials": agg["runs"], "mean": finite(agg[k]), "median": finite(agg[f"{k}_median"]),
+                        "ci95": finite(agg[f"{k}_ci95"]), "lost": agg["lost"]})
+    return out
+
+
+def rows(archives, table: str = "stats", boards=()) -> list[dict]:
+    """The rows of ``table`` (module docstring) over the archives, in the order given; ``boards``: leaderboards
+    of eval/campaign outputs (:func:`across`; the trials table only)."""
     if table not in TABLES:
         raise ReplayError(f"--table {table!r}: expected one of {', '.join(TABLES)}")
-    out = stats_rows(archives) if table == "stats" else trials_rows(archives)
+    if boards and table == "stats":
+        raise ReplayError(f"{boards[0][0]}: a replay eval or campaign output, not a results archive: tabulate it "
+                          "with replay leaderboard, or aggregate its recorded estimates across recordings with "
+                          "replay res --table trials")
+    out = stats_rows(archives) if table == "stats" else trials_rows(archives) + across(boards)
     if not out:
         raise ReplayError("--table trials: no trial set in these results (saved with replay score --trials)"
                           if table == "trials" else "no statistics in these results")
