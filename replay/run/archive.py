@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.run.pipeline import config_hash, plain
+from replay.trajectory.lengths import ERRORS as LENGTH_ERRORS
 from replay.util.errors import ReplayError
 
 KIND = "replay score results"
@@ -66,9 +67,7 @@ def frames(result) -> dict:
             i, j = entry["pairs"]
             cols = {"estimate": name, "length": label, "length_m": entry["length"], "i": i, "j": j,
                     "t_i": s.reference.t[i], "t_j": s.reference.t[j]}
-            from replay.trajectory.lengths import ERRORS
-
-            cols.update({e: entry[e] for e in ERRORS})
+            cols.update({e: entry[e] for e in LENGTH_ERRORS})
             parts.append(pd.DataFrame(cols))
     if parts:
         out["lengths"] = pd.concat(parts, ignore_index=True)
@@ -77,7 +76,7 @@ def frames(result) -> dict:
 
 def meta(result, reference: str | None = None) -> dict:
     """The content of ``results.json`` but ``files`` (module docstring)."""
-    from replay.trajectory.lengths import ERRORS, statistics as length_stats
+    from replay.trajectory.lengths import statistics as length_stats
     from replay.trajectory.pose_error import statistics
     from replay.util.version import __version__
 
@@ -94,7 +93,7 @@ def meta(result, reference: str | None = None) -> dict:
             "stats": {kind: {rel: statistics(e) | {"n": len(e)} for rel, e in errs.items()}
                       for kind, errs in (("ape", s.ape), ("rpe", s.rpe)) if errs},
             "lengths": {label: {"length_m": entry["length"], "gaps": entry["gaps"],
-                                **{e: length_stats(entry[e]) for e in ERRORS}}
+                                **{e: length_stats(entry[e]) for e in LENGTH_ERRORS}}
                         for label, entry in s.lengths.items()}})
     ref_source = reference or ref.source or ref.name
     return {"format": FORMAT, "version": VERSION, "replay_version": __version__,
