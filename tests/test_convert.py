@@ -13,10 +13,6 @@ from replay.trajectory.convert import ns
 from replay.trajectory.files import write_tum
 
 
-def run(*args):
-    return CliRunner().invoke(main, ["convert", *map(str, args)], catch_exceptions=False)
-
-
 @pytest.fixture
 def src(tmp_path):
     rng = np.random.default_rng(3)
@@ -27,6 +23,10 @@ def src(tmp_path):
     tr = make(t, p, q, source="src")
     write_tum(tmp_path / "src.tum", tr)  # %.17g: read back exactly
     return tmp_path, io.load(str(tmp_path / "src.tum"))
+
+
+def run(*args):
+    return CliRunner().invoke(main, ["convert", *map(str, args)], catch_exceptions=False)
 
 
 @pytest.mark.parametrize("name, fmt", [("o.tum", None), ("o.txt", None), ("o.kitti", None), ("o.csv", None),

@@ -42,6 +42,7 @@ def test_trials_refusals(files):
     refused(["score", gt, "--trials", f"{files}/nothing_*.txt"], "no file matches")
     refused(["score", gt, "--trials", f"a={files}/est*.tum", "--trials", f"a={files}/est1.tum"], "is given twice")
     refused(["score", gt], "no estimate")
+    refused(["score", gt, "--trials", f"{files}/*.tum"], "is the reference itself")
     refused(["score", gt, files / "est1.tum", "--trials-plot", files / "b.png"], "give --trials")
     refused(["score", gt, "--trials", f"{files}/est*.tum", "--trials-plot", files / "b.gif"], "unsupported extension")
     assert not (files / "b.png").exists()

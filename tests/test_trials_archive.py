@@ -42,6 +42,14 @@ def _hand(values):
     return v.mean(), float(np.median(v)), T975_2 * v.std(ddof=1) / math.sqrt(len(v))
 
 
+def _agrees(trials, agg, column, values):
+    """Each trial's ``column`` equals ``values``; the aggregated row their mean, median and 95 % t half-width."""
+    for row, want in zip(trials, values):
+        assert float(row[column]) == pytest.approx(want, rel=1e-12)
+    for suffix, want in zip(("", "_median", "_ci95"), _hand(values)):
+        assert float(agg[column + suffix]) == pytest.approx(want, rel=1e-12), suffix
+
+
 def test_trials_aggregate_equals_hand_computation(line):
     out = line / "lb.csv"
     r = run("score", line / "gt.tum", "--trials", f"est={line}/runs/est_run*.txt", "--lengths", "10",
@@ -54,21 +62,10 @@ def test_trials_aggregate_equals_hand_computation(line):
     assert [row["trial"] for row in trials] == ["1", "2", "3"]
     assert [row["trial_source"].rsplit("/", 1)[-1] for row in trials] == ["est_run1.txt", "est_run2.txt",
                                                                           "est_run3.txt"]
-    ape = [0.01 * k * math.sqrt(3350.0) for k in (1, 2, 3)]  # error 0.01 k x, mean of x^2 over 0..100 = 3350
-    for row, want in zip(trials, ape):
-        assert float(row["ape_trans_rmse"]) == pytest.approx(want, rel=1e-12)
-    mean, median, ci = _hand(ape)
-    assert float(agg["ape_trans_rmse"]) == pytest.approx(mean, rel=1e-12)
-    assert float(agg["ape_trans_rmse_median"]) == pytest.approx(median, rel=1e-12)
-    assert float(agg["ape_trans_rmse_ci95"]) == pytest.approx(ci, rel=1e-12)
+    # APE: error 0.01 k x, mean of x^2 over 0..100 = 3350
+    _agrees(trials, agg, "ape_trans_rmse", [0.01 * k * math.sqrt(3350.0) for k in (1, 2, 3)])
     # KITTI sub-trajectories of 10 m on 1 m steps end 11 m on: trans_perc = k % * 11 / 10 in every sample
-    perc = [1.1 * k for k in (1, 2, 3)]
-    for row, want in zip(trials, perc):
-        assert float(row["rel_trans_perc_rmse"]) == pytest.approx(want, rel=1e-12)
-    mean, median, ci = _hand(perc)
-    assert float(agg["rel_trans_perc_rmse"]) == pytest.approx(mean, rel=1e-12)
-    assert float(agg["rel_trans_perc_rmse_median"]) == pytest.approx(median, rel=1e-12)
-    assert float(agg["rel_trans_perc_rmse_ci95"]) == pytest.approx(ci, rel=1e-12)
+    _agrees(trials, agg, "rel_trans_perc_rmse", [1.1 * k for k in (1, 2, 3)])
     # lost: error above 1.5 m for 10 matched poses: trials 2 (from x = 76) and 3 (x = 51), not 1 (1 m at most)
     assert [row["lost"] for row in trials] == ["0", "1", "1"] and agg["lost"] == "2" and agg["runs"] == "3"
     assert agg["filter"] == "recorded:est" and json.loads(agg["params"])["trials"][2].endswith("est_run3.txt")

@@ -170,6 +170,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     from replay.run import trials as trial_sets
 
     sets = trial_sets.parse(trial_specs)
+    trial_sets.not_reference(sets, reference)
     if not estimates and not sets:
         raise ReplayError("replay score REFERENCE ESTIMATE...: no estimate (give estimates, or --trials GLOB)")
     members = trial_sets.members(sets)

@@ -266,6 +266,7 @@ def score(reference, estimates=None, *, align: str = "none", n_to_align=None, al
     from replay.run import trials as trial_sets
 
     sets = trial_sets.parse_api(trials)
+    trial_sets.not_reference(sets, reference, "trials")
     if lengths is not None:
         from replay.trajectory import lengths as by_length
 

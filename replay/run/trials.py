@@ -77,6 +77,19 @@ def parse(specs, what: str = "--trials") -> dict:
     return _once(out, what)
 
 
+def not_reference(sets: dict, reference, what: str = "--trials") -> None:
+    """Refuse a trial that is the reference itself (a glob such as ``*.tum`` catching ``gt.tum``)."""
+    import os
+
+    if not isinstance(reference, (str, os.PathLike)):
+        return
+    ref = os.path.realpath(os.fspath(reference))
+    for name, sources in sets.items():
+        for src in sources:
+            if isinstance(src, (str, os.PathLike)) and os.path.realpath(os.fspath(src)) == ref:
+                raise ReplayError(f"{what} {name}: {src} is the reference itself (narrow the glob)")
+
+
 def _once(sets: dict, what: str) -> dict:
     for name, sources in sets.items():
         paths = [s for s in sources if isinstance(s, str)]
