@@ -90,6 +90,11 @@ def test_res_refusals(files):
     refused(["res", out], "results.json: unreadable")
 
 
+def test_evo_save_as_answered(files):
+    for flag in ("--save_as_tum", "--save_as_kitti", "--save_as_bag"):
+        refused(["score", files / "gt.tum", files / "est1.tum", flag], "replay convert SOURCE OUT.tum")
+
+
 def test_convert_refusals(files):
     refused(["convert", files / "gt.tum", files / "o.bin"], "the extension .bin does not say the format")
     refused(["convert", files / "gt.tum", files / "o.tum", "--format", "ply"], "--format 'ply': expected one of")

@@ -130,6 +130,9 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="Trials of one estimator (rpg's --mul_trials, evo_res): files matching GLOB (or REC*.bag:/topic), "
                    "scored one by one and aggregated (mean, median, 95 % t-interval, lost k/N); repeatable, a NAME "
                    "repeated adds trials.")
+@click.option("--save_as_tum", "--save-as-tum", "--save_as_kitti", "--save-as-kitti", "--save_as_bag",
+              "--save-as-bag", "--save_as_bag2", "save_as", is_flag=True, hidden=True,
+              help="evo_traj's conversions: answered with replay convert.")
 @click.option("--trials-plot", "trial_plot", type=click.Path(dir_okay=False), default=None,
               help="With --trials: boxplots of each trial set's errors, the APE and RPE and per --lengths length "
                    "(png, pdf, svg, eps).")
@@ -140,7 +143,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
               rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method,
               sync_method, fmt, t_start, t_end, downsample, motion_filter, project_to_plane, kitti_times, columns,
               time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, out, trial_specs=(),
-              trial_plot=None, save_results=None):
+              trial_plot=None, save_results=None, save_as=False):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
@@ -158,6 +161,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     if p_flag:
         raise ReplayError("-p: replay never opens a window; write the figures with --plot FILE (png, pdf, svg; evo's "
                           "--save_plot)")
+    if save_as:
+        raise ReplayError("--save_as_tum/--save_as_kitti/--save_as_bag: replay score writes no trajectories; convert "
+                          "one with replay convert SOURCE OUT.tum (.kitti, .csv, .mcap; --format euroc)")
     method = _resolve_align(align, a_flag, s_flag)
     if lengths is not None:
         from replay.trajectory import lengths as by_length

@@ -101,11 +101,12 @@ def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "m
         channel = w.register_channel(topic=topic, message_encoding="cdr", schema_id=schema)
         for k, (stamp, p, q) in enumerate(zip(stamps.tolist(), tr.p.tolist(), tr.q.tolist())):
             sec, nsec = divmod(stamp, 1_000_000_000)
-            msg = T[name](header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
-                                                          frame_id=frame_id),
-                          pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
-                                                           orientation=T["geometry_msgs/msg/Quaternion"](
-                                                               x=q[0], y=q[1], z=q[2], w=q[3])))
+            header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                              frame_id=frame_id)
+            pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                                               orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2],
+                                                                                             w=q[3]))
+            msg = T[name](header=header, pose=pose)
             w.add_message(channel, log_time=stamp, publish_time=stamp, data=bytes(ts.serialize_cdr(msg, name)),
                           sequence=k)
         w.finish()
