@@ -25,6 +25,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from replay.run.pipeline import config_hash
 from replay.scoring import scorer
 from replay.scoring.summary import lost_share
 from replay.trajectory.io import RECORDING_SUFFIXES
@@ -148,15 +149,9 @@ def aggregate(trial_rows: list[dict]) -> dict:
         vals = np.asarray([r.get(k, math.nan) for r in trial_rows], float)
         row[k], row[f"{k}_ci95"] = agg[k], agg[f"{k}_ci95"]
         row[f"{k}_median"] = float(np.nanmedian(vals)) if np.isfinite(vals).any() else math.nan
-    row.update(matched=int(sum(r.get("matched", 0) for r in trial_rows)), scored=agg["scored"], masked=agg["masked"],
-               us_per_step=math.nan, config_hash=_hash([r.get("config_hash", "") for r in trial_rows]))
+    row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=math.nan,
+               config_hash=config_hash({"trials": [r.get("config_hash", "") for r in trial_rows]}))
     return row
-
-
-def _hash(parts) -> str:
-    import hashlib
-
-    return hashlib.sha256("\n".join(map(str, parts)).encode()).hexdigest()[:12]
 
 
 def members(sets: dict) -> list[tuple]:
