@@ -78,3 +78,24 @@ def test_positions_only_as_csv_only(tmp_path):
     assert (tmp_path / "out.csv").read_text().splitlines()[:2] == ["t,x,y,z", "0.25,0.0,0.0,0.125"]
     r = CliRunner().invoke(main, ["convert", str(tmp_path / "fix.csv"), str(tmp_path / "out.tum")])
     assert r.exit_code == 2 and "positions only" in r.output and not (tmp_path / "out.tum").exists()
+
+
+def test_tf_source(tmp_path, src):
+    """RECORDING:tf:PARENT,CHILD converted: the file holds the transform replay score reads there."""
+    from replay.adapters.bags import BagOut
+
+    _, tr = src
+    out = BagOut(tmp_path / "bag")
+    T = out.T
+    tf = out.connection("/tf", "tf2_msgs/msg/TFMessage")
+    for k, stamp in enumerate(ns(tr.t[:50]).tolist()):
+        out.write(tf, stamp, T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
+            header=out.header(stamp, "odom"), child_frame_id="base_link",
+            transform=T["geometry_msgs/msg/Transform"](translation=out.vec(tr.p[k]), rotation=out.quat(tr.q[k])))]))
+    out.close()
+    spec = f"{tmp_path / 'bag'}:tf:odom,base_link"
+    r = run(spec, tmp_path / "tf.tum")
+    assert r.exit_code == 0 and r.output.startswith("50 poses of bag:tf:odom,base_link"), r.output
+    back, want = io.load(str(tmp_path / "tf.tum")), io.load(spec)
+    assert np.array_equal(back.t, want.t) and np.array_equal(back.p, want.p) and np.array_equal(back.p, tr.p[:50])
+    assert np.abs(back.q - want.q).max() <= 1e-15
