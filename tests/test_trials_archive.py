@@ -151,7 +151,11 @@ def test_archive_round_trip_to_full_precision(saved, tmp_path):
     pd.testing.assert_frame_equal(ape.drop(columns=["ref_x", "ref_y", "ref_z"]), res.errors("ape"), check_exact=True)
     assert np.array_equal(ape["ref_x"].to_numpy()[:101], np.arange(101.0))
     assert res.stats().query("metric == 'ape'")["rmse"].min() > 1e-3  # the numbers compared are not zeros
-    pd.testing.assert_frame_equal(pd.read_parquet(out / "rpe.parquet"), res.errors("rpe"), check_exact=True)
+    rpe = pd.read_parquet(out / "rpe.parquet")
+    pd.testing.assert_frame_equal(rpe.drop(columns=["i", "j"]), res.errors("rpe"), check_exact=True)
+    first = ape[ape["estimate"] == "est_run1"]
+    pairs = rpe[rpe["estimate"] == "est_run1"]
+    assert np.array_equal(first["t"].to_numpy()[pairs["i"]], pairs["t_i"]) and pairs["j"].gt(pairs["i"]).all()
     assert meta["settings"]["align"] == "sim3" and len(meta["config_hash"]) == 16
 
 

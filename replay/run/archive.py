@@ -15,7 +15,7 @@ results), read back by ``replay res`` without the inputs.
 * ``ape.parquet`` — per matched pose: ``estimate``, ``t`` (reference stamp), ``t_estimate``, one column per
   relation, ``err_x, err_y, err_z`` (aligned estimate minus reference) and ``ref_x, ref_y, ref_z``;
 * ``rpe.parquet`` — per pair (when the RPE was computed): ``estimate``, ``t_i``, ``t_j``, the relations,
-  ``err_x..z``;
+  ``err_x..z``, ``i``, ``j`` (the pair's rows among the estimate's rows of ``ape.parquet``);
 * ``lengths.parquet`` — per sub-trajectory (``--lengths``): ``estimate``, ``length``, ``length_m``, ``i``,
   ``j``, ``t_i``, ``t_j`` and the six relative errors;
 * ``leaderboard.csv`` — the same rows as ``-o``, every digit.
@@ -60,7 +60,9 @@ def frames(result) -> dict:
     ape = ape.assign(ref_x=ref[:, 0], ref_y=ref[:, 1], ref_z=ref[:, 2])
     out = {"ape": ape}
     if any(s.rpe_pairs is not None for s in result.scores.values()):
-        out["rpe"] = result.errors("rpe")
+        pairs = [s.rpe_pairs for s in result.scores.values() if s.rpe_pairs is not None]
+        out["rpe"] = result.errors("rpe").assign(i=np.concatenate([i for i, _ in pairs]),
+                                                  j=np.concatenate([j for _, j in pairs]))
     parts = []
     for name, s in result.scores.items():
         for label, entry in s.lengths.items():
