@@ -33,8 +33,13 @@ EXAMPLES: dict[str, list[str]] = {
              "replay list datasets sim/ungm"],
     "score": ["replay score gt.tum est.tum -a",
               "replay score gt.tum est.tum --rpe --delta 1 --delta-unit m --plot rpe.png",
+              "replay score gt.tum --trials 'orb=runs/orb_*.txt' -a --lengths 10%,20%,30% --save-results res/orb",
               "replay score ../shared/datasets/bags/evo/ROS_example.bag:groundtruth "
               "../shared/datasets/bags/evo/ROS_example.bag:ORB-SLAM -a"],
+    "res": ["replay res results/orb results/vins --format latex -o table.tex",
+            "replay res results/orb --table trials --plot boxes.png"],
+    "convert": ["replay convert ../shared/datasets/bags/evo/ROS_example.bag:groundtruth gt.tum",
+                "replay convert est.txt est.mcap --topic /slam/pose --frame-id map"],
     "campaign run": ["replay campaign run campaigns/example.toml --out runs/campaign-example",
                      "replay campaign run campaigns/example.toml --workers 2 -q",
                      "replay campaign run campaigns/example.toml --dask-local 2"],

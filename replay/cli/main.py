@@ -327,6 +327,11 @@ def _register_optional():
     from replay.cli.score import score_cmd
 
     main.add_command(score_cmd)
+    from replay.cli.res import res_cmd
+    from replay.cli.convert import convert_cmd
+
+    main.add_command(res_cmd)
+    main.add_command(convert_cmd)
     from replay.cli.tune import tune_cmd
 
     main.add_command(tune_cmd)

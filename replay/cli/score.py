@@ -52,7 +52,7 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 
 @click.command("score")
 @click.argument("reference")
-@click.argument("estimates", nargs=-1, required=True)
+@click.argument("estimates", nargs=-1)
 @click.option("--align", type=click.Choice(["none", "yaw", "se3", "sim3", "scale"]), default=None,
               help="Alignment of each estimate onto the reference: none (default, as evo), yaw (4-DoF), se3, "
                    "sim3, scale (scale only).")
@@ -126,17 +126,31 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="Write a trajectory + error plot (png, pdf, svg, eps; missing directories are created).")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
+@click.option("--trials", "trial_specs", multiple=True, metavar="[NAME=]GLOB",
+              help="Trials of one estimator (rpg's --mul_trials, evo_res): files matching GLOB (or REC*.bag:/topic), "
+                   "scored one by one and aggregated (mean, median, 95 % t-interval, lost k/N); repeatable, a NAME "
+                   "repeated adds trials.")
+@click.option("--save_as_tum", "--save-as-tum", "--save_as_kitti", "--save-as-kitti", "--save_as_bag",
+              "--save-as-bag", "--save_as_bag2", "save_as", is_flag=True, hidden=True,
+              help="evo_traj's conversions: answered with replay convert.")
+@click.option("--trials-plot", "trial_plot", type=click.Path(dir_okay=False), default=None,
+              help="With --trials: boxplots of each trial set's errors, the APE and RPE and per --lengths length "
+                   "(png, pdf, svg, eps).")
+@click.option("--save-results", "--save_results", "save_results", default=None, metavar="DIR",
+              help="Write a results archive into this directory (per-pose errors, alignment, settings; Parquet + "
+                   "JSON), read back by replay res.")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
               rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method,
               sync_method, fmt, t_start, t_end, downsample, motion_filter, project_to_plane, kitti_times, columns,
-              time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, out):
+              time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, out, trial_specs=(),
+              trial_plot=None, save_results=None, save_as=False):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
     Each argument is a trajectory file (TUM, KITTI, EuRoC, CSV) or RECORDING:TOPIC (a .bag, ROS 2 bag
     directory or .mcap and a topic of nav_msgs/Odometry, PoseStamped, PoseWithCovarianceStamped,
     TransformStamped, nav_msgs/Path (last message) or NavSatFix), or RECORDING:tf:PARENT->CHILD.
     """
-    from replay.run.score_result import estimate_name, leaderboard_row
+    from replay.run.score_result import ScoreResult, estimate_name, leaderboard_row
     from replay.run.score_result import settings as score_settings
     from replay.scoring.summary import columns as leaderboard_columns
     from replay.trajectory import io, score
@@ -147,6 +161,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     if p_flag:
         raise ReplayError("-p: replay never opens a window; write the figures with --plot FILE (png, pdf, svg; evo's "
                           "--save_plot)")
+    if save_as:
+        raise ReplayError("--save_as_tum/--save_as_kitti/--save_as_bag: replay score writes no trajectories; convert "
+                          "one with replay convert SOURCE OUT.tum (.kitti, .csv, .mcap; --format euroc)")
     method = _resolve_align(align, a_flag, s_flag)
     if lengths is not None:
         from replay.trajectory import lengths as by_length
@@ -156,51 +173,84 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     want_rpe = rpe or delta is not None or all_pairs
     if "point_distance_error_ratio" in relations and not want_rpe:
         raise ReplayError("-r point_distance_error_ratio is an RPE relation: add --rpe")
-    inputs = [io.split(s)[0] for s in (reference, *estimates)] + ([Path(kitti_times)] if kitti_times else [])
-    for path, what, suffixes in ((out, "--out", None), (plot_path, "--plot", PLOT_FORMATS)):
+    from replay.run import trials as trial_sets
+
+    sets = trial_sets.parse(trial_specs)
+    trial_sets.not_reference(sets, reference)
+    if not estimates and not sets:
+        raise ReplayError("replay score REFERENCE ESTIMATE...: no estimate (give estimates, or --trials GLOB)")
+    members = trial_sets.members(sets)
+    sources = [*estimates, *(m[3] for m in members)]
+    inputs = [io.split(s)[0] for s in (reference, *sources)] + ([Path(kitti_times)] if kitti_times else [])
+    if trial_plot and not sets:
+        raise ReplayError("--trials-plot: boxplots of trials: give --trials [NAME=]GLOB")
+    for path, what, suffixes in ((out, "--out", None), (plot_path, "--plot", PLOT_FORMATS),
+                                 (trial_plot, "--trials-plot", PLOT_FORMATS)):
         if path:
             refuse_overlap(path, inputs, what)
             outfile.check(path, what, suffixes)
-    columns, columns_of = io.split_columns(columns, [reference, *estimates])
+    if save_results:
+        from replay.run import archive
+
+        archive.check(save_results, inputs)
+    columns, columns_of = io.split_columns(columns, [reference, *sources])
     opts = dict(fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
     taken = set()
     names = [estimate_name(reference, set())] + [estimate_name(spec, taken) for spec in estimates]
-    ref, *ests = io.load_all([reference, *estimates], names=names, columns_of=columns_of, **opts)
-    scores, rows, summary = {}, [], []
+    names += [m[0] for m in members]
+    ref, *ests = io.load_all([reference, *sources], names=names, columns_of=columns_of, **opts)
+    scores, summary = {}, []
     settings = score_settings(align=method, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
                               t_offset=t_offset, relations=relations, delta=(delta or 1.0) if want_rpe else None,
                               delta_unit=delta_unit, delta_tol=delta_tol, all_pairs=all_pairs,
                               pairs_from_reference=pairs_from_reference, lengths=lengths,
                               lengths_method=lengths_method, sync_method=sync_method, t_start=t_start, t_end=t_end,
                               downsample=downsample, motion_filter=motion_filter, project_to_plane=project_to_plane)
-    for spec, name, est in zip(estimates, names[1:], ests):
-        s = score(ref, est, **settings)
+    for k, (spec, name, est) in enumerate(zip(sources, names[1:], ests)):
+        with trial_sets.naming(members[k - len(estimates)] if k >= len(estimates) else None):
+            s = score(ref, est, **settings)
         scores[name] = s
         click.echo(f"{name} vs {ref.name}: {len(s.reference)} of {len(est)} poses matched (reference: {len(ref)} "
                    f"poses; t_max_diff {t_max_diff:g} s{f', t_offset {t_offset:g} s' if t_offset else ''})"
                    + (f"; scale {s.transform[2]:.6f}" if method in ("sim3", "scale") else ""))
+        row = leaderboard_row(s, reference=reference, dataset=io.label(reference), estimate=spec, name=name,
+                              settings=settings, lost_threshold=lost_threshold, lost_steps=lost_steps)
+        summary.append(row)
+        if k >= len(estimates):  # a trial: its numbers are in the trials table below
+            trial_sets.mark(row, *members[k - len(estimates)][1:])
+            continue
         for rel in s.ape:
             click.echo(_block(_title("APE", rel, settings), s.stats("ape", rel)))
         for rel in s.rpe:
             click.echo(_block(_title("RPE", rel, settings), s.stats("rpe", rel)))
         if s.lengths:
             click.echo(by_length.table(s.lengths, lengths_method))
-        row = leaderboard_row(s, reference=reference, dataset=io.label(reference), estimate=spec, name=name,
-                              settings=settings, lost_threshold=lost_threshold, lost_steps=lost_steps)
-        summary.append(row)
-        rows += by_length.rows(row, s.lengths, lengths_method) if s.lengths else [row]
-    if len(summary) > 1:
+    result = ScoreResult(ref, scores, summary, settings)
+    rows = result.output_rows()
+    for name in sets:
+        click.echo(trial_sets.table(name, [r for r in rows if r["filter"] == f"recorded:{name}" and "trial" in r],
+                                    relations, want_rpe))
+    plain = [row for row in summary if "trial" not in row]
+    if len(plain) > 1:
         rel = relations[0]
         click.echo(f"{'estimate':<24} {'matched':>8} {'APE ' + rel + ' rmse':>22}"
                    + (f" {'RPE ' + rel + ' rmse':>22}" if want_rpe else ""))
-        for row in summary:
+        for row in plain:
             click.echo(f"{row['filter'][9:]:<24} {row['matched']:>8} {row.get(f'ape_{rel}_rmse', math.nan):>22.6f}"
                        + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if want_rpe else ""))
     if out:
         outfile.write(out, "--out", lambda tmp: write_csv(rows, tmp, leaderboard_columns(rows)))
         click.echo(f"leaderboard: {out}")
+    if save_results:
+        archive.save(result, save_results, reference=reference)
+        click.echo(f"results: {save_results} (replay res {save_results})")
     if plot_path:
         from replay.trajectory import plot
 
         plot.write(plot_path, ref, scores, relation=relations[0])
         click.echo(f"plot: {plot_path}")
+    if trial_plot:
+        from replay.run import boxplots
+
+        boxplots.write(trial_plot, result)
+        click.echo(f"trials plot: {trial_plot}")

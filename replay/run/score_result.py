@@ -164,12 +164,42 @@ class ScoreResult:
 
     def leaderboard(self):
         """The leaderboard rows as a DataFrame: the columns and values ``replay score -o`` writes
-        (every digit kept, as in the CSV)."""
+        (every digit kept, as in the CSV; with ``trials=``, each trial and then each set's aggregated row)."""
         import pandas as pd
 
         from replay.scoring.summary import columns
 
-        return pd.DataFrame(self.rows, columns=columns(self.rows))
+        rows = _grouped(self.rows)
+        return pd.DataFrame(rows, columns=columns(rows))
+
+    def output_rows(self) -> list:
+        """The rows ``replay score -o`` writes: each estimate (one row per length with ``lengths``), then each
+        trial set's trials and aggregated rows (:func:`replay.run.trials.rows`)."""
+        from replay.trajectory import lengths as by_length
+
+        return _grouped([r for row, s in zip(self.rows, self.scores.values())
+                         for r in (by_length.rows(row, s.lengths, self.settings["lengths_method"])
+                                   if s.lengths else [row])])
+
+    def save(self, path):
+        """Write the results archive of ``replay score --save-results`` into the directory ``path``
+        (:mod:`replay.run.archive`; read back by ``replay res``); refused onto or inside an input."""
+        from replay.run import archive
+
+        archive.check(path, [io.split(spec)[0] for spec in getattr(self, "sources", ())])
+        return archive.save(self, path, reference=getattr(self, "reference_spec", None))
+
+    def trials(self):
+        """The trial sets (``trials=``): each trial's row and the aggregated row (``trial`` empty: mean over
+        trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.run.trials`), one per length with ``lengths``."""
+        import pandas as pd
+
+        from replay.scoring.summary import columns
+
+        rows = [r for r in self.output_rows() if "trial" in r]
+        if not rows:
+            raise ReplayError("trials(): no trials were scored (give trials={'name': 'runs/est_*.txt'})")
+        return pd.DataFrame(rows, columns=columns(rows))
 
     def plot(self, *, relation: str | None = None):
         """The figure of ``replay score --plot`` (:func:`replay.trajectory.plot.figure`): the tracks
@@ -180,6 +210,19 @@ class ScoreResult:
         if relation is not None and relation not in {r for s in self.scores.values() for r in (*s.ape, *s.rpe)}:
             raise ReplayError(f"plot: relation {relation!r} was not computed (pose_relation: {', '.join(rels)})")
         return plot.figure(self.reference, self.scores, relation=relation)
+
+
+def _grouped(rows: list) -> list:
+    """``rows`` of plain estimates first, then each trial set's rows and aggregated rows."""
+    from replay.run import trials as trial_sets
+
+    plain, sets = [], {}
+    for row in rows:
+        if row.get("trial", "") == "":
+            plain.append(row)
+        else:
+            sets.setdefault(row["filter"], []).append(row)
+    return plain + [r for these in sets.values() for r in trial_sets.rows(these)]
 
 
 def _trajectory(item, name: str) -> Trajectory:
@@ -197,13 +240,13 @@ def _default_name(item, taken: set, k: int) -> str:
     return _unique(str(own) if own else f"estimate{k}" if k else "reference", taken)
 
 
-def score(reference, estimates, *, align: str = "none", n_to_align=None, align_origin: bool = False,
+def score(reference, estimates=None, *, align: str = "none", n_to_align=None, align_origin: bool = False,
           t_max_diff: float = 0.01, t_offset: float = 0.0, pose_relation="trans", rpe: bool = False, delta=None,
           delta_unit: str = "f", delta_tol: float = 0.1, all_pairs: bool = False,
           pairs_from_reference: bool = False, fmt=None, kitti_times=None, columns=None, time_unit=None,
           lost_threshold=None, lost_steps: int = 10, names=None, lengths=None, lengths_method: str = "rpg",
           sync_method: str = "nearest", t_start=None, t_end=None, downsample=None, motion_filter=None,
-          project_to_plane=None) -> ScoreResult:
+          project_to_plane=None, trials=None) -> ScoreResult:
     """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
 
     ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
@@ -215,13 +258,22 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
     ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name);
     ``lengths`` (``"10%,20%"`` or a list of those strings), ``lengths_method``: the relative errors over
     lengths (``ScoreResult.lengths()``); evo's trajectory options ``sync_method``, ``t_start``, ``t_end``,
-    ``downsample``, ``motion_filter`` ((metres, degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`).
+    ``downsample``, ``motion_filter`` ((metres, degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`);
+    ``trials``: trials of one estimator each, ``{name: glob or [sources]}`` (or one glob, or a list of
+    ``NAME=GLOB``; ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated
+    (``ScoreResult.trials()``, :mod:`replay.run.trials`).
     """
+    from replay.run import trials as trial_sets
+
+    sets = trial_sets.parse_api(trials)
+    trial_sets.not_reference(sets, reference, "trials")
     if lengths is not None:
         from replay.trajectory import lengths as by_length
 
         lengths = by_length.parse(lengths if isinstance(lengths, str) else ",".join(f"{v:g}" for v in lengths))
-    items = list(estimates) if isinstance(estimates, (list, tuple)) else [estimates]
+    items = list(estimates) if isinstance(estimates, (list, tuple)) else [] if estimates is None else [estimates]
+    if not items and not sets:
+        raise ReplayError("score: no estimate (give estimates, or trials=)")
     relations = list(dict.fromkeys([pose_relation] if isinstance(pose_relation, str) else pose_relation))
     want_rpe = rpe or delta is not None or all_pairs
     if "point_distance_error_ratio" in relations and not want_rpe:
@@ -236,6 +288,8 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
     taken = set()
     ref_name = _default_name(reference, set(), 0)
     names = names or [_default_name(item, taken, k + 1) for k, item in enumerate(items)]
+    members = trial_sets.members(sets)
+    items, names = items + [m[3] for m in members], names + [m[0] for m in members]
     sources = [reference, *items]
     specs = [os.fspath(x) if isinstance(x, (str, os.PathLike)) else None for x in sources]
     files = [k for k, spec in enumerate(specs) if spec is not None]
@@ -252,9 +306,15 @@ def score(reference, estimates, *, align: str = "none", n_to_align=None, align_o
     ref_spec = specs[0] or f"<{ref_name}>"
     dataset = io.label(specs[0]) if specs[0] else ref_name
     scores, rows = {}, []
-    for spec, name, est in zip(specs[1:], names, ests):
-        s = score_one(ref, est, **opts)
+    first_trial = len(names) - len(members)
+    for k, (spec, name, est) in enumerate(zip(specs[1:], names, ests)):
+        with trial_sets.naming(members[k - first_trial] if k >= first_trial else None):
+            s = score_one(ref, est, **opts)
         scores[name] = s
         rows.append(leaderboard_row(s, reference=ref_spec, dataset=dataset, estimate=spec or f"<{name}>", name=name,
                                     settings=opts, lost_threshold=lost_threshold, lost_steps=lost_steps))
-    return ScoreResult(ref, scores, rows, opts)
+    for row, (_, set_name, k, src) in zip(rows[len(rows) - len(members):], members):
+        trial_sets.mark(row, set_name, k, src if isinstance(src, (str, os.PathLike)) else f"<{set_name}/{k}>")
+    result = ScoreResult(ref, scores, rows, opts)
+    result.sources, result.reference_spec = [spec for spec in specs if spec], ref_spec
+    return result

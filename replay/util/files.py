@@ -68,14 +68,19 @@ def fmt(v) -> str:
     return str(v)
 
 
-def write_csv(rows: list[dict], path, columns: list[str]) -> None:
-    """``rows`` as a CSV file with ``columns`` (missing cells empty), written atomically."""
+def csv_text(rows: list[dict], columns: list[str]) -> str:
+    """``rows`` as CSV text with ``columns`` (missing cells empty, cells by :func:`fmt`)."""
     buf = StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for row in rows:
         w.writerow({k: fmt(v) for k, v in row.items()})
-    write_atomic(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def write_csv(rows: list[dict], path, columns: list[str]) -> None:
+    """``rows`` as a CSV file with ``columns`` (missing cells empty), written atomically."""
+    write_atomic(path, csv_text(rows, columns))
 
 
 def refuse_overlap(out, inputs, what: str = "output") -> Path:

@@ -1,0 +1,177 @@
+"""The results archive of ``replay score --save-results DIR`` (evo's ``--save_results``, rpg's cached
+results), read back by ``replay res`` without the inputs.
+
+``DIR`` holds one set, written into a staging directory beside it and moved into place in one step
+(:func:`replay.util.files.staged_dir`: a crash leaves the previous archive or the new one; an existing
+``DIR`` is replaced only when it is an archive of ours):
+
+* ``results.json`` — ``format``, ``version``, the replay version, the reference (source, name, poses,
+  first and last stamp), the settings (those of :func:`replay.run.score_result.settings`) and their
+  ``config_hash``; per estimate: ``name``, ``source``, ``trial_of``/``trial`` (``--trials``), ``matched``,
+  the alignment ``transform`` (``R`` 3x3, ``t``, ``scale``: x -> scale R x + t), the statistics of every
+  APE/RPE relation and, with ``--lengths``, per length; ``leaderboard``: the rows ``-o`` writes; ``files``:
+  the SHA-256 of every other file (checked when read). Floats are written in full (JSON's shortest
+  round-trip text; ``NaN`` for a missing number).
+* ``ape.parquet`` — per matched pose: ``estimate``, ``t`` (reference stamp), ``t_estimate``, one column per
+  relation, ``err_x, err_y, err_z`` (aligned estimate minus reference) and ``ref_x, ref_y, ref_z``;
+* ``rpe.parquet`` — per pair (when the RPE was computed): ``estimate``, ``t_i``, ``t_j``, the relations,
+  ``err_x..z``, ``i``, ``j`` (the pair's rows among the estimate's rows of ``ape.parquet``);
+* ``lengths.parquet`` — per sub-trajectory (``--lengths``): ``estimate``, ``length``, ``length_m``, ``i``,
+  ``j``, ``t_i``, ``t_j`` and the six relative errors;
+* ``leaderboard.csv`` — the same rows as ``-o``, every digit.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from replay.run.pipeline import config_hash, plain
+from replay.trajectory.lengths import ERRORS as LENGTH_ERRORS
+from replay.util.errors import ReplayError
+
+KIND = "replay score results"
+FORMAT = "replay-score-results"
+VERSION = 1
+META = "results.json"
+WHAT = "--save-results"
+
+
+def check(out, inputs) -> None:
+    """Every check of ``DIR`` that can be made before scoring (one line naming it)."""
+    from replay.util.files import check_output_dir
+
+    check_output_dir(out, inputs, kind=KIND, what=WHAT)
+
+
+def _trial_of(row: dict):
+    return (row["filter"][len("recorded:"):], int(row["trial"])) if row.get("trial", "") != "" else (None, None)
+
+
+def frames(result) -> dict:
+    """The per-pose, per-pair and per-sub-trajectory tables of a :class:`ScoreResult` (module docstring)."""
+    import pandas as pd
+
+    ape = result.errors("ape")
+    ref = np.concatenate([s.reference.p for s in result.scores.values()])
+    ape = ape.assign(ref_x=ref[:, 0], ref_y=ref[:, 1], ref_z=ref[:, 2])
+    out = {"ape": ape}
+    if any(s.rpe_pairs is not None for s in result.scores.values()):
+        pairs = [s.rpe_pairs for s in result.scores.values() if s.rpe_pairs is not None]
+        out["rpe"] = result.errors("rpe").assign(i=np.concatenate([i for i, _ in pairs]),
+                                                  j=np.concatenate([j for _, j in pairs]))
+    parts = []
+    for name, s in result.scores.items():
+        for label, entry in s.lengths.items():
+            i, j = entry["pairs"]
+            cols = {"estimate": name, "length": label, "length_m": entry["length"], "i": i, "j": j,
+                    "t_i": s.reference.t[i], "t_j": s.reference.t[j]}
+            cols.update({e: entry[e] for e in LENGTH_ERRORS})
+            parts.append(pd.DataFrame(cols))
+    if parts:
+        out["lengths"] = pd.concat(parts, ignore_index=True)
+    return out
+
+
+def meta(result, reference: str | None = None) -> dict:
+    """The content of ``results.json`` but ``files`` (module docstring)."""
+    from replay.trajectory.lengths import statistics as length_stats
+    from replay.trajectory.pose_error import statistics
+    from replay.util.version import __version__
+
+    ref = result.reference
+    settings = plain(result.settings)
+    estimates = []
+    for (name, s), row in zip(result.scores.items(), result.rows):
+        R, t, c = s.transform
+        trial_of, trial = _trial_of(row)
+        estimates.append({
+            "name": name, "source": json.loads(row["params"]).get("source", ""), "trial_of": trial_of, "trial": trial,
+            "matched": len(s.reference), "unmatched": s.unmatched,
+            "transform": {"R": np.asarray(R, float).tolist(), "t": np.asarray(t, float).tolist(), "scale": float(c)},
+            "stats": {kind: {rel: statistics(e) | {"n": len(e)} for rel, e in errs.items()}
+                      for kind, errs in (("ape", s.ape), ("rpe", s.rpe)) if errs},
+            "lengths": {label: {"length_m": entry["length"], "gaps": entry["gaps"],
+                                **{e: length_stats(entry[e]) for e in LENGTH_ERRORS}}
+                        for label, entry in s.lengths.items()}})
+    ref_source = reference or ref.source or ref.name
+    return {"format": FORMAT, "version": VERSION, "replay_version": __version__,
+            "reference": {"source": str(ref_source), "name": ref.name, "poses": len(ref), "t_first": float(ref.t[0]),
+                          "t_last": float(ref.t[-1])},
+            "settings": settings, "config_hash": config_hash({"reference": str(ref_source), **settings}),
+            "estimates": estimates, "leaderboard": plain(result.output_rows())}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save(result, out, *, reference: str | None = None) -> Path:
+    """Write the archive of ``result`` into the directory ``out`` as one set (module docstring)."""
+    from replay.scoring.summary import columns
+    from replay.util.files import staged_dir, write_csv
+
+    content = meta(result, reference)
+    tables = frames(result)
+    with staged_dir(out, kind=KIND, what=WHAT) as d:
+        for name, df in tables.items():
+            df.to_parquet(d / f"{name}.parquet", index=False)
+        rows = result.output_rows()
+        write_csv(rows, d / "leaderboard.csv", columns(rows))
+        content["files"] = {f.name: _sha256(f) for f in sorted(d.iterdir()) if f.is_file()}
+        (d / META).write_text(json.dumps(content, indent=1) + "\n")
+    return Path(out)
+
+
+class Archive:
+    """One archive read back (:func:`load`): ``path``, ``meta`` (results.json), :meth:`table` (a Parquet file)."""
+
+    def __init__(self, path: Path, meta: dict, shown: str):
+        self.path, self.meta, self.shown = path, meta, shown
+
+    def table(self, name: str):
+        import pandas as pd
+
+        f = self.path / f"{name}.parquet"
+        return pd.read_parquet(f) if name + ".parquet" in self.meta["files"] else None
+
+
+def load(path) -> Archive:
+    """The archive in ``path``, checked (format, version, every file's SHA-256); one line otherwise."""
+    shown, p = str(path), Path(path)
+    if not p.is_dir():
+        raise ReplayError(f"{shown}: {'no such directory' if not p.exists() else 'not a directory'} (replay res "
+                          "reads the directories replay score --save-results writes)")
+    f = p / META
+    if not f.is_file():
+        raise ReplayError(f"{shown}: not a results archive (no {META}; written by replay score --save-results DIR)")
+    try:
+        m = json.loads(f.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise ReplayError(f"{shown}/{META}: unreadable ({str(e)[:80]})") from None
+    if not isinstance(m, dict) or m.get("format") != FORMAT:
+        raise ReplayError(f"{shown}/{META}: not a replay score results file (format {str(m.get('format'))[:40]!r})"
+                          if isinstance(m, dict) else f"{shown}/{META}: not a replay score results file")
+    if m.get("version") != VERSION:
+        raise ReplayError(f"{shown}/{META}: archive version {m.get('version')!r}, this replay reads {VERSION}")
+    if not m.get("estimates"):
+        raise ReplayError(f"{shown}: an empty results archive (no estimate)")
+    for name, digest in (m.get("files") or {}).items():
+        q = p / name
+        if "/" in name or not q.is_file():
+            raise ReplayError(f"{shown}: {name} is missing (listed in {META})")
+        if _sha256(q) != digest:
+            raise ReplayError(f"{shown}/{name}: damaged (its SHA-256 differs from the one in {META})")
+    return Archive(p, m, shown)
+
+
+def finite(v):
+    """A JSON number read back: NaN stays NaN, None (a missing number) becomes NaN."""
+    return math.nan if v is None else v

@@ -1,0 +1,113 @@
+"""Trajectory conversion (``replay convert``, evo_traj's ``--save_as_tum``/``--save_as_kitti``): write a
+:class:`Trajectory` as TUM, KITTI (+ ``times.txt``), EuRoC CSV, a plain CSV with a header, or MCAP.
+
+| format | written | read back by |
+|---|---|---|
+| ``tum`` | ``t x y z qx qy qz qw``, ``#`` header line | :func:`replay.trajectory.files.read_tum` |
+| ``kitti`` | the 3x4 ``[R p]`` row by row; the stamps in ``times.txt`` beside it | :func:`.files.read_kitti` |
+| ``euroc`` | ``#timestamp [ns],p_RS_R_x [m],...,q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []``, stamps in integer ns | :func:`.files.read_euroc` |
+| ``csv`` | ``t,x,y,z,qx,qy,qz,qw`` (``t,x,y,z`` for positions only), seconds | :func:`.files.read` (by the header) |
+| ``mcap`` | ``geometry_msgs/msg/PoseStamped`` (ROS 2 CDR, the definition in the schema) on one topic, ``header.stamp`` and log time the pose's stamp in ns | ``FILE.mcap:/topic`` |
+
+Numbers are written in full (the shortest text that reads back as the same float), so a file read
+back gives the numbers written: positions and stamps exactly, orientations to rounding (the
+reader normalises quaternions; KITTI stores rotation matrices). EuRoC and MCAP stamps are integer
+nanoseconds (the stamp rounded to the nearest ns). A trajectory without orientations (NavSatFix) is
+written only as CSV: the other formats would need an orientation it does not have. The covariance is
+not written.
+"""  # noqa: E501 (Markdown table)
+from __future__ import annotations
+
+import numpy as np
+
+from replay.trajectory import quat
+from replay.trajectory.base import Trajectory
+from replay.util.errors import ReplayError
+
+FORMATS = ("tum", "kitti", "euroc", "csv", "mcap")
+SUFFIXES = {".tum": "tum", ".txt": "tum", ".kitti": "kitti", ".csv": "csv", ".mcap": "mcap"}
+EUROC_HEADER = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"
+
+
+def fmt_of(path, fmt: str | None) -> str:
+    """The output format: ``fmt``, else the extension's (.tum/.txt TUM, .kitti, .csv plain CSV, .mcap)."""
+    from pathlib import Path
+
+    if fmt is not None:
+        if fmt not in FORMATS:
+            raise ReplayError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
+        return fmt
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ReplayError(f"{path}: the extension {suffix or '(none)'} does not say the format: give --format "
+                          f"{'|'.join(FORMATS)}")
+    return SUFFIXES[suffix]
+
+
+def check(tr: Trajectory, fmt: str) -> None:
+    if tr.q is None and fmt != "csv":
+        raise ReplayError(f"{tr.source or tr.name}: positions only (no orientation): {fmt} needs one; write "
+                          "--format csv (t, x, y, z)")
+
+
+def _lines(m: np.ndarray, sep: str = " ") -> str:
+    return "".join(sep.join(map(repr, row)) + "\n" for row in m.tolist())
+
+
+def ns(t) -> np.ndarray:
+    """Stamps in integer nanoseconds (nearest)."""
+    return np.round(np.asarray(t, float) * 1e9).astype(np.int64)
+
+
+def text(tr: Trajectory, fmt: str) -> str:
+    """The file content of ``tr`` as ``tum``, ``kitti`` (poses only: :func:`kitti_times`), ``euroc`` or ``csv``."""
+    check(tr, fmt)
+    if fmt == "tum":
+        return "# t x y z qx qy qz qw\n" + _lines(np.column_stack([tr.t, tr.p, tr.q]))
+    if fmt == "kitti":
+        R = quat.to_matrix(tr.q)
+        return _lines(np.concatenate([R, tr.p[:, :, None]], axis=2).reshape(-1, 12))
+    if fmt == "euroc":
+        body = np.column_stack([tr.p, tr.q[:, [3, 0, 1, 2]]])
+        return EUROC_HEADER + "\n" + "".join(f"{k}," + ",".join(map(repr, row)) + "\n"
+                                             for k, row in zip(ns(tr.t).tolist(), body.tolist()))
+    if fmt == "csv":
+        cols = [tr.t, tr.p] + ([tr.q] if tr.q is not None else [])
+        head = "t,x,y,z" + (",qx,qy,qz,qw" if tr.q is not None else "")
+        return head + "\n" + _lines(np.column_stack(cols), ",")
+    raise ReplayError(f"format {fmt!r}: not a text format")
+
+
+def kitti_times(tr: Trajectory) -> str:
+    """The ``times.txt`` of KITTI poses: one stamp (s) per line."""
+    return _lines(tr.t[:, None])
+
+
+def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "map") -> int:
+    """``tr`` as ``geometry_msgs/msg/PoseStamped`` messages on ``topic`` of a new MCAP file; returns the count."""
+    from mcap.writer import CompressionType, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    check(tr, "mcap")
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    name = "geometry_msgs/msg/PoseStamped"
+    stamps = ns(tr.t)
+    with open(path, "wb") as fh:
+        w = Writer(fh, compression=CompressionType.ZSTD)
+        w.start(profile="ros2", library="replay")
+        schema = w.register_schema(name=name, encoding="ros2msg",
+                                   data=ts.generate_msgdef(name, ros_version=2)[0].encode())
+        channel = w.register_channel(topic=topic, message_encoding="cdr", schema_id=schema)
+        for k, (stamp, p, q) in enumerate(zip(stamps.tolist(), tr.p.tolist(), tr.q.tolist())):
+            sec, nsec = divmod(stamp, 1_000_000_000)
+            header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                              frame_id=frame_id)
+            pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                                               orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2],
+                                                                                             w=q[3]))
+            msg = T[name](header=header, pose=pose)
+            w.add_message(channel, log_time=stamp, publish_time=stamp, data=bytes(ts.serialize_cdr(msg, name)),
+                          sequence=k)
+        w.finish()
+    return len(tr)
