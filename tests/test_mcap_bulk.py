@@ -12,7 +12,7 @@ from mcap.stream_reader import StreamReader
 from test_export_mcap import validate
 
 from replay.util.errors import ReplayError
-from replay.outputs.export_mcap import file_descriptor_set, json_rows
+from replay.outputs.mcap_out import file_descriptor_set, json_rows
 from replay.outputs.mcap_bulk import BulkWriter, gather
 from replay.outputs.pb_columns import encode, varint
 

@@ -53,3 +53,11 @@ def run_option(name: str, *short: str, default=..., extra: str = ""):
     return click.option(f"--{name.replace('_', '-')}", *short, name, default=default, type=Declared(p),
                         show_default=default is not None, metavar=p.type.__name__.upper(),
                         help=help_text(p, extra))
+
+
+def quiet_notes(quiet: bool) -> None:
+    """``-q``: the library's notes (logger ``replay``) down to warnings."""
+    if quiet:
+        import logging
+
+        logging.getLogger("replay").setLevel(logging.WARNING)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.run.evaluation import Evaluation, manifest
+from replay.run.evaluation import Evaluation
+from replay.run.manifest import manifest
 from replay.scoring.summary import (MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell,
                                     scored_share)
 from replay.util import covcols

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from replay.scoring import summary
-from replay.run.evaluation import Evaluation, command_line, evaluate
+from replay.run.evaluation import Evaluation, evaluate
+from replay.run.manifest import command_line
 from replay.scoring.metrics import paired
 
 from .verdict import cell, result_rows

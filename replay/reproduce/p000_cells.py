@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from replay.scoring import scorer
-from replay.run.evaluation import command_line, evaluate
+from replay.run.evaluation import evaluate
+from replay.run.manifest import command_line
 from replay.models.depth import R_FIXED, paper_Q
 from replay.run.pipeline import plain
 from replay.sim.lake_depth import base_for_rms, make_frame

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from replay.scoring import summary
-from replay.run.evaluation import command_line
+from replay.run.manifest import command_line
 from replay.reproduce.verdict import cell as text_cell
 from replay.reproduce.verdict import mean_ci
 from replay.scoring.scorer import ci95

@@ -15,10 +15,6 @@ on the task's reference; their notes (what was associated) are ``Evaluation.note
 """
 from __future__ import annotations
 
-import json
-import platform
-import shlex
-import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,12 +26,13 @@ from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
-from replay.run.pipeline import Config, build_problem, config_hash, default_task, load_frame, plain, run_block
-from replay.trajectory.recorded import RECORDED, RECORDED_PARAMS, is_recorded, recorded_params
+from replay.run.pipeline import Config, build_problem, config_hash, default_task, plain, run_block
+from replay.trajectory.recorded import RECORDED, is_recorded, recorded_params
 from replay.tasks import make_task
 from replay.run.eval_options import DEFAULTS, validate_eval_options
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
+from replay.run.checks import check_filters, check_memory, check_recorded, recorded_rows
 
 
 DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
@@ -150,7 +147,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                                   "baseline": baseline, "batch": batch})
     runs, seed, first, divergence_threshold, batch = (opts[k] for k in ("runs", "seed", "first",
                                                                          "divergence_threshold", "batch"))
-    filters, filter_params = _check_filters(filters, filter_params, recorded)
+    filters, filter_params = check_filters(filters, filter_params, recorded)
     offline = [n for n in filters if not is_recorded(n)]
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     if adapter is not None:
@@ -162,7 +159,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
                    dataset_params)
     task_name = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter,
                                      dataset_params=dataset_params, seed=seed)
-    names, estimates = _recorded(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir)
+    names, estimates = recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir)
     filters = offline + names
     for name in filter_params:
         if name not in filters:
@@ -181,7 +178,7 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
                                                           estimates[name[len(RECORDED):]].params)), *tail)
                 for name in names]
-    built = _check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
+    built = check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
     if any(noise_settings(f) for f in instances):  # their sizes, known once the task is built: before any run
         built = built or {0: build_problem(configs[0], 0, data_dir)}
         for f in instances:
@@ -242,37 +239,6 @@ def observes_position(problem) -> bool:
     return set(int(i) for i in problem.position_index) <= seen
 
 
-def _check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
-    """``filters`` (names), ``filter_params`` ({name: {parameter: value}}) and ``recorded`` checked: one line."""
-    if isinstance(filters, str) or not isinstance(filters, (list, tuple)) or not all(
-            isinstance(f, str) and f.strip() for f in filters):
-        raise ReplayError(f"filters must be a list of filter names (got {filters!r:.80})")
-    if filter_params is not None and not (isinstance(filter_params, dict) and all(
-            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
-        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
-                          f"(got {filter_params!r:.80})")
-    if recorded is not None and (isinstance(recorded, str) or not isinstance(recorded, (list, tuple))
-                                 or not all(isinstance(r, str) for r in recorded)):
-        raise ReplayError(f"recorded must be a list of recorded estimate names or null (got {recorded!r:.80})")
-    return list(filters), filter_params or {}
-
-
-def _check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None:
-    """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.run.resources`),
-    sized on run 0's problem of the first configuration, which is returned ({0: problem}: not built twice)."""
-    from replay.run.pipeline import build_problem
-    from replay.run.resources import available_memory, check_kept, check_particles
-
-    offline = [c for c in configs if not is_recorded(c.filter)]
-    if not offline or (avail := available_memory()) is None:
-        return
-    p = build_problem(offline[0], 0, data_dir)
-    for c in offline:
-        check_particles(c.filter, c.filter_params, min(runs, batch), p.model.nx, avail)
-    check_kept(len(offline), runs, len(p.z), p.model.nx, avail)
-    return {0: p} if offline[0] is configs[0] else None
-
-
 def _filled(rec: dict) -> dict:
     """A run's record; a failed run (the filter failed: :mod:`replay.run.failures`) with NaN estimates
     and errors on the problem's steps, so every table keeps one entry per run."""
@@ -283,105 +249,5 @@ def _filled(rec: dict) -> dict:
     est = Estimates(np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None,
                     {"error": rec["error"]})
     return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
-
-
-def failures(ev: Evaluation) -> dict:
-    """``{filter: {"runs": [failed runs], "error": the first error}}`` of the filters that failed."""
-    out = {}
-    for res in ev.results:
-        bad = [r for r in res.records if r["status"] == "failed"]
-        if bad:
-            out[res.name] = {"runs": [r["run"] for r in bad], "error": bad[0]["error"]}
-    return out
-
-
-def check_recorded(dataset, names, dataset_params) -> None:
-    """Refuse, before any recording is read, a ``recorded:<name>`` of ``names`` that the mapping given
-    in ``dataset_params`` does not declare in its ``[estimates]`` (without a mapping, the proposed one is
-    known only from the recording: :func:`_recorded` checks after reading it)."""
-    wanted = [n[len(RECORDED):] for n in names if is_recorded(n)]
-    mapping = (dataset_params or {}).get("mapping")
-    if not wanted or mapping is None:
-        return
-    from replay.adapters.bags import resolve_mapping
-
-    declared = [e.name for e in resolve_mapping(mapping).estimates]
-    unknown = [n for n in wanted if n not in declared]
-    if unknown:
-        raise ReplayError(f"{dataset}: no recorded estimate {unknown[0]!r} (the mapping's [estimates] "
-                          f"declare: {', '.join(declared) or 'none'})")
-
-
-def _recorded(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir):
-    """(``recorded:<name>`` rows to compute, {name: RecordedEstimate}) from the frame's estimates."""
-    named = [n for n in filters if is_recorded(n)] + [n if is_recorded(n) else RECORDED + n for n in recorded or ()]
-    if not named and (recorded is not None or ref.is_sim):
-        return [], {}
-    dataset = ref.id
-    cfg = {"dataset": dataset, "dataset_params": dataset_params, "first": first, "seed": seed, "adapter": adapter}
-    estimates = getattr(load_frame(cfg, 0, data_dir, ds=ref.entry), "estimates", {})
-    if recorded is None:
-        named += [RECORDED + k for k in estimates if RECORDED + k not in named]
-    for n in named:
-        if n[len(RECORDED):] not in estimates:
-            raise ReplayError(f"{dataset}: no recorded estimate {n[len(RECORDED):]!r} (the mapping's [estimates] "
-                              f"declare: {', '.join(estimates) or 'none'})")
-    return list(dict.fromkeys(named)), estimates
-
-
-def versions() -> dict:
-    import scipy
-
-    return {"replay": __version__, "python": platform.python_version(),
-            "numpy": np.__version__, "scipy": scipy.__version__, "platform": platform.platform()}
-
-
-def command_line(config: dict) -> str:
-    """The ``replay eval`` command that repeats a configuration."""
-    parts = ["replay", "eval", config["dataset"], "--task", config["task"],
-             "--filters", ",".join(config["filters"]), "--runs", str(config["runs"]),
-             "--seed", str(config["seed"])]
-    if config.get("first"):
-        parts += ["--first", str(config["first"])]
-    if config.get("adapter"):
-        parts += ["--adapter", config["adapter"]]
-    if config.get("baseline"):
-        parts += ["--baseline", config["baseline"]]
-    if (config.get("dataset_params") or {}).get("mapping"):
-        parts += ["--mapping", str(config["dataset_params"]["mapping"])]
-    try:  # name only the dataset parameters that differ from their declared defaults
-        defaults = plain(registry.check_params(config["dataset"], {}, adapter=config.get("adapter")))
-    except Exception:  # noqa: BLE001 — a dataset no longer registered: name them all
-        defaults = {}
-    for key, value in (config.get("dataset_params") or {}).items():
-        if key != "mapping" and (key not in defaults or defaults[key] != value):
-            text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
-            parts += ["--dataset-param", shlex.quote(f"{key}={text}")]
-    try:  # the task parameters that differ from their declared defaults
-        tdefaults = plain(make_task(config["task"]).params())
-    except Exception:  # noqa: BLE001 — a task no longer registered: name them all
-        tdefaults = {}
-    for key, value in (config.get("task_params") or {}).items():
-        if key not in tdefaults or tdefaults[key] != value:
-            text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
-            parts += ["--task-param", shlex.quote(f"{key}={text}")]
-    for name, params in (config.get("filter_params") or {}).items():  # those that differ from the defaults
-        try:
-            defaults = ({p.name: p.default for p in RECORDED_PARAMS} if is_recorded(name)
-                        else plain(make_filter(name).params()))
-        except Exception:  # noqa: BLE001 — a filter no longer registered: name them all
-            defaults = {}
-        for key, value in params.items():
-            if key not in defaults or defaults[key] != value:
-                text = value if isinstance(value, str) else json.dumps(value, separators=(",", ":"))
-                parts += ["-p", shlex.quote(f"{name}.{key}={text}")]
-    return " ".join(parts)
-
-
-def manifest(ev: Evaluation) -> dict:
-    return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
-            "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
-            "results": {r.name: dict(r.summary) for r in ev.results},
-            **({"failures": f} if (f := failures(ev)) else {})}
 
 
