@@ -204,7 +204,8 @@ def test_save_replaces_an_archive_whole(saved, tmp_path):
 def test_res_aggregates_recorded_estimates_across_eval_outputs(tmp_path):
     """Three ``replay eval`` outputs of three recordings, each with a recorded:orb row: one trial each."""
     from replay.scoring.summary import columns
-    from replay.util.files import MARKER, write_csv
+    from replay.util.files import write_csv
+    from replay.util.staging import MARKER
 
     dirs = []
     for k, (rmse, ate) in enumerate(((1.0, 0.5), (2.0, 0.25), (4.5, 0.75))):

@@ -70,7 +70,7 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
 
 def _is_output(d: Path) -> bool:
     """A ``replay eval`` output or a campaign directory (its leaderboard is read by ``replay leaderboard``)."""
-    from replay.util.files import read_marker
+    from replay.util.staging import read_marker
 
     mark = read_marker(d) if d.is_dir() else None
     return (mark is not None and mark.get("kind") == "replay eval") or (d / "units").is_dir()

@@ -42,7 +42,7 @@ WHAT = "--save-results"
 
 def check(out, inputs) -> None:
     """Every check of ``DIR`` that can be made before scoring (one line naming it)."""
-    from replay.util.files import check_output_dir
+    from replay.util.staging import check_output_dir
 
     check_output_dir(out, inputs, kind=KIND, what=WHAT)
 
@@ -116,7 +116,8 @@ def _sha256(path: Path) -> str:
 def save(result, out, *, reference: str | None = None) -> Path:
     """Write the archive of ``result`` into the directory ``out`` as one set (module docstring)."""
     from replay.scoring.summary import columns
-    from replay.util.files import staged_dir, write_csv
+    from replay.util.files import write_csv
+    from replay.util.staging import staged_dir
 
     content = meta(result, reference)
     tables = frames(result)
