@@ -20,7 +20,6 @@ that change the weighting all step in Python.
 """
 from __future__ import annotations
 
-import math
 from time import perf_counter
 
 import numba as nb
@@ -30,7 +29,7 @@ from numba import types
 from replay.model import Model, noise_factor
 from replay.util import kalman_loops
 from replay.util.angles import angle_mask
-from replay.util.kernels import gauss_loglik
+from replay.util.kernels import LOG_2PI, gauss_loglik
 
 from .loops import bound, derived_from_kernels, grain, param_stacks, row_kernels
 from .particles import ess_rows, moments, perturb, roughen, weights
@@ -40,7 +39,6 @@ from .threads import split
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
 # 0.2-0.3 µs per particle-step against the steps: their Python and numpy calls per run and step)
 COMPILE_AT = 10_000_000
-_LOG_2PI = math.log(2.0 * math.pi)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -122,7 +120,7 @@ def run(engine, Z, finite):
     X, P = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx))
     Z = np.ascontiguousarray(Z, dtype=float)
     qsd = np.ascontiguousarray(qsd)
-    fixed = (rdiag, rL, rinv, logdet + nz * _LOG_2PI, xmask, zmask, flt.ess_threshold * N,
+    fixed = (rdiag, rL, rinv, logdet + nz * LOG_2PI, xmask, zmask, flt.ess_threshold * N,
              float(flt.roughening), float(engine.logw0))
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
