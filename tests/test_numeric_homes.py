@@ -226,8 +226,8 @@ def test_cubature_step_known_value(stckf):
     post = x + (2.5 * g / S) * (z - x)
     assert lam[0, 0] == pytest.approx(g, rel=1e-14) and rep[0, 0] == 0
     np.testing.assert_allclose(X[0, 0], post, rtol=1e-14)
-    np.testing.assert_allclose(P[0, 0], (2.5 * g / S) * np.eye(2), rtol=1e-14)
-    np.testing.assert_allclose(L[0, 0], math.sqrt(2.5 * g / S) * np.eye(2), rtol=1e-14)
+    np.testing.assert_allclose(P[0, 0], (2.5 * g / S) * np.eye(2), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(L[0, 0], math.sqrt(2.5 * g / S) * np.eye(2), rtol=1e-14, atol=1e-15)
     if stckf:
         np.testing.assert_allclose(V[0, 0], np.outer(z - x, z - x), rtol=1e-14)
     # weight: log N(z; x+, R) + log N(x+; x, Q) (without 2 pi: it cancels) - log q(x+) (E = 0)
@@ -262,3 +262,41 @@ def test_plain_python_runs_the_stckf_and_the_stcpf():
         for key in ("pos_rmse", "x_rmse", "final_err"):
             assert math.isfinite(compiled[name][key])
             assert plain[name][key] == pytest.approx(compiled[name][key], rel=1e-9, abs=0), (name, key)
+
+
+@pytest.mark.slow  # binds and compiles paper 002's kernels for the sonar model (cached afterwards)
+@pytest.mark.parametrize("stckf,transition", [(True, False), (False, False), (True, True)])
+def test_cubature_step_python_text_equals_compiled(stckf, transition):
+    """The cubature step run as its Python text (every kernel un-jitted: what NUMBA_DISABLE_JIT=1
+    runs) gives the compiled numbers, on the sonar model's particles."""
+    from pure import pure
+
+    from replay.filters.p002.binding import bind
+    from replay.sim.auv_sonar import make_frame
+    from replay.tasks import make_task
+
+    pb = make_task("sonar").build(make_frame(np.random.default_rng(1), steps=5), np.random.default_rng(2))
+    m, g = pb.model, np.random.default_rng(8)
+    M, N, n, nz = 2, 4, pb.model.nx, pb.model.nz
+    X = pb.x0 + g.standard_normal((M, N, n)) @ np.linalg.cholesky(pb.P0).T
+    P = np.broadcast_to(pb.P0, (M, N, n, n)).copy()
+    Q, R = m.process_cov(1), m.measurement_cov(1)
+    pf_, ph_ = (np.asarray(p, float) for p in m.kernel_params(1))
+    pr = compiled_util.Proposal(stckf=stckf, fading=compiled_util.Fading(0.95, 1.2, True), scale_prior=True,
+                                transition=transition, have_L=False, have_V=False,
+                                logdet_Q=float(np.linalg.slogdet(Q)[1]), logdet_R=float(np.linalg.slogdet(R)[1]),
+                                nzf=nz)
+    xang, zang = np.zeros(n, bool), np.zeros(nz, bool)
+    xang[list(m.x_angles)], zang[list(m.z_angles)] = True, True
+    Z = np.ascontiguousarray(np.broadcast_to(pb.z[1], (M, nz)))
+    E = g.standard_normal((M, N, n))
+    k = bind(m.kernels())
+    outs = []
+    for step in (k.cubature_step, pure(k.cubature_step)):
+        a = [X.copy(), P.copy(), np.empty((M, N, n, n)), np.empty((M, N, nz, nz)), np.zeros((M, N))]
+        lam, rep = np.empty((M, N)), np.zeros((M, N), np.int64)
+        step(pf_, ph_, *a, Z, None, E, Q, np.linalg.inv(Q), R, np.linalg.inv(R), xang, zang, pr, lam, rep, 0, M * N)
+        outs.append(a[:3] + [a[4], lam, rep] + ([a[3]] if stckf else []))
+    for c, p in zip(*outs):
+        assert np.isfinite(c).all()
+        np.testing.assert_allclose(p, c, rtol=1e-10, atol=0)

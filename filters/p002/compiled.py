@@ -39,8 +39,8 @@ import numba as nb
 import numpy as np
 
 from replay.filters.p002.compiled_util import (
-    correct, cubature_points, draw, entropy_weights, factor, fading_factor, gram, leaders, moments, normalise,
-    quad, weighted_mean, workspace, wrap)
+    Fading, Proposal, correct, cubature_points, draw, entropy_weights, factor, fading_factor, gram, leaders, moments,
+    normalise, quad, weighted_mean, workspace, wrap)
 from replay.util.kernels import LOG_2PI, gauss_logpdf
 
 # MODEL KERNELS: replay.filters.p002.binding puts here the import of one model's f, h, F, H
@@ -204,11 +204,16 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
 def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs, chunks):
     """:func:`cubature_step` over all particles, in ``chunks`` ranges run by numba's threads
     (OpenMP threads spin between steps, so waking them costs microseconds, not the ~70 us of
-    a Python thread). Each particle is computed by one thread: the numbers do not depend on it."""
+    a Python thread). Each particle is computed by one thread: the numbers do not depend on it.
+    The record ``pr`` enters the threads as its fields (numba passes no tuple record into them)."""
     total = X.shape[0] * X.shape[1]
     size = (total + chunks - 1) // chunks
+    rho, beta, propagated = pr.fading.rho, pr.fading.beta, pr.fading.propagated
+    stckf, scale, transition, have_L, have_V = pr.stckf, pr.scale_prior, pr.transition, pr.have_L, pr.have_V
+    logdet_Q, logdet_R, nzf = pr.logdet_Q, pr.logdet_R, pr.nzf
     for ch in nb.prange(chunks):
-        cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs,
+        rec = Proposal(stckf, Fading(rho, beta, propagated), scale, transition, have_L, have_V, logdet_Q, logdet_R, nzf)
+        cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, rec, lam, repairs,
                       ch * size, min(total, (ch + 1) * size))
 
 

@@ -18,7 +18,11 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
   leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
 * :func:`normalise`, :func:`weighted_mean` — the particle bookkeeping kernels of
   :mod:`replay.filters.particles` (log-domain normalisation, circular weighted mean),
-  re-exported; :func:`estimate` composes them with the covariance over a stack of runs.
+  re-exported; :func:`estimate` composes them with the covariance over a stack of runs;
+* :func:`fading_factor` (settings :class:`Fading`) — the STCKF's fading factor, the one kernel
+  of :mod:`replay.filters.p002.stckf` and of the particles' STCKF proposal;
+* :class:`Proposal`, :func:`workspace`, :func:`correct`, :func:`draw` — the settings, work arrays,
+  Kalman correction and importance draw of :func:`replay.filters.p002.compiled.cubature_step`.
 """
 from __future__ import annotations
 

@@ -13,7 +13,9 @@ innovation and cross covariance sums by a fading factor lambda >= 1:
     e_{k+1} = z_{k+1} - h(x^_{k+1|k})
 
 with forgetting factor rho = 0.95 (0 < rho <= 1) and weakening factor beta = 1.2
-(beta >= 1); H and Phi are the Jacobians of h (at x^_{k+1|k}) and f (at x^_k).
+(beta >= 1); H and Phi are the Jacobians of h (at x^_{k+1|k}) and f (at x^_k). lambda is
+computed by :func:`replay.filters.p002.compiled_util.fading_factor`, the kernel of the
+STCPF's particles too (one text: compiled, or run as Python with ``NUMBA_DISABLE_JIT=1``).
 
 Choices where the paper is ambiguous (each configurable):
 
