@@ -17,8 +17,8 @@ the other runs in the stack: M runs at once equal M runs of one, bit for bit.
                 (Gordon, Salmond & Smith 1993, §4; d = nx)
 
 The arithmetic is written once, as numba kernels (``*_rows``, :func:`weights`,
-:func:`moments`; the weighted mean is :func:`replay.util.kernels.point_mean`): plain loops,
-sums taken in particle order. Their un-jitted
+:func:`moments`, :func:`perturb`, :func:`roughen`; the weighted mean is
+:func:`replay.util.kernels.point_mean`): plain loops, sums taken in particle order. Their un-jitted
 ``py_func`` is the same code run by Python: the readable reference, equal to
 the compiled kernels bit for bit (``tests/test_particles.py``). The Python
 functions below (:func:`normalise`, :func:`estimate`, :func:`ess`,
@@ -94,12 +94,39 @@ def moments_rows(X, w, xang, x, P):
 
 @nb.njit(cache=True)
 def ess_rows(w, out):
-    """Every run m: ESS = 1 / sum_i w[m, i]^2 into out[m]."""
+    """Every run m: ESS = 1 / sum_i w[m, i]^2 into out[m] (one run: a (1, N) view)."""
     for m in range(w.shape[0]):
         s = 0.0
         for i in range(w.shape[1]):
             s += w[m, i] * w[m, i]
         out[m] = 1.0 / s
+
+
+@nb.njit(cache=True)
+def perturb(X, sd, g):
+    """One run: X[i, q] += e sd[q] in place, e ~ N(0, 1) drawn from the generator ``g`` particle by
+    particle, component by component (the order of ``g.standard_normal(X.shape)``): the Gaussian
+    noise of the propagation (sd the standard deviations of a diagonal Q) and of :func:`roughen`."""
+    for i in range(X.shape[0]):
+        for q in range(X.shape[1]):
+            X[i, q] += g.standard_normal() * sd[q]
+
+
+@nb.njit(cache=True)
+def roughen(X, K, g):
+    """One run's resampled particles X (N, n), roughened in place (module docstring): the jitter of
+    sd K E_q N^(-1/n), E_q = max_i X[i, q] - min_i X[i, q], drawn from ``g`` (:func:`perturb`).
+    Returns X."""
+    N, n = X.shape
+    shrink = N ** (-1.0 / n)
+    sd = np.empty(n)
+    for q in range(n):
+        lo, hi = X[0, q], X[0, q]
+        for i in range(1, N):
+            lo, hi = min(lo, X[i, q]), max(hi, X[i, q])
+        sd[q] = K * (hi - lo) * shrink
+    perturb(X, sd, g)
+    return X
 
 
 # --- Python API: allocate, call the kernels ---------------------------------------------
@@ -138,13 +165,6 @@ def resample(w: np.ndarray, rngs, scheme: str = "systematic", threshold: float =
     """
     draw, limit = SCHEMES[scheme], threshold * w.shape[-1]
     return {j: draw(w[j], rngs[j]) for j, e in enumerate(ess(w).tolist()) if e < limit}
-
-
-def roughen(X_j: np.ndarray, K: float, rng: np.random.Generator) -> np.ndarray:
-    """One run's resampled particles (N, nx) with roughening jitter of sd K E_j N^(-1/nx)."""
-    N, nx = X_j.shape
-    sd = K * np.ptp(X_j, axis=0) * N ** (-1.0 / nx)
-    return X_j + rng.standard_normal(X_j.shape) * sd
 
 
 def gaussian(X0: np.ndarray, P0: np.ndarray, N: int, rngs) -> np.ndarray:

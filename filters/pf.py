@@ -74,12 +74,10 @@ def propagate(model, X, k, rngs):
     Y = on_points(model.f, X, k)
     diagonal, factor, _, _ = noise_factor(model.process_cov(k))
     for j, g in enumerate(rngs):
-        e = g.standard_normal(Y.shape[1:])
         if diagonal:
-            e *= factor
+            particles.perturb(Y[j], factor, g)
         else:
-            e = e @ factor.T
-        Y[j] += e
+            Y[j] += g.standard_normal(Y.shape[1:]) @ factor.T
     return Y
 
 
@@ -161,7 +159,7 @@ class PFEngine:
         for j, a in particles.resample(self.w, self.active, flt.resampling, flt.ess_threshold).items():
             Xj = self.X[j][a]
             if flt.roughening:
-                Xj = particles.roughen(Xj, flt.roughening, self.active[j])
+                particles.roughen(Xj, float(flt.roughening), self.active[j])
             new[j] = Xj
             self.w[j] = 1.0 / N
             self.logw[j] = self.logw0

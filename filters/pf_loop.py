@@ -2,12 +2,12 @@
 
 For one run, every step k (module docstring of :mod:`replay.filters.pf`)::
 
-    propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (Q diagonal)
+    propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (particles.perturb)
     weight      l^i <- l^i + log N(z_k; h(x^i), R)          (replay.util.kernels.gauss_loglik)
     normalise   w, l <- particles.weights(l)                   (log domain)
     estimate    x_k, P_k <- particles.moments(x, w)          (circular means for angles)
-    resample    when ESS = 1 / sum w^2 < threshold * N: systematic (resampling.invert_sorted),
-                then roughening (x^i_j += K E_j N^(-1/d) e^i_j) when K > 0
+    resample    when ESS = 1 / sum w^2 < threshold * N (particles.ess_rows): systematic
+                (resampling.invert_sorted), then roughening (particles.roughen) when K > 0
 
 The same kernels as the step-by-step engine, and the same draws from the same
 ``numpy.random.Generator`` in the same order (numba draws from a NumPy
@@ -20,7 +20,6 @@ that change the weighting all step in Python.
 """
 from __future__ import annotations
 
-import math
 from time import perf_counter
 
 import numba as nb
@@ -29,38 +28,35 @@ from numba import types
 
 from replay.model import Model, noise_factor
 from replay.util.angles import angle_mask
-from replay.util.kernels import gauss_loglik
+from replay.util.kernels import LOG_2PI, gauss_loglik
 
 from .compiled import ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
-from .particles import moments, weights
+from .particles import ess_rows, moments, perturb, roughen, weights
 from .resampling import SCHEMES, invert_sorted, systematic
 
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
 # 0.2-0.3 µs per particle-step against the steps: their Python and numpy calls per run and step)
 COMPILE_AT = 10_000_000
-_LOG_2PI = math.log(2.0 * math.pi)
 
 
 @nb.njit(cache=True, nogil=True)
 def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, xmask, zmask,
-           limit, rough, shrink, logw0, Xout, Pout, ess):
+           limit, rough, logw0, Xout, Pout, ess):
     """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
     w (N,) their log-weights and weights (all changed in place); Z (steps, nz), ``seen[k]``
     whether z_k is there (else no weighting at k); Pf[k], Ph[k] the
     kernels' parameters; qsd (n,) the process noise's standard deviations; R as ``gauss_loglik``
     takes it (rdiag, rL, rinv, rconst); ``limit`` = threshold * N; roughening constant
-    ``rough`` = K and ``shrink`` = N^(-1/n); ``logw0`` = -log N. Writes Xout (steps, n), Pout
-    (steps, n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
+    ``rough`` = K; ``logw0`` = -log N. Writes Xout (steps, n), Pout (steps, n, n) and ess (steps,),
+    the ESS before resampling. Returns the number of resampling steps."""
     N, n = X.shape
     steps, nz = Z.shape
     Y, zh, ll = np.empty((N, n)), np.empty((N, nz)), np.empty(N)
-    a, sd = np.empty(N, np.int64), np.empty(n)
+    a, e1 = np.empty(N, np.int64), np.empty(1)
     count = 0
     for k in range(steps):
-        f(X, Pf[k], Y)  # propagate: f on every particle, then the noise row by row
-        for i in range(N):
-            for q in range(n):
-                Y[i, q] += g.standard_normal() * qsd[q]
+        f(X, Pf[k], Y)  # propagate: f on every particle, then the noise
+        perturb(Y, qsd, g)
         X, Y = Y, X
         if seen[k]:  # weight (no measurement: the weights stay)
             h(X, Ph[k], zh)
@@ -69,25 +65,16 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
                 logw[i] += ll[i]
             weights(logw, w)
         moments(X, w, xmask, Xout[k], Pout[k])  # estimate before resampling
-        s = 0.0
-        for i in range(N):
-            s += w[i] * w[i]
-        ess[k] = 1.0 / s
-        if 1.0 / s < limit:  # resample (ESS below the threshold)
+        ess_rows(w.reshape((1, N)), e1)
+        ess[k] = e1[0]
+        if e1[0] < limit:  # resample (ESS below the threshold)
             invert_sorted(w, g.random(), a)
             for i in range(N):
                 for q in range(n):
                     Y[i, q] = X[a[i], q]
             X, Y = Y, X
             if rough > 0.0:
-                for q in range(n):
-                    lo, hi = X[0, q], X[0, q]
-                    for i in range(1, N):
-                        lo, hi = min(lo, X[i, q]), max(hi, X[i, q])
-                    sd[q] = rough * (hi - lo) * shrink
-                for i in range(N):
-                    for q in range(n):
-                        X[i, q] += g.standard_normal() * sd[q]
+                roughen(X, rough, g)
             for i in range(N):
                 w[i] = 1.0 / N
                 logw[i] = logw0
@@ -100,7 +87,7 @@ _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1
 PF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
                      _M, _M,
                      _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
-                     types.float64, types.float64, types.float64, types.float64, _M, _M3, _V)
+                     types.float64, types.float64, types.float64, _M, _M3, _V)
 
 
 def run(engine, Z, finite):
@@ -132,8 +119,8 @@ def run(engine, Z, finite):
     X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
     qsd = np.ascontiguousarray(qsd)
-    fixed = (rdiag, rL, rinv, logdet + nz * _LOG_2PI, xmask, zmask, flt.ess_threshold * N,
-             float(flt.roughening), N ** (-1.0 / m.nx), float(engine.logw0))
+    fixed = (rdiag, rL, rinv, logdet + nz * LOG_2PI, xmask, zmask, flt.ess_threshold * N,
+             float(flt.roughening), float(engine.logw0))
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)

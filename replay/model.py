@@ -30,7 +30,6 @@ from replay.util import kernels
 from replay.util.angles import angle_mask, residual, wrap
 from replay.util.linalg import cholesky
 
-_LOG_2PI = float(np.log(2 * np.pi))
 _NO_FACTOR, _NO_VAR = np.eye(1), np.ones(1)  # unused operands of the compiled likelihood
 
 
@@ -131,7 +130,7 @@ class Model:
         out = np.empty(len(zh2))
         kernels.gauss_loglik(zh2, np.ascontiguousarray(z, dtype=float), angle_mask(tuple(angles), nz), diagonal,
                              L if not diagonal else _NO_FACTOR, inv_var if diagonal else _NO_VAR,
-                             logdet + nz * _LOG_2PI, out)  # compiled (replay.util.kernels)
+                             logdet + nz * kernels.LOG_2PI, out)  # compiled (replay.util.kernels)
         return out.reshape(zh.shape[:-1])
 
     # --- simulation ----------------------------------------------------------------

@@ -31,10 +31,33 @@ from replay.filters import particles
 from replay.filters.p002 import gwo, pso
 from replay.filters.p002.igwo_stcpf import SwarmEngine, residual_fitness
 from replay.filters.p002.stack import fast_residual
-from replay.filters.p002.stckf import fading_factor, next_V
 from replay.filters.p002.stcpf import Engine, propagate
 from replay.model import is_diagonal
 from replay.util.angles import index, residual, wrap_components
+
+
+# --- the numpy STCKF fading factor (stacks of runs and particles): the kernel's independent check ---
+def next_V(V, e, rho):
+    """V_{k+1} = (rho V_k + e e') / (1 + rho); V_1 = e e' when ``V`` is None (batched over leading axes)."""
+    ee = e[..., :, None] * e[..., None, :]
+    return ee if V is None else (rho * V + ee) / (1.0 + rho)
+
+
+def fading_factor(V, H, F, P_prev, Q, R, beta, m_form="propagated"):
+    """lambda = max(1, tr(N) / tr(M)) (1 where tr(M) <= 0); works on stacks of matrices.
+
+    Only traces are needed: tr(N) = tr(V) - tr(H Q H') - beta tr(R) and
+    tr(H F P F' H') = sum((H F P) * (H F)), so no product is formed beyond H F P.
+    """
+    HF = H @ F
+    trN = np.trace(V, axis1=-2, axis2=-1) - ((H @ Q) * H).sum(axis=(-2, -1)) - beta * np.trace(R)
+    if m_form == "propagated":
+        trM = ((HF @ P_prev) * HF).sum(axis=(-2, -1))
+    else:
+        trM = np.trace(HF @ np.swapaxes(H, -1, -2), axis1=-2, axis2=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam0 = np.where(trM > 0, trN / np.where(trM > 0, trM, 1.0), 1.0)
+    return np.maximum(1.0, lam0)
 
 
 # --- stacked small-matrix helpers -------------------------------------------------------------

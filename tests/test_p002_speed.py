@@ -6,8 +6,7 @@ import numba as nb
 import numpy as np
 import pytest
 
-from replay.filters.p002 import gwo, pso, stack, stcpf
-from replay.models.auv_sonar import AUVSonar
+from replay.filters.p002 import compiled_util, gwo, pso, stack
 from replay.util.angles import residual, wrap
 
 from oracle_p002 import pso_optimize
@@ -97,7 +96,7 @@ def numba_sum_of_product(A, B):  # what the STCKF fading factor computed before 
 @pytest.mark.slow
 def test_fading_factor_trace_sum_is_the_former_array_sum_bit_for_bit():
     """``frobenius`` (no temporary) sums in numba's np.sum order: the fading factor's bits are unchanged."""
-    frob = stcpf.bound_kernels(AUVSonar().kernels()).frobenius
+    frob = compiled_util.frobenius  # the fading factor's (compiled_util.fading_factor)
     g = np.random.default_rng(3)
     for shape in ((3, 6), (2, 6), (1, 3), (6, 6)):
         A, B = g.normal(size=shape) * 10.0 ** g.integers(-8, 8, shape), g.normal(size=shape)

@@ -13,9 +13,9 @@ from replay.data import registry
 from replay.util.errors import ReplayError
 from replay.run.evaluation import evaluate
 from replay.filters import make_filter
-from replay.filters.p002 import gwo, pso
+from replay.filters.p002 import compiled_util, gwo, pso
 from replay.filters.sigma import CKF
-from replay.filters.p002.stckf import STCKF, fading_factor
+from replay.filters.p002.stckf import STCKF
 from replay.model import LinearGaussian
 from replay.models.auv_sonar import AUVSonar
 from replay.models.ungm import UNGM
@@ -65,13 +65,25 @@ def test_stckf_linear_no_mismatch_is_ckf_and_fades_under_mismatch():
 
 
 def test_fading_factor_known_value():
-    V = np.diag([10.0, 4.0])
+    """The one fading-factor kernel (compiled_util.fading_factor, used by the STCKF and the STCPF)."""
     H, F = np.eye(2), np.eye(2)
     P, Q, R = np.diag([1.0, 1.0]), np.diag([0.5, 0.5]), np.diag([1.0, 1.0])
+    e = np.array([np.sqrt(10.0), 2.0])  # fresh: V = e e', tr V = 14
+
+    def lam(V, e, fresh, P=P, m_form="propagated", rho=0.95):
+        st = compiled_util.Fading(rho, 1.2, m_form == "propagated")
+        return compiled_util.fading_factor(V, e, fresh, H, F, P, Q, R, st, *(np.empty((2, 2)) for _ in range(3)))
+
     # tr(N) = 14 - 1 - 1.2 * 2 = 10.6; tr(M) = 2
-    assert fading_factor(V, H, F, P, Q, R, 1.2) == pytest.approx(5.3)
-    assert fading_factor(0.1 * V, H, F, P, Q, R, 1.2) == 1.0
-    assert fading_factor(V, H, F, P, Q, R, 1.2, "printed") == pytest.approx(5.3)
+    V = np.empty((2, 2))
+    assert lam(V, e, True) == pytest.approx(5.3, rel=1e-14)
+    np.testing.assert_array_equal(V, np.outer(e, e))
+    assert lam(np.empty((2, 2)), np.sqrt(0.1) * e, True) == 1.0  # tr(N) = 1.4 - 3.4 < 0
+    assert lam(np.empty((2, 2)), e, True, m_form="printed") == pytest.approx(5.3, rel=1e-14)
+    assert lam(np.empty((2, 2)), e, True, P=np.zeros((2, 2))) == 1.0  # nothing propagated: tr(M) = 0
+    # V_2 = (rho V_1 + e e') / (1 + rho) with e = 0 and rho = 1: tr V = 7, tr N = 3.6, lambda = 1.8
+    assert lam(V, np.zeros(2), False, rho=1.0) == pytest.approx(1.8, rel=1e-14)
+    np.testing.assert_array_equal(V, 0.5 * np.outer(e, e))
 
 
 def test_batched_jacobian_matches_analytic():

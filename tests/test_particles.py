@@ -67,14 +67,14 @@ def test_roughen_standard_deviation():
     N, K = 4000, 0.2
     X = np.zeros((N, 2))
     X[0] = [2.0, 10.0]
-    out = particles.roughen(X, K, np.random.default_rng(5))
+    out = particles.roughen(X.copy(), K, np.random.default_rng(5))  # in place, returned
     expected = K * np.array([2.0, 10.0]) * N ** (-1 / 2)
     jitter = out - X
     np.testing.assert_allclose(jitter.std(axis=0), expected, rtol=0.05)  # 5 % ~ 4.5 standard errors
     # exactly: the same draw from the same generator
     e = np.random.default_rng(5).standard_normal((N, 2))
     np.testing.assert_array_equal(out, X + e * expected)
-    assert np.array_equal(particles.roughen(X, 0.0, np.random.default_rng(5)), X)
+    assert np.array_equal(particles.roughen(X.copy(), 0.0, np.random.default_rng(5)), X)
 
 
 def test_batch_rows_equal_single_rows():

@@ -39,12 +39,12 @@ import numba as nb
 import numpy as np
 
 from replay.filters.p002.compiled_util import (
-    chol_solve_rows, cubature_points, entropy_weights, factor, gram, leaders, matmul, moments, normalise, quad,
-    weighted_mean, wrap)
+    Fading, Proposal, correct, cubature_points, draw, entropy_weights, factor, fading_factor, gram, leaders, moments,
+    normalise, quad, weighted_mean, workspace, wrap)
+from replay.util.kernels import LOG_2PI, gauss_logpdf
 
 # MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H
 
-LOG2PI = np.log(2.0 * np.pi)
 U32 = 2.0**-32  # 32-bit integer u -> uniform (u + 0.5) 2^-32 in (0, 1)
 
 
@@ -57,216 +57,163 @@ def observe(x, ph, zidx, zf, out):
 
 
 @nb.njit(cache=True)
-def frobenius(A, B):
-    """sum(A * B) (the trace of A B') summed in index order, as ``np.sum(A * B)``, without the temporary."""
-    t = 0.0
-    for a in range(A.shape[0]):
-        for b in range(A.shape[1]):
-            t += A[a, b] * B[a, b]
-    return t
+def maha(x, ph, z, zidx, zang, Ri, zf, zh, d):
+    """d' R^-1 d of the residual d = z - h(x) (angles wrapped) of the measured components ``zidx``
+    of h (None: all; ``zf`` a buffer of the whole h); zh, d work arrays of z's size."""
+    if zidx is None:
+        h(x, ph, zh)
+    else:
+        observe(x, ph, zidx, zf, zh)
+    for a in range(z.shape[0]):
+        d[a] = z[a] - zh[a]
+    wrap(d, zang)
+    return quad(d, Ri)
+
+
+@nb.njit(cache=True)
+def predict(x, pf, Q, xang, w):
+    """The cubature prediction (002 §2.2.1) of (x, L L') with L = w.Lp: points X_j = x +- sqrt(n) L e_j
+    through f, w.mean their (circular) mean, w.Pm = 1/2n sum_j D_j D_j' + Q."""
+    n = x.shape[0]
+    cubature_points(x, w.Lp, np.sqrt(n), w.pts)
+    for j in range(2 * n):
+        f(w.pts[j], pf, w.Y[j])
+    moments(w.Y, xang, w.mean, w.Dx)
+    gram(w.Dx, w.Pm)
+    for a in range(n):
+        for b in range(n):
+            w.Pm[a, b] += Q[a, b]
+
+
+@nb.njit(cache=True)
+def innovation(ph, zidx, zang, w):
+    """The cubature innovation moments of the prediction (w.mean, w.Pm): points through h (the
+    measured components ``zidx``), w.zh their (circular) mean, w.Pzz = 1/2n sum_j D_j D_j' and
+    w.Pxz = sqrt(n)/2n L (D_+ - D_-). Returns 1 when w.Pm had to be repaired to be factored."""
+    n, nz = w.Pxz.shape
+    s = np.sqrt(n)
+    repaired = factor(w.Pm, w.Lm)
+    cubature_points(w.mean, w.Lm, s, w.pts)
+    for j in range(2 * n):
+        if zidx is None:
+            h(w.pts[j], ph, w.Zc[j])
+        else:
+            observe(w.pts[j], ph, zidx, w.zf, w.Zc[j])
+    moments(w.Zc, zang, w.zh, w.Dz)
+    gram(w.Dz, w.Pzz)
+    for a in range(n):
+        for b in range(nz):
+            t = 0.0
+            for j in range(n):
+                t += w.Lm[a, j] * (w.Dz[j, b] - w.Dz[n + j, b])
+            w.Pxz[a, b] = (s / (2 * n)) * t
+    return repaired
+
+
+@nb.njit(cache=True)
+def particle_fading(x, z, pf, ph, zidx, zang, P, V, fresh, Q, R, st, w):
+    """One particle's fading factor (:func:`replay.filters.p002.compiled_util.fading_factor`): F at its
+    previous state x (covariance P), H and h at its prediction w.mean, e = z - h (wrapped)."""
+    F(x, pf, w.Fj)
+    if zidx is None:
+        H(w.mean, ph, w.Hj)
+        h(w.mean, ph, w.zh0)
+    else:
+        H(w.mean, ph, w.Hf)
+        for a in range(zidx.shape[0]):
+            w.Hj[a] = w.Hf[zidx[a]]
+        observe(w.mean, ph, zidx, w.zf, w.zh0)
+    for a in range(z.shape[0]):
+        w.ez[a] = z[a] - w.zh0[a]
+    wrap(w.ez, zang)
+    return fading_factor(V, w.ez, fresh, w.Hj, w.Fj, P, Q, R, st, w.HQ, w.HF, w.HFP)
 
 
 @nb.njit(cache=True, nogil=True)
-def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs, start, stop):
+def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs, start, stop):
     """One CKF/STCKF proposal step of particles, the draw and the weight (002 §2.1–2.2).
 
-    For the flat particle indices start .. stop - 1 (index = m N + i, run m,
-    particle i), in place: X[m, i] <- m^i + L^i E[m, i] with (m^i, P^i) the
-    cubature posterior given the measured components ``zidx`` of z (Z[m] holds
-    them; R, R^-1, ``zang`` are theirs; ``zidx`` None: all), or the
-    prediction (m^i-, P^i-) when ``Z`` is None (a predict-only step). A None
-    argument gives numba a specialisation with the branch pruned, so the
-    common full-measurement step carries neither the gathers nor the
-    predict-only branch; P[m, i] <- P^i; L[m, i] <- its
-    factor; V[m, i] (STCKF) <- the innovation average; logw[m, i] += log p(z | x)
-    (0 without a measurement) + log p(x | x_prev) - log q(x); lam[m, i] <- the
-    fading factor (1 for a CKF); repairs[m, i] <- covariances repaired.
-    ``opts`` = [have_L, have_V, stckf, rho, beta, propagated, scale_prior,
-    log det Q, log det R, nz of the model, transition]. The STCKF choices are those of
-    :mod:`replay.filters.p002.stckf`. ``transition`` (the ``prior_cov`` parameter of
-    :class:`replay.filters.p002.stcpf.CubatureParticleFilter`): the prediction of particle i
-    is the transition density of its fixed sample, (f(x^i), Q), instead of the cubature
-    prediction of (x^i, P^i) (mean f of the points, F P^i F' + Q); the propagated M of the
-    fading factor is then 0 (P_k = 0), so lambda = 1 unless M is the printed H Phi H'.
-    Particles are independent: callers may split the index range among threads (the
-    function releases the GIL).
+    For the flat particle indices start .. stop - 1 (index = m N + i, run m, particle i), in
+    place: X[m, i] <- m^i + L^i E[m, i] with (m^i, P^i) the cubature posterior given the measured
+    components ``zidx`` of z (Z[m] holds them; R, R^-1, ``zang`` are theirs; ``zidx`` None: all),
+    or the prediction (m^i-, P^i-) when ``Z`` is None (a predict-only step; a None argument gives
+    numba a specialisation with the branch pruned); P[m, i] <- P^i; L[m, i] <- its factor;
+    V[m, i] (STCKF) <- the innovation average; logw[m, i] += log p(z | x) (0 without a
+    measurement) + log p(x | x_prev) - log q(x); lam[m, i] <- the fading factor (1 for a CKF);
+    repairs[m, i] <- covariances repaired. ``pr``: a :class:`replay.filters.p002.compiled_util.Proposal`
+    (the STCKF choices are those of :mod:`replay.filters.p002.stckf`). With ``pr.transition``
+    (the ``prior_cov`` parameter) the prediction of particle i is the transition density of its
+    fixed sample, (f(x^i), Q), instead of the cubature prediction of (x^i, P^i); the fading
+    factor then propagates P_k = 0. Particles are independent: callers may split the index
+    range among threads (the function releases the GIL).
     """
-    have_L, have_V, stckf = opts[0] != 0, opts[1] != 0, opts[2] != 0
-    rho, beta, propagated, scale_prior = opts[3], opts[4], opts[5] != 0, opts[6] != 0
-    logdet_Q, logdet_R, nzf, transition = opts[7], opts[8], int(opts[9]), opts[10] != 0
     M, N, n = X.shape
     nz = zang.shape[0]  # measured components (0: predict only)
-    c = 2 * n
-    s = np.sqrt(n)
-    Y = np.empty((c, n))
-    pts = np.empty((c, n))
-    Dx = np.empty((c, n))
-    Zc = np.empty((c, nz))
-    Dz = np.empty((c, nz))
-    mean, fx, mpost, xnew = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    zh, zh0, ez, y, d = np.empty(nz), np.empty(nz), np.empty(nz), np.empty(nz), np.empty(nz)
-    zf, Hf = np.empty(nzf), np.empty((nzf, n))
-    Lp, Lm = np.empty((n, n)), np.empty((n, n))
-    Pm = np.empty((n, n))
-    Fj = np.empty((n, n))
-    Hj = np.empty((nz, n))
-    Pxz = np.empty((n, nz))
-    Pzz = np.empty((nz, nz))
-    K = np.empty((n, nz))
-    S = np.empty((nz, nz))
-    Pn = np.empty((n, n))
-    HQ, HF, HFP = np.empty((nz, n)), np.empty((nz, n)), np.empty((nz, n))
-    dx = np.empty(n)
-    trR = np.trace(R) if nz > 0 else 0.0
+    w = workspace(n, nz, pr.nzf)
+    nothing = np.zeros((n, n))  # the P_k of a transition-density prediction
     for flat in range(start, stop):
         m, i = flat // N, flat % N
         x = X[m, i]
-        f(x, pf, fx)  # f(x_prev), for p(x | x_prev)
-        # --- predict (002 §2.2.1), shared by the update and the predict-only step: cubature points
-        # X_j = x ± sqrt(n) L e_j through f; m- their (circular) mean; P- = 1/2n sum_j D_j D_j' + Q
-        if transition:  # the fixed sample's transition density N(f(x), Q)
-            mean[:] = fx
-            wrap(mean, xang)
-            Pm[:, :] = Q
+        f(x, pf, w.fx)  # f(x_prev), for p(x | x_prev)
+        if pr.transition:  # the fixed sample's transition density N(f(x), Q)
+            w.mean[:] = w.fx
+            wrap(w.mean, xang)
+            w.Pm[:, :] = Q
         else:
-            if have_L:
-                Lp[:, :] = L[m, i]
+            if pr.have_L:
+                w.Lp[:, :] = L[m, i]
             else:
-                repairs[m, i] = factor(P[m, i], Lp)
-            cubature_points(x, Lp, s, pts)
-            for j in range(c):
-                f(pts[j], pf, Y[j])
-            moments(Y, xang, mean, Dx)
-            gram(Dx, Pm)
-            for a in range(n):
-                for b in range(n):
-                    Pm[a, b] += Q[a, b]
+                repairs[m, i] = factor(P[m, i], w.Lp)
+            predict(x, pf, Q, xang, w)
         g = 1.0
         if Z is None:  # predict only: the importance density is the prediction
-            mpost[:] = mean
-            Pn[:, :] = Pm
+            w.mpost[:] = w.mean
+            w.Pn[:, :] = w.Pm
         else:
-            z = Z[m]
-            if stckf:
-                F(x, pf, Fj)
-            # --- update: cubature points of (m^i-, P^i-) through h ---
-            repairs[m, i] += factor(Pm, Lm)
-            cubature_points(mean, Lm, s, pts)
-            for j in range(c):
-                if zidx is None:
-                    h(pts[j], ph, Zc[j])
-                else:
-                    observe(pts[j], ph, zidx, zf, Zc[j])
-            moments(Zc, zang, zh, Dz)
-            gram(Dz, Pzz)
-            for a in range(n):  # P_xz = s/c L (Z_+ - Z_-)
-                for b in range(nz):
-                    t = 0.0
-                    for j in range(n):
-                        t += Lm[a, j] * (Dz[j, b] - Dz[n + j, b])
-                    Pxz[a, b] = (s / c) * t
-            if stckf:  # fading factor (002 §2.2.2)
-                if zidx is None:
-                    H(mean, ph, Hj)
-                    h(mean, ph, zh0)
-                else:
-                    H(mean, ph, Hf)
-                    for a in range(nz):
-                        Hj[a] = Hf[zidx[a]]
-                    observe(mean, ph, zidx, zf, zh0)
-                for a in range(nz):
-                    ez[a] = z[a] - zh0[a]
-                wrap(ez, zang)
-                for a in range(nz):
-                    for b in range(nz):
-                        ee = ez[a] * ez[b]
-                        V[m, i, a, b] = (rho * V[m, i, a, b] + ee) / (1.0 + rho) if have_V else ee
-                trN = np.trace(V[m, i]) - beta * trR
-                matmul(Hj, Q, HQ)
-                matmul(Hj, Fj, HF)
-                trN -= frobenius(HQ, Hj)
-                if propagated and transition:  # P_k = 0: nothing propagated
-                    trM = 0.0
-                elif propagated:  # tr(H F P F' H') = sum((H F P) * (H F))
-                    matmul(HF, P[m, i], HFP)
-                    trM = frobenius(HFP, HF)
-                else:  # tr(H F H') as printed
-                    trM = 0.0
-                    for a in range(nz):
-                        for b in range(n):
-                            trM += HF[a, b] * Hj[a, b]
-                g = max(1.0, trN / trM) if trM > 0 else 1.0
+            repairs[m, i] += innovation(ph, zidx, zang, w)
+            if pr.stckf:  # fading factor (002 §2.2.2)
+                g = particle_fading(x, Z[m], pf, ph, zidx, zang, nothing if pr.transition else P[m, i], V[m, i],
+                                    not pr.have_V, Q, R, pr.fading, w)
+                Pzz, Pxz, Pm = w.Pzz, w.Pxz, w.Pm
                 Pzz *= g
                 Pxz *= g
-                if scale_prior:
+                if pr.scale_prior:
                     Pm *= g
-            for a in range(nz):
-                for b in range(nz):
-                    S[a, b] = Pzz[a, b] + R[a, b]
-            chol_solve_rows(S, Pxz, K)
-            for a in range(nz):
-                y[a] = z[a] - zh[a]
-            wrap(y, zang)
-            for a in range(n):
-                t = 0.0
-                for b in range(nz):
-                    t += K[a, b] * y[b]
-                mpost[a] = mean[a] + t
-            wrap(mpost, xang)
-            for a in range(n):  # P = P- - P_xz K', symmetrised
-                for b in range(n):
-                    t = 0.0
-                    for j in range(nz):
-                        t += Pxz[a, j] * K[b, j]
-                    Pn[a, b] = Pm[a, b] - t
-            for a in range(n):
-                for b in range(a):
-                    Pn[a, b] = Pn[b, a] = 0.5 * (Pn[a, b] + Pn[b, a])
+            correct(Z[m], R, zang, xang, w)
         lam[m, i] = g
-        # --- draw x = m + L e and weight it ---
-        Lq = L[m, i]
-        repairs[m, i] += factor(Pn, Lq)
-        e = E[m, i]
+        repairs[m, i] += draw(w.mpost, w.Pn, E[m, i], L[m, i], xang, w.xnew)  # x = m + L e
+        P[m, i] = w.Pn
+        X[m, i] = w.xnew
+        loglik = 0.0
+        if Z is not None:
+            loglik = gauss_logpdf(maha(w.xnew, ph, Z[m], zidx, zang, Ri, w.zf, w.zh0, w.d) + pr.logdet_R,
+                                  nz * LOG_2PI)
         for a in range(n):
-            t = 0.0
-            for b in range(a + 1):
-                t += Lq[a, b] * e[b]
-            xnew[a] = mpost[a] + t
-        wrap(xnew, xang)
-        P[m, i] = Pn
-        X[m, i] = xnew
-        if Z is None:
-            loglik = 0.0
-        else:
-            if zidx is None:
-                h(xnew, ph, zh0)
-            else:
-                observe(xnew, ph, zidx, zf, zh0)
-            for a in range(nz):
-                d[a] = Z[m, a] - zh0[a]
-            wrap(d, zang)
-            loglik = -0.5 * (quad(d, Ri) + logdet_R + nz * LOG2PI)
-        for a in range(n):
-            dx[a] = xnew[a] - fx[a]
-        wrap(dx, xang)
-        log_prior = -0.5 * (quad(dx, Qi) + logdet_Q)
+            w.dx[a] = w.xnew[a] - w.fx[a]
+        wrap(w.dx, xang)
+        log_prior = gauss_logpdf(quad(w.dx, Qi), pr.logdet_Q)  # the n log 2 pi cancel in the ratio
         logdet_q = 0.0
         ee = 0.0
         for a in range(n):
-            logdet_q += math.log(Lq[a, a])
-            ee += e[a] * e[a]
-        logw[m, i] += loglik + log_prior + 0.5 * (ee + 2.0 * logdet_q)
+            logdet_q += math.log(L[m, i, a, a])
+            ee += E[m, i, a] * E[m, i, a]
+        logw[m, i] += loglik + log_prior - gauss_logpdf(ee, 2.0 * logdet_q)
 
 
 @nb.njit(cache=True, parallel=True)
-def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs, chunks):
+def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs, chunks):
     """:func:`cubature_step` over all particles, in ``chunks`` ranges run by numba's threads
     (OpenMP threads spin between steps, so waking them costs microseconds, not the ~70 us of
-    a Python thread). Each particle is computed by one thread: the numbers do not depend on it."""
+    a Python thread). Each particle is computed by one thread: the numbers do not depend on it.
+    The record ``pr`` enters the threads as its fields (numba passes no tuple record into them)."""
     total = X.shape[0] * X.shape[1]
     size = (total + chunks - 1) // chunks
+    rho, beta, propagated = pr.fading.rho, pr.fading.beta, pr.fading.propagated
+    stckf, scale, transition, have_L, have_V = pr.stckf, pr.scale_prior, pr.transition, pr.have_L, pr.have_V
+    logdet_Q, logdet_R, nzf = pr.logdet_Q, pr.logdet_R, pr.nzf
     for ch in nb.prange(chunks):
-        cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, opts, lam, repairs,
+        rec = Proposal(stckf, Fading(rho, beta, propagated), scale, transition, have_L, have_V, logdet_Q, logdet_R, nzf)
+        cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, rec, lam, repairs,
                       ch * size, min(total, (ch + 1) * size))
 
 
@@ -286,14 +233,7 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
             continue
         for a in range(n):
             x[a] = c[a] + Xr[i, a]
-        if zidx is None:  # all components measured (numba prunes the other branch)
-            h(x, ph, zh)
-        else:
-            observe(x, ph, zidx, zf, zh)
-        for a in range(nz):
-            d[a] = z[a] - zh[a]
-        wrap(d, zang)
-        out[i] = quad(d, Ri)
+        out[i] = maha(x, ph, z, zidx, zang, Ri, zf, zh, d)
         if fx is not None:
             for a in range(n):
                 dx[a] = x[a] - fx[i, a]
@@ -340,7 +280,7 @@ def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, im
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]
             wrap(X[m, i], xang)
-            logw[m, i] = -0.5 * (f[i] + logdet_R + nz * LOG2PI)
+            logw[m, i] = gauss_logpdf(f[i] + logdet_R, nz * LOG_2PI)
 
 
 @nb.njit(cache=True)

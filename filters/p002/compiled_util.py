@@ -18,11 +18,17 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
   leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
 * :func:`normalise`, :func:`weighted_mean` — the particle bookkeeping kernels of
   :mod:`replay.filters.particles` (log-domain normalisation, circular weighted mean),
-  re-exported; :func:`estimate` composes them with the covariance over a stack of runs.
+  re-exported; :func:`estimate` composes them with the covariance over a stack of runs;
+* :func:`fading_factor` (settings :class:`Fading`) — the STCKF's fading factor, the one kernel
+  of :mod:`replay.filters.p002.stckf` and of the particles' STCKF proposal;
+* :class:`Proposal`, :func:`workspace`, :func:`correct`, :func:`draw` — the settings, work arrays,
+  Kalman correction and importance draw of :func:`replay.filters.p002.compiled.cubature_step`.
 """
 from __future__ import annotations
 
 import math
+from collections import namedtuple
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
@@ -30,9 +36,9 @@ import numpy as np
 from replay.filters.particles import moments as particle_moments  # the one particle bookkeeping
 from replay.filters.particles import weighted_mean  # noqa: F401 (re-exported)
 from replay.filters.particles import weights as normalise
-from replay.util.kernels import chol_solve_rows, cholesky, matmul, quad, wrap  # noqa: F401 (re-exported)
+from replay.util.kernels import (chol_solve_rows, cholesky, matmul, quad, symmetrise, wrap,  # noqa: F401 (re-exported)
+                                 wrap_angle)
 
-TWO_PI = 2.0 * np.pi
 SIN_TAYLOR = tuple(1.0 / math.factorial(k) for k in (15, 13, 11, 9, 7, 5, 3))  # sin d = d - d^3 (1/3! - ...)
 COS_TAYLOR = tuple(1.0 / math.factorial(k) for k in (16, 14, 12, 10, 8, 6, 4, 2))  # cos d = 1 - d^2 (1/2! - ...)
 
@@ -121,13 +127,10 @@ def moments(Y, mask, mean, D):
             ref = Y[0, i]
             ss, cc = 0.0, 0.0
             for j in range(c):
-                d = Y[j, i] - ref
-                d -= np.floor(d * (1.0 / TWO_PI) + 0.5) * TWO_PI
-                sd, cd = sincos_small(d)
+                sd, cd = sincos_small(wrap_angle(Y[j, i] - ref))
                 ss += sd
                 cc += cd
-            t = ref + math.atan2(ss, cc)
-            mean[i] = t - np.floor(t * (1.0 / TWO_PI) + 0.5) * TWO_PI
+            mean[i] = wrap_angle(ref + math.atan2(ss, cc))
         else:
             t = 0.0
             for j in range(c):
@@ -239,3 +242,133 @@ def estimate(X, logw, xang, x, P, w):
     for m in range(X.shape[0]):
         normalise(logw[m], w[m])
         particle_moments(X[m], w[m], xang, x[m], P[m])
+
+
+# --- the strong-tracking fading factor (002 §2.2.2): one kernel for the STCKF and the STCPF proposal ---
+class Fading(NamedTuple):
+    """The STCKF's settings (:data:`replay.filters.p002.stckf.STCKF_PARAMS`): forgetting factor ``rho``,
+    weakening factor ``beta``, and whether M is the propagated form (else H Phi H' as printed)."""
+
+    rho: float
+    beta: float
+    propagated: bool
+
+    @classmethod
+    def of(cls, flt) -> "Fading":
+        """The settings of a filter declaring ``rho``, ``beta``, ``m_form`` (typed for the kernels)."""
+        return cls(float(flt.rho), float(flt.beta), flt.m_form == "propagated")
+
+
+@nb.njit(cache=True)
+def frobenius(A, B):
+    """sum(A * B) (the trace of A B') summed in index order, as ``np.sum(A * B)``, without the temporary."""
+    t = 0.0
+    for a in range(A.shape[0]):
+        for b in range(A.shape[1]):
+            t += A[a, b] * B[a, b]
+    return t
+
+
+@nb.njit(cache=True, nogil=True)
+def fading_factor(V, e, fresh, H, F, P, Q, R, st, HQ, HF, HFP):
+    """The fading factor lambda of :mod:`replay.filters.p002.stckf` (002 §2.2.2), st a :class:`Fading`:
+
+        V = e e' (``fresh``) or (rho V + e e') / (1 + rho)     (in place; e = z - h(x^-) (nz,))
+        tr N = tr V - beta tr R - tr(H Q H')
+        tr M = tr(H F P F' H') = sum((H F P) * (H F))   (propagated; P = 0: nothing propagated)
+             = tr(H F H')                               (as printed)
+        lambda = max(1, tr N / tr M), 1 when tr M <= 0
+
+    H (nz, n) the Jacobian of h at the prediction, F (n, n) that of f at the previous estimate,
+    P its covariance, Q, R (nz, nz); HQ, HF, HFP (nz, n) work arrays. Sums in index order."""
+    rho = st.rho
+    for a in range(e.shape[0]):
+        for b in range(e.shape[0]):
+            ee = e[a] * e[b]
+            V[a, b] = ee if fresh else (rho * V[a, b] + ee) / (1.0 + rho)
+    trN = np.trace(V) - st.beta * np.trace(R)
+    matmul(H, Q, HQ)
+    matmul(H, F, HF)
+    trN -= frobenius(HQ, H)
+    if st.propagated:
+        matmul(HF, P, HFP)
+        trM = frobenius(HFP, HF)
+    else:
+        trM = frobenius(HF, H)
+    return max(1.0, trN / trM) if trM > 0 else 1.0
+
+
+# --- the cubature step's pieces without model kernels (replay.filters.p002.compiled.cubature_step) ---
+class Proposal(NamedTuple):
+    """What one :func:`replay.filters.p002.compiled.cubature_step` computes: the settings of
+    :class:`replay.filters.p002.stcpf.CubatureParticleFilter` at one step."""
+
+    stckf: bool  # the STCKF proposal (fading factor), else the CKF's
+    fading: Fading  # the STCKF's settings
+    scale_prior: bool  # the fading factor scales the prior covariance too
+    transition: bool  # predict with the transition density N(f(x^i), Q), else the cubature prediction
+    have_L: bool  # L holds the Cholesky factors of P
+    have_V: bool  # V holds the innovation averages (else they restart)
+    logdet_Q: float
+    logdet_R: float
+    nzf: int  # the model's measurement size (the length of h(x))
+
+
+Work = namedtuple("Work", "fx mean mpost xnew dx zh zh0 ez y d zf Hf Lp Lm Pm Fj Pn Y pts Dx Zc Dz Hj Pxz K Pzz "
+                          "S HQ HF HFP")
+
+
+@nb.njit(cache=True)
+def workspace(n, nz, nzf):
+    """The work arrays of one particle's cubature step (state size n, nz measured components of the
+    model's nzf), allocated once per call of the step and reused by each particle."""
+    c = 2 * n
+    v, vz, sq, nzn = (n,), (nz,), (n, n), (nz, n)
+    return Work(np.empty(v), np.empty(v), np.empty(v), np.empty(v), np.empty(v), np.empty(vz), np.empty(vz),
+                np.empty(vz), np.empty(vz), np.empty(vz), np.empty(nzf), np.empty((nzf, n)), np.empty(sq),
+                np.empty(sq), np.empty(sq), np.empty(sq), np.empty(sq), np.empty((c, n)), np.empty((c, n)),
+                np.empty((c, n)), np.empty((c, nz)), np.empty((c, nz)), np.empty(nzn), np.empty((n, nz)),
+                np.empty((n, nz)), np.empty((nz, nz)), np.empty((nz, nz)), np.empty(nzn), np.empty(nzn),
+                np.empty(nzn))
+
+
+@nb.njit(cache=True)
+def correct(z, R, zang, xang, w):
+    """The Kalman correction of the cubature update (Arasaratnam & Haykin 2009) on the work arrays
+    ``w``: S = Pzz + R, K = Pxz S^-1, mpost = mean + K (z - zh) (residual and state angles wrapped),
+    Pn = Pm - Pxz K', symmetrised. An S without a Cholesky factor gives NaN (the run diverges)."""
+    n, nz = w.Pxz.shape
+    for a in range(nz):
+        for b in range(nz):
+            w.S[a, b] = w.Pzz[a, b] + R[a, b]
+    chol_solve_rows(w.S, w.Pxz, w.K)
+    for a in range(nz):
+        w.y[a] = z[a] - w.zh[a]
+    wrap(w.y, zang)
+    for a in range(n):
+        t = 0.0
+        for b in range(nz):
+            t += w.K[a, b] * w.y[b]
+        w.mpost[a] = w.mean[a] + t
+    wrap(w.mpost, xang)
+    for a in range(n):
+        for b in range(n):
+            t = 0.0
+            for j in range(nz):
+                t += w.Pxz[a, j] * w.K[b, j]
+            w.Pn[a, b] = w.Pm[a, b] - t
+    symmetrise(w.Pn)
+
+
+@nb.njit(cache=True)
+def draw(mean, P, e, L, xang, x):
+    """The importance draw x = mean + L e (state angles wrapped), L the factor of P (:func:`factor`,
+    written into ``L``). Returns 1 when P was repaired, else 0."""
+    repaired = factor(P, L)
+    for a in range(x.shape[0]):
+        t = 0.0
+        for b in range(a + 1):
+            t += L[a, b] * e[b]
+        x[a] = mean[a] + t
+    wrap(x, xang)
+    return repaired

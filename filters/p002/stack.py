@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.util.angles import TWO_PI, angle_mask, index
+from replay.util.angles import angle_mask, index, wrap
 
 from .compiled_util import wrap_rows
 from ..compiled import Kernel
@@ -28,14 +28,7 @@ def wrap_inplace(x, angles):
         n = x.shape[-1]
         _wrap_rows(x.reshape(-1, n), angle_mask(tuple(angles), n))
     elif angles:
-        a = x[..., index(tuple(angles))]
-        t = a * (1.0 / TWO_PI)
-        t += 0.5
-        np.floor(t, out=t)
-        t *= TWO_PI
-        a -= t
-        if not isinstance(index(tuple(angles)), slice):  # fancy index: a is a copy
-            x[..., index(tuple(angles))] = a
+        x[..., index(tuple(angles))] = wrap(x[..., index(tuple(angles))])
     return x
 
 

@@ -13,7 +13,9 @@ innovation and cross covariance sums by a fading factor lambda >= 1:
     e_{k+1} = z_{k+1} - h(x^_{k+1|k})
 
 with forgetting factor rho = 0.95 (0 < rho <= 1) and weakening factor beta = 1.2
-(beta >= 1); H and Phi are the Jacobians of h (at x^_{k+1|k}) and f (at x^_k).
+(beta >= 1); H and Phi are the Jacobians of h (at x^_{k+1|k}) and f (at x^_k). lambda is
+computed by :func:`replay.filters.p002.compiled_util.fading_factor`, the kernel of the
+STCPF's particles too (one text: compiled, or run as Python with ``NUMBA_DISABLE_JIT=1``).
 
 Choices where the paper is ambiguous (each configurable):
 
@@ -72,29 +74,6 @@ REPAIR = Param("repair", bool, False, "repair a posterior covariance that is not
                "floor) instead of counting the run as diverged")
 
 
-def next_V(V, e, rho):
-    """V_{k+1} = (rho V_k + e e') / (1 + rho); V_1 = e e' when ``V`` is None (batched over leading axes)."""
-    ee = e[..., :, None] * e[..., None, :]
-    return ee if V is None else (rho * V + ee) / (1.0 + rho)
-
-
-def fading_factor(V, H, F, P_prev, Q, R, beta, m_form="propagated"):
-    """lambda = max(1, tr(N) / tr(M)) (1 where tr(M) <= 0); works on stacks of matrices.
-
-    Only traces are needed: tr(N) = tr(V) - tr(H Q H') - beta tr(R) and
-    tr(H F P F' H') = sum((H F P) * (H F)), so no product is formed beyond H F P.
-    """
-    HF = H @ F
-    trN = np.trace(V, axis1=-2, axis2=-1) - ((H @ Q) * H).sum(axis=(-2, -1)) - beta * np.trace(R)
-    if m_form == "propagated":
-        trM = ((HF @ P_prev) * HF).sum(axis=(-2, -1))
-    else:
-        trM = np.trace(HF @ np.swapaxes(H, -1, -2), axis1=-2, axis2=-1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam0 = np.where(trM > 0, trN / np.where(trM > 0, trM, 1.0), 1.0)
-    return np.maximum(1.0, lam0)
-
-
 class STCKF(CKF):
     """CKF with the strong-tracking fading factor of 002 §2.2.2 (rho = 0.95, beta = 1.2)."""
 
@@ -110,6 +89,8 @@ class STCKF(CKF):
         super().predict(state, k)
 
     def fading(self, state, z, k, mask, R):
+        """The fading factor (:func:`replay.filters.p002.compiled_util.fading_factor`, the kernel of
+        the STCPF's particles too) of the innovation z - h(x^-); V kept in ``state``."""
         m = state.model
         angles = m.z_angles
         zh = m.h(state.x, k)
@@ -118,11 +99,13 @@ class STCKF(CKF):
             zh, z, H = zh[mask], z[mask], H[mask]
             angles = remap_indices(angles, mask)
         key = None if mask is None else tuple(mask)
-        if key != state.V_mask:
-            state.V, state.V_mask = None, key
-        state.V = next_V(state.V, residual(z, zh, angles), self.rho)
-        F = m.F(state.x_prev, k)
-        lam = float(fading_factor(state.V, H, F, state.P_prev, m.process_cov(k), R, self.beta, self.m_form))
+        fresh = state.V is None or key != state.V_mask
+        if fresh:
+            state.V, state.V_mask = np.empty((len(zh), len(zh))), key
+        e = np.ascontiguousarray(residual(z, zh, angles), dtype=float)
+        work = [np.empty(H.shape) for _ in range(3)]
+        lam = compiled_util.fading_factor(state.V, e, fresh, *(np.ascontiguousarray(a, dtype=float) for a in (
+            H, m.F(state.x_prev, k), state.P_prev, m.process_cov(k), R)), compiled_util.Fading.of(self), *work)
         state.lambdas.append(lam)
         return lam
 

@@ -51,6 +51,7 @@ import numpy as np
 
 from replay.util.angles import wrap_components
 from replay.util.errors import ReplayError
+from replay.util.kernels import LOG_2PI, gauss_logpdf
 from replay.util.params import Param
 from replay.model import Model, is_diagonal, remap_indices
 
@@ -66,7 +67,6 @@ from .stckf import STCKF_PARAMS
 PROPOSALS = ("prior", "ckf", "stckf")
 GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run
 GRAIN_RUNS = 1000  # the same for batched runs
-LOG2PI = np.log(2.0 * np.pi)
 
 
 def bound_kernels(kernels):
@@ -212,7 +212,7 @@ class Engine:
         zh = m.h(X, k)
         d = fast_residual(zz[:, None, :], zh if mask is None else zh[..., mask], angles)
         maha = (d * d) @ Ri if Ri.ndim == 1 else np.einsum("...i,ij,...j->...", d, Ri, d)
-        return -0.5 * (maha + logdet + len(R) * LOG2PI)
+        return gauss_logpdf(maha + logdet, len(R) * LOG_2PI)
 
     def constants(self, name, C):
         """(C^-1, log det C) of a covariance, recomputed only when C changes."""
@@ -265,12 +265,14 @@ class Engine:
         lam = np.empty((M, N))
         rep = np.zeros((M, N), np.int64)
         pf, ph = m.kernel_params(k)
-        st = (flt.rho, flt.beta, flt.m_form == "propagated", flt.scale_prior) if stckf else (1.0, 1.0, True, True)
-        transition = getattr(flt, "prior_cov", "propagated") == "transition"
-        opts = np.array([have_L, have_V, stckf, *st, logdet_Q, logdet_R, m.nz, transition], float)
+        pr = compiled_util.Proposal(
+            stckf=stckf, fading=compiled_util.Fading.of(flt) if stckf else compiled_util.Fading(1.0, 1.0, True),
+            scale_prior=bool(flt.scale_prior) if stckf else True, have_L=have_L, have_V=have_V,
+            transition=getattr(flt, "prior_cov", "propagated") == "transition",
+            logdet_Q=float(logdet_Q), logdet_R=float(logdet_R), nzf=int(m.nz))
         zang = self.zmask if full else self.zmask[zidx]
         args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
-                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, opts,
+                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, pr,
                 lam, rep)
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)

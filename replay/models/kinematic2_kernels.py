@@ -11,8 +11,7 @@ import numba as nb
 import numpy as np
 
 from replay.models.kinematic_select import H, h  # noqa: F401 (the module's measurement kernels)
-
-TWO_PI = 2.0 * np.pi
+from replay.util.kernels import wrap_angle  # replay.util.angles.wrap, compiled
 
 
 @nb.njit(cache=True)
@@ -21,8 +20,7 @@ def f(x, p, out):
     c, s = np.cos(x[2]), np.sin(x[2])
     out[0] = x[0] + (x[3] * c - x[4] * s) * dt
     out[1] = x[1] + (x[3] * s + x[4] * c) * dt
-    a = x[2] + x[5] * dt
-    out[2] = a - np.floor(a * (1.0 / TWO_PI) + 0.5) * TWO_PI  # replay.util.angles.wrap
+    out[2] = wrap_angle(x[2] + x[5] * dt)
     out[3], out[4], out[5] = x[3], x[4], x[5]
 
 

@@ -18,12 +18,7 @@ import numpy as np
 
 from replay.models.kinematic_select import H, h  # noqa: F401 (the module's measurement kernels)
 
-TWO_PI = 2.0 * np.pi
-
-
-@nb.njit(cache=True)
-def _wrap(a):
-    return a - np.floor(a * (1.0 / TWO_PI) + 0.5) * TWO_PI  # replay.util.angles.wrap
+from replay.util.kernels import wrap_angle as _wrap  # replay.util.angles.wrap, compiled
 
 
 @nb.njit(cache=True)

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.special import logsumexp
 
+from replay.util.kernels import LOG_2PI, gauss_logpdf
 from replay.util.linalg import require_spd
 from replay.util.errors import ReplayError
 from replay.util.covariance import Covariance, as_matrix, diagonal  # noqa: F401 — declared here before
@@ -89,5 +90,5 @@ class Glint:
             else:
                 u = solve_triangular(L, (e - mu).reshape(-1, self.dim).T, lower=True,
                                      check_finite=False).T.reshape(e.shape)
-            terms.append(np.log(w) - 0.5 * (np.sum(u * u, axis=-1) + logdet + self.dim * np.log(2 * np.pi)))
+            terms.append(np.log(w) + gauss_logpdf(np.sum(u * u, axis=-1) + logdet, self.dim * LOG_2PI))
         return terms[0] if len(terms) == 1 else logsumexp(np.stack(terms), axis=0)

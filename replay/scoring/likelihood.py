@@ -16,9 +16,9 @@ passes them), so the likelihood is that of the filter that ran.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from replay.util.kernels import LOG_2PI, gauss_logpdf
 
 NLL_FILTERS = ("kf", "ekf", "ukf", "ckf")  # exact Kalman filters on a linear model
 
@@ -61,7 +61,7 @@ def innovation_nll(problem, est, nis, dof, model=None, P0=None) -> float:
     nis = np.asarray(nis, float)[used]
     if (sign <= 0).any() or not np.isfinite(nis).all():
         return float("nan")
-    return 0.5 * float(np.sum(nis + logdet + seen[used].sum(axis=1) * math.log(2 * math.pi)))
+    return -float(np.sum(gauss_logpdf(nis + logdet, seen[used].sum(axis=1) * LOG_2PI)))
 
 
 def of_run(config: dict, problem, est, series) -> dict:

@@ -9,7 +9,6 @@ averaging raw angles, seen in popular filter libraries).
 """
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
@@ -19,20 +18,12 @@ _INV_TWO_PI = 1.0 / TWO_PI
 
 
 def wrap(a):
-    """Wrap angles to [-pi, pi)."""
-    a = np.asarray(a, dtype=float)
-    if a.ndim == 0:
-        return np.float64(_wrap_scalar(float(a)))
-    k = a * _INV_TWO_PI
-    k += 0.5
-    np.floor(k, out=k)
-    k *= TWO_PI
-    return a - k
+    """Wrap angles to [-pi, pi): a - floor(a / 2 pi + 0.5) 2 pi, of a number or an array (a new value).
 
-
-def _wrap_scalar(x: float) -> float:
-    """:func:`wrap` of one number: the same operations, so the same bits."""
-    return x - TWO_PI * math.floor(x * _INV_TWO_PI + 0.5)
+    The project's one text of the angle wrap: numba compiles this same function for the kernels
+    (:data:`replay.util.kernels.wrap_angle`), so compiled and plain Python wrap to the same bits.
+    """
+    return a - np.floor(a * _INV_TWO_PI + 0.5) * TWO_PI
 
 
 @lru_cache(maxsize=256)
@@ -62,11 +53,11 @@ def wrap_components(x, angles=()):
     if angles:
         if x.ndim == 1:  # one vector: a Python loop beats numpy's per-call overhead
             for i in angles:
-                x[i] = _wrap_scalar(x[i])
+                x[i] = wrap(x[i])
         elif x.ndim == 2 and len(x) == 1:  # a stack of one vector (one run): the same, same bits
             v = x[0]
             for i in angles:
-                v[i] = _wrap_scalar(v[i])
+                v[i] = wrap(v[i])
         else:
             i = index(tuple(angles))
             a = x[..., i]

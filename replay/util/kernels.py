@@ -19,15 +19,18 @@ import math
 import numba as nb
 import numpy as np
 
-TWO_PI = 2.0 * np.pi
+from replay.util import angles
+
+LOG_2PI = math.log(2.0 * math.pi)
+wrap_angle = nb.njit(cache=True)(angles.wrap)  # the one text of the angle wrap, compiled (of a number here)
 
 
 @nb.njit(cache=True)
 def wrap(v, mask):
-    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (the arithmetic of replay.util.angles.wrap)."""
+    """Wrap the ``mask`` components of ``v`` into [-pi, pi) in place (:data:`wrap_angle` of each)."""
     for i in range(v.shape[0]):
         if mask[i]:
-            v[i] -= np.floor(v[i] * (1.0 / TWO_PI) + 0.5) * TWO_PI
+            v[i] = wrap_angle(v[i])
 
 
 @nb.njit(cache=True)
@@ -122,6 +125,16 @@ def quad(d, W):
 
 
 @nb.njit(cache=True)
+def gauss_logpdf(maha, const):
+    """The Gaussian log-density -(maha + const) / 2 of a residual d with Mahalanobis term
+    maha = d' C^-1 d and const = log det C + dim log 2 pi (:data:`LOG_2PI`): the project's one
+    text of it (numbers or arrays alike). A caller that adds log det C to maha first passes
+    (maha + log det C, dim log 2 pi): the order its numbers were computed in (paper 002's kernels);
+    one whose constants cancel passes what is left (a log-ratio of densities)."""
+    return -0.5 * (maha + const)
+
+
+@nb.njit(cache=True)
 def gauss_loglik(zh, z, zmask, diagonal, L, inv_var, const, out):
     """Gaussian log-likelihoods out[i] = -0.5 (d_i' R^-1 d_i + c) of the rows zh (P, nz)
     (predicted measurements), d_i = z - zh[i] with the ``zmask`` components wrapped; ``const``
@@ -139,7 +152,7 @@ def gauss_loglik(zh, z, zmask, diagonal, L, inv_var, const, out):
                 s += d[j] * d[j] * inv_var[j]
         else:
             s = whitened_norm2(L, d)
-        out[i] = -0.5 * (s + const)
+        out[i] = gauss_logpdf(s, const)
 
 
 @nb.njit(cache=True)
