@@ -6,6 +6,7 @@ and records in ``frame.report`` every sample or channel it dropped, flagged,
 masked or repaired. ``ADAPTERS`` maps the adapter names used in dataset
 manifests (``datasets/*.toml``) to ``"module:function"``.
 """
+
 ADAPTERS = {
     "bohai-csv": "replay.adapters.bohai:load",
     "lake": "replay.adapters.lake:load",

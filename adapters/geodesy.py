@@ -5,6 +5,7 @@ longitude to the UTM zone of the data (:func:`utm_epsg`) and express positions
 relative to an origin; :func:`enu_to_geodetic` is the inverse used by the
 exports.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,9 +51,12 @@ class Geo:
         return out
 
     def meta(self) -> dict:
-        return {"crs": f"EPSG:{self.epsg}", "epsg": self.epsg,
-                "origin": [float(self.origin[0]), float(self.origin[1])],
-                "origin_alt": float(self.origin[2])}
+        return {
+            "crs": f"EPSG:{self.epsg}",
+            "epsg": self.epsg,
+            "origin": [float(self.origin[0]), float(self.origin[1])],
+            "origin_alt": float(self.origin[2]),
+        }
 
 
 def enu_to_geodetic(enu, meta):

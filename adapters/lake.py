@@ -32,6 +32,7 @@ Bad input (no time column, unrecognised unit, a reference with no time
 overlap, ...) raises :class:`replay.util.errors.DataError`: one line naming the
 file and the column.
 """
+
 from __future__ import annotations
 
 import io
@@ -43,8 +44,15 @@ import pandas as pd
 
 from replay.util.angles import wrap
 from replay.util.errors import DataError
-from replay.adapters.lake_units import (RANGES, SI, STEP_RANGE, UNITS, check_range,  # noqa: F401
-                                        check_step, check_units)
+from replay.adapters.lake_units import (
+    RANGES,
+    SI,
+    STEP_RANGE,
+    UNITS,
+    check_range,  # noqa: F401
+    check_step,
+    check_units,
+)
 from replay.adapters.options import declare
 from replay.frame import Channel, Frame, Report
 from replay.util.params import Param
@@ -53,8 +61,11 @@ from replay.adapters.lake_align import MAX_GAP, align
 from replay.adapters.lake_table import numeric, parse_column, read_table
 
 FRAMES = {"depth": "down", "speed": "body forward", "pitch": "body"}
-DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",
-               "pitch": "pitch sensor, positive nose down"}
+DESCRIPTION = {
+    "depth": "depth gauge, positive down",
+    "speed": "speed sensor, forward",
+    "pitch": "pitch sensor, positive nose down",
+}
 
 
 # ---------------------------------------------------------------- columns
@@ -65,8 +76,19 @@ DESCRIPTION = {"depth": "depth gauge, positive down", "speed": "speed sensor, fo
 
 # ---------------------------------------------------------------- loading
 
-@declare("lake", Param("max_gap", float, MAX_GAP, "longest reference gap bridged by linear interpolation",
-                        unit="s", low=0.0, low_open=True))
+
+@declare(
+    "lake",
+    Param(
+        "max_gap",
+        float,
+        MAX_GAP,
+        "longest reference gap bridged by linear interpolation",
+        unit="s",
+        low=0.0,
+        low_open=True,
+    ),
+)
 def load(path, *, max_gap) -> Frame:
     """Read a lake-trial depth log (module docstring) into a :class:`Frame`."""
     path = Path(path)
@@ -93,22 +115,41 @@ def load(path, *, max_gap) -> Frame:
     check_step(path, cols[(False, "time")], unit[(False, "time")], np.diff(t_abs))
     channels = {}
     for kind in sensors:
-        channels[kind] = _channel(path, cols[(False, kind)], kind, unit[(False, kind)], si(False, kind)[keep], report,
-                                  f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})")
+        channels[kind] = _channel(
+            path,
+            cols[(False, kind)],
+            kind,
+            unit[(False, kind)],
+            si(False, kind)[keep],
+            report,
+            f"{DESCRIPTION[kind]} (column {cols[(False, kind)]})",
+        )
     reference, alignment = {}, {}
     rt = si(True, "time") if (True, "time") in cols else np.where(keep, time, np.nan)
     for kind in [k for k in ("depth", "speed", "pitch") if (True, k) in cols]:
-        reference[kind], alignment[kind] = _reference(path, cols[(True, kind)], kind, unit[(True, kind)], rt,
-                                                      si(True, kind), t_abs, max_gap, report)
+        reference[kind], alignment[kind] = _reference(
+            path, cols[(True, kind)], kind, unit[(True, kind)], rt, si(True, kind), t_abs, max_gap, report
+        )
     check_units(path, t, channels, reference, cols, unit, report)
     step = np.diff(t)
-    meta = {"source": str(path), "adapter": "lake", "comments": comments, "header": header,
-            "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
-            "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
-            "time": {"offset": t0, "median_step": float(np.median(step)),
-                     "min_step": float(step.min()), "max_step": float(step.max())},
-            "dt": float(np.median(step)), "reference_alignment": alignment,
-            "pitch_convention": "pitch positive nose down", "default_task": "depth"}
+    meta = {
+        "source": str(path),
+        "adapter": "lake",
+        "comments": comments,
+        "header": header,
+        "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
+        "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
+        "time": {
+            "offset": t0,
+            "median_step": float(np.median(step)),
+            "min_step": float(step.min()),
+            "max_step": float(step.max()),
+        },
+        "dt": float(np.median(step)),
+        "reference_alignment": alignment,
+        "pitch_convention": "pitch positive nose down",
+        "default_task": "depth",
+    }
     if "maneuvers" in header:
         meta["maneuvers"] = _parse_maneuvers(header["maneuvers"], t0)
     return Frame(t, channels, reference, None, meta, report)
@@ -125,14 +166,19 @@ def _columns(path, table, units_line, report) -> dict[tuple[bool, str], str]:
             continue
         ref, kind, unit = parsed
         if (ref, kind) in cols:
-            raise DataError(path, f"column {col}: a second {'reference ' if ref else ''}{kind} column "
-                            f"(first: {cols[(ref, kind)]})")
+            raise DataError(
+                path, f"column {col}: a second {'reference ' if ref else ''}{kind} column (first: {cols[(ref, kind)]})"
+            )
         if unit is None:
-            raise DataError(path, f"column {col}: no unit (name it e.g. {kind}_{SI[kind].replace('/', 'p')} "
-                            f"or add '# units: {col}={SI[kind]}')")
+            raise DataError(
+                path,
+                f"column {col}: no unit (name it e.g. {kind}_{SI[kind].replace('/', 'p')} "
+                f"or add '# units: {col}={SI[kind]}')",
+            )
         if unit not in UNITS[kind]:
-            raise DataError(path, f"column {col}: unit {unit!r} not recognised for {kind} "
-                            f"(known: {', '.join(UNITS[kind])})")
+            raise DataError(
+                path, f"column {col}: unit {unit!r} not recognised for {kind} (known: {', '.join(UNITS[kind])})"
+            )
         cols[(ref, kind)] = col
     if (False, "time") not in cols:
         raise DataError(path, f"no time column (expected e.g. 'time_s'; columns: {', '.join(table.columns)})")
@@ -147,8 +193,12 @@ def _sensor_rows(path, table, cols, sensors, time, rows, report) -> np.ndarray:
     empty = [table[cols[(False, k)]].str.strip().str.lower().isin(["", "nan", "na", "null"]) for k in sensors]
     no_time = ~has_time & ~np.logical_and.reduce([e.to_numpy() for e in empty])
     if no_time.any():
-        report.add("dropped", "rows", int(no_time.sum()),
-                   f"sensor values without a time ({cols[(False, 'time')]}) at {_lines(rows, no_time)}")
+        report.add(
+            "dropped",
+            "rows",
+            int(no_time.sum()),
+            f"sensor values without a time ({cols[(False, 'time')]}) at {_lines(rows, no_time)}",
+        )
     keep = has_time.copy()
     running = -np.inf
     for i in np.flatnonzero(has_time):  # strictly increasing sensor time
@@ -158,8 +208,12 @@ def _sensor_rows(path, table, cols, sensors, time, rows, report) -> np.ndarray:
             running = time[i]
     dropped = has_time & ~keep
     if dropped.any():
-        report.add("dropped", cols[(False, "time")], int(dropped.sum()),
-                   f"time not increasing (first at line {rows[np.argmax(dropped)]})")
+        report.add(
+            "dropped",
+            cols[(False, "time")],
+            int(dropped.sum()),
+            f"time not increasing (first at line {rows[np.argmax(dropped)]})",
+        )
     if keep.sum() < 2:
         raise DataError(path, f"column {cols[(False, 'time')]}: fewer than 2 valid sensor times")
     return keep
@@ -178,23 +232,45 @@ def _reference(path, col, kind, unit, rt, vr, t_abs, max_gap, report) -> tuple[C
     if len(tr) == 0:
         raise DataError(path, f"column {col}: no reference sample with a time")
     if tr[-1] < t_abs[0] or tr[0] > t_abs[-1]:
-        raise DataError(path, f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
-                        f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s")
+        raise DataError(
+            path,
+            f"column {col}: reference times {tr[0]:g}..{tr[-1]:g} s do not "
+            f"overlap the sensor times {t_abs[0]:g}..{t_abs[-1]:g} s",
+        )
     vv = check_range(path, col, kind, unit, vv, report)
     vals, valid, counts = align(t_abs, tr, vv, max_gap, angle=(kind == "pitch"))
     valid &= np.isfinite(vals)
     if counts["interpolated"]:
-        report.add("repaired", f"reference {kind}", counts["interpolated"],
-                   f"{col} interpolated linearly between reference samples at most {max_gap:g} s apart")
+        report.add(
+            "repaired",
+            f"reference {kind}",
+            counts["interpolated"],
+            f"{col} interpolated linearly between reference samples at most {max_gap:g} s apart",
+        )
     if counts["in_gaps"]:
-        report.add("masked", f"reference {kind}", counts["in_gaps"],
-                   f"{col}: {counts['gaps']} gap(s) longer than {max_gap:g} s")
+        report.add(
+            "masked",
+            f"reference {kind}",
+            counts["in_gaps"],
+            f"{col}: {counts['gaps']} gap(s) longer than {max_gap:g} s",
+        )
     if counts["outside"]:
-        report.add("masked", f"reference {kind}", counts["outside"],
-                   f"{col}: sensor samples outside the reference's time span")
-    return (Channel(vals, SI[kind], FRAMES[kind], valid, (kind,), (0,) if kind == "pitch" else (),
-                    "positive nose down" if kind == "pitch" else "", f"external reference {kind} (column {col})"),
-            dict(counts, column=col, max_gap=max_gap))
+        report.add(
+            "masked", f"reference {kind}", counts["outside"], f"{col}: sensor samples outside the reference's time span"
+        )
+    return (
+        Channel(
+            vals,
+            SI[kind],
+            FRAMES[kind],
+            valid,
+            (kind,),
+            (0,) if kind == "pitch" else (),
+            "positive nose down" if kind == "pitch" else "",
+            f"external reference {kind} (column {col})",
+        ),
+        dict(counts, column=col, max_gap=max_gap),
+    )
 
 
 def _lines(rows, mask, most=5) -> str:
@@ -208,8 +284,16 @@ def _channel(path, col, kind, unit, v, report, description) -> Channel:
     if missing.any():
         report.add("masked", kind, int(missing.sum()), f"{col}: missing values (empty or infinite cells)")
     v = check_range(path, col, kind, unit, v, report)
-    return Channel(v, SI[kind], FRAMES[kind], None, (kind,), (0,) if kind == "pitch" else (),
-                   "positive nose down" if kind == "pitch" else "", description)
+    return Channel(
+        v,
+        SI[kind],
+        FRAMES[kind],
+        None,
+        (kind,),
+        (0,) if kind == "pitch" else (),
+        "positive nose down" if kind == "pitch" else "",
+        description,
+    )
 
 
 def _parse_maneuvers(text: str, t0: float) -> list[list]:
@@ -222,4 +306,3 @@ def _parse_maneuvers(text: str, t0: float) -> list[list]:
 
 
 # ---------------------------------------------------------------- writing
-

@@ -1,4 +1,5 @@
 """The reference of a lake-trial log on the sensor times, without inventing samples (:func:`align`)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,8 +9,9 @@ from replay.util.angles import wrap
 MAX_GAP = 0.5  # s: longest reference gap bridged by interpolation
 
 
-def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GAP,
-          angle: bool = False, tol: float = 1e-6):
+def align(
+    t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GAP, angle: bool = False, tol: float = 1e-6
+):
     """Reference samples (tr, vr) on times ``t`` without inventing samples.
 
     Returns ``(values, valid, counts)``: a time within ``tol`` of a reference
@@ -40,6 +42,11 @@ def align(t: np.ndarray, tr: np.ndarray, vr: np.ndarray, max_gap: float = MAX_GA
     frac = (t[interp] - tr[lo[interp]]) / span[interp]
     d = vr[hi[interp]] - vr[lo[interp]]
     out[interp] = vr[lo[interp]] + (wrap(d) if angle else d) * frac
-    counts.update(exact=int(exact.sum()), interpolated=int(interp.sum()), in_gaps=int(gap.sum()),
-                  gaps=int(len(np.unique(j[gap]))), outside=int((~exact & ~inside).sum()))
+    counts.update(
+        exact=int(exact.sum()),
+        interpolated=int(interp.sum()),
+        in_gaps=int(gap.sum()),
+        gaps=int(len(np.unique(j[gap]))),
+        outside=int((~exact & ~inside).sum()),
+    )
     return out, exact | interp, counts

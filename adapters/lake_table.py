@@ -1,4 +1,5 @@
 """A lake-trial log's text: comment lines, the table, its columns and their units (:mod:`replay.adapters.lake`)."""
+
 from __future__ import annotations
 
 import io
@@ -11,8 +12,15 @@ import pandas as pd
 from replay.util.errors import DataError
 
 
-KINDS = {"time": "time", "t": "time", "timestamp": "time", "depth": "depth",
-         "speed": "speed", "velocity": "speed", "pitch": "pitch"}
+KINDS = {
+    "time": "time",
+    "t": "time",
+    "timestamp": "time",
+    "depth": "depth",
+    "speed": "speed",
+    "velocity": "speed",
+    "pitch": "pitch",
+}
 REF_PREFIXES = ("ref_", "ref.", "ref ", "reference_", "ext_", "external_")
 
 
@@ -27,7 +35,7 @@ def parse_column(name: str, units_line: dict):
     base = low
     for p in REF_PREFIXES:
         if base.startswith(p):
-            base = base[len(p):]
+            base = base[len(p) :]
             break
     kind = KINDS.get(base)
     if kind is None and unit is None and "_" in base:
@@ -74,11 +82,13 @@ def read_table(path: Path):
         raise DataError(path, "no header row (expected e.g. time_s,depth_m,speed_mps,pitch_deg,ref_depth_m)")
     sep = "\t" if "\t" in body[0] else ("," if "," in body[0] else (";" if ";" in body[0] else ","))
     try:
-        table = pd.read_csv(io.StringIO("\n".join(body)), sep=sep, dtype=str, skip_blank_lines=True,
-                            keep_default_na=False)
+        table = pd.read_csv(
+            io.StringIO("\n".join(body)), sep=sep, dtype=str, skip_blank_lines=True, keep_default_na=False
+        )
     except (pd.errors.ParserError, ValueError) as err:
-        raise DataError(path, f"not a readable {'TSV' if sep == chr(9) else 'CSV'} table: "
-                        f"{str(err).strip().splitlines()[-1]}") from None
+        raise DataError(
+            path, f"not a readable {'TSV' if sep == chr(9) else 'CSV'} table: {str(err).strip().splitlines()[-1]}"
+        ) from None
     table.columns = [str(c).strip() for c in table.columns]
     if len(table) == 0:
         raise DataError(path, "header only, no data rows")

@@ -19,6 +19,7 @@ the order :mod:`replay.adapters.lake` applies them:
 
 A check that cannot tell (too little motion, weak correlation) says nothing.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -29,8 +30,17 @@ STEP_RANGE = (1e-3, 10.0)  # s: plausible median step of a sensor log (1 kHz .. 
 UNITS = {  # kind -> {unit spelling: factor to SI}
     "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3},
     "depth": {"m": 1.0, "cm": 1e-2, "mm": 1e-3},
-    "speed": {"m/s": 1.0, "mps": 1.0, "m_s": 1.0, "ms-1": 1.0, "cm/s": 1e-2, "cmps": 1e-2,
-              "kn": 0.514444, "knots": 0.514444, "kt": 0.514444},
+    "speed": {
+        "m/s": 1.0,
+        "mps": 1.0,
+        "m_s": 1.0,
+        "ms-1": 1.0,
+        "cm/s": 1e-2,
+        "cmps": 1e-2,
+        "kn": 0.514444,
+        "knots": 0.514444,
+        "kt": 0.514444,
+    },
     "pitch": {"rad": 1.0, "deg": np.pi / 180, "degrees": np.pi / 180, "°": np.pi / 180},
 }
 SI = {"time": "s", "depth": "m", "speed": "m/s", "pitch": "rad"}
@@ -55,10 +65,18 @@ def check_step(path, col, unit, steps) -> None:
     """Refuse a median time step that contradicts the declared unit."""
     med, (lo, hi), seconds = float(np.median(steps)), STEP_RANGE, UNITS["time"][unit] == 1.0
     if not lo <= med <= hi:
-        guess = ("milliseconds (name it time_ms)" if med > hi and seconds else
-                 "seconds (name it time_s)" if med < lo and not seconds else "another unit")
-        raise DataError(path, f"column {col}: median time step {med:.4g} s is implausible for a sensor log "
-                              f"(expected {lo:g}-{hi:g} s): are the times in {guess}?")
+        guess = (
+            "milliseconds (name it time_ms)"
+            if med > hi and seconds
+            else "seconds (name it time_s)"
+            if med < lo and not seconds
+            else "another unit"
+        )
+        raise DataError(
+            path,
+            f"column {col}: median time step {med:.4g} s is implausible for a sensor log "
+            f"(expected {lo:g}-{hi:g} s): are the times in {guess}?",
+        )
 
 
 def check_range(path, col, kind, unit, v, report) -> np.ndarray:
@@ -69,24 +87,36 @@ def check_range(path, col, kind, unit, v, report) -> np.ndarray:
     if kind == "pitch" and fin.any():
         peak = float(np.abs(v[fin]).max())
         if UNITS["pitch"][unit] == 1.0 and peak > np.pi / 2:
-            raise DataError(path, f"column {col}: values reach {peak:.3g}, beyond pi/2 rad: "
-                            "the column looks like degrees (name it pitch_deg)")
+            raise DataError(
+                path,
+                f"column {col}: values reach {peak:.3g}, beyond pi/2 rad: "
+                "the column looks like degrees (name it pitch_deg)",
+            )
         if UNITS["pitch"][unit] != 1.0 and peak < np.deg2rad(0.5):
-            report.add("flagged", col, int(fin.sum()), f"declared degrees but never beyond "
-                       f"{np.rad2deg(peak):.3g} deg: is it radians?")
+            report.add(
+                "flagged",
+                col,
+                int(fin.sum()),
+                f"declared degrees but never beyond {np.rad2deg(peak):.3g} deg: is it radians?",
+            )
     out = fin & ((v < lo) | (v > hi))
     if out.sum() > MOST * fin.sum():
         raw = v[fin] / UNITS[kind][unit]
-        fits = [u for u, f in UNITS[kind].items()
-                if UNITS[kind][u] != UNITS[kind][unit] and np.mean((raw * f >= lo) & (raw * f <= hi)) > 0.99]
+        fits = [
+            u
+            for u, f in UNITS[kind].items()
+            if UNITS[kind][u] != UNITS[kind][unit] and np.mean((raw * f >= lo) & (raw * f <= hi)) > 0.99
+        ]
         fits = list(dict.fromkeys(fits, None))[:3]
         guess = f"; the values fit {' or '.join(fits)}" if fits else ""
-        raise DataError(path, f"column {col}: {int(out.sum())} of {int(fin.sum())} values are outside the "
-                              f"plausible {kind} range [{lo:g}, {hi:g}] {SI[kind]} when read in {unit}: "
-                              f"the unit is wrong{guess}")
+        raise DataError(
+            path,
+            f"column {col}: {int(out.sum())} of {int(fin.sum())} values are outside the "
+            f"plausible {kind} range [{lo:g}, {hi:g}] {SI[kind]} when read in {unit}: "
+            f"the unit is wrong{guess}",
+        )
     if out.any():
-        report.add("masked", col, int(out.sum()), f"outside the plausible {kind} range "
-                   f"[{lo:g}, {hi:g}] {SI[kind]}")
+        report.add("masked", col, int(out.sum()), f"outside the plausible {kind} range [{lo:g}, {hi:g}] {SI[kind]}")
         v = np.where(out, np.nan, v)
     return v
 
@@ -115,7 +145,7 @@ def depth_scale(t, depth, speed, pitch):
     wf = np.where(fin, w, 0.0)
     climb = np.r_[0.0, np.cumsum(0.5 * (wf[1:] + wf[:-1]) * np.diff(t))]
     missing = np.r_[0, np.cumsum(~fin)]  # missing[i]: missing values among w[:i]
-    ok = missing[k + 1:] - missing[:-k - 1] == 0  # window i .. i + k complete
+    ok = missing[k + 1 :] - missing[: -k - 1] == 0  # window i .. i + k complete
     b = np.where(ok, climb[k:] - climb[:-k], np.nan)
     return _scale(depth[k:] - depth[:-k], b, MIN_MOTION)
 
@@ -128,36 +158,57 @@ def check_units(path, t, channels, reference, cols, units, report) -> None:
     """Depth (sensor and reference) against the motion, each sensor against its reference; refuse
     a contradicted unit, naming the column the other checks do not clear (module docstring).
     ``cols``/``units``: (is_ref, kind) -> column name / declared unit; values SI on the times ``t``."""
-    pair = {k: _scale(_values(reference[k]), channels[k].values, 0.0)
-            for k in ("depth", "speed", "pitch") if k in channels and k in reference}
+    pair = {
+        k: _scale(_values(reference[k]), channels[k].values, 0.0)
+        for k in ("depth", "speed", "pitch")
+        if k in channels and k in reference
+    }
     motion = {}
     if all(k in channels for k in ("depth", "speed", "pitch")):
         for ref, group in ((False, channels), (True, reference)):
             if "depth" in group:
-                motion[ref] = depth_scale(t, _values(group["depth"]), channels["speed"].values,
-                                          channels["pitch"].values)
+                motion[ref] = depth_scale(
+                    t, _values(group["depth"]), channels["speed"].values, channels["pitch"].values
+                )
     name = lambda ref, kind: cols[(ref, kind)]  # noqa: E731
     if _far(pair.get("speed")):  # the sensor whose depth motion agrees is right
         m = motion.get(False)
-        wrong = (True if m is not None and not _far(m) else
-                 False if _far(m) and abs(np.log(abs(m / pair["speed"]))) < np.log(FAR) else None)
+        wrong = (
+            True
+            if m is not None and not _far(m)
+            else False
+            if _far(m) and abs(np.log(abs(m / pair["speed"]))) < np.log(FAR)
+            else None
+        )
         _refuse(path, "speed", pair["speed"], wrong, cols, units)
     if _far(pair.get("pitch")):
         _refuse(path, "pitch", pair["pitch"], None, cols, units)
     for ref, m in motion.items():
         if m is not None and m < 0:
-            report.add("flagged", name(ref, "depth"), len(t), f"depth falls where {name(False, 'speed')} and "
-                       f"{name(False, 'pitch')} say the vehicle dives (scale {m:.2g} against speed x "
-                       "sin(pitch)): depth or pitch sign convention?")
+            report.add(
+                "flagged",
+                name(ref, "depth"),
+                len(t),
+                f"depth falls where {name(False, 'speed')} and "
+                f"{name(False, 'pitch')} say the vehicle dives (scale {m:.2g} against speed x "
+                "sin(pitch)): depth or pitch sign convention?",
+            )
         elif _far(m):
             col, unit = name(ref, "depth"), units[(ref, "depth")]
             guess = likely_unit("depth", unit, m)
             v = float(np.nanmedian(np.abs(channels["speed"].values)))
-            speed = ("" if TYPICAL_SPEED[0] <= v <= TYPICAL_SPEED[1] else
-                     f", or {name(False, 'speed')} is not in {units[(False, 'speed')]} (median {v:.3g} m/s)")
-            raise DataError(path, f"column {col}: depth changes are {m:.3g} x what {name(False, 'speed')} and "
-                                  f"{name(False, 'pitch')} imply (speed x sin(pitch)): {col} is not in {unit}"
-                                  + (f" (it looks like {guess})" if guess else "") + speed)
+            speed = (
+                ""
+                if TYPICAL_SPEED[0] <= v <= TYPICAL_SPEED[1]
+                else f", or {name(False, 'speed')} is not in {units[(False, 'speed')]} (median {v:.3g} m/s)"
+            )
+            raise DataError(
+                path,
+                f"column {col}: depth changes are {m:.3g} x what {name(False, 'speed')} and "
+                f"{name(False, 'pitch')} imply (speed x sin(pitch)): {col} is not in {unit}"
+                + (f" (it looks like {guess})" if guess else "")
+                + speed,
+            )
     if _far(pair.get("depth")):
         wrong = True if motion.get(False) is not None else False if motion.get(True) is not None else None
         _refuse(path, "depth", pair["depth"], wrong, cols, units)
@@ -176,5 +227,6 @@ def _refuse(path, kind, s, wrong, cols, units):
         raise DataError(path, f"columns {sensor} and {other}: {text}the declared units of the two disagree")
     col, unit = cols[(wrong, kind)], units[(wrong, kind)]
     guess = likely_unit(kind, unit, abs(s) if wrong else 1 / abs(s))
-    raise DataError(path, f"column {col}: {text}{col} is not in {unit}"
-                    + (f" (it looks like {guess})" if guess else ""))
+    raise DataError(
+        path, f"column {col}: {text}{col} is not in {unit}" + (f" (it looks like {guess})" if guess else "")
+    )

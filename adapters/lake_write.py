@@ -1,4 +1,5 @@
 """Write a frame with depth, speed and pitch channels as a lake-trial log (the format: :mod:`replay.adapters.lake`)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,8 +25,7 @@ def write(frame: Frame, path, comments=(), pitch_unit: str = "deg") -> Path:
             ch = group.get(kind)
             if ch is not None:
                 data[f"{prefix}{kind}_{suffix[kind]}"] = np.where(ch.valid, ch.values * scale[kind], np.nan)
-    lines = [f"# {c}" for c in ["replay lake-trial depth log (format: README.md, 'Lake-trial logs')",
-                                *comments]]
+    lines = [f"# {c}" for c in ["replay lake-trial depth log (format: README.md, 'Lake-trial logs')", *comments]]
     table = pd.DataFrame(data)
     body = table.to_csv(index=False, float_format="%.10g", na_rep="", lineterminator="\n")
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -41,6 +41,7 @@ association with the reference, ``align`` (none, yaw, se3, sim3) of the fit that
 first moves them onto the reference (replay.trajectory.recorded.RECORDED_PARAMS).
 ``frame``/``child`` also select a TF pair in ``[channels]`` and ``[reference]`` (a TF-only recording needs them).
 """
+
 from __future__ import annotations
 
 import re
@@ -74,8 +75,14 @@ ROLE_KINDS = {
     "pose": ("pose", "odometry"),
     "none": ("navsatfix", "odometry", "imu", "pressure", "twist", "pose"),
 }
-DEFAULT_ROLE = {"navsatfix": "gps", "odometry": "odometry", "imu": "imu", "pressure": "depth",
-                "twist": "velocity", "pose": "pose"}
+DEFAULT_ROLE = {
+    "navsatfix": "gps",
+    "odometry": "odometry",
+    "imu": "imu",
+    "pressure": "depth",
+    "twist": "velocity",
+    "pose": "pose",
+}
 
 
 @dataclass
@@ -124,10 +131,14 @@ class Mapping:
                 continue
             lines += ["", f"[{group}]"]
             for e in chosen:
-                extra = "".join(f', {k} = "{v}"' for k, v in (("type", e.type), ("role", e.role),
-                                                               ("frame", e.frame), ("child", e.child)) if v)
-                extra += "".join(f", {k} = {v!r}" if not isinstance(v, str) else f', {k} = "{v}"'
-                                 for k, v in e.params.items())
+                extra = "".join(
+                    f', {k} = "{v}"'
+                    for k, v in (("type", e.type), ("role", e.role), ("frame", e.frame), ("child", e.child))
+                    if v
+                )
+                extra += "".join(
+                    f", {k} = {v!r}" if not isinstance(v, str) else f', {k} = "{v}"' for k, v in e.params.items()
+                )
                 extra += "".join(f", {k} = {_toml_value(v)}" for k, v in e.fusion.items())
                 key = e.name if re.fullmatch(r"[A-Za-z0-9_-]+", e.name) else f'"{e.name}"'
                 lines.append(f'{key} = {{ topic = "{e.topic}"{extra} }}')
@@ -164,8 +175,9 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
     if time not in ("header", "log"):
         raise ReplayError(f"{source}: time must be \"header\" or \"log\" (got {time!r})")
     until = doc.get("until")
-    if until is not None and (isinstance(until, bool) or not isinstance(until, (int, float))
-                              or not until > 0 or until == float("inf")):
+    if until is not None and (
+        isinstance(until, bool) or not isinstance(until, (int, float)) or not until > 0 or until == float("inf")
+    ):
         raise ReplayError(f"{source}: until must be a positive number of seconds (got {until!r})")
     allow = doc.get("allow_truncated", False)
     if not isinstance(allow, bool):
@@ -188,41 +200,52 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
         keys = ESTIMATE_KEYS if group == "estimates" else ENTRY_KEYS
         for name, spec in table.items():
             if group != "estimates" and not CHANNEL_NAME.fullmatch(name):
-                raise ReplayError(f"{source}: [{group}] {name!r}: a channel name is a letter, then letters, "
-                                  "digits and _ (at most 64; it names the frame channel and the exported topic "
-                                  "/sensors/<name>)")
+                raise ReplayError(
+                    f"{source}: [{group}] {name!r}: a channel name is a letter, then letters, "
+                    "digits and _ (at most 64; it names the frame channel and the exported topic "
+                    "/sensors/<name>)"
+                )
             if isinstance(spec, str):
                 spec = {"topic": spec}
             if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str) or not spec["topic"]:
                 raise ReplayError(f"{source}: [{group}] {name}: give a topic (name = \"/topic\")")
             extra = sorted(set(spec) - keys)
             if extra:
-                raise ReplayError(f"{source}: [{group}] {name}: unknown key(s) {', '.join(extra)} "
-                                  f"(known: {', '.join(sorted(keys))})")
+                raise ReplayError(
+                    f"{source}: [{group}] {name}: unknown key(s) {', '.join(extra)} (known: {', '.join(sorted(keys))})"
+                )
             typ = spec.get("type")
             if typ is not None and (not isinstance(typ, str) or kind_of(typ) is None):
-                raise ReplayError(f"{source}: [{group}] {name}: unknown message type {typ!r} "
-                                  f"(supported: {', '.join(sorted(KINDS))})")
+                raise ReplayError(
+                    f"{source}: [{group}] {name}: unknown message type {typ!r} (supported: {', '.join(sorted(KINDS))})"
+                )
             frame, child = _pair(source, group, name, spec)
             if group == "estimates":
                 estimates.append(_estimate(source, name, spec, typ, frame, child))
                 continue
             role = spec.get("role")
             if role is not None and ref:
-                raise ReplayError(f"{source}: [reference] {name}: a reference has no role "
-                                  "(roles are for [channels] entries)")
+                raise ReplayError(
+                    f"{source}: [reference] {name}: a reference has no role (roles are for [channels] entries)"
+                )
             if role is not None and role not in ROLE_KINDS:
-                raise ReplayError(f"{source}: [channels] {name}: unknown role {role!r} "
-                                  f"(known: {', '.join(ROLE_KINDS)})")
+                raise ReplayError(
+                    f"{source}: [channels] {name}: unknown role {role!r} (known: {', '.join(ROLE_KINDS)})"
+                )
             if role is not None and typ is not None and pose_like(kind_of(typ)) not in ROLE_KINDS[role]:
-                raise ReplayError(f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
-                                  f"{role!r} (it takes {kinds_for(role)})")
+                raise ReplayError(
+                    f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
+                    f"{role!r} (it takes {kinds_for(role)})"
+                )
             fusion = _fusion(source, name, spec, ref)
-            entries.append(Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role, frame, child,
-                                 fusion=fusion))
+            entries.append(
+                Entry(name, spec["topic"], normalize_type(typ) if typ else None, ref, role, frame, child, fusion=fusion)
+            )
     if not entries:
-        raise ReplayError(f"{source}: maps no topic ([channels] and [reference] are empty)"
-                          + ("; recorded [estimates] need a [reference] to be scored against" if estimates else ""))
+        raise ReplayError(
+            f"{source}: maps no topic ([channels] and [reference] are empty)"
+            + ("; recorded [estimates] need a [reference] to be scored against" if estimates else "")
+        )
     return Mapping(entries, time, float(until) if until is not None else None, allow, params, source, estimates)
 
 
@@ -238,18 +261,20 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
         value = spec[key]
         fields = list(value) if isinstance(value, (list, dict)) else None
         if fields is None or not all(isinstance(f, str) for f in fields):
-            raise ReplayError(f"{source}: [channels] {name}: {key} must be "
-                              + ("a table of field = variance" if key == "noise" else "a list of field names")
-                              + f" (fields: {', '.join(FUSION_FIELDS)})")
+            raise ReplayError(
+                f"{source}: [channels] {name}: {key} must be "
+                + ("a table of field = variance" if key == "noise" else "a list of field names")
+                + f" (fields: {', '.join(FUSION_FIELDS)})"
+            )
         bad = [f for f in fields if f not in FUSION_FIELDS]
         if bad:
-            raise ReplayError(f"{source}: [channels] {name}: {key}: unknown field {bad[0]!r} "
-                              f"(fields: {', '.join(FUSION_FIELDS)})")
+            raise ReplayError(
+                f"{source}: [channels] {name}: {key}: unknown field {bad[0]!r} (fields: {', '.join(FUSION_FIELDS)})"
+            )
         if key == "noise":
             for f, v in value.items():
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf"):
-                    raise ReplayError(f"{source}: [channels] {name}: noise.{f} must be a positive variance "
-                                      f"(got {v!r})")
+                    raise ReplayError(f"{source}: [channels] {name}: noise.{f} must be a positive variance (got {v!r})")
             value = {f: float(v) for f, v in value.items()}
         out[key] = value
     return out
@@ -269,26 +294,40 @@ def _pair(source: str, group: str, name: str, spec: dict):
 def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
     """One ``[estimates]`` entry, checked (name, message kind, association defaults)."""
     if not ESTIMATE_NAME.fullmatch(name) or name == "none":
-        raise ReplayError(f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - (at most 64, "
-                          "starting with a letter or digit, not 'none'; it names the leaderboard row "
-                          "recorded:<name> and its files)")
+        raise ReplayError(
+            f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - (at most 64, "
+            "starting with a letter or digit, not 'none'; it names the leaderboard row "
+            "recorded:<name> and its files)"
+        )
     if typ is not None and kind_of(typ) not in ESTIMATE_KINDS:
-        raise ReplayError(f"{source}: [estimates] {name}: a {normalize_type(typ)} is not a trajectory "
-                          "(an estimate is an Odometry, PoseStamped, PoseWithCovarianceStamped, TFMessage / "
-                          "TransformStamped pair, Path or NavSatFix)")
+        raise ReplayError(
+            f"{source}: [estimates] {name}: a {normalize_type(typ)} is not a trajectory "
+            "(an estimate is an Odometry, PoseStamped, PoseWithCovarianceStamped, TFMessage / "
+            "TransformStamped pair, Path or NavSatFix)"
+        )
     params = {}
     for key, low in (("t_max_diff", 0.0), ("t_offset", None)):
         if key in spec:
             v = spec[key]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or abs(v) == float("inf") \
-                    or (low is not None and v < low):
-                raise ReplayError(f"{source}: [estimates] {name}: {key} must be a finite number of seconds"
-                                  + (" >= 0" if low is not None else "") + f" (got {v!r})")
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float))
+                or v != v
+                or abs(v) == float("inf")
+                or (low is not None and v < low)
+            ):
+                raise ReplayError(
+                    f"{source}: [estimates] {name}: {key} must be a finite number of seconds"
+                    + (" >= 0" if low is not None else "")
+                    + f" (got {v!r})"
+                )
             params[key] = float(v)
     if "align" in spec:
         if spec["align"] not in ESTIMATE_ALIGN:
-            raise ReplayError(f"{source}: [estimates] {name}: align must be one of {', '.join(ESTIMATE_ALIGN)} "
-                              f"(got {spec['align']!r})")
+            raise ReplayError(
+                f"{source}: [estimates] {name}: align must be one of {', '.join(ESTIMATE_ALIGN)} "
+                f"(got {spec['align']!r})"
+            )
         params["align"] = spec["align"]
     return Entry(name, spec["topic"], normalize_type(typ) if typ else None, False, None, frame, child, True, params)
 
@@ -300,8 +339,9 @@ def pose_like(kind: str | None) -> str | None:
 
 def kinds_for(role: str) -> str:
     """The message types that can have ``role``, in words (for error messages)."""
-    return ", ".join(t.split("/")[-1] for t, k in KINDS.items() if k in ROLE_KINDS[role]
-                     and not t.startswith("foxglove"))
+    return ", ".join(
+        t.split("/")[-1] for t, k in KINDS.items() if k in ROLE_KINDS[role] and not t.startswith("foxglove")
+    )
 
 
 def role_of(entry: Entry, msgtype: str, source: str) -> str | None:
@@ -316,8 +356,8 @@ def role_of(entry: Entry, msgtype: str, source: str) -> str | None:
     if entry.role is None:
         return DEFAULT_ROLE.get(kind)
     if kind not in ROLE_KINDS[entry.role]:
-        raise ReplayError(f"{source}: [channels] {entry.name}: topic {entry.topic} is a {msgtype}, which "
-                          f"cannot have role {entry.role!r} (it takes {kinds_for(entry.role)})")
+        raise ReplayError(
+            f"{source}: [channels] {entry.name}: topic {entry.topic} is a {msgtype}, which "
+            f"cannot have role {entry.role!r} (it takes {kinds_for(entry.role)})"
+        )
     return entry.role
-
-

@@ -1,4 +1,5 @@
 """The mapping proposed for a recording's topics, for the obvious cases (:func:`propose`; docs/bags.md)."""
+
 from __future__ import annotations
 
 import re
@@ -19,8 +20,7 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
     Beside a ground-truth reference, every other pose topic is also proposed as a
     recorded estimate (``[estimates]``, named after its topic), as evo would score it.
     """
-    names = {"navsatfix": "gps", "odometry": "odom", "imu": "imu", "pressure": "depth",
-             "twist": "dvl", "pose": "pose"}
+    names = {"navsatfix": "gps", "odometry": "odom", "imu": "imu", "pressure": "depth", "twist": "dvl", "pose": "pose"}
     entries, used = [], {}
     truth_words = ("groundtruth", "ground_truth", "truth", "gt", "reference", "mocap", "vicon")
     reference = None
@@ -29,8 +29,11 @@ def propose(topics: dict[str, tuple[str, int]]) -> Mapping:
         if kind not in names or count == 0:  # TF needs a named pair, a Path is an estimate: not proposed
             continue
         base = topic.strip("/").lower().replace("/", "_")
-        if reference is None and kind in ("pose", "odometry") and any(
-                w == base or base.endswith(w) or base.startswith(w) for w in truth_words):
+        if (
+            reference is None
+            and kind in ("pose", "odometry")
+            and any(w == base or base.endswith(w) or base.startswith(w) for w in truth_words)
+        ):
             reference = Entry("position", topic, normalize_type(typ), True)
             continue
         stem = names[kind]

@@ -9,6 +9,7 @@ with one line (``adapter lake: max_gap must be a number > 0 (got 0)``) and passe
 every option, defaults filled in, to the function (whose options have no defaults
 of their own: they are written once, here).
 """
+
 from __future__ import annotations
 
 import functools
@@ -32,6 +33,7 @@ def declare(adapter: str, *params: Param):
 
     The decorated function carries them as ``PARAMS`` (and its name as ``ADAPTER``).
     """
+
     def wrap(load):
         @functools.wraps(load)
         def checked(path, **given):

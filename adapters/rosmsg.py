@@ -25,6 +25,7 @@ Depth from FluidPressure (REP: ``fluid_pressure`` in Pa):
 ``depth = (p - p_atm) / (rho * g)`` with ``water_density`` rho (kg/m^3),
 ``atmospheric_pressure`` p_atm (Pa) and ``gravity`` g (m/s^2) as parameters.
 """  # noqa: E501 (Markdown tables)
+
 from __future__ import annotations
 
 import numpy as np
@@ -45,16 +46,25 @@ KINDS = {
     "geometry_msgs/msg/TransformStamped": "tf",
     "nav_msgs/msg/Path": "path",
 }
-PRIMARY = {"imu": "gyro", "odometry": "position", "navsatfix": "position", "pressure": "depth",
-           "twist": "velocity", "pose": "position", "tf": "position", "path": "position"}
+PRIMARY = {
+    "imu": "gyro",
+    "odometry": "position",
+    "navsatfix": "position",
+    "pressure": "depth",
+    "twist": "velocity",
+    "pose": "position",
+    "tf": "position",
+    "path": "position",
+}
 
 WATER_DENSITY = 1025.0  # kg/m^3, sea water
 ATMOSPHERIC_PRESSURE = 101325.0  # Pa
 GRAVITY = 9.80665  # m/s^2
 
 RPY = ("roll", "pitch", "yaw")
-RPY_CONVENTION = ("roll, pitch, yaw from the quaternion (ZYX); yaw: 0 = +x of the frame, "
-                  "counter-clockwise positive (REP-103)")
+RPY_CONVENTION = (
+    "roll, pitch, yaw from the quaternion (ZYX); yaw: 0 = +x of the frame, counter-clockwise positive (REP-103)"
+)
 XYZ = ("x", "y", "z")
 
 
@@ -92,8 +102,14 @@ def rpy_to_quat(rpy: np.ndarray) -> np.ndarray:
     """(n, 3) roll, pitch, yaw -> (n, 4) quaternions x, y, z, w (inverse of quat_to_rpy)."""
     r, p, y = (np.asarray(rpy, float)[:, i] / 2 for i in range(3))
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.column_stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
+    return np.column_stack(
+        [
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy,
+        ]
+    )
 
 
 def _vec(items) -> np.ndarray:
@@ -152,7 +168,7 @@ def tf_pair(msgs: list, log_ns, parent: str | None, child: str | None):
     """
     poses, logs, seen = [], [], {}
     for msg, log in zip(msgs, log_ns):
-        for tr in (msg.transforms if hasattr(msg, "transforms") else [msg]):
+        for tr in msg.transforms if hasattr(msg, "transforms") else [msg]:
             pair = (frame_name(tr.header.frame_id), frame_name(tr.child_frame_id))
             seen[pair] = seen.get(pair, 0) + 1
             if parent is None or pair == (parent, child):
@@ -175,25 +191,33 @@ def convert(kind: str, msgs: list, geo=None, options: dict | None = None) -> dic
     fid = frame_id(msgs)
     if kind == "imu":
         cov0 = np.array([m.orientation_covariance[0] for m in msgs], float)
-        return {"gyro": _field(_vec(m.angular_velocity for m in msgs), "rad/s", fid, components=XYZ),
-                "accel": _field(_vec(m.linear_acceleration for m in msgs), "m/s^2", fid, components=XYZ),
-                "attitude": _attitude([m.orientation for m in msgs], fid, cov0 != -1)}
+        return {
+            "gyro": _field(_vec(m.angular_velocity for m in msgs), "rad/s", fid, components=XYZ),
+            "accel": _field(_vec(m.linear_acceleration for m in msgs), "m/s^2", fid, components=XYZ),
+            "attitude": _attitude([m.orientation for m in msgs], fid, cov0 != -1),
+        }
     if kind == "odometry":
         child = str(msgs[0].child_frame_id) if msgs else ""
         poses = [m.pose.pose for m in msgs]
         twists = [m.twist.twist for m in msgs]
-        return {"position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
-                "attitude": _attitude([p.orientation for p in poses], fid),
-                "velocity": _field(_vec(t.linear for t in twists), "m/s", child, components=XYZ),
-                "rate": _field(_vec(t.angular for t in twists), "rad/s", child, components=XYZ)}
+        return {
+            "position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
+            "attitude": _attitude([p.orientation for p in poses], fid),
+            "velocity": _field(_vec(t.linear for t in twists), "m/s", child, components=XYZ),
+            "rate": _field(_vec(t.angular for t in twists), "rad/s", child, components=XYZ),
+        }
     if kind == "pose":
         poses = [_pose_of(m) for m in msgs]
-        return {"position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
-                "attitude": _attitude([p.orientation for p in poses], fid)}
+        return {
+            "position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
+            "attitude": _attitude([p.orientation for p in poses], fid),
+        }
     if kind == "twist":
         twists = [m.twist.twist if hasattr(m.twist, "twist") else m.twist for m in msgs]
-        return {"velocity": _field(_vec(t.linear for t in twists), "m/s", fid, components=XYZ),
-                "rate": _field(_vec(t.angular for t in twists), "rad/s", fid, components=XYZ)}
+        return {
+            "velocity": _field(_vec(t.linear for t in twists), "m/s", fid, components=XYZ),
+            "rate": _field(_vec(t.angular for t in twists), "rad/s", fid, components=XYZ),
+        }
     if kind == "pressure":
         p = np.array([m.fluid_pressure for m in msgs], float)
         rho = float(opt.get("water_density", WATER_DENSITY))
@@ -206,13 +230,24 @@ def convert(kind: str, msgs: list, geo=None, options: dict | None = None) -> dic
         lon = np.array([m.longitude for m in msgs], float)
         alt = np.array([m.altitude for m in msgs], float)
         status = np.array([m.status.status if hasattr(m, "status") else 0 for m in msgs], float)
-        cov = np.array([tuple(m.position_covariance)[::4] if len(m.position_covariance) == 9
-                        else (np.nan,) * 3 for m in msgs], float).reshape(-1, 3)
+        cov = np.array(
+            [tuple(m.position_covariance)[::4] if len(m.position_covariance) == 9 else (np.nan,) * 3 for m in msgs],
+            float,
+        ).reshape(-1, 3)
         ok = (status >= 0) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(alt)
         ok &= (np.abs(lat) <= 90) & (np.abs(lon) <= 180) & ~((lat == 0) & (lon == 0))
         enu = geo.forward(lat, lon, alt, ok)
-        return {"position": _field(enu, "m", "ENU local", ok, ("east", "north", "up"), (),
-                                   "UTM (meta crs) minus meta origin; up = altitude - origin altitude"),
-                "sigma": _field(np.sqrt(np.abs(cov)), "m", "ENU local", ok, ("east", "north", "up")),
-                "status": _field(status, "", "", np.ones(len(status), bool))}
+        return {
+            "position": _field(
+                enu,
+                "m",
+                "ENU local",
+                ok,
+                ("east", "north", "up"),
+                (),
+                "UTM (meta crs) minus meta origin; up = altitude - origin altitude",
+            ),
+            "sigma": _field(np.sqrt(np.abs(cov)), "m", "ENU local", ok, ("east", "north", "up")),
+            "status": _field(status, "", "", np.ones(len(status), bool)),
+        }
     raise ValueError(f"no converter for {kind}")

@@ -9,6 +9,7 @@ entry points of installed distributions, and any ``"module:Class"`` name. A plug
 filter is a subclass of :class:`replay.filters.base.Filter` implementing ``engine``
 or the per-run ``predict``/``update``, with valid ``PARAMS`` (``docs/plugins.md``).
 """
+
 from replay.util.params import Param  # for plugins: from replay.filters import Filter, Param
 from replay.util.plugins import Registry, class_problem
 
@@ -31,25 +32,29 @@ def _check(obj):
     return class_problem(obj, Filter, "replay.filters.base.Filter", (("engine",), ("predict", "update")))
 
 
-FILTERS = Registry("filter", {
-    "kf": "replay.filters.kalman:KalmanFilter",
-    "ekf": "replay.filters.kalman:EKF",
-    "ukf": "replay.filters.sigma:UKF",
-    "ckf": "replay.filters.sigma:CKF",
-    "pf": "replay.filters.pf:ParticleFilter",
-    "gpf": "replay.filters.p000.gpf:GreyParticleFilter",
-    "mmpf": "replay.filters.p000.mmpf:MultipleModelPF",
-    "stckf": "replay.filters.p002.stckf:STCKF",
-    "stcpf": "replay.filters.p002.stcpf:CubatureParticleFilter",
-    "igwo-stcpf": "replay.filters.p002.igwo_stcpf:IGWOSTCPF",
-    "gwo-pf": "replay.filters.p002.igwo_stcpf:GWOPF",
-    "igwo-pf": "replay.filters.p002.igwo_stcpf:IGWOPF",
-    "pso-pf": "replay.filters.p002.igwo_stcpf:PSOPF",
-    "pso-cpf": "replay.filters.p002.igwo_stcpf:PSOCPF",
-    "aukf": "replay.filters.p001.aukf:AUKF",
-    "wf-pf": "replay.filters.p003.wfpf:WeightFactorPF",
-    "measurements": "replay.filters.measurements:Measurements",
-}, check=_check)
+FILTERS = Registry(
+    "filter",
+    {
+        "kf": "replay.filters.kalman:KalmanFilter",
+        "ekf": "replay.filters.kalman:EKF",
+        "ukf": "replay.filters.sigma:UKF",
+        "ckf": "replay.filters.sigma:CKF",
+        "pf": "replay.filters.pf:ParticleFilter",
+        "gpf": "replay.filters.p000.gpf:GreyParticleFilter",
+        "mmpf": "replay.filters.p000.mmpf:MultipleModelPF",
+        "stckf": "replay.filters.p002.stckf:STCKF",
+        "stcpf": "replay.filters.p002.stcpf:CubatureParticleFilter",
+        "igwo-stcpf": "replay.filters.p002.swarm_filters:IGWOSTCPF",
+        "gwo-pf": "replay.filters.p002.swarm_filters:GWOPF",
+        "igwo-pf": "replay.filters.p002.swarm_filters:IGWOPF",
+        "pso-pf": "replay.filters.p002.swarm_filters:PSOPF",
+        "pso-cpf": "replay.filters.p002.swarm_filters:PSOCPF",
+        "aukf": "replay.filters.p001.aukf:AUKF",
+        "wf-pf": "replay.filters.p003.wfpf:WeightFactorPF",
+        "measurements": "replay.filters.measurements:Measurements",
+    },
+    check=_check,
+)
 
 
 def make_filter(name: str, **params):

@@ -23,32 +23,28 @@ batch of one). Time convention: ``x0, P0`` describe the state one step before
 the first measurement; step k = 0..n-1 predicts with ``f(., k)`` and updates
 with ``z[k]``; estimates are the posterior mean and covariance at each step.
 
-Divergence is per run: a non-finite mean or covariance, or a negative variance,
-at step k makes that run's ``diverged_at = k`` (its estimates from k on are
-NaN) and drops it from the engine; the other runs go on. A numerical exception
-(LinAlgError, FloatingPointError, ValueError, IndexError, ...) raised by
-``start`` or ``step`` while several runs are active redoes the whole call run
-by run (M = 1 each) from the generators' saved starting states, so a run's
-numbers never depend on which runs share its batch; with one run it marks that
-run diverged at k with ``info["error"] = "<Type>: <message>"``. Errors of the
-user (ReplayError) and of the program (TypeError, AttributeError, ...) are
-raised, never counted as divergence. (The loop first runs without per-step
-tests and checks all estimates once at the end: most runs never diverge. When
-a run diverged or raised, the call is redone from the generators' saved states
-testing every step, so the numbers are those of the checked loop.)
+Divergence is per run: a non-finite mean or covariance, or a negative variance, at step k
+makes that run's ``diverged_at = k`` (its estimates from k on are NaN) and drops it from the
+engine; the other runs go on. A numerical exception (LinAlgError, FloatingPointError,
+ValueError, IndexError, ...) raised by ``start`` or ``step`` while several runs are active
+redoes the whole call run by run (M = 1 each) from the generators' saved starting states, so a
+run's numbers never depend on which runs share its batch; with one run it marks that run
+diverged at k with ``info["error"] = "<Type>: <message>"``. Errors of the user (ReplayError) and
+of the program (TypeError, AttributeError, ...) are raised, never counted as divergence. (The
+loop first runs without per-step tests and checks all estimates once at the end; a run that
+diverged or raised is redone, checked at every step, from the saved states.)
 
 Exactness rule for every engine: each run draws only from its own generator
 and every operation acts on each run's slice alone, so a batch of M runs gives
 the numbers of M runs of one, bit for bit.
 
-Filters written per run (a mutable :class:`State` per run) define
-``start(state, x0, P0)``, ``predict(state, k)``, ``update(state, z, k, mask)``,
-``estimate(state)`` and ``finish(state, info)``; the default :meth:`engine`
-loops over the runs calling them (:class:`PerRunEngine`). Such an ``update`` reports its
-normalised innovation squared by setting ``state.innovation = (y, S)`` (the innovation of the
-components it used and its covariance): the engine records NIS = yᵀ S⁻¹ y with len(y) degrees
-of freedom for that step (NaN where it is not set).
+Filters written per run (a mutable :class:`State` per run) define ``start(state, x0, P0)``,
+``predict(state, k)``, ``update(state, z, k, mask)``, ``estimate(state)`` and ``finish(state,
+info)``; the default :meth:`engine` loops over the runs calling them (:class:`PerRunEngine`).
+Such an ``update`` reports its innovation as ``state.innovation = (y, S)``: the engine records
+NIS = yᵀ S⁻¹ y with len(y) degrees of freedom for that step (NaN where it is not set).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -187,8 +183,13 @@ class Filter(Declared):
     def run(self, model, z, x0, P0, rng: np.random.Generator | None = None) -> Estimates:
         """One run: the batch of one."""
         z = np.asarray(z, dtype=float)
-        return self.run_batch(model, z[None], np.asarray(x0, float)[None], np.asarray(P0, float)[None],
-                              [rng if rng is not None else np.random.default_rng(0)])[0]
+        return self.run_batch(
+            model,
+            z[None],
+            np.asarray(x0, float)[None],
+            np.asarray(P0, float)[None],
+            [rng if rng is not None else np.random.default_rng(0)],
+        )[0]
 
     def run_batch(self, model, Z, X0, P0, rngs) -> list[Estimates]:
         """M runs: measurements ``Z`` (M, n, nz), priors ``X0`` (M, nx), ``P0`` (M, nx, nx), one
@@ -196,8 +197,10 @@ class Filter(Declared):
         Z, X0, P0 = (np.asarray(a, dtype=float) for a in (Z, X0, P0))
         M, nx = len(Z), model.nx
         if Z.ndim != 3 or X0.shape != (M, nx) or P0.shape != (M, nx, nx) or len(rngs) != M:
-            raise ValueError(f"run_batch: Z {Z.shape}, X0 {X0.shape}, P0 {P0.shape} and {len(rngs)} "
-                             f"generators must describe the same runs of a model with nx = {nx}")
+            raise ValueError(
+                f"run_batch: Z {Z.shape}, X0 {X0.shape}, P0 {P0.shape} and {len(rngs)} "
+                f"generators must describe the same runs of a model with nx = {nx}"
+            )
         rngs = [g if g is not None else np.random.default_rng(0) for g in rngs]
         saved = [g.bit_generator.state for g in rngs]
 
@@ -213,8 +216,10 @@ class Filter(Declared):
                 return self._loop(model, Z, X0, P0, rngs, careful=True)
         except _Redo:
             restore()
-            return [self._loop(model, Z[m:m + 1], X0[m:m + 1], P0[m:m + 1], rngs[m:m + 1], careful=True)[0]
-                    for m in range(M)]
+            return [
+                self._loop(model, Z[m : m + 1], X0[m : m + 1], P0[m : m + 1], rngs[m : m + 1], careful=True)[0]
+                for m in range(M)
+            ]
 
     def _loop(self, model, Z, X0, P0, rngs, careful: bool) -> list[Estimates]:
         """The steps of M runs. Careless first (no per-step test: most runs never diverge), checked
@@ -277,8 +282,9 @@ class Filter(Declared):
                 diverged[m] = k
             active = good
             engine.keep(ok)
-        if not careful and not (np.isfinite(X).all() and np.isfinite(P).all()
-                                and P.diagonal(0, 2, 3).min(initial=0.0) >= 0.0):
+        if not careful and not (
+            np.isfinite(X).all() and np.isfinite(P).all() and P.diagonal(0, 2, 3).min(initial=0.0) >= 0.0
+        ):
             raise _Careful
         out = []
         for m in range(M):
@@ -297,8 +303,10 @@ def shape_error(flt, where: str, want: tuple, x, P) -> ProtocolError:
     got = f"a state of shape {np.shape(x)} and a covariance of shape {np.shape(P)}"
     cls = flt if isinstance(flt, type) else type(flt)
     who = repr(flt) if isinstance(flt, str) else repr(cls.name) if "name" in vars(cls) else cls.__name__
-    return ProtocolError(f"filter {who}: {where} returned {got}; expected {want} and {want + want[-1:]} "
-                         f"(a state of {want[-1]} components)")
+    return ProtocolError(
+        f"filter {who}: {where} returned {got}; expected {want} and {want + want[-1:]} "
+        f"(a state of {want[-1]} components)"
+    )
 
 
 def check_batch(name: str, out, problems) -> None:
@@ -306,8 +314,9 @@ def check_batch(name: str, out, problems) -> None:
     covariances (n, nx, nx) at most as long as the measurements (else one-line ProtocolError)."""
     if not isinstance(out, (list, tuple)) or len(out) != len(problems):
         got = f"{len(out)} results" if isinstance(out, (list, tuple)) else f"a {type(out).__name__}"
-        raise ProtocolError(f"filter {name!r}: run_batch() returned {got} for {len(problems)} runs "
-                            "(expected one Estimates per run)")
+        raise ProtocolError(
+            f"filter {name!r}: run_batch() returned {got} for {len(problems)} runs (expected one Estimates per run)"
+        )
     for est, p in zip(out, problems):
         n, nx = len(p.z), p.model.nx
         x, P = getattr(est, "x", None), getattr(est, "P", None)
@@ -330,7 +339,7 @@ def _all_fine(x, P) -> bool:
     """
     if len(x) == 1:  # one run: Python floats beat numpy's per-call cost on a few numbers
         p = P.ravel().tolist()
-        return isfinite(sum(p) + sum(x.ravel().tolist())) and min(p[::len(P[0]) + 1]) >= 0.0
+        return isfinite(sum(p) + sum(x.ravel().tolist())) and min(p[:: len(P[0]) + 1]) >= 0.0
     return isfinite(x.sum() + P.sum()) and P.diagonal(0, 1, 2).min() >= 0.0
 
 

@@ -30,6 +30,7 @@ H and R).
 :class:`KalmanEngine` is shared with the sigma-point filters of
 :mod:`replay.filters.sigma`, which replace ``predict`` and ``update``.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -75,8 +76,15 @@ def kalman_update(x, P, y, H, R, x_angles=()):
     one = x.ndim == 1
     x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
     nis = np.empty(len(x2))
-    bad = kernels.joseph_update(x2, P3, stack_of(y, one), stack_of(H, one), np.ascontiguousarray(R, dtype=float),
-                                angle_mask(tuple(x_angles), x2.shape[1]), nis)
+    bad = kernels.joseph_update(
+        x2,
+        P3,
+        stack_of(y, one),
+        stack_of(H, one),
+        np.ascontiguousarray(R, dtype=float),
+        angle_mask(tuple(x_angles), x2.shape[1]),
+        nis,
+    )
     if bad >= 0:
         raise not_pd(bad)
     return (x2[0], P3[0], nis[0]) if one else (x2, P3, nis)
@@ -111,8 +119,11 @@ def measurement(model, k, mask):
 def groups(finite):
     """Runs sharing a measurement pattern: [(rows, mask or None for full)]."""
     patterns, inverse = np.unique(finite, axis=0, return_inverse=True)
-    return [(np.flatnonzero(inverse.ravel() == g), None if pat.all() else pat)
-            for g, pat in enumerate(patterns) if pat.any()]
+    return [
+        (np.flatnonzero(inverse.ravel() == g), None if pat.all() else pat)
+        for g, pat in enumerate(patterns)
+        if pat.any()
+    ]
 
 
 class KalmanEngine:
@@ -193,9 +204,15 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
         return None
     stacks = param_stacks(m, steps)
     try:  # Q, R of another shape at some step (ragged): no stack, step by step instead
-        Q, R = (np.ascontiguousarray(getattr(m, c)[None] if getattr(type(m), f) is getattr(Model, f)
-                                     else [getattr(m, f)(k) for k in range(steps)], dtype=float)
-                for f, c in (("process_cov", "Q"), ("measurement_cov", "R")))  # constant: a stack of one
+        Q, R = (
+            np.ascontiguousarray(
+                getattr(m, c)[None]
+                if getattr(type(m), f) is getattr(Model, f)
+                else [getattr(m, f)(k) for k in range(steps)],
+                dtype=float,
+            )
+            for f, c in (("process_cov", "Q"), ("measurement_cov", "R"))
+        )  # constant: a stack of one
     except ValueError:
         return None
     if stacks is None:
@@ -207,8 +224,7 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     masks = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
 
     def runs(lo, hi):  # the runs are independent: the same numbers on any thread
-        return call(x[lo:hi], P[lo:hi], Z[lo:hi], seen, *stacks, Q, R, *args, *masks, X[lo:hi], PP[lo:hi],
-                    nis[lo:hi])
+        return call(x[lo:hi], P[lo:hi], Z[lo:hi], seen, *stacks, Q, R, *args, *masks, X[lo:hi], PP[lo:hi], nis[lo:hi])
 
     t0 = perf_counter()
     bad = max(split(runs, M, grain=grain(4.0 * steps)))  # about 4 µs a run-step

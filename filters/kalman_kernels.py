@@ -13,13 +13,23 @@ readable reference (``tests/pure.py``: equal bit for bit). The ``*_into`` forms 
 work arrays from the caller (the whole-run loops of :mod:`replay.filters.kalman_loops` allocate
 them once per run, not once per step); the plain forms allocate them and call the ``_into`` form.
 """
+
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
-from replay.util.kernels import (cholesky, deviations, matmul, point_mean, solve_rows, symmetrise,
-                                 weighted_outer, whitened_norm2, wrap)
+from replay.util.kernels import (
+    cholesky,
+    deviations,
+    matmul,
+    point_mean,
+    solve_rows,
+    symmetrise,
+    weighted_outer,
+    whitened_norm2,
+    wrap,
+)
 
 
 @nb.njit(cache=True)
@@ -191,9 +201,30 @@ def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
     P has no Cholesky factor (its points, and later runs', not made)."""
     M, p, nz = Z.shape
     n = x.shape[1]
-    return sigma_update_into(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, np.empty((M, nz)),
-                             np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz)),
-                             np.empty((nz, nz)), np.empty((n, nz)), np.empty((n, n)))
+    return sigma_update_into(
+        Z,
+        dev,
+        z,
+        wm,
+        wc,
+        zmask,
+        R,
+        x,
+        P,
+        xmask,
+        nis,
+        xi,
+        X,
+        Xdev,
+        np.empty((M, nz)),
+        np.empty((M, nz, nz)),
+        np.empty((M, n, nz)),
+        np.empty(nz),
+        np.empty((p, nz)),
+        np.empty((nz, nz)),
+        np.empty((n, nz)),
+        np.empty((n, n)),
+    )
 
 
 @nb.njit(cache=True)
@@ -247,8 +278,22 @@ def joseph_update(x, P, y, H, R, xmask, nis):
     left as they were), or -1."""
     M, n = x.shape
     nz = y.shape[1]
-    return joseph_update_into(x, P, y, H, R, xmask, nis, np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz)),
-                              np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz)))
+    return joseph_update_into(
+        x,
+        P,
+        y,
+        H,
+        R,
+        xmask,
+        nis,
+        np.empty((n, nz)),
+        np.empty((nz, nz)),
+        np.empty((n, nz)),
+        np.empty((nz, nz)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, nz)),
+    )
 
 
 @nb.njit(cache=True)

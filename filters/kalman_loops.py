@@ -9,6 +9,7 @@ arguments of one declared type (:data:`replay.filters.compiled.ROWS_KERNEL`, ``J
 one compilation (cached by numba) serves every model. When a loop runs:
 :func:`replay.filters.compiled.loop_ready`.
 """
+
 from __future__ import annotations
 
 import numba as nb
@@ -18,8 +19,13 @@ from numba import types
 from replay.util.kernels import wrap
 
 from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
-from .kalman_kernels import (joseph_update_into, propagate_cov_into, sigma_points_into, sigma_predict_into,
-                             sigma_update_into)
+from .kalman_kernels import (
+    joseph_update_into,
+    propagate_cov_into,
+    sigma_points_into,
+    sigma_predict_into,
+    sigma_update_into,
+)
 
 COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
@@ -70,8 +76,30 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
         for m in range(M):
             for q in range(nz):
                 z[m, q] = Z[m, k, q]
-        bad = sigma_update_into(Zp, dev, z, wm, wc, zmask, R[k % R.shape[0]], x, P, xmask, nis[:, k], xi, X, dev,
-                                y, S, Pxz, zh, Dz, Lz, K, L)
+        bad = sigma_update_into(
+            Zp,
+            dev,
+            z,
+            wm,
+            wc,
+            zmask,
+            R[k % R.shape[0]],
+            x,
+            P,
+            xmask,
+            nis[:, k],
+            xi,
+            X,
+            dev,
+            y,
+            S,
+            Pxz,
+            zh,
+            Dz,
+            Lz,
+            K,
+            L,
+        )
         if 0 <= bad < M:
             return k
         Xout[:, k] = x

@@ -12,6 +12,7 @@ Deterministic: it draws no random number. A model with no direct observation (ra
 bearing, a sonar) has nothing to show: :func:`direct_rows` is empty and the pipeline adds
 no such row.
 """
+
 from __future__ import annotations
 
 import numpy as np

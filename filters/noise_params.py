@@ -26,6 +26,7 @@ likelihood (its own ``loglik``) derives them from ``Q``/``R`` in its own way: it
 new ones only when it defines ``refresh_noise()`` (recompute what it derives from
 ``self.Q`` and ``self.R``); otherwise a setting that changes them is refused.
 """
+
 from __future__ import annotations
 
 import copy
@@ -47,8 +48,10 @@ class NoiseMatrix(Covariance):
     (that times the identity)."""
 
     def accepts(self) -> str:
-        return ("a symmetric positive-definite matrix (list of rows), its diagonal (positive numbers) "
-                "or a positive number (times the identity)" + (" (or null)" if self.optional else ""))
+        return (
+            "a symmetric positive-definite matrix (list of rows), its diagonal (positive numbers) "
+            "or a positive number (times the identity)" + (" (or null)" if self.optional else "")
+        )
 
     def _coerce(self, v):
         if _is_number(v):
@@ -61,10 +64,10 @@ NOISE_PARAMS = (
     Param("q_scale", float, 1.0, "multiplies the task's process noise covariance Q_k at every step", **SCALE),
     Param("r_scale", float, 1.0, "multiplies the task's measurement noise covariance R_k", **SCALE),
     Param("p0_scale", float, 1.0, "multiplies the task's prior covariance P0", **SCALE),
-    NoiseMatrix("Q", list, None, "replaces the task's process noise covariance (time-invariant models)",
-                optional=True),
-    NoiseMatrix("R", list, None, "replaces the task's measurement noise covariance (time-invariant models)",
-                optional=True),
+    NoiseMatrix("Q", list, None, "replaces the task's process noise covariance (time-invariant models)", optional=True),
+    NoiseMatrix(
+        "R", list, None, "replaces the task's measurement noise covariance (time-invariant models)", optional=True
+    ),
     NoiseMatrix("P0", list, None, "replaces the task's prior covariance", optional=True),
 )
 NAMES = tuple(p.name for p in NOISE_PARAMS)
@@ -86,13 +89,16 @@ def declared(cls) -> tuple:
     their names is refused (TypeError, when the class is defined)."""
     own = tuple(p for p in cls.PARAMS if p not in NOISE_PARAMS)
     if clash := [p.name for p in own if p.name in NAMES]:
-        raise TypeError(f"filter {cls.__name__}: parameter {clash[0]!r} is reserved for the per-filter "
-                        "noise settings (replay.filters.noise_params); rename it")
+        raise TypeError(
+            f"filter {cls.__name__}: parameter {clash[0]!r} is reserved for the per-filter "
+            "noise settings (replay.filters.noise_params); rename it"
+        )
     return own + NOISE_PARAMS
 
 
 def taking_settings(init):
     """A filter's constructor of its own, also taking the noise settings (checked, one line)."""
+
     @functools.wraps(init)
     def __init__(self, *args, **kwargs):
         given = {k: kwargs.pop(k) for k in NAMES if k in kwargs}
@@ -100,14 +106,17 @@ def taking_settings(init):
         for p in NOISE_PARAMS:
             if p.name in given:
                 setattr(self, p.name, p.check(given[p.name], self.owner()))
+
     return __init__
 
 
 def reporting_settings(params):
     """A filter's ``params()`` of its own, reporting the noise settings as :func:`reported`."""
+
     @functools.wraps(params)
     def wrapped(self) -> dict:
         return reported(params(self), self)
+
     return wrapped
 
 
@@ -122,9 +131,11 @@ def matrix(value, n: int, who: str, name: str) -> np.ndarray:
     if M.ndim == 0:
         return float(M) * np.eye(n)
     if len(M) != n:
-        raise ReplayError(f"{who}: {name} must be {n}x{n} (this task's model has {n} "
-                          f"{'state' if name != 'R' else 'measurement'} components), or its diagonal "
-                          f"({n} numbers), or a number; got size {len(M)}")
+        raise ReplayError(
+            f"{who}: {name} must be {n}x{n} (this task's model has {n} "
+            f"{'state' if name != 'R' else 'measurement'} components), or its diagonal "
+            f"({n} numbers), or a number; got size {len(M)}"
+        )
     return np.diag(M) if M.ndim == 1 else M
 
 
@@ -151,11 +162,15 @@ def plan(flt, model) -> dict:
             continue
         given = s.get(name)
         if given is not None and _own(model, cov):
-            raise ReplayError(f"{who}: {name} cannot replace the noise of model {type(model).__name__}, whose "
-                              f"{cov}(k) changes with the step; use {name.lower()}_scale")
+            raise ReplayError(
+                f"{who}: {name} cannot replace the noise of model {type(model).__name__}, whose "
+                f"{cov}(k) changes with the step; use {name.lower()}_scale"
+            )
         if _own(model, draw) and not hasattr(model, "refresh_noise"):
-            raise ReplayError(f"{who}: model {type(model).__name__} computes its own {draw} from its noise; "
-                              f"{name} and {name.lower()}_scale cannot change it (it defines no refresh_noise)")
+            raise ReplayError(
+                f"{who}: model {type(model).__name__} computes its own {draw} from its noise; "
+                f"{name} and {name.lower()}_scale cannot change it (it defines no refresh_noise)"
+            )
         out[name] = (None if given is None else matrix(given, n, who, name), scale)
     if "P0" in s or "p0_scale" in s:
         out["P0"] = (None if s.get("P0") is None else matrix(s["P0"], nx, who, "P0"), s.get("p0_scale", 1.0))

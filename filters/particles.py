@@ -26,6 +26,7 @@ functions below (:func:`normalise`, :func:`estimate`, :func:`ess`,
 002's compiled kernels call the same kernels (re-exported by
 :mod:`replay.filters.p002.compiled_util`).
 """
+
 from __future__ import annotations
 
 import math
@@ -145,8 +146,9 @@ def estimate(X: np.ndarray, w: np.ndarray, angles=()):
     axis) get the circular mean and wrapped residuals."""
     M, N, nx = X.shape
     x, P = np.empty((M, nx)), np.empty((M, nx, nx))
-    moments_rows(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float),
-                 angle_mask(tuple(angles), nx), x, P)
+    moments_rows(
+        np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float), angle_mask(tuple(angles), nx), x, P
+    )
     return x, P
 
 

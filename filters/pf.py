@@ -29,6 +29,7 @@ numbers of M runs of one, bit for bit.
 Subclasses change the weighting through :meth:`ParticleFilter.weigh` (the
 weight-factor PF of paper 003 tempers the weights).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,10 +49,21 @@ class ParticleFilter(Filter):
     PARAMS = (
         Param("n_particles", int, 1000, "particles per run", low=1),
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
-        Param("ess_threshold", float, 1.0, "resample when ESS < ess_threshold * N (1: every step, 0: never)",
-              low=0.0, high=1.0),
-        Param("roughening", float, 0.0, "roughening constant K after resampling (Gordon et al. 1993 §4; "
-              "0: off, the paper suggests 0.2)", low=0.0),
+        Param(
+            "ess_threshold",
+            float,
+            1.0,
+            "resample when ESS < ess_threshold * N (1: every step, 0: never)",
+            low=0.0,
+            high=1.0,
+        ),
+        Param(
+            "roughening",
+            float,
+            0.0,
+            "roughening constant K after resampling (Gordon et al. 1993 §4; 0: off, the paper suggests 0.2)",
+            low=0.0,
+        ),
     )
 
     def engine(self, model, rngs):

@@ -18,6 +18,7 @@ and the general path: partly missing measurements, models that draw their own no
 a non-diagonal Q, time-varying Q or R, other resampling schemes and subclasses
 that change the weighting all step in Python.
 """
+
 from __future__ import annotations
 
 from time import perf_counter
@@ -40,8 +41,31 @@ COMPILE_AT = 10_000_000
 
 
 @nb.njit(cache=True, nogil=True)
-def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, xmask, zmask,
-           limit, rough, logw0, Xout, Pout, ess):
+def pf_run(
+    f,
+    h,
+    g,
+    X,
+    logw,
+    w,
+    Z,
+    seen,
+    Pf,
+    Ph,
+    qsd,
+    rdiag,
+    rL,
+    rinv,
+    rconst,
+    xmask,
+    zmask,
+    limit,
+    rough,
+    logw0,
+    Xout,
+    Pout,
+    ess,
+):
     """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
     w (N,) their log-weights and weights (all changed in place); Z (steps, nz), ``seen[k]``
     whether z_k is there (else no weighting at k); Pf[k], Ph[k] the
@@ -84,10 +108,31 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
 
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-PF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
-                     _M, _M,
-                     _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
-                     types.float64, types.float64, types.float64, _M, _M3, _V)
+PF_RUN = types.int64(
+    ROWS_KERNEL,
+    ROWS_KERNEL,
+    _GEN,
+    _M,
+    _V,
+    _V,
+    _M,
+    types.boolean[::1],
+    _M,
+    _M,
+    _V,
+    types.boolean,
+    _M,
+    _V,
+    types.float64,
+    types.boolean[::1],
+    types.boolean[::1],
+    types.float64,
+    types.float64,
+    types.float64,
+    _M,
+    _M3,
+    _V,
+)
 
 
 def run(engine, Z, finite):
@@ -102,8 +147,11 @@ def run(engine, Z, finite):
     seen = finite.all(axis=2)
     if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
         return None
-    if (not applies(engine, m) or not all(isinstance(g, np.random.Generator) for g in engine.active)
-            or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)):
+    if (
+        not applies(engine, m)
+        or not all(isinstance(g, np.random.Generator) for g in engine.active)
+        or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)
+    ):
         return None
     try:  # a covariance without a factor: the steps meet it and record the divergence
         (qdiag, qsd, _, _), (rdiag, rL, rinv, logdet) = noise_factor(m.Q), noise_factor(m.R)
@@ -119,13 +167,35 @@ def run(engine, Z, finite):
     X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
     qsd = np.ascontiguousarray(qsd)
-    fixed = (rdiag, rL, rinv, logdet + nz * LOG_2PI, xmask, zmask, flt.ess_threshold * N,
-             float(flt.roughening), float(engine.logw0))
+    fixed = (
+        rdiag,
+        rL,
+        rinv,
+        logdet + nz * LOG_2PI,
+        xmask,
+        zmask,
+        flt.ess_threshold * N,
+        float(flt.roughening),
+        float(engine.logw0),
+    )
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
-        return [call(engine.active[j], *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
-                     Z[j], seen[j], *stacks, qsd, *fixed, X[j], P[j], E[j]) for j in range(lo, hi)]
+        return [
+            call(
+                engine.active[j],
+                *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
+                Z[j],
+                seen[j],
+                *stacks,
+                qsd,
+                *fixed,
+                X[j],
+                P[j],
+                E[j],
+            )
+            for j in range(lo, hi)
+        ]
 
     t0 = perf_counter()
     counts = [c for part in split(runs, M, grain=grain(0.15 * steps * N)) for c in part]
@@ -143,7 +213,11 @@ def applies(engine, model) -> bool:
     bootstrap one, :meth:`replay.filters.pf.PFEngine.run_all`): systematic resampling, the
     model's own kernels, its noise drawn by the filter (no ``sample_f`` of its own), Q and R
     constant."""
-    return (SCHEMES.get(engine.flt.resampling) is systematic  # the scheme the loop computes, not a replacement
-            and model.kernels() is not None and derived_from_kernels(model)
-            and type(model).sample_f is Model.sample_f and type(model).process_cov is Model.process_cov
-            and type(model).measurement_cov is Model.measurement_cov)
+    return (
+        SCHEMES.get(engine.flt.resampling) is systematic  # the scheme the loop computes, not a replacement
+        and model.kernels() is not None
+        and derived_from_kernels(model)
+        and type(model).sample_f is Model.sample_f
+        and type(model).process_cov is Model.process_cov
+        and type(model).measurement_cov is Model.measurement_cov
+    )

@@ -7,6 +7,7 @@ Both invert the cumulative weights c_j = w_1 + ... + w_j (c_N set to 1, a guard
 against round-off leaving the last positions unmatched) at positions u: the
 ancestor of position u is the first j with c_j > u.
 """
+
 from __future__ import annotations
 
 import numba as nb

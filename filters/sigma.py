@@ -30,6 +30,7 @@ runs; the per-run State API of :class:`SigmaPointFilter` (``predict``,
 written per run, the AUKF of paper 001 and the STCKF of paper 002) calls the
 same functions on one run.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -66,8 +67,15 @@ def predict(model, x, P, k, xi, wm, wc):
     Y = on_points(model.f, sigma_points(x, P, xi)[0], k)
     Y3 = stack_of(Y, one)
     xm, Pm = np.empty(Y3.shape[::2]), np.empty((len(Y3),) + (Y3.shape[2],) * 2)
-    kernels.sigma_moments(Y3, wm, wc, angle_mask(model.x_angles, Y3.shape[2]),
-                          np.ascontiguousarray(model.process_cov(k), dtype=float), xm, Pm)
+    kernels.sigma_moments(
+        Y3,
+        wm,
+        wc,
+        angle_mask(model.x_angles, Y3.shape[2]),
+        np.ascontiguousarray(model.process_cov(k), dtype=float),
+        xm,
+        Pm,
+    )
     return (xm[0], Pm[0]) if one else (xm, Pm)
 
 
@@ -97,8 +105,9 @@ def correct(x, P, y, S, Pxz, x_angles=()):
     one = x.ndim == 1
     x3, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
     nis = np.empty(len(x3))
-    bad = kernels.kalman_correct(x3, P3, stack_of(y, one), stack_of(S, one), stack_of(Pxz, one),
-                                 angle_mask(x_angles, x3.shape[-1]), nis)
+    bad = kernels.kalman_correct(
+        x3, P3, stack_of(y, one), stack_of(S, one), stack_of(Pxz, one), angle_mask(x_angles, x3.shape[-1]), nis
+    )
     if bad >= 0:
         raise not_pd(bad)
     return (x3[0], P3[0], nis[0]) if one else (x3, P3, nis)
@@ -136,15 +145,17 @@ class SigmaEngine(KalmanEngine):
         self.all_made = not self.missing.any()
 
     def run_all(self, Z, finite):
-        return kalman.run_kernels(self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN,
-                                  self.xi, self.wm, self.wc)
+        return kalman.run_kernels(
+            self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN, self.xi, self.wm, self.wc
+        )
 
     def points(self, rows):
         """The points and deviations of the runs ``rows`` (None: all)."""
         missing = self.missing if rows is None else self.missing[rows]
         if not self.all_made and missing.any():
-            raise np.linalg.LinAlgError(f"covariance not positive definite (run {int(np.argmax(missing))} "
-                                        "of the stack)")
+            raise np.linalg.LinAlgError(
+                f"covariance not positive definite (run {int(np.argmax(missing))} of the stack)"
+            )
         return (self.X, self.dev) if rows is None else (self.X[rows], self.dev[rows])
 
     def predict(self, x, P, k):
@@ -154,9 +165,20 @@ class SigmaEngine(KalmanEngine):
         xm, Pm = np.empty((M, nx)), np.empty((M, nx, nx))
         self.X, self.dev = np.empty(Y.shape), np.empty(Y.shape)
         self.missing = np.zeros(M, bool)
-        self.unmade(kernels.sigma_predict(Y, self.wm, self.wc, self.xmask,
-                                          np.ascontiguousarray(m.process_cov(k), dtype=float), self.xi,
-                                          xm, Pm, self.X, self.dev))
+        self.unmade(
+            kernels.sigma_predict(
+                Y,
+                self.wm,
+                self.wc,
+                self.xmask,
+                np.ascontiguousarray(m.process_cov(k), dtype=float),
+                self.xi,
+                xm,
+                Pm,
+                self.X,
+                self.dev,
+            )
+        )
         return (xm[0], Pm[0]) if one else (xm, Pm)
 
     def update(self, x, P, z, k, mask, rows=None):
@@ -170,8 +192,22 @@ class SigmaEngine(KalmanEngine):
         x3, P3 = (x[None], P[None]) if one else (x, P)
         nis = np.empty(len(x3))
         Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
-        bad = kernels.sigma_update(Z, dev, stack_of(z, one), self.wm, self.wc, angle_mask(angles, Z.shape[2]),
-                                   np.ascontiguousarray(R, dtype=float), x3, P3, self.xmask, nis, self.xi, Xn, devn)
+        bad = kernels.sigma_update(
+            Z,
+            dev,
+            stack_of(z, one),
+            self.wm,
+            self.wc,
+            angle_mask(angles, Z.shape[2]),
+            np.ascontiguousarray(R, dtype=float),
+            x3,
+            P3,
+            self.xmask,
+            nis,
+            self.xi,
+            Xn,
+            devn,
+        )
         if 0 <= bad < len(x3):
             raise not_pd(bad)
         if rows is not None:
@@ -236,16 +272,22 @@ class UKF(SigmaPointFilter):
 
     name = "ukf"
     PARAMS = (
-        Param("alpha", float, 0.5, "spread of the sigma points about the mean (van der Merwe eq. 3.11)",
-              low=0.0, high=1.0, low_open=True),
+        Param(
+            "alpha",
+            float,
+            0.5,
+            "spread of the sigma points about the mean (van der Merwe eq. 3.11)",
+            low=0.0,
+            high=1.0,
+            low_open=True,
+        ),
         Param("beta", float, 2.0, "prior knowledge of the distribution (2: optimal for a Gaussian)", low=0.0),
         Param("kappa", float, 0.0, "secondary scaling; n + kappa must be positive for the state dimension n"),
     )
 
     def points(self, n):
         if not n + self.kappa > 0:
-            raise ReplayError(f"{self.owner()}: kappa must be > -{n} for a state of dimension {n} "
-                              f"(got {self.kappa:g})")
+            raise ReplayError(f"{self.owner()}: kappa must be > -{n} for a state of dimension {n} (got {self.kappa:g})")
         return tuple(a.copy() for a in _unscented(n, float(self.alpha), float(self.beta), float(self.kappa)))
 
 

@@ -11,14 +11,32 @@ Every name of :data:`__all__` is a function of :mod:`replay.api`, imported on fi
 ``replay.evaluate`` and ``replay.score`` are those functions; the modules behind them are
 :mod:`replay.run.evaluation` and :mod:`replay.scoring.scorer` (no submodule shares an API name).
 """
+
 import importlib as _importlib
 
 from replay.util.version import __version__  # noqa: F401  (a leaf: importlib.metadata)
 
-__all__ = ["campaign_results", "evaluate", "export_mcap", "frame_table", "list_plugins", "load_frame",
-           "load_trajectory", "make_filter", "make_task", "plot_errors", "plot_paired", "plot_rmse",
-           "plot_track", "refresh_plugins", "register_filter", "register_task", "report_table", "run_campaign",
-           "score"]
+__all__ = [
+    "campaign_results",
+    "evaluate",
+    "export_mcap",
+    "frame_table",
+    "list_plugins",
+    "load_frame",
+    "load_trajectory",
+    "make_filter",
+    "make_task",
+    "plot_errors",
+    "plot_paired",
+    "plot_rmse",
+    "plot_track",
+    "refresh_plugins",
+    "register_filter",
+    "register_task",
+    "report_table",
+    "run_campaign",
+    "score",
+]
 
 
 def __getattr__(name):

@@ -12,6 +12,7 @@ are used): a class is registered for this session under its ``name`` attribute (
 class name in lower case). Such a filter runs in this process (``evaluate``); a
 campaign's worker processes need a packaged plugin or a ``"module:Class"`` name.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -31,13 +32,30 @@ from replay.util.dataframes import frame_table, report_table  # noqa: F401 — r
 from replay.util.errors import ReplayError
 from replay.util.plugins import NAME
 
-__all__ = ["campaign_results", "evaluate", "export_mcap", "frame_table", "list_plugins", "load_frame",
-           "load_trajectory", "make_filter", "make_task", "plot_errors", "plot_paired", "plot_rmse", "plot_track",
-           "refresh_plugins", "register_filter", "register_task", "report_table", "run_campaign", "score"]
+__all__ = [
+    "campaign_results",
+    "evaluate",
+    "export_mcap",
+    "frame_table",
+    "list_plugins",
+    "load_frame",
+    "load_trajectory",
+    "make_filter",
+    "make_task",
+    "plot_errors",
+    "plot_paired",
+    "plot_rmse",
+    "plot_track",
+    "refresh_plugins",
+    "register_filter",
+    "register_task",
+    "report_table",
+    "run_campaign",
+    "score",
+]
 
 
-def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, adapter: str | None = None,
-               **params):
+def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, adapter: str | None = None, **params):
     """A dataset id (``"bohai/20220822_0_6"``, ``"sim/auv-sonar"``) or a file as a Frame.
 
     ``seed`` (an int or a ``numpy.random.Generator``) draws a simulated dataset;
@@ -67,13 +85,18 @@ def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict
     from replay.filters.base import Filter
 
     if not isinstance(filters, (list, tuple)) or not all(
-            isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters):
-        raise ReplayError(f"filters must be filter names (\"ekf,ukf\" or a list), Filter classes or instances "
-                          f"(got {filters!r:.80})")
-    if filter_params is not None and not (isinstance(filter_params, dict) and all(
-            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
-        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
-                          f"(got {filter_params!r:.80})")
+        isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters
+    ):
+        raise ReplayError(
+            f"filters must be filter names (\"ekf,ukf\" or a list), Filter classes or instances (got {filters!r:.80})"
+        )
+    if filter_params is not None and not (
+        isinstance(filter_params, dict)
+        and all(isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())
+    ):
+        raise ReplayError(
+            f"filter_params must be an object {{filter: {{parameter: value}}}} (got {filter_params!r:.80})"
+        )
     names, params = [], {k: dict(v) for k, v in (filter_params or {}).items()}
     for item in filters:
         if isinstance(item, str):
@@ -83,8 +106,10 @@ def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict
         name = register_filter(cls)
         if not inspect.isclass(item):  # an instance: its declared parameters
             if name in names:
-                raise ReplayError(f"filter {name!r} is given twice: evaluate runs one configuration per filter "
-                                  "(a parameter grid is a campaign: replay.run_campaign)")
+                raise ReplayError(
+                    f"filter {name!r} is given twice: evaluate runs one configuration per filter "
+                    "(a parameter grid is a campaign: replay.run_campaign)"
+                )
             params[name] = {**item.params(), **params.get(name, {})}
         names.append(name)
     return names, params
@@ -115,8 +140,9 @@ def register_task(cls, *, name: str | None = None) -> str:
     return _register(TASKS, cls, name)
 
 
-def run_campaign(campaign, *, out, workers: int | None = None, data_dir=None, quiet: bool = True,
-                 retry_failed: bool = False):
+def run_campaign(
+    campaign, *, out, workers: int | None = None, data_dir=None, quiet: bool = True, retry_failed: bool = False
+):
     """Run a campaign file (TOML, ``campaigns/example.toml``) into ``out``: its leaderboard as a
     DataFrame (one row per configuration; ``df.attrs["counts"]``: units computed, failed, ...)."""
     from pathlib import Path
@@ -152,9 +178,18 @@ def campaign_results(out, *, runs: bool = False):
     store, rows = Store(out), []
     for h, cfg in store.configs():
         for rec in store.records(h):
-            rows.append({"dataset": cfg["dataset"], "task": cfg["task"], "filter": cfg["filter"],
-                         "params": cfg["filter_params"], "config_hash": h, "run": rec["run"],
-                         "status": rec["status"], **(rec.get("metrics") or {})})
+            rows.append(
+                {
+                    "dataset": cfg["dataset"],
+                    "task": cfg["task"],
+                    "filter": cfg["filter"],
+                    "params": cfg["filter_params"],
+                    "config_hash": h,
+                    "run": rec["run"],
+                    "status": rec["status"],
+                    **(rec.get("metrics") or {}),
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -167,11 +202,15 @@ def _eval_runs(out):
 
     path = out / "runs.csv"
     if not path.is_file():
-        what = "a replay eval output written before runs.csv (rerun it)" if (out / "manifest.json").is_file() \
+        what = (
+            "a replay eval output written before runs.csv (rerun it)"
+            if (out / "manifest.json").is_file()
             else "not a campaign or replay eval output"
+        )
         raise ReplayError(f"{out}: no units/ and no runs.csv: {what}")
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
+
     def cell(k, v):
         if k == "params":
             return json.loads(v)
@@ -209,15 +248,20 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
     from replay.run.pipeline import load_frame as frame_of_run
 
     cfg = evaluation.results[0].config
-    check_target(path, dataset_inputs(cfg["dataset"], (cfg.get("dataset_params") or {}).get("mapping"), data_dir),
-                 "mcap")
+    check_target(
+        path, dataset_inputs(cfg["dataset"], (cfg.get("dataset_params") or {}).get("mapping"), data_dir), "mcap"
+    )
     frame = frame_of_run(cfg, run, data_dir)
     problem = tables.result(evaluation, evaluation.results[0].name).records[run]["problem"]
     estimates = {}
     for res in evaluation.results:
         est = res.estimates[run]
-        estimates[res.name] = {"t": evaluation.t[:len(est.x)], "x": est.x, "err": res.errors[run]["position"],
-                               "P": est.P}
+        estimates[res.name] = {
+            "t": evaluation.t[: len(est.x)],
+            "x": est.x,
+            "err": res.errors[run]["position"],
+            "P": est.P,
+        }
     return write_mcap(path, frame, problem, estimates)
 
 
@@ -241,17 +285,29 @@ def plugin_rows() -> list[dict]:
                     problem = ""
                 except ReplayError as err:
                     problem = str(err)
-                rows.append({"kind": kind, "name": name, "origin": reg.origin(name), "target": reg[name],
-                             "problem": problem})
-        rows += [{"kind": kind, "name": "", "origin": "", "target": "", "problem": p} for p in reg.problems()
-                 if not any(r["problem"] == p for r in rows)]
+                rows.append(
+                    {"kind": kind, "name": name, "origin": reg.origin(name), "target": reg[name], "problem": problem}
+                )
+        rows += [
+            {"kind": kind, "name": "", "origin": "", "target": "", "problem": p}
+            for p in reg.problems()
+            if not any(r["problem"] == p for r in rows)
+        ]
     found = registry.all_datasets()
     for ds_id, where, fields in dataset_entries()[0]:
         if ds_id in found:
-            rows.append({"kind": "dataset", "name": ds_id, "origin": where.split(", ")[0][len("entry point of "):],
-                         "target": fields.get("generator") or fields.get("file", ""), "problem": ""})
-    rows += [{"kind": "dataset", "name": "", "origin": "", "target": "", "problem": p}
-             for p in registry.plugin_problems()]
+            rows.append(
+                {
+                    "kind": "dataset",
+                    "name": ds_id,
+                    "origin": where.split(", ")[0][len("entry point of ") :],
+                    "target": fields.get("generator") or fields.get("file", ""),
+                    "problem": "",
+                }
+            )
+    rows += [
+        {"kind": "dataset", "name": "", "origin": "", "target": "", "problem": p} for p in registry.plugin_problems()
+    ]
     return rows
 
 

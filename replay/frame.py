@@ -29,6 +29,7 @@ Every adapter produces a :class:`Frame`; every task consumes one. Conventions:
 * **Report**: the adapter's account of every sample or channel it dropped,
   flagged, masked or repaired. Nothing is removed silently.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -66,8 +67,16 @@ class Channel:
         return 1 if self.values.ndim == 1 else self.values.shape[1]
 
     def take(self, index) -> "Channel":
-        return Channel(self.values[index], self.unit, self.frame, self.valid[index],
-                       self.components, self.angles, self.convention, self.description)
+        return Channel(
+            self.values[index],
+            self.unit,
+            self.frame,
+            self.valid[index],
+            self.components,
+            self.angles,
+            self.convention,
+            self.description,
+        )
 
 
 @dataclass
@@ -112,9 +121,17 @@ class RecordedEstimate:
     def until(self, t_end: float) -> "RecordedEstimate":
         """The poses stamped at or before ``t_end``."""
         keep = self.t <= t_end
-        pick = (lambda a: None if a is None else a[keep])
-        return RecordedEstimate(self.t[keep], self.position[keep], pick(self.orientation), pick(self.covariance),
-                                self.frame, self.child, self.description, dict(self.params))
+        pick = lambda a: None if a is None else a[keep]
+        return RecordedEstimate(
+            self.t[keep],
+            self.position[keep],
+            pick(self.orientation),
+            pick(self.covariance),
+            self.frame,
+            self.child,
+            self.description,
+            dict(self.params),
+        )
 
 
 @dataclass
@@ -138,8 +155,7 @@ class Report:
         self.entries.append(ReportEntry(action, what, int(count), reason))
 
     def find(self, action: str | None = None, what: str | None = None) -> list[ReportEntry]:
-        return [e for e in self.entries
-                if (action is None or e.action == action) and (what is None or e.what == what)]
+        return [e for e in self.entries if (action is None or e.action == action) and (what is None or e.what == what)]
 
     def count(self, action: str) -> int:
         return sum(e.count for e in self.entries if e.action == action)
@@ -190,9 +206,15 @@ class Frame:
         sl = slice(0, int(n))
         meta = dict(self.meta, first=int(n))
         end = float(self.t[int(n) - 1])  # recorded estimates: the poses stamped within the kept span
-        return Frame(self.t[sl], {k: c.take(sl) for k, c in self.channels.items()},
-                     {k: c.take(sl) for k, c in self.reference.items()},
-                     self.epoch, meta, self.report, {k: e.until(end) for k, e in self.estimates.items()})
+        return Frame(
+            self.t[sl],
+            {k: c.take(sl) for k, c in self.channels.items()},
+            {k: c.take(sl) for k, c in self.reference.items()},
+            self.epoch,
+            meta,
+            self.report,
+            {k: e.until(end) for k, e in self.estimates.items()},
+        )
 
     def summary(self) -> list[str]:
         """Human-readable lines: span, channels, reference, report."""
@@ -203,11 +225,15 @@ class Frame:
         for kind, group in (("channel", self.channels), ("reference", self.reference)):
             for name, ch in group.items():
                 comp = f" [{', '.join(ch.components)}]" if ch.components else ""
-                out.append(f"{kind:9s} {name}{comp}: {ch.unit}, {ch.frame or '-'}, "
-                           f"{int(ch.valid.sum())}/{len(ch)} valid")
+                out.append(
+                    f"{kind:9s} {name}{comp}: {ch.unit}, {ch.frame or '-'}, {int(ch.valid.sum())}/{len(ch)} valid"
+                )
         for name, est in self.estimates.items():
             span = f"{est.t[0]:.1f}..{est.t[-1]:.1f} s" if len(est) else "empty"
             extra = [w for w, v in (("orientation", est.orientation), ("covariance", est.covariance)) if v is not None]
-            out.append(f"estimate  {name}: {len(est)} poses, {span}, {est.frame or '-'}"
-                       + (f" -> {est.child}" if est.child else "") + (f", with {' and '.join(extra)}" if extra else ""))
+            out.append(
+                f"estimate  {name}: {len(est)} poses, {span}, {est.frame or '-'}"
+                + (f" -> {est.child}" if est.child else "")
+                + (f", with {' and '.join(extra)}" if extra else "")
+            )
         return out

@@ -20,6 +20,7 @@ Jacobians ``F`` and ``H`` are optional; the defaults are central differences
 Filters know nothing of files, datasets or the CLI: they see a model and
 measurements only.
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -128,9 +129,16 @@ class Model:
         nz = zh.shape[-1]
         zh2 = np.ascontiguousarray(zh.reshape(-1, nz), dtype=float)
         out = np.empty(len(zh2))
-        kernels.gauss_loglik(zh2, np.ascontiguousarray(z, dtype=float), angle_mask(tuple(angles), nz), diagonal,
-                             L if not diagonal else _NO_FACTOR, inv_var if diagonal else _NO_VAR,
-                             logdet + nz * kernels.LOG_2PI, out)  # compiled (replay.util.kernels)
+        kernels.gauss_loglik(
+            zh2,
+            np.ascontiguousarray(z, dtype=float),
+            angle_mask(tuple(angles), nz),
+            diagonal,
+            L if not diagonal else _NO_FACTOR,
+            inv_var if diagonal else _NO_VAR,
+            logdet + nz * kernels.LOG_2PI,
+            out,
+        )  # compiled (replay.util.kernels)
         return out.reshape(zh.shape[:-1])
 
     # --- simulation ----------------------------------------------------------------

@@ -252,10 +252,10 @@ def test_entropy_weights_invert_the_leader_order():
     """002 §3.2.2 as printed: w = 1 - E with E = -p log p peaking at p = 1/e, so the weights are not
     monotone in the fitness: f = [1, 1.5, 10] gives the worst leader the largest weight (the kernel's
     own function, equal to the oracle's numpy reading)."""
-    from replay.filters.p002 import compiled_util
+    from replay.filters.p002 import swarm_kernels
 
     f, w = np.array([1.0, 1.5, 10.0]), np.empty(3)
-    compiled_util.entropy_weights(f, 1e-12, 1e-4, w)
+    swarm_kernels.entropy_weights(f, 1e-12, 1e-4, w)
     np.testing.assert_allclose(w, [0.316, 0.294, 0.390], atol=5e-4)
     assert w[2] > w[0] > w[1]  # delta (f = 10) > alpha (f = 1) > beta (f = 1.5)
     np.testing.assert_allclose(w, entropy_weights(f), rtol=1e-14)

@@ -38,6 +38,7 @@ bags through rosbags, and the dispatch by kind), :mod:`.mcap_reader`
 bag writer, the inverse used by the exports and the simulated bags); the
 projection is :mod:`replay.adapters.geodesy`, shared with ``bohai-csv``.
 """
+
 from replay.adapters.geodesy import Geo, enu_to_geodetic, utm_epsg
 
 from .loader import SIM_TIME_BEFORE_NS, build_frame, inspect, load, resolve_mapping
@@ -45,6 +46,18 @@ from .reading import read, recording_kind
 from .recording import Recording, Topic
 from .writer import BagOut
 
-__all__ = ["SIM_TIME_BEFORE_NS", "BagOut", "Geo", "Recording", "Topic", "build_frame",
-           "enu_to_geodetic", "inspect", "load", "read", "recording_kind", "resolve_mapping",
-           "utm_epsg"]
+__all__ = [
+    "SIM_TIME_BEFORE_NS",
+    "BagOut",
+    "Geo",
+    "Recording",
+    "Topic",
+    "build_frame",
+    "enu_to_geodetic",
+    "inspect",
+    "load",
+    "read",
+    "recording_kind",
+    "resolve_mapping",
+    "utm_epsg",
+]

@@ -18,6 +18,7 @@ off by more than 1e-3 (a quaternion that is exactly zero on every message means
 no usable pose, and stamps (shifted by the entry's ``t_offset``) that do not
 overlap the reference's span.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,25 +49,30 @@ def _arrays(kind: str, msgs: list, geo):
         return pos, None, cov, ok
     poses = [m.pose.pose for m in msgs] if kind == "odometry" else [rosmsg._pose_of(m) for m in msgs]
     pos = np.array([(p.position.x, p.position.y, p.position.z) for p in poses], float).reshape(-1, 3)
-    quat = np.array([(p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) for p in poses],
-                    float).reshape(-1, 4)
+    quat = np.array(
+        [(p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w) for p in poses], float
+    ).reshape(-1, 4)
     cov = None
     if kind == "odometry" or hasattr(msgs[0].pose, "covariance"):
         cov = np.array([tuple(m.pose.covariance) for m in msgs], float).reshape(-1, 6, 6)[:, :3, :3].copy()
     return pos, quat, cov, np.ones(len(pos), bool)
 
 
-def build(rec: Recording, mp: Mapping, time: str, geo, t0: int, report: Report,
-          ref_span: tuple[int, int] | None) -> dict[str, RecordedEstimate]:
+def build(
+    rec: Recording, mp: Mapping, time: str, geo, t0: int, report: Report, ref_span: tuple[int, int] | None
+) -> dict[str, RecordedEstimate]:
     """Every ``[estimates]`` entry of ``mp`` as a RecordedEstimate (module docstring)."""
     out = {}
     for e in mp.estimates:
         topic = rec.topics[e.topic]
         where = f"estimate {e.name} (topic {e.topic}{e.pair})"
         if rosmsg.kind_of(topic.type) not in ESTIMATE_KINDS:
-            raise DataError(rec.path, f"{where} is a {topic.type}, which is not a trajectory (an estimate is an "
-                                      "Odometry, PoseStamped, PoseWithCovarianceStamped, a TF pair, a Path or a "
-                                      "NavSatFix)")
+            raise DataError(
+                rec.path,
+                f"{where} is a {topic.type}, which is not a trajectory (an estimate is an "
+                "Odometry, PoseStamped, PoseWithCovarianceStamped, a TF pair, a Path or a "
+                "NavSatFix)",
+            )
         msgs, logs, kind = sources.messages(rec, e)
         st, _ = sources.stamps(rec, e, msgs, logs, time)
         pos, quat, cov, ok = _arrays(kind, msgs, geo)
@@ -80,16 +86,27 @@ def build(rec: Recording, mp: Mapping, time: str, geo, t0: int, report: Report,
             off = np.abs(norm - 1.0)
             bad = np.flatnonzero(ok & (off > REFUSE_TOL))
             if len(bad):
-                raise DataError(rec.path, f"{where}: non-unit quaternion at message {int(bad[0])} (norm "
-                                          f"{norm[bad[0]]:.6g}; a recorded orientation must be a unit quaternion)")
+                raise DataError(
+                    rec.path,
+                    f"{where}: non-unit quaternion at message {int(bad[0])} (norm "
+                    f"{norm[bad[0]]:.6g}; a recorded orientation must be a unit quaternion)",
+                )
             fix = ok & (off > REPAIR_TOL)
             if fix.any():
-                report.add("repaired", e.name, int(fix.sum()), f"{e.topic}: quaternion norm off by more than "
-                                                               f"{REPAIR_TOL:g} (at most {REFUSE_TOL:g}): normalised")
+                report.add(
+                    "repaired",
+                    e.name,
+                    int(fix.sum()),
+                    f"{e.topic}: quaternion norm off by more than {REPAIR_TOL:g} (at most {REFUSE_TOL:g}): normalised",
+                )
             quat = np.where(ok[:, None], quat / np.where(norm > 0, norm, 1.0)[:, None], np.nan)
         if (~ok).any():
-            report.add("dropped", e.name, int((~ok).sum()), f"{e.topic}: poses with no usable value (non-finite "
-                                                            "position or quaternion, NavSatFix without a fix)")
+            report.add(
+                "dropped",
+                e.name,
+                int((~ok).sum()),
+                f"{e.topic}: poses with no usable value (non-finite position or quaternion, NavSatFix without a fix)",
+            )
         if not ok.any():
             raise DataError(rec.path, f"{where}: no usable pose ({len(ok)} message(s), every one dropped)")
         if cov is not None:
@@ -98,34 +115,63 @@ def build(rec: Recording, mp: Mapping, time: str, geo, t0: int, report: Report,
             if unknown[ok].all():
                 cov = None
             elif unknown[ok].any():
-                report.add("masked", f"{e.name}_covariance", int(unknown[ok].sum()),
-                           f"{e.topic}: covariance unknown (all zero or not finite): no NEES at those poses")
+                report.add(
+                    "masked",
+                    f"{e.name}_covariance",
+                    int(unknown[ok].sum()),
+                    f"{e.topic}: covariance unknown (all zero or not finite): no NEES at those poses",
+                )
         offset_ns = int(round(e.params.get("t_offset", 0.0) * 1e9))
         s = st[ok] + offset_ns
         if ref_span is not None and (s[-1] < ref_span[0] or s[0] > ref_span[1]):
-            raise DataError(rec.path, f"{where}: its stamps ({s[0] / 1e9:.3f} .. {s[-1] / 1e9:.3f} s"
-                                      + (f" with t_offset {e.params['t_offset']:g} s" if offset_ns else "")
-                                      + f") do not overlap the reference's ({ref_span[0] / 1e9:.3f} .. "
-                                        f"{ref_span[1] / 1e9:.3f} s): nothing to score")
+            raise DataError(
+                rec.path,
+                f"{where}: its stamps ({s[0] / 1e9:.3f} .. {s[-1] / 1e9:.3f} s"
+                + (f" with t_offset {e.params['t_offset']:g} s" if offset_ns else "")
+                + f") do not overlap the reference's ({ref_span[0] / 1e9:.3f} .. "
+                f"{ref_span[1] / 1e9:.3f} s): nothing to score",
+            )
         frame = str(getattr(msgs[0].header, "frame_id", "") or "")
         if not frame and rosmsg.kind_of(topic.type) == "path":  # poses without a frame: the Path's
             frame = str(topic.msgs[-1].header.frame_id)
         child = e.child or (str(msgs[0].child_frame_id) if kind == "odometry" else "")
         if kind == "navsatfix":
             frame = "ENU local"
-        pick = (lambda a: None if a is None else a[ok])
-        out[e.name] = RecordedEstimate((st[ok] - t0) / 1e9, pos[ok], pick(quat), pick(cov), rosmsg.frame_name(frame),
-                                       rosmsg.frame_name(child), f"{e.topic}{e.pair} ({topic.type})", dict(e.params))
+        pick = lambda a: None if a is None else a[ok]
+        out[e.name] = RecordedEstimate(
+            (st[ok] - t0) / 1e9,
+            pos[ok],
+            pick(quat),
+            pick(cov),
+            rosmsg.frame_name(frame),
+            rosmsg.frame_name(child),
+            f"{e.topic}{e.pair} ({topic.type})",
+            dict(e.params),
+        )
         has = [w for w, v in (("orientation", quat), ("position covariance", cov)) if v is not None]
-        report.add("info", e.name, int(ok.sum()), f"{e.topic}{e.pair} ({topic.type}): a recorded estimate of "
-                                                  f"{int(ok.sum())} poses at their own stamps"
-                                                  + (f", with {' and '.join(has)}" if has else "")
-                                                  + "; scored, never a filter input")
+        report.add(
+            "info",
+            e.name,
+            int(ok.sum()),
+            f"{e.topic}{e.pair} ({topic.type}): a recorded estimate of "
+            f"{int(ok.sum())} poses at their own stamps"
+            + (f", with {' and '.join(has)}" if has else "")
+            + "; scored, never a filter input",
+        )
     return out
 
 
 def meta(estimates: dict[str, RecordedEstimate]) -> dict:
     """What the manifest records of the recorded estimates."""
-    return {k: {"source": e.description, "frame": e.frame, "child": e.child, "poses": len(e),
-                "orientation": e.orientation is not None, "covariance": e.covariance is not None,
-                "params": e.params} for k, e in estimates.items()}
+    return {
+        k: {
+            "source": e.description,
+            "frame": e.frame,
+            "child": e.child,
+            "poses": len(e),
+            "orientation": e.orientation is not None,
+            "covariance": e.covariance is not None,
+            "params": e.params,
+        }
+        for k, e in estimates.items()
+    }

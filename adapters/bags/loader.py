@@ -1,4 +1,5 @@
 """``load``: a recording and its mapping into a :class:`~replay.frame.Frame`; ``inspect``: what a recording holds."""
+
 from __future__ import annotations
 
 import difflib
@@ -27,8 +28,14 @@ from .recording import Recording, Topic
 SIM_TIME_BEFORE_NS = 315_532_800 * 10**9  # 1980-01-01: earlier stamps are simulation time
 
 # role -> the message fields (rosmsg converters) a task may take from an entry of that role
-ROLE_FIELDS = {"gps": ("position",), "odometry": ("velocity", "rate"), "imu": ("gyro", "accel", "attitude"),
-               "depth": ("depth",), "velocity": ("velocity",), "pose": ("position", "attitude")}
+ROLE_FIELDS = {
+    "gps": ("position",),
+    "odometry": ("velocity", "rate"),
+    "imu": ("gyro", "accel", "attitude"),
+    "depth": ("depth",),
+    "velocity": ("velocity",),
+    "pose": ("position", "attitude"),
+}
 
 
 def resolve_mapping(mapping) -> Mapping | None:
@@ -44,8 +51,7 @@ class MappingParam(Param):
     """The ``mapping`` option: a mapping file (a path), a dict of the same form or a Mapping."""
 
     def accepts(self) -> str:
-        return "a mapping file (a path), a dict of the same form or a Mapping" + (" (or null)" if self.optional
-                                                                                  else "")
+        return "a mapping file (a path), a dict of the same form or a Mapping" + (" (or null)" if self.optional else "")
 
     def _coerce(self, v):
         if isinstance(v, (dict, Mapping)):
@@ -58,22 +64,60 @@ CONVERSIONS = ("water_density", "atmospheric_pressure", "gravity")  # the mappin
 
 @declare(
     "bags",
-    MappingParam("mapping", os.PathLike, None, "topic mapping (docs/bags.md; null: proposed from the topics)",
-                 optional=True),
-    Param("time", str, None, "time axis: header (header.stamp) or log (receive time); null: the mapping's",
-          choices=("header", "log"), optional=True),
-    Param("until", float, None, "only messages logged within this many s of the first one (null: the mapping's)",
-          unit="s", low=0.0, low_open=True, optional=True),
-    Param("allow_truncated", bool, None, "use what precedes a truncation, flagged (null: the mapping's)",
-          optional=True),
-    Param("water_density", float, None,
-          f"water density of the depth conversion (null: the mapping's, else {rosmsg.WATER_DENSITY:g})",
-          unit="kg/m^3", low=0.0, low_open=True, optional=True),
-    Param("atmospheric_pressure", float, None, "atmospheric pressure of the depth conversion (null: the "
-          f"mapping's, else {rosmsg.ATMOSPHERIC_PRESSURE:g})", unit="Pa", low=0.0, low_open=True, optional=True),
-    Param("gravity", float, None,
-          f"gravity of the depth conversion (null: the mapping's, else {rosmsg.GRAVITY:g})",
-          unit="m/s^2", low=0.0, low_open=True, optional=True),
+    MappingParam(
+        "mapping", os.PathLike, None, "topic mapping (docs/bags.md; null: proposed from the topics)", optional=True
+    ),
+    Param(
+        "time",
+        str,
+        None,
+        "time axis: header (header.stamp) or log (receive time); null: the mapping's",
+        choices=("header", "log"),
+        optional=True,
+    ),
+    Param(
+        "until",
+        float,
+        None,
+        "only messages logged within this many s of the first one (null: the mapping's)",
+        unit="s",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
+    Param(
+        "allow_truncated", bool, None, "use what precedes a truncation, flagged (null: the mapping's)", optional=True
+    ),
+    Param(
+        "water_density",
+        float,
+        None,
+        f"water density of the depth conversion (null: the mapping's, else {rosmsg.WATER_DENSITY:g})",
+        unit="kg/m^3",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
+    Param(
+        "atmospheric_pressure",
+        float,
+        None,
+        f"atmospheric pressure of the depth conversion (null: the mapping's, else {rosmsg.ATMOSPHERIC_PRESSURE:g})",
+        unit="Pa",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
+    Param(
+        "gravity",
+        float,
+        None,
+        f"gravity of the depth conversion (null: the mapping's, else {rosmsg.GRAVITY:g})",
+        unit="m/s^2",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
 )
 def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame:
     """Read a bag or MCAP into a Frame (see the module docstring).
@@ -91,11 +135,17 @@ def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame
         proposed.append(propose(listing))
         if not proposed[0].entries:
             tf = [t for t, (typ, _) in listing.items() if rosmsg.kind_of(typ) == "tf"]
-            raise DataError(path, "no topic of a supported type to map; write a mapping "
-                                  "(see `replay inspect` and docs/bags.md)"
-                            + (f"; {', '.join(tf)} hold(s) TF: name a pair in the mapping "
-                               '(e.g. position = { topic = "/tf", frame = "odom", child = "base_link" })'
-                               if tf else ""))
+            raise DataError(
+                path,
+                "no topic of a supported type to map; write a mapping "
+                "(see `replay inspect` and docs/bags.md)"
+                + (
+                    f"; {', '.join(tf)} hold(s) TF: name a pair in the mapping "
+                    '(e.g. position = { topic = "/tf", frame = "odom", child = "base_link" })'
+                    if tf
+                    else ""
+                ),
+            )
         return proposed[0].topics
 
     until = until if until is not None else (mp.until if mp else None)
@@ -115,12 +165,19 @@ def _fail_if_truncated(rec: Recording, report, allow) -> None:
     if rec.truncated is None:
         return
     if not allow:
-        raise DataError(rec.path, f"truncated or corrupted: {rec.truncated}; "
-                                  f"{rec.read_messages} message(s) before it could be read — set "
-                                  "allow_truncated = true in the mapping to use them (flagged)")
+        raise DataError(
+            rec.path,
+            f"truncated or corrupted: {rec.truncated}; "
+            f"{rec.read_messages} message(s) before it could be read — set "
+            "allow_truncated = true in the mapping to use them (flagged)",
+        )
     if report is not None:
-        report.add("flagged", str(rec.path), rec.read_messages,
-                   f"TRUNCATED recording: only the messages before the damage were read ({rec.truncated})")
+        report.add(
+            "flagged",
+            str(rec.path),
+            rec.read_messages,
+            f"TRUNCATED recording: only the messages before the damage were read ({rec.truncated})",
+        )
 
 
 def _check_topics(rec: Recording, mp: Mapping) -> None:
@@ -132,8 +189,11 @@ def _check_topics(rec: Recording, mp: Mapping) -> None:
             what = f"estimate {e.name}" if e.estimate else e.name
             raise DataError(rec.path, f"topic {e.topic} (mapped to {what}) is not in the recording{hint}")
         if rosmsg.kind_of(topic.type) is None:
-            raise DataError(rec.path, f"topic {e.topic} has type {topic.type}, which no converter reads "
-                                      f"(supported: {', '.join(sorted(rosmsg.KINDS))})")
+            raise DataError(
+                rec.path,
+                f"topic {e.topic} has type {topic.type}, which no converter reads "
+                f"(supported: {', '.join(sorted(rosmsg.KINDS))})",
+            )
         if e.type and rosmsg.normalize_type(e.type) != topic.type:
             raise DataError(rec.path, f"topic {e.topic}: the mapping expects {e.type}, the recording has {topic.type}")
         if not topic.msgs:
@@ -141,8 +201,7 @@ def _check_topics(rec: Recording, mp: Mapping) -> None:
             raise DataError(rec.path, f"topic {e.topic} (mapped to {e.name}) has no messages{span}")
 
 
-def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Report,
-                until: float | None) -> Frame:
+def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Report, until: float | None) -> Frame:
     _check_topics(rec, mp)
     stamps, other, fields, kinds = {}, {}, {}, {}
     geo = None
@@ -173,55 +232,97 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
         for key in keys + [f"{e.name}_{other_name}"]:
             maker = made.setdefault((e.reference, key), e.name)
             if maker != e.name:
-                raise DataError(mp.source, f"[{'reference' if e.reference else 'channels'}] {e.name} "
-                                           f"({e.topic}) makes channel {key}, which {maker} makes too: "
-                                           "rename one of them")
+                raise DataError(
+                    mp.source,
+                    f"[{'reference' if e.reference else 'channels'}] {e.name} "
+                    f"({e.topic}) makes channel {key}, which {maker} makes too: "
+                    "rename one of them",
+                )
         for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[src].items():
             key = e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
             full = np.full((n,) + vals.shape[1:], np.nan)
             full[idx] = vals
             ok = np.zeros(n, bool)
             ok[idx] = valid
-            group[key] = Channel(full, unit, frame, ok, tuple(comps), tuple(angles), conv,
-                                 f"{e.topic}{e.pair} ({topic.type}) {fname}")
+            group[key] = Channel(
+                full, unit, frame, ok, tuple(comps), tuple(angles), conv, f"{e.topic}{e.pair} ({topic.type}) {fname}"
+            )
         t_other = np.full(n, np.nan)
         t_other[idx] = (other[src] - t0) / 1e9
-        group[f"{e.name}_{other_name}"] = Channel(t_other, "s", "", np.isin(np.arange(n), idx),
-                                                  description=f"{e.topic} {other_name.replace('_', ' ')}, "
-                                                              "seconds from t = 0")
+        group[f"{e.name}_{other_name}"] = Channel(
+            t_other,
+            "s",
+            "",
+            np.isin(np.arange(n), idx),
+            description=f"{e.topic} {other_name.replace('_', ' ')}, seconds from t = 0",
+        )
         role = role_of(e, topic.type, mp.source)
         if role and role != "none":
-            names = {f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
-                     for f in ROLE_FIELDS[role] if f in fields[src]}
+            names = {
+                f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
+                for f in ROLE_FIELDS[role]
+                if f in fields[src]
+            }
             for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
                 for f in value:
                     if f not in fields[src]:
-                        raise ReplayError(f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
-                                          f"{topic.type} lacks (it has: {', '.join(fields[src])})")
-            roles.setdefault(role, []).append({
-                "entry": e.name, "source": f"{e.topic} ({topic.type})", "declared": e.role is not None,
-                "channels": names, **e.fusion})
+                        raise ReplayError(
+                            f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
+                            f"{topic.type} lacks (it has: {', '.join(fields[src])})"
+                        )
+            roles.setdefault(role, []).append(
+                {
+                    "entry": e.name,
+                    "source": f"{e.topic} ({topic.type})",
+                    "declared": e.role is not None,
+                    "channels": names,
+                    **e.fusion,
+                }
+            )
         primary = fields[src][rosmsg.PRIMARY[kind]][1]
-        report.add("info", e.name, len(idx), f"{e.topic} ({topic.type}): {len(idx)} messages at their "
-                                             f"{time} stamps; not valid at the other {n - len(idx)} samples")
+        report.add(
+            "info",
+            e.name,
+            len(idx),
+            f"{e.topic} ({topic.type}): {len(idx)} messages at their "
+            f"{time} stamps; not valid at the other {n - len(idx)} samples",
+        )
         if (~primary).any():
-            report.add("masked", e.name, int((~primary).sum()),
-                       f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
-                       "NaN, unnormalised quaternion)")
+            report.add(
+                "masked",
+                e.name,
+                int((~primary).sum()),
+                f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
+                "NaN, unnormalised quaternion)",
+            )
     shared = sum(len(s) for s in stamps.values()) - n
-    report.add("info", "t", n, f"union of the {time} stamps of {len(stamps)} mapped topic(s)"
-                               + (f"; {shared} stamp(s) shared by several topics" if shared else ""))
+    report.add(
+        "info",
+        "t",
+        n,
+        f"union of the {time} stamps of {len(stamps)} mapped topic(s)"
+        + (f"; {shared} stamp(s) shared by several topics" if shared else ""),
+    )
     if sim:
         report.add("info", "t", n, f"simulation time: stamps start at {t0 / 1e9:.3f} s; epoch unknown")
     refs = [stamps[sources.key(e)] for e in mp.entries if e.reference]
     span = (min(int(s[0]) for s in refs), max(int(s[-1]) for s in refs)) if refs else None
     estimates = recorded.build(rec, mp, time, geo, t0, report, span)
-    meta = {"adapter": "bags", "source": str(rec.path), "format": rec.format, "time": time,
-            "t0_ns": t0, "sim_time": bool(sim), "until": until, "truncated": rec.truncated,
-            "sha256": _sha256(rec.path), "mapping": json.loads(json.dumps(_mapping_dict(mp))),
-            "roles": roles, "estimates": recorded.meta(estimates),
-            "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)}
-                       for k, v in rec.topics.items()}}
+    meta = {
+        "adapter": "bags",
+        "source": str(rec.path),
+        "format": rec.format,
+        "time": time,
+        "t0_ns": t0,
+        "sim_time": bool(sim),
+        "until": until,
+        "truncated": rec.truncated,
+        "sha256": _sha256(rec.path),
+        "mapping": json.loads(json.dumps(_mapping_dict(mp))),
+        "roles": roles,
+        "estimates": recorded.meta(estimates),
+        "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)} for k, v in rec.topics.items()},
+    }
     if geo is not None:
         meta.update(geo.meta())
     return Frame(t, channels, reference, None if sim else t0 / 1e9, meta, report, estimates)
@@ -239,8 +340,14 @@ def _make_geo(rec: Recording, topic: Topic) -> Geo:
 
 
 def _mapping_dict(mp: Mapping) -> dict:
-    return {"time": mp.time, "until": mp.until, "source": mp.source, "params": mp.params,
-            "entries": [e.__dict__ for e in mp.entries], "estimates": [e.__dict__ for e in mp.estimates]}
+    return {
+        "time": mp.time,
+        "until": mp.until,
+        "source": mp.source,
+        "params": mp.params,
+        "entries": [e.__dict__ for e in mp.entries],
+        "estimates": [e.__dict__ for e in mp.estimates],
+    }
 
 
 def _sha256(path: Path) -> str:
@@ -264,11 +371,27 @@ def inspect(path) -> dict:
         stamp0 = None
         if t.msgs and hasattr(t.msgs[0], "header"):
             stamp0 = rosmsg.stamp_ns(t.msgs[0]) / 1e9
-        rows.append({"topic": t.name, "type": t.type, "count": t.count, "rate_hz": rate,
-                     "span_s": span, "supported": rosmsg.kind_of(t.type) is not None,
-                     "first_stamp_s": stamp0, "first_log_s": log[0] / 1e9 if len(log) else None})
+        rows.append(
+            {
+                "topic": t.name,
+                "type": t.type,
+                "count": t.count,
+                "rate_hz": rate,
+                "span_s": span,
+                "supported": rosmsg.kind_of(t.type) is not None,
+                "first_stamp_s": stamp0,
+                "first_log_s": log[0] / 1e9 if len(log) else None,
+            }
+        )
     span = (rec.end_ns - rec.start_ns) / 1e9 if rec.start_ns is not None else 0.0
     mp = propose({t.name: (t.type, t.count) for t in rec.topics.values()})
-    return {"path": str(rec.path), "format": rec.format, "start_ns": rec.start_ns, "span_s": span,
-            "messages": sum(t.count for t in rec.topics.values()), "topics": rows,
-            "truncated": rec.truncated, "mapping": mp}
+    return {
+        "path": str(rec.path),
+        "format": rec.format,
+        "start_ns": rec.start_ns,
+        "span_s": span,
+        "messages": sum(t.count for t in rec.topics.values()),
+        "topics": rows,
+        "truncated": rec.truncated,
+        "mapping": mp,
+    }

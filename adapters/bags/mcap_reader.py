@@ -1,4 +1,5 @@
 """Standalone MCAP files: ROS 2 CDR, Foxglove JSON and protobuf channels, read as one stream."""
+
 from __future__ import annotations
 
 import json
@@ -46,7 +47,8 @@ def _read_mcap(path: Path, topics, until, first_only=False) -> Recording:
     if not channels and rec.truncated:
         raise DataError(path, f"truncated or corrupted, no channel could be read ({rec.truncated})")
     if any(s.encoding == "ros2msg" for s in schemas.values()) or any(
-            c.message_encoding == "cdr" for c in channels.values()):
+        c.message_encoding == "cdr" for c in channels.values()
+    ):
         rec.format = "mcap-ros2"
     limit = None if until is None or rec.start_ns is None else rec.start_ns + int(round(until * 1e9))
     if callable(topics):
@@ -66,8 +68,7 @@ def _read_mcap(path: Path, topics, until, first_only=False) -> Recording:
         try:
             msg = decoders[cid](data)
         except Exception as e:  # noqa: BLE001
-            raise DataError(path, f"topic {ch.topic}: cannot decode a {topic.type} message "
-                                  f"({_reason(e)})") from None
+            raise DataError(path, f"topic {ch.topic}: cannot decode a {topic.type} message ({_reason(e)})") from None
         topic.log_ns.append(log_ns)
         topic.msgs.append(msg)
         rec.read_messages += 1
@@ -100,13 +101,16 @@ def _cdr_decoder(path, schema, channel):
         try:
             store.register(get_types_from_msg(schema.data.decode(), name))
         except Exception as e:  # noqa: BLE001
-            raise DataError(path, f"topic {channel.topic}: cannot parse the definition of {name} "
-                                  f"({_reason(e)})") from None
+            raise DataError(
+                path, f"topic {channel.topic}: cannot parse the definition of {name} ({_reason(e)})"
+            ) from None
     else:  # ROS 2 bags before Iron carry no definitions
         store = get_typestore(Stores.ROS2_HUMBLE)
         if name not in store.fielddefs:
-            raise DataError(path, f"topic {channel.topic}: {name} has no definition in the file "
-                                  "nor in the default (humble) typestore")
+            raise DataError(
+                path,
+                f"topic {channel.topic}: {name} has no definition in the file nor in the default (humble) typestore",
+            )
     return lambda data: store.deserialize_cdr(data, name)
 
 

@@ -1,4 +1,5 @@
 """Opening a recording: ROS 1 ``.bag`` and ROS 2 bag directories through rosbags; MCAP by :mod:`.mcap_reader`."""
+
 from __future__ import annotations
 
 import re
@@ -59,8 +60,9 @@ def _read_rosbags(path: Path, kind: str, topics, until, first_only=False) -> Rec
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except Exception as e:  # noqa: BLE001 - any reader failure is bad input here
-        raise DataError(path, f"cannot open ({_reason(e)}); the file is truncated, corrupted "
-                              "or not a bag; no message could be read") from None
+        raise DataError(
+            path, f"cannot open ({_reason(e)}); the file is truncated, corrupted or not a bag; no message could be read"
+        ) from None
     try:
         if kind == "ros2":
             found = re.search(r"storage_identifier:\s*(\w+)", (path / "metadata.yaml").read_text())

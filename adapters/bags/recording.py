@@ -1,4 +1,5 @@
 """What was read from a recording: its topics, their log times and deserialized messages."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -1,5 +1,6 @@
 """What one mapping entry reads from its topic: the messages (a TF pair, a Path's poses, or the
 topic's own messages), their stamps, and the kind of converter that reads them."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,15 +34,19 @@ def messages(rec: Recording, entry) -> tuple[list, list, str]:
         many = topic.type.endswith("TFMessage")
         _, _, seen = rosmsg.tf_pair(topic.msgs, topic.log_ns, None, None)
         if many and entry.frame is None:
-            raise DataError(rec.path, f"{where} is a {topic.type}, which holds several transforms: name the "
-                                      f"pair with frame = \"parent\" and child = \"child\" in the entry "
-                                      f"(pairs: {_pairs_text(seen)})")
+            raise DataError(
+                rec.path,
+                f"{where} is a {topic.type}, which holds several transforms: name the "
+                f"pair with frame = \"parent\" and child = \"child\" in the entry "
+                f"(pairs: {_pairs_text(seen)})",
+            )
         msgs, logs, _ = rosmsg.tf_pair(topic.msgs, topic.log_ns, entry.frame, entry.child)
         if not msgs and many:  # not recorded as one pair: composed through the tree (map -> odom -> base_link)
             msgs, logs = composed(rec, entry, where, seen)
         if not msgs:
-            raise DataError(rec.path, f"{where}: no transform {entry.frame} -> {entry.child} "
-                                      f"(pairs: {_pairs_text(seen)})")
+            raise DataError(
+                rec.path, f"{where}: no transform {entry.frame} -> {entry.child} (pairs: {_pairs_text(seen)})"
+            )
         return msgs, logs, "pose"
     if entry.frame is not None:
         raise DataError(rec.path, f"{where}: frame/child select a TF pair, but the topic is a {topic.type}")
@@ -68,10 +73,16 @@ def composed(rec: Recording, entry, where: str, seen) -> tuple[list, list]:
     except ValueError as err:
         raise DataError(rec.path, f"{where}: {entry.frame} -> {entry.child}: {err}") from None
     ns = np.round(times * 1e9).astype(np.int64)
-    head = [rosmsg._Plain(stamp=rosmsg._Plain(sec=int(t // 1_000_000_000), nanosec=int(t % 1_000_000_000)),
-                          frame_id=entry.frame) for t in ns]
-    poses = [rosmsg._Pose(h, rosmsg._Plain(x=a[0], y=a[1], z=a[2]), rosmsg._Plain(x=b[0], y=b[1], z=b[2], w=b[3]))
-             for h, a, b in zip(head, p.tolist(), q.tolist())]
+    head = [
+        rosmsg._Plain(
+            stamp=rosmsg._Plain(sec=int(t // 1_000_000_000), nanosec=int(t % 1_000_000_000)), frame_id=entry.frame
+        )
+        for t in ns
+    ]
+    poses = [
+        rosmsg._Pose(h, rosmsg._Plain(x=a[0], y=a[1], z=a[2]), rosmsg._Plain(x=b[0], y=b[1], z=b[2], w=b[3]))
+        for h, a, b in zip(head, p.tolist(), q.tolist())
+    ]
     return poses, list(ns)
 
 
@@ -91,8 +102,11 @@ def stamps(rec: Recording, entry, msgs: list, log_ns, time: str) -> tuple[np.nda
         i = int(bad[0]) + 1
         what = f"{entry.topic}{entry.pair}" if entry.frame else entry.topic
         if d[bad[0]] == 0:
-            raise DataError(rec.path, f"topic {what}: non-increasing {time} stamps at message {i} "
-                                      f"(duplicate stamp: {use[i]} ns twice)")
-        raise DataError(rec.path, f"topic {what}: non-increasing {time} stamps at message {i} "
-                                  f"({use[i]} ns after {use[i - 1]} ns)")
+            raise DataError(
+                rec.path,
+                f"topic {what}: non-increasing {time} stamps at message {i} (duplicate stamp: {use[i]} ns twice)",
+            )
+        raise DataError(
+            rec.path, f"topic {what}: non-increasing {time} stamps at message {i} ({use[i]} ns after {use[i - 1]} ns)"
+        )
     return use, (log if time == "header" else header)

@@ -3,6 +3,7 @@
 Used by the exports (:mod:`replay.outputs.export_ros2`) and by the simulated
 bag dataset; no Foxglove JSON/protobuf channel ever goes into these bags.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -68,8 +69,9 @@ class BagOut:
     # message pieces
     def header(self, ns: int, frame_id: str):
         sec, nsec = divmod(int(ns), 1_000_000_000)
-        return self.T["std_msgs/msg/Header"](stamp=self.T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
-                                             frame_id=frame_id)
+        return self.T["std_msgs/msg/Header"](
+            stamp=self.T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id
+        )
 
     def vec(self, v):
         return self.T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
@@ -90,6 +92,8 @@ class BagOut:
         T = self.T
         pcov = np.zeros(36) if pcov is None else np.asarray(pcov, float)
         return T["nav_msgs/msg/Odometry"](
-            header=self.header(ns, frame_id), child_frame_id=child,
+            header=self.header(ns, frame_id),
+            child_frame_id=child,
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(p, q), covariance=pcov),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=self.twist(v, w), covariance=np.zeros(36)))
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=self.twist(v, w), covariance=np.zeros(36)),
+        )

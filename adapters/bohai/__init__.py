@@ -53,18 +53,52 @@ two layouts, what each column is, the per-column plausibility checks),
 velocity, yaw against course, gyro against attitude); the UTM projection is
 :mod:`replay.adapters.geodesy`, shared with the ``bags`` adapter.
 """
+
 from replay.adapters.geodesy import utm_epsg
 
 from .checks import track_velocity
-from .columns import (ACCURACY_LIMITS, COLS31, COLS36, COLUMNS, GROUPS, LIMITS, PRIORITY,
-                      check_agreement, check_columns, check_constant, check_integer, check_limit,
-                      check_nonnegative, find_duplicate)
+from .columns import (
+    ACCURACY_LIMITS,
+    COLS31,
+    COLS36,
+    COLUMNS,
+    GROUPS,
+    LIMITS,
+    PRIORITY,
+    check_agreement,
+    check_columns,
+    check_constant,
+    check_integer,
+    check_limit,
+    check_nonnegative,
+    find_duplicate,
+)
 from .gps import fresh_mask, stale_stretches
 from .loader import load
 from .reference import NOMINAL_STEP, find_jumps, gps_contradiction, mask_jumps
 
-__all__ = ["ACCURACY_LIMITS", "COLS31", "COLS36", "COLUMNS", "GROUPS", "LIMITS", "NOMINAL_STEP",
-           "PRIORITY", "check_agreement", "check_columns", "check_constant", "check_integer",
-           "check_limit", "check_nonnegative", "find_duplicate", "find_jumps", "fresh_mask",
-           "gps_contradiction", "load", "mask_jumps", "stale_stretches", "track_velocity",
-           "utm_epsg"]
+__all__ = [
+    "ACCURACY_LIMITS",
+    "COLS31",
+    "COLS36",
+    "COLUMNS",
+    "GROUPS",
+    "LIMITS",
+    "NOMINAL_STEP",
+    "PRIORITY",
+    "check_agreement",
+    "check_columns",
+    "check_constant",
+    "check_integer",
+    "check_limit",
+    "check_nonnegative",
+    "find_duplicate",
+    "find_jumps",
+    "fresh_mask",
+    "gps_contradiction",
+    "load",
+    "mask_jumps",
+    "stale_stretches",
+    "track_velocity",
+    "utm_epsg",
+]

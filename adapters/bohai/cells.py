@@ -11,6 +11,7 @@
   plausible step and a plausible position-derived speed, the column is converted
   ("repaired", every row counted); otherwise one line refuses the file.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +34,7 @@ def mask_infinite(table, lines, report):
         x = table.iloc[:, j].to_numpy(dtype=float)
         bad = np.isinf(x)
         if bad.any():
-            report.add("masked", c, int(bad.sum()),
-                       f"infinite values (inf) at {_rows(lines, bad)}: treated as missing")
+            report.add("masked", c, int(bad.sum()), f"infinite values (inf) at {_rows(lines, bad)}: treated as missing")
             table.isetitem(j, np.where(bad, np.nan, x))
 
 
@@ -47,9 +47,14 @@ def mask_isolated(cols, lines, report):
         over = np.abs(x) > limit
         k = int(over.sum())
         if 0 < k <= ISOLATED_SHARE * np.isfinite(x).sum():
-            report.add("masked", c, k, f"|value| beyond the {limit:g} {unit} limit at "
-                                       f"{_rows(lines, over)} (isolated: at most "
-                                       f"{ISOLATED_SHARE:.0%} of the column)")
+            report.add(
+                "masked",
+                c,
+                k,
+                f"|value| beyond the {limit:g} {unit} limit at "
+                f"{_rows(lines, over)} (isolated: at most "
+                f"{ISOLATED_SHARE:.0%} of the column)",
+            )
             cols[c] = np.where(over, np.nan, x)
 
 
@@ -72,8 +77,12 @@ def time_unit(path, time, cols, lines, report, meta, max_speed):
     if lo <= med <= hi:
         meta["time_unit"] = {"unit": "seconds", "factor": 1.0}
         if not 0.5 * NOMINAL_RATE_STEP <= med <= 2 * NOMINAL_RATE_STEP:
-            report.add("flagged", "time", len(time), f"median step {med:.4g} s: the Bohai logs are about "
-                                                     f"{1 / NOMINAL_RATE_STEP:g} Hz")
+            report.add(
+                "flagged",
+                "time",
+                len(time),
+                f"median step {med:.4g} s: the Bohai logs are about {1 / NOMINAL_RATE_STEP:g} Hz",
+            )
         return time
     speed = _median_speed(cols["lat"], cols["lon"], steps)
     for factor, unit in UNITS:
@@ -81,15 +90,24 @@ def time_unit(path, time, cols, lines, report, meta, max_speed):
             continue
         v = None if speed is None else speed / factor
         if v is not None and v > max_speed:
-            raise DataError(path, f"column time: median step {med:g} is not seconds; read as {unit} "
-                                  f"({med * factor:.4g} s) the vehicle would move at {v:.1f} m/s, above the "
-                                  f"{max_speed:g} m/s limit: fix the time column")
-        why = "" if v is None else (f"; position-derived median speed then {v:.2f} m/s instead of "
-                                    f"{speed:.3g} m/s")
-        report.add("repaired", "time", len(time),
-                   f"time column in {unit}: median step {med:g} is implausible as seconds for a ~10 Hz "
-                   f"log, {med * factor:.4g} s as {unit}; divided by {1 / factor:g}{why}")
+            raise DataError(
+                path,
+                f"column time: median step {med:g} is not seconds; read as {unit} "
+                f"({med * factor:.4g} s) the vehicle would move at {v:.1f} m/s, above the "
+                f"{max_speed:g} m/s limit: fix the time column",
+            )
+        why = "" if v is None else (f"; position-derived median speed then {v:.2f} m/s instead of {speed:.3g} m/s")
+        report.add(
+            "repaired",
+            "time",
+            len(time),
+            f"time column in {unit}: median step {med:g} is implausible as seconds for a ~10 Hz "
+            f"log, {med * factor:.4g} s as {unit}; divided by {1 / factor:g}{why}",
+        )
         meta["time_unit"] = {"unit": unit, "factor": factor, "median_step_raw": med}
         return time * factor
-    raise DataError(path, f"column time: median step {med:g} is implausible for a ~10 Hz log in seconds "
-                          f"(expected {lo:g}-{hi:g} s), and as milliseconds, microseconds or nanoseconds too")
+    raise DataError(
+        path,
+        f"column time: median step {med:g} is implausible for a ~10 Hz log in seconds "
+        f"(expected {lo:g}-{hi:g} s), and as milliseconds, microseconds or nanoseconds too",
+    )

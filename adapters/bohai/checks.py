@@ -1,4 +1,5 @@
 """Checks of the track: velocity from positions, yaw against the course, gyro against attitude."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,11 +28,14 @@ def _speed_check(vel, report) -> dict:
     speed = speed[np.isfinite(speed)]
     if not len(speed):
         return {}
-    out = {"median": float(np.median(speed)), "p95": float(np.percentile(speed, 95)),
-           "max": float(speed.max())}
-    report.add("info", "position", len(speed),
-               f"position-derived speed median {out['median']:.2f} m/s, 95th percentile "
-               f"{out['p95']:.2f} m/s, max {out['max']:.2f} m/s")
+    out = {"median": float(np.median(speed)), "p95": float(np.percentile(speed, 95)), "max": float(speed.max())}
+    report.add(
+        "info",
+        "position",
+        len(speed),
+        f"position-derived speed median {out['median']:.2f} m/s, 95th percentile "
+        f"{out['p95']:.2f} m/s, max {out['max']:.2f} m/s",
+    )
     return out
 
 
@@ -40,21 +44,29 @@ def _yaw_check(yaw, vel, report, min_speed=0.5) -> dict:
     speed = np.hypot(vel[:, 0], vel[:, 1])
     sel = np.isfinite(speed) & (speed > min_speed) & np.isfinite(yaw)
     if sel.sum() < 10:
-        report.add("info", "attitude", int(sel.sum()),
-                   "too few samples at speed to compare yaw with course")
+        report.add("info", "attitude", int(sel.sum()), "too few samples at speed to compare yaw with course")
         return {"samples": int(sel.sum())}
     course = np.arctan2(vel[sel, 1], vel[sel, 0])
     signed = wrap(yaw[sel] - course)
     diff = np.abs(signed)
     med = float(np.median(diff))
-    out = {"samples": int(sel.sum()), "median_abs_rad": med, "median_rad": float(np.median(signed)),
-           "p90_abs_rad": float(np.percentile(diff, 90))}
-    report.add("info", "attitude", int(sel.sum()),
-               f"yaw vs course over ground at > {min_speed:g} m/s: median |difference| {med:.3f} rad "
-               f"(median signed {out['median_rad']:+.3f} rad)")
+    out = {
+        "samples": int(sel.sum()),
+        "median_abs_rad": med,
+        "median_rad": float(np.median(signed)),
+        "p90_abs_rad": float(np.percentile(diff, 90)),
+    }
+    report.add(
+        "info",
+        "attitude",
+        int(sel.sum()),
+        f"yaw vs course over ground at > {min_speed:g} m/s: median |difference| {med:.3f} rad "
+        f"(median signed {out['median_rad']:+.3f} rad)",
+    )
     if med > 0.5:
-        report.add("flagged", "attitude", int(sel.sum()),
-                   f"yaw disagrees with the course over ground (median {med:.2f} rad)")
+        report.add(
+            "flagged", "attitude", int(sel.sum()), f"yaw disagrees with the course over ground (median {med:.2f} rad)"
+        )
     return out
 
 
@@ -69,17 +81,25 @@ def _gyro_check(t, w, att, report, window=1.0) -> dict:
         return {}
     rate = wrap(att[k:] - att[:-k]) / (t[k:] - t[:-k])[:, None]
     mean = np.cumsum(np.r_[np.zeros((1, 3)), w], axis=0)
-    mean = (mean[k + 1:] - mean[1:-k]) / k  # w averaged over samples i+1 .. i+k
+    mean = (mean[k + 1 :] - mean[1:-k]) / k  # w averaged over samples i+1 .. i+k
     ok = np.isfinite(rate).all(axis=1) & np.isfinite(mean).all(axis=1)
     if ok.sum() < 10:
         return {}
     corr = [float(np.corrcoef(mean[ok, i], rate[ok, i])[0, 1]) for i in range(3)]
     out = {"wx_roll": corr[0], "wy_pitch": corr[1], "wz_yaw": corr[2]}
-    report.add("info", "gyro", int(ok.sum()),
-               "correlation with attitude rates: " + ", ".join(f"{k} {v:.2f}" for k, v in out.items()))
+    report.add(
+        "info",
+        "gyro",
+        int(ok.sum()),
+        "correlation with attitude rates: " + ", ".join(f"{k} {v:.2f}" for k, v in out.items()),
+    )
     weak = [k for k, v in out.items() if not v >= 0.3]
     if weak:
-        report.add("flagged", "gyro", int(ok.sum()),
-                   f"weak correlation with attitude rates ({', '.join(weak)} < 0.3): a gyro axis or "
-                   f"an attitude angle may not hold what its header says")
+        report.add(
+            "flagged",
+            "gyro",
+            int(ok.sum()),
+            f"weak correlation with attitude rates ({', '.join(weak)} < 0.3): a gyro axis or "
+            f"an attitude angle may not hold what its header says",
+        )
     return out

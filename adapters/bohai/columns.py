@@ -1,16 +1,80 @@
 """The two Bohai header layouts, what each column holds, and the per-column plausibility checks."""
+
 from __future__ import annotations
 
 import numpy as np
 
-COLS36 = ("lat_gps", "lon_gps", "alt_gps", "roll", "pitch", "yaw", "vn", "ve", "vf", "vl", "vu",
-          "ax", "ay", "az", "af", "al", "au", "wx", "wy", "wz", "wf", "wl", "wu",
-          "pos_accuracy", "vel_accuracy", "navstat", "numsats", "posmode", "velmode", "orimode",
-          "lat", "lon", "depth", "height", "time", "time_gps")
-COLS31 = ("lat", "lon", "alt", "roll", "pitch", "yaw", "vn", "ve", "vf", "vl", "vu",
-          "ax", "ay", "az", "af", "al", "au", "wx", "wy", "wz", "wf", "wl", "wu",
-          "pos_accuracy", "vel_accuracy", "navstat", "numsats", "posmode", "velmode", "orimode",
-          "time")
+COLS36 = (
+    "lat_gps",
+    "lon_gps",
+    "alt_gps",
+    "roll",
+    "pitch",
+    "yaw",
+    "vn",
+    "ve",
+    "vf",
+    "vl",
+    "vu",
+    "ax",
+    "ay",
+    "az",
+    "af",
+    "al",
+    "au",
+    "wx",
+    "wy",
+    "wz",
+    "wf",
+    "wl",
+    "wu",
+    "pos_accuracy",
+    "vel_accuracy",
+    "navstat",
+    "numsats",
+    "posmode",
+    "velmode",
+    "orimode",
+    "lat",
+    "lon",
+    "depth",
+    "height",
+    "time",
+    "time_gps",
+)
+COLS31 = (
+    "lat",
+    "lon",
+    "alt",
+    "roll",
+    "pitch",
+    "yaw",
+    "vn",
+    "ve",
+    "vf",
+    "vl",
+    "vu",
+    "ax",
+    "ay",
+    "az",
+    "af",
+    "al",
+    "au",
+    "wx",
+    "wy",
+    "wz",
+    "wf",
+    "wl",
+    "wu",
+    "pos_accuracy",
+    "vel_accuracy",
+    "navstat",
+    "numsats",
+    "posmode",
+    "velmode",
+    "orimode",
+    "time",
+)
 
 # column -> (kind, unit, frame, description). Kinds select the plausibility checks.
 COLUMNS = {
@@ -49,23 +113,36 @@ COLUMNS = {
 
 # Magnitude limits per kind for an AUV (|value| must stay below).
 LIMITS = {
-    "velocity": (10.0, "m/s"), "acceleration": (50.0, "m/s^2"), "rate": (10.0, "rad/s"),
-    "roll": (np.pi + 1e-3, "rad"), "pitch": (np.pi / 2 + 1e-3, "rad"), "yaw": (np.pi + 1e-3, "rad"),
-    "altitude": (10000.0, "m"), "depth": (12000.0, "m"), "height": (1000.0, "m"),
+    "velocity": (10.0, "m/s"),
+    "acceleration": (50.0, "m/s^2"),
+    "rate": (10.0, "rad/s"),
+    "roll": (np.pi + 1e-3, "rad"),
+    "pitch": (np.pi / 2 + 1e-3, "rad"),
+    "yaw": (np.pi + 1e-3, "rad"),
+    "altitude": (10000.0, "m"),
+    "depth": (12000.0, "m"),
+    "height": (1000.0, "m"),
 }
 ACCURACY_LIMITS = {"m": 1000.0, "m/s": 10.0}
 
 # Columns the README establishes as consistent come first when looking for
 # duplicates: a later column that repeats an earlier one is the duplicate.
-PRIORITY = ("time", "lat", "lon", "lat_gps", "lon_gps", "alt_gps", "alt",
-            "roll", "pitch", "yaw", "wx", "wy", "wz")
+PRIORITY = ("time", "lat", "lon", "lat_gps", "lon_gps", "alt_gps", "alt", "roll", "pitch", "yaw", "wx", "wy", "wz")
 
 GROUPS = {  # channel -> (columns, components, angle components, convention)
-    "attitude": (("roll", "pitch", "yaw"), ("roll", "pitch", "yaw"), (0, 1, 2),
-                 "roll: positive = left side up; pitch: positive = front down; "
-                 "yaw: heading, 0 = east, counter-clockwise positive (ENU)"),
-    "gyro": (("wx", "wy", "wz"), ("wx", "wy", "wz"), (),
-             "body angular rates around x = front, y = left, z = top (right-handed)"),
+    "attitude": (
+        ("roll", "pitch", "yaw"),
+        ("roll", "pitch", "yaw"),
+        (0, 1, 2),
+        "roll: positive = left side up; pitch: positive = front down; "
+        "yaw: heading, 0 = east, counter-clockwise positive (ENU)",
+    ),
+    "gyro": (
+        ("wx", "wy", "wz"),
+        ("wx", "wy", "wz"),
+        (),
+        "body angular rates around x = front, y = left, z = top (right-handed)",
+    ),
 }
 
 
@@ -99,8 +176,7 @@ def find_duplicate(x, earlier: dict):
     """'duplicate of column c' when ``x`` repeats (or negates) an earlier column."""
     head = x[:16]
     for name, y in earlier.items():
-        if not (np.array_equal(head, y[:16], equal_nan=True)
-                or np.array_equal(head, -y[:16], equal_nan=True)):
+        if not (np.array_equal(head, y[:16], equal_nan=True) or np.array_equal(head, -y[:16], equal_nan=True)):
             continue  # cheap test first
         if np.array_equal(x, y, equal_nan=True):
             return f"duplicate of column {name}"
@@ -117,8 +193,7 @@ def check_agreement(x, ref, tol, unit, what):
     d = float(np.median(np.abs(x[sel] - ref[sel])))
     scale = float(np.median(np.abs(ref[sel])))
     if d > max(tol, 0.5 * scale):
-        return (f"disagrees with {what} (median |difference| {d:.2f} {unit}, "
-                f"median |{what}| {scale:.2f} {unit})")
+        return f"disagrees with {what} (median |difference| {d:.2f} {unit}, median |{what}| {scale:.2f} {unit})"
     return None
 
 

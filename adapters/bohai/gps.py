@@ -1,4 +1,5 @@
 """GPS columns of the 36-column layout: fresh fixes, stale values, altitude, time of day."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -57,21 +58,38 @@ def _gps_fixes(cols, t, to_utm, lines, report, meta, jump_threshold, max_speed):
     outliers[idx[~keep]] = True
     valid &= ~outliers
     stretches = stale_stretches(t, fresh)
-    info = {"fresh": int(fresh.sum()), "valid": int(valid.sum()),
-            "stale": int((plausible & ~fresh).sum()),
-            "longest_stale_s": float(stretches.max()), "stale_over_10s": int((stretches > 10).sum()),
-            "implausible": int(bad.sum()), "outliers": int(outliers.sum())}
+    info = {
+        "fresh": int(fresh.sum()),
+        "valid": int(valid.sum()),
+        "stale": int((plausible & ~fresh).sum()),
+        "longest_stale_s": float(stretches.max()),
+        "stale_over_10s": int((stretches > 10).sum()),
+        "implausible": int(bad.sum()),
+        "outliers": int(outliers.sum()),
+    }
     meta["gps"] = info
-    report.add("info", "gps_position", info["fresh"],
-               f"{info['fresh']} fresh fixes (lat_gps/lon_gps changed), {info['stale']} stale samples "
-               f"repeating the last fix; longest stale stretch {info['longest_stale_s']:.1f} s")
+    report.add(
+        "info",
+        "gps_position",
+        info["fresh"],
+        f"{info['fresh']} fresh fixes (lat_gps/lon_gps changed), {info['stale']} stale samples "
+        f"repeating the last fix; longest stale stretch {info['longest_stale_s']:.1f} s",
+    )
     if bad.any():
-        report.add("masked", "gps_position", int(bad.sum()),
-                   f"rows with zero or impossible lat_gps/lon_gps at {_rows(lines, bad)}")
+        report.add(
+            "masked",
+            "gps_position",
+            int(bad.sum()),
+            f"rows with zero or impossible lat_gps/lon_gps at {_rows(lines, bad)}",
+        )
     if outliers.any():
-        report.add("masked", "gps_position", int(outliers.sum()),
-                   f"fixes jumping > {jump_threshold:g} m per 0.1 s, or faster than {max_speed:g} m/s, "
-                   f"from their neighbours at {_rows(lines, outliers)}")
+        report.add(
+            "masked",
+            "gps_position",
+            int(outliers.sum()),
+            f"fixes jumping > {jump_threshold:g} m per 0.1 s, or faster than {max_speed:g} m/s, "
+            f"from their neighbours at {_rows(lines, outliers)}",
+        )
     if not valid.any():
         for c in ("lat_gps", "lon_gps"):
             _drop(report, meta, c, n, "no fresh plausible GPS fix")
@@ -84,13 +102,15 @@ def _fresh_alt(x, t, lines, name, report) -> Channel:
     zero = fresh & (x == 0)
     valid = fresh & ~zero & np.isfinite(x)
     longest = float(stale_stretches(t, fresh).max())
-    report.add("info", name, int(fresh.sum()),
-               f"{int(fresh.sum())} new values, {int(len(x) - fresh.sum())} repeats; "
-               f"longest repeat {longest:.1f} s")
+    report.add(
+        "info",
+        name,
+        int(fresh.sum()),
+        f"{int(fresh.sum())} new values, {int(len(x) - fresh.sum())} repeats; longest repeat {longest:.1f} s",
+    )
     if zero.any():
         report.add("masked", name, int(zero.sum()), f"zero altitude at {_rows(lines, zero)}")
-    return Channel(x, "m", "up", valid, (name,),
-                   description="altitude; valid only where a new value appears")
+    return Channel(x, "m", "up", valid, (name,), description="altitude; valid only where a new value appears")
 
 
 def _time_of_day(x, t, report, meta):
@@ -122,11 +142,19 @@ def _time_of_day(x, t, report, meta):
     t0 = float(np.median(offset)) % 86400
     hh, rem = divmod(t0, 3600)
     mm, ss = divmod(rem, 60)
-    meta["gps_time_of_day"] = {"column": "time_gps", "format": "hhmmss", "t0_seconds_of_day": t0,
-                               "t0_hhmmss": f"{int(hh):02d}:{int(mm):02d}:{ss:04.1f}",
-                               "resolution_s": 1.0, "updates": int(changed.sum()),
-                               "note": "time of day of t = 0 from the GPS fixes; the date is not "
-                                       "in the file, so no epoch is set"}
-    report.add("info", "time_gps", int(changed.sum()),
-               f"read as GPS time of day hhmmss: t = 0 at {meta['gps_time_of_day']['t0_hhmmss']} "
-               f"(+-1 s); no date, so no epoch")
+    meta["gps_time_of_day"] = {
+        "column": "time_gps",
+        "format": "hhmmss",
+        "t0_seconds_of_day": t0,
+        "t0_hhmmss": f"{int(hh):02d}:{int(mm):02d}:{ss:04.1f}",
+        "resolution_s": 1.0,
+        "updates": int(changed.sum()),
+        "note": "time of day of t = 0 from the GPS fixes; the date is not in the file, so no epoch is set",
+    }
+    report.add(
+        "info",
+        "time_gps",
+        int(changed.sum()),
+        f"read as GPS time of day hhmmss: t = 0 at {meta['gps_time_of_day']['t0_hhmmss']} "
+        f"(+-1 s); no date, so no epoch",
+    )

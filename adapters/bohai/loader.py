@@ -1,4 +1,5 @@
 """``load``: one Bohai CSV log into a :class:`~replay.frame.Frame` (see the package docstring)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,14 +24,34 @@ from .reference import _reference_mask
 
 @declare(
     "bohai-csv",
-    Param("jump_threshold", float, 5.0, "a step of the navigation solution longer than this is a jump",
-          unit="m per 0.1 s", low=0.0, low_open=True),
-    Param("max_speed", float, 10.0, "the fastest plausible motion of the vehicle", unit="m/s",
-          low=0.0, low_open=True),
-    Param("gps_tolerance", float, 15.0, "how far a fresh GPS fix may lie from the navigation solution "
-          "before it contradicts it (null: no GPS check)", unit="m", low=0.0, low_open=True, optional=True),
-    Param("gap_factor", float, 5.0, "a time step longer than this many median steps is flagged as a gap",
-          low=1.0, low_open=True),
+    Param(
+        "jump_threshold",
+        float,
+        5.0,
+        "a step of the navigation solution longer than this is a jump",
+        unit="m per 0.1 s",
+        low=0.0,
+        low_open=True,
+    ),
+    Param("max_speed", float, 10.0, "the fastest plausible motion of the vehicle", unit="m/s", low=0.0, low_open=True),
+    Param(
+        "gps_tolerance",
+        float,
+        15.0,
+        "how far a fresh GPS fix may lie from the navigation solution before it contradicts it (null: no GPS check)",
+        unit="m",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
+    Param(
+        "gap_factor",
+        float,
+        5.0,
+        "a time step longer than this many median steps is flagged as a gap",
+        low=1.0,
+        low_open=True,
+    ),
 )
 def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame:
     """Read one Bohai CSV log into a :class:`Frame`."""
@@ -41,8 +62,7 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
     layout = _layout(path, list(table.columns))
     report = Report()
     mask_infinite(table, lines, report)
-    meta = {"source": str(path), "sha256": sha256,
-            "layout": layout, "adapter": "bohai-csv", "dropped_columns": {}}
+    meta = {"source": str(path), "sha256": sha256, "layout": layout, "adapter": "bohai-csv", "dropped_columns": {}}
     names = COLS36 if layout == 36 else COLS31
     for c in table.columns:
         if c not in names:
@@ -61,37 +81,51 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
     if not geo_ok.any():
         raise DataError(path, "no plausible lat/lon in the navigation solution")
     if (~geo_ok).any():
-        report.add("masked", "position", int((~geo_ok).sum()),
-                   f"lat/lon missing or impossible at {_rows(lines, ~geo_ok)}")
+        report.add(
+            "masked", "position", int((~geo_ok).sum()), f"lat/lon missing or impossible at {_rows(lines, ~geo_ok)}"
+        )
     load_stage("projecting and checking the GPS fixes", 0.45)
     epsg = utm_epsg(lat[geo_ok], lon[geo_ok])
     to_utm = pyproj.Transformer.from_crs("EPSG:4326", epsg, always_xy=True)
     utm = project(to_utm, lat, lon, geo_ok)
-    gps = _gps_fixes(cols, t, to_utm, lines, report, meta, jump_threshold, max_speed) \
-        if layout == 36 else None
+    gps = _gps_fixes(cols, t, to_utm, lines, report, meta, jump_threshold, max_speed) if layout == 36 else None
     load_stage("masking the jumps of the navigation solution", 0.55)
-    valid = _reference_mask(t, utm, geo_ok, gps, lines, report, meta,
-                            jump_threshold, max_speed, gps_tolerance)
+    valid = _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, max_speed, gps_tolerance)
     origin = utm[int(np.argmax(valid if valid.any() else geo_ok))].copy()
     meta.update(crs=f"EPSG:{epsg}", epsg=epsg, origin=[float(origin[0]), float(origin[1])])
     pos = utm - origin
-    reference = {"position": Channel(pos, "m", "ENU local", valid, ("east", "north"),
-                                     description="navigation solution lat/lon in UTM minus origin; "
-                                                 "masked where displaced (see meta['jumps'])")}
+    reference = {
+        "position": Channel(
+            pos,
+            "m",
+            "ENU local",
+            valid,
+            ("east", "north"),
+            description="navigation solution lat/lon in UTM minus origin; masked where displaced (see meta['jumps'])",
+        )
+    }
     vel = track_velocity(t, pos, valid)
     meta["speed"] = _speed_check(vel, report)
 
     load_stage("checking the sensor columns", 0.7)
     channels = _sensor_channels(cols, t, vel, lines, report, meta)
     if gps is not None:
-        channels["gps_position"] = Channel(gps["utm"] - origin, "m", "ENU local", gps["valid"],
-                                           ("east", "north"),
-                                           description="GPS fix lat_gps/lon_gps in UTM minus origin; "
-                                                       "valid only where a new fix appears")
+        channels["gps_position"] = Channel(
+            gps["utm"] - origin,
+            "m",
+            "ENU local",
+            gps["valid"],
+            ("east", "north"),
+            description="GPS fix lat_gps/lon_gps in UTM minus origin; valid only where a new fix appears",
+        )
     if layout == 36:
         _time_of_day(cols["time_gps"], t, report, meta)
-    meta["channel_columns"] = {"attitude": ["roll", "pitch", "yaw"], "gyro": ["wx", "wy", "wz"],
-                               "gps_position": ["lat_gps", "lon_gps"], "gps_alt": ["alt_gps"]}
+    meta["channel_columns"] = {
+        "attitude": ["roll", "pitch", "yaw"],
+        "gyro": ["wx", "wy", "wz"],
+        "gps_position": ["lat_gps", "lon_gps"],
+        "gps_alt": ["alt_gps"],
+    }
     meta["roles"] = _roles(channels, meta)
     return Frame(t, channels, reference, None, meta, report)
 
@@ -101,8 +135,14 @@ def _roles(channels, meta) -> dict:
     an IMU when its wz follows the yaw rate (the adapter's gyro check)."""
     roles = {}
     if "gps_position" in channels:
-        roles["gps"] = [{"entry": "gps_position", "source": "columns lat_gps, lon_gps", "declared": False,
-                         "channels": {"position": "gps_position"}}]
+        roles["gps"] = [
+            {
+                "entry": "gps_position",
+                "source": "columns lat_gps, lon_gps",
+                "declared": False,
+                "channels": {"position": "gps_position"},
+            }
+        ]
     imu = {}
     if "gyro" in channels and meta.get("gyro_attitude", {}).get("wz_yaw", 0.0) >= 0.3:
         imu["gyro"] = "gyro"
@@ -111,8 +151,15 @@ def _roles(channels, meta) -> dict:
     if imu:
         # its yaw is east-north-up when it follows the course over ground (the adapter's yaw check)
         enu = meta.get("yaw_course", {}).get("median_abs_rad", np.inf) < 0.5
-        roles["imu"] = [{"entry": "gyro" if "gyro" in imu else "attitude", "declared": False, "channels": imu,
-                         "source": "columns " + ", ".join(COLUMNS_OF[f] for f in imu), "attitude_enu": bool(enu)}]
+        roles["imu"] = [
+            {
+                "entry": "gyro" if "gyro" in imu else "attitude",
+                "declared": False,
+                "channels": imu,
+                "source": "columns " + ", ".join(COLUMNS_OF[f] for f in imu),
+                "attitude_enu": bool(enu),
+            }
+        ]
     return roles
 
 
@@ -131,14 +178,21 @@ def _sensor_channels(cols, t, vel, lines, report, meta) -> dict:
         if all(c in passed for c in members):
             values = np.column_stack([cols[c] for c in members])
             frame = "body" if name == "attitude" else COLUMNS[members[0]][2]
-            channels[name] = Channel(values, COLUMNS[members[0]][1], frame, None, comps, angles,
-                                     convention, ", ".join(COLUMNS[c][3] for c in members))
+            channels[name] = Channel(
+                values,
+                COLUMNS[members[0]][1],
+                frame,
+                None,
+                comps,
+                angles,
+                convention,
+                ", ".join(COLUMNS[c][3] for c in members),
+            )
             passed = [c for c in passed if c not in members]
     if "attitude" in channels:
         meta["yaw_course"] = _yaw_check(channels["attitude"].values[:, 2], vel, report)
     if "attitude" in channels and "gyro" in channels:
-        meta["gyro_attitude"] = _gyro_check(t, channels["gyro"].values, channels["attitude"].values,
-                                            report)
+        meta["gyro_attitude"] = _gyro_check(t, channels["gyro"].values, channels["attitude"].values, report)
     for c in passed:
         kind, unit, frame, desc = COLUMNS[c]
         if kind == "altitude":

@@ -3,6 +3,7 @@
 Also the two report helpers every stage uses: :func:`_rows` (``lines 4, 9, 12``)
 and :func:`_drop` (a column not passed on).
 """
+
 from __future__ import annotations
 
 import csv
@@ -74,8 +75,7 @@ def _parse(path, source, first: bytes):
     except pd.errors.ParserError as err:
         last = str(err).strip().splitlines()[-1]
         line = re.search(r"line (\d+)", last)
-        raise DataError(path, f"not a readable CSV table: {last}",
-                        row=int(line.group(1)) if line else None) from None
+        raise DataError(path, f"not a readable CSV table: {last}", row=int(line.group(1)) if line else None) from None
     except (UnicodeDecodeError, ValueError) as err:
         raise DataError(path, f"not a readable CSV table: {err}") from None
     table.columns = [str(c).strip() for c in table.columns]
@@ -92,8 +92,7 @@ def _parse(path, source, first: bytes):
         col = table[c]
         if col.dtype.kind in "fiub":
             continue
-        num = pd.to_numeric(col.astype(str).str.strip().replace({"nan": ""}).replace("", np.nan),
-                            errors="coerce")
+        num = pd.to_numeric(col.astype(str).str.strip().replace({"nan": ""}).replace("", np.nan), errors="coerce")
         bad = num.isna().to_numpy() & col.notna().to_numpy()
         if bad.any():
             i = int(np.argmax(bad))
@@ -113,8 +112,11 @@ def _layout(path, columns) -> int:
         if not missing[layout]:
             return layout
     near = min(missing, key=lambda k: len(missing[k]))
-    raise DataError(path, f"header matches neither Bohai layout: missing columns "
-                          f"{', '.join(missing[near])} (of the {near}-column layout)")
+    raise DataError(
+        path,
+        f"header matches neither Bohai layout: missing columns "
+        f"{', '.join(missing[near])} (of the {near}-column layout)",
+    )
 
 
 def _rows(lines, mask, most=5) -> str:
@@ -138,8 +140,7 @@ def _clean_rows(path, table, names, lines, report, meta):
     for j, c in enumerate(names):
         values[:, j] = table[c].to_numpy(dtype=float)
     if empty.any():
-        report.add("dropped", "rows", int(empty.sum()),
-                   f"empty or all-NaN rows at {_rows(lines, empty)}")
+        report.add("dropped", "rows", int(empty.sum()), f"empty or all-NaN rows at {_rows(lines, empty)}")
     no_time = ~empty & ~np.isfinite(values[:, names.index("time")])
     if no_time.any():
         report.add("dropped", "rows", int(no_time.sum()), f"no time value at {_rows(lines, no_time)}")
@@ -155,16 +156,24 @@ def _clean_rows(path, table, names, lines, report, meta):
         identical = same & ((values == prev) | (np.isnan(values) & np.isnan(prev))).all(axis=1)
         if (same & ~identical).any():
             i = int(np.argmax(same & ~identical))
-            raise DataError(path, f"time {time[i]:g} s repeats line {lines[i - 1]} with different "
-                                  f"values (duplicate timestamp)", row=int(lines[i]))
-        report.add("dropped", "rows", int(identical.sum()),
-                   f"exact duplicates of the previous row at {_rows(lines, identical)}")
+            raise DataError(
+                path,
+                f"time {time[i]:g} s repeats line {lines[i - 1]} with different values (duplicate timestamp)",
+                row=int(lines[i]),
+            )
+        report.add(
+            "dropped",
+            "rows",
+            int(identical.sum()),
+            f"exact duplicates of the previous row at {_rows(lines, identical)}",
+        )
         values, lines, time = values[~identical], lines[~identical], time[~identical]
     back = np.diff(time) < 0
     if back.any():
         i = int(np.argmax(back)) + 1
-        raise DataError(path, f"time decreases from {time[i - 1]:g} s (line {lines[i - 1]}) "
-                              f"to {time[i]:g} s", row=int(lines[i]))
+        raise DataError(
+            path, f"time decreases from {time[i - 1]:g} s (line {lines[i - 1]}) to {time[i]:g} s", row=int(lines[i])
+        )
     if len(lines) < 2:
         raise DataError(path, "fewer than 2 usable data rows")
     meta["rows"] = {"read": n_read, "kept": len(lines), "dropped": n_read - len(lines)}
@@ -175,13 +184,25 @@ def _time_axis(t, lines, report, gap_factor) -> dict:
     dt = np.diff(t)
     med = float(np.median(dt))
     gaps = dt > gap_factor * med
-    stats = {"median_step": med, "min_step": float(dt.min()), "max_step": float(dt.max()),
-             "span": float(t[-1]), "gaps": int(gaps.sum())}
-    report.add("info", "time", len(t), f"median step {med:.4f} s, min {dt.min():.4f} s, "
-                                       f"max {dt.max():.4f} s, span {t[-1]:.1f} s")
+    stats = {
+        "median_step": med,
+        "min_step": float(dt.min()),
+        "max_step": float(dt.max()),
+        "span": float(t[-1]),
+        "gaps": int(gaps.sum()),
+    }
+    report.add(
+        "info",
+        "time",
+        len(t),
+        f"median step {med:.4f} s, min {dt.min():.4f} s, max {dt.max():.4f} s, span {t[-1]:.1f} s",
+    )
     if gaps.any():
         i = int(np.argmax(dt))
-        report.add("flagged", "time", int(gaps.sum()),
-                   f"gaps > {gap_factor:g} x median step "
-                   f"(longest {dt[i]:.3f} s before line {lines[i + 1]})")
+        report.add(
+            "flagged",
+            "time",
+            int(gaps.sum()),
+            f"gaps > {gap_factor:g} x median step (longest {dt[i]:.3f} s before line {lines[i + 1]})",
+        )
     return stats

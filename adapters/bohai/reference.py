@@ -1,4 +1,5 @@
 """Validity of the reference position: jumps of the navigation solution and GPS contradictions."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,7 +49,7 @@ def mask_jumps(t, p, jump_threshold=5.0, max_speed=10.0, block=10):
     keep = np.zeros(n, bool)
     k = len(starts) - 1 - int(np.argmax(best[::-1]))
     while k >= 0:
-        keep[starts[k]:ends[k] + 1] = True
+        keep[starts[k] : ends[k] + 1] = True
         k = prev[k]
     _regrow(t, p, keep, jump_threshold, max_speed)
     return keep
@@ -136,6 +137,7 @@ def _best_chain(t, p, starts, ends, at_jump, jump_threshold, max_speed, chunk=64
 
 def _regrow(t, p, keep, jump_threshold, max_speed):
     """Unmask samples at the edges of masked stretches while they stay compatible."""
+
     def ok(i, j):
         if i is None or j is None:
             return True
@@ -194,8 +196,7 @@ def gps_contradiction(t, p, fixes, fix_p, after_jump, tolerance=15.0, window=1.0
     return out, dist
 
 
-def _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, max_speed,
-                    gps_tolerance):
+def _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, max_speed, gps_tolerance):
     """Validity of the reference: plausible lat/lon, not contradicted by GPS, no jumps.
 
     Two stages. First (36-column files) the samples that fresh GPS fixes
@@ -219,18 +220,27 @@ def _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, ma
         contra &= geo_ok
         valid &= ~contra
         far = dist > gps_tolerance
-        gps["info"].update(median_distance_to_reference_m=float(np.nanmedian(dist)),
-                           fixes_contradicting_reference=int(far.sum()))
+        gps["info"].update(
+            median_distance_to_reference_m=float(np.nanmedian(dist)), fixes_contradicting_reference=int(far.sum())
+        )
         worst = int(np.nanargmax(np.nan_to_num(dist, nan=-1.0)))
-        report.add("info", "gps_position", len(fixes),
-                   f"fresh fixes vs navigation solution: median {np.nanmedian(dist):.1f} m, "
-                   f"{int(far.sum())} fixes > {gps_tolerance:g} m (largest {dist[worst]:.1f} m "
-                   f"at line {lines[fixes[worst]]})")
+        report.add(
+            "info",
+            "gps_position",
+            len(fixes),
+            f"fresh fixes vs navigation solution: median {np.nanmedian(dist):.1f} m, "
+            f"{int(far.sum())} fixes > {gps_tolerance:g} m (largest {dist[worst]:.1f} m "
+            f"at line {lines[fixes[worst]]})",
+        )
         if contra.any():
-            report.add("masked", "position", int(contra.sum()),
-                       f"contradicted by fresh GPS fixes: {int(far.sum())} fixes > {gps_tolerance:g} m "
-                       f"from the navigation solution; samples within 1 s of them, and between "
-                       f"consecutive ones without a jump, masked ({len(_runs(contra))} stretches)")
+            report.add(
+                "masked",
+                "position",
+                int(contra.sum()),
+                f"contradicted by fresh GPS fixes: {int(far.sum())} fixes > {gps_tolerance:g} m "
+                f"from the navigation solution; samples within 1 s of them, and between "
+                f"consecutive ones without a jump, masked ({len(_runs(contra))} stretches)",
+            )
     rest = np.flatnonzero(valid)
     keep = mask_jumps(t[rest], utm[rest], jump_threshold, max_speed)
     kinematic = np.zeros(n, bool)
@@ -238,20 +248,26 @@ def _reference_mask(t, utm, geo_ok, gps, lines, report, meta, jump_threshold, ma
     valid &= ~kinematic
     masked = contra | kinematic
     meta["jumps"] = {
-        "events": len(jumps), "largest_m": float(steps.max()) if len(steps) else 0.0,
-        "masked": int(masked.sum()), "masked_gps": int(contra.sum()),
-        "masked_kinematic": int(kinematic.sum()), "stretches": len(_runs(masked)),
-        "steps": [{"line": int(lines[i]), "t": float(t[i]), "step_m": float(s)}
-                  for i, s in zip(jumps, steps)],
-        "method": (f"masked where fresh GPS fixes contradict it by > {gps_tolerance:g} m, then "
-                   if gps_check else "") +
-                  f"the largest set of samples with no step > {jump_threshold:g} m per 0.1 s and "
-                  f"no motion > {max_speed:g} m/s across masked stretches"}
+        "events": len(jumps),
+        "largest_m": float(steps.max()) if len(steps) else 0.0,
+        "masked": int(masked.sum()),
+        "masked_gps": int(contra.sum()),
+        "masked_kinematic": int(kinematic.sum()),
+        "stretches": len(_runs(masked)),
+        "steps": [{"line": int(lines[i]), "t": float(t[i]), "step_m": float(s)} for i, s in zip(jumps, steps)],
+        "method": (f"masked where fresh GPS fixes contradict it by > {gps_tolerance:g} m, then " if gps_check else "")
+        + f"the largest set of samples with no step > {jump_threshold:g} m per 0.1 s and "
+        f"no motion > {max_speed:g} m/s across masked stretches",
+    }
     if len(jumps):
         i = int(np.argmax(steps))
-        report.add("masked", "position", int(kinematic.sum()),
-                   f"{len(jumps)} jumps > {jump_threshold:g} m per 0.1 s in the navigation solution "
-                   f"(largest {steps[i]:.1f} m at line {lines[jumps[i]]}); {int(kinematic.sum())} "
-                   f"displaced samples in {len(_runs(kinematic))} stretches masked so that no "
-                   f"kept step is a jump and no masked gap is crossed faster than {max_speed:g} m/s")
+        report.add(
+            "masked",
+            "position",
+            int(kinematic.sum()),
+            f"{len(jumps)} jumps > {jump_threshold:g} m per 0.1 s in the navigation solution "
+            f"(largest {steps[i]:.1f} m at line {lines[jumps[i]]}); {int(kinematic.sum())} "
+            f"displaced samples in {len(_runs(kinematic))} stretches masked so that no "
+            f"kept step is a jump and no masked gap is crossed faster than {max_speed:g} m/s",
+        )
     return valid

@@ -21,11 +21,23 @@ loop is its Python function (the same numbers); a cache directory that cannot be
 in memory (one note), a damaged cache file is removed and compiled again; a model without
 kernels, or a filter engine that is not the library's own, steps in Python.
 """
+
 from .copies import bind
-from .loops import (JACOBIAN_ROWS, ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks,
-                    row_kernels)
+from .loops import JACOBIAN_ROWS, ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels
 from .numba_internals import Kernel
 from .threadpool import split, threads
 
-__all__ = ["JACOBIAN_ROWS", "Kernel", "ROWS_KERNEL", "bind", "bound", "derived_from_kernels", "grain", "loop_ready",
-           "param_stacks", "row_kernels", "split", "threads"]
+__all__ = [
+    "JACOBIAN_ROWS",
+    "Kernel",
+    "ROWS_KERNEL",
+    "bind",
+    "bound",
+    "derived_from_kernels",
+    "grain",
+    "loop_ready",
+    "param_stacks",
+    "row_kernels",
+    "split",
+    "threads",
+]

@@ -27,6 +27,7 @@ memory, nothing cached (:func:`.files.private_dir`). Older copies of the same mo
 and template. Two checkouts of different versions sharing one cache directory therefore
 recompile each other's copies; give them separate ``REPLAY_CACHE_DIR``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -85,17 +86,20 @@ def _callees(modules) -> list:
 
 def _bound_copy(template, kernels, what: str):
     places = [where(k) for k in kernels]
-    lines = [f"from {mod} import {name} as {alias}  # noqa: E402"
-             for (mod, name), alias in zip(places, ("f", "h", "F", "H"))]
+    lines = [
+        f"from {mod} import {name} as {alias}  # noqa: E402" for (mod, name), alias in zip(places, ("f", "h", "F", "H"))
+    ]
     kernel_modules = [sys.modules[m] for m in sorted({m for m, _ in places})]
-    for tag, mods in (("kernels' sources", kernel_modules),
-                      ("the functions they call", _callees([template, *kernel_modules]))):
+    for tag, mods in (
+        ("kernels' sources", kernel_modules),
+        ("the functions they call", _callees([template, *kernel_modules])),
+    ):
         text = "".join(_source(m) for m in mods)
         lines.append(f"# {tag}: sha256 {hashlib.sha256(text.encode()).hexdigest()[:16]}")
     lines.append("# numba's cache files of this copy are sealed (replay.filters.compiled.numba_internals, format 1)")
     text = _source(template)
     at = text.index(MARKER)
-    text = text[:at] + "\n".join(lines) + text[text.index("\n", at):]
+    text = text[:at] + "\n".join(lines) + text[text.index("\n", at) :]
     model = hashlib.sha256(repr(places).encode()).hexdigest()[:8]
     label = ", ".join(sorted({m.rsplit(".", 1)[-1].removesuffix("_kernels") for m, _ in places}))
     prefix = f"replay_{template.__name__.rsplit('.', 1)[-1]}_"
@@ -159,7 +163,7 @@ def _matches(path: Path, digest: str) -> bool:
         data = path.read_bytes()
     except OSError:
         return False
-    return hashlib.sha256(data).hexdigest()[:len(digest)] == digest
+    return hashlib.sha256(data).hexdigest()[: len(digest)] == digest
 
 
 def _drop_numba_cache(directory: Path, name: str) -> None:
@@ -170,7 +174,7 @@ def _drop_numba_cache(directory: Path, name: str) -> None:
 
 def _prune(directory: Path, current: str) -> None:
     """Remove the other copies of ``current``'s model and template (another digest), with their numba caches."""
-    for p in directory.glob(f"{current[:current.rindex('_') + 1]}*.py"):
+    for p in directory.glob(f"{current[: current.rindex('_') + 1]}*.py"):
         if p.stem != current:
             p.unlink(missing_ok=True)
             _drop_numba_cache(directory, p.stem)

@@ -4,6 +4,7 @@ What the cache trusts: the owner's own files. The directory is kept owner-only (
 0600); one writable by others is made owner-only, one owned by another user is not used
 (:func:`private_dir`). Nothing here knows numba.
 """
+
 from __future__ import annotations
 
 import logging
@@ -20,8 +21,7 @@ _noted: set = set()
 
 def cache_dir() -> Path:
     """``$REPLAY_CACHE_DIR/kernels`` (default ``~/.cache/replay/kernels``)."""
-    root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or "~/.cache", "replay")
+    root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(os.environ.get("XDG_CACHE_HOME") or "~/.cache", "replay")
     return Path(root).expanduser() / "kernels"
 
 
@@ -76,8 +76,10 @@ def private_dir(directory: Path) -> str | None:
         probe.touch(mode=0o600)
         probe.unlink()
     except (FileExistsError, NotADirectoryError):
-        culprit = next((p for p in (directory / "__pycache__", directory, *directory.parents)
-                        if p.exists() and not p.is_dir()), directory)
+        culprit = next(
+            (p for p in (directory / "__pycache__", directory, *directory.parents) if p.exists() and not p.is_dir()),
+            directory,
+        )
         return f"{where}: " + ("not a directory" if culprit == directory.parent else f"{culprit} is not a directory")
     except OSError as e:
         return f"{where}: {e.strerror or e} (read-only or not writable)"

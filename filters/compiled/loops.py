@@ -10,6 +10,7 @@ model. A loop is used only for the model's own kernels (:func:`derived_from_kern
 when it is compiled already, or cached, or the job is big enough to pay for its compilation
 (:func:`loop_ready`: a short first run never waits for it).
 """
+
 from __future__ import annotations
 
 import math
@@ -22,8 +23,8 @@ from .files import log
 
 THREAD_WORK_US = 1000.0  # work per thread at least (waking a thread costs tens of µs)
 _VEC, _S2, _S3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
-ROWS_KERNEL = types.FunctionType(types.void(_S2, _VEC, _S2))      # f, h: (X, p, out)
-JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))    # F, H: (X, p, J)
+ROWS_KERNEL = types.FunctionType(types.void(_S2, _VEC, _S2))  # f, h: (X, p, out)
+JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))  # F, H: (X, p, J)
 
 
 def derived_from_kernels(model) -> bool:
@@ -48,8 +49,9 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
         fn = _rows.get((ids, i))
         if fn is None:
             mod = copies.bind(rows, ks, "the run loops' rows kernels (about 2 s)")
-            fn = _rows[ids, i] = copies.cfunc(JACOBIAN_ROWS if i >= 2 else ROWS_KERNEL,
-                                              getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i]))
+            fn = _rows[ids, i] = copies.cfunc(
+                JACOBIAN_ROWS if i >= 2 else ROWS_KERNEL, getattr(mod, ("f_rows", "h_rows", "F_rows", "H_rows")[i])
+            )
         got.append(fn)
     return got
 

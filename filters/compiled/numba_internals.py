@@ -17,6 +17,7 @@ pyproject.toml; a new numba is tried here first).
   every argument of every call: about 7 µs for each function argument).
 * :func:`from_cache`: a run loop's declared signature loaded from numba's disk cache, or None.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -84,7 +85,7 @@ class SealedCacheFile(IndexDataCacheFile):
         except OSError:  # absent (or unreadable): nothing cached
             return {}
         if payload is None:  # its data files are orphans now: removed, or a new index could name them
-            for p in Path(self._cache_path).glob(self._index_name[:-len("nbi")] + "*.nbc"):
+            for p in Path(self._cache_path).glob(self._index_name[: -len("nbi")] + "*.nbc"):
                 p.unlink(missing_ok=True)
             return {}
         f = io.BytesIO(payload)
@@ -112,8 +113,9 @@ class SealedCacheFile(IndexDataCacheFile):
         try:
             write_private(path, seal(payload))
         except OSError as e:  # e.g. a full disk: the compiled code runs, only not cached
-            note_once(f"kernel cache {os.path.dirname(path)}: cannot write ({e.strerror or e}); "
-                      "compiled code not cached")
+            note_once(
+                f"kernel cache {os.path.dirname(path)}: cannot write ({e.strerror or e}); compiled code not cached"
+            )
 
 
 def _seal_cache(cache, label: str) -> None:
@@ -140,7 +142,7 @@ def guard(module, label: str) -> int:
                     p.unlink()
                     damaged += 1
                     if p.suffix == ".nbi":  # its data files are orphans: removed unread
-                        for q in d.glob(p.name[:-len("nbi")] + "*.nbc"):
+                        for q in d.glob(p.name[: -len("nbi")] + "*.nbc"):
                             q.unlink(missing_ok=True)
                 elif p.stat().st_mode & 0o077:
                     p.chmod(0o600)
@@ -175,8 +177,10 @@ def from_cache(loop, sig) -> bool:
 def _key(args):
     """What numba's typing of ``args`` depends on: dtype, dimensions and layout (C, F or neither) of
     arrays, the type of anything else."""
-    return tuple((a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray)
-                 else type(a) for a in args)
+    return tuple(
+        (a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray) else type(a)
+        for a in args
+    )
 
 
 class Kernel:

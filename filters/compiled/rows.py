@@ -11,6 +11,7 @@ inlines them into these loops: a run loop makes one call through a function
 pointer per stack of states (the particles of a run, the sigma points of a
 run), not one per state. The arithmetic of each state is the kernel's own.
 """
+
 import numba as nb
 
 # MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H

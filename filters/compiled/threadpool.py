@@ -8,6 +8,7 @@ process may use, at most 8); campaign and reproduction workers set it to 1
 (:mod:`replay.campaign.workers`), so N worker processes on N cores do not each
 start N threads.
 """
+
 from __future__ import annotations
 
 import os

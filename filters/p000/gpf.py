@@ -37,6 +37,7 @@ Choices made here (the paper does not say):
   derived from eq. 11; eq. 12 with its printed factor, see
   :mod:`replay.filters.p000.grey`). ``replay reproduce 000`` runs them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -60,21 +61,30 @@ class GreyParticleFilter(Filter):
     name = "gpf"
     PARAMS = (
         Param("n_particles", int, 1000, "particles N (000 §3: 1000)", low=2),
-        Param("n_grey", int, 100, "grey particles N_grey among the N (000 §3: 100, N_grey : N_std = 1 : 9)",
-              low=0),
+        Param("n_grey", int, 100, "grey particles N_grey among the N (000 §3: 100, N_grey : N_std = 1 : 9)", low=0),
         Param("grey_window", int, 30, "GM(1,1) window L (eq. 7; 000 §3: 30)", unit="steps", low=3),
         Param("noise_window", int, 50, "wavelet noise window (eq. 17; 000 §3: 50)", unit="steps", low=1),
         Param("wavelet_name", str, "db6", "wavelet of the noise estimator (000 §3: db6)"),
         Param("grey", bool, True, "draw grey particles (false: a bootstrap PF with the wavelet R)"),
         Param("wavelet", bool, True, "estimate R by wavelets (false: the model's fixed R)"),
         Param("grey_alpha", float, 0.5, "GM(1,1) background weight alpha (eq. 10)", low=0.0, high=1.0),
-        Param("grey_response", str, "discrete", "GM(1,1) time response: of the fitted discrete equation; "
-              "eq. 12 derived from eq. 11, (1 - e^a); or eq. 12 with the printed factor (1 - e^-a), about the "
-              "negated prediction (filters/p000/grey.py)", choices=RESPONSES),
-        Param("grey_floor", float, 1.0, "GM(1,1) conditioning shift applies when the window dips below this "
-              "(null: never)", optional=True),
-        Param("grey_shift_ratio", float, 100.0, "GM(1,1) conditioning shift: max(floor, ratio * span) - min",
-              low=0.0),
+        Param(
+            "grey_response",
+            str,
+            "discrete",
+            "GM(1,1) time response: of the fitted discrete equation; "
+            "eq. 12 derived from eq. 11, (1 - e^a); or eq. 12 with the printed factor (1 - e^-a), about the "
+            "negated prediction (filters/p000/grey.py)",
+            choices=RESPONSES,
+        ),
+        Param(
+            "grey_floor",
+            float,
+            1.0,
+            "GM(1,1) conditioning shift applies when the window dips below this (null: never)",
+            optional=True,
+        ),
+        Param("grey_shift_ratio", float, 100.0, "GM(1,1) conditioning shift: max(floor, ratio * span) - min", low=0.0),
         Param("sigma_floor", float, 1e-6, "lower bound of each wavelet sigma", low=0.0, low_open=True),
         Param("resampling", str, "systematic", "resampling scheme (every step)", choices=tuple(SCHEMES)),
     )
@@ -82,14 +92,14 @@ class GreyParticleFilter(Filter):
     def check(self):
         """n_grey < n_particles; the wavelet accepts the window. Builds the two estimators."""
         if self.n_grey >= self.n_particles:
-            raise ReplayError(f"{self.owner()}: n_grey must be < n_particles = {self.n_particles} "
-                              f"(got {self.n_grey})")
+            raise ReplayError(f"{self.owner()}: n_grey must be < n_particles = {self.n_particles} (got {self.n_grey})")
         try:
             self._noise = WaveletNoise(self.noise_window, self.wavelet_name)
         except ReplayError as err:
             raise ReplayError(f"{self.owner()}: noise_window / wavelet_name: {err}") from None
-        self._grey = GreyPredictor(self.grey_window, self.grey_alpha, self.grey_response, self.grey_floor,
-                                   self.grey_shift_ratio)
+        self._grey = GreyPredictor(
+            self.grey_window, self.grey_alpha, self.grey_response, self.grey_floor, self.grey_shift_ratio
+        )
 
     # ------------------------------------------------------------------ run
     def start(self, state, x0, P0):
@@ -97,8 +107,10 @@ class GreyParticleFilter(Filter):
         m = state.model
         probe = np.asarray(x0, float) + np.arange(1.0, m.nx + 1.0)
         if m.nz != m.nx or not np.allclose(m.h(probe[None], 0)[0], probe):
-            raise ReplayError(f"{self.owner()}: the model must measure its state directly (h(x) = x, eq. 6); "
-                              f"this one has nx={m.nx}, nz={m.nz}")
+            raise ReplayError(
+                f"{self.owner()}: the model must measure its state directly (h(x) = x, eq. 6); "
+                f"this one has nx={m.nx}, nz={m.nz}"
+            )
         N = self.n_particles
         X = particles.gaussian(state.x[None], state.P[None], N, [state.rng])[0]
         state.particles = wrap_components(X, m.x_angles)
@@ -130,7 +142,7 @@ class GreyParticleFilter(Filter):
 
     def _grey_prediction(self, state):
         """Eq. 21: GM(1,1) of each channel over z_{k-L..k-1}; None if one is missing."""
-        win = state.hist[-self.grey_window:]
+        win = state.hist[-self.grey_window :]
         if not np.isfinite(win).all():
             return None
         return wrap_components(self._grey(win), state.model.z_angles)
@@ -139,7 +151,7 @@ class GreyParticleFilter(Filter):
         m = state.model
         state.hist[-1] = z
         if self.wavelet:
-            win = state.hist[-self.noise_window:]
+            win = state.hist[-self.noise_window :]
             full = np.isfinite(win).all(axis=0)
             if full.any():
                 s = self._noise.sigma(win[:, full])
@@ -165,6 +177,9 @@ class GreyParticleFilter(Filter):
         return x[0], P[0]
 
     def finish(self, state, info):
-        info.update(grey_steps=state.grey_steps, wavelet_steps=state.wavelet_steps,
-                    mean_ess=state.ess_sum / max(state.steps, 1),
-                    last_sigma=state.sigma.tolist())
+        info.update(
+            grey_steps=state.grey_steps,
+            wavelet_steps=state.wavelet_steps,
+            mean_ess=state.ess_sum / max(state.steps, 1),
+            last_sigma=state.sigma.tolist(),
+        )

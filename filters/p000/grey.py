@@ -45,6 +45,7 @@ Choices made here (the paper is silent or ambiguous):
 All functions work along axis 0 on arrays of shape (n, ...): several channels
 (or Monte Carlo runs) are predicted at once.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -76,8 +77,13 @@ def gm11_fit(z0: np.ndarray, alpha: float = ALPHA):
     return a, b
 
 
-def gm11_predict(z0: np.ndarray, alpha: float = ALPHA, response: str = "discrete",
-                 floor: float | None = 1.0, shift_ratio: float = 100.0) -> np.ndarray:
+def gm11_predict(
+    z0: np.ndarray,
+    alpha: float = ALPHA,
+    response: str = "discrete",
+    floor: float | None = 1.0,
+    shift_ratio: float = 100.0,
+) -> np.ndarray:
     """One-step GM(1,1) prediction z0^(n+1) of the series along axis 0 (eq. 7-12).
 
     ``floor`` and ``shift_ratio`` set the conditioning shift (module docstring);
@@ -91,8 +97,14 @@ class GreyPredictor:
     """:func:`gm11_predict` for windows of a fixed length ``n``, with the sums of
     eq. 10 precomputed as one matrix (one product per call: the GPF calls it every step)."""
 
-    def __init__(self, n: int, alpha: float = ALPHA, response: str = "discrete",
-                 floor: float | None = 1.0, shift_ratio: float = 100.0):
+    def __init__(
+        self,
+        n: int,
+        alpha: float = ALPHA,
+        response: str = "discrete",
+        floor: float | None = 1.0,
+        shift_ratio: float = 100.0,
+    ):
         if n < 3:
             raise ReplayError(f"GM(1,1) needs at least 3 samples (got {n})")
         if response not in RESPONSES:
@@ -118,7 +130,7 @@ class GreyPredictor:
         x = z0 + shift
         r = self.M @ x
         m = self.m
-        Zc, Yc = r[:m], r[m:2 * m]
+        Zc, Yc = r[:m], r[m : 2 * m]
         var = (Zc * Zc).sum(axis=0)
         const = hi == lo  # a constant series predicts itself, bit for bit
         a = -(Zc * Yc).sum(axis=0) / np.where(const, 1.0, var)  # eq. 10

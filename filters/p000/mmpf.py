@@ -23,6 +23,7 @@ Pi: stay with probability ``stay`` = 0.95, switch to each other mode with
 after the model step (the depth feels the new pitch from the next step on).
 ``T_k`` is ``model.step(k)`` when the model has it, else 1.
 """
+
 from __future__ import annotations
 
 import math
@@ -64,8 +65,11 @@ class Rows(Param):
 
 
 def _finite_number(x) -> bool:
-    return (isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-            and math.isfinite(x))
+    return (
+        isinstance(x, (int, float, np.integer, np.floating))
+        and not isinstance(x, (bool, np.bool_))
+        and math.isfinite(x)
+    )
 
 
 class MultipleModelPF(Filter):
@@ -74,12 +78,24 @@ class MultipleModelPF(Filter):
     name = "mmpf"
     PARAMS = (
         Param("n_particles", int, 1000, "particles N", low=2),
-        Rows("modes", list, DEFAULT_MODES, "one rate vector per motion mode (state units per second), added "
-             "to the model's motion"),
-        Param("stay", float, 0.95, "probability of staying in a mode (when transition is null)",
-              low=0.0, high=1.0, low_open=True),
-        Rows("transition", list, None, "Markov switching matrix Pi, rows summing to 1 (null: from stay)",
-             optional=True),
+        Rows(
+            "modes",
+            list,
+            DEFAULT_MODES,
+            "one rate vector per motion mode (state units per second), added to the model's motion",
+        ),
+        Param(
+            "stay",
+            float,
+            0.95,
+            "probability of staying in a mode (when transition is null)",
+            low=0.0,
+            high=1.0,
+            low_open=True,
+        ),
+        Rows(
+            "transition", list, None, "Markov switching matrix Pi, rows summing to 1 (null: from stay)", optional=True
+        ),
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
         Param("ess_threshold", float, 1.0, "resample when ESS < threshold * N (1: every step)", low=0.0, high=1.0),
     )
@@ -93,8 +109,10 @@ class MultipleModelPF(Filter):
         else:
             Pi = np.asarray(self.transition, float)
         if Pi.shape != (M, M) or (Pi < 0).any() or not np.allclose(Pi.sum(axis=1), 1.0):
-            raise ReplayError(f"{self.owner()}: transition must be a {M}x{M} matrix (one row per mode) of "
-                              f"non-negative rows summing to 1 (got {Pi.tolist()})")
+            raise ReplayError(
+                f"{self.owner()}: transition must be a {M}x{M} matrix (one row per mode) of "
+                f"non-negative rows summing to 1 (got {Pi.tolist()})"
+            )
         self._rates, self._cum = rates, np.cumsum(Pi, axis=1)
 
     def params(self) -> dict:
@@ -109,8 +127,10 @@ class MultipleModelPF(Filter):
         super().start(state, x0, P0)
         m, N = state.model, self.n_particles
         if self._rates.shape[1] != m.nx:
-            raise ReplayError(f"{self.owner()}: modes must have {m.nx} rates per mode (one per state "
-                              f"component of this model; got {self._rates.shape[1]})")
+            raise ReplayError(
+                f"{self.owner()}: modes must have {m.nx} rates per mode (one per state "
+                f"component of this model; got {self._rates.shape[1]})"
+            )
         X = particles.gaussian(state.x[None], state.P[None], N, [state.rng])[0]
         state.particles = wrap_components(X, m.x_angles)
         state.modes = state.rng.integers(0, len(self._rates), N)
@@ -145,5 +165,8 @@ class MultipleModelPF(Filter):
         return x[0], P[0]
 
     def finish(self, state, info):
-        info.update(resampled=state.resampled, mean_ess=state.ess_sum / max(state.steps, 1),
-                    mean_mode_probability=(state.mu_sum / max(state.steps, 1)).tolist())
+        info.update(
+            resampled=state.resampled,
+            mean_ess=state.ess_sum / max(state.steps, 1),
+            mean_mode_probability=(state.mu_sum / max(state.steps, 1)).tolist(),
+        )

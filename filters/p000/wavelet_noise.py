@@ -26,6 +26,7 @@ Choices made here:
 :class:`WaveletNoise` precomputes the (n_coef, window) matrix so that one
 estimate for all channels is one small matrix product and a median.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,7 +51,7 @@ def detail_matrix(window: int = WINDOW, wavelet: str = WAVELET) -> np.ndarray:
     starts = np.arange(0, window - L + 1, 2)
     D = np.zeros((len(starts), window))
     for i, s in enumerate(starts):
-        D[i, s:s + L] = hi[::-1]  # convolution: reversed filter
+        D[i, s : s + L] = hi[::-1]  # convolution: reversed filter
     return D
 
 
@@ -91,5 +92,5 @@ def wavelet_sigma(x: np.ndarray, window: int = WINDOW, wavelet: str = WAVELET) -
     c = np.einsum("cw,k...w->kc...", est.D, win)
     s = np.median(np.abs(c), axis=1) / MAD_SCALE
     out = np.full(x.shape, np.nan)
-    out[window - 1:] = s
+    out[window - 1 :] = s
     return out

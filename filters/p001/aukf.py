@@ -70,6 +70,7 @@ Choices (the paper is silent or ambiguous):
   on that block only.
 * **Angles.** q̂ and p̂ components of angles are wrapped; residuals are wrapped.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -93,17 +94,37 @@ class AUKF(UKF):
 
     name = "aukf"
     PARAMS = UKF.PARAMS + (
-        Param("forgetting", float, 0.98, "forgetting factor b of the fading memory (eq. 83)",
-              low=0.0, high=1.0, low_open=True, high_open=True),
+        Param(
+            "forgetting",
+            float,
+            0.98,
+            "forgetting factor b of the fading memory (eq. 83)",
+            low=0.0,
+            high=1.0,
+            low_open=True,
+            high_open=True,
+        ),
         Param("adapt", bool, True, "estimate the noise statistics (false: the plain UKF)"),
         Param("adapt_q", bool, True, "estimate the process noise covariance Q (eq. 110)"),
         Param("adapt_r", bool, True, "estimate the measurement noise covariance R (eq. 107)"),
-        Param("adapt_means", str, "both", "which noise means to estimate: q (eq. 105), p (eq. 106), both "
-              "(the paper) or none", choices=tuple(MEANS)),
-        Param("guard", str, "biased", "what replaces an updated Q or R that is not positive definite",
-              choices=GUARDS),
-        Param("guard_floor", float, 1e-3, "eigenvalue floor of the guard, in units of the prior",
-              low=0.0, high=1.0, low_open=True, high_open=True),
+        Param(
+            "adapt_means",
+            str,
+            "both",
+            "which noise means to estimate: q (eq. 105), p (eq. 106), both (the paper) or none",
+            choices=tuple(MEANS),
+        ),
+        Param("guard", str, "biased", "what replaces an updated Q or R that is not positive definite", choices=GUARDS),
+        Param(
+            "guard_floor",
+            float,
+            1e-3,
+            "eigenvalue floor of the guard, in units of the prior",
+            low=0.0,
+            high=1.0,
+            low_open=True,
+            high_open=True,
+        ),
         Param("keep_history", bool, False, "keep every step's q, p, Q, R in info['history']"),
     )
 
@@ -212,8 +233,15 @@ class AUKF(UKF):
         info["adapt"] = self.adapt
         if not self.adapt:
             return
-        info.update(guard_q=int(state.guard_q), guard_r=int(state.guard_r), adapt_updates=int(state.j),
-                    Q_hat=state.Qh, R_hat=state.Rh, q_hat=state.q, p_hat=state.p)
+        info.update(
+            guard_q=int(state.guard_q),
+            guard_r=int(state.guard_r),
+            adapt_updates=int(state.j),
+            Q_hat=state.Qh,
+            R_hat=state.Rh,
+            q_hat=state.q,
+            p_hat=state.p,
+        )
         if state.history is not None:
             info["history"] = {k: np.array(v) for k, v in state.history.items()}
 
@@ -221,7 +249,7 @@ class AUKF(UKF):
 def is_spd(M: np.ndarray, scale2: np.ndarray, floor: float) -> bool:
     """True when diag(s) M diag(s) − floor·I has a Cholesky factor (M symmetric, scale2 = s sᵀ)."""
     Ms = M * scale2
-    Ms.flat[::len(Ms) + 1] -= floor
+    Ms.flat[:: len(Ms) + 1] -= floor
     try:
         cholesky(Ms)
     except np.linalg.LinAlgError:

@@ -31,6 +31,7 @@ cubature step 0.39 ms (~200 sin, cos, atan2, sqrt per particle), the swarm 0.25 
 (2,000 fitness evaluations), drawing its 72,000 uniforms 0.1 ms, Python 0.2 ms
 (``benchmarks/bench_002.py``). :func:`sincos_small` serves the circular means.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,8 +40,22 @@ import numba as nb
 import numpy as np
 
 from replay.filters.p002.compiled_util import (
-    Fading, Proposal, correct, cubature_points, draw, entropy_weights, factor, fading_factor, gram, leaders, moments,
-    normalise, quad, weighted_mean, workspace, wrap)
+    Fading,
+    Proposal,
+    correct,
+    cubature_points,
+    draw,
+    factor,
+    fading_factor,
+    gram,
+    moments,
+    normalise,
+    quad,
+    weighted_mean,
+    workspace,
+    wrap,
+)
+from replay.filters.p002.swarm_kernels import entropy_weights, leaders
 from replay.util.kernels import LOG_2PI, gauss_logpdf
 
 # MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H
@@ -172,8 +187,21 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         else:
             repairs[m, i] += innovation(ph, zidx, zang, w)
             if pr.stckf:  # fading factor (002 §2.2.2)
-                g = particle_fading(x, Z[m], pf, ph, zidx, zang, nothing if pr.transition else P[m, i], V[m, i],
-                                    not pr.have_V, Q, R, pr.fading, w)
+                g = particle_fading(
+                    x,
+                    Z[m],
+                    pf,
+                    ph,
+                    zidx,
+                    zang,
+                    nothing if pr.transition else P[m, i],
+                    V[m, i],
+                    not pr.have_V,
+                    Q,
+                    R,
+                    pr.fading,
+                    w,
+                )
                 Pzz, Pxz, Pm = w.Pzz, w.Pxz, w.Pm
                 Pzz *= g
                 Pxz *= g
@@ -186,8 +214,7 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         X[m, i] = w.xnew
         loglik = 0.0
         if Z is not None:
-            loglik = gauss_logpdf(maha(w.xnew, ph, Z[m], zidx, zang, Ri, w.zf, w.zh0, w.d) + pr.logdet_R,
-                                  nz * LOG_2PI)
+            loglik = gauss_logpdf(maha(w.xnew, ph, Z[m], zidx, zang, Ri, w.zf, w.zh0, w.d) + pr.logdet_R, nz * LOG_2PI)
         for a in range(n):
             w.dx[a] = w.xnew[a] - w.fx[a]
         wrap(w.dx, xang)
@@ -213,8 +240,29 @@ def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, z
     logdet_Q, logdet_R, nzf = pr.logdet_Q, pr.logdet_R, pr.nzf
     for ch in nb.prange(chunks):
         rec = Proposal(stckf, Fading(rho, beta, propagated), scale, transition, have_L, have_V, logdet_Q, logdet_R, nzf)
-        cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, rec, lam, repairs,
-                      ch * size, min(total, (ch + 1) * size))
+        cubature_step(
+            pf,
+            ph,
+            X,
+            P,
+            L,
+            V,
+            logw,
+            Z,
+            zidx,
+            E,
+            Q,
+            Qi,
+            R,
+            Ri,
+            xang,
+            zang,
+            rec,
+            lam,
+            repairs,
+            ch * size,
+            min(total, (ch + 1) * size),
+        )
 
 
 @nb.njit(cache=True)
@@ -242,8 +290,9 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
 
 
 @nb.njit(cache=True, nogil=True)
-def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, improved, xi, eps, logdet_R, nzf,
-               best, start, stop):
+def swarm_move(
+    ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, improved, xi, eps, logdet_R, nzf, best, start, stop
+):
     """The relocation of :class:`replay.filters.p002.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
     for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
     log weights, log p(z | x) of the measured components ``zidx`` (Z (M, len(zidx)); R^-1 and
@@ -274,8 +323,7 @@ def swarm_move(ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, im
             wrap(Xr[i], xang)
         mov = None if movable is None else movable[m]
         fx = None if Fx is None else Fx[m]
-        swarm(ph, Xr, c, Z[m], zidx, Ri, zang, xang, mov, fx, Qi, raw[m - start], a, improved, xi, eps, f, best[m],
-              nzf)
+        swarm(ph, Xr, c, Z[m], zidx, Ri, zang, xang, mov, fx, Qi, raw[m - start], a, improved, xi, eps, f, best[m], nzf)
         for i in range(N):
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]
@@ -295,7 +343,7 @@ def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, 
     iteration. The leaders are not moved (elitism); the candidates are
     X_L - A |C X_L - X| with A = a (2 r1 - 1), C = 2 r2, combined with weights
     1/k (GWO) or the entropy weights of the leaders' fitness (IGWO,
-    002 §3.2.2, :func:`replay.filters.p002.compiled_util.entropy_weights`). ``mov`` (n,) bool:
+    002 §3.2.2, :func:`replay.filters.p002.swarm_kernels.entropy_weights`). ``mov`` (n,) bool:
     only these components move (None: all); ``fx``, ``Qi``: the posterior-type fitness
     (:func:`fitness_rows`).
     """
@@ -337,4 +385,3 @@ def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, 
                 X[i, q] = acc
         fitness_rows(ph, c, X, z, zidx, Ri, zang, xang, fx, Qi, fm, is_lead, zf)
         best[t + 1] = fm.min()
-

@@ -12,10 +12,6 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 * :func:`factor` (Cholesky with an eigenvalue-floor repair), :func:`gram`;
 * :func:`cubature_points`, :func:`moments` — the cubature points and their
   equal-weight (circular) mean and deviations; :func:`sincos_small`;
-* :func:`scaled_uniforms`, :func:`pso_velocity`, :func:`pso_best` — the array passes of one PSO
-  iteration (:func:`replay.filters.p002.pso.optimize`, which calls the fitness between them);
-* :func:`leaders` — the alpha, beta, delta wolves of GWO; :func:`entropy_weights` — the IGWO
-  leader weights (002 §3.2.2; the kernel's only copy, callable from Python too);
 * :func:`normalise`, :func:`weighted_mean` — the particle bookkeeping kernels of
   :mod:`replay.filters.particles` (log-domain normalisation, circular weighted mean),
   re-exported; :func:`estimate` composes them with the covariance over a stack of runs;
@@ -24,6 +20,7 @@ is that of the test oracle's ``batched_cholesky`` (``tests/oracle_p002.py``):
 * :class:`Proposal`, :func:`workspace`, :func:`correct`, :func:`draw` — the settings, work arrays,
   Kalman correction and importance draw of :func:`replay.filters.p002.compiled.cubature_step`.
 """
+
 from __future__ import annotations
 
 import math
@@ -36,8 +33,15 @@ import numpy as np
 from replay.filters.particles import moments as particle_moments  # the one particle bookkeeping
 from replay.filters.particles import weighted_mean  # noqa: F401 (re-exported)
 from replay.filters.particles import weights as normalise
-from replay.util.kernels import (chol_solve_rows, cholesky, matmul, quad, symmetrise, wrap,  # noqa: F401 (re-exported)
-                                 wrap_angle)
+from replay.util.kernels import (
+    chol_solve_rows,
+    cholesky,
+    matmul,
+    quad,  # noqa: F401 (re-exported)
+    symmetrise,
+    wrap,  # noqa: F401 (re-exported)
+    wrap_angle,
+)
 
 SIN_TAYLOR = tuple(1.0 / math.factorial(k) for k in (15, 13, 11, 9, 7, 5, 3))  # sin d = d - d^3 (1/3! - ...)
 COS_TAYLOR = tuple(1.0 / math.factorial(k) for k in (16, 14, 12, 10, 8, 6, 4, 2))  # cos d = 1 - d^2 (1/2! - ...)
@@ -142,98 +146,6 @@ def moments(Y, mask, mean, D):
         wrap(D[j], mask)
 
 
-@nb.njit(cache=True)
-def scaled_uniforms(raw, scales, out):
-    """out[t, c, j] = (raw[t, c, j] + 0.5) 2^-32 scales[t, c]: 32-bit integers to uniforms in (0, 1)
-    (:func:`replay.filters.p002.gwo.uniforms`), times a coefficient per iteration t and kind c."""
-    for t in range(raw.shape[0]):
-        for c in range(raw.shape[1]):
-            s = scales[t, c]
-            for j in range(raw.shape[2]):
-                out[t, c, j] = ((raw[t, c, j] + 0.5) * 2.0**-32) * s
-
-
-@nb.njit(cache=True)
-def pso_velocity(V, X, pbest, g, R, it, w, keep):
-    """One PSO move of every particle in place (002 §4.1): V = w V + c1 r1 (pbest - X) + c2 r2 (g - X),
-    times ``keep`` (M, d) (None: all components move), then X = X + V. ``R[m, it, 0]`` holds
-    c1 r1, ``R[m, it, 1]`` c2 r2; ``g`` (M,) the index of each swarm's best. Sums in that order."""
-    M, N, d = X.shape
-    for m in range(M):
-        b = g[m]
-        for i in range(N):
-            for q in range(d):
-                x = X[m, i, q]
-                v = V[m, i, q] * w
-                v = v + (pbest[m, i, q] - x) * R[m, it, 0, i, q]
-                v = v + (pbest[m, b, q] - x) * R[m, it, 1, i, q]
-                if keep is not None:
-                    v = v * keep[m, q]
-                V[m, i, q] = v
-                X[m, i, q] = x + v
-
-
-@nb.njit(cache=True)
-def pso_best(X, f, pbest, pf, g, best):
-    """The personal bests (pbest, pf) of the positions X with fitness f (where f < pf), each swarm's
-    best index g (``np.argmin``: the first minimum, or the first NaN) and its fitness into ``best`` (M,)."""
-    M, N, d = X.shape
-    for m in range(M):
-        for i in range(N):
-            if f[m, i] < pf[m, i]:
-                pf[m, i] = f[m, i]
-                for q in range(d):
-                    pbest[m, i, q] = X[m, i, q]
-        k, lo = 0, pf[m, 0]
-        if not np.isnan(lo):
-            for i in range(1, N):
-                if not pf[m, i] >= lo:
-                    k, lo = i, pf[m, i]
-                    if np.isnan(lo):
-                        break
-        g[m] = k
-        best[m] = lo
-
-
-@nb.njit(cache=True)
-def leaders(f, k, out):
-    """Indices of the k smallest of ``f`` in increasing order (ties: lower index first): alpha, beta, delta."""
-    for j in range(k):
-        best = -1
-        for i in range(f.shape[0]):
-            taken = False
-            for q in range(j):
-                if out[q] == i:
-                    taken = True
-            if taken:
-                continue
-            if best < 0 or f[i] < f[best]:
-                best = i
-        out[j] = best
-
-
-@nb.njit(cache=True)
-def entropy_weights(fl, eps, xi, w):
-    """IGWO entropy weights (002 §3.2.2) of the leaders' fitness ``fl`` (k,) into ``w`` (k,):
-    p_i = (1 / (f_i + eps)) / sum_j 1 / (f_j + eps), E_i = -p_i log(p_i + eps),
-    w_i = max(1 - E_i, xi), normalised to sum one.
-
-    Not monotone in the fitness: E = -p log p peaks at p = 1/e, so a leader whose share p
-    is near 1/e gets the smallest weight, e.g. f = [1, 1.5, 10] -> w = [0.316, 0.294, 0.390]
-    (the worst leader weighs most; docs/reproduction/002.md, tests/test_paper002.py)."""
-    k = fl.shape[0]
-    sinv = 0.0
-    for j in range(k):
-        sinv += 1.0 / (fl[j] + eps)
-    sw = 0.0
-    for j in range(k):
-        p = (1.0 / (fl[j] + eps)) / sinv
-        w[j] = max(1.0 + p * math.log(p + eps), xi)
-        sw += w[j]
-    for j in range(k):
-        w[j] /= sw
-
-
 @nb.njit(cache=True, nogil=True)
 def estimate(X, logw, xang, x, P, w):
     """Weighted estimate of every run: the weights w (M, N) normalised from ``logw`` (which is
@@ -314,8 +226,9 @@ class Proposal(NamedTuple):
     nzf: int  # the model's measurement size (the length of h(x))
 
 
-Work = namedtuple("Work", "fx mean mpost xnew dx zh zh0 ez y d zf Hf Lp Lm Pm Fj Pn Y pts Dx Zc Dz Hj Pxz K Pzz "
-                          "S HQ HF HFP")
+Work = namedtuple(
+    "Work", "fx mean mpost xnew dx zh zh0 ez y d zf Hf Lp Lm Pm Fj Pn Y pts Dx Zc Dz Hj Pxz K Pzz S HQ HF HFP"
+)
 
 
 @nb.njit(cache=True)
@@ -324,12 +237,38 @@ def workspace(n, nz, nzf):
     model's nzf), allocated once per call of the step and reused by each particle."""
     c = 2 * n
     v, vz, sq, nzn = (n,), (nz,), (n, n), (nz, n)
-    return Work(np.empty(v), np.empty(v), np.empty(v), np.empty(v), np.empty(v), np.empty(vz), np.empty(vz),
-                np.empty(vz), np.empty(vz), np.empty(vz), np.empty(nzf), np.empty((nzf, n)), np.empty(sq),
-                np.empty(sq), np.empty(sq), np.empty(sq), np.empty(sq), np.empty((c, n)), np.empty((c, n)),
-                np.empty((c, n)), np.empty((c, nz)), np.empty((c, nz)), np.empty(nzn), np.empty((n, nz)),
-                np.empty((n, nz)), np.empty((nz, nz)), np.empty((nz, nz)), np.empty(nzn), np.empty(nzn),
-                np.empty(nzn))
+    return Work(
+        np.empty(v),
+        np.empty(v),
+        np.empty(v),
+        np.empty(v),
+        np.empty(v),
+        np.empty(vz),
+        np.empty(vz),
+        np.empty(vz),
+        np.empty(vz),
+        np.empty(vz),
+        np.empty(nzf),
+        np.empty((nzf, n)),
+        np.empty(sq),
+        np.empty(sq),
+        np.empty(sq),
+        np.empty(sq),
+        np.empty(sq),
+        np.empty((c, n)),
+        np.empty((c, n)),
+        np.empty((c, n)),
+        np.empty((c, nz)),
+        np.empty((c, nz)),
+        np.empty(nzn),
+        np.empty((n, nz)),
+        np.empty((n, nz)),
+        np.empty((nz, nz)),
+        np.empty((nz, nz)),
+        np.empty(nzn),
+        np.empty(nzn),
+        np.empty(nzn),
+    )
 
 
 @nb.njit(cache=True)

@@ -46,24 +46,33 @@ leader weighting is therefore close to GWO's 1/3 each; most of the difference
 between GWO and IGWO comes from the convergence factor. Nor is it monotone in
 the fitness: E peaks at p = 1/e, so the leader order can be inverted, e.g.
 f = [1, 1.5, 10] gives w = [0.316, 0.294, 0.390], the worst leader weighing most
-(:func:`replay.filters.p002.compiled_util.entropy_weights`).
+(:func:`replay.filters.p002.swarm_kernels.entropy_weights`).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from .compiled_util import scaled_uniforms
+from .swarm_kernels import scaled_uniforms
 from ..compiled import Kernel
 
 _scaled = Kernel(scaled_uniforms)
+
 
 def a_linear(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0) -> float:
     """Standard GWO convergence factor: linear from ``a_start`` (t = 0) toward ``a_end``."""
     return a_start - (a_start - a_end) * t / t_max
 
 
-def a_sigmoid(t: int, t_max: int, a_start: float = 2.0, a_end: float = 0.0,
-              b_start: float = 1.0, b_end: float = 0.5, form: str = "centred") -> float:
+def a_sigmoid(
+    t: int,
+    t_max: int,
+    a_start: float = 2.0,
+    a_end: float = 0.0,
+    b_start: float = 1.0,
+    b_end: float = 0.5,
+    form: str = "centred",
+) -> float:
     """IGWO nonlinear convergence factor (002, §3.2.1), as we read the garbled formula.
 
     Printed: a(t) = a_end + (a_start - a_end) / (1 + exp(10 b(t) (2t) / (T_max - 1))),
@@ -108,8 +117,7 @@ def as_runs(X, rng, fitness, project):
             raise ValueError("one generator per run of wolves is needed")
         return X, rngs, fitness, project, False
     one = project
-    return (X[None], [rng], lambda Y: fitness(Y[0])[None],
-            None if one is None else (lambda Y: one(Y[0])[None]), True)
+    return (X[None], [rng], lambda Y: fitness(Y[0])[None], None if one is None else (lambda Y: one(Y[0])[None]), True)
 
 
 def raw_draws(rngs, shape):
@@ -133,7 +141,7 @@ def uniforms(raw):
 def scaled_draws(rngs, shape, scales) -> np.ndarray:
     """(M, *shape) uniforms of :func:`draws` (the same draws, the same bits) each times
     ``scales[t, c]`` (shape = (T, C, ...)), in one compiled pass per run
-    (:func:`replay.filters.p002.compiled_util.scaled_uniforms`): PSO's c1(t) r1 and c2(t) r2."""
+    (:func:`replay.filters.p002.swarm_kernels.scaled_uniforms`): PSO's c1(t) r1 and c2(t) r2."""
     shape = tuple(shape)
     scales = np.ascontiguousarray(scales, dtype=float)
     out = np.empty((len(rngs),) + shape)

@@ -54,13 +54,14 @@ PSO bounds: LB = [-300, -300, -300, 0, -pi/2, -pi], UB = [300, 300, 0, 10, pi/2,
 the model's state dimension (on the 3-state Bohai position task the search is
 unbounded, reported as ``info["bounds"]``).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from replay.util.angles import residual, wrap_components
 from replay.util.errors import ReplayError
-from replay.util.params import Param, without
+from replay.util.params import Param
 from replay.model import is_diagonal, remap_indices
 
 from .. import particles
@@ -77,20 +78,28 @@ GWO_PARAMS = (
     Param("b_start", float, 1.0, "IGWO sigmoid steepness b at the last iteration (002 §3.2.1; not printed)", low=0.0),
     Param("b_end", float, 0.5, "IGWO sigmoid steepness b at the first iteration (not printed)", low=0.0),
     Param("xi", float, 1e-4, "floor of the IGWO entropy weights (002 §3.2.2)", low=1e-6, high=1e-3),
-    Param("a_form", str, "centred", "IGWO convergence factor: the centred sigmoid (our reading) or the "
-          "formula as printed (002 §3.2.1)", choices=("centred", "printed")),
+    Param(
+        "a_form",
+        str,
+        "centred",
+        "IGWO convergence factor: the centred sigmoid (our reading) or the formula as printed (002 §3.2.1)",
+        choices=("centred", "printed"),
+    ),
 )
 PSO_PARAMS = (
     Param("omega_max", float, 0.9, "PSO inertia at the first iteration (002 §4.1)", low=0.0),
     Param("omega_min", float, 0.4, "PSO inertia limit", low=0.0),
-    Param("omega_decay", float, 0.2, "PSO inertia decay rate alpha: omega_min + (max - min) exp(-alpha (t - 1))",
-          low=0.0),
+    Param(
+        "omega_decay", float, 0.2, "PSO inertia decay rate alpha: omega_min + (max - min) exp(-alpha (t - 1))", low=0.0
+    ),
     Param("c1", list, (2.0, 1.0), "PSO cognitive coefficient, from .. to (linear in t)", length=2),
     Param("c2", list, (1.5, 2.0), "PSO social coefficient, from .. to (linear in t)", length=2),
-    Param("lower", list, pso.LB_002, "PSO search lower bounds (002 §4.1), used when as long as the state",
-          optional=True),
-    Param("upper", list, pso.UB_002, "PSO search upper bounds (002 §4.1), used when as long as the state",
-          optional=True),
+    Param(
+        "lower", list, pso.LB_002, "PSO search lower bounds (002 §4.1), used when as long as the state", optional=True
+    ),
+    Param(
+        "upper", list, pso.UB_002, "PSO search upper bounds (002 §4.1), used when as long as the state", optional=True
+    ),
 )
 STCKF_NAMES = tuple(p.name for p in STCKF_PARAMS)
 PROPOSAL_NAMES = STCKF_NAMES + ("prior_cov",)  # what only a cubature proposal uses
@@ -140,12 +149,29 @@ class SwarmParticleFilter(CubatureParticleFilter):
         *CubatureParticleFilter.PARAMS[:2],
         Param("optimizer", str, "igwo", "what replaces resampling", choices=OPTIMIZERS),
         Param("t_max", int, 20, "optimiser iterations per step (002: T_max = 20; PSO: its 'iterations')", low=0),
-        Param("estimate_at", str, "after", "estimate from the particles after the optimiser moved them "
-              "(weighted by the likelihood) or before", choices=("after", "before")),
-        Param("move_components", str, "all", "state components the optimiser moves: all, or only those "
-              "the measurement depends on (observed: non-zero columns of H)", choices=("all", "observed")),
-        Param("fitness", str, "residual", "optimiser fitness: the measurement residual (002) or the residual "
-              "plus the particle's transition term (posterior)", choices=("residual", "posterior")),
+        Param(
+            "estimate_at",
+            str,
+            "after",
+            "estimate from the particles after the optimiser moved them (weighted by the likelihood) or before",
+            choices=("after", "before"),
+        ),
+        Param(
+            "move_components",
+            str,
+            "all",
+            "state components the optimiser moves: all, or only those "
+            "the measurement depends on (observed: non-zero columns of H)",
+            choices=("all", "observed"),
+        ),
+        Param(
+            "fitness",
+            str,
+            "residual",
+            "optimiser fitness: the measurement residual (002) or the residual "
+            "plus the particle's transition term (posterior)",
+            choices=("residual", "posterior"),
+        ),
         *GWO_PARAMS,
         *PSO_PARAMS,
         *CubatureParticleFilter.PARAMS[2:],
@@ -160,20 +186,22 @@ class SwarmParticleFilter(CubatureParticleFilter):
         if self.t_max < 1:
             raise ReplayError(f"{owner}: t_max must be an integer >= 1 for PSO (got {self.t_max})")
         if not p["omega_min"] <= p["omega_max"]:
-            raise ReplayError(f"{owner}: omega_min must be <= omega_max = {p['omega_max']:g} "
-                              f"(got {p['omega_min']:g})")
+            raise ReplayError(f"{owner}: omega_min must be <= omega_max = {p['omega_max']:g} (got {p['omega_min']:g})")
         lo, hi = p["lower"], p["upper"]
         if (lo is None) != (hi is None):
-            raise ReplayError(f"{owner}: lower and upper must be given together or both null "
-                              f"(got lower={lo}, upper={hi})")
+            raise ReplayError(
+                f"{owner}: lower and upper must be given together or both null (got lower={lo}, upper={hi})"
+            )
         if lo is not None:
             if len(lo) != len(hi):
                 raise ReplayError(f"{owner}: lower and upper must have one length (got {len(lo)} and {len(hi)})")
             bad = [i for i, (a, b) in enumerate(zip(lo, hi)) if not a < b]
             if bad:
                 i = bad[0]
-                raise ReplayError(f"{owner}: lower must be < upper in every component "
-                                  f"(component {i}: lower {lo[i]:g} >= upper {hi[i]:g})")
+                raise ReplayError(
+                    f"{owner}: lower must be < upper in every component "
+                    f"(component {i}: lower {lo[i]:g} >= upper {hi[i]:g})"
+                )
 
     def engine(self, model, rngs):
         return SwarmEngine(self, model, rngs)
@@ -201,8 +229,9 @@ class SwarmEngine(Engine):
         self.bounds = (np.asarray(flt.lower), np.asarray(flt.upper)) if use else None
         if flt.optimizer != "pso":
             self.k_swarm = Kernel(bound_kernels(self.kern).swarm_move)
-            self.schedule = gwo.schedule(flt.t_max, flt.optimizer == "igwo", flt.a_start, flt.a_end,
-                                         flt.b_start, flt.b_end, flt.a_form)
+            self.schedule = gwo.schedule(
+                flt.t_max, flt.optimizer == "igwo", flt.a_start, flt.a_end, flt.b_start, flt.b_end, flt.a_form
+            )
         self.Fx = None
 
     def step(self, k, Z, finite):
@@ -275,8 +304,19 @@ class SwarmEngine(Engine):
                 return fit(Xr) + self.transition_term(c + Xr, k)
 
         Xr = residual(self.X, c, m.x_angles)
-        Xr, _, best = pso.optimize(Xr, fitness, self.active_rngs(), flt.t_max, flt.omega_max, flt.omega_min,
-                                   flt.omega_decay, flt.c1, flt.c2, project, self.movable(k, mask))
+        Xr, _, best = pso.optimize(
+            Xr,
+            fitness,
+            self.active_rngs(),
+            flt.t_max,
+            flt.omega_max,
+            flt.omega_min,
+            flt.omega_decay,
+            flt.c1,
+            flt.c2,
+            project,
+            self.movable(k, mask),
+        )
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1
         self.X = wrap_components(c + Xr, m.x_angles)
@@ -293,8 +333,19 @@ class SwarmEngine(Engine):
         Ri, logdet_R = self.constants("R", meas[0])
         zidx = None if mask is None else np.flatnonzero(mask)  # None: all (no gather in the kernel)
         Qi = self.constants("Q", m.process_cov(k))[0] if self.Fx is not None else None
-        args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, np.ascontiguousarray(zz, float), zidx, Ri,
-                self.xmask, self.zmask if mask is None else self.zmask[zidx], self.movable(k, mask), self.Fx, Qi)
+        args = (
+            np.asarray(m.kernel_params(k)[1], float),
+            self.X,
+            self.logw,
+            np.ascontiguousarray(zz, float),
+            zidx,
+            Ri,
+            self.xmask,
+            self.zmask if mask is None else self.zmask[zidx],
+            self.movable(k, mask),
+            self.Fx,
+            Qi,
+        )
         opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, m.nz, best)
 
         def runs(start, stop):  # each run draws from its own generator, in the thread that moves it
@@ -327,42 +378,3 @@ class SwarmEngine(Engine):
         info["optimizer"] = self.flt.optimizer
         info["mean_fitness_gain"] = float(self.gain_sum[m] / self.moves[m]) if self.moves[m] else 0.0
         info["bounds"] = "paper (002 §4.1)" if self.bounds is not None else "none"
-
-
-class IGWOSTCPF(SwarmParticleFilter):
-    """IGWO-STCPF (002, §3.3): STCKF importance density, IGWO in place of resampling."""
-
-    name, proposal, optimizer = "igwo-stcpf", "stckf", "igwo"
-    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES)
-
-
-class GWOPF(SwarmParticleFilter):
-    """Bootstrap PF with standard GWO in place of resampling (002, §3.2 benchmark 1)."""
-
-    name, proposal, optimizer = "gwo-pf", "prior", "gwo"
-    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES, *PROPOSAL_NAMES)
-
-
-class IGWOPF(GWOPF):
-    """Bootstrap PF with IGWO in place of resampling (002, §3.2 benchmark 1)."""
-
-    name, proposal, optimizer = "igwo-pf", "prior", "igwo"
-
-
-class PSOPF(SwarmParticleFilter):
-    """PSO-PF baseline (002, §4.1): bootstrap PF, PSO (20 iterations, bounded) in place of resampling.
-
-    The PSO iteration count is ``t_max`` (the paper's "iterations"; one name for
-    every swarm filter). Nothing is compiled (the bootstrap proposal and PSO are numpy): it runs
-    on any model, kernels or not, with the model's own likelihood.
-    """
-
-    name, proposal, optimizer = "pso-pf", "prior", "pso"
-    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *PROPOSAL_NAMES)
-
-
-class PSOCPF(SwarmParticleFilter):
-    """PSO-CPF baseline (002, §4.1): PSO-PF with a per-particle CKF importance density (``t_max`` iterations)."""
-
-    name, proposal, optimizer = "pso-cpf", "ckf", "pso"
-    PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES)

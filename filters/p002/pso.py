@@ -13,11 +13,12 @@ positions). The swarm's best fitness never worsens (recorded and asserted).
 The particle filter keeps the final *positions* X_i (not the personal bests):
 the swarm replaces resampling, and the positions are its population.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from .compiled_util import pso_best, pso_velocity
+from .swarm_kernels import pso_best, pso_velocity
 from .gwo import as_runs, scaled_draws
 from ..compiled import Kernel
 
@@ -38,9 +39,19 @@ def ramp(t: int, iterations: int, start: float, end: float) -> float:
     return start + (end - start) * (t - 1) / max(iterations - 1, 1)
 
 
-def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
-             omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2,
-             c1=(2.0, 1.0), c2=(1.5, 2.0), project=None, movable=None):
+def optimize(
+    X: np.ndarray,
+    fitness,
+    rng,
+    iterations: int = 20,
+    omega_max: float = 0.9,
+    omega_min: float = 0.4,
+    alpha: float = 0.2,
+    c1=(2.0, 1.0),
+    c2=(1.5, 2.0),
+    project=None,
+    movable=None,
+):
     """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds; ``movable``
     (M, d) bool (None: all): the components the particles move in (velocity 0 in the others).
 
@@ -48,8 +59,8 @@ def optimize(X: np.ndarray, fitness, rng, iterations: int = 20,
     and after each iteration (non-increasing). Batched like
     the GWO move: ``X`` (M, N, d) with M generators.
     Each swarm draws its (iterations, 2, N, d) uniforms in one call. The array passes of an
-    iteration are compiled (:func:`replay.filters.p002.compiled_util.pso_velocity`,
-    :func:`replay.filters.p002.compiled_util.pso_best`: numpy's operations in numpy's order, so
+    iteration are compiled (:func:`replay.filters.p002.swarm_kernels.pso_velocity`,
+    :func:`replay.filters.p002.swarm_kernels.pso_best`: numpy's operations in numpy's order, so
     the numbers of the numpy reading kept as the test oracle ``tests/oracle_p002.py``, bit for
     bit); ``fitness`` and ``project`` are called between them.
     """

@@ -9,6 +9,7 @@ pass over the angle columns was a fifth of PSO-PF's time), in numpy otherwise.
 (The stacked Cholesky, solve and circular mean of the former numpy cubature
 engine live in the test oracle ``tests/oracle_p002.py``.)
 """
+
 from __future__ import annotations
 
 import numpy as np

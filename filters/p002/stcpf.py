@@ -45,6 +45,7 @@ generator, per step, in the same order (the importance draw (N, nx), then the
 relocation's draws), and every operation acts on each run's slice alone, so a
 batch of M runs gives the numbers of M runs of one, bit for bit.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -86,12 +87,23 @@ class CubatureParticleFilter(Filter):
     name = "stcpf"
     PARAMS = (
         Param("n_particles", int, 100, "particles per run (002 §4.1: N = 100)", low=1),
-        Param("proposal", str, "stckf", "importance density of each particle: its STCKF or CKF posterior, "
-              "or the prior (bootstrap)", choices=PROPOSALS),
+        Param(
+            "proposal",
+            str,
+            "stckf",
+            "importance density of each particle: its STCKF or CKF posterior, or the prior (bootstrap)",
+            choices=PROPOSALS,
+        ),
         *STCKF_PARAMS,
-        Param("prior_cov", str, "propagated", "prediction of each particle: the cubature prediction of "
-              "(x^i, P^i) (propagated, as the UPF) or the transition density N(f(x^i), Q) of the fixed "
-              "sample (transition)", choices=("propagated", "transition")),
+        Param(
+            "prior_cov",
+            str,
+            "propagated",
+            "prediction of each particle: the cubature prediction of "
+            "(x^i, P^i) (propagated, as the UPF) or the transition density N(f(x^i), Q) of the fixed "
+            "sample (transition)",
+            choices=("propagated", "transition"),
+        ),
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),
         Param("ess_threshold", float, 1.0, "resample when ESS < threshold * N (1: every step)", low=0.0, high=1.0),
     )
@@ -116,11 +128,14 @@ class Engine:
         if flt.needs_kernels():
             self.kern = model.kernels()
             if self.kern is None:
-                raise ReplayError(f"{flt.name} needs a model with compiled kernels (Model.kernels()); "
-                                  f"{type(model).__name__} has none")
+                raise ReplayError(
+                    f"{flt.name} needs a model with compiled kernels (Model.kernels()); {type(model).__name__} has none"
+                )
             if self.custom_loglik:
-                raise ReplayError(f"{flt.name} needs the Gaussian likelihood of Model.loglik (its kernels weight "
-                                  f"with it); {type(model).__name__} overrides loglik")
+                raise ReplayError(
+                    f"{flt.name} needs the Gaussian likelihood of Model.loglik (its kernels weight "
+                    f"with it); {type(model).__name__} overrides loglik"
+                )
             self.xmask = self.angle_mask(model.x_angles, model.nx)
             self.zmask = self.angle_mask(model.z_angles, model.nz)
             self.cache = {}
@@ -266,14 +281,38 @@ class Engine:
         rep = np.zeros((M, N), np.int64)
         pf, ph = m.kernel_params(k)
         pr = compiled_util.Proposal(
-            stckf=stckf, fading=compiled_util.Fading.of(flt) if stckf else compiled_util.Fading(1.0, 1.0, True),
-            scale_prior=bool(flt.scale_prior) if stckf else True, have_L=have_L, have_V=have_V,
+            stckf=stckf,
+            fading=compiled_util.Fading.of(flt) if stckf else compiled_util.Fading(1.0, 1.0, True),
+            scale_prior=bool(flt.scale_prior) if stckf else True,
+            have_L=have_L,
+            have_V=have_V,
             transition=getattr(flt, "prior_cov", "propagated") == "transition",
-            logdet_Q=float(logdet_Q), logdet_R=float(logdet_R), nzf=int(m.nz))
+            logdet_Q=float(logdet_Q),
+            logdet_R=float(logdet_R),
+            nzf=int(m.nz),
+        )
         zang = self.zmask if full else self.zmask[zidx]
-        args = (np.asarray(pf, float), np.asarray(ph, float), self.X, self.P, self.L, V, self.logw,
-                np.ascontiguousarray(zz, float) if nzm else None, zidx, e, Q, Qi, R, Ri, self.xmask, zang, pr,
-                lam, rep)
+        args = (
+            np.asarray(pf, float),
+            np.asarray(ph, float),
+            self.X,
+            self.P,
+            self.L,
+            V,
+            self.logw,
+            np.ascontiguousarray(zz, float) if nzm else None,
+            zidx,
+            e,
+            Q,
+            Qi,
+            R,
+            Ri,
+            self.xmask,
+            zang,
+            pr,
+            lam,
+            rep,
+        )
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
             self.k_threads(*args, chunks)

@@ -6,6 +6,7 @@ metric, n, diff, diff_ci95, a_better`` for every two configurations on the same
 dataset and task (common random numbers): mean of a - b over the runs both
 finished without divergence.
 """
+
 from __future__ import annotations
 
 import csv
@@ -30,8 +31,9 @@ def _collect(store: Store):
     return configs, records
 
 
-def campaign_rows(out, order=None, baseline: str | None = None, *, store: Store | None = None,
-                  collected=None) -> list[dict]:
+def campaign_rows(
+    out, order=None, baseline: str | None = None, *, store: Store | None = None, collected=None
+) -> list[dict]:
     """One leaderboard row per stored configuration of the campaign directory ``out``
     (:func:`replay.scoring.summary.config_row`, the schema of ``replay eval``), in ``order`` (config
     hashes, e.g. the campaign file's order) when given, else sorted; with paired columns.
@@ -44,12 +46,21 @@ def campaign_rows(out, order=None, baseline: str | None = None, *, store: Store 
         recs = records[h]
         sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
         try:
-            rows.append(summary.config_row(cfg, h, recs, lambda run, cols, h=h, sha=sha: store.series(
-                h, run, cols, sha.get(run)), recs[0].get("version", "") if recs else ""))
+            rows.append(
+                summary.config_row(
+                    cfg,
+                    h,
+                    recs,
+                    lambda run, cols, h=h, sha=sha: store.series(h, run, cols, sha.get(run)),
+                    recs[0].get("version", "") if recs else "",
+                )
+            )
         except (KeyError, TypeError, ValueError, IndexError) as err:  # records edited by hand
-            raise ReplayError(f"{store.units / h}: unit records lack what the leaderboard needs "
-                              f"({type(err).__name__}: {err}); remove the directory and run "
-                              "`replay campaign run` again") from None
+            raise ReplayError(
+                f"{store.units / h}: unit records lack what the leaderboard needs "
+                f"({type(err).__name__}: {err}); remove the directory and run "
+                "`replay campaign run` again"
+            ) from None
     rows = [r for r in rows if r["runs"] or r["failed"]]
     if order is not None:
         rank = {h: i for i, h in enumerate(order)}
@@ -117,8 +128,13 @@ def merge(dirs, sort: str | None = None) -> list[dict]:
     rows, seen = [], set()
     for d in dirs:
         for row in read_dir(d):
-            key = (row.get("config_hash"), row.get("filter"), row.get("dataset"), row.get("task"),
-                   _num(row.get("runs")))
+            key = (
+                row.get("config_hash"),
+                row.get("filter"),
+                row.get("dataset"),
+                row.get("task"),
+                _num(row.get("runs")),
+            )
             if key in seen:
                 continue
             seen.add(key)
@@ -146,19 +162,38 @@ def merged_columns(rows) -> list[str]:
 def format_rows(rows) -> str:
     """A compact text table of the main columns (and first the source of merged rows)."""
     sourced = any("source" in r for r in rows)
-    head = ["source"] * sourced + ["dataset", "task", "filter", "pos_rmse", "median", "ate", "anees", "diverged",
-                                   "lost", "us/step"]
+    head = ["source"] * sourced + [
+        "dataset",
+        "task",
+        "filter",
+        "pos_rmse",
+        "median",
+        "ate",
+        "anees",
+        "diverged",
+        "lost",
+        "us/step",
+    ]
     body = []
     for r in rows:
         pm, pc = _num(r.get("pos_rmse")), _num(r.get("pos_rmse_ci95"))
-        body.append([str(r.get("source", ""))] * sourced + [
-                     str(r.get("dataset", "")), str(r.get("task", "")), str(r.get("label") or r.get("filter")),
-                     f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
-                     f"{_num(r.get('pos_rmse_median')):.4f}", f"{_num(r.get('ate')):.4f}",
-                     summary.consistency_cell(r, "anees"),
-                     f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}", summary.lost_cell(r),
-                     f"{_num(r.get('us_per_step')):.1f}"])
+        body.append(
+            [str(r.get("source", ""))] * sourced
+            + [
+                str(r.get("dataset", "")),
+                str(r.get("task", "")),
+                str(r.get("label") or r.get("filter")),
+                f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
+                f"{_num(r.get('pos_rmse_median')):.4f}",
+                f"{_num(r.get('ate')):.4f}",
+                summary.consistency_cell(r, "anees"),
+                f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}",
+                summary.lost_cell(r),
+                f"{_num(r.get('us_per_step')):.1f}",
+            ]
+        )
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 + sourced else c.rjust(w)
-                                  for i, (c, w) in enumerate(zip(cells, widths)))
+    fmt = lambda cells: "  ".join(
+        c.ljust(w) if i < 3 + sourced else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
+    )
     return "\n".join([fmt(head), *(fmt(b) for b in body)])

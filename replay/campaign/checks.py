@@ -1,4 +1,5 @@
 """Checking a campaign file's values, each error ``file:line: key: message`` (:class:`Where`)."""
+
 from __future__ import annotations
 
 import os
@@ -35,17 +36,29 @@ def check_name(where, name: str) -> None:
     """A campaign name must be a plain name: it becomes the directory ``runs/campaign-<name>``,
     and a separator, ``..`` or an absolute path would place the output elsewhere."""
     seps = {"/", "\\", os.sep} | ({os.altsep} if os.altsep else set())
-    bad = ("it is empty" if not name.strip() else
-           "it is an absolute path" if os.path.isabs(name) else
-           "it contains a path separator" if any(c in name for c in seps) else
-           "it is . or .." if name in (".", "..") else
-           "it contains a control character" if any(ord(c) < 32 or ord(c) == 127 for c in name) else
-           f"it is {len(name.encode())} bytes long, at most {MAX_NAME_BYTES}" if len(name.encode()) > MAX_NAME_BYTES
-           else None)
+    bad = (
+        "it is empty"
+        if not name.strip()
+        else "it is an absolute path"
+        if os.path.isabs(name)
+        else "it contains a path separator"
+        if any(c in name for c in seps)
+        else "it is . or .."
+        if name in (".", "..")
+        else "it contains a control character"
+        if any(ord(c) < 32 or ord(c) == 127 for c in name)
+        else f"it is {len(name.encode())} bytes long, at most {MAX_NAME_BYTES}"
+        if len(name.encode()) > MAX_NAME_BYTES
+        else None
+    )
     if bad:
         shown = name if len(name) <= 60 else name[:40] + "..."
-        raise where.error("name", f"{shown!r} is not a plain name ({bad}; the output would not be "
-                                  f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'", name)
+        raise where.error(
+            "name",
+            f"{shown!r} is not a plain name ({bad}; the output would not be "
+            f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'",
+            name,
+        )
 
 
 def check_type(where, key, value, typ):

@@ -5,6 +5,7 @@ columns the leaderboard reads beside them, :func:`summary_columns`); the main pr
 describes the bytes in the unit's record (:func:`describe`: rows, columns, size,
 SHA-256) and writes them (:mod:`replay.campaign.store`).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -54,9 +55,13 @@ def pack(results: list[dict]) -> list[dict]:
     """Worker side: replace each result's ``series`` by its Parquet bytes (smaller to send,
     and the encoding runs in parallel instead of in the main process), and keep beside them
     the few columns the leaderboard reads (:func:`summary_columns`)."""
-    return [{k: v for k, v in r.items() if k != "series"} | {"parquet": parquet_bytes(r["series"]),
-                                                             "summary": summary_columns(r["series"])}
-            if "series" in r else r for r in results]
+    return [
+        {k: v for k, v in r.items() if k != "series"}
+        | {"parquet": parquet_bytes(r["series"]), "summary": summary_columns(r["series"])}
+        if "series" in r
+        else r
+        for r in results
+    ]
 
 
 def summary_columns(series: dict) -> dict:

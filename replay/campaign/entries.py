@@ -3,6 +3,7 @@
 Every function raises ``file:line: key: message`` (:meth:`replay.campaign.spec._Where.error`)
 and returns the entry canonical (every default filled in), ready to become configurations.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -63,8 +64,12 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
     first = entry.get("first")
     check_params(where, "[[dataset]]", (EVAL["first"],), {"first": first})  # replay eval's declaration
     if ref.kind == "file" and ref.locate(data_dir) is None:
-        raise where.error("id", f"dataset {ref.id} not found (set data_dir in [campaign], pass "
-                                f"--data-dir, or run `replay datasets fetch {ref.id}`)", ref.id)
+        raise where.error(
+            "id",
+            f"dataset {ref.id} not found (set data_dir in [campaign], pass "
+            f"--data-dir, or run `replay datasets fetch {ref.id}`)",
+            ref.id,
+        )
     params = _dataset_params(where, path, ref, dict(entry.get("params", {})))
     if ref.is_sim and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
         _load_once(where, ref.id, params, first, data_dir)
@@ -135,8 +140,9 @@ def _recording(where, path: Path, ds_id: str):
 def _frame0(ds_id, ds_params: dict, first, data_dir):
     from replay.run.pipeline import load_frame
 
-    return load_frame({"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0,
-                       "adapter": None}, 0, data_dir)
+    return load_frame(
+        {"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0, "adapter": None}, 0, data_dir
+    )
 
 
 def _load_once(where, ds_id, ds_params: dict, first, data_dir):
@@ -165,8 +171,12 @@ def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapt
     out = {}
     for name in chosen:
         if not isinstance(name, str) or name not in declared:
-            raise where.error("recorded", f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
-                                          f"declare: {', '.join(declared) or 'none'})", name)
+            raise where.error(
+                "recorded",
+                f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
+                f"declare: {', '.join(declared) or 'none'})",
+                name,
+            )
         try:
             out[name] = _plain(recorded_params(name, None, declared[name]))
         except ReplayError as e:
@@ -205,10 +215,15 @@ def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tu
     keys = list(grid)
     combos = math.prod(len(grid[k]) for k in keys)
     if (held + combos) * runs > max_units:  # before building them (a grid multiplies)
-        raise where.error(keys[0] if keys else "filter", f"{held + combos} filter configurations x {runs} runs, "
-                          f"more than a campaign may hold ({max_units} units); split it")
-    return [(name, _made(where, name, {**base, **dict(zip(keys, combo))}))
-            for combo in itertools.product(*(grid[k] for k in keys))]
+        raise where.error(
+            keys[0] if keys else "filter",
+            f"{held + combos} filter configurations x {runs} runs, "
+            f"more than a campaign may hold ({max_units} units); split it",
+        )
+    return [
+        (name, _made(where, name, {**base, **dict(zip(keys, combo))}))
+        for combo in itertools.product(*(grid[k] for k in keys))
+    ]
 
 
 def _made(where, name: str, params: dict) -> dict:

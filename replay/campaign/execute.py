@@ -24,6 +24,7 @@ The numbers do not depend on the backend, the number of workers or the order
 in which jobs finish: every run draws from its own seed streams and jobs are
 fixed blocks of runs.
 """
+
 from __future__ import annotations
 
 import gc
@@ -91,8 +92,9 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
         damaged.extend((h, r, bad[r]) for r in sorted(bad))
         wanted = set(runs_of(c, range(campaign.runs)))  # a recorded estimate: run 0 only
         for start in range(0, campaign.runs, campaign.batch):
-            runs = [r for r in range(start, min(start + campaign.batch, campaign.runs))
-                    if r in wanted and r not in have]
+            runs = [
+                r for r in range(start, min(start + campaign.batch, campaign.runs)) if r in wanted and r not in have
+            ]
             if runs:
                 jobs.append(Job(c, h, runs, data_dir or campaign.data_dir))
         if progress is not None:
@@ -147,8 +149,10 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise ReplayError("Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
-                          "(it adds dask[distributed])") from None
+        raise ReplayError(
+            "Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
+            "(it adds dask[distributed])"
+        ) from None
     import logging
 
     logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -157,14 +161,17 @@ def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
         if scheduler:
             client = connect_scheduler(scheduler, connect_timeout)  # bounds the handshake too
         else:
-            cluster = LocalCluster(n_workers=n_local, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None)
+            cluster = LocalCluster(
+                n_workers=n_local, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+            )
             client = Client(cluster, set_as_default=False)
     except (OSError, TimeoutError) as err:
         if cluster is not None:
             cluster.close()
-        raise ReplayError(f"Dask scheduler {scheduler or 'LocalCluster'}: no answer within "
-                          f"{connect_timeout:g} s ({type(err).__name__})") from None
+        raise ReplayError(
+            f"Dask scheduler {scheduler or 'LocalCluster'}: no answer within "
+            f"{connect_timeout:g} s ({type(err).__name__})"
+        ) from None
 
     def run(jobs):
         futures = client.map(execute_packed, jobs, pure=False)
@@ -186,14 +193,26 @@ def _result(fut, job):
     try:
         return fut.result()
     except Exception as err:  # noqa: BLE001 — recorded per unit, the campaign goes on
-        return [{"run": r, "status": "failed", "error": f"{type(err).__name__}: {err}".splitlines()[0]}
-                for r in job.runs]
+        return [
+            {"run": r, "status": "failed", "error": f"{type(err).__name__}: {err}".splitlines()[0]} for r in job.runs
+        ]
 
 
-def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str | None = None,
-        dask_local: int | None = None, quiet: bool = False, retry_failed: bool = False,
-        data_dir=None, limit: int | None = None, connect_timeout: float = 5.0,
-        progress_stream=None, wait: bool = False) -> dict:
+def run(
+    campaign: Campaign,
+    out,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    dask_local: int | None = None,
+    quiet: bool = False,
+    retry_failed: bool = False,
+    data_dir=None,
+    limit: int | None = None,
+    connect_timeout: float = 5.0,
+    progress_stream=None,
+    wait: bool = False,
+) -> dict:
     """Compute every unit of ``campaign`` not yet stored intact in ``out``; write the leaderboard.
 
     Holds the directory's campaign lock throughout (:mod:`.lock`; ``wait``: block until a
@@ -206,8 +225,19 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
     try:
         out.mkdir(parents=True, exist_ok=True)
         with locked(out, wait=wait):
-            return _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir,
-                               limit, connect_timeout, progress_stream)
+            return _run_locked(
+                campaign,
+                out,
+                workers,
+                scheduler,
+                dask_local,
+                quiet,
+                retry_failed,
+                data_dir,
+                limit,
+                connect_timeout,
+                progress_stream,
+            )
     except OSError as err:  # a full or read-only disk, a name too long: the stored units are intact
         for name in ("leaderboard.csv", "paired.csv"):
             try:
@@ -215,12 +245,25 @@ def run(campaign: Campaign, out, *, workers: int | None = None, scheduler: str |
             except OSError:
                 pass
         where = err.filename or out
-        raise ReplayError(f"{where}: cannot write ({err.strerror or type(err).__name__}); the units stored "
-                          f"in {out} before are intact: free space and run the campaign again") from None
+        raise ReplayError(
+            f"{where}: cannot write ({err.strerror or type(err).__name__}); the units stored "
+            f"in {out} before are intact: free space and run the campaign again"
+        ) from None
 
 
-def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_failed, data_dir, limit,
-                connect_timeout, progress_stream) -> dict:
+def _run_locked(
+    campaign,
+    out,
+    workers,
+    scheduler,
+    dask_local,
+    quiet,
+    retry_failed,
+    data_dir,
+    limit,
+    connect_timeout,
+    progress_stream,
+) -> dict:
     store = Store(out)
     hashes = [config_hash(c.as_dict()) for c in campaign.configs]
     stored_before = 0
@@ -229,8 +272,10 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         # files' configurations: not recomputed here (a unit directory that is a file: refused)
         good, bad = store.scan(h)
         if bad:
-            raise ReplayError(f"{bad[min(bad)]}; this configuration is not in {campaign.path}: run the "
-                              f"campaign file that made it on {out} to recompute it")
+            raise ReplayError(
+                f"{bad[min(bad)]}; this configuration is not in {campaign.path}: run the "
+                f"campaign file that made it on {out} to recompute it"
+            )
         stored_before += len(good)
     if campaign.path.resolve() != (out / "campaign.toml").resolve():
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
@@ -248,17 +293,24 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
         jobs = jobs[:limit]
     scheduled = {(j.config_hash, r) for j in jobs for r in j.runs}
     total = sum(len(j.runs) for j in jobs)
-    counts = {"jobs": len(jobs), "units": total, "done": 0, "failed": 0,
-              "damaged": [what for h, r, what in damaged if r is not None and (h, r) in scheduled],
-              "missing": [what for h, r, what in damaged if r == -1],
-              "rewritten": [what for h, r, what in damaged if r is None],
-              "stored_before": stored_before, "backend": "none"}
+    counts = {
+        "jobs": len(jobs),
+        "units": total,
+        "done": 0,
+        "failed": 0,
+        "damaged": [what for h, r, what in damaged if r is not None and (h, r) in scheduled],
+        "missing": [what for h, r, what in damaged if r == -1],
+        "rewritten": [what for h, r, what in damaged if r is None],
+        "stored_before": stored_before,
+        "backend": "none",
+    }
     if jobs:
         check_noise(jobs, campaign.path)  # per-filter Q, R, P0 of the task model's size: before any unit
         check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
         backend, counts["backend"] = open_backend(workers, scheduler, dask_local, connect_timeout, len(jobs))
-        weights = {(j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs))
-                   for j in jobs}
+        weights = {
+            (j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs
+        }
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
         progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
@@ -270,8 +322,9 @@ def _run_locked(campaign, out, workers, scheduler, dask_local, quiet, retry_fail
                     bad = sum(r["status"] != "done" for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
-                    progress.update(len(results), bad,
-                                    weight=weights.get((job.config_hash, tuple(job.runs)), len(results)))
+                    progress.update(
+                        len(results), bad, weight=weights.get((job.config_hash, tuple(job.runs)), len(results))
+                    )
         finally:
             progress.close()
     counts["rows"] = board.summarise(out, hashes, store)

@@ -13,6 +13,7 @@ dataset with (``--data-dir``, else ``[campaign] data_dir``), which ``replay expo
 uses when it is given none. Stores written before the index have none: their
 configurations are those of the ``units/`` directories.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -23,8 +24,7 @@ NAME = "configs.json"
 
 
 def _checksum(configs: dict, data_dirs: dict) -> str:
-    text = json.dumps({"configs": configs, "data_dirs": data_dirs}, sort_keys=True, separators=(",", ":"),
-                      default=str)
+    text = json.dumps({"configs": configs, "data_dirs": data_dirs}, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -46,8 +46,11 @@ def read(out) -> tuple[dict, dict, str | None]:
         return {}, {}, f"{path}: {'zero-length' if not raw.strip() else 'not valid JSON'}"
     configs = doc.get("configs") if isinstance(doc, dict) else None
     dirs = doc.get("data_dirs", {}) if isinstance(doc, dict) else None
-    if not isinstance(configs, dict) or not isinstance(dirs, dict) or \
-            not all(isinstance(c, dict) for c in configs.values()):
+    if (
+        not isinstance(configs, dict)
+        or not isinstance(dirs, dict)
+        or not all(isinstance(c, dict) for c in configs.values())
+    ):
         return {}, {}, f"{path}: not a campaign's configuration index"
     if doc.get("sha256") != _checksum(configs, dirs):
         return {}, {}, f"{path}: content differs from the checksum it holds (edited or damaged)"

@@ -11,6 +11,7 @@ process about to lock it). :func:`lock_file` is the same lock on any file (or
 directory): ``replay eval`` holds it on its ``--out`` and its numbered run directories
 (:mod:`replay.outputs.rundirs`).
 """
+
 from __future__ import annotations
 
 import errno
@@ -36,8 +37,13 @@ def holder(path: Path) -> str:
 def locked(out, wait: bool = False):
     """Hold the campaign lock of result directory ``out`` (which must exist) for the block."""
     path = Path(out) / LOCK_NAME
-    with lock_file(path, wait, busy=f"{path}: another campaign process (pid {{pid}}) is writing to {out}; "
-                                    "wait for it to finish or pass --wait", what="the campaign lock") as p:
+    with lock_file(
+        path,
+        wait,
+        busy=f"{path}: another campaign process (pid {{pid}}) is writing to {out}; "
+        "wait for it to finish or pass --wait",
+        what="the campaign lock",
+    ) as p:
         yield p
 
 

@@ -5,6 +5,7 @@ model the task builds, known only once it is built: run 0's problem of each data
 with such settings is built once here, so that a wrong size (or a model that cannot take
 them) stops the campaign in one line instead of failing its units.
 """
+
 from __future__ import annotations
 
 import json

@@ -1,5 +1,6 @@
 """Progress of a campaign: :class:`replay.util.progress.Progress` labelled ``campaign``, units weighted
 by their expected cost."""
+
 from __future__ import annotations
 
 from replay.util.progress import Progress as _Progress

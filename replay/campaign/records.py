@@ -19,6 +19,7 @@ column), each ``<axis>_rmse`` and ``<angle>_rmse`` with an ``err_`` column,
 as recorded; ``replay campaign run --retry-failed`` does not reseal them (delete
 the configuration's directory to recompute it with a checksum).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -68,14 +69,14 @@ def legacy_problem(path: Path, record: dict, read) -> str | None:
         e = pos[ok]
         found = {"scored": float(ok.sum())} if axes else {}
         if axes:
-            found["pos_rmse"] = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))) if len(e) else np.nan
+            found["pos_rmse"] = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) if len(e) else np.nan
             last = np.flatnonzero(ok)
             found["final_err"] = float(np.linalg.norm(pos[last[-1]])) if len(last) else np.nan
         for k, v in names.items():
             if k.startswith("err_"):
                 a = np.asarray(v, float)
                 a = a[np.isfinite(a)]
-                found[f"{k[4:]}_rmse"] = float(np.sqrt(np.mean(a ** 2))) if len(a) else np.nan
+                found[f"{k[4:]}_rmse"] = float(np.sqrt(np.mean(a**2))) if len(a) else np.nan
         for k in ("nees", "nis"):
             if k in names:
                 v = np.asarray(names[k], float)
@@ -89,6 +90,5 @@ def legacy_problem(path: Path, record: dict, read) -> str | None:
             return f"{path}: {key} is {m[key]!r}, not a number"
         same = (np.isnan(given) and np.isnan(value)) or np.isclose(given, value, rtol=RTOL, atol=0)
         if not same:
-            return (f"{path}: {key} {given!r} disagrees with its table ({value!r}); "
-                    "the record was edited or damaged")
+            return f"{path}: {key} {given!r} disagrees with its table ({value!r}); the record was edited or damaged"
     return None

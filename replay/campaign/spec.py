@@ -52,6 +52,7 @@ Each configuration stores its parameters with
 every default filled in (canonical), so ``{}`` and the defaults are the same
 configuration, with the same hash.
 """
+
 from __future__ import annotations
 
 import tomllib
@@ -70,9 +71,14 @@ from replay.util.params import Param
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and the API, one declaration
     Param("name", str, None, "names the default result directory runs/campaign-<name>", optional=True),
-    EVAL["runs"], EVAL["seed"], EVAL["batch"], EVAL["alignment"], EVAL["divergence_threshold"],
-    Param("data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)",
-          optional=True),
+    EVAL["runs"],
+    EVAL["seed"],
+    EVAL["batch"],
+    EVAL["alignment"],
+    EVAL["divergence_threshold"],
+    Param(
+        "data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)", optional=True
+    ),
 )
 SECTIONS = ("campaign", "dataset", "task", "filter", "tune")
 _Where = Where  # the name it had
@@ -101,18 +107,36 @@ def load(path) -> Campaign:
     ds_entries = [entries.dataset(where, path, entry, head["data_dir"]) for entry in datasets]
     flt_entries = entries.filters(where, filters, head["runs"], MAX_UNITS)
     if not flt_entries and not any(e.recorded for e in ds_entries):
-        raise where.error("filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with "
-                                    "recorded estimates)")
-    configs = [Config(ds.id, ds.params, ds.first, t, canonical, name, fp, head["seed"], head["alignment"],
-                      head["divergence_threshold"])
-               for ds in ds_entries for t, canonical in _tasks(where, ds.tasks, task_params)
-               for name, fp in flt_entries + [(RECORDED + k, v) for k, v in ds.recorded.items()]]
+        raise where.error(
+            "filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with recorded estimates)"
+        )
+    configs = [
+        Config(
+            ds.id,
+            ds.params,
+            ds.first,
+            t,
+            canonical,
+            name,
+            fp,
+            head["seed"],
+            head["alignment"],
+            head["divergence_threshold"],
+        )
+        for ds in ds_entries
+        for t, canonical in _tasks(where, ds.tasks, task_params)
+        for name, fp in flt_entries + [(RECORDED + k, v) for k, v in ds.recorded.items()]
+    ]
     runs = head["runs"]
     if len(configs) * runs > MAX_UNITS:
-        raise where.error("runs", f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
-                                  f"more than a campaign may hold ({MAX_UNITS}); split it")
-    return Campaign(path, head["name"], runs, head["seed"], head["batch"], head["data_dir"], configs,
-                    doc.get("tune"), where)
+        raise where.error(
+            "runs",
+            f"{len(configs)} configurations x {runs} runs = {len(configs) * runs} units, "
+            f"more than a campaign may hold ({MAX_UNITS}); split it",
+        )
+    return Campaign(
+        path, head["name"], runs, head["seed"], head["batch"], head["data_dir"], configs, doc.get("tune"), where
+    )
 
 
 def _read(path: Path) -> tuple[dict, Where]:
@@ -122,8 +146,9 @@ def _read(path: Path) -> tuple[dict, Where]:
     except OSError as e:
         raise ReplayError(f"{path}: cannot read campaign file: {e.strerror}") from None
     except UnicodeDecodeError as e:
-        raise ReplayError(f"{path}: not a campaign file (not UTF-8 text: byte {e.start}); a campaign "
-                          "is a TOML file") from None
+        raise ReplayError(
+            f"{path}: not a campaign file (not UTF-8 text: byte {e.start}); a campaign is a TOML file"
+        ) from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -163,8 +188,9 @@ def _entry_lists(where, doc: dict) -> tuple[list, list]:
     if not isinstance(datasets, list) or not datasets:
         raise where.error("dataset", "the campaign needs at least one [[dataset]]")
     filters = doc.get("filter", [])
-    maybe_recorded = any(isinstance(d, dict) and (d.get("recorded") or "mapping" in (d.get("params") or {}))
-                         for d in datasets)  # recorded estimates alone need no [[filter]]
+    maybe_recorded = any(
+        isinstance(d, dict) and (d.get("recorded") or "mapping" in (d.get("params") or {})) for d in datasets
+    )  # recorded estimates alone need no [[filter]]
     if not isinstance(filters, list) or not (filters or maybe_recorded):
         raise where.error("filter", "the campaign needs at least one [[filter]]")
     return datasets, filters

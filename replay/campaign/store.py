@@ -36,6 +36,7 @@ are checked for the columns the leaderboard reads and for the row count of the
 configuration's other units; records without their own checksum, for the metrics the
 table determines (:func:`.records.legacy_problem`).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -52,8 +53,16 @@ from replay.util.version import __version__
 from replay.util.errors import ReplayError
 
 from . import records as sealing
-from .encode import (SUMMARY_COLUMNS, describe, footer as _footer, pack, parquet_bytes,  # noqa: F401 (re-exported)
-                     summary_columns, to_arrow, to_numpy)
+from .encode import (
+    SUMMARY_COLUMNS,
+    describe,
+    footer as _footer,
+    pack,
+    parquet_bytes,  # noqa: F401 (re-exported)
+    summary_columns,
+    to_arrow,
+    to_numpy,
+)
 from replay.util.files import json_default, sync_dir, write_bytes, write_json
 
 RUN_FILE = re.compile(r"^(\d+)\.json$")
@@ -156,8 +165,10 @@ class Store:
         missing = [c for c in expected if c not in names]
         if missing or (described and names != expected):
             extra = [c for c in names if c not in expected]
-            return (f"{path}: columns differ from the unit's (missing {', '.join(missing) or 'none'}; "
-                    f"unexpected {', '.join(extra) or 'none'})"), None
+            return (
+                f"{path}: columns differ from the unit's (missing {', '.join(missing) or 'none'}; "
+                f"unexpected {', '.join(extra) or 'none'})"
+            ), None
         if not described:
             return None, rows
         if rows != table.get("rows"):
@@ -225,12 +236,16 @@ class Store:
         entries = sorted(self.units.iterdir()) if self.units.is_dir() else []
         for d in entries:
             if not d.is_dir() and not d.name.startswith("."):
-                raise ReplayError(f"{d}: not a directory (the units of configuration {d.name} belong there); "
-                                  "move it away and run `replay campaign run` on its campaign file again")
+                raise ReplayError(
+                    f"{d}: not a directory (the units of configuration {d.name} belong there); "
+                    "move it away and run `replay campaign run` on its campaign file again"
+                )
         for h, cfg in listed.items():
             if h not in skip and not (self.units / h).is_dir():
-                raise ReplayError(f"{self.units / h}: missing: configuration {index.describe(cfg)}, listed in "
-                                  f"{self.out / index.NAME}, has no units directory; {RERUN_HINT}")
+                raise ReplayError(
+                    f"{self.units / h}: missing: configuration {index.describe(cfg)}, listed in "
+                    f"{self.out / index.NAME}, has no units directory; {RERUN_HINT}"
+                )
         out = []
         for d in entries:
             if not d.is_dir() or d.name in skip:
@@ -238,8 +253,11 @@ class Store:
             cfg, problem = self.read_config(d.name)
             if problem is None:
                 out.append((d.name, cfg))
-            elif problem.endswith(": missing") and d.name in listed and not any(RUN_FILE.match(p.name)
-                                                                                for p in d.iterdir()):
+            elif (
+                problem.endswith(": missing")
+                and d.name in listed
+                and not any(RUN_FILE.match(p.name) for p in d.iterdir())
+            ):
                 out.append((d.name, listed[d.name]))  # no units yet: config.json comes with the first
             elif (d / "config.json").exists() or any(RUN_FILE.match(p.name) for p in d.iterdir()):
                 raise ReplayError(f"{problem}; run `replay campaign run` on its campaign file again to rewrite it")
@@ -261,15 +279,21 @@ class Store:
         import pyarrow.parquet as pq
 
         kept = self._kept.get((config_hash, run))
-        if sha256 is not None and columns is not None and kept is not None and kept[0] == sha256 \
-                and all(c in kept[1] for c in columns):
+        if (
+            sha256 is not None
+            and columns is not None
+            and kept is not None
+            and kept[0] == sha256
+            and all(c in kept[1] for c in columns)
+        ):
             return {c: kept[1][c] for c in columns}
         path = self.units / config_hash / f"{run}.parquet"
         try:
             t = pq.ParquetFile(path).read(columns=columns)
         except (pa.ArrowException, OSError, ValueError) as err:
-            raise ReplayError(f"{path}: unreadable unit table ({str(err).splitlines()[0] if str(err) else ''}); "
-                              f"{RERUN_HINT}") from None
+            raise ReplayError(
+                f"{path}: unreadable unit table ({str(err).splitlines()[0] if str(err) else ''}); {RERUN_HINT}"
+            ) from None
         return {name: to_numpy(t.column(name)) for name in t.column_names}
 
     # ---- writing -----------------------------------------------------------------------
@@ -303,8 +327,12 @@ class Store:
             data = result["parquet"] if "parquet" in result else parquet_bytes(result["series"])
             record["table"] = describe(data)
             write_bytes(d / f"{run}.parquet", data, sync=False)  # its record's checksum vouches for it
-            self._keep(config_hash, run, record["table"]["sha256"], result["summary"] if "summary" in result
-                       else summary_columns(result.get("series", {})))
+            self._keep(
+                config_hash,
+                run,
+                record["table"]["sha256"],
+                result["summary"] if "summary" in result else summary_columns(result.get("series", {})),
+            )
         write_json(d / f"{run}.json", sealing.seal(record, json_default))
         if sync:
             sync_dir(d)

@@ -15,6 +15,7 @@ A recorded estimate's configuration (``recorded:<name>``, :mod:`replay.campaign.
 has one unit, run 0: :func:`replay.run.pipeline.run_block` computes only that run of a
 job (:func:`replay.run.pipeline.runs_of`) and returns no record for the others.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

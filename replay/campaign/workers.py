@@ -24,6 +24,7 @@ abruptly loses nothing that a resumed campaign does not compute again.
 :func:`connect_scheduler` connects a Dask client to a remote scheduler within a
 bounded time (distributed leaves the comm handshake unbounded).
 """
+
 from __future__ import annotations
 
 import os
@@ -95,8 +96,12 @@ def process_pool(n: int):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    return ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context(start_method()), initializer=init_worker,
-                               initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)))
+    return ProcessPoolExecutor(
+        max_workers=n,
+        mp_context=mp.get_context(start_method()),
+        initializer=init_worker,
+        initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)),
+    )
 
 
 def connect_scheduler(address: str, timeout: float):
@@ -128,13 +133,15 @@ def connect_scheduler(address: str, timeout: float):
     except (asyncio.TimeoutError, TimeoutError):
         raise refuse("it accepted the connection but sent no handshake") from None
     except OSError as err:  # refused until the timeout, unknown host, ...
-        raise refuse(err.strerror or ("nothing accepted the connection" if "Timed out" in str(err)
-                                      else type(err).__name__)) from None
+        raise refuse(
+            err.strerror or ("nothing accepted the connection" if "Timed out" in str(err) else type(err).__name__)
+        ) from None
     except ValueError as err:
         raise ReplayError(f"Dask scheduler {address}: not a scheduler address ({err})") from None
     except Exception as err:  # noqa: BLE001 — whatever answered is not a Dask scheduler
-        raise ReplayError(f"Dask scheduler {address}: the answer is not a Dask handshake "
-                          f"({type(err).__name__})") from None
+        raise ReplayError(
+            f"Dask scheduler {address}: the answer is not a Dask handshake ({type(err).__name__})"
+        ) from None
     try:
         return Client(address, timeout=f"{timeout}s", set_as_default=False)
     except (OSError, TimeoutError) as err:

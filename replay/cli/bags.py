@@ -3,6 +3,7 @@
 Errors are raised as ReplayError; the top-level `replay` command prints them on
 one line and exits with status 2.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,23 +15,35 @@ from replay.util.errors import ReplayError
 
 @click.command("inspect")
 @click.argument("path", type=click.Path())
-@click.option("--write-mapping", default=None, type=click.Path(dir_okay=False),
-              help="Write the proposed mapping to this TOML file.")
+@click.option(
+    "--write-mapping",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="Write the proposed mapping to this TOML file.",
+)
 def inspect_cmd(path, write_mapping):
     """List the topics of a bag or MCAP (type, count, rate, span) and propose a topic mapping."""
     from replay.adapters.bags import inspect
 
     info = inspect(path)
-    click.echo(f"{info['path']}  format={info['format']}  messages={info['messages']}  "
-               f"span={info['span_s']:.3f} s")
+    click.echo(f"{info['path']}  format={info['format']}  messages={info['messages']}  span={info['span_s']:.3f} s")
     if info["truncated"]:
         click.echo(f"TRUNCATED: {info['truncated']} (counts are what could be read)")
     head = ("topic", "type", "count", "rate Hz", "span s", "first stamp s", "mapped")
     rows = [head]
     for r in info["topics"]:
         stamp = f"{r['first_stamp_s']:.3f}" if r["first_stamp_s"] is not None else "-"
-        rows.append((r["topic"], r["type"], str(r["count"]), f"{r['rate_hz']:.2f}", f"{r['span_s']:.2f}",
-                     stamp, "yes" if r["supported"] else "no (unsupported type)"))
+        rows.append(
+            (
+                r["topic"],
+                r["type"],
+                str(r["count"]),
+                f"{r['rate_hz']:.2f}",
+                f"{r['span_s']:.2f}",
+                stamp,
+                "yes" if r["supported"] else "no (unsupported type)",
+            )
+        )
     widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
     for row in rows:
         click.echo("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
@@ -69,8 +82,9 @@ def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_
         check_export_targets(mcap_out, ros2_out, [out_dir] + dataset_inputs(dataset, mapping, data_dir))
 
 
-def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: int = 0, select=None,
-                   sigma=None, quiet: bool = False) -> None:
+def export_outputs(
+    run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: int = 0, select=None, sigma=None, quiet: bool = False
+) -> None:
     """Export one run of an evaluation directory (or of a campaign's configurations chosen by
     ``select``) as a Foxglove MCAP and/or a ROS 2 bag.
 
@@ -90,10 +104,10 @@ def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: in
     loaded = load_run(run_dir, data_dir, run=run, select=select)
     check_export_targets(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
     tracks = ", ".join(loaded["estimates"])
-    for target, write, label, slash in ((mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p),
-                                         "export mcap", ""),
-                                        (ros2_out, lambda p: write_run_ros2(loaded, ros2_out, progress=p),
-                                         "export ros2 bag", "/")):
+    for target, write, label, slash in (
+        (mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p), "export mcap", ""),
+        (ros2_out, lambda p: write_run_ros2(loaded, ros2_out, progress=p), "export ros2 bag", "/"),
+    ):
         if not target:
             continue
         progress = Progress(0, quiet, label=label, unit="message")
@@ -106,22 +120,44 @@ def export_outputs(run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: in
 
 @click.command("export")  # examples: replay.cli.examples
 @click.argument("run_dir", type=click.Path())
-@click.option("--mcap", "mcap_out", default=None, type=click.Path(),
-              help="Foxglove MCAP to write (poses, paths, frame transforms, covariance ellipsoids, errors, sensor "
-                   "data, the manifest as metadata); replaces only an MCAP replay wrote.")
-@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
-              help="ROS 2 bag directory (MCAP storage, zstd chunks) with nav_msgs/Odometry per filter and the "
-                   "reference; replaces only a bag replay wrote.")
-@click.option("--run", "run", default=0, show_default=True, type=click.IntRange(min=0),
-              help="Which Monte Carlo run to export (a recorded estimate has run 0 only, shown in every run).")
+@click.option(
+    "--mcap",
+    "mcap_out",
+    default=None,
+    type=click.Path(),
+    help="Foxglove MCAP to write (poses, paths, frame transforms, covariance ellipsoids, errors, sensor "
+    "data, the manifest as metadata); replaces only an MCAP replay wrote.",
+)
+@click.option(
+    "--ros2-bag",
+    "ros2_out",
+    default=None,
+    type=click.Path(),
+    help="ROS 2 bag directory (MCAP storage, zstd chunks) with nav_msgs/Odometry per filter and the "
+    "reference; replaces only a bag replay wrote.",
+)
+@click.option(
+    "--run",
+    "run",
+    default=0,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="Which Monte Carlo run to export (a recorded estimate has run 0 only, shown in every run).",
+)
 @click.option("--dataset", default=None, help="Campaign: the configurations of this dataset id (comma-separated list).")
 @click.option("--task", default=None, help="Campaign: the configurations of this task.")
 @click.option("--filter", "filter_", default=None, help="Campaign: only these filters (comma-separated).")
-@click.option("--config", default=None,
-              help="Campaign: only the configurations whose hash (units/<hash>) starts with one of these "
-                   "(comma-separated).")
-@click.option("--sigma", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]")
+@click.option(
+    "--config",
+    default=None,
+    help="Campaign: only the configurations whose hash (units/<hash>) starts with one of these (comma-separated).",
+)
+@click.option(
+    "--sigma",
+    default=None,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]",
+)
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir, quiet=False):
@@ -137,5 +173,13 @@ def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config,
         import logging
 
         logging.getLogger("replay").setLevel(logging.WARNING)
-    export_outputs(run_dir, mcap_out, ros2_out, data_dir=data_dir, run=run, sigma=sigma, quiet=quiet,
-                   select={"dataset": dataset, "task": task, "filter": filter_, "config": config})
+    export_outputs(
+        run_dir,
+        mcap_out,
+        ros2_out,
+        data_dir=data_dir,
+        run=run,
+        sigma=sigma,
+        quiet=quiet,
+        select={"dataset": dataset, "task": task, "filter": filter_, "config": config},
+    )

@@ -1,4 +1,5 @@
 """``replay campaign run``, ``replay leaderboard``, ``replay report``."""
+
 from __future__ import annotations
 
 import os
@@ -23,24 +24,37 @@ def check_names(out, what: str) -> None:
     for part in Path(out).parts:
         if len(os.fsencode(part)) > NAME_MAX:
             shown = str(out) if len(str(out)) <= 80 else str(out)[:60] + "..."
-            raise ReplayError(f"{what} {shown}: a name in it is {len(os.fsencode(part))} bytes long "
-                              f"(file systems allow {NAME_MAX})")
+            raise ReplayError(
+                f"{what} {shown}: a name in it is {len(os.fsencode(part))} bytes long (file systems allow {NAME_MAX})"
+            )
 
 
 @campaign.command("run")
 @click.argument("file", type=click.Path(dir_okay=False))
-@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
-              help="Result directory (default: runs/campaign-<name>).")
-@click.option("--workers", "-w", default=None, type=click.IntRange(1),
-              help="Local worker processes (default: all cores; 1 = in this process).")
+@click.option(
+    "--out",
+    "-o",
+    default=None,
+    type=click.Path(file_okay=False),
+    help="Result directory (default: runs/campaign-<name>).",
+)
+@click.option(
+    "--workers",
+    "-w",
+    default=None,
+    type=click.IntRange(1),
+    help="Local worker processes (default: all cores; 1 = in this process).",
+)
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--retry-failed", is_flag=True, help="Compute failed units again.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress output.")
-@click.option("--wait", is_flag=True,
-              help="If another campaign process is writing to the result directory, wait for it "
-                   "instead of refusing.")
+@click.option(
+    "--wait",
+    is_flag=True,
+    help="If another campaign process is writing to the result directory, wait for it instead of refusing.",
+)
 def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet, wait):
     """Run the units of campaign FILE not yet stored in the result directory."""
     from replay.campaign import board, execute, spec
@@ -55,11 +69,22 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     check_names(out, "--out")
     refuse_overlap(out, [c.data_dir, data_dir], "--out")  # never onto or inside the data
     check_writable(out, "--out")
-    counts = execute.run(c, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet,
-                         retry_failed=retry_failed, data_dir=data_dir, wait=wait)
-    for key, what in (("rewritten", "rewrote {n} damaged configuration file{s}"),
-                      ("missing", "recomputed {n} missing configuration{s}"),
-                      ("damaged", "recomputed {n} damaged unit{s}")):
+    counts = execute.run(
+        c,
+        out,
+        workers=workers,
+        scheduler=scheduler,
+        dask_local=dask_local,
+        quiet=quiet,
+        retry_failed=retry_failed,
+        data_dir=data_dir,
+        wait=wait,
+    )
+    for key, what in (
+        ("rewritten", "rewrote {n} damaged configuration file{s}"),
+        ("missing", "recomputed {n} missing configuration{s}"),
+        ("damaged", "recomputed {n} damaged unit{s}"),
+    ):
         found = counts[key]
         if found:
             more = f"; and {len(found) - 5} more" if len(found) > 5 else ""
@@ -69,14 +94,24 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     if counts["units"] == 0:
         click.echo(f"nothing to do: all {counts['stored_before']} units already stored in {out}")
     else:
-        click.echo(f"{counts['done']} units computed, {counts['failed']} failed ({counts['backend']}); "
-                   f"wrote {out / 'leaderboard.csv'}, {out / 'paired.csv'}")
+        click.echo(
+            f"{counts['done']} units computed, {counts['failed']} failed ({counts['backend']}); "
+            f"wrote {out / 'leaderboard.csv'}, {out / 'paired.csv'}"
+        )
     for name, t in tunes:  # replay tune at scale: every tune's units in one store, OUT/tune
         from replay.tune import run as tune_run
         from replay.tune.write import format_board
 
-        res = tune_run.tune(t, out / "tune" / name, store_dir=out / "tune", workers=workers, scheduler=scheduler,
-                            dask_local=dask_local, quiet=quiet, wait=wait)
+        res = tune_run.tune(
+            t,
+            out / "tune" / name,
+            store_dir=out / "tune",
+            workers=workers,
+            scheduler=scheduler,
+            dask_local=dask_local,
+            quiet=quiet,
+            wait=wait,
+        )
         click.echo(f"tune {name} ({t.split.tuned_on} -> {t.split.tested_on}; {t.trials} trials per filter):")
         click.echo(format_board(res["rows"]))
         click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))
@@ -103,8 +138,13 @@ def leaderboard(dirs, sort, out):
 
 @click.command("report")
 @click.argument("dir", type=click.Path(exists=True, file_okay=False))
-@click.option("--out", "-o", default=None, type=click.Path(file_okay=False),
-              help="Where to write the PNGs and report.html (default: DIR/report).")
+@click.option(
+    "--out",
+    "-o",
+    default=None,
+    type=click.Path(file_okay=False),
+    help="Where to write the PNGs and report.html (default: DIR/report).",
+)
 def report(dir, out):
     """Summary, leaderboards and figures (trajectories, error bands, metrics, NEES/NIS) in one HTML page."""
     from replay.outputs.report import make_report

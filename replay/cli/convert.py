@@ -1,6 +1,7 @@
 """``replay convert SOURCE OUT``: a trajectory from any source ``replay score`` reads, written as TUM, KITTI,
 EuRoC, CSV or MCAP (:mod:`replay.trajectory.convert`; evo_traj's ``--save_as_tum``). Registered in
 :mod:`replay.cli.main`."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,16 +12,31 @@ import click
 @click.command("convert")
 @click.argument("source")
 @click.argument("out")
-@click.option("--format", "fmt", metavar="tum|kitti|euroc|csv|mcap", default=None,
-              help="Output format (default: from OUT's extension: .tum/.txt TUM, .kitti, .csv plain CSV, .mcap). "
-                   "KITTI writes times.txt beside OUT.")
-@click.option("--in-format", "in_fmt", type=click.Choice(["tum", "kitti", "euroc", "csv"]), default=None,
-              help="Format of a SOURCE file (default: from its header, extension and column count, as replay score).")
-@click.option("--kitti-times", type=click.Path(dir_okay=False), default=None,
-              help="Stamps of KITTI SOURCE poses (default: times.txt beside them).")
+@click.option(
+    "--format",
+    "fmt",
+    metavar="tum|kitti|euroc|csv|mcap",
+    default=None,
+    help="Output format (default: from OUT's extension: .tum/.txt TUM, .kitti, .csv plain CSV, .mcap). "
+    "KITTI writes times.txt beside OUT.",
+)
+@click.option(
+    "--in-format",
+    "in_fmt",
+    type=click.Choice(["tum", "kitti", "euroc", "csv"]),
+    default=None,
+    help="Format of a SOURCE file (default: from its header, extension and column count, as replay score).",
+)
+@click.option(
+    "--kitti-times",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Stamps of KITTI SOURCE poses (default: times.txt beside them).",
+)
 @click.option("--columns", default=None, help="Columns of a plain CSV SOURCE, as replay score --columns.")
-@click.option("--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default=None,
-              help="Unit of a CSV SOURCE's time column.")
+@click.option(
+    "--time-unit", type=click.Choice(["s", "ms", "us", "ns"]), default=None, help="Unit of a CSV SOURCE's time column."
+)
 @click.option("--topic", default="/pose", show_default=True, help="MCAP output: the topic of the PoseStamped messages.")
 @click.option("--frame-id", default="map", show_default=True, help="MCAP output: header.frame_id of the messages.")
 def convert_cmd(source, out, fmt, in_fmt, kitti_times, columns, time_unit, topic, frame_id):
@@ -44,5 +60,7 @@ def convert_cmd(source, out, fmt, in_fmt, kitti_times, columns, time_unit, topic
         if times is not None:
             outfile.write(times, "OUT's times.txt", lambda tmp: Path(tmp).write_text(convert.kitti_times(tr)))
         outfile.write(out, "OUT", lambda tmp: Path(tmp).write_text(convert.text(tr, fmt)))
-    click.echo(f"{len(tr)} poses of {io.label(source)} -> {out} ({fmt}{', stamps in ' + str(times) if times else ''}"
-               f"{', topic ' + topic if fmt == 'mcap' else ''})")
+    click.echo(
+        f"{len(tr)} poses of {io.label(source)} -> {out} ({fmt}{', stamps in ' + str(times) if times else ''}"
+        f"{', topic ' + topic if fmt == 'mcap' else ''})"
+    )

@@ -3,6 +3,7 @@
 Errors are raised as ReplayError; the top-level `replay` command prints them on
 one line and exits with status 2.
 """
+
 from __future__ import annotations
 
 import click
@@ -12,8 +13,12 @@ from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 from replay.data.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
 
-DATA_DIR = click.option("--data-dir", type=click.Path(file_okay=False), default=None,
-                        help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).")
+DATA_DIR = click.option(
+    "--data-dir",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).",
+)
 
 
 @click.group("datasets")
@@ -49,10 +54,18 @@ def list_cmd(data_dir):
 @click.argument("dataset")
 @DATA_DIR
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
-@click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
-@click.option("--dataset-param", "dataset_params", multiple=True,
-              help="Dataset parameter NAME=VALUE (repeatable; as for `replay eval`).")
+@click.option(
+    "--mapping",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
+)
+@click.option(
+    "--dataset-param",
+    "dataset_params",
+    multiple=True,
+    help="Dataset parameter NAME=VALUE (repeatable; as for `replay eval`).",
+)
 @view_options
 def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), rate=None, window=None, segment=None):
     """Manifest fields, location and, when present, what loading it gives.
@@ -63,8 +76,9 @@ def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), r
     from replay.run.pipeline import load_frame
 
     ref = dataset_ref.resolve(dataset, adapter)
-    dparams = registry.check_params(ref.target, with_views(dataset_inputs(dataset_params, mapping), rate, window,
-                                                           segment), adapter=adapter)
+    dparams = registry.check_params(
+        ref.target, with_views(dataset_inputs(dataset_params, mapping), rate, window, segment), adapter=adapter
+    )
     config = {"dataset": dataset, "dataset_params": dparams, "first": None, "seed": 0, "adapter": adapter}
     if ref.is_path:
         frame = load_frame(config, 0, data_dir, ds=None)  # as `replay eval` reads it
@@ -103,13 +117,25 @@ def _describe(frame) -> None:
 
 @datasets.command("fetch")
 @click.argument("dataset_ids", nargs=-1)
-@click.option("--dest", type=click.Path(file_okay=False), default=None,
-              help="Download into this directory (default: the user cache).")
+@click.option(
+    "--dest",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Download into this directory (default: the user cache).",
+)
 @click.option("--all", "fetch_all", is_flag=True, help="Fetch every downloadable dataset.")
-@click.option("--force", is_flag=True,
-              help="Download again even if present; the copy is replaced only once the new one passed every check.")
-@click.option("--deadline", type=float, default=DEFAULT_DEADLINE,
-              show_default=True, help="Seconds allowed for each whole download.")
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Download again even if present; the copy is replaced only once the new one passed every check.",
+)
+@click.option(
+    "--deadline",
+    type=float,
+    default=DEFAULT_DEADLINE,
+    show_default=True,
+    help="Seconds allowed for each whole download.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress display (results and errors still print).")
 def fetch_cmd(dataset_ids, dest, fetch_all, force, deadline, quiet=False):
     """Download datasets, checked by size and sha256 where registered upstream, else by content.
@@ -151,8 +177,9 @@ def _fetch_one(ds, dest, deadline, force, quiet):
 @click.argument("dataset_id")
 @click.option("--out", "-o", required=True, type=click.Path(dir_okay=False), help="File to write.")
 @click.option("--seed", "-s", default=0, show_default=True, type=int, help="Seed of the generator.")
-@click.option("--param", "-p", "params", multiple=True,
-              help="Generator parameter NAME=VALUE (value parsed as JSON), repeatable.")
+@click.option(
+    "--param", "-p", "params", multiple=True, help="Generator parameter NAME=VALUE (value parsed as JSON), repeatable."
+)
 def make_cmd(dataset_id, out, seed, params):
     """Write one generated log of a simulated dataset as a file (e.g. sim/lake-depth as a lake-trial CSV)."""
     from importlib import import_module

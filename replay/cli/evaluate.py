@@ -1,5 +1,6 @@
 """``replay eval DATASET``: filters over a dataset, scored, written as one output set (and exported);
 registered by :mod:`replay.cli.main`."""
+
 from __future__ import annotations
 
 import sys
@@ -15,49 +16,116 @@ from replay.util.errors import ReplayError
 @click.command("eval")
 @click.argument("dataset")
 @click.option("--task", "-t", default=None, help="Task (default: the dataset's default task).")
-@click.option("--filters", "-f", default="ekf,ukf,ckf,pf", show_default=True,
-              help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
-                   "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
-                   "as recorded:<name>, or recorded:none for none).")
+@click.option(
+    "--filters",
+    "-f",
+    default="ekf,ukf,ckf,pf",
+    show_default=True,
+    help="Comma-separated filter names; 'none' for no filter. Recorded estimates of the mapping's "
+    "[estimates] are scored beside them as rows recorded:<name> (all by default; name some "
+    "as recorded:<name>, or recorded:none for none).",
+)
 @run_option("runs", "-n")
 @run_option("seed", "-s")
 @run_option("first")
-@click.option("--out", "-o", default=None, type=click.Path(),
-              help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
-                   "with runs/<dataset>/<task>/latest pointing to it).")
-@click.option("--force", is_flag=True, help="Replace --out if it holds an earlier replay eval output "
-              "(never anything else).")
-@click.option("--wait", is_flag=True, help="If another replay eval is writing to --out, wait for it to "
-              "finish instead of refusing.")
+@click.option(
+    "--out",
+    "-o",
+    default=None,
+    type=click.Path(),
+    help="Output directory (default: a new numbered one, runs/<dataset>/<task>/NNN, "
+    "with runs/<dataset>/<task>/latest pointing to it).",
+)
+@click.option(
+    "--force", is_flag=True, help="Replace --out if it holds an earlier replay eval output (never anything else)."
+)
+@click.option(
+    "--wait",
+    is_flag=True,
+    help="If another replay eval is writing to --out, wait for it to finish instead of refusing.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
-@click.option("--param", "-p", "params", multiple=True,
-              help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable; "
-                   "VALUE is JSON; `replay list filters` shows every filter's parameters).")
-@click.option("--task-param", "task_params", multiple=True,
-              help="Task parameter NAME=VALUE (repeatable; `replay list tasks`).")
-@click.option("--dataset-param", "dataset_params", multiple=True,
-              help="Dataset parameter NAME=VALUE, e.g. q=10 for sim/ungm (repeatable; `replay list datasets`).")
-@click.option("--baseline", default=None,
-              help="Filter the leaderboard's paired columns compare with (default: the first listed).")
-@click.option("--mapping", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).")
-@click.option("--mcap", "mcap_out", default=None, type=click.Path(),
-              help="Also export the run as a Foxglove MCAP file.")
-@click.option("--ros2-bag", "ros2_out", default=None, type=click.Path(),
-              help="Also export the run as a ROS 2 bag (MCAP storage) directory.")
+@click.option(
+    "--param",
+    "-p",
+    "params",
+    multiple=True,
+    help="Filter parameter FILTER.NAME=VALUE, e.g. pf.n_particles=500 (repeatable; "
+    "VALUE is JSON; `replay list filters` shows every filter's parameters).",
+)
+@click.option(
+    "--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable; `replay list tasks`)."
+)
+@click.option(
+    "--dataset-param",
+    "dataset_params",
+    multiple=True,
+    help="Dataset parameter NAME=VALUE, e.g. q=10 for sim/ungm (repeatable; `replay list datasets`).",
+)
+@click.option(
+    "--baseline", default=None, help="Filter the leaderboard's paired columns compare with (default: the first listed)."
+)
+@click.option(
+    "--mapping",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
+)
+@click.option(
+    "--mcap", "mcap_out", default=None, type=click.Path(), help="Also export the run as a Foxglove MCAP file."
+)
+@click.option(
+    "--ros2-bag",
+    "ros2_out",
+    default=None,
+    type=click.Path(),
+    help="Also export the run as a ROS 2 bag (MCAP storage) directory.",
+)
 @run_option("alignment")
 @run_option("divergence_threshold")
-@click.option("--min-scored-share", default=None, type=float,
-              help="Flag rows scored on a smaller share of the reference samples (default: 0.5; "
-                   "the rest is masked).")
-@click.option("--tuned", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.")
+@click.option(
+    "--min-scored-share",
+    default=None,
+    type=float,
+    help="Flag rows scored on a smaller share of the reference samples (default: 0.5; the rest is masked).",
+)
+@click.option(
+    "--tuned",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.",
+)
 @view_options
-def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, params, task_params,
-             dataset_params, baseline, mapping, mcap_out, ros2_out, alignment, divergence_threshold, force, quiet,
-             wait, min_scored_share, rate, window, segment, tuned):
+def eval_cmd(
+    dataset,
+    task,
+    filters,
+    runs,
+    seed,
+    first,
+    out,
+    data_dir,
+    adapter,
+    params,
+    task_params,
+    dataset_params,
+    baseline,
+    mapping,
+    mcap_out,
+    ros2_out,
+    alignment,
+    divergence_threshold,
+    force,
+    quiet,
+    wait,
+    min_scored_share,
+    rate,
+    window,
+    segment,
+    tuned,
+):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
     from replay.run.evaluation import evaluate
@@ -67,11 +135,25 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     from replay.scoring.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
-    min_scored_share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if min_scored_share is None
-                                              else min_scored_share, "--min-scored-share")
+    min_scored_share = MIN_SCORED_SHARE.check(
+        MIN_SCORED_SHARE.default if min_scored_share is None else min_scored_share, "--min-scored-share"
+    )
     ref, names, recorded, fparams, tparams, dparams, task = _configuration(
-        dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, (rate, window, segment),
-        adapter, first, data_dir, seed)
+        dataset,
+        task,
+        filters,
+        params,
+        task_params,
+        dataset_params,
+        mapping,
+        baseline,
+        tuned,
+        (rate, window, segment),
+        adapter,
+        first,
+        data_dir,
+        seed,
+    )
     # the output set is checked before the computation (inputs, writable, space, ownership)
     numbered = out is None
     inputs = eval_inputs(ref, data_dir, mapping)
@@ -80,8 +162,9 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
     else:
         check_output(Path(out), inputs, "--out")
         _fresh(Path(out), force)
-    _check_exports(new_run_dir(dataset, task) if numbered else Path(out), mcap_out, ros2_out, dataset, mapping,
-                   data_dir)
+    _check_exports(
+        new_run_dir(dataset, task) if numbered else Path(out), mcap_out, ros2_out, dataset, mapping, data_dir
+    )
     from contextlib import ExitStack
 
     with ExitStack() as held:  # a claimed numbered directory, or --out's lock, until published
@@ -96,20 +179,47 @@ def eval_cmd(dataset, task, filters, runs, seed, first, out, data_dir, adapter, 
         quiet_notes(quiet)
         progress = Progress(0, quiet, label="eval", unit="run")
         try:
-            ev = evaluate(ref, task=task, filters=names, runs=runs, seed=seed, first=first,
-                          data_dir=data_dir, filter_params=fparams,
-                          task_params=tparams, adapter=adapter,
-                          dataset_params=dparams or None, alignment=alignment,
-                          divergence_threshold=divergence_threshold, baseline=baseline, recorded=recorded,
-                          progress=progress, min_scored_share=min_scored_share)
+            ev = evaluate(
+                ref,
+                task=task,
+                filters=names,
+                runs=runs,
+                seed=seed,
+                first=first,
+                data_dir=data_dir,
+                filter_params=fparams,
+                task_params=tparams,
+                adapter=adapter,
+                dataset_params=dparams or None,
+                alignment=alignment,
+                divergence_threshold=divergence_threshold,
+                baseline=baseline,
+                recorded=recorded,
+                progress=progress,
+                min_scored_share=min_scored_share,
+            )
         finally:
             progress.close()
         _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
     _failed_filters(ev)
 
 
-def _configuration(dataset, task, filters, params, task_params, dataset_params, mapping, baseline, tuned, views,
-                   adapter, first, data_dir, seed):
+def _configuration(
+    dataset,
+    task,
+    filters,
+    params,
+    task_params,
+    dataset_params,
+    mapping,
+    baseline,
+    tuned,
+    views,
+    adapter,
+    first,
+    data_dir,
+    seed,
+):
     """``replay eval``'s configuration from its options, checked whole before any data is read:
     (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
     from replay.data import dataset_ref
@@ -118,8 +228,11 @@ def _configuration(dataset, task, filters, params, task_params, dataset_params, 
     from replay.run.pipeline import default_task
 
     names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
-    if baseline is not None and baseline not in names + (recorded or []) and not (
-            recorded is None and baseline.startswith("recorded:")):
+    if (
+        baseline is not None
+        and baseline not in names + (recorded or [])
+        and not (recorded is None and baseline.startswith("recorded:"))
+    ):
         raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
     fparams = cli_params.filter_params(params, names + (recorded or []))
     tparams = cli_params.task_params(task_params, task)
@@ -135,8 +248,7 @@ def _configuration(dataset, task, filters, params, task_params, dataset_params, 
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, handed down
     cli_params.check_config(ref, task, names, fparams, tparams, dparams, adapter=adapter)
     check_recorded(ref.id, recorded or [], dparams)  # before any recording is read
-    task = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams,
-                                seed=seed)
+    task = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams, seed=seed)
     return ref, names, recorded, fparams, tparams, dparams, task
 
 
@@ -145,7 +257,7 @@ def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, 
     from replay.outputs.files import format_table, write_all
     from replay.outputs.rundirs import mark_latest
 
-    for note in ([] if quiet else ev.frame_meta.get("task_notes", [])):
+    for note in [] if quiet else ev.frame_meta.get("task_notes", []):
         click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
     for note in ev.notes:
@@ -164,8 +276,9 @@ def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, 
 def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
     """--mcap and --ros2-bag: not inside or around the output directory, writable (before computing)."""
     for opt, path in (("--mcap", mcap_out), ("--ros2-bag", ros2_out)):
-        if path and (Path(path).resolve().is_relative_to(out.resolve())
-                     or out.resolve().is_relative_to(Path(path).resolve())):
+        if path and (
+            Path(path).resolve().is_relative_to(out.resolve()) or out.resolve().is_relative_to(Path(path).resolve())
+        ):
             raise ReplayError(f"{opt} {path}: overlaps the output directory {out}, which is replaced as a whole")
     if mcap_out or ros2_out:
         from replay.cli.bags import check_eval_exports
@@ -177,8 +290,10 @@ def _fresh(out: Path, replace: bool) -> None:
     """Without --force, refuse an --out that holds an output (checked at the start and again
     before publication, under --out's lock)."""
     if not replace and out.is_dir() and any(out.iterdir()):
-        raise ReplayError(f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
-                          "or leave out --out for a new numbered directory")
+        raise ReplayError(
+            f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
+            "or leave out --out for a new numbered directory"
+        )
 
 
 def _failed_filters(ev) -> None:
@@ -188,7 +303,10 @@ def _failed_filters(ev) -> None:
 
     bad = failures(ev)
     for name, f in bad.items():
-        click.echo(f"replay: warning: filter {name!r}: {len(f['runs'])} of {ev.config['runs']} runs failed "
-                   f"({f['error']}); recorded in the leaderboard's failed column and the manifest", err=True)
+        click.echo(
+            f"replay: warning: filter {name!r}: {len(f['runs'])} of {ev.config['runs']} runs failed "
+            f"({f['error']}); recorded in the leaderboard's failed column and the manifest",
+            err=True,
+        )
     if bad:
         sys.exit(1)

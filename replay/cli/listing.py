@@ -13,6 +13,7 @@ used is left out and named in one warning line on stderr (the others are listed)
 ``replay list filters pkg.module:Class`` shows a filter that is not registered.
 ``replay list plugins`` lists every plugin of the four groups and every problem.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -82,8 +83,10 @@ def entries(kind: str, problems: list | None = None, extra: str | None = None) -
     if kind == "reproductions":
         from replay.reproduce import REPRODUCTIONS
 
-        return [(n, summary(sys.modules[resolve(REPRODUCTIONS, n, "reproduction").__module__], n), [])
-                for n in sorted(REPRODUCTIONS)]
+        return [
+            (n, summary(sys.modules[resolve(REPRODUCTIONS, n, "reproduction").__module__], n), [])
+            for n in sorted(REPRODUCTIONS)
+        ]
     table, describe = _table(kind)
     names = sorted(table) + ([extra] if extra and extra not in set(table) and extra in table else [])
     out = []
@@ -132,7 +135,7 @@ def _datasets(problems):
         lines += [line + " (a view: every dataset)" for line in _declared(VIEW_PARAMS)]
         doc = plain_text(ds.description)
         if ds.manifest.startswith("entry point of "):
-            doc += f" (plugin: {ds.manifest[len('entry point of '):].split(', ')[0]})"
+            doc += f" (plugin: {ds.manifest[len('entry point of ') :].split(', ')[0]})"
         out.append((ds.id, doc, lines))
     problems += registry.plugin_problems()
     return out
@@ -180,8 +183,11 @@ def _adapter_of(family: str) -> str | None:
     """The one adapter that reads the datasets ``family/...`` (``bohai`` -> bohai-csv), else None."""
     from replay.data import registry
 
-    found = {ds.adapter for ds in registry.all_datasets().values()
-             if ds.kind == "file" and (ds.id == family or ds.id.startswith(family.rstrip("/") + "/"))}
+    found = {
+        ds.adapter
+        for ds in registry.all_datasets().values()
+        if ds.kind == "file" and (ds.id == family or ds.id.startswith(family.rstrip("/") + "/"))
+    }
     return found.pop() if len(found) == 1 else None
 
 

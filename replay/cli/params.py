@@ -18,6 +18,7 @@ Recorded estimates (``[estimates]`` of a bag mapping) are named in ``--filters``
 as ``recorded:<name>`` (:func:`split_filters`) and take ``-p
 recorded:<name>.t_max_diff=...`` / ``t_offset`` (:data:`replay.trajectory.recorded.RECORDED_PARAMS`).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -75,13 +76,16 @@ def split_filters(names) -> tuple[list, list | None]:
     chosen = [n for n in names if is_recorded(n)]
     if "none" in offline:
         if offline != ["none"]:
-            raise ReplayError(f"--filters: 'none' (no offline filter) cannot be listed with filters "
-                              f"({', '.join(n for n in offline if n != 'none')})")
+            raise ReplayError(
+                f"--filters: 'none' (no offline filter) cannot be listed with filters "
+                f"({', '.join(n for n in offline if n != 'none')})"
+            )
         offline = []
     for n in chosen:
         if n == RECORDED or (n == f"{RECORDED}none" and len(chosen) > 1):
-            raise ReplayError(f"--filters {n!r}: expected recorded:<name> (an [estimates] name of the mapping) "
-                              "or recorded:none alone")
+            raise ReplayError(
+                f"--filters {n!r}: expected recorded:<name> (an [estimates] name of the mapping) or recorded:none alone"
+            )
     if len(set(names)) != len(names):
         raise ReplayError(f"--filters: a name is listed twice ({', '.join(names)})")
     recorded = None if not chosen else [] if chosen == [f"{RECORDED}none"] else chosen
@@ -99,8 +103,9 @@ def filter_params(items, filters) -> dict:
         key, value = parse(item, "-p")
         name, dot, param = key.rpartition(".") if ":" in key else key.partition(".")  # recorded:NAME, module:Class
         if not dot or not name or not param:
-            raise ReplayError(f"-p {item}: expected FILTER.NAME=VALUE, e.g. "
-                              f"{(filters or ['pf'])[0]}.{param or key}={_text(value)}")
+            raise ReplayError(
+                f"-p {item}: expected FILTER.NAME=VALUE, e.g. {(filters or ['pf'])[0]}.{param or key}={_text(value)}"
+            )
         if name.startswith("recorded:"):  # a recorded estimate: its association parameters
             from replay.trajectory.recorded import RECORDED_PARAMS
 
@@ -112,8 +117,9 @@ def filter_params(items, filters) -> dict:
             given[param] = check_one(RECORDED_PARAMS, param, value, f"recorded estimate {name[9:]!r}")
             continue
         if name not in FILTERS:
-            raise ReplayError(f"-p {item}: unknown filter {name!r}{_suggest(name, FILTERS)} "
-                              f"(known: {', '.join(sorted(FILTERS))})")
+            raise ReplayError(
+                f"-p {item}: unknown filter {name!r}{_suggest(name, FILTERS)} (known: {', '.join(sorted(FILTERS))})"
+            )
         if name not in filters:
             raise ReplayError(f"-p {item}: filter {name!r} is not in --filters ({', '.join(filters)})")
         given = out.setdefault(name, {})
@@ -182,8 +188,9 @@ class Checked:
     dataset_params: dict
 
 
-def check_config(dataset, task, filters, filter_params=None, task_params=None, dataset_params=None,
-                 adapter=None) -> Checked:
+def check_config(
+    dataset, task, filters, filter_params=None, task_params=None, dataset_params=None, adapter=None
+) -> Checked:
     """Check a whole configuration before any data is read; returns it canonical.
 
     The dataset (its parameters against its generator's declarations or its
@@ -206,6 +213,7 @@ def check_config(dataset, task, filters, filter_params=None, task_params=None, d
     if task is None and not ref.is_path:
         task = ref.entry.default_task or None
     tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
-    fparams = {name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name)
-               for name in filters}
+    fparams = {
+        name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name) for name in filters
+    }
     return Checked(task, tparams, fparams, dparams)

@@ -1,6 +1,7 @@
 """``replay rerun MANIFEST`` (repeat a recorded evaluation and check every recorded result) and
 ``replay reproduce PAPER`` (a paper's experiments into docs/reproduction/); registered by
 :mod:`replay.cli.main`."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,11 +15,21 @@ from replay.util.errors import ReplayError
 @click.command("rerun")
 @click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
-@click.option("--out", "-o", default=None, type=click.Path(),
-              help="Also write the rerun's leaderboard, manifest and estimates to this directory.")
-@click.option("--allow-module", "allow_modules", multiple=True, metavar="MODULE",
-              help="Let the manifest name a filter, task or adapter as 'MODULE:Class' (importing MODULE runs its "
-                   "code); without it only built-in and installed (entry-point) ones are loaded. Repeatable.")
+@click.option(
+    "--out",
+    "-o",
+    default=None,
+    type=click.Path(),
+    help="Also write the rerun's leaderboard, manifest and estimates to this directory.",
+)
+@click.option(
+    "--allow-module",
+    "allow_modules",
+    multiple=True,
+    metavar="MODULE",
+    help="Let the manifest name a filter, task or adapter as 'MODULE:Class' (importing MODULE runs its "
+    "code); without it only built-in and installed (entry-point) ones are loaded. Repeatable.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
     """Repeat the run recorded in a manifest.json and check that every recorded result is reproduced exactly."""
@@ -50,11 +61,19 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 @run_option("runs", "-n", default=None, extra=" Default: the paper's.")
 @run_option("seed", "-s")
 @click.option("--data-dir", default=None, type=click.Path())
-@click.option("--doc", default=None, type=click.Path(dir_okay=False),
-              help="Markdown report to write (default: docs/reproduction/<paper>.md).")
+@click.option(
+    "--doc",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="Markdown report to write (default: docs/reproduction/<paper>.md).",
+)
 @click.option("--quick", is_flag=True, help="A short version (few runs) for a smoke check.")
-@click.option("--part", default=None, help="Only this part of a reproduction split into parts "
-              "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.")
+@click.option(
+    "--part",
+    default=None,
+    help="Only this part of a reproduction split into parts "
+    "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
 def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part, quiet=False):
     """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""

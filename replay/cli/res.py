@@ -3,6 +3,7 @@
 Registered in :mod:`replay.cli.main`. The tables are :mod:`replay.run.res`'s, the archive
 :mod:`replay.run.archive`'s, the figure :mod:`replay.run.boxplots`'s.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,17 +15,44 @@ from replay.util.errors import ReplayError
 
 @click.command("res")
 @click.argument("dirs", nargs=-1, required=True)
-@click.option("--table", "table", type=click.Choice(["stats", "trials"]), default="stats", show_default=True,
-              help="stats: every estimate's APE/RPE (and per-length) statistics; trials: each trial set's "
-                   "aggregation (mean, median, 95 % t-interval, lost).")
-@click.option("--format", "fmt", metavar="csv|md|latex", default=None,
-              help="Table format (default: from the -o extension .csv/.md/.tex, else md).")
-@click.option("--digits", type=click.IntRange(1, 17), default=6, show_default=True,
-              help="Significant digits of Markdown and LaTeX tables (CSV: every digit).")
-@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
-              help="Write the table to this file instead of printing it.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Write the APE over time and boxplots per estimate (png, pdf, svg, eps).")
+@click.option(
+    "--table",
+    "table",
+    type=click.Choice(["stats", "trials"]),
+    default="stats",
+    show_default=True,
+    help="stats: every estimate's APE/RPE (and per-length) statistics; trials: each trial set's "
+    "aggregation (mean, median, 95 % t-interval, lost).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    metavar="csv|md|latex",
+    default=None,
+    help="Table format (default: from the -o extension .csv/.md/.tex, else md).",
+)
+@click.option(
+    "--digits",
+    type=click.IntRange(1, 17),
+    default=6,
+    show_default=True,
+    help="Significant digits of Markdown and LaTeX tables (CSV: every digit).",
+)
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Write the table to this file instead of printing it.",
+)
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Write the APE over time and boxplots per estimate (png, pdf, svg, eps).",
+)
 def res_cmd(dirs, table, fmt, digits, out, plot_path):
     """Tables (CSV, Markdown, LaTeX) and plots of results saved by replay score --save-results DIR.
 
@@ -55,8 +83,10 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
         else:
             archives.append(archive.load(d))
     if plot_path and boards:
-        raise ReplayError(f"--plot: {boards[0][0]} is a replay eval or campaign output; --plot draws results archives "
-                          "(replay report draws eval and campaign outputs)")
+        raise ReplayError(
+            f"--plot: {boards[0][0]} is a replay eval or campaign output; --plot draws results archives "
+            "(replay report draws eval and campaign outputs)"
+        )
     text = res.render(res.rows(archives, table, boards), fmt, digits)
     if out:
         outfile.write(out, "-o", lambda tmp: Path(tmp).write_text(text))

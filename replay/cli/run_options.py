@@ -5,6 +5,7 @@
 bare word stays a string) and checked by the declaration, so ``replay eval --runs 0`` and
 ``replay.evaluate(runs=0)`` are refused with the same line.
 """
+
 from __future__ import annotations
 
 import json
@@ -50,9 +51,16 @@ def run_option(name: str, *short: str, default=..., extra: str = ""):
     e.g. ``replay tune``'s run count)."""
     p = BY_NAME[name]
     default = p.default if default is ... else default
-    return click.option(f"--{name.replace('_', '-')}", *short, name, default=default, type=Declared(p),
-                        show_default=default is not None, metavar=p.type.__name__.upper(),
-                        help=help_text(p, extra))
+    return click.option(
+        f"--{name.replace('_', '-')}",
+        *short,
+        name,
+        default=default,
+        type=Declared(p),
+        show_default=default is not None,
+        metavar=p.type.__name__.upper(),
+        help=help_text(p, extra),
+    )
 
 
 def quiet_notes(quiet: bool) -> None:

@@ -1,4 +1,5 @@
 """``replay tune``: each filter at its best on training data, scored on held-out data."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,16 +14,32 @@ from replay.util.errors import ReplayError
 @click.argument("dataset", required=False)
 @click.option("--filters", "-f", default="ekf,ukf,pf", show_default=True, help="Comma-separated filters to tune.")
 @click.option("--task", "-t", default=None, help="Task (default: the dataset's default task).")
-@click.option("--space", "space_file", default=None, type=click.Path(dir_okay=False),
-              help="Search space TOML file: FILTER.PARAM = \"log[a,b]\" | [a,b] | [choices...].")
-@click.option("--param", "-p", "space_params", multiple=True,
-              help="Search space entry FILTER.PARAM=SPEC or task.PARAM=SPEC, SPEC log[a,b], [a,b] or "
-                   "choice[v1,v2] (repeatable).")
+@click.option(
+    "--space",
+    "space_file",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="Search space TOML file: FILTER.PARAM = \"log[a,b]\" | [a,b] | [choices...].",
+)
+@click.option(
+    "--param",
+    "-p",
+    "space_params",
+    multiple=True,
+    help="Search space entry FILTER.PARAM=SPEC or task.PARAM=SPEC, SPEC log[a,b], [a,b] or choice[v1,v2] (repeatable).",
+)
 @click.option("--trials", default=50, show_default=True, type=int, help="Trials per filter (the same for each).")
-@click.option("--objective", default="mean_rmse", show_default=True,
-              help="mean_rmse, median_rmse, lost, nll, anees, or weighted:NAME=W,NAME=W.")
-@click.option("--train-segment", default=None, help="Train on this first fraction of DATASET's duration "
-              "(e.g. 0.6), test on the rest.")
+@click.option(
+    "--objective",
+    default="mean_rmse",
+    show_default=True,
+    help="mean_rmse, median_rmse, lost, nll, anees, or weighted:NAME=W,NAME=W.",
+)
+@click.option(
+    "--train-segment",
+    default=None,
+    help="Train on this first fraction of DATASET's duration (e.g. 0.6), test on the rest.",
+)
 @click.option("--train", default=None, help="Training dataset ids, comma-separated (with --test).")
 @click.option("--test", default=None, help="Test dataset ids, comma-separated (with --train).")
 @click.option("--split", default=None, help="'seeds': simulated data, train on --seed, test on --seed + 1.")
@@ -33,18 +50,52 @@ from replay.util.errors import ReplayError
 @click.option("--window", default=None, help="Dataset view: START:END seconds, or #i:j samples.")
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
 @click.option("--dataset-param", "dataset_params", multiple=True, help="Dataset parameter NAME=VALUE (repeatable).")
-@click.option("--out", "-o", required=True, type=click.Path(file_okay=False),
-              help="Tune directory (study.db, units/, leaderboard.csv, tuned.toml); resumed when it exists.")
+@click.option(
+    "--out",
+    "-o",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Tune directory (study.db, units/, leaderboard.csv, tuned.toml); resumed when it exists.",
+)
 @click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
-@click.option("--workers", "-w", default=None, type=click.IntRange(1),
-              help="Local worker processes for a trial's runs (default: in this process).")
+@click.option(
+    "--workers",
+    "-w",
+    default=None,
+    type=click.IntRange(1),
+    help="Local worker processes for a trial's runs (default: in this process).",
+)
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
 @click.option("--allow-overlap", is_flag=True, help="Allow training and test data to overlap (flagged on every row).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress display.")
-def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective, train_segment, train, test, split,
-             runs, seed, first, rate, window, task_params, dataset_params, out, data_dir, workers, dask_local,
-             scheduler, allow_overlap, quiet):
+def tune_cmd(
+    dataset,
+    filters,
+    task,
+    space_file,
+    space_params,
+    trials,
+    objective,
+    train_segment,
+    train,
+    test,
+    split,
+    runs,
+    seed,
+    first,
+    rate,
+    window,
+    task_params,
+    dataset_params,
+    out,
+    data_dir,
+    workers,
+    dask_local,
+    scheduler,
+    allow_overlap,
+    quiet,
+):
     """Tune each filter's declared parameters on training data and score it on held-out data."""
     from replay.cli import params as cli_params
     from replay.cli.campaign import check_names
@@ -59,27 +110,46 @@ def tune_cmd(dataset, filters, task, space_file, space_params, trials, objective
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")
     d = Path(out)
     if d.is_dir() and any(d.iterdir()) and not (d / "study.db").is_file():
-        raise ReplayError(f"--out {out}: a non-empty directory that is not a replay tune output (no study.db); "
-                          "give a new or a tune directory")
+        raise ReplayError(
+            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db); "
+            "give a new or a tune directory"
+        )
     if d.exists() and not d.is_dir():
         raise ReplayError(f"--out {out}: not a directory")
     parallel = workers or dask_local or (scheduler and 4)
-    t = check.prepare(dataset, filters=filters.split(","), entries=entries, trials=trials, objective=objective,
-                      runs=runs, seed=seed, task=task, task_params=cli_params.task_params(task_params, task),
-                      dataset_params=cli_params.dataset_params(dataset_params), view={"rate": rate, "window": window},
-                      first=first, data_dir=data_dir, train_segment=train_segment, train=train, test=test,
-                      split=split, allow_overlap=allow_overlap,
-                      batch=-(-runs // parallel) if parallel and runs > 0 else None)  # a trial's runs over the workers
+    t = check.prepare(
+        dataset,
+        filters=filters.split(","),
+        entries=entries,
+        trials=trials,
+        objective=objective,
+        runs=runs,
+        seed=seed,
+        task=task,
+        task_params=cli_params.task_params(task_params, task),
+        dataset_params=cli_params.dataset_params(dataset_params),
+        view={"rate": rate, "window": window},
+        first=first,
+        data_dir=data_dir,
+        train_segment=train_segment,
+        train=train,
+        test=test,
+        split=split,
+        allow_overlap=allow_overlap,
+        batch=-(-runs // parallel) if parallel and runs > 0 else None,
+    )  # a trial's runs over the workers
     check_names(out, "--out")
-    refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file],
-                   "--out")
+    refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file], "--out")
     check_writable(out, "--out")
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet)
     click.echo(format_board(res["rows"]))
     budget = res["budget"]
     same = len(set(budget.values())) == 1
-    click.echo(f"budget: {next(iter(budget.values()))} trials per filter, the same for every filter" if same else
-               "budget differs between filters: " + ", ".join(f"{k} {v} trials" for k, v in budget.items()))
+    click.echo(
+        f"budget: {next(iter(budget.values()))} trials per filter, the same for every filter"
+        if same
+        else "budget differs between filters: " + ", ".join(f"{k} {v} trials" for k, v in budget.items())
+    )
     if t.split.overlap:
         click.echo("warning: training and test data overlap (--allow-overlap): test scores are not held out")
     click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))

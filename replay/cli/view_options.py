@@ -2,6 +2,7 @@
 
 ``replay eval D --rate 1`` is ``replay eval D --dataset-param rate=1``; both at once are refused.
 """
+
 from __future__ import annotations
 
 import click
@@ -9,12 +10,27 @@ import click
 from replay.util.errors import ReplayError
 
 OPTIONS = (
-    ("--rate", "rate", float, "Resample the dataset onto a regular grid at HZ (per channel the sample nearest each "
-     "grid point within half a period, else masked; nothing averaged or invented). Same as --dataset-param rate=HZ."),
-    ("--window", "window", str, "Keep START:END seconds from the first sample (either bound may be empty), or "
-     "#I:J sample indices; times start again at 0. Same as --dataset-param window=START:END."),
-    ("--segment", "segment", str, "Keep the share A:B of the duration (e.g. 0:0.6 for the first 60 %), after "
-     "--window. Same as --dataset-param segment=A:B."),
+    (
+        "--rate",
+        "rate",
+        float,
+        "Resample the dataset onto a regular grid at HZ (per channel the sample nearest each "
+        "grid point within half a period, else masked; nothing averaged or invented). Same as --dataset-param rate=HZ.",
+    ),
+    (
+        "--window",
+        "window",
+        str,
+        "Keep START:END seconds from the first sample (either bound may be empty), or "
+        "#I:J sample indices; times start again at 0. Same as --dataset-param window=START:END.",
+    ),
+    (
+        "--segment",
+        "segment",
+        str,
+        "Keep the share A:B of the duration (e.g. 0:0.6 for the first 60 %), after "
+        "--window. Same as --dataset-param segment=A:B.",
+    ),
 )
 
 

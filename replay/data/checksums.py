@@ -19,6 +19,7 @@ without a registered checksum (its sha256, size, url, and that it passed the
 content check), so that a later edit can be told ("changed"). It is never taken
 for a registered checksum.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -39,26 +40,56 @@ CONTENT_CHECKED = "not registered upstream (content-checked)"
 
 # dataset id -> (upstream path, size in bytes, sha256)
 REGISTERED: dict[str, tuple[str, int, str]] = {
-    "bohai/20220625_0_0": ("20220625/0/20220625_0_0.csv", 4093632,
-                           "7fd4ad89103e4e0a8fe4032f0c7e805be6d32db457fe2c64223034540132fce1"),
-    "bohai/20220625_0_1": ("20220625/0/20220625_0_1.csv", 3161346,
-                           "c0d5440707b0ab6e53855407977dbe872f95d5b0922eb81b181edef84af6609f"),
-    "bohai/20220712_0_1": ("20220712_0_1.csv", 353643,
-                           "3287424eafd36f5e3129ad9bd2c21c827fc9779338f4136e84b2a6ea6369973c"),
-    "bohai/20220719_6_1": ("20220719_6_1.csv", 1557212,
-                           "4690ef43fafd4585b17a994f441babe049ad6db332f703381dd46bcf98ece24d"),
-    "bohai/20220822_0_0": ("20220822/0/20220822_0_0.csv", 1071327,
-                           "db16c328bc2ffbc82d5053f1a93aee4630a4f6fa50aaaf2d83b7f2cbacc5b863"),
-    "bohai/20220822_0_3": ("20220822/0/20220822_0_3.csv", 4146862,
-                           "5a188116182f20f4e9c0fde42d0ef360462ebc0e807a017010503da782872ea2"),
-    "bohai/20220822_0_4": ("20220822/0/20220822_0_4.csv", 3711638,
-                           "13f6ab202bafb0e3ccb3ff1ad9ccde3cfe70f64b9dab86f7c4c3c2fd72e475ab"),
-    "bohai/20220822_0_5": ("20220822/0/20220822_0_5.csv", 3462196,
-                           "6583147c352309ab3684537f3d98d20255cff38731fd2ad6b4cf861ee90673f7"),
-    "bohai/20220822_0_6": ("20220822/0/20220822_0_6.csv", 3659129,
-                           "749001a1d5dbb4e110335528177d613702a91cce33cd9ebe7dfeae910faf12e8"),
-    "bohai/20230517_0_0": ("20230517_0_0.csv", 1376002,
-                           "378ce66997c34fca339145a9504b0e0cf7818dfc59e25e081c28c43e6fc24d52"),
+    "bohai/20220625_0_0": (
+        "20220625/0/20220625_0_0.csv",
+        4093632,
+        "7fd4ad89103e4e0a8fe4032f0c7e805be6d32db457fe2c64223034540132fce1",
+    ),
+    "bohai/20220625_0_1": (
+        "20220625/0/20220625_0_1.csv",
+        3161346,
+        "c0d5440707b0ab6e53855407977dbe872f95d5b0922eb81b181edef84af6609f",
+    ),
+    "bohai/20220712_0_1": (
+        "20220712_0_1.csv",
+        353643,
+        "3287424eafd36f5e3129ad9bd2c21c827fc9779338f4136e84b2a6ea6369973c",
+    ),
+    "bohai/20220719_6_1": (
+        "20220719_6_1.csv",
+        1557212,
+        "4690ef43fafd4585b17a994f441babe049ad6db332f703381dd46bcf98ece24d",
+    ),
+    "bohai/20220822_0_0": (
+        "20220822/0/20220822_0_0.csv",
+        1071327,
+        "db16c328bc2ffbc82d5053f1a93aee4630a4f6fa50aaaf2d83b7f2cbacc5b863",
+    ),
+    "bohai/20220822_0_3": (
+        "20220822/0/20220822_0_3.csv",
+        4146862,
+        "5a188116182f20f4e9c0fde42d0ef360462ebc0e807a017010503da782872ea2",
+    ),
+    "bohai/20220822_0_4": (
+        "20220822/0/20220822_0_4.csv",
+        3711638,
+        "13f6ab202bafb0e3ccb3ff1ad9ccde3cfe70f64b9dab86f7c4c3c2fd72e475ab",
+    ),
+    "bohai/20220822_0_5": (
+        "20220822/0/20220822_0_5.csv",
+        3462196,
+        "6583147c352309ab3684537f3d98d20255cff38731fd2ad6b4cf861ee90673f7",
+    ),
+    "bohai/20220822_0_6": (
+        "20220822/0/20220822_0_6.csv",
+        3659129,
+        "749001a1d5dbb4e110335528177d613702a91cce33cd9ebe7dfeae910faf12e8",
+    ),
+    "bohai/20230517_0_0": (
+        "20230517_0_0.csv",
+        1376002,
+        "378ce66997c34fca339145a9504b0e0cf7818dfc59e25e081c28c43e6fc24d52",
+    ),
 }
 
 
@@ -122,9 +153,16 @@ def record_download(dest: Path, ds, sha: str, size: int, src: str, declared: boo
         data = read_checksums(dest)
     except ReplayError:  # our own record file, damaged: start it again
         data = {}
-    data[ds.file] = {"dataset": ds.id, "sha256": sha, "size": size, "url": src, "content_checked": True,
-                     "declared_checked": declared, "registered": False,
-                     "fetched": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    data[ds.file] = {
+        "dataset": ds.id,
+        "sha256": sha,
+        "size": size,
+        "url": src,
+        "content_checked": True,
+        "declared_checked": declared,
+        "registered": False,
+        "fetched": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(dir=dest, prefix=part_prefix(CHECKSUMS_FILE), suffix=".part")
@@ -135,8 +173,7 @@ def record_download(dest: Path, ds, sha: str, size: int, src: str, declared: boo
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError as e:  # the file is in place; without its record it loads as checksum "unknown"
-        raise ReplayError(f"{path}: cannot record the content-checked download of {ds.id}: "
-                          f"{e.strerror or e}") from None
+        raise ReplayError(f"{path}: cannot record the content-checked download of {ds.id}: {e.strerror or e}") from None
     finally:
         if tmp:
             Path(tmp).unlink(missing_ok=True)
@@ -188,8 +225,10 @@ def bohai_csv(path: Path) -> Content:
                 continue
             cells = last.split(b",")
             if len(cells) != fields:
-                raise ValueError(f"line {number} has {len(cells)} fields, the header {fields}: "
-                                 "the body was cut short or is not a Bohai CSV")
+                raise ValueError(
+                    f"line {number} has {len(cells)} fields, the header {fields}: "
+                    "the body was cut short or is not a Bohai CSV"
+                )
             rows += 1
             times.append(cells[at])
     if not rows:
@@ -261,14 +300,20 @@ def check_loaded(ds, path: Path, frame) -> None:
     sha, status = check_file(ds, path)
     other = None if status == "verified" else identical_to(ds, sha, path.parent)
     if other:
-        raise ReplayError(f"{path}: this file is byte-identical to {other}, so it is not {ds.id} "
-                          f"(sha256 {sha}); fetch it again with `replay datasets fetch {ds.id} --force`")
+        raise ReplayError(
+            f"{path}: this file is byte-identical to {other}, so it is not {ds.id} "
+            f"(sha256 {sha}); fetch it again with `replay datasets fetch {ds.id} --force`"
+        )
     checked = status == "verified"
     if status in ("mismatch", "changed"):
         expected = ds.sha256 or "the checksum recorded at download"
-        frame.report.add("flagged", path.name, 1,
-                         f"sha256 {sha} differs from {expected}: the file was edited or is "
-                         "another version; results may not compare with published ones")
+        frame.report.add(
+            "flagged",
+            path.name,
+            1,
+            f"sha256 {sha} differs from {expected}: the file was edited or is "
+            "another version; results may not compare with published ones",
+        )
     elif not checked and declares(ds) and ds.adapter in CONTENT_CHECKS:
         try:
             why = declared_mismatch(ds, CONTENT_CHECKS[ds.adapter](path))
@@ -280,11 +325,16 @@ def check_loaded(ds, path: Path, frame) -> None:
     frame.meta.update(path=str(path), sha256=sha, checksum=status, content_checked=checked)
     if not checked and (ds.id, sha) not in _NOTED:  # once per file and process
         _NOTED.add((ds.id, sha))
-        why = {"mismatch": "its sha256 is not the registered one", "changed": "it was edited since its download"
-               }.get(status, "it contradicts the rows or span its listing declares" if declares(ds) else
-                     "no registered checksum, no declared rows or span")
-        logging.getLogger("replay").info(f"{ds.id}: {path} is not confirmed as the published file ({why}): "
-                                         "leaderboard rows on it say content_checked=False")
+        why = {"mismatch": "its sha256 is not the registered one", "changed": "it was edited since its download"}.get(
+            status,
+            "it contradicts the rows or span its listing declares"
+            if declares(ds)
+            else "no registered checksum, no declared rows or span",
+        )
+        logging.getLogger("replay").info(
+            f"{ds.id}: {path} is not confirmed as the published file ({why}): "
+            "leaderboard rows on it say content_checked=False"
+        )
 
 
 _NOTED: set = set()

@@ -6,6 +6,7 @@ simulator from a recording; the rest of the library is handed the :class:`Datase
 parsing the string again. The configuration (and so the manifest and every hash) keeps
 the id as given: a reference is rebuilt from it, never stored.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,8 +64,9 @@ class DatasetRef:
 
 def simulated(dataset) -> bool:
     """Whether ``dataset`` names a registered simulator (False for a path or an unknown id: never raises)."""
-    return isinstance(dataset, str) and (entry := registry.all_datasets().get(dataset)) is not None \
-        and entry.kind == "sim"
+    return (
+        isinstance(dataset, str) and (entry := registry.all_datasets().get(dataset)) is not None and entry.kind == "sim"
+    )
 
 
 def resolve(dataset, adapter: str | None = None) -> DatasetRef:

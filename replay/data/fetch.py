@@ -35,6 +35,7 @@ The download URL is the manifest's ``url``, unless ``url=`` is given or
 (a mirror, or a test server, laid out like the upstream repository). An
 ``http(s)_proxy`` from the environment is used (CONNECT for https).
 """
+
 from __future__ import annotations
 
 import errno
@@ -52,8 +53,7 @@ from pathlib import Path
 from replay.data import registry
 from replay.data.checksums import CONTENT_CHECKS, declared_mismatch, declares, identical_to, record_download
 from replay.data.registry import Dataset
-from replay.util.downloads import (Deadline, check_url, network_reason, part_prefix, printable,
-                                   remove_stale_parts)
+from replay.util.downloads import Deadline, check_url, network_reason, part_prefix, printable, remove_stale_parts
 from replay.util.errors import ReplayError
 from replay.util.files import check_writable
 from replay.util.staging import check_space
@@ -94,9 +94,16 @@ def default_dest(ds: Dataset) -> Path:
     return registry.cache_dir() / ds.namespace
 
 
-def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | None = None,
-          timeout: float = DEFAULT_TIMEOUT, deadline: float = DEFAULT_DEADLINE,
-          force: bool = False, progress=None) -> FetchResult:
+def fetch(
+    ds: Dataset | str,
+    dest_dir: str | Path | None = None,
+    *,
+    url: str | None = None,
+    timeout: float = DEFAULT_TIMEOUT,
+    deadline: float = DEFAULT_DEADLINE,
+    force: bool = False,
+    progress=None,
+) -> FetchResult:
     """Make sure ``dest_dir/<file>`` holds the dataset, downloading it if needed.
 
     ``force`` downloads again and replaces the copy in place (only once the new one
@@ -109,8 +116,10 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
         raise ReplayError(f"{ds.id} is generated on demand; there is nothing to download")
     check = None if ds.sha256 else CONTENT_CHECKS.get(ds.adapter)
     if not ds.sha256 and check is None:
-        raise ReplayError(f"cannot download {ds.id}: it has no registered checksum and its adapter "
-                          f"{ds.adapter} has no content check, so nothing could confirm the download")
+        raise ReplayError(
+            f"cannot download {ds.id}: it has no registered checksum and its adapter "
+            f"{ds.adapter} has no content check, so nothing could confirm the download"
+        )
     for name, value in (("timeout", timeout), ("deadline", deadline)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
             raise ReplayError(f"download {name} must be a positive number of seconds (got {value!r})")
@@ -130,8 +139,9 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
     src = download_url(ds, url)
     if urllib.parse.urlsplit(src).scheme not in ("https", "http"):
         raise ReplayError(f"cannot download {ds.id}: only http(s) URLs are supported (url {src})")
-    what = "download destination" + (f" (from {registry.cache_variable()})"
-                                      if not dest_dir and registry.cache_variable() else "")
+    what = "download destination" + (
+        f" (from {registry.cache_variable()})" if not dest_dir and registry.cache_variable() else ""
+    )
     check_writable(dest, what)
     try:
         dest.mkdir(parents=True, exist_ok=True)
@@ -144,16 +154,23 @@ def fetch(ds: Dataset | str, dest_dir: str | Path | None = None, *, url: str | N
 
     sha, size, announced, summary = _download(ds, src, dest, target, timeout, deadline, check, progress)
     if ds.sha256:
-        return FetchResult(target, sha, True, True,
-                           f"{ds.id}: downloaded to {target}, size and sha256 verified{note}")
+        return FetchResult(target, sha, True, True, f"{ds.id}: downloaded to {target}, size and sha256 verified{note}")
     record = record_download(dest, ds, sha, size, src, declared=declares(ds))
     told = "as announced by the server" if announced else "no size announced by the server"
-    how = ("rows and time span as the upstream listing declares" if declares(ds) else
-           "nothing published to check it against: rows using it say content_checked=false")
-    return FetchResult(target, sha, False, True,
-                       f"{ds.id}: downloaded to {target} ({size} bytes, {told}); checksum not registered "
-                       f"upstream; content-checked: {summary}; {how}; sha256 {sha} kept in {record}{note}",
-                       content_checked=True)
+    how = (
+        "rows and time span as the upstream listing declares"
+        if declares(ds)
+        else "nothing published to check it against: rows using it say content_checked=false"
+    )
+    return FetchResult(
+        target,
+        sha,
+        False,
+        True,
+        f"{ds.id}: downloaded to {target} ({size} bytes, {told}); checksum not registered "
+        f"upstream; content-checked: {summary}; {how}; sha256 {sha} kept in {record}{note}",
+        content_checked=True,
+    )
 
 
 def _present(ds: Dataset, target: Path, check) -> FetchResult | str:
@@ -171,11 +188,18 @@ def _present(ds: Dataset, target: Path, check) -> FetchResult | str:
         return f"; the local copy failed the content check ({e}) and was replaced"
     if why:
         return f"; the local copy was not {ds.id} ({why}) and was replaced"
-    how = {registry.CONTENT_CHECKED: "the file downloaded and content-checked",
-           "changed": "passes the content check but differs from the file downloaded"}.get(
-        status, "passes the content check")
-    return FetchResult(target, sha, False, False, f"{ds.id}: already present at {target} (checksum not "
-                       f"registered upstream; {how}: {summary})", content_checked=True)
+    how = {
+        registry.CONTENT_CHECKED: "the file downloaded and content-checked",
+        "changed": "passes the content check but differs from the file downloaded",
+    }.get(status, "passes the content check")
+    return FetchResult(
+        target,
+        sha,
+        False,
+        False,
+        f"{ds.id}: already present at {target} (checksum not registered upstream; {how}: {summary})",
+        content_checked=True,
+    )
 
 
 class _TLS(http.client.HTTPSConnection):
@@ -233,8 +257,9 @@ def _open(src: str, clock: Deadline, timeout: float, fail):
             fail(f"redirected to {url}, which is not an http(s) URL")
         conn, path = _connect(parts, clock, timeout)
         try:
-            conn.request("GET", path, headers={"User-Agent": f"replay-nav/{__version__}",
-                                               "Accept-Encoding": "identity"})
+            conn.request(
+                "GET", path, headers={"User-Agent": f"replay-nav/{__version__}", "Accept-Encoding": "identity"}
+            )
             resp = conn.getresponse()
         except BaseException:
             conn.close()
@@ -278,12 +303,12 @@ def _check_answer(ds: Dataset, resp, fail) -> int | None:
     return announced
 
 
-def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, deadline: float, check,
-              progress=None):
+def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, deadline: float, check, progress=None):
     """Stream ``src`` into a temp file in ``dest``, check it, move it to ``target``.
 
     Returns (sha256, size, whether the server announced the size, content summary).
     """
+
     def fail(reason):  # the reason may quote the server: made printable, bounded
         raise ReplayError(f"cannot download {ds.id}: {printable(reason, 300)} (url {printable(src, 300)})")
 
@@ -335,9 +360,11 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
         sha = h.hexdigest()
         other = None if sha == ds.sha256 else identical_to(ds, sha, dest)
         if ds.sha256 and sha != ds.sha256:
-            raise ReplayError(f"checksum mismatch for {ds.id}: expected {ds.sha256}, got {sha}"
-                              f"{f', the checksum of {other}' if other else ''}; the download was discarded "
-                              f"(url {printable(src, 300)})")
+            raise ReplayError(
+                f"checksum mismatch for {ds.id}: expected {ds.sha256}, got {sha}"
+                f"{f', the checksum of {other}' if other else ''}; the download was discarded "
+                f"(url {printable(src, 300)})"
+            )
         if other:
             fail(f"the body is byte-identical to {other}, not {ds.id}; the download was discarded")
         summary = ""

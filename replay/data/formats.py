@@ -1,5 +1,6 @@
 """Which adapter reads a plain file or directory: a ROS 2 bag directory, a lake-trial log by its
 header, else the extension (:func:`adapter_for`)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -28,8 +29,9 @@ def adapter_for(path: Path) -> str:
         return ADAPTER_BY_SUFFIX[path.suffix.lower()]
     except KeyError:
         known = ", ".join(sorted(ADAPTER_BY_SUFFIX))
-        raise ReplayError(f"{path}: cannot tell the file format from its extension "
-                          f"{path.suffix or '(none)'!r} (known: {known})") from None
+        raise ReplayError(
+            f"{path}: cannot tell the file format from its extension {path.suffix or '(none)'!r} (known: {known})"
+        ) from None
 
 
 def _looks_like_lake_log(path: Path) -> bool:
@@ -42,8 +44,11 @@ def _looks_like_lake_log(path: Path) -> bool:
                     return True
                 if line.strip() and not line.startswith("#"):
                     cols = [c.strip().lower() for c in line.replace("\t", ",").split(",")]
-                    return (any(c.startswith("depth") for c in cols) and any(c.startswith("time") for c in cols)
-                            and not any(c.startswith(("lat", "lon")) for c in cols))
+                    return (
+                        any(c.startswith("depth") for c in cols)
+                        and any(c.startswith("time") for c in cols)
+                        and not any(c.startswith(("lat", "lon")) for c in cols)
+                    )
     except OSError:
         return False
     return False

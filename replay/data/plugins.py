@@ -18,6 +18,7 @@ points at either
 fields; :mod:`replay.data.registry` makes them datasets beside the manifests'. Every
 problem is one line naming the plugin and its distribution (:mod:`replay.util.plugins`).
 """
+
 from __future__ import annotations
 
 import inspect
@@ -98,8 +99,10 @@ def _fields(ds_id: str, target: str, obj) -> tuple[dict, str | None]:
             return {}, f"its id {fields['id']!r} differs from the entry point's name"
         return fields, None
     if not callable(obj) or inspect.isclass(obj):
-        return {}, (f"is {describe(obj)}: neither a simulator (a function decorated with replay.sim.generator) "
-                    "nor a dict of manifest fields")
+        return {}, (
+            f"is {describe(obj)}: neither a simulator (a function decorated with replay.sim.generator) "
+            "nor a dict of manifest fields"
+        )
     if getattr(obj, "PARAMS", None) is None:
         return {}, "declares no parameters (decorate the simulator with replay.sim.generator)"
     problem = declaration_problem(obj.PARAMS)
@@ -108,8 +111,13 @@ def _fields(ds_id: str, target: str, obj) -> tuple[dict, str | None]:
     if target.count(".", target.index(":")):
         return {}, "a simulator's target must be 'module:function'"
     doc = " ".join((inspect.getdoc(obj) or "").split("\n\n")[0].split())
-    fields = {"id": ds_id, "generator": target, "site": "simulated",
-              "description": str(getattr(obj, "DESCRIPTION", doc)),
-              "default_task": str(getattr(obj, "DEFAULT_TASK", "")),
-              "license": str(getattr(obj, "LICENSE", "")), "citation": str(getattr(obj, "CITATION", ""))}
+    fields = {
+        "id": ds_id,
+        "generator": target,
+        "site": "simulated",
+        "description": str(getattr(obj, "DESCRIPTION", doc)),
+        "default_task": str(getattr(obj, "DEFAULT_TASK", "")),
+        "license": str(getattr(obj, "LICENSE", "")),
+        "citation": str(getattr(obj, "CITATION", "")),
+    }
     return fields, None

@@ -14,6 +14,7 @@ named after the id's prefix (``root/bohai/...``).
 Registered upstream checksums and sizes, and the checks of a local copy, are in
 ``replay/data/checksums.py`` (re-exported here).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -28,8 +29,15 @@ from pathlib import Path
 import numpy as np
 
 from replay.data import views
-from replay.data.checksums import (CHECKSUMS_FILE, CONTENT_CHECKED, check_file, check_loaded,  # noqa: F401
-                              read_checksums, sha256_file, with_registered)
+from replay.data.checksums import (
+    CHECKSUMS_FILE,
+    CONTENT_CHECKED,
+    check_file,
+    check_loaded,  # noqa: F401
+    read_checksums,
+    sha256_file,
+    with_registered,
+)
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import Param, validate
@@ -73,6 +81,7 @@ MANIFEST_KEYS = {f.name for f in fields(Dataset)} - {"kind", "manifest"}
 
 
 # ---------------------------------------------------------------- manifests
+
 
 def manifests_dir() -> Path:
     """Where the ``*.toml`` manifests are: the source tree first, then the install prefix."""
@@ -177,8 +186,9 @@ def get(dataset_id: str) -> Dataset:
     conflict = dataset_entries()[1].get(dataset_id)
     if conflict:
         raise ReplayError(conflict)
-    raise ReplayError(f"unknown dataset {dataset_id!r}{_suggest(dataset_id, known)}; "
-                      "`replay datasets list` shows them all")
+    raise ReplayError(
+        f"unknown dataset {dataset_id!r}{_suggest(dataset_id, known)}; `replay datasets list` shows them all"
+    )
 
 
 def _suggest(query: str, known) -> str:
@@ -196,6 +206,7 @@ def _suggest(query: str, known) -> str:
 
 
 # ---------------------------------------------------------------- local copies
+
 
 def candidates(ds: Dataset, root: Path) -> list[Path]:
     """Where in one root the file may be: flat, upstream layout, and both under <prefix>/."""
@@ -218,8 +229,8 @@ def locate(ds: Dataset | str, data_dir: str | Path | None = None) -> Path | None
 
 # ---------------------------------------------------------------- loading
 
-def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None,
-               adapter: str | None = None, **params):
+
+def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None, adapter: str | None = None, **params):
     """Load a dataset id, a :class:`Dataset`, or a plain file path as a Frame.
 
     File datasets are located (see :func:`locate`) and read by their adapter with
@@ -252,6 +263,7 @@ def is_path(dataset) -> bool:
 
 # ---------------------------------------------------------------- parameters
 
+
 def generator(ds: Dataset):
     """The generator function of a sim dataset (its ``PARAMS`` are its declared parameters)."""
     module, func = ds.generator.split(":")
@@ -260,8 +272,9 @@ def generator(ds: Dataset):
     except (ImportError, AttributeError) as e:
         raise ReplayError(f"dataset {ds.id}: generator {ds.generator} is not available ({e})") from None
     if getattr(make_frame, "PARAMS", None) is None:
-        raise ReplayError(f"dataset {ds.id}: generator {ds.generator} declares no parameters "
-                          "(decorate it with replay.sim.generator)")
+        raise ReplayError(
+            f"dataset {ds.id}: generator {ds.generator} declares no parameters (decorate it with replay.sim.generator)"
+        )
     return make_frame
 
 
@@ -289,8 +302,11 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
         return {**(_check_options(name, params) if name else params), **views.check(chosen, f"dataset {dataset!r}")}
     else:
         ds = get(dataset)
-    own = validate(generator(ds).PARAMS, params, f"dataset {ds.id!r}") if ds.kind == "sim" else \
-        _check_options(ds.adapter, params)
+    own = (
+        validate(generator(ds).PARAMS, params, f"dataset {ds.id!r}")
+        if ds.kind == "sim"
+        else _check_options(ds.adapter, params)
+    )
     return {**own, **views.check(chosen, f"dataset {ds.id!r}")}
 
 
@@ -346,8 +362,9 @@ def _load_file(ds: Dataset, data_dir, params: dict):
     path = locate(ds, data_dir)
     if path is None:
         where = ", ".join(str(r) for r in search_roots(data_dir))
-        raise ReplayError(f"dataset {ds.id} not found in {where}; "
-                          f"run `replay datasets fetch {ds.id}` or pass --data-dir")
+        raise ReplayError(
+            f"dataset {ds.id} not found in {where}; run `replay datasets fetch {ds.id}` or pass --data-dir"
+        )
     frame = _read(ds.adapter, path, params)
     check_loaded(ds, path, frame)  # sha256, checksum status, content_checked; flags; another sequence refused
     return frame

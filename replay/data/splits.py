@@ -24,19 +24,21 @@ in seconds that intersect, any other pair of views of one sequence), or the same
 master seed; with ``allow_overlap=True`` it returns the overlap's description
 instead (a tune then flags every row).
 """
+
 from __future__ import annotations
 
 from replay.data import views
 from replay.util.errors import ReplayError
 
-SEED_MAX = 2 ** 63 - 1
+SEED_MAX = 2**63 - 1
 
 
 def split_views(spec: dict) -> tuple[dict, dict]:
     """``(train, test)`` of a split specification (module docstring); one line on a bad one."""
     if not isinstance(spec, dict) or len(spec.keys() & {"segment", "train", "test", "seeds"}) == 0:
-        raise ReplayError(f"split: expected {{segment = SHARE}}, {{train = [ids], test = [ids]}} or "
-                          f"{{seeds = S}} (got {spec!r})")
+        raise ReplayError(
+            f"split: expected {{segment = SHARE}}, {{train = [ids], test = [ids]}} or {{seeds = S}} (got {spec!r})"
+        )
     kinds = [k for k in ("segment", "seeds") if k in spec] + (["train/test"] if {"train", "test"} & spec.keys() else [])
     extra = sorted(set(spec) - {"segment", "train", "test", "seeds"})
     if len(kinds) != 1 or extra:
@@ -44,16 +46,19 @@ def split_views(spec: dict) -> tuple[dict, dict]:
     if "segment" in spec:
         share = spec["segment"]
         if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 < share < 1:
-            raise ReplayError(f"split: segment must be the training share of the duration, a number in (0, 1) "
-                              f"(got {share!r})")
+            raise ReplayError(
+                f"split: segment must be the training share of the duration, a number in (0, 1) (got {share!r})"
+            )
         cut = views.check({"segment": f"0:{float(share)!r}"})["segment"].split(":")[1]
         return {"segment": f"0:{cut}"}, {"segment": f"{cut}:1"}
     if "seeds" in spec:
         seeds = spec["seeds"]
         pair = [seeds, seeds + 1] if _seed(seeds) else seeds
         if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and all(_seed(s) for s in pair)):
-            raise ReplayError(f"split: seeds must be a master seed S (test S + 1) or [S_train, S_test], "
-                              f"integers in [0, {SEED_MAX}] (got {seeds!r})")
+            raise ReplayError(
+                f"split: seeds must be a master seed S (test S + 1) or [S_train, S_test], "
+                f"integers in [0, {SEED_MAX}] (got {seeds!r})"
+            )
         train, test = {"seed": int(pair[0])}, {"seed": int(pair[1])}
         check_disjoint(train, test)
         return train, test
@@ -81,16 +86,21 @@ def check_disjoint(train: dict, test: dict, allow_overlap: bool = False, dataset
     overlap = _overlap(train, test, dataset)
     if overlap is None or allow_overlap:
         return overlap
-    raise ReplayError(f"the training and test sets overlap: {overlap} (pass --allow-overlap to tune anyway; "
-                      "every row is then flagged)")
+    raise ReplayError(
+        f"the training and test sets overlap: {overlap} (pass --allow-overlap to tune anyway; "
+        "every row is then flagged)"
+    )
 
 
 def _overlap(train: dict, test: dict, dataset) -> str | None:
     if "seed" in train or "seed" in test:
         if train.get("seed") == test.get("seed"):
             return f"both use master seed {train.get('seed')}"
-        recorded = [d for d in train.get("datasets", [dataset]) + test.get("datasets", [dataset])
-                    if d is not None and not _simulated(d)]
+        recorded = [
+            d
+            for d in train.get("datasets", [dataset]) + test.get("datasets", [dataset])
+            if d is not None and not _simulated(d)
+        ]
         return f"{recorded[0]} is a recording: its samples are the same under every seed" if recorded else None
     common = [d for d in train.get("datasets", [dataset]) if d in test.get("datasets", [dataset])]
     if not common:

@@ -37,6 +37,7 @@ step (a window ``:END``, a segment ``0:B``); the others are refused in one line
 (the task's model would not describe the frame). Its training and test data
 differ by seed (:mod:`replay.data.splits`).
 """
+
 from __future__ import annotations
 
 import math
@@ -48,13 +49,32 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 VIEW_PARAMS = (
-    Param("rate", float, None, "resample onto a regular grid at this rate: per channel the valid sample nearest each "
-          "grid point within half a period, else masked (no sample invented or averaged)", unit="Hz",
-          low=0.0, low_open=True, optional=True),
-    Param("window", str, None, "keep START <= t < END, seconds from the first sample (either bound may be empty, "
-          "e.g. 60:, :120.5), or #I:J sample indices; times shifted back by the start", optional=True),
-    Param("segment", str, None, "keep the share A:B of the duration (0 <= A < B <= 1, e.g. 0:0.6, 0.6:1); "
-          "applied after window", optional=True),
+    Param(
+        "rate",
+        float,
+        None,
+        "resample onto a regular grid at this rate: per channel the valid sample nearest each "
+        "grid point within half a period, else masked (no sample invented or averaged)",
+        unit="Hz",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
+    Param(
+        "window",
+        str,
+        None,
+        "keep START <= t < END, seconds from the first sample (either bound may be empty, "
+        "e.g. 60:, :120.5), or #I:J sample indices; times shifted back by the start",
+        optional=True,
+    ),
+    Param(
+        "segment",
+        str,
+        None,
+        "keep the share A:B of the duration (0 <= A < B <= 1, e.g. 0:0.6, 0.6:1); applied after window",
+        optional=True,
+    ),
 )
 NAMES = tuple(p.name for p in VIEW_PARAMS)
 _NUM = r"\s*(\d+(?:\.\d*)?(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)?\s*"
@@ -104,8 +124,10 @@ def _parse_segment(text: str, where: str) -> tuple[float, float]:
     lo, hi = (None, None) if m is None else (None if g is None else float(g) for g in m.groups())
     lo, hi = 0.0 if lo is None else lo, 1.0 if hi is None else hi
     if m is None or not 0 <= lo < hi <= 1:
-        raise ReplayError(f"{where}segment must be A:B with 0 <= A < B <= 1, shares of the recording's duration "
-                          f"(e.g. 0:0.6, 0.6:1) (got {text!r})")
+        raise ReplayError(
+            f"{where}segment must be A:B with 0 <= A < B <= 1, shares of the recording's duration "
+            f"(e.g. 0:0.6, 0.6:1) (got {text!r})"
+        )
     if (lo, hi) == (0, 1):
         raise ReplayError(f"{where}segment {text!r} keeps everything: give a share, or no segment")
     return lo, hi
@@ -124,6 +146,7 @@ def _fmt_window(index: bool, lo, hi) -> str:
 
 
 # ---------------------------------------------------------------- applying
+
 
 def apply(frame, views: dict, source: str = "dataset"):
     """``frame`` cut and resampled by ``views`` (checked by :func:`check`); ``frame`` itself when
@@ -152,11 +175,22 @@ def apply(frame, views: dict, source: str = "dataset"):
     offset = float(t[idx[0]] - t[0])
     _check_simulation(frame, views, offset, source)
     view = dict(views, offset_s=offset, samples=[int(idx[0]), int(idx[-1]) + 1], of=n0)
-    out = _rebuild(frame, t[idx] - offset, {k: c.take(idx) for k, c in frame.channels.items()},
-                   {k: c.take(idx) for k, c in frame.reference.items()}, offset, view)
+    out = _rebuild(
+        frame,
+        t[idx] - offset,
+        {k: c.take(idx) for k, c in frame.channels.items()},
+        {k: c.take(idx) for k, c in frame.reference.items()},
+        offset,
+        view,
+    )
     if "window" in views or "segment" in views:
-        out.report.add("dropped", "samples", n0 - len(idx), f"outside the view {_describe(views)} "
-                       f"(kept samples {idx[0]}..{idx[-1]} of {n0}, times re-based by {offset:.3f} s)")
+        out.report.add(
+            "dropped",
+            "samples",
+            n0 - len(idx),
+            f"outside the view {_describe(views)} "
+            f"(kept samples {idx[0]}..{idx[-1]} of {n0}, times re-based by {offset:.3f} s)",
+        )
     return resample(out, views["rate"]) if "rate" in views else out
 
 
@@ -174,9 +208,11 @@ def _check_simulation(frame, views, offset, source):
         why = f"rate {views['rate']:g} Hz resamples a simulation generated every {dt} s"
     else:
         return
-    raise ReplayError(f"{source}: {why}, but its task starts from the simulated state at the first sample and "
-                      "steps at the generation step; simulate what you need with the generator's own parameters "
-                      f"(replay list datasets), cut its end with --first or a window ':END'")
+    raise ReplayError(
+        f"{source}: {why}, but its task starts from the simulated state at the first sample and "
+        "steps at the generation step; simulate what you need with the generator's own parameters "
+        f"(replay list datasets), cut its end with --first or a window ':END'"
+    )
 
 
 def _need(keep, what, frame, source, span):
@@ -196,12 +232,21 @@ def _rebuild(frame, t, channels, reference, offset, view, report=None):
     start, end = float(t[0]), float(t[-1])
     estimates = {}
     for name, e in frame.estimates.items():
-        shifted = type(e)(e.t - offset, e.position, e.orientation, e.covariance, e.frame, e.child, e.description,
-                          dict(e.params))
+        shifted = type(e)(
+            e.t - offset, e.position, e.orientation, e.covariance, e.frame, e.child, e.description, dict(e.params)
+        )
         keep = (shifted.t >= start - 1e-9) & (shifted.t <= end + 1e-9)
-        pick = (lambda a: None if a is None else a[keep])
-        estimates[name] = type(e)(shifted.t[keep], shifted.position[keep], pick(shifted.orientation),
-                                  pick(shifted.covariance), e.frame, e.child, e.description, dict(e.params))
+        pick = lambda a: None if a is None else a[keep]
+        estimates[name] = type(e)(
+            shifted.t[keep],
+            shifted.position[keep],
+            pick(shifted.orientation),
+            pick(shifted.covariance),
+            e.frame,
+            e.child,
+            e.description,
+            dict(e.params),
+        )
     meta = dict(frame.meta, view=view)
     epoch = None if frame.epoch is None else frame.epoch + offset
     report = report if report is not None else Report(list(frame.report.entries))
@@ -233,12 +278,14 @@ def resample(frame, rate: float):
 
     report = Report(list(frame.report.entries))  # the input frame's report stays as it was
     t = frame.t - frame.t[0]
-    n_grid = int(min(t[-1] * rate + 0.5, 2.0 ** 62)) + 1
+    n_grid = int(min(t[-1] * rate + 0.5, 2.0**62)) + 1
     if not 2 <= n_grid <= 10 * len(t) + 10:
         shown = frame.meta.get("dataset") or frame.meta.get("source") or "dataset"
-        raise ReplayError(f"{shown}: rate {rate:g} Hz gives {n_grid} grid point(s) over the {t[-1]:g} s of "
-                          f"{len(t)} samples; " + ("2 at least are needed" if n_grid < 2 else
-                                                   "more than 10 per sample would be nearly all masked"))
+        raise ReplayError(
+            f"{shown}: rate {rate:g} Hz gives {n_grid} grid point(s) over the {t[-1]:g} s of "
+            f"{len(t)} samples; "
+            + ("2 at least are needed" if n_grid < 2 else "more than 10 per sample would be nearly all masked")
+        )
     grid = np.arange(n_grid) / rate  # from the first sample; the frame's own origin is kept below
     groups = []
     for group in (frame.channels, frame.reference):
@@ -248,16 +295,25 @@ def resample(frame, rate: float):
             taken = idx >= 0
             values = np.full((n_grid,) + ch.values.shape[1:], np.nan)
             values[taken] = ch.values[idx[taken]]
-            out[name] = Channel(values, ch.unit, ch.frame, taken, ch.components, ch.angles, ch.convention,
-                                ch.description)
+            out[name] = Channel(
+                values, ch.unit, ch.frame, taken, ch.components, ch.angles, ch.convention, ch.description
+            )
             shift = float(np.max(np.abs(t[idx[taken]] - grid[taken]))) if taken.any() else 0.0
             n_valid, kept = int(ch.valid.sum()), int(taken.sum())
             kind = "reference" if group is frame.reference else "channel"
-            report.add("dropped", name, n_valid - kept,
-                       f"{kind} at {rate:g} Hz: {kept} of its {n_valid} valid samples taken (the nearest to each "
-                       f"grid point within ±{0.5 / rate:g} s; largest shift {shift:.3f} s), the rest not taken")
-            report.add("masked", name, n_grid - kept,
-                       f"{kind} at {rate:g} Hz: grid points of the {n_grid} with no valid sample within half a period")
+            report.add(
+                "dropped",
+                name,
+                n_valid - kept,
+                f"{kind} at {rate:g} Hz: {kept} of its {n_valid} valid samples taken (the nearest to each "
+                f"grid point within ±{0.5 / rate:g} s; largest shift {shift:.3f} s), the rest not taken",
+            )
+            report.add(
+                "masked",
+                name,
+                n_grid - kept,
+                f"{kind} at {rate:g} Hz: grid points of the {n_grid} with no valid sample within half a period",
+            )
         groups.append(out)
     view = dict(frame.meta.get("view") or {}, rate=rate, grid=n_grid)
     view.setdefault("offset_s", 0.0)

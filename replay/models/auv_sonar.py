@@ -6,6 +6,7 @@ docstring gives the equations); ``f``, ``h``, ``F``, ``H`` on arrays of states
 are derived from them (:mod:`replay.models.kernel_model`). This module holds
 the parameters and Table 2's covariances.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -25,6 +25,7 @@ constant speed and pitch, yaw turning at the known rate ``yaw_rate``,
 
 plus additive noise w ~ N(0, Q), Q = diag(1, 1, 1, 0.1, 0.01, 0.01).
 """
+
 from __future__ import annotations
 
 import math

@@ -23,6 +23,7 @@ EKF and MMPF use the fixed R = diag(0.2^2, 5^2, 0.5^2). The units of the
 printed numbers are not stated; they are read in the frame's SI units
 (metres, m/s, radians), which makes the pitch noise large (0.5 rad = 29 deg).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,8 +47,9 @@ def paper_Q() -> tuple[np.ndarray, str]:
     if is_positive_definite(Q_PRINTED):
         return Q_PRINTED.copy(), "as printed (positive definite)"
     det = float(np.linalg.det(Q_PRINTED))
-    return Q_FALLBACK.copy(), (f"printed Q is not positive definite (determinant {det:.4f}); "
-                               "using diag(0.2^2, 1^2, 0.5^2)")
+    return Q_FALLBACK.copy(), (
+        f"printed Q is not positive definite (determinant {det:.4f}); using diag(0.2^2, 1^2, 0.5^2)"
+    )
 
 
 class DepthModel(Model):

@@ -25,6 +25,7 @@ cached on disk by numba (``__pycache__`` beside the kernels module, checked
 against the module's source): a later process loads them in milliseconds,
 after numba's own start-up (about 0.2 s to import, 0.2 s for its first load).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -90,8 +91,10 @@ class KernelModel(Model):
         if forms is None:
             f, h, F, H = kernels = _module_kernels(self.kernel_module)  # not self.kernels(): a subclass
             # may hide its kernels from the filters and still compute with them
-            forms = _forms[type(self)] = (kernels, tuple(array_form(k, m).ufunc for k, m in
-                                                         ((f, False), (h, False), (F, True), (H, True))))
+            forms = _forms[type(self)] = (
+                kernels,
+                tuple(array_form(k, m).ufunc for k, m in ((f, False), (h, False), (F, True), (H, True))),
+            )
         return forms
 
     def _apply(self, i, x, p, shape):

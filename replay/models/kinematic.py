@@ -30,6 +30,7 @@ The equations are written once, as numba kernels of one state
 :mod:`replay.models.kinematic_select`); the array methods are derived from them
 (:mod:`replay.models.kernel_model`), and the compiled filters of paper 002 run on them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -83,6 +84,11 @@ def rotation(roll, pitch, yaw) -> np.ndarray:
     """(..., 3, 3) body-to-ENU rotations Rz(yaw) Ry(pitch) Rx(roll) (the differential inputs'
     rotation into the body frame; the model's own is in its kernels)."""
     cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.stack([np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-                     np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-                     np.stack([-sp, cp * sr, cp * cr], -1)], -2)
+    return np.stack(
+        [
+            np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+            np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+            np.stack([-sp, cp * sr, cp * cr], -1),
+        ],
+        -2,
+    )

@@ -5,6 +5,7 @@ State ``[east, north, yaw, u, v, r]``, ``p_f = [dt]``::
     east_k  = east + (u cos yaw - v sin yaw) dt      yaw_k = wrap(yaw + r dt)
     north_k = north + (u sin yaw + v cos yaw) dt     u, v, r constant
 """
+
 from __future__ import annotations
 
 import numba as nb

@@ -11,6 +11,7 @@ State ``[east, north, up, roll, pitch, yaw, u, v, w, p, q, r]`` (REP-103 body ax
 ``F`` by central differences of ``f`` (step 1e-6, angle differences wrapped): the model's
 Jacobian has no short closed form worth a second text of the equations.
 """
+
 from __future__ import annotations
 
 import numba as nb

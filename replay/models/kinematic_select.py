@@ -4,6 +4,7 @@
 ``-up``), so ``H`` has one entry ``s_j`` per row. Shared by :mod:`kinematic2_kernels` and
 :mod:`kinematic3_kernels` (see :mod:`replay.models.kernel_model`).
 """
+
 from __future__ import annotations
 
 import numba as nb

@@ -16,6 +16,7 @@ In paper 003, ε is called an "influence factor" and printed as 0.75 (§4.1);
 it is a different quantity from the weight exponent α of eq. 27, which the
 paper also prints as 0.75 (§4.2): see :mod:`replay.filters.p003.wfpf`.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -49,8 +50,9 @@ class Glint:
         self.mu1 = np.zeros(d) if mu1 is None else np.asarray(mu1, float).reshape(d)
         self.mu2 = np.zeros(d) if mu2 is None else np.asarray(mu2, float).reshape(d)
         self._L = (np.linalg.cholesky(self.P1), np.linalg.cholesky(self.P2))
-        self._diag = not (np.any(self.P1 - np.diag(np.diagonal(self.P1)))
-                          or np.any(self.P2 - np.diag(np.diagonal(self.P2))))
+        self._diag = not (
+            np.any(self.P1 - np.diag(np.diagonal(self.P1))) or np.any(self.P2 - np.diag(np.diagonal(self.P2)))
+        )
         self._logdet = (2 * np.log(np.diag(self._L[0])).sum(), 2 * np.log(np.diag(self._L[1])).sum())
 
     @property
@@ -66,8 +68,11 @@ class Glint:
     def cov(self) -> np.ndarray:
         """The mixture covariance (eq. 10 with the P₁, P₂ terms the paper omits)."""
         m = self.mean
-        return ((1 - self.eps) * (self.P1 + np.outer(self.mu1, self.mu1))
-                + self.eps * (self.P2 + np.outer(self.mu2, self.mu2)) - np.outer(m, m))
+        return (
+            (1 - self.eps) * (self.P1 + np.outer(self.mu1, self.mu1))
+            + self.eps * (self.P2 + np.outer(self.mu2, self.mu2))
+            - np.outer(m, m)
+        )
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` draws, shape (n, dim): component 2 with probability ε."""
@@ -81,14 +86,17 @@ class Glint:
         """log p(e) for residuals ``e`` of shape (..., dim) (log-sum-exp of the two components)."""
         e = np.asarray(e, float)
         terms = []
-        for w, mu, L, logdet in ((1 - self.eps, self.mu1, self._L[0], self._logdet[0]),
-                                 (self.eps, self.mu2, self._L[1], self._logdet[1])):
+        for w, mu, L, logdet in (
+            (1 - self.eps, self.mu1, self._L[0], self._logdet[0]),
+            (self.eps, self.mu2, self._L[1], self._logdet[1]),
+        ):
             if w == 0.0:
                 continue
             if self._diag:
                 u = (e - mu) / np.diagonal(L)
             else:
-                u = solve_triangular(L, (e - mu).reshape(-1, self.dim).T, lower=True,
-                                     check_finite=False).T.reshape(e.shape)
+                u = solve_triangular(L, (e - mu).reshape(-1, self.dim).T, lower=True, check_finite=False).T.reshape(
+                    e.shape
+                )
             terms.append(np.log(w) + gauss_logpdf(np.sum(u * u, axis=-1) + logdet, self.dim * LOG_2PI))
         return terms[0] if len(terms) == 1 else logsumexp(np.stack(terms), axis=0)

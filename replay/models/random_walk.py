@@ -4,6 +4,7 @@ x_k = x_{k-1} + w_k,  w ~ N(0, Q);   z_k = x_k + v_k,  v ~ N(0, R). The kernels
 are :mod:`replay.models.random_walk_kernels`; ``f``, ``h``, ``F``, ``H`` on
 arrays of states are derived from them (:mod:`replay.models.kernel_model`).
 """
+
 from __future__ import annotations
 
 import numpy as np

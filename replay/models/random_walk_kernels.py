@@ -6,6 +6,7 @@ f = h = identity, F = H = I. The numba kernels of one state of
 :class:`replay.models.random_walk.RandomWalkPosition` (see
 :mod:`replay.models.kernel_model`); no parameters (``p_f``, ``p_h`` empty).
 """
+
 from __future__ import annotations
 
 import numba as nb

@@ -39,6 +39,7 @@ Choices, written down where they are made:
   sensor error budget of 001 §5 and :data:`Q_DEFAULT` is our nominal
   process noise per step (the AUKF estimates both).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,25 +53,23 @@ PAPER_MEASURED = (2, 3, 4, 5, 6, 7, 8, 9)
 COMPONENTS = ("north", "east", "depth", "vx", "vy", "vz", "ax", "ay", "az", "heading")
 
 # nominal process noise per step of 0.5 s (ours; the paper gives none)
-Q_DEFAULT = np.diag([0.01**2, 0.01**2, 0.01**2, 0.01**2, 0.01**2, 0.01**2,
-                     0.02**2, 0.02**2, 0.02**2, (0.2 * DEG) ** 2])
+Q_DEFAULT = np.diag([0.01**2, 0.01**2, 0.01**2, 0.01**2, 0.01**2, 0.01**2, 0.02**2, 0.02**2, 0.02**2, (0.2 * DEG) ** 2])
 
 
 def default_R(dt: float = 0.5, depth_full_scale: float = 50.0, speed: float = 4 * KNOT):
     """R from 001 §5: depth 3 % of full scale, DVL 1 % (of ``speed``), accelerometer
     0.02 m/(s^2 sqrt(Hz)) white at rate 1/dt, AHRS heading 2 deg (1 sigma)."""
     acc = 0.02 * np.sqrt(1.0 / dt)
-    return np.diag([(0.03 * depth_full_scale) ** 2] + [(0.01 * speed) ** 2] * 3
-                   + [acc**2] * 3 + [(2.0 * DEG) ** 2])
+    return np.diag([(0.03 * depth_full_scale) ** 2] + [(0.01 * speed) ** 2] * 3 + [acc**2] * 3 + [(2.0 * DEG) ** 2])
 
 
 def body_to_level(pitch, roll):
     """C_b^h of eq. 1 for arrays of pitch theta and roll gamma: (..., 3, 3)."""
     ct, st, cg, sg = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
     z = np.zeros_like(ct)
-    return np.stack([np.stack([ct, st * sg, st * cg], -1),
-                     np.stack([z, cg, -sg], -1),
-                     np.stack([-st, ct * sg, ct * cg], -1)], -2)
+    return np.stack(
+        [np.stack([ct, st * sg, st * cg], -1), np.stack([z, cg, -sg], -1), np.stack([-st, ct * sg, ct * cg], -1)], -2
+    )
 
 
 class SAUV(Model):
@@ -80,8 +79,18 @@ class SAUV(Model):
     x_angles = (9,)
     components = COMPONENTS
 
-    def __init__(self, dt=0.5, pitch=0.0, roll=0.0, Q=None, R=None, measured=PAPER_MEASURED,
-                 mean_maneuver: str = "previous", alpha_b: float = 1.0, alpha_psi: float = 0.1):
+    def __init__(
+        self,
+        dt=0.5,
+        pitch=0.0,
+        roll=0.0,
+        Q=None,
+        R=None,
+        measured=PAPER_MEASURED,
+        mean_maneuver: str = "previous",
+        alpha_b: float = 1.0,
+        alpha_psi: float = 0.1,
+    ):
         self.dt = np.asarray(dt, float)
         self.pitch = np.asarray(pitch, float)
         self.roll = np.asarray(roll, float)
@@ -90,9 +99,13 @@ class SAUV(Model):
         self.z_angles = tuple(j for j, i in enumerate(self.measured) if i == 9)
         self.Q = Q_DEFAULT.copy() if Q is None else np.asarray(Q, float)
         if R is None:
-            R = default_R(float(np.median(self.dt)))[np.ix_([i - 2 for i in self.measured],
-                                                           [i - 2 for i in self.measured])] \
-                if all(i >= 2 for i in self.measured) else np.eye(self.nz)
+            R = (
+                default_R(float(np.median(self.dt)))[
+                    np.ix_([i - 2 for i in self.measured], [i - 2 for i in self.measured])
+                ]
+                if all(i >= 2 for i in self.measured)
+                else np.eye(self.nz)
+            )
         self.R = np.asarray(R, float)
         if mean_maneuver not in ("previous", "zero"):
             raise ValueError("mean_maneuver must be 'previous' or 'zero'")

@@ -6,6 +6,7 @@ coefficient as printed in 002 and the time convention); ``f``, ``h``, ``F``,
 ``H`` on arrays of states (..., 1) are derived from them
 (:mod:`replay.models.kernel_model`).
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -14,6 +14,7 @@ particle-filter literature (Kitagawa 1996; Gordon et al. 1993) has g = 25:
 Parameters: ``p_f = [g, 8 cos(1.2 (k + k0))]`` (the time term computed once per
 step, by :meth:`UNGM.kernel_params`), ``p_h`` empty.
 """
+
 from __future__ import annotations
 
 import numba as nb

@@ -37,6 +37,7 @@ holds one window, not the file (``McapOut``). The file goes to a hidden temporar
 name beside the target and is renamed over it when complete
 (``replay.outputs.export_safety``).
 """  # noqa: E501 (Markdown tables)
+
 from __future__ import annotations
 
 import json
@@ -44,13 +45,20 @@ import json
 import numpy as np
 
 from replay.util import covcols
-from replay.outputs.run_data import (enu_axes, enu_yaw, load_run, ned, read_estimates, time_ns, to_enu,
-                                     track_index)
+from replay.outputs.run_data import enu_axes, enu_yaw, load_run, ned, read_estimates, time_ns, to_enu, track_index
 from replay.util.errors import ReplayError
 from replay.outputs.mcap_out import McapOut, json_rows
 
-__all__ = ["McapOut", "export_run", "json_rows", "load_run", "read_estimates", "time_ns", "write_mcap",
-           "write_run_mcap"]
+__all__ = [
+    "McapOut",
+    "export_run",
+    "json_rows",
+    "load_run",
+    "read_estimates",
+    "time_ns",
+    "write_mcap",
+    "write_run_mcap",
+]
 
 FRAME_ID = "enu"
 
@@ -59,6 +67,7 @@ FRAME_ID = "enu"
 
 
 # ---------------------------------------------------------------- writing
+
 
 def _quat_yaw(yaw):
     return np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)])
@@ -108,8 +117,9 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None
 
     def poses(sel):
         p, q = rows(sel)
-        return encode(PoseInFrame, {**_stamp(t[sel]), "frame_id": FRAME_ID, **_pose_fields(p, q, "pose.")},
-                      len(sel)).flat()
+        return encode(
+            PoseInFrame, {**_stamp(t[sel]), "frame_id": FRAME_ID, **_pose_fields(p, q, "pose.")}, len(sel)
+        ).flat()
 
     def path(_):  # one PosesInFrame whose repeated `poses` field is every pose in turn
         number = PosesInFrame.DESCRIPTOR.fields_by_name["poses"].number
@@ -125,8 +135,11 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None
         from replay.adapters.geodesy import enu_to_geodetic
 
         lat, lon, alt = enu_to_geodetic(rows(sel)[0], geo_meta)
-        return encode(LocationFix, {**_stamp(t[sel]), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon,
-                                    "altitude": alt}, len(sel)).flat()
+        return encode(
+            LocationFix,
+            {**_stamp(t[sel]), "frame_id": FRAME_ID, "latitude": lat, "longitude": lon, "altitude": alt},
+            len(sel),
+        ).flat()
 
     out.plan(out.proto_channel(f"{prefix}/pose", PoseInFrame), t, poses)
     out.plan(out.proto_channel(f"{prefix}/path", PosesInFrame), t[:1], path, big=True)
@@ -149,9 +162,11 @@ def _plan_values(out: McapOut, topic, ns, values, ok, names) -> None:
 
 def _error_rows(err):
     """Position error components and their norm, for rows of ``err`` that are all finite."""
+
     def get(rows):
         e = err[rows]
-        return np.column_stack([e, np.sqrt(np.sum(e ** 2, axis=1))])
+        return np.column_stack([e, np.sqrt(np.sum(e**2, axis=1))])
+
     return get
 
 
@@ -173,9 +188,15 @@ def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sig
 
 def write_run_mcap(run: dict, mcap_path, sigma=None, progress=None) -> int:
     """The MCAP of a loaded run (``run_data.load_run``), with its manifest as metadata."""
-    return write_mcap(mcap_path, run["frame"], run["problem"], run["estimates"], sigma=sigma,
-                      metadata={"replay.manifest": run.get("manifest", {}),
-                                "replay.export": export_info(run, sigma)}, progress=progress)
+    return write_mcap(
+        mcap_path,
+        run["frame"],
+        run["problem"],
+        run["estimates"],
+        sigma=sigma,
+        metadata={"replay.manifest": run.get("manifest", {}), "replay.export": export_info(run, sigma)},
+        progress=progress,
+    )
 
 
 def export_info(run: dict, sigma=None) -> dict:
@@ -183,15 +204,29 @@ def export_info(run: dict, sigma=None) -> dict:
     from replay.util.version import __version__
     from replay.outputs.foxglove_scene import ROOT, SIGMA
 
-    return {"source": str(run.get("source", "")), "run": str(run.get("run", 0)),
-            "tracks": json.dumps(["reference", *run["estimates"]]), "sigma": f"{sigma or SIGMA:g}",
-            "frames": json.dumps({"root": ROOT, "poses": FRAME_ID, "body": "<track>/base_link"}),
-            "replay_version": __version__}
+    return {
+        "source": str(run.get("source", "")),
+        "run": str(run.get("run", 0)),
+        "tracks": json.dumps(["reference", *run["estimates"]]),
+        "sigma": f"{sigma or SIGMA:g}",
+        "frames": json.dumps({"root": ROOT, "poses": FRAME_ID, "body": "<track>/base_link"}),
+        "replay_version": __version__,
+    }
 
 
-def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str = "zstd",
-               chunk_size: int = 4 << 20, window: int = 1 << 16, sigma=None, metadata=None,
-               progress=None) -> int:
+def write_mcap(
+    mcap_path,
+    frame,
+    problem,
+    estimates: dict,
+    *,
+    compression: str = "zstd",
+    chunk_size: int = 4 << 20,
+    window: int = 1 << 16,
+    sigma=None,
+    metadata=None,
+    progress=None,
+) -> int:
     """Estimates ``{filter: {t, x, P, err}}`` of one run, the reference and the sensors -> MCAP.
 
     ``sigma``: the scale of the covariance ellipsoids (default ``foxglove_scene.SIGMA``);
@@ -219,8 +254,16 @@ def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str =
         ref = np.asarray(problem.truth_position, float)
         ok = problem.truth_valid & np.isfinite(ref).all(axis=1)
         no_yaw = lambda rows: np.full(len(rows), np.nan)  # noqa: E731
-        _plan_track(out, "/replay/reference", ns_frame, lambda rows: to_enu(ref[rows], axes_enu), no_yaw, ok, geo,
-                    scene.body_frame("reference"))
+        _plan_track(
+            out,
+            "/replay/reference",
+            ns_frame,
+            lambda rows: to_enu(ref[rows], axes_enu),
+            no_yaw,
+            ok,
+            geo,
+            scene.body_frame("reference"),
+        )
         axes = [f"e{a}" for a in problem.axis_names]
         for name, est in estimates.items():
             ns = time_ns(frame, est["t"])
@@ -232,15 +275,24 @@ def write_mcap(mcap_path, frame, problem, estimates: dict, *, compression: str =
             _plan_track(out, f"/replay/{name}", ns, pos, yaw, finite, geo, scene.body_frame(name))
             P = covcols.as_matrices(est["P"])  # (n, nx, nx), taken per window (no copy of the track's)
             cov = lambda rows, P=P, p=pidx: scene.enu_covariance(P[rows][:, p][:, :, p], axes_enu)  # noqa: E731
-            has_cov = finite & (np.diagonal(P, axis1=1, axis2=2)[:, pidx] >= 0).all(axis=1) \
+            has_cov = (
+                finite
+                & (np.diagonal(P, axis1=1, axis2=2)[:, pidx] >= 0).all(axis=1)
                 & np.isfinite(P[:, pidx][:, :, pidx]).all(axis=(1, 2))
-            scene.plan_ellipsoids(out, f"/replay/{name}/covariance", name, ns, pos, cov, has_cov, sigma,
-                                  colours[name])
-            _plan_values(out, f"/replay/{name}/position_covariance", ns, lambda rows, cov=cov: scene.upper(cov(rows)),
-                         has_cov, scene.UPPER_NAMES)
-            err = est["err"][:, :len(axes_enu)]
-            _plan_values(out, f"/replay/{name}/error", ns, _error_rows(err), np.isfinite(err).all(axis=1),
-                         axes + ["norm"])
+            )
+            scene.plan_ellipsoids(out, f"/replay/{name}/covariance", name, ns, pos, cov, has_cov, sigma, colours[name])
+            _plan_values(
+                out,
+                f"/replay/{name}/position_covariance",
+                ns,
+                lambda rows, cov=cov: scene.upper(cov(rows)),
+                has_cov,
+                scene.UPPER_NAMES,
+            )
+            err = est["err"][:, : len(axes_enu)]
+            _plan_values(
+                out, f"/replay/{name}/error", ns, _error_rows(err), np.isfinite(err).all(axis=1), axes + ["norm"]
+            )
         for cname, ch in frame.channels.items():
             comps = list(ch.components) or ([cname] if ch.width == 1 else [f"c{i}" for i in range(ch.width)])
             _plan_values(out, f"/sensors/{cname}", ns_frame, ch.values, ch.valid, comps)

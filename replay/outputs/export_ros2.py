@@ -29,6 +29,7 @@ in when complete (``replay.outputs.export_safety.staged_dir``); the bag's
 ``metadata.yaml`` carries ``custom_data: {replay.output: ...}``, the mark that lets a
 later export replace it. An existing directory without that mark is never replaced.
 """
+
 from __future__ import annotations
 
 import re
@@ -55,18 +56,31 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
     hdr = out.header(ns, fid.get("main", ""))
     if kind == "imu":
         att_ok = f["attitude"][1][i]
-        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0] if att_ok else np.array([0, 0, 0, 1.0])
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0] if att_ok else np.array([0, 0, 0, 1.0])
         ocov = np.zeros(9)
         ocov[0] = 0.0 if att_ok else -1.0
-        return T[typ](header=hdr, orientation=out.quat(q), orientation_covariance=ocov,
-                      angular_velocity=out.vec(f["gyro"][0][i]), angular_velocity_covariance=np.zeros(9),
-                      linear_acceleration=out.vec(f["accel"][0][i]), linear_acceleration_covariance=np.zeros(9))
+        return T[typ](
+            header=hdr,
+            orientation=out.quat(q),
+            orientation_covariance=ocov,
+            angular_velocity=out.vec(f["gyro"][0][i]),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=out.vec(f["accel"][0][i]),
+            linear_acceleration_covariance=np.zeros(9),
+        )
     if kind == "odometry":
-        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0]
-        return out.odometry(ns, fid.get("main", ""), fid.get("velocity", ""), f["position"][0][i], q,
-                            f["velocity"][0][i], f["rate"][0][i])
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0]
+        return out.odometry(
+            ns,
+            fid.get("main", ""),
+            fid.get("velocity", ""),
+            f["position"][0][i],
+            q,
+            f["velocity"][0][i],
+            f["rate"][0][i],
+        )
     if kind == "pose":
-        q = rosmsg.rpy_to_quat(f["attitude"][0][i:i + 1])[0]
+        q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0]
         pose = out.pose(f["position"][0][i], q)
         if typ.endswith("PoseWithCovarianceStamped"):
             pose = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
@@ -85,16 +99,22 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
     if kind == "navsatfix":
         ok = f["position"][1][i]
         if ok:
-            lat, lon, alt = (a[0] for a in geo(f["position"][0][i:i + 1]))
+            lat, lon, alt = (a[0] for a in geo(f["position"][0][i : i + 1]))
         else:
             lat = lon = alt = float("nan")
         status = int(f["status"][0][i][0]) if f["status"][1][i] else (0 if ok else -1)
         sig = f["sigma"][0][i]
         cov = np.zeros(9)
         cov[[0, 4, 8]] = np.where(np.isfinite(sig), sig**2, 0.0)
-        return T[typ](header=hdr, status=T["sensor_msgs/msg/NavSatStatus"](status=status, service=1),
-                      latitude=float(lat), longitude=float(lon), altitude=float(alt),
-                      position_covariance=cov, position_covariance_type=2)
+        return T[typ](
+            header=hdr,
+            status=T["sensor_msgs/msg/NavSatStatus"](status=status, service=1),
+            latitude=float(lat),
+            longitude=float(lon),
+            altitude=float(alt),
+            position_covariance=cov,
+            position_covariance_type=2,
+        )
     raise ReplayError(f"cannot write message kind {kind}")
 
 
@@ -112,8 +132,9 @@ def write_frame_bag(frame, path) -> int:
     geo = (lambda enu: enu_to_geodetic(enu, frame.meta)) if frame.meta.get("crs") else None
     other = "header_time" if mapping.get("time") == "log" else "log_time"
     with staged_dir(path, "bag") as tmp:
-        return _write_frame(BagOut(tmp, {MARK_KEY: "frame bag"}, compression="zstd"), frame, mapping, n, ns, t0,
-                            params, geo, other)
+        return _write_frame(
+            BagOut(tmp, {MARK_KEY: "frame bag"}, compression="zstd"), frame, mapping, n, ns, t0, params, geo, other
+        )
 
 
 def _write_frame(out, frame, mapping, n, ns, t0, params, geo, other) -> int:
@@ -130,8 +151,8 @@ def _write_frame(out, frame, mapping, n, ns, t0, params, geo, other) -> int:
             name = e["name"]
             f, fid = {}, {}
             for key in group:
-                if key == name or (key.startswith(name + "_") and key[len(name) + 1:] != other):
-                    fname = primary if key == name else key[len(name) + 1:]
+                if key == name or (key.startswith(name + "_") and key[len(name) + 1 :] != other):
+                    fname = primary if key == name else key[len(name) + 1 :]
                     f[fname] = (group[key].values.reshape(n, -1), group[key].valid)
                     fid[fname] = group[key].frame
             for fname in ("gyro", "accel", "attitude", "position", "velocity", "rate", "depth", "status", "sigma"):
@@ -207,13 +228,19 @@ def _write_run(out, run, progress=None) -> int:
     frame, problem = run["frame"], run["problem"]
     axes, is_ned = enu_axes(problem), ned(problem)
     try:
-        tracks = [("reference", time_ns(frame, frame.t), problem.truth_position, None, None,
-                   problem.truth_valid)]
+        tracks = [("reference", time_ns(frame, frame.t), problem.truth_position, None, None, problem.truth_valid)]
         for name, est in run["estimates"].items():
             pidx, hidx = track_index(name, problem)
-            tracks.append((name, time_ns(frame, est["t"]), est["x"][:, pidx],
-                           enu_yaw(est["x"][:, hidx], is_ned) if hidx is not None else None,
-                           pose_covariance(est["P"], pidx, hidx, axes, is_ned), None))
+            tracks.append(
+                (
+                    name,
+                    time_ns(frame, est["t"]),
+                    est["x"][:, pidx],
+                    enu_yaw(est["x"][:, hidx], is_ned) if hidx is not None else None,
+                    pose_covariance(est["P"], pidx, hidx, axes, is_ned),
+                    None,
+                )
+            )
         topics = {}
         for name, *_ in tracks:
             topic = f"/replay/{ros_name(name)}/odom"
@@ -233,9 +260,20 @@ def _write_run(out, run, progress=None) -> int:
             for i in idx:
                 y = float(yaw[i]) if yaw is not None and np.isfinite(yaw[i]) else 0.0
                 cov = np.zeros(36) if var is None else var[i]
-                out.write(conn, int(ns[i]), out.odometry(int(ns[i]), "enu", "base_link", pos[i],
-                                                          (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
-                                                          (0, 0, 0), (0, 0, 0), cov))
+                out.write(
+                    conn,
+                    int(ns[i]),
+                    out.odometry(
+                        int(ns[i]),
+                        "enu",
+                        "base_link",
+                        pos[i],
+                        (0.0, 0.0, np.sin(y / 2), np.cos(y / 2)),
+                        (0, 0, 0),
+                        (0, 0, 0),
+                        cov,
+                    ),
+                )
                 if progress is not None and out.count - told >= PROGRESS_EVERY and out.count < total:
                     progress.update(out.count - told)
                     told = out.count

@@ -18,6 +18,7 @@
   temporary, which the next export to the same target removes once its process is
   gone (:func:`clean_stale`).
 """
+
 from __future__ import annotations
 
 import glob
@@ -38,6 +39,7 @@ _TMP = ".replay-tmp-"
 
 
 # ---------------------------------------------------------------- what an export reads
+
 
 def dataset_inputs(dataset, mapping=None, data_dir=None) -> list[Path]:
     """The files a dataset id or path is read from (none for a simulator), and the mapping."""
@@ -63,8 +65,11 @@ def run_inputs(run_dir, data_dir=None) -> list[Path]:
         dirs = store.data_dirs()
         for _, cfg in store.configs():
             params = cfg.get("dataset_params")
-            found += dataset_inputs(cfg.get("dataset"), params.get("mapping") if isinstance(params, dict) else None,
-                                    data_dir or dirs.get(cfg.get("dataset")))  # the campaign's
+            found += dataset_inputs(
+                cfg.get("dataset"),
+                params.get("mapping") if isinstance(params, dict) else None,
+                data_dir or dirs.get(cfg.get("dataset")),
+            )  # the campaign's
         return list(dict.fromkeys(found))
     try:
         man = json.loads(path.read_text())
@@ -74,8 +79,7 @@ def run_inputs(run_dir, data_dir=None) -> list[Path]:
         raise DataError(path, "no such file: not a `replay eval` output directory") from None
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise DataError(path, f"not a replay manifest ({e})") from None
-    found = [run_dir] + dataset_inputs(dataset, params.get("mapping") if isinstance(params, dict) else None,
-                                       data_dir)
+    found = [run_dir] + dataset_inputs(dataset, params.get("mapping") if isinstance(params, dict) else None, data_dir)
     recorded = man.get("dataset", {}).get("path") if isinstance(man.get("dataset"), dict) else None
     if isinstance(recorded, str) and recorded:
         found.append(Path(recorded))
@@ -83,6 +87,7 @@ def run_inputs(run_dir, data_dir=None) -> list[Path]:
 
 
 # ---------------------------------------------------------------- ownership
+
 
 def mcap_library(path) -> str | None:
     """The library string of an MCAP file's Header record, or None if it is not an MCAP file."""
@@ -98,7 +103,7 @@ def mcap_library(path) -> str | None:
     if at + 4 > len(head):
         return None
     n = struct.unpack_from("<I", head, at)[0]
-    lib = head[at + 4:at + 4 + n]
+    lib = head[at + 4 : at + 4 + n]
     return lib.decode("utf-8", "replace") if len(lib) == n else None
 
 
@@ -149,12 +154,15 @@ def check_target(out, inputs, kind: str, others=()) -> Path:
         if not p.is_dir():
             raise ReplayError(f"{what} {out}: exists and is not a directory")
         if not _is_ours(p, kind):
-            raise ReplayError(f"{what} {out}: exists and is not a ROS 2 bag written by replay "
-                              f"(no {MARK_KEY} in its metadata.yaml); refusing to replace it")
+            raise ReplayError(
+                f"{what} {out}: exists and is not a ROS 2 bag written by replay "
+                f"(no {MARK_KEY} in its metadata.yaml); refusing to replace it"
+            )
     return p
 
 
 # ---------------------------------------------------------------- staging
+
 
 def temp_beside(target) -> Path:
     """The hidden temporary name of this process for ``target``."""
@@ -184,7 +192,7 @@ def clean_stale(target) -> list[Path]:
     target = Path(target)
     gone = []
     for p in target.parent.glob(glob.escape(f".{target.name}{_TMP}") + "*"):
-        pid = p.name[len(target.name) + 1 + len(_TMP):]
+        pid = p.name[len(target.name) + 1 + len(_TMP) :]
         if pid.isdigit() and (int(pid) == os.getpid() or not _alive(int(pid))):
             _remove(p)
             gone.append(p)

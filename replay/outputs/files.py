@@ -12,6 +12,7 @@ directory is replaced only when it is a whole ``replay eval`` output (its marker
 or a replay manifest and nothing else); it must not be, hold or lie inside an
 input (:func:`check_output`).
 """
+
 from __future__ import annotations
 
 import csv
@@ -25,13 +26,21 @@ import numpy as np
 
 from replay.run.evaluation import Evaluation
 from replay.run.manifest import manifest
-from replay.scoring.summary import (MIN_SCORED_SHARE, SYNTHETIC, columns, consistency_cell, lost_cell, scored_cell,
-                                    scored_share)
+from replay.scoring.summary import (
+    MIN_SCORED_SHARE,
+    SYNTHETIC,
+    columns,
+    consistency_cell,
+    lost_cell,
+    scored_cell,
+    scored_share,
+)
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
 from replay.scoring.scorer import rmse_over_time
+
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:
     """The evaluation's leaderboard rows (:mod:`replay.scoring.summary`), in ``--filters`` order."""
@@ -50,8 +59,14 @@ def format_table(ev: Evaluation) -> str:
     rows = leaderboard_rows(ev)
     metrics = [k for k in columns(rows) if k.endswith("_rmse")]
     recorded = any(str(r["filter"]).startswith("recorded:") for r in rows)  # evo users compare the ATE
-    head = (["filter"] + metrics[:1] + ["median"] + (["ate"] if recorded else []) + metrics[1:]
-            + ["anees", "us/step", "diverged", "lost", "scored"])
+    head = (
+        ["filter"]
+        + metrics[:1]
+        + ["median"]
+        + (["ate"] if recorded else [])
+        + metrics[1:]
+        + ["anees", "us/step", "diverged", "lost", "scored"]
+    )
     minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
     distinct = {r.name: distinct_runs(r) for r in ev.results}
     body, warnings = [], []
@@ -65,46 +80,67 @@ def format_table(ev: Evaluation) -> str:
                 cells.append(f"{row.get('pos_rmse_median', np.nan):.4f}")
                 if recorded:
                     cells.append(f"{row.get('ate', np.nan):.4f}")
-        cells += [consistency_cell(row, "anees"), f"{row['us_per_step']:.1f}", f"{row['diverged']}/{row['runs']}",
-                  lost_cell(row), scored_cell(row, minimum)]
+        cells += [
+            consistency_cell(row, "anees"),
+            f"{row['us_per_step']:.1f}",
+            f"{row['diverged']}/{row['runs']}",
+            lost_cell(row),
+            scored_cell(row, minimum),
+        ]
         body.append(cells)
         if same:
-            warnings.append(f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical; "
-                            "no interval)")
+            warnings.append(
+                f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical; no interval)"
+            )
         if scored_share(row) < minimum:
-            warnings.append(f"{row['filter']}: scored on {row['scored']} of {row['scored'] + row['masked']} reference "
-                            f"samples ({scored_cell(row, 0)}; the rest masked), under min_scored_share={minimum:g}: "
-                            "its numbers describe only the samples scored")
+            warnings.append(
+                f"{row['filter']}: scored on {row['scored']} of {row['scored'] + row['masked']} reference "
+                f"samples ({scored_cell(row, 0)}; the rest masked), under min_scored_share={minimum:g}: "
+                "its numbers describe only the samples scored"
+            )
     widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
-    line = lambda cells: "  ".join(str(c).rjust(w) if i else str(c).ljust(w)
-                                   for i, (c, w) in enumerate(zip(cells, widths)))
+    line = lambda cells: "  ".join(
+        str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths))
+    )
     cfg = ev.config
-    rule = ", ".join(f"{k}={cfg['task_params'][k]:g}" for k in ("lost_threshold", "lost_steps")
-                     if k in cfg["task_params"])
-    title = (f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}"
-             + (f"  first={cfg['first']}" if cfg["first"] else ""))
+    rule = ", ".join(
+        f"{k}={cfg['task_params'][k]:g}" for k in ("lost_threshold", "lost_steps") if k in cfg["task_params"]
+    )
+    title = f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}" + (
+        f"  first={cfg['first']}" if cfg["first"] else ""
+    )
     worse = [r["label"] for r in ev.rows if r.get("worse_than_measurements") is True]
     if worse:
-        title += ("\nworse than its own measurements (the measurements row: the raw observations, scored "
-                  "alike): " + ", ".join(worse))
+        title += (
+            "\nworse than its own measurements (the measurements row: the raw observations, scored "
+            "alike): " + ", ".join(worse)
+        )
     if any(r.get("measurements") == SYNTHETIC for r in ev.rows):
-        title += (f"\nsynthetic measurements: task {cfg['task']} draws them from the reference plus its own "
-                  "noise, not from the recording's sensors (task fusion reads the sensors)")
+        title += (
+            f"\nsynthetic measurements: task {cfg['task']} draws them from the reference plus its own "
+            "noise, not from the recording's sensors (task fusion reads the sensors)"
+        )
     unit = ev.units or {}
     shown = ", ".join(f"{k} {unit[k]}" for k in metrics if k in unit)
-    note = ("RMSE: mean over runs of per-run RMSE, ± half-width of the 95 % interval; median: "
-            f"median over runs of the position RMSE ({unit.get('pos_rmse', 'm')})\n"
-            f"units: {shown}{', ' if shown else ''}us/step µs per step (1 = dimensionless)\n"
-            + ("ate: position RMSE after the --alignment fit (evo's APE with -a); a recorded estimate with an "
-               "align (mapping or -p recorded:NAME.align=se3) is scored after that fit, its numbers before it in "
-               "the *_unaligned columns\n" if recorded else "")
-            + "anees: mean position NEES over runs and steps (about the number of position axes if "
-            "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
-            f"diverged: numerical failure (left out of the means); lost: the track was lost "
-            f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
-            "kept in the means); * = lost runs make up most of the mean\n"
-            "scored: share of the reference samples scored (the rest masked); ! = under min_scored_share "
-            f"({minimum:g})")
+    note = (
+        "RMSE: mean over runs of per-run RMSE, ± half-width of the 95 % interval; median: "
+        f"median over runs of the position RMSE ({unit.get('pos_rmse', 'm')})\n"
+        f"units: {shown}{', ' if shown else ''}us/step µs per step (1 = dimensionless)\n"
+        + (
+            "ate: position RMSE after the --alignment fit (evo's APE with -a); a recorded estimate with an "
+            "align (mapping or -p recorded:NAME.align=se3) is scored after that fit, its numbers before it in "
+            "the *_unaligned columns\n"
+            if recorded
+            else ""
+        )
+        + "anees: mean position NEES over runs and steps (about the number of position axes if "
+        "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
+        f"diverged: numerical failure (left out of the means); lost: the track was lost "
+        f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
+        "kept in the means); * = lost runs make up most of the mean\n"
+        "scored: share of the reference samples scored (the rest masked); ! = under min_scored_share "
+        f"({minimum:g})"
+    )
     return "\n".join([title, line(head), *(line(b) for b in body), *warnings, note])
 
 
@@ -121,19 +157,35 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
         pidx = ev.position_components(r.name)
         head = ["run", "k", "t"] + [f"x{i}" for i in range(nx)] + covcols.variance_names(nx)
         head += [f"err_{axis}" for axis in ev.axis_names] + covcols.covariance_names(pidx)
-        with open(est_dir / f"{r.name}.csv.gz", "wb") as raw, \
-                gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz, \
-                io.TextIOWrapper(gz, newline="") as fh:  # mtime 0: the same run gives the same bytes
+        with (
+            open(est_dir / f"{r.name}.csv.gz", "wb") as raw,
+            gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz,
+            io.TextIOWrapper(gz, newline="") as fh,
+        ):  # mtime 0: the same run gives the same bytes
             fh.write(",".join(head) + "\n")
             for run, (est, err) in enumerate(zip(r.estimates, r.errors)):
                 n = len(est.x)
-                block = np.column_stack([np.full(n, run), np.arange(n), ev.t[:n], est.x,
-                                         np.diagonal(est.P, axis1=1, axis2=2), err["position"],
-                                         *covcols.covariance_columns(est.P, pidx).values()])
+                block = np.column_stack(
+                    [
+                        np.full(n, run),
+                        np.arange(n),
+                        ev.t[:n],
+                        est.x,
+                        np.diagonal(est.P, axis1=1, axis2=2),
+                        err["position"],
+                        *covcols.covariance_columns(est.P, pidx).values(),
+                    ]
+                )
                 np.savetxt(fh, block, delimiter=",", fmt="%.10g")
         curve = rmse_over_time([e["position"] for e in r.errors])
-        np.savetxt(est_dir / f"{r.name}_rmse_over_time.csv", np.column_stack([ev.t, curve]),
-                   delimiter=",", header="t,pos_rmse_across_runs", comments="", fmt="%.10g")
+        np.savetxt(
+            est_dir / f"{r.name}_rmse_over_time.csv",
+            np.column_stack([ev.t, curve]),
+            delimiter=",",
+            header="t,pos_rmse_across_runs",
+            comments="",
+            fmt="%.10g",
+        )
 
 
 RUNS_HEAD = ["dataset", "task", "filter", "params", "config_hash", "run", "status"]
@@ -146,9 +198,18 @@ def run_rows(ev: Evaluation) -> list[dict]:
     for r in ev.results:
         params = json.dumps(r.params, sort_keys=True, separators=(",", ":"))
         for rec in r.records:
-            rows.append({"dataset": ev.config["dataset"], "task": ev.config["task"], "filter": r.name,
-                         "params": params, "config_hash": r.config_hash, "run": rec["run"],
-                         "status": rec["status"], **(rec.get("metrics") or {})})
+            rows.append(
+                {
+                    "dataset": ev.config["dataset"],
+                    "task": ev.config["task"],
+                    "filter": r.name,
+                    "params": params,
+                    "config_hash": r.config_hash,
+                    "run": rec["run"],
+                    "status": rec["status"],
+                    **(rec.get("metrics") or {}),
+                }
+            )
     return rows
 
 
@@ -179,8 +240,12 @@ def legacy_output(path: Path) -> bool:
     for e in path.iterdir():
         if e.name in ("leaderboard.csv", "manifest.json") and e.is_file() or is_report_dir(e):
             continue
-        if e.name == "estimates" and e.is_dir() and not e.is_symlink() and all(
-                f.is_file() and f.name.endswith((".csv.gz", "_rmse_over_time.csv")) for f in e.iterdir()):
+        if (
+            e.name == "estimates"
+            and e.is_dir()
+            and not e.is_symlink()
+            and all(f.is_file() and f.name.endswith((".csv.gz", "_rmse_over_time.csv")) for f in e.iterdir())
+        ):
             continue
         return False
     return True
@@ -211,8 +276,10 @@ def refuse_claimed(path, what: str = "--out") -> None:
     """Refuse (one line naming its pid) a directory another live process has claimed."""
     pid = claim_holder(path)
     if pid is not None and pid != os.getpid():
-        raise ReplayError(f"{what} {path}: another replay eval process (pid {pid if pid > 0 else 'unknown'}) "
-                          f"is computing into it; choose another {what}")
+        raise ReplayError(
+            f"{what} {path}: another replay eval process (pid {pid if pid > 0 else 'unknown'}) "
+            f"is computing into it; choose another {what}"
+        )
 
 
 def owned(path: Path) -> bool:
@@ -262,12 +329,14 @@ def check_name_lengths(out, what: str = "output", room: int = 17) -> None:
     for i, part in enumerate(p.parts):
         limit = name_max - (room if i == len(p.parts) - 1 else 0)
         if len(os.fsencode(part)) > limit:
-            raise ReplayError(f"{what} {shown}: a name of {len(os.fsencode(part))} bytes "
-                              f"({part[:20]}...); at most {limit} fit here")
+            raise ReplayError(
+                f"{what} {shown}: a name of {len(os.fsencode(part))} bytes ({part[:20]}...); at most {limit} fit here"
+            )
     if len(os.fsencode(str(p))) + 64 > path_max:
-        raise ReplayError(f"{what} {shown}: the path is {len(os.fsencode(str(p)))} bytes; at most "
-                          f"{path_max - 64} fit here (with the files written inside)")
-
+        raise ReplayError(
+            f"{what} {shown}: the path is {len(os.fsencode(str(p)))} bytes; at most "
+            f"{path_max - 64} fit here (with the files written inside)"
+        )
 
 
 def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
@@ -285,8 +354,12 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
         write_estimates(ev, stage)
         write_runs(ev, stage / "runs.csv")
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
-    return {"leaderboard": out / "leaderboard.csv", "manifest": out / "manifest.json",
-            "estimates": out / "estimates", "runs": out / "runs.csv"}
+    return {
+        "leaderboard": out / "leaderboard.csv",
+        "manifest": out / "manifest.json",
+        "estimates": out / "estimates",
+        "runs": out / "runs.csv",
+    }
 
 
 def readable_name(dataset: str) -> str:

@@ -24,6 +24,7 @@ colour in the report (:mod:`replay.outputs.palette`), translucent. The covarianc
 at the same times. Both come from the full position covariance of the estimate (the
 variances alone only for an output written before the covariances were kept).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,7 +40,7 @@ def body_frame(track: str) -> str:
 
 
 def rgba(hex_colour: str) -> tuple[float, float, float, float]:
-    return tuple(int(hex_colour[k:k + 2], 16) / 255 for k in (1, 3, 5)) + (ALPHA,)
+    return tuple(int(hex_colour[k : k + 2], 16) / 255 for k in (1, 3, 5)) + (ALPHA,)
 
 
 def colours(names) -> dict:
@@ -65,7 +66,7 @@ def enu_covariance(var, axes) -> np.ndarray:
     if absent.any():
         biggest = np.max(np.diagonal(out, axis1=1, axis2=2), axis=1)
         for slot in np.flatnonzero(absent):
-            out[:, slot, slot] = THIN ** 2 * biggest
+            out[:, slot, slot] = THIN**2 * biggest
     return out
 
 
@@ -88,9 +89,15 @@ def quat_from_matrix(R) -> np.ndarray:
     s = 2 * np.sqrt(np.maximum(cand[np.arange(len(R)), k], 1e-300))
     a, b, c = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
     d, e, f = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
-    q = np.select([k[:, None] == j for j in range(4)], [
-        np.stack([a, b, c, s * s / 4], 1), np.stack([s * s / 4, d, e, a], 1),
-        np.stack([d, s * s / 4, f, b], 1), np.stack([e, f, s * s / 4, c], 1)])
+    q = np.select(
+        [k[:, None] == j for j in range(4)],
+        [
+            np.stack([a, b, c, s * s / 4], 1),
+            np.stack([s * s / 4, d, e, a], 1),
+            np.stack([d, s * s / 4, f, b], 1),
+            np.stack([e, f, s * s / 4, c], 1),
+        ],
+    )
     return q / s[:, None]
 
 
@@ -140,8 +147,11 @@ def plan_ellipsoids(out, topic: str, name: str, ns, pos, cov, ok, sigma: float, 
         f.update({f"spheres.color.{a}": v for a, v in zip("rgba", colour)})
         return encode(SceneUpdate, {f"entities.{k}": v for k, v in f.items()}, len(sel)).flat()
 
-    meta = {"sigma": f"{sigma:g}", "frame_id": ROOT, "what": "position covariance ellipsoid, semi-axes sigma "
-            "standard deviations along the eigenvectors"}
+    meta = {
+        "sigma": f"{sigma:g}",
+        "frame_id": ROOT,
+        "what": "position covariance ellipsoid, semi-axes sigma standard deviations along the eigenvectors",
+    }
     out.plan(out.proto_channel(topic, SceneUpdate, meta), ns[idx], updates)
 
 
@@ -169,5 +179,12 @@ def plan_transforms(out, topic: str, child: str, ns, pos, quat, ok) -> None:
 def plan_static(out, t_ns: int, child: str) -> None:
     """``/tf_static``: the identity ``map -> child`` at ``t_ns`` (the first time of the file)."""
     one = np.zeros((1, 3))
-    plan_transforms(out, "/tf_static", child, np.array([t_ns], np.int64), lambda rows: one,
-                    lambda rows: np.array([[0.0, 0.0, 0.0, 1.0]]), np.ones(1, bool))
+    plan_transforms(
+        out,
+        "/tf_static",
+        child,
+        np.array([t_ns], np.int64),
+        lambda rows: one,
+        lambda rows: np.array([[0.0, 0.0, 0.0, 1.0]]),
+        np.ones(1, bool),
+    )

@@ -32,6 +32,7 @@ Memory: the buffered window, one pending chunk (about ``chunk_size``, more when 
 message is larger) and records assembled about 1 MB at a time; a payload above 1 MB
 (a whole-trajectory message) is copied as it is, never indexed byte by byte.
 """
+
 from __future__ import annotations
 
 import struct
@@ -40,14 +41,33 @@ import zlib
 import numpy as np
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema,
-                          Statistics, SummaryOffset)
+from mcap.records import (
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
 from mcap.writer import MCAP0_MAGIC
 
 from replay.util.errors import ReplayError
 
-_MSG_HEADER = np.dtype([("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
-                        ("log_time", "<u8"), ("publish_time", "<u8")])  # 31 bytes, packed
+_MSG_HEADER = np.dtype(
+    [
+        ("op", "u1"),
+        ("length", "<u8"),
+        ("channel", "<u2"),
+        ("sequence", "<u4"),
+        ("log_time", "<u8"),
+        ("publish_time", "<u8"),
+    ]
+)  # 31 bytes, packed
 BATCH = 1 << 20  # bytes of records assembled per numpy gather
 BIG = 1 << 20  # a payload longer than this is copied on its own
 
@@ -94,8 +114,7 @@ class BulkWriter:
     ``path`` is a temporary one). The file is opened at the first flush (or ``finish``).
     """
 
-    def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, library: str = "replay",
-                 name=None):
+    def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, library: str = "replay", name=None):
         if compression not in ("zstd", "lz4", ""):
             raise ValueError(f"compression {compression!r}: one of zstd, lz4, ''")
         self.path, self.compression, self.chunk_size, self.library = path, compression, chunk_size, library
@@ -125,8 +144,15 @@ class BulkWriter:
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata=None) -> int:
         self._not_started()
-        self.channels.append(Channel(id=len(self.channels) + 1, topic=topic, message_encoding=message_encoding,
-                                     metadata=dict(metadata or {}), schema_id=schema_id))
+        self.channels.append(
+            Channel(
+                id=len(self.channels) + 1,
+                topic=topic,
+                message_encoding=message_encoding,
+                metadata=dict(metadata or {}),
+                schema_id=schema_id,
+            )
+        )
         return self.channels[-1].id
 
     def add_metadata(self, name: str, data: dict) -> None:
@@ -146,8 +172,9 @@ class BulkWriter:
             raise ValueError(f"channel {channel_id}: {len(t)} times for {len(lens)} payloads")
         if len(t) and t.min() < 0:
             topic = self.channels[channel_id - 1].topic
-            raise ReplayError(f"{self.name}: topic {topic}: time {t.min()} ns before 1970 "
-                              "(MCAP log times are unsigned)")
+            raise ReplayError(
+                f"{self.name}: topic {topic}: time {t.min()} ns before 1970 (MCAP log times are unsigned)"
+            )
         if len(t):
             self.parts.append((channel_id, t, buf, lens))
         return len(t)
@@ -215,7 +242,7 @@ class BulkWriter:
             if hi - lo == 1 and lens[lo] > BIG:  # copied as it is
                 p = parts[part_no[lo]]
                 self.chunk += hdr[lo:hi].tobytes()
-                self.chunk += memoryview(p[2])[p_start[lo]:p_start[lo] + lens[lo]]
+                self.chunk += memoryview(p[2])[p_start[lo] : p_start[lo] + lens[lo]]
             else:
                 self.chunk += _records(parts, part_no[lo:hi], p_start[lo:hi], lens[lo:hi], hdr[lo:hi]).data
             self.chunk_meta.append((ch[lo:hi], t[lo:hi], rec_start + np.cumsum(rec_len[lo:hi]) - rec_len[lo:hi]))
@@ -231,9 +258,11 @@ class BulkWriter:
     def _compress(self, data) -> bytes:
         if self.compression == "zstd":
             import zstandard
+
             return zstandard.ZstdCompressor(level=1).compress(data)
         if self.compression == "lz4":
             import lz4.frame
+
             return lz4.frame.compress(data)
         return bytes(data)
 
@@ -248,8 +277,14 @@ class BulkWriter:
         self.chunk_meta = []
         compressed = self._compress(data)
         rb = RecordBuilder()
-        chunk = Chunk(compression=self.compression, data=compressed, message_start_time=int(t.min()),
-                      message_end_time=int(t.max()), uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
+        chunk = Chunk(
+            compression=self.compression,
+            data=compressed,
+            message_start_time=int(t.min()),
+            message_end_time=int(t.max()),
+            uncompressed_crc=zlib.crc32(data),
+            uncompressed_size=len(data),
+        )
         del data
         chunk.write(rb)
         chunk_start = self.offset
@@ -259,13 +294,22 @@ class BulkWriter:
             sel = ch == cid
             pairs = np.column_stack([t[sel].view(np.uint64), offsets[sel].astype(np.uint64)]).astype("<u8")
             index_offsets[cid] = self.offset
-            self._write(struct.pack("<BQHI", int(Opcode.MESSAGE_INDEX), 6 + pairs.nbytes, cid, pairs.nbytes)
-                        + pairs.tobytes())
-        self.chunk_indexes.append(ChunkIndex(
-            message_start_time=chunk.message_start_time, message_end_time=chunk.message_end_time,
-            chunk_start_offset=chunk_start, chunk_length=index_start - chunk_start,
-            message_index_offsets=index_offsets, message_index_length=self.offset - index_start,
-            compression=self.compression, compressed_size=len(compressed), uncompressed_size=chunk.uncompressed_size))
+            self._write(
+                struct.pack("<BQHI", int(Opcode.MESSAGE_INDEX), 6 + pairs.nbytes, cid, pairs.nbytes) + pairs.tobytes()
+            )
+        self.chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=chunk.message_start_time,
+                message_end_time=chunk.message_end_time,
+                chunk_start_offset=chunk_start,
+                chunk_length=index_start - chunk_start,
+                message_index_offsets=index_offsets,
+                message_index_length=self.offset - index_start,
+                compression=self.compression,
+                compressed_size=len(compressed),
+                uncompressed_size=chunk.uncompressed_size,
+            )
+        )
 
     def finish(self) -> int:
         """Flush, write the last chunk, the summary and the footer, close the file; returns the message count."""
@@ -288,25 +332,41 @@ class BulkWriter:
     def _summary(self) -> None:
         summary_start, sb, offsets = self.offset, RecordBuilder(), []
         counts = dict(sorted(self.counts.items()))
-        groups = [(Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
-                  (Opcode.STATISTICS, [Statistics(
-                      message_count=self.n, schema_count=len(self.schemas), channel_count=len(self.channels),
-                      attachment_count=0, metadata_count=len(self.metadata), chunk_count=len(self.chunk_indexes),
-                      message_start_time=self.t_min, message_end_time=self.t_max, channel_message_counts=counts)]),
-                  (Opcode.CHUNK_INDEX, self.chunk_indexes), (Opcode.METADATA_INDEX, self.metadata_indexes)]
+        groups = [
+            (Opcode.SCHEMA, self.schemas),
+            (Opcode.CHANNEL, self.channels),
+            (
+                Opcode.STATISTICS,
+                [
+                    Statistics(
+                        message_count=self.n,
+                        schema_count=len(self.schemas),
+                        channel_count=len(self.channels),
+                        attachment_count=0,
+                        metadata_count=len(self.metadata),
+                        chunk_count=len(self.chunk_indexes),
+                        message_start_time=self.t_min,
+                        message_end_time=self.t_max,
+                        channel_message_counts=counts,
+                    )
+                ],
+            ),
+            (Opcode.CHUNK_INDEX, self.chunk_indexes),
+            (Opcode.METADATA_INDEX, self.metadata_indexes),
+        ]
         for opcode, records in groups:
             if not records:
                 continue
             start = sb.count
             for r in records:
                 r.write(sb)
-            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
-                                         group_length=sb.count - start))
+            offsets.append(
+                SummaryOffset(group_opcode=opcode, group_start=summary_start + start, group_length=sb.count - start)
+            )
         offset_start = summary_start + sb.count
         for o in offsets:
             o.write(sb)
         summary = sb.end()
-        crc = zlib.crc32(struct.pack("<BQQQ", int(Opcode.FOOTER), 20, summary_start, offset_start),
-                         zlib.crc32(summary))
+        crc = zlib.crc32(struct.pack("<BQQQ", int(Opcode.FOOTER), 20, summary_start, offset_start), zlib.crc32(summary))
         Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc).write(sb)
         self._write(summary + sb.end() + MCAP0_MAGIC)

@@ -1,5 +1,6 @@
 """The MCAP writer of the exports: protobuf schemas (:func:`file_descriptor_set`), channels and
 messages encoded in time windows (:class:`McapOut`), JSON rows (:func:`json_rows`)."""
+
 from __future__ import annotations
 
 import json
@@ -37,8 +38,7 @@ class McapOut:
     and so the file are the same as if every channel were encoded at once.
     """
 
-    def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, window: int = 1 << 16,
-                 name=None):
+    def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, window: int = 1 << 16, name=None):
         from replay.outputs.mcap_bulk import BulkWriter
 
         self.w = BulkWriter(path, compression=compression, chunk_size=chunk_size, name=name)
@@ -134,6 +134,9 @@ def json_rows(values, names) -> list[bytes]:
     rows, it = [], iter(text)
     keys = [json.dumps(n) + ":" for n in names]
     for ok_row, row in zip(finite.tolist(), values.tolist()):
-        rows.append(next(it) if ok_row else ("{" + ",".join(
-            k + (repr(x) if np.isfinite(x) else "null") for k, x in zip(keys, row)) + "}").encode())
+        rows.append(
+            next(it)
+            if ok_row
+            else ("{" + ",".join(k + (repr(x) if np.isfinite(x) else "null") for k, x in zip(keys, row)) + "}").encode()
+        )
     return rows

@@ -17,6 +17,7 @@ and the reproductions can all use it)::
     pal = Palette(["ekf", "ukf(alpha=0.5)", "ukf(alpha=1.0)", "pf"])
     ax.plot(t, y, **pal.style("ukf(alpha=0.5)"), label="ukf(alpha=0.5)")
 """
+
 from __future__ import annotations
 
 import colorsys
@@ -44,8 +45,24 @@ FIXED = {
     "pso-cpf": "#e7969c",  # salmon
     "wf-pf": "#843c39",  # maroon
 }
-SPARE = ["#3182bd", "#e6550d", "#31a354", "#756bb1", "#636363", "#fd8d3c", "#74c476", "#9e9ac8",
-         "#d6616b", "#8ca252", "#ce6dbd", "#de9ed6", "#5254a3", "#b5cf6b", "#e7ba52", "#ad494a"]
+SPARE = [
+    "#3182bd",
+    "#e6550d",
+    "#31a354",
+    "#756bb1",
+    "#636363",
+    "#fd8d3c",
+    "#74c476",
+    "#9e9ac8",
+    "#d6616b",
+    "#8ca252",
+    "#ce6dbd",
+    "#de9ed6",
+    "#5254a3",
+    "#b5cf6b",
+    "#e7ba52",
+    "#ad494a",
+]
 STYLES = ["-", "--", ":", "-."]
 
 
@@ -64,7 +81,7 @@ def shade(hex_colour: str, i: int, n: int) -> str:
     """Variant ``i`` of ``n`` of a colour: the same hue, lightness from darker to lighter."""
     if n <= 1:
         return hex_colour
-    r, g, b = (int(hex_colour[k:k + 2], 16) / 255 for k in (1, 3, 5))
+    r, g, b = (int(hex_colour[k : k + 2], 16) / 255 for k in (1, 3, 5))
     h, light, s = colorsys.rgb_to_hls(r, g, b)
     lo, hi = max(0.2, light - 0.16), min(0.72, light + 0.16)
     light = lo + (hi - lo) * i / (n - 1)

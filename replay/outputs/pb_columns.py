@@ -17,14 +17,21 @@ message, which is only a few bytes longer than the canonical (default-omitting) 
 Negative integers are written as 10-byte two's complement varints, as protobuf does for
 int32/int64.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from google.protobuf.descriptor import FieldDescriptor as FD
 
 _VARINT_TYPES = {FD.TYPE_INT32, FD.TYPE_INT64, FD.TYPE_UINT32, FD.TYPE_UINT64, FD.TYPE_BOOL, FD.TYPE_ENUM}
-_FIXED = {FD.TYPE_DOUBLE: "<f8", FD.TYPE_FLOAT: "<f4", FD.TYPE_FIXED64: "<u8", FD.TYPE_SFIXED64: "<i8",
-          FD.TYPE_FIXED32: "<u4", FD.TYPE_SFIXED32: "<i4"}
+_FIXED = {
+    FD.TYPE_DOUBLE: "<f8",
+    FD.TYPE_FLOAT: "<f4",
+    FD.TYPE_FIXED64: "<u8",
+    FD.TYPE_SFIXED64: "<i8",
+    FD.TYPE_FIXED32: "<u4",
+    FD.TYPE_SFIXED32: "<i4",
+}
 
 
 class Rows:
@@ -97,8 +104,10 @@ def _field(fd, value, n: int) -> list:
         dt = np.dtype(_FIXED[fd.type])
         col = np.ascontiguousarray(np.broadcast_to(np.asarray(value, dt), (n,)))
         wire = 1 if dt.itemsize == 8 else 5
-        return [const(n, _tag(fd.number, wire)), (col.view(np.uint8).reshape(n, dt.itemsize),
-                                                   np.full(n, dt.itemsize, np.int64))]
+        return [
+            const(n, _tag(fd.number, wire)),
+            (col.view(np.uint8).reshape(n, dt.itemsize), np.full(n, dt.itemsize, np.int64)),
+        ]
     raise TypeError(f"field {fd.full_name}: type {fd.type} not supported by pb_columns")
 
 

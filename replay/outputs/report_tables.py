@@ -6,6 +6,7 @@ meaningless number), ``lost`` reads ``k/N`` (``*``: lost runs dominate the mean)
 difference smaller than :data:`TIE` (in the metric's unit) is a tie: no "wins" on rounding
 noise (two filters that are the same on a linear model differ by 1e-16 m).
 """
+
 from __future__ import annotations
 
 import html
@@ -108,8 +109,7 @@ COLUMNS = [
 
 def leaderboard(rows, pal: Palette) -> str:
     """One section's leaderboard: rounded, with flags; the lowest position RMSE in bold."""
-    best = min((r for r in rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]),
-               default=None)
+    best = min((r for r in rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]), default=None)
     cols = [(h, fn) for h, fn in COLUMNS if any(fn(r) not in ("–", "", "nan") for r in rows)]
     out = ["<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h, _ in cols) + "</tr>"]
     for r in rows:
@@ -153,19 +153,27 @@ def paired(sec, pal: Palette) -> str:
     counts, in a ``<details>`` element whose summary counts ties and significant differences."""
     head = ["a", "b", "metric", "runs", "mean of a − b, 95 % interval", "verdict", "runs a lower / b lower / tied"]
     says = [verdict(p.get("diff"), p.get("diff_ci95"), p["a"], p["b"]) for p in sec.paired]
-    tally = (f"{len(says)} comparisons: {sum(v.endswith(' lower') for v in says)} significant, "
-             f"{sum(v.startswith('tie') for v in says)} ties (|a − b| < {TIE:g}), "
-             f"{sum(v == 'no significant difference' for v in says)} not significant")
-    out = [f"<details><summary>Paired comparisons on the same runs (common random numbers): {tally}</summary>",
-           "<table><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"]
+    tally = (
+        f"{len(says)} comparisons: {sum(v.endswith(' lower') for v in says)} significant, "
+        f"{sum(v.startswith('tie') for v in says)} ties (|a − b| < {TIE:g}), "
+        f"{sum(v == 'no significant difference' for v in says)} not significant"
+    )
+    out = [
+        f"<details><summary>Paired comparisons on the same runs (common random numbers): {tally}</summary>",
+        "<table><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>",
+    ]
     for p in sec.paired:
         unit = UNITS.get(p.get("metric"), "")
         w = wins(sec, p["a"], p["b"], p.get("metric"))
-        cells = [swatch(pal.colour(p["a"])) + html.escape(p["a"]), swatch(pal.colour(p["b"])) + html.escape(p["b"]),
-                 html.escape(f"{p.get('metric')} ({unit})" if unit else str(p.get("metric"))), count(p.get("n")),
-                 html.escape(diff(p.get("diff"), p.get("diff_ci95"))),
-                 html.escape(verdict(p.get("diff"), p.get("diff_ci95"), p["a"], p["b"], unit or "")),
-                 "/".join(map(str, w)) if w else "–"]
+        cells = [
+            swatch(pal.colour(p["a"])) + html.escape(p["a"]),
+            swatch(pal.colour(p["b"])) + html.escape(p["b"]),
+            html.escape(f"{p.get('metric')} ({unit})" if unit else str(p.get("metric"))),
+            count(p.get("n")),
+            html.escape(diff(p.get("diff"), p.get("diff_ci95"))),
+            html.escape(verdict(p.get("diff"), p.get("diff_ci95"), p["a"], p["b"], unit or "")),
+            "/".join(map(str, w)) if w else "–",
+        ]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "\n".join(out + ["</table></details>"])
 
@@ -189,27 +197,39 @@ def summary_rows(sections) -> list[dict]:
         ties, rest = [], []
         for r in rows[1:]:
             p = _pair(sec, best["label"], r["label"])
-            same = (p is not None and abs(p[0]) < TIE and not p[1] >= TIE) or \
-                   (p is None and abs(_f(r["pos_rmse"]) - _f(best["pos_rmse"])) < TIE)
+            same = (p is not None and abs(p[0]) < TIE and not p[1] >= TIE) or (
+                p is None and abs(_f(r["pos_rmse"]) - _f(best["pos_rmse"])) < TIE
+            )
             (ties if same else rest).append(r)
         note = ""
         if rest:
             nxt = rest[0]
             p = _pair(sec, best["label"], nxt["label"])
             if p is not None:
-                note = (f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; paired "
-                        f"difference {diff(*p)} m: {verdict(*p, best['label'], nxt['label'])}")
+                note = (
+                    f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; paired "
+                    f"difference {diff(*p)} m: {verdict(*p, best['label'], nxt['label'])}"
+                )
             else:
                 lo = _f(best["pos_rmse"]) + _f(best.get("pos_rmse_ci95"))
                 hi = _f(nxt["pos_rmse"]) - _f(nxt.get("pos_rmse_ci95"))
-                note = (f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; intervals "
-                        + ("disjoint" if lo < hi else "overlap"))
+                note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; intervals " + (
+                    "disjoint" if lo < hi else "overlap"
+                )
         flags = [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
         flags += [f"{r['label']}: lost {summary.lost_cell(r)}" for r in sec.rows if _f(r.get("lost")) > 0]
         flags += [f"{r['label']}: {int(_f(r['diverged']))} diverged" for r in sec.rows if _f(r.get("diverged")) > 0]
-        out.append({"section": sec.title, "best": best["label"], "ties": [r["label"] for r in ties],
-                    "value": pm(best["pos_rmse"], best.get("pos_rmse_ci95")), "runs": count(best.get("runs")),
-                    "note": note, "flags": flags})
+        out.append(
+            {
+                "section": sec.title,
+                "best": best["label"],
+                "ties": [r["label"] for r in ties],
+                "value": pm(best["pos_rmse"], best.get("pos_rmse_ci95")),
+                "runs": count(best.get("runs")),
+                "note": note,
+                "flags": flags,
+            }
+        )
     return out
 
 
@@ -220,8 +240,14 @@ def summary_table(sections, pal: Palette) -> str:
         best = swatch(pal.colour(s["best"])) + f"<b>{html.escape(s['best'])}</b>"
         if s["ties"]:
             best += " tied with " + ", ".join(swatch(pal.colour(t)) + html.escape(t) for t in s["ties"])
-        cells = [html.escape(s["section"]), best, html.escape(s["value"]), s["runs"], html.escape(s["note"]),
-                 html.escape("; ".join(s["flags"])) or "none"]
+        cells = [
+            html.escape(s["section"]),
+            best,
+            html.escape(s["value"]),
+            s["runs"],
+            html.escape(s["note"]),
+            html.escape("; ".join(s["flags"])) or "none",
+        ]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "\n".join(out + ["</table>"])
 

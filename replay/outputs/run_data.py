@@ -13,6 +13,7 @@ north as east. Its heading (clockwise from north) becomes the ENU yaw
 (anticlockwise from east): ``yaw = pi/2 - heading`` (:func:`enu_yaw`). Axis names
 outside that list are taken in order as x, y, z.
 """
+
 from __future__ import annotations
 
 import gzip
@@ -43,8 +44,10 @@ def load_run(run_dir, data_dir=None, run: int = 0, select=None) -> dict:
         return load_campaign_run(run_dir, data_dir, run, select or {})
     if any((select or {}).values()):
         flags = ", ".join(f"--{k}" for k, v in select.items() if v)
-        raise ReplayError(f"export: {flags} choose among a campaign's configurations; {run_dir} is a `replay eval` "
-                          "output (every filter of it is exported; --run picks the run)")
+        raise ReplayError(
+            f"export: {flags} choose among a campaign's configurations; {run_dir} is a `replay eval` "
+            "output (every filter of it is exported; --run picks the run)"
+        )
     run_dir = Path(run_dir)
     path = run_dir / "manifest.json"
     try:
@@ -53,8 +56,9 @@ def load_run(run_dir, data_dir=None, run: int = 0, select=None) -> dict:
         names, runs = list(cfg["filters"]), cfg.get("runs")
         cfg["dataset"], cfg["seed"], cfg["task"]  # noqa: B018 -- present
     except FileNotFoundError:
-        raise DataError(path, "no such file: not a `replay eval` output directory (nor a campaign's: no units/)") \
-            from None
+        raise DataError(
+            path, "no such file: not a `replay eval` output directory (nor a campaign's: no units/)"
+        ) from None
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise DataError(path, f"not a replay manifest ({e})") from None
     for name in names:
@@ -62,10 +66,19 @@ def load_run(run_dir, data_dir=None, run: int = 0, select=None) -> dict:
             raise DataError(path, f"filter name {name!r} is not a plain name")
     check_run(run, runs, path)
     frame, problem = frame_and_problem(cfg, run, data_dir)
-    estimates = {name: read_estimates(run_dir / "estimates" / f"{name}.csv.gz", 0 if is_recorded(name) else run)
-                 for name in names}
-    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates, "run": run,
-            "source": run_dir, "manifest": {"manifest.json": text}}
+    estimates = {
+        name: read_estimates(run_dir / "estimates" / f"{name}.csv.gz", 0 if is_recorded(name) else run)
+        for name in names
+    }
+    return {
+        "config": cfg,
+        "frame": frame,
+        "problem": problem,
+        "estimates": estimates,
+        "run": run,
+        "source": run_dir,
+        "manifest": {"manifest.json": text},
+    }
 
 
 def check_run(run, runs, where) -> None:
@@ -82,8 +95,14 @@ def frame_and_problem(cfg: dict, run: int, data_dir=None):
     from replay.util.seeds import DATA, TASK, rng_for
 
     dparams, tparams = dict(cfg.get("dataset_params") or {}), dict(cfg.get("task_params") or {})
-    frame = registry.load_frame(cfg["dataset"], data_dir=data_dir, rng=rng_for(cfg["seed"], run, DATA),
-                                first=cfg.get("first"), adapter=cfg.get("adapter"), **dparams)
+    frame = registry.load_frame(
+        cfg["dataset"],
+        data_dir=data_dir,
+        rng=rng_for(cfg["seed"], run, DATA),
+        first=cfg.get("first"),
+        adapter=cfg.get("adapter"),
+        **dparams,
+    )
     return frame, make_task(cfg["task"], **tparams).build(frame, rng_for(cfg["seed"], run, TASK))
 
 
@@ -104,11 +123,14 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     from replay.campaign.store import RERUN_HINT, Store
 
     select, store = {k: _split(v) for k, v in (select or {}).items()}, Store(out)
-    chosen = [(h, c) for h, c in store.configs()
-              if (not select.get("dataset") or c["dataset"] in select["dataset"])
-              and (not select.get("task") or c["task"] in select["task"])
-              and (not select.get("filter") or c["filter"] in select["filter"])
-              and (not select.get("config") or any(h.startswith(p) for p in select["config"]))]
+    chosen = [
+        (h, c)
+        for h, c in store.configs()
+        if (not select.get("dataset") or c["dataset"] in select["dataset"])
+        and (not select.get("task") or c["task"] in select["task"])
+        and (not select.get("filter") or c["filter"] in select["filter"])
+        and (not select.get("config") or any(h.startswith(p) for p in select["config"]))
+    ]
     if not chosen:
         asked = " ".join(f"--{k} {','.join(v)}" for k, v in select.items() if v) or "(all)"
         known = "; ".join(sorted({f"{c['dataset']} {c['task']} {c['filter']} {h[:8]}" for h, c in store.configs()}))
@@ -117,14 +139,22 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     for h, c in chosen:
         groups.setdefault(summary.group_key(c), []).append((h, c))
     if len(groups) > 1:
-        kinds = "; ".join(f"{g[0][1]['dataset']} task={g[0][1]['task']} seed={g[0][1]['seed']} "
-                          f"first={g[0][1]['first']} ({len(g)} configurations, e.g. --config {g[0][0][:8]})"
-                          for g in groups.values())
-        raise ReplayError(f"{out}: the selection spans {len(groups)} datasets/tasks ({kinds}); one export holds "
-                          "one: choose with --dataset, --task, --filter or --config")
+        kinds = "; ".join(
+            f"{g[0][1]['dataset']} task={g[0][1]['task']} seed={g[0][1]['seed']} "
+            f"first={g[0][1]['first']} ({len(g)} configurations, e.g. --config {g[0][0][:8]})"
+            for g in groups.values()
+        )
+        raise ReplayError(
+            f"{out}: the selection spans {len(groups)} datasets/tasks ({kinds}); one export holds "
+            "one: choose with --dataset, --task, --filter or --config"
+        )
     chosen.sort(key=lambda hc: (hc[1]["filter"], json.dumps(hc[1]["filter_params"], sort_keys=True), hc[0]))
-    rows = summary.label([{"filter": c["filter"], "params": json.dumps(c["filter_params"], sort_keys=True,
-                                                                      separators=(",", ":"))} for _, c in chosen])
+    rows = summary.label(
+        [
+            {"filter": c["filter"], "params": json.dumps(c["filter_params"], sort_keys=True, separators=(",", ":"))}
+            for _, c in chosen
+        ]
+    )
     names = [r["label"].replace(" ", "") for r in rows]
     names = [n if names.count(n) == 1 else f"{n}@{h[:8]}" for n, (h, _) in zip(names, chosen)]
     check_run(run, None, out)
@@ -148,9 +178,13 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
         cols = store.series(h, r)
         nx = sum(1 for k in cols if k[:1] == "x" and k[1:].isdigit())
         P, full = covcols.matrices(cols, nx)
-        estimates[name] = {"t": cols["t"], "x": np.column_stack([cols[f"x{i}"] for i in range(nx)]),
-                           "P": P, "full_covariance": full,
-                           "err": {k[4:]: v for k, v in cols.items() if k.startswith("err_")}}
+        estimates[name] = {
+            "t": cols["t"],
+            "x": np.column_stack([cols[f"x{i}"] for i in range(nx)]),
+            "P": P,
+            "full_covariance": full,
+            "err": {k[4:]: v for k, v in cols.items() if k.startswith("err_")},
+        }
         manifest[f"units/{h}/config.json"] = (unit / "config.json").read_text()
     cfg = chosen[0][1]
     frame, problem = frame_and_problem(cfg, run, data_dir or store.data_dirs().get(cfg["dataset"]))  # the campaign's
@@ -158,11 +192,19 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
         try:
             est["err"] = np.column_stack([est["err"][str(a)] for a in problem.axis_names])
         except KeyError as e:
-            raise ReplayError(f"{out}: the table of {name} has no position error column err_{e.args[0]}; "
-                              f"{RERUN_HINT}") from None
+            raise ReplayError(
+                f"{out}: the table of {name} has no position error column err_{e.args[0]}; {RERUN_HINT}"
+            ) from None
     manifest["selection"] = json.dumps({"run": run, "tracks": {n: h for n, (h, _) in zip(names, chosen)}})
-    return {"config": cfg, "frame": frame, "problem": problem, "estimates": estimates, "run": run,
-            "source": Path(out), "manifest": manifest}
+    return {
+        "config": cfg,
+        "frame": frame,
+        "problem": problem,
+        "estimates": estimates,
+        "run": run,
+        "source": Path(out),
+        "manifest": manifest,
+    }
 
 
 def _run_rows(fh, run: int):
@@ -198,8 +240,10 @@ def read_estimates(path, run: int = 0) -> dict:
         raise DataError(path, f"cannot read estimates ({e})") from None
     nx = sum(1 for h in head if h.startswith("x") and h[1:].isdigit())
     if not len(data) or data.shape[1] != len(head):
-        raise DataError(path, f"no rows of run {run}" if not len(data) else
-                        f"{data.shape[1]} columns for the {len(head)} of the header")
+        raise DataError(
+            path,
+            f"no rows of run {run}" if not len(data) else f"{data.shape[1]} columns for the {len(head)} of the header",
+        )
     if not np.array_equal(data[:, 1], np.arange(len(data))):
         raise DataError(path, f"the rows of run {run} are not its steps 0, 1, 2, ... in order")
     cols = dict(zip(head, data.T))
@@ -208,8 +252,13 @@ def read_estimates(path, run: int = 0) -> dict:
         raise DataError(path, f"no column {missing[0]} in the header")
     P, full = covcols.matrices(cols, nx)
     err = [h for h in head if h.startswith("err_")]
-    return {"t": cols["t"], "x": data[:, 3:3 + nx], "P": P, "full_covariance": full,
-            "err": np.column_stack([cols[h] for h in err]) if err else np.zeros((len(data), 0))}
+    return {
+        "t": cols["t"],
+        "x": data[:, 3 : 3 + nx],
+        "P": P,
+        "full_covariance": full,
+        "err": np.column_stack([cols[h] for h in err]) if err else np.zeros((len(data), 0)),
+    }
 
 
 def time_ns(frame, t) -> np.ndarray:
@@ -237,16 +286,26 @@ def track_index(name: str, problem) -> tuple[list[int], int | None]:
     return list(problem.position_index), heading_index(problem)
 
 
-_SLOT = {"x": (0, 1), "east": (0, 1), "y": (1, 1), "north": (1, 1), "z": (2, 1), "up": (2, 1),
-         "depth": (2, -1), "down": (2, -1)}
+_SLOT = {
+    "x": (0, 1),
+    "east": (0, 1),
+    "y": (1, 1),
+    "north": (1, 1),
+    "z": (2, 1),
+    "up": (2, 1),
+    "depth": (2, -1),
+    "down": (2, -1),
+}
 
 
 def enu_axes(problem) -> list[tuple[int, int]]:
     """(ENU slot, sign) of each position component of the task (see the module docstring)."""
     names = [str(a).lower() for a in problem.axis_names]
     if len(names) != len(problem.position_index) or not 1 <= len(names) <= 3:
-        raise ReplayError(f"export: task with position axes {tuple(problem.axis_names)}: "
-                          "cannot place them in east-north-up (1 to 3 axes)")
+        raise ReplayError(
+            f"export: task with position axes {tuple(problem.axis_names)}: "
+            "cannot place them in east-north-up (1 to 3 axes)"
+        )
     slots = [_SLOT.get(n) for n in names]
     if None in slots or len({s for s, _ in slots}) < len(slots):
         return [(i, 1) for i in range(len(names))]

@@ -15,6 +15,7 @@ An explicit ``--out DIR`` is held for the whole run by the lock file ``.DIR.lock
 (:func:`out_locked`, the campaign lock of :mod:`replay.campaign.lock`): a second writer refuses
 in one line naming the holder's pid, or with ``--wait`` waits for it. The lock file stays.
 """
+
 from __future__ import annotations
 
 import os
@@ -126,7 +127,8 @@ def out_locked(out, wait: bool = False):
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ReplayError(f"--out {out}: cannot create {target.parent} ({err.strerror})") from None
-    busy = (f"--out {out}: another replay eval process (pid {{pid}}) is writing to it; "
-            "wait for it to finish or pass --wait")
+    busy = (
+        f"--out {out}: another replay eval process (pid {{pid}}) is writing to it; wait for it to finish or pass --wait"
+    )
     with lock_file(target.parent / f".{target.name}.lock", wait, busy=busy, what="the --out lock"):
         yield target

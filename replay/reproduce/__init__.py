@@ -6,6 +6,7 @@
 paper's numbers beside ours (with 95 % intervals) and writes the Markdown
 report (``docs/reproduction/<paper>.md`` by default).
 """
+
 from importlib import import_module
 
 from replay.util.errors import ReplayError

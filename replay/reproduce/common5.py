@@ -9,6 +9,7 @@ recomputed over the union by :func:`replay.scoring.summary.add_paired` (the code
 ``replay eval``'s ``pos_rmse_vs_<baseline>``): jobs with the same seed, dataset
 and task parameters ran on the same measurements (common random numbers).
 """
+
 from __future__ import annotations
 
 import sys
@@ -46,9 +47,16 @@ def run_jobs(jobs: list[Job], runs: int, seed: int, data_dir=None, quiet: bool =
         n = job.runs or runs
         if not quiet:
             print(f"[{i}/{len(jobs)}] {job.key} ({n} runs) ...", file=sys.stderr, flush=True)
-        out[job.key] = evaluate(job.dataset, filters=job.filters, runs=n, seed=seed, data_dir=data_dir,
-                                dataset_params=job.dataset_params, filter_params=job.filter_params,
-                                task_params=job.task_params or None)
+        out[job.key] = evaluate(
+            job.dataset,
+            filters=job.filters,
+            runs=n,
+            seed=seed,
+            data_dir=data_dir,
+            dataset_params=job.dataset_params,
+            filter_params=job.filter_params,
+            task_params=job.task_params or None,
+        )
     return out
 
 
@@ -98,8 +106,9 @@ def diff_cell(r: dict, metric: str = "pos_rmse", digits: int = 3) -> str:
     return f"{d:+.{digits}f} ± {h:.{digits}f}{mark}"
 
 
-def table(rows: list[dict], metrics=("pos_rmse",), paired_metrics=("pos_rmse",), digits: int = 3,
-          base_name: str | None = None) -> str:
+def table(
+    rows: list[dict], metrics=("pos_rmse",), paired_metrics=("pos_rmse",), digits: int = 3, base_name: str | None = None
+) -> str:
     """:func:`result_rows` (mean ± 95 %, median, lost k/N, diverged) plus a paired column per metric
     in ``paired_metrics``: this row minus the first row, run by run, with its 95 % interval."""
     base = base_name or rows[0]["label"]
@@ -162,6 +171,12 @@ def rmse_figures(t, errors: dict, quantities, title: str) -> dict:
     for key, name, unit in quantities:
         curves = {label: e[key] for label, e in errors.items()}
         runs = min(len(v) for v in curves.values())
-        figs[key] = mc_figure(t, curves, name, unit, f"{title}: {name} over time, {runs} runs "
-                              "(line: RMSE over the runs; band: 5-95 % of the runs' |error|)", stat="rmse")
+        figs[key] = mc_figure(
+            t,
+            curves,
+            name,
+            unit,
+            f"{title}: {name} over time, {runs} runs (line: RMSE over the runs; band: 5-95 % of the runs' |error|)",
+            stat="rmse",
+        )
     return figs

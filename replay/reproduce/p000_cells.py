@@ -8,6 +8,7 @@ through :func:`replay.run.evaluation.evaluate` and keeps per filter the leaderbo
 RMSE of each channel (diverged +inf, lost flags), the same over the maneuvers and the level runs,
 and the particle filters' mean ESS / N.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -31,8 +32,10 @@ CH = ("depth", "speed", "pitch")
 UNITS = {"depth": "m", "speed": "m/s", "pitch": "rad"}
 N = 1000  # particles of GPF, MMPF and PF (000 §3)
 # sim/lake-depth's default sensors: their RMS over a 90 s run (base_sigma times the regimes' RMS factor)
-GENERATED_RMS = tuple(float(b) / f for b, f in zip(next(p.default for p in make_frame.PARAMS if p.name == "base_sigma"),
-                                                   base_for_rms((1.0, 1.0, 1.0))))
+GENERATED_RMS = tuple(
+    float(b) / f
+    for b, f in zip(next(p.default for p in make_frame.PARAMS if p.name == "base_sigma"), base_for_rms((1.0, 1.0, 1.0)))
+)
 
 
 def tidy(x: float) -> float:  # a short decimal for commands: 0.006, not 0.006000000000000001
@@ -40,8 +43,13 @@ def tidy(x: float) -> float:  # a short decimal for commands: 0.006, not 0.00600
 
 
 MATCHED_R = [tidy(g * g) for g in GENERATED_RMS]  # the generated sensors' mean square noise (an oracle's R)
-MAIN = {"GPF": ("gpf", {}), "MMPF": ("mmpf", {}), "EKF": ("ekf", {}), "UKF": ("ukf", {}),
-        "PF": ("pf", {"n_particles": N})}
+MAIN = {
+    "GPF": ("gpf", {}),
+    "MMPF": ("mmpf", {}),
+    "EKF": ("ekf", {}),
+    "UKF": ("ukf", {}),
+    "PF": ("pf", {"n_particles": N}),
+}
 ORACLE = {f"{lab}, R matched": (name, {**p, "R": MATCHED_R}) for lab, (name, p) in MAIN.items() if lab != "GPF"}
 ABLATIONS = {  # GPF with one part changed (same filter stream as GPF: common random numbers)
     "GPF without grey particles": ("gpf", {"grey": False}),
@@ -59,9 +67,11 @@ class Cell:
     profile: int | None = None  # profile_seed; None: the fixed schedule
 
     def dataset_params(self, duration: float | None = None) -> dict:
-        return ({} if self.noise is None else {"noise_rms": [tidy(self.noise * s) for s in R_STD]}) | (
-            {} if self.profile is None else {"profile_seed": int(self.profile)}) | (
-            {} if duration is None else {"duration": float(duration)})
+        return (
+            ({} if self.noise is None else {"noise_rms": [tidy(self.noise * s) for s in R_STD]})
+            | ({} if self.profile is None else {"profile_seed": int(self.profile)})
+            | ({} if duration is None else {"duration": float(duration)})
+        )
 
     def task_params(self) -> dict:
         return {} if self.kappa == 1.0 else {"Q": [tidy(self.kappa * q) for q in Q_DIAG]}
@@ -73,7 +83,8 @@ class Cell:
     @property
     def name(self) -> str:
         return f"sensors {self.noise_text}, κ = {self.kappa:g}, " + (
-            "fixed profile" if self.profile is None else f"profile {self.profile}")
+            "fixed profile" if self.profile is None else f"profile {self.profile}"
+        )
 
 
 def maneuver_mask(problem) -> np.ndarray:
@@ -95,16 +106,32 @@ def _segment(res, div, keep) -> dict:
 def compute(job) -> dict:
     """``(cell, labels, runs, seed, duration)`` -> the cell's results; the labels' filters differ."""
     cell, labels, runs, seed, duration = job
-    ev = evaluate(DATASET, task=TASK, filters=[VARIANTS[lab][0] for lab in labels], runs=runs, seed=seed,
-                  dataset_params=cell.dataset_params(duration), task_params=cell.task_params(),
-                  filter_params={VARIANTS[lab][0]: VARIANTS[lab][1] for lab in labels})
-    out = {"cell": cell, "seed": seed, "command": command_line(ev.config), "filters": {},
-           "t": np.asarray(ev.t, float), "maneuvers": plain(ev.frame_meta["maneuvers"])}
+    ev = evaluate(
+        DATASET,
+        task=TASK,
+        filters=[VARIANTS[lab][0] for lab in labels],
+        runs=runs,
+        seed=seed,
+        dataset_params=cell.dataset_params(duration),
+        task_params=cell.task_params(),
+        filter_params={VARIANTS[lab][0]: VARIANTS[lab][1] for lab in labels},
+    )
+    out = {
+        "cell": cell,
+        "seed": seed,
+        "command": command_line(ev.config),
+        "filters": {},
+        "t": np.asarray(ev.t, float),
+        "maneuvers": plain(ev.frame_meta["maneuvers"]),
+    }
     for lab, res, row in zip(labels, ev.results, ev.rows):
         div = np.array([bool(m["diverged"]) for m in res.runs])
         out["filters"][lab] = {
-            "row": plain(row), "lost": per_run(res, "depth_rmse")[1], "rmse": {ch: per_run(res, f"{ch}_rmse")[0]
-                                                                               for ch in CH},
+            "row": plain(row),
+            "lost": per_run(res, "depth_rmse")[1],
+            "rmse": {ch: per_run(res, f"{ch}_rmse")[0] for ch in CH},
             "ess": np.array([e.info.get("mean_ess", np.nan) / N for e in res.estimates]),
-            "man": _segment(res, div, maneuver_mask), "level": _segment(res, div, lambda p: ~maneuver_mask(p))}
+            "man": _segment(res, div, maneuver_mask),
+            "level": _segment(res, div, lambda p: ~maneuver_mask(p)),
+        }
     return out

@@ -15,6 +15,7 @@ imported) and end with the process that started them
 compiled-kernel threads (``REPLAY_THREADS``), so two workers on two cores do
 not run four threads.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,8 +57,7 @@ def pool(n: int):
         ex.shutdown(wait=True, cancel_futures=True)
 
 
-def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, quiet: bool = False,
-                      prefix: str = ""):
+def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, quiet: bool = False, prefix: str = ""):
     """``fn(args[i])`` for every i, the largest ``costs`` first, in ``executor`` (a pool of
     :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes,
     with the line ``[done/total] <prefix><labels[i]> done at <s> s`` on stderr unless ``quiet``."""

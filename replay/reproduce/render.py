@@ -15,6 +15,7 @@ decided, and the residual gap beside a *recovered* row), and a link to the evide
 An evidence row carries the anchor :func:`anchor_tag` of its claim's ``evidence``; :func:`fmt`
 and :func:`pm` print a mean ± half-width and a paired difference in the tables.
 """
+
 from __future__ import annotations
 
 import re
@@ -65,8 +66,10 @@ def found(v: Verdict) -> str:
     """The verdict table's evidence cell of ``v``: the deciding outcomes, and the condition's or ablation's."""
     out = "; ".join(o.text() for o in v.deciding)
     if v.label == RECOVERED:
-        out = "under the condition: " + "; ".join(o.text() for o in v.support) + f". Residual gap in the paper's " \
-              f"setting: {v.gap}"
+        out = (
+            "under the condition: " + "; ".join(o.text() for o in v.support) + f". Residual gap in the paper's "
+            f"setting: {v.gap}"
+        )
     elif v.label == MECHANISM:
         out += ". Ablation: " + "; ".join(o.text() for o in v.support)
     for kind, words in (("condition", "Stated condition, not met"), ("mechanism", "Ablation, not shown")):
@@ -77,10 +80,27 @@ def found(v: Verdict) -> str:
 
 def verdict_table(verdicts: list[Verdict]) -> str:
     """The verdict table (module docstring) and the count of each label."""
-    rows = [[v.claim.words, v.claim.paper, f"**{v.label}**", v.rule, v.tests, found(v),
-             f"[{v.claim.evidence.lstrip('#')}]({v.claim.evidence})"] for v in verdicts]
-    head = ["claim", "paper", "verdict", "rule (declared before the run)", "test",
-            "adjusted p / interval (deciding comparisons)", "evidence"]
+    rows = [
+        [
+            v.claim.words,
+            v.claim.paper,
+            f"**{v.label}**",
+            v.rule,
+            v.tests,
+            found(v),
+            f"[{v.claim.evidence.lstrip('#')}]({v.claim.evidence})",
+        ]
+        for v in verdicts
+    ]
+    head = [
+        "claim",
+        "paper",
+        "verdict",
+        "rule (declared before the run)",
+        "test",
+        "adjusted p / interval (deciding comparisons)",
+        "evidence",
+    ]
     return table(head, rows) + "\n\n" + counts(verdicts)
 
 
@@ -99,6 +119,8 @@ def render(template: str | Path, fields: dict, verdicts: list[Verdict]) -> str:
         raise ValueError(f"{path.name}: section {early[0]!r} before the verdict table")
     missing, unused = names - set(fields) - {"verdicts"}, set(fields) - names
     if missing or unused:
-        raise ValueError(f"{path.name}: placeholders without a value {sorted(missing)}, values without a "
-                         f"placeholder {sorted(unused)}")
+        raise ValueError(
+            f"{path.name}: placeholders without a value {sorted(missing)}, values without a "
+            f"placeholder {sorted(unused)}"
+        )
     return t.substitute({k: str(v) for k, v in fields.items()}, verdicts=verdict_table(verdicts))

@@ -20,6 +20,7 @@ results), read back by ``replay res`` without the inputs.
   ``j``, ``t_i``, ``t_j`` and the six relative errors;
 * ``leaderboard.csv`` — the same rows as ``-o``, every digit.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -48,7 +49,7 @@ def check(out, inputs) -> None:
 
 
 def _trial_of(row: dict):
-    return (row["filter"][len("recorded:"):], int(row["trial"])) if row.get("trial", "") != "" else (None, None)
+    return (row["filter"][len("recorded:") :], int(row["trial"])) if row.get("trial", "") != "" else (None, None)
 
 
 def frames(result) -> dict:
@@ -61,14 +62,22 @@ def frames(result) -> dict:
     out = {"ape": ape}
     if any(s.rpe_pairs is not None for s in result.scores.values()):
         pairs = [s.rpe_pairs for s in result.scores.values() if s.rpe_pairs is not None]
-        out["rpe"] = result.errors("rpe").assign(i=np.concatenate([i for i, _ in pairs]),
-                                                  j=np.concatenate([j for _, j in pairs]))
+        out["rpe"] = result.errors("rpe").assign(
+            i=np.concatenate([i for i, _ in pairs]), j=np.concatenate([j for _, j in pairs])
+        )
     parts = []
     for name, s in result.scores.items():
         for label, entry in s.lengths.items():
             i, j = entry["pairs"]
-            cols = {"estimate": name, "length": label, "length_m": entry["length"], "i": i, "j": j,
-                    "t_i": s.reference.t[i], "t_j": s.reference.t[j]}
+            cols = {
+                "estimate": name,
+                "length": label,
+                "length_m": entry["length"],
+                "i": i,
+                "j": j,
+                "t_i": s.reference.t[i],
+                "t_j": s.reference.t[j],
+            }
             cols.update({e: entry[e] for e in LENGTH_ERRORS})
             parts.append(pd.DataFrame(cols))
     if parts:
@@ -88,21 +97,51 @@ def meta(result, reference: str | None = None) -> dict:
     for (name, s), row in zip(result.scores.items(), result.rows):
         R, t, c = s.transform
         trial_of, trial = _trial_of(row)
-        estimates.append({
-            "name": name, "source": json.loads(row["params"]).get("source", ""), "trial_of": trial_of, "trial": trial,
-            "matched": len(s.reference), "unmatched": s.unmatched,
-            "transform": {"R": np.asarray(R, float).tolist(), "t": np.asarray(t, float).tolist(), "scale": float(c)},
-            "stats": {kind: {rel: statistics(e) | {"n": len(e)} for rel, e in errs.items()}
-                      for kind, errs in (("ape", s.ape), ("rpe", s.rpe)) if errs},
-            "lengths": {label: {"length_m": entry["length"], "gaps": entry["gaps"],
-                                **{e: length_stats(entry[e]) for e in LENGTH_ERRORS}}
-                        for label, entry in s.lengths.items()}})
+        estimates.append(
+            {
+                "name": name,
+                "source": json.loads(row["params"]).get("source", ""),
+                "trial_of": trial_of,
+                "trial": trial,
+                "matched": len(s.reference),
+                "unmatched": s.unmatched,
+                "transform": {
+                    "R": np.asarray(R, float).tolist(),
+                    "t": np.asarray(t, float).tolist(),
+                    "scale": float(c),
+                },
+                "stats": {
+                    kind: {rel: statistics(e) | {"n": len(e)} for rel, e in errs.items()}
+                    for kind, errs in (("ape", s.ape), ("rpe", s.rpe))
+                    if errs
+                },
+                "lengths": {
+                    label: {
+                        "length_m": entry["length"],
+                        "gaps": entry["gaps"],
+                        **{e: length_stats(entry[e]) for e in LENGTH_ERRORS},
+                    }
+                    for label, entry in s.lengths.items()
+                },
+            }
+        )
     ref_source = reference or ref.source or ref.name
-    return {"format": FORMAT, "version": VERSION, "replay_version": __version__,
-            "reference": {"source": str(ref_source), "name": ref.name, "poses": len(ref), "t_first": float(ref.t[0]),
-                          "t_last": float(ref.t[-1])},
-            "settings": settings, "config_hash": config_hash({"reference": str(ref_source), **settings}),
-            "estimates": estimates, "leaderboard": plain(result.output_rows())}
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "replay_version": __version__,
+        "reference": {
+            "source": str(ref_source),
+            "name": ref.name,
+            "poses": len(ref),
+            "t_first": float(ref.t[0]),
+            "t_last": float(ref.t[-1]),
+        },
+        "settings": settings,
+        "config_hash": config_hash({"reference": str(ref_source), **settings}),
+        "estimates": estimates,
+        "leaderboard": plain(result.output_rows()),
+    }
 
 
 def _sha256(path: Path) -> str:
@@ -148,8 +187,10 @@ def load(path) -> Archive:
     """The archive in ``path``, checked (format, version, every file's SHA-256); one line otherwise."""
     shown, p = str(path), Path(path)
     if not p.is_dir():
-        raise ReplayError(f"{shown}: {'no such directory' if not p.exists() else 'not a directory'} (replay res "
-                          "reads the directories replay score --save-results writes)")
+        raise ReplayError(
+            f"{shown}: {'no such directory' if not p.exists() else 'not a directory'} (replay res "
+            "reads the directories replay score --save-results writes)"
+        )
     f = p / META
     if not f.is_file():
         raise ReplayError(f"{shown}: not a results archive (no {META}; written by replay score --save-results DIR)")
@@ -158,8 +199,11 @@ def load(path) -> Archive:
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise ReplayError(f"{shown}/{META}: unreadable ({str(e)[:80]})") from None
     if not isinstance(m, dict) or m.get("format") != FORMAT:
-        raise ReplayError(f"{shown}/{META}: not a replay score results file (format {str(m.get('format'))[:40]!r})"
-                          if isinstance(m, dict) else f"{shown}/{META}: not a replay score results file")
+        raise ReplayError(
+            f"{shown}/{META}: not a replay score results file (format {str(m.get('format'))[:40]!r})"
+            if isinstance(m, dict)
+            else f"{shown}/{META}: not a replay score results file"
+        )
     if m.get("version") != VERSION:
         raise ReplayError(f"{shown}/{META}: archive version {m.get('version')!r}, this replay reads {VERSION}")
     if not m.get("estimates"):

@@ -5,6 +5,7 @@ length, the relative translation error (% of the length) and rotation error (deg
 boxplots. Each panel has one box per estimate (each trial of a trial set is one, coloured by its set);
 ``replay res --plot`` adds the APE over time above them. Written without pyplot.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,14 +26,22 @@ def panels(tables: dict, relation: str, label=lambda name: name) -> list:
     for kind in ("ape", "rpe"):
         df = tables.get(kind)
         if df is not None and relation in df:
-            out.append((f"{kind.upper()} {relation}{_unit(UNITS[relation])}",
-                        {label(n): g[relation].dropna().to_numpy() for n, g in df.groupby("estimate", sort=False)}))
+            out.append(
+                (
+                    f"{kind.upper()} {relation}{_unit(UNITS[relation])}",
+                    {label(n): g[relation].dropna().to_numpy() for n, g in df.groupby("estimate", sort=False)},
+                )
+            )
     df = tables.get("lengths")
     if df is not None:
         for length, g in df.groupby("length", sort=False):
             for err in ("trans_perc", "rot_deg_per_m"):
-                out.append((f"length {length}: {err}{_unit(REL_UNITS[err])}",
-                            {label(n): h[err].to_numpy() for n, h in g.groupby("estimate", sort=False)}))
+                out.append(
+                    (
+                        f"length {length}: {err}{_unit(REL_UNITS[err])}",
+                        {label(n): h[err].to_numpy() for n, h in g.groupby("estimate", sort=False)},
+                    )
+                )
     return out
 
 

@@ -1,5 +1,6 @@
 """What ``replay eval`` refuses before any run: filter names and parameters, recorded estimates the
 mapping does not declare, memory that cannot be had."""
+
 from __future__ import annotations
 
 
@@ -10,15 +11,24 @@ from replay.util.errors import ReplayError
 
 def check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
     """``filters`` (names), ``filter_params`` ({name: {parameter: value}}) and ``recorded`` checked: one line."""
-    if isinstance(filters, str) or not isinstance(filters, (list, tuple)) or not all(
-            isinstance(f, str) and f.strip() for f in filters):
+    if (
+        isinstance(filters, str)
+        or not isinstance(filters, (list, tuple))
+        or not all(isinstance(f, str) and f.strip() for f in filters)
+    ):
         raise ReplayError(f"filters must be a list of filter names (got {filters!r:.80})")
-    if filter_params is not None and not (isinstance(filter_params, dict) and all(
-            isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())):
-        raise ReplayError(f"filter_params must be an object {{filter: {{parameter: value}}}} "
-                          f"(got {filter_params!r:.80})")
-    if recorded is not None and (isinstance(recorded, str) or not isinstance(recorded, (list, tuple))
-                                 or not all(isinstance(r, str) for r in recorded)):
+    if filter_params is not None and not (
+        isinstance(filter_params, dict)
+        and all(isinstance(k, str) and isinstance(v, dict) for k, v in filter_params.items())
+    ):
+        raise ReplayError(
+            f"filter_params must be an object {{filter: {{parameter: value}}}} (got {filter_params!r:.80})"
+        )
+    if recorded is not None and (
+        isinstance(recorded, str)
+        or not isinstance(recorded, (list, tuple))
+        or not all(isinstance(r, str) for r in recorded)
+    ):
         raise ReplayError(f"recorded must be a list of recorded estimate names or null (got {recorded!r:.80})")
     return list(filters), filter_params or {}
 
@@ -42,7 +52,7 @@ def check_recorded(dataset, names, dataset_params) -> None:
     """Refuse, before any recording is read, a ``recorded:<name>`` of ``names`` that the mapping given
     in ``dataset_params`` does not declare in its ``[estimates]`` (without a mapping, the proposed one is
     known only from the recording: :func:`_recorded` checks after reading it)."""
-    wanted = [n[len(RECORDED):] for n in names if is_recorded(n)]
+    wanted = [n[len(RECORDED) :] for n in names if is_recorded(n)]
     mapping = (dataset_params or {}).get("mapping")
     if not wanted or mapping is None:
         return
@@ -51,8 +61,10 @@ def check_recorded(dataset, names, dataset_params) -> None:
     declared = [e.name for e in resolve_mapping(mapping).estimates]
     unknown = [n for n in wanted if n not in declared]
     if unknown:
-        raise ReplayError(f"{dataset}: no recorded estimate {unknown[0]!r} (the mapping's [estimates] "
-                          f"declare: {', '.join(declared) or 'none'})")
+        raise ReplayError(
+            f"{dataset}: no recorded estimate {unknown[0]!r} (the mapping's [estimates] "
+            f"declare: {', '.join(declared) or 'none'})"
+        )
 
 
 def recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir):
@@ -66,7 +78,9 @@ def recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, 
     if recorded is None:
         named += [RECORDED + k for k in estimates if RECORDED + k not in named]
     for n in named:
-        if n[len(RECORDED):] not in estimates:
-            raise ReplayError(f"{dataset}: no recorded estimate {n[len(RECORDED):]!r} (the mapping's [estimates] "
-                              f"declare: {', '.join(estimates) or 'none'})")
+        if n[len(RECORDED) :] not in estimates:
+            raise ReplayError(
+                f"{dataset}: no recorded estimate {n[len(RECORDED) :]!r} (the mapping's [estimates] "
+                f"declare: {', '.join(estimates) or 'none'})"
+            )
     return list(dict.fromkeys(named)), estimates

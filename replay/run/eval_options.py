@@ -5,6 +5,7 @@ Each is a :class:`replay.util.params.Param` (type, default, bounds, unit, doc); 
 argument declarations (:mod:`replay.api_args`) reuse them, and the hostile API test
 generates its bad calls from them.
 """
+
 from __future__ import annotations
 
 import os
@@ -15,7 +16,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 MAX_RUNS = 1_000_000  # beyond, a run count is a typo; what fits in memory is checked too (replay.run.resources)
-MAX_SEED = 2 ** 63 - 1  # a TOML / JSON integer
+MAX_SEED = 2**63 - 1  # a TOML / JSON integer
 
 EVAL_OPTIONS = (
     Param("task", str, None, "task (default: the dataset's default task)", optional=True),
@@ -26,10 +27,19 @@ EVAL_OPTIONS = (
     Param("adapter", str, None, "adapter for a plain file (default: chosen from the file)", optional=True),
     Param("task_params", dict, None, "task parameters (replay list tasks)", optional=True),
     Param("dataset_params", dict, None, "dataset parameters (replay list datasets)", optional=True),
-    Param("alignment", str, "se3", "alignment of the estimate onto the reference for the ATE column",
-          choices=ALIGNMENTS),
-    Param("divergence_threshold", float, None, "position error beyond which a run counts as diverged (null: none)",
-          unit="m", low=0.0, low_open=True, optional=True),
+    Param(
+        "alignment", str, "se3", "alignment of the estimate onto the reference for the ATE column", choices=ALIGNMENTS
+    ),
+    Param(
+        "divergence_threshold",
+        float,
+        None,
+        "position error beyond which a run counts as diverged (null: none)",
+        unit="m",
+        low=0.0,
+        low_open=True,
+        optional=True,
+    ),
     Param("baseline", str, None, "row the paired columns compare with (default: the first)", optional=True),
     Param("batch", int, 25, "runs computed at once (a block)", unit="runs", low=1, high=MAX_RUNS),
 )

@@ -13,6 +13,7 @@ Recorded estimates of the frame (``[estimates]`` of a bag mapping) are rows
 (:func:`replay.trajectory.recorded.recorded_estimates`): one run each (deterministic), scored
 on the task's reference; their notes (what was associated) are ``Evaluation.notes``.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -105,9 +106,19 @@ class Evaluation:
         n = BY_NAME["runs"].check(n)
         if n >= self.config["runs"]:
             return self
-        results = [FilterResult(r.name, r.params, r.runs[:n], r.errors[:n], r.estimates[:n],
-                                config_hash=r.config_hash, config=r.config, records=r.records[:n])
-                   for r in self.results]
+        results = [
+            FilterResult(
+                r.name,
+                r.params,
+                r.runs[:n],
+                r.errors[:n],
+                r.estimates[:n],
+                config_hash=r.config_hash,
+                config=r.config,
+                records=r.records[:n],
+            )
+            for r in self.results
+        ]
         rows = _summarise(results, self.baseline)
         return replace(self, config=dict(self.config, runs=n), results=results, truths=self.truths[:n], rows=rows)
 
@@ -116,22 +127,41 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     """Each result's leaderboard row (``summary``), labelled, with the paired columns."""
     for res in results:
         series = {r["run"]: r["series"] for r in res.records}
-        res.summary = summary.config_row(res.config, res.config_hash, res.records,
-                                         lambda run, cols, s=series: {k: s[run][k] for k in cols},
-                                         __version__)
+        res.summary = summary.config_row(
+            res.config,
+            res.config_hash,
+            res.records,
+            lambda run, cols, s=series: {k: s[run][k] for k in cols},
+            __version__,
+        )
     rows = summary.label([r.summary for r in results])
-    rows = summary.add_paired(rows, {r.config_hash: r.config for r in results},
-                              {r.config_hash: r.records for r in results}, baseline)
+    rows = summary.add_paired(
+        rows, {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}, baseline
+    )
     return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
 
 
-def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, runs: int = DEFAULTS["runs"],
-             seed: int = DEFAULTS["seed"], first: int | None = None, data_dir=None,
-             task_params: dict | None = None, filter_params: dict | None = None,
-             dataset_params: dict | None = None, adapter: str | None = None, alignment: str = DEFAULTS["alignment"],
-             divergence_threshold: float | None = None, baseline: str | None = None,
-             batch: int = BATCH, recorded=(), progress=None,
-             min_scored_share: float = summary.MIN_SCORED_SHARE.default) -> Evaluation:
+def evaluate(
+    dataset: str,
+    *,
+    task: str | None = None,
+    filters=DEFAULT_FILTERS,
+    runs: int = DEFAULTS["runs"],
+    seed: int = DEFAULTS["seed"],
+    first: int | None = None,
+    data_dir=None,
+    task_params: dict | None = None,
+    filter_params: dict | None = None,
+    dataset_params: dict | None = None,
+    adapter: str | None = None,
+    alignment: str = DEFAULTS["alignment"],
+    divergence_threshold: float | None = None,
+    baseline: str | None = None,
+    batch: int = BATCH,
+    recorded=(),
+    progress=None,
+    min_scored_share: float = summary.MIN_SCORED_SHARE.default,
+) -> Evaluation:
     """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring).
 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
@@ -141,12 +171,25 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     """
     min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
     registry.check_data_dir(data_dir)
-    opts = validate_eval_options({"task": task, "runs": runs, "seed": seed, "first": first, "data_dir": data_dir,
-                                  "adapter": adapter, "task_params": task_params, "dataset_params": dataset_params,
-                                  "alignment": alignment, "divergence_threshold": divergence_threshold,
-                                  "baseline": baseline, "batch": batch})
-    runs, seed, first, divergence_threshold, batch = (opts[k] for k in ("runs", "seed", "first",
-                                                                         "divergence_threshold", "batch"))
+    opts = validate_eval_options(
+        {
+            "task": task,
+            "runs": runs,
+            "seed": seed,
+            "first": first,
+            "data_dir": data_dir,
+            "adapter": adapter,
+            "task_params": task_params,
+            "dataset_params": dataset_params,
+            "alignment": alignment,
+            "divergence_threshold": divergence_threshold,
+            "baseline": baseline,
+            "batch": batch,
+        }
+    )
+    runs, seed, first, divergence_threshold, batch = (
+        opts[k] for k in ("runs", "seed", "first", "divergence_threshold", "batch")
+    )
     filters, filter_params = check_filters(filters, filter_params, recorded)
     offline = [n for n in filters if not is_recorded(n)]
     instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
@@ -155,29 +198,40 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
     dataset = ref.id  # what the configurations and the manifest record
     dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
-    check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()],
-                   dataset_params)
-    task_name = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter,
-                                     dataset_params=dataset_params, seed=seed)
+    check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], dataset_params)
+    task_name = task or default_task(
+        ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dataset_params, seed=seed
+    )
     names, estimates = recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir)
     filters = offline + names
     for name in filter_params:
         if name not in filters:
-            raise ReplayError(f"parameters given for filter {name!r}, which is not among the filters run "
-                              f"({', '.join(filters) or 'none'})")
+            raise ReplayError(
+                f"parameters given for filter {name!r}, which is not among the filters run "
+                f"({', '.join(filters) or 'none'})"
+            )
     if not filters:
-        raise ReplayError(f"{dataset}: nothing to score: no filter (--filters none) and no recorded estimate "
-                          "(declare them in the mapping's [estimates]; docs/bags.md)")
+        raise ReplayError(
+            f"{dataset}: nothing to score: no filter (--filters none) and no recorded estimate "
+            "(declare them in the mapping's [estimates]; docs/bags.md)"
+        )
     if baseline is not None and baseline not in filters:
         raise ReplayError(f"--baseline {baseline!r}: not among the rows ({', '.join(filters)})")
     the_task = make_task(task_name, **(task_params or {}))
     base = (dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()))
     tail = (seed, alignment, divergence_threshold, adapter)
-    configs = [Config(*base, name, plain(params_of(f, "filter", name)), *tail)
-               for name, f in zip(offline, instances)]
-    configs += [Config(*base, name, plain(recorded_params(name[len(RECORDED):], filter_params.get(name),
-                                                          estimates[name[len(RECORDED):]].params)), *tail)
-                for name in names]
+    configs = [Config(*base, name, plain(params_of(f, "filter", name)), *tail) for name, f in zip(offline, instances)]
+    configs += [
+        Config(
+            *base,
+            name,
+            plain(
+                recorded_params(name[len(RECORDED) :], filter_params.get(name), estimates[name[len(RECORDED) :]].params)
+            ),
+            *tail,
+        )
+        for name in names
+    ]
     built = check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
     if any(noise_settings(f) for f in instances):  # their sizes, known once the task is built: before any run
         built = built or {0: build_problem(configs[0], 0, data_dir)}
@@ -192,36 +246,72 @@ def evaluate(dataset: str, *, task: str | None = None, filters=DEFAULT_FILTERS, 
             filters = offline + [MEASUREMENTS] + names
     results = []
     if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
-        progress.start(sum(1 if is_recorded(c.filter) else runs for c in configs),
-                       sum(particle_weight(c.filter_params, 1 if is_recorded(c.filter) else runs) for c in configs))
+        progress.start(
+            sum(1 if is_recorded(c.filter) else runs for c in configs),
+            sum(particle_weight(c.filter_params, 1 if is_recorded(c.filter) else runs) for c in configs),
+        )
     for cfg in configs:
         c, h = cfg.as_dict(), config_hash(cfg.as_dict())
         recs = []
         for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
             block = list(range(start, min(runs, start + batch)))
-            recs += [_filled(r) for r in run_block(c, block, data_dir, keep=True, strict=True,
-                                                   built=built if cfg is configs[0] else None)]
+            recs += [
+                _filled(r)
+                for r in run_block(
+                    c, block, data_dir, keep=True, strict=True, built=built if cfg is configs[0] else None
+                )
+            ]
             if progress is not None:
                 progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
-        results.append(FilterResult(cfg.filter, c["filter_params"], [r["metrics"] for r in recs],
-                                    [r["errors"] for r in recs], [r["estimates"] for r in recs],
-                                    config_hash=h, config=c, records=recs))
+        results.append(
+            FilterResult(
+                cfg.filter,
+                c["filter_params"],
+                [r["metrics"] for r in recs],
+                [r["errors"] for r in recs],
+                [r["estimates"] for r in recs],
+                config_hash=h,
+                config=c,
+                records=recs,
+            )
+        )
     rows = _summarise(results, baseline)
     problems = [r["problem"] for r in max(results, key=lambda r: len(r.records)).records]
     p0 = problems[0]
     config = {
-        "dataset": dataset, "task": task_name, "task_params": configs[0].task_params,
-        "filters": filters, "filter_params": {r.name: r.params for r in results},
-        "runs": runs, "seed": seed, "first": first, "dataset_params": configs[0].dataset_params,
-        "adapter": adapter, "alignment": alignment, "divergence_threshold": divergence_threshold,
-        "baseline": baseline, "dataset_sha256": p0.frame_meta.get("sha256"), "replay_version": __version__,
+        "dataset": dataset,
+        "task": task_name,
+        "task_params": configs[0].task_params,
+        "filters": filters,
+        "filter_params": {r.name: r.params for r in results},
+        "runs": runs,
+        "seed": seed,
+        "first": first,
+        "dataset_params": configs[0].dataset_params,
+        "adapter": adapter,
+        "alignment": alignment,
+        "divergence_threshold": divergence_threshold,
+        "baseline": baseline,
+        "dataset_sha256": p0.frame_meta.get("sha256"),
+        "replay_version": __version__,
         "config_hashes": {r.name: r.config_hash for r in results},
         "min_scored_share": min_scored_share,
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
-    return Evaluation(config, plain(p0.frame_meta), p0.frame_report.to_list(), results, p0.t,
-                      [p.truth_position for p in problems], tuple(p0.axis_names), rows, baseline, notes,
-                      scorer.units(p0), tuple(int(i) for i in p0.position_index))
+    return Evaluation(
+        config,
+        plain(p0.frame_meta),
+        p0.frame_report.to_list(),
+        results,
+        p0.t,
+        [p.truth_position for p in problems],
+        tuple(p0.axis_names),
+        rows,
+        baseline,
+        notes,
+        scorer.units(p0),
+        tuple(int(i) for i in p0.position_index),
+    )
 
 
 MEASUREMENTS = "measurements"  # replay.filters.measurements
@@ -234,8 +324,7 @@ def observes_position(problem) -> bool:
 
     if problem.z.shape[0] == 0:
         return False
-    seen = {i for j, i, _ in direct_rows(problem.model, problem.x0)
-            if np.isfinite(problem.z[:, j]).any()}
+    seen = {i for j, i, _ in direct_rows(problem.model, problem.x0) if np.isfinite(problem.z[:, j]).any()}
     return set(int(i) for i in problem.position_index) <= seen
 
 
@@ -246,8 +335,7 @@ def _filled(rec: dict) -> dict:
         return rec
     p = rec["problem"]
     n, nx = len(p.z), p.model.nx
-    est = Estimates(np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None,
-                    {"error": rec["error"]})
+    est = Estimates(
+        np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None, {"error": rec["error"]}
+    )
     return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
-
-

@@ -6,6 +6,7 @@ error in the manifest's ``failures``); the other filters' results stand. What en
 evaluation is a user's error (:class:`replay.util.errors.ReplayError`, one line) in
 ``strict`` mode (``replay eval``), and an interrupt (Ctrl-C).
 """
+
 from __future__ import annotations
 
 import traceback
@@ -28,8 +29,12 @@ def describe(err: BaseException) -> str:
 
 def failed(run: int, err: BaseException) -> dict:
     """The record of a run that could not be computed."""
-    return {"run": run, "status": "failed", "error": describe(err),
-            "traceback": "".join(traceback.format_exception(err))[-4000:]}
+    return {
+        "run": run,
+        "status": "failed",
+        "error": describe(err),
+        "traceback": "".join(traceback.format_exception(err))[-4000:],
+    }
 
 
 def ends_run(err: BaseException, strict: bool) -> bool:

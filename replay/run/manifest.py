@@ -1,5 +1,6 @@
 """What an evaluation records about itself: its failures, the versions, the command line that repeats
 it, the manifest."""
+
 from __future__ import annotations
 
 import json
@@ -30,15 +31,30 @@ def failures(ev) -> dict:
 def versions() -> dict:
     import scipy
 
-    return {"replay": __version__, "python": platform.python_version(),
-            "numpy": np.__version__, "scipy": scipy.__version__, "platform": platform.platform()}
+    return {
+        "replay": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "platform": platform.platform(),
+    }
 
 
 def command_line(config: dict) -> str:
     """The ``replay eval`` command that repeats a configuration."""
-    parts = ["replay", "eval", config["dataset"], "--task", config["task"],
-             "--filters", ",".join(config["filters"]), "--runs", str(config["runs"]),
-             "--seed", str(config["seed"])]
+    parts = [
+        "replay",
+        "eval",
+        config["dataset"],
+        "--task",
+        config["task"],
+        "--filters",
+        ",".join(config["filters"]),
+        "--runs",
+        str(config["runs"]),
+        "--seed",
+        str(config["seed"]),
+    ]
     if config.get("first"):
         parts += ["--first", str(config["first"])]
     if config.get("adapter"):
@@ -65,8 +81,9 @@ def command_line(config: dict) -> str:
             parts += ["--task-param", shlex.quote(f"{key}={text}")]
     for name, params in (config.get("filter_params") or {}).items():  # those that differ from the defaults
         try:
-            defaults = ({p.name: p.default for p in RECORDED_PARAMS} if is_recorded(name)
-                        else plain(make_filter(name).params()))
+            defaults = (
+                {p.name: p.default for p in RECORDED_PARAMS} if is_recorded(name) else plain(make_filter(name).params())
+            )
         except Exception:  # noqa: BLE001 — a filter no longer registered: name them all
             defaults = {}
         for key, value in params.items():
@@ -77,7 +94,14 @@ def command_line(config: dict) -> str:
 
 
 def manifest(ev) -> dict:
-    return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
-            "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
-            "results": {r.name: dict(r.summary) for r in ev.results},
-            **({"failures": f} if (f := failures(ev)) else {})}
+    return {
+        "config": ev.config,
+        "command": command_line(ev.config),
+        "argv": sys.argv,
+        "versions": versions(),
+        "dataset": ev.frame_meta,
+        "adapter_report": ev.report,
+        "units": ev.units,
+        "results": {r.name: dict(r.summary) for r in ev.results},
+        **({"failures": f} if (f := failures(ev)) else {}),
+    }

@@ -35,6 +35,7 @@ the task's reference and the run is scored by the same
 :func:`score_record`. A recorded estimate is deterministic: it has one run, run 0
 (:func:`runs_of`), whatever the number of runs asked for.
 """
+
 from __future__ import annotations
 
 import functools
@@ -58,6 +59,7 @@ from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates
 from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.seeds import DATA, TASK, filter_rng, rng_for
+
 
 @dataclass(frozen=True)
 class Config:
@@ -113,8 +115,7 @@ def is_sim(dataset) -> bool:
 def _file_frame(dataset, first, data_dir, adapter, params_json, state=()):
     """A file dataset's frame, read once per process (the same for every run) while the file is
     unchanged: ``state`` (:func:`_file_state`) is part of the key, so an edited file is read again."""
-    return registry.load_frame(dataset, data_dir=data_dir, first=first, adapter=adapter,
-                               **json.loads(params_json))
+    return registry.load_frame(dataset, data_dir=data_dir, first=first, adapter=adapter, **json.loads(params_json))
 
 
 def _file_state(target, data_dir) -> tuple:
@@ -134,11 +135,23 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
     c = config.as_dict() if isinstance(config, Config) else config
     ds = resolve(c["dataset"]) if ds is False else ds
     if ds is not None and ds.kind == "sim":  # the entry itself: the registry looks it up no more
-        return registry.load_frame(ds, data_dir=data_dir, rng=rng_for(c["seed"], run, DATA),
-                                   first=c["first"], adapter=c.get("adapter"), **c["dataset_params"])
+        return registry.load_frame(
+            ds,
+            data_dir=data_dir,
+            rng=rng_for(c["seed"], run, DATA),
+            first=c["first"],
+            adapter=c.get("adapter"),
+            **c["dataset_params"],
+        )
     data_dir = None if data_dir is None else str(data_dir)
-    return _file_frame(c["dataset"], c["first"], data_dir, c.get("adapter"), json.dumps(c["dataset_params"],
-                       sort_keys=True), _file_state(c["dataset"] if ds is None else ds, data_dir))
+    return _file_frame(
+        c["dataset"],
+        c["first"],
+        data_dir,
+        c.get("adapter"),
+        json.dumps(c["dataset_params"], sort_keys=True),
+        _file_state(c["dataset"] if ds is None else ds, data_dir),
+    )
 
 
 def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
@@ -148,8 +161,7 @@ def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_pa
     ref = dataset_ref.resolve(dataset)
     if ref.entry is not None and ref.entry.default_task:
         return ref.entry.default_task
-    cfg = {"dataset": ref.id, "dataset_params": dataset_params or {}, "first": first, "seed": seed,
-           "adapter": adapter}
+    cfg = {"dataset": ref.id, "dataset_params": dataset_params or {}, "first": first, "seed": seed, "adapter": adapter}
     meta = load_frame(cfg, 0, data_dir, ds=ref.entry).meta
     sensors = any(e for role, e in (meta.get("roles") or {}).items() if role != "none")
     return meta.get("default_task") or ("fusion" if sensors else "position")
@@ -162,8 +174,9 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     task = make_task(c["task"], **c["task_params"])
     problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
     # the manifest's "dataset" section: the frame's metadata plus what the task used and noted
-    problem.frame_meta = dict(frame.meta, task_inputs=getattr(problem, "inputs", {}),
-                              task_notes=getattr(problem, "notes", []))
+    problem.frame_meta = dict(
+        frame.meta, task_inputs=getattr(problem, "inputs", {}), task_notes=getattr(problem, "notes", [])
+    )
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
     problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
@@ -179,8 +192,11 @@ def _groups(runs, problems):
         p = problems[r]
         for g in groups:
             q = problems[g[0]]
-            if (p.z.shape == q.z.shape and same_model(p.model, q.model)
-                    and np.array_equal(np.isfinite(p.z), np.isfinite(q.z))):
+            if (
+                p.z.shape == q.z.shape
+                and same_model(p.model, q.model)
+                and np.array_equal(np.isfinite(p.z), np.isfinite(q.z))
+            ):
                 g.append(r)
                 break
         else:
@@ -204,8 +220,9 @@ def same_model(a, b) -> bool:
     return True
 
 
-def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False,
-              built: dict | None = None) -> list[dict]:
+def run_block(
+    config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False, built: dict | None = None
+) -> list[dict]:
     """Compute and score runs ``runs`` of ``config`` (module docstring); one record per run, in run order.
 
     ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``);
@@ -243,8 +260,13 @@ def run_block(config: Config | dict, runs, data_dir=None, keep: bool = False, st
         ps = [problems[r] for r in group]
         t0 = perf_counter()
         try:
-            out = flt.run_batch(model, np.stack([p.z for p in ps]), np.stack([p.x0 for p in ps]), P0,
-                                [filter_rng(c["seed"], r, c["filter"]) for r in group])
+            out = flt.run_batch(
+                model,
+                np.stack([p.z for p in ps]),
+                np.stack([p.x0 for p in ps]),
+                P0,
+                [filter_rng(c["seed"], r, c["filter"]) for r in group],
+            )
             check_batch(c["filter"], out, ps)
         except BaseException as err:  # the filter's failure (any, sys.exit too): its runs failed
             if ends_run(err, strict):
@@ -271,7 +293,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     err = scorer.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
     m.update(likelihood.of_run(c, problem, est, series))  # replay tune's likelihood objective, where it exists
-    cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[:len(est.x)], float)}
+    cols = {"k": np.arange(len(est.x)), "t": np.asarray(problem.t[: len(est.x)], float)}
     cols.update({f"x{i}": est.x[:, i] for i in range(est.x.shape[1])})
     cols.update({f"P{i}{i}": est.P[:, i, i] for i in range(est.x.shape[1])})
     cols.update(covcols.covariance_columns(est.P, range(est.x.shape[1])))  # the whole state's covariance
@@ -293,6 +315,7 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
 
 # ---------------------------------------------------------------- recorded estimates
 
+
 def runs_of(config: dict, runs) -> list:
     """The runs of ``runs`` a configuration computes: all, or only run 0 for a recorded estimate."""
     return [r for r in runs if r == 0] if is_recorded(config["filter"]) else list(runs)
@@ -302,7 +325,7 @@ def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> dict
     """The record of run 0 of a ``recorded:<name>`` configuration (never raises unless ``strict``)."""
     try:
         problem = build_problem(c, run, data_dir)
-        scored, est, note = recorded_estimates(problem, c["filter"][len(RECORDED):], c["filter_params"])
+        scored, est, note = recorded_estimates(problem, c["filter"][len(RECORDED) :], c["filter_params"])
         rec = score_record(c, scored, est, run, float("nan"), keep)
         rec["metrics"].update(unaligned_metrics(scored, est, c["divergence_threshold"]))
     except Exception as err:

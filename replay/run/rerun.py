@@ -48,6 +48,7 @@ manifest with one RMSE changed by 1 % (or by one unit in the last place) is refu
 ``rerun_rtol`` that an earlier version recorded beside a swarm filter's row is not compared
 and loosens nothing.
 """
+
 from __future__ import annotations
 
 import json
@@ -118,6 +119,7 @@ def load(path, allow_modules=()) -> dict:
 
 def check(man, path, allow_modules=()) -> None:
     """Refuse, in one line, a manifest that cannot be trusted (module docstring)."""
+
     def bad(key, what):
         return ReplayError(f"{path}: {key}: {what}")
 
@@ -154,8 +156,11 @@ def check(man, path, allow_modules=()) -> None:
     check_sources(cfg, path, allow_modules)
     extra = sorted(set(results) - set(filters))
     if extra:
-        raise bad("results", f"{', '.join(map(str, extra))} not among config.filters ({', '.join(filters)}): "
-                             "a result the rerun would not check")
+        raise bad(
+            "results",
+            f"{', '.join(map(str, extra))} not among config.filters ({', '.join(filters)}): "
+            "a result the rerun would not check",
+        )
     for key in ("filter_params", "config_hashes"):
         extra = sorted(set(cfg[key]) - set(filters))
         if extra:
@@ -179,35 +184,52 @@ def check_sources(cfg: dict, path, allow_modules=()) -> None:
         if isinstance(name, str) and TARGET.fullmatch(name):
             module = name.partition(":")[0]
             if module not in allowed:
-                raise ReplayError(f"{path}: {key}: {name!r:.120} would import the module {module}: a rerun loads "
-                                  f"only built-in and installed (entry-point) {kind}s; if you trust that module, "
-                                  f"pass --allow-module {module}")
+                raise ReplayError(
+                    f"{path}: {key}: {name!r:.120} would import the module {module}: a rerun loads "
+                    f"only built-in and installed (entry-point) {kind}s; if you trust that module, "
+                    f"pass --allow-module {module}"
+                )
 
 
 def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:
     if name not in cfg["filter_params"]:
         raise bad(f"config.filter_params.{name}", "missing: the filter's parameters are not recorded")
     if not isinstance(cfg["filter_params"][name], dict):
-        raise bad(f"config.filter_params.{name}",
-                  f"expected an object, got {type(cfg['filter_params'][name]).__name__}")
+        raise bad(
+            f"config.filter_params.{name}", f"expected an object, got {type(cfg['filter_params'][name]).__name__}"
+        )
     recorded = cfg["config_hashes"].get(name)
     if not isinstance(recorded, str) or not HASH.match(recorded):
         raise bad(f"config.config_hashes.{name}", f"expected 16 hex digits, got {recorded!r}")
-    config = Config(cfg["dataset"], cfg["dataset_params"], cfg["first"], cfg["task"], cfg["task_params"], name,
-                    cfg["filter_params"][name], cfg["seed"], cfg["alignment"], cfg["divergence_threshold"],
-                    cfg["adapter"])
+    config = Config(
+        cfg["dataset"],
+        cfg["dataset_params"],
+        cfg["first"],
+        cfg["task"],
+        cfg["task_params"],
+        name,
+        cfg["filter_params"][name],
+        cfg["seed"],
+        cfg["alignment"],
+        cfg["divergence_threshold"],
+        cfg["adapter"],
+    )
     actual = config_hash(config.as_dict())
     if actual != recorded:
-        raise bad(f"config.config_hashes.{name}", f"{recorded} does not match the recorded configuration "
-                                                  f"(which hashes to {actual}): the manifest was edited or damaged")
+        raise bad(
+            f"config.config_hashes.{name}",
+            f"{recorded} does not match the recorded configuration "
+            f"(which hashes to {actual}): the manifest was edited or damaged",
+        )
     res = results.get(name)
     if res is None:
         raise bad(f"results.{name}", "missing: the filter's recorded results are not in the manifest")
     if not isinstance(res, dict):
         raise bad(f"results.{name}", f"expected an object, got {type(res).__name__}")
     if res.get("config_hash") != recorded:
-        raise bad(f"results.{name}.config_hash", f"{res.get('config_hash')!r} is not the configuration's "
-                                                 f"hash {recorded}")
+        raise bad(
+            f"results.{name}.config_hash", f"{res.get('config_hash')!r} is not the configuration's hash {recorded}"
+        )
     _check_echoes(cfg, res, name, bad)
     expected = ["pos_rmse"] + [k[:-5] for k in res if k.endswith("_rmse_ci95")]  # each mean beside its interval
     for key in expected:
@@ -226,8 +248,10 @@ def _check_echoes(cfg: dict, res: dict, name: str, bad) -> None:
     for key, want in wants.items():
         if key in res and res[key] != want:  # a deleted column is found by the rerun
             where = {"filter": "config.filters", "params": f"config.filter_params.{name}"}.get(key, f"config.{key}")
-            raise bad(f"results.{name}.{key}", f"{res[key]!r:.80} does not repeat {where} ({want!r:.80}): "
-                                               "the manifest was edited or damaged")
+            raise bad(
+                f"results.{name}.{key}",
+                f"{res[key]!r:.80} does not repeat {where} ({want!r:.80}): the manifest was edited or damaged",
+            )
 
 
 def _check_dataset(cfg: dict, bad) -> None:
@@ -238,8 +262,11 @@ def _check_dataset(cfg: dict, bad) -> None:
         raise bad("config.dataset", str(err)) from None
     if sha is None:
         if not simulated:
-            raise bad("config.dataset_sha256", f"null, but {cfg['dataset']} is not a simulated dataset: without "
-                                               "its checksum the rerun cannot tell whether the data changed")
+            raise bad(
+                "config.dataset_sha256",
+                f"null, but {cfg['dataset']} is not a simulated dataset: without "
+                "its checksum the rerun cannot tell whether the data changed",
+            )
     elif not SHA256.match(sha):
         raise bad("config.dataset_sha256", f"expected 64 lowercase hex digits, got {sha!r:.80}")
 
@@ -251,12 +278,23 @@ def repeat(man: dict, data_dir=None, progress=None):
     from replay.run.evaluation import evaluate
 
     cfg = man["config"]
-    return evaluate(cfg["dataset"], task=cfg["task"], filters=cfg["filters"], runs=cfg["runs"],
-                    seed=cfg["seed"], first=cfg["first"], data_dir=data_dir,
-                    task_params=cfg["task_params"], filter_params=cfg["filter_params"],
-                    dataset_params=cfg["dataset_params"], adapter=cfg["adapter"],
-                    alignment=cfg["alignment"], divergence_threshold=cfg["divergence_threshold"],
-                    baseline=cfg.get("baseline"), progress=progress)
+    return evaluate(
+        cfg["dataset"],
+        task=cfg["task"],
+        filters=cfg["filters"],
+        runs=cfg["runs"],
+        seed=cfg["seed"],
+        first=cfg["first"],
+        data_dir=data_dir,
+        task_params=cfg["task_params"],
+        filter_params=cfg["filter_params"],
+        dataset_params=cfg["dataset_params"],
+        adapter=cfg["adapter"],
+        alignment=cfg["alignment"],
+        divergence_threshold=cfg["divergence_threshold"],
+        baseline=cfg.get("baseline"),
+        progress=progress,
+    )
 
 
 def differences(man: dict, ev) -> list[str]:
@@ -272,8 +310,10 @@ def differences(man: dict, ev) -> list[str]:
     for r in ev.results:
         was = man["results"][r.name]
         if r.config_hash != cfg["config_hashes"][r.name]:
-            out.append(f"{r.name}: configuration {cfg['config_hashes'][r.name]} -> {r.config_hash} "
-                       f"(this version fills in other parameters)")
+            out.append(
+                f"{r.name}: configuration {cfg['config_hashes'][r.name]} -> {r.config_hash} "
+                f"(this version fills in other parameters)"
+            )
         new = {k: v for k, v in _as_written(r.summary).items() if k not in NOT_COMPARED}
         old = {k: v for k, v in was.items() if k not in NOT_COMPARED}
         for k in sorted(set(new) - set(old)):
@@ -309,6 +349,7 @@ def verify(man: dict, ev, path) -> None:
     """Raise a one-line :class:`ReplayError` unless ``ev`` reproduces the manifest exactly."""
     diff = differences(man, ev)
     if diff:
-        more = (f" (and {len(diff) - 5} more: {', '.join(d.partition(':')[0] for d in diff[5:])})"
-                if len(diff) > 5 else "")
+        more = (
+            f" (and {len(diff) - 5} more: {', '.join(d.partition(':')[0] for d in diff[5:])})" if len(diff) > 5 else ""
+        )
         raise ReplayError(f"{path}: not reproduced: " + "; ".join(diff[:5]) + more)

@@ -17,6 +17,7 @@ Two tables (:func:`rows`):
 :func:`render` writes them as CSV (every digit, :func:`replay.util.files.fmt`), Markdown or LaTeX (numbers
 with ``digits`` significant digits).
 """
+
 from __future__ import annotations
 
 import math
@@ -43,19 +44,41 @@ def stats_rows(archives) -> list[dict]:
     out = []
     for a in archives:
         for e in a.meta["estimates"]:
-            base = {"results": a.shown, "estimate": e["name"], "trial_of": e.get("trial_of") or "",
-                    "trial": e.get("trial") or ""}
+            base = {
+                "results": a.shown,
+                "estimate": e["name"],
+                "trial_of": e.get("trial_of") or "",
+                "trial": e.get("trial") or "",
+            }
             for kind, by_rel in e["stats"].items():
                 for rel, st in by_rel.items():
-                    out.append({**base, "metric": kind, "relation": rel, "length": "", "length_m": "",
-                                "unit": units.get(rel) or "", "n": st["n"],
-                                **{k: finite(st.get(k)) for k in STATS}})
+                    out.append(
+                        {
+                            **base,
+                            "metric": kind,
+                            "relation": rel,
+                            "length": "",
+                            "length_m": "",
+                            "unit": units.get(rel) or "",
+                            "n": st["n"],
+                            **{k: finite(st.get(k)) for k in STATS},
+                        }
+                    )
             for label, entry in e.get("lengths", {}).items():
                 for err, unit in rel_units.items():
                     st = entry[err]
-                    out.append({**base, "metric": "rel", "relation": err, "length": label,
-                                "length_m": entry["length_m"], "unit": unit, "n": st["num_samples"],
-                                **{k: finite(st.get(k)) if k in st else "" for k in STATS}})
+                    out.append(
+                        {
+                            **base,
+                            "metric": "rel",
+                            "relation": err,
+                            "length": label,
+                            "length_m": entry["length_m"],
+                            "unit": unit,
+                            "n": st["num_samples"],
+                            **{k: finite(st.get(k)) if k in st else "" for k in STATS},
+                        }
+                    )
     return out
 
 
@@ -68,16 +91,27 @@ def trials_rows(archives) -> list[dict]:
         for row in a.meta["leaderboard"]:
             if row.get("trial", None) != "":
                 continue
-            name = row["filter"][len("recorded:"):]
-            keys = [k for k in aggregated_keys(row) if not k.endswith(("_ci95", "_median"))
-                    and (k.startswith("rel_") or name not in seen)]  # a length's row repeats the APE/RPE
+            name = row["filter"][len("recorded:") :]
+            keys = [
+                k
+                for k in aggregated_keys(row)
+                if not k.endswith(("_ci95", "_median")) and (k.startswith("rel_") or name not in seen)
+            ]  # a length's row repeats the APE/RPE
             seen.add(name)
             for k in keys:
-                out.append({"results": a.shown, "estimate": name,
-                            "length": row.get("length", "") if k.startswith("rel_") else "", "metric": k,
-                            "trials": row["runs"],
-                            "mean": finite(row[k]), "median": finite(row.get(f"{k}_median")),
-                            "ci95": finite(row.get(f"{k}_ci95")), "lost": row.get("lost", "")})
+                out.append(
+                    {
+                        "results": a.shown,
+                        "estimate": name,
+                        "length": row.get("length", "") if k.startswith("rel_") else "",
+                        "metric": k,
+                        "trials": row["runs"],
+                        "mean": finite(row[k]),
+                        "median": finite(row.get(f"{k}_median")),
+                        "ci95": finite(row.get(f"{k}_ci95")),
+                        "lost": row.get("lost", ""),
+                    }
+                )
     return out
 
 
@@ -97,9 +131,19 @@ def across(boards) -> list[dict]:
         agg = aggregate([dict(r, params="{}") for _, r in members])
         shown = "+".join(dict.fromkeys(s for s, _ in members))
         for k in [k for k in aggregated_keys(members[0][1]) if not k.endswith(("_ci95", "_median"))]:
-            out.append({"results": shown, "estimate": name[len("recorded:"):], "length": "", "metric": k,
-                        "trials": agg["runs"], "mean": finite(agg[k]), "median": finite(agg[f"{k}_median"]),
-                        "ci95": finite(agg[f"{k}_ci95"]), "lost": agg["lost"]})
+            out.append(
+                {
+                    "results": shown,
+                    "estimate": name[len("recorded:") :],
+                    "length": "",
+                    "metric": k,
+                    "trials": agg["runs"],
+                    "mean": finite(agg[k]),
+                    "median": finite(agg[f"{k}_median"]),
+                    "ci95": finite(agg[f"{k}_ci95"]),
+                    "lost": agg["lost"],
+                }
+            )
     return out
 
 
@@ -109,13 +153,18 @@ def rows(archives, table: str = "stats", boards=()) -> list[dict]:
     if table not in TABLES:
         raise ReplayError(f"--table {table!r}: expected one of {', '.join(TABLES)}")
     if boards and table == "stats":
-        raise ReplayError(f"{boards[0][0]}: a replay eval or campaign output, not a results archive: tabulate it "
-                          "with replay leaderboard, or aggregate its recorded estimates across recordings with "
-                          "replay res --table trials")
+        raise ReplayError(
+            f"{boards[0][0]}: a replay eval or campaign output, not a results archive: tabulate it "
+            "with replay leaderboard, or aggregate its recorded estimates across recordings with "
+            "replay res --table trials"
+        )
     out = stats_rows(archives) if table == "stats" else trials_rows(archives) + across(boards)
     if not out:
-        raise ReplayError("--table trials: no trial set in these results (saved with replay score --trials)"
-                          if table == "trials" else "no statistics in these results")
+        raise ReplayError(
+            "--table trials: no trial set in these results (saved with replay score --trials)"
+            if table == "trials"
+            else "no statistics in these results"
+        )
     return out
 
 
@@ -126,8 +175,18 @@ def _cell(v, digits: int) -> str:
 
 
 def _latex(s: str) -> str:
-    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("$", r"\$"), ("#", r"\#"),
-                 ("_", r"\_"), ("{", r"\{"), ("}", r"\}"), ("~", r"\textasciitilde{}"), ("^", r"\^{}")):
+    for a, b in (
+        ("\\", r"\textbackslash{}"),
+        ("&", r"\&"),
+        ("%", r"\%"),
+        ("$", r"\$"),
+        ("#", r"\#"),
+        ("_", r"\_"),
+        ("{", r"\{"),
+        ("}", r"\}"),
+        ("~", r"\textasciitilde{}"),
+        ("^", r"\^{}"),
+    ):
         s = s.replace(a, b) if a != "\\" else s.replace(a, "\0")
     return s.replace("\0", r"\textbackslash{}")
 

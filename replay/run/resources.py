@@ -12,6 +12,7 @@ Available memory: psutil's ``available`` when installed, else ``MemAvailable`` o
 ``/proc/meminfo``, else ``os.sysconf``; lowered to the address-space limit (``ulimit -v``).
 Unknown: nothing is refused.
 """
+
 from __future__ import annotations
 
 import os
@@ -63,9 +64,11 @@ def check_particles(name: str, params: dict, at_once: int, nx: int, avail: int |
         return
     need = n * at_once * nx * 8
     if need > avail:
-        raise ReplayError(f"-p {name}.n_particles = {n}: the particles need about {size(need)} of memory "
-                          f"({n} particles x {at_once} runs at once x {nx} state components x 8 bytes); "
-                          f"{size(avail)} available: use fewer particles")
+        raise ReplayError(
+            f"-p {name}.n_particles = {n}: the particles need about {size(need)} of memory "
+            f"({n} particles x {at_once} runs at once x {nx} state components x 8 bytes); "
+            f"{size(avail)} available: use fewer particles"
+        )
 
 
 def check_kept(filters: int, runs: int, steps: int, nx: int, avail: int | None = None) -> None:
@@ -75,6 +78,8 @@ def check_kept(filters: int, runs: int, steps: int, nx: int, avail: int | None =
         return
     need = filters * runs * steps * (nx * nx + 3 * nx + 24) * 8
     if need > avail:
-        raise ReplayError(f"runs = {runs}: replay eval keeps every run's estimates in memory, about {size(need)} "
-                          f"({filters} filter(s) x {runs} runs x {steps} steps of a {nx}-component state); "
-                          f"{size(avail)} available: use fewer runs, or a campaign (it stores runs on disk)")
+        raise ReplayError(
+            f"runs = {runs}: replay eval keeps every run's estimates in memory, about {size(need)} "
+            f"({filters} filter(s) x {runs} runs x {steps} steps of a {nx}-component state); "
+            f"{size(avail)} available: use fewer runs, or a campaign (it stores runs on disk)"
+        )

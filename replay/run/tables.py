@@ -13,6 +13,7 @@
 * :func:`paired` — every two filters compared run by run (``paired.csv`` of a campaign).
 * :func:`rmse_over_time` — RMSE of the position error across runs at each step, per filter.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -43,8 +44,7 @@ def leaderboard(ev):
     rows = [{k: (np.nan if isinstance(v, str) and v == "" else v) for k, v in row.items()} for row in ev.rows]
     df = pd.DataFrame(rows, columns=summary.columns(ev.rows))
     for col in df.columns:  # a column of numbers and empty cells: numbers
-        if df[col].dtype == object and all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                           for v in df[col]):
+        if df[col].dtype == object and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in df[col]):
             df[col] = df[col].astype(float)
     return df
 
@@ -74,7 +74,7 @@ def estimates(ev, name: str, *, run: int | None = None):
     nx = est[0].x.shape[1]
     x = np.concatenate([e.x for e in est])
     var = np.concatenate([np.diagonal(e.P, axis1=1, axis2=2) for e in est])
-    t = np.concatenate([ev.t[:len(e.x)] for e in est])
+    t = np.concatenate([ev.t[: len(e.x)] for e in est])
     data = {"t": t, **{f"x{i}": x[:, i] for i in range(nx)}, **{f"P{i}{i}": var[:, i] for i in range(nx)}}
     pidx = ev.position_components(name)  # the covariances of estimates/<filter>.csv.gz: the position's
     data.update(covcols.covariance_columns(np.concatenate([e.P for e in est]), pidx))
@@ -91,9 +91,9 @@ def errors(ev, name: str, *, run: int | None = None):
     pos = np.concatenate([np.asarray(e["position"], float) for e in errs])
     n = [len(e["position"]) for e in errs]
     data = {"t": np.concatenate([ev.t[:k] for k in n])}
-    for i, axis in enumerate(ev.axis_names[:pos.shape[1]]):
+    for i, axis in enumerate(ev.axis_names[: pos.shape[1]]):
         data[f"err_{axis}"] = pos[:, i]
-    data["err"] = np.sqrt(np.sum(pos ** 2, axis=1))
+    data["err"] = np.sqrt(np.sum(pos**2, axis=1))
     for key in errs[0]:
         if key != "position" and np.ndim(errs[0][key]) == 1:
             data[f"err_{key}"] = np.concatenate([np.asarray(e[key], float) for e in errs])

@@ -15,6 +15,7 @@ aggregated row (``trial`` empty, ``runs`` = N) holds, for every ``*_rmse`` metri
 median ``<m>_median``; ``lost`` = trials that lost the track (``--lost-threshold``; empty when not judged)
 and ``lost_share`` as for filter runs.
 """
+
 from __future__ import annotations
 
 import glob
@@ -52,8 +53,8 @@ def _expand(pattern: str, what: str) -> list[str]:
     """The sources of one pattern (module docstring)."""
     head, topic = pattern, ""
     for m in re.finditer(":", pattern):
-        if pattern[:m.start()].lower().endswith(RECORDING_SUFFIXES):
-            head, topic = pattern[:m.start()], pattern[m.start():]
+        if pattern[: m.start()].lower().endswith(RECORDING_SUFFIXES):
+            head, topic = pattern[: m.start()], pattern[m.start() :]
             break
     if not GLOB.search(head):
         return [pattern]
@@ -109,22 +110,29 @@ def parse_api(trials) -> dict:
     if isinstance(trials, (list, tuple)):
         trials = {_default_name(str(trials[0])) if trials and isinstance(trials[0], str) else "trials": trials}
     if not isinstance(trials, dict):
-        raise ReplayError(f"trials: expected a glob, a list of sources or {{name: glob or list}} "
-                          f"(got {type(trials).__name__})")
+        raise ReplayError(
+            f"trials: expected a glob, a list of sources or {{name: glob or list}} (got {type(trials).__name__})"
+        )
     out = {}
     for name, items in trials.items():
         items = [items] if isinstance(items, str) or not isinstance(items, (list, tuple)) else list(items)
         if not items:
             raise ReplayError(f"trials {name!r}: no trial")
-        out[str(name)] = [s for it in items for s in (_expand(str(it), f"trials {name!r}")
-                                                      if isinstance(it, str) else [it])]
+        out[str(name)] = [
+            s for it in items for s in (_expand(str(it), f"trials {name!r}") if isinstance(it, str) else [it])
+        ]
     return _once(out, "trials")
 
 
 def aggregated_keys(row: dict) -> list[str]:
     """The metrics of a trial row that are aggregated over trials (module docstring)."""
-    return [k for k, v in row.items() if isinstance(v, (float, int)) and not isinstance(v, bool)
-            and (k.endswith("_rmse") or k in EXTRA or (k.startswith("rel_") and k.endswith(("_rmse", "_mean"))))]
+    return [
+        k
+        for k, v in row.items()
+        if isinstance(v, (float, int))
+        and not isinstance(v, bool)
+        and (k.endswith("_rmse") or k in EXTRA or (k.startswith("rel_") and k.endswith(("_rmse", "_mean"))))
+    ]
 
 
 def aggregate(trial_rows: list[dict]) -> dict:
@@ -135,22 +143,37 @@ def aggregate(trial_rows: list[dict]) -> dict:
     runs = [dict(r, diverged=False, us_per_step=math.nan) for r in trial_rows]
     agg = scorer.aggregate(runs, names=keys)
     first = trial_rows[0]
-    row = {k: first[k] for k in ("dataset", "task", "filter", "label", "seed", "first", "alignment", "version")
-           if k in first}
+    row = {
+        k: first[k]
+        for k in ("dataset", "task", "filter", "label", "seed", "first", "alignment", "version")
+        if k in first
+    }
     for k in ("length", "length_m", "lengths_method"):
         if k in first:
             row[k] = first[k]
     judged = all(r.get("lost", "") != "" for r in trial_rows)
-    row.update(runs=len(trial_rows), diverged=0, failed=0, trial="",
-               lost=agg["lost"] if judged else "", lost_share=lost_share(trial_rows) if judged else math.nan)
-    row["params"] = json.dumps({"trials": [json.loads(r["params"]).get("source", "") if r.get("params") else ""
-                                           for r in trial_rows]}, sort_keys=True)
+    row.update(
+        runs=len(trial_rows),
+        diverged=0,
+        failed=0,
+        trial="",
+        lost=agg["lost"] if judged else "",
+        lost_share=lost_share(trial_rows) if judged else math.nan,
+    )
+    row["params"] = json.dumps(
+        {"trials": [json.loads(r["params"]).get("source", "") if r.get("params") else "" for r in trial_rows]},
+        sort_keys=True,
+    )
     for k in keys:
         vals = np.asarray([r.get(k, math.nan) for r in trial_rows], float)
         row[k], row[f"{k}_ci95"] = agg[k], agg[f"{k}_ci95"]
         row[f"{k}_median"] = float(np.nanmedian(vals)) if np.isfinite(vals).any() else math.nan
-    row.update(scored=agg["scored"], masked=agg["masked"], us_per_step=math.nan,
-               config_hash=config_hash({"trials": [r.get("config_hash", "") for r in trial_rows]}))
+    row.update(
+        scored=agg["scored"],
+        masked=agg["masked"],
+        us_per_step=math.nan,
+        config_hash=config_hash({"trials": [r.get("config_hash", "") for r in trial_rows]}),
+    )
     return row
 
 
@@ -195,8 +218,10 @@ def table(name: str, rows_: list[dict], relations, want_rpe: bool) -> str:
     metrics += [f"rpe_{rel}_rmse" for rel in relations if want_rpe and f"rpe_{rel}_rmse" in agg[0]]
     n = agg[0]["runs"]
     lost = agg[0].get("lost", "")
-    out = [f"trials of {name}: {n}; lost {'not judged (--lost-threshold)' if lost == '' else f'{lost}/{n}'}; "
-           "mean, median and 95 % t-interval over trials"]
+    out = [
+        f"trials of {name}: {n}; lost {'not judged (--lost-threshold)' if lost == '' else f'{lost}/{n}'}; "
+        "mean, median and 95 % t-interval over trials"
+    ]
     blocks = [(None, agg[0], metrics)]
     blocks += [(a["length"], a, ["rel_trans_perc_rmse", "rel_rot_deg_per_m_rmse"]) for a in agg if "length" in a]
     for length, a, cols in blocks:

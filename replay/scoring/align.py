@@ -30,6 +30,7 @@ For trajectories (:mod:`replay.trajectory`, ``replay score``), as evo does it:
 * :func:`origin` — the rigid transform taking the first estimated pose onto the first
   reference pose (evo's ``--align_origin``): R = R_b0 R_a0', t = p_b0 - R p_a0.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -59,16 +60,16 @@ def yaw_align(a: np.ndarray, b: np.ndarray):
     """(R, t, 1) with R a rotation about z (4-DOF alignment, closed form)."""
     mu_a, mu_b = a.mean(axis=0), b.mean(axis=0)
     da, db = a - mu_a, b - mu_b
-    yaw = np.arctan2((da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]).sum(),
-                     (da[:, 0] * db[:, 0] + da[:, 1] * db[:, 1]).sum())
+    yaw = np.arctan2(
+        (da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]).sum(), (da[:, 0] * db[:, 0] + da[:, 1] * db[:, 1]).sum()
+    )
     c, s = np.cos(yaw), np.sin(yaw)
     R = np.eye(a.shape[1])
     R[:2, :2] = [[c, -s], [s, c]]
     return R, mu_b - R @ mu_a, 1.0
 
 
-def align(a: np.ndarray, b: np.ndarray, method: str = "none", *, n_to_align: int | None = None,
-          strict: bool = False):
+def align(a: np.ndarray, b: np.ndarray, method: str = "none", *, n_to_align: int | None = None, strict: bool = False):
     """Transform (R, t, c) of ``method`` (one of :data:`TRAJECTORY_ALIGNMENTS`) taking ``a`` onto ``b``,
     fitted on the first ``n_to_align`` rows (all when None); ``strict`` refuses a degenerate fit."""
     if method not in TRAJECTORY_ALIGNMENTS:
@@ -106,8 +107,10 @@ def check_rank(a: np.ndarray, b: np.ndarray, method: str) -> None:
     sigma = (b - b.mean(axis=0)).T @ (a - a.mean(axis=0)) / n
     D = np.linalg.svd(sigma, compute_uv=False)
     if np.count_nonzero(D > np.finfo(float).eps) < d - 1:
-        raise ReplayError(f"{method} alignment is undetermined: the {n} aligned positions lie on a line or "
-                          "a point (cross-covariance of rank < 2)")
+        raise ReplayError(
+            f"{method} alignment is undetermined: the {n} aligned positions lie on a line or "
+            "a point (cross-covariance of rank < 2)"
+        )
 
 
 def origin(R_a0: np.ndarray, p_a0: np.ndarray, R_b0: np.ndarray, p_b0: np.ndarray):

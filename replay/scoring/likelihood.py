@@ -14,6 +14,7 @@ A filter with its own noise settings (``q_scale``, ``R``, ...: :mod:`replay.filt
 ran on the model and P0 under those settings: ``model`` and ``P0`` here are those (the pipeline
 passes them), so the likelihood is that of the filter that ran.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,7 +45,7 @@ def innovation_nll(problem, est, nis, dof, model=None, P0=None) -> float:
         return float("nan")
     F, H, Q, R = mats
     n = len(est.x)
-    prev = np.concatenate([np.asarray(problem.P0 if P0 is None else P0, float)[None], est.P[:n - 1]])
+    prev = np.concatenate([np.asarray(problem.P0 if P0 is None else P0, float)[None], est.P[: n - 1]])
     S = H @ (F @ prev @ F.T + Q) @ H.T + R  # (n, nz, nz)
     z = np.asarray(problem.z[:n], float)
     seen = np.isfinite(z)

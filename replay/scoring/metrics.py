@@ -36,6 +36,7 @@ random numbers, see :mod:`replay.run.evaluation`) are compared run by run; the m
 difference and its 95 % Student-t interval are much tighter than the two
 separate intervals suggest.
 """
+
 from __future__ import annotations
 
 import functools
@@ -74,8 +75,7 @@ def lstsq_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     if not (np.isfinite(A).all() and np.isfinite(b).all()):
         return np.stack([np.linalg.lstsq(p, v, rcond=None)[0] for p, v in zip(A, b)])
     out = np.empty(b.shape)
-    _lstsq_each()(np.ascontiguousarray(A), np.ascontiguousarray(b), np.finfo(np.float64).eps * max(A.shape[-2:]),
-                  out)
+    _lstsq_each()(np.ascontiguousarray(A), np.ascontiguousarray(b), np.finfo(np.float64).eps * max(A.shape[-2:]), out)
     return out
 
 
@@ -133,8 +133,13 @@ def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
     dof = np.broadcast_to(np.asarray(dof, float), v.shape[-1:])
     runs = np.isfinite(v).sum(axis=0)
     use = (runs > 0) & (dof > 0)
-    out = {prefix: np.nan, f"{prefix}_lo": np.nan, f"{prefix}_hi": np.nan, f"{prefix}_inside": np.nan,
-           f"{prefix}_flag": ""}
+    out = {
+        prefix: np.nan,
+        f"{prefix}_lo": np.nan,
+        f"{prefix}_hi": np.nan,
+        f"{prefix}_inside": np.nan,
+        f"{prefix}_flag": "",
+    }
     if not use.any():
         return out
     with np.errstate(invalid="ignore"):
@@ -144,8 +149,14 @@ def consistency(values: np.ndarray, dof, prefix: str = "anees") -> dict:
     blo, bhi = chi2_band(d0, int(np.median(runs[use])))
     with np.errstate(all="ignore"):
         mean = float(avg.mean())
-    out.update({prefix: mean, f"{prefix}_lo": float(blo), f"{prefix}_hi": float(bhi),
-                f"{prefix}_inside": float(np.mean((avg >= lo) & (avg <= hi)))})
+    out.update(
+        {
+            prefix: mean,
+            f"{prefix}_lo": float(blo),
+            f"{prefix}_hi": float(bhi),
+            f"{prefix}_inside": float(np.mean((avg >= lo) & (avg <= hi))),
+        }
+    )
     if not np.isfinite(mean) or mean > COLLAPSED * d0 or mean < 0:  # < 0: P not positive definite
         out.update({prefix: np.nan, f"{prefix}_flag": "collapsed"})
     else:
@@ -177,7 +188,7 @@ def quat_angle(q_est: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     """
     a, b = np.asarray(q_est, float), np.asarray(q_ref, float)
     w = np.einsum("...i,...i->...", a, b)  # real part of conj(b) a
-    v = (b[..., :1] * a[..., 1:] - a[..., :1] * b[..., 1:] - np.cross(b[..., 1:], a[..., 1:]))
+    v = b[..., :1] * a[..., 1:] - a[..., :1] * b[..., 1:] - np.cross(b[..., 1:], a[..., 1:])
     return 2.0 * np.arctan2(np.linalg.norm(v, axis=-1), np.abs(w))
 
 
@@ -185,8 +196,12 @@ def pose_errors(p_est, q_est, p_ref, q_ref) -> dict:
     """Position error norm (m) and attitude error angle (rad) of every pose, with their RMSE."""
     dp = np.linalg.norm(np.asarray(p_est, float) - p_ref, axis=-1)
     da = quat_angle(q_est, q_ref)
-    return {"position": dp, "attitude": da, "pos_rmse": float(np.sqrt(np.mean(dp**2))),
-            "att_rmse": float(np.sqrt(np.mean(da**2)))}
+    return {
+        "position": dp,
+        "attitude": da,
+        "pos_rmse": float(np.sqrt(np.mean(dp**2))),
+        "att_rmse": float(np.sqrt(np.mean(da**2))),
+    }
 
 
 def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
@@ -203,8 +218,9 @@ def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
     return bool(longest >= min(int(steps), len(e)))
 
 
-def run_metrics(problem, est, alignment: str = "none", divergence_threshold: float | None = None,
-                errors: dict | None = None):
+def run_metrics(
+    problem, est, alignment: str = "none", divergence_threshold: float | None = None, errors: dict | None = None
+):
     """Per-run metrics (module docstring) and the per-step series ``nees``, ``nis``, ``nis_dof``;
     ``errors``: the run's :func:`replay.scoring.scorer.errors`, when computed already."""
     errors = scorer.errors(problem, est) if errors is None else errors
@@ -230,8 +246,13 @@ def run_metrics(problem, est, alignment: str = "none", divergence_threshold: flo
         divergence_threshold = getattr(problem, "divergence_threshold", None)
     big = divergence_threshold is not None and np.nanmax(np.linalg.norm(err, axis=1), initial=0) > divergence_threshold
     m["diverged"] = bool(est.diverged or big)
-    m["lost"] = None if m["diverged"] else lost_track(np.linalg.norm(err, axis=1), getattr(
-        problem, "lost_threshold", None), getattr(problem, "lost_steps", 10))
+    m["lost"] = (
+        None
+        if m["diverged"]
+        else lost_track(
+            np.linalg.norm(err, axis=1), getattr(problem, "lost_threshold", None), getattr(problem, "lost_steps", 10)
+        )
+    )
     m["diverged_at"] = est.diverged_at
     return m, {"nees": nees_k, "nis": nis_k, "nis_dof": nis_dof}
 
@@ -245,5 +266,9 @@ def paired(a, b) -> dict:
     a, b = np.asarray(a, float), np.asarray(b, float)
     ok = np.isfinite(a) & np.isfinite(b)
     d = a[ok] - b[ok]
-    return {"n": int(ok.sum()), "diff": float(d.mean()) if len(d) else float("nan"),
-            "diff_ci95": ci95(d), "a_better": float(np.mean(d < 0)) if len(d) else float("nan")}
+    return {
+        "n": int(ok.sum()),
+        "diff": float(d.mean()) if len(d) else float("nan"),
+        "diff_ci95": ci95(d),
+        "a_better": float(np.mean(d < 0)) if len(d) else float("nan"),
+    }

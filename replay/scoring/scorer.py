@@ -21,6 +21,7 @@ Over Monte Carlo runs (:func:`aggregate`):
 Diverged runs (non-finite or non-positive covariance) are counted in
 ``diverged`` and left out of the means.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -67,8 +68,9 @@ def units(problem) -> dict:
     out = {"pos_rmse": problem.position_unit}
     out.update({f"{a}_rmse": problem.position_unit for a in problem.axis_names})
     out.update({f"{a}_rmse": "rad" for a in problem.truth_angles})
-    out.update({f"{a}_rmse": getattr(problem, "extra_units", {}).get(a, "?")
-                for a in getattr(problem, "truth_extra", {})})
+    out.update(
+        {f"{a}_rmse": getattr(problem, "extra_units", {}).get(a, "?") for a in getattr(problem, "truth_extra", {})}
+    )
     return out
 
 
@@ -98,8 +100,11 @@ def aggregate(run_metrics: list[dict], names=()) -> dict:
     its 95 % interval (``<m>_ci95``); ``us_per_step`` (median), ``scored``/``masked`` (mean).
     The one aggregation of every leaderboard (:func:`replay.scoring.summary.config_row`)."""
     ok = [m for m in run_metrics if not m["diverged"]]
-    out = {"runs": len(run_metrics), "diverged": len(run_metrics) - len(ok),
-           "lost": sum(1 for m in ok if m.get("lost"))}
+    out = {
+        "runs": len(run_metrics),
+        "diverged": len(run_metrics) - len(ok),
+        "lost": sum(1 for m in ok if m.get("lost")),
+    }
     keys = list(names)
     for m in run_metrics:
         keys += [k for k in m if k.endswith("_rmse") and k not in keys]

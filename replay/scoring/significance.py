@@ -20,6 +20,7 @@ claim "a is smaller than b" (a lower error), the default.
 
 Each function equals its ``scipy.stats`` counterpart (``tests/test_significance.py``).
 """
+
 from __future__ import annotations
 
 import math
@@ -131,14 +132,14 @@ def wilcoxon_paired(a, b, alternative: str = "less") -> tuple[float, float]:
     if n <= 50:
         counts, total = _exact_signed_rank_cdf(r)
         k = int(round(2 * w))
-        allp = 2 ** n
+        allp = 2**n
         lo = int(sum(counts[: k + 1])) / allp  # P(W+ <= w)
         hi = int(sum(counts[k:])) / allp  # P(W+ >= w)
         p = {"less": lo, "greater": hi, "two-sided": min(1.0, 2 * min(lo, hi))}[alternative]
         return _w_stat(w, total / 2, alternative), float(p)
     mean = n * (n + 1) / 4
     _, tie = np.unique(r, return_counts=True)
-    var = n * (n + 1) * (2 * n + 1) / 24 - (tie ** 3 - tie).sum() / 48
+    var = n * (n + 1) * (2 * n + 1) / 24 - (tie**3 - tie).sum() / 48
     z = (w - mean) / math.sqrt(var)
     p = {"less": stats.norm.cdf(z), "greater": stats.norm.sf(z), "two-sided": 2 * stats.norm.sf(abs(z))}[alternative]
     return _w_stat(w, n * (n + 1) / 2, alternative), float(min(1.0, p))
@@ -149,8 +150,9 @@ def _w_stat(w: float, total: float, alternative: str) -> float:
     return min(w, total - w) if alternative == "two-sided" else w
 
 
-def median_diff_ci(a, b, rng: np.random.Generator, n_boot: int = 4000,
-                   level: float = 0.95) -> tuple[float, float, float]:
+def median_diff_ci(
+    a, b, rng: np.random.Generator, n_boot: int = 4000, level: float = 0.95
+) -> tuple[float, float, float]:
     """Median of the paired differences a - b and its percentile bootstrap interval
     ``(median, lo, hi)`` (runs resampled with replacement, ``n_boot`` times, from ``rng``)."""
     a, b = pairs(a, b)
@@ -196,9 +198,17 @@ def fisher_exact_lost(k_a: int, n_a: int, k_b: int, n_b: int, alternative: str =
     lost, total = k_a + k_b, n_a + n_b
     lo, hi = max(0, lost - n_b), min(n_a, lost)
     ks = np.arange(lo, hi + 1)
-    logp = (special.gammaln(n_a + 1) - special.gammaln(ks + 1) - special.gammaln(n_a - ks + 1)
-            + special.gammaln(n_b + 1) - special.gammaln(lost - ks + 1) - special.gammaln(n_b - lost + ks + 1)
-            - special.gammaln(total + 1) + special.gammaln(lost + 1) + special.gammaln(total - lost + 1))
+    logp = (
+        special.gammaln(n_a + 1)
+        - special.gammaln(ks + 1)
+        - special.gammaln(n_a - ks + 1)
+        + special.gammaln(n_b + 1)
+        - special.gammaln(lost - ks + 1)
+        - special.gammaln(n_b - lost + ks + 1)
+        - special.gammaln(total + 1)
+        + special.gammaln(lost + 1)
+        + special.gammaln(total - lost + 1)
+    )
     pk = np.exp(logp)
     if alternative == "less":
         p = pk[ks <= k_a].sum()

@@ -43,6 +43,7 @@ the file: its registered checksum, or the rows and time span its upstream listin
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
 over the batch); ``alignment, version, config_hash``.
 """
+
 from __future__ import annotations
 
 import json
@@ -53,11 +54,33 @@ from replay.scoring import metrics, scorer
 from replay.util.params import Param
 from replay.data.views import NAMES as VIEWS
 
-HEAD = ["dataset", "task", "filter", "label", "params", "runs", "diverged", "lost", "lost_share", "failed", "seed",
-        "first"]
+HEAD = [
+    "dataset",
+    "task",
+    "filter",
+    "label",
+    "params",
+    "runs",
+    "diverged",
+    "lost",
+    "lost_share",
+    "failed",
+    "seed",
+    "first",
+]
 RUN_METRICS = ["pos_rmse", "x_rmse", "y_rmse", "z_rmse", "ate", "final_err", "drift_pct", "nees", "nis"]
-ENSEMBLE = ["anees", "anees_lo", "anees_hi", "anees_inside", "anees_flag",
-            "anis", "anis_lo", "anis_hi", "anis_inside", "anis_flag"]
+ENSEMBLE = [
+    "anees",
+    "anees_lo",
+    "anees_hi",
+    "anees_inside",
+    "anees_flag",
+    "anis",
+    "anis_lo",
+    "anis_hi",
+    "anis_inside",
+    "anis_flag",
+]
 TAIL = ["measurements", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
 # what the filters of a row were given (issue 24): "sensors" (the recording's own), "synthetic"
 # (a recording's reference plus the task's noise: a number about the task's noise generator, not
@@ -71,23 +94,38 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     run's per-step columns (``nees``, ``nis``, ``nis_dof``)."""
     done = [r for r in records if r["status"] == "done"]
     ok = [r for r in done if not r["metrics"]["diverged"]]
-    row = {"dataset": cfg["dataset"], "task": cfg["task"], "filter": cfg["filter"], "label": cfg["filter"],
-           "params": json.dumps(cfg["filter_params"], sort_keys=True, separators=(",", ":")),
-           "runs": len(done), "diverged": len(done) - len(ok), "failed": len(records) - len(done),
-           "seed": cfg["seed"], "first": cfg["first"] or ""}
+    row = {
+        "dataset": cfg["dataset"],
+        "task": cfg["task"],
+        "filter": cfg["filter"],
+        "label": cfg["filter"],
+        "params": json.dumps(cfg["filter_params"], sort_keys=True, separators=(",", ":")),
+        "runs": len(done),
+        "diverged": len(done) - len(ok),
+        "failed": len(records) - len(done),
+        "seed": cfg["seed"],
+        "first": cfg["first"] or "",
+    }
     with np.errstate(all="ignore"):
         agg = scorer.aggregate([r["metrics"] for r in done], RUN_METRICS)
-        row.update({k: v for k, v in agg.items()
-                    if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")})
+        row.update(
+            {k: v for k, v in agg.items() if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")}
+        )
         row["lost"] = agg["lost"] if any(r["metrics"].get("lost") is not None for r in ok) or not ok else ""
         row["lost_share"] = lost_share([r["metrics"] for r in ok])
         dof = ok[0]["metrics"].get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
         row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
     if len(done) == 1:  # a recorded estimate moved by its align fit: its numbers before the fit, named
         row.update({k: ("" if v is None else v) for k, v in done[0]["metrics"].items() if k.endswith("_unaligned")})
-    row.update(measurements=measurements(cfg), scored=agg["scored"], masked=agg["masked"],
-               us_per_step=agg["us_per_step"],
-               alignment=cfg["alignment"], version=version, config_hash=h)
+    row.update(
+        measurements=measurements(cfg),
+        scored=agg["scored"],
+        masked=agg["masked"],
+        us_per_step=agg["us_per_step"],
+        alignment=cfg["alignment"],
+        version=version,
+        config_hash=h,
+    )
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)
@@ -148,9 +186,14 @@ def lost_cell(row) -> str:
 
 
 MIN_SCORED_SHARE = Param(
-    "min_scored_share", float, 0.5, "a row scored on a smaller share of the reference samples "
+    "min_scored_share",
+    float,
+    0.5,
+    "a row scored on a smaller share of the reference samples "
     "(scored / (scored + masked)) is flagged in the printed table: its numbers describe only the samples scored",
-    low=0.0, high=1.0)
+    low=0.0,
+    high=1.0,
+)
 
 
 def scored_share(row) -> float:
@@ -167,8 +210,13 @@ def scored_cell(row, minimum: float) -> str:
     share = scored_share(row)
     if share != share:
         return "?"
-    text = ("100%" if share == 1 else f"{min(100 * share, 99.9):.1f}%" if share >= 0.001  # never 100.0% when not all
-            else f"{100 * share:.2g}%")
+    text = (
+        "100%"
+        if share == 1
+        else f"{min(100 * share, 99.9):.1f}%"
+        if share >= 0.001  # never 100.0% when not all
+        else f"{100 * share:.2g}%"
+    )
     return text + ("!" if share < minimum else "")
 
 
@@ -211,18 +259,33 @@ def label(rows: list[dict]) -> list[dict]:
 
 def group_key(cfg: dict) -> str:
     """Configurations with the same key ran on the same measurements (paired comparisons)."""
-    return json.dumps([cfg["dataset"], cfg["dataset_params"], cfg["first"], cfg["task"], cfg["task_params"],
-                       cfg["seed"], cfg.get("adapter")], sort_keys=True, default=str)
+    return json.dumps(
+        [
+            cfg["dataset"],
+            cfg["dataset_params"],
+            cfg["first"],
+            cfg["task"],
+            cfg["task_params"],
+            cfg["seed"],
+            cfg.get("adapter"),
+        ],
+        sort_keys=True,
+        default=str,
+    )
 
 
 def per_run(records: list[dict], metric: str) -> dict:
     """{run: value} of a metric over the runs that finished without diverging."""
-    return {r["run"]: r["metrics"].get(metric, np.nan) for r in records
-            if r["status"] == "done" and not r["metrics"]["diverged"]}
+    return {
+        r["run"]: r["metrics"].get(metric, np.nan)
+        for r in records
+        if r["status"] == "done" and not r["metrics"]["diverged"]
+    }
 
 
-def add_paired(rows: list[dict], configs: dict, records: dict, baseline: str | None = None,
-               metric: str = "pos_rmse") -> list[dict]:
+def add_paired(
+    rows: list[dict], configs: dict, records: dict, baseline: str | None = None, metric: str = "pos_rmse"
+) -> list[dict]:
     """Add ``<metric>_vs_<baseline>`` columns to ``rows`` (in place): within each group of
     configurations on the same measurements, against ``baseline`` (a label) or the first row."""
     groups = {}
@@ -253,14 +316,24 @@ def paired_rows(rows, configs: dict, records: dict, metric_names=("pos_rmse", "a
     out = []
     for members in groups.values():
         for i, a in enumerate(members):
-            for b in members[i + 1:]:
+            for b in members[i + 1 :]:
                 for m in metric_names:
                     pa, pb = per_run(records[a["config_hash"]], m), per_run(records[b["config_hash"]], m)
                     common = sorted(set(pa) & set(pb))
                     p = metrics.paired([pa[r] for r in common], [pb[r] for r in common])
-                    out.append({"dataset": a["dataset"], "task": a["task"], "a": a["label"], "b": b["label"],
-                                "metric": m, "n": p["n"], "diff": p["diff"], "diff_ci95": p["diff_ci95"],
-                                "a_better": p["a_better"]})
+                    out.append(
+                        {
+                            "dataset": a["dataset"],
+                            "task": a["task"],
+                            "a": a["label"],
+                            "b": b["label"],
+                            "metric": m,
+                            "n": p["n"],
+                            "diff": p["diff"],
+                            "diff_ci95": p["diff_ci95"],
+                            "a_better": p["a_better"],
+                        }
+                    )
     return out
 
 

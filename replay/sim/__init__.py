@@ -12,6 +12,7 @@ the simulators need beyond :class:`replay.util.params.Param`: a list of
 numbers bounded element by element, and a list of ``[start, end)`` intervals
 (declared with ``type=list``).
 """
+
 from __future__ import annotations
 
 import functools
@@ -26,6 +27,7 @@ def generator(params: tuple[Param, ...]):
 
     The decorated function carries the declarations as ``PARAMS``.
     """
+
     def wrap(make_frame):
         owner = f"simulator {make_frame.__module__}"
 
@@ -78,8 +80,12 @@ class Intervals(Param):
             return False, v
         out = []
         for pair in v:
-            if not (isinstance(pair, (list, tuple)) and len(pair) == 2
-                    and all(_is_number(x) and math.isfinite(x) for x in pair) and pair[0] < pair[1]):
+            if not (
+                isinstance(pair, (list, tuple))
+                and len(pair) == 2
+                and all(_is_number(x) and math.isfinite(x) for x in pair)
+                and pair[0] < pair[1]
+            ):
                 return False, v
             out.append((float(pair[0]), float(pair[1])))
         return True, tuple(out)

@@ -16,6 +16,7 @@ Topics (standard ROS 2 types only; header stamps = log times + ``latency``):
 
 ``AUV_MAPPING`` (same as ``docs/mappings/auv.toml``) reads it back.
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -103,30 +104,50 @@ def make_bag(path, rng: np.random.Generator, **params) -> int:
             cov[[0, 7, 14]] = sigma_dvl**2
             msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](
                 header=out.header(s, "dvl_link"),
-                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=cov))
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=cov),
+            )
             out.write(c, s + lat_ns, msg)
         idx, ns = at(4)
         c = out.connection("/pressure", "sensor_msgs/msg/FluidPressure")
         p = ATMOSPHERIC_PRESSURE + WATER_DENSITY * GRAVITY * d[idx] + rng.standard_normal(len(idx)) * sigma_p
         for s, pi in zip(ns, p):
-            out.write(c, s + lat_ns, T["sensor_msgs/msg/FluidPressure"](header=out.header(s, "pressure_link"),
-                                                                       fluid_pressure=float(pi), variance=sigma_p**2))
+            out.write(
+                c,
+                s + lat_ns,
+                T["sensor_msgs/msg/FluidPressure"](
+                    header=out.header(s, "pressure_link"), fluid_pressure=float(pi), variance=sigma_p**2
+                ),
+            )
         idx, ns = at(20)
         c = out.connection("/imu/data", "sensor_msgs/msg/Imu")
         gyro = rng.standard_normal((len(idx), 3)) * sigma_gyro
         yaw = h[idx] + rng.standard_normal(len(idx)) * sigma_yaw
         q = rpy_to_quat(np.column_stack([np.zeros(len(idx)), np.zeros(len(idx)), yaw]))
         for j, (i, s) in enumerate(zip(idx, ns)):
-            out.write(c, s + lat_ns, T["sensor_msgs/msg/Imu"](
-                header=out.header(s, "imu_link"), orientation=out.quat(q[j]), orientation_covariance=np.zeros(9),
-                angular_velocity=out.vec(gyro[j] + (0, 0, w[i])), angular_velocity_covariance=np.zeros(9),
-                linear_acceleration=out.vec((0, 0, GRAVITY)), linear_acceleration_covariance=np.zeros(9)))
+            out.write(
+                c,
+                s + lat_ns,
+                T["sensor_msgs/msg/Imu"](
+                    header=out.header(s, "imu_link"),
+                    orientation=out.quat(q[j]),
+                    orientation_covariance=np.zeros(9),
+                    angular_velocity=out.vec(gyro[j] + (0, 0, w[i])),
+                    angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=out.vec((0, 0, GRAVITY)),
+                    linear_acceleration_covariance=np.zeros(9),
+                ),
+            )
         idx, ns = at(10)
         c = out.connection("/reference/pose", "geometry_msgs/msg/PoseStamped")
         q = rpy_to_quat(np.column_stack([np.zeros(len(idx)), np.zeros(len(idx)), h[idx]]))
         for j, (i, s) in enumerate(zip(idx, ns)):
-            out.write(c, s + lat_ns, T["geometry_msgs/msg/PoseStamped"](
-                header=out.header(s, "enu"), pose=out.pose((e[i], n[i], -d[i]), q[j])))
+            out.write(
+                c,
+                s + lat_ns,
+                T["geometry_msgs/msg/PoseStamped"](
+                    header=out.header(s, "enu"), pose=out.pose((e[i], n[i], -d[i]), q[j])
+                ),
+            )
     finally:
         out.close()
     return out.count
@@ -142,8 +163,9 @@ def make_frame(rng: np.random.Generator, **params):
             make_bag(Path(tmp) / "auv", rng, **params)
             frame = load(Path(tmp) / "auv", mapping=AUV_MAPPING)
     except OSError as err:  # a full disk or a file-size limit while writing the temporary bag
-        raise ReplayError(f"sim/auv-bag: cannot write its temporary bag in {tempfile.gettempdir()} "
-                          f"({err.strerror or err})") from None
+        raise ReplayError(
+            f"sim/auv-bag: cannot write its temporary bag in {tempfile.gettempdir()} ({err.strerror or err})"
+        ) from None
     frame.meta["generator"] = "replay.sim.auv_bag:make_frame"
     frame.meta["source"] = "sim/auv-bag"  # not the temporary bag's path (gone, and machine-specific)
     frame.meta.pop("path", None)

@@ -17,6 +17,7 @@ trajectory (the same draws are made, so the sonar noise of a run is unchanged;
 the filters still assume the task's Q); ``x0`` and ``steps`` change the pitch
 and the horizon.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,24 +35,42 @@ X0_TABLE2 = (0.0, 0.0, 0.0, 10.0, np.pi / 4, np.pi / 10)
 PARAMS = (
     Param("steps", int, 100, "number of samples (t = T, 2T, ..., steps T)", low=1),
     Param("T", float, 1.0, "time step", unit="s", low=0, low_open=True),
-    Numbers("x0", list, X0_TABLE2, "initial state [x, y, z, v, pitch, yaw] at t = 0 (Table 2)",
-            unit="m, m/s, rad", length=6),
+    Numbers(
+        "x0", list, X0_TABLE2, "initial state [x, y, z, v, pitch, yaw] at t = 0 (Table 2)", unit="m, m/s, rad", length=6
+    ),
     Param("yaw_rate", float, 0.25, "constant yaw rate of the AUV", unit="rad/s"),
     Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance (Table 2)", dim=6),
-    Covariance("R", list, diagonal(R_TABLE2), "sonar noise covariance, range/elevation/azimuth "
-               "(Table 2)", unit="m^2, rad^2", dim=3),
-    Param("mixture_eps", float, 0.0, "probability of an outlier, drawn from N(0, mixture_scale R) "
-          "(Table 6: 0.05)", low=0, high=1),
-    Param("mixture_scale", float, 10.0, "outlier covariance as a multiple of R (Table 6: 10)",
-          low=0, low_open=True),
-    Param("truth_noise", bool, True, "apply the process noise Q to the true trajectory (false: the "
-          "noiseless trajectory from x0; the sonar noise draws are unchanged)"),
+    Covariance(
+        "R",
+        list,
+        diagonal(R_TABLE2),
+        "sonar noise covariance, range/elevation/azimuth (Table 2)",
+        unit="m^2, rad^2",
+        dim=3,
+    ),
+    Param(
+        "mixture_eps",
+        float,
+        0.0,
+        "probability of an outlier, drawn from N(0, mixture_scale R) (Table 6: 0.05)",
+        low=0,
+        high=1,
+    ),
+    Param("mixture_scale", float, 10.0, "outlier covariance as a multiple of R (Table 6: 10)", low=0, low_open=True),
+    Param(
+        "truth_noise",
+        bool,
+        True,
+        "apply the process noise Q to the true trajectory (false: the "
+        "noiseless trajectory from x0; the sonar noise draws are unchanged)",
+    ),
 )
 
 
 @generator(PARAMS)
-def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixture_eps,
-               mixture_scale, truth_noise) -> Frame:
+def make_frame(
+    rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixture_eps, mixture_scale, truth_noise
+) -> Frame:
     """Simulate ``steps`` samples of truth and sonar measurements from ``rng``."""
     model = AUVSonar(Q=as_matrix(Q), R=as_matrix(R), dt=T, yaw_rate=yaw_rate)
     x0 = np.asarray(x0, float)
@@ -76,14 +95,35 @@ def make_frame(rng: np.random.Generator, *, steps, T, x0, yaw_rate, Q, R, mixtur
     ref = {
         "position": Channel(x[:, :3], "m", "ENU local (sonar at origin)", components=("x", "y", "z")),
         "speed": Channel(x[:, 3], "m/s", "body"),
-        "attitude": Channel(x[:, 4:], "rad", "ENU local", components=("pitch", "yaw"), angles=(0, 1),
-                            convention="pitch positive nose down; yaw 0 = east, counter-clockwise"),
+        "attitude": Channel(
+            x[:, 4:],
+            "rad",
+            "ENU local",
+            components=("pitch", "yaw"),
+            angles=(0, 1),
+            convention="pitch positive nose down; yaw 0 = east, counter-clockwise",
+        ),
     }
-    sonar = Channel(z, "m, rad, rad", "sonar at origin", components=("range", "elevation", "azimuth"),
-                    angles=(1, 2), description="single active sonar (002 §1.2)")
-    meta = {"source": "synthetic: replay.sim.auv_sonar", "synthetic": True, "crs": None,
-            "initial_state": x0.tolist(), "dt": T, "yaw_rate": yaw_rate,
-            "Q": np.diag(model.Q).tolist(), "R": np.diag(model.R).tolist(),
-            "mixture_eps": mixture_eps, "mixture_scale": mixture_scale, "truth_noise": truth_noise,
-            "sonar_origin": [0.0, 0.0, 0.0]}
+    sonar = Channel(
+        z,
+        "m, rad, rad",
+        "sonar at origin",
+        components=("range", "elevation", "azimuth"),
+        angles=(1, 2),
+        description="single active sonar (002 §1.2)",
+    )
+    meta = {
+        "source": "synthetic: replay.sim.auv_sonar",
+        "synthetic": True,
+        "crs": None,
+        "initial_state": x0.tolist(),
+        "dt": T,
+        "yaw_rate": yaw_rate,
+        "Q": np.diag(model.Q).tolist(),
+        "R": np.diag(model.R).tolist(),
+        "mixture_eps": mixture_eps,
+        "mixture_scale": mixture_scale,
+        "truth_noise": truth_noise,
+        "sonar_origin": [0.0, 0.0, 0.0],
+    }
     return Frame(t, {"sonar": sonar}, ref, None, meta)

@@ -37,6 +37,7 @@ The reference is the truth at every sensor sample, unless ``ref_every`` > 1
 reference) say otherwise: then those reference samples are marked invalid (not
 interpolated: aligning is the adapter's job when a file is read back).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -140,8 +141,15 @@ def maneuvers(duration: float, settle: float = 1.5, profile=PROFILE) -> list[lis
     return out
 
 
-def trajectory(n: int, dt: float = T, depth0: float = 3.0, tau_pitch: float = 0.5,
-               max_pitch_rate: float = 15.0, tau_speed: float = 2.0, profile=PROFILE) -> np.ndarray:
+def trajectory(
+    n: int,
+    dt: float = T,
+    depth0: float = 3.0,
+    tau_pitch: float = 0.5,
+    max_pitch_rate: float = 15.0,
+    tau_speed: float = 2.0,
+    profile=PROFILE,
+) -> np.ndarray:
     """True states [depth, speed, pitch] (n, 3) at t = 0, dt, ..., following the profile."""
     t = dt * np.arange(n)
     pc, vc = commands(t, profile)
@@ -163,8 +171,7 @@ def noise_sigma(t: np.ndarray, duration: float, base, regimes, drift: float) -> 
     return factor[:, None] * np.asarray(base, float)
 
 
-def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=REGIMES,
-                 drift: float = DRIFT) -> tuple:
+def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=REGIMES, drift: float = DRIFT) -> tuple:
     """``base_sigma`` whose sigma_c(t) has root-mean-square ``target[c]`` over the run.
 
     Used to put the sensors at the level of a filter's fixed R (R's std = the
@@ -180,24 +187,56 @@ PARAMS = (
     Param("duration", float, 90.0, "length of the log", unit="s", low=0, low_open=True),
     Param("dt", float, T, "sample period", unit="s", low=0, low_open=True),
     Param("depth0", float, 3.0, "initial depth", unit="m"),
-    Numbers("base_sigma", list, (0.05, 0.05, float(np.deg2rad(0.5))),
-            "base noise standard deviations of the depth, speed and pitch sensors", unit="m, m/s, rad",
-            length=3, low=0),
-    Numbers("noise_rms", list, None, "RMS over the run of each sensor's noise std (depth, speed, pitch), "
-            "replacing base_sigma; regimes and drift vary around it (null: base_sigma)", unit="m, m/s, rad",
-            length=3, low=0, optional=True),
+    Numbers(
+        "base_sigma",
+        list,
+        (0.05, 0.05, float(np.deg2rad(0.5))),
+        "base noise standard deviations of the depth, speed and pitch sensors",
+        unit="m, m/s, rad",
+        length=3,
+        low=0,
+    ),
+    Numbers(
+        "noise_rms",
+        list,
+        None,
+        "RMS over the run of each sensor's noise std (depth, speed, pitch), "
+        "replacing base_sigma; regimes and drift vary around it (null: base_sigma)",
+        unit="m, m/s, rad",
+        length=3,
+        low=0,
+        optional=True,
+    ),
     Numbers("regimes", list, REGIMES, "noise factor of each equal part of the run", low=0),
     Param("drift", float, DRIFT, "slow rise of the noise: factor 1 + drift t / duration", low=0),
-    Param("profile_seed", int, None, "seed of a random maneuvering schedule (random_profile); null: the "
-          "fixed PROFILE", low=0, optional=True),
+    Param(
+        "profile_seed",
+        int,
+        None,
+        "seed of a random maneuvering schedule (random_profile); null: the fixed PROFILE",
+        low=0,
+        optional=True,
+    ),
     Param("ref_every", int, 1, "reference at every ref_every-th sample", low=1),
     Intervals("ref_gaps", list, (), "[t0, t1) spans without reference", unit="s"),
 )
 
 
 @generator(PARAMS)
-def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, noise_rms, regimes, drift,
-               profile_seed, ref_every, ref_gaps) -> Frame:
+def make_frame(
+    rng: np.random.Generator,
+    *,
+    duration,
+    dt,
+    depth0,
+    base_sigma,
+    noise_rms,
+    regimes,
+    drift,
+    profile_seed,
+    ref_every,
+    ref_gaps,
+) -> Frame:
     """A synthetic lake-trial frame: sensors in ``channels``, truth in ``reference``."""
     n = int(round(duration / dt))
     t = dt * np.arange(n)
@@ -211,8 +250,11 @@ def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, no
     ref_ok[::ref_every] = True
     for t0, t1 in ref_gaps:
         ref_ok &= ~((t >= t0) & (t < t1))
-    desc = {"depth": "depth gauge, positive down", "speed": "speed sensor, forward",
-            "pitch": f"pitch sensor, {PITCH_CONVENTION}"}
+    desc = {
+        "depth": "depth gauge, positive down",
+        "speed": "speed sensor, forward",
+        "pitch": f"pitch sensor, {PITCH_CONVENTION}",
+    }
     units = {"depth": ("m", "down"), "speed": ("m/s", "body forward"), "pitch": ("rad", "body")}
     channels, reference = {}, {}
     for i, name in enumerate(("depth", "speed", "pitch")):
@@ -220,15 +262,34 @@ def make_frame(rng: np.random.Generator, *, duration, dt, depth0, base_sigma, no
         angles = (0,) if name == "pitch" else ()
         conv = PITCH_CONVENTION if name == "pitch" else ""
         channels[name] = Channel(z[:, i], unit, frame, None, (name,), angles, conv, desc[name])
-        reference[name] = Channel(np.where(ref_ok, x[:, i], np.nan), unit, frame, ref_ok, (name,),
-                                  angles, conv, f"true {name} (synthetic external reference)")
-    meta = {"source": "synthetic: replay.sim.lake_depth", "synthetic": True, "dt": dt,
-            "maneuvers": maneuvers(duration, profile=profile), "pitch_convention": PITCH_CONVENTION,
-            "profile_seed": profile_seed, "profile": [list(seg) for seg in profile],
-            "noise": {"base_sigma": list(base_sigma), "noise_rms": None if noise_rms is None else list(noise_rms),
-                      "regimes": list(regimes), "drift": drift},
-            "columns": {"depth": "depth", "speed": "speed", "pitch": "pitch"},
-            "ref_every": int(ref_every), "ref_gaps": [list(g) for g in ref_gaps]}
+        reference[name] = Channel(
+            np.where(ref_ok, x[:, i], np.nan),
+            unit,
+            frame,
+            ref_ok,
+            (name,),
+            angles,
+            conv,
+            f"true {name} (synthetic external reference)",
+        )
+    meta = {
+        "source": "synthetic: replay.sim.lake_depth",
+        "synthetic": True,
+        "dt": dt,
+        "maneuvers": maneuvers(duration, profile=profile),
+        "pitch_convention": PITCH_CONVENTION,
+        "profile_seed": profile_seed,
+        "profile": [list(seg) for seg in profile],
+        "noise": {
+            "base_sigma": list(base_sigma),
+            "noise_rms": None if noise_rms is None else list(noise_rms),
+            "regimes": list(regimes),
+            "drift": drift,
+        },
+        "columns": {"depth": "depth", "speed": "speed", "pitch": "pitch"},
+        "ref_every": int(ref_every),
+        "ref_gaps": [list(g) for g in ref_gaps],
+    }
     return Frame(t, channels, reference, None, meta)
 
 
@@ -237,11 +298,14 @@ def write_example(path, rng: np.random.Generator, **params) -> Frame:
     from replay.adapters.lake_write import write
 
     frame = make_frame(rng, **{**EXAMPLE, **params})
-    write(frame, path, comments=[
-        "SYNTHETIC: generated by replay.sim.lake_depth (`replay datasets make sim/lake-depth`), "
-        "not a lake trial",
-        "synthetic: true",
-        f"convention: depth positive down; {PITCH_CONVENTION}",
-        "maneuvers: " + "; ".join(f"{a:g}-{b:g} {lab}" for a, b, lab in frame.meta["maneuvers"]),
-    ])
+    write(
+        frame,
+        path,
+        comments=[
+            "SYNTHETIC: generated by replay.sim.lake_depth (`replay datasets make sim/lake-depth`), not a lake trial",
+            "synthetic: true",
+            f"convention: depth positive down; {PITCH_CONVENTION}",
+            "maneuvers: " + "; ".join(f"{a:g}-{b:g} {lab}" for a, b, lab in frame.meta["maneuvers"]),
+        ],
+    )
     return frame

@@ -6,6 +6,7 @@ channel ``z``. The true ``q`` and ``r`` are in the frame's metadata: a filter
 tuned on its innovations' likelihood (``replay tune --objective nll``) should
 find them (task ``linear``, whose assumed q and r are parameters).
 """
+
 from __future__ import annotations
 
 import numpy as np

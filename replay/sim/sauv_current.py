@@ -60,6 +60,7 @@ counter-clockwise). **Reference**: ``position`` [east, north, up] (ENU, m),
 as the channel), ``current`` [east, north] (m/s). The filter model runs in NED
 (:mod:`replay.models.sauv`); the task converts.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -72,8 +73,10 @@ from replay.util.params import Param
 from . import Numbers, generator
 
 LAMBDA, C_PHASE = 0.84, 0.12
-ATT_CONVENTION = ("roll: positive = left side up; pitch: positive = front down; "
-                  "yaw: heading, 0 = east, counter-clockwise positive (ENU)")
+ATT_CONVENTION = (
+    "roll: positive = left side up; pitch: positive = front down; "
+    "yaw: heading, 0 = east, counter-clockwise positive (ENU)"
+)
 
 
 def meander_B(t):
@@ -110,14 +113,18 @@ def current_acceleration(x, y, t, h: float = 1e-4):
     return (e1 - e0) / (2 * h), (n1 - n0) / (2 * h)
 
 
-def mission(T=0.5, dive_pitch_deg=20.0, cruise_s=300.0, depth=30.0, heading0_deg=45.0,
-            turn_rate_deg=3.0):
+def mission(T=0.5, dive_pitch_deg=20.0, cruise_s=300.0, depth=30.0, heading0_deg=45.0, turn_rate_deg=3.0):
     """Through-water surge speed u(t), pitch (NED, nose up +), heading (NED) at steps of T."""
     fast, slow = 4 * KNOT, 2 * KNOT
     th = dive_pitch_deg * DEG
-    legs = [("AB", fast / 0.2, 0.2, 0.0), ("BC", depth / (fast * np.sin(th)), 0.0, -th),
-            ("CD", (fast - slow) / 0.2, -0.2, 0.0), ("DE", cruise_s, 0.0, 0.0),
-            ("EF", depth / (slow * np.sin(th)), 0.0, th), ("FG", slow / 0.1, -0.1, 0.0)]
+    legs = [
+        ("AB", fast / 0.2, 0.2, 0.0),
+        ("BC", depth / (fast * np.sin(th)), 0.0, -th),
+        ("CD", (fast - slow) / 0.2, -0.2, 0.0),
+        ("DE", cruise_s, 0.0, 0.0),
+        ("EF", depth / (slow * np.sin(th)), 0.0, th),
+        ("FG", slow / 0.1, -0.1, 0.0),
+    ]
     t_end = sum(leg[1] for leg in legs)
     t = np.arange(0.0, t_end + 1e-9, T)
     u, pitch = np.zeros_like(t), np.zeros_like(t)
@@ -157,35 +164,85 @@ def gauss_markov(rng, n, sigma, tau, T):
 PARAMS = (
     Param("T", float, 0.5, "time step (ours)", unit="s", low=0, low_open=True),
     Param("strength", float, 0.5, "current velocity scale (the jet is non-dimensional)", unit="m/s", low=0),
-    Param("length_scale", float, 100.0, "metres per non-dimensional unit of the jet", unit="m",
-          low=0, low_open=True),
+    Param("length_scale", float, 100.0, "metres per non-dimensional unit of the jet", unit="m", low=0, low_open=True),
     Param("grid", float, 8.0, "cell of the sampled current field (001: 8 m); 0 = continuous", unit="m", low=0),
     Numbers("origin_en", list, (0.0, 0.0), "start point [east, north]", unit="m", length=2),
-    Param("dive_pitch_deg", float, 20.0, "pitch of the dive and the climb (ours)", unit="deg",
-          low=0, high=90, low_open=True, high_open=True),
+    Param(
+        "dive_pitch_deg",
+        float,
+        20.0,
+        "pitch of the dive and the climb (ours)",
+        unit="deg",
+        low=0,
+        high=90,
+        low_open=True,
+        high_open=True,
+    ),
     Param("cruise_s", float, 300.0, "duration of the cruise leg DE (ours)", unit="s", low=0),
     Param("heading0_deg", float, 45.0, "initial heading, NED (ours)", unit="deg"),
-    Param("depth_full_scale", float, 50.0, "depth gauge full scale; its noise is 3 % of it (ours)", unit="m",
-          low=0, low_open=True),
-    Param("dvl_track", str, "bottom", "DVL reference: bottom lock (velocity over ground) or water track "
-          "(velocity through the water: the current becomes an unmodelled drift) (ours; 001 is silent)",
-          choices=("bottom", "water")),
-    Param("dvl_percent", float, 1.0, "DVL noise standard deviation, percent of speed per axis (001 §5)",
-          unit="%", low=0),
-    Param("acc_bias", float, 0.02, "accelerometer bias standard deviation, constant over a run (001 §5)",
-          unit="m/s^2", low=0),
-    Param("acc_noise_density", float, 0.02, "accelerometer white noise density (001 §5)",
-          unit="m/(s^2 sqrt(Hz))", low=0),
-    Param("ahrs_sigma_deg", float, 2.0, "AHRS roll, pitch and heading error standard deviation (001 §5)",
-          unit="deg", low=0),
+    Param(
+        "depth_full_scale",
+        float,
+        50.0,
+        "depth gauge full scale; its noise is 3 % of it (ours)",
+        unit="m",
+        low=0,
+        low_open=True,
+    ),
+    Param(
+        "dvl_track",
+        str,
+        "bottom",
+        "DVL reference: bottom lock (velocity over ground) or water track "
+        "(velocity through the water: the current becomes an unmodelled drift) (ours; 001 is silent)",
+        choices=("bottom", "water"),
+    ),
+    Param(
+        "dvl_percent", float, 1.0, "DVL noise standard deviation, percent of speed per axis (001 §5)", unit="%", low=0
+    ),
+    Param(
+        "acc_bias",
+        float,
+        0.02,
+        "accelerometer bias standard deviation, constant over a run (001 §5)",
+        unit="m/s^2",
+        low=0,
+    ),
+    Param(
+        "acc_noise_density", float, 0.02, "accelerometer white noise density (001 §5)", unit="m/(s^2 sqrt(Hz))", low=0
+    ),
+    Param(
+        "ahrs_sigma_deg",
+        float,
+        2.0,
+        "AHRS roll, pitch and heading error standard deviation (001 §5)",
+        unit="deg",
+        low=0,
+    ),
     Param("ahrs_tau", float, 30.0, "correlation time of the AHRS error (ours); 0 = white", unit="s", low=0),
 )
 
 
 @generator(PARAMS)
-def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, origin_en, dive_pitch_deg,
-               cruise_s, heading0_deg, depth_full_scale, dvl_track, dvl_percent, acc_bias, acc_noise_density,
-               ahrs_sigma_deg, ahrs_tau) -> Frame:
+def make_frame(
+    rng: np.random.Generator,
+    *,
+    T,
+    strength,
+    length_scale,
+    grid,
+    origin_en,
+    dive_pitch_deg,
+    cruise_s,
+    heading0_deg,
+    depth_full_scale,
+    dvl_track,
+    dvl_percent,
+    acc_bias,
+    acc_noise_density,
+    ahrs_sigma_deg,
+    ahrs_tau,
+) -> Frame:
     """Simulate the A→G mission in the current field; sensors from ``rng``."""
     t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
     n = len(t)
@@ -234,25 +291,54 @@ def make_frame(rng: np.random.Generator, *, T, strength, length_scale, grid, ori
     body = "body forward-starboard-down"
     channels = {
         "depth": Channel(depth, "m", "positive down", description="depth gauge, 3 % of full scale"),
-        "dvl_velocity": Channel(dvl, "m/s", body, components=("vx", "vy", "vz"),
-                                description="DVL bottom-lock velocity over ground, 1 %" if dvl_track == "bottom"
-                                else "DVL water-track velocity through the water, 1 %"),
-        "accel": Channel(acc, "m/s^2", body, components=("ax", "ay", "az"),
-                         description="AHRS accelerometers (kinematic acceleration, no gravity)"),
-        "attitude": Channel(att_meas, "rad", "body", components=("roll", "pitch", "yaw"),
-                            angles=(0, 1, 2), convention=ATT_CONVENTION, description="AHRS, 2 deg"),
+        "dvl_velocity": Channel(
+            dvl,
+            "m/s",
+            body,
+            components=("vx", "vy", "vz"),
+            description="DVL bottom-lock velocity over ground, 1 %"
+            if dvl_track == "bottom"
+            else "DVL water-track velocity through the water, 1 %",
+        ),
+        "accel": Channel(
+            acc,
+            "m/s^2",
+            body,
+            components=("ax", "ay", "az"),
+            description="AHRS accelerometers (kinematic acceleration, no gravity)",
+        ),
+        "attitude": Channel(
+            att_meas,
+            "rad",
+            "body",
+            components=("roll", "pitch", "yaw"),
+            angles=(0, 1, 2),
+            convention=ATT_CONVENTION,
+            description="AHRS, 2 deg",
+        ),
     }
     reference = {
-        "position": Channel(np.column_stack([pos[:, 1], pos[:, 0], -pos[:, 2]]), "m", "ENU local",
-                            components=("east", "north", "up")),
+        "position": Channel(
+            np.column_stack([pos[:, 1], pos[:, 0], -pos[:, 2]]), "m", "ENU local", components=("east", "north", "up")
+        ),
         "velocity_body": Channel(v_b, "m/s", body, components=("vx", "vy", "vz")),
         "accel_body": Channel(a_b, "m/s^2", body, components=("ax", "ay", "az")),
-        "attitude": Channel(att_true, "rad", "body", components=("roll", "pitch", "yaw"),
-                            angles=(0, 1, 2), convention=ATT_CONVENTION),
+        "attitude": Channel(
+            att_true, "rad", "body", components=("roll", "pitch", "yaw"), angles=(0, 1, 2), convention=ATT_CONVENTION
+        ),
         "current": Channel(cur[:, [1, 0]], "m/s", "ENU local", components=("east", "north")),
     }
-    meta = {"source": "synthetic: replay.sim.sauv_current", "synthetic": True, "crs": None, "dt": T,
-            "strength": strength, "length_scale": length_scale, "grid": grid,
-            "depth_full_scale": depth_full_scale, "ahrs_tau": ahrs_tau, "dvl_track": dvl_track,
-            "initial_state_ned": np.concatenate([pos[0], v_b[0], a_b[0], [heading[0]]]).tolist()}
+    meta = {
+        "source": "synthetic: replay.sim.sauv_current",
+        "synthetic": True,
+        "crs": None,
+        "dt": T,
+        "strength": strength,
+        "length_scale": length_scale,
+        "grid": grid,
+        "depth_full_scale": depth_full_scale,
+        "ahrs_tau": ahrs_tau,
+        "dvl_track": dvl_track,
+        "initial_state_ned": np.concatenate([pos[0], v_b[0], a_b[0], [heading[0]]]).tolist(),
+    }
     return Frame(t, channels, reference, None, meta)

@@ -18,6 +18,7 @@ Channels: ``radar`` [range, bearing] (bearing 0 = east, counter-clockwise),
 the follower's own commanded turns). Reference: the follower's
 ``position`` [x, y] and ``velocity`` [vx, vy] (x east, y north, metres).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,25 +51,44 @@ PARAMS = (
     Param("T", float, 1.0, "time step (ours)", unit="s", low=0, low_open=True),
     Param("leg", int, 20, "steps per leg of the straight / left / straight / right pattern (ours)", low=1),
     Param("turn_rate", float, 0.05, "|w| of the commanded turns, eq. 3 (ours)", unit="rad/s"),
-    Param("accel_sigma", float, 1.0, "follower acceleration noise standard deviation (ours)",
-          unit="m/s^2", low=0, low_open=True),
+    Param(
+        "accel_sigma",
+        float,
+        1.0,
+        "follower acceleration noise standard deviation (ours)",
+        unit="m/s^2",
+        low=0,
+        low_open=True,
+    ),
     Param("eps", float, 0.75, "glint probability epsilon (003 §4.1)", low=0, high=1),
-    Param("range_sigma", float, 5.0, "range noise standard deviation (003 §4.1)", unit="m",
-          low=0, low_open=True),
-    Param("sigma1", float, 0.4 * DEG, "thermal bearing noise standard deviation (003 §4.1)", unit="rad",
-          low=0, low_open=True),
-    Param("sigma2", float, 0.8 * DEG, "glint bearing noise standard deviation (003 §4.1)", unit="rad",
-          low=0, low_open=True),
-    Numbers("x0", list, X0_FOLLOWER, "follower initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s",
-            length=4),
-    Numbers("leader0", list, X0_LEADER, "leader initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s",
-            length=4),
+    Param("range_sigma", float, 5.0, "range noise standard deviation (003 §4.1)", unit="m", low=0, low_open=True),
+    Param(
+        "sigma1",
+        float,
+        0.4 * DEG,
+        "thermal bearing noise standard deviation (003 §4.1)",
+        unit="rad",
+        low=0,
+        low_open=True,
+    ),
+    Param(
+        "sigma2",
+        float,
+        0.8 * DEG,
+        "glint bearing noise standard deviation (003 §4.1)",
+        unit="rad",
+        low=0,
+        low_open=True,
+    ),
+    Numbers("x0", list, X0_FOLLOWER, "follower initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s", length=4),
+    Numbers("leader0", list, X0_LEADER, "leader initial state [x, y, vx, vy] (003 §4.1)", unit="m, m/s", length=4),
 )
 
 
 @generator(PARAMS)
-def make_frame(rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigma, eps, range_sigma,
-               sigma1, sigma2, x0, leader0) -> Frame:
+def make_frame(
+    rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigma, eps, range_sigma, sigma1, sigma2, x0, leader0
+) -> Frame:
     """Simulate ``steps`` samples of both aircraft and the follower's radar from ``rng``."""
     noise = glint_003(eps, range_sigma, sigma1, sigma2)
     w = turn_schedule(steps, leg, turn_rate)
@@ -86,9 +106,15 @@ def make_frame(rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigm
     z[:, 1] = wrap(z[:, 1])
     t = T * np.arange(1, steps + 1)
     channels = {
-        "radar": Channel(z, "m, rad", "follower", components=("range", "bearing"), angles=(1,),
-                         convention="bearing: 0 = east (x), counter-clockwise positive",
-                         description="ranging radar on the follower, glint noise (003 eq. 7-10)"),
+        "radar": Channel(
+            z,
+            "m, rad",
+            "follower",
+            components=("range", "bearing"),
+            angles=(1,),
+            convention="bearing: 0 = east (x), counter-clockwise positive",
+            description="ranging radar on the follower, glint noise (003 eq. 7-10)",
+        ),
         "leader_position": Channel(lead[:, :2], "m", "local x east, y north", components=("x", "y")),
         "turn_rate": Channel(w, "rad/s", "", description="commanded turn rate (eq. 3), > 0 left"),
     }
@@ -96,7 +122,16 @@ def make_frame(rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigm
         "position": Channel(fol[:, :2], "m", "local x east, y north", components=("x", "y")),
         "velocity": Channel(fol[:, 2:], "m/s", "local x east, y north", components=("vx", "vy")),
     }
-    meta = {"source": "synthetic: replay.sim.uav_formation", "synthetic": True, "crs": None, "dt": T,
-            "initial_state": list(map(float, x0)), "accel_sigma": accel_sigma, "eps": eps,
-            "range_sigma": range_sigma, "sigma1": sigma1, "sigma2": sigma2}
+    meta = {
+        "source": "synthetic: replay.sim.uav_formation",
+        "synthetic": True,
+        "crs": None,
+        "dt": T,
+        "initial_state": list(map(float, x0)),
+        "accel_sigma": accel_sigma,
+        "eps": eps,
+        "range_sigma": range_sigma,
+        "sigma1": sigma1,
+        "sigma2": sigma2,
+    }
     return Frame(t, channels, reference, None, meta)

@@ -5,6 +5,7 @@ x_0 = 0; 100 steps; Gaussian noise, Q = R = 1 (first set) or Q = R = 10
 ``state`` (and ``position``, one component, for the scorer); the measurement
 z_k = x_k^2 / 20 + v_k is the sensor channel ``z``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,9 +38,20 @@ def make_frame(rng: np.random.Generator, *, steps, q, r, x0, growth) -> Frame:
         x[k] = prev[0]
     z = x * x / 20.0 + v
     t = np.arange(1, steps + 1, dtype=float)
-    ref = {"position": Channel(x[:, None], "1", "state", components=("x",),
-                               description="UNGM state (scored as the 1-D 'position')")}
+    ref = {
+        "position": Channel(
+            x[:, None], "1", "state", components=("x",), description="UNGM state (scored as the 1-D 'position')"
+        )
+    }
     meas = Channel(z[:, None], "1", "measurement", components=("z",), description="z = x^2/20 + v")
-    meta = {"source": "synthetic: replay.sim.ungm", "synthetic": True, "crs": None, "dt": 1.0,
-            "initial_state": [float(x0)], "q": q, "r": r, "growth": growth}
+    meta = {
+        "source": "synthetic: replay.sim.ungm",
+        "synthetic": True,
+        "crs": None,
+        "dt": 1.0,
+        "initial_state": [float(x0)],
+        "q": q,
+        "r": r,
+        "growth": growth,
+    }
     return Frame(t, {"z": meas}, ref, None, meta)

@@ -18,6 +18,7 @@ input says so in ``Problem.notes`` (``task_notes`` in the manifest). A task
 that lacks a required channel refuses in one line naming the adapter's report
 line that removed it (:func:`missing`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -34,17 +35,21 @@ def _check(obj):
     return class_problem(obj, Task, "replay.tasks.Task", (("build",),))
 
 
-TASKS = Registry("task", {
-    "position": "replay.tasks.position:PositionTask",
-    "sonar": "replay.tasks.sonar:SonarTask",
-    "ungm": "replay.tasks.ungm:UNGMTask",
-    "linear": "replay.tasks.linear:LinearTask",
-    "gps-odom": "replay.tasks.gps_odom:GpsOdomTask",
-    "depth": "replay.tasks.depth:DepthTask",
-    "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
-    "formation": "replay.tasks.formation:FormationTask",
-    "fusion": "replay.tasks.fusion:FusionTask",
-}, check=_check)
+TASKS = Registry(
+    "task",
+    {
+        "position": "replay.tasks.position:PositionTask",
+        "sonar": "replay.tasks.sonar:SonarTask",
+        "ungm": "replay.tasks.ungm:UNGMTask",
+        "linear": "replay.tasks.linear:LinearTask",
+        "gps-odom": "replay.tasks.gps_odom:GpsOdomTask",
+        "depth": "replay.tasks.depth:DepthTask",
+        "dead-reckoning": "replay.tasks.dead_reckoning:DeadReckoningTask",
+        "formation": "replay.tasks.formation:FormationTask",
+        "fusion": "replay.tasks.fusion:FusionTask",
+    },
+    check=_check,
+)
 
 
 # the default divergence threshold of every task, times its lost threshold (replay.scoring.metrics): an
@@ -98,11 +103,19 @@ class Task(Declared):
         super().__init_subclass__(**kwargs)
         if "lost_threshold" not in {p.name for p in cls.PARAMS}:
             cls.PARAMS = tuple(cls.PARAMS) + (
-                Param("lost_threshold", float, float(cls.LOST_M), "a run whose position error stays above "
-                      "this for lost_steps consecutive scored samples is counted lost", unit="m",
-                      low=0.0, low_open=True),
-                Param("lost_steps", int, 10, "consecutive scored samples above lost_threshold that make a "
-                      "run lost", low=1),
+                Param(
+                    "lost_threshold",
+                    float,
+                    float(cls.LOST_M),
+                    "a run whose position error stays above "
+                    "this for lost_steps consecutive scored samples is counted lost",
+                    unit="m",
+                    low=0.0,
+                    low_open=True,
+                ),
+                Param(
+                    "lost_steps", int, 10, "consecutive scored samples above lost_threshold that make a run lost", low=1
+                ),
             )
 
     def judge(self, problem: Problem) -> Problem:
@@ -141,9 +154,11 @@ def describe(frame, name: str, group: str = "channels") -> str:
 
 
 # frames whose adapter declares no roles (no ``meta["roles"]``): a channel named as the role
-LEGACY_ROLES = {"gps": ("gps", {"position": "gps"}),
-                "odometry": ("odom", {"velocity": "odom_velocity", "rate": "odom_rate"}),
-                "imu": ("imu", {"gyro": "imu"})}
+LEGACY_ROLES = {
+    "gps": ("gps", {"position": "gps"}),
+    "odometry": ("odom", {"velocity": "odom_velocity", "rate": "odom_rate"}),
+    "imu": ("imu", {"gyro": "imu"}),
+}
 
 
 def role_input(frame, role: str, task: str) -> dict | None:
@@ -161,13 +176,14 @@ def role_input(frame, role: str, task: str) -> dict | None:
             return None
         entry, chans = LEGACY_ROLES[role]
         chans = {k: v for k, v in chans.items() if v in frame.channels}
-        return {"entry": entry, "source": frame.channels[entry].description, "declared": False,
-                "channels": chans}
+        return {"entry": entry, "source": frame.channels[entry].description, "declared": False, "channels": chans}
     found = [r for r in roles.get(role, []) if any(c in frame.channels for c in r["channels"].values())]
     if len(found) > 1:
-        raise ReplayError(f"{source_of(frame)}: task {task}: {len(found)} inputs have role {role} ("
-                          + ", ".join(f"{r['entry']} = {r['source']}" for r in found)
-                          + "): keep one (role = \"none\" on the others in the mapping)")
+        raise ReplayError(
+            f"{source_of(frame)}: task {task}: {len(found)} inputs have role {role} ("
+            + ", ".join(f"{r['entry']} = {r['source']}" for r in found)
+            + "): keep one (role = \"none\" on the others in the mapping)"
+        )
     return found[0] if found else None
 
 

@@ -29,6 +29,7 @@ NED heading = π/2 − yaw, roll unchanged.
   fix is withheld from the filter and the RMSE is the position error at the
   resurfacing fixes.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -53,25 +54,63 @@ class DeadReckoningTask(Task):
     LOST_M = 1000.0  # lost-track threshold (m): dead reckoning drifts by hundreds of metres over the mission by design
 
     PARAMS = (
-        Covariance("Q", list, None, "process noise covariance of the 10 states; null = the model's, "
-                   "scaled by the frame's step / 0.5 s", dim=10, optional=True),
-        Covariance("R", list, None, "measurement noise covariance (DVL frame: depth, body velocity, "
-                   "acceleration, heading; Bohai frame: north, east, pseudo-measurements, heading); null = from "
-                   "the sigmas below", dim=8, optional=True),
-        Covariance("P0", list, None, "prior covariance of the 10 states; null = the task's", dim=10,
-                   optional=True),
-        Param("gps_sigma", float, 5.0, "GPS fix noise standard deviation (Bohai frames)", unit="m",
-              low=0, low_open=True),
-        Param("pseudo_sigma", float, 0.05, "standard deviation of the zero sideways/heave pseudo-measurements",
-              unit="m/s", low=0, low_open=True),
-        Param("accel_sigma", float, 0.05, "standard deviation of the zero-acceleration pseudo-measurements",
-              unit="m/s^2", low=0, low_open=True),
-        Param("score", str, "navigation", "reference: the vehicle's navigation solution, or the first fix "
-              "after each dive", choices=("navigation", "fixes")),
-        Param("dive_gap", float, 10.0, "a gap between fixes longer than this is a dive", unit="s",
-              low=0, low_open=True),
-        Param("mean_maneuver", str, "previous", "mean manoeuvre of the model (replay.models.sauv)",
-              choices=("previous", "zero")),
+        Covariance(
+            "Q",
+            list,
+            None,
+            "process noise covariance of the 10 states; null = the model's, scaled by the frame's step / 0.5 s",
+            dim=10,
+            optional=True,
+        ),
+        Covariance(
+            "R",
+            list,
+            None,
+            "measurement noise covariance (DVL frame: depth, body velocity, "
+            "acceleration, heading; Bohai frame: north, east, pseudo-measurements, heading); null = from "
+            "the sigmas below",
+            dim=8,
+            optional=True,
+        ),
+        Covariance("P0", list, None, "prior covariance of the 10 states; null = the task's", dim=10, optional=True),
+        Param(
+            "gps_sigma", float, 5.0, "GPS fix noise standard deviation (Bohai frames)", unit="m", low=0, low_open=True
+        ),
+        Param(
+            "pseudo_sigma",
+            float,
+            0.05,
+            "standard deviation of the zero sideways/heave pseudo-measurements",
+            unit="m/s",
+            low=0,
+            low_open=True,
+        ),
+        Param(
+            "accel_sigma",
+            float,
+            0.05,
+            "standard deviation of the zero-acceleration pseudo-measurements",
+            unit="m/s^2",
+            low=0,
+            low_open=True,
+        ),
+        Param(
+            "score",
+            str,
+            "navigation",
+            "reference: the vehicle's navigation solution, or the first fix after each dive",
+            choices=("navigation", "fixes"),
+        ),
+        Param(
+            "dive_gap", float, 10.0, "a gap between fixes longer than this is a dive", unit="s", low=0, low_open=True
+        ),
+        Param(
+            "mean_maneuver",
+            str,
+            "previous",
+            "mean manoeuvre of the model (replay.models.sauv)",
+            choices=("previous", "zero"),
+        ),
     )
 
     def build(self, frame, rng):
@@ -97,18 +136,32 @@ class DeadReckoningTask(Task):
             c = ch[name]
             cols += list(np.where(c.valid[:, None], c.values, np.nan).T)
         z = np.column_stack(cols + [heading])
-        model = SAUV(dt, pitch, roll, Q=Q, R=as_matrix(self.R), measured=PAPER_MEASURED,
-                     mean_maneuver=self.mean_maneuver)
+        model = SAUV(
+            dt, pitch, roll, Q=Q, R=as_matrix(self.R), measured=PAPER_MEASURED, mean_maneuver=self.mean_maneuver
+        )
         ref = frame.reference["position"]
         truth = np.column_stack([ref.values[:, 1], ref.values[:, 0], -ref.values[:, 2]])
-        P0 = np.diag([1.0, 1.0, 1.0] + [0.05**2] * 3 + [0.02**2] * 3 + [(2 * DEG) ** 2]) \
-            if self.P0 is None else as_matrix(self.P0)
+        P0 = (
+            np.diag([1.0, 1.0, 1.0] + [0.05**2] * 3 + [0.02**2] * 3 + [(2 * DEG) ** 2])
+            if self.P0 is None
+            else as_matrix(self.P0)
+        )
         x_true0 = np.asarray(frame.meta["initial_state_ned"], float)
         x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
         x0[9] = wrap(x0[9])
-        pb = Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
-                     ("north", "east", "depth"), params=self.params(),
-                     inputs={name: describe(frame, name) for name in ("depth", "dvl_velocity", "accel", "attitude")})
+        pb = Problem(
+            model,
+            z,
+            x0,
+            P0,
+            frame.t,
+            truth,
+            ref.valid.copy(),
+            (0, 1, 2),
+            ("north", "east", "depth"),
+            params=self.params(),
+            inputs={name: describe(frame, name) for name in ("depth", "dvl_velocity", "accel", "attitude")},
+        )
         extra, units = {}, {}  # body velocity and acceleration, scored as extra components when present
         for name, first in (("velocity_body", 3), ("accel_body", 6)):
             if name in frame.reference:
@@ -123,8 +176,9 @@ class DeadReckoningTask(Task):
         gps = frame.channels.get("gps_position")
         ref = frame.reference.get("position")
         if gps is None:
-            raise missing(frame, self.name, "a DVL channel, or gps_position fixes (columns lat_gps, lon_gps)",
-                          ("gps_position",))
+            raise missing(
+                frame, self.name, "a DVL channel, or gps_position fixes (columns lat_gps, lon_gps)", ("gps_position",)
+            )
         if ref is None:
             raise missing(frame, self.name, "a reference position", ("position",))
         n = len(frame.t)
@@ -143,19 +197,26 @@ class DeadReckoningTask(Task):
         z[fix, :2] = ne[fix]
         z[:, 2:7] = 0.0
         z[:, 7] = heading
-        R = np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [self.accel_sigma**2] * 3
-                    + [(2 * DEG) ** 2]) \
-            if self.R is None else as_matrix(self.R)
+        R = (
+            np.diag([self.gps_sigma**2] * 2 + [self.pseudo_sigma**2] * 2 + [self.accel_sigma**2] * 3 + [(2 * DEG) ** 2])
+            if self.R is None
+            else as_matrix(self.R)
+        )
         model = SAUV(dt, pitch, roll, Q=Q, R=R, measured=BOHAI_MEASURED, mean_maneuver=self.mean_maneuver)
         first = idx[0] if len(idx) else int(np.argmax(ref.valid))
         start = ne[first] if len(idx) else truth[first]
         x0 = np.zeros(10)
         x0[:2] = start
         x0[9] = heading[first] if np.isfinite(heading[first]) else 0.0
-        P0 = np.diag([self.gps_sigma**2] * 2 + [1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.1, (5 * DEG) ** 2]) \
-            if self.P0 is None else as_matrix(self.P0)
+        P0 = (
+            np.diag([self.gps_sigma**2] * 2 + [1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 0.1, (5 * DEG) ** 2])
+            if self.P0 is None
+            else as_matrix(self.P0)
+        )
         params = dict(self.params(), resurfacing_fixes=int(len(resurface)), fixes_used=int(fix.sum()))
-        inputs = {"attitude": describe(frame, "attitude"), "gps": describe(frame, "gps_position"),
-                  "reference": describe(frame, "position", "reference")}
-        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params,
-                       inputs=inputs)
+        inputs = {
+            "attitude": describe(frame, "attitude"),
+            "gps": describe(frame, "gps_position"),
+            "reference": describe(frame, "position", "reference"),
+        }
+        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("north", "east"), params=params, inputs=inputs)

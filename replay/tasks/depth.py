@@ -16,6 +16,7 @@ angle (``pitch_rmse``) and ``speed`` (``speed_rmse``) where the reference has th
 * ``window`` (default 50, the paper's wavelet window): a log with fewer valid
   samples in a channel is refused, naming the file and the column.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,13 +36,26 @@ class DepthTask(Task):
     name = "depth"
     LOST_M = 1.0  # lost-track threshold (m): depth sensor noise 0.05-0.2 m; working filters stay near 0.1 m
     PARAMS = (
-        Covariance("Q", list, None, "process noise covariance of [z, v, phi]; null = the paper's, made "
-                   "positive definite (replay.models.depth.paper_Q)", unit=UNITS, dim=3, optional=True),
-        Covariance("R", list, diagonal(R_FIXED), "fixed measurement noise covariance (000: used by "
-                   "EKF and MMPF)", unit=UNITS, dim=3),
+        Covariance(
+            "Q",
+            list,
+            None,
+            "process noise covariance of [z, v, phi]; null = the paper's, made "
+            "positive definite (replay.models.depth.paper_Q)",
+            unit=UNITS,
+            dim=3,
+            optional=True,
+        ),
+        Covariance(
+            "R",
+            list,
+            diagonal(R_FIXED),
+            "fixed measurement noise covariance (000: used by EKF and MMPF)",
+            unit=UNITS,
+            dim=3,
+        ),
         Covariance("P0", list, None, "prior covariance; null = R", unit=UNITS, dim=3, optional=True),
-        Param("window", int, 50, "noise-estimation window: fewer valid samples in a channel are refused",
-              low=1),
+        Param("window", int, 50, "noise-estimation window: fewer valid samples in a channel are refused", low=1),
     )
 
     def build(self, frame, rng):
@@ -54,15 +68,20 @@ class DepthTask(Task):
             col = columns.get(name, name)
             if ch is None:
                 why = why_missing(frame, (name, col))
-                raise DataError(source, f"no {name} sensor column: the depth task needs depth, speed and pitch"
-                                + (f" ({why})" if why else ""))
+                raise DataError(
+                    source,
+                    f"no {name} sensor column: the depth task needs depth, speed and pitch"
+                    + (f" ({why})" if why else ""),
+                )
             z[:, i] = np.where(ch.valid, ch.values, np.nan)
             n_ok = int(np.isfinite(z[:, i]).sum())
             if n_ok < self.window:
                 why = why_missing(frame, (name, col))
-                raise DataError(source, f"column {col}: {n_ok} valid samples, "
-                                f"fewer than the noise-estimation window of {self.window}"
-                                + (f"; {why}" if why else ""))
+                raise DataError(
+                    source,
+                    f"column {col}: {n_ok} valid samples, "
+                    f"fewer than the noise-estimation window of {self.window}" + (f"; {why}" if why else ""),
+                )
         ref = frame.reference.get("depth")
         if ref is None:
             raise DataError(source, "no reference depth column (e.g. ref_depth_m) to score against")
@@ -86,10 +105,23 @@ class DepthTask(Task):
         if "speed" in frame.reference:
             s = frame.reference["speed"]
             extra["speed"] = (np.where(s.valid, s.values, np.nan), 1)
-        return Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0,), ("depth",),
-                       angles, {"pitch": 2} if angles else {},
-                       params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if Qgiven is None else "user",
-                               "R": R.tolist(), "T": med},
-                       truth_extra=extra, extra_units={"speed": "m/s"},
-                       inputs={**{n: describe(frame, n) for n in CHANNELS},
-                               **{f"reference {n}": describe(frame, n, "reference") for n in frame.reference}})
+        return Problem(
+            model,
+            z,
+            x0,
+            P0,
+            frame.t,
+            truth,
+            ref.valid.copy(),
+            (0,),
+            ("depth",),
+            angles,
+            {"pitch": 2} if angles else {},
+            params={"Q": Q.tolist(), "Q_source": paper_Q()[1] if Qgiven is None else "user", "R": R.tolist(), "T": med},
+            truth_extra=extra,
+            extra_units={"speed": "m/s"},
+            inputs={
+                **{n: describe(frame, n) for n in CHANNELS},
+                **{f"reference {n}": describe(frame, n, "reference") for n in frame.reference},
+            },
+        )

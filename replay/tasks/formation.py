@@ -9,6 +9,7 @@ once from the task's seed, P0 = diag(10², 10², 1, 1) by default (ours: the pap
 say how it initialises). Scored: position x, y; velocity vx, vy as extra
 components.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,10 +27,23 @@ class FormationTask(Task):
     name = "formation"
     LOST_M = 20.0  # lost-track threshold (m): working filters stay near 1-2 m
     PARAMS = (
-        Param("eps", float, None, "glint probability the filters assume; null = the simulator's",
-              low=0, high=1, optional=True),
-        Covariance("P0", list, (100.0, 100.0, 1.0, 1.0), "prior covariance of [x, y, vx, vy] (ours)",
-                   unit="m^2, (m/s)^2", dim=4),
+        Param(
+            "eps",
+            float,
+            None,
+            "glint probability the filters assume; null = the simulator's",
+            low=0,
+            high=1,
+            optional=True,
+        ),
+        Covariance(
+            "P0",
+            list,
+            (100.0, 100.0, 1.0, 1.0),
+            "prior covariance of [x, y, vx, vy] (ours)",
+            unit="m^2, (m/s)^2",
+            dim=4,
+        ),
     )
 
     def build(self, frame, rng):
@@ -38,15 +52,30 @@ class FormationTask(Task):
             raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: formation needs channels {', '.join(need)}")
         m = frame.meta
         noise = glint_003(m["eps"] if self.eps is None else self.eps, m["range_sigma"], m["sigma1"], m["sigma2"])
-        model = Formation(frame.channels["leader_position"].values, frame.channels["turn_rate"].values,
-                          m["dt"], m["accel_sigma"] ** 2 * np.eye(2), noise)
+        model = Formation(
+            frame.channels["leader_position"].values,
+            frame.channels["turn_rate"].values,
+            m["dt"],
+            m["accel_sigma"] ** 2 * np.eye(2),
+            noise,
+        )
         radar = frame.channels["radar"]
         z = np.where(radar.valid[:, None], radar.values, np.nan)
         P0 = as_matrix(self.P0)
         x0 = np.asarray(m["initial_state"], float) + np.linalg.cholesky(P0) @ rng.standard_normal(4)
         ref = frame.reference
-        pb = Problem(model, z, x0, P0, frame.t, ref["position"].values, ref["position"].valid.copy(),
-                     (0, 1), ("x", "y"), params=self.params())
+        pb = Problem(
+            model,
+            z,
+            x0,
+            P0,
+            frame.t,
+            ref["position"].values,
+            ref["position"].valid.copy(),
+            (0, 1),
+            ("x", "y"),
+            params=self.params(),
+        )
         vel = ref["velocity"]
         pb.truth_extra = {"vx": (vel.values[:, 0], 2), "vy": (vel.values[:, 1], 3)}
         pb.extra_units = {"vx": vel.unit, "vy": vel.unit}

@@ -30,6 +30,7 @@ Refused in one line: a frame with no sensor input (naming the tasks that would r
 reference (nothing to score against: how to declare one), an unknown field, a differential
 field with fewer than two messages.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,8 +40,15 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
-from .fusion_inputs import (NOISE_PARAM, components, configured, differential, field_channel, has_absolute_position,
-                            inputs)
+from .fusion_inputs import (
+    NOISE_PARAM,
+    components,
+    configured,
+    differential,
+    field_channel,
+    has_absolute_position,
+    inputs,
+)
 
 POS = dict(low=0, low_open=True)
 
@@ -51,43 +59,70 @@ class FusionTask(Task):
     # Noise defaults: those of gps-odom (set on the first 60 s of test1.bag: skid-steer odometry,
     # a ground robot's turns), plain engineering choices like them, every one a task parameter.
     PARAMS = (
-        Param("dims", str, "auto", "state dimension: 2 (planar), 3, or auto (3 with a depth input)",
-              choices=("auto", "2", "3")),
-        Param("gps_every", int, 5, "when the reference is a gps input's topic, every gps_every-th fix is fed, "
-              "the others are held out for scoring", low=1),
+        Param(
+            "dims",
+            str,
+            "auto",
+            "state dimension: 2 (planar), 3, or auto (3 with a depth input)",
+            choices=("auto", "2", "3"),
+        ),
+        Param(
+            "gps_every",
+            int,
+            5,
+            "when the reference is a gps input's topic, every gps_every-th fix is fed, "
+            "the others are held out for scoring",
+            low=1,
+        ),
         Param("q_position", float, 0.01, "process noise of each position axis, per second", unit="m^2/s", **POS),
-        Param("q_attitude", float, 0.01, "process noise of each attitude angle, per second", unit="rad^2/s",
-              **POS),
-        Param("q_velocity", float, 0.5, "process noise of each body velocity, per second", unit="(m/s)^2/s",
-              **POS),
+        Param("q_attitude", float, 0.01, "process noise of each attitude angle, per second", unit="rad^2/s", **POS),
+        Param("q_velocity", float, 0.5, "process noise of each body velocity, per second", unit="(m/s)^2/s", **POS),
         Param("q_rate", float, 0.5, "process noise of each body rate, per second", unit="(rad/s)^2/s", **POS),
-        Param("r_position", float, 1.0, "position measurement variance per axis (default of an input)",
-              unit="m^2", **POS),
+        Param(
+            "r_position", float, 1.0, "position measurement variance per axis (default of an input)", unit="m^2", **POS
+        ),
         Param("r_attitude", float, 0.01, "attitude measurement variance per angle", unit="rad^2", **POS),
         Param("r_velocity", float, 0.04, "body velocity measurement variance per axis", unit="(m/s)^2", **POS),
-        Param("r_rate", float, 0.01, "body rate (gyro, odometry twist) measurement variance per axis",
-              unit="(rad/s)^2", **POS),
+        Param(
+            "r_rate",
+            float,
+            0.01,
+            "body rate (gyro, odometry twist) measurement variance per axis",
+            unit="(rad/s)^2",
+            **POS,
+        ),
         Param("r_depth", float, 0.01, "depth measurement variance", unit="m^2", **POS),
         Param("p0_position", float, 1.0, "prior variance of each position axis", unit="m^2", **POS),
         Param("p0_attitude", float, 0.25, "prior variance of each attitude angle", unit="rad^2", **POS),
         Param("p0_velocity", float, 1.0, "prior variance of each body velocity", unit="(m/s)^2", **POS),
         Param("p0_rate", float, 0.1, "prior variance of each body rate", unit="(rad/s)^2", **POS),
-        Param("p0_known", float, 1e-4, "prior variance of a start position axis or heading taken from the "
-              "reference (dead reckoning: the known start)", unit="m^2 or rad^2", **POS),
+        Param(
+            "p0_known",
+            float,
+            1e-4,
+            "prior variance of a start position axis or heading taken from the "
+            "reference (dead reckoning: the known start)",
+            unit="m^2 or rad^2",
+            **POS,
+        ),
     )
 
     def build(self, frame, rng):
         where = source_of(frame)
         found = inputs(frame)
         if not found:
-            raise ReplayError(f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
-                              "pose; docs/bags.md); tasks that need none: position, sonar (synthetic "
-                              "measurements from the reference)")
+            raise ReplayError(
+                f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
+                "pose; docs/bags.md); tasks that need none: position, sonar (synthetic "
+                "measurements from the reference)"
+            )
         ref = frame.reference.get("position")
         if ref is None or not ref.valid.any():
-            raise ReplayError(f"{where}: task fusion: nothing to score against: the recording has no valid "
-                              "position reference; declare one in the mapping ([reference] position = { topic = "
-                              "\"/ground_truth\" }, or a GPS, pose or TF topic; docs/bags.md)")
+            raise ReplayError(
+                f"{where}: task fusion: nothing to score against: the recording has no valid "
+                "position reference; declare one in the mapping ([reference] position = { topic = "
+                "\"/ground_truth\" }, or a GPS, pose or TF topic; docs/bags.md)"
+            )
         dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
         n, t = len(frame.t), np.asarray(frame.t, float)
         cols, rows_R, index, sign, z_angles = [], [], [], [], []
@@ -98,13 +133,17 @@ class FusionTask(Task):
             key = f"[channels] {entry['entry']}"
             fuse, diff, noise = configured(entry, role, f"{where}: {key}", absolute)
             if role == "imu" and "attitude" not in fuse and not entry.get("fuse") and "attitude" in entry["channels"]:
-                notes.append(f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
-                             "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)")
+                notes.append(
+                    f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
+                    "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)"
+                )
             for fld in fuse + diff:
                 name = field_channel(frame, entry, fld)
                 if name is None:
-                    raise ReplayError(f"{where}: {key}: no field {fld!r} in {entry['source']} "
-                                      f"(it has: {', '.join(sorted(entry['channels']))})")
+                    raise ReplayError(
+                        f"{where}: {key}: no field {fld!r} in {entry['source']} "
+                        f"(it has: {', '.join(sorted(entry['channels']))})"
+                    )
                 ch = frame.channels[name]
                 vals = np.asarray(ch.values, float).reshape(n, -1)
                 valid = ch.valid & np.isfinite(vals).all(axis=1)
@@ -125,8 +164,10 @@ class FusionTask(Task):
                     valid, fed_gps, holdout = fed, fed, True
                 comps = [c for c in components(fld, dims, role) if c[0] < vals.shape[1]]
                 if not comps or not valid.any():
-                    notes.append(f"task fusion: {key} {label}: " + ("not used in a 2-D state" if not comps
-                                                                  else "no valid sample"))
+                    notes.append(
+                        f"task fusion: {key} {label}: "
+                        + ("not used in a 2-D state" if not comps else "no valid sample")
+                    )
                     continue
                 var, how = self._variance(frame, entry, fld, noise, n, valid)
                 for col, state, sgn, ang in comps:
@@ -138,8 +179,7 @@ class FusionTask(Task):
                     index.append(state)
                     sign.append(sgn)
                 used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
-                notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "")
-                             + f": noise {how}")
+                notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "") + f": noise {how}")
                 if fld == "position" and absolute_pos is None:
                     absolute_pos = (np.flatnonzero(valid)[0], vals, comps, valid)
                 if fld == "attitude" and attitude_at is None:
@@ -152,7 +192,7 @@ class FusionTask(Task):
         nx = len(model_cls.STATE)
         dt = np.diff(t, prepend=t[0])
         first = int(np.flatnonzero(np.isfinite(Z).any(axis=1))[0])  # the first sensor message
-        dt[:first + 1] = 0.0  # before it nothing is known of the motion: the state is held at the start
+        dt[: first + 1] = 0.0  # before it nothing is known of the motion: the state is held at the start
         q = self._per_state(dims, self.q_position, self.q_attitude, self.q_velocity, self.q_rate)
         model = model_cls(dt, q, index, sign, z_angles, R)
         x0, notes, known = self._prior(frame, ref, dims, nx, absolute_pos, attitude_at, notes, first)
@@ -167,13 +207,29 @@ class FusionTask(Task):
         params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(holdout))
         axes = ("x", "y", "z")[:d]
         angle_index = {"yaw": 5 if dims == 3 else 2}
-        return Problem(model, Z, x0, P0, t, np.asarray(ref.values[:, :d], float), valid_ref, tuple(range(d)), axes,
-                       angle_index=angle_index, params=params, inputs=used, notes=notes)
+        return Problem(
+            model,
+            Z,
+            x0,
+            P0,
+            t,
+            np.asarray(ref.values[:, :d], float),
+            valid_ref,
+            tuple(range(d)),
+            axes,
+            angle_index=angle_index,
+            params=params,
+            inputs=used,
+            notes=notes,
+        )
 
     @staticmethod
     def _per_state(dims, pos, att, vel, rate):
-        return np.array([pos] * 2 + [att] + [vel] * 2 + [rate]) if dims == 2 else \
-            np.array([pos] * 3 + [att] * 3 + [vel] * 3 + [rate] * 3)
+        return (
+            np.array([pos] * 2 + [att] + [vel] * 2 + [rate])
+            if dims == 2
+            else np.array([pos] * 3 + [att] * 3 + [vel] * 3 + [rate] * 3)
+        )
 
     def _variance(self, frame, entry, fld, noise, n, valid):
         """(n,) variance per step of a field, and how it was chosen (for the notes)."""
@@ -190,7 +246,10 @@ class FusionTask(Task):
             if bad < valid.sum():
                 return var, "recorded position_covariance" + (
                     f" ({bad} of {int(valid.sum())} messages had none usable: not positive or not finite; "
-                    f"{NOISE_PARAM[fld]} = {v:g} used there)" if bad else "")
+                    f"{NOISE_PARAM[fld]} = {v:g} used there)"
+                    if bad
+                    else ""
+                )
         return np.full(n, v), f"default {NOISE_PARAM[fld]} = {v:g}"
 
     @staticmethod
@@ -210,9 +269,11 @@ class FusionTask(Task):
             d = min(dims, ref.values.shape[1])
             x0[:d] = ref.values[k, :d]
             known += list(range(d))
-            notes = notes + ["task fusion: no absolute position input (dead reckoning): the start position is "
-                             f"the reference's sample nearest the first sensor message (t = {frame.t[k]:.3f} s); "
-                             "no other reference sample reaches a filter"]
+            notes = notes + [
+                "task fusion: no absolute position input (dead reckoning): the start position is "
+                f"the reference's sample nearest the first sensor message (t = {frame.t[k]:.3f} s); "
+                "no other reference sample reaches a filter"
+            ]
         if attitude_at is not None:
             k, vals, comps = attitude_at
             for col, state, sgn, _ in comps:
@@ -231,6 +292,8 @@ class FusionTask(Task):
                 k = self._nearest_valid(att.valid, first)
                 x0[yaw_i] = att.values[k, 2]
                 known.append(yaw_i)
-                notes = notes + ["task fusion: no attitude input: the start heading is the reference's "
-                                 "(nearest the first sensor message)"]
+                notes = notes + [
+                    "task fusion: no attitude input: the start heading is the reference's "
+                    "(nearest the first sensor message)"
+                ]
         return x0, notes, known

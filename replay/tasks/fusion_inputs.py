@@ -14,6 +14,7 @@ A field maps to state components of the 2-D or 3-D kinematic state
 body-velocity (position) or a yaw-rate (attitude) measurement at the later message:
 ``v_body = R(yaw_prev)^T (p_k - p_prev) / (t_k - t_prev)``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,26 +23,45 @@ from replay.util.angles import wrap
 from replay.util.errors import ReplayError
 
 FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")
-DEFAULT_FUSE = {"gps": ("position",), "odometry": ("velocity", "rate"), "imu": ("gyro", "attitude"),
-                "depth": ("depth",), "velocity": ("velocity",), "pose": ("position", "attitude")}
+DEFAULT_FUSE = {
+    "gps": ("position",),
+    "odometry": ("velocity", "rate"),
+    "imu": ("gyro", "attitude"),
+    "depth": ("depth",),
+    "velocity": ("velocity",),
+    "pose": ("position", "attitude"),
+}
 # the default noise variance of a field, by its task parameter (per component)
-NOISE_PARAM = {"position": "r_position", "attitude": "r_attitude", "velocity": "r_velocity", "rate": "r_rate",
-               "gyro": "r_rate", "depth": "r_depth"}
+NOISE_PARAM = {
+    "position": "r_position",
+    "attitude": "r_attitude",
+    "velocity": "r_velocity",
+    "rate": "r_rate",
+    "gyro": "r_rate",
+    "depth": "r_depth",
+}
 
 
 def components(field: str, dims: int, role: str) -> list[tuple[int, int, float, bool]]:
     """``(channel column, state component, sign, angle)`` of a field in the 2-D or 3-D state."""
     if dims == 2:
-        table = {"position": [(0, 0, 1.0, False), (1, 1, 1.0, False)],
-                 "attitude": [(2, 2, 1.0, True)],
-                 "velocity": [(0, 3, 1.0, False), (1, 4, 1.0, False)],
-                 "rate": [(2, 5, 1.0, False)], "gyro": [(2, 5, 1.0, False)], "depth": []}
+        table = {
+            "position": [(0, 0, 1.0, False), (1, 1, 1.0, False)],
+            "attitude": [(2, 2, 1.0, True)],
+            "velocity": [(0, 3, 1.0, False), (1, 4, 1.0, False)],
+            "rate": [(2, 5, 1.0, False)],
+            "gyro": [(2, 5, 1.0, False)],
+            "depth": [],
+        }
     else:
-        table = {"position": [(0, 0, 1.0, False), (1, 1, 1.0, False)] + ([] if role == "gps" else [(2, 2, 1.0, False)]),
-                 "attitude": [(i, 3 + i, 1.0, True) for i in range(3)],
-                 "velocity": [(i, 6 + i, 1.0, False) for i in range(3)],
-                 "rate": [(i, 9 + i, 1.0, False) for i in range(3)], "gyro": [(i, 9 + i, 1.0, False) for i in range(3)],
-                 "depth": [(0, 2, -1.0, False)]}
+        table = {
+            "position": [(0, 0, 1.0, False), (1, 1, 1.0, False)] + ([] if role == "gps" else [(2, 2, 1.0, False)]),
+            "attitude": [(i, 3 + i, 1.0, True) for i in range(3)],
+            "velocity": [(i, 6 + i, 1.0, False) for i in range(3)],
+            "rate": [(i, 9 + i, 1.0, False) for i in range(3)],
+            "gyro": [(i, 9 + i, 1.0, False) for i in range(3)],
+            "depth": [(0, 2, -1.0, False)],
+        }
     return table[field]
 
 
@@ -50,8 +70,11 @@ def field_channel(frame, entry: dict, field: str) -> str | None:
     or the entry's primary channel when that is the field), or None."""
     for name in (entry["channels"].get(field), f"{entry['entry']}_{field}", entry["entry"]):
         ch = frame.channels.get(name) if name else None
-        if ch is not None and (name == entry["channels"].get(field) or str(ch.description).endswith(f" {field}")
-                               or name == f"{entry['entry']}_{field}"):
+        if ch is not None and (
+            name == entry["channels"].get(field)
+            or str(ch.description).endswith(f" {field}")
+            or name == f"{entry['entry']}_{field}"
+        ):
             return name
     return None
 

@@ -46,6 +46,7 @@ manifest's ``task_inputs``); without odometry or IMU a note says that the
 filters run on the fixes only (``task_notes``). Defaults are plain engineering
 choices (no paper prescribes them), written here and in the manifest.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -70,14 +71,12 @@ class UnicycleModel(Model):
         self.q = np.asarray(q, float)
         self.R = np.diag(np.asarray(r, float))
         self.Q = np.diag(self.q * max(float(np.median(self.dt)), 1e-6))
-        self._H = np.array([[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 0, 1, 0],
-                            [0, 0, 0, 0, 1], [0, 0, 0, 0, 1]], float)
+        self._H = np.array([[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [0, 0, 0, 1, 0], [0, 0, 0, 0, 1], [0, 0, 0, 0, 1]], float)
 
     def f(self, x, k):
         dt = self.dt[k]
         e, n, th, v, w = np.moveaxis(x, -1, 0)
-        return np.stack([e + v * np.cos(th) * dt, n + v * np.sin(th) * dt,
-                         wrap(th + w * dt), v, w], axis=-1)
+        return np.stack([e + v * np.cos(th) * dt, n + v * np.sin(th) * dt, wrap(th + w * dt), v, w], axis=-1)
 
     def F(self, x, k):
         dt = self.dt[k]
@@ -106,8 +105,13 @@ class GpsOdomTask(Task):
     name = "gps-odom"
     LOST_M = 20.0  # lost-track threshold (m): GPS-scale errors; working filters stay near 1-3 m
     PARAMS = (
-        Param("gps_every", int, 5, "every gps_every-th valid fix is fed to the filters; the others are "
-              "the held-out reference", low=1),
+        Param(
+            "gps_every",
+            int,
+            5,
+            "every gps_every-th valid fix is fed to the filters; the others are the held-out reference",
+            low=1,
+        ),
         _variance("q_pos", 0.01, "process noise of east and north, per second", "m^2/s"),
         _variance("q_heading", 0.01, "process noise of the heading, per second", "rad^2/s"),
         _variance("q_v", 0.5, "process noise of the forward speed, per second", "(m/s)^2/s"),
@@ -126,18 +130,28 @@ class GpsOdomTask(Task):
         gps_in = role_input(frame, "gps", self.name)
         ref = frame.reference.get("position")
         if gps_in is None or "position" not in gps_in["channels"]:
-            raise missing(frame, self.name, "a gps input (a NavSatFix topic, or a topic with role = \"gps\" "
-                          "in the mapping; docs/bags.md)", ("gps", "gps_position"))
+            raise missing(
+                frame,
+                self.name,
+                "a gps input (a NavSatFix topic, or a topic with role = \"gps\" in the mapping; docs/bags.md)",
+                ("gps", "gps_position"),
+            )
         gps_name = gps_in["channels"]["position"]
         gps = frame.channels[gps_name]
         if ref is None:
-            raise missing(frame, self.name, "a position reference ([reference] position in the mapping; "
-                          "docs/bags.md)", ("position",))
+            raise missing(
+                frame,
+                self.name,
+                "a position reference ([reference] position in the mapping; docs/bags.md)",
+                ("position",),
+            )
         n = len(frame.t)
         idx = np.flatnonzero(gps.valid)
         if len(idx) < 2:
-            raise ReplayError(f"{where}: task gps-odom needs at least 2 valid fixes on {gps_name} (got {len(idx)})"
-                              + (f"; {why}" if (why := why_missing(frame, (gps_name,))) else ""))
+            raise ReplayError(
+                f"{where}: task gps-odom needs at least 2 valid fixes on {gps_name} (got {len(idx)})"
+                + (f"; {why}" if (why := why_missing(frame, (gps_name,))) else "")
+            )
         fed = np.zeros(n, bool)
         fed[idx[:: self.gps_every]] = True
         z = np.full((n, 5), np.nan)
@@ -161,25 +175,43 @@ class GpsOdomTask(Task):
                 absent.append(role if found is None else f"{role} ({found['entry']}: no valid sample)")
         notes = []
         if len(absent) == 2:
-            notes.append(f"task gps-odom: no {absent[0]} and no {absent[1]} input (roles odometry, imu; "
-                         "docs/bags.md): the filters use the GPS fixes only")
+            notes.append(
+                f"task gps-odom: no {absent[0]} and no {absent[1]} input (roles odometry, imu; "
+                "docs/bags.md): the filters use the GPS fixes only"
+            )
         elif absent:
-            notes.append(f"task gps-odom: no {absent[0]} input (docs/bags.md): the filters use the GPS fixes "
-                         f"and the {'imu' if absent[0].startswith('odometry') else 'odometry'} only")
+            notes.append(
+                f"task gps-odom: no {absent[0]} input (docs/bags.md): the filters use the GPS fixes "
+                f"and the {'imu' if absent[0].startswith('odometry') else 'odometry'} only"
+            )
         truth = ref.values[:, :2]
         valid = ref.valid.copy()
         holdout = ref.description == gps.description
         if holdout:
             valid &= ~fed
         dt = np.diff(frame.t, prepend=frame.t[0])
-        model = UnicycleModel(dt, [self.q_pos, self.q_pos, self.q_heading, self.q_v, self.q_omega],
-                              [self.r_gps, self.r_gps, self.r_v, self.r_omega, self.r_gyro])
+        model = UnicycleModel(
+            dt,
+            [self.q_pos, self.q_pos, self.q_heading, self.q_v, self.q_omega],
+            [self.r_gps, self.r_gps, self.r_v, self.r_omega, self.r_gyro],
+        )
         fed_idx = np.flatnonzero(fed)
         p_first = gps.values[fed_idx[0], :2]
         far = [i for i in fed_idx if np.hypot(*(gps.values[i, :2] - p_first)) >= 2.0]
         d = gps.values[far[0], :2] - p_first if far else np.array([1.0, 0.0])
         x0 = np.array([p_first[0], p_first[1], np.arctan2(d[1], d[0]), 0.0, 0.0])
         P0 = np.diag([self.r_gps, self.r_gps, self.p0_heading, self.p0_v, self.p0_omega])
-        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1), ("x", "y"),
-                       params=dict(self.params(), fed_fixes=int(fed.sum()), holdout=bool(holdout)),
-                       inputs=inputs, notes=notes)
+        return Problem(
+            model,
+            z,
+            x0,
+            P0,
+            frame.t,
+            truth,
+            valid,
+            (0, 1),
+            ("x", "y"),
+            params=dict(self.params(), fed_fixes=int(fed.sum()), holdout=bool(holdout)),
+            inputs=inputs,
+            notes=notes,
+        )

@@ -12,6 +12,7 @@ measurements range/elevation/azimuth with R = diag(2, 0.01^2, 0.01^2).
   reference with seeded noise R; step length is the frame's time step. The
   prior is the start point with zero speed, pitch and yaw and a wide P0.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -29,14 +30,31 @@ class SonarTask(Task):
     SYNTHETIC = True  # measurements drawn from the reference (the paper's protocol)
     LOST_M = 20.0  # lost-track threshold (m): range noise std 1.4 m; working filters stay near 2-3 m
     PARAMS = (
-        Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance the filters assume "
-                   "(Table 2)", dim=6),
-        Covariance("R", list, diagonal(R_TABLE2), "sonar noise covariance the filters assume, "
-                   "range/elevation/azimuth (Table 2)", unit="m^2, rad^2", dim=3),
-        Covariance("P0", list, None, "prior covariance; null = Table 2's on a sonar frame, "
-                   "diag(1, 1, 1, 4, 0.1, pi^2) otherwise", dim=6, optional=True),
-        Param("yaw_rate", float, None, "yaw rate of the model; null = the simulator's (0 on other frames)",
-              unit="rad/s", optional=True),
+        Covariance("Q", list, diagonal(Q_TABLE2), "process noise covariance the filters assume (Table 2)", dim=6),
+        Covariance(
+            "R",
+            list,
+            diagonal(R_TABLE2),
+            "sonar noise covariance the filters assume, range/elevation/azimuth (Table 2)",
+            unit="m^2, rad^2",
+            dim=3,
+        ),
+        Covariance(
+            "P0",
+            list,
+            None,
+            "prior covariance; null = Table 2's on a sonar frame, diag(1, 1, 1, 4, 0.1, pi^2) otherwise",
+            dim=6,
+            optional=True,
+        ),
+        Param(
+            "yaw_rate",
+            float,
+            None,
+            "yaw rate of the model; null = the simulator's (0 on other frames)",
+            unit="rad/s",
+            optional=True,
+        ),
     )
 
     def build(self, frame, rng):
@@ -44,9 +62,13 @@ class SonarTask(Task):
         truth, valid = reference_position_3d(frame, task="sonar")
         if "sonar" in frame.channels:
             meta = frame.meta
-            model = AUVSonar(Q, R, dt=meta.get("dt", 1.0),
-                             yaw_rate=meta.get("yaw_rate", 0.25) if self.yaw_rate is None else self.yaw_rate,
-                             origin=meta.get("sonar_origin", (0, 0, 0)))
+            model = AUVSonar(
+                Q,
+                R,
+                dt=meta.get("dt", 1.0),
+                yaw_rate=meta.get("yaw_rate", 0.25) if self.yaw_rate is None else self.yaw_rate,
+                origin=meta.get("sonar_origin", (0, 0, 0)),
+            )
             ch = frame.channels["sonar"]
             z = np.where(ch.valid[:, None], ch.values, np.nan)
             P0 = P0_TABLE2 if P0 is None else P0
@@ -67,11 +89,28 @@ class SonarTask(Task):
         angles = {}
         att = frame.reference.get("attitude")
         if att is not None and att.components == ("pitch", "yaw"):
-            angles = {"pitch": np.where(att.valid, att.values[:, 0], np.nan),
-                      "yaw": np.where(att.valid, att.values[:, 1], np.nan)}
-        inputs = {"reference": describe(frame, "position", "reference"),
-                  "sonar": describe(frame, "sonar") if "sonar" in frame.channels
-                  else "synthesised from the reference with noise R"}
-        return Problem(model, z, x0, P0, frame.t, truth, valid, (0, 1, 2), ("x", "y", "z"),
-                       angles, {"pitch": 4, "yaw": 5} if angles else {},
-                       params={"Q": np.diag(Q).tolist(), "R": np.diag(R).tolist()}, inputs=inputs)
+            angles = {
+                "pitch": np.where(att.valid, att.values[:, 0], np.nan),
+                "yaw": np.where(att.valid, att.values[:, 1], np.nan),
+            }
+        inputs = {
+            "reference": describe(frame, "position", "reference"),
+            "sonar": describe(frame, "sonar")
+            if "sonar" in frame.channels
+            else "synthesised from the reference with noise R",
+        }
+        return Problem(
+            model,
+            z,
+            x0,
+            P0,
+            frame.t,
+            truth,
+            valid,
+            (0, 1, 2),
+            ("x", "y", "z"),
+            angles,
+            {"pitch": 4, "yaw": 5} if angles else {},
+            params={"Q": np.diag(Q).tolist(), "R": np.diag(R).tolist()},
+            inputs=inputs,
+        )

@@ -4,6 +4,7 @@ The model's Q, R and growth come from the frame's metadata (the values the
 simulator used) unless given. Prior: x_0 = the simulator's initial state (0)
 with P0 = ``p0`` (002 gives x_0 = 0 and no P0; we take 1).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,13 +20,26 @@ class UNGMTask(Task):
     # lost-track threshold (m): state units; the sign ambiguity of x^2/20 puts a wrong-mode estimate about 2|x| away
     LOST_M = 10.0
     PARAMS = (
-        Param("q", float, None, "process noise variance the filters assume; null = the simulator's",
-              low=0, low_open=True, optional=True),
-        Param("r", float, None, "measurement noise variance the filters assume; null = the simulator's",
-              low=0, low_open=True, optional=True),
+        Param(
+            "q",
+            float,
+            None,
+            "process noise variance the filters assume; null = the simulator's",
+            low=0,
+            low_open=True,
+            optional=True,
+        ),
+        Param(
+            "r",
+            float,
+            None,
+            "measurement noise variance the filters assume; null = the simulator's",
+            low=0,
+            low_open=True,
+            optional=True,
+        ),
         Param("p0", float, 1.0, "prior variance (002 gives none)", low=0, low_open=True),
-        Param("growth", float, None, "growth coefficient g the filters assume; null = the simulator's",
-              optional=True),
+        Param("growth", float, None, "growth coefficient g the filters assume; null = the simulator's", optional=True),
     )
 
     def build(self, frame, rng):
@@ -41,6 +55,16 @@ class UNGMTask(Task):
         ch, ref = frame.channels["z"], frame.reference["position"]
         z = np.where(ch.valid[:, None], ch.values, np.nan)
         x0 = np.asarray(meta.get("initial_state", [0.0]), float)
-        return Problem(model, z, x0, np.array([[self.p0]]), frame.t, ref.values, ref.valid.copy(),
-                       (0,), ("x",), params={"q": q, "r": r, "growth": g, "p0": self.p0},
-                       position_unit="1")  # UNGM is dimensionless
+        return Problem(
+            model,
+            z,
+            x0,
+            np.array([[self.p0]]),
+            frame.t,
+            ref.values,
+            ref.valid.copy(),
+            (0,),
+            ("x",),
+            params={"q": q, "r": r, "growth": g, "p0": self.p0},
+            position_unit="1",
+        )  # UNGM is dimensionless

@@ -8,11 +8,23 @@ Modules, bottom up: :mod:`.quat` (quaternion algebra, x y z w), :mod:`.base`
 Alignment is :mod:`replay.scoring.align`, shared with the ATE column of the filters' leaderboard.
 The library never imports evo; evo is the test oracle (``tests/test_trajectory_evo.py``).
 """
+
 from replay.trajectory.associate import associate
 from replay.trajectory.base import Trajectory, make
 from replay.trajectory.io import load
 from replay.trajectory.pose_error import ape, pairs, rpe, statistics
 from replay.trajectory.scoring import Score, row_metrics, score
 
-__all__ = ["Score", "Trajectory", "ape", "associate", "load", "make", "pairs", "row_metrics", "rpe", "score",
-           "statistics"]
+__all__ = [
+    "Score",
+    "Trajectory",
+    "ape",
+    "associate",
+    "load",
+    "make",
+    "pairs",
+    "row_metrics",
+    "rpe",
+    "score",
+    "statistics",
+]

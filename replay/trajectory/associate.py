@@ -9,6 +9,7 @@ This reproduces evo's ``sync.matching_time_indices`` index for index (``nearest_
 Refused in one line naming both sources: time spans that do not overlap (even within
 ``t_max_diff``), and fewer than :data:`MIN_MATCHES` matched poses.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -47,23 +48,33 @@ def associate_times(t_ref, t_est, t_max_diff: float = 0.01, t_offset: float = 0.
     return i, j
 
 
-def associate(ref: Trajectory, est: Trajectory, *, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
-              min_matches: int = MIN_MATCHES):
+def associate(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    t_max_diff: float = T_MAX_DIFF,
+    t_offset: float = 0.0,
+    min_matches: int = MIN_MATCHES,
+):
     """(ref indices, est indices) of the matched poses (module docstring)."""
     if not t_max_diff >= 0:
         raise ReplayError(f"t_max_diff {t_max_diff}: expected a time difference >= 0 s")
     names = f"{est.source or est.name} against {ref.source or ref.name}"
     lo, hi = est.t[0] + t_offset, est.t[-1] + t_offset
     if hi < ref.t[0] - t_max_diff or lo > ref.t[-1] + t_max_diff:
-        raise ReplayError(f"{names}: the time spans do not overlap (estimate {lo:.3f} .. {hi:.3f} s"
-                          f"{f' with t_offset {t_offset:g} s' if t_offset else ''}, reference {ref.t[0]:.3f} .. "
-                          f"{ref.t[-1]:.3f} s)")
+        raise ReplayError(
+            f"{names}: the time spans do not overlap (estimate {lo:.3f} .. {hi:.3f} s"
+            f"{f' with t_offset {t_offset:g} s' if t_offset else ''}, reference {ref.t[0]:.3f} .. "
+            f"{ref.t[-1]:.3f} s)"
+        )
     if len(est) > len(ref):
         i_ref, i_est = matching_indices(ref.t, est.t + t_offset, t_max_diff)
     else:
         i_est, i_ref = matching_indices(est.t, ref.t - t_offset, t_max_diff)
     if len(i_ref) < min_matches:
-        raise ReplayError(f"{names}: {len(i_ref)} pose{'s' if len(i_ref) != 1 else ''} matched within "
-                          f"t_max_diff {t_max_diff:g} s{f' (t_offset {t_offset:g} s)' if t_offset else ''}; at least "
-                          f"{min_matches} are needed (stamps in different clocks? try --t-offset or --t-max-diff)")
+        raise ReplayError(
+            f"{names}: {len(i_ref)} pose{'s' if len(i_ref) != 1 else ''} matched within "
+            f"t_max_diff {t_max_diff:g} s{f' (t_offset {t_offset:g} s)' if t_offset else ''}; at least "
+            f"{min_matches} are needed (stamps in different clocks? try --t-offset or --t-max-diff)"
+        )
     return i_ref, i_est

@@ -20,6 +20,7 @@ edge is interpolated there (linear in position, slerp in orientation), and stamp
 outside its recorded span are dropped, as tf does not extrapolate. A path of static
 edges only is a constant transform, not a trajectory, and is refused.
 """  # noqa: E501 (Markdown tables)
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -31,8 +32,14 @@ from replay.util.errors import DataError
 from replay.util.tf_tree import compose, path_between, tf_edges
 from replay.util.tf_tree import seconds as _seconds, xyz as _xyz, xyzw as _xyzw
 
-POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-              "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Path", "sensor_msgs/msg/NavSatFix")
+POSE_TYPES = (
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/TransformStamped",
+    "nav_msgs/msg/Path",
+    "sensor_msgs/msg/NavSatFix",
+)
 TF_TOPICS = ("/tf", "tf", "/tf_static", "tf_static")
 
 
@@ -72,14 +79,19 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
     src = f"{path}:{topic}"
     top = _find(rec, topic)
     if top is None:
-        listed = ", ".join(f"{t.name} ({t.type.split('/')[-1]})" for t in rec.topics.values()
-                           if t.type in POSE_TYPES) or "none"
+        listed = (
+            ", ".join(f"{t.name} ({t.type.split('/')[-1]})" for t in rec.topics.values() if t.type in POSE_TYPES)
+            or "none"
+        )
         raise DataError(path, f"no topic {topic!r} (trajectory topics: {listed})")
     if top.type == "tf2_msgs/msg/TFMessage":
         raise DataError(src, "a tf topic: name the frames as BAG:tf:PARENT->CHILD")
     if top.type not in POSE_TYPES:
-        raise DataError(src, f"message type {top.type} is not a trajectory (supported: "
-                             f"{', '.join(t.split('/')[-1] for t in POSE_TYPES)}, and tf frames as tf:PARENT->CHILD)")
+        raise DataError(
+            src,
+            f"message type {top.type} is not a trajectory (supported: "
+            f"{', '.join(t.split('/')[-1] for t in POSE_TYPES)}, and tf frames as tf:PARENT->CHILD)",
+        )
     msgs = top.msgs
     if not msgs:
         raise DataError(src, "no messages")
@@ -93,8 +105,7 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
         t = [_seconds(ps.header.stamp) for ps in poses]
         p = [_xyz(ps.pose.position) for ps in poses]
         q = [_xyzw(ps.pose.orientation) for ps in poses]
-        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)),
-                    unit="pose")
+        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose")
     t = [_seconds(m.header.stamp) for m in msgs]
     if kind == "sensor_msgs/msg/NavSatFix":
         return _fixes(src, msgs, np.array(t), name)
@@ -126,16 +137,20 @@ def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
     enu = Geo(lat, lon, alt, ok).forward(lat, lon, alt, ok)
     cov = np.array([np.asarray(m.position_covariance, float) for m in msgs]).reshape(-1, 3, 3)
     idx = np.flatnonzero(ok)
-    return make(t[idx], enu[idx], None, cov[idx] if cov[idx].any() else None, source=src, name=name, rows=idx,
-                unit="message")
+    return make(
+        t[idx], enu[idx], None, cov[idx] if cov[idx].any() else None, source=src, name=name, rows=idx, unit="message"
+    )
 
 
 def parse_tf(spec: str):
     """``PARENT->CHILD``, or the spellings that need no shell quoting: ``PARENT,CHILD``, ``PARENT:CHILD``
     and evo's ``PARENT.CHILD`` -> (parent, child)."""
     if spec.endswith("-") and "->" not in spec:  # an unquoted A->B: the shell redirected stdout to a file B
-        raise DataError(f"tf:{spec}", "the shell took '>' for a redirection (and wrote a file named after the child "
-                        "frame): quote the argument ('REC:tf:map->base_link') or write REC:tf:map,base_link")
+        raise DataError(
+            f"tf:{spec}",
+            "the shell took '>' for a redirection (and wrote a file named after the child "
+            "frame): quote the argument ('REC:tf:map->base_link') or write REC:tf:map,base_link",
+        )
     for sep in ("->", ",", ":", "."):
         if sep in spec:
             parent, child = spec.split(sep, 1)
@@ -144,8 +159,10 @@ def parse_tf(spec: str):
         parent, child = spec, ""
     parent, child = parent.strip().lstrip("/"), child.strip().lstrip("/")
     if not parent or not child:
-        raise DataError(f"tf:{spec}", "expected tf:PARENT->CHILD (quoted), tf:PARENT,CHILD or tf:PARENT.CHILD, "
-                        "e.g. tf:map,base_link")
+        raise DataError(
+            f"tf:{spec}",
+            "expected tf:PARENT->CHILD (quoted), tf:PARENT,CHILD or tf:PARENT.CHILD, e.g. tf:map,base_link",
+        )
     return parent, child
 
 

@@ -11,6 +11,7 @@ fewer than :data:`MIN_POSES` poses, a non-finite value, a quaternion whose norm 
 not within :data:`QUAT_TOL` of 1 (those within are normalised), a stamp equal to the
 previous one (duplicate) or before it (time not increasing).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -42,8 +43,13 @@ class Trajectory:
 
     def take(self, idx) -> Trajectory:
         """The poses at ``idx`` (indices or a boolean mask)."""
-        return replace(self, t=self.t[idx], p=self.p[idx], q=None if self.q is None else self.q[idx],
-                       cov=None if self.cov is None else self.cov[idx])
+        return replace(
+            self,
+            t=self.t[idx],
+            p=self.p[idx],
+            q=None if self.q is None else self.q[idx],
+            cov=None if self.cov is None else self.cov[idx],
+        )
 
     def to_pandas(self):
         """The poses as a DataFrame: columns ``t`` (s), ``x, y, z`` (m) and, with an orientation,
@@ -68,20 +74,31 @@ class Trajectory:
         quat = [c for c in QUAT_COLUMNS if c in df.columns]
         if missing or 0 < len(quat) < 4:
             absent = missing or [c for c in QUAT_COLUMNS if c not in quat]
-            raise DataError(source, f"lacks column{'s' if len(absent) > 1 else ''} {', '.join(absent)}: expected t, "
-                            f"x, y, z (s, m) and optionally all of {', '.join(QUAT_COLUMNS)} "
-                            f"(columns: {', '.join(map(str, df.columns))[:120]})")
+            raise DataError(
+                source,
+                f"lacks column{'s' if len(absent) > 1 else ''} {', '.join(absent)}: expected t, "
+                f"x, y, z (s, m) and optionally all of {', '.join(QUAT_COLUMNS)} "
+                f"(columns: {', '.join(map(str, df.columns))[:120]})",
+            )
         wanted = ["t", "x", "y", "z", *quat]
         twice = [c for c in wanted if list(df.columns).count(c) > 1]
         if twice:
             raise DataError(source, f"column {twice[0]!r} appears twice")
         bad = [c for c in wanted if df[c].dtype.kind not in "iuf"]
         if bad:
-            raise DataError(source, f"column {bad[0]!r} is not numeric (dtype {df[bad[0]].dtype}): t in seconds, "
-                            "positions in metres")
+            raise DataError(
+                source,
+                f"column {bad[0]!r} is not numeric (dtype {df[bad[0]].dtype}): t in seconds, positions in metres",
+            )
         values = df[wanted].to_numpy(float)
-        return make(values[:, 0], values[:, 1:4], values[:, 4:8] if quat else None, source=source, name=name,
-                    rows=np.arange(len(values)))
+        return make(
+            values[:, 0],
+            values[:, 1:4],
+            values[:, 4:8] if quat else None,
+            source=source,
+            name=name,
+            rows=np.arange(len(values)),
+        )
 
     def transformed(self, R: np.ndarray, t: np.ndarray, c: float = 1.0) -> Trajectory:
         """The trajectory moved by x -> c R x + t (orientations rotated by R, covariance by c R)."""
@@ -105,8 +122,9 @@ def _where(rows, i: int, unit: str) -> str:
     return f"{unit} {int(rows[i]) if rows is not None else i + 1}"
 
 
-def make(t, p, q=None, cov=None, *, source, name: str = "", rows=None, unit: str = "row",
-         min_poses: int = MIN_POSES) -> Trajectory:
+def make(
+    t, p, q=None, cov=None, *, source, name: str = "", rows=None, unit: str = "row", min_poses: int = MIN_POSES
+) -> Trajectory:
     """A checked :class:`Trajectory` (module docstring). ``rows`` gives each pose's line number
     (or message index) for the messages; ``unit`` names it ("row", "message")."""
     t = np.asarray(t, float).reshape(-1)
@@ -133,15 +151,22 @@ def make(t, p, q=None, cov=None, *, source, name: str = "", rows=None, unit: str
         norm = np.linalg.norm(q, axis=1)
         off = ~(np.abs(norm - 1.0) <= QUAT_TOL)
         if off.any():
-            bad(off, lambda i: f"quaternion (x, y, z, w) = {np.round(q[i], 6).tolist()} has norm {norm[i]:.6g}, "
-                               f"not 1 (tolerance {QUAT_TOL:g}): not a rotation")
+            bad(
+                off,
+                lambda i: (
+                    f"quaternion (x, y, z, w) = {np.round(q[i], 6).tolist()} has norm {norm[i]:.6g}, "
+                    f"not 1 (tolerance {QUAT_TOL:g}): not a rotation"
+                ),
+            )
         q = q / norm[:, None]
     dt = np.diff(t)
     if (dt == 0).any():
         bad(np.concatenate([[False], dt == 0]), lambda i: f"duplicate stamp {t[i]:.9f} s (as the previous pose)")
     if (dt < 0).any():
-        bad(np.concatenate([[False], dt < 0]),
-            lambda i: f"time goes backwards: stamp {t[i]:.9f} s is before the previous {t[i - 1]:.9f} s")
+        bad(
+            np.concatenate([[False], dt < 0]),
+            lambda i: f"time goes backwards: stamp {t[i]:.9f} s is before the previous {t[i - 1]:.9f} s",
+        )
     if cov is not None:
         cov = np.asarray(cov, float)
         if cov.shape not in ((n, 6, 6), (n, 3, 3)):

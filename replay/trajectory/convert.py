@@ -16,6 +16,7 @@ nanoseconds (the stamp rounded to the nearest ns). A trajectory without orientat
 written only as CSV: the other formats would need an orientation it does not have. The covariance is
 not written.
 """  # noqa: E501 (Markdown table)
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,15 +40,17 @@ def fmt_of(path, fmt: str | None) -> str:
         return fmt
     suffix = Path(path).suffix.lower()
     if suffix not in SUFFIXES:
-        raise ReplayError(f"{path}: the extension {suffix or '(none)'} does not say the format: give --format "
-                          f"{'|'.join(FORMATS)}")
+        raise ReplayError(
+            f"{path}: the extension {suffix or '(none)'} does not say the format: give --format {'|'.join(FORMATS)}"
+        )
     return SUFFIXES[suffix]
 
 
 def check(tr: Trajectory, fmt: str) -> None:
     if tr.q is None and fmt != "csv":
-        raise ReplayError(f"{tr.source or tr.name}: positions only (no orientation): {fmt} needs one; write "
-                          "--format csv (t, x, y, z)")
+        raise ReplayError(
+            f"{tr.source or tr.name}: positions only (no orientation): {fmt} needs one; write --format csv (t, x, y, z)"
+        )
 
 
 def _lines(m: np.ndarray, sep: str = " ") -> str:
@@ -69,8 +72,11 @@ def text(tr: Trajectory, fmt: str) -> str:
         return _lines(np.concatenate([R, tr.p[:, :, None]], axis=2).reshape(-1, 12))
     if fmt == "euroc":
         body = np.column_stack([tr.p, tr.q[:, [3, 0, 1, 2]]])
-        return EUROC_HEADER + "\n" + "".join(f"{k}," + ",".join(map(repr, row)) + "\n"
-                                             for k, row in zip(ns(tr.t).tolist(), body.tolist()))
+        return (
+            EUROC_HEADER
+            + "\n"
+            + "".join(f"{k}," + ",".join(map(repr, row)) + "\n" for k, row in zip(ns(tr.t).tolist(), body.tolist()))
+        )
     if fmt == "csv":
         cols = [tr.t, tr.p] + ([tr.q] if tr.q is not None else [])
         head = "t,x,y,z" + (",qx,qy,qz,qw" if tr.q is not None else "")
@@ -96,18 +102,22 @@ def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "m
     with open(path, "wb") as fh:
         w = Writer(fh, compression=CompressionType.ZSTD)
         w.start(profile="ros2", library="replay")
-        schema = w.register_schema(name=name, encoding="ros2msg",
-                                   data=ts.generate_msgdef(name, ros_version=2)[0].encode())
+        schema = w.register_schema(
+            name=name, encoding="ros2msg", data=ts.generate_msgdef(name, ros_version=2)[0].encode()
+        )
         channel = w.register_channel(topic=topic, message_encoding="cdr", schema_id=schema)
         for k, (stamp, p, q) in enumerate(zip(stamps.tolist(), tr.p.tolist(), tr.q.tolist())):
             sec, nsec = divmod(stamp, 1_000_000_000)
-            header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
-                                              frame_id=frame_id)
-            pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
-                                               orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2],
-                                                                                             w=q[3]))
+            header = T["std_msgs/msg/Header"](
+                stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id
+            )
+            pose = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+            )
             msg = T[name](header=header, pose=pose)
-            w.add_message(channel, log_time=stamp, publish_time=stamp, data=bytes(ts.serialize_cdr(msg, name)),
-                          sequence=k)
+            w.add_message(
+                channel, log_time=stamp, publish_time=stamp, data=bytes(ts.serialize_cdr(msg, name)), sequence=k
+            )
         w.finish()
     return len(tr)

@@ -18,6 +18,7 @@ stored as quaternions: the nearest rotation, so files printed with 6 digits are
 orthonormalised (evo keeps the printed matrices; rotation statistics then differ from
 evo's in about the 6th digit).
 """  # noqa: E501 (Markdown tables)
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -118,8 +119,11 @@ def kitti_times_path(path: Path, times=None) -> Path:
     beside = path.parent / "times.txt"
     if beside.is_file():
         return beside
-    raise DataError(path, "KITTI poses carry no stamps: give a times file (--kitti-times FILE, one stamp in "
-                          "seconds per line, or times.txt beside the poses)")
+    raise DataError(
+        path,
+        "KITTI poses carry no stamps: give a times file (--kitti-times FILE, one stamp in "
+        "seconds per line, or times.txt beside the poses)",
+    )
 
 
 def read_kitti(path, *, times=None, name: str = "") -> Trajectory:
@@ -138,16 +142,20 @@ def read_kitti(path, *, times=None, name: str = "") -> Trajectory:
     bad = ~((err <= ROT_TOL) & (det > 0))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataError(path, f"the 3x3 block is not a rotation (|R'R - I| = {err[i]:.3g}, det = {det[i]:.6g}; "
-                              f"tolerance {ROT_TOL:g})", row=int(numbers[i]))
+        raise DataError(
+            path,
+            f"the 3x3 block is not a rotation (|R'R - I| = {err[i]:.3g}, det = {det[i]:.6g}; tolerance {ROT_TOL:g})",
+            row=int(numbers[i]),
+        )
     return make(stamps, M[:, :, 3], quat.from_matrix(R), source=path, name=name, rows=numbers)
 
 
 def read_euroc(path, *, name: str = "") -> Trajectory:
     path = Path(path)
     numbers, tokens, _ = _rows(path, ",")
-    m = _matrix(path, numbers, tokens, None, "EuRoC: timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z, ...",
-                min_cols=8)
+    m = _matrix(
+        path, numbers, tokens, None, "EuRoC: timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z, ...", min_cols=8
+    )
     q = m[:, [5, 6, 7, 4]]
     return make(m[:, 0] / 1e9, m[:, 1:4], q, source=path, name=name, rows=numbers)
 
@@ -184,8 +192,9 @@ def parse_columns(spec) -> dict:
     return out
 
 
-def read_csv(path, *, columns, time_unit: str | None = None, name: str = "",
-             header_unit: str | None = None) -> Trajectory:
+def read_csv(
+    path, *, columns, time_unit: str | None = None, name: str = "", header_unit: str | None = None
+) -> Trajectory:
     """A CSV (``,`` or ``;``; or whitespace) of declared ``columns``; stamps in ``time_unit``, else in the
     unit the header names (``header_unit``), else seconds where they can be (:func:`layout.seconds`)."""
     path = Path(path)
@@ -203,8 +212,11 @@ def read_csv(path, *, columns, time_unit: str | None = None, name: str = "",
                 raise DataError(path, f"--columns {field}={c}: the file has {m.shape[1]} columns")
             index[field] = c
         elif head is None or c not in head:
-            raise DataError(path, f"--columns {field}={c}: no column {c!r} in the header "
-                                  f"({', '.join(head) if head else 'the file has no header'})")
+            raise DataError(
+                path,
+                f"--columns {field}={c}: no column {c!r} in the header "
+                f"({', '.join(head) if head else 'the file has no header'})",
+            )
         else:
             index[field] = head.index(c)
     col = lambda k: m[:, index[k]]  # noqa: E731
@@ -216,15 +228,19 @@ def read_csv(path, *, columns, time_unit: str | None = None, name: str = "",
         from replay.adapters.rosmsg import rpy_to_quat
 
         zero = np.zeros(len(m))
-        q = rpy_to_quat(np.column_stack([col("roll") if "roll" in index else zero,
-                                         col("pitch") if "pitch" in index else zero, col("yaw")]))
+        q = rpy_to_quat(
+            np.column_stack(
+                [col("roll") if "roll" in index else zero, col("pitch") if "pitch" in index else zero, col("yaw")]
+            )
+        )
     tname = head[index["t"]] if head is not None and index["t"] < len(head) else f"column {index['t'] + 1}"
     factor = layout.seconds(path, col("t"), tname, header_unit, time_unit)
     return make(col("t") * factor, p, q, source=path, name=name, rows=numbers)
 
 
-def read(path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None,
-         name: str = "") -> Trajectory:
+def read(
+    path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None, name: str = ""
+) -> Trajectory:
     """Read a trajectory file of format ``fmt`` (``csv`` when ``columns`` are given; else decided by
     :func:`replay.trajectory.layout.decide`: the header's names, then the layouts TUM and KITTI
     have alone; an ambiguous file is refused naming the choices). ``time_unit``: of a CSV's stamps

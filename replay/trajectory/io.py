@@ -10,6 +10,7 @@ A source is
 The recording path is the longest prefix before a ``:`` that exists as a file or
 directory, so paths holding ``:`` still work.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -34,22 +35,31 @@ def split(spec: str):
     for i in reversed(cuts):
         head = Path(spec[:i])
         if head.exists() and (head.is_dir() or head.suffix.lower() in RECORDING_SUFFIXES):
-            return head, spec[i + 1:]
+            return head, spec[i + 1 :]
     for i in cuts:
         if Path(spec[:i]).suffix.lower() in RECORDING_SUFFIXES:
             raise DataError(spec[:i], "no such file")
     return whole, None
 
 
-def load(spec, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None,
-         name: str = "", rec=None) -> Trajectory:
+def load(
+    spec,
+    *,
+    fmt: str | None = None,
+    kitti_times=None,
+    columns=None,
+    time_unit: str | None = None,
+    name: str = "",
+    rec=None,
+) -> Trajectory:
     """The trajectory of ``spec`` (module docstring); ``fmt``, ``kitti_times``, ``columns`` and
     ``time_unit`` apply to files (:func:`replay.trajectory.files.read`); ``rec``: the recording,
     when already read (:func:`load_all`)."""
     path, topic = split(spec)
     if topic is None:
-        return files.read(path, fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit,
-                          name=name or path.name)
+        return files.read(
+            path, fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit, name=name or path.name
+        )
     if not topic:
         raise DataError(spec, "empty topic after ':'")
     if topic.startswith(("tf:", "/tf:")):
@@ -71,8 +81,7 @@ def load_all(specs, *, names=None, columns_of: dict | None = None, **options) ->
     for k, spec in enumerate(specs):
         path, topic = split(spec)
         opts = dict(options, columns=columns_of[spec]) if columns_of and spec in columns_of else options
-        out.append(load(spec, name=names[k] if names else "", rec=recs.get(path.resolve()) if topic else None,
-                        **opts))
+        out.append(load(spec, name=names[k] if names else "", rec=recs.get(path.resolve()) if topic else None, **opts))
     return out
 
 

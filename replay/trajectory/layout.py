@@ -21,6 +21,7 @@ the last part is the axis (``x y z w``); parts before it that say ``q``, ``quat`
 ``orientation``, ``rot`` make a quaternion component, ``p``, ``pos``, ``position``, ``t``,
 ``trans``, ``pose`` (or none) a position; others (EuRoC's velocities and biases) are ignored.
 """
+
 from __future__ import annotations
 
 import re
@@ -37,21 +38,35 @@ TIME_WORDS = {"t", "time", "timestamp", "stamp", "times", "ts", "sec", "secs"}
 POSITION_WORDS = {"p", "pos", "position", "t", "tr", "trans", "translation", "pose", "xyz"}
 QUAT_WORDS = {"q", "quat", "quaternion", "orientation", "ori", "rot", "rotation", "att", "attitude"}
 ANGLE_WORDS = {"roll", "pitch", "yaw", "heading", "phi", "theta", "psi"}
-UNITS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s", "ms": "ms", "us": "us",
-         "µs": "us", "ns": "ns", "nsec": "ns", "nsecs": "ns"}
+UNITS = {
+    "s": "s",
+    "sec": "s",
+    "secs": "s",
+    "second": "s",
+    "seconds": "s",
+    "ms": "ms",
+    "us": "us",
+    "µs": "us",
+    "ns": "ns",
+    "nsec": "ns",
+    "nsecs": "ns",
+}
 LENGTHS = ("m", "mm", "cm", "km")  # a position column's unit: only m (or none) is read as is
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 NOT_SECONDS = 1e11  # s: a stamp beyond this (year 5138 as Unix time) is not in seconds
 EPOCH = (1e8, 1e10)  # s: Unix time from 1973 to 2286, what a stamp of unstated unit is taken for
 STEP = (1e-5, 1e3)  # s: ... when the median step between poses is then plausible too
-CHOICES = ("--format euroc (t [ns], x, y, z, qw, qx, qy, qz), or --columns "
-           "t=0,x=1,y=2,z=3,qx=4,qy=5,qz=6,qw=7 (x first; --time-unit), or a header line naming the columns")
+CHOICES = (
+    "--format euroc (t [ns], x, y, z, qw, qx, qy, qz), or --columns "
+    "t=0,x=1,y=2,z=3,qx=4,qy=5,qz=6,qw=7 (x first; --time-unit), or a header line naming the columns"
+)
 
 
 @dataclass
 class Layout:
     """What the text shows: separator, columns of the first data line, header names (or None),
     and, where the names decide, the column of each field and the unit the time column names."""
+
     sep: str | None
     ncols: int
     names: list | None
@@ -93,12 +108,13 @@ def role(name: str):
     m = re.search(r"[\[(]\s*([^\])]*?)\s*[\])]", base)
     if m:
         unit = m.group(1).replace(" ", "") or None
-        base = (base[:m.start()] + base[m.end():]).strip()
+        base = (base[: m.start()] + base[m.end() :]).strip()
     parts = [p for p in re.split(r"[\s_.:/\-]+", base) if p]
     if len(parts) == 1 and re.fullmatch(r"[qpt][xyzw]", parts[0]):
         parts = [parts[0][0], parts[0][1]]
-    if len(parts) > 1 and ((parts[-1] in UNITS and parts[-2] in TIME_WORDS)
-                           or (parts[-1] in LENGTHS and parts[-2] in ("x", "y", "z"))):
+    if len(parts) > 1 and (
+        (parts[-1] in UNITS and parts[-2] in TIME_WORDS) or (parts[-1] in LENGTHS and parts[-2] in ("x", "y", "z"))
+    ):
         unit, parts = parts[-1], parts[:-1]
     if not parts:
         return None, None
@@ -151,8 +167,9 @@ def sniff(text: str) -> Layout:
     if unit is not None and unit not in UNITS:
         lay.problem = f"the header's time column {names[found['t'][0]]!r} gives the unknown unit {unit!r}"
     elif badpos is not None:
-        lay.problem = (f"the header's position column {badpos!r} is not in metres, which replay reads: "
-                       "convert the file to metres")
+        lay.problem = (
+            f"the header's position column {badpos!r} is not in metres, which replay reads: convert the file to metres"
+        )
     elif twice:
         lay.problem = f"the header names {twice!r} twice ({', '.join(names[i] for i in found[twice])})"
     elif quat and len(quat) != 4:
@@ -166,8 +183,10 @@ def sniff(text: str) -> Layout:
     return lay
 
 
-READS = {"tum": "'t x y z qx qy qz qw' separated by spaces, stamps in s",
-         "euroc": "'timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z' separated by commas"}
+READS = {
+    "tum": "'t x y z qx qy qz qw' separated by spaces, stamps in s",
+    "euroc": "'timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z' separated by commas",
+}
 
 
 def decide(path, text: str, fmt: str | None, by: str = "--format"):
@@ -177,16 +196,23 @@ def decide(path, text: str, fmt: str | None, by: str = "--format"):
     contradicts it is refused. Refusals are one line."""
     lay = sniff(text)
     if lay.problem and fmt not in ("tum", "euroc"):
-        raise DataError(path, lay.problem if "metres" in lay.problem else f"{lay.problem}: declare the columns "
-                        "with --columns t=...,x=...,y=...,z=...,qx=...,qy=...,qz=...,qw=... (names or 0-based indices)")
+        raise DataError(
+            path,
+            lay.problem
+            if "metres" in lay.problem
+            else f"{lay.problem}: declare the columns "
+            "with --columns t=...,x=...,y=...,z=...,qx=...,qy=...,qz=...,qw=... (names or 0-based indices)",
+        )
     cols, unit = lay.columns, lay.time_unit
     if cols and not lay.problem:
         tum = cols == TUM_ORDER and lay.sep is None and lay.ncols == 8 and unit in (None, "s")
         euroc = cols == EUROC_ORDER and lay.sep == "," and unit in (None, "ns")
         if (fmt == "tum" and not tum) or (fmt == "euroc" and not euroc):
             who, how = (f"--format {fmt}", "leave out --format") if by == "--format" else (by, "give --format csv")
-            raise DataError(path, f"{who} reads {READS[fmt]}, but the header names {lay.shown}: {how} to "
-                                  "read the columns by their names")
+            raise DataError(
+                path,
+                f"{who} reads {READS[fmt]}, but the header names {lay.shown}: {how} to read the columns by their names",
+            )
         if fmt in ("tum", "euroc"):
             return fmt, None, None
         if euroc and not (unit is None and not lay.euroc_names):  # unit-less: EuRoC's own names say ns
@@ -199,12 +225,18 @@ def decide(path, text: str, fmt: str | None, by: str = "--format"):
             return "tum", None, None
         if lay.ncols == 12:
             return "kitti", None, None
-        raise DataError(path, f"cannot tell the format ({lay.ncols} columns on the first data line: TUM has 8, "
-                              "KITTI 12; a CSV needs --columns); name it with --format")
+        raise DataError(
+            path,
+            f"cannot tell the format ({lay.ncols} columns on the first data line: TUM has 8, "
+            "KITTI 12; a CSV needs --columns); name it with --format",
+        )
     if lay.ncols >= 8:
         what = f"a header the columns cannot be told from ({lay.shown})" if lay.names else "no header naming them"
-        raise DataError(path, f"cannot tell the column order ({lay.ncols} columns, {what}): x first "
-                              f"(t x y z qx qy qz qw) or w first (EuRoC)? choose with {CHOICES}")
+        raise DataError(
+            path,
+            f"cannot tell the column order ({lay.ncols} columns, {what}): x first "
+            f"(t x y z qx qy qz qw) or w first (EuRoC)? choose with {CHOICES}",
+        )
     return "csv", None, None
 
 
@@ -222,10 +254,13 @@ def check_columns(path, text: str, columns: dict) -> str | None:
             continue
         if (f in lay.columns and lay.columns[f] != c) or field_of.get(c, f) != f:
             named = lay.names[c] if c < len(lay.names) else "nothing"
-            raise DataError(path, f"--columns {f}={c}, but the header names column {c} {named!r}"
-                                  + (f" and {f} {lay.names[lay.columns[f]]!r}" if f in lay.columns else "")
-                                  + ": give the columns by name (--columns t=NAME,...) or leave out --columns "
-                                    "to read this file by its header")
+            raise DataError(
+                path,
+                f"--columns {f}={c}, but the header names column {c} {named!r}"
+                + (f" and {f} {lay.names[lay.columns[f]]!r}" if f in lay.columns else "")
+                + ": give the columns by name (--columns t=NAME,...) or leave out --columns "
+                "to read this file by its header",
+            )
     t = columns.get("t")
     t = lay.names.index(t) if isinstance(t, str) and t in lay.names else t
     return lay.time_unit if t == lay.columns["t"] else None
@@ -242,9 +277,14 @@ def seconds(path, t, name: str, header_unit, given) -> float:
     top = float(abs(t).max()) if len(t) else 0.0
     step = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     if unit is None:
-        unit = next((u for u, f in TIME_UNITS.items()
-                     if EPOCH[0] <= top * f <= EPOCH[1] and STEP[0] <= step * f <= STEP[1]), None)
+        unit = next(
+            (u for u, f in TIME_UNITS.items() if EPOCH[0] <= top * f <= EPOCH[1] and STEP[0] <= step * f <= STEP[1]),
+            None,
+        )
     if unit is None and top >= NOT_SECONDS:
-        raise DataError(path, f"the time column {name!r} names no unit and its stamps reach {top:.4g}, which are "
-                              "neither seconds nor Unix time in ms, us or ns: give --time-unit")
+        raise DataError(
+            path,
+            f"the time column {name!r} names no unit and its stamps reach {top:.4g}, which are "
+            "neither seconds nor Unix time in ms, us or ns: give --time-unit",
+        )
     return TIME_UNITS[unit or "s"]

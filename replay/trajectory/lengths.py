@@ -34,6 +34,7 @@ rigid motion of the estimate leaves every relative motion unchanged).
 Statistics per length and error: rmse, mean, median, std, min, max, num_samples (rpg's
 ``compute_statistics``).
 """
+
 from __future__ import annotations
 
 import math
@@ -56,11 +57,11 @@ def _item(tok: str, spec: str):
     try:
         v = float(tok[:-1] if pct else tok)
     except ValueError:
-        raise ReplayError(f"--lengths {spec}: {tok!r} is neither a length in metres nor a percentage like 10%") \
-            from None
+        raise ReplayError(
+            f"--lengths {spec}: {tok!r} is neither a length in metres nor a percentage like 10%"
+        ) from None
     if not (math.isfinite(v) and v > 0) or (pct and v > 100):
-        raise ReplayError(f"--lengths {spec}: {tok!r} must be a positive length in metres or a percentage in "
-                          "(0, 100]%")
+        raise ReplayError(f"--lengths {spec}: {tok!r} must be a positive length in metres or a percentage in (0, 100]%")
     return ("%" if pct else "m", v)
 
 
@@ -103,8 +104,10 @@ def resolve(items, path_length: float) -> list:
     for unit, v in items:
         m = math.trunc(v / 100.0 * path_length * 100.0) / 100.0 if unit == "%" else float(v)
         if not m > 0:
-            raise ReplayError(f"--lengths {label(unit, v)}: {m:g} m of a reference path of {path_length:g} m "
-                              "(percentages are truncated to cm, as rpg does): give a larger length")
+            raise ReplayError(
+                f"--lengths {label(unit, v)}: {m:g} m of a reference path of {path_length:g} m "
+                "(percentages are truncated to cm, as rpg does): give a larger length"
+            )
         out.append((label(unit, v), m))
     return out
 
@@ -126,7 +129,7 @@ def rpg_pairs(D: np.ndarray, length: float, max_diff: float):
     found = err < max_diff
     ends = best[found]
     last = np.flatnonzero(found)[-1] if found.any() else -1
-    gaps = int(np.sum(~found[:last + 1])) if last >= 0 else 0
+    gaps = int(np.sum(~found[: last + 1])) if last >= 0 else 0
     if len(ends) < 2:
         return np.zeros(0, int), np.zeros(0, int), gaps
     return np.arange(len(ends)), ends.astype(int), gaps
@@ -184,18 +187,27 @@ def errors(*, p_ref, q_ref, p_est, q_est, i, j, length: float, scale: float = 1.
     tr = np.trace(R_w, axis1=1, axis2=2)
     rot = np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0)))
     yaw, pitch, roll = _euler_zyx(R_w)
-    return {"trans": trans, "trans_perc": trans / length * 100.0, "rot": rot, "rot_deg_per_m": rot / length,
-            "yaw": np.degrees(np.abs(yaw)), "gravity": np.degrees(np.sqrt(pitch**2 + roll**2))}
+    return {
+        "trans": trans,
+        "trans_perc": trans / length * 100.0,
+        "rot": rot,
+        "rot_deg_per_m": rot / length,
+        "yaw": np.degrees(np.abs(yaw)),
+        "gravity": np.degrees(np.sqrt(pitch**2 + roll**2)),
+    }
 
 
-def relative_errors(*, ref_path_length: float, p_ref, q_ref, p_est, q_est, items, method: str = "rpg",
-                    scale: float = 1.0) -> dict:
+def relative_errors(
+    *, ref_path_length: float, p_ref, q_ref, p_est, q_est, items, method: str = "rpg", scale: float = 1.0
+) -> dict:
     """``{label: {"length": m, "pairs": (i, j), "gaps": k, <error>: array}}`` for each length item."""
     if method not in METHODS:
         raise ReplayError(f"--lengths-method {method!r}: expected one of {', '.join(METHODS)}")
     if q_ref is None or q_est is None:
-        raise ReplayError("--lengths needs orientations in the reference and the estimate (relative rotation "
-                          "errors): a positions-only trajectory cannot be scored over lengths")
+        raise ReplayError(
+            "--lengths needs orientations in the reference and the estimate (relative rotation "
+            "errors): a positions-only trajectory cannot be scored over lengths"
+        )
     p_ref, p_est = np.asarray(p_ref, float), np.asarray(p_est, float)
     out = {}
     D = distances(p_ref)
@@ -216,8 +228,15 @@ def statistics(e) -> dict:
     e = np.asarray(e, float)
     if not len(e):
         return {**{k: float("nan") for k in ("rmse", "mean", "median", "std", "min", "max")}, "num_samples": 0}
-    return {"rmse": float(np.sqrt(np.dot(e, e) / len(e))), "mean": float(np.mean(e)), "median": float(np.median(e)),
-            "std": float(np.std(e)), "min": float(np.min(e)), "max": float(np.max(e)), "num_samples": len(e)}
+    return {
+        "rmse": float(np.sqrt(np.dot(e, e) / len(e))),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "min": float(np.min(e)),
+        "max": float(np.max(e)),
+        "num_samples": len(e),
+    }
 
 
 def table(result: dict, method: str) -> str:
@@ -227,9 +246,15 @@ def table(result: dict, method: str) -> str:
     out = [f"Relative errors over lengths ({method}: {source} sub-trajectories)"]
     for name, entry in result.items():
         i, _ = entry["pairs"]
-        out.append(f"\nlength {name} = {entry['length']:g} m: {len(i)} sub-trajectories"
-                   + (f" ({entry['gaps']} starts without an end within 20 % of the length: ends paired with "
-                      "shifted starts, as rpg does)" if entry["gaps"] else ""))
+        out.append(
+            f"\nlength {name} = {entry['length']:g} m: {len(i)} sub-trajectories"
+            + (
+                f" ({entry['gaps']} starts without an end within 20 % of the length: ends paired with "
+                "shifted starts, as rpg does)"
+                if entry["gaps"]
+                else ""
+            )
+        )
         out.append(f"{'error':>20}" + "".join(f"{k:>13}" for k in stats))
         for err in ERRORS:
             st = statistics(entry[err])

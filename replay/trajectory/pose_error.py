@@ -33,6 +33,7 @@ on the reference with ``pairs_from_reference``):
 **Statistics** (:func:`statistics`, evo's ``get_all_statistics``): rmse, mean, median,
 std (population, ddof = 0), min, max, sse (sum of squares).
 """  # noqa: E501 (Markdown tables)
+
 from __future__ import annotations
 
 import math
@@ -44,8 +45,15 @@ from replay.util.errors import ReplayError
 
 RELATIONS = ("trans", "rot", "full", "angle_deg", "angle_rad", "point_distance", "point_distance_error_ratio")
 EVO_NAMES = {"trans_part": "trans", "rot_part": "rot"}  # evo's -r spellings accepted too
-UNITS = {"trans": "m", "point_distance": "m", "point_distance_error_ratio": "%", "angle_deg": "deg",
-         "angle_rad": "rad", "rot": "", "full": ""}
+UNITS = {
+    "trans": "m",
+    "point_distance": "m",
+    "point_distance_error_ratio": "%",
+    "angle_deg": "deg",
+    "angle_rad": "rad",
+    "rot": "",
+    "full": "",
+}
 DELTA_UNITS = ("f", "m", "d", "r", "s")
 STATISTICS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 ROTATION_RELATIONS = ("rot", "full", "angle_deg", "angle_rad")
@@ -56,15 +64,19 @@ def relation(name: str) -> str:
     """The canonical name of a pose relation (ours or evo's), or a one-line refusal."""
     name = EVO_NAMES.get(name, name)
     if name not in RELATIONS:
-        raise ReplayError(f"pose relation {name!r}: expected one of {', '.join(RELATIONS)} "
-                          "(evo's trans_part and rot_part are accepted too)")
+        raise ReplayError(
+            f"pose relation {name!r}: expected one of {', '.join(RELATIONS)} "
+            "(evo's trans_part and rot_part are accepted too)"
+        )
     return name
 
 
 def _need_q(q, what: str):
     if q is None:
-        raise ReplayError(f"{what} needs orientations, and a trajectory has positions only (e.g. GNSS fixes): "
-                          "use -r trans (APE) or point_distance (RPE)")
+        raise ReplayError(
+            f"{what} needs orientations, and a trajectory has positions only (e.g. GNSS fixes): "
+            "use -r trans (APE) or point_distance (RPE)"
+        )
 
 
 def _from_error(rel: str, q_e, t_norm) -> np.ndarray:
@@ -163,8 +175,9 @@ def _nearest_ahead(D: np.ndarray, delta: float, tol: float):
 def pairs(*, p, q, t, delta: float, unit: str = "f", all_pairs: bool = False, rel_tol: float = 0.1):
     """Index arrays (i, j) of the RPE pairs (module docstring), or a one-line refusal when there are none."""
     if unit not in DELTA_UNITS:
-        raise ReplayError(f"delta unit {unit!r}: expected one of {', '.join(DELTA_UNITS)} (frames, metres, "
-                          "degrees, radians, seconds)")
+        raise ReplayError(
+            f"delta unit {unit!r}: expected one of {', '.join(DELTA_UNITS)} (frames, metres, degrees, radians, seconds)"
+        )
     if not delta > 0:
         raise ReplayError(f"delta {delta}: expected a positive number")
     n = len(p)
@@ -196,7 +209,7 @@ def pairs(*, p, q, t, delta: float, unit: str = "f", all_pairs: bool = False, re
         if all_pairs:
             ii, jj = [], []
             for k in range(n - 1):
-                a = quat.angle(quat.multiply(quat.conjugate(q[k]), q[k + 1:]))
+                a = quat.angle(quat.multiply(quat.conjugate(q[k]), q[k + 1 :]))
                 m = np.flatnonzero((a >= rad - tol) & (a <= rad + tol)) + k + 1
                 ii.append(np.full(len(m), k))
                 jj.append(m)
@@ -205,8 +218,10 @@ def pairs(*, p, q, t, delta: float, unit: str = "f", all_pairs: bool = False, re
             steps = quat.angle(quat.multiply(quat.conjugate(q[:-1]), q[1:]))
             i, j = _consecutive(steps, rad)
     if not len(i):
-        raise ReplayError(f"RPE: delta = {delta:g} ({unit}) gives no pose pair among {n} poses: try a smaller "
-                          "delta" + (" or a larger tolerance" if all_pairs and unit != "f" else ""))
+        raise ReplayError(
+            f"RPE: delta = {delta:g} ({unit}) gives no pose pair among {n} poses: try a smaller "
+            "delta" + (" or a larger tolerance" if all_pairs and unit != "f" else "")
+        )
     return np.asarray(i, int), np.asarray(j, int)
 
 
@@ -216,5 +231,12 @@ def statistics(errors) -> dict:
     if not len(e):
         return {k: float("nan") for k in STATISTICS}
     sq = np.power(e, 2)
-    return {"rmse": math.sqrt(np.mean(sq)), "mean": float(np.mean(e)), "median": float(np.median(e)),
-            "std": float(np.std(e)), "min": float(np.min(e)), "max": float(np.max(e)), "sse": float(np.sum(sq))}
+    return {
+        "rmse": math.sqrt(np.mean(sq)),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "min": float(np.min(e)),
+        "max": float(np.max(e)),
+        "sse": float(np.sum(sq)),
+    }

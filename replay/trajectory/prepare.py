@@ -17,6 +17,7 @@ In evo's order (:func:`replay.trajectory.scoring.score` calls them):
    after the alignment as in evo): the dropped axis set to 0 and each orientation reduced to its
    rotation about the plane's normal (the twist of a swing-twist decomposition).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -42,8 +43,10 @@ def window(tr: Trajectory, t_start, t_end, offset: float = 0.0) -> Trajectory:
     if t_end is not None:
         keep &= t <= t_end
     if keep.sum() < 2:
-        raise ReplayError(f"{tr.source or tr.name}: {int(keep.sum())} pose(s) between t_start {t_start} and t_end "
-                          f"{t_end} s (its stamps {t[0]:.3f} .. {t[-1]:.3f} s): at least 2 are needed")
+        raise ReplayError(
+            f"{tr.source or tr.name}: {int(keep.sum())} pose(s) between t_start {t_start} and t_end "
+            f"{t_end} s (its stamps {t[0]:.3f} .. {t[-1]:.3f} s): at least 2 are needed"
+        )
     return tr.take(keep)
 
 
@@ -69,12 +72,16 @@ def thin(ref: Trajectory, downsample: int | None = None, motion_filter=None) -> 
     if motion_filter is not None:
         distance, angle_deg = (float(v) for v in motion_filter)
         if not (distance >= 0 and 0 <= angle_deg <= 180):
-            raise ReplayError(f"motion_filter ({distance:g} m, {angle_deg:g} deg): expected a distance >= 0 m and an "
-                              "angle in [0, 180] deg")
+            raise ReplayError(
+                f"motion_filter ({distance:g} m, {angle_deg:g} deg): expected a distance >= 0 m and an "
+                "angle in [0, 180] deg"
+            )
         ids = ids[_moving(ref.take(ids), distance, np.deg2rad(angle_deg))]
     if len(ids) < 3:
-        raise ReplayError(f"{ref.source or ref.name}: {len(ids)} matched pose(s) left after downsample/motion_filter; "
-                          "at least 3 are needed")
+        raise ReplayError(
+            f"{ref.source or ref.name}: {len(ids)} matched pose(s) left after downsample/motion_filter; "
+            "at least 3 are needed"
+        )
     return ids
 
 

@@ -4,6 +4,7 @@ configurations of the pipeline: ``filter = "recorded:<name>"`` with the associat
 with the task's reference (:func:`replay.trajectory.associate.associate_times`, evo's rule) and the
 pipeline scores them as any filter's estimates (:func:`replay.run.pipeline.run_block`).
 """
+
 from __future__ import annotations
 
 import copy
@@ -17,14 +18,27 @@ from replay.util.params import Param, validate
 
 RECORDED = "recorded:"  # the filter name of a recorded estimate's configuration: recorded:<name>
 RECORDED_PARAMS = (
-    Param("t_max_diff", float, 0.01, "a recorded pose and a reference sample are associated when their stamps "
-          "differ by at most this (nearest stamp, as evo's --t_max_diff)", unit="s", low=0.0),
+    Param(
+        "t_max_diff",
+        float,
+        0.01,
+        "a recorded pose and a reference sample are associated when their stamps "
+        "differ by at most this (nearest stamp, as evo's --t_max_diff)",
+        unit="s",
+        low=0.0,
+    ),
     Param("t_offset", float, 0.0, "added to the recorded stamps before association (evo's --t_offset)", unit="s"),
-    Param("align", str, "none", "the recorded trajectory is first moved onto the reference by this fit over "
-          "the associated poses (as evo's -a / --correct_scale; for an estimate in its own frame, a SLAM map): "
-          "every column, the covariance (NEES) and the lost judgement are then of the aligned track, and "
-          "pos_rmse/nees/lost_unaligned give the numbers before it. none: scored as recorded (an estimate in the "
-          "reference's frame, whose offset is an error)", choices=ALIGNMENTS),
+    Param(
+        "align",
+        str,
+        "none",
+        "the recorded trajectory is first moved onto the reference by this fit over "
+        "the associated poses (as evo's -a / --correct_scale; for an estimate in its own frame, a SLAM map): "
+        "every column, the covariance (NEES) and the lost judgement are then of the aligned track, and "
+        "pos_rmse/nees/lost_unaligned give the numbers before it. none: scored as recorded (an estimate in the "
+        "reference's frame, whose offset is an error)",
+        choices=ALIGNMENTS,
+    ),
 )
 
 
@@ -65,10 +79,12 @@ def recorded_estimates(problem, name: str, params: dict):
     first = np.r_[True, np.diff(k[order]) != 0] if len(k) else np.zeros(0, bool)
     k, j, dup = k[order][first], j[order][first], int((~first).sum())
     if len(k) < 3:
-        raise ReplayError(f"{src}: recorded estimate {name} ({rec.description}): {len(k)} pose(s) associated with "
-                          f"the reference within t_max_diff {params['t_max_diff']:g} s (t_offset "
-                          f"{params['t_offset']:g} s); at least 3 are needed: check the stamps, or raise "
-                          f"t_max_diff (-p recorded:{name}.t_max_diff=..., or in the mapping's [estimates])")
+        raise ReplayError(
+            f"{src}: recorded estimate {name} ({rec.description}): {len(k)} pose(s) associated with "
+            f"the reference within t_max_diff {params['t_max_diff']:g} s (t_offset "
+            f"{params['t_offset']:g} s); at least 3 are needed: check the stamps, or raise "
+            f"t_max_diff (-p recorded:{name}.t_max_diff=..., or in the mapping's [estimates])"
+        )
     n = len(problem.t)
     x, P = np.full((n, d), np.nan), np.full((n, d, d), np.nan)
     R, t, c = align(rec.position[j, :d], problem.truth_position[k], params["align"])
@@ -91,11 +107,13 @@ def recorded_estimates(problem, name: str, params: dict):
     est = Estimates(x, P, np.full(n, np.nan), None, info)
     scored = copy.copy(problem)  # the position only: a recorded state has no task-specific components
     scored.position_index, scored.truth_angles, scored.angle_index, scored.truth_extra = tuple(range(d)), {}, {}, {}
-    note = (f"recorded:{name}: {len(k)} of its {len(rec)} poses associated with {len(ref)} reference samples "
-            f"(nearest stamp within {params['t_max_diff']:g} s, t_offset {params['t_offset']:g} s"
-            + (f"; moved onto the reference by a {params['align']} fit" if params["align"] != "none" else "")
-            + (f"; {dup} more pose(s) on an already associated sample left out" if dup else "")
-            + "); position scored, one run (a recorded estimate is deterministic)")
+    note = (
+        f"recorded:{name}: {len(k)} of its {len(rec)} poses associated with {len(ref)} reference samples "
+        f"(nearest stamp within {params['t_max_diff']:g} s, t_offset {params['t_offset']:g} s"
+        + (f"; moved onto the reference by a {params['align']} fit" if params["align"] != "none" else "")
+        + (f"; {dup} more pose(s) on an already associated sample left out" if dup else "")
+        + "); position scored, one run (a recorded estimate is deterministic)"
+    )
     return scored, est, note
 
 

@@ -20,6 +20,7 @@ Where the estimate records a covariance, ``nees`` is the mean position NEES e' P
 matched poses and ``anees*`` its 95 % chi-square(3) band and share of poses inside
 (:func:`replay.scoring.metrics.consistency`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -68,12 +69,30 @@ def _align(ref: Trajectory, est: Trajectory, method: str, n_to_align, origin: bo
     return moved, (R, t, c)
 
 
-def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: int | None = None,
-          align_origin: bool = False, t_max_diff: float = T_MAX_DIFF, t_offset: float = 0.0,
-          relations=("trans",), delta: float | None = None, delta_unit: str = "f", all_pairs: bool = False,
-          rel_tol: float = 0.1, pairs_from_reference: bool = False, lengths=None,
-          lengths_method: str = "rpg", sync_method: str = "nearest", t_start=None, t_end=None,
-          downsample: int | None = None, motion_filter=None, project_to_plane: str | None = None) -> Score:
+def score(
+    ref: Trajectory,
+    est: Trajectory,
+    *,
+    align: str = "none",
+    n_to_align: int | None = None,
+    align_origin: bool = False,
+    t_max_diff: float = T_MAX_DIFF,
+    t_offset: float = 0.0,
+    relations=("trans",),
+    delta: float | None = None,
+    delta_unit: str = "f",
+    all_pairs: bool = False,
+    rel_tol: float = 0.1,
+    pairs_from_reference: bool = False,
+    lengths=None,
+    lengths_method: str = "rpg",
+    sync_method: str = "nearest",
+    t_start=None,
+    t_end=None,
+    downsample: int | None = None,
+    motion_filter=None,
+    project_to_plane: str | None = None,
+) -> Score:
     """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring and
     :mod:`replay.trajectory.prepare` (time window, interpolation, downsampling, motion filter, projection)."""
     relations = [pose_error.relation(r) for r in relations]
@@ -84,27 +103,48 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
                 need += [f"RPE {r}" for r in relations if r in pose_error.RPE_NEEDS_ORIENTATION]
                 need += [f"an RPE delta in {delta_unit}"] if delta_unit in ("d", "r") else []
             if need:
-                raise ReplayError(f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
-                                  "orientations: use -r trans for the APE and -r point_distance for the RPE")
+                raise ReplayError(
+                    f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
+                    "orientations: use -r trans for the APE and -r point_distance for the RPE"
+                )
     if sync_method not in prepare.SYNC_METHODS:
         raise ReplayError(f"sync_method {sync_method!r}: expected one of {', '.join(prepare.SYNC_METHODS)}")
     ref, est = prepare.window(ref, t_start, t_end), prepare.window(est, t_start, t_end, t_offset)
     i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
     r, e = ref.take(i_ref), est.take(i_est)
     if sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
-        r, e = (r, prepare.interpolate(est, r.t - t_offset)) if len(est) > len(ref) else \
-            (prepare.interpolate(ref, e.t + t_offset), e)
+        r, e = (
+            (r, prepare.interpolate(est, r.t - t_offset))
+            if len(est) > len(ref)
+            else (prepare.interpolate(ref, e.t + t_offset), e)
+        )
     if downsample is not None or motion_filter is not None:
         keep = prepare.thin(r, downsample, motion_filter)
         r, e = r.take(keep), e.take(keep)
     moved, transform = _align(r, e, align, n_to_align, align_origin)
     if project_to_plane is not None:  # after the alignment, as evo
         r, e, moved = (prepare.project(x, project_to_plane) for x in (r, e, moved))
-    options = dict(align=align, n_to_align=n_to_align, align_origin=align_origin, t_max_diff=t_max_diff,
-                   t_offset=t_offset, relations=relations, delta=delta, delta_unit=delta_unit, all_pairs=all_pairs,
-                   rel_tol=rel_tol, pairs_from_reference=pairs_from_reference, lengths=lengths,
-                   lengths_method=lengths_method, sync_method=sync_method, t_start=t_start, t_end=t_end,
-                   downsample=downsample, motion_filter=motion_filter, project_to_plane=project_to_plane)
+    options = dict(
+        align=align,
+        n_to_align=n_to_align,
+        align_origin=align_origin,
+        t_max_diff=t_max_diff,
+        t_offset=t_offset,
+        relations=relations,
+        delta=delta,
+        delta_unit=delta_unit,
+        all_pairs=all_pairs,
+        rel_tol=rel_tol,
+        pairs_from_reference=pairs_from_reference,
+        lengths=lengths,
+        lengths_method=lengths_method,
+        sync_method=sync_method,
+        t_start=t_start,
+        t_end=t_end,
+        downsample=downsample,
+        motion_filter=motion_filter,
+        project_to_plane=project_to_plane,
+    )
     out = Score(r, e, moved, transform, options, unmatched=len(est) - len(np.unique(i_est)))
     for rel in relations:
         if rel != "point_distance_error_ratio":
@@ -112,12 +152,14 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
     out.ape_axes = pose_error.ape_axes(p_ref=r.p, p_est=moved.p)
     if delta is not None:
         base = r if pairs_from_reference else moved
-        i, j = pose_error.pairs(p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs,
-                                rel_tol=rel_tol)
+        i, j = pose_error.pairs(
+            p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs, rel_tol=rel_tol
+        )
         out.rpe_pairs = (i, j)
         for rel in relations:
-            out.rpe[rel], axes = pose_error.rpe(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, i=i, j=j,
-                                                relation=rel)
+            out.rpe[rel], axes = pose_error.rpe(
+                p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, i=i, j=j, relation=rel
+            )
             if axes is not None:
                 out.rpe_axes = axes
     if lengths:
@@ -125,8 +167,15 @@ def score(ref: Trajectory, est: Trajectory, *, align: str = "none", n_to_align: 
 
         items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
         out.lengths = by_length.relative_errors(
-            ref_path_length=float(by_length.distances(ref.p)[-1]), p_ref=r.p, q_ref=r.q, p_est=e.p, q_est=e.q,
-            items=items, method=lengths_method, scale=float(transform[2]))
+            ref_path_length=float(by_length.distances(ref.p)[-1]),
+            p_ref=r.p,
+            q_ref=r.q,
+            p_est=e.p,
+            q_est=e.q,
+            items=items,
+            method=lengths_method,
+            scale=float(transform[2]),
+        )
     return out
 
 
@@ -140,9 +189,15 @@ def _track_cells(track: Trajectory, ref: Trajectory, lost_threshold, lost_steps)
     err = track.p - ref.p
     norm = np.linalg.norm(err, axis=1)
     dist = metrics.path_length(ref.p)
-    cells = {"pos_rmse": _rmse(norm), "x_rmse": _rmse(err[:, 0]), "y_rmse": _rmse(err[:, 1]),
-             "z_rmse": _rmse(err[:, 2]), "final_err": float(norm[-1]),
-             "drift_pct": 100.0 * float(norm[-1]) / dist if dist > 0 else float("nan"), "nees": float("nan")}
+    cells = {
+        "pos_rmse": _rmse(norm),
+        "x_rmse": _rmse(err[:, 0]),
+        "y_rmse": _rmse(err[:, 1]),
+        "z_rmse": _rmse(err[:, 2]),
+        "final_err": float(norm[-1]),
+        "drift_pct": 100.0 * float(norm[-1]) / dist if dist > 0 else float("nan"),
+        "nees": float("nan"),
+    }
     lost = metrics.lost_track(norm, lost_threshold, lost_steps)
     cells["lost"] = "" if lost is None else int(lost)
     nees = None
@@ -177,8 +232,9 @@ def row_metrics(s: Score, *, lost_threshold: float | None = None, lost_steps: in
         D = pose_error.accumulated_distances(s.reference.p)
         seg = D[j] - D[i]
         ok = seg > 0
-        row["rpe_drift_pct"] = float(np.mean(100.0 * np.linalg.norm(s.rpe_axes[ok], axis=1) / seg[ok])) \
-            if ok.any() else float("nan")
+        row["rpe_drift_pct"] = (
+            float(np.mean(100.0 * np.linalg.norm(s.rpe_axes[ok], axis=1) / seg[ok])) if ok.any() else float("nan")
+        )
     row["matched"] = len(s.reference)
     row["unmatched"] = s.unmatched
     row["scale"] = float(s.transform[2])

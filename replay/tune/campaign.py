@@ -17,6 +17,7 @@ runs the campaign's own configurations, then one tune per dataset x task (``segm
 ``OUT/tune/units``: a configuration two tunes try is computed once. The runs, seed,
 batch, alignment and data directory are the campaign's.
 """
+
 from __future__ import annotations
 
 import re
@@ -40,27 +41,37 @@ def plan(c, data_dir=None) -> list[tuple[str, run.Tune]]:
             raise c.where.error(key, f"unknown key in [tune] (known: {', '.join(sorted(KEYS))})")
         if not isinstance(value, KEYS[key]) or (KEYS[key] is int and isinstance(value, bool)):
             raise c.where.error(key, f"expected {KEYS[key].__name__}, got {type(value).__name__} {value!r}")
-    names = tab.get("filters") or list(dict.fromkeys(
-        cfg.filter for cfg in c.configs if not cfg.filter.startswith("recorded:") and cfg.filter != "measurements"))
-    entries = [(k, v, f"{c.path}:{c.where.line(k.split('.')[-1])}: [tune] space {k}")
-               for k, v in tab.get("space", {}).items()]
+    names = tab.get("filters") or list(
+        dict.fromkeys(
+            cfg.filter for cfg in c.configs if not cfg.filter.startswith("recorded:") and cfg.filter != "measurements"
+        )
+    )
+    entries = [
+        (k, v, f"{c.path}:{c.where.line(k.split('.')[-1])}: [tune] space {k}") for k, v in tab.get("space", {}).items()
+    ]
     split = tab.get("split")
     if split is None:
-        raise c.where.error("tune", "[tune] needs a split: { segment = 0.6 }, { seeds = S } or "
-                                    "{ train = [ids], test = [ids] }")
+        raise c.where.error(
+            "tune", "[tune] needs a split: { segment = 0.6 }, { seeds = S } or { train = [ids], test = [ids] }"
+        )
     if set(split) - {"segment", "seeds", "train", "test"}:
         raise c.where.error("split", "expected { segment = 0.6 }, { seeds = S } or { train = [ids], test = [ids] }")
-    common = dict(filters=names, entries=entries, trials=tab.get("trials", 50), objective=tab.get("objective",
-                  "mean_rmse"), runs=c.runs, allow_overlap=tab.get("allow_overlap", False),
-                  data_dir=data_dir or c.data_dir,
-                  alignment=c.configs[0].alignment if c.configs else DEFAULTS["alignment"],
-                  batch=c.batch)
+    common = dict(
+        filters=names,
+        entries=entries,
+        trials=tab.get("trials", 50),
+        objective=tab.get("objective", "mean_rmse"),
+        runs=c.runs,
+        allow_overlap=tab.get("allow_overlap", False),
+        data_dir=data_dir or c.data_dir,
+        alignment=c.configs[0].alignment if c.configs else DEFAULTS["alignment"],
+        batch=c.batch,
+    )
     out = []
     try:
         if "train" in split or "test" in split:
             ids = lambda side: ",".join(split.get(side) or []) if isinstance(split.get(side), list) else None
-            out.append(("train-test", check.prepare(None, train=ids("train"), test=ids("test"), seed=c.seed,
-                                                     **common)))
+            out.append(("train-test", check.prepare(None, train=ids("train"), test=ids("test"), seed=c.seed, **common)))
             return out
         seen = set()
         for cfg in c.configs:
@@ -69,13 +80,20 @@ def plan(c, data_dir=None) -> list[tuple[str, run.Tune]]:
                 continue
             seen.add(key)
             dp = {k: v for k, v in cfg.dataset_params.items() if k != "segment"}
-            way = ({"train_segment": str(split["segment"])} if "segment" in split else
-                   {"split": "seeds"})
+            way = {"train_segment": str(split["segment"])} if "segment" in split else {"split": "seeds"}
             seed = split.get("seeds", c.seed)
             if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
                 raise c.where.error("split", f"seeds must be an integer >= 0 (got {seed!r})")
-            t = check.prepare(cfg.dataset, task=cfg.task, task_params=cfg.task_params, dataset_params=dp,
-                              first=cfg.first, seed=seed, **way, **common)
+            t = check.prepare(
+                cfg.dataset,
+                task=cfg.task,
+                task_params=cfg.task_params,
+                dataset_params=dp,
+                first=cfg.first,
+                seed=seed,
+                **way,
+                **common,
+            )
             name = re.sub(r"[^A-Za-z0-9._-]+", "_", f"{cfg.dataset}_{cfg.task}")
             while any(n == name for n, _ in out):
                 name += "_"

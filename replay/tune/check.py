@@ -1,4 +1,5 @@
 """Everything ``replay tune`` is given, checked before any trial (one line each, ReplayError)."""
+
 from __future__ import annotations
 
 from replay.run.eval_options import DEFAULTS
@@ -8,9 +9,29 @@ from . import objectives, space, splits
 from .run import Tune
 
 
-def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=None, task_params=None,
-            dataset_params=None, view=None, first=None, data_dir=None, train_segment=None, train=None, test=None,
-            split=None, allow_overlap=False, alignment=DEFAULTS["alignment"], batch=None) -> Tune:
+def prepare(
+    dataset,
+    *,
+    filters,
+    entries,
+    trials,
+    objective,
+    runs,
+    seed,
+    task=None,
+    task_params=None,
+    dataset_params=None,
+    view=None,
+    first=None,
+    data_dir=None,
+    train_segment=None,
+    train=None,
+    test=None,
+    split=None,
+    allow_overlap=False,
+    alignment=DEFAULTS["alignment"],
+    batch=None,
+) -> Tune:
     """The checked :class:`Tune` (no trial run, no file written)."""
     from replay.data import dataset_ref, registry
     from replay.run.eval_options import validate_eval_options
@@ -33,17 +54,39 @@ def prepare(dataset, *, filters, entries, trials, objective, runs, seed, task=No
         raise ReplayError(f"--filters {','.join(names)}: a filter named twice")
     weights = objectives.parse(objective)
     view = {k: v for k, v in (view or {}).items() if v is not None}
-    s = splits.make(dataset, {**(dataset_params or {}), **view}, train_segment=train_segment, train=train,
-                    test=test, split=split, seed=seed, allow_overlap=allow_overlap)
+    s = splits.make(
+        dataset,
+        {**(dataset_params or {}), **view},
+        train_segment=train_segment,
+        train=train,
+        test=test,
+        split=split,
+        seed=seed,
+        allow_overlap=allow_overlap,
+    )
     refs = {d: dataset_ref.resolve(d) for d, _ in s.train + s.test}  # each id parsed once
     checked = [(d, plain(registry.check_params(refs[d].target, p))) for d, p in s.train + s.test]  # canonical
-    s.train, s.test = checked[:len(s.train)], checked[len(s.train):]
+    s.train, s.test = checked[: len(s.train)], checked[len(s.train) :]
     first_ds, first_p = s.train[0]
     task = task or default_task(refs[first_ds], first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
     make_task(task, **(task_params or {}))
     dims = space.build(entries, names, task)
-    t = Tune(task, names, dims, trials, objective, weights, s, runs, seed, dict(task_params or {}), first,
-             alignment, data_dir, batch or DEFAULTS["batch"])
+    t = Tune(
+        task,
+        names,
+        dims,
+        trials,
+        objective,
+        weights,
+        s,
+        runs,
+        seed,
+        dict(task_params or {}),
+        first,
+        alignment,
+        data_dir,
+        batch or DEFAULTS["batch"],
+    )
     if "nll" in weights:
         _check_nll(t)
     return t
@@ -57,9 +100,12 @@ def _check_nll(t: Tune) -> None:
     for name in t.filters:
         why = likelihood.provides(name)
         if why is not None:
-            raise ReplayError(f"--objective {t.objective}: filter {name!r} cannot provide the innovations' "
-                              f"likelihood ({why})")
+            raise ReplayError(
+                f"--objective {t.objective}: filter {name!r} cannot provide the innovations' likelihood ({why})"
+            )
     problem = build_problem(t.configs("train", t.filters[0], {})[0], 0, t.data_dir)
     if likelihood.linear_matrices(problem.model) is None:
-        raise ReplayError(f"--objective {t.objective}: task {t.task!r} has a nonlinear model "
-                          f"({type(problem.model).__name__}); the likelihood is computed on linear models only")
+        raise ReplayError(
+            f"--objective {t.objective}: task {t.task!r} has a nonlinear model "
+            f"({type(problem.model).__name__}); the likelihood is computed on linear models only"
+        )

@@ -12,6 +12,7 @@
 A configuration with a failed or diverged run scores ``inf`` (it is not a usable setting). Over
 several training datasets the objective is the mean of each dataset's.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,10 +29,12 @@ def parse(text: str) -> dict[str, float]:
     if text in BASIC:
         return {text: 1.0}
     if not text.startswith("weighted:"):
-        raise ReplayError(f"--objective {text!r}: expected one of {', '.join(BASIC)} or "
-                          "weighted:NAME=W,NAME=W (e.g. weighted:mean_rmse=1,anees=0.5)")
+        raise ReplayError(
+            f"--objective {text!r}: expected one of {', '.join(BASIC)} or "
+            "weighted:NAME=W,NAME=W (e.g. weighted:mean_rmse=1,anees=0.5)"
+        )
     out = {}
-    for part in text[len("weighted:"):].split(","):
+    for part in text[len("weighted:") :].split(","):
         name, eq, w = part.partition("=")
         name = name.strip()
         if name not in BASIC:

@@ -4,6 +4,7 @@ importances (:func:`optuna.importance.get_param_importances`, fANOVA) and the tr
 Writes ``history_<filter>.png``, ``importance_<filter>.png`` and ``report.html`` (images embedded)
 into ``DIR/report`` (or ``out``).
 """
+
 from __future__ import annotations
 
 import base64
@@ -38,14 +39,18 @@ def make_report(d: Path, out: Path | None = None) -> Path:
     except (OSError, ValueError) as err:
         raise ReplayError(f"{d}: not a finished replay tune directory ({err})") from None
     store = studies.storage(d)
-    parts = [f"<h1>replay tune report: {html.escape(str(d))}</h1>",
-             f"<p>objective <b>{html.escape(asked['objective'])}</b>, {asked['trials']} trials per filter; "
-             f"tuned on {html.escape(str(asked['tuned_on']))}, tested on {html.escape(str(asked['tested_on']))}"
-             + (f"; <b>OVERLAP: {html.escape(str(asked['overlap']))}</b>" if asked.get("overlap") else "") + "</p>",
-             "<h2>Train versus test</h2>", _gap_table(rows)]
+    parts = [
+        f"<h1>replay tune report: {html.escape(str(d))}</h1>",
+        f"<p>objective <b>{html.escape(asked['objective'])}</b>, {asked['trials']} trials per filter; "
+        f"tuned on {html.escape(str(asked['tuned_on']))}, tested on {html.escape(str(asked['tested_on']))}"
+        + (f"; <b>OVERLAP: {html.escape(str(asked['overlap']))}</b>" if asked.get("overlap") else "")
+        + "</p>",
+        "<h2>Train versus test</h2>",
+        _gap_table(rows),
+    ]
     for name in asked["filters"]:
         st = optuna.load_study(study_name=name, storage=store)
-        done = studies.complete(st)[:asked["trials"]]
+        done = studies.complete(st)[: asked["trials"]]
         if not done:
             continue
         parts.append(f"<h2>{html.escape(name)}</h2>")
@@ -71,8 +76,10 @@ def make_report(d: Path, out: Path | None = None) -> Path:
             ax.barh(list(imp)[::-1], list(imp.values())[::-1])
             ax.set_xlabel("importance (fANOVA)")
             parts.append(_embed(plots.save(fig, out / f"importance_{name}.png"), f"parameter importances of {name}"))
-    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>replay tune report: {html.escape(d.name)}"
-            f"</title><style>{STYLE}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n")
+    page = (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>replay tune report: {html.escape(d.name)}"
+        f"</title><style>{STYLE}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>\n"
+    )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path
@@ -80,8 +87,10 @@ def make_report(d: Path, out: Path | None = None) -> Path:
 
 def _embed(png: Path, caption: str) -> str:
     b64 = base64.b64encode(Path(png).read_bytes()).decode()
-    return f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{b64}'><figcaption>" \
-           f"{html.escape(caption)}</figcaption></figure>"
+    return (
+        f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{b64}'><figcaption>"
+        f"{html.escape(caption)}</figcaption></figure>"
+    )
 
 
 def _gap_table(rows) -> str:
@@ -92,8 +101,18 @@ def _gap_table(rows) -> str:
             gap = f"{float(r['test_score']) - float(r['train_score']):+.4g}"
         except ValueError:
             gap = ""
-        cells = [r["label"], r["tuned_on"], r["trials"], r["train_score"], r["test_score"], gap, r["pos_rmse"],
-                 r["params"]]
+        cells = [
+            r["label"],
+            r["tuned_on"],
+            r["trials"],
+            r["train_score"],
+            r["test_score"],
+            gap,
+            r["pos_rmse"],
+            r["params"],
+        ]
         body.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>")
-    return ("<table><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>" + "".join(body) + "</table>"
-            "<p>gap: test score minus training score (the objective on held-out data minus where it was tuned).</p>")
+    return (
+        "<table><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>" + "".join(body) + "</table>"
+        "<p>gap: test score minus training score (the objective on held-out data minus where it was tuned).</p>"
+    )

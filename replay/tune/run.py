@@ -7,6 +7,7 @@ Optuna studies, :mod:`.study`), ``tune.json`` (what was asked), ``leaderboard.cs
 (one row per filter with its default parameters and one with its tuned ones),
 ``tuned.toml`` (the tuned configurations on the test data, a campaign file).
 """
+
 from __future__ import annotations
 
 import json
@@ -29,9 +30,29 @@ from . import objectives, study as studies
 from .splits import Split
 from replay.tune.write import write_tuned
 
-COLUMNS = ["dataset", "task", "filter", "label", "params", "tuned_on", "tested_on", "objective", "trials",
-           "train_score", "test_score", "overlap", "runs", "seed", "pos_rmse", "pos_rmse_median", "lost",
-           "diverged", "anees", "train_config_hashes", "test_config_hashes"]
+COLUMNS = [
+    "dataset",
+    "task",
+    "filter",
+    "label",
+    "params",
+    "tuned_on",
+    "tested_on",
+    "objective",
+    "trials",
+    "train_score",
+    "test_score",
+    "overlap",
+    "runs",
+    "seed",
+    "pos_rmse",
+    "pos_rmse_median",
+    "lost",
+    "diverged",
+    "anees",
+    "train_config_hashes",
+    "test_config_hashes",
+]
 
 
 @dataclass
@@ -58,8 +79,18 @@ class Tune:
         from replay.tasks import make_task
 
         task = plain(make_task(self.task, **{**self.task_params, **tparams}).params())
-        return Config(dataset, plain(dparams), self.first, self.task, task, name,
-                      plain(make_filter(name, **fparams).params()), seed, self.alignment, None)
+        return Config(
+            dataset,
+            plain(dparams),
+            self.first,
+            self.task,
+            task,
+            name,
+            plain(make_filter(name, **fparams).params()),
+            seed,
+            self.alignment,
+            None,
+        )
 
     def configs(self, part: str, name: str, params: dict) -> list[Config]:
         """The configurations of filter ``name`` with the searched ``params`` ({key: value}) on
@@ -67,8 +98,10 @@ class Tune:
         fp = {k.split(".", 1)[1]: v for k, v in params.items() if k.split(".", 1)[0] == name}
         tp = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("task.")}
         seed = self.split.train_seed if part == "train" else self.split.test_seed
-        return [self.config(d, p, seed if seed is not None else self.seed, name, fp, tp)
-                for d, p in (self.split.train if part == "train" else self.split.test)]
+        return [
+            self.config(d, p, seed if seed is not None else self.seed, name, fp, tp)
+            for d, p in (self.split.train if part == "train" else self.split.test)
+        ]
 
     def defaults(self, name: str) -> dict | None:
         """{key: default} of filter ``name``'s searched parameters, or None when a default lies outside
@@ -77,19 +110,34 @@ class Tune:
 
         from .space import _declared
 
-        have = {**{f"{name}.{p.name}": p.default for p in _declared(name)},  # params() leaves out default noise
-                **{f"task.{k}": v for k, v in make_task(self.task, **self.task_params).params().items()}}
+        have = {
+            **{f"{name}.{p.name}": p.default for p in _declared(name)},  # params() leaves out default noise
+            **{f"task.{k}": v for k, v in make_task(self.task, **self.task_params).params().items()},
+        }
         out = {d.key: have.get(d.key) for d in self.dims[name]}
-        inside = all(v in d.choices if d.kind == "choice" else
-                     isinstance(v, (int, float)) and not isinstance(v, bool) and d.low <= v <= d.high
-                     for d, v in zip(self.dims[name], out.values()))
+        inside = all(
+            v in d.choices
+            if d.kind == "choice"
+            else isinstance(v, (int, float)) and not isinstance(v, bool) and d.low <= v <= d.high
+            for d, v in zip(self.dims[name], out.values())
+        )
         return out if inside else None
 
     def fingerprint(self, name: str) -> dict:
-        return plain({"train": self.split.train, "train_seed": self.split.train_seed, "task": self.task,
-                      "task_params": self.task_params, "objective": self.objective,
-                      "space": {d.key: d.text() for d in self.dims[name]}, "runs": self.runs, "seed": self.seed,
-                      "first": self.first, "alignment": self.alignment})
+        return plain(
+            {
+                "train": self.split.train,
+                "train_seed": self.split.train_seed,
+                "task": self.task,
+                "task_params": self.task_params,
+                "objective": self.objective,
+                "space": {d.key: d.text() for d in self.dims[name]},
+                "runs": self.runs,
+                "seed": self.seed,
+                "first": self.first,
+                "alignment": self.alignment,
+            }
+        )
 
 
 class Runner:
@@ -111,8 +159,19 @@ class Runner:
         return float(sum(vals) / len(vals))
 
 
-def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=False, progress_stream=None,
-         connect_timeout: float = 5.0, wait: bool = False, store_dir=None) -> dict:
+def tune(
+    t: Tune,
+    out,
+    *,
+    workers=None,
+    scheduler=None,
+    dask_local=None,
+    quiet=False,
+    progress_stream=None,
+    connect_timeout: float = 5.0,
+    wait: bool = False,
+    store_dir=None,
+) -> dict:
     """Run (or resume) every filter's study, score default and tuned configurations on the test
     data, write ``leaderboard.csv`` and ``tuned.toml``; returns {"rows", "budget", "paths"}.
     ``store_dir``: where the units are stored (default ``out``; a campaign's tunes share one)."""
@@ -131,8 +190,9 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
-        progress = Progress(sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune",
-                            unit="step")  # the trials, then each filter's default and tuned held-out scoring
+        progress = Progress(
+            sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune", unit="step"
+        )  # the trials, then each filter's default and tuned held-out scoring
         try:
             with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
                 run = Runner(t, units, mapper)
@@ -150,17 +210,35 @@ def tune(t: Tune, out, *, workers=None, scheduler=None, dask_local=None, quiet=F
         write_csv(rows, out / "leaderboard.csv", COLUMNS)
         paths = {"leaderboard": out / "leaderboard.csv", "study": out / "study.db"}
         paths.update(write_tuned(t, out, rows))
-    return {"rows": rows, "budget": {f: min(t.trials, len(studies.complete(s))) for f, s in opened.items()},
-            "paths": paths}
+    return {
+        "rows": rows,
+        "budget": {f: min(t.trials, len(studies.complete(s))) for f, s in opened.items()},
+        "paths": paths,
+    }
 
 
 def _asked(t: Tune) -> dict:
-    return plain({"task": t.task, "filters": t.filters, "trials": t.trials, "objective": t.objective,
-                  "space": {f: {d.key: d.text() for d in ds} for f, ds in t.dims.items()},
-                  "train": t.split.train, "test": t.split.test, "train_seed": t.split.train_seed,
-                  "test_seed": t.split.test_seed, "tuned_on": t.split.tuned_on, "tested_on": t.split.tested_on,
-                  "overlap": t.split.overlap, "runs": t.runs, "seed": t.seed, "task_params": t.task_params,
-                  "first": t.first, "alignment": t.alignment})
+    return plain(
+        {
+            "task": t.task,
+            "filters": t.filters,
+            "trials": t.trials,
+            "objective": t.objective,
+            "space": {f: {d.key: d.text() for d in ds} for f, ds in t.dims.items()},
+            "train": t.split.train,
+            "test": t.split.test,
+            "train_seed": t.split.train_seed,
+            "test_seed": t.split.test_seed,
+            "tuned_on": t.split.tuned_on,
+            "tested_on": t.split.tested_on,
+            "overlap": t.split.overlap,
+            "runs": t.runs,
+            "seed": t.seed,
+            "task_params": t.task_params,
+            "first": t.first,
+            "alignment": t.alignment,
+        }
+    )
 
 
 def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
@@ -176,20 +254,32 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
             progress.update(1)
             per = [_row(run.store, x, recs) for x, recs in zip(test, test_recs)]  # one per test dataset
             c = test[0].as_dict()
-            rows.append({
-                "dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": name,
-                "label": f"{name} ({kind})", "params": json.dumps({**c["filter_params"], **{
-                    k: v for k, v in params.items() if k.startswith("task.")}}, sort_keys=True),
-                "tuned_on": t.split.tuned_on if kind == "tuned" else "defaults (not tuned)",
-                "tested_on": t.split.tested_on, "objective": t.objective,
-                "trials": len(studies.complete(st)[:t.trials]) if kind == "tuned" else 0,
-                "train_score": train_score, "test_score": test_score,
-                "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
-                "runs": t.runs * len(test), "seed": test[0].seed,
-                **_pooled(per),
-                "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
-                "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
-                "_test": test, "_params": params})
+            rows.append(
+                {
+                    "dataset": ",".join(d for d, _ in t.split.test),
+                    "task": t.task,
+                    "filter": name,
+                    "label": f"{name} ({kind})",
+                    "params": json.dumps(
+                        {**c["filter_params"], **{k: v for k, v in params.items() if k.startswith("task.")}},
+                        sort_keys=True,
+                    ),
+                    "tuned_on": t.split.tuned_on if kind == "tuned" else "defaults (not tuned)",
+                    "tested_on": t.split.tested_on,
+                    "objective": t.objective,
+                    "trials": len(studies.complete(st)[: t.trials]) if kind == "tuned" else 0,
+                    "train_score": train_score,
+                    "test_score": test_score,
+                    "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
+                    "runs": t.runs * len(test),
+                    "seed": test[0].seed,
+                    **_pooled(per),
+                    "train_config_hashes": " ".join(config_hash(x.as_dict()) for x in train),
+                    "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
+                    "_test": test,
+                    "_params": params,
+                }
+            )
     return rows + _measurements_row(t, run)
 
 
@@ -199,21 +289,37 @@ def _measurements_row(t: Tune, run: Runner) -> list[dict]:
     from replay.run.evaluation import observes_position
     from replay.run.pipeline import build_problem
 
-    test = [t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
-            for d, p in t.split.test]
+    test = [
+        t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
+        for d, p in t.split.test
+    ]
     if not observes_position(build_problem(test[0], 0, t.data_dir)):
         return []
     recs = run.records(test)
     score = float(sum(objectives.value(t.weights, r) for r in recs) / len(recs))
-    return [{"dataset": ",".join(d for d, _ in t.split.test), "task": t.task, "filter": "measurements",
-             "label": "measurements (raw observations)", "params": "{}", "tuned_on": "", "tested_on": t.split.tested_on,
-             "objective": t.objective, "trials": 0, "train_score": "",
-             "test_score": score if math.isfinite(score) else "",
-             "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "", "runs": t.runs * len(test),
-             "seed": test[0].seed,
-             **_pooled([_row(run.store, x, r) for x, r in zip(test, recs)]),
-             "train_config_hashes": "", "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
-             "_test": test, "_params": None}]
+    return [
+        {
+            "dataset": ",".join(d for d, _ in t.split.test),
+            "task": t.task,
+            "filter": "measurements",
+            "label": "measurements (raw observations)",
+            "params": "{}",
+            "tuned_on": "",
+            "tested_on": t.split.tested_on,
+            "objective": t.objective,
+            "trials": 0,
+            "train_score": "",
+            "test_score": score if math.isfinite(score) else "",
+            "overlap": f"OVERLAP: {t.split.overlap}" if t.split.overlap else "",
+            "runs": t.runs * len(test),
+            "seed": test[0].seed,
+            **_pooled([_row(run.store, x, r) for x, r in zip(test, recs)]),
+            "train_config_hashes": "",
+            "test_config_hashes": " ".join(config_hash(x.as_dict()) for x in test),
+            "_test": test,
+            "_params": None,
+        }
+    ]
 
 
 def _row(store, cfg: Config, recs) -> dict:
@@ -222,13 +328,19 @@ def _row(store, cfg: Config, recs) -> dict:
 
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
     sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
-    return summary.config_row(c, h, recs, lambda run_, cols: store.series(h, run_, cols, sha.get(run_)),
-                              recs[0].get("version", "") if recs else "")
+    return summary.config_row(
+        c,
+        h,
+        recs,
+        lambda run_, cols: store.series(h, run_, cols, sha.get(run_)),
+        recs[0].get("version", "") if recs else "",
+    )
 
 
 def _pooled(rows) -> dict:
     """The test columns over the test datasets: means of ``pos_rmse``, ``pos_rmse_median`` and
     ``anees`` (one dataset: its own), sums of ``lost`` and ``diverged``."""
+
     def num(r, k):
         try:
             return float(r.get(k))
@@ -238,5 +350,3 @@ def _pooled(rows) -> dict:
     out = {k: float(np.mean([num(r, k) for r in rows])) for k in ("pos_rmse", "pos_rmse_median", "anees")}
     out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
     return out
-
-

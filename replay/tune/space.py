@@ -15,6 +15,7 @@ is checked against the declaration (:class:`replay.util.params.Param`); an unkno
 or parameter, an empty or inverted range, a log range with a non-positive bound, an
 integer range on a float parameter (or the reverse) is one line, :class:`ReplayError`.
 """
+
 from __future__ import annotations
 
 import json
@@ -114,11 +115,14 @@ def make_dim(owner: str, name: str, raw, declarations, where: str) -> Dim:
         raise ReplayError(f"{where}: a log range needs positive bounds (got low {a!r})")
     ints = all(isinstance(v, int) for v in vals)
     if p.type is float and ints and word != "log":
-        raise ReplayError(f"{where}: integer range [{a}, {b}] on the float parameter {owner}.{name}: "
-                          f"write the bounds as floats ([{float(a)}, {float(b)}])")
+        raise ReplayError(
+            f"{where}: integer range [{a}, {b}] on the float parameter {owner}.{name}: "
+            f"write the bounds as floats ([{float(a)}, {float(b)}])"
+        )
     if p.type is int and not ints:
-        raise ReplayError(f"{where}: {owner}.{name} is an integer parameter: the range needs integer "
-                          f"bounds (got [{a!r}, {b!r}])")
+        raise ReplayError(
+            f"{where}: {owner}.{name} is an integer parameter: the range needs integer bounds (got [{a!r}, {b!r}])"
+        )
     for v in vals:
         try:
             p.check(v, owner)
@@ -136,8 +140,9 @@ def entries_from_cli(params) -> list[tuple[str, object, str]]:
     for text in params:
         key, eq, spec = text.partition("=")
         if not eq or "." not in key:
-            raise ReplayError(f"--param {text!r}: expected FILTER.PARAM=SPEC or task.PARAM=SPEC, e.g. "
-                              "'ukf.alpha=log[1e-3,1]'")
+            raise ReplayError(
+                f"--param {text!r}: expected FILTER.PARAM=SPEC or task.PARAM=SPEC, e.g. 'ukf.alpha=log[1e-3,1]'"
+            )
         out.append((key.strip(), spec, f"--param {key.strip()}"))
     return out
 
@@ -174,9 +179,11 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
         seen.add(key)
         if owner == "task":
             if getattr(task_class(task), "SYNTHETIC", False):  # its parameters also draw the measurements
-                raise ReplayError(f"{where}: task {task!r} draws its measurements from the reference with its own "
-                                  "parameters: searching them would score every trial on other data; search the "
-                                  "filters' noise settings instead (FILTER.q_scale, FILTER.r_scale, ...)")
+                raise ReplayError(
+                    f"{where}: task {task!r} draws its measurements from the reference with its own "
+                    "parameters: searching them would score every trial on other data; search the "
+                    "filters' noise settings instead (FILTER.q_scale, FILTER.r_scale, ...)"
+                )
             dim = make_dim(f"task {task!r}", name, raw, task_class(task).PARAMS, where)
             for f in filters:
                 per[f].append(Dim("task", name, dim.kind, dim.low, dim.high, dim.choices))

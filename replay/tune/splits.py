@@ -8,6 +8,7 @@
 
 Overlap (the same data on both sides) is refused unless ``allow_overlap``; then every row says so.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,14 +42,26 @@ def _describe(parts, seed) -> str:
     return text + (f" (seed {seed})" if seed is not None else "")
 
 
-def make(dataset: str | None, view: dict, *, train_segment=None, train=None, test=None, split=None,
-         seed: int = 0, allow_overlap: bool = False) -> Split:
+def make(
+    dataset: str | None,
+    view: dict,
+    *,
+    train_segment=None,
+    train=None,
+    test=None,
+    split=None,
+    seed: int = 0,
+    allow_overlap: bool = False,
+) -> Split:
     """The split the options ask for (exactly one way), checked for overlap."""
-    ways = [w for w, v in (("--train-segment", train_segment), ("--train/--test", train or test),
-                           ("--split", split)) if v]
+    ways = [
+        w for w, v in (("--train-segment", train_segment), ("--train/--test", train or test), ("--split", split)) if v
+    ]
     if len(ways) != 1:
-        raise ReplayError("give exactly one of --train-segment F, --train IDS --test IDS, --split seeds"
-                          + (f" (got {', '.join(ways)})" if ways else ""))
+        raise ReplayError(
+            "give exactly one of --train-segment F, --train IDS --test IDS, --split seeds"
+            + (f" (got {', '.join(ways)})" if ways else "")
+        )
     if train_segment is not None:
         if not dataset:
             raise ReplayError("--train-segment needs a DATASET")
@@ -76,9 +89,11 @@ def make(dataset: str | None, view: dict, *, train_segment=None, train=None, tes
         s = Split(a, b, seed, seed + 1, _describe(a, seed), _describe(b, seed + 1))
     s.overlap = overlap(s, dataset)
     if s.overlap and not allow_overlap:
-        raise ReplayError(f"training data ({s.tuned_on}) and test data ({s.tested_on}) overlap: {s.overlap}; a "
-                          "filter would be scored on data it was tuned on (pass --allow-overlap to tune anyway: "
-                          "every row is then flagged)")
+        raise ReplayError(
+            f"training data ({s.tuned_on}) and test data ({s.tested_on}) overlap: {s.overlap}; a "
+            "filter would be scored on data it was tuned on (pass --allow-overlap to tune anyway: "
+            "every row is then flagged)"
+        )
     return s
 
 

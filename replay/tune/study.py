@@ -13,6 +13,7 @@ Each study carries its configuration (``replay_fingerprint``: data, task, object
 runs, seed); a study of the same name made by another configuration is refused in one line
 before any trial.
 """
+
 from __future__ import annotations
 
 import json
@@ -48,23 +49,28 @@ def open_study(store, name: str, fingerprint: dict, where: Path):
     try:
         study = optuna.create_study(storage=store, study_name=name, direction="minimize", load_if_exists=True)
     except Exception as err:  # noqa: BLE001 — a damaged or foreign file: one line
-        raise ReplayError(f"{where}: cannot open as an Optuna study ({type(err).__name__}: "
-                          f"{str(err).splitlines()[0] if str(err) else ''})") from None
+        raise ReplayError(
+            f"{where}: cannot open as an Optuna study ({type(err).__name__}: "
+            f"{str(err).splitlines()[0] if str(err) else ''})"
+        ) from None
     had = study.user_attrs.get(ATTR)
     if had is None:
         if study.trials:
             raise ReplayError(f"{where}: study {name!r} was not made by replay tune (no {ATTR}); use another --out")
         study.set_user_attr(ATTR, fingerprint)
     elif had != json.loads(json.dumps(fingerprint)):
-        diff = sorted(k for k in set(had) | set(fingerprint)
-                      if had.get(k) != json.loads(json.dumps(fingerprint.get(k))))
-        raise ReplayError(f"{where}: study {name!r} belongs to another configuration (differs in: "
-                          f"{', '.join(diff)}); use another --out, or the options it was made with")
+        diff = sorted(
+            k for k in set(had) | set(fingerprint) if had.get(k) != json.loads(json.dumps(fingerprint.get(k)))
+        )
+        raise ReplayError(
+            f"{where}: study {name!r} belongs to another configuration (differs in: "
+            f"{', '.join(diff)}); use another --out, or the options it was made with"
+        )
     return study
 
 
 def sampler_seed(seed: int, name: str, n: int) -> int:
-    return int(np.random.SeedSequence([seed % 2 ** 63, zlib.crc32(name.encode()), n]).generate_state(1)[0])
+    return int(np.random.SeedSequence([seed % 2**63, zlib.crc32(name.encode()), n]).generate_state(1)[0])
 
 
 def next_trial(study, dims, seed: int, name: str, defaults: dict | None = None):
@@ -80,16 +86,16 @@ def next_trial(study, dims, seed: int, name: str, defaults: dict | None = None):
     n = len(complete(study))
     if defaults is not None and not study.get_trials(deepcopy=False):
         study.enqueue_trial(defaults)
-    study.sampler = optuna.samplers.TPESampler(seed=sampler_seed(seed, name, n), n_startup_trials=N_STARTUP,
-                                               multivariate=True)
+    study.sampler = optuna.samplers.TPESampler(
+        seed=sampler_seed(seed, name, n), n_startup_trials=N_STARTUP, multivariate=True
+    )
     trial = study.ask(want)
     return trial, dict(trial.params)
 
 
 def complete(study) -> list:
     optuna = _optuna()
-    return sorted(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)),
-                  key=lambda t: t.number)
+    return sorted(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)), key=lambda t: t.number)
 
 
 def best(study, trials: int):

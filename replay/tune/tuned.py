@@ -5,6 +5,7 @@ takes from it the filters and their parameters, and the task's parameters, so th
 ``replay eval DATASET --tuned DIR/tuned.toml --runs R --seed S`` (with the views of the
 test data) gives the rows ``replay tune`` scored on its held-out data.
 """
+
 from __future__ import annotations
 
 from replay.util.errors import ReplayError

@@ -1,5 +1,6 @@
 """What ``replay tune`` writes and prints: a ``tuned.toml`` per filter (:func:`write_tuned`) and the
 board (:func:`format_board`)."""
+
 from __future__ import annotations
 
 import json
@@ -29,11 +30,16 @@ def write_tuned(t, out: Path, rows) -> dict:
 
 
 def _toml(t, rows, task_params: dict) -> str:
-    lines = ["# written by replay tune: the tuned configurations on the held-out data",
-             f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
-             + ", ".join(f"{r['filter']} {r['trials']}" for r in rows),
-             "[campaign]", 'name = "tuned"', f"runs = {t.runs}", f"seed = {rows[0]['_test'][0].seed}",
-             f'alignment = "{t.alignment}"']
+    lines = [
+        "# written by replay tune: the tuned configurations on the held-out data",
+        f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
+        + ", ".join(f"{r['filter']} {r['trials']}" for r in rows),
+        "[campaign]",
+        'name = "tuned"',
+        f"runs = {t.runs}",
+        f"seed = {rows[0]['_test'][0].seed}",
+        f'alignment = "{t.alignment}"',
+    ]
     if t.data_dir:
         lines.append(f"data_dir = {json.dumps(str(Path(t.data_dir).resolve()))}")
     for d, p in t.split.test:
@@ -42,11 +48,16 @@ def _toml(t, rows, task_params: dict) -> str:
             lines.append("params = " + _inline(p))
         if t.first is not None:
             lines.append(f"first = {t.first}")
-    lines += ["", f"[task.{json.dumps(t.task)}]"] + [f"{k} = {_val(v)}" for k, v in task_params.items()
-                                                      if v is not None]
+    lines += ["", f"[task.{json.dumps(t.task)}]"] + [
+        f"{k} = {_val(v)}" for k, v in task_params.items() if v is not None
+    ]
     for r in rows:
-        lines += ["", "[[filter]]", f"name = {json.dumps(r['filter'])}",
-                  "params = " + _inline(r["_test"][0].filter_params)]
+        lines += [
+            "",
+            "[[filter]]",
+            f"name = {json.dumps(r['filter'])}",
+            "params = " + _inline(r["_test"][0].filter_params),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -71,8 +82,19 @@ def format_board(rows) -> str:
     head = ["filter", "tuned_on", "objective", "trials", "train", "test", "pos_rmse", "lost", "params"]
     body = []
     for r in rows:
-        body.append([r["label"], r["tuned_on"], r["objective"], str(r["trials"]), _num(r["train_score"]),
-                     _num(r["test_score"]), _num(r["pos_rmse"]), f"{r['lost']}/{r['runs']}", _short(r)])
+        body.append(
+            [
+                r["label"],
+                r["tuned_on"],
+                r["objective"],
+                str(r["trials"]),
+                _num(r["train_score"]),
+                _num(r["test_score"]),
+                _num(r["pos_rmse"]),
+                f"{r['lost']}/{r['runs']}",
+                _short(r),
+            ]
+        )
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
     return "\n".join([line(head), *(line(b) for b in body)])

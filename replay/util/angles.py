@@ -7,6 +7,7 @@ averaging raw angles, seen in popular filter libraries).
 
 ``angles`` arguments are tuples of component indices (along the last axis).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache

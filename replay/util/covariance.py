@@ -4,6 +4,7 @@ and simulators' Q, R, P0) or, for a filter's own noise settings, a scalar times 
 Kept in :mod:`replay.util` (no project import) so that tasks, simulators and filters declare
 covariances alike (:mod:`replay.models.noise` re-exports them).
 """
+
 from __future__ import annotations
 
 import math
@@ -30,8 +31,9 @@ class Covariance(Param):
         n = f"{self.dim}x{self.dim}" if self.dim else "square"
         diag = f"{self.dim} positive numbers" if self.dim else "positive numbers"
         article = "an" if n.startswith(("8", "11", "18")) else "a"
-        return (f"{article} {n} symmetric positive-definite matrix or its diagonal ({diag})"
-                + (" (or null)" if self.optional else ""))
+        return f"{article} {n} symmetric positive-definite matrix or its diagonal ({diag})" + (
+            " (or null)" if self.optional else ""
+        )
 
     def check(self, value, owner: str = ""):
         return super().check(value.tolist() if isinstance(value, np.ndarray) else value, owner)

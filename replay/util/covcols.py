@@ -7,6 +7,7 @@ covariances among the position components, the campaign store those of the whole
 A table written before the covariances were kept has the variances only: :func:`matrices`
 then returns diagonal matrices and says so.
 """
+
 from __future__ import annotations
 
 from itertools import combinations
@@ -32,8 +33,7 @@ def matrices(columns, nx: int, n: int | None = None) -> tuple[np.ndarray, bool]:
     """((n, nx, nx) covariances, whether any covariance column was present) from ``columns``
     (a mapping name -> array): the variances ``P{i}{i}``, and ``P{i}_{j}`` where present
     (symmetric; absent pairs are 0)."""
-    diag = np.column_stack([np.asarray(columns[f"P{i}{i}"], float) for i in range(nx)]) if nx else \
-        np.zeros((n or 0, 0))
+    diag = np.column_stack([np.asarray(columns[f"P{i}{i}"], float) for i in range(nx)]) if nx else np.zeros((n or 0, 0))
     out = np.zeros((len(diag), nx, nx))
     out[:, np.arange(nx), np.arange(nx)] = diag
     full = False

@@ -3,6 +3,7 @@
 Plain path helpers (a leaf: nothing of replay but its errors), re-exported by
 :mod:`replay.data.registry`.
 """
+
 from __future__ import annotations
 
 import os

@@ -15,6 +15,7 @@ Duck-typed on :class:`replay.frame.Frame` (``t``, ``channels``, ``reference``,
 * ``df.attrs``: ``units`` (column -> unit), ``frames`` (column -> frame),
   ``epoch``, ``crs``, ``origin`` and ``group`` ("channels" or "reference").
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -55,8 +56,14 @@ def frame_table(frame, *, reference: bool = False, masks: bool = False, time: st
         index = pd.DatetimeIndex(pd.to_datetime(frame.epoch + index.to_numpy(), unit="s", utc=True), name="utc")
     df = pd.DataFrame(data, index=index)
     meta = getattr(frame, "meta", {}) or {}
-    df.attrs.update(units=units, frames=frames, epoch=frame.epoch, crs=meta.get("crs"), origin=meta.get("origin"),
-                    group="reference" if reference else "channels")
+    df.attrs.update(
+        units=units,
+        frames=frames,
+        epoch=frame.epoch,
+        crs=meta.get("crs"),
+        origin=meta.get("origin"),
+        group="reference" if reference else "channels",
+    )
     return df
 
 

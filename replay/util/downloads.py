@@ -8,6 +8,7 @@ process is gone (same host, process id no longer running), and those of an earli
 (``.<file>.<random>.part``, no owner recorded) untouched for :data:`LEGACY_AGE` seconds; a
 download still running is never touched.
 """
+
 from __future__ import annotations
 
 import http.client
@@ -46,8 +47,9 @@ def check_url(url: str, where: str) -> str:
     except ValueError as e:
         raise ReplayError(f"{where} '{printable(url)}' is not a valid URL ({printable(e)})") from None
     if parts.scheme not in ("http", "https") or not parts.hostname:
-        raise ReplayError(f"{where} '{printable(url)}' is not an http(s) URL with a host "
-                          "(e.g. https://mirror.example.org/data)")
+        raise ReplayError(
+            f"{where} '{printable(url)}' is not an http(s) URL with a host (e.g. https://mirror.example.org/data)"
+        )
     return url
 
 

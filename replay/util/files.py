@@ -1,4 +1,5 @@
 """Writing output files so that a crash leaves the old file or the new one, never a mix."""
+
 from __future__ import annotations
 
 import csv

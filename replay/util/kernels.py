@@ -12,6 +12,7 @@ The Kalman-family steps built on them are :mod:`replay.filters.kalman_kernels`;
 paper 002's kernels use them through :mod:`replay.filters.p002.compiled_util`;
 the particle bookkeeping is :mod:`replay.filters.particles`.
 """
+
 from __future__ import annotations
 
 import math

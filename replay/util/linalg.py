@@ -16,6 +16,7 @@ layout (BLAS transposition flags), so a stack must have the layout of one.
 Failures raise ``numpy.linalg.LinAlgError`` so the run loop can count a
 divergence.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -60,6 +61,7 @@ def require_spd(M, name: str) -> np.ndarray:
     try:
         np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
-        raise ReplayError(f"{name} must be positive definite "
-                          f"(smallest eigenvalue {np.linalg.eigvalsh(M).min():.3g})") from None
+        raise ReplayError(
+            f"{name} must be positive definite (smallest eigenvalue {np.linalg.eigvalsh(M).min():.3g})"
+        ) from None
     return M

@@ -5,6 +5,7 @@ The registries of filters, tasks and adapters are :class:`replay.util.plugins.Re
 objects: besides their built-in entries they hold the entry points of other installed
 distributions and resolve ``"module:Class"`` names; :func:`resolve` defers to them.
 """
+
 from __future__ import annotations
 
 from importlib import import_module
@@ -34,8 +35,10 @@ def instantiate(table, name: str, kind: str, **params):
     except TypeError as err:
         raise ReplayError(f"{kind} {name!r}: {err}") from None
     except BaseException as err:  # noqa: BLE001 — a plugin's constructor: its error, in one line
-        raise ReplayError(f"{kind} {name!r}: its constructor failed: "
-                          + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]) from err
+        raise ReplayError(
+            f"{kind} {name!r}: its constructor failed: "
+            + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]
+        ) from err
 
 
 def params_of(obj, kind: str, name: str) -> dict:
@@ -45,5 +48,6 @@ def params_of(obj, kind: str, name: str) -> dict:
     except (ReplayError, KeyboardInterrupt):
         raise
     except BaseException as err:  # noqa: BLE001 — a plugin's params(): its error, in one line
-        raise ReplayError(f"{kind} {name!r}: params() failed: "
-                          + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]) from err
+        raise ReplayError(
+            f"{kind} {name!r}: params() failed: " + (f"{type(err).__name__}: {err}".splitlines() or [""])[0][:300]
+        ) from err

@@ -11,6 +11,7 @@ a crash leaves the old file or the new one, never a part. A symbolic link keeps 
 did: the file it points to is replaced. Nothing is written under /dev, /proc or /sys (``-o
 /dev/stdout`` would otherwise rename a file over the link itself).
 """
+
 from __future__ import annotations
 
 import os
@@ -33,16 +34,20 @@ def check(path, what: str, suffixes=None) -> Path:
     p = Path(path)
     if suffixes is not None and p.suffix.lower().lstrip(".") not in suffixes:
         shown = repr(p.suffix) if p.suffix else "none"
-        raise ReplayError(f"{what} {path}: unsupported extension {shown} (supported: "
-                          f"{', '.join('.' + s for s in suffixes)})")
+        raise ReplayError(
+            f"{what} {path}: unsupported extension {shown} (supported: {', '.join('.' + s for s in suffixes)})"
+        )
     sizes = [len(os.fsencode(part)) for part in p.parts]
     if sizes and (sizes[-1] > NAME_MAX or max(sizes) > 255):
-        raise ReplayError(f"{what} {str(path)[:60]}...: a name of {max(sizes)} bytes in this path is too long "
-                          f"(at most {NAME_MAX} for the file, 255 for a directory)")
+        raise ReplayError(
+            f"{what} {str(path)[:60]}...: a name of {max(sizes)} bytes in this path is too long "
+            f"(at most {NAME_MAX} for the file, 255 for a directory)"
+        )
     for q in (Path(os.path.abspath(p)), Path(os.path.realpath(p))):
         if q.parts[1:2] in (("dev",), ("proc",), ("sys",)):  # /dev/stdout -> /proc/self/fd/1, devices
-            raise ReplayError(f"{what} {path}: lies in /{q.parts[1]} (devices and kernel files), "
-                              "not a place for an output file")
+            raise ReplayError(
+                f"{what} {path}: lies in /{q.parts[1]} (devices and kernel files), not a place for an output file"
+            )
     if p.is_dir():
         raise ReplayError(f"{what} {path}: is a directory; give a file name")
     try:

@@ -21,6 +21,7 @@ accepts and the value given:
 Classes declare ``PARAMS`` (a tuple of :class:`Param`) and inherit from
 :class:`Declared`, whose keyword-only constructor validates and sets them.
 """
+
 from __future__ import annotations
 
 import math
@@ -69,7 +70,7 @@ class Param:
         elif self.type is os.PathLike:
             text = "a path (a non-empty string or a pathlib.Path)"
         else:
-            text = ("an integer" if self.type is int else "a finite number" if self.finite else "a number")
+            text = "an integer" if self.type is int else "a finite number" if self.finite else "a number"
             text += self.bounds_text()
         return text + (" (or null)" if self.optional else "")
 
@@ -108,7 +109,8 @@ class Param:
             return isinstance(v, dict) and all(isinstance(k, str) for k in v), v
         if self.type is os.PathLike:
             return isinstance(v, (str, os.PathLike)) and str(os.fspath(v)).strip() != "" and "\0" not in str(
-                os.fspath(v)), v
+                os.fspath(v)
+            ), v
         if self.type is list:
             if not isinstance(v, (list, tuple)) or (self.length is not None and len(v) != self.length):
                 return False, v
@@ -186,8 +188,7 @@ def validate(params: tuple[Param, ...], given: dict, owner: str) -> dict:
     known = {p.name: p for p in params}
     for name in given:
         if name not in known:
-            raise ReplayError(f"{owner}: unknown parameter {name!r} "
-                              f"(known: {', '.join(known) or 'none'})")
+            raise ReplayError(f"{owner}: unknown parameter {name!r} (known: {', '.join(known) or 'none'})")
     return {p.name: p.check(given[p.name], owner) if p.name in given else p.default for p in params}
 
 

@@ -21,6 +21,7 @@ declarations (:func:`declaration_problem`). Discovery problems are listed by
 :meth:`Registry.problems` (``replay list`` prints them as warnings); using a broken
 entry raises its line as :class:`~replay.util.errors.ReplayError`.
 """
+
 from __future__ import annotations
 
 import importlib.metadata as metadata
@@ -35,8 +36,12 @@ from replay.util.errors import ReplayError
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_+-]*")  # usable in --filters a,b and in -p NAME.param=...
 _IDENT = r"[A-Za-z_]\w*"
 TARGET = re.compile(rf"{_IDENT}(\.{_IDENT})*:{_IDENT}(\.{_IDENT})*")
-GROUPS = {"filter": "replay.filters", "task": "replay.tasks", "adapter": "replay.adapters",
-          "dataset": "replay.datasets"}
+GROUPS = {
+    "filter": "replay.filters",
+    "task": "replay.tasks",
+    "adapter": "replay.adapters",
+    "dataset": "replay.datasets",
+}
 
 
 @dataclass(frozen=True)
@@ -94,8 +99,10 @@ def discover(group: str, kind: str, valid=NAME.fullmatch) -> tuple[dict, dict, l
         if len(ps) == 1:
             plugins[name] = ps[0]
             continue
-        line = (f"{kind} {name!r} is registered twice ({'; '.join(sorted(p.where for p in ps))}): "
-                "neither is used; uninstall one")
+        line = (
+            f"{kind} {name!r} is registered twice ({'; '.join(sorted(p.where for p in ps))}): "
+            "neither is used; uninstall one"
+        )
         conflicts[name] = line
         problems.append(line)
     return plugins, conflicts, problems
@@ -135,8 +142,10 @@ class Registry(MutableMapping):
         if self._plugins is None:
             plugins, self._conflicts, problems = discover(self.group, self.kind)
             for name in [n for n in plugins if n in self.builtin]:
-                problems.append(f"{self.kind} {name!r} ({plugins.pop(name).where}): the name is taken by "
-                                f"the built-in {self.kind}; ignored")
+                problems.append(
+                    f"{self.kind} {name!r} ({plugins.pop(name).where}): the name is taken by "
+                    f"the built-in {self.kind}; ignored"
+                )
             self._plugins, self._problems = plugins, problems
         return self._plugins
 
@@ -198,11 +207,14 @@ class Registry(MutableMapping):
     def register(self, name: str, obj) -> str:
         """Register ``obj`` (a class or function of this session) as ``name``; returns the name."""
         if not isinstance(name, str) or not NAME.fullmatch(name):
-            raise ReplayError(f"{self.kind} name {name!r}: use letters, digits, '-', '_' or '+' "
-                              "(it is written in --filters a,b and -p NAME.param=...)")
+            raise ReplayError(
+                f"{self.kind} name {name!r}: use letters, digits, '-', '_' or '+' "
+                "(it is written in --filters a,b and -p NAME.param=...)"
+            )
         if name in self.builtin or name in self._discovered():
-            raise ReplayError(f"{self.kind} name {name!r} is taken by the {self.origin(name)} {self.kind}; "
-                              "choose another")
+            raise ReplayError(
+                f"{self.kind} name {name!r} is taken by the {self.origin(name)} {self.kind}; choose another"
+            )
         problem = self._check(obj) if self._check else None
         if problem:
             raise ReplayError(f"{self.kind} {name!r} (registered in this session): {problem}")
@@ -255,6 +267,7 @@ class Registry(MutableMapping):
 
 # ------------------------------------------------------------------ what a plugin must be
 
+
 def describe(obj) -> str:
     """'a function', 'the module x', 'an int', 'the class X' (for messages)."""
     if inspect.isclass(obj):
@@ -306,8 +319,11 @@ def class_problem(obj, base: type, base_name: str, needs) -> str | None:
         sig = inspect.signature(obj)
     except (TypeError, ValueError):
         return None
-    positional = [p.name for p in sig.parameters.values()
-                  if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL)]
+    positional = [
+        p.name
+        for p in sig.parameters.values()
+        if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL)
+    ]
     if positional:
         return f"its constructor takes positional parameters ({', '.join(positional)}): parameters are keyword-only"
     return None

@@ -8,6 +8,7 @@ work done: it is left out of that rate (:func:`compile_seconds`) and shown apart
 it lasts the bar says so instead of an ETA. Notes logged meanwhile (:class:`NoteHandler`)
 take their own line, not the bar's.
 """
+
 from __future__ import annotations
 
 import logging
@@ -87,8 +88,17 @@ def particle_weight(params: dict, runs: int) -> float:
 class Progress:
     """``update(n, weight=...)`` after each finished item; ``close()`` at the end."""
 
-    def __init__(self, total: int, quiet: bool = False, stream=None, every: float = 10.0, *,
-                 label: str = "progress", unit: str = "unit", total_weight: float | None = None):
+    def __init__(
+        self,
+        total: int,
+        quiet: bool = False,
+        stream=None,
+        every: float = 10.0,
+        *,
+        label: str = "progress",
+        unit: str = "unit",
+        total_weight: float | None = None,
+    ):
         self.total, self.quiet, self.every, self.label, self.unit = total, quiet, every, label, unit
         self.total_weight = float(total_weight if total_weight is not None else total)
         self.stream = stream or sys.stderr
@@ -124,9 +134,11 @@ class Progress:
         frac = min(1.0, self.weight_done / self.total_weight) if self.total_weight else 1.0
         eta = self.eta(now)
         fail = f", {self.failed} failed" if self.failed else ""
-        tail = (f" {self.done}/{self.total} {self.unit}s{fail} [{now - self.t0:.0f} s"
-                + (", compiling kernels (one time, cached)...]" if compiling() else
-                   self._compiling(now) + (f", ETA {eta:.0f} s]" if eta == eta else "]")))
+        tail = f" {self.done}/{self.total} {self.unit}s{fail} [{now - self.t0:.0f} s" + (
+            ", compiling kernels (one time, cached)...]"
+            if compiling()
+            else self._compiling(now) + (f", ETA {eta:.0f} s]" if eta == eta else "]")
+        )
         head = f"{self.label}: {100 * frac:3.0f}%|"
         width = max(10, cols - len(head) - len(tail) - 2)
         fill = int(round(frac * width))
@@ -169,8 +181,10 @@ class Progress:
         pct = 100.0 * self.weight_done / self.total_weight if self.total_weight else 100.0
         fail = f", {self.failed} failed" if self.failed else ""
         eta = self.eta(now)
-        return (f"{self.label}: {self.done}/{self.total} {self.unit}s ({pct:.0f} % of the work){fail}, "
-                f"elapsed {el:.0f} s{self._compiling(now)}" + (f", ETA {eta:.0f} s" if eta == eta else ""))
+        return (
+            f"{self.label}: {self.done}/{self.total} {self.unit}s ({pct:.0f} % of the work){fail}, "
+            f"elapsed {el:.0f} s{self._compiling(now)}" + (f", ETA {eta:.0f} s" if eta == eta else "")
+        )
 
     def close(self) -> None:
         if self.bar and self.done:
@@ -195,8 +209,15 @@ class Loading:
 
     active: list = []  # the loads in progress, innermost last (load_stage talks to the last)
 
-    def __init__(self, label: str, size: int | None = None, quiet: bool | None = None, stream=None,
-                 after: float = 3.0, every: float = 10.0):
+    def __init__(
+        self,
+        label: str,
+        size: int | None = None,
+        quiet: bool | None = None,
+        stream=None,
+        after: float = 3.0,
+        every: float = 10.0,
+    ):
         if quiet is None:
             import logging
 

@@ -5,6 +5,7 @@
 with ``stat`` (which never blocks) and :func:`read_bytes` opens without blocking and checks the
 opened file again, so a path swapped after the check is still refused.
 """
+
 from __future__ import annotations
 
 import os
@@ -12,8 +13,13 @@ import stat
 
 from replay.util.errors import DataError
 
-KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-         (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
+KINDS = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISDIR, "a directory"),
+)
 
 
 def kind(mode: int) -> str:

@@ -10,6 +10,7 @@ So in a given run every filter sees the same measurements (common random
 numbers: paired comparisons have tight intervals), and adding a filter changes
 no other filter's numbers.
 """
+
 from __future__ import annotations
 
 import zlib

@@ -11,6 +11,7 @@ Test hooks (fault injection, used by tests/test_outputs_safety.py): ``REPLAY_FAU
 kills the process with SIGKILL at that point (``written``, ``aside``, ``swapped``);
 ``REPLAY_NO_EXCHANGE=1`` uses the fallback swap instead of renameat2(RENAME_EXCHANGE).
 """
+
 from __future__ import annotations
 
 import os
@@ -61,8 +62,7 @@ def fsync_tree(root) -> None:
 
 
 def _tree_files(root: Path) -> list[str]:
-    return sorted(str(Path(d, f).relative_to(root).as_posix())
-                  for d, _dirs, files in os.walk(root) for f in files)
+    return sorted(str(Path(d, f).relative_to(root).as_posix()) for d, _dirs, files in os.walk(root) for f in files)
 
 
 def read_marker(path) -> dict | None:
@@ -78,8 +78,12 @@ def read_marker(path) -> dict | None:
 
 def is_report_dir(entry: Path) -> bool:
     """``report/`` written into an output directory by ``replay report``: goes with its set."""
-    return (entry.name == "report" and entry.is_dir() and not entry.is_symlink()
-            and all(p.is_file() and (p.name == "report.html" or p.suffix == ".png") for p in entry.iterdir()))
+    return (
+        entry.name == "report"
+        and entry.is_dir()
+        and not entry.is_symlink()
+        and all(p.is_file() and (p.name == "report.html" or p.suffix == ".png") for p in entry.iterdir())
+    )
 
 
 def check_replaceable(target, kind: str, what: str = "output", legacy=None, shown=None) -> None:
@@ -105,8 +109,10 @@ def check_replaceable(target, kind: str, what: str = "output", legacy=None, show
     except OSError:
         cwd = None
     if cwd is not None and cwd.is_relative_to(p.resolve()):
-        raise ReplayError(f"{what} {target}: holds the current directory, which replacing it as a whole "
-                          f"would remove; run from elsewhere or choose another {what}")
+        raise ReplayError(
+            f"{what} {target}: holds the current directory, which replacing it as a whole "
+            f"would remove; run from elsewhere or choose another {what}"
+        )
     entries = sorted(p.iterdir())
     if not entries:
         return
@@ -114,20 +120,33 @@ def check_replaceable(target, kind: str, what: str = "output", legacy=None, show
     if mark is None:
         if legacy is not None and legacy(p):
             return
-        raise ReplayError(f"{what} {target}: is a non-empty directory that is not a {kind} output "
-                          f"(it holds {entries[0].name!r}); refusing to replace it: choose another {what}")
+        raise ReplayError(
+            f"{what} {target}: is a non-empty directory that is not a {kind} output "
+            f"(it holds {entries[0].name!r}); refusing to replace it: choose another {what}"
+        )
     if mark.get("kind") != kind:
-        raise ReplayError(f"{what} {target}: holds a {mark.get('kind')!r} output, not a {kind} output; "
-                          f"refusing to replace it: choose another {what}")
+        raise ReplayError(
+            f"{what} {target}: holds a {mark.get('kind')!r} output, not a {kind} output; "
+            f"refusing to replace it: choose another {what}"
+        )
     listed = set(mark.get("files") or ()) | {MARKER}
     for e in entries:
         if is_report_dir(e):
             continue
-        extra = [f for f in ([e.name] if not e.is_dir() or e.is_symlink() else
-                             [str(Path(e.name, f).as_posix()) for f in _tree_files(e)]) if f not in listed]
+        extra = [
+            f
+            for f in (
+                [e.name]
+                if not e.is_dir() or e.is_symlink()
+                else [str(Path(e.name, f).as_posix()) for f in _tree_files(e)]
+            )
+            if f not in listed
+        ]
         if extra:
-            raise ReplayError(f"{what} {target}: holds {extra[0]!r}, which is not part of the {kind} output; "
-                              f"refusing to replace the directory: move it away or choose another {what}")
+            raise ReplayError(
+                f"{what} {target}: holds {extra[0]!r}, which is not part of the {kind} output; "
+                f"refusing to replace the directory: move it away or choose another {what}"
+            )
 
 
 def check_space(out, what: str = "output", need: int | None = None) -> None:
@@ -145,8 +164,10 @@ def check_space(out, what: str = "output", need: int | None = None) -> None:
         raise ReplayError(f"{what} {out}: {shown(out, probe)} is on a read-only file system")
     free = (st.f_bfree if os.geteuid() == 0 else st.f_bavail) * st.f_frsize
     if free < need:
-        raise ReplayError(f"{what} {out}: not enough space on the file system of {shown(out, probe)} "
-                          f"({free} bytes free, at least {need} needed)")
+        raise ReplayError(
+            f"{what} {out}: not enough space on the file system of {shown(out, probe)} "
+            f"({free} bytes free, at least {need} needed)"
+        )
 
 
 def check_output_dir(out, inputs=(), *, kind: str, what: str = "output", legacy=None) -> Path:
@@ -300,6 +321,7 @@ def staged_dir(target, *, kind: str, what: str = "output", legacy=None):
                 pass
         if isinstance(exc, OSError):
             why = exc.strerror or str(exc)
-            raise ReplayError(f"{what} {given}: cannot write ({why}); "
-                              "the previous output, if any, is unchanged") from None
+            raise ReplayError(
+                f"{what} {given}: cannot write ({why}); the previous output, if any, is unchanged"
+            ) from None
         raise

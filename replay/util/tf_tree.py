@@ -3,6 +3,7 @@ their composition over time — shared by ``replay score BAG:tf:PARENT->CHILD``
 (:mod:`replay.trajectory.bag`) and the bag adapter's TF estimates, which need not be recorded
 as one pair (``map -> odom -> base_link``).
 """
+
 from __future__ import annotations
 
 from collections import deque

@@ -4,6 +4,7 @@ Every module that records or prints the version imports it from here, never from
 package ``replay`` itself (an import contract in pyproject.toml forbids ``import replay``
 inside the library).
 """
+
 from importlib.metadata import PackageNotFoundError, version
 
 DISTRIBUTION = "replay-nav"  # [project] name in pyproject.toml
