@@ -206,7 +206,7 @@ def test_cubature_step_known_value(stckf):
     """On a linear-Gaussian model the particle's STCKF (CKF) is the exact Kalman update with the
     faded prior: x = [1, 2], P = 2 I, Q = 0.5 I, R = I, z = [5, -2]: e = [4, -4], tr N = 32 - 1 - 2.4,
     tr M = tr P = 4, lambda = 7.15; S = 2.5 lambda + 1, K = 2.5 lambda / S, P+ = 2.5 lambda / S."""
-    from replay.filters.p002.binding import bind
+    from replay.filters.p002.stcpf import bound_kernels as bind
     from replay.models.random_walk import RandomWalkPosition
 
     m = RandomWalkPosition(0.5 * np.eye(2), np.eye(2))
@@ -273,7 +273,7 @@ def test_cubature_step_python_text_equals_compiled(stckf, transition):
     runs) gives the compiled numbers, on the sonar model's particles."""
     from pure import pure
 
-    from replay.filters.p002.binding import bind
+    from replay.filters.p002.stcpf import bound_kernels as bind
     from replay.sim.auv_sonar import make_frame
     from replay.tasks import make_task
 
