@@ -10,7 +10,6 @@ import pytest
 
 from replay.evaluation import evaluate
 from replay.reproduce import rules, verdict
-from replay.util.errors import ReplayError
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
 BOHAI = SHARED / "datasets" / "bohai"
@@ -61,7 +60,7 @@ def test_quick_row_is_that_of_replay_eval_and_tuned_rows_are_printed(quick):
 
 
 def test_parts_are_refused_in_one_line():
-    from replay.reproduce.p002 import run
+    """002 runs whole: the former --part tables|ablations|bohai is refused in one line, exit 2."""
+    from hostile import assert_refused
 
-    with pytest.raises(ReplayError, match="no parts any more"):
-        run(quick=True, quiet=True, part="tables")
+    assert_refused(["reproduce", "002", "--part", "tables"], "paper 002 is not split into parts")

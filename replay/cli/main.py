@@ -275,8 +275,8 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 @click.option("--doc", default=None, type=click.Path(dir_okay=False),
               help="Markdown report to write (default: docs/reproduction/<paper>.md).")
 @click.option("--quick", is_flag=True, help="A short version (few runs) for a smoke check.")
-@click.option("--part", default=None, help="Only this part of a reproduction split into parts "
-              "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.")
+@click.option("--part", default=None, help="Only this part of a reproduction that is split into "
+              "parts; the document keeps the other parts' sections.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
 def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part, quiet=False):
     """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""

@@ -20,7 +20,6 @@ import numpy as np
 from replay import registry
 from replay.evaluation import command_line, evaluate
 from replay.models.auv_sonar import R_TABLE2
-from replay.util.errors import ReplayError
 
 from .pool import pool, run_longest_first, workers
 from .rules import per_run
@@ -125,19 +124,14 @@ def sequences(data_dir) -> list[str]:
 
 
 # --- running ----------------------------------------------------------------------------------------
-def bases(e: Exp) -> dict:
-    """The first row of each tuned filter: the one its tuned row copies."""
-    out = {}
+def variants(e: Exp, qs, label: str) -> tuple:
+    """The first row of each filter ``f`` of ``qs`` (filter -> q_scale values) with ``q_scale`` set:
+    the tuned rows (one value each) or the grid (:data:`GRID`)."""
+    base = {}
     for a in e.arms:
-        out.setdefault(a.filter, a)
-    return out
-
-
-def tuned_arms(e: Exp, qs: dict) -> tuple:
-    base = bases(e)
-    return tuple(replace(base[f], label=f"{base[f].label}, q tuned", params=dict(base[f].params, q_scale=qs[f]),
-                         paper=())
-                 for f in e.tune if f in qs)
+        base.setdefault(a.filter, a)
+    return tuple(replace(base[f], label=label.format(f=f, q=q, base=base[f].label), paper=(),
+                         params=dict(base[f].params, q_scale=q)) for f, v in qs.items() for q in v)
 
 
 def q_for(e: Exp, chosen: dict) -> dict:
@@ -148,14 +142,7 @@ def q_for(e: Exp, chosen: dict) -> dict:
     return {} if e.dataset == TUNE_SEQ else chosen.get(f"{e.key.split('-')[0]}-{TUNE_SEQ[-3:]}", {})
 
 
-def grid_exp(e: Exp, seed_shift: int) -> Exp:
-    base = bases(e)
-    arms = tuple(replace(base[f], label=f"{f} q×{q:g}", params=dict(base[f].params, q_scale=q), paper=())
-                 for q in GRID for f in e.tune)
-    return replace(e, key=f"{e.key}:grid{seed_shift}", arms=arms, runs="tune" if e.runs == "mc" else e.runs)
-
-
-def jobs(exps, s: dict, seed_shift: dict) -> list[tuple]:
+def jobs(exps, s: dict) -> list[tuple]:
     """Pack each experiment's rows into evaluate calls: one call per distinct dataset and task
     parameters, each filter once per call. A job: (exp key, ((label, filter, params), ...), kwargs)."""
     out = []
@@ -173,7 +160,7 @@ def jobs(exps, s: dict, seed_shift: dict) -> list[tuple]:
         for key, rows in calls:
             dp, tp = json.loads(key)
             out.append((e.key, tuple(rows), dict(dataset=e.dataset, task=e.task, runs=runs, first=e.first,
-                                                 seed=s["seed"] + seed_shift.get(e.key, 0), dataset_params=dp or None,
+                                                 seed=s["seed"] + (e.runs == "tune"), dataset_params=dp or None,
                                                  task_params=tp or None,
                                                  data_dir=s["data_dir"] if e.runs == "bohai" else None)))
     return out
@@ -197,9 +184,9 @@ def compute(job) -> dict:
     return out
 
 
-def run_all(exps, s, ex, shift=None) -> dict:
+def run_all(exps, s, ex) -> dict:
     """{exp key: {label: row evidence, ...}, "cmd:<key>": [commands]} of every experiment."""
-    todo = jobs(exps, s, shift or {})
+    todo = jobs(exps, s)
     cost = [kw["runs"] * (kw["first"] or 100) * sum(5 if "gwo" in f or "pso" in f or "stcpf" in f else 1
                                                       for _, f, _ in rows) for _, rows, kw in todo]
     E = {}
@@ -214,20 +201,17 @@ def run_all(exps, s, ex, shift=None) -> dict:
 
 def tune(exps, s, ex) -> dict:
     """{exp key: {filter: chosen q_scale}} from the grids (module docstring)."""
-    grids, shift = [], {}
-    for e in exps:
-        if e.tune and (e.runs != "bohai" or e.dataset == TUNE_SEQ):
-            g = grid_exp(e, 1 if e.runs == "mc" else 0)
-            grids.append(g)
-            shift[g.key] = 1 if e.runs == "mc" else 0
-    E = run_all(grids, s, ex, shift)
-    chosen = {}
+    grids = [replace(e, key=f"{e.key}:grid", runs="tune" if e.runs == "mc" else e.runs,
+                     arms=variants(e, {f: GRID for f in e.tune}, "{f} q×{q:g}"))
+             for e in exps if e.tune and (e.runs != "bohai" or e.dataset == TUNE_SEQ)]
+    E, chosen = run_all(grids, s, ex), {}
     for g in grids:
-        key = g.key.split(":")[0]
-        for f in {a.filter for a in g.arms}:
-            cands = [(np.mean(E[g.key][a.label]["v"]), a.params["q_scale"]) for a in g.arms if a.filter == f]
-            chosen.setdefault(key, {})[f] = min(cands)[1]
-    return chosen
+        for a in g.arms:
+            best = chosen.setdefault(g.key.split(":")[0], {}).get(a.filter)
+            m = np.mean(E[g.key][a.label]["v"])
+            if best is None or m < best[0]:
+                chosen[g.key.split(":")[0]][a.filter] = (m, a.params["q_scale"])
+    return {k: {f: q for f, (_, q) in v.items()} for k, v in chosen.items()}
 
 
 def compute_all(runs, seed, data_dir, quick, quiet) -> tuple:
@@ -239,16 +223,15 @@ def compute_all(runs, seed, data_dir, quick, quiet) -> tuple:
     exps = list(SIM) + bohai(seqs[-2:] if quick else seqs)
     with pool(workers()) as ex:
         chosen = tune(exps, s, ex)
-        exps = [replace(e, arms=e.arms + tuned_arms(e, q_for(e, chosen))) for e in exps]
+        exps = [replace(e, arms=e.arms + variants(e, {f: (q,) for f, q in q_for(e, chosen).items()},
+                                                  "{base}, q tuned")) for e in exps]
         return exps, run_all(exps, s, ex), chosen, seqs
 
 
-def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, part=None):
+def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     """Compute every experiment, decide the claims, write the document."""
     from . import p002_claims
 
-    if part not in (None, "all"):
-        raise ReplayError(f"reproduce 002: no parts any more (got --part {part}); it runs whole")
     watch = Stopwatch()
     exps, E, chosen, seqs = compute_all(runs, seed, data_dir, quick, quiet)
     cmd = "replay reproduce 002" + (f" --runs {runs}" if runs else "") + (" --quick" if quick else "") + \
