@@ -6,6 +6,7 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from replay.evaluation import evaluate
@@ -64,3 +65,27 @@ def test_parts_are_refused_in_one_line():
     from hostile import assert_refused
 
     assert_refused(["reproduce", "002", "--part", "tables"], "paper 002 is not split into parts")
+
+
+def test_every_rule_names_evidence_and_equal_arms_decide_nothing():
+    """Each claim's rule (declared before the run) names comparisons the evidence builder makes; with
+    every row the same numbers, no ordering holds and no paper number far from them is inside."""
+    from collections import defaultdict
+
+    from replay.reproduce.p002_claims import CLAIMS, evidence
+
+    rng = np.random.default_rng(0)
+    same = rng.normal(50.0, 1.0, 20).tolist()
+
+    class Rows(dict):
+        def __contains__(self, label):
+            return True
+
+        def __missing__(self, label):
+            return {"v": same, "lost": [False] * 20, "above2": [0.5] * 20, "cols": defaultdict(lambda: same)}
+
+    ev = evidence(defaultdict(Rows), ["b1hz-0_5", "b1hz-0_6"], ["b10hz-0_5", "b10hz-0_6"])
+    keys = {k for c in CLAIMS for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k}
+    assert keys <= set(ev) and all(ev[k] for k in keys)
+    labels = {v.claim.id: v.label for v in rules.decide(CLAIMS, ev)}
+    assert set(labels.values()) == {rules.NOT}, labels

@@ -117,7 +117,7 @@ def evidence(E, b1, b10) -> dict:
         "fr": [cmp(E, "sweep", "R1, N = 100", "5 R1"), cmp(E, "sweep", "5 R1", "10 R1")],
         "fn": [cmp(E, "sweep", "N = 500", b) for b in ("N = 50", "R1, N = 100")],
         "b": [inside(E, k, "igwo-stcpf", 1.2853) for k in b1], "b10": [inside(E, k, "igwo-stcpf", 1.2853) for k in b10],
-        "b-move": [cmp(E, k, "igwo-stcpf, estimate before the move", "igwo-stcpf") for k in (b1[-1], b10[-1])],
+        "b-move": [cmp(E, k, "igwo-stcpf, estimate before the move", "igwo-stcpf") for k in (b1 + b10)[-1:] + b1[-1:]],
         "bo": [cmp(E, k, a, b) for k in b1 for a, b in (("igwo-stcpf", "pso-cpf"), ("pso-cpf", "stckf"),
                                                          ("stckf", "pf (N = 100)"))],
         "bv": [inside(E, k, a, t) for k in b1 for a, t in (("stckf", 3.68), ("pf (N = 100)", 6.6236))],
