@@ -2,6 +2,8 @@
 (:mod:`replay.reproduce.rules`); the tables and fields of ``templates/002.md``."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from replay.filters.p002 import compiled_util
@@ -189,7 +191,7 @@ def document(exps, E, chosen, seqs, seed) -> str:
     compiled_util.entropy_weights(np.array([1.0, 1.5, 10.0]), 1e-12, 1e-4, w)
     fields.update(b1hz=bohai_table(exps, E, "1hz") if b1 else none, b10hz=bohai_table(exps, E, "10hz") if b1 else none,
                   z_low=f"{100 * E['t5']['stckf']['z_low']:.1f} %", seqs=", ".join(seqs) or "none found",
-                  tune_seq=TUNE_SEQ, entropy="(" + ", ".join(f"{x:.3f}" for x in w) + ")",
+                  tune_seq=TUNE_SEQ, load=", ".join(f"{x:.1f}" for x in os.getloadavg()), entropy="(" + ", ".join(f"{x:.3f}" for x in w) + ")",
                   tuned="; ".join(f"{k}: " + ", ".join(f"{f} × {q:g}" for f, q in v.items())
                                   for k, v in chosen.items()))
     return render("002", fields, verdicts)
