@@ -107,8 +107,8 @@ B_ABL = (A("igwo-stcpf, estimate before the move", "igwo-stcpf", estimate_at="be
 
 
 def bohai(seqs) -> list[Exp]:
-    """Benchmark 3 on each sequence at the paper's T = 1 s and at the recording's 10 Hz (the paper's
-    filters at 10 Hz: no PSO-CPF, no Q-prior rows), the optimiser ablations on the last sequence."""
+    """Benchmark 3 on each sequence at the paper's T = 1 s and at the recording's 10 Hz (the
+    rows at 10 Hz without the Q-prior ones), the optimiser ablations on the last sequence."""
     out = []
     for tag, dp, arms in (("1hz", {"rate": 1.0}, B_ARMS), ("10hz", {}, B_ARMS[:6] + B_ARMS[8:])):
         for s in seqs:
