@@ -156,12 +156,10 @@ def test_evaluate_batches_and_matches_a_single_run():
 
 
 def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
-    from replay.reproduce.p002 import first_runs
-
     kw = dict(task="sonar", filters=("stckf", "pf"), seed=1, filter_params={"pf": {"n_particles": 50}},
               dataset_params={"steps": 20})
     three, two = evaluate("sim/auv-sonar", runs=3, **kw), evaluate("sim/auv-sonar", runs=2, **kw)
-    cut = first_runs(three, 2)
+    cut = three.first(2)
     assert cut.config["runs"] == 2 and len(cut.truths) == 2
     for a, b in zip(cut.results, two.results):
         a.summary.pop("us_per_step"), b.summary.pop("us_per_step")  # timing differs

@@ -30,6 +30,13 @@ Choices where the paper is ambiguous (each configurable):
   whenever lambda is large; scaling the prior too is exactly the Kalman update
   with the faded prior lambda P_{k+1|k} for a linear h (Zhang et al. 2019).
   ``scale_prior=False`` follows the print (P = P_{k+1|k} - K S K').
+* ``form="innovation"`` (default): lambda acts on the cubature sums of P_zz
+  and P_xz (and the prior, ``scale_prior``), as printed. ``form="classic"``:
+  the classic strong-tracking prediction P_{k+1|k} = lambda F P F' + Q (Zhou &
+  Frank 1996), Q left unscaled: the cubature estimate of F P F' (the predicted
+  covariance minus Q) is scaled, fresh cubature points are drawn from the new
+  prior and the update is the CKF's (:meth:`STCKF.classic`). The same lambda
+  (``m_form``, ``rho``, ``beta``); ``scale_prior=False`` is refused with it.
 * Missing measurement components: lambda is computed from the measured
   components; V restarts (V = e e') whenever the set of measured components
   changes.
@@ -55,6 +62,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import residual
+from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.model import remap_indices
 
@@ -70,6 +78,9 @@ STCKF_PARAMS = (
           "as printed", choices=("propagated", "printed")),
     Param("scale_prior", bool, True, "scale the prior covariance by the fading factor too (false: as printed)"),
 )
+FORM = Param("form", str, "innovation", "where the fading factor acts: on the cubature sums of P_zz and P_xz "
+             "(and the prior, scale_prior) as 002 prints (innovation), or the classic strong-tracking prior "
+             "lambda F P F' + Q with fresh cubature points (classic)", choices=("innovation", "classic"))
 REPAIR = Param("repair", bool, False, "repair a posterior covariance that is not positive definite (eigenvalue "
                "floor) instead of counting the run as diverged")
 
@@ -78,7 +89,12 @@ class STCKF(CKF):
     """CKF with the strong-tracking fading factor of 002 §2.2.2 (rho = 0.95, beta = 1.2)."""
 
     name = "stckf"
-    PARAMS = CKF.PARAMS + STCKF_PARAMS + (REPAIR,)
+    PARAMS = CKF.PARAMS + STCKF_PARAMS + (REPAIR, FORM)
+
+    def check(self):
+        if self.form == "classic" and not self.scale_prior:
+            raise ReplayError(f"{self.owner()}: scale_prior=false applies to form=innovation only (the classic "
+                              "form scales F P F', not the innovation)")
 
     def start(self, state, x0, P0):
         super().start(state, x0, P0)
@@ -115,6 +131,9 @@ class STCKF(CKF):
         if lam == 1.0:
             self.correct(state, y, Pzz + R, Pxz)
             return
+        if self.form == "classic":
+            self.classic(state, z, k, mask, lam)
+            return
         with np.errstate(over="ignore", invalid="ignore"):  # an overflow is this run's divergence, counted
             if self.scale_prior:
                 state.P = lam * state.P
@@ -125,6 +144,16 @@ class STCKF(CKF):
             if compiled_util.factor(state.P, L) and np.isfinite(L).all():
                 state.P = L @ L.T
                 state.repairs += 1
+
+    def classic(self, state, z, k, mask, lam):
+        """The classic strong-tracking prediction lambda F P F' + Q (Zhou & Frank 1996): the fading factor
+        scales the propagated covariance (the cubature estimate P_{k+1|k} - Q), not Q; the innovation
+        is recomputed from fresh cubature points of that prior and used unscaled."""
+        Q = state.model.process_cov(k)
+        with np.errstate(over="ignore", invalid="ignore"):
+            state.P = lam * (state.P - Q) + Q
+        y, Pzz, Pxz, R = self.innovation(state, z, k, mask)
+        self.correct(state, y, Pzz + R, Pxz)
 
     def finish(self, state, info):
         lam = np.asarray(state.lambdas)

@@ -71,8 +71,7 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 @click.option(
     "--part",
     default=None,
-    help="Only this part of a reproduction split into parts "
-    "(002: tables, ablations, bohai, all); the document keeps the other parts' sections.",
+    help="Only this part of a reproduction that is split into parts; the document keeps the other parts' sections.",
 )
 @click.option("--quiet", "-q", is_flag=True, help="No progress lines.")
 def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part, quiet=False):

@@ -128,6 +128,7 @@ class Comparison:
     lost_b: object = None
     counts: tuple | None = None
     target: float | None = None
+    test: str = ""  # this comparison's own test (one of TESTS), declared with it; "": the rule's
 
 
 @dataclass
@@ -253,7 +254,7 @@ def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
             if not evidence.get(key):
                 raise ValueError(f"claim {cl.id!r}: no evidence under {key!r}")
             if (fam_of[cl.id], key) not in tested:
-                outs = [test_one(c, cl.rule.test, rng) for c in evidence[key]]
+                outs = [test_one(c, c.test or cl.rule.test, rng) for c in evidence[key]]
                 tested[(fam_of[cl.id], key)] = outs
                 families.setdefault(fam_of[cl.id], []).extend(o for o in outs if o.test != "interval")
     alpha = {fam_of[cl.id]: cl.rule.alpha for cl in claims}
