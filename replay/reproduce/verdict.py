@@ -1,4 +1,9 @@
-"""What every reproduction document shares: the verdict table, the Monte Carlo rows, the footer.
+"""What every reproduction document shares: the Monte Carlo rows, the footer, portable writing.
+
+The verdict vocabulary, the rules and the decision are :mod:`replay.reproduce.rules`; the one
+renderer is :mod:`replay.reproduce.render`. :class:`Claim`, :data:`VERDICTS` and
+:func:`verdict_table` below are the old three-label vocabulary ("deviation explained"), kept
+only until every paper has moved to :mod:`replay.reproduce.rules`; new code must not use them.
 
 A reproduction document (``docs/reproduction/NNN.md``) opens with a **verdict
 table**: one row per claim of the paper, with our number and its 95 %

@@ -1,0 +1,80 @@
+"""The one renderer of reproduction documents: a prose template, the verdict table, tables as data.
+
+A paper's document is ``replay/reproduce/templates/NNN.md``, Markdown with ``${name}``
+placeholders (:class:`string.Template`; ``$$`` for a literal dollar), filled by
+:func:`render` from ``fields`` (text the paper's code computes: numbers, tables made with
+:func:`table`) and the verdicts (:func:`replay.reproduce.rules.decide`). Every placeholder
+must be given and every field used, so a template and its code cannot drift apart silently.
+The template must hold ``${verdicts}`` (the verdict table, :func:`verdict_table`) before its
+first ``## `` section other than ``## Verdict``: each document opens with its verdicts.
+
+The verdict table has one row per claim: the claim (the paper's words), the paper's number,
+the label, the rule declared before the run, the test, the Holm-adjusted p-values or
+intervals of the deciding comparisons (with the stated condition's or the ablation's when they
+decided, and the residual gap beside a *recovered* row), and a link to the evidence row.
+An evidence row carries the anchor :func:`anchor_tag` of its claim's ``evidence``.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from string import Template
+
+from .rules import MECHANISM, RECOVERED, Verdict, counts
+from .verdict import cell
+
+TEMPLATES = Path(__file__).with_name("templates")
+
+
+def table(head: list[str], rows: list[list]) -> str:
+    """A Markdown table (cells escaped: ``|`` and newlines)."""
+    lines = ["| " + " | ".join(cell(h) for h in head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(cell(x) for x in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def anchor_tag(evidence: str) -> str:
+    """The HTML anchor an evidence row carries for the link ``evidence`` (``#e-depth`` -> ``<a id="e-depth"></a>``)."""
+    name = evidence.lstrip("#")
+    if not re.fullmatch(r"[\w\-]+", name):
+        raise ValueError(f"evidence anchor {evidence!r}: letters, digits, '-' and '_' only")
+    return f'<a id="{name}"></a>'
+
+
+def _found(v: Verdict) -> str:
+    out = "; ".join(o.text() for o in v.deciding)
+    if v.label == RECOVERED:
+        out = "under the condition: " + "; ".join(o.text() for o in v.support) + f". Residual gap in the paper's " \
+              f"setting: {v.gap}"
+    elif v.label == MECHANISM:
+        out += ". Ablation: " + "; ".join(o.text() for o in v.support)
+    return out
+
+
+def verdict_table(verdicts: list[Verdict]) -> str:
+    """The verdict table (module docstring) and the count of each label."""
+    rows = [[v.claim.words, v.claim.paper, f"**{v.label}**", v.rule, v.tests, _found(v),
+             f"[{v.claim.evidence.lstrip('#')}]({v.claim.evidence})"] for v in verdicts]
+    head = ["claim", "paper", "verdict", "rule (declared before the run)", "test",
+            "adjusted p / interval (deciding comparisons)", "evidence"]
+    return table(head, rows) + "\n\n" + counts(verdicts)
+
+
+def render(template: str | Path, fields: dict, verdicts: list[Verdict]) -> str:
+    """The document: ``template`` (a path, or a paper number "NNN" for ``templates/NNN.md``) with
+    ``${verdicts}`` and every ``fields`` placeholder filled (module docstring)."""
+    path = TEMPLATES / f"{template}.md" if re.fullmatch(r"\d{3}", str(template)) else Path(template)
+    text = path.read_text(encoding="utf-8")
+    t = Template(text)
+    names = {m.group("named") or m.group("braced") for m in t.pattern.finditer(text)} - {None}
+    if "verdicts" not in names:
+        raise ValueError(f"{path.name}: no ${{verdicts}} placeholder (a document opens with its verdicts)")
+    before = text[: text.index("${verdicts}")]
+    early = [h for h in re.findall(r"^## .*$", before, flags=re.M) if h.strip() != "## Verdict"]
+    if early:
+        raise ValueError(f"{path.name}: section {early[0]!r} before the verdict table")
+    missing, unused = names - set(fields) - {"verdicts"}, set(fields) - names
+    if missing or unused:
+        raise ValueError(f"{path.name}: placeholders without a value {sorted(missing)}, values without a "
+                         f"placeholder {sorted(unused)}")
+    return t.substitute({k: str(v) for k, v in fields.items()}, verdicts=verdict_table(verdicts))

@@ -1,0 +1,1 @@
+"""Scoring statistics shared by the library: :mod:`replay.scoring.significance` (tests, intervals, multiplicity)."""
