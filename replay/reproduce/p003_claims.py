@@ -47,3 +47,8 @@ CLAIMS = [
                condition="alpha-lost-poor", condition_text=POOR),
           "#e-mechanism"),
 ]
+
+# the labels of the document before issue 27 (rows 1–5; row 5 is split into distinct, alpha-rmse, alpha-lost)
+OLD = {"pf-peak": "not reproduced", "pf-drift": "reproduced", "wf-better": "deviation explained",
+       "wf-nodrift": "not reproduced", "distinct": "reproduced (row 5)", "alpha-rmse": "reproduced (row 5)",
+       "alpha-lost": "reproduced (row 5)"}

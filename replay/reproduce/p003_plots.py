@@ -8,7 +8,6 @@ import numpy as np
 from .common5 import rmse_figures
 
 AXES = (("x", "x position error", "m"), ("y", "y position error", "m"))
-FILTERS = (("PF", 0), ("WF-PF", 1), ("UKF", 2))  # label, result index of the printed-setting evaluation
 
 
 def run_errors(ev, i) -> dict[str, np.ndarray]:
