@@ -45,11 +45,11 @@ SETTINGS = [
 ]
 TUNED = ("printed", "σ_a = 0.03")  # the settings whose baselines are tuned
 GRIDS = {  # filter: (parameter, grid); ``rough`` is the pf's roughening constant K
-    "pf": ("q_scale", (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)),
-    "rough": ("roughening", (0.05, 0.1, 0.2, 0.4)),
+    "pf": ("q_scale", (1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0)),
+    "rough": ("roughening", (0.05, 0.1, 0.2, 0.4, 0.8)),
     "ukf": ("q_scale", (0.5, 1.0, 2.0, 4.0)),
     "ekf": ("q_scale", (0.5, 1.0, 2.0, 4.0)),
-    "wf-pf": ("alpha", (1.0, 0.75, 0.5, 0.25)),
+    "wf-pf": ("alpha", (1.0, 0.75, 0.5, 0.25, 0.1)),
 }
 
 

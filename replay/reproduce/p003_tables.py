@@ -201,6 +201,22 @@ def tuned(evs, best) -> str:
                "shared setting: pos_rmse (m), seed s", "tuned: pos_rmse (m), seed s"], body)
 
 
+def poor(evs, rng) -> str:
+    """The impoverished setting in numbers: lost runs of each row (seed s) and α = 0.5 against α = 1
+    on the pooled seeds (not the paper's α: not deciding)."""
+    get = lambda r, fn: np.concatenate([fn(evs[f"{Q}|{r}|{k}"]) for k in POOLED])
+    c = Comparison("α = 0.5 − α = 1", get("a=0.5", rmse), get("a=1.0", rmse), get("a=0.5", lost), get("a=1.0", lost))
+    o, m = test_one(c, "auto", rng), test_one(c, "mcnemar", rng)
+    o.p_adj, m.p_adj = o.p, m.p
+    seed_s = ", ".join(f"{name(r)} {int(lost(evs[f'{Q}|{r}|0']).sum())}"
+                       for r in rows(next(s for s in SETTINGS if s[0] == Q)))
+    kept = ", ".join(f"α = {a}: {np.nanmean(get(f'a={a}', distinct)):.1f}" for a in (1.0, 0.75, 0.5))
+    tuned = ", ".join(f"{f} {evs[f'tuned|{Q}|{f}'].rows[0]['lost']}" for f in GRIDS)
+    return (f"lost runs (of {len(lost(evs[f'{Q}|a=1.0|0']))}) at seed s: {seed_s}; tuned: {tuned}. "
+            f"α = 0.5 against α = 1, {len(c.a)} pooled runs: median Δ {cellof(o)}; lost {cellof(m)}. "
+            f"Distinct particles after resampling (of N = 100, pooled): {kept}")
+
+
 def fields(evs, best, runs, doc, verdicts, evid) -> dict:
     """Every placeholder of ``templates/003.md`` but the verdicts and the command."""
     rng = np.random.default_rng(0)
@@ -213,6 +229,6 @@ def fields(evs, best, runs, doc, verdicts, evid) -> dict:
     return {"runs": runs, "seeds": len(POOLED), "k_printed": f"{kurtosis(2, 0.75):.2f}",
             "k_strong": f"{kurtosis(10, 0.1):.1f}", "drift": drift(evs), "plots": "\n".join(figs),
             "distinct": distincts(evs), "where": where_table, "pooled": pooled_table, "relabel": "\n".join(relabel),
-            "replication": replication(evs, rng), "tuned": tuned(evs, best),
+            "replication": replication(evs, rng), "tuned": tuned(evs, best), "poor": poor(evs, rng),
             **{f"n_{k}": f"{a} of {b}" for k, (a, b) in n.items()},
             **{f"t_{g}": sweep(evs, g) for g in (P, "N", "Q", "contrast", "mismatch")}}
