@@ -98,6 +98,7 @@ class PFEngine:
         self.logw = np.full((M, N), -np.log(N))
         self.w = np.full((M, N), 1.0 / N)
         self.resampled = [0] * M
+        self.ess_sum, self.ess_steps = np.zeros(M), np.zeros(M, int)  # ESS before resampling, per run
         self.no_nis = np.full(M, np.nan), np.zeros(M, int)  # a PF records no innovation
 
     def keep(self, ok):
@@ -108,11 +109,15 @@ class PFEngine:
 
     def finish(self, m, info):
         info["resampled"] = int(self.resampled[m])
+        if self.ess_steps[m]:
+            info["mean_ess"] = float(self.ess_sum[m] / self.ess_steps[m])
 
     def step(self, k, Z, finite):
         self.propagate(k)
         self.update(k, Z, finite)
         x, P = particles.estimate(self.X, self.w, self.model.x_angles)
+        self.ess_sum[self.ids] += particles.ess(self.w)
+        self.ess_steps[self.ids] += 1
         self.resample()
         return x, P, *self.no_nis
 

@@ -45,14 +45,14 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @nb.njit(cache=True, nogil=True)
 def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, xmask, zmask,
-           limit, rough, shrink, logw0, Xout, Pout):
+           limit, rough, shrink, logw0, Xout, Pout, ess):
     """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
     w (N,) their log-weights and weights (all changed in place); Z (steps, nz), ``seen[k]``
     whether z_k is there (else no weighting at k); Pf[k], Ph[k] the
     kernels' parameters; qsd (n,) the process noise's standard deviations; R as ``gauss_loglik``
     takes it (rdiag, rL, rinv, rconst); ``limit`` = threshold * N; roughening constant
     ``rough`` = K and ``shrink`` = N^(-1/n); ``logw0`` = -log N. Writes Xout (steps, n), Pout
-    (steps, n, n). Returns the number of resampling steps."""
+    (steps, n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
     N, n = X.shape
     steps, nz = Z.shape
     Y, zh, ll = np.empty((N, n)), np.empty((N, nz)), np.empty(N)
@@ -74,6 +74,7 @@ def pf_run(f, h, g, X, logw, w, Z, seen, Pf, Ph, qsd, rdiag, rL, rinv, rconst, x
         s = 0.0
         for i in range(N):
             s += w[i] * w[i]
+        ess[k] = 1.0 / s
         if 1.0 / s < limit:  # resample (ESS below the threshold)
             invert_sorted(w, g.random(), a)
             for i in range(N):
@@ -101,7 +102,7 @@ _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1
 PF_RUN = types.int64(kalman_loops.ROWS_KERNEL, kalman_loops.ROWS_KERNEL, _GEN, _M, _V, _V, _M, types.boolean[::1],
                      _M, _M,
                      _V, types.boolean, _M, _V, types.float64, types.boolean[::1], types.boolean[::1],
-                     types.float64, types.float64, types.float64, types.float64, _M, _M3)
+                     types.float64, types.float64, types.float64, types.float64, _M, _M3, _V)
 
 
 def run(engine, Z, finite):
@@ -130,7 +131,7 @@ def run(engine, Z, finite):
     rinv = np.ascontiguousarray(rinv if rdiag else np.zeros(0))
     call = bound(pf_run, *row_kernels(m, (0, 1)))
     xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
-    X, P = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx))
+    X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
     qsd = np.ascontiguousarray(qsd)
     fixed = (rdiag, rL, rinv, logdet + nz * _LOG_2PI, xmask, zmask, flt.ess_threshold * N,
@@ -139,13 +140,16 @@ def run(engine, Z, finite):
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
         return [call(engine.active[j], *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
-                     Z[j], seen[j], *stacks, qsd, *fixed, X[j], P[j]) for j in range(lo, hi)]
+                     Z[j], seen[j], *stacks, qsd, *fixed, X[j], P[j], E[j]) for j in range(lo, hi)]
 
     t0 = perf_counter()
     counts = [c for part in split(runs, M, grain=grain(0.15 * steps * N)) for c in part]
     engine.seconds = perf_counter() - t0  # the computation, without loading the compiled code
     for j, c in enumerate(counts):
         engine.resampled[engine.ids[j]] += c
+        if steps:  # summed in step order, as the steps sum it
+            engine.ess_sum[engine.ids[j]] += np.cumsum(E[j])[-1]
+            engine.ess_steps[engine.ids[j]] += steps
     return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
 
 

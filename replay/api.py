@@ -131,15 +131,20 @@ def run_campaign(campaign, *, out, workers: int | None = None, data_dir=None, qu
 
 def campaign_results(out, *, runs: bool = False):
     """A result directory (a campaign's, or a ``replay eval`` output) as one DataFrame: its
-    leaderboard rows; ``runs=True``: one row per configuration and run (a campaign's units)."""
+    leaderboard rows; ``runs=True``: one row per configuration and run with every per-run metric
+    (a campaign's units, or an eval output's ``runs.csv``)."""
     from replay.campaign import board
 
     if not runs:
         return _rows(board.read_dir(out))
     import pandas as pd
 
+    from pathlib import Path
+
     from replay.campaign.store import Store
 
+    if not (Path(out) / "units").is_dir() and Path(out).is_dir():
+        return _eval_runs(Path(out))
     store, rows = Store(out), []
     for h, cfg in store.configs():
         for rec in store.records(h):
@@ -147,6 +152,33 @@ def campaign_results(out, *, runs: bool = False):
                          "params": cfg["filter_params"], "config_hash": h, "run": rec["run"],
                          "status": rec["status"], **(rec.get("metrics") or {})})
     return pd.DataFrame(rows)
+
+
+def _eval_runs(out):
+    """The per-run rows of a ``replay eval`` output (``runs.csv``; floats read back bit for bit)."""
+    import csv
+    import json
+
+    import pandas as pd
+
+    path = out / "runs.csv"
+    if not path.is_file():
+        what = "a replay eval output written before runs.csv (rerun it)" if (out / "manifest.json").is_file() \
+            else "not a campaign or replay eval output"
+        raise ReplayError(f"{out}: no units/ and no runs.csv: {what}")
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    def cell(k, v):
+        if k == "params":
+            return json.loads(v)
+        if k in ("dataset", "task", "filter", "config_hash", "status") or v in ("True", "False", ""):
+            return {"True": True, "False": False, "": None}.get(v, v)
+        try:
+            return int(v) if k == "run" else float(v)
+        except ValueError:
+            return v
+
+    return pd.DataFrame([{k: cell(k, v) for k, v in row.items()} for row in rows])
 
 
 def _rows(rows):

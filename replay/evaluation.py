@@ -376,16 +376,7 @@ def command_line(config: dict) -> str:
 def manifest(ev: Evaluation) -> dict:
     return {"config": ev.config, "command": command_line(ev.config), "argv": sys.argv,
             "versions": versions(), "dataset": ev.frame_meta, "adapter_report": ev.report, "units": ev.units,
-            "results": {r.name: dict(r.summary, **_tolerance(r.name)) for r in ev.results},
+            "results": {r.name: dict(r.summary) for r in ev.results},
             **({"failures": f} if (f := failures(ev)) else {})}
 
 
-def _tolerance(name: str) -> dict:
-    """``rerun_rtol`` of a filter chaotic at rounding level (its class's ``RERUN_RTOL``), else nothing."""
-    from replay.filters import FILTERS
-    from replay.util.lookup import resolve
-
-    if is_recorded(name):
-        return {}
-    rtol = float(getattr(resolve(FILTERS, name, "filter"), "RERUN_RTOL", 0.0))
-    return {"rerun_rtol": rtol} if rtol > 0 else {}

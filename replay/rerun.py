@@ -33,23 +33,20 @@ recorded one — results (RMSEs, ``ate``, ``lost``, ``lost_share``, ``diverged``
 ``failed``, ``nees``, ``nis``, ``final_err``, ``drift_pct``, medians, ``*_ci95``,
 ANEES/ANIS and their flags, ``scored``, ``masked``, the paired columns, ...) and the
 columns that repeat the configuration — except :data:`NOT_COMPARED`: timing
-(``us_per_step``), the package ``version`` and ``rerun_rtol`` (recorded for the
-reader). Any parameter that changes a result therefore fails the rerun even when
+(``us_per_step``), the package ``version`` and ``rerun_rtol`` (an earlier
+version's note). Any parameter that changes a result therefore fails the rerun even when
 the manifest's hashes were recomputed after editing it: the rerun of the edited
 configuration does not give the recorded numbers. (An edit that changes no recorded
 number, such as a ``lost_threshold`` that classifies every run as before, is
 reproduced: the recorded numbers are then those of the edited configuration too.)
 
-Values are compared exactly (NaN equals NaN), except for a filter whose class
-declares ``RERUN_RTOL`` > 0: a filter that is chaotic at rounding level (paper 002's
-swarm filters: another CPU's floating-point reductions give another trajectory of
-the swarm), whose real-valued columns must agree to that relative tolerance (an
-interval ``<m>_ci95`` also to that share of its mean ``m``; a paired column
-``<m>_vs_<baseline>``, a difference of two means, to the sum of both means'
-tolerances: :func:`_tolerance`); its counts (``runs``, ``lost``, ``diverged``,
-...), flags and every other column stay exact. The tolerance comes from the code,
-not from the manifest (which records it for the reader, under
-``results.<filter>.rerun_rtol``), so an edited manifest cannot loosen it.
+Values are compared exactly (NaN equals NaN; a count is no float) for every filter: the
+filters are bit-reproducible, the swarm filters of paper 002 included (each run draws from
+its own seeded streams; two processes, with one and with two threads, give the same bits
+for every registered filter), so a rerun says "reproduced" only when every recorded value is equal, and a
+manifest with one RMSE changed by 1 % (or by one unit in the last place) is refused. A
+``rerun_rtol`` that an earlier version recorded beside a swarm filter's row is not compared
+and loosens nothing.
 """
 from __future__ import annotations
 
@@ -66,7 +63,7 @@ from replay.util.plugins import TARGET
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
 HASH = re.compile(r"^[0-9a-f]{16}$")
 _NUM = (int, float)
-NOT_COMPARED = frozenset(TIMING) | {"version", "rerun_rtol"}  # row columns a rerun does not compare
+NOT_COMPARED = frozenset(TIMING) | {"version", "rerun_rtol"}  # not compared (rerun_rtol: older manifests)
 ECHOES = ("dataset", "task", "filter", "seed", "first", "alignment")  # row columns that repeat the configuration
 
 
@@ -263,17 +260,6 @@ def repeat(man: dict, data_dir=None, progress=None):
                     baseline=cfg.get("baseline"), progress=progress)
 
 
-def rerun_rtol(name: str) -> float:
-    """The relative tolerance ``replay rerun`` allows the filter ``name`` (0: exact)."""
-    from replay.filters import FILTERS
-    from replay.util.lookup import resolve
-
-    try:
-        return float(getattr(resolve(FILTERS, name, "filter"), "RERUN_RTOL", 0.0))
-    except ReplayError:
-        return 0.0
-
-
 def differences(man: dict, ev) -> list[str]:
     """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything):
     the dataset checksum, the configuration, the hashes and every compared column (module docstring)."""
@@ -296,53 +282,17 @@ def differences(man: dict, ev) -> list[str]:
         for k in sorted(set(old) - set(new)):
             out.append(f"{r.name}.{k}: {_show(old[k])} -> not computed")
         for k in [k for k in old if k in new]:  # in the leaderboard's order: the headline columns first
-            rtol, atol = _tolerance(man["results"], r.name, k)
-            if not same(old[k], new[k], rtol, atol):
-                loose = f"{rtol:g}" if rtol else f"±{atol:g}" if atol else ""
-                out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}"
-                           + (f" (beyond its rerun tolerance {loose})" if loose and _real(old[k], new[k]) else ""))
+            if not same(old[k], new[k]):
+                out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}")
     return out
 
 
-def _tolerance(results: dict, name: str, key: str) -> tuple[float, float]:
-    """(relative, absolute) tolerance of the column ``key`` of filter ``name``'s row: its filter's
-    ``rerun_rtol``, plus ``rtol |m|`` for the interval ``<m>_ci95`` of a mean ``m`` (a half-width
-    estimated from few runs moves on the scale of its mean: IGWO-STCPF's ``pitch_rmse_ci95``,
-    20 runs, moved 40 % where ``pitch_rmse`` moved 19 % when P0 was nudged by 1e-12); for a
-    paired column ``<m>_vs_<baseline>[_ci95]``, a difference of two means each within its
-    filter's tolerance, the absolute bound ``rtol_row |m_row| + rtol_base |m_base|``."""
-    metric, vs, rest = key.partition("_vs_")
-    if not vs:
-        rtol = rerun_rtol(name)
-        mean = results.get(name, {}).get(key[:-5]) if key.endswith("_ci95") and rtol > 0 else None
-        if _is(mean, _NUM) and mean == mean:  # an interval moves on the scale of its mean
-            return rtol, rtol * abs(mean)
-        return rtol, 0.0
-    label = rest[:-5] if rest.endswith("_ci95") else rest
-    base = next((f for f, row in results.items() if isinstance(row, dict) and row.get("label") == label), None)
-    atol = 0.0
-    for f in (name, base):
-        value = results.get(f, {}).get(metric) if f is not None else None
-        if _is(value, _NUM) and value == value and rerun_rtol(f) > 0:
-            atol += rerun_rtol(f) * abs(value)
-    return 0.0, atol
-
-
-def same(recorded, rerun, rtol: float = 0.0, atol: float = 0.0) -> bool:
-    """Whether a rerun's value reproduces the recorded one: two numbers of equal value (NaN
-    equals NaN; a bool is no number), or, both real (not integers: counts are exact), within
-    ``rtol`` relative plus ``atol`` absolute tolerance (both 0: exact); anything else equal
-    and of one type."""
+def same(recorded, rerun) -> bool:
+    """Whether a rerun's value equals the recorded one: two numbers of equal value (NaN equals
+    NaN; a bool is no number), anything else equal and of one type."""
     if _is(recorded, _NUM) and _is(rerun, _NUM):
-        if recorded == rerun or (recorded != recorded and rerun != rerun):
-            return True
-        return _real(recorded, rerun) and abs(rerun - recorded) <= rtol * abs(recorded) + atol
+        return recorded == rerun or (recorded != recorded and rerun != rerun)
     return type(recorded) is type(rerun) and recorded == rerun
-
-
-def _real(a, b) -> bool:
-    """Both are JSON real numbers (floats; the counts are integers and compared exactly)."""
-    return type(a) is float and type(b) is float
 
 
 def _as_written(obj):

@@ -213,15 +213,6 @@ def test_score_reports_speed_as_extra(problem):
     assert m["speed_rmse"] == pytest.approx(np.sqrt(np.mean((est.x[ok, 1] - truth_v[ok]) ** 2)))
 
 
-def test_reproduction_status_of_paired_intervals():
-    from replay.reproduce.p000_cells import status
-
-    assert status([(-0.1, 0.05), (-0.2, 0.1)]) == "holds"  # both intervals below 0
-    assert status([(-0.1, 0.05), (0.2, 0.1)]) == "fails"  # one interval above 0
-    assert status([(-0.1, 0.05), (0.05, 0.1)]) == "unresolved"  # one interval holds 0
-    assert status([(-0.1, float("nan")), (-0.2, 0.1)]) == "unresolved"
-
-
 # ---------------------------------------------------------------- PFs against the EKF
 
 @pytest.fixture(scope="module")

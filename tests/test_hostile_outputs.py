@@ -165,6 +165,7 @@ def test_eval_output_replaced_and_report_goes_with_it(tmp_path):
     assert not (tmp_path / "run" / "report").exists()
     assert json.loads((tmp_path / "run" / "manifest.json").read_text())["config"]["runs"] == 2
     (tmp_path / "run" / ".replay-output.json").unlink()  # as written by earlier versions
+    (tmp_path / "run" / "runs.csv").unlink()  # (no marker, no runs.csv)
     assert_ok(["eval", *SIM, "--runs", "3", "-o", "run", "--force"], cwd=tmp_path)
     assert (tmp_path / "run" / ".replay-output.json").is_file()
     (tmp_path / "empty").mkdir()

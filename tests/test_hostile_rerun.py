@@ -236,12 +236,12 @@ def test_many_differences_name_every_key(manifest, tmp_path):
 
 
 def test_comparison_rules():
-    """Exact for counts, flags and strings; the rerun tolerance only for real numbers."""
+    """Exact for numbers, counts, flags and strings (no tolerance argument any more)."""
     assert rerun.same(float("nan"), float("nan")) and rerun.same(2, 2.0)
     assert not rerun.same(1.0, 1.0 + 1e-15) and not rerun.same("", 0.0) and not rerun.same(True, 1)
-    assert rerun.same(2.0, 2.4, rtol=0.25) and not rerun.same(2.0, 2.6, rtol=0.25)
-    assert not rerun.same(2, 3, rtol=0.5)  # a count of lost or diverged runs is exact
-    assert not rerun.same("consistent", "optimistic", rtol=0.5)
+    assert not rerun.same(2.0, 2.02) and not rerun.same(2, 3) and not rerun.same("consistent", "optimistic")
+    with pytest.raises(TypeError):
+        rerun.same(2.0, 2.4, rtol=0.25)
 
 
 # ---------------------------------------------------------------- item: a manifest imports code
@@ -312,35 +312,61 @@ def test_allowed_module_is_rerun(tmp_path, monkeypatch):
     assert "reproduced: every recorded result" in res.stdout
 
 
-def test_tolerance_of_a_chaotic_filter_spares_no_count(monkeypatch):
-    """A filter declaring RERUN_RTOL: its real columns to that relative tolerance, a paired
-    column to the sum of both means' tolerances, its counts exactly; other filters exactly."""
+def _ev(results: dict, changed: dict):
     from types import SimpleNamespace
 
-    from replay.filters.kalman import EKF
+    return SimpleNamespace(config={"dataset_sha256": None}, results=[
+        SimpleNamespace(name=f, config_hash=row["config_hash"], summary=dict(row, **changed.get(f, {})))
+        for f, row in results.items()])
 
-    monkeypatch.setattr(EKF, "RERUN_RTOL", 0.1, raising=False)
-    results = {"ekf": {"label": "ekf", "config_hash": "a", "pos_rmse": 2.0, "pos_rmse_vs_ekf": "", "lost": 1},
-               "ukf": {"label": "ukf", "config_hash": "b", "pos_rmse": 1.9, "pos_rmse_vs_ekf": -0.1, "lost": 0}}
-    assert rerun._tolerance(results, "ekf", "pos_rmse") == (0.1, 0.0)
-    assert rerun._tolerance(results, "ekf", "pos_rmse_ci95") == (0.1, pytest.approx(0.2))
-    assert rerun._tolerance(results, "ukf", "pos_rmse_ci95") == (0.0, 0.0)
-    assert rerun._tolerance(results, "ukf", "pos_rmse") == (0.0, 0.0)
-    assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf") == (0.0, pytest.approx(0.2))
-    assert rerun._tolerance(results, "ukf", "pos_rmse_vs_ekf_ci95") == (0.0, pytest.approx(0.2))
-    man = {"config": {"dataset_sha256": None, "config_hashes": {"ekf": "a", "ukf": "b"}}, "results": results}
 
-    def ev(ekf, ukf):
-        return SimpleNamespace(config={"dataset_sha256": None}, results=[
-            SimpleNamespace(name="ekf", config_hash="a", summary=dict(results["ekf"], **ekf)),
-            SimpleNamespace(name="ukf", config_hash="b", summary=dict(results["ukf"], **ukf))])
+@pytest.mark.parametrize("name", sorted(__import__("replay.filters", fromlist=["FILTERS"]).FILTERS))
+def test_one_rmse_changed_by_one_percent_is_refused_for_every_registered_filter(name):
+    """Issue 27: no filter is compared to a tolerance (a 25 % one once let a manifest whose IGWO-PF
+    RMSE had been raised by 20 % pass), even where an older manifest recorded one."""
+    row = {"label": name, "config_hash": "a", "pos_rmse": 2.0, "x_rmse": 1.25, "pos_rmse_ci95": 0.5, "lost": 1,
+           "rerun_rtol": 0.25}
+    man = {"config": {"dataset_sha256": None, "config_hashes": {name: "a"}}, "results": {name: row}}
+    for key in ("pos_rmse", "x_rmse", "pos_rmse_ci95"):
+        assert rerun.differences(man, _ev(man["results"], {name: {key: row[key] * 1.01}})) == [
+            f"{name}.{key}: {row[key]} -> {row[key] * 1.01}"]
+        up = math.nextafter(row[key], math.inf)  # one unit in the last place
+        assert rerun.differences(man, _ev(man["results"], {name: {key: up}})) == [f"{name}.{key}: {row[key]} -> {up}"]
+    assert rerun.differences(man, _ev(man["results"], {})) == []
 
-    assert rerun.differences(man, ev({"pos_rmse": 2.19}, {"pos_rmse_vs_ekf": -0.29})) == []
-    assert rerun.differences(man, ev({"pos_rmse": 2.21, "lost": 2}, {"pos_rmse": 1.9000001})) == [
-        "ekf.pos_rmse: 2.0 -> 2.21 (beyond its rerun tolerance 0.1)", "ekf.lost: 1 -> 2",
-        "ukf.pos_rmse: 1.9 -> 1.9000001"]
-    assert rerun.differences(man, ev({}, {"pos_rmse_vs_ekf": -0.31})) == [
-        "ukf.pos_rmse_vs_ekf: -0.1 -> -0.31 (beyond its rerun tolerance ±0.2)"]
+
+GROUPS = {  # every registered filter on a dataset its model fits (20 runs: the swarm filters' old tolerance)
+    "sim/auv-sonar": ["ekf", "ukf", "ckf", "pf", "stckf", "stcpf", "igwo-stcpf", "pso-cpf", "measurements"],
+    "sim/ungm": ["gwo-pf", "igwo-pf", "pso-pf"],
+    "sim/lake-depth": ["gpf", "mmpf"],
+    "sim/linear": ["kf"],
+    "sim/sauv-current": ["aukf"],
+    "sim/uav-formation": ["wf-pf"],
+}
+
+
+def test_groups_cover_every_registered_filter():
+    from replay.filters import FILTERS
+    assert sorted(f for fs in GROUPS.values() for f in fs) == sorted(FILTERS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dataset", list(GROUPS))
+def test_rerun_of_every_filter_is_exact_and_refuses_one_percent(dataset, tmp_path):
+    """Each registered filter, run and rerun: equal; each RMSE raised by 1 %: refused,
+    naming every filter."""
+    filters = GROUPS[dataset]
+    task = {"sim/ungm": ["--task", "ungm"], "sim/lake-depth": ["--task", "depth"]}.get(dataset, [])
+    assert_ok(["eval", dataset, *task, "-f", ",".join(filters), "--runs", "3", "--first", "60", "-o",
+               tmp_path / "ev", "-q"])
+    path = tmp_path / "ev" / "manifest.json"
+    assert "reproduced: every recorded result equals" in assert_ok(["rerun", "-q", path]).stdout
+    man = json.loads(path.read_text())
+    for f in filters:
+        man["results"][f]["pos_rmse"] *= 1.01
+    out = assert_refused(["rerun", "-q", _write(tmp_path, man)], r"not reproduced: ")
+    for f in filters:
+        assert f"{f}.pos_rmse" in out, f
 
 
 register("rerun-module-dataset")

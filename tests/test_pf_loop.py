@@ -55,6 +55,7 @@ def test_loop_equals_the_steps_on_the_sonar_model(sonar, params, monkeypatch):
         assert np.isfinite(a.x).all()
         assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
         assert a.info["resampled"] == b.info["resampled"]
+        assert a.info["mean_ess"] == b.info["mean_ess"] and 1 <= a.info["mean_ess"] <= params["n_particles"]
         assert np.array_equal(a.info["nis_dof"], b.info["nis_dof"]) and np.isnan(a.info["nis"]).all()
     assert e1 == e2  # the generators were advanced by the same draws
     if params.get("ess_threshold", 1.0) < 1.0:

@@ -103,19 +103,18 @@ def test_changed_data_file_is_not_reproduced(tmp_path):
     assert_refused(["rerun", "-q", path], rf"not reproduced: dataset checksum {sha} -> [0-9a-f]{{64}}$")
 
 
-def test_rerun_tolerance_comes_from_the_filter_class(monkeypatch):
-    """A filter declaring RERUN_RTOL is compared to that relative tolerance, others exactly."""
+def test_rerun_compares_exactly_whatever_the_filter_class_declares(monkeypatch):
+    """No tolerance: a class attribute RERUN_RTOL (an earlier version's) loosens nothing."""
     from types import SimpleNamespace
 
     from replay import rerun
     from replay.filters.kalman import EKF
 
     man = {"config": {"dataset_sha256": None, "config_hashes": {"ekf": "h"}},
-           "results": {"ekf": {"pos_rmse": 2.0}}}
+           "results": {"ekf": {"pos_rmse": 2.0, "rerun_rtol": 0.25}}}
     ev = SimpleNamespace(config={"dataset_sha256": None},
                          results=[SimpleNamespace(name="ekf", config_hash="h", summary={"pos_rmse": 2.001})])
+    monkeypatch.setattr(EKF, "RERUN_RTOL", 0.25, raising=False)
     assert rerun.differences(man, ev) == ["ekf.pos_rmse: 2.0 -> 2.001"]
-    monkeypatch.setattr(EKF, "RERUN_RTOL", 1e-3, raising=False)
-    assert rerun.rerun_rtol("ekf") == 1e-3 and rerun.differences(man, ev) == []
-    ev.results[0].summary["pos_rmse"] = 2.003
-    assert rerun.differences(man, ev) == ["ekf.pos_rmse: 2.0 -> 2.003 (beyond its rerun tolerance 0.001)"]
+    ev.results[0].summary["pos_rmse"] = 2.0
+    assert rerun.differences(man, ev) == []

@@ -168,3 +168,30 @@ def test_a_diverged_run_is_the_worst_error_and_lost():
 def stats_wilcoxon_less(d):
     from scipy import stats
     return stats.wilcoxon(np.nan_to_num(np.asarray(d), posinf=1e300), alternative="less").pvalue
+
+
+def test_majority_rule_counts_holm_adjusted_comparisons():
+    ev = {"x": [mcnemar(6), mcnemar(6), mcnemar(1)]}  # Holm: 0.046875, 0.046875, 0.5
+    v, = decide([claim(Rule("x", "3 pairs", "lost runs", test="mcnemar", need="majority"))], ev)
+    assert [o.holds for o in v.deciding] == [True, True, False] and v.label == REPRODUCED
+    assert "more than half of the comparisons significant" in v.rule
+    v, = decide([claim(Rule("x", "3 pairs", "lost runs", test="mcnemar", need="majority"))],
+                {"x": [mcnemar(6), mcnemar(1), mcnemar(1)]})
+    assert v.label == NOT
+    with pytest.raises(ValueError, match="rule need"):
+        Rule("x", "c", "s", need="most")
+
+
+def test_a_condition_tried_and_not_met_is_printed_beside_the_verdict():
+    rng = np.random.default_rng(0)
+    base = rng.normal(1, 0.1, 12)
+    same = Comparison("paper's setting", base + rng.normal(0, 0.01, 12), base)
+    worse = Comparison("small Q", base + 0.5, base)
+    v, = decide([claim(Rule("p", "paper", "A - B", test="t", condition="q", condition_text="Q small",
+                            mechanism="m", mechanism_text="ablation"))], {"p": [same], "q": [worse], "m": [same]})
+    assert v.label == NOT and [o.comparison.name for o in v.tried["condition"]] == ["small Q"]
+    row = render.verdict_table([v]).splitlines()[2]
+    assert "Stated condition, not met: small Q: mean 0.5" in row and "Ablation, not shown: paper's setting" in row
+    v, = decide([claim(Rule("p", "paper", "A - B", test="t", condition="q", condition_text="Q small"))],
+                {"p": [same], "q": [Comparison("small Q", base - 0.5, base)]})
+    assert v.label == RECOVERED and v.tried == {}

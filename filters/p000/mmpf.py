@@ -116,7 +116,7 @@ class MultipleModelPF(Filter):
         state.modes = state.rng.integers(0, len(self._rates), N)
         state.w = np.full(N, 1.0 / N)
         state.mu_sum = np.zeros(len(self._rates))
-        state.resampled, state.steps = 0, 0
+        state.resampled, state.steps, state.ess_sum = 0, 0, 0.0
 
     def predict(self, state, k):
         m, rng = state.model, state.rng
@@ -135,6 +135,7 @@ class MultipleModelPF(Filter):
         w = state.w[None]
         x, P = particles.estimate(state.particles[None], w, state.model.x_angles)
         state.mu_sum += np.bincount(state.modes, weights=state.w, minlength=len(self._rates))
+        state.ess_sum += float(particles.ess(w)[0])  # before resampling
         state.steps += 1
         idx = particles.resample(w, [state.rng], self.resampling, self.ess_threshold).get(0)
         if idx is not None:
@@ -144,5 +145,5 @@ class MultipleModelPF(Filter):
         return x[0], P[0]
 
     def finish(self, state, info):
-        info.update(resampled=state.resampled,
+        info.update(resampled=state.resampled, mean_ess=state.ess_sum / max(state.steps, 1),
                     mean_mode_probability=(state.mu_sum / max(state.steps, 1)).tolist())

@@ -131,22 +131,12 @@ class SwarmParticleFilter(CubatureParticleFilter):
     One engine: the compiled kernels for the cubature proposal and the GWO/IGWO move (no
     ``compiled`` parameter), so those need a model with :meth:`replay.model.Model.kernels`.
 
-    ``RERUN_RTOL``: the relative tolerance ``replay rerun`` applies to these filters' RMSEs.
-    The swarm filters are chaotic at rounding level: the leaders are the best of near-ties,
-    so a rounding difference (another CPU's libm or vector width) picks another leader after
-    some steps and the runs part. On one machine two runs agree bit for bit; another CPU gave
-    Table 5's IGWO-STCPF position RMSE 4.1405 where this machine gives 4.1757 (0.85 %, 100
-    runs). Multiplying P0 by 1 + 1e-12 (a rounding-level change) moved IGWO-STCPF's RMSE
-    columns on sim/auv-sonar by up to 19 % after 20 runs and 5.4 % after 100 (pitch and yaw,
-    which the swarm drags onto its leaders, move most; position 0.5 % and 3.3 %): 0.25 covers
-    a rerun of 20 runs or more (docs/reproduction/002.md, "Reproducibility"). Fewer runs can
-    part further. PSO-PF did not part under that perturbation; it shares the tolerance
-    because its swarm best is likewise picked among near-ties (a CPU with other vector
-    reductions may part it), not because it was seen to part.
+    Bit-reproducible like every filter here (each run draws from its own seeded streams: two
+    processes, one with one thread and one with two, give the same bits in every leaderboard
+    column, 20 runs on sim/auv-sonar and sim/ungm), so ``replay rerun`` compares them exactly.
     """
 
     name = "swarm-pf"
-    RERUN_RTOL = 0.25
     PARAMS = (
         *CubatureParticleFilter.PARAMS[:2],
         Param("optimizer", str, "igwo", "what replaces resampling", choices=OPTIMIZERS),

@@ -14,6 +14,7 @@ input (:func:`check_output`).
 """
 from __future__ import annotations
 
+import csv
 import gzip
 import io
 import json
@@ -124,6 +125,34 @@ def write_estimates(ev: Evaluation, out: Path) -> None:
         curve = rmse_over_time([e["position"] for e in r.errors])
         np.savetxt(est_dir / f"{r.name}_rmse_over_time.csv", np.column_stack([ev.t, curve]),
                    delimiter=",", header="t,pos_rmse_across_runs", comments="", fmt="%.10g")
+
+
+RUNS_HEAD = ["dataset", "task", "filter", "params", "config_hash", "run", "status"]
+
+
+def run_rows(ev: Evaluation) -> list[dict]:
+    """One row per filter and run: the configuration's columns, the run, its status and every
+    per-run metric (the rows ``replay.campaign_results(out, runs=True)`` returns)."""
+    rows = []
+    for r in ev.results:
+        params = json.dumps(r.params, sort_keys=True, separators=(",", ":"))
+        for rec in r.records:
+            rows.append({"dataset": ev.config["dataset"], "task": ev.config["task"], "filter": r.name,
+                         "params": params, "config_hash": r.config_hash, "run": rec["run"],
+                         "status": rec["status"], **(rec.get("metrics") or {})})
+    return rows
+
+
+def write_runs(ev: Evaluation, path: Path) -> None:
+    """``runs.csv``: :func:`run_rows`, floats written in full (``repr``: they read back bit for bit)."""
+    rows = run_rows(ev)
+    cols = RUNS_HEAD + [k for k in dict.fromkeys(k for row in rows for k in row) if k not in RUNS_HEAD]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for row in rows:
+        w.writerow({k: repr(v) if isinstance(v, float) else v for k, v in row.items()})
+    write_atomic(path, buf.getvalue())
 
 
 KIND = "replay eval"  # the kind recorded in the output directory's ownership marker
@@ -250,9 +279,10 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
     with staged_dir(out, kind=KIND, what=what, legacy=owned) as stage:
         write_leaderboard(leaderboard_rows(ev), stage / "leaderboard.csv")
         write_estimates(ev, stage)
+        write_runs(ev, stage / "runs.csv")
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
     return {"leaderboard": out / "leaderboard.csv", "manifest": out / "manifest.json",
-            "estimates": out / "estimates"}
+            "estimates": out / "estimates", "runs": out / "runs.csv"}
 
 
 def readable_name(dataset: str) -> str:

@@ -12,13 +12,18 @@ The verdict table has one row per claim: the claim (the paper's words), the pape
 the label, the rule declared before the run, the test, the Holm-adjusted p-values or
 intervals of the deciding comparisons (with the stated condition's or the ablation's when they
 decided, and the residual gap beside a *recovered* row), and a link to the evidence row.
-An evidence row carries the anchor :func:`anchor_tag` of its claim's ``evidence``.
+An evidence row carries the anchor :func:`anchor_tag` of its claim's ``evidence``; :func:`fmt`
+and :func:`pm` print a mean ± half-width and a paired difference in the tables.
 """
 from __future__ import annotations
 
 import re
 from pathlib import Path
 from string import Template
+
+import numpy as np
+
+from replay.scoring.significance import pairs, t_interval
 
 from .rules import MECHANISM, RECOVERED, Verdict, counts
 from .verdict import cell
@@ -33,6 +38,21 @@ def table(head: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def fmt(m: float, c: float | None = None) -> str:
+    """``m ± c`` with two significant digits on the half-width, signed (``m`` to 3 digits without one)."""
+    if not np.isfinite(m):
+        return "n/a"
+    if c is None or not np.isfinite(c) or c <= 0:
+        return f"{m:.3g}"
+    d = max(0, 1 - int(np.floor(np.log10(c))))
+    return f"{m:+.{d}f} ± {c:.{d}f}"
+
+
+def pm(a, b) -> str:
+    """Paired a − b over runs as a table prints it: mean ± 95 % t half-width (:func:`fmt`)."""
+    return fmt(*t_interval(np.subtract(*pairs(a, b))))
+
+
 def anchor_tag(evidence: str) -> str:
     """The HTML anchor an evidence row carries for the link ``evidence`` (``#e-depth`` -> ``<a id="e-depth"></a>``)."""
     name = evidence.lstrip("#")
@@ -41,19 +61,23 @@ def anchor_tag(evidence: str) -> str:
     return f'<a id="{name}"></a>'
 
 
-def _found(v: Verdict) -> str:
+def found(v: Verdict) -> str:
+    """The verdict table's evidence cell of ``v``: the deciding outcomes, and the condition's or ablation's."""
     out = "; ".join(o.text() for o in v.deciding)
     if v.label == RECOVERED:
         out = "under the condition: " + "; ".join(o.text() for o in v.support) + f". Residual gap in the paper's " \
               f"setting: {v.gap}"
     elif v.label == MECHANISM:
         out += ". Ablation: " + "; ".join(o.text() for o in v.support)
+    for kind, words in (("condition", "Stated condition, not met"), ("mechanism", "Ablation, not shown")):
+        if v.tried.get(kind):
+            out += f". {words}: " + "; ".join(o.text() for o in v.tried[kind])
     return out
 
 
 def verdict_table(verdicts: list[Verdict]) -> str:
     """The verdict table (module docstring) and the count of each label."""
-    rows = [[v.claim.words, v.claim.paper, f"**{v.label}**", v.rule, v.tests, _found(v),
+    rows = [[v.claim.words, v.claim.paper, f"**{v.label}**", v.rule, v.tests, found(v),
              f"[{v.claim.evidence.lstrip('#')}]({v.claim.evidence})"] for v in verdicts]
     head = ["claim", "paper", "verdict", "rule (declared before the run)", "test",
             "adjusted p / interval (deciding comparisons)", "evidence"]

@@ -59,16 +59,17 @@ class Rule:
     ``decides``: the evidence key of the comparisons in the paper's own setting; ``cells``: those
     cells in words; ``statistic``: what is compared, in words; ``test``: one of :data:`TESTS`;
     ``alpha``: the family-wise level; ``need``: how many deciding comparisons must hold (None:
-    every one); ``condition``/``condition_text``: the evidence key and the words of the stated
-    condition of :data:`RECOVERED`; ``mechanism``/``mechanism_text``: those of the ablation of
-    :data:`MECHANISM`; ``family``: a Holm family shared with other claims ("" = the claim's own)."""
+    every one; ``"majority"``: more than half); ``condition``/``condition_text``: the evidence
+    key and the words of the stated condition of :data:`RECOVERED`; ``mechanism`` and
+    ``mechanism_text``: those of the ablation of :data:`MECHANISM`; ``family``: a Holm family
+    shared with other claims ("" = the claim's own)."""
 
     decides: str
     cells: str
     statistic: str
     test: str = "auto"
     alpha: float = 0.05
-    need: int | None = None
+    need: int | str | None = None
     condition: str = ""
     condition_text: str = ""
     mechanism: str = ""
@@ -80,8 +81,8 @@ class Rule:
             raise ValueError(f"rule test {self.test!r}: one of {', '.join(TESTS)}")
         if not 0 < self.alpha < 1:
             raise ValueError(f"rule alpha {self.alpha}: between 0 and 1")
-        if self.need is not None and self.need < 1:
-            raise ValueError(f"rule need {self.need}: at least 1 comparison (None: every one)")
+        if self.need is not None and self.need != "majority" and not (isinstance(self.need, int) and self.need >= 1):
+            raise ValueError(f"rule need {self.need!r}: at least 1 comparison, 'majority' or None (every one)")
         for key, words, what in ((self.condition, self.condition_text, "condition"),
                                  (self.mechanism, self.mechanism_text, "mechanism")):
             if bool(key) != bool(words):
@@ -89,7 +90,8 @@ class Rule:
 
     def text(self) -> str:
         """The rule in words, as the document prints it beside the verdict."""
-        need = "every comparison" if self.need is None else f"at least {self.need} comparison(s)"
+        need = {None: "every comparison", "majority": "more than half of the comparisons"}.get(
+            self.need, f"at least {self.need} comparison(s)")
         how = (f"{need} inside the interval" if self.test == "interval" else
                f"{need} significant at α = {self.alpha:g} (one-sided, Holm-adjusted over the family)")
         out = f"{self.statistic}; cells: {self.cells}; {how}"
@@ -154,13 +156,16 @@ class Outcome:
             body = f"{c.name}: {what} {g(self.estimate)} [{g(self.lo)}, {g(self.hi)}]"
         if self.test == "interval":
             return f"{body} vs paper {g(self.comparison.target)}"
-        return f"{body}, p_adj = {p_text(self.p_adj)}"
+        p = p_text(self.p_adj)
+        return f"{body}, p_adj {p if p.startswith('<') else '= ' + p}"
 
 
 @dataclass
 class Verdict:
     """A decided claim: its label, the rule text, the tests used, the deciding outcomes (and those
-    of the condition or ablation that decided), the residual gap of a :data:`RECOVERED` row."""
+    of the condition or ablation that decided), the residual gap of a :data:`RECOVERED` row, and
+    ``tried``: the outcomes of a declared condition or ablation that was tested and did not hold
+    (``{"condition": [...], "mechanism": [...]}``), printed so that a reader sees it was tried."""
 
     claim: Claim
     label: str
@@ -169,6 +174,7 @@ class Verdict:
     deciding: list = field(default_factory=list)
     support: list = field(default_factory=list)
     gap: str = ""
+    tried: dict = field(default_factory=dict)
 
 
 def per_run(result, metric: str = "pos_rmse") -> tuple[np.ndarray, np.ndarray]:
@@ -262,6 +268,8 @@ def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
 
 def _enough(outs: list[Outcome], need: int | None) -> bool:
     n = sum(o.holds for o in outs)
+    if need == "majority":
+        return n > len(outs) / 2
     return n == len(outs) if need is None else n >= need
 
 
@@ -272,11 +280,14 @@ def _verdict(cl: Claim, out: dict) -> Verdict:
     v = Verdict(cl, NOT, r.text(), tests, deciding=dec)
     if _enough(dec, r.need):
         v.label = REPRODUCED
-    elif r.condition and _enough(out[r.condition], None):
-        v.label, v.support = RECOVERED, out[r.condition]
-        v.gap = "; ".join(o.text() for o in dec)
-    elif r.mechanism and _enough(out[r.mechanism], None):
-        v.label, v.support = MECHANISM, out[r.mechanism]
+        return v
+    for kind, key, label in (("condition", r.condition, RECOVERED), ("mechanism", r.mechanism, MECHANISM)):
+        if key and _enough(out[key], None):
+            v.label, v.support = label, out[key]
+            v.gap = "; ".join(o.text() for o in dec) if label == RECOVERED else ""
+            return v
+        if key:
+            v.tried[kind] = out[key]
     return v
 
 

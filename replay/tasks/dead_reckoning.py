@@ -109,13 +109,14 @@ class DeadReckoningTask(Task):
         pb = Problem(model, z, x0, P0, frame.t, truth, ref.valid.copy(), (0, 1, 2),
                      ("north", "east", "depth"), params=self.params(),
                      inputs={name: describe(frame, name) for name in ("depth", "dvl_velocity", "accel", "attitude")})
-        extra = {}  # body velocity and acceleration, scored as extra components when present
+        extra, units = {}, {}  # body velocity and acceleration, scored as extra components when present
         for name, first in (("velocity_body", 3), ("accel_body", 6)):
             if name in frame.reference:
                 c = frame.reference[name]
                 for j, comp in enumerate(c.components):
                     extra[comp] = (np.where(c.valid, c.values[:, j], np.nan), first + j)
-        pb.truth_extra = extra
+                    units[comp] = c.unit
+        pb.truth_extra, pb.extra_units = extra, units
         return pb
 
     def _bohai(self, frame, dt, roll, pitch, heading, Q):

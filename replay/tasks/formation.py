@@ -47,6 +47,7 @@ class FormationTask(Task):
         ref = frame.reference
         pb = Problem(model, z, x0, P0, frame.t, ref["position"].values, ref["position"].valid.copy(),
                      (0, 1), ("x", "y"), params=self.params())
-        vel = ref["velocity"].values
-        pb.truth_extra = {"vx": (vel[:, 0], 2), "vy": (vel[:, 1], 3)}
+        vel = ref["velocity"]
+        pb.truth_extra = {"vx": (vel.values[:, 0], 2), "vy": (vel.values[:, 1], 3)}
+        pb.extra_units = {"vx": vel.unit, "vy": vel.unit}
         return pb
