@@ -46,14 +46,38 @@ def test_wrong_size_refused_before_any_run(tmp_path, param, value, size):
 
 
 def test_a_model_that_draws_its_own_noise_without_refresh_is_refused():
-    """Formation (paper 003) draws its process noise through Qa and weighs by its glint mixture."""
-    p = build_problem(FORMATION, 0)
-    with pytest.raises(ReplayError, match=r"^filter 'pf': model Formation computes its own sample_f from its "
+    """A model that draws its own process noise and weighs by its own likelihood, without
+    ``refresh_noise``: a change of Q or R would not reach them, so it is refused. Formation (paper
+    003) defines ``refresh_noise`` and follows both (tests/test_hostile_p003.py)."""
+    import numpy as np
+
+    from replay.model import Model
+
+    class Drawing(Model):
+        nx, nz = 1, 1
+        Q, R = np.eye(1), np.eye(1)
+
+        def f(self, x, k):
+            return x
+
+        def h(self, x, k):
+            return x
+
+        def sample_f(self, x, k, rng):
+            return x + rng.standard_normal(x.shape)
+
+        def loglik(self, z, x, k, mask=None):
+            return -0.5 * (z[0] - x[..., 0]) ** 2
+
+    with pytest.raises(ReplayError, match=r"^filter 'pf': model Drawing computes its own sample_f from its "
                                           r"noise; Q and q_scale cannot change it"):
-        check(make_filter("pf", q_scale=2.0), p.model)
-    with pytest.raises(ReplayError, match=r"^filter 'pf': model Formation computes its own loglik"):
-        check(make_filter("pf", r_scale=2.0), p.model)
-    check(make_filter("pf", p0_scale=2.0), p.model)  # the prior is the filter's alone
+        check(make_filter("pf", q_scale=2.0), Drawing())
+    with pytest.raises(ReplayError, match=r"^filter 'pf': model Drawing computes its own loglik"):
+        check(make_filter("pf", r_scale=2.0), Drawing())
+    check(make_filter("pf", p0_scale=2.0), Drawing())  # the prior is the filter's alone
+    p = build_problem(FORMATION, 0)
+    for params in ({"q_scale": 2.0}, {"r_scale": 2.0}):
+        check(make_filter("pf", **params), p.model)
 
 
 

@@ -115,7 +115,7 @@ def test_tempering_is_a_widened_gaussian_likelihood():
 @pytest.mark.parametrize("ratio, eps", [(2, 0.75), (10, 0.1)])
 def test_bearing_glint_excess_kurtosis(ratio, eps):
     """The excess kurtosis the 003 document quotes (0.48 at the printed glint) is the sampled one."""
-    from replay.reproduce.p003_doc import kurtosis
+    from replay.reproduce.p003_tables import kurtosis
 
     g = Glint([[1.0]], [[float(ratio) ** 2]], eps=eps)
     e = g.sample(np.random.default_rng(4), 2_000_000)[:, 0]
@@ -123,3 +123,36 @@ def test_bearing_glint_excess_kurtosis(ratio, eps):
     assert sample == pytest.approx(kurtosis(ratio, eps), rel=0.05)
     if (ratio, eps) == (2, 0.75):
         assert kurtosis(ratio, eps) == pytest.approx(0.48, abs=0.01)
+
+
+def test_distinct_particles_counted_after_resampling():
+    """The engine records per step the distinct particles after resampling (the ancestors kept):
+    within [1, N], equal to the distinct ancestors of the systematic draw, and α < 1 keeps more."""
+    from replay.run.evaluation import evaluate
+    from replay.filters.p003.wfpf import distinct
+
+    X = np.arange(12.0).reshape(6, 2)
+    assert distinct(X[[0, 0, 3, 3, 3, 5]]) == 3 and distinct(X) == 6
+    kept = {}
+    for a in (1.0, 0.5):
+        ev = evaluate("sim/uav-formation", filters=("wf-pf",), runs=3, seed=0,
+                      filter_params={"wf-pf": {"n_particles": 100, "alpha": a}})
+        d = np.array([e.info["distinct"] for e in ev.results[0].estimates])
+        assert d.shape == (3, len(ev.t)) and d.min() >= 1 and d.max() <= 100
+        kept[a] = d.mean()
+    assert kept[0.5] > kept[1.0] + 5  # flatter weights: fewer copies of the heavy particles
+
+
+def test_counting_changes_no_estimate():
+    """The counting engine gives the estimates of the plain PF engine, bit for bit."""
+    from replay.filters.pf import PFEngine
+    from replay.run.pipeline import build_problem
+    from replay.run.evaluation import evaluate
+
+    ev = evaluate("sim/uav-formation", filters=("wf-pf",), runs=1, seed=3)
+    pb = build_problem(ev.results[0].config, 0)
+    f = WeightFactorPF(n_particles=200, alpha=0.6)
+    a = f.run(pb.model, pb.z, pb.x0, pb.P0, rng=np.random.default_rng(7))
+    f.engine = lambda model, rngs: PFEngine(f, model, rngs)
+    b = f.run(pb.model, pb.z, pb.x0, pb.P0, rng=np.random.default_rng(7))
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P) and "distinct" not in b.info

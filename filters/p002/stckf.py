@@ -57,6 +57,7 @@ Choices where the paper is ambiguous (each configurable):
 
 When lambda = 1 the update is the CKF's, bit for bit.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -71,18 +72,41 @@ from . import compiled_util
 
 
 STCKF_PARAMS = (
-    Param("rho", float, 0.95, "STCKF forgetting factor of the innovation average V (002 §2.2.2)",
-          low=0.0, high=1.0, low_open=True),
+    Param(
+        "rho",
+        float,
+        0.95,
+        "STCKF forgetting factor of the innovation average V (002 §2.2.2)",
+        low=0.0,
+        high=1.0,
+        low_open=True,
+    ),
     Param("beta", float, 1.2, "STCKF weakening factor (002 §2.2.2)", low=1.0),
-    Param("m_form", str, "propagated", "M of the fading factor: H Phi P Phi' H' (propagated) or H Phi H' "
-          "as printed", choices=("propagated", "printed")),
+    Param(
+        "m_form",
+        str,
+        "propagated",
+        "M of the fading factor: H Phi P Phi' H' (propagated) or H Phi H' as printed",
+        choices=("propagated", "printed"),
+    ),
     Param("scale_prior", bool, True, "scale the prior covariance by the fading factor too (false: as printed)"),
 )
-FORM = Param("form", str, "innovation", "where the fading factor acts: on the cubature sums of P_zz and P_xz "
-             "(and the prior, scale_prior) as 002 prints (innovation), or the classic strong-tracking prior "
-             "lambda F P F' + Q with fresh cubature points (classic)", choices=("innovation", "classic"))
-REPAIR = Param("repair", bool, False, "repair a posterior covariance that is not positive definite (eigenvalue "
-               "floor) instead of counting the run as diverged")
+FORM = Param(
+    "form",
+    str,
+    "innovation",
+    "where the fading factor acts: on the cubature sums of P_zz and P_xz "
+    "(and the prior, scale_prior) as 002 prints (innovation), or the classic strong-tracking prior "
+    "lambda F P F' + Q with fresh cubature points (classic)",
+    choices=("innovation", "classic"),
+)
+REPAIR = Param(
+    "repair",
+    bool,
+    False,
+    "repair a posterior covariance that is not positive definite (eigenvalue "
+    "floor) instead of counting the run as diverged",
+)
 
 
 class STCKF(CKF):
@@ -93,8 +117,10 @@ class STCKF(CKF):
 
     def check(self):
         if self.form == "classic" and not self.scale_prior:
-            raise ReplayError(f"{self.owner()}: scale_prior=false applies to form=innovation only (the classic "
-                              "form scales F P F', not the innovation)")
+            raise ReplayError(
+                f"{self.owner()}: scale_prior=false applies to form=innovation only (the classic "
+                "form scales F P F', not the innovation)"
+            )
 
     def start(self, state, x0, P0):
         super().start(state, x0, P0)
@@ -120,8 +146,17 @@ class STCKF(CKF):
             state.V, state.V_mask = np.empty((len(zh), len(zh))), key
         e = np.ascontiguousarray(residual(z, zh, angles), dtype=float)
         work = [np.empty(H.shape) for _ in range(3)]
-        lam = compiled_util.fading_factor(state.V, e, fresh, *(np.ascontiguousarray(a, dtype=float) for a in (
-            H, m.F(state.x_prev, k), state.P_prev, m.process_cov(k), R)), compiled_util.Fading.of(self), *work)
+        lam = compiled_util.fading_factor(
+            state.V,
+            e,
+            fresh,
+            *(
+                np.ascontiguousarray(a, dtype=float)
+                for a in (H, m.F(state.x_prev, k), state.P_prev, m.process_cov(k), R)
+            ),
+            compiled_util.Fading.of(self),
+            *work,
+        )
         state.lambdas.append(lam)
         return lam
 

@@ -31,7 +31,14 @@ Where the exponent applies: the paper applies eq. 27 "in the normalisation
 of the weights", before resampling, and estimates with eq. 25 after it. We
 take the estimate from the tempered weights (the weights the resampler
 sees), so the estimate and the resampled cloud agree.
+
+Diagnostic (the paper's mechanism, eq. 28–32: fewer copies of the heavy
+particles): the engine records per run and step the number of distinct
+particles after the resampling step (``info["distinct"]``, (n,) of the run's
+steps; :meth:`replay.filters.base.Filter.run` and ``Evaluation.results[i].
+estimates[r].info``). Counting draws nothing and changes no number.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,7 +46,7 @@ import numpy as np
 from replay.util.params import Param
 
 from .. import particles
-from ..pf import ParticleFilter
+from ..pf import ParticleFilter, PFEngine
 
 _PF = {p.name: p for p in ParticleFilter.PARAMS}
 
@@ -50,14 +57,30 @@ class WeightFactorPF(ParticleFilter):
     name = "wf-pf"
     PARAMS = (
         _PF["n_particles"],
-        Param("alpha", float, 0.75, "weight exponent α of eq. 27 (1: the bootstrap PF; toward 0: uniform)",
-              low=0.0, high=1.0, low_open=True),
-        Param("weight_floor", float, 1e-99, "floor of the unnormalised weight w p(z | x) (§2, under eq. 22)",
-              low=0.0, low_open=True),
+        Param(
+            "alpha",
+            float,
+            0.75,
+            "weight exponent α of eq. 27 (1: the bootstrap PF; toward 0: uniform)",
+            low=0.0,
+            high=1.0,
+            low_open=True,
+        ),
+        Param(
+            "weight_floor",
+            float,
+            1e-99,
+            "floor of the unnormalised weight w p(z | x) (§2, under eq. 22)",
+            low=0.0,
+            low_open=True,
+        ),
         _PF["resampling"],
         _PF["ess_threshold"],
     )
     roughening = 0.0  # the paper has none
+
+    def engine(self, model, rngs):
+        return CountingEngine(self, model, rngs)
 
     def weigh(self, logw, ll):
         l = np.maximum(logw + ll, np.log(self.weight_floor))  # floor 1e-99 (eq. 22)
@@ -70,3 +93,26 @@ class WeightFactorPF(ParticleFilter):
 def temper(logw: np.ndarray, alpha: float):
     """Eq. 27 on normalised log-weights (..., N): (w, log w) of w^α / Σ w^α."""
     return particles.normalise(alpha * logw)
+
+
+def distinct(X_j: np.ndarray) -> int:
+    """Distinct particles of one run's cloud (N, nx): copies made by resampling share every
+    component, and continuous process noise never makes two equal, so the first component suffices."""
+    return int(np.unique(X_j[:, 0]).size)
+
+
+class CountingEngine(PFEngine):
+    """The PF engine, recording the distinct particles after each resampling step of each run."""
+
+    def start(self, X0, P0):
+        super().start(X0, P0)
+        self.distinct = [[] for _ in range(len(X0))]
+
+    def resample(self):
+        super().resample()
+        for j, m in enumerate(self.ids):
+            self.distinct[m].append(distinct(self.X[j]))
+
+    def finish(self, m, info):
+        super().finish(m, info)
+        info["distinct"] = np.array(self.distinct[m], int)

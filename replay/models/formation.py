@@ -24,12 +24,20 @@ leader broadcasts its GPS/INS position):
 (the paper writes arctan((y_l − y)/(x_l − x)); atan2 keeps the quadrant).
 The noise is ``noise`` (e.g. :class:`replay.models.noise.Glint`, eq. 7–10): the PF
 likelihood is its density, and R = its covariance for the Kalman family.
+
+A filter's noise settings (``q_scale``, ``r_scale``, ``Q``, ``R``:
+:mod:`replay.filters.noise_params`) reach :meth:`sample_f` and :meth:`loglik`
+through :meth:`refresh_noise`: Q must stay of the form G Q_a Gᵀ (q_scale
+scales Q_a), R a multiple of the model's (r_scale scales both components of
+the glint, so its covariance is R); any other Q or R is refused (one line).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from replay.util.angles import residual
+from replay.util.errors import ReplayError
 from replay.model import Model
 
 
@@ -41,8 +49,7 @@ def transition(w: float, T: float) -> np.ndarray:
     if abs(w) < 1e-12:
         return np.array([[1.0, 0, T, 0], [0, 1.0, 0, T], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
     s, c = np.sin(w * T), np.cos(w * T)
-    return np.array([[1.0, 0, s / w, (c - 1) / w], [0, 1.0, (1 - c) / w, s / w],
-                     [0, 0, c, -s], [0, 0, s, c]])
+    return np.array([[1.0, 0, s / w, (c - 1) / w], [0, 1.0, (1 - c) / w, s / w], [0, 0, c, -s], [0, 0, s, c]])
 
 
 class Formation(Model):
@@ -61,6 +68,28 @@ class Formation(Model):
         self.R = np.asarray(R, float) if R is not None else noise.cov
         self._F = [transition(w, self.T) for w in self.turn_rate]
         self._La = np.linalg.cholesky(self.Qa)
+        self._R0, self._noise0 = self.R.copy(), noise
+
+    def refresh_noise(self) -> None:
+        """After a filter's noise settings changed ``Q`` or ``R`` (module docstring): the acceleration
+        covariance Q_a that :meth:`sample_f` draws with, and the glint noise scaled with R."""
+        Gp = np.linalg.pinv(self.G)
+        Qa = Gp @ self.Q @ Gp.T
+        if not np.allclose(self.G @ Qa @ self.G.T, self.Q, rtol=1e-9, atol=1e-12):
+            raise ReplayError(
+                "model Formation: Q must be G Q_a Gᵀ (the acceleration noise through the gain of "
+                "eq. 4); change it with q_scale"
+            )
+        self.Qa, self._La = Qa, np.linalg.cholesky(Qa)
+        s = float(self.R.flat[0] / self._R0.flat[0])
+        if not np.allclose(self.R, s * self._R0, rtol=1e-9, atol=0):
+            raise ReplayError(
+                "model Formation: R must be a multiple of the glint noise's covariance; change it with r_scale"
+            )
+        n = self._noise0
+        if n is not None:
+            # a glint mixture (replay.models.noise.Glint) with both covariances times s: its covariance is R
+            self.noise = n if s == 1.0 else type(n)(n.P1 * s, n.P2 * s, n.eps, n.mu1 * s**0.5, n.mu2 * s**0.5)
 
     def f(self, x, k):
         return x @ self._F[k].T

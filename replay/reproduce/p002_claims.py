@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 
-from replay.filters.p002 import compiled_util
+from replay.filters.p002 import swarm_kernels
 
 from .p002 import B_PAPER, TUNE_SEQ
 from .render import anchor_tag, render, table
@@ -373,7 +373,7 @@ def document(exps, E, chosen, seqs, seed) -> str:
     fields = {k: exp_table(by[k], E) for k in ("ungm1", "ungm10", "t5", "t6", "box", "sweep")}
     none = "No 20220822 Bohai sequence found (give `--data-dir`): not run."
     w = np.empty(3)
-    compiled_util.entropy_weights(np.array([1.0, 1.5, 10.0]), 1e-12, 1e-4, w)
+    swarm_kernels.entropy_weights(np.array([1.0, 1.5, 10.0]), 1e-12, 1e-4, w)
     fields.update(
         b1hz=bohai_table(exps, E, "1hz") if b1 else none,
         b10hz=bohai_table(exps, E, "10hz") if b1 else none,

@@ -1,6 +1,7 @@
 """The figures of the paper-003 reproduction (:mod:`.p003`): the x and y position error over time at
 the printed setting, drawn with :mod:`replay.outputs.plots` (units on the axes, one panel per filter,
 the Monte Carlo band of the runs)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +9,6 @@ import numpy as np
 from .common5 import rmse_figures
 
 AXES = (("x", "x position error", "m"), ("y", "y position error", "m"))
-FILTERS = (("PF", 0), ("WF-PF", 1), ("UKF", 2))  # label, result index of the printed-setting evaluation
 
 
 def run_errors(ev, i) -> dict[str, np.ndarray]:
@@ -37,5 +37,8 @@ def plots(t, errors: dict, doc, what: str) -> list[str]:
         png = doc.parent / f"003_rmse_{key}.png"
         save(figs[key], png)
         out += [f"![{name} over time, {what}]({png.name})", ""]
-    return out + ["One panel per filter: the RMSE over the runs at each step and the 5-95 % band of the runs' "
-                  "absolute errors; grey: the other filters' RMSE.", ""]
+    return out + [
+        "One panel per filter: the RMSE over the runs at each step and the 5-95 % band of the runs' "
+        "absolute errors; grey: the other filters' RMSE.",
+        "",
+    ]
