@@ -8,7 +8,9 @@ Conventions (the report follows them; a reproduction's PNG should too):
   the 5-95 % band of the runs and thin outlines at its edges (:func:`mc_band`), one filter per
   panel when several bands would overlap (:func:`mc_figure`);
 * missing samples (NaN: a masked reference) and time gaps (a step above ``GAP`` times the
-  median step) break the lines instead of being bridged (:func:`gaps`);
+  median step) break the lines instead of being bridged (:func:`gaps`); a sparse track (a
+  recorded estimate, NaN on every reference sample it was not associated with) is drawn through
+  its associated samples, broken only at its own time gaps (:func:`joined`), not as dots;
 * every artist drawn for a filter carries its label as ``gid`` and its palette colour, so
   that :func:`artist_colours` reads back, from the figures, which colours each filter got.
 
@@ -61,6 +63,17 @@ def gaps(t, *ys, factor: float = GAP):
     return (t, *(np.insert(y, at, np.nan, axis=-1) for y in ys))
 
 
+def joined(t, *ys, factor: float = GAP):
+    """The samples where ``t`` and every ``y`` (along its last axis) are finite, with a NaN inserted
+    inside each of their time gaps (:func:`gaps`): a sparse track's associated points as one line."""
+    t = np.asarray(t, float)
+    ys = [np.asarray(y, float) for y in ys]
+    keep = np.isfinite(t)
+    for y in ys:
+        keep &= np.isfinite(y).reshape(-1, len(t)).all(axis=0)
+    return gaps(t[keep], *(y[..., keep] for y in ys), factor=factor)
+
+
 @contextmanager
 def _quiet():
     """No warnings for all-NaN columns (a step that no run scored: a gap, on purpose)."""
@@ -88,13 +101,14 @@ def quantiles(values, q=(5, 95)):
         return np.nanpercentile(np.asarray(values, float), q, axis=0)
 
 
-def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.22, lw=1.3):
+def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.22, lw=1.3, join=False):
     """Centre line and ``q`` band (with thin outlines) of per-run values (runs, steps) against ``t``.
 
-    Returns the centre line. ``name`` becomes every artist's ``gid`` (and the line's label)."""
+    Returns the centre line. ``name`` becomes every artist's ``gid`` (and the line's label).
+    ``join``: a sparse track, drawn through its finite steps (:func:`joined`)."""
     values = np.atleast_2d(np.asarray(values, float))
     mid, (lo, hi) = centre(values, stat), quantiles(values, q)
-    tt, mid, lo, hi = gaps(t, mid, lo, hi)
+    tt, mid, lo, hi = (joined if join else gaps)(t, mid, lo, hi)
     if len(values) > 1:
         band = ax.fill_between(tt, lo, hi, color=color, alpha=alpha, lw=0, gid=name)
         band.set_label(f"_{q[0]:g}-{q[1]:g} % of {len(values)} runs")
@@ -144,11 +158,12 @@ def masked_spans(ax, t, valid, text="reference masked"):
 
 def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: str = "median",
               q=(5, 95), logy: bool = False, palette: Palette | None = None, xlabel: str = "t (s)",
-              ncols: int = 3):
+              ncols: int = 3, join=()):
     """One panel per filter: its centre line and ``q`` band over runs, the others' centre lines
     in grey for context; shared axes. ``curves``: {label: (runs, steps) values against ``t``}
     (signed or absolute errors; with ``stat="rmse"`` the line is the RMSE over the runs at each
-    step and the band the ``q`` percentiles of the values themselves: pass absolute errors)."""
+    step and the band the ``q`` percentiles of the values themselves: pass absolute errors);
+    ``join``: the labels of sparse tracks (:func:`joined`)."""
     pal = palette or Palette(curves)
     n = len(curves)
     cols = min(n, ncols)
@@ -158,8 +173,8 @@ def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: st
     for ax, (lab, v) in zip(axes.flat, curves.items()):
         for other, m in mids.items():
             if other != lab:
-                ax.plot(*gaps(t, m), color=CONTEXT, lw=0.7, alpha=0.7)
-        mc_band(ax, t, v, pal.colour(lab), lab, q=q, stat=stat)
+                ax.plot(*(joined if other in join else gaps)(t, m), color=CONTEXT, lw=0.7, alpha=0.7)
+        mc_band(ax, t, v, pal.colour(lab), lab, q=q, stat=stat, join=lab in join)
         runs = np.atleast_2d(v).shape[0]
         ax.set_title(f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""),
                      fontsize=9)

@@ -4,7 +4,9 @@ A :class:`Section` holds, per label, ``{run: series}`` with ``t``, ``pos`` (n, d
 estimated position, ``ref`` (n, d) the reference (NaN where masked), ``err`` (n, d),
 ``valid`` (n,) and, from a campaign, ``nees``, ``nis``, ``nis_dof``; ``metrics`` holds the
 per-run metrics (``pos_rmse``, and from a campaign every stored one) for the worst-run view
-and the paired comparisons. Every task keeps its position in the first ``d`` state
+and the paired comparisons; ``sparse`` the labels of recorded estimates (``recorded:<name>``: a
+position, stored as scored, i.e. after its ``align`` fit, only on the reference samples it was
+associated with; NaN elsewhere, which is no masking of the reference). Every task keeps its position in the first ``d`` state
 components (``Problem.position_index`` is ``(0, ..., d-1)``), which is how ``pos`` is read.
 """
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.trajectory.recorded import is_recorded
 from replay.util.errors import ReplayError
 
 
@@ -29,6 +32,7 @@ class Section:
     metrics: dict = field(default_factory=dict)  # label -> {run: {metric: value}}
     rows: list = field(default_factory=list)  # leaderboard rows, in the leaderboard's order
     paired: list = field(default_factory=list)  # paired.csv rows of this dataset x task
+    sparse: set = field(default_factory=set)  # labels of recorded estimates: NaN off their associated samples
 
     @property
     def title(self) -> str:
@@ -92,6 +96,8 @@ def load_campaign(d: Path) -> list[Section]:
             mets[rec["run"]].setdefault("pos_rmse", _rmse(err))
             sec.axes = sec.axes or axes
         sec.runs[lab], sec.metrics[lab] = runs, mets
+        if is_recorded(cfg["filter"]):
+            sec.sparse.add(lab)
     rank = {id(r): i for i, r in enumerate(rows)}
     for sec in sections.values():  # the leaderboard's order (dataset, task, filter, parameters)
         sec.rows.sort(key=lambda r: rank[id(r)])
@@ -130,6 +136,8 @@ def load_eval(d: Path) -> list[Section]:
             mets[int(r)] = {"pos_rmse": _rmse(err)}
         name = path.name[:-len(".csv.gz")]
         sec.runs[name], sec.metrics[name] = runs, mets
+        if is_recorded(name):
+            sec.sparse.add(name)
     order = {str(r.get("label")): i for i, r in enumerate(sec.rows)}
     sec.runs = dict(sorted(sec.runs.items(), key=lambda kv: order.get(kv[0], len(order))))
     sec.paired = _paired_columns(sec.rows)

@@ -60,14 +60,30 @@ def _views(sec: Section):
     return views
 
 
+def _reference(sec: Section, run: int) -> dict:
+    """The run's reference: a filter's series (NaN where the reference is masked), else, with recorded
+    estimates only (NaN off their associated samples), the union of theirs, ``sparse`` (drawn joined)."""
+    have = [(lab, runs[run]) for lab, runs in sec.runs.items() if run in runs]
+    dense = [s for lab, s in have if lab not in sec.sparse]
+    if dense:
+        return {**dense[0], "sparse": False}
+    n = min(len(s["t"]) for _, s in have)
+    ref = np.full_like(have[0][1]["ref"][:n], np.nan)
+    for _, s in have:
+        ref = np.where(np.isfinite(ref), ref, s["ref"][:n])
+    return {"t": have[0][1]["t"][:n], "ref": ref, "valid": np.isfinite(ref).all(axis=1), "sparse": True}
+
+
 def _estimates(ax, sec: Section, pal: Palette, run: int, cols, ref):
-    """The run's estimates of components ``cols`` (one: against time), then the reference on top."""
+    """The run's estimates of components ``cols`` (one: against time), then the reference on top; a
+    recorded estimate (and a reference known only where they were associated) through its associated
+    samples (:func:`replay.outputs.plots.joined`)."""
     for lab, runs in sec.runs.items():
         if run in runs:
             s = runs[run]
-            xy = plots.gaps(s["t"], *(s["pos"][:, c] for c in cols))
+            xy = (plots.joined if lab in sec.sparse else plots.gaps)(s["t"], *(s["pos"][:, c] for c in cols))
             ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **pal.style(lab))
-    xy = plots.gaps(ref["t"], *(ref["ref"][:, c] for c in cols))
+    xy = (plots.joined if ref["sparse"] else plots.gaps)(ref["t"], *(ref["ref"][:, c] for c in cols))
     ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5)
 
 
@@ -81,7 +97,7 @@ def trajectory(sec: Section, pal: Palette):
     fig, axes = plots.figure(len(heights), len(views), figsize=(6.4 * len(views), 2.6 * sum(heights) + 0.6),
                              gridspec_kw={"height_ratios": heights})
     for c, (run, what) in enumerate(views):
-        ref = next(r[run] for r in sec.runs.values() if run in r)
+        ref = _reference(sec, run)
         row = 0
         if plane is not None:
             h, v = plane
@@ -95,7 +111,8 @@ def trajectory(sec: Section, pal: Palette):
             row = 1
         for k, i in enumerate(timed):
             ax = axes[row + k, c]
-            plots.masked_spans(ax, ref["t"], ref["valid"])
+            if not ref["sparse"]:  # else unknown: NaN there means "not associated"
+                plots.masked_spans(ax, ref["t"], ref["valid"])
             _estimates(ax, sec, pal, run, (i,), ref)
             ax.set(xlabel="t (s)", ylabel=plots.label(sec.axes[i], "m"), title=f"{sec.axes[i]} over time, {what}")
             if str(sec.axes[i]).lower() in ("depth", "down"):
@@ -116,10 +133,11 @@ def error(sec: Section, pal: Palette):
     curves = {lab: v[:, :len(t)] for lab, v in curves.items()}
     fig = plots.mc_figure(t, curves, "position error", "m",
                           f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
-                          "grey: the other filters' medians)", logy=True, palette=pal)
-    valid = next(iter(next(iter(sec.runs.values())).values()))["valid"]
+                          "grey: the other filters' medians)", logy=True, palette=pal, join=sec.sparse)
+    dense = [runs for lab, runs in sec.runs.items() if lab not in sec.sparse]
+    valid = next(iter(dense[0].values()))["valid"] if dense else None  # recorded only: masking unknown
     for ax in fig.axes:
-        if ax.get_visible():
+        if ax.get_visible() and valid is not None:
             plots.masked_spans(ax, t, valid[:len(t)])
     fig.axes[0].legend(fontsize=7, loc="upper left")
     return fig

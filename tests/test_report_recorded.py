@@ -1,0 +1,102 @@
+"""`replay report` on recorded estimates (``recorded:<name>``: NaN on every reference sample they were
+not associated with): each track is drawn as a line through its associated samples, as many drawn
+points as matched poses, in the reference's frame as scored; the reference too when no filter
+gives it. Read from the figures' data."""
+import gzip
+import json
+
+import numpy as np
+
+from replay.outputs import plots
+from replay.outputs.report import build
+
+N = 200  # reference samples (0.1 s)
+
+
+def _write(d, name, t, pos, err):
+    head = "run,k,t,x0,x1,x2,P00,P11,P22,err_x,err_y,err_z"
+    lines = [head] + [",".join(repr(float(v)) for v in [0, k, t[k], *pos[k], *([np.nan] * 3), *err[k]]) for k in range(len(t))]
+    with gzip.open(d / "estimates" / f"{name}.csv.gz", "wt") as fh:
+        fh.write("\n".join(lines) + "\n")
+
+
+def _eval_dir(d, with_filter=False):
+    """Two recorded estimates associated on every 5th / 7th sample (a 10 s gap in the second), aligned
+    as scored (position = reference + error), optionally a filter estimated on every sample."""
+    (d / "estimates").mkdir(parents=True)
+    t = np.arange(N) * 0.1
+    truth = np.column_stack([np.cos(t / 3) * 10, np.sin(t / 3) * 10, t * 0.1])
+    rng = np.random.default_rng(1)
+    counts = {}
+    for name, step, cut in (("recorded:orb", 5, None), ("recorded:sptam", 7, slice(80, 180))):
+        err = np.full_like(truth, np.nan)
+        k = np.arange(0, N, step)
+        if cut is not None:
+            k = k[(k < cut.start) | (k >= cut.stop)]
+        err[k] = rng.normal(0, 0.3, (len(k), 3))
+        _write(d, name, t, truth + err, err)
+        counts[name] = len(k)
+    labels = list(counts)
+    if with_filter:
+        err = rng.normal(0, 0.2, truth.shape)
+        err[50:60] = np.nan  # the reference masked there
+        _write(d, "ekf", t, truth + np.nan_to_num(err), err)
+        labels.append("ekf")
+    (d / "leaderboard.csv").write_text("dataset,task,filter,label,runs,pos_rmse\n"
+                                       + "".join(f"bag,position,{f},{f},1,0.3\n" for f in labels))
+    (d / "manifest.json").write_text(json.dumps({"config": {"dataset": "bag", "task": "position"}}))
+    return truth, counts
+
+
+def _lines(fig, gid):
+    return [ln for ax in fig.axes for ln in ax.lines if ln.get_gid() == gid]
+
+
+def _points(line):
+    xy = np.asarray(line.get_xydata(), float)
+    return xy[np.isfinite(xy).all(axis=1)]
+
+
+def test_recorded_tracks_drawn_through_their_associated_samples(tmp_path):
+    truth, counts = _eval_dir(tmp_path / "ev")
+    secs, pal, figs = build(tmp_path / "ev")
+    assert secs[0].sparse == set(counts)
+    traj = next(f for _, n, f in figs if n == "trajectory")
+    plane = traj.axes[0]
+    for name, n in counts.items():
+        (line,) = [ln for ln in plane.lines if ln.get_gid() == name]
+        pts = _points(line)
+        assert len(pts) == n  # every matched pose drawn, none invented
+        x = np.asarray(line.get_xdata(), float)
+        runs = np.diff(np.r_[0, np.isfinite(x).astype(int), 0])
+        assert (np.flatnonzero(runs == -1) - np.flatnonzero(runs == 1)).min() > 1  # segments, never lone dots
+    x = np.asarray([ln for ln in plane.lines if ln.get_gid() == "recorded:sptam"][0].get_xdata(), float)
+    assert np.isnan(x).sum() == 1  # the 10 s without an associated pose is a gap, nothing else is
+    (ref,) = [ln for ln in plane.lines if ln.get_gid() == "reference"]
+    union = len(set(range(0, N, 5)) | {k for k in range(0, N, 7) if not 80 <= k < 180})
+    assert len(_points(ref)) == union
+    # the reference drawn is the one scored: its points lie on the truth
+    assert np.allclose(_points(ref), truth[sorted(set(range(0, N, 5)) | {k for k in range(0, N, 7)
+                                                                           if not 80 <= k < 180}), :2])
+    assert not any(p.get_gid() == "masked" for ax in traj.axes for p in ax.patches)  # unknown, not "masked"
+    err = next(f for _, n, f in figs if n == "error")
+    for name, n in counts.items():
+        assert sum(len(_points(ln)) for ln in _lines(err, name)) == n
+        assert not any(p.get_gid() == "masked" for ax in err.axes for p in ax.patches)
+
+
+def test_with_a_filter_the_reference_keeps_its_masked_gaps(tmp_path):
+    truth, counts = _eval_dir(tmp_path / "ev", with_filter=True)
+    secs, pal, figs = build(tmp_path / "ev")
+    traj = next(f for _, n, f in figs if n == "trajectory")
+    (ref,) = [ln for ln in traj.axes[0].lines if ln.get_gid() == "reference"]
+    x = np.asarray(ref.get_xdata(), float)
+    assert len(x) == N and np.isnan(x[50:60]).all() and np.isfinite(x).sum() == N - 10
+    assert any(p.get_gid() == "masked" for ax in traj.axes for p in ax.patches)
+    for name, n in counts.items():
+        assert len(_points(next(iter(_lines(traj, name))))) == n
+
+
+def test_joined_keeps_finite_samples_and_breaks_time_gaps():
+    t, y = plots.joined([0, 1, 2, 3, 4, 20, 21], [1, np.nan, 3, np.nan, 5, 6, 7])
+    assert list(t[:3]) == [0, 2, 4] and np.isnan(t[3]) and list(y[4:]) == [6, 7]
