@@ -15,7 +15,8 @@ N = 200  # reference samples (0.1 s)
 
 def _write(d, name, t, pos, err):
     head = "run,k,t,x0,x1,x2,P00,P11,P22,err_x,err_y,err_z"
-    lines = [head] + [",".join(repr(float(v)) for v in [0, k, t[k], *pos[k], *([np.nan] * 3), *err[k]]) for k in range(len(t))]
+    rows = ([0, k, t[k], *pos[k], *([np.nan] * 3), *err[k]] for k in range(len(t)))
+    lines = [head] + [",".join(repr(float(v)) for v in row) for row in rows]
     with gzip.open(d / "estimates" / f"{name}.csv.gz", "wt") as fh:
         fh.write("\n".join(lines) + "\n")
 

@@ -6,8 +6,9 @@ estimated position, ``ref`` (n, d) the reference (NaN where masked), ``err`` (n,
 per-run metrics (``pos_rmse``, and from a campaign every stored one) for the worst-run view
 and the paired comparisons; ``sparse`` the labels of recorded estimates (``recorded:<name>``: a
 position, stored as scored, i.e. after its ``align`` fit, only on the reference samples it was
-associated with; NaN elsewhere, which is no masking of the reference). Every task keeps its position in the first ``d`` state
-components (``Problem.position_index`` is ``(0, ..., d-1)``), which is how ``pos`` is read.
+associated with; NaN elsewhere, which is no masking of the reference). Every task keeps its
+position in the first ``d`` state components (``Problem.position_index`` is ``(0, ..., d-1)``),
+which is how ``pos`` is read.
 """
 from __future__ import annotations
 
