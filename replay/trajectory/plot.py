@@ -163,7 +163,7 @@ def error_map(reference, scores: dict, *, relation: str | None = None, mode: str
             _fit_3d(ax, reference.p, s.aligned.p)
         else:
             ax.autoscale_view()
-        fig.colorbar(lc, ax=ax, label=label("APE", rel), shrink=0.85)
+        fig.colorbar(lc, ax=ax, label=label("APE", rel), shrink=0.85, pad=0.1 if len(cols) == 3 else 0.05)
         ax.set_title(f"{name}: APE along the track, {mode}")
         ax.legend(fontsize="small", loc="best")
     return fig
