@@ -101,3 +101,23 @@ def test_with_a_filter_the_reference_keeps_its_masked_gaps(tmp_path):
 def test_joined_keeps_finite_samples_and_breaks_time_gaps():
     t, y = plots.joined([0, 1, 2, 3, 4, 20, 21], [1, np.nan, 3, np.nan, 5, 6, 7])
     assert list(t[:3]) == [0, 2, 4] and np.isnan(t[3]) and list(y[4:]) == [6, 7]
+
+
+def test_a_track_without_motion_in_the_plane_is_a_marker_not_a_blank_panel(tmp_path):
+    """An AR.Drone's raw odometry (robot_localization's test3 bag) holds x = y = 0 throughout: a line of
+    no length draws nothing, so the x-y panel was blank; it is a marker and the title says so."""
+    d = tmp_path / "ev"
+    (d / "estimates").mkdir(parents=True)
+    t = np.arange(50) * 0.1
+    pos = np.column_stack([np.zeros(50), np.zeros(50), np.sin(t)])
+    _write(d, "recorded:odom", t, pos, np.zeros_like(pos))
+    (d / "leaderboard.csv").write_text("dataset,task,filter,label,runs,pos_rmse\nbag,position,recorded:odom,"
+                                       "recorded:odom,1,0\n")
+    (d / "manifest.json").write_text(json.dumps({"config": {"dataset": "bag", "task": "position"}}))
+    _, _, figs = build(d)
+    plane = next(f for _, n, f in figs if n == "trajectory").axes[0]
+    assert plane.get_title().endswith("(no motion in it)")
+    for ln in plane.lines:
+        assert ln.get_marker() == "o" and ln.get_markevery() == [0] and len(_points(ln)) == 50
+    z = next(f for _, n, f in figs if n == "trajectory").axes[1]
+    assert all(ln.get_marker() in ("None", None, "") for ln in z.lines)  # moving in time: plain lines

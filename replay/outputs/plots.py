@@ -178,7 +178,7 @@ def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: st
         runs = np.atleast_2d(v).shape[0]
         ax.set_title(f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""),
                      fontsize=9)
-        if logy:
+        if logy and (np.asarray(v, float) > 0).any():  # all zero (an estimate equal to the reference): linear
             ax.set_yscale("log")
         ax.grid(alpha=0.3)
     for ax in axes.flat[n:]:

@@ -82,9 +82,20 @@ def _estimates(ax, sec: Section, pal: Palette, run: int, cols, ref):
         if run in runs:
             s = runs[run]
             xy = (plots.joined if lab in sec.sparse else plots.gaps)(s["t"], *(s["pos"][:, c] for c in cols))
-            ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **pal.style(lab))
+            ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **_still(xy[-2:]), **pal.style(lab))
     xy = (plots.joined if ref["sparse"] else plots.gaps)(ref["t"], *(ref["ref"][:, c] for c in cols))
-    ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5)
+    ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5,
+            **_still(xy[-2:]))
+
+
+def _still(xy) -> dict:
+    """A marker for a track that does not move in the plane (a line of no length draws nothing: a
+    recording whose x and y are 0 throughout, e.g. an AR.Drone's raw odometry)."""
+    pts = np.column_stack(xy)
+    ok = np.flatnonzero(np.isfinite(pts).all(axis=1))
+    if not len(ok) or np.ptp(pts[ok], axis=0).max() > 0:
+        return {}
+    return {"marker": "o", "ms": 6, "mfc": "none", "markevery": [int(ok[0])]}
 
 
 def trajectory(sec: Section, pal: Palette):
@@ -103,8 +114,9 @@ def trajectory(sec: Section, pal: Palette):
             h, v = plane
             ax = axes[0, c]
             _estimates(ax, sec, pal, run, (h, v), ref)
+            still = all(ln.get_marker() == "o" for ln in ax.lines)
             ax.set(xlabel=plots.label(sec.axes[h], "m"), ylabel=plots.label(sec.axes[v], "m"),
-                   title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}")
+                   title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}" + (" (no motion in it)" if still else ""))
             ax.set_aspect("equal", adjustable="datalim")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
