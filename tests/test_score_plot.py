@@ -41,7 +41,7 @@ def _units_everywhere(fig):
                 assert text.endswith(")") and "(" in text, text
 
 
-@pytest.mark.parametrize("mode,cols", [("xy", (0, 1)), ("xz", (0, 2)), ("yz", (1, 2))])
+@pytest.mark.parametrize("mode,cols", [("xy", (0, 1)), ("xz", (0, 2)), ("yz", (1, 2)), ("zy", (2, 1))])
 def test_plot_modes_pick_the_coordinates(result, mode, cols):
     fig = result.plot(mode=mode)
     ax = fig.axes[0]
@@ -59,7 +59,7 @@ def test_plot_mode_xyz_is_3d(result):
     assert ax.name == "3d" and ax.get_zlabel() == "z (m)"
     (ref,) = [ln for ln in ax.lines if ln.get_gid() == "reference"]
     assert np.allclose(np.column_stack(ref.get_data_3d()), result.reference.p)
-    with pytest.raises(ReplayError, match=r"^plot mode 'xw': expected one of xy, xz, yz, xyz$"):
+    with pytest.raises(ReplayError, match=r"^plot mode 'xw': expected one of xy, xz, yz, yx, zx, zy, xyz$"):
         result.plot(mode="xw")
 
 

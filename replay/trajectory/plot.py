@@ -3,7 +3,7 @@
 Figures (:data:`KINDS`), each a :class:`matplotlib.figure.Figure` made without pyplot:
 
 * ``trajectories`` — left: the reference (the whole trajectory, one continuous line) and every
-  estimate after its alignment, in the plot mode's plane (:data:`MODES`: xy, xz, yz, or xyz in 3-D),
+  estimate after its alignment, in the plot mode's plane (:data:`MODES`: xy, xz, yz, yx, zx, zy, or xyz in 3-D),
   equal scales; right, top: the APE of the pose relation over time, one line per estimate, with its
   RMSE as a dotted line; below it, when the RPE was computed, the RPE at the second pose of each pair;
 * ``map`` — evo's error map: per estimate, the reference (dashed grey) and the aligned estimate
@@ -27,7 +27,8 @@ from replay.util.errors import ReplayError
 
 FORMATS = ("png", "pdf", "svg", "eps")  # the extensions --plot writes
 KINDS = ("trajectories", "map", "xyz", "rpy")
-MODES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "xyz": (0, 1, 2)}  # evo's --plot_mode
+MODES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "yx": (1, 0), "zx": (2, 0), "zy": (2, 1),
+         "xyz": (0, 1, 2)}  # evo's --plot_mode: horizontal, vertical axis
 NAMES = {"trans": "translation", "rot": "rotation part", "full": "full pose", "angle_deg": "rotation angle",
          "angle_rad": "rotation angle", "point_distance": "point distance",
          "point_distance_error_ratio": "point distance error ratio"}
