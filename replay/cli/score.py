@@ -127,7 +127,8 @@ def _title(kind: str, rel: str, opts: dict) -> str:
                    "the APE/RPE over time, FILE_map (tracks coloured by their APE), FILE_xyz, FILE_rpy beside it.")
 @click.option("--plot-mode", "--plot_mode", "plot_mode", default="xy", show_default=True,
               type=click.Choice(["xy", "xz", "yz", "yx", "zx", "zy", "xyz"]),
-              help="Plane (horizontal, vertical axis; xyz: 3-D) of the tracks in the --plot figures (evo: --plot_mode).")
+              help="Plane of the tracks in the --plot figures (horizontal, vertical axis; xyz: 3-D), as evo's "
+                   "--plot_mode.")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
