@@ -121,3 +121,33 @@ def test_a_track_without_motion_in_the_plane_is_a_marker_not_a_blank_panel(tmp_p
         assert ln.get_marker() == "o" and ln.get_markevery() == [0] and len(_points(ln)) == 50
     z = next(f for _, n, f in figs if n == "trajectory").axes[1]
     assert all(ln.get_marker() in ("None", None, "") for ln in z.lines)  # moving in time: plain lines
+
+
+def test_campaign_recorded_estimate_keeps_the_stored_reference_and_its_masks():
+    """A campaign stores the reference itself (NaN only where masked): with a recorded estimate alone,
+    the reference is drawn whole, breaking at the masked samples, and they are shaded as masked."""
+    from replay.outputs.palette import Palette
+    from replay.outputs.report_data import Section
+    from replay.outputs.report_plots import section_figures
+
+    t = np.arange(N) * 0.1
+    truth = np.column_stack([np.cos(t), np.sin(t), t])
+    ref = truth.copy()
+    ref[100:110] = np.nan
+    pos = np.full_like(truth, np.nan)
+    pos[::4] = truth[::4] + 0.1
+    pos[100:110] = np.nan
+    err = pos - truth
+    sec = Section("bag", "position", ("x", "y", "z"), sparse={"recorded:orb"})
+    sec.runs["recorded:orb"] = {0: {"t": t, "pos": pos, "ref": ref, "err": err,
+                                    "valid": np.isfinite(ref).all(axis=1) & np.isfinite(err).all(axis=1)}}
+    sec.metrics["recorded:orb"] = {0: {"pos_rmse": 0.17}}
+    sec.rows = [{"label": "recorded:orb", "pos_rmse": 0.17, "runs": 1}]
+    figs = dict(section_figures(sec, Palette(["recorded:orb"])))
+    plane = figs["trajectory"].axes[0]
+    (r,) = [ln for ln in plane.lines if ln.get_gid() == "reference"]
+    x = np.asarray(r.get_xdata(), float)
+    assert len(x) == N and np.isnan(x[100:110]).all() and np.isfinite(x).sum() == N - 10
+    (e,) = [ln for ln in plane.lines if ln.get_gid() == "recorded:orb"]
+    assert len(_points(e)) == len(range(0, N, 4)) - len(range(100, 110, 4))
+    assert any(p.get_gid() == "masked" for ax in figs["trajectory"].axes for p in ax.patches)

@@ -6,7 +6,9 @@ estimated position, ``ref`` (n, d) the reference (NaN where masked), ``err`` (n,
 per-run metrics (``pos_rmse``, and from a campaign every stored one) for the worst-run view
 and the paired comparisons; ``sparse`` the labels of recorded estimates (``recorded:<name>``: a
 position, stored as scored, i.e. after its ``align`` fit, only on the reference samples it was
-associated with; NaN elsewhere, which is no masking of the reference). Every task keeps its
+associated with; NaN elsewhere, which is no masking of the reference). An eval directory stores no
+reference: it is ``pos - err``, so a recorded estimate's is known only where it was associated
+(``ref_sparse`` in its series); a campaign stores it (NaN only where masked). Every task keeps its
 position in the first ``d`` state components (``Problem.position_index`` is ``(0, ..., d-1)``),
 which is how ``pos`` is read.
 """
@@ -126,6 +128,8 @@ def load_eval(d: Path) -> list[Section]:
             head = fh.readline().strip().split(",")
             data = np.loadtxt(fh, delimiter=",", ndmin=2)
         col = {name: data[:, i] for i, name in enumerate(head)}
+        name = path.name[:-len(".csv.gz")]
+        extra = {"ref_sparse": True} if is_recorded(name) else None  # its reference: where it was associated
         axes = tuple(h[4:] for h in head if h.startswith("err_"))  # the position axes, in order
         sec.axes = sec.axes or axes
         runs, mets = {}, {}
@@ -133,9 +137,8 @@ def load_eval(d: Path) -> list[Section]:
             sel = col["run"] == r
             pos = np.column_stack([col[f"x{j}"][sel] for j in range(len(axes))])
             err = np.column_stack([col[f"err_{a}"][sel] for a in axes])
-            runs[int(r)] = _series(col["t"][sel], pos, pos - err, err)
+            runs[int(r)] = _series(col["t"][sel], pos, pos - err, err, extra)
             mets[int(r)] = {"pos_rmse": _rmse(err)}
-        name = path.name[:-len(".csv.gz")]
         sec.runs[name], sec.metrics[name] = runs, mets
         if is_recorded(name):
             sec.sparse.add(name)

@@ -61,10 +61,11 @@ def _views(sec: Section):
 
 
 def _reference(sec: Section, run: int) -> dict:
-    """The run's reference: a filter's series (NaN where the reference is masked), else, with recorded
-    estimates only (NaN off their associated samples), the union of theirs, ``sparse`` (drawn joined)."""
+    """The run's reference: a series that holds it whole (NaN where masked: a filter's, or any from a
+    campaign), else (an eval directory of recorded estimates only: known where they were associated)
+    the union of theirs, ``sparse`` (drawn joined, no masked spans)."""
     have = [(lab, runs[run]) for lab, runs in sec.runs.items() if run in runs]
-    dense = [s for lab, s in have if lab not in sec.sparse]
+    dense = [s for _, s in have if not s.get("ref_sparse")]
     if dense:
         return {**dense[0], "sparse": False}
     n = min(len(s["t"]) for _, s in have)
@@ -146,8 +147,8 @@ def error(sec: Section, pal: Palette):
     fig = plots.mc_figure(t, curves, "position error", "m",
                           f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
                           "grey: the other filters' medians)", logy=True, palette=pal, join=sec.sparse)
-    dense = [runs for lab, runs in sec.runs.items() if lab not in sec.sparse]
-    valid = next(iter(dense[0].values()))["valid"] if dense else None  # recorded only: masking unknown
+    dense = [s for runs in sec.runs.values() for s in runs.values() if not s.get("ref_sparse")]
+    valid = dense[0]["valid"] if dense else None  # recorded estimates of an eval only: masking unknown
     for ax in fig.axes:
         if ax.get_visible() and valid is not None:
             plots.masked_spans(ax, t, valid[:len(t)])
