@@ -4,8 +4,10 @@ points as matched poses, in the reference's frame as scored; the reference too w
 gives it. Read from the figures' data."""
 import gzip
 import json
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from replay.outputs import plots
 from replay.outputs.report import build
@@ -151,3 +153,72 @@ def test_campaign_recorded_estimate_keeps_the_stored_reference_and_its_masks():
     (e,) = [ln for ln in plane.lines if ln.get_gid() == "recorded:orb"]
     assert len(_points(e)) == len(range(0, N, 4)) - len(range(100, 110, 4))
     assert any(p.get_gid() == "masked" for ax in figs["trajectory"].axes for p in ax.patches)
+
+
+def test_isolated_samples_are_drawn_as_a_line():
+    from replay.util.series import isolated, line
+
+    f = np.zeros(100, bool)
+    f[::5] = True
+    assert isolated(f) and not isolated(np.ones(100, bool)) and not isolated(f[:1])
+    masked = np.ones(100, bool)
+    masked[40:50] = False
+    assert not isolated(masked)
+    t = np.arange(100.0)
+    y = np.where(f, t, np.nan)
+    tt, yy = line(t, y)
+    assert np.array_equal(tt, t[::5]) and np.array_equal(yy, t[::5])  # through the 20 samples, no NaN
+    y = np.where(masked, t, np.nan)
+    tt, yy = line(t, y)
+    assert len(tt) == 100 and np.isnan(yy[40:50]).all()  # a masked stretch still breaks the line
+
+
+def test_reference_held_at_fixes_only_is_a_line_with_its_errors(tmp_path):
+    """gps-odom: the reference is known at the held-out fixes only (every 10th step of the time axis),
+    a filter's estimate on every step, its errors at the fixes: the reference and the error curves are
+    lines through the fixes (not dots), and nothing is shaded as masked."""
+    from replay.outputs.palette import Palette
+    from replay.outputs.report_data import Section
+    from replay.outputs.report_plots import section_figures
+
+    t = np.arange(N) * 0.1
+    truth = np.column_stack([np.cos(t), np.sin(t)])
+    ref = np.full_like(truth, np.nan)
+    ref[::10] = truth[::10]
+    sec = Section("bag", "gps-odom", ("east", "north"))
+    rng = np.random.default_rng(3)
+    for lab in ("ekf", "ukf"):
+        sec.runs[lab], sec.metrics[lab] = {}, {}
+        for r in range(3):
+            pos = truth + rng.normal(0, 0.1, truth.shape)
+            err = pos - ref
+            sec.runs[lab][r] = {"t": t, "pos": pos, "ref": ref, "err": err, "valid": np.isfinite(err).all(axis=1)}
+            sec.metrics[lab][r] = {"pos_rmse": 0.1}
+        sec.rows.append({"label": lab, "pos_rmse": 0.1, "runs": 3})
+    figs = dict(section_figures(sec, Palette(["ekf", "ukf"])))
+    (r,) = [ln for ln in figs["trajectory"].axes[0].lines if ln.get_gid() == "reference"]
+    assert len(r.get_xdata()) == len(_points(r)) == N // 10  # one line through the 20 fixes
+    for lab in ("ekf", "ukf"):
+        (e,) = [ln for ln in figs["trajectory"].axes[0].lines if ln.get_gid() == lab]
+        assert len(_points(e)) == N  # the estimate on every step
+        centre = [ln for ln in figs["error"].axes[("ekf", "ukf").index(lab)].lines
+                  if ln.get_gid() == lab and ln.get_label() == lab]
+        assert len(centre[0].get_xdata()) == len(_points(centre[0])) == N // 10
+    assert not any(p.get_gid() == "masked" for f in figs.values() for ax in f.axes for p in ax.patches)
+
+
+@pytest.mark.slow  # loads 60 s of a real bag (about 5 s)
+def test_python_plots_draw_recorded_estimates_as_lines(shared_dir):
+    import replay
+
+    mcap = shared_dir / "datasets" / "bags" / "derived" / "rl_test1_60s_mcap"
+    mapping = Path(__file__).resolve().parents[1] / "docs" / "mappings" / "rl_test1_recorded.toml"
+    ev = replay.evaluate(str(mcap), filters=["recorded:wheel_odom"], dataset_params={"mapping": str(mapping)})
+    matched = int(ev.rows[0]["scored"])
+    assert matched == 56  # of 120 held-out fixes (replay eval's note)
+    lines = {ln.get_label(): ln for ln in replay.plot_track(ev).axes[0].lines}
+    assert len(_points(lines["reference"])) == 120 and len(_points(lines["recorded:wheel_odom"])) == matched
+    for name, n in (("reference", 120), ("recorded:wheel_odom", matched)):  # lines: few NaN (time gaps), not
+        assert len(lines[name].get_xdata()) <= n + 5, name  # one NaN per sample of the IMU-rate time axis
+    (err,) = replay.plot_errors(ev).axes[0].lines
+    assert len(_points(err)) == matched and len(err.get_xdata()) <= matched + 5  # a line, not NaN-separated dots

@@ -66,8 +66,8 @@ def _reference(sec: Section, run: int) -> dict:
     the union of theirs, ``sparse`` (drawn joined, no masked spans)."""
     have = [(lab, runs[run]) for lab, runs in sec.runs.items() if run in runs]
     dense = [s for _, s in have if not s.get("ref_sparse")]
-    if dense:
-        return {**dense[0], "sparse": False}
+    if dense:  # valid: where the reference is (a recorded estimate's own series is valid where associated)
+        return {**dense[0], "valid": np.isfinite(dense[0]["ref"]).all(axis=1), "sparse": False}
     n = min(len(s["t"]) for _, s in have)
     ref = np.full_like(have[0][1]["ref"][:n], np.nan)
     for _, s in have:
@@ -82,9 +82,9 @@ def _estimates(ax, sec: Section, pal: Palette, run: int, cols, ref):
     for lab, runs in sec.runs.items():
         if run in runs:
             s = runs[run]
-            xy = (plots.joined if lab in sec.sparse else plots.gaps)(s["t"], *(s["pos"][:, c] for c in cols))
+            xy = (plots.joined if lab in sec.sparse else plots.line)(s["t"], *(s["pos"][:, c] for c in cols))
             ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **_still(xy[-2:]), **pal.style(lab))
-    xy = (plots.joined if ref["sparse"] else plots.gaps)(ref["t"], *(ref["ref"][:, c] for c in cols))
+    xy = (plots.joined if ref["sparse"] else plots.line)(ref["t"], *(ref["ref"][:, c] for c in cols))
     ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5,
             **_still(xy[-2:]))
 
@@ -148,7 +148,7 @@ def error(sec: Section, pal: Palette):
                           f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
                           "grey: the other filters' medians)", logy=True, palette=pal, join=sec.sparse)
     dense = [s for runs in sec.runs.values() for s in runs.values() if not s.get("ref_sparse")]
-    valid = dense[0]["valid"] if dense else None  # recorded estimates of an eval only: masking unknown
+    valid = np.isfinite(dense[0]["ref"]).all(axis=1) if dense else None  # eval, recorded only: unknown
     for ax in fig.axes:
         if ax.get_visible() and valid is not None:
             plots.masked_spans(ax, t, valid[:len(t)])
@@ -207,7 +207,7 @@ def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
         vals, t = _stack(runs, key)
         avg = plots.centre(vals, "mean")
         clipped |= bool(np.any((avg < CLIP[0]) | (avg > CLIP[1])))
-        tt, avg = plots.gaps(t, np.clip(avg, *CLIP))
+        tt, avg = plots.line(t, np.clip(avg, *CLIP))
         flag = flags.get(lab, "")
         ax.plot(tt, avg, lw=1, label=lab + (f" ({flag})" if flag and flag != "consistent" else ""), gid=lab,
                 **pal.style(lab))
