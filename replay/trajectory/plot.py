@@ -200,10 +200,18 @@ def write(path, reference, scores: dict, *, relation: str | None = None, mode: s
     extension or a write error is one line."""
     from replay.util import outfile
 
+    import logging
+
     outfile.check(path, what, FORMATS)
     where, written = paths(path), []
-    for kind, fig in figures(reference, scores, relation=relation, mode=mode).items():
-        p = outfile.check(where[kind], what, FORMATS)
-        written.append(outfile.write(p, what, lambda tmp, f=fig, p=p: f.savefig(tmp, dpi=120,
-                                                                                format=p.suffix.lower()[1:])))
+    ps = logging.getLogger("matplotlib.backends.backend_ps")  # "no transparency" for every eps: rendered opaque
+    level = ps.level
+    ps.setLevel(logging.ERROR)
+    try:
+        for kind, fig in figures(reference, scores, relation=relation, mode=mode).items():
+            p = outfile.check(where[kind], what, FORMATS)
+            written.append(outfile.write(p, what, lambda tmp, f=fig, p=p: f.savefig(tmp, dpi=120,
+                                                                                    format=p.suffix.lower()[1:])))
+    finally:
+        ps.setLevel(level)
     return written
