@@ -130,5 +130,10 @@ def test_cli_writes_every_figure_in_the_mode(tmp_path):
     assert sorted(p.name for p in png.parent.iterdir()) == sorted(names)
     assert f"plot: {', '.join(str(png.parent / n) for n in names)}" in res.output
     assert all((png.parent / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for n in names)
+    res = CliRunner().invoke(main, ["score", str(tmp_path / "gt.tum"), str(tmp_path / "est.tum"), "-a", "--rpe",
+                                    "-r", "point_distance_error_ratio", "--plot", str(png)])  # an RPE-only relation
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in png.parent.iterdir()) == ["p.png", "p_rpy.png", "p_xyz.png"]  # no stale map
+    assert f"(removed the earlier {png.parent / 'p_map.png'})" in res.output
     res = CliRunner().invoke(main, ["score", str(tmp_path / "gt.tum"), str(tmp_path / "est.tum"), "--plot-mode", "xw"])
     assert res.exit_code == 2 and "Traceback" not in res.output

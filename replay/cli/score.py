@@ -209,5 +209,6 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     if plot_path:
         from replay.trajectory import plot
 
-        written = plot.write(plot_path, ref, scores, relation=relations[0], mode=plot_mode)
-        click.echo(f"plot: {', '.join(map(str, written))}")
+        written, removed = plot.write(plot_path, ref, scores, relation=relations[0], mode=plot_mode)
+        click.echo(f"plot: {', '.join(map(str, written))}"
+                   + (f" (removed the earlier {', '.join(map(str, removed))})" if removed else ""))

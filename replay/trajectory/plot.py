@@ -114,7 +114,12 @@ def figure(reference, scores: dict, *, relation: str | None = None, mode: str = 
     top.legend(fontsize="small")
     (rpe_ax or err_ax).set_xlabel("time since the first matched pose (s)")
     err_ax.set_title("absolute pose error (dotted: RMSE)")
-    err_ax.legend(fontsize="small")
+    if err_ax.lines:
+        err_ax.legend(fontsize="small")
+    else:  # an RPE-only relation (point_distance_error_ratio)
+        err_ax.text(0.5, 0.5, f"no APE of {relation} (an RPE relation)", ha="center", va="center",
+                    transform=err_ax.transAxes)
+        err_ax.set_yticks([])
     if rpe_ax is not None:
         rpe_ax.set_title("relative pose error, at the second pose of each pair")
     return fig
@@ -194,10 +199,11 @@ def paths(path) -> dict:
 
 
 def write(path, reference, scores: dict, *, relation: str | None = None, mode: str = "xy",
-          what: str = "--plot") -> list:
+          what: str = "--plot") -> tuple[list, list]:
     """Save :func:`figures` to :func:`paths` of ``path`` (format from the extension: :data:`FORMATS`),
-    each atomically, creating missing parent directories; returns the paths written. An unsupported
-    extension or a write error is one line."""
+    each atomically, creating missing parent directories; returns (paths written, paths removed: a
+    figure of an earlier call that this one does not draw, e.g. ``_rpy`` without orientations, which
+    would otherwise be taken for this call's). An unsupported extension or a write error is one line."""
     from replay.util import outfile
 
     import logging
@@ -208,10 +214,18 @@ def write(path, reference, scores: dict, *, relation: str | None = None, mode: s
     level = ps.level
     ps.setLevel(logging.ERROR)
     try:
-        for kind, fig in figures(reference, scores, relation=relation, mode=mode).items():
+        figs = figures(reference, scores, relation=relation, mode=mode)
+        for kind, fig in figs.items():
             p = outfile.check(where[kind], what, FORMATS)
             written.append(outfile.write(p, what, lambda tmp, f=fig, p=p: f.savefig(tmp, dpi=120,
                                                                                     format=p.suffix.lower()[1:])))
     finally:
         ps.setLevel(level)
-    return written
+    removed = [p for kind, p in where.items() if kind not in figs and p.is_file() and not p.is_symlink()]
+    for p in removed:
+        try:
+            p.unlink()
+        except OSError as e:
+            raise ReplayError(f"{what} {p}: an earlier figure this call does not draw, and it cannot be removed "
+                              f"({e.strerror})") from None
+    return written, removed
