@@ -61,6 +61,8 @@ def test_plot_mode_xyz_is_3d(result):
     assert np.allclose(np.column_stack(ref.get_data_3d()), result.reference.p)
     with pytest.raises(ReplayError, match=r"^plot mode 'xw': expected one of xy, xz, yz, yx, zx, zy, xyz$"):
         result.plot(mode="xw")
+    with pytest.raises(ReplayError, match=r"^plot: kind 'raw': expected one of trajectories, map, xyz, rpy, all$"):
+        result.plot(kind="raw")
 
 
 def test_error_map_colours_are_the_ape(result):
