@@ -209,7 +209,8 @@ def test_output_parents_are_created_and_files_written_whole(files):
     rows = out.read_text().splitlines()
     assert rows[0].startswith("dataset,task,filter") and "recorded:est" in rows[1] and len(rows) == 2
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert sorted(os.listdir(out.parent)) == ["board.csv"] and sorted(os.listdir(plot.parent)) == ["p.png"]
+    assert sorted(os.listdir(out.parent)) == ["board.csv"]
+    assert sorted(os.listdir(plot.parent)) == ["p.png", "p_map.png", "p_rpy.png", "p_xyz.png"]  # replay.trajectory.plot
     (files / "kept.csv").write_text("old\n")
     (files / "link.csv").symlink_to("kept.csv")  # a link keeps pointing where it did; its target is replaced
     assert_ok(["score", files / "ref.tum", files / "est.tum", "-o", files / "link.csv"])

@@ -123,7 +123,12 @@ def _title(kind: str, rel: str, opts: dict) -> str:
               help="Accepted for evo's -v: replay always prints the statistics and the association.")
 @click.option("-p", "p_flag", is_flag=True, help="evo's -p (a window): answered with --plot FILE.")
 @click.option("--plot", "--save-plot", "--save_plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Write a trajectory + error plot (png, pdf, svg, eps; missing directories are created).")
+              help="Write the figures (png, pdf, svg, eps; missing directories are created): FILE the tracks and "
+                   "the APE/RPE over time, FILE_map (tracks coloured by their APE), FILE_xyz, FILE_rpy beside it.")
+@click.option("--plot-mode", "--plot_mode", "plot_mode", default="xy", show_default=True,
+              type=click.Choice(["xy", "xz", "yz", "yx", "zx", "zy", "xyz"]),
+              help="Plane of the tracks in the --plot figures (horizontal, vertical axis; xyz: 3-D), as evo's "
+                   "--plot_mode.")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the leaderboard CSV (the schema of replay eval; missing directories are created).")
 @click.option("--trials", "trial_specs", multiple=True, metavar="[NAME=]GLOB",
@@ -142,7 +147,7 @@ def _title(kind: str, rel: str, opts: dict) -> str:
 def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_origin, t_max_diff, t_offset, relations,
               rpe, delta, delta_unit, delta_tol, all_pairs, pairs_from_reference, lengths, lengths_method,
               sync_method, fmt, t_start, t_end, downsample, motion_filter, project_to_plane, kitti_times, columns,
-              time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, out, trial_specs=(),
+              time_unit, lost_threshold, lost_steps, verbose, p_flag, plot_path, plot_mode, out, trial_specs=(),
               trial_plot=None, save_results=None, save_as=False):
     """Score ESTIMATE trajectories against REFERENCE, as evo_ape/evo_rpe (docs/evo.md).
 
@@ -155,6 +160,7 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     from replay.scoring.summary import columns as leaderboard_columns
     from replay.trajectory import io, score
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
+    from replay.trajectory.plot import paths as plot_paths
     from replay.util import outfile
     from replay.util.files import refuse_overlap, write_csv
 
@@ -184,7 +190,8 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     inputs = [io.split(s)[0] for s in (reference, *sources)] + ([Path(kitti_times)] if kitti_times else [])
     if trial_plot and not sets:
         raise ReplayError("--trials-plot: boxplots of trials: give --trials [NAME=]GLOB")
-    for path, what, suffixes in ((out, "--out", None), (plot_path, "--plot", PLOT_FORMATS),
+    plots = list(plot_paths(plot_path).values()) if plot_path else []
+    for path, what, suffixes in ((out, "--out", None), *((p, "--plot", PLOT_FORMATS) for p in plots),
                                  (trial_plot, "--trials-plot", PLOT_FORMATS)):
         if path:
             refuse_overlap(path, inputs, what)
@@ -247,8 +254,9 @@ def score_cmd(reference, estimates, align, a_flag, s_flag, n_to_align, align_ori
     if plot_path:
         from replay.trajectory import plot
 
-        plot.write(plot_path, ref, scores, relation=relations[0])
-        click.echo(f"plot: {plot_path}")
+        written, removed = plot.write(plot_path, ref, scores, relation=relations[0], mode=plot_mode)
+        click.echo(f"plot: {', '.join(map(str, written))}"
+                   + (f" (removed the earlier {', '.join(map(str, removed))})" if removed else ""))
     if trial_plot:
         from replay.run import boxplots
 

@@ -8,7 +8,11 @@ Conventions (the report follows them; a reproduction's PNG should too):
   the 5-95 % band of the runs and thin outlines at its edges (:func:`mc_band`), one filter per
   panel when several bands would overlap (:func:`mc_figure`);
 * missing samples (NaN: a masked reference) and time gaps (a step above ``GAP`` times the
-  median step) break the lines instead of being bridged (:func:`gaps`);
+  median step) break the lines instead of being bridged (:func:`gaps`); a sparse track (a
+  recorded estimate, NaN on every reference sample it was not associated with) is drawn through
+  its associated samples, broken only at its own time gaps (:func:`joined`), not as dots, and
+  so is any series whose finite samples are mostly isolated (:func:`line`: a reference held only
+  at GPS fixes, the errors scored there);
 * every artist drawn for a filter carries its label as ``gid`` and its palette colour, so
   that :func:`artist_colours` reads back, from the figures, which colours each filter got.
 
@@ -27,9 +31,9 @@ from contextlib import contextmanager
 import numpy as np
 
 from replay.outputs.palette import BAND, CONTEXT, Palette
+from replay.util.series import GAP, gaps, isolated, joined, line  # noqa: F401 -- the line-breaking rules, shared with replay.run
 
 STAT = {"median": "median", "mean": "mean", "rmse": "RMSE"}
-GAP = 5.0  # a time step above GAP x the median step is a gap in the data: lines break there
 
 
 def figure(nrows: int = 1, ncols: int = 1, figsize=(8, 4.5), **kw):
@@ -44,21 +48,6 @@ def figure(nrows: int = 1, ncols: int = 1, figsize=(8, 4.5), **kw):
 def label(name: str, unit: str | None) -> str:
     """An axis label with its unit: ``label("position error", "m")`` -> ``position error (m)``."""
     return f"{name} ({unit})" if unit else name
-
-
-def gaps(t, *ys, factor: float = GAP):
-    """``t`` and each ``y`` (along its last axis) with a NaN inserted inside every time gap."""
-    t = np.asarray(t, float)
-    ys = [np.asarray(y, float) for y in ys]
-    dt = np.diff(t)
-    ok = np.isfinite(dt) & (dt > 0)
-    if not ok.any():
-        return (t, *ys)
-    at = np.flatnonzero(dt > factor * np.median(dt[ok])) + 1
-    if not len(at):
-        return (t, *ys)
-    t = np.insert(t, at, np.nan)
-    return (t, *(np.insert(y, at, np.nan, axis=-1) for y in ys))
 
 
 @contextmanager
@@ -88,20 +77,21 @@ def quantiles(values, q=(5, 95)):
         return np.nanpercentile(np.asarray(values, float), q, axis=0)
 
 
-def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.22, lw=1.3):
+def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.22, lw=1.3, join=False):
     """Centre line and ``q`` band (with thin outlines) of per-run values (runs, steps) against ``t``.
 
-    Returns the centre line. ``name`` becomes every artist's ``gid`` (and the line's label)."""
+    Returns the centre line. ``name`` becomes every artist's ``gid`` (and the line's label).
+    ``join``: a sparse track, drawn through its finite steps (:func:`joined`)."""
     values = np.atleast_2d(np.asarray(values, float))
     mid, (lo, hi) = centre(values, stat), quantiles(values, q)
-    tt, mid, lo, hi = gaps(t, mid, lo, hi)
+    tt, mid, lo, hi = (joined if join else line)(t, mid, lo, hi)
     if len(values) > 1:
         band = ax.fill_between(tt, lo, hi, color=color, alpha=alpha, lw=0, gid=name)
         band.set_label(f"_{q[0]:g}-{q[1]:g} % of {len(values)} runs")
         for edge in (lo, hi):
             ax.plot(tt, edge, color=color, lw=0.5, alpha=0.8, gid=name)
-    line, = ax.plot(tt, mid, color=color, lw=lw, label=name, gid=name)
-    return line
+    centre_line, = ax.plot(tt, mid, color=color, lw=lw, label=name, gid=name)
+    return centre_line
 
 
 def chi2_limits(dof, runs: int, p: float = 0.95):
@@ -132,9 +122,10 @@ def chi2_band(ax, t, dof, runs: int, p: float = 0.95):
 
 
 def masked_spans(ax, t, valid, text="reference masked"):
-    """Light hatched spans over the times where ``valid`` is False (nothing is scored there)."""
+    """Light hatched spans over the times where ``valid`` is False (nothing is scored there); none when
+    the valid samples are mostly isolated (a reference held at GPS fixes only: sampled, not masked)."""
     t, valid = np.asarray(t, float), np.asarray(valid, bool)
-    if valid.all() or not len(t):
+    if valid.all() or not len(t) or isolated(valid):
         return
     edges = np.flatnonzero(np.diff(np.r_[0, (~valid).astype(int), 0]))
     for i, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
@@ -144,11 +135,12 @@ def masked_spans(ax, t, valid, text="reference masked"):
 
 def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: str = "median",
               q=(5, 95), logy: bool = False, palette: Palette | None = None, xlabel: str = "t (s)",
-              ncols: int = 3):
+              ncols: int = 3, join=()):
     """One panel per filter: its centre line and ``q`` band over runs, the others' centre lines
     in grey for context; shared axes. ``curves``: {label: (runs, steps) values against ``t``}
     (signed or absolute errors; with ``stat="rmse"`` the line is the RMSE over the runs at each
-    step and the band the ``q`` percentiles of the values themselves: pass absolute errors)."""
+    step and the band the ``q`` percentiles of the values themselves: pass absolute errors);
+    ``join``: the labels of sparse tracks (:func:`joined`)."""
     pal = palette or Palette(curves)
     n = len(curves)
     cols = min(n, ncols)
@@ -158,12 +150,12 @@ def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: st
     for ax, (lab, v) in zip(axes.flat, curves.items()):
         for other, m in mids.items():
             if other != lab:
-                ax.plot(*gaps(t, m), color=CONTEXT, lw=0.7, alpha=0.7)
-        mc_band(ax, t, v, pal.colour(lab), lab, q=q, stat=stat)
+                ax.plot(*(joined if other in join else line)(t, m), color=CONTEXT, lw=0.7, alpha=0.7)
+        mc_band(ax, t, v, pal.colour(lab), lab, q=q, stat=stat, join=lab in join)
         runs = np.atleast_2d(v).shape[0]
         ax.set_title(f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""),
                      fontsize=9)
-        if logy:
+        if logy and (np.asarray(v, float) > 0).any():  # all zero (an estimate equal to the reference): linear
             ax.set_yscale("log")
         ax.grid(alpha=0.3)
     for ax in axes.flat[n:]:

@@ -44,7 +44,9 @@ CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
 
 CAPTIONS = {
     "trajectory": "Reference (black; gaps where it is masked) and each filter's estimate, run 0 beside the "
-                  "worst run (the highest median position RMSE over the filters).",
+                  "worst run (the highest median position RMSE over the filters). A recorded estimate is drawn "
+                  "as scored (after its align fit) through the reference samples it was associated with; with "
+                  "recorded estimates only, the reference is drawn through those samples.",
     "error": "Position error norm per step: median over the runs (line) and 5-95 % of the runs (band with "
              "thin outlines), one panel per filter; the other filters' medians in grey. Grey spans: reference "
              "masked (nothing scored).",

@@ -4,8 +4,13 @@ A :class:`Section` holds, per label, ``{run: series}`` with ``t``, ``pos`` (n, d
 estimated position, ``ref`` (n, d) the reference (NaN where masked), ``err`` (n, d),
 ``valid`` (n,) and, from a campaign, ``nees``, ``nis``, ``nis_dof``; ``metrics`` holds the
 per-run metrics (``pos_rmse``, and from a campaign every stored one) for the worst-run view
-and the paired comparisons. Every task keeps its position in the first ``d`` state
-components (``Problem.position_index`` is ``(0, ..., d-1)``), which is how ``pos`` is read.
+and the paired comparisons; ``sparse`` the labels of recorded estimates (``recorded:<name>``: a
+position, stored as scored, i.e. after its ``align`` fit, only on the reference samples it was
+associated with; NaN elsewhere, which is no masking of the reference). An eval directory stores no
+reference: it is ``pos - err``, so a recorded estimate's is known only where it was associated
+(``ref_sparse`` in its series); a campaign stores it (NaN only where masked). Every task keeps its
+position in the first ``d`` state components (``Problem.position_index`` is ``(0, ..., d-1)``),
+which is how ``pos`` is read.
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.trajectory.recorded import is_recorded
 from replay.util.errors import ReplayError
 
 
@@ -29,6 +35,7 @@ class Section:
     metrics: dict = field(default_factory=dict)  # label -> {run: {metric: value}}
     rows: list = field(default_factory=list)  # leaderboard rows, in the leaderboard's order
     paired: list = field(default_factory=list)  # paired.csv rows of this dataset x task
+    sparse: set = field(default_factory=set)  # labels of recorded estimates: NaN off their associated samples
 
     @property
     def title(self) -> str:
@@ -92,6 +99,8 @@ def load_campaign(d: Path) -> list[Section]:
             mets[rec["run"]].setdefault("pos_rmse", _rmse(err))
             sec.axes = sec.axes or axes
         sec.runs[lab], sec.metrics[lab] = runs, mets
+        if is_recorded(cfg["filter"]):
+            sec.sparse.add(lab)
     rank = {id(r): i for i, r in enumerate(rows)}
     for sec in sections.values():  # the leaderboard's order (dataset, task, filter, parameters)
         sec.rows.sort(key=lambda r: rank[id(r)])
@@ -119,6 +128,8 @@ def load_eval(d: Path) -> list[Section]:
             head = fh.readline().strip().split(",")
             data = np.loadtxt(fh, delimiter=",", ndmin=2)
         col = {name: data[:, i] for i, name in enumerate(head)}
+        name = path.name[:-len(".csv.gz")]
+        extra = {"ref_sparse": True} if is_recorded(name) else None  # its reference: where it was associated
         axes = tuple(h[4:] for h in head if h.startswith("err_"))  # the position axes, in order
         sec.axes = sec.axes or axes
         runs, mets = {}, {}
@@ -126,10 +137,11 @@ def load_eval(d: Path) -> list[Section]:
             sel = col["run"] == r
             pos = np.column_stack([col[f"x{j}"][sel] for j in range(len(axes))])
             err = np.column_stack([col[f"err_{a}"][sel] for a in axes])
-            runs[int(r)] = _series(col["t"][sel], pos, pos - err, err)
+            runs[int(r)] = _series(col["t"][sel], pos, pos - err, err, extra)
             mets[int(r)] = {"pos_rmse": _rmse(err)}
-        name = path.name[:-len(".csv.gz")]
         sec.runs[name], sec.metrics[name] = runs, mets
+        if is_recorded(name):
+            sec.sparse.add(name)
     order = {str(r.get("label")): i for i, r in enumerate(sec.rows)}
     sec.runs = dict(sorted(sec.runs.items(), key=lambda kv: order.get(kv[0], len(order))))
     sec.paired = _paired_columns(sec.rows)

@@ -60,15 +60,43 @@ def _views(sec: Section):
     return views
 
 
+def _reference(sec: Section, run: int) -> dict:
+    """The run's reference: a series that holds it whole (NaN where masked: a filter's, or any from a
+    campaign), else (an eval directory of recorded estimates only: known where they were associated)
+    the union of theirs, ``sparse`` (drawn joined, no masked spans)."""
+    have = [(lab, runs[run]) for lab, runs in sec.runs.items() if run in runs]
+    dense = [s for _, s in have if not s.get("ref_sparse")]
+    if dense:  # valid: where the reference is (a recorded estimate's own series is valid where associated)
+        return {**dense[0], "valid": np.isfinite(dense[0]["ref"]).all(axis=1), "sparse": False}
+    n = min(len(s["t"]) for _, s in have)
+    ref = np.full_like(have[0][1]["ref"][:n], np.nan)
+    for _, s in have:
+        ref = np.where(np.isfinite(ref), ref, s["ref"][:n])
+    return {"t": have[0][1]["t"][:n], "ref": ref, "valid": np.isfinite(ref).all(axis=1), "sparse": True}
+
+
 def _estimates(ax, sec: Section, pal: Palette, run: int, cols, ref):
-    """The run's estimates of components ``cols`` (one: against time), then the reference on top."""
+    """The run's estimates of components ``cols`` (one: against time), then the reference on top; a
+    recorded estimate (and a reference known only where they were associated) through its associated
+    samples (:func:`replay.outputs.plots.joined`)."""
     for lab, runs in sec.runs.items():
         if run in runs:
             s = runs[run]
-            xy = plots.gaps(s["t"], *(s["pos"][:, c] for c in cols))
-            ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **pal.style(lab))
-    xy = plots.gaps(ref["t"], *(ref["ref"][:, c] for c in cols))
-    ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5)
+            xy = (plots.joined if lab in sec.sparse else plots.line)(s["t"], *(s["pos"][:, c] for c in cols))
+            ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **_still(xy[-2:]), **pal.style(lab))
+    xy = (plots.joined if ref["sparse"] else plots.line)(ref["t"], *(ref["ref"][:, c] for c in cols))
+    ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5,
+            **_still(xy[-2:]))
+
+
+def _still(xy) -> dict:
+    """A marker for a track that does not move in the plane (a line of no length draws nothing: a
+    recording whose x and y are 0 throughout, e.g. an AR.Drone's raw odometry)."""
+    pts = np.column_stack(xy)
+    ok = np.flatnonzero(np.isfinite(pts).all(axis=1))
+    if not len(ok) or np.ptp(pts[ok], axis=0).max() > 0:
+        return {}
+    return {"marker": "o", "ms": 6, "mfc": "none", "markevery": [int(ok[0])]}
 
 
 def trajectory(sec: Section, pal: Palette):
@@ -81,21 +109,23 @@ def trajectory(sec: Section, pal: Palette):
     fig, axes = plots.figure(len(heights), len(views), figsize=(6.4 * len(views), 2.6 * sum(heights) + 0.6),
                              gridspec_kw={"height_ratios": heights})
     for c, (run, what) in enumerate(views):
-        ref = next(r[run] for r in sec.runs.values() if run in r)
+        ref = _reference(sec, run)
         row = 0
         if plane is not None:
             h, v = plane
             ax = axes[0, c]
             _estimates(ax, sec, pal, run, (h, v), ref)
+            still = all(ln.get_marker() == "o" for ln in ax.lines)
             ax.set(xlabel=plots.label(sec.axes[h], "m"), ylabel=plots.label(sec.axes[v], "m"),
-                   title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}")
+                   title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}" + (" (no motion in it)" if still else ""))
             ax.set_aspect("equal", adjustable="datalim")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
             row = 1
         for k, i in enumerate(timed):
             ax = axes[row + k, c]
-            plots.masked_spans(ax, ref["t"], ref["valid"])
+            if not ref["sparse"]:  # else unknown: NaN there means "not associated"
+                plots.masked_spans(ax, ref["t"], ref["valid"])
             _estimates(ax, sec, pal, run, (i,), ref)
             ax.set(xlabel="t (s)", ylabel=plots.label(sec.axes[i], "m"), title=f"{sec.axes[i]} over time, {what}")
             if str(sec.axes[i]).lower() in ("depth", "down"):
@@ -116,10 +146,11 @@ def error(sec: Section, pal: Palette):
     curves = {lab: v[:, :len(t)] for lab, v in curves.items()}
     fig = plots.mc_figure(t, curves, "position error", "m",
                           f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
-                          "grey: the other filters' medians)", logy=True, palette=pal)
-    valid = next(iter(next(iter(sec.runs.values())).values()))["valid"]
+                          "grey: the other filters' medians)", logy=True, palette=pal, join=sec.sparse)
+    dense = [s for runs in sec.runs.values() for s in runs.values() if not s.get("ref_sparse")]
+    valid = np.isfinite(dense[0]["ref"]).all(axis=1) if dense else None  # eval, recorded only: unknown
     for ax in fig.axes:
-        if ax.get_visible():
+        if ax.get_visible() and valid is not None:
             plots.masked_spans(ax, t, valid[:len(t)])
     fig.axes[0].legend(fontsize=7, loc="upper left")
     return fig
@@ -176,7 +207,7 @@ def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
         vals, t = _stack(runs, key)
         avg = plots.centre(vals, "mean")
         clipped |= bool(np.any((avg < CLIP[0]) | (avg > CLIP[1])))
-        tt, avg = plots.gaps(t, np.clip(avg, *CLIP))
+        tt, avg = plots.line(t, np.clip(avg, *CLIP))
         flag = flags.get(lab, "")
         ax.plot(tt, avg, lw=1, label=lab + (f" ({flag})" if flag and flag != "consistent" else ""), gid=lab,
                 **pal.style(lab))

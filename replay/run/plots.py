@@ -4,6 +4,9 @@
   estimated tracks (one run), on UTM axes when the source is geodetic (``meta["crs"]``,
   ``meta["origin"]``), else on the local east/north axes (m).
 * :func:`plot_errors` — position error over time: RMSE across runs per filter (m).
+
+A recorded estimate (``recorded:<name>``: NaN off the reference samples it was associated with) is
+drawn as a line through its associated samples (:func:`replay.util.series.joined`), not as dots.
 * :func:`plot_rmse` — position RMSE per filter, mean over runs with its 95 % interval (m).
 * :func:`plot_paired` — each filter minus the baseline, run by run (common random numbers):
   mean difference of the position RMSE and its 95 % interval (m); below zero is better.
@@ -17,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from replay.run import tables
+from replay.trajectory.recorded import is_recorded
+from replay.util.series import joined, line
 
 
 def _axes(ax, size=(7.0, 4.0)):
@@ -58,6 +63,8 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
         if first is not None:  # where the reference is masked, no line (as the scorer skips it)
             truth = np.where(np.asarray(first.truth_valid, bool)[:, None], truth, np.nan)
         truth = _en(truth, names) + off
+        t = np.asarray(first.t, float) if first is not None else np.arange(len(truth), dtype=float)
+        truth = np.column_stack(line(t, truth[:, 0], truth[:, 1])[1:])  # held at GPS fixes only: not dots
         ax.plot(truth[:, 0], truth[:, 1], color="k", lw=3.0, label="reference")
         for res in ([tables.result(source, f) for f in filters] if filters else source.results):
             problem = res.records[run].get("problem") if len(res.records) > run else None
@@ -65,6 +72,8 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
                 continue
             x = res.estimates[run].x[:, list(problem.position_index)]
             p = _en(x, names) + off
+            if is_recorded(res.name):  # NaN off its associated samples: a line through them, not dots
+                p = np.column_stack(joined(problem.t, p[:, 0], p[:, 1])[1:])
             ax.plot(p[:, 0], p[:, 1], lw=1.0, label=res.name)
         ax.set_title(f"{source.config['dataset']}: run {run}")
     else:  # a Frame
@@ -105,7 +114,9 @@ def plot_errors(ev, *, ax=None, filters=None):
     fig, ax = _axes(ax)
     curves = tables.rmse_over_time(ev, filters=filters)
     for name in curves.columns:
-        ax.plot(curves.index.to_numpy(), curves[name].to_numpy(), lw=1.0, label=name)
+        t, y = curves.index.to_numpy(), curves[name].to_numpy()
+        t, y = (joined if is_recorded(name) else line)(t, y)
+        ax.plot(t, y, lw=1.0, label=name)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"position error, RMSE over {ev.config['runs']} runs [m]")
     ax.set_title(f"{ev.config['dataset']}, task {ev.config['task']}")

@@ -201,15 +201,27 @@ class ScoreResult:
             raise ReplayError("trials(): no trials were scored (give trials={'name': 'runs/est_*.txt'})")
         return pd.DataFrame(rows, columns=columns(rows))
 
-    def plot(self, *, relation: str | None = None):
-        """The figure of ``replay score --plot`` (:func:`replay.trajectory.plot.figure`): the tracks
-        aligned as scored, the APE (and RPE) of ``relation`` (default: the first) over time."""
+    def plot(self, *, relation: str | None = None, mode: str = "xy", kind: str = "trajectories"):
+        """A figure of ``replay score --plot`` (:mod:`replay.trajectory.plot`), the tracks aligned as
+        scored, of the pose relation ``relation`` (default: the first) in plot mode ``mode`` (xy, xz, yz,
+        xyz): ``kind`` ``trajectories`` (tracks, APE and RPE over time), ``map`` (each track coloured by
+        its APE), ``xyz`` (x, y, z over time), ``rpy`` (roll, pitch, yaw over time), or ``all``:
+        {kind: Figure} of those that have something to show."""
         from replay.trajectory import plot
 
         rels = self.settings["relations"]
         if relation is not None and relation not in {r for s in self.scores.values() for r in (*s.ape, *s.rpe)}:
             raise ReplayError(f"plot: relation {relation!r} was not computed (pose_relation: {', '.join(rels)})")
-        return plot.figure(self.reference, self.scores, relation=relation)
+        if kind not in (*plot.KINDS, "all"):
+            raise ReplayError(f"plot: kind {kind!r}: expected one of {', '.join(plot.KINDS)}, all")
+        figs = plot.figures(self.reference, self.scores, relation=relation, mode=mode,
+                            kinds=plot.KINDS if kind == "all" else (kind,))
+        if kind == "all":
+            return figs
+        if kind not in figs:
+            raise ReplayError(f"plot: no {kind} figure: " + ("no APE of that relation" if kind == "map" else
+                                                              "the reference or the estimates have no orientations"))
+        return figs[kind]
 
 
 def _grouped(rows: list) -> list:
