@@ -41,7 +41,7 @@ def cli(*args):
 
 def printed(output: str, estimate: str, metric: str, relation: str) -> dict:
     """The statistics block ``replay score`` prints for one estimate, metric and relation (as text)."""
-    from replay.cli.score import REL_TITLES
+    from replay.cli.score_steps import REL_TITLES
 
     part = output.split(f"{estimate} vs ", 1)[1].split(" vs ", 1)[0]
     block = part.split(f"{metric.upper()} w.r.t. {REL_TITLES[relation]}", 1)[1].split("w.r.t.", 1)[0]

@@ -18,6 +18,7 @@ then writes beside this script
 Needs the project installed (``pip install -e .``), Debian's ``chromium`` and Pillow (with
 matplotlib). The PNGs are quantised to 256 colours to stay small.
 """
+
 from __future__ import annotations
 
 import base64
@@ -44,8 +45,7 @@ WHAT = {  # channel name suffix -> what a Foxglove panel shows of it
 
 
 def replay(*args, cwd):
-    subprocess.run([sys.executable, "-m", "replay.cli", *args], cwd=cwd, check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-m", "replay.cli", *args], cwd=cwd, check=True, stdout=subprocess.DEVNULL)
 
 
 def chromium(html_path: Path, png: Path, height: int) -> None:
@@ -53,11 +53,24 @@ def chromium(html_path: Path, png: Path, height: int) -> None:
     if exe is None:
         sys.exit("make_screenshots: chromium not found (Debian: apt-get install chromium)")
     work = png.parent / "profile"
-    cmd = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--no-first-run",
-           "--disable-background-networking", "--disable-component-update", "--disable-sync",
-           "--disable-extensions", f"--user-data-dir={work}", "--host-resolver-rules=MAP * ~NOTFOUND",
-           "--virtual-time-budget=5000", f"--window-size={WIDTH},{height}", f"--screenshot={png}",
-           html_path.resolve().as_uri()]
+    cmd = [
+        exe,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--disable-extensions",
+        f"--user-data-dir={work}",
+        "--host-resolver-rules=MAP * ~NOTFOUND",
+        "--virtual-time-budget=5000",
+        f"--window-size={WIDTH},{height}",
+        f"--screenshot={png}",
+        html_path.resolve().as_uri(),
+    ]
     subprocess.run(cmd, check=True, capture_output=True, timeout=120)
 
 
@@ -87,11 +100,16 @@ def read_mcap(path: Path):
         for cid, ch in sorted(summary.channels.items()):
             schema = summary.schemas[ch.schema_id]
             kind = ch.topic.rsplit("/", 1)[-1]
-            what = WHAT.get(kind, "the sensor's values at its valid samples (Plot panel)"
-                            if ch.topic.startswith("/sensors/") else "identity map -> enu, once")
+            what = WHAT.get(
+                kind,
+                "the sensor's values at its valid samples (Plot panel)"
+                if ch.topic.startswith("/sensors/")
+                else "identity map -> enu, once",
+            )
             if ch.topic.startswith("/replay/reference/"):
                 what = what.replace("the estimate's position and heading", "the reference position").replace(
-                    "the whole trajectory", "the whole reference trajectory")
+                    "the whole trajectory", "the whole reference trajectory"
+                )
             rows.append((ch.topic, f"{schema.name} ({ch.message_encoding})", counts.get(cid, 0), what))
         fh.seek(0)
         for _, ch, msg in make_reader(fh).iter_messages():
@@ -121,16 +139,29 @@ def tracks_figure(xy, err) -> str:
     a, b = axes[0]
     for track, (x, y) in xy.items():
         ref = track == "reference"
-        a.plot(x, y, color="black" if ref else pal.colour(track), ls="--" if ref else "-", lw=1.4 if ref else 1,
-               label=track)
-    a.set(xlabel=plots.label("east", "m"), ylabel=plots.label("north", "m"),
-          title="/replay/<track>/pose, decoded from run.mcap (run 0)")
+        a.plot(
+            x,
+            y,
+            color="black" if ref else pal.colour(track),
+            ls="--" if ref else "-",
+            lw=1.4 if ref else 1,
+            label=track,
+        )
+    a.set(
+        xlabel=plots.label("east", "m"),
+        ylabel=plots.label("north", "m"),
+        title="/replay/<track>/pose, decoded from run.mcap (run 0)",
+    )
     a.set_aspect("equal", adjustable="datalim")
     for track, (t, norm) in err.items():
         t = np.asarray(t)
         b.plot(t - t[0], norm, color=pal.colour(track), lw=1, label=track)
-    b.set(xlabel="t (s)", ylabel=plots.label("position error", "m"), yscale="log",
-          title="/replay/<filter>/error: field norm, decoded from run.mcap")
+    b.set(
+        xlabel="t (s)",
+        ylabel=plots.label("position error", "m"),
+        yscale="log",
+        title="/replay/<filter>/error: field norm, decoded from run.mcap",
+    )
     for ax in (a, b):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
@@ -141,8 +172,11 @@ def tracks_figure(xy, err) -> str:
 
 
 def channels_page(rows, xy, err, out: Path) -> None:
-    cells = "\n".join(f"<tr><td><code>{html.escape(t)}</code></td><td>{html.escape(s)}</td>"
-                      f"<td class=n>{n}</td><td>{html.escape(w)}</td></tr>" for t, s, n, w in rows)
+    cells = "\n".join(
+        f"<tr><td><code>{html.escape(t)}</code></td><td>{html.escape(s)}</td>"
+        f"<td class=n>{n}</td><td>{html.escape(w)}</td></tr>"
+        for t, s, n, w in rows
+    )
     total = sum(r[2] for r in rows)
     out.write_text(f"""<!doctype html><html><head><meta charset="utf-8"><style>
 body {{ font: 13px/1.35 sans-serif; margin: 14px 18px; color: #222 }}

@@ -3,6 +3,7 @@
 Bad input raises :class:`replay.util.errors.ReplayError`; :class:`Main` turns it into
 one line on stderr and exit status 2 (no traceback).
 """
+
 from __future__ import annotations
 
 import sys

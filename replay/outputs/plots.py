@@ -23,6 +23,7 @@ It imports nothing of replay but the palette (numpy, scipy, matplotlib without p
                     "Paper 001, dive 3: depth error over 100 runs", stat="rmse")
     save(fig, "docs/reproduction/001_depth.png")
 """
+
 from __future__ import annotations
 
 import warnings
@@ -67,7 +68,7 @@ def centre(values, stat: str = "median"):
         if stat == "mean":
             return np.nanmean(v, axis=0)
         if stat == "rmse":
-            return np.sqrt(np.nanmean(v ** 2, axis=0))
+            return np.sqrt(np.nanmean(v**2, axis=0))
     raise ValueError(f"stat {stat!r}: median, mean or rmse")
 
 
@@ -90,7 +91,7 @@ def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.2
         band.set_label(f"_{q[0]:g}-{q[1]:g} % of {len(values)} runs")
         for edge in (lo, hi):
             ax.plot(tt, edge, color=color, lw=0.5, alpha=0.8, gid=name)
-    centre_line, = ax.plot(tt, mid, color=color, lw=lw, label=name, gid=name)
+    (centre_line,) = ax.plot(tt, mid, color=color, lw=lw, label=name, gid=name)
     return centre_line
 
 
@@ -129,13 +130,33 @@ def masked_spans(ax, t, valid, text="reference masked"):
         return
     edges = np.flatnonzero(np.diff(np.r_[0, (~valid).astype(int), 0]))
     for i, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
-        ax.axvspan(t[a], t[min(b, len(t) - 1)], color="#f0f0f0", hatch="//", ec="#d0d0d0", lw=0,
-                   label=text if i == 0 else None, gid="masked", zorder=0)
+        ax.axvspan(
+            t[a],
+            t[min(b, len(t) - 1)],
+            color="#f0f0f0",
+            hatch="//",
+            ec="#d0d0d0",
+            lw=0,
+            label=text if i == 0 else None,
+            gid="masked",
+            zorder=0,
+        )
 
 
-def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: str = "median",
-              q=(5, 95), logy: bool = False, palette: Palette | None = None, xlabel: str = "t (s)",
-              ncols: int = 3, join=()):
+def mc_figure(
+    t,
+    curves: dict,
+    name: str,
+    unit: str | None,
+    title: str,
+    stat: str = "median",
+    q=(5, 95),
+    logy: bool = False,
+    palette: Palette | None = None,
+    xlabel: str = "t (s)",
+    ncols: int = 3,
+    join=(),
+):
     """One panel per filter: its centre line and ``q`` band over runs, the others' centre lines
     in grey for context; shared axes. ``curves``: {label: (runs, steps) values against ``t``}
     (signed or absolute errors; with ``stat="rmse"`` the line is the RMSE over the runs at each
@@ -153,8 +174,9 @@ def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, stat: st
                 ax.plot(*(joined if other in join else line)(t, m), color=CONTEXT, lw=0.7, alpha=0.7)
         mc_band(ax, t, v, pal.colour(lab), lab, q=q, stat=stat, join=lab in join)
         runs = np.atleast_2d(v).shape[0]
-        ax.set_title(f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""),
-                     fontsize=9)
+        ax.set_title(
+            f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""), fontsize=9
+        )
         if logy and (np.asarray(v, float) > 0).any():  # all zero (an estimate equal to the reference): linear
             ax.set_yscale("log")
         ax.grid(alpha=0.3)

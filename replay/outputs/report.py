@@ -22,6 +22,7 @@ filter name), masked reference samples and time gaps left as gaps. ``report.html
 the PNGs (base64) and loads nothing else (its Content-Security-Policy forbids it): one file
 to send or archive.
 """
+
 from __future__ import annotations
 
 import base64
@@ -32,29 +33,31 @@ from replay.outputs import plots, report_plots, report_tables
 from replay.outputs.palette import Palette
 from replay.outputs.report_data import load
 
-STYLE = ("body{font-family:sans-serif;margin:2em;max-width:1400px;color:#222}"
-         "table{border-collapse:collapse;font-size:12px;margin:0.5em 0 1em}"
-         "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
-         "td:first-child,th:first-child{text-align:left}table.summary td{text-align:left}"
-         "td.best{font-weight:bold}img{max-width:100%}figure{margin:1em 0}"
-         "figcaption{font-size:12px;color:#555}"
-         ".sw{display:inline-block;width:0.9em;height:0.9em;margin-right:0.35em;vertical-align:-0.1em;"
-         "border:1px solid #0003}.legend{font-size:13px}.note{font-size:12px;color:#555}")
+STYLE = (
+    "body{font-family:sans-serif;margin:2em;max-width:1400px;color:#222}"
+    "table{border-collapse:collapse;font-size:12px;margin:0.5em 0 1em}"
+    "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
+    "td:first-child,th:first-child{text-align:left}table.summary td{text-align:left}"
+    "td.best{font-weight:bold}img{max-width:100%}figure{margin:1em 0}"
+    "figcaption{font-size:12px;color:#555}"
+    ".sw{display:inline-block;width:0.9em;height:0.9em;margin-right:0.35em;vertical-align:-0.1em;"
+    "border:1px solid #0003}.legend{font-size:13px}.note{font-size:12px;color:#555}"
+)
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
 
 CAPTIONS = {
     "trajectory": "Reference (black; gaps where it is masked) and each filter's estimate, run 0 beside the "
-                  "worst run (the highest median position RMSE over the filters). A recorded estimate is drawn "
-                  "as scored (after its align fit) through the reference samples it was associated with; with "
-                  "recorded estimates only, the reference is drawn through those samples.",
+    "worst run (the highest median position RMSE over the filters). A recorded estimate is drawn "
+    "as scored (after its align fit) through the reference samples it was associated with; with "
+    "recorded estimates only, the reference is drawn through those samples.",
     "error": "Position error norm per step: median over the runs (line) and 5-95 % of the runs (band with "
-             "thin outlines), one panel per filter; the other filters' medians in grey. Grey spans: reference "
-             "masked (nothing scored).",
+    "thin outlines), one panel per filter; the other filters' medians in grey. Grey spans: reference "
+    "masked (nothing scored).",
     "metrics": "Leaderboard metrics: mean over the non-diverged runs with its 95 % Student-t interval.",
     "nees": "Average NEES over the runs per step; grey: the 95 % chi-square band for that many runs. Above "
-            "the band: optimistic (covariance too small); below: pessimistic.",
+    "the band: optimistic (covariance too small); below: pessimistic.",
     "nis": "Average NIS over the runs per step (Kalman-family filters) against the 95 % chi-square band "
-           "for the measurement dimension of each step.",
+    "for the measurement dimension of each step.",
 }
 
 
@@ -82,11 +85,15 @@ def make_report(d: Path, out: Path | None = None) -> Path:
     pal = page_palette(sections)
     out = Path(out) if out else d / "report"
     out.mkdir(parents=True, exist_ok=True)
-    parts = [f"<h1>replay report: {html.escape(str(d))}</h1>",
-             "<h2>Summary</h2>", report_tables.summary_table(sections, pal),
-             "<p class='note'>Lowest mean position RMSE over the runs per dataset and task, with its 95 % "
-             f"interval; filters within {report_tables.TIE:g} m of it are tied. Colours (the same in every "
-             "figure):</p>", report_tables.legend(pal)]
+    parts = [
+        f"<h1>replay report: {html.escape(str(d))}</h1>",
+        "<h2>Summary</h2>",
+        report_tables.summary_table(sections, pal),
+        "<p class='note'>Lowest mean position RMSE over the runs per dataset and task, with its 95 % "
+        f"interval; filters within {report_tables.TIE:g} m of it are tied. Colours (the same in every "
+        "figure):</p>",
+        report_tables.legend(pal),
+    ]
     for i, sec in enumerate(sections):
         parts += [f"<h2 id='s{i}'>{html.escape(sec.title)}</h2>", report_tables.leaderboard(sec.rows, pal)]
         if sec.paired:
@@ -94,12 +101,17 @@ def make_report(d: Path, out: Path | None = None) -> Path:
         for name, fig in report_plots.section_figures(sec, pal):
             png = plots.save(fig, out / f"{name}_{i}.png", dpi=100)
             b64 = base64.b64encode(png.read_bytes()).decode()
-            parts.append(f"<figure><img alt='{name} {html.escape(sec.title)}' src='data:image/png;base64,{b64}'>"
-                         f"<figcaption>{html.escape(CAPTIONS[name])}</figcaption></figure>")
-    page = ("<!doctype html><html><head><meta charset='utf-8'>"
-            f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\">"
-            f"<title>replay report: {html.escape(d.name)}</title><style>{STYLE}</style></head><body>\n"
-            + "\n".join(parts) + "\n</body></html>\n")
+            parts.append(
+                f"<figure><img alt='{name} {html.escape(sec.title)}' src='data:image/png;base64,{b64}'>"
+                f"<figcaption>{html.escape(CAPTIONS[name])}</figcaption></figure>"
+            )
+    page = (
+        "<!doctype html><html><head><meta charset='utf-8'>"
+        f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\">"
+        f"<title>replay report: {html.escape(d.name)}</title><style>{STYLE}</style></head><body>\n"
+        + "\n".join(parts)
+        + "\n</body></html>\n"
+    )
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path

@@ -12,6 +12,7 @@ reference: it is ``pos - err``, so a recorded estimate's is known only where it 
 position in the first ``d`` state components (``Problem.position_index`` is ``(0, ..., d-1)``),
 which is how ``pos`` is read.
 """
+
 from __future__ import annotations
 
 import csv
@@ -53,8 +54,13 @@ def _rmse(err) -> float:
 
 
 def _series(t, pos, ref, err, extra=None) -> dict:
-    s = {"t": np.asarray(t, float), "pos": pos, "ref": ref, "err": err,
-         "valid": np.isfinite(ref).all(axis=1) & np.isfinite(err).all(axis=1)}
+    s = {
+        "t": np.asarray(t, float),
+        "pos": pos,
+        "ref": ref,
+        "err": err,
+        "valid": np.isfinite(ref).all(axis=1) & np.isfinite(err).all(axis=1),
+    }
     s.update(extra or {})
     return s
 
@@ -93,8 +99,9 @@ def load_campaign(d: Path) -> list[Section]:
             ref = np.column_stack([raw[f"ref_{a}"] for a in axes])
             err = np.column_stack([raw[f"err_{a}"] for a in axes])
             pos = np.column_stack([raw[f"x{j}"] for j in range(len(axes))])
-            runs[rec["run"]] = _series(raw["t"], pos, ref, err,
-                                       {k: np.asarray(raw[k], float) for k in ("nees", "nis", "nis_dof") if k in raw})
+            runs[rec["run"]] = _series(
+                raw["t"], pos, ref, err, {k: np.asarray(raw[k], float) for k in ("nees", "nis", "nis_dof") if k in raw}
+            )
             mets[rec["run"]] = {k: v for k, v in rec["metrics"].items() if isinstance(v, (int, float))}
             mets[rec["run"]].setdefault("pos_rmse", _rmse(err))
             sec.axes = sec.axes or axes
@@ -128,7 +135,7 @@ def load_eval(d: Path) -> list[Section]:
             head = fh.readline().strip().split(",")
             data = np.loadtxt(fh, delimiter=",", ndmin=2)
         col = {name: data[:, i] for i, name in enumerate(head)}
-        name = path.name[:-len(".csv.gz")]
+        name = path.name[: -len(".csv.gz")]
         extra = {"ref_sparse": True} if is_recorded(name) else None  # its reference: where it was associated
         axes = tuple(h[4:] for h in head if h.startswith("err_"))  # the position axes, in order
         sec.axes = sec.axes or axes
@@ -154,9 +161,18 @@ def _paired_columns(rows) -> list[dict]:
     for r in rows:
         for k, v in r.items():
             if k.startswith("pos_rmse_vs_") and not k.endswith("_ci95") and v not in ("", None):
-                out.append({"dataset": r.get("dataset"), "task": r.get("task"), "a": str(r.get("label")),
-                            "b": k[len("pos_rmse_vs_"):], "metric": "pos_rmse", "n": r.get("runs"), "diff": v,
-                            "diff_ci95": r.get(f"{k}_ci95")})
+                out.append(
+                    {
+                        "dataset": r.get("dataset"),
+                        "task": r.get("task"),
+                        "a": str(r.get("label")),
+                        "b": k[len("pos_rmse_vs_") :],
+                        "metric": "pos_rmse",
+                        "n": r.get("runs"),
+                        "diff": v,
+                        "diff_ci95": r.get(f"{k}_ci95"),
+                    }
+                )
     return out
 
 
@@ -179,8 +195,9 @@ def load(d: Path) -> list[Section]:
     elif (d / "estimates").is_dir():
         sections = load_eval(d)
     else:
-        raise ReplayError(f"{d}: not a result directory (no units/ from `replay campaign run`, "
-                          "no estimates/ from `replay eval`)")
+        raise ReplayError(
+            f"{d}: not a result directory (no units/ from `replay campaign run`, no estimates/ from `replay eval`)"
+        )
     if not sections:
         raise ReplayError(f"{d}: no finished runs to report")
     return sections

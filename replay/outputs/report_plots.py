@@ -7,6 +7,7 @@ and from a campaign ``nees`` and ``nis`` (average over runs per step against the
 chi-square band). Every artist drawn for a configuration has its label as ``gid`` and its
 colour from one :class:`~replay.outputs.palette.Palette` for the whole page.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,10 +19,17 @@ from replay.outputs.report_data import Section, worst_run
 CLIP = (1e-3, 1e6)  # NEES of a collapsed particle cloud reaches 1e190: keep the axes readable
 
 # leaderboard metrics drawn in the metrics figure: column, name, unit
-METRICS = [("pos_rmse", "position RMSE", "m"), ("ate", "ATE (aligned)", "m"), ("final_err", "final error", "m"),
-           ("drift_pct", "drift", "% of distance"), ("heading_rmse", "heading RMSE", "rad"),
-           ("yaw_rmse", "yaw RMSE", "rad"), ("pitch_rmse", "pitch RMSE", "rad"), ("roll_rmse", "roll RMSE", "rad"),
-           ("us_per_step", "filter time per step", "µs")]
+METRICS = [
+    ("pos_rmse", "position RMSE", "m"),
+    ("ate", "ATE (aligned)", "m"),
+    ("final_err", "final error", "m"),
+    ("drift_pct", "drift", "% of distance"),
+    ("heading_rmse", "heading RMSE", "rad"),
+    ("yaw_rmse", "yaw RMSE", "rad"),
+    ("pitch_rmse", "pitch RMSE", "rad"),
+    ("roll_rmse", "roll RMSE", "rad"),
+    ("us_per_step", "filter time per step", "µs"),
+]
 _H = {"east": 0, "x": 0, "north": 1, "y": 1}
 
 
@@ -85,8 +93,16 @@ def _estimates(ax, sec: Section, pal: Palette, run: int, cols, ref):
             xy = (plots.joined if lab in sec.sparse else plots.line)(s["t"], *(s["pos"][:, c] for c in cols))
             ax.plot(*xy[-2:], lw=1, label=lab, gid=lab, **_still(xy[-2:]), **pal.style(lab))
     xy = (plots.joined if ref["sparse"] else plots.line)(ref["t"], *(ref["ref"][:, c] for c in cols))
-    ax.plot(*xy[-2:], color=REFERENCE, lw=1.1, ls=(0, (4, 2)), label="reference", gid="reference", zorder=5,
-            **_still(xy[-2:]))
+    ax.plot(
+        *xy[-2:],
+        color=REFERENCE,
+        lw=1.1,
+        ls=(0, (4, 2)),
+        label="reference",
+        gid="reference",
+        zorder=5,
+        **_still(xy[-2:]),
+    )
 
 
 def _still(xy) -> dict:
@@ -106,8 +122,12 @@ def trajectory(sec: Section, pal: Palette):
     plane = _plane_axes(sec.axes) if d >= 2 else None
     timed = [i for i in range(d) if plane is None or (d == 3 and i not in plane)]
     heights = [1.8] * (plane is not None) + [1] * len(timed)
-    fig, axes = plots.figure(len(heights), len(views), figsize=(6.4 * len(views), 2.6 * sum(heights) + 0.6),
-                             gridspec_kw={"height_ratios": heights})
+    fig, axes = plots.figure(
+        len(heights),
+        len(views),
+        figsize=(6.4 * len(views), 2.6 * sum(heights) + 0.6),
+        gridspec_kw={"height_ratios": heights},
+    )
     for c, (run, what) in enumerate(views):
         ref = _reference(sec, run)
         row = 0
@@ -116,8 +136,11 @@ def trajectory(sec: Section, pal: Palette):
             ax = axes[0, c]
             _estimates(ax, sec, pal, run, (h, v), ref)
             still = all(ln.get_marker() == "o" for ln in ax.lines)
-            ax.set(xlabel=plots.label(sec.axes[h], "m"), ylabel=plots.label(sec.axes[v], "m"),
-                   title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}" + (" (no motion in it)" if still else ""))
+            ax.set(
+                xlabel=plots.label(sec.axes[h], "m"),
+                ylabel=plots.label(sec.axes[v], "m"),
+                title=f"{sec.axes[h]}-{sec.axes[v]} plane, {what}" + (" (no motion in it)" if still else ""),
+            )
             ax.set_aspect("equal", adjustable="datalim")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
@@ -141,17 +164,25 @@ def trajectory(sec: Section, pal: Palette):
 def error(sec: Section, pal: Palette):
     curves, t = {}, None
     for lab, runs in sec.runs.items():
-        curves[lab], tt = _stack(runs, "err", lambda e: np.sqrt(np.sum(e ** 2, axis=1)))
+        curves[lab], tt = _stack(runs, "err", lambda e: np.sqrt(np.sum(e**2, axis=1)))
         t = tt if t is None or len(tt) < len(t) else t
-    curves = {lab: v[:, :len(t)] for lab, v in curves.items()}
-    fig = plots.mc_figure(t, curves, "position error", "m",
-                          f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
-                          "grey: the other filters' medians)", logy=True, palette=pal, join=sec.sparse)
+    curves = {lab: v[:, : len(t)] for lab, v in curves.items()}
+    fig = plots.mc_figure(
+        t,
+        curves,
+        "position error",
+        "m",
+        f"{sec.title}: position error over time (median and 5-95 % of the runs per filter; "
+        "grey: the other filters' medians)",
+        logy=True,
+        palette=pal,
+        join=sec.sparse,
+    )
     dense = [s for runs in sec.runs.values() for s in runs.values() if not s.get("ref_sparse")]
     valid = np.isfinite(dense[0]["ref"]).all(axis=1) if dense else None  # eval, recorded only: unknown
     for ax in fig.axes:
         if ax.get_visible() and valid is not None:
-            plots.masked_spans(ax, t, valid[:len(t)])
+            plots.masked_spans(ax, t, valid[: len(t)])
     fig.axes[0].legend(fontsize=7, loc="upper left")
     return fig
 
@@ -176,19 +207,25 @@ def metrics(sec: Section, pal: Palette):
                 ax.plot([v - ci, v + ci], [yi, yi], color=c, lw=2.2, solid_capstyle="butt", gid=lab)
             ax.plot([v], [yi], "o", color=c, ms=5, gid=lab)
             if col == "pos_rmse" and _f(r.get("lost")) > 0:
-                ax.annotate(f" lost {int(_f(r['lost']))}/{int(_f(r.get('runs')))}", (v, yi), fontsize=7,
-                            va="bottom", color="0.3")
+                ax.annotate(
+                    f" lost {int(_f(r['lost']))}/{int(_f(r.get('runs')))}",
+                    (v, yi),
+                    fontsize=7,
+                    va="bottom",
+                    color="0.3",
+                )
         ax.set_yticks(y, [str(r.get("label")) for r in rows], fontsize=8)
         ax.set_ylim(-0.7, len(rows) - 0.3)
         ax.set_xlabel(plots.label(name, unit))
-        ax.set_title(name + (": median per step" if col == "us_per_step" else ": mean over runs, 95 % interval"),
-                     fontsize=9)
+        ax.set_title(
+            name + (": median per step" if col == "us_per_step" else ": mean over runs, 95 % interval"), fontsize=9
+        )
         vals = [_f(r.get(col)) for r in rows]
         vals = [v for v in vals if np.isfinite(v) and v > 0]
         if vals and max(vals) / min(vals) > 50:
             ax.set_xscale("log")
         ax.grid(axis="x", alpha=0.3)
-    for ax in axes.flat[len(have):]:
+    for ax in axes.flat[len(have) :]:
         ax.set_visible(False)
     plots.suptitle(fig, f"{sec.title}: leaderboard metrics")
     fig.subplots_adjust(hspace=0.6, wspace=0.45)
@@ -196,8 +233,11 @@ def metrics(sec: Section, pal: Palette):
 
 
 def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
-    have = {lab: runs for lab, runs in sec.runs.items()
-            if all(key in s for s in runs.values()) and any(np.isfinite(s[key]).any() for s in runs.values())}
+    have = {
+        lab: runs
+        for lab, runs in sec.runs.items()
+        if all(key in s for s in runs.values()) and any(np.isfinite(s[key]).any() for s in runs.values())
+    }
     if not have:
         return None
     fig, ax = plots.figure(figsize=(12, 4.4))
@@ -209,8 +249,14 @@ def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
         clipped |= bool(np.any((avg < CLIP[0]) | (avg > CLIP[1])))
         tt, avg = plots.line(t, np.clip(avg, *CLIP))
         flag = flags.get(lab, "")
-        ax.plot(tt, avg, lw=1, label=lab + (f" ({flag})" if flag and flag != "consistent" else ""), gid=lab,
-                **pal.style(lab))
+        ax.plot(
+            tt,
+            avg,
+            lw=1,
+            label=lab + (f" ({flag})" if flag and flag != "consistent" else ""),
+            gid=lab,
+            **pal.style(lab),
+        )
         counts.append(len(vals))
     runs_n = max(set(counts), key=counts.count)
     if key == "nees":
@@ -220,9 +266,13 @@ def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
         dof = dofs[0]
     plots.chi2_band(ax, t, dof, runs_n)
     what = f"position, d = {len(sec.axes)}" if key == "nees" else "innovation, d per step"
-    ax.set(xlabel="t (s)", ylabel=plots.label(f"average {key.upper()} over runs", "dimensionless"), yscale="log",
-           title=f"{sec.title}: {key.upper()} ({what}) against the 95 % chi-square band"
-                 + (f" (values clipped to [{CLIP[0]:g}, {CLIP[1]:g}])" if clipped else ""))
+    ax.set(
+        xlabel="t (s)",
+        ylabel=plots.label(f"average {key.upper()} over runs", "dimensionless"),
+        yscale="log",
+        title=f"{sec.title}: {key.upper()} ({what}) against the 95 % chi-square band"
+        + (f" (values clipped to [{CLIP[0]:g}, {CLIP[1]:g}])" if clipped else ""),
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     return fig
@@ -231,7 +281,11 @@ def _consistency(sec: Section, pal: Palette, key: str, flags: dict):
 def section_figures(sec: Section, pal: Palette) -> list:
     """``[(name, Figure)]`` of one section (figures that have nothing to show are left out)."""
     flags = {str(r.get("label")): r for r in sec.rows}
-    out = [("trajectory", trajectory(sec, pal)), ("error", error(sec, pal)), ("metrics", metrics(sec, pal)),
-           ("nees", _consistency(sec, pal, "nees", {k: r.get("anees_flag", "") for k, r in flags.items()})),
-           ("nis", _consistency(sec, pal, "nis", {k: r.get("anis_flag", "") for k, r in flags.items()}))]
+    out = [
+        ("trajectory", trajectory(sec, pal)),
+        ("error", error(sec, pal)),
+        ("metrics", metrics(sec, pal)),
+        ("nees", _consistency(sec, pal, "nees", {k: r.get("anees_flag", "") for k, r in flags.items()})),
+        ("nis", _consistency(sec, pal, "nis", {k: r.get("anis_flag", "") for k, r in flags.items()})),
+    ]
     return [(name, fig) for name, fig in out if fig is not None]

@@ -23,12 +23,12 @@ from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
 from replay.models.auv_sonar import R_TABLE2
 
+from .p002_claims import TUNE_SEQ
 from .pool import pool, run_longest_first, workers
 from .rules import per_run
 from .verdict import Stopwatch, footer, write_document
 
 GRID = (0.01, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # q_scale of the tuned baselines, declared
-TUNE_SEQ = "bohai/20220822_0_0"  # the Bohai tuning sequence (not scored with tuned rows)
 COLS = ("pos_rmse", "x_rmse", "y_rmse", "pitch_rmse", "yaw_rmse")
 
 
@@ -146,7 +146,6 @@ SIM = (
         ),
     ),
 )
-B_PAPER = {"igwo-stcpf": 1.2853, "stckf": 3.68, "pf (N = 100)": 6.6236, "pso-cpf": 3.4149}
 B_ARMS = (
     A("igwo-stcpf"),
     A("pso-cpf"),

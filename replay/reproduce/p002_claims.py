@@ -9,7 +9,6 @@ import numpy as np
 
 from replay.filters.p002 import swarm_kernels
 
-from .p002 import B_PAPER, TUNE_SEQ
 from .render import anchor_tag, render, table
 from .rules import Claim, Comparison, Rule, decide
 
@@ -20,6 +19,9 @@ BEFORE = (
     "IGWO-STCPF with its estimate taken before the swarm's move (estimate_at = before) on the last sequence, "
     "1 Hz and 10 Hz: smaller error (paired)"
 )
+
+TUNE_SEQ = "bohai/20220822_0_0"  # the Bohai tuning sequence (not scored with tuned rows)
+B_PAPER = {"igwo-stcpf": 1.2853, "stckf": 3.68, "pf (N = 100)": 6.6236, "pso-cpf": 3.4149}
 
 
 def C(id, words, paper, ev, decides, cells, statistic, test="auto", **kw):

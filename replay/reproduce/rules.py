@@ -34,6 +34,7 @@ Tests (:data:`TESTS`; every p-value one-sided, "a < b": list the arm claimed sma
 
 Rendering: :mod:`replay.reproduce.render` (the verdict table, templates).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -48,8 +49,13 @@ MECHANISM = "not reproduced — mechanism shown"
 NOT = "not reproduced"
 LABELS = (REPRODUCED, RECOVERED, MECHANISM, NOT)
 TESTS = ("auto", "t", "wilcoxon", "mcnemar", "fisher", "interval")
-TEST_NAMES = {"t": "paired t", "wilcoxon": "Wilcoxon signed-rank", "mcnemar": "exact McNemar",
-              "fisher": "Fisher exact", "interval": "95 % interval holds the paper's number"}
+TEST_NAMES = {
+    "t": "paired t",
+    "wilcoxon": "Wilcoxon signed-rank",
+    "mcnemar": "exact McNemar",
+    "fisher": "Fisher exact",
+    "interval": "95 % interval holds the paper's number",
+}
 
 
 @dataclass(frozen=True)
@@ -83,17 +89,23 @@ class Rule:
             raise ValueError(f"rule alpha {self.alpha}: between 0 and 1")
         if self.need is not None and self.need != "majority" and not (isinstance(self.need, int) and self.need >= 1):
             raise ValueError(f"rule need {self.need!r}: at least 1 comparison, 'majority' or None (every one)")
-        for key, words, what in ((self.condition, self.condition_text, "condition"),
-                                 (self.mechanism, self.mechanism_text, "mechanism")):
+        for key, words, what in (
+            (self.condition, self.condition_text, "condition"),
+            (self.mechanism, self.mechanism_text, "mechanism"),
+        ):
             if bool(key) != bool(words):
                 raise ValueError(f"rule {what}: its evidence key and its words are declared together")
 
     def text(self) -> str:
         """The rule in words, as the document prints it beside the verdict."""
         need = {None: "every comparison", "majority": "more than half of the comparisons"}.get(
-            self.need, f"at least {self.need} comparison(s)")
-        how = (f"{need} inside the interval" if self.test == "interval" else
-               f"{need} significant at α = {self.alpha:g} (one-sided, Holm-adjusted over the family)")
+            self.need, f"at least {self.need} comparison(s)"
+        )
+        how = (
+            f"{need} inside the interval"
+            if self.test == "interval"
+            else f"{need} significant at α = {self.alpha:g} (one-sided, Holm-adjusted over the family)"
+        )
         out = f"{self.statistic}; cells: {self.cells}; {how}"
         if self.condition_text:
             out += f"; stated condition: {self.condition_text}"
@@ -294,5 +306,6 @@ def _verdict(cl: Claim, out: dict) -> Verdict:
 
 def counts(verdicts: list[Verdict]) -> str:
     """``"1 reproduced, 2 recovered under a stated condition, ... (of N claims)"``."""
-    return ", ".join(f"{sum(v.label == lab for v in verdicts)} {lab}" for lab in LABELS) + \
-        f" (of {len(verdicts)} claims)."
+    return (
+        ", ".join(f"{sum(v.label == lab for v in verdicts)} {lab}" for lab in LABELS) + f" (of {len(verdicts)} claims)."
+    )

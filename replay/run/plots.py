@@ -15,6 +15,7 @@ Figures are made without pyplot (no global state, nothing shown by itself); in a
 the returned figure is displayed, ``fig.savefig(path)`` writes it. ``ax=`` draws into an
 existing axes instead (its figure is returned).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -66,7 +67,7 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
         t = np.asarray(first.t, float) if first is not None else np.arange(len(truth), dtype=float)
         truth = np.column_stack(line(t, truth[:, 0], truth[:, 1])[1:])  # held at GPS fixes only: not dots
         ax.plot(truth[:, 0], truth[:, 1], color="k", lw=3.0, label="reference")
-        for res in ([tables.result(source, f) for f in filters] if filters else source.results):
+        for res in [tables.result(source, f) for f in filters] if filters else source.results:
             problem = res.records[run].get("problem") if len(res.records) > run else None
             if problem is None:
                 continue
@@ -80,8 +81,13 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
         off, labels = _geo(source.meta, utm)
         ref = source.reference.get("position")
         if ref is not None:
-            p = _en(np.where(ref.valid[:, None], np.asarray(ref.values, float).reshape(len(ref), -1), np.nan),
-                    ref.components or ("x", "y")) + off
+            p = (
+                _en(
+                    np.where(ref.valid[:, None], np.asarray(ref.values, float).reshape(len(ref), -1), np.nan),
+                    ref.components or ("x", "y"),
+                )
+                + off
+            )
             ax.plot(p[:, 0], p[:, 1], color="k", lw=2.0, label="reference")
         gps = _gps(source)
         if gps is not None:
@@ -145,7 +151,7 @@ def plot_paired(ev, *, ax=None, metric: str = "pos_rmse"):
     col = next((k for r in ev.rows for k in r if k.startswith(f"{metric}_vs_") and not k.endswith("_ci95")), None)
     if col is None:
         raise ValueError(f"no paired {metric} column: the evaluation needs two filters or more")
-    base = col[len(metric) + 4:]
+    base = col[len(metric) + 4 :]
     rows = [r for r in ev.rows if r["label"] != base]
     diff = np.array([float(r[col]) for r in rows])
     ci = np.array([float(r[f"{col}_ci95"]) for r in rows])

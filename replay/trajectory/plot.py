@@ -16,6 +16,7 @@ Time in seconds from the reference's first matched pose; every axis names its un
 (the convention of :mod:`replay.outputs.plots`). ``--plot FILE`` writes the ``trajectories`` figure
 to FILE and each other one beside it as ``<stem>_<kind><suffix>`` (:func:`paths`).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,15 +25,31 @@ import numpy as np
 
 from replay.trajectory.pose_error import UNITS
 from replay.util.errors import ReplayError
+from replay.trajectory.plot_series import REFERENCE, first_stamp
+from replay.trajectory.plot_series import rpy as rpy_figure
+from replay.trajectory.plot_series import xyz as xyz_figure
+
 
 FORMATS = ("png", "pdf", "svg", "eps")  # the extensions --plot writes
 KINDS = ("trajectories", "map", "xyz", "rpy")
-MODES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "yx": (1, 0), "zx": (2, 0), "zy": (2, 1),
-         "xyz": (0, 1, 2)}  # evo's --plot_mode: horizontal, vertical axis
-NAMES = {"trans": "translation", "rot": "rotation part", "full": "full pose", "angle_deg": "rotation angle",
-         "angle_rad": "rotation angle", "point_distance": "point distance",
-         "point_distance_error_ratio": "point distance error ratio"}
-REFERENCE = "0.3"  # the reference's colour
+MODES = {
+    "xy": (0, 1),
+    "xz": (0, 2),
+    "yz": (1, 2),
+    "yx": (1, 0),
+    "zx": (2, 0),
+    "zy": (2, 1),
+    "xyz": (0, 1, 2),
+}  # evo's --plot_mode: horizontal, vertical axis
+NAMES = {
+    "trans": "translation",
+    "rot": "rotation part",
+    "full": "full pose",
+    "angle_deg": "rotation angle",
+    "angle_rad": "rotation angle",
+    "point_distance": "point distance",
+    "point_distance_error_ratio": "point distance error ratio",
+}
 
 
 def label(kind: str, rel: str) -> str:
@@ -78,10 +95,6 @@ def draw_track(ax, p, cols, **kw):
     return line
 
 
-def _t0(scores) -> float:
-    return min(s.reference.t[0] for s in scores.values())
-
-
 def figure(reference, scores: dict, *, relation: str | None = None, mode: str = "xy"):
     """The ``trajectories`` figure of the full ``reference`` and ``scores`` {name: Score}."""
     from matplotlib.figure import Figure
@@ -91,9 +104,10 @@ def figure(reference, scores: dict, *, relation: str | None = None, mode: str = 
     fig = Figure(figsize=(13.0, 6.0), layout="constrained")
     grid = fig.add_gridspec(2 if with_rpe else 1, 2, width_ratios=[1.1, 1.0])
     top = track_axes(fig, grid[:, 0], mode)
-    draw_track(top, reference.p, cols, color=REFERENCE, ls="--", lw=1.2, label=f"reference ({reference.name})",
-               gid="reference")
-    t0 = _t0(scores)
+    draw_track(
+        top, reference.p, cols, color=REFERENCE, ls="--", lw=1.2, label=f"reference ({reference.name})", gid="reference"
+    )
+    t0 = first_stamp(scores)
     err_ax = fig.add_subplot(grid[0, 1])
     rpe_ax = fig.add_subplot(grid[1, 1], sharex=err_ax) if with_rpe else None
     for c, (name, s) in enumerate(scores.items()):
@@ -101,8 +115,14 @@ def figure(reference, scores: dict, *, relation: str | None = None, mode: str = 
         line = draw_track(top, s.aligned.p, cols, lw=1.0, color=f"C{c}", label=name, gid=name)
         if rel in s.ape:
             err_ax.plot(s.reference.t - t0, s.ape[rel], lw=0.9, color=line.get_color(), label=name, gid=name)
-            err_ax.axhline(float(np.sqrt(np.mean(s.ape[rel] ** 2))), color=line.get_color(), lw=0.8, ls=":",
-                           label=f"_{name} rmse", gid=f"{name} rmse")
+            err_ax.axhline(
+                float(np.sqrt(np.mean(s.ape[rel] ** 2))),
+                color=line.get_color(),
+                lw=0.8,
+                ls=":",
+                label=f"_{name} rmse",
+                gid=f"{name} rmse",
+            )
             err_ax.set_ylabel(label("APE", rel))
         if rpe_ax is not None and rel in s.rpe and s.rpe_pairs is not None:
             tj, err = rpe_times(s, rel, t0)
@@ -117,8 +137,9 @@ def figure(reference, scores: dict, *, relation: str | None = None, mode: str = 
     if err_ax.lines:
         err_ax.legend(fontsize="small")
     else:  # an RPE-only relation (point_distance_error_ratio)
-        err_ax.text(0.5, 0.5, f"no APE of {relation} (an RPE relation)", ha="center", va="center",
-                    transform=err_ax.transAxes)
+        err_ax.text(
+            0.5, 0.5, f"no APE of {relation} (an RPE relation)", ha="center", va="center", transform=err_ax.transAxes
+        )
         err_ax.set_yticks([])
     if rpe_ax is not None:
         rpe_ax.set_title("relative pose error, at the second pose of each pair")
@@ -152,8 +173,16 @@ def error_map(reference, scores: dict, *, relation: str | None = None, mode: str
     for k, (name, s) in enumerate(have.items()):
         rel = relation_of(s, relation)
         ax = track_axes(fig, grid[k // 3, k % 3], mode)
-        draw_track(ax, reference.p, cols, color=REFERENCE, ls="--", lw=0.9, label=f"reference ({reference.name})",
-                   gid="reference")
+        draw_track(
+            ax,
+            reference.p,
+            cols,
+            color=REFERENCE,
+            ls="--",
+            lw=0.9,
+            label=f"reference ({reference.name})",
+            gid="reference",
+        )
         pts = s.aligned.p[:, cols]
         segs = np.stack([pts[:-1], pts[1:]], axis=1)
         err = s.ape[rel]
@@ -178,15 +207,22 @@ def error_map(reference, scores: dict, *, relation: str | None = None, mode: str
 def figures(reference, scores: dict, *, relation: str | None = None, mode: str = "xy", kinds=KINDS) -> dict:
     """{kind: Figure} of the ``kinds`` (:data:`KINDS`) that have something to show: ``map`` needs an APE
     of the relation, ``rpy`` orientations in the reference and an estimate."""
-    from replay.trajectory import plot_series
 
     check_mode(mode)
-    make = {"trajectories": lambda: figure(reference, scores, relation=relation, mode=mode),
-            "map": lambda: error_map(reference, scores, relation=relation, mode=mode)
-            if any(relation_of(s, relation) in s.ape for s in scores.values()) else None,
-            "xyz": lambda: plot_series.xyz(reference, scores),
-            "rpy": lambda: plot_series.rpy(reference, scores)
-            if reference.q is not None and any(s.aligned.q is not None for s in scores.values()) else None}
+    make = {
+        "trajectories": lambda: figure(reference, scores, relation=relation, mode=mode),
+        "map": lambda: (
+            error_map(reference, scores, relation=relation, mode=mode)
+            if any(relation_of(s, relation) in s.ape for s in scores.values())
+            else None
+        ),
+        "xyz": lambda: xyz_figure(reference, scores),
+        "rpy": lambda: (
+            rpy_figure(reference, scores)
+            if reference.q is not None and any(s.aligned.q is not None for s in scores.values())
+            else None
+        ),
+    }
     out = {kind: make[kind]() for kind in kinds}
     return {kind: fig for kind, fig in out.items() if fig is not None}
 
@@ -198,8 +234,9 @@ def paths(path) -> dict:
     return {kind: p if kind == "trajectories" else p.with_name(f"{p.stem}_{kind}{p.suffix}") for kind in KINDS}
 
 
-def write(path, reference, scores: dict, *, relation: str | None = None, mode: str = "xy",
-          what: str = "--plot") -> tuple[list, list]:
+def write(
+    path, reference, scores: dict, *, relation: str | None = None, mode: str = "xy", what: str = "--plot"
+) -> tuple[list, list]:
     """Save :func:`figures` to :func:`paths` of ``path`` (format from the extension: :data:`FORMATS`),
     each atomically, creating missing parent directories; returns (paths written, paths removed: a
     figure of an earlier call that this one does not draw, e.g. ``_rpy`` without orientations, which
@@ -217,8 +254,9 @@ def write(path, reference, scores: dict, *, relation: str | None = None, mode: s
         figs = figures(reference, scores, relation=relation, mode=mode)
         for kind, fig in figs.items():
             p = outfile.check(where[kind], what, FORMATS)
-            written.append(outfile.write(p, what, lambda tmp, f=fig, p=p: f.savefig(tmp, dpi=120,
-                                                                                    format=p.suffix.lower()[1:])))
+            written.append(
+                outfile.write(p, what, lambda tmp, f=fig, p=p: f.savefig(tmp, dpi=120, format=p.suffix.lower()[1:]))
+            )
     finally:
         ps.setLevel(level)
     removed = [p for kind, p in where.items() if kind not in figs and p.is_file() and not p.is_symlink()]
@@ -226,6 +264,7 @@ def write(path, reference, scores: dict, *, relation: str | None = None, mode: s
         try:
             p.unlink()
         except OSError as e:
-            raise ReplayError(f"{what} {p}: an earlier figure this call does not draw, and it cannot be removed "
-                              f"({e.strerror})") from None
+            raise ReplayError(
+                f"{what} {p}: an earlier figure this call does not draw, and it cannot be removed ({e.strerror})"
+            ) from None
     return written, removed

@@ -3,14 +3,22 @@ yaw (deg) over time, the reference (whole, dashed grey) and each estimate after 
 matched poses, at the reference's stamps). Angles: roll about x, pitch about y, yaw about z, applied
 z-y-x (evo's ``sxyz`` Euler angles), in (-180, 180] deg.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from replay.trajectory.plot import REFERENCE, _t0
 
 AXES = ("x", "y", "z")
 ANGLES = ("roll", "pitch", "yaw")
+
+
+REFERENCE = "0.3"  # the reference's colour (every trajectory figure)
+
+
+def first_stamp(scores) -> float:
+    """The first matched reference stamp over the estimates (time axes start there)."""
+    return min(s.reference.t[0] for s in scores.values())
 
 
 def euler_deg(q) -> np.ndarray:
@@ -29,10 +37,17 @@ def _panels(reference, scores: dict, ref_values, values_of, names, unit: str, ti
 
     fig = Figure(figsize=(11.0, 7.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    t0 = _t0(scores)
+    t0 = first_stamp(scores)
     for k, ax in enumerate(axes):
-        ax.plot(reference.t - t0, ref_values[:, k], color=REFERENCE, ls="--", lw=1.1,
-                label=f"reference ({reference.name})", gid="reference")
+        ax.plot(
+            reference.t - t0,
+            ref_values[:, k],
+            color=REFERENCE,
+            ls="--",
+            lw=1.1,
+            label=f"reference ({reference.name})",
+            gid="reference",
+        )
         for c, (name, s) in enumerate(scores.items()):
             v = values_of(s)
             if v is not None:
@@ -47,12 +62,25 @@ def _panels(reference, scores: dict, ref_values, values_of, names, unit: str, ti
 
 def xyz(reference, scores: dict):
     """x, y, z over time (m), three panels."""
-    return _panels(reference, scores, reference.p, lambda s: s.aligned.p, AXES, "m",
-                   "position over time (estimates aligned as scored)")
+    return _panels(
+        reference,
+        scores,
+        reference.p,
+        lambda s: s.aligned.p,
+        AXES,
+        "m",
+        "position over time (estimates aligned as scored)",
+    )
 
 
 def rpy(reference, scores: dict):
     """Roll, pitch, yaw over time (deg), three panels (estimates without orientations left out)."""
-    return _panels(reference, scores, euler_deg(reference.q),
-                   lambda s: None if s.aligned.q is None else euler_deg(s.aligned.q), ANGLES, "deg",
-                   "orientation over time, z-y-x Euler angles (estimates aligned as scored)")
+    return _panels(
+        reference,
+        scores,
+        euler_deg(reference.q),
+        lambda s: None if s.aligned.q is None else euler_deg(s.aligned.q),
+        ANGLES,
+        "deg",
+        "orientation over time, z-y-x Euler angles (estimates aligned as scored)",
+    )

@@ -5,6 +5,7 @@ only at its own time gaps (:func:`joined`), and so is any series whose finite sa
 isolated (:func:`line`: a reference held only at GPS fixes). Used by the report (:mod:`replay.outputs.plots`) and the
 Python API's figures (:mod:`replay.run.plots`). Imports nothing of replay.
 """
+
 from __future__ import annotations
 
 import numpy as np
