@@ -12,30 +12,21 @@ from pathlib import Path
 import numpy as np
 
 from replay.adapters.geodesy import Geo, plausible_latlon
-from replay.frame import Channel, Frame, Report
+from replay.frame import Frame, Report
 from replay.adapters.options import declare
-from replay.util.errors import DataError, ReplayError
+from replay.util.errors import DataError
 from replay.util.params import Param
 
 from .. import rosmsg
-from ..mapping import Mapping, from_dict, load_mapping, role_of
+from ..mapping import Mapping, from_dict, load_mapping
 from ..mapping_propose import propose
 from . import estimates as recorded
 from . import sources
+from .channels import place_entries, read_sources
 from .reading import read
 from .recording import Recording, Topic
 
 SIM_TIME_BEFORE_NS = 315_532_800 * 10**9  # 1980-01-01: earlier stamps are simulation time
-
-# role -> the message fields (rosmsg converters) a task may take from an entry of that role
-ROLE_FIELDS = {
-    "gps": ("position",),
-    "odometry": ("velocity", "rate"),
-    "imu": ("gyro", "accel", "attitude"),
-    "depth": ("depth",),
-    "velocity": ("velocity",),
-    "pose": ("position", "attitude"),
-}
 
 
 def resolve_mapping(mapping) -> Mapping | None:
@@ -203,98 +194,29 @@ def _check_topics(rec: Recording, mp: Mapping) -> None:
 
 def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Report, until: float | None) -> Frame:
     _check_topics(rec, mp)
-    stamps, other, fields, kinds = {}, {}, {}, {}
-    geo = None
-    for topic_name in mp.topics:  # the projection: the first mapped NavSatFix topic
-        if geo is None and rosmsg.kind_of(rec.topics[topic_name].type) == "navsatfix":
-            geo = _make_geo(rec, rec.topics[topic_name])
-    for e in mp.entries:  # one source per topic (and TF pair), shared by the entries reading it
-        src = sources.key(e)
-        if src not in fields:
-            msgs, logs, kinds[src] = sources.messages(rec, e)
-            stamps[src], other[src] = sources.stamps(rec, e, msgs, logs, time)
-            fields[src] = rosmsg.convert(kinds[src], msgs, geo, opts)
-    axis = np.unique(np.concatenate(list(stamps.values())))
+    geo = _projection(rec, mp)
+    srcs = read_sources(rec, mp, time, geo, opts)
+    axis = np.unique(np.concatenate(list(srcs.stamps.values())))
     t0 = int(axis[0])
-    t = (axis - t0) / 1e9
-    n = len(axis)
     sim = t0 < SIM_TIME_BEFORE_NS
-    channels, reference, roles = {}, {}, {}
-    other_name = "header_time" if time == "log" else "log_time"
-    made = {}  # (group, channel name) -> the entry that made it
-    for e in mp.entries:
-        topic = rec.topics[e.topic]
-        src = sources.key(e)
-        kind = kinds[src]
-        idx = np.searchsorted(axis, stamps[src])
-        group = reference if e.reference else channels
-        keys = [e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}" for f in fields[src]]
-        for key in keys + [f"{e.name}_{other_name}"]:
-            maker = made.setdefault((e.reference, key), e.name)
-            if maker != e.name:
-                raise DataError(
-                    mp.source,
-                    f"[{'reference' if e.reference else 'channels'}] {e.name} "
-                    f"({e.topic}) makes channel {key}, which {maker} makes too: "
-                    "rename one of them",
-                )
-        for fname, (vals, valid, unit, frame, comps, angles, conv) in fields[src].items():
-            key = e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
-            full = np.full((n,) + vals.shape[1:], np.nan)
-            full[idx] = vals
-            ok = np.zeros(n, bool)
-            ok[idx] = valid
-            group[key] = Channel(
-                full, unit, frame, ok, tuple(comps), tuple(angles), conv, f"{e.topic}{e.pair} ({topic.type}) {fname}"
-            )
-        t_other = np.full(n, np.nan)
-        t_other[idx] = (other[src] - t0) / 1e9
-        group[f"{e.name}_{other_name}"] = Channel(
-            t_other,
-            "s",
-            "",
-            np.isin(np.arange(n), idx),
-            description=f"{e.topic} {other_name.replace('_', ' ')}, seconds from t = 0",
-        )
-        role = role_of(e, topic.type, mp.source)
-        if role and role != "none":
-            names = {
-                f: (e.name if f == rosmsg.PRIMARY[kind] else f"{e.name}_{f}")
-                for f in ROLE_FIELDS[role]
-                if f in fields[src]
-            }
-            for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-                for f in value:
-                    if f not in fields[src]:
-                        raise ReplayError(
-                            f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
-                            f"{topic.type} lacks (it has: {', '.join(fields[src])})"
-                        )
-            roles.setdefault(role, []).append(
-                {
-                    "entry": e.name,
-                    "source": f"{e.topic} ({topic.type})",
-                    "declared": e.role is not None,
-                    "channels": names,
-                    **e.fusion,
-                }
-            )
-        primary = fields[src][rosmsg.PRIMARY[kind]][1]
-        report.add(
-            "info",
-            e.name,
-            len(idx),
-            f"{e.topic} ({topic.type}): {len(idx)} messages at their "
-            f"{time} stamps; not valid at the other {n - len(idx)} samples",
-        )
-        if (~primary).any():
-            report.add(
-                "masked",
-                e.name,
-                int((~primary).sum()),
-                f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
-                "NaN, unnormalised quaternion)",
-            )
+    placed = place_entries(rec, mp, time, srcs, axis, report)
+    _report_axis(report, srcs.stamps, len(axis), time, t0, sim)
+    estimates = recorded.build(rec, mp, time, geo, t0, report, _reference_span(mp, srcs.stamps))
+    meta = _frame_meta(rec, mp, time, t0, sim, until, placed.roles, estimates, geo)
+    return Frame(
+        (axis - t0) / 1e9, placed.channels, placed.reference, None if sim else t0 / 1e9, meta, report, estimates
+    )
+
+
+def _projection(rec: Recording, mp: Mapping) -> Geo | None:
+    """The projection: the first mapped NavSatFix topic's."""
+    for topic_name in mp.topics:
+        if rosmsg.kind_of(rec.topics[topic_name].type) == "navsatfix":
+            return _make_geo(rec, rec.topics[topic_name])
+    return None
+
+
+def _report_axis(report: Report, stamps: dict, n: int, time: str, t0: int, sim: bool) -> None:
     shared = sum(len(s) for s in stamps.values()) - n
     report.add(
         "info",
@@ -305,9 +227,14 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     )
     if sim:
         report.add("info", "t", n, f"simulation time: stamps start at {t0 / 1e9:.3f} s; epoch unknown")
+
+
+def _reference_span(mp: Mapping, stamps: dict) -> tuple[int, int] | None:
     refs = [stamps[sources.key(e)] for e in mp.entries if e.reference]
-    span = (min(int(s[0]) for s in refs), max(int(s[-1]) for s in refs)) if refs else None
-    estimates = recorded.build(rec, mp, time, geo, t0, report, span)
+    return (min(int(s[0]) for s in refs), max(int(s[-1]) for s in refs)) if refs else None
+
+
+def _frame_meta(rec: Recording, mp: Mapping, time, t0, sim, until, roles, estimates, geo) -> dict:
     meta = {
         "adapter": "bags",
         "source": str(rec.path),
@@ -325,7 +252,7 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     }
     if geo is not None:
         meta.update(geo.meta())
-    return Frame(t, channels, reference, None if sim else t0 / 1e9, meta, report, estimates)
+    return meta
 
 
 def _make_geo(rec: Recording, topic: Topic) -> Geo:

@@ -1,0 +1,154 @@
+"""The mapped entries of a bag as the frame's channels: one source per topic (and TF pair), each
+entry's fields placed on the union time axis, its role for the tasks, and what the report says."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from replay.frame import Channel, Report
+from replay.util.errors import DataError, ReplayError
+
+from .. import rosmsg
+from ..mapping import Mapping, role_of
+from . import sources
+from .recording import Recording
+
+# role -> the message fields (rosmsg converters) a task may take from an entry of that role
+ROLE_FIELDS = {
+    "gps": ("position",),
+    "odometry": ("velocity", "rate"),
+    "imu": ("gyro", "accel", "attitude"),
+    "depth": ("depth",),
+    "velocity": ("velocity",),
+    "pose": ("position", "attitude"),
+}
+
+
+@dataclass
+class Sources:
+    """Per source (sources.key): its stamps on the chosen time axis, its other time, converted fields, kind."""
+
+    stamps: dict = field(default_factory=dict)
+    other: dict = field(default_factory=dict)
+    fields: dict = field(default_factory=dict)
+    kinds: dict = field(default_factory=dict)
+
+
+@dataclass
+class Placed:
+    """The frame's channels and reference channels, the task roles, and who made each channel name."""
+
+    other_name: str
+    channels: dict = field(default_factory=dict)
+    reference: dict = field(default_factory=dict)
+    roles: dict = field(default_factory=dict)
+    made: dict = field(default_factory=dict)  # (group, channel name) -> the entry that made it
+
+
+def read_sources(rec: Recording, mp: Mapping, time: str, geo, opts: dict) -> Sources:
+    """One source per topic (and TF pair), shared by the entries reading it."""
+    srcs = Sources()
+    for e in mp.entries:
+        src = sources.key(e)
+        if src not in srcs.fields:
+            msgs, logs, srcs.kinds[src] = sources.messages(rec, e)
+            srcs.stamps[src], srcs.other[src] = sources.stamps(rec, e, msgs, logs, time)
+            srcs.fields[src] = rosmsg.convert(srcs.kinds[src], msgs, geo, opts)
+    return srcs
+
+
+def _name(e, kind: str, fname: str) -> str:
+    return e.name if fname == rosmsg.PRIMARY[kind] else f"{e.name}_{fname}"
+
+
+def _claim_names(mp: Mapping, e, keys: list, made: dict) -> None:
+    for key in keys:
+        maker = made.setdefault((e.reference, key), e.name)
+        if maker != e.name:
+            raise DataError(
+                mp.source,
+                f"[{'reference' if e.reference else 'channels'}] {e.name} "
+                f"({e.topic}) makes channel {key}, which {maker} makes too: "
+                "rename one of them",
+            )
+
+
+def _entry_channels(e, topic_type: str, fields: dict, kind: str, idx, n: int) -> dict:
+    out = {}
+    for fname, (vals, valid, unit, frame, comps, angles, conv) in fields.items():
+        full = np.full((n,) + vals.shape[1:], np.nan)
+        full[idx] = vals
+        ok = np.zeros(n, bool)
+        ok[idx] = valid
+        out[_name(e, kind, fname)] = Channel(
+            full, unit, frame, ok, tuple(comps), tuple(angles), conv, f"{e.topic}{e.pair} ({topic_type}) {fname}"
+        )
+    return out
+
+
+def _other_time(e, other, idx, n: int, t0: int, other_name: str) -> Channel:
+    t_other = np.full(n, np.nan)
+    t_other[idx] = (other - t0) / 1e9
+    return Channel(
+        t_other,
+        "s",
+        "",
+        np.isin(np.arange(n), idx),
+        description=f"{e.topic} {other_name.replace('_', ' ')}, seconds from t = 0",
+    )
+
+
+def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> tuple[str, dict] | None:
+    role = role_of(e, topic_type, mp.source)
+    if not role or role == "none":
+        return None
+    names = {f: _name(e, kind, f) for f in ROLE_FIELDS[role] if f in fields}
+    for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
+        for f in value:
+            if f not in fields:
+                raise ReplayError(
+                    f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
+                    f"{topic_type} lacks (it has: {', '.join(fields)})"
+                )
+    row = {"entry": e.name, "source": f"{e.topic} ({topic_type})", "declared": e.role is not None, "channels": names}
+    return role, {**row, **e.fusion}
+
+
+def _report_entry(report: Report, e, topic_type: str, primary, m: int, n: int, time: str) -> None:
+    report.add(
+        "info",
+        e.name,
+        m,
+        f"{e.topic} ({topic_type}): {m} messages at their {time} stamps; not valid at the other {n - m} samples",
+    )
+    if (~primary).any():
+        report.add(
+            "masked",
+            e.name,
+            int((~primary).sum()),
+            f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
+            "NaN, unnormalised quaternion)",
+        )
+
+
+def place_entries(rec: Recording, mp: Mapping, time: str, srcs: Sources, axis, report: Report) -> Placed:
+    """Every mapped entry's channels on ``axis`` (valid only at its own stamps), its role, its report lines."""
+    t0, n = int(axis[0]), len(axis)
+    placed = Placed("header_time" if time == "log" else "log_time")
+    for e in mp.entries:
+        topic_type = rec.topics[e.topic].type
+        src = sources.key(e)
+        kind, fields = srcs.kinds[src], srcs.fields[src]
+        idx = np.searchsorted(axis, srcs.stamps[src])
+        group = placed.reference if e.reference else placed.channels
+        other_key = f"{e.name}_{placed.other_name}"
+        _claim_names(mp, e, [_name(e, kind, f) for f in fields] + [other_key], placed.made)
+        group.update(_entry_channels(e, topic_type, fields, kind, idx, n))
+        group[other_key] = _other_time(e, srcs.other[src], idx, n, t0, placed.other_name)
+        role = _role_row(mp, e, topic_type, fields, kind)
+        if role is not None:
+            placed.roles.setdefault(role[0], []).append(role[1])
+        _report_entry(report, e, topic_type, fields[rosmsg.PRIMARY[kind]][1], len(idx), n, time)
+    return placed
