@@ -63,6 +63,8 @@ as the channel), ``current`` [east, north] (m/s). The filter model runs in NED
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from replay.util.angles import wrap
@@ -223,28 +225,8 @@ PARAMS = (
 )
 
 
-@generator(PARAMS)
-def make_frame(
-    rng: np.random.Generator,
-    *,
-    T,
-    strength,
-    length_scale,
-    grid,
-    origin_en,
-    dive_pitch_deg,
-    cruise_s,
-    heading0_deg,
-    depth_full_scale,
-    dvl_track,
-    dvl_percent,
-    acc_bias,
-    acc_noise_density,
-    ahrs_sigma_deg,
-    ahrs_tau,
-) -> Frame:
-    """Simulate the A→G mission in the current field; sensors from ``rng``."""
-    t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
+def _truth(t, u, pitch, heading, T, origin_en, grid, length_scale, strength):
+    """The vehicle flown through the current: NED position, current, body velocity and acceleration."""
     n = len(t)
     roll = np.zeros(n)
     C = body_to_level(pitch, roll)  # (n, 3, 3)
@@ -275,40 +257,51 @@ def make_frame(
     v_ned = v_water + cur
     v_b = np.einsum("nji,nj->ni", Cnb, v_ned)  # Cnb^T v
     a_b = np.einsum("nji,nj->ni", Cnb, a_water + cur_acc)
+    return SimpleNamespace(n=n, roll=roll, Cnb=Cnb, v_water=v_water, pos=pos, cur=cur, v_b=v_b, a_b=a_b)
 
-    # sensors
-    depth = pos[:, 2] + rng.standard_normal(n) * 0.03 * depth_full_scale
-    v_dvl = v_b if dvl_track == "bottom" else np.einsum("nji,nj->ni", Cnb, v_water)  # water track: Cnb^T v_water
+
+def _sensors(rng, tr, pitch, heading, T, p):
+    """Depth, DVL, accelerometers and AHRS attitude of the truth ``tr``, drawn from ``rng`` in a fixed order."""
+    n = tr.n
+    depth = tr.pos[:, 2] + rng.standard_normal(n) * 0.03 * p.depth_full_scale
+    # water track: Cnb^T v_water
+    v_dvl = tr.v_b if p.dvl_track == "bottom" else np.einsum("nji,nj->ni", tr.Cnb, tr.v_water)
     speed = np.linalg.norm(v_dvl, axis=1, keepdims=True)
-    dvl = v_dvl + rng.standard_normal((n, 3)) * (dvl_percent / 100.0) * np.maximum(speed, 0.05)
-    acc = a_b + acc_bias * rng.standard_normal(3) + rng.standard_normal((n, 3)) * acc_noise_density / np.sqrt(T)
-    att_err = gauss_markov(rng, n, [ahrs_sigma_deg * DEG] * 3, ahrs_tau, T)
+    dvl = v_dvl + rng.standard_normal((n, 3)) * (p.dvl_percent / 100.0) * np.maximum(speed, 0.05)
+    acc = tr.a_b + p.acc_bias * rng.standard_normal(3) + rng.standard_normal((n, 3)) * p.acc_noise_density / np.sqrt(T)
+    att_err = gauss_markov(rng, n, [p.ahrs_sigma_deg * DEG] * 3, p.ahrs_tau, T)
     # Bohai-style attitude: roll same sign as NED, pitch front-down positive, yaw ENU
-    att_true = np.column_stack([roll, -pitch, wrap(np.pi / 2 - heading)])
+    att_true = np.column_stack([tr.roll, -pitch, wrap(np.pi / 2 - heading)])
     att_meas = att_true + att_err
     att_meas[:, 2] = wrap(att_meas[:, 2])
+    return SimpleNamespace(depth=depth, dvl=dvl, acc=acc, att_true=att_true, att_meas=att_meas)
 
-    body = "body forward-starboard-down"
-    channels = {
-        "depth": Channel(depth, "m", "positive down", description="depth gauge, 3 % of full scale"),
+
+BODY = "body forward-starboard-down"
+
+
+def _channels(sn, dvl_track):
+    """The frame's sensor channels."""
+    return {
+        "depth": Channel(sn.depth, "m", "positive down", description="depth gauge, 3 % of full scale"),
         "dvl_velocity": Channel(
-            dvl,
+            sn.dvl,
             "m/s",
-            body,
+            BODY,
             components=("vx", "vy", "vz"),
             description="DVL bottom-lock velocity over ground, 1 %"
             if dvl_track == "bottom"
             else "DVL water-track velocity through the water, 1 %",
         ),
         "accel": Channel(
-            acc,
+            sn.acc,
             "m/s^2",
-            body,
+            BODY,
             components=("ax", "ay", "az"),
             description="AHRS accelerometers (kinematic acceleration, no gravity)",
         ),
         "attitude": Channel(
-            att_meas,
+            sn.att_meas,
             "rad",
             "body",
             components=("roll", "pitch", "yaw"),
@@ -317,17 +310,57 @@ def make_frame(
             description="AHRS, 2 deg",
         ),
     }
-    reference = {
+
+
+def _reference(tr, att_true):
+    """The frame's reference: the truth, in the channels' conventions."""
+    pos = tr.pos
+    return {
         "position": Channel(
             np.column_stack([pos[:, 1], pos[:, 0], -pos[:, 2]]), "m", "ENU local", components=("east", "north", "up")
         ),
-        "velocity_body": Channel(v_b, "m/s", body, components=("vx", "vy", "vz")),
-        "accel_body": Channel(a_b, "m/s^2", body, components=("ax", "ay", "az")),
+        "velocity_body": Channel(tr.v_b, "m/s", BODY, components=("vx", "vy", "vz")),
+        "accel_body": Channel(tr.a_b, "m/s^2", BODY, components=("ax", "ay", "az")),
         "attitude": Channel(
             att_true, "rad", "body", components=("roll", "pitch", "yaw"), angles=(0, 1, 2), convention=ATT_CONVENTION
         ),
-        "current": Channel(cur[:, [1, 0]], "m/s", "ENU local", components=("east", "north")),
+        "current": Channel(tr.cur[:, [1, 0]], "m/s", "ENU local", components=("east", "north")),
     }
+
+
+@generator(PARAMS)
+def make_frame(
+    rng: np.random.Generator,
+    *,
+    T,
+    strength,
+    length_scale,
+    grid,
+    origin_en,
+    dive_pitch_deg,
+    cruise_s,
+    heading0_deg,
+    depth_full_scale,
+    dvl_track,
+    dvl_percent,
+    acc_bias,
+    acc_noise_density,
+    ahrs_sigma_deg,
+    ahrs_tau,
+) -> Frame:
+    """Simulate the A→G mission in the current field; sensors from ``rng``."""
+    t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
+    tr = _truth(t, u, pitch, heading, T, origin_en, grid, length_scale, strength)
+    noise = SimpleNamespace(
+        depth_full_scale=depth_full_scale,
+        dvl_track=dvl_track,
+        dvl_percent=dvl_percent,
+        acc_bias=acc_bias,
+        acc_noise_density=acc_noise_density,
+        ahrs_sigma_deg=ahrs_sigma_deg,
+        ahrs_tau=ahrs_tau,
+    )
+    sn = _sensors(rng, tr, pitch, heading, T, noise)
     meta = {
         "source": "synthetic: replay.sim.sauv_current",
         "synthetic": True,
@@ -339,6 +372,6 @@ def make_frame(
         "depth_full_scale": depth_full_scale,
         "ahrs_tau": ahrs_tau,
         "dvl_track": dvl_track,
-        "initial_state_ned": np.concatenate([pos[0], v_b[0], a_b[0], [heading[0]]]).tolist(),
+        "initial_state_ned": np.concatenate([tr.pos[0], tr.v_b[0], tr.a_b[0], [heading[0]]]).tolist(),
     }
-    return Frame(t, channels, reference, None, meta)
+    return Frame(t, _channels(sn, dvl_track), _reference(tr, sn.att_true), None, meta)

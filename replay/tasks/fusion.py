@@ -33,6 +33,8 @@ field with fewer than two messages.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from replay.models.kinematic import Kinematic2D, Kinematic3D
@@ -110,6 +112,43 @@ class FusionTask(Task):
     def build(self, frame, rng):
         where = source_of(frame)
         found = inputs(frame)
+        ref = self._require(frame, where, found)
+        dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
+        t = np.asarray(frame.t, float)
+        m = self._measurements(frame, where, found, ref, dims, t)
+        model_cls, model, first = self._model(dims, t, m)
+        nx = len(model_cls.STATE)
+        x0, notes, known = self._prior(frame, ref, dims, nx, m.absolute_pos, m.attitude_at, m.notes, first)
+        p0 = self._per_state(dims, self.p0_position, self.p0_attitude, self.p0_velocity, self.p0_rate)
+        p0[known] = self.p0_known  # the start taken from the reference: known, as dead reckoning assumes
+        P0 = np.diag(p0)
+        d = 3 if dims == 3 and ref.values.shape[1] >= 3 else 2
+        valid_ref = ref.valid & np.isfinite(ref.values[:, :d]).all(axis=1)
+        if m.holdout:
+            valid_ref &= ~m.fed_gps
+        m.used["reference"] = describe(frame, "position", "reference")
+        params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(m.holdout))
+        axes = ("x", "y", "z")[:d]
+        angle_index = {"yaw": 5 if dims == 3 else 2}
+        return Problem(
+            model,
+            m.Z,
+            x0,
+            P0,
+            t,
+            np.asarray(ref.values[:, :d], float),
+            valid_ref,
+            tuple(range(d)),
+            axes,
+            angle_index=angle_index,
+            params=params,
+            inputs=m.used,
+            notes=notes,
+        )
+
+    @staticmethod
+    def _require(frame, where, found):
+        """The frame's position reference; refused without a sensor input or a valid reference."""
         if not found:
             raise ReplayError(
                 f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
@@ -123,105 +162,98 @@ class FusionTask(Task):
                 "position reference; declare one in the mapping ([reference] position = { topic = "
                 "\"/ground_truth\" }, or a GPS, pose or TF topic; docs/bags.md)"
             )
-        dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
-        n, t = len(frame.t), np.asarray(frame.t, float)
-        cols, rows_R, index, sign, z_angles = [], [], [], [], []
-        used, notes, fed_gps, holdout = {}, [f"task fusion: {dims}-D state"], None, False
-        absolute_pos, attitude_at = None, None
+        return ref
+
+    def _measurements(self, frame, where, found, ref, dims, t):
+        """Every fused field of every input: measurement columns, their variances and states, notes."""
+        m = SimpleNamespace(
+            cols=[],
+            rows_R=[],
+            index=[],
+            sign=[],
+            z_angles=[],
+            used={},
+            notes=[f"task fusion: {dims}-D state"],
+            fed_gps=None,
+            holdout=False,
+            absolute_pos=None,
+            attitude_at=None,
+        )
+        ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t))
         absolute = has_absolute_position(found)
         for role, entry in found:
             key = f"[channels] {entry['entry']}"
             fuse, diff, noise = configured(entry, role, f"{where}: {key}", absolute)
             if role == "imu" and "attitude" not in fuse and not entry.get("fuse") and "attitude" in entry["channels"]:
-                notes.append(
+                m.notes.append(
                     f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
                     "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)"
                 )
             for fld in fuse + diff:
-                name = field_channel(frame, entry, fld)
-                if name is None:
-                    raise ReplayError(
-                        f"{where}: {key}: no field {fld!r} in {entry['source']} "
-                        f"(it has: {', '.join(sorted(entry['channels']))})"
-                    )
-                ch = frame.channels[name]
-                vals = np.asarray(ch.values, float).reshape(n, -1)
-                valid = ch.valid & np.isfinite(vals).all(axis=1)
-                is_diff, label = fld in diff, fld
-                if is_diff:
-                    att_name = field_channel(frame, entry, "attitude")
-                    att = frame.channels[att_name].values if att_name else None
-                    rows, derived = differential(t, vals, valid, att, fld, f"{where}: {key}")
-                    vals = np.full((n, 3), np.nan)
-                    vals[rows] = derived
-                    valid = np.zeros(n, bool)
-                    valid[rows] = True
-                    fld = "velocity" if fld == "position" else "rate"
-                if role == "gps" and fld == "position" and ref.description == ch.description:
-                    idx = np.flatnonzero(valid)
-                    fed = np.zeros(n, bool)
-                    fed[idx[:: self.gps_every]] = True
-                    valid, fed_gps, holdout = fed, fed, True
-                comps = [c for c in components(fld, dims, role) if c[0] < vals.shape[1]]
-                if not comps or not valid.any():
-                    notes.append(
-                        f"task fusion: {key} {label}: "
-                        + ("not used in a 2-D state" if not comps else "no valid sample")
-                    )
-                    continue
-                var, how = self._variance(frame, entry, fld, noise, n, valid)
-                for col, state, sgn, ang in comps:
-                    z = np.where(valid, vals[:, col], np.nan)
-                    if ang:
-                        z_angles.append(len(index))
-                    cols.append(z)
-                    rows_R.append(var)
-                    index.append(state)
-                    sign.append(sgn)
-                used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
-                notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "") + f": noise {how}")
-                if fld == "position" and absolute_pos is None:
-                    absolute_pos = (np.flatnonzero(valid)[0], vals, comps, valid)
-                if fld == "attitude" and attitude_at is None:
-                    attitude_at = (np.flatnonzero(valid)[0], vals, comps)
-        if not index:
+                self._add_field(frame, ctx, m, role, entry, key, fld, fld in diff, noise)
+        if not m.index:
             raise ReplayError(f"{where}: task fusion: none of the inputs has a valid sample")
-        Z = np.column_stack(cols)
-        R = np.column_stack(rows_R)
+        return m
+
+    def _add_field(self, frame, ctx, m, role, entry, key, fld, is_diff, noise):
+        """One field of one input into the record ``m`` (or a note why it is not used)."""
+        where, n = ctx.where, ctx.n
+        name = field_channel(frame, entry, fld)
+        if name is None:
+            raise ReplayError(
+                f"{where}: {key}: no field {fld!r} in {entry['source']} "
+                f"(it has: {', '.join(sorted(entry['channels']))})"
+            )
+        ch = frame.channels[name]
+        vals = np.asarray(ch.values, float).reshape(n, -1)
+        valid = ch.valid & np.isfinite(vals).all(axis=1)
+        label = fld
+        if is_diff:
+            att_name = field_channel(frame, entry, "attitude")
+            att = frame.channels[att_name].values if att_name else None
+            rows, derived = differential(ctx.t, vals, valid, att, fld, f"{where}: {key}")
+            vals = np.full((n, 3), np.nan)
+            vals[rows] = derived
+            valid = np.zeros(n, bool)
+            valid[rows] = True
+            fld = "velocity" if fld == "position" else "rate"
+        if role == "gps" and fld == "position" and ctx.ref.description == ch.description:
+            idx = np.flatnonzero(valid)
+            fed = np.zeros(n, bool)
+            fed[idx[:: self.gps_every]] = True
+            valid, m.fed_gps, m.holdout = fed, fed, True
+        comps = [c for c in components(fld, ctx.dims, role) if c[0] < vals.shape[1]]
+        if not comps or not valid.any():
+            m.notes.append(
+                f"task fusion: {key} {label}: " + ("not used in a 2-D state" if not comps else "no valid sample")
+            )
+            return
+        var, how = self._variance(frame, entry, fld, noise, n, valid)
+        for col, state, sgn, ang in comps:
+            z = np.where(valid, vals[:, col], np.nan)
+            if ang:
+                m.z_angles.append(len(m.index))
+            m.cols.append(z)
+            m.rows_R.append(var)
+            m.index.append(state)
+            m.sign.append(sgn)
+        m.used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
+        m.notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "") + f": noise {how}")
+        if fld == "position" and m.absolute_pos is None:
+            m.absolute_pos = (np.flatnonzero(valid)[0], vals, comps, valid)
+        if fld == "attitude" and m.attitude_at is None:
+            m.attitude_at = (np.flatnonzero(valid)[0], vals, comps)
+
+    def _model(self, dims, t, m):
+        """The kinematic model over the measurements (``m.Z`` set), and the step of the first sensor message."""
+        m.Z = np.column_stack(m.cols)
+        R = np.column_stack(m.rows_R)
         model_cls = Kinematic3D if dims == 3 else Kinematic2D
-        nx = len(model_cls.STATE)
         dt = np.diff(t, prepend=t[0])
-        first = int(np.flatnonzero(np.isfinite(Z).any(axis=1))[0])  # the first sensor message
+        first = int(np.flatnonzero(np.isfinite(m.Z).any(axis=1))[0])  # the first sensor message
         dt[: first + 1] = 0.0  # before it nothing is known of the motion: the state is held at the start
         q = self._per_state(dims, self.q_position, self.q_attitude, self.q_velocity, self.q_rate)
-        model = model_cls(dt, q, index, sign, z_angles, R)
-        x0, notes, known = self._prior(frame, ref, dims, nx, absolute_pos, attitude_at, notes, first)
-        p0 = self._per_state(dims, self.p0_position, self.p0_attitude, self.p0_velocity, self.p0_rate)
-        p0[known] = self.p0_known  # the start taken from the reference: known, as dead reckoning assumes
-        P0 = np.diag(p0)
-        d = 3 if dims == 3 and ref.values.shape[1] >= 3 else 2
-        valid_ref = ref.valid & np.isfinite(ref.values[:, :d]).all(axis=1)
-        if holdout:
-            valid_ref &= ~fed_gps
-        used["reference"] = describe(frame, "position", "reference")
-        params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(holdout))
-        axes = ("x", "y", "z")[:d]
-        angle_index = {"yaw": 5 if dims == 3 else 2}
-        return Problem(
-            model,
-            Z,
-            x0,
-            P0,
-            t,
-            np.asarray(ref.values[:, :d], float),
-            valid_ref,
-            tuple(range(d)),
-            axes,
-            angle_index=angle_index,
-            params=params,
-            inputs=used,
-            notes=notes,
-        )
+        return model_cls, model_cls(dt, q, m.index, m.sign, m.z_angles, R), first
 
     @staticmethod
     def _per_state(dims, pos, att, vel, rate):
