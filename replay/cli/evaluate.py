@@ -128,9 +128,7 @@ def eval_cmd(
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
-    from replay.run.evaluation import evaluate
-    from replay.outputs.files import check_location, check_output, eval_inputs
-    from replay.outputs.rundirs import claimed_run_dir, new_run_dir, out_locked
+    from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.data.registry import check_data_dir
     from replay.scoring.summary import MIN_SCORED_SHARE
 
@@ -154,7 +152,43 @@ def eval_cmd(
         data_dir,
         seed,
     )
-    # the output set is checked before the computation (inputs, writable, space, ownership)
+    numbered, inputs = _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir)
+    from contextlib import ExitStack
+
+    with ExitStack() as held:  # a claimed numbered directory, or --out's lock, until published
+        out = held.enter_context(claimed_run_dir(dataset, task)) if numbered else Path(out)
+        if not numbered:
+            held.enter_context(out_locked(out, wait))
+        _recheck_output_set(out, inputs, numbered or force, mcap_out, ros2_out, dataset, mapping, data_dir)
+        ev = _evaluate(
+            ref,
+            quiet,
+            task=task,
+            filters=names,
+            runs=runs,
+            seed=seed,
+            first=first,
+            data_dir=data_dir,
+            filter_params=fparams,
+            task_params=tparams,
+            adapter=adapter,
+            dataset_params=dparams or None,
+            alignment=alignment,
+            divergence_threshold=divergence_threshold,
+            baseline=baseline,
+            recorded=recorded,
+            min_scored_share=min_scored_share,
+        )
+        _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
+    _failed_filters(ev)
+
+
+def _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir) -> tuple[bool, object]:
+    """The output set checked before the computation (inputs, writable, space, ownership): whether
+    the output directory is a new numbered one, and the run's inputs."""
+    from replay.outputs.files import check_location, check_output, eval_inputs
+    from replay.outputs.rundirs import new_run_dir
+
     numbered = out is None
     inputs = eval_inputs(ref, data_dir, mapping)
     if numbered:  # the location, before claiming a number in it
@@ -165,43 +199,29 @@ def eval_cmd(
     _check_exports(
         new_run_dir(dataset, task) if numbered else Path(out), mcap_out, ros2_out, dataset, mapping, data_dir
     )
-    from contextlib import ExitStack
+    return numbered, inputs
 
-    with ExitStack() as held:  # a claimed numbered directory, or --out's lock, until published
-        out = held.enter_context(claimed_run_dir(dataset, task)) if numbered else Path(out)
-        if not numbered:
-            held.enter_context(out_locked(out, wait))
-        check_output(out, inputs, "--out")  # again, now that no other replay eval writes there
-        _fresh(out, numbered or force)
-        _check_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
-        from replay.util.progress import Progress
 
-        quiet_notes(quiet)
-        progress = Progress(0, quiet, label="eval", unit="run")
-        try:
-            ev = evaluate(
-                ref,
-                task=task,
-                filters=names,
-                runs=runs,
-                seed=seed,
-                first=first,
-                data_dir=data_dir,
-                filter_params=fparams,
-                task_params=tparams,
-                adapter=adapter,
-                dataset_params=dparams or None,
-                alignment=alignment,
-                divergence_threshold=divergence_threshold,
-                baseline=baseline,
-                recorded=recorded,
-                progress=progress,
-                min_scored_share=min_scored_share,
-            )
-        finally:
-            progress.close()
-        _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
-    _failed_filters(ev)
+def _recheck_output_set(out: Path, inputs, replace: bool, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
+    """The output set checked again, now that no other replay eval writes there."""
+    from replay.outputs.files import check_output
+
+    check_output(out, inputs, "--out")
+    _fresh(out, replace)
+    _check_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
+
+
+def _evaluate(ref, quiet: bool, **options):
+    """:func:`replay.run.evaluation.evaluate` with a progress display (none when ``quiet``)."""
+    from replay.run.evaluation import evaluate
+    from replay.util.progress import Progress
+
+    quiet_notes(quiet)
+    progress = Progress(0, quiet, label="eval", unit="run")
+    try:
+        return evaluate(ref, progress=progress, **options)
+    finally:
+        progress.close()
 
 
 def _configuration(

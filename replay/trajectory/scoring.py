@@ -96,31 +96,11 @@ def score(
     """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring and
     :mod:`replay.trajectory.prepare` (time window, interpolation, downsampling, motion filter, projection)."""
     relations = [pose_error.relation(r) for r in relations]
-    for tr in (ref, est):
-        if tr.q is None:
-            need = [f"APE {r}" for r in relations if r in pose_error.ROTATION_RELATIONS]
-            if delta is not None:
-                need += [f"RPE {r}" for r in relations if r in pose_error.RPE_NEEDS_ORIENTATION]
-                need += [f"an RPE delta in {delta_unit}"] if delta_unit in ("d", "r") else []
-            if need:
-                raise ReplayError(
-                    f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
-                    "orientations: use -r trans for the APE and -r point_distance for the RPE"
-                )
+    _require_orientations(ref, est, relations, delta, delta_unit)
     if sync_method not in prepare.SYNC_METHODS:
         raise ReplayError(f"sync_method {sync_method!r}: expected one of {', '.join(prepare.SYNC_METHODS)}")
     ref, est = prepare.window(ref, t_start, t_end), prepare.window(est, t_start, t_end, t_offset)
-    i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
-    r, e = ref.take(i_ref), est.take(i_est)
-    if sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
-        r, e = (
-            (r, prepare.interpolate(est, r.t - t_offset))
-            if len(est) > len(ref)
-            else (prepare.interpolate(ref, e.t + t_offset), e)
-        )
-    if downsample is not None or motion_filter is not None:
-        keep = prepare.thin(r, downsample, motion_filter)
-        r, e = r.take(keep), e.take(keep)
+    i_est, r, e = _matched(ref, est, t_max_diff, t_offset, sync_method, downsample, motion_filter)
     moved, transform = _align(r, e, align, n_to_align, align_origin)
     if project_to_plane is not None:  # after the alignment, as evo
         r, e, moved = (prepare.project(x, project_to_plane) for x in (r, e, moved))
@@ -151,32 +131,74 @@ def score(
             out.ape[rel] = pose_error.ape(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, relation=rel)
     out.ape_axes = pose_error.ape_axes(p_ref=r.p, p_est=moved.p)
     if delta is not None:
-        base = r if pairs_from_reference else moved
-        i, j = pose_error.pairs(
-            p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs, rel_tol=rel_tol
-        )
-        out.rpe_pairs = (i, j)
-        for rel in relations:
-            out.rpe[rel], axes = pose_error.rpe(
-                p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, i=i, j=j, relation=rel
-            )
-            if axes is not None:
-                out.rpe_axes = axes
+        _add_rpe(out, relations, delta, delta_unit, all_pairs, rel_tol, pairs_from_reference)
     if lengths:
-        from replay.trajectory import lengths as by_length
-
-        items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
-        out.lengths = by_length.relative_errors(
-            ref_path_length=float(by_length.distances(ref.p)[-1]),
-            p_ref=r.p,
-            q_ref=r.q,
-            p_est=e.p,
-            q_est=e.q,
-            items=items,
-            method=lengths_method,
-            scale=float(transform[2]),
-        )
+        out.lengths = _by_length(ref, r, e, lengths, lengths_method, scale=float(transform[2]))
     return out
+
+
+def _require_orientations(ref: Trajectory, est: Trajectory, relations, delta, delta_unit) -> None:
+    """Refuse relations (and RPE deltas) that need orientations when a trajectory has positions only."""
+    for tr in (ref, est):
+        if tr.q is None:
+            need = [f"APE {r}" for r in relations if r in pose_error.ROTATION_RELATIONS]
+            if delta is not None:
+                need += [f"RPE {r}" for r in relations if r in pose_error.RPE_NEEDS_ORIENTATION]
+                need += [f"an RPE delta in {delta_unit}"] if delta_unit in ("d", "r") else []
+            if need:
+                raise ReplayError(
+                    f"{tr.source or tr.name}: positions only (no orientation), and {need[0]} needs "
+                    "orientations: use -r trans for the APE and -r point_distance for the RPE"
+                )
+
+
+def _matched(ref: Trajectory, est: Trajectory, t_max_diff, t_offset, sync_method, downsample, motion_filter):
+    """The associated poses (evo's sync, then downsampling and motion filter): the matched estimate
+    indices and the matched reference and estimate."""
+    i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
+    r, e = ref.take(i_ref), est.take(i_est)
+    if sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
+        r, e = (
+            (r, prepare.interpolate(est, r.t - t_offset))
+            if len(est) > len(ref)
+            else (prepare.interpolate(ref, e.t + t_offset), e)
+        )
+    if downsample is not None or motion_filter is not None:
+        keep = prepare.thin(r, downsample, motion_filter)
+        r, e = r.take(keep), e.take(keep)
+    return i_est, r, e
+
+
+def _add_rpe(out: Score, relations, delta, delta_unit, all_pairs, rel_tol, pairs_from_reference) -> None:
+    """The RPE of each relation over the pairs ``delta`` apart (on the reference or the aligned estimate)."""
+    r, moved = out.reference, out.aligned
+    base = r if pairs_from_reference else moved
+    i, j = pose_error.pairs(
+        p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs, rel_tol=rel_tol
+    )
+    out.rpe_pairs = (i, j)
+    for rel in relations:
+        out.rpe[rel], axes = pose_error.rpe(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, i=i, j=j, relation=rel)
+        if axes is not None:
+            out.rpe_axes = axes
+
+
+def _by_length(ref: Trajectory, r: Trajectory, e: Trajectory, lengths, method: str, scale: float) -> dict:
+    """Relative errors over lengths (:mod:`replay.trajectory.lengths`) of the matched estimate as recorded;
+    ``ref`` is the windowed reference, whose path length is the total."""
+    from replay.trajectory import lengths as by_length
+
+    items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
+    return by_length.relative_errors(
+        ref_path_length=float(by_length.distances(ref.p)[-1]),
+        p_ref=r.p,
+        q_ref=r.q,
+        p_est=e.p,
+        q_est=e.q,
+        items=items,
+        method=method,
+        scale=scale,
+    )
 
 
 def _rmse(x) -> float:
