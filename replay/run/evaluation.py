@@ -17,6 +17,7 @@ on the task's reference; their notes (what was associated) are ``Evaluation.note
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -171,39 +172,78 @@ def evaluate(
     """
     min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
     registry.check_data_dir(data_dir)
-    opts = validate_eval_options(
-        {
-            "task": task,
-            "runs": runs,
-            "seed": seed,
-            "first": first,
-            "data_dir": data_dir,
-            "adapter": adapter,
-            "task_params": task_params,
-            "dataset_params": dataset_params,
-            "alignment": alignment,
-            "divergence_threshold": divergence_threshold,
-            "baseline": baseline,
-            "batch": batch,
-        }
+    s = _resolve(
+        dataset,
+        task=task,
+        filters=filters,
+        runs=runs,
+        seed=seed,
+        first=first,
+        data_dir=data_dir,
+        task_params=task_params,
+        filter_params=filter_params,
+        dataset_params=dataset_params,
+        adapter=adapter,
+        alignment=alignment,
+        divergence_threshold=divergence_threshold,
+        baseline=baseline,
+        batch=batch,
+        recorded=recorded,
     )
-    runs, seed, first, divergence_threshold, batch = (
+    configs, built = _configs(s, task_params)
+    _start_progress(progress, configs, s.runs)
+    results = [_run_config(cfg, s, built if cfg is configs[0] else None, progress) for cfg in configs]
+    return _assemble(s, configs, results, min_scored_share)
+
+
+_EVAL_OPTIONS = (
+    "task",
+    "runs",
+    "seed",
+    "first",
+    "data_dir",
+    "adapter",
+    "task_params",
+    "dataset_params",
+    "alignment",
+    "divergence_threshold",
+    "baseline",
+    "batch",
+)  # the options validate_eval_options checks, in the order given to it
+
+
+def _resolve(dataset, *, filters, filter_params, dataset_params, recorded, **given) -> SimpleNamespace:
+    """The checked and resolved settings of an evaluation (the options validated, the filters made,
+    the dataset id parsed, the task named, the recorded rows found), in the order ``evaluate`` checks them."""
+    options = dict(given, dataset_params=dataset_params)
+    opts = validate_eval_options({k: options[k] for k in _EVAL_OPTIONS})
+    s = SimpleNamespace(**given)
+    s.runs, s.seed, s.first, s.divergence_threshold, s.batch = (
         opts[k] for k in ("runs", "seed", "first", "divergence_threshold", "batch")
     )
-    filters, filter_params = check_filters(filters, filter_params, recorded)
-    offline = [n for n in filters if not is_recorded(n)]
-    instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
+    filters, s.filter_params = check_filters(filters, filter_params, recorded)
+    s.offline = [n for n in filters if not is_recorded(n)]
+    s.instances = [make_filter(name, **s.filter_params.get(name, {})) for name in s.offline]  # validated up front
+    adapter, data_dir, first, seed = s.adapter, s.data_dir, s.first, s.seed
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
-    dataset = ref.id  # what the configurations and the manifest record
-    dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
-    check_recorded(dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], dataset_params)
-    task_name = task or default_task(
-        ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dataset_params, seed=seed
+    s.dataset = ref.id  # what the configurations and the manifest record
+    s.dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
+    check_recorded(
+        s.dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], s.dataset_params
     )
-    names, estimates = recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, data_dir)
-    filters = offline + names
+    s.task_name = s.task or default_task(
+        ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=s.dataset_params, seed=seed
+    )
+    s.names, s.estimates = recorded_rows(ref, filters, recorded, seed, first, s.dataset_params, adapter, data_dir)
+    s.filters = s.offline + s.names
+    _check_rows(s.dataset, s.filters, s.filter_params, s.baseline)
+    return s
+
+
+def _check_rows(dataset: str, filters: list, filter_params: dict, baseline: str | None) -> None:
+    """Every parameter set and the baseline name a row that runs, and some row runs."""
     for name in filter_params:
         if name not in filters:
             raise ReplayError(
@@ -217,81 +257,91 @@ def evaluate(
         )
     if baseline is not None and baseline not in filters:
         raise ReplayError(f"--baseline {baseline!r}: not among the rows ({', '.join(filters)})")
-    the_task = make_task(task_name, **(task_params or {}))
-    base = (dataset, plain(dataset_params or {}), first, task_name, plain(the_task.params()))
-    tail = (seed, alignment, divergence_threshold, adapter)
-    configs = [Config(*base, name, plain(params_of(f, "filter", name)), *tail) for name, f in zip(offline, instances)]
-    configs += [
-        Config(
-            *base,
-            name,
-            plain(
-                recorded_params(name[len(RECORDED) :], filter_params.get(name), estimates[name[len(RECORDED) :]].params)
-            ),
-            *tail,
-        )
-        for name in names
+
+
+def _configs(s: SimpleNamespace, task_params: dict | None) -> tuple[list[Config], dict | None]:
+    """One configuration per row (offline filters, ``measurements`` where it applies, recorded
+    estimates) and the problems built while checking them (``built``: run 0's of the first);
+    ``s.filters`` gains ``measurements`` when its row is added."""
+    the_task = make_task(s.task_name, **(task_params or {}))
+    base = (s.dataset, plain(s.dataset_params or {}), s.first, s.task_name, plain(the_task.params()))
+    tail = (s.seed, s.alignment, s.divergence_threshold, s.adapter)
+    configs = [
+        Config(*base, name, plain(params_of(f, "filter", name)), *tail) for name, f in zip(s.offline, s.instances)
     ]
-    built = check_memory(configs, runs, batch, data_dir)  # run 0's problem of the first filter, reused
-    if any(noise_settings(f) for f in instances):  # their sizes, known once the task is built: before any run
-        built = built or {0: build_problem(configs[0], 0, data_dir)}
-        for f in instances:
+    configs += [Config(*base, name, plain(_recorded_params(s, name)), *tail) for name in s.names]
+    built = check_memory(configs, s.runs, s.batch, s.data_dir)  # run 0's problem of the first filter, reused
+    if any(noise_settings(f) for f in s.instances):  # their sizes, known once the task is built: before any run
+        built = built or {0: build_problem(configs[0], 0, s.data_dir)}
+        for f in s.instances:
             check_noise(f, built[0].model)
-    if offline and MEASUREMENTS not in filters:  # beside filters only: nothing to compare otherwise
-        built = built or {0: build_problem(configs[0], 0, data_dir)}
+    if s.offline and MEASUREMENTS not in s.filters:  # beside filters only: nothing to compare otherwise
+        built = built or {0: build_problem(configs[0], 0, s.data_dir)}
         if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat
             # after the offline filters, before the recorded estimates: the order the rows take when
             # the configuration names it (a rerun passes it explicitly)
-            configs.insert(len(offline), Config(*base, MEASUREMENTS, {}, *tail))
-            filters = offline + [MEASUREMENTS] + names
-    results = []
-    if progress is not None:  # replay.util.progress.Progress: weighted by each configuration's cost
+            configs.insert(len(s.offline), Config(*base, MEASUREMENTS, {}, *tail))
+            s.filters = s.offline + [MEASUREMENTS] + s.names
+    return configs, built
+
+
+def _recorded_params(s: SimpleNamespace, name: str) -> dict:
+    """The parameters of recorded row ``name`` (``recorded:<estimate>``)."""
+    estimate = name[len(RECORDED) :]
+    return recorded_params(estimate, s.filter_params.get(name), s.estimates[estimate].params)
+
+
+def _start_progress(progress, configs: list[Config], runs: int) -> None:
+    """Start ``progress`` (:class:`replay.util.progress.Progress`), weighted by each configuration's cost."""
+    if progress is not None:
         progress.start(
             sum(1 if is_recorded(c.filter) else runs for c in configs),
             sum(particle_weight(c.filter_params, 1 if is_recorded(c.filter) else runs) for c in configs),
         )
-    for cfg in configs:
-        c, h = cfg.as_dict(), config_hash(cfg.as_dict())
-        recs = []
-        for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
-            block = list(range(start, min(runs, start + batch)))
-            recs += [
-                _filled(r)
-                for r in run_block(
-                    c, block, data_dir, keep=True, strict=True, built=built if cfg is configs[0] else None
-                )
-            ]
-            if progress is not None:
-                progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
-        results.append(
-            FilterResult(
-                cfg.filter,
-                c["filter_params"],
-                [r["metrics"] for r in recs],
-                [r["errors"] for r in recs],
-                [r["estimates"] for r in recs],
-                config_hash=h,
-                config=c,
-                records=recs,
-            )
-        )
-    rows = _summarise(results, baseline)
+
+
+def _run_config(cfg: Config, s: SimpleNamespace, built: dict | None, progress) -> FilterResult:
+    """The runs of one configuration, in blocks of ``s.batch`` (a recorded estimate: one run)."""
+    runs, batch = s.runs, s.batch
+    c, h = cfg.as_dict(), config_hash(cfg.as_dict())
+    recs = []
+    for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
+        block = list(range(start, min(runs, start + batch)))
+        recs += [_filled(r) for r in run_block(c, block, s.data_dir, keep=True, strict=True, built=built)]
+        if progress is not None:
+            progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
+    return FilterResult(
+        cfg.filter,
+        c["filter_params"],
+        [r["metrics"] for r in recs],
+        [r["errors"] for r in recs],
+        [r["estimates"] for r in recs],
+        config_hash=h,
+        config=c,
+        records=recs,
+    )
+
+
+def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterResult], min_scored_share) -> Evaluation:
+    """The Evaluation: the rows, the configuration as a campaign records it, the frame's meta and report,
+    the truths of the runs and the recorded estimates' notes."""
+    rows = _summarise(results, s.baseline)
     problems = [r["problem"] for r in max(results, key=lambda r: len(r.records)).records]
     p0 = problems[0]
     config = {
-        "dataset": dataset,
-        "task": task_name,
+        "dataset": s.dataset,
+        "task": s.task_name,
         "task_params": configs[0].task_params,
-        "filters": filters,
+        "filters": s.filters,
         "filter_params": {r.name: r.params for r in results},
-        "runs": runs,
-        "seed": seed,
-        "first": first,
+        "runs": s.runs,
+        "seed": s.seed,
+        "first": s.first,
         "dataset_params": configs[0].dataset_params,
-        "adapter": adapter,
-        "alignment": alignment,
-        "divergence_threshold": divergence_threshold,
-        "baseline": baseline,
+        "adapter": s.adapter,
+        "alignment": s.alignment,
+        "divergence_threshold": s.divergence_threshold,
+        "baseline": s.baseline,
         "dataset_sha256": p0.frame_meta.get("sha256"),
         "replay_version": __version__,
         "config_hashes": {r.name: r.config_hash for r in results},
@@ -307,7 +357,7 @@ def evaluate(
         [p.truth_position for p in problems],
         tuple(p0.axis_names),
         rows,
-        baseline,
+        s.baseline,
         notes,
         scorer.units(p0),
         tuple(int(i) for i in p0.position_index),
