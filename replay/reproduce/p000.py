@@ -106,11 +106,10 @@ def tuned(T: dict, grid, noise) -> dict:
     return out
 
 
-def evidence(R: dict, T: dict, p: dict) -> dict:
-    """The comparisons every rule of :data:`CLAIMS` names (``R``: verdict seed, ``T``: tuning seed)."""
-    ev, grid = {}, p["grid"]
+def _best_evidence(R: dict, T: dict, grid) -> list:
+    """GPF − each other filter, every one at its setting tuned on the tuning seed."""
     best = tuned(T, grid, None)
-    ev["best"] = [
+    return [
         cmp(
             f"{ch}: GPF − {lab}",
             R[best[("GPF", ch)][0]][best[("GPF", ch)][1]],
@@ -120,70 +119,92 @@ def evidence(R: dict, T: dict, p: dict) -> dict:
         for ch in CH
         for lab in OTHERS
     ]
+
+
+def _cell_evidence(r: dict, cell: Cell, tag: str) -> dict:
+    """The order, the worst maneuver errors and the degradation under maneuvers in one key cell."""
+    ev = {}
+    for ch in CH:
+        ev[f"{ch}@{tag}"] = [
+            cmp(f"κ = {cell.kappa:g}: GPF − MMPF", r["GPF"], r["MMPF"], ch=ch),
+            cmp(f"κ = {cell.kappa:g}: MMPF − EKF", r["MMPF"], r["EKF"], ch=ch),
+        ]
+    ev[f"worst@{tag}"] = [
+        cmp(f"κ = {cell.kappa:g}, {ch}: {lab} − EKF", r[lab], r["EKF"], "man", ch)
+        for ch in CH
+        for lab in ("GPF", "MMPF")
+    ]
+    ev[f"degrades@{tag}"] = [
+        cmp(f"κ = {cell.kappa:g}, {ch}: {lab} − EKF", ratio(r[lab], ch), ratio(r["EKF"], ch), "r", ch)
+        for ch in CH
+        for lab in ("GPF", "MMPF")
+    ]
+    return ev
+
+
+def _lead_evidence(R: dict, p: dict) -> dict:
+    """GPF's lead over the best baseline: across κ per sensor level (lead-q), across sensor levels per κ (lead-r)."""
+    noises, kappas = [n for n in p["noises"] if n is not None], p["kappas"]
+    cell = {(c.noise, c.kappa): R[c] for c in p["grid"]}
+    return {
+        "lead-q": [
+            cmp(
+                f"sensors {Cell(n, 1).noise_text}, {ch}",
+                lead(cell[(n, kappas[0])], ch),
+                lead(cell[(n, kappas[-1])], ch),
+                "v",
+                ch,
+            )
+            for n in p["noises"]
+            for ch in CH
+        ],
+        "lead-r": [
+            cmp(f"κ = {k:g}, {ch}", lead(cell[(max(noises), k)], ch), lead(cell[(min(noises), k)], ch), "v", ch)
+            for k in kappas
+            for ch in CH
+        ],
+    }
+
+
+def _ablation_evidence(R: dict, ablation) -> dict:
+    """GPF − GPF without grey particles (κ < 1 cells), GPF − GPF with the fixed R (every ablation cell)."""
+    name = lambda c, ch: f"sensors {c.noise_text}, κ = {c.kappa:g}, {ch}"
+    return {
+        "grey": [
+            cmp(name(c, ch), R[c]["GPF"], R[c]["GPF without grey particles"], ch=ch)
+            for c in ablation
+            if c.kappa < 1
+            for ch in CH
+        ],
+        "wavelet": [cmp(name(c, ch), R[c]["GPF"], R[c]["GPF with the fixed R"], ch=ch) for c in ablation for ch in CH],
+    }
+
+
+def evidence(R: dict, T: dict, p: dict) -> dict:
+    """The comparisons every rule of :data:`CLAIMS` names (``R``: verdict seed, ``T``: tuning seed)."""
+    ev, grid = {"best": _best_evidence(R, T, p["grid"])}, p["grid"]
     for cell, tag in ((PAPER, "paper"), (MISMATCH, "mismatch")):
-        r = R[cell]
-        for ch in CH:
-            ev[f"{ch}@{tag}"] = [
-                cmp(f"κ = {cell.kappa:g}: GPF − MMPF", r["GPF"], r["MMPF"], ch=ch),
-                cmp(f"κ = {cell.kappa:g}: MMPF − EKF", r["MMPF"], r["EKF"], ch=ch),
-            ]
-        ev[f"worst@{tag}"] = [
-            cmp(f"κ = {cell.kappa:g}, {ch}: {lab} − EKF", r[lab], r["EKF"], "man", ch)
-            for ch in CH
-            for lab in ("GPF", "MMPF")
-        ]
-        ev[f"degrades@{tag}"] = [
-            cmp(f"κ = {cell.kappa:g}, {ch}: {lab} − EKF", ratio(r[lab], ch), ratio(r["EKF"], ch), "r", ch)
-            for ch in CH
-            for lab in ("GPF", "MMPF")
-        ]
+        ev.update(_cell_evidence(R[cell], cell, tag))
     for ch in CH:
         ev[f"{ch}@fixedR"] = [
             cmp(f"{ch}: GPF with the fixed R − GPF", R[PAPER]["GPF with the fixed R"], R[PAPER]["GPF"], ch=ch)
         ]
     us = {lab: [R[c][lab]["row"]["us_per_step"] for c in grid] for lab in ("GPF", "MMPF")}
     ev["cost"] = [Comparison("GPF − MMPF, µs per step over the grid cells", us["GPF"], us["MMPF"])]
-    noises, kappas = [n for n in p["noises"] if n is not None], p["kappas"]
-    cell = {(c.noise, c.kappa): R[c] for c in grid}
-    ev["lead-q"] = [
-        cmp(
-            f"sensors {Cell(n, 1).noise_text}, {ch}",
-            lead(cell[(n, kappas[0])], ch),
-            lead(cell[(n, kappas[-1])], ch),
-            "v",
-            ch,
-        )
-        for n in p["noises"]
-        for ch in CH
-    ]
-    ev["lead-r"] = [
-        cmp(f"κ = {k:g}, {ch}", lead(cell[(max(noises), k)], ch), lead(cell[(min(noises), k)], ch), "v", ch)
-        for k in kappas
-        for ch in CH
-    ]
-    name = lambda c, ch: f"sensors {c.noise_text}, κ = {c.kappa:g}, {ch}"
-    ev["grey"] = [
-        cmp(name(c, ch), R[c]["GPF"], R[c]["GPF without grey particles"], ch=ch)
-        for c in p["ablation"]
-        if c.kappa < 1
-        for ch in CH
-    ]
-    ev["wavelet"] = [
-        cmp(name(c, ch), R[c]["GPF"], R[c]["GPF with the fixed R"], ch=ch) for c in p["ablation"] for ch in CH
-    ]
+    ev.update(_lead_evidence(R, p))
+    ev.update(_ablation_evidence(R, p["ablation"]))
     return ev
 
 
-def tables(R: dict, T: dict, p: dict) -> dict:
-    """The evidence tables of the template (each a Markdown table; anchors on the claims' rows)."""
-    t, grid, tag = {}, p["grid"], render.anchor_tag
+def _table_best(R: dict, T: dict, grid) -> str:
+    """Each filter at its tuned setting, per channel, and GPF − the best other filter."""
     best = tuned(T, grid, None)
     at = {(lab, ch): R[best[(lab, ch)][0]][best[(lab, ch)][1]]["rmse"][ch] for lab in MAIN for ch in CH}
     other = {ch: min(OTHERS, key=lambda lab: _mean(at[(lab, ch)])) for ch in CH}
-    t["best"] = render.table(
+    return render.table(
         ["channel", *MAIN, "GPF − the best other (paired)"],
         [
-            [tag("#e-best") * (ch == "depth") + ch]
+            [render.anchor_tag("#e-best") * (ch == "depth") + ch]
             + [
                 f"{fmt(_mean(at[(lab, ch)]))} (κ = {best[(lab, ch)][0].kappa:g}"
                 f"{', R matched' * ('R m' in best[(lab, ch)][1])})"
@@ -193,64 +214,106 @@ def tables(R: dict, T: dict, p: dict) -> dict:
             for ch in CH
         ],
     )
-    t["grid"] = render.table(
+
+
+def _table_order(R: dict, grid) -> str:
+    """GPF − MMPF / MMPF − EKF in every grid cell."""
+    return render.table(
         ["sensors", "κ", *[f"{ch}: GPF − MMPF / MMPF − EKF" for ch in CH]],
         [
-            [tag("#e-order") * (c == PAPER) + c.noise_text, f"{c.kappa:g}"] + [order(R[c], ch) for ch in CH]
+            [render.anchor_tag("#e-order") * (c == PAPER) + c.noise_text, f"{c.kappa:g}"]
+            + [order(R[c], ch) for ch in CH]
             for c in grid
         ],
     )
-    key = [c for c in (PAPER, MISMATCH) if c in grid]
-    t["maneuvers"] = render.table(
+
+
+def _table_maneuvers(R: dict, grid) -> str:
+    """Errors during maneuvers, on level legs, and their ratio, in the key cells."""
+    filters, key = ("GPF", "MMPF", "EKF"), [c for c in (PAPER, MISMATCH) if c in grid]
+    return render.table(
         ["cell", "channel", "maneuvers GPF / MMPF / EKF", "level GPF / MMPF / EKF", "ratio GPF / MMPF / EKF"],
         [
-            [tag("#e-man") * (c == PAPER and ch == "depth") + c.name, ch]
-            + [" / ".join(fmt(_mean(R[c][lab][k][ch])) for lab in ("GPF", "MMPF", "EKF")) for k in ("man", "level")]
-            + [" / ".join(f"{np.mean(ratio(R[c][lab], ch)['r'][ch]):.2f}" for lab in ("GPF", "MMPF", "EKF"))]
+            [render.anchor_tag("#e-man") * (c == PAPER and ch == "depth") + c.name, ch]
+            + [" / ".join(fmt(_mean(R[c][lab][k][ch])) for lab in filters) for k in ("man", "level")]
+            + [" / ".join(f"{np.mean(ratio(R[c][lab], ch)['r'][ch]):.2f}" for lab in filters)]
             for c in key
             for ch in CH
         ],
     )
-    t["profiles"] = render.table(
-        ["κ", "profile", *[f"{ch}: GPF − MMPF / MMPF − EKF" for ch in CH]],
-        [[f"{c.kappa:g}", c.profile] + [order(R[c], ch) for ch in CH] for c in p["profiles"]],
-    )
-    t["ablation"] = render.table(
+
+
+def _table_ablation(R: dict, ablation) -> str:
+    """Each GPF variant − GPF in the ablation cells."""
+    return render.table(
         ["cell", "variant", *[f"{ch}: variant − GPF" for ch in CH]],
         [
-            [tag("#e-ablation") * (c == p["ablation"][0] and lab == "GPF without grey particles") + c.name, lab]
+            [
+                render.anchor_tag("#e-ablation") * (c == ablation[0] and lab == "GPF without grey particles") + c.name,
+                lab,
+            ]
             + [pm(R[c][lab]["rmse"][ch], R[c]["GPF"]["rmse"][ch]) for ch in CH]
-            for c in p["ablation"]
+            for c in ablation
             for lab in ABLATIONS
         ],
     )
-    t["lead"] = render.table(
+
+
+def _table_lead(R: dict, grid) -> str:
+    """GPF's mean lead over the best baseline in every grid cell."""
+    return render.table(
         ["sensors", "κ", *CH],
         [
-            [tag("#e-lead") * (c == grid[0]) + c.noise_text, f"{c.kappa:g}"]
+            [render.anchor_tag("#e-lead") * (c == grid[0]) + c.noise_text, f"{c.kappa:g}"]
             + [f"{100 * np.nanmean(lead(R[c], ch)['v'][ch]):+.0f} % ({lead(R[c], ch)['best']})" for ch in CH]
             for c in grid
         ],
     )
-    t["ess"] = render.table(
+
+
+def _table_ess(R: dict, grid) -> str:
+    """Mean ESS/N and lost runs of the particle filters in every grid cell."""
+    filters = ("GPF", "MMPF", "PF")
+    return render.table(
         ["sensors", "κ", "ESS/N GPF", "ESS/N MMPF", "ESS/N PF", "lost GPF / MMPF / PF"],
         [
             [c.noise_text, f"{c.kappa:g}"]
-            + [f"{100 * np.mean(R[c][lab]['ess']):.2g} %" for lab in ("GPF", "MMPF", "PF")]
-            + [" / ".join(f"{int(R[c][lab]['lost'].sum())}/{len(R[c][lab]['lost'])}" for lab in ("GPF", "MMPF", "PF"))]
+            + [f"{100 * np.mean(R[c][lab]['ess']):.2g} %" for lab in filters]
+            + [" / ".join(f"{int(R[c][lab]['lost'].sum())}/{len(R[c][lab]['lost'])}" for lab in filters)]
             for c in grid
         ],
     )
-    t["cost"] = render.table(
+
+
+def _table_cost(R: dict, grid) -> str:
+    """µs per step of each filter, and GPF / MMPF, in every grid cell."""
+    return render.table(
         ["sensors", "κ", *[f"{lab} µs/step" for lab in MAIN], "GPF/MMPF"],
         [
-            [tag("#e-cost") * (c == grid[0]) + c.noise_text, f"{c.kappa:g}"]
+            [render.anchor_tag("#e-cost") * (c == grid[0]) + c.noise_text, f"{c.kappa:g}"]
             + [f"{R[c][lab]['row']['us_per_step']:.0f}" for lab in MAIN]
             + [f"{R[c]['GPF']['row']['us_per_step'] / R[c]['MMPF']['row']['us_per_step']:.2f}"]
             for c in grid
         ],
     )
-    return t
+
+
+def tables(R: dict, T: dict, p: dict) -> dict:
+    """The evidence tables of the template (each a Markdown table; anchors on the claims' rows)."""
+    grid = p["grid"]
+    return {
+        "best": _table_best(R, T, grid),
+        "grid": _table_order(R, grid),
+        "maneuvers": _table_maneuvers(R, grid),
+        "profiles": render.table(
+            ["κ", "profile", *[f"{ch}: GPF − MMPF / MMPF − EKF" for ch in CH]],
+            [[f"{c.kappa:g}", c.profile] + [order(R[c], ch) for ch in CH] for c in p["profiles"]],
+        ),
+        "ablation": _table_ablation(R, p["ablation"]),
+        "lead": _table_lead(R, grid),
+        "ess": _table_ess(R, grid),
+        "cost": _table_cost(R, grid),
+    }
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
