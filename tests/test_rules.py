@@ -195,3 +195,16 @@ def test_a_condition_tried_and_not_met_is_printed_beside_the_verdict():
     v, = decide([claim(Rule("p", "paper", "A - B", test="t", condition="q", condition_text="Q small"))],
                 {"p": [same], "q": [Comparison("small Q", base - 0.5, base)]})
     assert v.label == RECOVERED and v.tried == {}
+
+
+def test_interval_text_without_a_paper_number_and_with_lost_runs():
+    """An interval comparison with no paper number prints n/a (it cannot hold), and with a lost run its
+    estimate is the median (the bootstrap interval test_one takes then), said as such."""
+    import numpy as np
+
+    from replay.reproduce.rules import Comparison, test_one
+
+    rng = np.random.default_rng(0)
+    c = Comparison("cell", [1.0, 2.0, 3.0, 4.0], None, lost_a=[False, False, False, True], lost_b=None, target=None)
+    o = test_one(c, "interval", rng)
+    assert not o.holds and "vs paper n/a" in o.text() and "median" in o.text()

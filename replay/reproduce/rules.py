@@ -157,7 +157,7 @@ class Outcome:
     holds: bool = False
 
     def text(self, digits: int = 3) -> str:
-        g = lambda v: f"{v:.{digits}g}" if np.isfinite(v) else "n/a"
+        g = lambda v: f"{v:.{digits}g}" if v is not None and np.isfinite(v) else "n/a"
         c = self.comparison
         if self.test == "mcnemar":
             a, b = np.asarray(c.lost_a, bool), np.asarray(c.lost_b, bool)
@@ -165,7 +165,8 @@ class Outcome:
         elif self.test == "fisher":
             body = f"{c.name}: lost {c.counts[0]}/{c.counts[1]} vs {c.counts[2]}/{c.counts[3]}"
         else:
-            what = "median" if self.test == "wilcoxon" else "mean"
+            lost = self.test == "interval" and c.lost_a is not None and sig.bimodal(c.lost_a, [])
+            what = "median" if self.test == "wilcoxon" or lost else "mean"  # test_one's estimate
             body = f"{c.name}: {what} {g(self.estimate)} [{g(self.lo)}, {g(self.hi)}]"
         if self.test == "interval":
             return f"{body} vs paper {g(self.comparison.target)}"
