@@ -39,7 +39,6 @@ the task's reference and the run is scored by the same
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +50,7 @@ from replay.data import dataset_ref, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
+from replay.run.canonical import config_hash, plain  # noqa: F401 (the pipeline's names too)
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, metrics, scorer
@@ -79,27 +79,6 @@ class Config:
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
-
-def config_hash(config: dict) -> str:
-    """The hash of a configuration's canonical JSON (16 hex digits); the one name of a configuration."""
-    text = json.dumps(plain(config), sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def plain(obj):
-    """``obj`` with numpy values, tuples and paths made JSON-plain (lists, floats, ints, strings)."""
-    if isinstance(obj, dict):
-        return {str(k): plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.floating, np.integer, np.bool_)):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
 
 
 def resolve(dataset):

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from replay.run.pipeline import config_hash
+from replay.run.canonical import config_hash
 from replay.trajectory import io, row_metrics
 from replay.trajectory.base import Trajectory
 from replay.trajectory.pose_error import UNITS, statistics
