@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-COLS36 = (
-    "lat_gps",
-    "lon_gps",
-    "alt_gps",
+# the columns both layouts share, between the position fix and the times
+_SHARED = (
     "roll",
     "pitch",
     "yaw",
@@ -35,46 +33,9 @@ COLS36 = (
     "posmode",
     "velmode",
     "orimode",
-    "lat",
-    "lon",
-    "depth",
-    "height",
-    "time",
-    "time_gps",
 )
-COLS31 = (
-    "lat",
-    "lon",
-    "alt",
-    "roll",
-    "pitch",
-    "yaw",
-    "vn",
-    "ve",
-    "vf",
-    "vl",
-    "vu",
-    "ax",
-    "ay",
-    "az",
-    "af",
-    "al",
-    "au",
-    "wx",
-    "wy",
-    "wz",
-    "wf",
-    "wl",
-    "wu",
-    "pos_accuracy",
-    "vel_accuracy",
-    "navstat",
-    "numsats",
-    "posmode",
-    "velmode",
-    "orimode",
-    "time",
-)
+COLS36 = ("lat_gps", "lon_gps", "alt_gps", *_SHARED, "lat", "lon", "depth", "height", "time", "time_gps")
+COLS31 = ("lat", "lon", "alt", *_SHARED, "time")
 
 # column -> (kind, unit, frame, description). Kinds select the plausibility checks.
 COLUMNS = {
