@@ -5,7 +5,7 @@ schedule, random maneuver schedules, GPF ablations, every filter (and the baseli
 matched to the sensors) on a **tuning seed** (master seed + 1) to pick each filter's best
 setting, then compared on the verdict seed. The claims and their rules are :data:`CLAIMS`,
 declared before the run; :func:`evidence` fills the comparisons the rules name; the verdicts
-come from :func:`replay.reproduce.rules.decide`; the prose is ``templates/000.md``.
+come from :func:`replay.reproduce.rules.decide`; the prose is ``replay/papers/000.md``.
 ``quick``: 20 s logs, 2 runs, a 3 × 2 grid, 2 profiles (a smoke check of the path).
 """
 

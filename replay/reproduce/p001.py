@@ -2,7 +2,7 @@
 
 The paper publishes figures only: per-time RMSE of north, east, depth, body velocity and
 acceleration for UKF and AUKF. The experiments, the claims and their rules are data in
-:mod:`.p001_plan`; the prose is ``templates/001.md``, filled by the one renderer
+:mod:`.p001_plan`; the prose is ``replay/papers/001.md``, filled by the one renderer
 (:mod:`.render`); every row comes from :func:`replay.run.evaluation.evaluate` (the pipeline of
 ``replay eval``), comparisons paired on the same runs (common random numbers). Everything the
 paper does not print (time step, Q, R, P0, mission legs, current scale, DVL mode) is documented in

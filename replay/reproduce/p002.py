@@ -2,7 +2,7 @@
 
 :data:`SIM` and :func:`bohai` list the experiments (dataset, task, rows: filter and parameters, the
 paper's numbers); :mod:`.p002_claims` declares each claim with its rule (before any run) and the
-comparisons it draws on; ``templates/002.md`` holds the prose. Adding an ablation is a row here.
+comparisons it draws on; ``replay/papers/002.md`` holds the prose. Adding an ablation is a row here.
 Every row is one :func:`replay.run.evaluation.evaluate` call's filter (the pipeline of ``replay eval``;
 each table prints the commands that give its rows); rows of one experiment share the seed, so
 they are paired run by run. Baselines at their best (``tune``): each listed filter's ``q_scale``

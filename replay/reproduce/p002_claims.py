@@ -1,5 +1,5 @@
 """Paper 002's claims, each with its rule and the comparisons it draws on, declared before any run
-(:mod:`replay.reproduce.rules`); the tables and fields of ``templates/002.md``."""
+(:mod:`replay.reproduce.rules`); the tables and fields of ``replay/papers/002.md``."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Reproduction of paper 003 (weight-factor PF vs PF, UAV formation under glint noise), §4 Fig. 1–6.
 
 The experiments are data (:mod:`.p003_plan`), the claims and their rules are declared before the
-run (:mod:`.p003_claims`), the prose is ``templates/003.md``; this module runs the evaluations
+run (:mod:`.p003_claims`), the prose is ``replay/papers/003.md``; this module runs the evaluations
 (:func:`replay.run.evaluation.evaluate`, in ``REPLAY_WORKERS`` processes), builds the evidence (per-run
 values paired on the same measurements), decides (:func:`replay.reproduce.rules.decide`) and
 renders (:func:`replay.reproduce.render.render`).

@@ -291,7 +291,7 @@ def poor(evs, rng) -> str:
 
 
 def fields(evs, best, runs, doc, verdicts, evid) -> dict:
-    """Every placeholder of ``templates/003.md`` but the verdicts and the command."""
+    """Every placeholder of ``replay/papers/003.md`` but the verdicts and the command."""
     rng = np.random.default_rng(0)
     where_table, n = where(evs, rng)
     pooled_table, outs = pooled(evid, rng)

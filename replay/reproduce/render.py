@@ -1,6 +1,6 @@
 """The one renderer of reproduction documents: a prose template, the verdict table, tables as data.
 
-A paper's document is ``replay/reproduce/templates/NNN.md``, Markdown with ``${name}``
+A paper's document is ``replay/papers/NNN.md``, Markdown with ``${name}``
 placeholders (:class:`string.Template`; ``$$`` for a literal dollar), filled by
 :func:`render` from ``fields`` (text the paper's code computes: numbers, tables made with
 :func:`table`) and the verdicts (:func:`replay.reproduce.rules.decide`). Every placeholder
@@ -27,9 +27,10 @@ import numpy as np
 from replay.scoring.significance import pairs, t_interval
 
 from .rules import MECHANISM, RECOVERED, Verdict, counts
+from .spec import PAPERS
 from .verdict import cell
 
-TEMPLATES = Path(__file__).with_name("templates")
+TEMPLATES = PAPERS
 
 
 def table(head: list[str], rows: list[list]) -> str:
@@ -105,7 +106,7 @@ def verdict_table(verdicts: list[Verdict]) -> str:
 
 
 def render(template: str | Path, fields: dict, verdicts: list[Verdict]) -> str:
-    """The document: ``template`` (a path, or a paper number "NNN" for ``templates/NNN.md``) with
+    """The document: ``template`` (a path, or a paper number "NNN" for ``replay/papers/NNN.md``) with
     ``${verdicts}`` and every ``fields`` placeholder filled (module docstring)."""
     path = TEMPLATES / f"{template}.md" if re.fullmatch(r"\d{3}", str(template)) else Path(template)
     text = path.read_text(encoding="utf-8")

@@ -1,0 +1,65 @@
+"""A paper's reproduction as data: ``replay/papers/NNN.toml`` beside its prose ``replay/papers/NNN.md``.
+
+The TOML file holds what a referee reads before the run: the experiments (datasets, filters and
+their parameters, the paper's numbers), the baselines' tuning grids and the claims, each with its
+deciding rule (:class:`replay.reproduce.rules.Rule`), the label of the previous document and the
+anchor of its evidence row::
+
+    [[claim]]
+    id = "depth"
+    words = "depth RMSE: GPF < MMPF < EKF (Fig. 4)"
+    paper = "GPF < MMPF < EKF (figures only)"
+    evidence = "#e-order"
+    old = "deviation explained (holds in 1/12 cells)"
+    rule = { decides = "depth@paper", cells = "the paper's setting", statistic = "per-run depth RMSE" }
+
+Every key is checked: an unknown one is refused naming the file and the claim, so a misspelt rule
+field cannot silently fall back to its default. The experiments' tables are read by the paper's
+module (``replay/reproduce/pNNN.py``), which names what it expects.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import fields
+from pathlib import Path
+
+from .rules import Claim, Rule
+
+PAPERS = Path(__file__).resolve().parents[1] / "papers"
+CLAIM_KEYS = {"id", "words", "paper", "evidence", "old", "rule"}
+RULE_KEYS = {f.name for f in fields(Rule)}
+
+
+def path(paper: str, suffix: str) -> Path:
+    """``replay/papers/<paper>.<suffix>``."""
+    return PAPERS / f"{paper}.{suffix}"
+
+
+def load(paper: str) -> dict:
+    """The paper's TOML table (``ValueError`` naming the file on a syntax error)."""
+    p = path(paper, "toml")
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{p.name}: {e}") from None
+
+
+def claims(spec: dict, where: str = "paper") -> list[Claim]:
+    """The ``[[claim]]`` tables as :class:`Claim` objects, every key checked (module docstring)."""
+    out = []
+    for i, c in enumerate(spec.get("claim", []), 1):
+        name = f"{where}: claim {c.get('id', i)!r}"
+        bad = set(c) - CLAIM_KEYS or set(c.get("rule", {})) - RULE_KEYS
+        if bad:
+            raise ValueError(f"{name}: unknown key(s) {sorted(bad)}")
+        missing = CLAIM_KEYS - {"old"} - set(c)
+        if missing:
+            raise ValueError(f"{name}: missing {sorted(missing)}")
+        out.append(Claim(c["id"], c["words"], c["paper"], Rule(**c["rule"]), c["evidence"]))
+    return out
+
+
+def old_labels(spec: dict) -> dict[str, str]:
+    """Claim id -> the label of the previous document ("(new row)" when it had none)."""
+    return {c["id"]: c.get("old", "(new row)") for c in spec.get("claim", [])}
