@@ -27,7 +27,7 @@
    ``replay`` script, from the repository root), after one untimed ``--quick``
    run (about 50 s: every compiled kernel in numba's cache), against the
    baseline stored in ``REPRODUCE_002_BASELINE_S`` (one process). The reproduction computes its
-   evaluations in ``REPLAY_WORKERS`` worker processes (default 2, :mod:`replay.reproduce.pool`).
+   evaluations in ``REPLAY_WORKERS`` worker processes (default 2, :mod:`replay.campaign.longest`).
    Target (issue 17): >= 2x faster.
 
 ``--filters`` also accepts ``stcpf`` (not in Table 5). The numpy engine that
@@ -57,7 +57,7 @@ from replay.util.seeds import rng_for
 from replay.filters import make_filter
 from replay.filters import compiled
 from replay.filters.p002 import gwo
-from replay.reproduce import pool as reproduce_pool
+from replay.campaign import longest as reproduce_pool
 from replay.tasks import make_task
 
 FIVE = ("stckf", "pf", "pso-pf", "pso-cpf", "igwo-stcpf")

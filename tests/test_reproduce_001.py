@@ -49,7 +49,7 @@ def test_water_track_error_is_the_integrated_current():
 def test_reproduce_001_quick(tmp_path):
     from replay.reproduce.p001 import run
     from replay.reproduce.rules import LABELS
-    from replay.reproduce.verdict import check_portable
+    from replay.util.portable import check_portable
 
     doc = tmp_path / "001.md"
     evs = run(quick=True, runs=3, doc=doc, quiet=True)

@@ -53,7 +53,7 @@ def test_core_gaussian_likelihood_is_mismatched_to_strong_glint():
 @pytest.mark.slow
 def test_reproduce_003_quick(tmp_path):
     from replay.reproduce.p003 import run
-    from replay.reproduce.verdict import check_portable
+    from replay.util.portable import check_portable
 
     doc = tmp_path / "003.md"
     evs = run(quick=True, runs=2, doc=doc, quiet=True)

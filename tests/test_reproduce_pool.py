@@ -1,4 +1,4 @@
-"""The reproductions' worker pool (replay.reproduce.pool): the costliest evaluation first, the serial
+"""The reproductions' worker pool (replay.campaign.longest): the costliest evaluation first, the serial
 results whatever the workers, ``REPLAY_WORKERS`` read in one line; paper 002's jobs through it."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from replay.reproduce import pool
+from replay.campaign import longest as pool
 from replay.reproduce.p002 import A, Exp, run_all
 from replay.util.errors import ReplayError
 

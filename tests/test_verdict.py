@@ -1,20 +1,8 @@
-"""The reproductions' shared verdict table and portability check."""
+"""The reproductions' shared leaderboard rows and the portability check of documents."""
 import pytest
 
-from replay.reproduce.verdict import Claim, check_portable, result_rows, verdict_table
-
-
-def test_verdict_table_counts_and_links():
-    claims = [Claim("IGWO-STCPF beats PF", "4.14 ± 0.29", "3.1", "deviation explained", "#table-5",
-                    cause="the bounds of PSO"),
-              Claim("CKF 2.1 m", "2.08 ± 0.05", "2.1", "reproduced", "#table-2")]
-    t = verdict_table(claims)
-    assert "[table-5](#table-5)" in t and "**deviation explained**: the bounds of PSO" in t
-    assert t.endswith("1 reproduced, 1 deviation explained, 0 not reproduced (of 2 claims).")
-    with pytest.raises(ValueError):
-        Claim("x", "1", "1", "deviation explained", "#a")  # no cause
-    with pytest.raises(ValueError):
-        Claim("x", "1", "1", "maybe", "#a")
+from replay.reproduce.verdict import result_rows
+from replay.util.portable import check_portable
 
 
 def test_result_rows_show_median_lost_and_diverged():

@@ -19,9 +19,11 @@ import numpy as np
 from . import render
 from .render import fmt, pm
 from .p000_cells import ABLATIONS, CH, GENERATED_RMS, MAIN, ORACLE, R_STD, UNITS, Cell, compute
-from .pool import pool, run_longest_first, workers as pool_workers
+from replay.campaign.longest import pool, run_longest_first, workers as pool_workers
 from .rules import Claim, Comparison, decide
-from .verdict import Stopwatch, footer, result_rows, write_document
+from replay.util.portable import write_document
+
+from .verdict import Stopwatch, footer, result_rows
 from replay.reproduce.p000_claims import CLAIMS, OLD, EVIDENCE
 
 NOISES, KAPPAS, PROFILES, PROFILE_KAPPAS = (None, 0.03, 0.3, 1.0), (1.0, 1e-2, 1e-4), (1, 2, 3, 4, 5, 6), (1.0, 1e-4)

@@ -22,7 +22,9 @@ from .common5 import combine, commands, row, run_jobs, table
 from .p001_plots import TRACK, plots
 from .render import found, render, table as md
 from .rules import Comparison, decide, per_run
-from .verdict import Stopwatch, footer, write_document
+from replay.util.portable import write_document
+
+from .verdict import Stopwatch, footer
 
 OLD = {
     "depth": "deviation explained",

@@ -24,9 +24,11 @@ from replay.run.manifest import command_line
 from replay.models.auv_sonar import R_TABLE2
 
 from .p002_claims import TUNE_SEQ
-from .pool import pool, run_longest_first, workers
+from replay.campaign.longest import pool, run_longest_first, workers
 from .rules import per_run
-from .verdict import Stopwatch, footer, write_document
+from replay.util.portable import write_document
+
+from .verdict import Stopwatch, footer
 
 GRID = (0.01, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # q_scale of the tuned baselines, declared
 COLS = ("pos_rmse", "x_rmse", "y_rmse", "pitch_rmse", "yaw_rmse")

@@ -18,10 +18,12 @@ from replay.run.evaluation import evaluate
 from . import p003_tables as tables
 from .p003_claims import CLAIMS
 from .p003_plan import GRIDS, SETTINGS, TUNE_RUNS, TUNED, plan, row_job, tune_plan
-from .pool import pool, run_longest_first, workers
+from replay.campaign.longest import pool, run_longest_first, workers
 from .render import render
 from .rules import decide
-from .verdict import Stopwatch, footer, write_document
+from replay.util.portable import write_document
+
+from .verdict import Stopwatch, footer
 
 
 def _evaluate(args):

@@ -1,4 +1,4 @@
-"""The evaluations of a reproduction in worker processes: one runner for every paper.
+"""Independent evaluations in worker processes, the costliest first (every paper reproduction uses it).
 
 A reproduction lists independent evaluations (``replay eval`` configurations);
 :func:`run_longest_first` computes them in ``REPLAY_WORKERS`` processes (default
@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from concurrent.futures import as_completed
 from contextlib import contextmanager
 
 from replay.campaign.workers import process_pool
 from replay.util.errors import ReplayError
-
-from .verdict import Stopwatch
 
 
 def workers() -> int:
@@ -62,11 +61,13 @@ def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, 
     :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes,
     with the line ``[done/total] <prefix><labels[i]> done at <s> s`` on stderr unless ``quiet``."""
     order = longest_first(costs)
-    sw, n = Stopwatch(), len(order)
+    t0, n = time.perf_counter(), len(order)
 
     def note(k, i):
         if not quiet:
-            print(f"[{k}/{n}] {prefix}{labels[i]} done at {sw.seconds:.0f} s", file=sys.stderr, flush=True)
+            print(
+                f"[{k}/{n}] {prefix}{labels[i]} done at {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True
+            )
 
     if executor is None:
         for k, i in enumerate(order, 1):
