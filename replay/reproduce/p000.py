@@ -1,12 +1,11 @@
 """``replay reproduce 000``: GPF vs MMPF vs EKF on synthetic lake-trial logs (paper 000), as data + a template.
 
-``replay/papers/000.toml`` declares the cells (:class:`Cell`), the filters and GPF variants, the tuning seed
-that picks each filter's best setting, the claims with their rules and the paired comparisons the rules name
-(its comments say how; every key checked by :func:`experiment`). :func:`compute` runs a cell through
-:func:`replay.run.evaluation.evaluate` (the pipeline of ``replay eval``); :func:`evidence` fills the
-comparisons; :func:`replay.reproduce.rules.decide` gives the verdicts; :func:`tables` the evidence tables of
-the prose ``replay/papers/000.md``. A filter variant, a cell, a grid value, a claim or a comparison of two
-filters in named cells is a TOML edit; a new kind of statistic or table is code.
+``replay/papers/000.toml`` declares the cells (:class:`Cell`), filters, GPF variants, tuning seed, table heads,
+the claims with their rules and the paired comparisons they name (its comments say how; :func:`experiment`
+checks every key). :func:`compute` runs a cell through :func:`replay.run.evaluation.evaluate` (the pipeline of
+``replay eval``); :func:`evidence` fills the comparisons, :func:`replay.reproduce.rules.decide` decides, and
+:func:`tables` fills the prose ``replay/papers/000.md``. A filter variant, cell, grid value, claim or paired
+comparison in named cells is a TOML edit; a new kind of statistic or table is code.
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ from .render import anchor_tag, fmt, pm, table
 from .rules import Comparison, decide, per_run
 from .verdict import Stopwatch, footer, result_rows, write_document
 
+RUNS = ("experiment", "quick")
 SCHEMA = {  # each kind of TOML entry -> its keys ("?": optional)
     "file": "experiment quick filters tables evidence claim",
     "experiment": "dataset task channels particles runs profile_runs tune_runs tune_seed grid profiles "
@@ -42,18 +42,19 @@ SCHEMA = {  # each kind of TOML entry -> its keys ("?": optional)
 
 
 def experiment(x: dict) -> dict:
-    """``x`` if every entry's keys are those of its :data:`SCHEMA` (the claims: :func:`spec.claims`), else a
+    """``x`` if every entry has the keys of its kind in :data:`SCHEMA` (claims: :func:`spec.claims`), else a
     ``ValueError`` naming the file and the entry."""
-    todo = [(x, "file", "the top level"), (x["filters"], "filters", "[filters]"), (x["tables"], "tables", "[tables]")]
-    todo += [(e, "filter", f"[filters.{k}] {lab!r}") for k, t in x["filters"].items() for lab, e in t.items()]
-    todo += [(e, "evidence", f"[[evidence]] {e.get('key')!r}") for e in x["evidence"]]
-    for n, t in (("experiment", x["experiment"]), ("quick", x["quick"])):
-        todo += [(t, n, f"[{n}]")] + [(t[k], k, f"[{n}] {k}") for k in ("grid", "profiles") if k in t]
-        cells = [*t.get("ablation_cells", []), *t.get("key_cells", {}).values()]
-        todo += [(c, "cell", f"[{n}] cell {c}") for c in cells]
-    for table_, kind, entry in todo:
+    todo = [("file", x, "the top level"), *((k, x.get(k, {}), f"[{k}]") for k in ("filters", "tables", *RUNS))]
+    todo += [("filter", e, f"[filters.{k}] {lab!r}") for k, t in x.get("filters", {}).items() for lab, e in t.items()]
+    todo += [("evidence", e, f"[[evidence]] {e.get('key')!r}") for e in x.get("evidence", [])]
+    for n, t in ((n, x.get(n, {})) for n in RUNS):
+        todo += [(k, t[k], f"[{n}] {k}") for k in ("grid", "profiles") if k in t]
+        todo += [
+            ("cell", c, f"[{n}] cell {c}") for c in [*t.get("ablation_cells", []), *t.get("key_cells", {}).values()]
+        ]
+    for kind, t, entry in todo:
         keys = SCHEMA[kind].split()
-        unknown, missing = set(table_) - {k.rstrip("?") for k in keys}, {k for k in keys if "?" not in k} - set(table_)
+        unknown, missing = set(t) - {k.rstrip("?") for k in keys}, {k for k in keys if "?" not in k} - set(t)
         if unknown or missing:
             raise ValueError(f"000.toml: {entry}: unknown key(s) {sorted(unknown)}, missing {sorted(missing)}")
     return x
@@ -67,9 +68,19 @@ GENERATED_RMS = tuple(float(b) / f for b, f in zip(BASE, base_for_rms((1.0, 1.0,
 tidy = lambda x: float(f"{float(x):.10g}")  # a short decimal for commands: 0.006, not 0.006000000000000001
 MATCHED_R = [tidy(g * g) for g in GENERATED_RMS]  # the generated sensors' mean square noise (an oracle's R)
 _params = lambda e: {k: MATCHED_R if v == "matched" else v for k, v in e.get("params", {}).items()}
-MAIN, ORACLE, ABLATIONS = ({k: (e["filter"], _params(e)) for k, e in X["filters"][t].items()} for t in X["filters"])
+MAIN, ORACLE, ABLATIONS = (
+    {k: (e["filter"], _params(e)) for k, e in X["filters"][t].items()} for t in SCHEMA["filters"].split()
+)
 VARIANTS, OTHERS = {**MAIN, **ORACLE, **ABLATIONS}, tuple(MAIN)[1:]  # the baselines: every main filter but GPF
 PFS, THREE = ("GPF", "MMPF", "PF"), ("GPF", "MMPF", "EKF")
+_each = lambda h: CH if "{ch}" in h else MAIN if "{main}" in h else [""]  # [tables]: {ch}, {main} columns
+HEADS = {k: [h.format(ch=x, main=x) for h in v for x in _each(h)] for k, v in X["tables"].items()}
+SENSORS = {  # the template's numbers of sim/lake-depth's sensors as generated
+    "generated": ", ".join(f"{g:.3g}" for g in GENERATED_RMS),
+    "rho": ", ".join(f"{g / r:.3g}" for g, r in zip(GENERATED_RMS, R_STD)),
+    "matched": ", ".join(f"{g:.3g}²" for g in GENERATED_RMS),
+    "units": ", ".join(EXP["channels"].values()),
+}
 
 
 @dataclass(frozen=True)
@@ -161,15 +172,14 @@ def evidence(R: dict, T: dict, p: dict) -> dict:
     cost (µs per step over the grid), lead-q (first vs last κ per sensor level), lead-r (1 R vs lowest per κ)."""
     ev, at, cell = {}, tuned(T, R, p["grid"]), {(c.noise, c.kappa): R[c] for c in p["grid"]}
     for e in X["evidence"]:
-        cells = (
-            [("ablation", c) for c in p["ablation"]] if e["cells"] == "ablation" else [(n, KEY[n]) for n in e["cells"]]
-        )
+        cells = [(n, c) for n in e["cells"] for c in (p["ablation"] if n == "ablation" else [KEY[n]])]
         for n, c, ch, (a, b) in [(n, c, ch, ab) for n, c in cells for ch in CH for ab in e["pairs"]]:
-            name = e["name"].format(sensors=c.noise_text, kappa=c.kappa, ch=ch, a=a, b=b)
+            name, key = (
+                e["name"].format(sensors=c.noise_text, kappa=c.kappa, ch=ch, a=a, b=b),
+                e["key"].format(tag=n, ch=ch),
+            )
             if c.kappa < e.get("kappa_below", np.inf):
-                ev.setdefault(e["key"].format(tag=n, ch=ch), []).append(
-                    cmp(name, R[c][a], R[c][b], ch, e.get("of", "rmse"))
-                )
+                ev.setdefault(key, []).append(cmp(name, R[c][a], R[c][b], ch, e.get("of", "rmse")))
     ev["best"] = [cmp(f"{ch}: GPF − {lab}", at[("GPF", ch)][2], at[(lab, ch)][2], ch) for ch in CH for lab in OTHERS]
     us = ([R[c][lab]["row"]["us_per_step"] for c in p["grid"]] for lab in ("GPF", "MMPF"))
     ev["cost"] = [Comparison("GPF − MMPF, µs per step over the grid cells", *us)]
@@ -182,12 +192,6 @@ def evidence(R: dict, T: dict, p: dict) -> dict:
     return ev
 
 
-def heads(name: str) -> list:
-    """The column heads of ``[tables] name``: a head with {ch} once per channel, with {main} once per main filter."""
-    each = lambda h: CH if "{ch}" in h else MAIN if "{main}" in h else [""]
-    return [h.format(ch=x, main=x) for h in X["tables"][name] for x in each(h)]
-
-
 def tables(R: dict, T: dict, p: dict) -> dict:
     """The evidence tables of the template (anchors on the claims' rows); differences paired, mean ± 95 %."""
     g, abl, at, mark = p["grid"], p["ablation"], tuned(T, R, p["grid"]), lambda a, here: anchor_tag(a) if here else ""
@@ -197,15 +201,12 @@ def tables(R: dict, T: dict, p: dict) -> dict:
     m = lambda c, k, ch, f=fmt: " / ".join(f(np.mean(R[c][lab][k][ch])) for lab in THREE)
     us = lambda c, lab: R[c][lab]["row"]["us_per_step"]
     by_cell = lambda k, cols, a="", first=None: table(
-        heads(k), [[mark(a, c == first) + c.noise_text, f"{c.kappa:g}", *cols(c)] for c in g]
+        HEADS[k], [[mark(a, c == first) + c.noise_text, f"{c.kappa:g}", *cols(c)] for c in g]
     )
     other = {ch: min(OTHERS, key=lambda lab: np.mean(rm(lab, ch))) for ch in CH}
     tune = lambda lab, ch: f"κ = {at[(lab, ch)][0].kappa:g}{at[(lab, ch)][1][len(lab) :]}"
-    best = [[ch, *(f"{fmt(np.mean(rm(lab, ch)))} ({tune(lab, ch)})" for lab in MAIN)] for ch in CH]
-    best = [
-        [mark("#e-best", i == 0) + r[0], *r[1:], f"{pm(rm('GPF', r[0]), rm(other[r[0]], r[0]))} ({other[r[0]]})"]
-        for i, r in enumerate(best)
-    ]
+    gap = lambda ch: f"{pm(rm('GPF', ch), rm(other[ch], ch))} ({other[ch]})"  # GPF − the best other
+    best = [[ch, *(f"{fmt(np.mean(rm(lab, ch)))} ({tune(lab, ch)})" for lab in MAIN), gap(ch)] for ch in CH]
     man = [
         [c.name, ch, m(c, "man", ch), m(c, "level", ch), m(c, "ratio", ch, "{:.2f}".format)]
         for c in KEY.values()
@@ -216,14 +217,14 @@ def tables(R: dict, T: dict, p: dict) -> dict:
     lost = lambda c: " / ".join(f"{int(R[c][lab]['lost'].sum())}/{len(R[c][lab]['lost'])}" for lab in PFS)
     grows = lambda c: [f"{100 * np.nanmean(lead(R[c], ch)['lead'][ch]):+.0f} % ({lead(R[c], ch)['best']})" for ch in CH]
     return {
-        "best": table(heads("best"), best),
+        "best": table(HEADS["best"], [[mark("#e-best", i == 0) + r[0], *r[1:]] for i, r in enumerate(best)]),
         "grid": by_cell("grid", order, "#e-order", KEY["paper"]),
         "maneuvers": table(
-            heads("maneuvers"),
+            HEADS["maneuvers"],
             [[mark("#e-man", (c, ch) == (KEY["paper"].name, CH[0])) + c, ch, *r] for c, ch, *r in man],
         ),
-        "profiles": table(heads("profiles"), [[f"{c.kappa:g}", c.profile, *order(c)] for c in p["profiles"]]),
-        "ablation": table(heads("ablation"), [[mark("#e-ablation", i == 0) + r[0], *r[1:]] for i, r in enumerate(abl)]),
+        "profiles": table(HEADS["profiles"], [[f"{c.kappa:g}", c.profile, *order(c)] for c in p["profiles"]]),
+        "ablation": table(HEADS["ablation"], [[mark("#e-ablation", i == 0) + r[0], *r[1:]] for i, r in enumerate(abl)]),
         "lead": by_cell("lead", grows, "#e-lead", g[0]),
         "ess": by_cell("ess", lambda c: [f"{100 * np.mean(R[c][lab]['ess']):.2g} %" for lab in PFS] + [lost(c)]),
         "cost": by_cell(
@@ -257,21 +258,11 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     ]
     ess = lambda c: ", ".join(f"{lab} {100 * np.mean(R[c][lab]['ess']):.2g} %" for lab in PFS)
     relabel = [[v.claim.words, old[v.claim.id], v.label, render.found(v)] for v in verdicts]
-    fields = {f"table_{k}": v for k, v in tables(R, T, p).items()} | {
-        k: p[k] for k in ("runs", "tune_runs", "profile_runs")
-    }
-    fields |= dict(
-        command=cmd, jobs=len(args), workers=workers, seed=seed, tune_seed=tune, every_cell="\n\n".join(cells)
-    )
-    fields |= dict(generated=", ".join(f"{g:.3g}" for g in GENERATED_RMS), units=", ".join(EXP["channels"].values()))
-    fields |= dict(
-        rho=", ".join(f"{g / r:.3g}" for g, r in zip(GENERATED_RMS, R_STD)),
-        matched=", ".join(f"{g:.3g}²" for g in GENERATED_RMS),
-    )
-    fields |= dict(
-        relabelled=table(heads("relabelled"), relabel),
-        ess_paper=" ".join(f"{c.name}: mean ESS/N {ess(c)}." for c in KEY.values()),
-    )
+    fields = {f"table_{k}": v for k, v in tables(R, T, p).items()} | SENSORS
+    fields |= {k: p[k] for k in ("runs", "tune_runs", "profile_runs")} | {"every_cell": "\n\n".join(cells)}
+    fields |= dict(command=cmd, jobs=len(args), workers=workers, seed=seed, tune_seed=tune)
+    fields["relabelled"] = table(HEADS["relabelled"], relabel)
+    fields["ess_paper"] = " ".join(f"{c.name}: mean ESS/N {ess(c)}." for c in KEY.values())
     text = render.render("000", fields, verdicts) + footer(cmd, sw.seconds)
     doc = write_document(doc or "docs/reproduction/000.md", text)
     if not quiet:
