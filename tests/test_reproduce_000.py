@@ -124,6 +124,14 @@ def test_maneuver_and_level_scores_split_the_run(cell):
             r"000\.toml: \[experiment\] grid: unknown key\(s\) \['kappa'\]",
         ),
         (lambda x: x.update(table={}), r"000\.toml: the top level: unknown key\(s\) \['table'\]"),
+        (
+            lambda x: x["evidence"][1].update(of="maneuvers"),
+            r"000\.toml: \[\[evidence\]\] 'worst@\{tag\}': unknown name\(s\) \['maneuvers'\]",
+        ),
+        (
+            lambda x: x["evidence"][0]["pairs"].append(["GPF", "EFK"]),
+            r"\[\[evidence\]\] '\{ch\}@\{tag\}': unknown name\(s\) \['EFK'\]",
+        ),
     ],
 )
 def test_a_misspelt_or_missing_key_is_refused_naming_the_file_and_entry(edit, message):

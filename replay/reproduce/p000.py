@@ -28,7 +28,7 @@ from .render import anchor_tag, fmt, pm, table
 from .rules import Comparison, decide, per_run
 from .verdict import Stopwatch, footer, result_rows, write_document
 
-RUNS = ("experiment", "quick")
+RUNS, STATS = ("experiment", "quick"), {"rmse", "man", "level", "ratio"}
 SCHEMA = {  # each kind of TOML entry -> its keys ("?": optional)
     "file": "experiment quick filters tables evidence claim",
     "experiment": "dataset task channels particles runs profile_runs tune_runs tune_seed grid profiles "
@@ -57,6 +57,13 @@ def experiment(x: dict) -> dict:
         unknown, missing = set(t) - {k.rstrip("?") for k in keys}, {k for k in keys if "?" not in k} - set(t)
         if unknown or missing:
             raise ValueError(f"000.toml: {entry}: unknown key(s) {sorted(unknown)}, missing {sorted(missing)}")
+    labels, cells = {lab for t in x["filters"].values() for lab in t}, {"ablation", *x["experiment"]["key_cells"]}
+    for e in x["evidence"]:  # the names an [[evidence]] entry uses: cells, filter labels, the statistic
+        bad = (
+            set(e["cells"]) - cells | {lab for ab in e["pairs"] for lab in ab} - labels | {e.get("of", "rmse")} - STATS
+        )
+        if bad:
+            raise ValueError(f"000.toml: [[evidence]] {e['key']!r}: unknown name(s) {sorted(bad)}")
     return x
 
 
