@@ -92,7 +92,8 @@ SENSORS = {  # the template's numbers of sim/lake-depth's sensors as generated
 
 @dataclass(frozen=True)
 class Cell:
-    """Sensors at ``noise`` × the fixed R's std (None: as generated), Q = ``kappa`` × the paper's, ``profile`` seed."""
+    """Sensors at ``noise`` × the fixed R's std (None: as generated), Q = ``kappa`` × the paper's, ``profile`` seed.
+    Cells of one sensor level draw the same noise, so its filters and cells are paired run by run."""
 
     noise: float | None
     kappa: float
