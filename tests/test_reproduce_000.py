@@ -1,18 +1,26 @@
-"""Paper 000's reproduction: the generator's sweep parameters, one cell against `replay eval`, quick mode."""
+"""Paper 000's reproduction: the generator's sweep parameters, one cell against `replay eval`, the TOML table
+(every key checked; a row added there reaches the document without code), quick mode."""
+
+import copy
 import csv
+import json
 import shlex
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from replay.cli import main
-from replay.reproduce.p000_cells import MAIN, R_STD, Cell, compute
+from replay.reproduce import p000
+from replay.reproduce.p000 import MAIN, R_STD, Cell, compute
 from replay.sim.lake_depth import maneuvers, random_profile, trajectory
 from replay.sim.lake_depth import make_frame
 
 
 # ---------------------------------------------------------------- generator parameters
+
 
 def test_noise_rms_puts_each_sensor_at_its_level_and_keeps_the_draws():
     target = 0.3 * R_STD
@@ -49,6 +57,7 @@ def test_profile_seed_fixes_the_trajectory_across_runs():
 
 # ---------------------------------------------------------------- one cell = replay eval
 
+
 @pytest.fixture(scope="module")
 def cell():
     """A short mismatched-Q cell with sensors at 0.3 R: GPF, MMPF and EKF, 2 runs of 11 s (a dive from 10 s)."""
@@ -69,7 +78,9 @@ def test_cell_numbers_are_those_of_its_replay_eval_command(cell, tmp_path):
     for lab, f in out["filters"].items():
         name = MAIN[lab][0]
         for ch in ("depth", "speed", "pitch"):
-            assert float(rows[name][f"{ch}_rmse"]) == pytest.approx(np.nanmean(f["rmse"][ch]), rel=1e-5)  # the CSV keeps 6 digits
+            assert float(rows[name][f"{ch}_rmse"]) == pytest.approx(
+                np.nanmean(f["rmse"][ch]), rel=1e-5
+            )  # the CSV keeps 6 digits
             assert f["row"][f"{ch}_rmse"] == pytest.approx(float(rows[name][f"{ch}_rmse"]), rel=1e-5)
 
 
@@ -88,7 +99,126 @@ def test_maneuver_and_level_scores_split_the_run(cell):
             np.testing.assert_allclose(whole, f["rmse"][ch], rtol=1e-9)
 
 
+# ---------------------------------------------------------------- the TOML table
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda x: x["filters"]["ablation"]["GPF with the fixed R"].update(parms={}),
+            r"000\.toml: \[filters\.ablation\] 'GPF with the fixed R': unknown key\(s\) \['parms'\]",
+        ),
+        (
+            lambda x: x["evidence"][0].pop("pairs"),
+            r"000\.toml: \[\[evidence\]\] '\{ch\}@\{tag\}': .*missing \['pairs'\]",
+        ),
+        (
+            lambda x: x["experiment"]["ablation_cells"][0].update(kapa=1.0),
+            r"000\.toml: \[experiment\] cell .*unknown key\(s\) \['kapa'\]",
+        ),
+        (lambda x: x["quick"].update(run=2), r"000\.toml: \[quick\]: unknown key\(s\) \['run'\]"),
+        (lambda x: x["experiment"].pop("tune_seed"), r"000\.toml: \[experiment\]: .*missing \['tune_seed'\]"),
+        (
+            lambda x: x["experiment"]["grid"].update(kappa=[1.0]),
+            r"000\.toml: \[experiment\] grid: unknown key\(s\) \['kappa'\]",
+        ),
+        (lambda x: x.update(table={}), r"000\.toml: the top level: unknown key\(s\) \['table'\]"),
+        (
+            lambda x: x["evidence"][1].update(of="maneuvers"),
+            r"000\.toml: \[\[evidence\]\] 'worst@\{tag\}': unknown name\(s\) \['maneuvers'\]",
+        ),
+        (
+            lambda x: x["evidence"][0]["pairs"].append(["GPF", "EFK"]),
+            r"\[\[evidence\]\] '\{ch\}@\{tag\}': unknown name\(s\) \['EFK'\]",
+        ),
+    ],
+)
+def test_a_misspelt_or_missing_key_is_refused_naming_the_file_and_entry(edit, message):
+    x = copy.deepcopy(p000.X)
+    p000.experiment(copy.deepcopy(x))  # the table as shipped passes
+    edit(x)
+    with pytest.raises(ValueError, match=message):
+        p000.experiment(x)
+
+
+def fake_results(p: dict, runs: int = 3):
+    """Synthetic per-filter results for every job of a plan (no filter runs): the renderer's whole input."""
+    rng = np.random.default_rng(0)
+    R, T = {}, {}
+    for c, labels, _, s in p["jobs"]:
+        for lab in labels:
+            v = lambda: {ch: rng.uniform(0.5, 1.5, runs) for ch in p000.CH}
+            f = {"rmse": v(), "man": v(), "level": v(), "ratio": v(), "lost": np.zeros(runs, bool)}
+            (T if s else R).setdefault(c, {})[lab] = f | {
+                "ess": rng.uniform(0, 1, runs),
+                "row": {"us_per_step": 150.0 + rng.uniform()},
+            }
+    return R, T
+
+
+def test_every_rule_finds_its_evidence_and_every_table_fills_from_synthetic_results():
+    p = p000.plan(quick=True)
+    R, T = fake_results(p)
+    ev = p000.evidence(R, T, p)
+    verdicts = p000.decide(p000.CLAIMS, ev, 0)  # raises if a rule names missing evidence
+    assert [v.claim.id for v in verdicts] == [c.id for c in p000.CLAIMS] and len(verdicts) == 11
+    assert [len(ev[k]) for k in ("depth@paper", "worst@mismatch", "depth@fixedR", "grey", "wavelet", "best")] == [
+        2,
+        6,
+        1,
+        3,
+        6,
+        12,
+    ]
+    tables = p000.tables(R, T, p)
+    assert tables["ablation"].count("\n") == 2 + 2 * 4 - 1 and tables["grid"].count("\n") == 2 + 6 - 1
+
+
+EDIT = """
+[filters.ablation."GPF, no wavelet, no grey"]
+filter = "gpf"
+params = { wavelet = false, grey = false }
+
+[[evidence]]
+key = "both"
+cells = ["ablation"]
+pairs = [["GPF", "GPF, no wavelet, no grey"]]
+name = "{sensors}, κ = {kappa:g}, {ch}"
+"""
+
+
+def test_a_row_added_in_the_toml_reaches_the_plan_evidence_and_tables_without_code(tmp_path):
+    """A copy of 000.toml with one more ablation variant and one more comparison, read by a fresh process."""
+    from replay.reproduce import spec
+
+    text = spec.path("000", "toml").read_text(encoding="utf-8")
+    (tmp_path / "000.toml").write_text(
+        text.replace("# Paired comparisons the claims'", EDIT + "\n# Paired comparisons the claims'"), encoding="utf-8"
+    )
+    script = f"""
+import json, sys
+sys.path.insert(0, {str(__import__('pathlib').Path(__file__).parent)!r})
+from replay.reproduce import spec
+spec.PAPERS = __import__('pathlib').Path({str(tmp_path)!r})
+from replay.reproduce import p000
+from test_reproduce_000 import fake_results
+p = p000.plan(quick=True)
+R, T = fake_results(p)
+ev, tables = p000.evidence(R, T, p), p000.tables(R, T, p)
+print(json.dumps({{"jobs": [[c.name, list(labs)] for c, labs, _, _ in p["jobs"]], "both": [c.name for c in ev["both"]],
+                  "rows": tables["ablation"].count("no wavelet, no grey")}}))
+"""
+    out = json.loads(subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True).stdout)
+    assert [j for j in out["jobs"] if j[1] == ["GPF, no wavelet, no grey"]] == [
+        ["sensors as generated, κ = 1, fixed profile", ["GPF, no wavelet, no grey"]],
+        ["sensors as generated, κ = 0.0001, fixed profile", ["GPF, no wavelet, no grey"]],
+    ]
+    assert len(out["both"]) == 6 and out["both"][0] == "as generated, κ = 1, depth" and out["rows"] == 2
+
+
 # ---------------------------------------------------------------- the whole path, quick
+
 
 def test_particle_filters_report_their_effective_sample_size(cell):
     _, out = cell
@@ -108,10 +238,12 @@ def test_quick_reproduction_writes_the_verdict_first(tmp_path):
     text = doc.read_text()
     lines = text.splitlines()
     assert lines[0].startswith("# Paper 000") and lines[2] == "## Verdict" and lines[4].startswith("| claim |")
-    rows = lines[6:6 + len(CLAIMS)]
+    rows = lines[6 : 6 + len(CLAIMS)]
     assert all(any(f"| **{lab}** |" in r for lab in LABELS) for r in rows) and lines[6 + len(CLAIMS)] == ""
     assert "deviation explained" not in "\n".join(rows)
-    assert text.count("`replay eval sim/lake-depth --task depth") == 6 + 6 + 4 + 2 + 8  # grid, tuning, R, profiles, ablations
+    assert (
+        text.count("`replay eval sim/lake-depth --task depth") == 6 + 6 + 4 + 2 + 8
+    )  # grid, tuning, R, profiles, ablations
     assert "## Relabelled rows" in text and "Generated by `replay reproduce 000 --quick` in" in text
     for anchor in ("e-best", "e-order", "e-man", "e-cost", "e-lead", "e-ablation"):
         assert text.count(f'<a id="{anchor}"></a>') == 1 and f"](#{anchor})" in text
