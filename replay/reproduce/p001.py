@@ -1,15 +1,11 @@
-"""Reproduction of paper 001 (AUKF vs UKF, small-AUV dead reckoning in currents), §5 Fig. 3–5.
+"""Reproduction of paper 001 (AUKF vs UKF, small-AUV dead reckoning in currents), §5 Fig. 3–5: the paper prints
+figures only (per-time RMSE of north, east, depth, body velocity and acceleration of UKF and AUKF).
 
-The paper prints figures only (per-time RMSE of north, east, depth, body velocity and acceleration of
-UKF and AUKF). Everything declared is data in ``replay/papers/001.toml``, whose comments give its
-reading rules: the experiments, the UKF's tuning grid and rule, the tables, the comparisons the claims
-draw on, the claims with their rules (:mod:`.spec`), the figures. The prose is ``replay/papers/001.md``,
-filled by the one renderer (:mod:`.render`); every row comes from :func:`replay.run.evaluation.evaluate`
-(the pipeline of ``replay eval``), comparisons paired on the same runs. :func:`load` refuses an unknown
-or missing key (:data:`SCHEMA`) and a job, info list or evidence key named but not declared.
-
-Adding an ablation is a TOML edit: a ``job``, a row in its ``[[table]]`` (and a comparison in
-``[evidence]`` if a claim draws on it); a claim: a ``[[claim]]`` whose rule names evidence keys.
+Everything declared (experiments, the UKF's tuning grid and rule, tables, the comparisons the claims draw on, the
+claims with their rules (:mod:`.spec`), figures) is data in ``replay/papers/001.toml``, whose comments give its
+reading rules; :func:`load` refuses an unknown or missing key (:data:`SCHEMA`) and a job or info list named but not
+declared. The prose is ``replay/papers/001.md`` (:mod:`.render`). Adding an ablation is a TOML edit: a ``job``, a
+row in its ``[[table]]`` (and a comparison in ``[evidence]`` if a claim draws on it); a claim: a ``[[claim]]``.
 """
 
 import itertools
@@ -27,18 +23,19 @@ from .render import found, render, table as md
 from .rules import Comparison, decide, per_run
 from .verdict import Stopwatch, footer, write_document
 
-# kind of entry -> "required keys | optional keys" (;-separated, :func:`check`)
-SCHEMA = dict(
-    kind.split(": ")
-    for kind in (
-        "top level: dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job tuning table info "
-        "evidence plots claim |; tuning: filter data grid runs seed_offset tie anees label |; cell: key title data | "
-        "full; cell_job: suffix filters | params; job: key filters | dataset data params task sweep at_most full; "
-        "table: name metrics paired rows | info; info: head key format | component abs; evidence: name metric a b | "
-        "fa fb; plots: quantities plot traces |; plot: file track title filters |; traces: job label panels title "
-        "alt text |"
-    ).split("; ")
-)
+SCHEMA = {  # kind of entry -> "required keys | optional keys" (:func:`check`)
+    "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "
+    "tuning table info evidence traces nees claim |",
+    "tuning": "filter data grid runs seed_offset tie anees label |",
+    "cell": "key title data | full",
+    "cell_job": "suffix filters | params",
+    "job": "key filters | dataset data params task sweep at_most full",
+    "table": "name metrics paired rows | info",
+    "info": "head key format | component abs",
+    "evidence": "name metric a b | fa fb",
+    "plot": "file track title filters |",
+    "traces": "job label panels title alt text |",
+}
 
 
 def check(entry: dict, kind: str, name="") -> dict:
@@ -53,19 +50,18 @@ def check(entry: dict, kind: str, name="") -> dict:
 def load() -> dict:
     """``replay/papers/001.toml``, every entry checked (module docstring); the claims by :mod:`.spec`."""
     s = check(papers.load("001"), "top level")
-    p = check(s["plots"], "plots")
-    entries = [("tuning", s["tuning"]), ("traces", p["traces"])] + [("plot", x) for x in p["plot"]]
-    entries += [(k, x) for k in ("cell", "cell_job", "job", "table") for x in s[k]]
+    entries = [("tuning", s["tuning"]), ("traces", s["traces"])]
+    entries += [(k, x) for k in ("cell", "cell_job", "job", "table", "plot") for x in s[k]]
     entries += [(k, x) for k in ("info", "evidence") for xs in s[k].values() for x in xs]
     for kind, e in entries:
         check(e, kind, next((e[k] for k in ("key", "name", "file", "head", "suffix", "job") if k in e), ""))
-    planned, claims = {j.key for j in jobs(s, False, {}, 1, 1)}, papers.claims(s, "001.toml")
-    used = [r[1] for t in s["table"] for r in t["rows"]] + [f[1] for x in p["plot"] for f in x["filters"]]
-    used += [c[x][0] for cs in s["evidence"].values() for c in cs for x in "ab"] + [s["primary"], p["traces"]["job"]]
+    planned = {j.key for j in jobs(s, False, {}, 1, 1)}
+    used = [r[1] for t in s["table"] for r in t["rows"]] + [f[1] for x in s["plot"] for f in x["filters"]]
+    used += [c[x][0] for cs in s["evidence"].values() for c in cs for x in "ab"] + [s["primary"], s["traces"]["job"]]
     unknown = {k for k in used if k not in planned} | {t["info"] for t in s["table"] if "info" in t} - set(s["info"])
-    unknown |= {k for c in claims for k in (c.rule.decides, c.rule.mechanism) if k and k not in s["evidence"]}
     if unknown:
-        raise ValueError(f"001.toml: jobs, info lists or evidence named but not declared: {sorted(unknown)}")
+        raise ValueError(f"001.toml: jobs or info lists named but not declared: {sorted(unknown)}")
+    papers.claims(s, "001.toml")  # the claims' schema (:mod:`.spec`)
     return s
 
 
@@ -80,25 +76,20 @@ def jobs(s: dict, quick: bool, tuned: dict, runs: int, n: int) -> list[Job]:
     return out
 
 
-def grid(s: dict, runs: int = 0) -> list[tuple[dict, Job]]:
-    """(point, its job on ``runs`` runs, at most ``[tuning] runs``) of every combination of the grid's lists."""
+def tune(s: dict, runs: int, seed: int, data_dir, quiet: bool) -> tuple[dict, str]:
+    """The baseline's scales chosen by ``[tuning]``'s rule on its grid (every combination of its lists), its table."""
     t, f = s["tuning"], s["tuning"]["filter"]
     points = [dict(zip(t["grid"], v)) for v in itertools.product(*t["grid"].values())]
-    return [(p, Job(f"tune {p}", s["dataset"], (f,), t["data"], {f: p}, runs=min(runs, t["runs"]))) for p in points]
-
-
-def pick(s: dict, evs: dict) -> tuple[dict, str]:
-    """The tuned scales by ``[tuning]``'s rule (a diverged point scores inf as in ``replay tune``), the grid table."""
-    t, pts = s["tuning"], [(p, evs[job.key].rows[0]) for p, job in grid(s)]
-    score = [x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf for _, x in pts]
+    grid = [Job(f"tune {p}", s["dataset"], (f,), t["data"], {f: p}, runs=min(runs, t["runs"])) for p in points]
+    xs = [ev.rows[0] for ev in run_jobs(grid, runs, seed + t["seed_offset"], data_dir, quiet).values()]
+    score = [x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf for x in xs]
     if not np.isfinite(best := min(score)):
-        raise ReplayError(f"001 tuning: every grid point of the {t['filter'].upper()} diverged on the training seeds")
-    near = [pt for pt, sc in zip(pts, score) if sc <= (1 + t["tie"]) * best]
+        raise ReplayError(f"001 tuning: every grid point of the {f.upper()} diverged on the training seeds")
+    near = [(p, x) for p, x, sc in zip(points, xs, score) if sc <= (1 + t["tie"]) * best]
     chosen = min(near, key=lambda pt: abs(float(pt[1]["anees"] or np.inf) - t["anees"]))[0]
-    rows = [
-        [*(f"{v:g}" for v in p.values()), f"{x['pos_rmse']:.3f}", f"{float(x['anees'] or np.nan):.1f}"] for p, x in pts
-    ]
-    rows = [r + ["**chosen**" * (p == chosen)] for r, (p, _) in zip(rows, pts)]
+    anees = [f"{float(x['anees'] or np.nan):.1f}" for x in xs]
+    rows = [[*map("{:g}".format, p.values()), f"{x['pos_rmse']:.3f}", a] for p, x, a in zip(points, xs, anees)]
+    rows = [r + ["**chosen**" * (p == chosen)] for r, p in zip(rows, points)]
     return chosen, md([*t["grid"], "pos_rmse (training seeds)", "ANEES", ""], rows)
 
 
@@ -111,12 +102,11 @@ def items(evs: dict, rows: list) -> list[tuple]:
 
 def evidence(s: dict, evs: dict) -> dict:
     """Key -> the comparisons "fa × a < fb × b" of ``[evidence]`` whose jobs ran, over their common first runs."""
-    out = {key: [] for key in s["evidence"]}
+    out = {}
     for key, c in ((key, c) for key, cs in s["evidence"].items() for c in cs if c["a"][0] in evs and c["b"][0] in evs):
-        (a, la), (b, lb) = (
-            per_run(ev.results[i], c["metric"]) for _, (ev, i) in items(evs, [["a", *c["a"]], ["b", *c["b"]]])
-        )
-        out[key].append(Comparison(c["name"], c.get("fa", 1.0) * a, c.get("fb", 1.0) * b, la, lb))
+        arms = items(evs, [["a", *c["a"]], ["b", *c["b"]]])
+        (a, la), (b, lb) = (per_run(ev.results[i], c["metric"]) for _, (ev, i) in arms)
+        out.setdefault(key, []).append(Comparison(c["name"], c.get("fa", 1.0) * a, c.get("fb", 1.0) * b, la, lb))
     return out
 
 
@@ -129,10 +119,9 @@ def final(ev, i: int, c: dict) -> str:
 
 def spec_table(s: dict, evs: dict, t: dict) -> str:
     """One ``[[table]]``: its rows' results and commands, then the final estimates (``info``) of its AUKF rows."""
-    its, out, cols = items(evs, t["rows"]), [], s["info"].get(t.get("info"), [])
-    if t["metrics"]:
-        rows = combine(its, metrics=t["metrics"])
-        out.append(table(rows, metrics=t["metrics"], paired_metrics=t["paired"]) + "\n\nCommands:\n\n" + commands(rows))
+    its, m, cols = items(evs, t["rows"]), t["metrics"], s["info"].get(t.get("info"), [])
+    rows = combine(its, metrics=m) if m else []
+    out = [table(rows, metrics=m, paired_metrics=t["paired"]) + "\n\nCommands:\n\n" + commands(rows)] if m else []
     values = [[lab] + [final(ev, i, c) for c in cols] for lab, (ev, i) in its if ev.results[i].name == "aukf"]
     return "\n\n".join(out + [md(["filter"] + [c["head"] for c in cols], values)] * bool(cols))
 
@@ -141,19 +130,17 @@ def fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc) -> dict:
     """The template's placeholders: the cells' tables (``cell_rows``), every ``[[table]]``, the figures."""
     tl, old = s["tuning"]["label"].format(**tuned), papers.old_labels(s)
     g = lambda r, k: f"{float(r[k]):.3g}" if np.isfinite(float(r.get(k) or np.nan)) else "n/a"  # noqa: E731
-    head = ["filter", "ANEES (position, 3 dof)", "95 % band", "steps inside", "flag", "ANIS"]
 
     def cell(key):  # a cell's table, its NEES table (ANEES against its 95 % band, steps inside, ANIS), commands
-        r = combine(
-            items(evs, [[lab.replace("{tuned}", tl), key + x, f] for lab, x, f in s["cell_rows"]]), s["metrics"]
-        )
+        rows = [[lab.replace("{tuned}", tl), key + x, f] for lab, x, f in s["cell_rows"]]
+        r = combine(items(evs, rows), s["metrics"])
         band = [[x["label"], g(x, "anees"), f"[{g(x, 'anees_lo')}, {g(x, 'anees_hi')}]"] for x in r]
         band = [b + [g(x, "anees_inside"), x.get("anees_flag", ""), g(x, "anis")] for b, x in zip(band, r)]
-        return [table(r, metrics=s["metrics"]), md(head, band), "Commands:", commands(r)]
+        return [table(r, metrics=s["metrics"]), md(s["nees"], band), "Commands:", commands(r)]
 
     primary, nees, _, cmds = cell(s["primary"])
     cells = "\n\n".join("\n\n".join([f"### {c['title']}", *cell(c["key"])]) for c in s["cell"] if c["key"] in evs)
-    out = dict(runs=runs, n=n, seed=seed, quick=" --quick" if quick else "", tuned=tl, grid=grid_md, cells=cells)
+    out = dict(runs=runs, n=n, seed=seed, quick=" --quick" * quick, tuned=tl, grid=grid_md, cells=cells)
     out |= dict(tune_runs=s["tuning"]["runs"], primary=primary, nees=nees, commands=cmds, plots=plots(s, evs, doc))
     relabel = [[v.claim.id, old[v.claim.id], v.label, found(v)] for v in verdicts]
     out["relabel"] = md(["claim", "old label", "new label", "the numbers behind it"], relabel)
@@ -167,7 +154,7 @@ def run_errors(ev, i: int, quantities: list) -> dict[str, np.ndarray]:
 
 
 def traces_figure(t, histories: list[dict], tr: dict):
-    """The AUKF's noise-mean estimates over time (``[plots.traces]``): median and 5-95 % band over the runs."""
+    """The AUKF's noise-mean estimates over time (``[traces]``): median and 5-95 % band over the runs."""
     fig, axes = draw.figure(len(tr["panels"]), 1, figsize=(8, 2.1 * len(tr["panels"]) + 0.6), sharex=True)
     for ax, (key, j, name, unit) in zip(axes[:, 0], tr["panels"]):
         v = np.stack([np.asarray(h[key], float)[:, j] for h in histories])
@@ -182,21 +169,17 @@ def traces_figure(t, histories: list[dict], tr: dict):
 
 
 def plots(s: dict, evs: dict, doc: Path) -> str:
-    """The figures of ``[plots]`` saved beside ``doc`` (:func:`.common5.rmse_figures`), as Markdown."""
-    p, out = s["plots"], []
+    """The figures of ``plot`` and ``[traces]`` saved beside ``doc`` (:func:`.common5.rmse_figures`), as Markdown."""
+    out, quantities, tr, ev = [], [q[:3] for q in s["quantities"]], s["traces"], evs[s["traces"]["job"]]
     doc.parent.mkdir(parents=True, exist_ok=True)
-    for fig in p["plot"]:
-        errors = {lab: run_errors(*row(evs[k], f), p["quantities"]) for lab, k, f in fig["filters"]}
-        figs = rmse_figures(
-            evs[fig["filters"][0][1]].t, errors, [q[:3] for q in p["quantities"]], f"001, {fig['title']}"
-        )
-        for key, name, *_ in p["quantities"]:
+    for fig in s["plot"]:
+        errors = {lab: run_errors(*row(evs[k], f), s["quantities"]) for lab, k, f in fig["filters"]}
+        figs = rmse_figures(evs[fig["filters"][0][1]].t, errors, quantities, f"001, {fig['title']}")
+        for key, name, _ in quantities:
             draw.save(figs[key], png := doc.parent / f"001_{fig['file']}_{key}.png")
             out += [f"![{name} over time, {fig['track']}]({png.name})", ""]
-    tr, ev = p["traces"], evs[p["traces"]["job"]]
-    draw.save(
-        traces_figure(ev.t, [e.info["history"] for e in ev.results[0].estimates], tr), doc.parent / "001_traces.png"
-    )
+    histories = [e.info["history"] for e in ev.results[0].estimates]
+    draw.save(traces_figure(ev.t, histories, tr), doc.parent / "001_traces.png")
     return "\n".join(out + [f"![{tr['alt']}](001_traces.png)", "", f"{tr['text']}`{command(ev)}`.", ""])
 
 
@@ -206,12 +189,11 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, sw
     watch, s, doc = Stopwatch(), load(), Path(doc or "docs/reproduction/001.md")
     runs = runs or s["quick_runs" if quick else "runs"]
     n = min(sweep_runs or s["sweep_runs"], runs)
-    tune = run_jobs([job for _, job in grid(s, runs)], runs, seed + s["tuning"]["seed_offset"], data_dir, quiet)
-    tuned, grid_md = pick(s, tune)
+    tuned, grid_md = tune(s, runs, seed, data_dir, quiet)
     evs = run_jobs(jobs(s, quick, tuned, runs, n), runs, seed, data_dir, quiet)
     verdicts = decide(papers.claims(s, "001.toml"), evidence(s, evs), seed=seed)
     text = render("001", fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc), verdicts)
-    command_line = f"replay reproduce 001 --runs {runs} --seed {seed}" + (" --quick" if quick else "")
+    command_line = f"replay reproduce 001 --runs {runs} --seed {seed}" + " --quick" * quick
     write_document(doc, text + footer(command_line, watch.seconds))
     if not quiet:
         print(f"wrote {doc} in {watch.seconds:.0f} s")
