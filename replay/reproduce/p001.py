@@ -66,7 +66,7 @@ def load() -> dict:
 
 
 def jobs(s: dict, quick: bool, tuned: dict, runs: int, n: int) -> list[Job]:
-    """Every scored evaluation (module docstring; ``n``: the sweep's runs; ``tuned``: the chosen scales)."""
+    """Each cell × each cell_job, then every job (the TOML's rules); ``n``: the sweep's runs, ``tuned``: the scales."""
     cells = [dict(c, **j, key=c["key"] + j["suffix"]) for c in s["cell"] for j in s["cell_job"]]
     out = []
     for j in (j for j in cells + s["job"] if not (quick and j.get("full"))):
