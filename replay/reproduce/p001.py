@@ -1,222 +1,202 @@
-"""Reproduction of paper 001 (AUKF vs UKF, small-AUV dead reckoning in currents), §5 Fig. 3–5.
+"""Reproduction of paper 001 (AUKF vs UKF, small-AUV dead reckoning in currents), §5 Fig. 3–5: the paper prints
+figures only (per-time RMSE of north, east, depth, body velocity and acceleration of UKF and AUKF).
 
-The paper publishes figures only: per-time RMSE of north, east, depth, body velocity and
-acceleration for UKF and AUKF. The experiments, the claims and their rules are data in
-:mod:`.p001_plan`; the prose is ``replay/papers/001.md``, filled by the one renderer
-(:mod:`.render`); every row comes from :func:`replay.run.evaluation.evaluate` (the pipeline of
-``replay eval``), comparisons paired on the same runs (common random numbers). Everything the
-paper does not print (time step, Q, R, P0, mission legs, current scale, DVL mode) is documented in
-replay/sim/sauv_current.py and replay/models/sauv.py.
+Everything declared (experiments, the UKF's tuning grid and rule, tables, the comparisons the claims draw on, the
+claims with their rules (:mod:`.spec`), figures) is data in ``replay/papers/001.toml``, whose comments give its
+reading rules; :func:`load` refuses an unknown or missing key (:data:`SCHEMA`) and a job or info list named but not
+declared. The prose is ``replay/papers/001.md`` (:mod:`.render`). Adding an ablation is a TOML edit: a ``job``, a
+row in its ``[[table]]`` (and a comparison in ``[evidence]`` if a claim draws on it); a claim: a ``[[claim]]``.
 """
 
-from __future__ import annotations
-
+import itertools
 from pathlib import Path
 
 import numpy as np
 
+from replay.outputs import plots as draw
+from replay.outputs.palette import colour
 from replay.util.errors import ReplayError
 
-from . import p001_plan as plan
-from .common5 import combine, commands, row, run_jobs, table
-from .p001_plots import TRACK, plots
+from . import spec as papers
+from .common5 import Job, combine, command, commands, rmse_figures, row, run_jobs, table
 from .render import found, render, table as md
 from .rules import Comparison, decide, per_run
 from replay.util.portable import write_document
 
 from .verdict import Stopwatch, footer
 
-OLD = {
-    "depth": "deviation explained",
-    "north": "deviation explained",
-    "east": "deviation explained",
-    "velocity": "deviation explained",
-    "acceleration": "deviation explained",
-    "current": "deviation explained",
-    "premise": "(new row)",
+SCHEMA = {  # kind of entry -> "required keys | optional keys" (:func:`check`)
+    "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "
+    "tuning table info evidence traces nees claim |",
+    "tuning": "filter data grid runs seed_offset tie anees label |",
+    "cell": "key title data | full",
+    "cell_job": "suffix filters | params",
+    "job": "key filters | dataset data params task sweep at_most full",
+    "table": "name metrics paired rows | info",
+    "info": "head key format | component abs",
+    "evidence": "name metric a b | fa fb",
+    "plot": "file track title filters |",
+    "traces": "job label panels title alt text |",
 }
 
 
-def pick(evs) -> dict:
-    """The tuned UKF's scales by the declared rule (:data:`.p001_plan.TUNE_TIE`) and the grid's rows."""
-    grid = [(q, r, evs[f"tune q{q} r{r}"].rows[0]) for q in plan.Q_SCALES for r in plan.R_SCALES]
-    score = {
-        (q, r): x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf
-        for q, r, x in grid
-    }  # as `replay tune`: a diverged run scores inf
-    best = min(score.values())
-    if not np.isfinite(best):
-        raise ReplayError("001 tuning: every grid point of the UKF diverged on the training seeds")
-    near = [g for g in grid if score[g[:2]] <= (1 + plan.TUNE_TIE) * best]
-    q, r, _ = min(near, key=lambda g: abs(float(g[2]["anees"] or np.inf) - 3.0))
-    rows = [
-        [
-            f"{a:g}",
-            f"{b:g}",
-            f"{x['pos_rmse']:.3f}",
-            f"{float(x['anees'] or np.nan):.1f}",
-            "**chosen**" if (a, b) == (q, r) else "",
-        ]
-        for a, b, x in grid
-    ]
-    return {"q_scale": q, "r_scale": r}, md(["q_scale", "r_scale", "pos_rmse (training seeds)", "ANEES", ""], rows)
+def check(entry: dict, kind: str, name="") -> dict:
+    """``entry``, or a ValueError naming the file and the entry unless its keys are :data:`SCHEMA`'s ``kind``."""
+    req, opt = (set(part.split()) for part in SCHEMA[kind].split("|"))
+    if (bad := set(entry) - req - opt) or (missing := req - set(entry)):
+        what = f"unknown key(s) {sorted(bad)}" if bad else f"missing {sorted(missing)}"
+        raise ValueError(f"001.toml: {kind}{f' {name!r}' if name else ''}: {what}")
+    return entry
 
 
-def cmp(name, ra, rb, metric, fa=1.0, fb=1.0):
-    """Comparison "fa × ``ra`` < fb × ``rb``" of ``metric`` per run (results of the same runs)."""
-    (a, la), (b, lb) = per_run(ra, metric), per_run(rb, metric)
-    return Comparison(name, fa * a, fb * b, la, lb)
+def load() -> dict:
+    """``replay/papers/001.toml``, every entry checked (module docstring); the claims by :mod:`.spec`."""
+    s = check(papers.load("001"), "top level")
+    entries = [("tuning", s["tuning"]), ("traces", s["traces"])]
+    entries += [(k, x) for k in ("cell", "cell_job", "job", "table", "plot") for x in s[k]]
+    entries += [(k, x) for k in ("info", "evidence") for xs in s[k].values() for x in xs]
+    for kind, e in entries:
+        check(e, kind, next((e[k] for k in ("key", "name", "file", "head", "suffix", "job") if k in e), ""))
+    planned = {j.key for j in jobs(s, False, {}, 1, 1)}
+    used = [r[1] for t in s["table"] for r in t["rows"]] + [f[1] for x in s["plot"] for f in x["filters"]]
+    used += [c[x][0] for cs in s["evidence"].values() for c in cs for x in "ab"] + [s["primary"], s["traces"]["job"]]
+    unknown = {k for k in used if k not in planned} | {t["info"] for t in s["table"] if "info" in t} - set(s["info"])
+    if unknown:
+        raise ValueError(f"001.toml: jobs or info lists named but not declared: {sorted(unknown)}")
+    papers.claims(s, "001.toml")  # the claims' schema (:mod:`.spec`)
+    return s
 
 
-def evidence(evs, n) -> dict:
-    prim = evs[plan.key(*plan.PRIMARY)]
-    u, a = prim.results
-    u30 = prim.first(n).results[0]
-    abl = {k: evs[f"bottom ablation {k}"].results[0] for k in ("p̂ only", "R̂ only", "Q̂ only")}
-    out = {
-        "depth": [
-            cmp("depth, AUKF < 1.2 × UKF", a, u, "depth_rmse", fb=1 + plan.MARGIN),
-            cmp("depth, 0.8 × UKF < AUKF", u, a, "depth_rmse", fa=1 - plan.MARGIN),
-        ],
-        "north": [cmp("north", a, u, "north_rmse")],
-        "east": [cmp("east", a, u, "east_rmse")],
-    }
-    for claim, chans in (("depth", ("depth",)), ("velocity", plan.CH[3:6]), ("acceleration", plan.CH[6:])):
-        out.setdefault(claim, [cmp(c, a, u, f"{c}_rmse") for c in chans])
-        out[f"{claim} why"] = [
-            x
-            for c in chans
-            for x in (
-                cmp(f"{c}: UKF < p̂ only", u30, abl["p̂ only"], f"{c}_rmse"),
-                cmp(f"{c}: UKF < R̂ only", u30, abl["R̂ only"], f"{c}_rmse"),
-                cmp(f"{c}: Q̂ only < 1.2 × UKF", abl["Q̂ only"], u30, f"{c}_rmse", fb=1 + plan.MARGIN),
-            )
-        ]
-    water = [k for k in ("water 0.5", "water 1.5") if k in evs]
-    out["current"] = [cmp(f"{k} m/s", evs[k].results[1], evs[k].results[0], "pos_rmse") for k in water]
-    out["current why"] = [
-        cmp(
-            "noise-free UKF, bottom < water",
-            evs["bottom noise-free"].results[0],
-            evs["water noise-free"].results[0],
-            "pos_rmse",
-        )
-    ]
-    mt, lin, lw = evs["mistuned"], evs["linear"], evs["linear wrong R"]
-    out["premise"] = [cmp("R × 100: AUKF < UKF", mt.results[1], mt.results[0], "pos_rmse")]
-    out["premise why"] = [
-        cmp("true Q, R: UKF < Q̂R̂ AUKF", lin.results[0], lin.results[1], "pos_rmse"),
-        cmp("R × 100: R̂ only < Q̂R̂ AUKF", evs["linear wrong R, R̂ only"].results[0], lw.results[1], "pos_rmse"),
-    ]
+def jobs(s: dict, quick: bool, tuned: dict, runs: int, n: int) -> list[Job]:
+    """Each cell × each cell_job, then every job (the TOML's rules); ``n``: the sweep's runs, ``tuned``: the scales."""
+    cells = [dict(c, **j, key=c["key"] + j["suffix"]) for c in s["cell"] for j in s["cell_job"]]
+    out = []
+    for j in (j for j in cells + s["job"] if not (quick and j.get("full"))):
+        params = {f: tuned if p == "tuned" else p for f, p in j.get("params", {}).items()}
+        ds, data, k = j.get("dataset", s["dataset"]), dict(j.get("data", {})), n if j.get("sweep") else runs
+        out.append(Job(j["key"], ds, tuple(j["filters"]), data, params, j.get("task", {}), min(k, j.get("at_most", k))))
     return out
 
 
-def cell_rows(evs, k, tuned_label):
-    items = [
-        ("UKF", row(evs[k], "ukf")),
-        (tuned_label, row(evs[f"{k} tuned"])),
-        ("AUKF (paper: q̂, p̂, Q̂, R̂)", row(evs[k], "aukf")),
-        ("AUKF (Q̂, R̂ only)", row(evs[f"{k} QR"])),
-    ]
-    return combine(items, metrics=plan.ALL)
+def tune(s: dict, runs: int, seed: int, data_dir, quiet: bool) -> tuple[dict, str]:
+    """The baseline's scales chosen by ``[tuning]``'s rule on its grid (every combination of its lists), its table."""
+    t, f = s["tuning"], s["tuning"]["filter"]
+    points = [dict(zip(t["grid"], v)) for v in itertools.product(*t["grid"].values())]
+    grid = [Job(f"tune {p}", s["dataset"], (f,), t["data"], {f: p}, runs=min(runs, t["runs"])) for p in points]
+    xs = [ev.rows[0] for ev in run_jobs(grid, runs, seed + t["seed_offset"], data_dir, quiet).values()]
+    score = [x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf for x in xs]
+    if not np.isfinite(best := min(score)):
+        raise ReplayError(f"001 tuning: every grid point of the {f.upper()} diverged on the training seeds")
+    near = [(p, x) for p, x, sc in zip(points, xs, score) if sc <= (1 + t["tie"]) * best]
+    chosen = min(near, key=lambda pt: abs(float(pt[1]["anees"] or np.inf) - t["anees"]))[0]
+    anees = [f"{float(x['anees'] or np.nan):.1f}" for x in xs]
+    rows = [[*map("{:g}".format, p.values()), f"{x['pos_rmse']:.3f}", a] for p, x, a in zip(points, xs, anees)]
+    rows = [r + ["**chosen**" * (p == chosen)] for r, p in zip(rows, points)]
+    return chosen, md([*t["grid"], "pos_rmse (training seeds)", "ANEES", ""], rows)
 
 
-def nees_table(rows) -> str:
-    f = lambda r, k: f"{float(r[k]):.3g}" if np.isfinite(float(r.get(k) or np.nan)) else "n/a"  # noqa: E731
-    return md(
-        ["filter", "ANEES (position, 3 dof)", "95 % band", "steps inside", "flag", "ANIS"],
-        [
-            [
-                r["label"],
-                f(r, "anees"),
-                f"[{f(r, 'anees_lo')}, {f(r, 'anees_hi')}]",
-                f(r, "anees_inside"),
-                r.get("anees_flag", ""),
-                f(r, "anis"),
-            ]
-            for r in rows
-        ],
-    )
+def items(evs: dict, rows: list) -> list[tuple]:
+    """``[label, job, filter]`` rows whose jobs ran as (label, (evaluation, index)) over their common first runs."""
+    rows = [r for r in rows if r[1] in evs]
+    n = min(evs[k].config["runs"] for _, k, _ in rows)
+    return [(label, row(evs[k].first(n), f)) for label, k, f in rows]
 
 
-def tab(items, metrics=plan.ALL, paired=plan.POS) -> str:
-    rows = combine(items, metrics=metrics)
-    return table(rows, metrics=metrics, paired_metrics=paired) + "\n\nCommands:\n\n" + commands(rows)
+def evidence(s: dict, evs: dict) -> dict:
+    """Key -> the comparisons "fa × a < fb × b" of ``[evidence]`` whose jobs ran, over their common first runs."""
+    out = {}
+    for key, c in ((key, c) for key, cs in s["evidence"].items() for c in cs if c["a"][0] in evs and c["b"][0] in evs):
+        arms = items(evs, [["a", *c["a"]], ["b", *c["b"]]])
+        (a, la), (b, lb) = (per_run(ev.results[i], c["metric"]) for _, (ev, i) in arms)
+        out.setdefault(key, []).append(Comparison(c["name"], c.get("fa", 1.0) * a, c.get("fb", 1.0) * b, la, lb))
+    return out
 
 
-def final(ev, i, name, j, absolute):
-    """Mean over runs of the final estimate ``name`` (info of result ``i``; a matrix: its mean diagonal)."""
-    v = [np.atleast_1d(np.asarray(e.info[name], float)) for e in ev.results[i].estimates]
-    v = [np.diagonal(x) if x.ndim == 2 else x for x in v]
-    v = [np.abs(x) if absolute else x for x in v]
-    return float(np.mean([x.mean() if j is None else x[j] for x in v]))
+def final(ev, i: int, c: dict) -> str:
+    """Mean over runs of result ``i``'s final estimate of ``[info]`` column ``c`` (a matrix: its diagonal)."""
+    v = [np.atleast_1d(np.asarray(e.info[c["key"]], float)) for e in ev.results[i].estimates]
+    v = [np.abs(x) if c.get("abs") else x for x in (np.diagonal(x) if x.ndim == 2 else x for x in v)]
+    return format(float(np.mean([x[c["component"]] if "component" in c else x.mean() for x in v])), c["format"])
 
 
-def spec_table(evs, n, metrics, paired, rows, cut, info) -> str:
-    """One of :data:`.p001_plan.TABLES`: the rows' results, then their final estimates."""
-    items = [(lab, (evs[k].first(n) if cut else evs[k], i)) for lab, k, i in rows if k in evs]
-    out = [tab(items, metrics, paired)] if metrics else []
-    est = [(lab, ev, i) for lab, (ev, i) in items if ev.results[i].name == "aukf"]
-    if info:
-        out.append(
-            md(
-                ["filter"] + [c[0] for c in info],
-                [[lab] + [format(final(ev, i, *c[1:3], c[4]), c[3]) for c in info] for lab, ev, i in est],
-            )
-        )
-    return "\n\n".join(out)
+def spec_table(s: dict, evs: dict, t: dict) -> str:
+    """One ``[[table]]``: its rows' results and commands, then the final estimates (``info``) of its AUKF rows."""
+    its, m, cols = items(evs, t["rows"]), t["metrics"], s["info"].get(t.get("info"), [])
+    rows = combine(its, metrics=m) if m else []
+    out = [table(rows, metrics=m, paired_metrics=t["paired"]) + "\n\nCommands:\n\n" + commands(rows)] if m else []
+    values = [[lab] + [final(ev, i, c) for c in cols] for lab, (ev, i) in its if ev.results[i].name == "aukf"]
+    return "\n\n".join(out + [md(["filter"] + [c["head"] for c in cols], values)] * bool(cols))
 
 
-def fields(evs, verdicts, runs, seed, n, tuned, grid, quick, doc):
-    tl = f"UKF tuned (q × {tuned['q_scale']:g}, r × {tuned['r_scale']:g})"
-    cells = [k for k in (plan.key(*c) for c in plan.CELLS) if k in evs]
-    sect = {
-        k: "### no current" if k == "no current" else f"### {TRACK[k.split()[0]]}, current {k.split()[1]} m/s"
-        for k in cells
-    }
-    prim = cell_rows(evs, plan.key(*plan.PRIMARY), tl)
-    f = {
-        "runs": runs,
-        "n": n,
-        "tuned": tl,
-        "grid": grid,
-        "tune_runs": plan.TUNE_RUNS,
-        "primary": table(prim, metrics=plan.ALL),
-        "nees": nees_table(prim),
-        "commands": commands(prim),
-        "cells": "\n\n".join(
-            f"{sect[k]}\n\n"
-            + table(r := cell_rows(evs, k, tl), metrics=plan.ALL)
-            + "\n\n"
-            + nees_table(r)
-            + "\n\nCommands:\n\n"
-            + commands(r)
-            for k in cells
-        ),
-        "relabel": md(
-            ["claim", "old label", "new label", "the numbers behind it"],
-            [[v.claim.id, OLD[v.claim.id], v.label, found(v)] for v in verdicts],
-        ),
-        "quick": " --quick" if quick else "",
-        "seed": seed,
-        "plots": plots(evs, doc),
-    }
-    return f | {name: spec_table(evs, n, *spec) for name, spec in plan.TABLES.items()}
+def fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc) -> dict:
+    """The template's placeholders: the cells' tables (``cell_rows``), every ``[[table]]``, the figures."""
+    tl, old = s["tuning"]["label"].format(**tuned), papers.old_labels(s)
+    g = lambda r, k: f"{float(r[k]):.3g}" if np.isfinite(float(r.get(k) or np.nan)) else "n/a"  # noqa: E731
+
+    def cell(key):  # a cell's table, its NEES table (ANEES against its 95 % band, steps inside, ANIS), commands
+        rows = [[lab.replace("{tuned}", tl), key + x, f] for lab, x, f in s["cell_rows"]]
+        r = combine(items(evs, rows), s["metrics"])
+        band = [[x["label"], g(x, "anees"), f"[{g(x, 'anees_lo')}, {g(x, 'anees_hi')}]"] for x in r]
+        band = [b + [g(x, "anees_inside"), x.get("anees_flag", ""), g(x, "anis")] for b, x in zip(band, r)]
+        return [table(r, metrics=s["metrics"]), md(s["nees"], band), "Commands:", commands(r)]
+
+    primary, nees, _, cmds = cell(s["primary"])
+    cells = "\n\n".join("\n\n".join([f"### {c['title']}", *cell(c["key"])]) for c in s["cell"] if c["key"] in evs)
+    out = dict(runs=runs, n=n, seed=seed, quick=" --quick" * quick, tuned=tl, grid=grid_md, cells=cells)
+    out |= dict(tune_runs=s["tuning"]["runs"], primary=primary, nees=nees, commands=cmds, plots=plots(s, evs, doc))
+    relabel = [[v.claim.id, old[v.claim.id], v.label, found(v)] for v in verdicts]
+    out["relabel"] = md(["claim", "old label", "new label", "the numbers behind it"], relabel)
+    return out | {t["name"]: spec_table(s, evs, t) for t in s["table"]}
+
+
+def run_errors(ev, i: int, quantities: list) -> dict[str, np.ndarray]:
+    """Per-run absolute errors (runs, steps) of result ``i`` per quantity ``[key, name, unit, error, column]``."""
+    e = {q[0]: np.abs(np.stack([np.asarray(x[q[3]], float) for x in ev.results[i].errors])) for q in quantities}
+    return {q[0]: e[q[0]][:, :, q[4]] if len(q) > 4 else e[q[0]] for q in quantities}
+
+
+def traces_figure(t, histories: list[dict], tr: dict):
+    """The AUKF's noise-mean estimates over time (``[traces]``): median and 5-95 % band over the runs."""
+    fig, axes = draw.figure(len(tr["panels"]), 1, figsize=(8, 2.1 * len(tr["panels"]) + 0.6), sharex=True)
+    for ax, (key, j, name, unit) in zip(axes[:, 0], tr["panels"]):
+        v = np.stack([np.asarray(h[key], float)[:, j] for h in histories])
+        draw.mc_band(ax, t[-v.shape[1] :], v, colour("aukf"), tr["label"])
+        ax.set_ylabel(draw.label(name, unit))
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper left")
+    axes[-1, 0].set_xlabel("t (s)")
+    draw.suptitle(fig, tr["title"].format(runs=len(histories)))
+    fig.subplots_adjust(hspace=0.15)
+    return fig
+
+
+def plots(s: dict, evs: dict, doc: Path) -> str:
+    """The figures of ``plot`` and ``[traces]`` saved beside ``doc`` (:func:`.common5.rmse_figures`), as Markdown."""
+    out, quantities, tr, ev = [], [q[:3] for q in s["quantities"]], s["traces"], evs[s["traces"]["job"]]
+    doc.parent.mkdir(parents=True, exist_ok=True)
+    for fig in s["plot"]:
+        errors = {lab: run_errors(*row(evs[k], f), s["quantities"]) for lab, k, f in fig["filters"]}
+        figs = rmse_figures(evs[fig["filters"][0][1]].t, errors, quantities, f"001, {fig['title']}")
+        for key, name, _ in quantities:
+            draw.save(figs[key], png := doc.parent / f"001_{fig['file']}_{key}.png")
+            out += [f"![{name} over time, {fig['track']}]({png.name})", ""]
+    histories = [e.info["history"] for e in ev.results[0].estimates]
+    draw.save(traces_figure(ev.t, histories, tr), doc.parent / "001_traces.png")
+    return "\n".join(out + [f"![{tr['alt']}](001_traces.png)", "", f"{tr['text']}`{command(ev)}`.", ""])
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, sweep_runs=None):
-    """Write ``docs/reproduction/001.md``: ``runs`` Monte Carlo runs (50; quick 4) for the main
-    tables, ``sweep_runs`` (30, at most ``runs``) for the forgetting-factor sweep and the ablation."""
-    watch = Stopwatch()
-    runs = runs or (4 if quick else 50)
-    n = min(sweep_runs or 30, runs)
-    doc = Path(doc or "docs/reproduction/001.md")
-    tuned, grid = pick(run_jobs(plan.tuning_jobs(runs), runs, seed + 1, data_dir, quiet))
-    evs = run_jobs(plan.jobs(quick, n, tuned), runs, seed, data_dir, quiet)
-    verdicts = decide(plan.CLAIMS, evidence(evs, n), seed=seed)
-    text = render("001", fields(evs, verdicts, runs, seed, n, tuned, grid, quick, doc), verdicts)
-    command = f"replay reproduce 001 --runs {runs} --seed {seed}" + (" --quick" if quick else "")
-    write_document(doc, text + footer(command, watch.seconds))
+    """Write ``docs/reproduction/001.md``: ``runs`` Monte Carlo runs (the TOML's ``runs``; quick:
+    ``quick_runs``) for the main tables, ``sweep_runs`` (at most ``runs``) for the sweep and the ablation."""
+    watch, s, doc = Stopwatch(), load(), Path(doc or "docs/reproduction/001.md")
+    runs = runs or s["quick_runs" if quick else "runs"]
+    n = min(sweep_runs or s["sweep_runs"], runs)
+    tuned, grid_md = tune(s, runs, seed, data_dir, quiet)
+    evs = run_jobs(jobs(s, quick, tuned, runs, n), runs, seed, data_dir, quiet)
+    verdicts = decide(papers.claims(s, "001.toml"), evidence(s, evs), seed=seed)
+    text = render("001", fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc), verdicts)
+    command_line = f"replay reproduce 001 --runs {runs} --seed {seed}" + " --quick" * quick
+    write_document(doc, text + footer(command_line, watch.seconds))
     if not quiet:
         print(f"wrote {doc} in {watch.seconds:.0f} s")
     return evs
