@@ -38,38 +38,31 @@ SCHEMA = {  # the keys of each table of 003.toml ("?": optional); row, grid, set
 }
 
 
-def check(where: str, entry: dict, keys: str, named_ok: bool = True) -> None:
-    """Refuse (naming the file and ``where``) an ``entry`` without every key of ``keys`` ("?key": optional), with
-    another key, or (``named_ok`` False) naming a row, setting, table or value that is not declared."""
+def check(where: str, entry: dict, keys: str) -> None:
+    """Refuse (naming the file and ``where``) an ``entry`` without every key of ``keys`` ("?key": optional) or with
+    another key."""
     need, bad = {k for k in keys.split() if k[0] != "?"}, set(entry) - set(keys.replace("?", "").split())
-    if bad or need - set(entry) or not named_ok:
-        what = (
-            f"unknown key(s) {sorted(bad)}"
-            if bad
-            else f"missing {sorted(need - set(entry))}"
-            if need - set(entry)
-            else ""
+    if bad or need - set(entry):
+        raise ValueError(
+            f"003.toml: {where}: {'unknown' if bad else 'missing'} key(s) {sorted(bad or need - set(entry))}"
         )
-        raise ValueError(f"003.toml: {where}: {what or 'names a row, setting, table or per-run value not declared'}")
 
 
 def load(t: dict) -> dict:
-    """``t`` checked (:func:`check`, :data:`SCHEMA`), with ``by_label``: the settings by label."""
+    """``t`` checked (:func:`check` against :data:`SCHEMA`; the rows, settings, tables and values named must be
+    declared), with ``by_label``: the settings by label."""
     check("top level", t, SCHEMA["top level"])
-    for k in ("growth", "tune", "peak", "drift", "distinct", "where", "poor"):
-        check(k, t[k], SCHEMA[k])
-    for kind, k, e in [(kind, k, e) for kind in ("row", "grid") for k, e in t[kind].items()]:
-        check(f"{kind} {k!r}", e, SCHEMA[kind])
-    for c in t["where"]["columns"]:
-        check(f"column {c.get('head')!r}", c, SCHEMA["column"])
-    by, rows = {s.get("label"): s for s in t["setting"]}, {*t["row"], "zero"}
-    for k, s in by.items():
-        check(
-            f"setting {k!r}", s, SCHEMA["setting"], not set(s.get("rows", [])) - rows and s.get("table") in t["sweeps"]
-        )
+    entries = [(k, t[k], k) for k in ("growth", "tune", "peak", "drift", "distinct", "where", "poor")]
+    entries += [(f"{kind} {k!r}", e, kind) for kind in ("row", "grid") for k, e in t[kind].items()]
+    entries += [(f"setting {s.get('label')!r}", s, "setting") for s in t["setting"]]
+    for where, e, kind in entries + [(f"column {c.get('head')!r}", c, "column") for c in t["where"]["columns"]]:
+        check(where, e, SCHEMA[kind])
+    by, rows = {s["label"]: s for s in t["setting"]}, {*t["row"], "zero"}
     ok = lambda c: len(c) == 5 and c[1] in by and not {*c[2:4]} - rows and c[4] in VALUES
-    for k, v in t["evidence"].items():
-        check(f"evidence {k!r}", {}, "", all(map(ok, v)))
+    bad = [f"setting {k!r}" for k, s in by.items() if set(s["rows"]) - rows or s["table"] not in t["sweeps"]]
+    bad += [f"evidence {k!r}" for k, v in t["evidence"].items() if not all(map(ok, v))]
+    if bad:
+        raise ValueError(f"003.toml: {bad[0]}: names a row, setting, sweep table or per-run value not declared")
     return t | {"by_label": by}
 
 
@@ -90,9 +83,7 @@ def run_errors(ev, i=0) -> dict:
 
 rmse = lambda ev: per_run(ev, 0, "pos_rmse")  # position RMSE per run (NaN: diverged)
 lost = lambda ev: np.array([bool(r.get("lost")) for r in ev.results[0].runs])
-distinct = lambda ev: np.array(
-    [np.mean(getattr(e, "info", {}).get("distinct", np.nan)) for e in ev.results[0].estimates]
-)
+distinct = lambda ev: np.array([np.mean(e.info.get("distinct", np.nan)) for e in ev.results[0].estimates])
 VALUES = {"rmse": rmse, "growth": growth, "distinct": distinct, "lost": lost}  # the per-run values [evidence] names
 kurtosis = lambda r, eps: 3 * ((1 - eps) + eps * r**4) / ((1 - eps) + eps * r**2) ** 2 - 3  # of the glint, r = σ₂/σ₁
 T = load(spec.load("003"))
@@ -113,12 +104,11 @@ def plan(runs: int, tune_runs: int) -> list[SimpleNamespace]:
     seeds, ``tune|<setting>|<grid>|<value>`` (``tune_runs`` each)."""
     tu, ks = T["tune"], lambda s, r: SEEDS if s.get("pooled") and r in T["pooled_rows"] else (0,)
     jobs = [job(f"{s['label']}|{r}|{k}", s, r, runs, k) for s in T["setting"] for r in s["rows"] for k in ks(s, r)]
-    for s, g, d in [(s, g, d) for s in tu["settings"] for g, d in T["grid"].items()]:
-        jobs += [
-            job(f"tune|{s}|{g}|{v}", T["by_label"][s], d["row"], tune_runs, tu["seed"], (d["param"], v))
-            for v in d["values"]
-        ]
-    return jobs
+    cells = [(s, g, d, v) for s in tu["settings"] for g, d in T["grid"].items() for v in d["values"]]
+    tune = lambda s, g, d, v: job(
+        f"tune|{s}|{g}|{v}", T["by_label"][s], d["row"], tune_runs, tu["seed"], (d["param"], v)
+    )
+    return jobs + [tune(*c) for c in cells]
 
 
 def _evaluate(args):
@@ -148,10 +138,8 @@ def evidence(evs, seeds=SEEDS) -> dict:
     p, out = T["peak"], {k: [pair(evs, *c, seeds) for c in v] for k, v in T["evidence"].items()}
     err = run_errors(evs[f"{p['setting']}|{p['row']}|0"])
     k = {x: int(np.nanargmax(rmse_curve(err[x]))) for x in p["paper"]}
-    peak = [
-        Comparison(f"{x} at step {k[x] + 1} (m²)", err[x][:, k[x]] ** 2, target=v**2) for x, v in p["paper"].items()
-    ]
-    return {p["key"]: peak} | out
+    peak = lambda x, v: Comparison(f"{x} at step {k[x] + 1} (m²)", err[x][:, k[x]] ** 2, target=v**2)
+    return {p["key"]: [peak(x, v) for x, v in p["paper"].items()]} | out
 
 
 def cell(o, p=None, digits=2) -> str:
@@ -189,10 +177,8 @@ def where(evs, rng) -> dict:
         counts = "/".join(str(int(lost(evs[f"{lab}|{r}|0"]).sum())) if r in s["rows"] else "–" for r in w["counts"])
         rows.append([lab, o, counts, mc])
     n = {f"n_{k}": f"{holm_family(v)} of {len(v)}" for k, v in fams.items()}
-    rows = [
-        [lab, *[cell(o[c["head"]]) if c["head"] in o else "n/a" for c in w["columns"]], k, "; ".join(map(cell, mc))]
-        for lab, o, k, mc in rows
-    ]
+    cells = lambda o: [cell(o[c["head"]]) if c["head"] in o else "n/a" for c in w["columns"]]
+    rows = [[lab, *cells(o), k, "; ".join(map(cell, mc))] for lab, o, k, mc in rows]
     return n | {"where": md(["setting", *[c["head"] for c in w["columns"]], *w["heads"]], rows)}
 
 
@@ -206,21 +192,15 @@ def pooled(evs, evid, rng) -> dict:
         outs[c.id] = [test_one(x, c.rule.test, rng) for k in keys for x in evid[k]]
         holm_family([o for o in outs[c.id] if o.test != "interval"], c.rule.alpha)
         for i, o in enumerate(outs[c.id]):
-            kind = "stated condition" if i >= len(evid[c.rule.decides]) else "deciding"
+            text = o.text() if o.test == "interval" else f"{o.comparison.name}: {cell(o)}"
             rows.append(
-                [
-                    c.id,
-                    kind,
-                    TEST_NAMES[o.test],
-                    o.text() if o.test == "interval" else f"{o.comparison.name}: {cell(o)}",
-                ]
+                [c.id, "stated condition" if i >= len(evid[c.rule.decides]) else "deciding", TEST_NAMES[o.test], text]
             )
     per = [evidence(evs, (k,)) for k in SEEDS]
     for key, test in tests.items():
         for i, c in enumerate(per[0][key] if key != T["peak"]["key"] else []):
-            rep.append(
-                [key, c.name.split(": ", 1)[-1], *(cell(o, o.p) for o in [test_one(p[key][i], test, rng) for p in per])]
-            )
+            outs_k = [test_one(p[key][i], test, rng) for p in per]
+            rep.append([key, c.name.split(": ", 1)[-1], *(cell(o, o.p) for o in outs_k)])
     head = ["evidence", "comparison", *[f"seed s + {k}" for k in SEEDS]]
     return {"pooled": md(T["pooled_head"], rows), "outs": outs, "replication": md(head, rep)}
 
@@ -255,41 +235,24 @@ def tables(evs, best, doc) -> dict:
     for (s, g), (v, sc) in best.items():
         edge = " (grid edge)" if v in (min(sc), max(sc)) and len(sc) > 1 else ""
         grid, shared = ", ".join(f"{x:g}: {y:.2f}" for x, y in sc.items()), ev0(s, T["grid"][g]["shared"]).rows[0]
-        tuned.append(
-            [s, g, T["grid"][g]["param"], grid, f"{v:g}{edge}", row(shared), row(evs[f"tuned|{s}|{g}"].rows[0])]
-        )
+        ours = row(evs[f"tuned|{s}|{g}"].rows[0])
+        tuned.append([s, g, T["grid"][g]["param"], grid, f"{v:g}{edge}", row(shared), ours])
     for g, m in T["sweeps"].items():
         for s in [s for s in T["setting"] if s["table"] == g]:
             rs = combine([(f"{s['label']}: {name(r)}", (ev0(s["label"], r), 0)) for r in s["rows"]], metrics=m)
-            out[f"t_{g}"] = out.get(f"t_{g}", []) + [
-                table(rs, m, base_name="α = 1"),
-                "",
-                "Commands (one per row):",
-                "",
-                commands(rs),
-                "",
-            ]
-    figs = rmse_figures(
-        ev0(d["setting"], d["rows"][0]).t,
-        {name(r): run_errors(ev0(d["setting"], r)) for r in d["rows"]},
-        d["axes"],
-        f"003, {d['what']}",
-    )
+            text = f"{table(rs, m, base_name='α = 1')}\n\nCommands (one per row):\n\n{commands(rs)}\n"
+            out[f"t_{g}"] = out.get(f"t_{g}", []) + [text]
+    errors = {name(r): run_errors(ev0(d["setting"], r)) for r in d["rows"]}
+    figs = rmse_figures(ev0(d["setting"], d["rows"][0]).t, errors, d["axes"], f"003, {d['what']}")
     doc.parent.mkdir(parents=True, exist_ok=True)
     for k, q, _ in d["axes"]:
         save(figs[k], doc.parent / f"003_rmse_{k}.png")
-    out["plots"] = [x for k, q, _ in d["axes"] for x in (f"![{q} over time, {d['what']}](003_rmse_{k}.png)", "")] + [
-        d["caption"],
-        "",
-    ]
+        out["plots"] = out.get("plots", []) + [f"![{q} over time, {d['what']}](003_rmse_{k}.png)", ""]
+    out["plots"] += [d["caption"], ""]
     out["drift"] = md([h.format(seeds=len(SEEDS)) for h in d["head"]], [[name(r), peak(r), grow(r)] for r in d["rows"]])
-    out["distinct"] = md(
-        T["distinct"]["head"],
-        [[s["label"], s["n"], *(dist(s, r) for r in T["distinct"]["rows"])] for s in T["setting"]],
-    )
-    return {k: "\n".join(v) if isinstance(v, list) else v for k, v in out.items()} | {
-        "tuned": md(T["tune"]["head"], tuned)
-    }
+    dists = [[s["label"], s["n"], *(dist(s, r) for r in T["distinct"]["rows"])] for s in T["setting"]]
+    out |= {"distinct": md(T["distinct"]["head"], dists), "tuned": md(T["tune"]["head"], tuned)}
+    return {k: "\n".join(v) if isinstance(v, list) else v for k, v in out.items()}
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
@@ -298,23 +261,20 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     watch, runs, doc, best = Stopwatch(), runs or (4 if quick else 100), Path(doc or "docs/reproduction/003.md"), {}
     with pool(workers()) as ex:
         evs = compute(plan(runs, min(T["tune"]["runs"], runs)), seed, data_dir, ex, quiet)
+        more = []
         for s, (g, d) in [(s, x) for s in T["tune"]["settings"] for x in T["grid"].items()]:
             sc = {v: float(evs[f"tune|{s}|{g}|{v}"].rows[0]["pos_rmse"]) for v in d["values"]}
-            best[(s, g)] = d["values"][int(np.nanargmin(list(sc.values())))], sc
-        more = [
-            job(f"tuned|{s}|{g}", T["by_label"][s], T["grid"][g]["row"], runs, 0, (T["grid"][g]["param"], v))
-            for (s, g), (v, _) in best.items()
-        ]
+            v = d["values"][int(np.nanargmin(list(sc.values())))]
+            best[(s, g)] = v, sc
+            more.append(job(f"tuned|{s}|{g}", T["by_label"][s], d["row"], runs, 0, (d["param"], v)))
         evs |= compute(more, seed, data_dir, ex, quiet)
     evid, rng = evidence(evs), np.random.default_rng(0)
     verdicts = decide(CLAIMS, evid, seed=seed)
     command = f"replay reproduce 003 --runs {runs} --seed {seed}" + (" --quick" if quick else "")
     f = where(evs, rng) | pooled(evs, evid, rng) | poor(evs, rng) | tables(evs, best, doc)
     outs = f.pop("outs")
-    relabel = [
-        f"* {v.claim.words}: {OLD[v.claim.id]} → **{v.label}** ({'; '.join(o.text() for o in outs[v.claim.id])})"
-        for v in verdicts
-    ]
+    found = lambda v: "; ".join(o.text() for o in outs[v.claim.id])
+    relabel = [f"* {v.claim.words}: {OLD[v.claim.id]} → **{v.label}** ({found(v)})" for v in verdicts]
     f |= {"runs": runs, "seeds": len(SEEDS), "command": command, "relabel": "\n".join(relabel)}
     f |= {"k_printed": f"{kurtosis(2, 0.75):.2f}", "k_strong": f"{kurtosis(10, 0.1):.1f}"}
     write_document(doc, render("003", f, verdicts) + footer(command, watch.seconds))
