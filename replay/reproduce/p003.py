@@ -41,10 +41,11 @@ SCHEMA = {  # the keys of each table of 003.toml ("?": optional); row, grid, set
 def check(where: str, entry: dict, keys: str) -> None:
     """Refuse (naming the file and ``where``) an ``entry`` without every key of ``keys`` ("?key": optional) or with
     another key."""
-    need, bad = {k for k in keys.split() if k[0] != "?"}, set(entry) - set(keys.replace("?", "").split())
-    if bad or need - set(entry):
+    unknown = set(entry) - set(keys.replace("?", "").split())
+    missing = {k for k in keys.split() if k[0] != "?"} - set(entry)
+    if unknown or missing:
         raise ValueError(
-            f"003.toml: {where}: {'unknown' if bad else 'missing'} key(s) {sorted(bad or need - set(entry))}"
+            f"003.toml: {where}: {'unknown' if unknown else 'missing'} key(s) {sorted(unknown or missing)}"
         )
 
 
@@ -55,8 +56,10 @@ def load(t: dict) -> dict:
     entries = [(k, t[k], k) for k in ("growth", "tune", "peak", "drift", "distinct", "where", "poor")]
     entries += [(f"{kind} {k!r}", e, kind) for kind in ("row", "grid") for k, e in t[kind].items()]
     entries += [(f"setting {s.get('label')!r}", s, "setting") for s in t["setting"]]
-    for where, e, kind in entries + [(f"column {c.get('head')!r}", c, "column") for c in t["where"]["columns"]]:
+    for where, e, kind in entries:
         check(where, e, SCHEMA[kind])
+    for c in t["where"]["columns"]:
+        check(f"column {c.get('head')!r}", c, SCHEMA["column"])
     by, rows = {s["label"]: s for s in t["setting"]}, {*t["row"], "zero"}
     ok = lambda c: len(c) == 5 and c[1] in by and not {*c[2:4]} - rows and c[4] in VALUES
     bad = [f"setting {k!r}" for k, s in by.items() if set(s["rows"]) - rows or s["table"] not in t["sweeps"]]
