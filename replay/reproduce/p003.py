@@ -86,7 +86,8 @@ def run_errors(ev, i=0) -> dict:
 
 rmse = lambda ev: per_run(ev, 0, "pos_rmse")  # position RMSE per run (NaN: diverged)
 lost = lambda ev: np.array([bool(r.get("lost")) for r in ev.results[0].runs])
-distinct = lambda ev: np.array([np.mean(e.info.get("distinct", np.nan)) for e in ev.results[0].estimates])
+info = lambda e: getattr(e, "info", {})  # an estimate's filter record (none for a run without one)
+distinct = lambda ev: np.array([np.mean(info(e).get("distinct", np.nan)) for e in ev.results[0].estimates])
 VALUES = {"rmse": rmse, "growth": growth, "distinct": distinct, "lost": lost}  # the per-run values [evidence] names
 kurtosis = lambda r, eps: 3 * ((1 - eps) + eps * r**4) / ((1 - eps) + eps * r**2) ** 2 - 3  # of the glint, r = σ₂/σ₁
 T = load(spec.load("003"))
