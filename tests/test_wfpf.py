@@ -115,7 +115,7 @@ def test_tempering_is_a_widened_gaussian_likelihood():
 @pytest.mark.parametrize("ratio, eps", [(2, 0.75), (10, 0.1)])
 def test_bearing_glint_excess_kurtosis(ratio, eps):
     """The excess kurtosis the 003 document quotes (0.48 at the printed glint) is the sampled one."""
-    from replay.reproduce.p003_tables import kurtosis
+    from replay.reproduce.p003 import kurtosis
 
     g = Glint([[1.0]], [[float(ratio) ** 2]], eps=eps)
     e = g.sample(np.random.default_rng(4), 2_000_000)[:, 0]
