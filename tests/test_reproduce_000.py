@@ -111,14 +111,14 @@ def test_maneuver_and_level_scores_split_the_run(cell):
         ),
         (
             lambda x: x["evidence"][0].pop("pairs"),
-            r"000\.toml: \[\[evidence\]\] '\{ch\}@\{tag\}': .*missing \['pairs'\]",
+            r"000\.toml: \[\[evidence\]\] '\{ch\}@\{tag\}': missing key\(s\) \['pairs'\]",
         ),
         (
             lambda x: x["experiment"]["ablation_cells"][0].update(kapa=1.0),
             r"000\.toml: \[experiment\] cell .*unknown key\(s\) \['kapa'\]",
         ),
         (lambda x: x["quick"].update(run=2), r"000\.toml: \[quick\]: unknown key\(s\) \['run'\]"),
-        (lambda x: x["experiment"].pop("tune_seed"), r"000\.toml: \[experiment\]: .*missing \['tune_seed'\]"),
+        (lambda x: x["experiment"].pop("tune_seed"), r"000\.toml: \[experiment\]: missing key\(s\) \['tune_seed'\]"),
         (
             lambda x: x["experiment"]["grid"].update(kappa=[1.0]),
             r"000\.toml: \[experiment\] grid: unknown key\(s\) \['kappa'\]",

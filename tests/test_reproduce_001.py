@@ -165,7 +165,7 @@ def _edited_spec(tmp_path, monkeypatch, *edits):
     "old, new, message",
     [
         ("at_most = 10", "at_mots = 10", "001.toml: job 'traces': unknown key(s) ['at_mots']"),
-        ('paired = ["pos_rmse"]\n', "", "001.toml: table 'floor': missing ['paired']"),
+        ('paired = ["pos_rmse"]\n', "", "001.toml: table 'floor': missing key(s) ['paired']"),
         ("fb = 1.2", "fbb = 1.2", "001.toml: evidence 'depth, AUKF < 1.2 × UKF': unknown key(s) ['fbb']"),
         ('sweep_runs = 30', 'sweep_run = 30', "001.toml: top level: unknown key(s) ['sweep_run']"),
         (

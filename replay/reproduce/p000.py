@@ -54,10 +54,7 @@ def experiment(x: dict) -> dict:
             ("cell", c, f"[{n}] cell {c}") for c in [*t.get("ablation_cells", []), *t.get("key_cells", {}).values()]
         ]
     for kind, t, entry in todo:
-        keys = SCHEMA[kind].split()
-        unknown, missing = set(t) - {k.rstrip("?") for k in keys}, {k for k in keys if "?" not in k} - set(t)
-        if unknown or missing:
-            raise ValueError(f"000.toml: {entry}: unknown key(s) {sorted(unknown)}, missing {sorted(missing)}")
+        spec.check(t, SCHEMA[kind], f"000.toml: {entry}")
     labels, cells = {lab for t in x["filters"].values() for lab in t}, {"ablation", *x["experiment"]["key_cells"]}
     for e in x["evidence"]:  # the names an [[evidence]] entry uses: cells, filter labels, the statistic
         bad = (

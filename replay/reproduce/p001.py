@@ -25,28 +25,24 @@ from replay.util.portable import write_document
 
 from .verdict import Stopwatch, footer
 
-SCHEMA = {  # kind of entry -> "required keys | optional keys" (:func:`check`)
+SCHEMA = {  # kind of entry -> its keys ("key?": optional; :func:`check`)
     "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "
-    "tuning table info evidence traces nees claim |",
-    "tuning": "filter data grid runs seed_offset tie anees label |",
-    "cell": "key title data | full",
-    "cell_job": "suffix filters | params",
-    "job": "key filters | dataset data params task sweep at_most full",
-    "table": "name metrics paired rows | info",
-    "info": "head key format | component abs",
-    "evidence": "name metric a b | fa fb",
-    "plot": "file track title filters |",
-    "traces": "job label panels title alt text |",
+    "tuning table info evidence traces nees claim",
+    "tuning": "filter data grid runs seed_offset tie anees label",
+    "cell": "key title data full?",
+    "cell_job": "suffix filters params?",
+    "job": "key filters dataset? data? params? task? sweep? at_most? full?",
+    "table": "name metrics paired rows info?",
+    "info": "head key format component? abs?",
+    "evidence": "name metric a b fa? fb?",
+    "plot": "file track title filters",
+    "traces": "job label panels title alt text",
 }
 
 
 def check(entry: dict, kind: str, name="") -> dict:
     """``entry``, or a ValueError naming the file and the entry unless its keys are :data:`SCHEMA`'s ``kind``."""
-    req, opt = (set(part.split()) for part in SCHEMA[kind].split("|"))
-    if (bad := set(entry) - req - opt) or (missing := req - set(entry)):
-        what = f"unknown key(s) {sorted(bad)}" if bad else f"missing {sorted(missing)}"
-        raise ValueError(f"001.toml: {kind}{f' {name!r}' if name else ''}: {what}")
-    return entry
+    return papers.check(entry, SCHEMA[kind], f"001.toml: {kind}{f' {name!r}' if name else ''}")
 
 
 def load() -> dict:

@@ -22,7 +22,7 @@ from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
 from .verdict import Stopwatch, footer
 from replay.util.portable import write_document
 
-SCHEMA = {  # the keys of each table of 003.toml ("?": optional); row, grid, setting, column: of each entry
+SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column: of each entry
     "top level": "dataset seeds pooled_rows growth tune pooled_head setting row grid sweeps evidence peak drift "
     "distinct where poor claim",
     "growth": "early late",
@@ -32,22 +32,16 @@ SCHEMA = {  # the keys of each table of 003.toml ("?": optional); row, grid, set
     "distinct": "rows head",
     "where": "columns counts heads",
     "poor": "setting name a b distinct",
-    "row": "filter name ?particles ?params",
+    "row": "filter name particles? params?",
     "grid": "row param values shared",
-    "setting": "label table n rows ?data ?task ?pooled",
-    "column": "head a b family ?mcnemar",
+    "setting": "label table n rows data? task? pooled?",
+    "column": "head a b family mcnemar?",
 }
 
 
 def check(where: str, entry: dict, keys: str) -> None:
-    """Refuse (naming the file and ``where``) an ``entry`` without every key of ``keys`` ("?key": optional) or with
-    another key."""
-    unknown = set(entry) - set(keys.replace("?", "").split())
-    missing = {k for k in keys.split() if k[0] != "?"} - set(entry)
-    if unknown or missing:
-        raise ValueError(
-            f"003.toml: {where}: {'unknown' if unknown else 'missing'} key(s) {sorted(unknown or missing)}"
-        )
+    """Refuse (naming the file and ``where``) an ``entry`` without every key of ``keys`` or with another key."""
+    spec.check(entry, keys, f"003.toml: {where}")
 
 
 def load(t: dict) -> dict:

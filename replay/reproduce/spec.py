@@ -15,7 +15,8 @@ anchor of its evidence row::
 
 Every key is checked: an unknown one is refused naming the file and the claim, so a misspelt rule
 field cannot silently fall back to its default. The experiments' tables are read by the paper's
-module (``replay/reproduce/pNNN.py``), which names what it expects.
+module (``replay/reproduce/pNNN.py``), which declares the keys of each kind of entry and checks
+every entry with :func:`check` before any run.
 """
 
 from __future__ import annotations
@@ -34,6 +35,18 @@ RULE_KEYS = {f.name for f in fields(Rule)}
 def path(paper: str, suffix: str) -> Path:
     """``replay/papers/<paper>.<suffix>``."""
     return PAPERS / f"{paper}.{suffix}"
+
+
+def check(entry: dict, keys: str, where: str) -> dict:
+    """``entry`` if it has every key of ``keys`` (space-separated; ``key?``: optional) and no other, else a
+    ``ValueError`` naming ``where`` (the file and the entry: ``"003.toml: setting 'N = 50'"``)."""
+    names = keys.split()
+    unknown = set(entry) - {k.rstrip("?") for k in names}
+    missing = {k for k in names if not k.endswith("?")} - set(entry)
+    if unknown or missing:
+        what = [f"{w} key(s) {sorted(v)}" for w, v in (("unknown", unknown), ("missing", missing)) if v]
+        raise ValueError(f"{where}: {', '.join(what)}")
+    return entry
 
 
 def load(paper: str) -> dict:
