@@ -72,7 +72,7 @@ def experiments(t: dict, seqs: list[str]) -> list[dict]:
 
 
 def compute(bounds: dict, job) -> dict:
-    """One evaluate call (in a worker): its command; per row the summary, lost flags, z_low, per-run values."""
+    """One evaluate call (in a worker): its command; per row the summary, lost flags, z_low (§4.1), per-run values."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
