@@ -1,16 +1,18 @@
 """``replay reproduce 002`` (quick mode): the document opens with the verdicts in the four labels, each row
 with its rule and a link to its evidence; a row equals ``replay eval``'s; the old ``--part`` is refused."""
+
 from __future__ import annotations
 
 import os
 import re
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from replay.run.evaluation import evaluate
-from replay.reproduce import rules
+from replay.reproduce import p002, rules, spec
 from replay.util.portable import check_portable
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
@@ -33,17 +35,28 @@ def test_quick_document_opens_with_the_verdicts_each_with_its_rule_and_evidence(
     assert head[0].startswith("# Reproduction of paper 002") and head[1].startswith("Verdict")
     assert "| claim | paper | verdict | rule (declared before the run) | test |" in head[1]
     rows = [r for r in head[1].splitlines() if r.startswith("| ") and "](#e-" in r]
-    from replay.reproduce.p002_claims import CLAIMS
-    assert len(rows) == (len(CLAIMS) if BOHAI.is_dir() else sum(not c.evidence.startswith("#e-b") for c in CLAIMS))
+    from replay.reproduce.p002 import load
+
+    claims = spec.claims(load())
+    assert len(rows) == (len(claims) if BOHAI.is_dir() else sum(not c.evidence.startswith("#e-b") for c in claims))
     for r in rows:
         assert any(f"**{lab}**" in r for lab in rules.LABELS), r
         assert "cells:" in r  # the rule's text
     anchors = set(re.findall(r'<a id="([\w\-]+)"></a>', text))
     for link in re.findall(r"\]\(#([^)]+)\) \|$", head[1], flags=re.M):
         assert link in anchors, link
-    for section in ("Benchmark 1: UNGM", "Table 5", "Table 6", "Inside the paper's box", "Fig. 17 and 18",
-                    "Benchmark 3: Bohai", "At the paper's T = 1 s", "At the recording's 10 Hz",
-                    "Baselines at their best", "Reproducibility"):
+    for section in (
+        "Benchmark 1: UNGM",
+        "Table 5",
+        "Table 6",
+        "Inside the paper's box",
+        "Fig. 17 and 18",
+        "Benchmark 3: Bohai",
+        "At the paper's T = 1 s",
+        "At the recording's 10 Hz",
+        "Baselines at their best",
+        "Reproducibility",
+    ):
         assert f"# {section}" in text or f"### {section}" in text, section
     assert "another CPU" in text and "retracted" in text
     check_portable(text, "002.md")
@@ -53,8 +66,15 @@ def test_quick_document_opens_with_the_verdicts_each_with_its_rule_and_evidence(
 @pytest.mark.slow
 def test_quick_row_is_that_of_replay_eval_and_tuned_rows_are_printed(quick):
     text = quick.read_text(encoding="utf-8")
-    ev = evaluate("sim/ungm", task="ungm", filters=("gwo-pf", "igwo-pf", "pf", "ckf", "stcpf"), runs=3, seed=0,
-                  dataset_params={"q": 1.0, "r": 1.0}, filter_params={"pf": {"n_particles": 100}})
+    ev = evaluate(
+        "sim/ungm",
+        task="ungm",
+        filters=("gwo-pf", "igwo-pf", "pf", "ckf", "stcpf"),
+        runs=3,
+        seed=0,
+        dataset_params={"q": 1.0, "r": 1.0},
+        filter_params={"pf": {"n_particles": 100}},
+    )
     row = next(r for r in ev.rows if r["filter"] == "igwo-pf")
     assert f"| igwo-pf | 2.1829 | {row['pos_rmse']:.3f} ± {row['pos_rmse_ci95']:.3f} |" in text
     assert re.search(r"\| ckf, q tuned \(q × [0-9.e+-]+\) \| — \|", text)
@@ -71,22 +91,75 @@ def test_parts_are_refused_in_one_line():
 def test_every_rule_names_evidence_and_equal_arms_decide_nothing():
     """Each claim's rule (declared before the run) names comparisons the evidence builder makes; with
     every row the same numbers, no ordering holds and no paper number far from them is inside."""
-    from collections import defaultdict
-
-    from replay.reproduce.p002_claims import CLAIMS, evidence
-
     rng = np.random.default_rng(0)
     same = rng.normal(50.0, 1.0, 20).tolist()
 
     class Rows(dict):
-        def __contains__(self, label):
-            return True
-
         def __missing__(self, label):
-            return {"v": same, "lost": [False] * 20, "above2": [0.5] * 20, "cols": defaultdict(lambda: same)}
+            return {"v": defaultdict(lambda: same, above2=[0.5] * 20), "lost": [False] * 20}
 
-    ev = evidence(defaultdict(Rows), ["b1hz-0_5", "b1hz-0_6"], ["b10hz-0_5", "b10hz-0_6"])
-    keys = {k for c in CLAIMS for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k}
+        def get(self, label, default=None):
+            return self[label] if label else default
+
+    t = p002.load()
+    exps = p002.experiments(t, ["bohai/20220822_0_5", "bohai/20220822_0_6"])
+    ev = p002.evidence(t, exps, defaultdict(Rows))
+    claims = spec.claims(t)
+    keys = {k for c in claims for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k}
     assert keys <= set(ev) and all(ev[k] for k in keys)
-    labels = {v.claim.id: v.label for v in rules.decide(CLAIMS, ev)}
+    labels = {v.claim.id: v.label for v in rules.decide(claims, ev)}
     assert set(labels.values()) == {rules.NOT}, labels
+    assert [c.name for c in ev["b-move"]] == [
+        f"{k}-0_6: igwo-stcpf, estimate before the move < igwo-stcpf" for k in ("b10hz", "b1hz")
+    ]  # "<key>:last": the last sequence
+
+
+@pytest.fixture
+def copy(tmp_path, monkeypatch):
+    """Edit a copy of replay/papers/002.toml: ``copy(old, new)`` replaces a line's text and loads the copy."""
+    text = spec.path("002", "toml").read_text(encoding="utf-8")
+    monkeypatch.setattr(spec, "PAPERS", tmp_path)
+
+    def edit(old, new):
+        assert text.count(old) >= 1, old
+        (tmp_path / "002.toml").write_text(text.replace(old, new, 1), encoding="utf-8")
+        return p002.load()
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ('{ label = "ckf" },', '{ label = "ckf", parms = { q_scale = 2.0 } },', "exp 'ungm1' rows 4: unknown 'parms'"),
+        ('task = "sonar"', 'tsak = "sonar"', "exp 3: unknown 'tsak'"),
+        ('{ label = "igwo-pf", paper = [2.1829] },', '{ paper = [2.1829] },', "exp 'ungm1' rows 2: missing 'label'"),
+        ('cols = ["pos_rmse", "x_rmse"', 'cols = ["pos_rmse", "z_rmse"', "exp 't5': runs or cols not among"),
+        ('u1 = { exps = ["ungm1"]', 'u1 = { exps = ["ungm3"]', "evidence 'u1': unknown exps"),
+        ('{ a = "gwo-pf", target = 2.4984 }', '{ a = "gwo-pf", traget = 2.4984 }', "evidence 'u1': unknown 'traget'"),
+        ('u10o = {', 'u10x = {', "claim 'u10o': no [evidence] for ['u10o']"),
+        ('grid = [', 'grids = [', "top level: unknown 'grids'"),
+    ],
+)
+def test_a_misspelt_or_missing_key_is_refused_naming_the_entry(copy, old, new, message):
+    with pytest.raises(ValueError, match="^002.toml: " + re.escape(message)):
+        copy(old, new)
+
+
+def test_a_row_added_in_the_toml_reaches_an_evaluate_call_and_the_table(copy, monkeypatch):
+    """No code changes: one more line in [[exp]] t5's rows is a row of its table, computed by evaluate with its
+    parameters (the evaluation replaced by a stand-in that records the calls)."""
+    row = '{ label = "ckf, Q doubled", filter = "ckf", params = { q_scale = 2.0 } },'
+    t = copy('  { label = "pf (N = 5000)"', "  " + row + '\n  { label = "pf (N = 5000)"')
+    calls = []
+
+    def fake(bounds, job):
+        calls.append(job)
+        rows = {lab: {"row": {"pos_rmse": 1.0, "pos_rmse_ci95": 0.5}, "lost": [False]} for lab, _, _ in job[1]}
+        return {"command": f"call {len(calls)}", "rows": rows}
+
+    monkeypatch.setattr(p002, "compute", fake)
+    t5 = [e for e in p002.experiments(t, []) if e["key"] == "t5"]
+    E = p002.run_all(t5, dict(seed=0, data_dir=None, quiet=True, mc=3, bounds=t["bounds"]), None)
+    assert sum(("ckf, Q doubled", "ckf", {"q_scale": 2.0}) in rows for _, rows, _ in calls) == 1
+    assert "| ckf, Q doubled (q × 2) | — | 1.000 ± 0.500 | n/a |" in p002.exp_table(t5, E, t)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from replay.campaign import longest as pool
-from replay.reproduce.p002 import A, Exp, run_all
+from replay.reproduce import p002
 from replay.util.errors import ReplayError
 
 
@@ -59,13 +59,16 @@ def test_p002_jobs_in_two_workers_equal_the_serial_run():
     """Two small experiments of the paper-002 reproduction, serial and in a pool of two: the same
     per-run values, lost flags and leaderboard rows but the timing (each evaluation draws from its own
     seeded streams), keyed by experiment and row."""
-    exps = [Exp("u", "UNGM", "sim/ungm", "ungm", (A("igwo-pf", t_max=3), A("pf (N = 50)", "pf", n_particles=50))),
-            Exp("s", "sonar", "sim/auv-sonar", "sonar", (A("stcpf", n_particles=20),
-                                                         A("pso-pf", n_particles=20, t_max=3)), {"steps": 15})]
-    s = {"seed": 3, "data_dir": None, "quiet": True, "mc": 2, "tune": 2, "bohai": 2}
-    serial = run_all(exps, s, None)
+    row = lambda label, params, flt=None: {**p002.ROW, "label": label, "filter": flt or label, "params": params}
+    exp = lambda key, dataset, task, rows, dp=None: {**p002.EXP, "key": key, "dataset": dataset, "task": task,
+                                                     "rows": rows, "dp": dp or {}}
+    exps = [exp("u", "sim/ungm", "ungm", [row("igwo-pf", {"t_max": 3}), row("pf (N = 50)", {"n_particles": 50}, "pf")]),
+            exp("s", "sim/auv-sonar", "sonar", [row("stcpf", {"n_particles": 20}),
+                                                 row("pso-pf", {"n_particles": 20, "t_max": 3})], {"steps": 15})]
+    s = {"seed": 3, "data_dir": None, "quiet": True, "mc": 2, "tune": 2, "bohai": 2, "bounds": p002.load()["bounds"]}
+    serial = p002.run_all(exps, s, None)
     with pool.pool(2) as ex:
-        parallel = run_all(exps, s, ex)
+        parallel = p002.run_all(exps, s, ex)
     assert sorted(serial) == sorted(parallel) == ["cmd:s", "cmd:u", "s", "u"]
     assert sorted(serial["u"]) == ["igwo-pf", "pf (N = 50)"]
     for key in ("u", "s"):
@@ -73,4 +76,4 @@ def test_p002_jobs_in_two_workers_equal_the_serial_run():
             b = parallel[key][label]
             a["row"].pop("us_per_step"), b["row"].pop("us_per_step")
             assert repr(a) == repr(b), label  # NaN-safe: the same text
-            assert len(a["v"]) == 2 and np.isfinite(a["v"]).all()
+            assert len(a["v"]["pos_rmse"]) == 2 and np.isfinite(a["v"]["pos_rmse"]).all()

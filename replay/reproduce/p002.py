@@ -1,365 +1,201 @@
-"""``replay reproduce 002``: the IGWO-STCPF paper as data: experiments, claims with rules, one template.
+"""``replay reproduce 002``: the IGWO-STCPF paper (UNGM, sonar Tables 5/6, Figs. 17/18, Bohai) as data.
 
-:data:`SIM` and :func:`bohai` list the experiments (dataset, task, rows: filter and parameters, the
-paper's numbers); :mod:`.p002_claims` declares each claim with its rule (before any run) and the
-comparisons it draws on; ``replay/papers/002.md`` holds the prose. Adding an ablation is a row here.
-Every row is one :func:`replay.run.evaluation.evaluate` call's filter (the pipeline of ``replay eval``;
-each table prints the commands that give its rows); rows of one experiment share the seed, so
-they are paired run by run. Baselines at their best (``tune``): each listed filter's ``q_scale``
-over the declared :data:`GRID`, chosen by the smallest mean position RMSE on the seed ``seed + 1``
-(simulations, a fifth of the runs) or on the sequence :data:`TUNE_SEQ` (Bohai), then run on the
-experiment's data.
+``replay/papers/002.toml`` declares the experiments, the comparisons and the claims (its comments define every
+key, :func:`load` checks them): a row, an ablation, a comparison or a claim is a TOML edit (a new experiment
+also needs its ``${key}`` in ``replay/papers/002.md``). Each row is a filter of one ``replay eval`` call
+(:func:`replay.run.evaluation.evaluate`); one experiment's rows share the seed, so they are paired by run.
 """
 
-from __future__ import annotations
-
 import json
-from dataclasses import dataclass, field, replace
+import os
+from functools import partial
 
 import numpy as np
 
 from replay.data import registry
+from replay.filters.p002 import swarm_kernels
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
-from replay.models.auv_sonar import R_TABLE2
 
-from .p002_claims import TUNE_SEQ
+from . import spec
 from replay.campaign.longest import pool, run_longest_first, workers
-from .rules import per_run
+from .render import anchor_tag, render, table
+from .rules import Comparison, decide, per_run
+from .verdict import Stopwatch, footer
 from replay.util.portable import write_document
 
-from .verdict import Stopwatch, footer
-
-GRID = (0.01, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # q_scale of the tuned baselines, declared
-COLS = ("pos_rmse", "x_rmse", "y_rmse", "pitch_rmse", "yaw_rmse")
-
-
-@dataclass(frozen=True)
-class Arm:
-    """One row: ``label``, ``filter`` and its parameters, the paper's numbers (per column), dataset and
-    task parameters of this row alone (sweeps)."""
-
-    label: str
-    filter: str
-    params: dict = field(default_factory=dict)
-    paper: tuple = ()
-    dp: dict = field(default_factory=dict)
-    tp: dict = field(default_factory=dict)
+TOP = dict.fromkeys("grid columns runs quick bounds sequences tune_seq no_sequences exp evidence claim".split(), ...)
+EXP = dict(key=..., task=..., rows=..., dataset="", dp={}, cols=["pos_rmse"], tune=[], runs="mc", first=None)
+EXP |= dict(per_sequence=False, last=[])  # the keys of 002.toml's tables and their defaults (...: required)
+ROW, EVIDENCE = dict(label=..., filter="", params={}, paper=[], dp={}, tp={}), dict(exps=..., compare=...)
+CMP = dict(a=..., b="", target=None, col="pos_rmse", lost=False, gap=None)
+pm = lambda r, c: "n/a" if r.get(c) is None or not np.isfinite(r[c]) else f"{r[c]:.3f} ± {r[f'{c}_ci95']:.3f}"
+name = lambda a: a["label"] + (f" (q × {a['params']['q_scale']:g})" if "q_scale" in a["params"] else "")
+paper = lambda a: " / ".join(f"{x:g}" for x in a["paper"]) or "—"
+WHICH = "Commands ({}: the one that gives the row exactly):\n\n"
+cmds = lambda cs, what="column 'command'": WHICH.format(what) + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
 
 
-@dataclass(frozen=True)
-class Exp:
-    key: str  # evidence anchor e-<key>
-    title: str
-    dataset: str
-    task: str
-    arms: tuple
-    dp: dict = field(default_factory=dict)
-    cols: tuple = ("pos_rmse",)
-    tune: tuple = ()  # the filters tuned over GRID
-    runs: str = "mc"  # "mc" (the paper's 100), "bohai" (20 per sequence), "tune" (a fifth of mc: the grids)
-    first: int | None = None
+def checked(entry, keys: dict, where: str) -> dict:
+    """``entry`` with the defaults of ``keys``; an unknown or a missing key is refused naming the entry (generic)."""
+    bad = [f"unknown {k!r}" for k in entry if k not in keys] if isinstance(entry, dict) else ["not a table"]
+    if bad := bad or [f"missing {k!r}" for k, v in keys.items() if v is ... and k not in entry]:
+        raise ValueError(f"002.toml: {where}: {', '.join(bad)}")
+    return {**keys, **entry}
 
 
-def A(label, flt=None, paper=(), dp=None, tp=None, **params):
-    return Arm(label, flt or label, params, paper if isinstance(paper, tuple) else (paper,), dp or {}, tp or {})
+def load() -> dict:
+    """``replay/papers/002.toml``, every key checked; a row's filter defaults to its label, "null" is None."""
+    t, null = checked(spec.load("002"), TOP, "top level"), lambda v: None if v == "null" else v
+    row = lambda r: r | {"filter": r["filter"] or r["label"], "params": {k: null(v) for k, v in r["params"].items()}}
+    rows = lambda e, p: [row(checked(r, ROW, f"exp {e['key']!r} {p} {j + 1}")) for j, r in enumerate(e[p])]
+    for i, raw in enumerate(t["exp"]):
+        e = t["exp"][i] = checked(raw, EXP, f"exp {i + 1}")
+        e |= {"rows": rows(e, "rows"), "last": rows(e, "last")}
+        if e["runs"] not in t["runs"] or set(e["cols"]) - set(t["columns"]):
+            raise ValueError(f"002.toml: exp {e['key']!r}: runs or cols not among those the file's header declares")
+    for k, raw in t["evidence"].items():
+        ev = t["evidence"][k] = checked(raw, EVIDENCE, f"evidence {k!r}")
+        ev["compare"] = [checked(c, CMP, f"evidence {k!r}") for c in ev["compare"]]
+        bad = [x for x in ev["exps"] if x.removesuffix(":last") not in {e["key"] for e in t["exp"]}]
+        if bad := bad + [c["a"] for c in ev["compare"] if not c["b"] and c["target"] is None]:
+            raise ValueError(f"002.toml: evidence {k!r}: unknown exps or a comparison without b or target {bad}")
+    for c in spec.claims(t, "002.toml"):
+        if bad := [k for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k and k not in t["evidence"]]:
+            raise ValueError(f"002.toml: claim {c.id!r}: no [evidence] for {bad}")
+    return t
 
 
-N100, UNB, QP = {"n_particles": 100}, {"lower": None, "upper": None}, {"prior_cov": "transition"}
-MIX = {"mixture_eps": 0.05, "mixture_scale": 10.0}
-TUNED = ("ckf", "stckf", "pf")
-UNGM_ARMS = lambda g, i: (
-    A("gwo-pf", paper=g),
-    A("igwo-pf", paper=i),
-    A("pf (N = 100)", "pf", **N100),  # noqa: E731
-    A("ckf"),
-    A("stcpf"),
-)
-T5 = (
-    A("stckf", paper=(1.3373, 0.9998, 1.0090, 0.0790, 0.1117)),
-    A("pf (N = 100)", "pf", (1.4222, 1.2044, 1.2016, 0.0804, 0.0937), **N100),
-    A("pso-pf (bounded)", "pso-pf", (1.4818, 1.0420, 1.1079, 0.0913, 0.0909)),
-    A("pso-cpf (bounded)", "pso-cpf", (1.4714, 1.0424, 1.0901, 0.0909, 0.0891)),
-    A("igwo-stcpf", paper=(1.1579, 0.8775, 0.8808, 0.0602, 0.0760)),
-    A("pso-pf (unbounded)", "pso-pf", **UNB),
-    A("pso-cpf (unbounded)", "pso-cpf", **UNB),
-    A("ckf"),
-    A("stcpf (printed proposal)", "stcpf"),
-    A("stcpf (Q prior)", "stcpf", **QP),
-    A("igwo-stcpf (Q prior)", "igwo-stcpf", **QP),
-    A("pf (N = 5000)", "pf", n_particles=5000),
-    A("stckf (classic λ·FPFᵀ + Q)", "stckf", form="classic"),
-    A("stckf (as printed)", "stckf", m_form="printed", scale_prior=False),
-    A("stckf (as printed, repaired)", "stckf", m_form="printed", scale_prior=False, repair=True),
-)
-T6 = (
-    A("pf (N = 100)", "pf", (3.3033, 1.3744, 1.4536, 0.0765, 0.1241), **N100),
-    A("pso-pf (bounded)", "pso-pf", (2.3941, 1.0505, 1.1514, 0.0957, 0.1017)),
-    A("pso-cpf (bounded)", "pso-cpf", (2.4627, 1.0518, 1.1496, 0.1008, 0.1029)),
-    A("igwo-stcpf", paper=(1.5234, 0.9230, 0.9629, 0.0615, 0.0967)),
-    A("pso-pf (unbounded)", "pso-pf", **UNB),
-    A("pso-cpf (unbounded)", "pso-cpf", **UNB),
-    A("ckf"),
-    A("stcpf"),
-    A("stckf"),
-)
-R5, R10 = {"R": (5 * R_TABLE2).tolist()}, {"R": (10 * R_TABLE2).tolist()}
-SIM = (
-    Exp(
-        "ungm1",
-        "UNGM, Q = R = 1 (002 §3.2)",
-        "sim/ungm",
-        "ungm",
-        UNGM_ARMS(2.4984, 2.1829),
-        {"q": 1.0, "r": 1.0},
-        tune=("ckf", "pf"),
-    ),
-    Exp(
-        "ungm10",
-        "UNGM, Q = R = 10",
-        "sim/ungm",
-        "ungm",
-        UNGM_ARMS(5.2923, 4.1794),
-        {"q": 10.0, "r": 10.0},
-        tune=("ckf", "pf"),
-    ),
-    Exp("t5", "Table 5: sonar, Gaussian noise", "sim/auv-sonar", "sonar", T5, cols=COLS, tune=TUNED),
-    Exp("t6", "Table 6: sonar, mixed-Gaussian (glint) noise", "sim/auv-sonar", "sonar", T6, MIX, COLS, TUNED),
-    Exp(
-        "box",
-        "Table 5 inside the paper's PSO box (truth without process noise, pitch 0.3 rad)",
-        "sim/auv-sonar",
-        "sonar",
-        T5[:5] + (A("ckf"),),
-        {"truth_noise": False, "x0": [0.0, 0.0, 0.0, 10.0, 0.3, np.pi / 10]},
-        COLS,
-    ),
-    Exp(
-        "sweep",
-        "Fig. 17 and 18: IGWO-STCPF over R and N",
-        "sim/auv-sonar",
-        "sonar",
-        (
-            A("R1, N = 100", "igwo-stcpf", 1.3625),
-            A("5 R1", "igwo-stcpf", 2.7283, R5, R5),
-            A("10 R1", "igwo-stcpf", 2.9635, R10, R10),
-            A("N = 50", "igwo-stcpf", 1.2600, n_particles=50),
-            A("N = 500", "igwo-stcpf", 1.1953, n_particles=500),
-        ),
-    ),
-)
-B_ARMS = (
-    A("igwo-stcpf"),
-    A("pso-cpf"),
-    A("stckf"),
-    A("pf (N = 100)", "pf", **N100),
-    A("ckf"),
-    A("stcpf (printed proposal)", "stcpf"),
-    A("stcpf (Q prior)", "stcpf", **QP),
-    A("igwo-stcpf (Q prior)", "igwo-stcpf", **QP),
-    A("raw measurements", "measurements"),
-)
-B_ABL = (
-    A("igwo-stcpf, estimate before the move", "igwo-stcpf", estimate_at="before"),
-    A("igwo-stcpf, posterior-type fitness", "igwo-stcpf", fitness="posterior"),
-)
+def experiments(t: dict, seqs: list[str]) -> list[dict]:
+    """The declared experiments, each ``per_sequence`` one expanded over ``seqs``; ``group``: the declared key."""
+    at = lambda e, s: s and dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
+    return [e | {"group": e["key"]} | (at(e, s) or {}) for e in t["exp"] for s in (seqs if e["per_sequence"] else [""])]
 
 
-def bohai(seqs) -> list[Exp]:
-    """Benchmark 3 on each sequence at the paper's T = 1 s and at the recording's 10 Hz (the
-    rows at 10 Hz without the Q-prior ones), the optimiser ablations on the last sequence."""
-    out = []
-    for tag, dp, arms in (("1hz", {"rate": 1.0}, B_ARMS), ("10hz", {}, B_ARMS[:6] + B_ARMS[8:])):
-        for s in seqs:
-            out.append(
-                Exp(
-                    f"b{tag}-{s[-3:]}",
-                    s,
-                    s,
-                    "position",
-                    arms + (B_ABL if s == seqs[-1] else ()),
-                    dp,
-                    tune=TUNED,
-                    runs="bohai",
-                    first=1000,
-                )
-            )
-    return out
-
-
-def sequences(data_dir) -> list[str]:
-    """The 20220822 Bohai sequences found (the paper's 0_7 too when its file is supplied)."""
-    ids = sorted(i for i in registry.all_datasets() if i.startswith("bohai/20220822_"))
-    return [i for i in ids if registry.locate(i, data_dir) is not None]
-
-
-# --- running ----------------------------------------------------------------------------------------
-def variants(e: Exp, qs, label: str) -> tuple:
-    """The first row of each filter ``f`` of ``qs`` (filter -> q_scale values) with ``q_scale`` set:
-    the tuned rows (one value each) or the grid (:data:`GRID`)."""
-    base = {}
-    for a in e.arms:
-        base.setdefault(a.filter, a)
-    return tuple(
-        replace(
-            base[f], label=label.format(f=f, q=q, base=base[f].label), paper=(), params=dict(base[f].params, q_scale=q)
-        )
-        for f, v in qs.items()
-        for q in v
-    )
-
-
-def q_for(e: Exp, chosen: dict) -> dict:
-    """The tuned q_scale of each of ``e.tune``: its own seed + 1 grid (simulations), the tuning
-    sequence's at the same rate (Bohai; none on the tuning sequence itself)."""
-    if e.runs == "mc":
-        return chosen.get(e.key, {})
-    return {} if e.dataset == TUNE_SEQ else chosen.get(f"{e.key.split('-')[0]}-{TUNE_SEQ[-3:]}", {})
-
-
-def jobs(exps, s: dict) -> list[tuple]:
-    """Pack each experiment's rows into evaluate calls: one call per distinct dataset and task
-    parameters, each filter once per call. A job: (exp key, ((label, filter, params), ...), kwargs)."""
-    out = []
-    for e in exps:
-        calls = []
-        for a in e.arms:
-            if a.filter == "measurements":
-                continue
-            key = json.dumps([dict(e.dp, **a.dp), a.tp], sort_keys=True)
-            c = next((c for c in calls if c[0] == key and a.filter not in {x[1] for x in c[1]}), None)
-            if c is None:
-                calls.append(c := (key, []))
-            c[1].append((a.label, a.filter, a.params))
-        runs = s[e.runs]
-        for key, rows in calls:
-            dp, tp = json.loads(key)
-            out.append(
-                (
-                    e.key,
-                    tuple(rows),
-                    dict(
-                        dataset=e.dataset,
-                        task=e.task,
-                        runs=runs,
-                        first=e.first,
-                        seed=s["seed"] + (e.runs == "tune"),
-                        dataset_params=dp or None,
-                        task_params=tp or None,
-                        data_dir=s["data_dir"] if e.runs == "bohai" else None,
-                    ),
-                )
-            )
-    return out
-
-
-def compute(job) -> dict:
-    """One evaluate call (a worker process), reduced to what the document and the claims use."""
+def compute(bounds: dict, job) -> dict:
+    """One evaluate call (in a worker): its command; per row the summary, lost flags, z_low (§4.1), per-run values."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
-    by = {r.name: r for r in ev.results}
-    out = {"command": command_line(ev.config), "labels": {lab: f for lab, f, _ in rows}, "rows": {}}
-    z_low = [
-        float(np.mean(t[:, 2] < -300.0)) for t in ev.truths if t.shape[1] > 2
-    ]  # the PSO box's depth bound (002 §4.1)
-    for lab, f in list(out["labels"].items()) + [("raw measurements", "measurements")]:
-        if f in by:
-            r, (v, lost) = by[f], per_run(by[f])
-            above = [float(np.mean(np.linalg.norm(e["position"], axis=1) > 2.0)) for e in r.errors]
-            out["rows"][lab] = {
-                "row": {
-                    k: r.summary.get(k)
-                    for k in r.summary
-                    if k.endswith(("rmse", "ci95", "median")) or k in ("lost", "diverged", "runs", "us_per_step")
-                },
-                "v": v.tolist(),
-                "lost": lost.tolist(),
-                "above2": above,
-                "z_low": float(np.mean(z_low)) if z_low else None,
-                "cols": {c: per_run(r, c)[0].tolist() for c in COLS if c in r.runs[0]},
-            }
+    by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
+    z = [float(np.mean(t[:, 2] < bounds["depth"])) for t in ev.truths if t.shape[1] > 2]
+    for lab, r in ((lab, by[f]) for lab, f, _ in rows + (("raw measurements", "measurements", 0),) if f in by):
+        v = {c: per_run(r, c)[0].tolist() for c in r.runs[0] if c.endswith("_rmse")}
+        v["above2"] = [float(np.mean(np.linalg.norm(e["position"], axis=1) > bounds["error"])) for e in r.errors]
+        out["rows"][lab] = dict(row=r.summary, v=v, lost=per_run(r)[1].tolist(), z_low=float(np.mean(z)) if z else None)
     return out
 
 
-def run_all(exps, s, ex) -> dict:
-    """{exp key: {label: row evidence, ...}, "cmd:<key>": [commands]} of every experiment."""
-    todo = jobs(exps, s)
-    cost = [
-        kw["runs"]
-        * (kw["first"] or 100)
-        * sum(5 if "gwo" in f or "pso" in f or "stcpf" in f else 1 for _, f, _ in rows)
-        for _, rows, kw in todo
-    ]
-    E = {}
-    for i, out in run_longest_first(
-        compute, todo, cost, [f"{k}: {', '.join(r[0] for r in rows)}" for k, rows, _ in todo], ex, s["quiet"], "002 "
-    ):
-        k = todo[i][0]
-        cmds = E.setdefault(f"cmd:{k}", [])
-        cmds.append(out["command"])
-        E.setdefault(k, {}).update({lab: dict(r, cmd=len(cmds)) for lab, r in out["rows"].items()})
+def run_all(exps, s: dict, ex) -> dict:
+    """Each experiment's rows in evaluate calls, one per distinct dataset and task parameters and per repeat of a
+    filter, in row order, in worker processes: {exp key: {label: row evidence}, "cmd:<key>": [their commands]}."""
+    todo, E = [], {}  # todo: (experiment key, ((label, filter, params), ...), evaluate's arguments)
+    for e in exps:
+        calls, seen = {}, []  # (parameters as JSON, n-th call with them) -> rows; evaluate adds the measurements
+        for a in (a for a in e["rows"] if a["filter"] != "measurements"):
+            seen.append((json.dumps([e["dp"] | a["dp"], a["tp"]], sort_keys=True), a["filter"]))
+            calls.setdefault((seen[-1][0], seen.count(seen[-1]) - 1), []).append((a["label"], a["filter"], a["params"]))
+        kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e["first"])
+        kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
+        for (dp, tp), rows in ((json.loads(key), rows) for (key, _), rows in calls.items()):
+            todo.append((e["key"], tuple(rows), kw | dict(dataset_params=dp or None, task_params=tp or None)))
+    heavy = lambda f: 5 if "gwo" in f or "pso" in f or "stcpf" in f else 1  # cost: a swarm filter ~5 PFs
+    cost = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
+    done = dict(run_longest_first(partial(compute, s["bounds"]), todo, cost, [j[0] for j in todo], ex, s["quiet"]))
+    for i, (k, _, _) in enumerate(todo):
+        (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
+        E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
     return E
 
 
-def tune(exps, s, ex) -> dict:
-    """{exp key: {filter: chosen q_scale}} from the grids (module docstring)."""
-    grids = [
-        replace(
-            e,
-            key=f"{e.key}:grid",
-            runs="tune" if e.runs == "mc" else e.runs,
-            arms=variants(e, {f: GRID for f in e.tune}, "{f} q×{q:g}"),
-        )
-        for e in exps
-        if e.tune and (e.runs != "bohai" or e.dataset == TUNE_SEQ)
-    ]
-    E, chosen = run_all(grids, s, ex), {}
-    for g in grids:
-        for a in g.arms:
-            best = chosen.setdefault(g.key.split(":")[0], {}).get(a.filter)
-            m = np.mean(E[g.key][a.label]["v"])
-            if best is None or m < best[0]:
-                chosen[g.key.split(":")[0]][a.filter] = (m, a.params["q_scale"])
-    return {k: {f: q for f, (_, q) in v.items()} for k, v in chosen.items()}
+def variants(e: dict, qs: dict, label: str) -> list[dict]:
+    """The first row of each filter of ``qs`` (filter -> q_scale values) with ``q_scale`` set, relabelled."""
+    base = {f: next(r for r in e["rows"] if r["filter"] == f) for f in qs}
+    new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])
+    return [base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}} for f in qs for q in qs[f]]
 
 
-def compute_all(runs, seed, data_dir, quick, quiet) -> tuple:
-    """(experiments with their tuned rows, evidence, chosen q_scale, Bohai sequences)."""
-    seqs = sequences(data_dir)
-    mc = runs or (3 if quick else 100)
-    s = {
-        "seed": seed,
-        "data_dir": data_dir,
-        "quiet": quiet,
-        "mc": mc,
-        "tune": max(2, mc // 5),
-        "bohai": 2 if quick else max(20, runs or 20),
-    }
-    exps = list(SIM) + bohai(seqs[-2:] if quick else seqs)
-    with pool(workers()) as ex:
-        chosen = tune(exps, s, ex)
-        exps = [
-            replace(e, arms=e.arms + variants(e, {f: (q,) for f, q in q_for(e, chosen).items()}, "{base}, q tuned"))
-            for e in exps
-        ]
-        return exps, run_all(exps, s, ex), chosen, seqs
+def comparison(rows: dict, k: str, c: dict) -> Comparison:
+    """A declared comparison in experiment ``k``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
+    a, b, col, who = rows[c["a"]], rows.get(c["b"]), c["col"], f"{k}: {c['a']}"
+    if c["target"] is not None:
+        return Comparison(f"{who} {col}", a["v"][col], lost_a=a["lost"], target=c["target"], test="interval")
+    if c["lost"]:
+        m = np.mean(a["v"]["pos_rmse"])
+        gap = f" (residual gap: {c['a']} {m:.3f} vs paper {c['gap']}, {m / c['gap']:.1f}×)" if c["gap"] else ""
+        return Comparison(f"{k}: lost, {c['a']} vs {c['b']}{gap}", (), (), a["lost"], b["lost"], test="mcnemar")
+    return Comparison(f"{who} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
+
+
+def evidence(t: dict, exps, E: dict) -> dict:
+    """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` (the TOML's comments)."""
+    pick = lambda x: [e["key"] for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]
+    compare = lambda v: [comparison(E[e], e, c) for x in v["exps"] for e in pick(x) for c in v["compare"]]
+    return {k: compare(v) for k, v in t["evidence"].items()}
+
+
+def exp_table(ex: list[dict], E: dict, t: dict) -> str:
+    """An experiment's table: per row the paper's numbers, ours per column, ours ÷ paper, median, lost, ..."""
+    e, out = ex[0], []
+    for a, r in ((a, E[e["key"]][a["label"]]) for a in e["rows"] if a["label"] in E[e["key"]]):
+        w, p, n = r["row"], a["paper"], len(r["lost"])
+        ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
+        med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
+        out.append([name(a), paper(a), *(pm(w, c) for c in e["cols"]), ratio, f"{med:.3f}", f"{sum(r['lost'])}/{n}"])
+        out[-1] += [f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
+    head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
+    tab = table(head + ["µs/step", "command"], out)
+    return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{cmds(E['cmd:' + e['key']])}"
+
+
+def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
+    """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
+    rows, off = {name(a): a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
+    at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
+    cell = lambda i, r: f"{pm(r['row'], 'pos_rmse')} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
+    body = [[k, paper(a), *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
+    head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
+    return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{cmds(cs, '[n]')}"
+
+
+def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
+    """The verdicts (a claim whose comparisons draw on no experiment is not run) and the template's fields."""
+    ev, groups = evidence(t, exps, E), {d["key"]: [e for e in exps if e["group"] == d["key"]] for d in t["exp"]}
+    tab = lambda d, ex: (sequence_table if d["per_sequence"] else exp_table)(ex, E, t) if ex else t["no_sequences"]
+    fields = {d["key"]: tab(d, groups[d["key"]]) for d in t["exp"]}
+    fields |= {"tune_seq": t["tune_seq"], "grid": ", ".join(f"{q:g}" for q in t["grid"])}
+    fields |= {"seqs": ", ".join(seqs) or "none found", "z_low": f"{100 * E['t5']['stckf']['z_low']:.1f} %"}
+    fields["load"] = ", ".join(f"{x:.1f}" for x in os.getloadavg())  # the machine's load, printed beside the times
+    swarm_kernels.entropy_weights(np.array([1.0, 1.5, 10.0]), 1e-12, 1e-4, w := np.empty(3))  # 002 §3.2.2
+    fields["entropy"] = "(" + ", ".join(f"{x:.3f}" for x in w) + ")"
+    fields["tuned"] = "; ".join(f"{k}: " + ", ".join(f"{f} × {q:g}" for f, q in v.items()) for k, v in chosen.items())
+    claims = [c for c in spec.claims(t, "002.toml") if ev[c.rule.decides]]
+    return render("002", fields, decide(claims, ev, seed=seed))
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
-    """Compute every experiment, decide the claims, write the document."""
-    from . import p002_claims
-
-    watch = Stopwatch()
-    exps, E, chosen, seqs = compute_all(runs, seed, data_dir, quick, quiet)
-    cmd = (
-        "replay reproduce 002"
-        + (f" --runs {runs}" if runs else "")
-        + (" --quick" if quick else "")
-        + f" --seed {seed}"
-        + (" --data-dir ../shared/datasets/bohai" if data_dir else "")
-    )
-    text = p002_claims.document(exps, E, chosen, seqs, seed)
-    path = write_document(doc or "docs/reproduction/002.md", text + footer(cmd, watch.seconds))
+    """Tune the baselines (each ``tune`` filter's first ``grid`` value of least mean position RMSE on the data the
+    TOML's header names), compute every experiment with the tuned rows, decide the claims, write the document."""
+    watch, t = Stopwatch(), load()
+    seqs = [i for i in sorted(registry.all_datasets()) if i.startswith(t["sequences"]) and registry.locate(i, data_dir)]
+    n = t["quick"] if quick else t["runs"]
+    mc, bohai = runs or n["mc"], n["bohai"] if quick else max(n["bohai"], runs or n["bohai"])
+    s = dict(seed=seed, data_dir=data_dir, quiet=quiet, mc=mc, tune=max(2, mc // 5), bohai=bohai, bounds=t["bounds"])
+    exps = experiments(t, seqs[-n["sequences"] :] if quick else seqs)
+    grids = [e for e in exps if e["tune"] and (e["runs"] == "mc" or e["dataset"] == t["tune_seq"])]
+    grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
+    grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
+    on = lambda e: e["key"] if e["runs"] == "mc" else f"{e['group']}-{t['tune_seq'][-3:]}"  # where e's q is tuned
+    with pool(workers()) as ex:
+        G = run_all(grids, s, ex)
+        rmse = lambda g, f, q: np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
+        chosen = {g["key"][:-5]: {f: min(t["grid"], key=partial(rmse, g, f)) for f in g["tune"]} for g in grids}
+        for e in (e for e in exps if e["dataset"] != t["tune_seq"]):
+            e["rows"] = e["rows"] + variants(e, {f: (q,) for f, q in chosen.get(on(e), {}).items()}, "{base}, q tuned")
+        E = run_all(exps, s, ex)
+    cmd = f"replay reproduce 002{f' --runs {runs}' if runs else ''}{' --quick' if quick else ''} --seed {seed}"
+    cmd += " --data-dir ../shared/datasets/bohai" if data_dir else ""
+    text = document(t, exps, E, chosen, seqs, seed) + footer(cmd, watch.seconds)
+    path = write_document(doc or "docs/reproduction/002.md", text)
     if not quiet:
         print(f"wrote {path} ({watch.seconds:.0f} s)")
     return path
