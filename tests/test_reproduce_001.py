@@ -103,7 +103,7 @@ def test_tuned_ukf_rule_breaks_rmse_ties_by_anees(monkeypatch):
         calls.append((len(jobs), {j.runs for j in jobs}, seed))
         return {j.key: SimpleNamespace(rows=[rows[tuple(j.filter_params["ukf"].values())]]) for j in jobs}
 
-    monkeypatch.setattr(p001, "run_jobs", fake_run_jobs)
+    monkeypatch.setattr(p001, "evaluate_jobs", fake_run_jobs)
     rows[Q[0], R[0]].update(pos_rmse=5.0, anees=400.0)
     rows[Q[-1], R[-1]].update(pos_rmse=5.04, anees=3.5)  # within 1 %
     rows[Q[1], R[1]].update(pos_rmse=5.06, anees=3.0)  # 1.2 %: out
@@ -190,7 +190,7 @@ def test_toml_refuses_unknown_missing_and_undeclared(tmp_path, monkeypatch, old,
 def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch):
     """An ablation is a TOML edit: a job and a row in its table, no code."""
     from replay.reproduce import p001
-    from replay.reproduce.common5 import run_jobs
+    from replay.reproduce.tables import evaluate_jobs
 
     job = (
         '    { key = "linear wrong R, Q̂ only", dataset = "sim/linear", filters = ["aukf"], data = { steps = 2000, '
@@ -205,7 +205,7 @@ def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch)
     linear = next(t for t in s["table"] if t["name"] == "linear")
     planned = [j for j in p001.jobs(s, True, {}, 2, 2) if j.key in {r[1] for r in linear["rows"]}]
     assert "linear wrong R, Q̂ only" in [j.key for j in planned]
-    out = p001.spec_table(s, run_jobs(planned, 2, 0, quiet=True), linear)
+    out = p001.spec_table(s, evaluate_jobs(planned, 2, 0, quiet=True), linear)
     assert "| AUKF (Q̂ only), R̂₀ = R × 100 |" in out and "aukf.adapt_r=false" in out
     assert out.count("AUKF (Q̂ only), R̂₀ = R × 100") == 3  # its RMSE row, its command, its final estimates
 
@@ -226,7 +226,7 @@ def _fake_ev(runs=5, steps=40, seed=0, scale=1.0):
 
 def test_error_figures_one_panel_per_filter_with_units_rmse_and_band():
     from replay.outputs.palette import colour
-    from replay.reproduce.common5 import rmse_figures
+    from replay.outputs.plots import rmse_figures
     from replay.reproduce.p001 import load, run_errors
 
     quantities = load()["quantities"]

@@ -125,7 +125,7 @@ def _fake_printed(runs=7, steps=30):
 
 
 def test_error_figures_one_panel_per_filter_with_units_and_band():
-    from replay.reproduce.common5 import rmse_curve, rmse_figures
+    from replay.outputs.plots import rmse_curve, rmse_figures
     from replay.reproduce.p003 import T, run_errors
 
     ev, signed = _fake_printed()

@@ -1,7 +1,7 @@
 """The reproductions' shared leaderboard rows and the portability check of documents."""
 import pytest
 
-from replay.reproduce.verdict import result_rows
+from replay.reproduce.tables import result_rows
 from replay.util.portable import check_portable
 
 

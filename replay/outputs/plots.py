@@ -228,3 +228,28 @@ def artist_colours(figures) -> dict:
                 elif hasattr(a, "get_facecolor"):
                     add(gid, a.get_facecolor())  # bands, bars, markers
     return out
+
+
+def rmse_curve(err: np.ndarray) -> np.ndarray:
+    """RMSE across runs at each step of errors (runs, n): sqrt(mean_runs e²), NaN-aware."""
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.nanmean(err**2, axis=0))
+
+
+def rmse_figures(t, errors: dict, quantities, title: str) -> dict:
+    """One figure per quantity ``(key, name, unit)``: a panel per filter with the RMSE over the runs
+    at each step (the papers' curves) and the 5-95 % band of the runs' absolute errors. ``errors``:
+    {filter label: {key: (runs, steps) errors}}; ``title`` starts each figure's title."""
+    figs = {}
+    for key, name, unit in quantities:
+        curves = {label: e[key] for label, e in errors.items()}
+        runs = min(len(v) for v in curves.values())
+        figs[key] = mc_figure(
+            t,
+            curves,
+            name,
+            unit,
+            f"{title}: {name} over time, {runs} runs (line: RMSE over the runs; band: 5-95 % of the runs' |error|)",
+            stat="rmse",
+        )
+    return figs

@@ -15,19 +15,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from replay.campaign.longest import pool, run_longest_first
+from replay.campaign.longest import workers as pool_workers
 from replay.models.depth import R_FIXED, paper_Q
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
 from replay.run.pipeline import plain
 from replay.scoring import scorer
 from replay.sim.lake_depth import base_for_rms, make_frame
+from replay.util.portable import write_document
 
 from . import render, spec
-from replay.campaign.longest import pool, run_longest_first, workers as pool_workers
 from .render import anchor_tag, fmt, pm, table
 from .rules import Comparison, decide, per_run
-from .verdict import Stopwatch, footer, result_rows
-from replay.util.portable import write_document
+from .tables import Stopwatch, footer, result_rows
 
 RUNS, STATS = ("experiment", "quick"), {"rmse", "man", "level", "ratio"}
 SCHEMA = {  # each kind of TOML entry -> its keys ("?": optional)

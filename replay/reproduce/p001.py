@@ -15,15 +15,15 @@ import numpy as np
 
 from replay.outputs import plots as draw
 from replay.outputs.palette import colour
+from replay.outputs.plots import rmse_figures
 from replay.util.errors import ReplayError
-
-from . import spec as papers
-from .common5 import Job, combine, command, commands, rmse_figures, row, run_jobs, table
-from .render import found, render, table as md
-from .rules import Comparison, decide, per_run
 from replay.util.portable import write_document
 
-from .verdict import Stopwatch, footer
+from . import spec as papers
+from .render import found, render
+from .render import table as md
+from .rules import Comparison, decide, per_run
+from .tables import Job, Stopwatch, combine, command, commands, evaluate_jobs, footer, row, table
 
 SCHEMA = {  # kind of entry -> its keys ("key?": optional; :func:`check`)
     "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "
@@ -79,7 +79,7 @@ def tune(s: dict, runs: int, seed: int, data_dir, quiet: bool) -> tuple[dict, st
     t, f = s["tuning"], s["tuning"]["filter"]
     points = [dict(zip(t["grid"], v)) for v in itertools.product(*t["grid"].values())]
     grid = [Job(f"tune {p}", s["dataset"], (f,), t["data"], {f: p}, runs=min(runs, t["runs"])) for p in points]
-    xs = [ev.rows[0] for ev in run_jobs(grid, runs, seed + t["seed_offset"], data_dir, quiet).values()]
+    xs = [ev.rows[0] for ev in evaluate_jobs(grid, runs, seed + t["seed_offset"], data_dir, quiet).values()]
     score = [x["pos_rmse"] if not x.get("diverged") and np.isfinite(float(x["pos_rmse"])) else np.inf for x in xs]
     if not np.isfinite(best := min(score)):
         raise ReplayError(f"001 tuning: every grid point of the {f.upper()} diverged on the training seeds")
@@ -188,7 +188,7 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, sw
     runs = runs or s["quick_runs" if quick else "runs"]
     n = min(sweep_runs or s["sweep_runs"], runs)
     tuned, grid_md = tune(s, runs, seed, data_dir, quiet)
-    evs = run_jobs(jobs(s, quick, tuned, runs, n), runs, seed, data_dir, quiet)
+    evs = evaluate_jobs(jobs(s, quick, tuned, runs, n), runs, seed, data_dir, quiet)
     verdicts = decide(papers.claims(s, "001.toml"), evidence(s, evs), seed=seed)
     text = render("001", fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc), verdicts)
     command_line = f"replay reproduce 001 --runs {runs} --seed {seed}" + " --quick" * quick

@@ -12,17 +12,17 @@ from functools import partial
 
 import numpy as np
 
+from replay.campaign.longest import pool, run_longest_first, workers
 from replay.data import registry
 from replay.filters.p002 import swarm_kernels
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
+from replay.util.portable import write_document
 
 from . import spec
-from replay.campaign.longest import pool, run_longest_first, workers
 from .render import anchor_tag, render, table
 from .rules import Comparison, decide, per_run
-from .verdict import Stopwatch, footer
-from replay.util.portable import write_document
+from .tables import Stopwatch, footer
 
 TOP = dict.fromkeys("grid columns runs quick bounds sequences tune_seq no_sequences exp evidence claim".split(), ...)
 EXP = dict(key=..., task=..., rows=..., dataset="", dp={}, cols=["pos_rmse"], tune=[], runs="mc", first=None)

@@ -10,17 +10,20 @@ claims and rules (:mod:`.spec`) and the layouts. :func:`run` evaluates (``REPLAY
 
 from pathlib import Path
 from types import SimpleNamespace
+
 import numpy as np
-from replay.outputs.plots import save
+
+from replay.campaign.longest import pool, run_longest_first, workers
+from replay.outputs.plots import rmse_curve, rmse_figures, save
 from replay.run.evaluation import evaluate
 from replay.scoring.significance import holm, t_interval
-from . import spec
-from .common5 import combine, commands, per_run, rmse_curve, rmse_figures, table
-from replay.campaign.longest import pool, run_longest_first, workers
-from .render import render, table as md
-from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
-from .verdict import Stopwatch, footer
 from replay.util.portable import write_document
+
+from . import spec
+from .render import render
+from .render import table as md
+from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
+from .tables import Stopwatch, combine, commands, footer, per_run, table
 
 SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column: of each entry
     "top level": "dataset seeds pooled_rows growth tune pooled_head setting row grid sweeps evidence peak drift "

@@ -28,7 +28,7 @@ from replay.scoring.significance import pairs, t_interval
 
 from .rules import MECHANISM, RECOVERED, Verdict, counts
 from .spec import PAPERS
-from .verdict import cell
+from .tables import cell
 
 TEMPLATES = PAPERS
 
