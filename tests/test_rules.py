@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from replay.reproduce import render, rules
-from replay.reproduce.rules import MECHANISM, NOT, RECOVERED, REPRODUCED, Claim, Comparison, Rule, decide
+from replay.reproduce.rules import (MECHANISM, NOT, RECOVERED, REPRODUCED, Claim, Comparison, Rule, decide,
+                                    holm_adjust, test_one)
 from replay.scoring import significance as sig
 
 
@@ -92,6 +93,14 @@ def test_holm_in_decide_matches_a_hand_computation():
     assert [o.holds for o in v.deciding] == [False, True, False] and v.label == NOT
     v, = decide([claim(Rule("x", "3 cells", "lost runs", test="mcnemar", need=1))], ev)
     assert v.label == REPRODUCED
+
+
+def test_holm_adjust_sets_adjusted_p_and_counts_what_holds():
+    rng = np.random.default_rng(0)
+    outs = [test_one(mcnemar(k), "mcnemar", rng) for k in (5, 6, 4)]
+    assert holm_adjust(outs, 0.05) == 1
+    assert [o.p_adj for o in outs] == pytest.approx([0.0625, 0.046875, 0.0625])
+    assert holm_adjust(outs, 0.07) == 3
 
 
 def test_a_shared_family_adjusts_across_claims():

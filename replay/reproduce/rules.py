@@ -251,6 +251,14 @@ def _keys(rule: Rule) -> list[str]:
     return [k for k in (rule.decides, rule.condition, rule.mechanism) if k]
 
 
+def holm_adjust(outcomes: list[Outcome], alpha: float = 0.05) -> int:
+    """Holm over ``outcomes`` (one family): set each one's ``p_adj`` and ``holds`` (``p_adj < alpha``);
+    return how many hold."""
+    for o, padj in zip(outcomes, sig.holm([o.p for o in outcomes])):
+        o.p_adj, o.holds = float(padj), bool(padj < alpha)
+    return sum(o.holds for o in outcomes)
+
+
 def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
     """Test every comparison the claims draw on, Holm-adjust each family, apply each rule (module
     docstring). ``evidence``: ``key -> [Comparison, ...]``; a key a rule names must be there and
@@ -275,8 +283,7 @@ def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
         if cl.rule.alpha != alpha[fam_of[cl.id]]:
             raise ValueError(f"claim {cl.id!r}: family {fam_of[cl.id]!r} has two alphas")
     for name, fam in families.items():
-        for o, padj in zip(fam, sig.holm([o.p for o in fam])):
-            o.p_adj, o.holds = float(padj), bool(padj < alpha[name])
+        holm_adjust(fam, alpha[name])
     return [_verdict(cl, {k: tested[(fam_of[cl.id], k)] for k in _keys(cl.rule)}) for cl in claims]
 
 
