@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from replay.reproduce import render, rules
-from replay.reproduce.rules import (MECHANISM, NOT, RECOVERED, REPRODUCED, Claim, Comparison, Rule, decide,
-                                    holm_adjust, test_one)
+from replay.reproduce.rules import MECHANISM, NOT, RECOVERED, REPRODUCED, Claim, Comparison, Rule, decide, holm_adjust
 from replay.scoring import significance as sig
 
 
@@ -97,7 +96,7 @@ def test_holm_in_decide_matches_a_hand_computation():
 
 def test_holm_adjust_sets_adjusted_p_and_counts_what_holds():
     rng = np.random.default_rng(0)
-    outs = [test_one(mcnemar(k), "mcnemar", rng) for k in (5, 6, 4)]
+    outs = [rules.test_one(mcnemar(k), "mcnemar", rng) for k in (5, 6, 4)]
     assert holm_adjust(outs, 0.05) == 1
     assert [o.p_adj for o in outs] == pytest.approx([0.0625, 0.046875, 0.0625])
     assert holm_adjust(outs, 0.07) == 3
