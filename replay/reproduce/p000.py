@@ -77,7 +77,14 @@ X = experiment(spec.load("000"))
 CLAIMS, EXP = spec.claims(X, "000.toml"), X["experiment"]
 CH, N, MARGIN = tuple(EXP["channels"]), EXP["particles"], EXP["cost_margin"]
 R_STD, Q_DIAG = np.sqrt(np.diag(R_FIXED)), np.diag(paper_Q()[0])  # the baselines' fixed R, the paper's Q
-MATCHED_R = [tidy(g * g) for g in sensor_rms()]  # the sensors' mean-square noise as generated: an oracle's R
+RMS = sensor_rms()  # sim/lake-depth's sensors as generated (RMS of their noise over the run)
+MATCHED_R = [tidy(g * g) for g in RMS]  # their mean-square noise: an oracle's R
+SENSORS = {  # the template's numbers of those sensors
+    "generated": ", ".join(f"{g:.3g}" for g in RMS),
+    "rho": ", ".join(f"{g / r:.3g}" for g, r in zip(RMS, R_STD)),
+    "matched": ", ".join(f"{g:.3g}²" for g in RMS),
+    "units": ", ".join(EXP["channels"].values()),
+}
 
 
 def variants(kind: str) -> dict:
@@ -201,7 +208,7 @@ def tuned(T: dict, R: dict, grid) -> dict:
 
 
 def paired(name: str, fa: dict, fb: dict, ch: str, of: str = "rmse") -> Comparison:
-    """ "``fa``'s per-run ``of`` in channel ``ch`` is smaller than ``fb``'s" (their lost flags choose the test)."""
+    """The claim "``fa``'s per-run ``of`` in channel ``ch`` is below ``fb``'s" (their lost flags choose the test)."""
     return Comparison(name, fa[of][ch], fb[of][ch], fa["lost"], fb["lost"])
 
 
@@ -239,9 +246,8 @@ def evidence(R: dict, T: dict, p: dict) -> dict:
 
 def anchored(kind: str, rows: list[list], anchor: str = "", at: int | None = 0) -> str:
     """The evidence table ``[tables] kind`` of ``rows``, the claims' ``anchor`` on row ``at`` (None: on none)."""
-    return table(
-        HEADS[kind], [[anchor_tag(anchor) + str(r[0]), *r[1:]] if anchor and i == at else r for i, r in enumerate(rows)]
-    )
+    rows = [[anchor_tag(anchor) + str(r[0]), *r[1:]] if anchor and i == at else r for i, r in enumerate(rows)]
+    return table(HEADS[kind], rows)
 
 
 def best_rows(R: dict, T: dict, grid) -> list[list]:
@@ -256,6 +262,11 @@ def best_rows(R: dict, T: dict, grid) -> list[list]:
     return rows
 
 
+def ess_share(res: dict, lab: str) -> str:
+    """A filter's mean ESS as a share of N in one cell (mean over runs)."""
+    return f"{100 * np.mean(res[lab]['ess']):.2g} %"
+
+
 def tables(R: dict, T: dict, p: dict) -> dict:
     """The evidence tables of the template (anchors on the claims' rows); differences paired, mean ± 95 %."""
     g, paper = p["grid"], KEY["paper"]
@@ -264,27 +275,25 @@ def tables(R: dict, T: dict, p: dict) -> dict:
         return [[c.noise_text, f"{c.kappa:g}", *columns(R[c])] for c in g]
 
     def order(res) -> list[str]:  # paired GPF − MMPF / MMPF − EKF per channel
-        d = lambda a, b, ch: pm(res[a]["rmse"][ch], res[b]["rmse"][ch])  # noqa: E731
+        d = lambda a, b, ch: pm(res[a]["rmse"][ch], res[b]["rmse"][ch])
         return [f"{d('GPF', 'MMPF', ch)} / {d('MMPF', 'EKF', ch)}" for ch in CH]
 
-    def means(res, key, ch, f=fmt) -> str:  # GPF / MMPF / EKF
-        return " / ".join(f(np.mean(res[lab][key][ch])) for lab in THREE)
+    def grows(res) -> list[str]:  # GPF's lead over the best baseline per channel
+        return [f"{100 * np.nanmean(lead(res, ch)['lead'][ch]):+.0f} % ({lead(res, ch)['best']})" for ch in CH]
 
     def ess(res) -> list[str]:
         lost = " / ".join(f"{int(res[lab]['lost'].sum())}/{len(res[lab]['lost'])}" for lab in PFS)
-        return [f"{100 * np.mean(res[lab]['ess']):.2g} %" for lab in PFS] + [lost]
+        return [ess_share(res, lab) for lab in PFS] + [lost]
 
     def cost(res) -> list[str]:
         us = {lab: res[lab]["row"]["us_per_step"] for lab in MAIN}
         return [f"{us[lab]:.0f}" for lab in MAIN] + [f"{us['GPF'] / us['MMPF']:.2f}"]
 
-    def grows(res) -> list[str]:
-        return [f"{100 * np.nanmean(lead(res, ch)['lead'][ch]):+.0f} % ({lead(res, ch)['best']})" for ch in CH]
-
-    key_cells = [c for c in KEY.values() if c in g]
+    means = lambda c, key, ch, f=fmt: " / ".join(f(np.mean(R[c][lab][key][ch])) for lab in THREE)
     man = [
-        [c.name, ch, means(R[c], "man", ch), means(R[c], "level", ch), means(R[c], "ratio", ch, "{:.2f}".format)]
-        for c in key_cells
+        [c.name, ch, means(c, "man", ch), means(c, "level", ch), means(c, "ratio", ch, "{:.2f}".format)]
+        for c in KEY.values()
+        if c in g
         for ch in CH
     ]
     ablation = [
@@ -292,10 +301,11 @@ def tables(R: dict, T: dict, p: dict) -> dict:
         for c in p["ablation"]
         for lab in ABLATIONS
     ]
+    paper_row = [r[0] for r in man].index(paper.name) if paper in g else None  # its first channel
     return {
         "best": anchored("best", best_rows(R, T, g), "#e-best"),
-        "grid": anchored("grid", by_cell(order), "#e-order", g.index(paper) if paper in g else None),
-        "maneuvers": anchored("maneuvers", man, "#e-man", key_cells.index(paper) * len(CH) if paper in g else None),
+        "grid": anchored("grid", by_cell(order), "#e-order", at=g.index(paper) if paper in g else None),
+        "maneuvers": anchored("maneuvers", man, "#e-man", at=paper_row),
         "profiles": anchored("profiles", [[f"{c.kappa:g}", c.profile, *order(R[c])] for c in p["profiles"]]),
         "ablation": anchored("ablation", ablation, "#e-ablation"),
         "lead": anchored("lead", by_cell(grows), "#e-lead"),
@@ -317,6 +327,17 @@ def collect(jobs: list, tune_seed: int, quiet: bool) -> tuple[dict, dict, dict]:
     return R, T, commands
 
 
+def every_cell(R: dict, T: dict, commands: dict, seeds: tuple[int, int]) -> str:
+    """Each cell's leaderboard rows and ``replay eval`` commands: the verdict seed's cells, then the tuning seed's."""
+    out = []
+    for res, s in zip((R, T), seeds):
+        for c in res:
+            rows = result_rows([f["row"] for f in res[c].values()], [f"{ch}_rmse" for ch in CH], list(res[c]), 4)
+            cmds = "  \n".join(f"`{x}`" for x in sorted(commands[(c, s)]))
+            out.append(f"### {c.name}{', tuning seed' * (s == seeds[1])}\n\n{rows}\n\n{cmds}")
+    return "\n\n".join(out)
+
+
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     """Compute every job of :func:`plan`, decide the claims, write the document (``data_dir``: unused, synthetic)."""
     sw, p, tune = Stopwatch(), plan(runs, quick), seed + EXP["tune_seed"]
@@ -324,26 +345,16 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
     R, T, commands = collect(jobs, tune, quiet)
     cmd = "replay reproduce 000" + " --quick" * quick + f" --runs {runs}" * bool(runs) + f" --seed {seed}" * bool(seed)
     verdicts, old = decide(CLAIMS, evidence(R, T, p), seed), spec.old_labels(X)
-    cells = []
-    for res, s in ((R, seed), (T, tune)):
-        for c in res:
-            rows = result_rows([f["row"] for f in res[c].values()], [f"{ch}_rmse" for ch in CH], list(res[c]), 4)
-            cmds = "  \n".join(f"`{x}`" for x in sorted(commands[(c, s)]))
-            cells.append(f"### {c.name}{', tuning seed' * (s == tune)}\n\n{rows}\n\n{cmds}")
-    rms = sensor_rms()
-    fields = {f"table_{k}": v for k, v in tables(R, T, p).items()} | {
-        k: p[k] for k in ("runs", "tune_runs", "profile_runs")
-    }
-    fields |= dict(command=cmd, jobs=len(jobs), workers=workers(), seed=seed, tune_seed=tune, cost_margin=f"{MARGIN:g}")
-    fields |= {"generated": ", ".join(f"{g:.3g}" for g in rms), "matched": ", ".join(f"{g:.3g}²" for g in rms)}
-    fields |= {
-        "rho": ", ".join(f"{g / r:.3g}" for g, r in zip(rms, R_STD)),
-        "units": ", ".join(EXP["channels"].values()),
-    }
     relabel = [[v.claim.words, old[v.claim.id], v.label, render.found(v)] for v in verdicts]
-    ess = lambda c: ", ".join(f"{lab} {100 * np.mean(R[c][lab]['ess']):.2g} %" for lab in PFS)
-    fields |= {"every_cell": "\n\n".join(cells), "relabelled": table(HEADS["relabelled"], relabel)}
-    fields["ess_paper"] = " ".join(f"{c.name}: mean ESS/N {ess(c)}." for c in KEY.values())
+    fields = {f"table_{k}": v for k, v in tables(R, T, p).items()} | SENSORS
+    fields |= {k: p[k] for k in ("runs", "tune_runs", "profile_runs")} | {"cost_margin": f"{MARGIN:g}"}
+    fields |= dict(command=cmd, jobs=len(jobs), workers=workers(), seed=seed, tune_seed=tune)
+    fields |= {
+        "every_cell": every_cell(R, T, commands, (seed, tune)),
+        "relabelled": table(HEADS["relabelled"], relabel),
+    }
+    ess = {c: ", ".join(f"{lab} {ess_share(R[c], lab)}" for lab in PFS) for c in KEY.values()}
+    fields["ess_paper"] = " ".join(f"{c.name}: mean ESS/N {ess[c]}." for c in KEY.values())
     text = render.render("000", fields, verdicts) + footer(cmd, sw.seconds)
     doc = write_document(doc or "docs/reproduction/000.md", text)
     if not quiet:
