@@ -155,3 +155,17 @@ def test_base_for_rms_puts_the_sensor_noise_at_a_target_level():
         assert np.sqrt(np.mean(e * e)) == pytest.approx(want, rel=0.05)  # 1800 samples: ~2 % spread
     # regimes (1, 3, 0.5, 2) times a drift 1 -> 1.5: the RMS factor is 2.373
     assert base[0] == pytest.approx(0.2 / 2.3733, rel=1e-3)
+
+
+def test_sensor_rms_is_the_generated_noise_level_and_inverts_base_for_rms():
+    from replay.sim.lake_depth import BASE_SIGMA, base_for_rms, sensor_rms
+
+    # regimes (1, 3, 0.5, 2) over the quarters: mean square 3.5625; drift 1 -> 1.5: mean square 1 + 1/2 + 1/12
+    factor = np.sqrt(3.5625 * (1 + 1 / 2 + 1 / 12))
+    assert sensor_rms() == pytest.approx([factor * b for b in BASE_SIGMA], rel=2e-3)
+    assert sensor_rms() == pytest.approx((0.118665, 0.118665, 0.0207109), rel=1e-5)  # 1800 samples of 0.05 s
+    assert sensor_rms(base_for_rms((0.2, 5.0, 0.5))) == pytest.approx((0.2, 5.0, 0.5), rel=1e-12)
+    f = make_frame(np.random.default_rng(3))
+    for c, rms in zip(("depth", "speed", "pitch"), sensor_rms()):
+        e = f.channels[c].values - f.reference[c].values
+        assert np.sqrt(np.mean(e * e)) == pytest.approx(rms, rel=0.05)

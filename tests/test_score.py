@@ -58,3 +58,20 @@ def test_rmse_over_time_across_runs():
     curve = scorer.rmse_over_time([e1, e2])
     assert curve[0] == pytest.approx(np.sqrt(5.0))
     assert curve[1] == pytest.approx(2.0)  # the masked run is left out at that step
+
+
+def test_score_where_scores_the_samples_of_a_time_mask_and_the_parts_combine():
+    truth = np.zeros((5, 3))
+    x = np.zeros((5, 5))
+    x[:, 0] = [1.0, 2.0, 3.0, 100.0, 4.0]  # the 100 m error falls on a masked sample
+    valid = np.array([True, True, True, False, True])
+    est = Estimates(x, np.tile(np.eye(5), (5, 1, 1)), np.ones(5))
+    problem = make_problem(truth, valid)
+    keep = scorer.within(np.arange(5.0), [[0.5, 2.5, "dive"], [3.0, 3.5, "climb"]])  # [t0, t1) spans
+    assert keep.tolist() == [False, True, True, True, False]
+    assert not scorer.within(np.arange(5.0), []).any()
+    a, b = scorer.score_where(problem, est, keep), scorer.score_where(problem, est, ~keep)
+    assert a["x_rmse"] == pytest.approx(np.sqrt((4 + 9) / 2)) and (a["scored"], a["masked"]) == (2, 3)
+    assert b["x_rmse"] == pytest.approx(np.sqrt((1 + 16) / 2)) and (b["scored"], b["masked"]) == (2, 3)
+    whole = scorer.score_run(problem, est)["x_rmse"]
+    assert whole == pytest.approx(np.sqrt((a["x_rmse"] ** 2 * 2 + b["x_rmse"] ** 2 * 2) / 4))

@@ -11,6 +11,9 @@ the filter has an estimate:
 * ``scored`` / ``masked``: samples used, and samples skipped because the
   reference is masked there (e.g. jumps of a navigation solution).
 
+Over part of a run (:func:`score_where`): the same metrics over the samples of a
+time mask, e.g. :func:`within` a frame's maneuver segments and its complement.
+
 Over Monte Carlo runs (:func:`aggregate`):
 
 * ``<metric>`` is the **mean over runs of the per-run RMSE**, with
@@ -23,6 +26,8 @@ Diverged runs (non-finite or non-positive covariance) are counted in
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -60,6 +65,23 @@ def score_run(problem, est, err: dict | None = None) -> dict:
     m["us_per_step"] = est.us_per_step
     m["diverged"] = bool(est.diverged)
     return m
+
+
+def within(t, spans) -> np.ndarray:
+    """A bool per time of ``t``: inside any span ``[t0, t1, ...]`` of ``spans`` (t0 <= t < t1; further items,
+    e.g. a label, ignored), such as a frame's ``meta["maneuvers"]``."""
+    t = np.asarray(t, float)
+    inside = np.zeros(t.shape, bool)
+    for t0, t1, *_ in spans:
+        inside |= (t >= t0) & (t < t1)
+    return inside
+
+
+def score_where(problem, est, keep) -> dict:
+    """:func:`score_run` over the samples where ``keep`` (a bool per step) holds: the reference elsewhere is left
+    out as if masked (``masked`` counts it). With ``keep`` and ``~keep`` the two parts' RMSE combine, weighted by
+    their ``scored`` samples, into the whole run's."""
+    return score_run(replace(problem, truth_valid=problem.truth_valid & np.asarray(keep, bool)), est)
 
 
 def units(problem) -> dict:

@@ -50,6 +50,7 @@ from . import Intervals, Numbers, generator
 T = 0.05
 REGIMES = (1.0, 3.0, 0.5, 2.0)
 DRIFT = 0.5
+BASE_SIGMA = (0.05, 0.05, float(np.deg2rad(0.5)))  # m, m/s, rad
 # (start s, end s, commanded pitch deg, commanded speed m/s, label); level runs in between
 PROFILE = (
     (0.0, 10.0, 0.0, 1.5, "level"),
@@ -171,6 +172,15 @@ def noise_sigma(t: np.ndarray, duration: float, base, regimes, drift: float) -> 
     return factor[:, None] * np.asarray(base, float)
 
 
+def sensor_rms(base=BASE_SIGMA, duration: float = 90.0, dt: float = T, regimes=REGIMES, drift: float = DRIFT):
+    """Root-mean-square over the run of each sensor's sigma_c(t) with ``base_sigma`` = ``base``: the sensors'
+    noise level as generated (the inverse of :func:`base_for_rms`). Its square, per sensor, is the measurement
+    covariance R matched to the sensors' mean-square noise (paper 000's oracle R)."""
+    t = dt * np.arange(int(round(duration / dt)))
+    sigma = noise_sigma(t, duration, base, regimes, drift)
+    return tuple(float(v) for v in np.sqrt(np.mean(sigma * sigma, axis=0)))
+
+
 def base_for_rms(target, duration: float = 90.0, dt: float = T, regimes=REGIMES, drift: float = DRIFT) -> tuple:
     """``base_sigma`` whose sigma_c(t) has root-mean-square ``target[c]`` over the run.
 
@@ -190,7 +200,7 @@ PARAMS = (
     Numbers(
         "base_sigma",
         list,
-        (0.05, 0.05, float(np.deg2rad(0.5))),
+        BASE_SIGMA,
         "base noise standard deviations of the depth, speed and pitch sensors",
         unit="m, m/s, rad",
         length=3,
