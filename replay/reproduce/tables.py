@@ -41,35 +41,28 @@ class Job:
     seed: int = 0  # added to the reproduction's seed
 
 
-def _evaluate(args) -> Evaluation:
-    """One job's evaluation (what a worker process runs)."""
-    job, runs, seed, data_dir = args
-    return evaluate(
-        job.dataset,
-        filters=job.filters,
-        runs=job.runs or runs,
-        seed=seed + job.seed,
-        data_dir=data_dir,
-        dataset_params=job.dataset_params or None,
-        filter_params=job.filter_params,
-        task_params=job.task_params or None,
-    )
+def _evaluate(args):
+    """One job's evaluation (what a worker process runs), through ``reduce`` when given."""
+    job, runs, seed, data_dir, reduce = args
+    params = dict(dataset_params=job.dataset_params or None, filter_params=job.filter_params)
+    params |= dict(task_params=job.task_params or None, runs=job.runs or runs, seed=seed + job.seed)
+    ev = evaluate(job.dataset, filters=job.filters, data_dir=data_dir, **params)
+    return ev if reduce is None else reduce(job, ev)
 
 
-def evaluate_jobs(
-    jobs: list[Job], runs: int, seed: int, data_dir=None, quiet=False, prefix=""
-) -> dict[str, Evaluation]:
+def evaluate_jobs(jobs: list[Job], runs: int, seed: int, data_dir=None, quiet=False, prefix="", reduce=None) -> dict:
     """``{key: Evaluation}`` of ``jobs`` in the plan's order, computed in worker processes the costliest first
-    (runs × particles, 30 for a filter without; a progress line each on stderr unless ``quiet``)."""
-    if len({j.key for j in jobs}) != len(jobs):
-        raise ValueError(
-            f"jobs planned twice: {sorted({j.key for j in jobs if [x.key for x in jobs].count(j.key) > 1})}"
-        )
-    n = lambda j: j.runs or runs  # noqa: E731
-    cost = [n(j) * sum(j.filter_params.get(f, {}).get("n_particles", 30) for f in j.filters) for j in jobs]
-    labels = [f"{j.key} ({n(j)} runs)" for j in jobs]
+    (runs × particles, 30 for a filter without; a progress line each on stderr unless ``quiet``). ``reduce(job,
+    evaluation)``, a module-level function, runs in the worker and its result comes back instead of the
+    evaluation (a run's records can weigh a megabyte)."""
+    keys = [j.key for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"jobs planned twice: {sorted({k for k in keys if keys.count(k) > 1})}")
+    runs_of = [j.runs or runs for j in jobs]
+    particles = [sum(j.filter_params.get(f, {}).get("n_particles", 30) for f in j.filters) for j in jobs]
+    cost, labels = [n * p for n, p in zip(runs_of, particles)], [f"{j.key} ({n} runs)" for j, n in zip(jobs, runs_of)]
     with pool(workers()) as ex:
-        args = [(j, runs, seed, data_dir) for j in jobs]
+        args = [(j, runs, seed, data_dir, reduce) for j in jobs]
         done = dict(run_longest_first(_evaluate, args, cost, labels, ex, quiet, prefix))
     return {j.key: done[i] for i, j in enumerate(jobs)}
 
