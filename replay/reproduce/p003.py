@@ -23,7 +23,7 @@ from . import spec
 from .render import render
 from .render import table as md
 from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
-from .tables import Job, Stopwatch, combine, commands, evaluate_jobs, footer, per_run, table
+from .tables import Job, Stopwatch, combine, commands, evaluate_jobs, footer, mean_ci, per_run, table
 
 SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column: of each entry
     "top level": "dataset seeds pooled_rows growth tune pooled_head setting row grid sweeps evidence peak drift "
@@ -107,17 +107,15 @@ def job(key, s, row, runs, seed=0, tuned=None) -> Job:
     return Job(key, T["dataset"], (r["filter"],), data, {r["filter"]: params}, task, runs=runs, seed=seed)
 
 
-def seed_offsets(s: dict, row: str) -> list:
-    """The seed offsets ``row`` runs on at setting ``s``: all of ``seeds`` for a pooled row of a pooled setting."""
-    return SEEDS if s.get("pooled") and row in T["pooled_rows"] else [0]
-
-
 def plan(runs: int, tune_runs: int) -> list[Job]:
-    """The settings' evaluations, ``<label>|<row>|<seed offset>`` (``runs`` each), and the grids' on the tuning
-    seeds, ``tune|<setting>|<grid>|<value>`` (``tune_runs`` each)."""
-    jobs = [
-        job(f"{s['label']}|{r}|{k}", s, r, runs, k) for s in T["setting"] for r in s["rows"] for k in seed_offsets(s, r)
-    ]
+    """The settings' evaluations, ``<label>|<row>|<seed offset>`` (``runs`` each; a pooled row of a pooled setting
+    on every offset of ``seeds``, the others on seed s), and the grids' on the tuning seeds,
+    ``tune|<setting>|<grid>|<value>`` (``tune_runs`` each)."""
+    jobs = []
+    for s in T["setting"]:
+        for r in s["rows"]:
+            offsets = SEEDS if s.get("pooled") and r in T["pooled_rows"] else [0]
+            jobs += [job(f"{s['label']}|{r}|{k}", s, r, runs, k) for k in offsets]
     for lab, (g, d) in [(lab, x) for lab in T["tune"]["settings"] for x in T["grid"].items()]:
         s, seed = T["by_label"][lab], T["tune"]["seed"]
         jobs += [job(f"tune|{lab}|{g}|{v}", s, d["row"], tune_runs, seed, (d["param"], v)) for v in d["values"]]
@@ -129,15 +127,23 @@ def seed_s(evs, lab: str, row: str):
     return evs[f"{lab}|{row}|0"]
 
 
+def n_lost(evs, lab: str, row: str) -> int:
+    """The lost runs of ``row`` at setting ``lab`` on seed s."""
+    return int(lost(seed_s(evs, lab, row)).sum())
+
+
+def pooled_runs(evs, lab: str, row: str, value: str, seeds=SEEDS) -> np.ndarray:
+    """The per-run ``value`` (:data:`VALUES`) of ``row`` at setting ``lab``, the runs of ``seeds`` one after another."""
+    return np.concatenate([VALUES[value](evs[f"{lab}|{row}|{k}"]) for k in seeds])
+
+
 def pair(evs, txt, lab, a, b, value, seeds=SEEDS) -> Comparison:
-    """``a`` against ``b`` at setting ``lab``: per-run ``value`` and lost flags on ``seeds`` pooled (``zero``: 0)."""
-
-    def pooled_runs(row, v):
-        return np.concatenate([VALUES[v](evs[f"{lab}|{row}|{k}"]) for k in seeds])
-
-    vb, lb = pooled_runs(b, value), pooled_runs(b, "lost")
-    va, la = (np.zeros_like(vb), lb) if a == "zero" else (pooled_runs(a, value), pooled_runs(a, "lost"))
-    return Comparison(txt, va, vb, la, lb)
+    """``a`` against ``b`` at setting ``lab``, run by run on ``seeds`` pooled: per-run ``value`` and lost flags
+    (``a`` = ``zero``: 0 on every run)."""
+    vb, lb = pooled_runs(evs, lab, b, value, seeds), pooled_runs(evs, lab, b, "lost", seeds)
+    if a == "zero":
+        return Comparison(txt, np.zeros_like(vb), vb, lb, lb)
+    return Comparison(txt, pooled_runs(evs, lab, a, value, seeds), vb, pooled_runs(evs, lab, a, "lost", seeds), lb)
 
 
 def evidence(evs, seeds=SEEDS) -> dict:
@@ -161,7 +167,7 @@ def cell(o, p=None, digits=2) -> str:
 
 
 def holm_family(outs, alpha=0.05) -> int:
-    """Holm over ``outs`` (sets their p_adj and holds); how many hold."""
+    """Holm over ``outs`` (sets their p_adj and holds); how many hold. (``rules.holm_adjust`` on main, to replace.)"""
     for o, p in zip(outs, holm([o.p for o in outs])):
         o.p_adj, o.holds = float(p), bool(p < alpha)
     return sum(o.holds for o in outs)
@@ -177,19 +183,20 @@ def where(evs, rng) -> dict:
     """``where``: every setting on seed s, each column's paired position-RMSE comparison (paired t, or Wilcoxon and
     the median's bootstrap interval where a run is lost), exact McNemar on the lost runs of the ``mcnemar``
     columns, Holm over each family; ``n_<family>``: how many of the family hold."""
-    w, fams, found = T["where"], {}, []
+    w, fams, per_setting = T["where"], {}, []
     for s in T["setting"]:
         lab, cols = s["label"], [c for c in w["columns"] if c["a"] in s["rows"] and c["b"] in s["rows"]]
         o = {c["head"]: test_one(pair(evs, lab, lab, c["a"], c["b"], "rmse", (0,)), "auto", rng) for c in cols}
         mc = [test_one(o[c["head"]].comparison, "mcnemar", rng) for c in cols if c.get("mcnemar")]
         for x, f in [(o[c["head"]], c["family"]) for c in cols] + [(m, "lost") for m in mc]:
             fams.setdefault(f, []).append(x)
-        counts = "/".join(str(int(lost(seed_s(evs, lab, r)).sum())) if r in s["rows"] else "–" for r in w["counts"])
-        found.append((lab, o, counts, mc))
+        counts = "/".join(str(n_lost(evs, lab, r)) if r in s["rows"] else "–" for r in w["counts"])
+        per_setting.append((lab, o, counts, mc))
     n = {f"n_{k}": f"{holm_family(v)} of {len(v)}" for k, v in fams.items()}  # before the cells: they show p_adj
     heads = [c["head"] for c in w["columns"]]
     rows = [
-        [lab, *(cell(o[h]) if h in o else "n/a" for h in heads), k, "; ".join(map(cell, mc))] for lab, o, k, mc in found
+        [lab, *(cell(o[h]) if h in o else "n/a" for h in heads), k, "; ".join(map(cell, mc))]
+        for lab, o, k, mc in per_setting
     ]
     return n | {"where": md(["setting", *heads, *w["heads"]], rows)}
 
@@ -222,8 +229,8 @@ def poor(evs, rng) -> dict:
     p, lab, s = T["poor"], T["poor"]["setting"], T["by_label"][T["poor"]["setting"]]
     c = pair(evs, p["name"], lab, p["a"], p["b"], "rmse")
     o, m, n = test_one(c, "auto", rng), test_one(c, "mcnemar", rng), len(lost(seed_s(evs, lab, p["b"])))
-    kept = ", ".join(f"α = {r[2:]}: {np.nanmean(pair(evs, '', lab, r, r, 'distinct').a):.1f}" for r in p["distinct"])
-    at_s = ", ".join(f"{NAMES[r]} {int(lost(seed_s(evs, lab, r)).sum())}" for r in s["rows"])
+    kept = ", ".join(f"α = {r[2:]}: {np.nanmean(pooled_runs(evs, lab, r, 'distinct')):.1f}" for r in p["distinct"])
+    at_s = ", ".join(f"{NAMES[r]} {n_lost(evs, lab, r)}" for r in s["rows"])
     tuned = ", ".join(f"{g} {evs[f'tuned|{lab}|{g}'].rows[0]['lost']}" for g in T["grid"])
     return {
         "poor": f"lost runs (of {n}) at seed s: {at_s}; tuned: {tuned}. {p['name']}, {len(c.a)} pooled runs: "
@@ -234,9 +241,7 @@ def poor(evs, rng) -> dict:
 
 def leaderboard(row: dict) -> str:
     """A leaderboard row in a cell: mean ± 95 % position RMSE, median, lost."""
-    return (
-        f"{row['pos_rmse']:.2f} ± {row['pos_rmse_ci95']:.2f} (median {row['pos_rmse_median']:.2f}, lost {row['lost']})"
-    )
+    return f"{mean_ci(row, 'pos_rmse', 2)} (median {row['pos_rmse_median']:.2f}, lost {row['lost']})"
 
 
 def tables(evs, best) -> dict:
@@ -270,7 +275,7 @@ def drift(evs, doc: Path) -> dict:
     d = T["drift"]
     errors = {r: run_errors(seed_s(evs, d["setting"], r)) for r in d["rows"]}
     peaks = {r: " / ".join(f"{np.nanmax(rmse_curve(x)):.2f}" for x in e.values()) for r, e in errors.items()}
-    rows = [[NAMES[r], peaks[r], ci(pair(evs, "", d["setting"], r, r, "growth").a)] for r in d["rows"]]
+    rows = [[NAMES[r], peaks[r], ci(pooled_runs(evs, d["setting"], r, "growth"))] for r in d["rows"]]
     t = seed_s(evs, d["setting"], d["rows"][0]).t
     figs = rmse_figures(t, {NAMES[r]: e for r, e in errors.items()}, d["axes"], f"003, {d['what']}")
     doc.parent.mkdir(parents=True, exist_ok=True)
