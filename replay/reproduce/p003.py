@@ -25,7 +25,7 @@ from .render import table as md
 from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
 from .tables import Job, Stopwatch, combine, commands, evaluate_jobs, footer, mean_ci, per_run, table
 
-SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column: of each entry
+SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column, kurtosis: of each entry
     "top level": "dataset seeds pooled_rows growth tune pooled_head setting row grid sweeps evidence peak drift "
     "distinct where poor kurtosis claim",
     "growth": "early late",
@@ -39,6 +39,7 @@ SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, 
     "grid": "row param values shared",
     "setting": "label table n rows data? task? pooled?",
     "column": "head a b family mcnemar?",
+    "kurtosis": "ratio eps digits",
 }
 
 
@@ -47,7 +48,7 @@ def load(t: dict) -> dict:
     be declared), with ``by_label``: the settings by label."""
     spec.check(t, SCHEMA["top level"], "003.toml: top level")
     entries = [(k, t[k], k) for k in ("growth", "tune", "peak", "drift", "distinct", "where", "poor")]
-    entries += [(f"{kind} {k!r}", e, kind) for kind in ("row", "grid") for k, e in t[kind].items()]
+    entries += [(f"{kind} {k!r}", e, kind) for kind in ("row", "grid", "kurtosis") for k, e in t[kind].items()]
     entries += [(f"setting {s.get('label')!r}", s, "setting") for s in t["setting"]]
     entries += [(f"column {c.get('head')!r}", c, "column") for c in t["where"]["columns"]]
     for where, e, kind in entries:
@@ -127,11 +128,6 @@ def seed_s(evs, lab: str, row: str):
     return evs[f"{lab}|{row}|0"]
 
 
-def n_lost(evs, lab: str, row: str) -> int:
-    """The lost runs of ``row`` at setting ``lab`` on seed s."""
-    return int(lost(seed_s(evs, lab, row)).sum())
-
-
 def pooled_runs(evs, lab: str, row: str, value: str, seeds=SEEDS) -> np.ndarray:
     """The per-run ``value`` (:data:`VALUES`) of ``row`` at setting ``lab``, the runs of ``seeds`` one after another."""
     return np.concatenate([VALUES[value](evs[f"{lab}|{row}|{k}"]) for k in seeds])
@@ -157,12 +153,13 @@ def evidence(evs, seeds=SEEDS) -> dict:
     return {p["key"]: peaks} | {k: [pair(evs, *c, seeds) for c in v] for k, v in T["evidence"].items()}
 
 
-def cell(o, p=None, digits=2) -> str:
-    """An outcome in a table cell: the estimate, its interval, ``p`` (default the adjusted p); bold where it holds."""
+def cell(o, p=None) -> str:
+    """An outcome in a table cell: the estimate, its interval, ``p`` (default the adjusted p); bold where it holds
+    (McNemar: the lost runs of both arms)."""
     p = p_text(o.p_adj if p is None else p)
     if o.test == "mcnemar":
         return f"{int(np.sum(o.comparison.lost_a))} vs {int(np.sum(o.comparison.lost_b))}, p = {p}"
-    s = f"{o.estimate:+.{digits}f} [{o.lo:+.{digits}f}, {o.hi:+.{digits}f}], p = {p}"
+    s = f"{o.estimate:+.2f} [{o.lo:+.2f}, {o.hi:+.2f}], p = {p}"
     return f"**{s}**" if o.holds else s
 
 
@@ -190,7 +187,7 @@ def where(evs, rng) -> dict:
         mc = [test_one(o[c["head"]].comparison, "mcnemar", rng) for c in cols if c.get("mcnemar")]
         for x, f in [(o[c["head"]], c["family"]) for c in cols] + [(m, "lost") for m in mc]:
             fams.setdefault(f, []).append(x)
-        counts = "/".join(str(n_lost(evs, lab, r)) if r in s["rows"] else "–" for r in w["counts"])
+        counts = "/".join(str(lost(seed_s(evs, lab, r)).sum()) if r in s["rows"] else "–" for r in w["counts"])
         per_setting.append((lab, o, counts, mc))
     n = {f"n_{k}": f"{holm_family(v)} of {len(v)}" for k, v in fams.items()}  # before the cells: they show p_adj
     heads = [c["head"] for c in w["columns"]]
@@ -228,20 +225,15 @@ def poor(evs, rng) -> dict:
     (median Δ, McNemar), the distinct particles kept (not deciding)."""
     p, lab, s = T["poor"], T["poor"]["setting"], T["by_label"][T["poor"]["setting"]]
     c = pair(evs, p["name"], lab, p["a"], p["b"], "rmse")
-    o, m, n = test_one(c, "auto", rng), test_one(c, "mcnemar", rng), len(lost(seed_s(evs, lab, p["b"])))
+    o, m, runs_s = test_one(c, "auto", rng), test_one(c, "mcnemar", rng), len(lost(seed_s(evs, lab, p["b"])))
     kept = ", ".join(f"α = {r[2:]}: {np.nanmean(pooled_runs(evs, lab, r, 'distinct')):.1f}" for r in p["distinct"])
-    at_s = ", ".join(f"{NAMES[r]} {n_lost(evs, lab, r)}" for r in s["rows"])
+    at_s = ", ".join(f"{NAMES[r]} {lost(seed_s(evs, lab, r)).sum()}" for r in s["rows"])
     tuned = ", ".join(f"{g} {evs[f'tuned|{lab}|{g}'].rows[0]['lost']}" for g in T["grid"])
     return {
-        "poor": f"lost runs (of {n}) at seed s: {at_s}; tuned: {tuned}. {p['name']}, {len(c.a)} pooled runs: "
+        "poor": f"lost runs (of {runs_s}) at seed s: {at_s}; tuned: {tuned}. {p['name']}, {len(c.a)} pooled runs: "
         f"median Δ {cell(o, o.p)}; lost {cell(m, m.p)}. Distinct particles after resampling (of N = {s['n']}, "
         f"pooled): {kept}"
     }
-
-
-def leaderboard(row: dict) -> str:
-    """A leaderboard row in a cell: mean ± 95 % position RMSE, median, lost."""
-    return f"{mean_ci(row, 'pos_rmse', 2)} (median {row['pos_rmse_median']:.2f}, lost {row['lost']})"
 
 
 def tables(evs, best) -> dict:
@@ -249,6 +241,10 @@ def tables(evs, best) -> dict:
     distinct particles after resampling (% of N: mean over steps, then runs ± t; seed s), each baseline at its
     shared setting and tuned (``best``: (setting, grid) -> (value chosen, {value: tuning RMSE}))."""
     out, tuned = {f"t_{g}": [] for g in T["sweeps"]}, []
+
+    def leaderboard(row: dict) -> str:  # mean ± 95 % position RMSE, median, lost
+        return f"{mean_ci(row, 'pos_rmse', 2)} (median {row['pos_rmse_median']:.2f}, lost {row['lost']})"
+
     for s in T["setting"]:
         m = T["sweeps"][s["table"]]
         rs = combine([(f"{s['label']}: {NAMES[r]}", (seed_s(evs, s["label"], r), 0)) for r in s["rows"]], metrics=m)
@@ -316,8 +312,8 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
         for v in verdicts
     ]
     f |= {"runs": runs, "seeds": len(SEEDS), "command": command, "relabel": "\n".join(relabel)}
-    for k, (ratio, eps, digits) in T["kurtosis"].items():  # of the simulator's glint bearing noise
-        f[k] = f"{glint_003(eps, 1.0, 1.0, ratio).excess_kurtosis()[1]:.{digits}f}"
+    for k, g in T["kurtosis"].items():  # of the simulator's glint bearing noise (σ₁ = 1, σ₂ = ratio)
+        f[k] = f"{glint_003(g['eps'], 1.0, 1.0, g['ratio']).excess_kurtosis()[1]:.{g['digits']}f}"
     write_document(doc, render("003", f, verdicts) + footer(command, watch.seconds))
     if not quiet:
         print(f"wrote {doc} in {watch.seconds:.0f} s")
