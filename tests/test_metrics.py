@@ -177,3 +177,17 @@ def test_anees_band_uses_the_tasks_position_dimension():
     assert one["anees_flag"] == "consistent" and abs(one["anees"] - 1) < 0.05
     assert one["anees_lo"] < 1 < one["anees_hi"] < 1.5
     assert ensemble(cols, nees_dof=3)["anees_flag"] == "pessimistic"  # the old hard-coded 3 misjudged it
+
+
+def test_stacked_axis_errors_and_window_growth():
+    """Per-run diagnostics of an evaluation's error records: the stacked array, the absolute error per axis, and
+    the growth of the RMS error norm between two windows of steps (NaN for the runs marked invalid)."""
+    errors = [{"position": np.array([[3.0, -4.0], [0.0, 1.0], [6.0, 8.0], [0.0, -2.0]])}, {"position": np.ones((4, 2))}]
+    assert metrics.stacked_errors(errors).shape == (2, 4, 2)
+    ax = metrics.axis_errors(errors, ["x", "y"])
+    assert np.array_equal(ax["y"], [[4.0, 1.0, 8.0, 2.0], [1.0, 1.0, 1.0, 1.0]])
+    # run 0: norms 5, 1, 10, 2: RMS over steps 2-3 is sqrt(52), over 0-1 sqrt(13); run 1: no growth
+    g = metrics.window_growth(metrics.stacked_errors(errors), (0, 2), (2, 4))
+    assert g == pytest.approx([np.sqrt(52) - np.sqrt(13), 0.0])
+    g = metrics.window_growth(np.array([[1.0, 3.0], [2.0, 2.0]]), (0, 1), (1, 2), invalid=[False, True])
+    assert g[0] == 2.0 and np.isnan(g[1])

@@ -178,6 +178,7 @@ def _table(edit=None):
             r"setting 'N = 50': names a row",
         ),
         (('"a=0.75", "pf", "growth"]]', '"a=0.75", "pf", "grwoth"]]'), r"evidence 'wf-nodrift': names a row"),
+        (("k_strong = { ratio = 10.0, eps", "k_strong = { ratio = 10.0, epsilon"), r"kurtosis 'k_strong': unknown key"),
     ],
 )
 def test_table_refuses_unknown_and_missing_keys(edit, message):

@@ -115,21 +115,19 @@ def test_tempering_is_a_widened_gaussian_likelihood():
 @pytest.mark.parametrize("ratio, eps", [(2, 0.75), (10, 0.1)])
 def test_bearing_glint_excess_kurtosis(ratio, eps):
     """The excess kurtosis the 003 document quotes (0.48 at the printed glint) is the sampled one."""
-    from replay.reproduce.p003 import kurtosis
-
     g = Glint([[1.0]], [[float(ratio) ** 2]], eps=eps)
     e = g.sample(np.random.default_rng(4), 2_000_000)[:, 0]
     sample = np.mean(e**4) / np.mean(e**2) ** 2 - 3
-    assert sample == pytest.approx(kurtosis(ratio, eps), rel=0.05)
+    assert sample == pytest.approx(g.excess_kurtosis()[0], rel=0.05)
     if (ratio, eps) == (2, 0.75):
-        assert kurtosis(ratio, eps) == pytest.approx(0.48, abs=0.01)
+        assert g.excess_kurtosis()[0] == pytest.approx(0.48, abs=0.01)
 
 
 def test_distinct_particles_counted_after_resampling():
     """The engine records per step the distinct particles after resampling (the ancestors kept):
     within [1, N], equal to the distinct ancestors of the systematic draw, and α < 1 keeps more."""
     from replay.run.evaluation import evaluate
-    from replay.filters.p003.wfpf import distinct
+    from replay.filters.p003.wfpf import distinct, mean_distinct
 
     X = np.arange(12.0).reshape(6, 2)
     assert distinct(X[[0, 0, 3, 3, 3, 5]]) == 3 and distinct(X) == 6
@@ -140,11 +138,13 @@ def test_distinct_particles_counted_after_resampling():
         d = np.array([e.info["distinct"] for e in ev.results[0].estimates])
         assert d.shape == (3, len(ev.t)) and d.min() >= 1 and d.max() <= 100
         kept[a] = d.mean()
+        assert np.array_equal(mean_distinct(ev.results[0].estimates), d.mean(axis=1))
     assert kept[0.5] > kept[1.0] + 5  # flatter weights: fewer copies of the heavy particles
 
 
 def test_counting_changes_no_estimate():
     """The counting engine gives the estimates of the plain PF engine, bit for bit."""
+    from replay.filters.p003.wfpf import mean_distinct
     from replay.filters.pf import PFEngine
     from replay.run.pipeline import build_problem
     from replay.run.evaluation import evaluate
@@ -156,3 +156,19 @@ def test_counting_changes_no_estimate():
     f.engine = lambda model, rngs: PFEngine(f, model, rngs)
     b = f.run(pb.model, pb.z, pb.x0, pb.P0, rng=np.random.default_rng(7))
     assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P) and "distinct" not in b.info
+    assert np.isnan(mean_distinct([b])).all()  # a run without the record
+
+
+def test_glint_excess_kurtosis():
+    """Per axis: 3((1 − ε) + ε r⁴) / ((1 − ε) + ε r²)² − 3 for zero means; a Gaussian has none; two narrow
+    components at ±1 with equal weight (a two-point law) have −2."""
+    g = Glint(np.diag([1.0, 1.0]), np.diag([1.0, 4.0]), eps=0.75)
+    assert g.excess_kurtosis() == pytest.approx([0.0, 3 * 12.25 / 3.25**2 - 3])  # 0.4793: the printed 0.48
+    assert Glint([[1.0]], [[100.0]], eps=0.1).excess_kurtosis()[0] == pytest.approx(3 * 1000.9 / 10.9**2 - 3)
+    assert Glint([[2.0]], [[9.0]], eps=0.0).excess_kurtosis()[0] == pytest.approx(0.0)
+    two_point = Glint([[1e-12]], [[1e-12]], eps=0.5, mu1=[-1.0], mu2=[1.0])
+    assert two_point.excess_kurtosis()[0] == pytest.approx(-2.0)
+    shifted = Glint([[1.0]], [[4.0]], eps=0.75, mu2=[0.5])  # nonzero means: the central moments
+    e = shifted.sample(np.random.default_rng(0), 400_000)[:, 0]
+    sample = np.mean((e - e.mean()) ** 4) / np.var(e) ** 2 - 3
+    assert sample == pytest.approx(shifted.excess_kurtosis()[0], abs=0.03)

@@ -36,7 +36,8 @@ Diagnostic (the paper's mechanism, eq. 28–32: fewer copies of the heavy
 particles): the engine records per run and step the number of distinct
 particles after the resampling step (``info["distinct"]``, (n,) of the run's
 steps; :meth:`replay.filters.base.Filter.run` and ``Evaluation.results[i].
-estimates[r].info``). Counting draws nothing and changes no number.
+estimates[r].info``; per run over the steps: :func:`mean_distinct`). Counting
+draws nothing and changes no number.
 """
 
 from __future__ import annotations
@@ -99,6 +100,12 @@ def distinct(X_j: np.ndarray) -> int:
     """Distinct particles of one run's cloud (N, nx): copies made by resampling share every
     component, and continuous process noise never makes two equal, so the first component suffices."""
     return int(np.unique(X_j[:, 0]).size)
+
+
+def mean_distinct(estimates) -> np.ndarray:
+    """Per run: the mean over steps of the distinct particles after resampling (``info["distinct"]`` of each
+    run's estimates, as :class:`CountingEngine` records them; NaN for a run without the record)."""
+    return np.array([np.mean(getattr(e, "info", {}).get("distinct", np.nan)) for e in estimates])
 
 
 class CountingEngine(PFEngine):

@@ -272,3 +272,31 @@ def paired(a, b) -> dict:
         "diff_ci95": ci95(d),
         "a_better": float(np.mean(d < 0)) if len(d) else float("nan"),
     }
+
+
+def stacked_errors(errors: list[dict], key: str = "position") -> np.ndarray:
+    """One filter's per-run ``key`` errors (a dict per run, as ``Evaluation.results[i].errors``) as one array
+    (runs, steps, d)."""
+    return np.stack([np.asarray(e[key], float) for e in errors])
+
+
+def axis_errors(errors: list[dict], axes, key: str = "position") -> dict:
+    """Per-run absolute errors of each axis, ``{axes[j]: |e_j|}`` (runs, steps) of the j-th component of ``key``
+    (:func:`stacked_errors`); the RMSE over runs at each step is the same as of the signed errors."""
+    e = np.abs(stacked_errors(errors, key))
+    return {a: e[:, :, j] for j, a in enumerate(axes)}
+
+
+def window_growth(err: np.ndarray, early, late, invalid=None) -> np.ndarray:
+    """Per run: the RMS error over the steps ``late`` = (start, stop) minus over ``early`` (0-based, stop
+    excluded); positive where the error grows over the run. ``err``: (runs, steps), or (runs, steps, d) for the
+    norm over d; NaN for the runs where ``invalid`` (e.g. diverged) is true."""
+    e = np.linalg.norm(err, axis=-1) if np.ndim(err) == 3 else np.array(err, float)
+    if invalid is not None:
+        e[np.asarray(invalid, bool)] = np.nan
+
+    def rms(window):
+        return np.sqrt(np.mean(e[:, slice(*window)] ** 2, axis=1))
+
+    with np.errstate(invalid="ignore"):
+        return rms(late) - rms(early)
