@@ -190,7 +190,7 @@ def test_toml_refuses_unknown_missing_and_undeclared(tmp_path, monkeypatch, old,
 def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch):
     """An ablation is a TOML edit: a job and a row in its table, no code."""
     from replay.reproduce import p001
-    from replay.reproduce.tables import evaluate_jobs
+    from replay.campaign.longest import evaluate_jobs
 
     job = (
         '    { key = "linear wrong R, Q̂ only", dataset = "sim/linear", filters = ["aukf"], data = { steps = 2000, '

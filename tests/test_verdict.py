@@ -26,7 +26,7 @@ def _pos_rmse(job, ev):  # a reducer: what comes back from the worker instead of
 
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_evaluate_jobs_in_plan_order_and_reduced_in_the_worker(monkeypatch, workers):
-    from replay.reproduce.tables import Job, evaluate_jobs
+    from replay.campaign.longest import Job, evaluate_jobs
     from replay.run.evaluation import evaluate
 
     monkeypatch.setenv("REPLAY_WORKERS", workers)

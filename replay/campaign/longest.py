@@ -1,5 +1,9 @@
 """Independent evaluations in worker processes, the costliest first (every paper reproduction uses it).
 
+:class:`Job` is one planned evaluation (a ``replay eval`` configuration: dataset and its parameters,
+filters and theirs, task parameters, runs, seed offset); :func:`evaluate_jobs` computes a list of them
+with :func:`run_longest_first` and returns them in the plan's order.
+
 A reproduction lists independent evaluations (``replay eval`` configurations);
 :func:`run_longest_first` computes them in ``REPLAY_WORKERS`` processes (default
 2, :func:`workers`), the most expensive first so that the last ones to finish are
@@ -23,8 +27,10 @@ import sys
 import time
 from concurrent.futures import as_completed
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 
 from replay.campaign.workers import process_pool
+from replay.run.evaluation import evaluate
 from replay.util.errors import ReplayError
 
 
@@ -85,3 +91,43 @@ def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, 
     finally:
         for fut in futures:
             fut.cancel()
+
+
+@dataclass
+class Job:
+    """One evaluation: ``filters`` with ``filter_params`` on ``dataset`` with ``dataset_params``."""
+
+    key: str
+    dataset: str
+    filters: tuple
+    dataset_params: dict = field(default_factory=dict)
+    filter_params: dict = field(default_factory=dict)
+    task_params: dict = field(default_factory=dict)
+    runs: int = 0  # 0: the reproduction's default
+    seed: int = 0  # added to the reproduction's seed
+
+
+def _evaluate(args):
+    """One job's evaluation (what a worker process runs), through ``reduce`` when given."""
+    job, runs, seed, data_dir, reduce = args
+    params = dict(dataset_params=job.dataset_params or None, filter_params=job.filter_params)
+    params |= dict(task_params=job.task_params or None, runs=job.runs or runs, seed=seed + job.seed)
+    ev = evaluate(job.dataset, filters=job.filters, data_dir=data_dir, **params)
+    return ev if reduce is None else reduce(job, ev)
+
+
+def evaluate_jobs(jobs: list[Job], runs: int, seed: int, data_dir=None, quiet=False, prefix="", reduce=None) -> dict:
+    """``{key: Evaluation}`` of ``jobs`` in the plan's order, computed in worker processes the costliest first
+    (runs × particles, 30 for a filter without; a progress line each on stderr unless ``quiet``). ``reduce(job,
+    evaluation)``, a module-level function, runs in the worker and its result comes back instead of the
+    evaluation (a run's records can weigh a megabyte)."""
+    keys = [j.key for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"jobs planned twice: {sorted({k for k in keys if keys.count(k) > 1})}")
+    runs_of = [j.runs or runs for j in jobs]
+    particles = [sum(j.filter_params.get(f, {}).get("n_particles", 30) for f in j.filters) for j in jobs]
+    cost, labels = [n * p for n, p in zip(runs_of, particles)], [f"{j.key} ({n} runs)" for j, n in zip(jobs, runs_of)]
+    with pool(workers()) as ex:
+        args = [(j, runs, seed, data_dir, reduce) for j in jobs]
+        done = dict(run_longest_first(_evaluate, args, cost, labels, ex, quiet, prefix))
+    return {j.key: done[i] for i, j in enumerate(jobs)}

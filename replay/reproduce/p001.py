@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.campaign.longest import Job, evaluate_jobs
 from replay.outputs import plots as draw
 from replay.outputs.palette import colour
 from replay.outputs.plots import rmse_figures
@@ -23,7 +24,7 @@ from . import spec as papers
 from .render import found, render
 from .render import table as md
 from .rules import Comparison, decide, per_run
-from .tables import Job, Stopwatch, combine, command, commands, evaluate_jobs, footer, row, table
+from .tables import Stopwatch, combine, command, commands, footer, row, table
 
 SCHEMA = {  # kind of entry -> its keys ("key?": optional; :func:`check`)
     "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "

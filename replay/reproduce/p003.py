@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.campaign.longest import Job, evaluate_jobs
 from replay.filters.p003.wfpf import mean_distinct
 from replay.outputs.plots import rmse_curve, rmse_figures, save
 from replay.scoring.metrics import axis_errors, stacked_errors, window_growth
@@ -23,7 +24,7 @@ from . import spec
 from .render import render
 from .render import table as md
 from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
-from .tables import Job, Stopwatch, combine, commands, evaluate_jobs, footer, mean_ci, per_run, table
+from .tables import Stopwatch, combine, commands, footer, mean_ci, per_run, table
 
 SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column, kurtosis: of each entry
     "top level": "dataset seeds pooled_rows growth tune pooled_head setting row grid sweeps evidence peak drift "

@@ -1,9 +1,8 @@
 """What every reproduction document shares: planned evaluations, leaderboard rows as Markdown, the footer.
 
-A reproduction lists :class:`Job` (one ``replay eval`` configuration each: dataset and its
-parameters, filters and theirs, task parameters, runs, seed offset); :func:`evaluate_jobs` computes
-them through :func:`replay.run.evaluation.evaluate` in ``REPLAY_WORKERS`` processes, the costliest
-first (:mod:`replay.campaign.longest`), and returns them in the plan's order. Every table row comes
+A reproduction lists its evaluations as :class:`replay.campaign.longest.Job` (one ``replay eval``
+configuration each), computed by :func:`replay.campaign.longest.evaluate_jobs` in ``REPLAY_WORKERS``
+processes, the costliest first, and returned in the plan's order. Every table row comes
 from those evaluations through :func:`result_rows`, so a document shows the columns of a
 leaderboard: mean ± 95 % half-width, median, ``lost k/N`` and ``diverged``. :func:`combine` puts
 rows of several jobs in one table with the paired columns recomputed over the union by
@@ -16,55 +15,13 @@ numbers). :func:`footer` states the command and the total runtime; documents are
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from replay.campaign.longest import pool, run_longest_first, workers
-from replay.run.evaluation import Evaluation, evaluate
+from replay.run.evaluation import Evaluation
 from replay.run.manifest import command_line
 from replay.scoring import summary
 from replay.scoring.summary import lost_cell
-
-
-@dataclass
-class Job:
-    """One evaluation: ``filters`` with ``filter_params`` on ``dataset`` with ``dataset_params``."""
-
-    key: str
-    dataset: str
-    filters: tuple
-    dataset_params: dict = field(default_factory=dict)
-    filter_params: dict = field(default_factory=dict)
-    task_params: dict = field(default_factory=dict)
-    runs: int = 0  # 0: the reproduction's default
-    seed: int = 0  # added to the reproduction's seed
-
-
-def _evaluate(args):
-    """One job's evaluation (what a worker process runs), through ``reduce`` when given."""
-    job, runs, seed, data_dir, reduce = args
-    params = dict(dataset_params=job.dataset_params or None, filter_params=job.filter_params)
-    params |= dict(task_params=job.task_params or None, runs=job.runs or runs, seed=seed + job.seed)
-    ev = evaluate(job.dataset, filters=job.filters, data_dir=data_dir, **params)
-    return ev if reduce is None else reduce(job, ev)
-
-
-def evaluate_jobs(jobs: list[Job], runs: int, seed: int, data_dir=None, quiet=False, prefix="", reduce=None) -> dict:
-    """``{key: Evaluation}`` of ``jobs`` in the plan's order, computed in worker processes the costliest first
-    (runs × particles, 30 for a filter without; a progress line each on stderr unless ``quiet``). ``reduce(job,
-    evaluation)``, a module-level function, runs in the worker and its result comes back instead of the
-    evaluation (a run's records can weigh a megabyte)."""
-    keys = [j.key for j in jobs]
-    if len(set(keys)) != len(keys):
-        raise ValueError(f"jobs planned twice: {sorted({k for k in keys if keys.count(k) > 1})}")
-    runs_of = [j.runs or runs for j in jobs]
-    particles = [sum(j.filter_params.get(f, {}).get("n_particles", 30) for f in j.filters) for j in jobs]
-    cost, labels = [n * p for n, p in zip(runs_of, particles)], [f"{j.key} ({n} runs)" for j, n in zip(jobs, runs_of)]
-    with pool(workers()) as ex:
-        args = [(j, runs, seed, data_dir, reduce) for j in jobs]
-        done = dict(run_longest_first(_evaluate, args, cost, labels, ex, quiet, prefix))
-    return {j.key: done[i] for i, j in enumerate(jobs)}
 
 
 def row(ev: Evaluation, name: str | None = None) -> tuple:
