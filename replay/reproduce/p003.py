@@ -16,14 +16,14 @@ from replay.campaign.longest import Job, evaluate_jobs
 from replay.filters.p003.wfpf import mean_distinct
 from replay.outputs.plots import rmse_curve, rmse_figures, save
 from replay.scoring.metrics import axis_errors, stacked_errors, window_growth
-from replay.scoring.significance import holm, t_interval
+from replay.scoring.significance import t_interval
 from replay.sim.uav_formation import glint_003
 from replay.util.portable import write_document
 
 from . import spec
 from .render import render
 from .render import table as md
-from .rules import TEST_NAMES, Comparison, decide, p_text, test_one
+from .rules import TEST_NAMES, Comparison, decide, holm_adjust, p_text, test_one
 from .tables import Stopwatch, combine, commands, footer, mean_ci, per_run, table
 
 SCHEMA = {  # the keys of each table of 003.toml ("key?": optional); row, grid, setting, column, kurtosis: of each entry
@@ -164,13 +164,6 @@ def cell(o, p=None) -> str:
     return f"**{s}**" if o.holds else s
 
 
-def holm_family(outs, alpha=0.05) -> int:
-    """Holm over ``outs`` (sets their p_adj and holds); how many hold. (``rules.holm_adjust`` on main, to replace.)"""
-    for o, p in zip(outs, holm([o.p for o in outs])):
-        o.p_adj, o.holds = float(p), bool(p < alpha)
-    return sum(o.holds for o in outs)
-
-
 def ci(x, digits=2, scale=1.0) -> str:
     """Mean ± 95 % t half-width of ``x`` × ``scale`` (``n/a`` without a half-width)."""
     m, h = t_interval(np.asarray(x, float) * scale)
@@ -190,7 +183,7 @@ def where(evs, rng) -> dict:
             fams.setdefault(f, []).append(x)
         counts = "/".join(str(lost(seed_s(evs, lab, r)).sum()) if r in s["rows"] else "–" for r in w["counts"])
         per_setting.append((lab, o, counts, mc))
-    n = {f"n_{k}": f"{holm_family(v)} of {len(v)}" for k, v in fams.items()}  # before the cells: they show p_adj
+    n = {f"n_{k}": f"{holm_adjust(v)} of {len(v)}" for k, v in fams.items()}  # before the cells: they show p_adj
     heads = [c["head"] for c in w["columns"]]
     rows = [
         [lab, *(cell(o[h]) if h in o else "n/a" for h in heads), k, "; ".join(map(cell, mc))]
@@ -207,7 +200,7 @@ def pooled(evs, evid, rng) -> dict:
         keys = [k for k in (c.rule.decides, c.rule.condition) if k]
         tests |= {k: c.rule.test for k in keys}
         outs[c.id] = [test_one(x, c.rule.test, rng) for k in keys for x in evid[k]]
-        holm_family([o for o in outs[c.id] if o.test != "interval"], c.rule.alpha)
+        holm_adjust([o for o in outs[c.id] if o.test != "interval"], c.rule.alpha)
         for i, o in enumerate(outs[c.id]):
             role = "stated condition" if i >= len(evid[c.rule.decides]) else "deciding"
             text = o.text() if o.test == "interval" else f"{o.comparison.name}: {cell(o)}"
