@@ -226,15 +226,15 @@ def _fake_ev(runs=5, steps=40, seed=0, scale=1.0):
 
 def test_error_figures_one_panel_per_filter_with_units_rmse_and_band():
     from replay.outputs.palette import colour
-    from replay.outputs.plots import rmse_figures
-    from replay.reproduce.p001 import load, run_errors
+    from replay.outputs.plots import abs_errors, rmse_figures
+    from replay.reproduce.p001 import load
 
     quantities = load()["quantities"]
 
     t = np.arange(40) * 0.5
     ev, qr = _fake_ev(), _fake_ev(seed=1, scale=2.0)
     errs = {
-        lab: run_errors(e, i, quantities)
+        lab: abs_errors(e.results[i].errors, quantities)
         for lab, e, i in (("UKF", ev, 0), ("AUKF (paper)", ev, 1), ("AUKF (Q̂, R̂)", qr, 0))
     }
     signed = np.stack([e["position"] for e in qr.results[0].errors])
@@ -267,7 +267,7 @@ def test_traces_figure_median_and_band_with_units():
 
     rng = np.random.default_rng(3)
     hist = [{"p": rng.standard_normal((30, 2)), "q": rng.standard_normal((30, 3))} for _ in range(6)]
-    fig = traces_figure(np.arange(31.0), hist, load()["traces"])
+    fig = traces_figure(np.arange(31.0), [{"history": h} for h in hist], load()["traces"])
     labels = [ax.get_ylabel() for ax in fig.axes]
     assert labels == ["p̂ depth (m)", "p̂ forward velocity (m/s)", "q̂ north (m/step)", "q̂ east (m/step)"]
     line = next(ln for ln in fig.axes[2].get_lines() if ln.get_label() == "AUKF (paper)")
