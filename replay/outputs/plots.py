@@ -264,11 +264,12 @@ def abs_errors(errors: list[dict], quantities) -> dict:
 
 
 def rmse_figures(t, errors: dict, quantities, title: str) -> dict:
-    """One figure per quantity ``(key, name, unit)``: a panel per filter with the RMSE over the runs
-    at each step (the papers' curves) and the 5-95 % band of the runs' absolute errors. ``errors``:
-    {filter label: {key: (runs, steps) errors}}; ``title`` starts each figure's title."""
+    """One figure per quantity ``(key, name, unit, ...)`` (further entries ignored: those of :func:`abs_errors`):
+    a panel per filter with the RMSE over the runs at each step (the papers' curves) and the 5-95 % band of the
+    runs' absolute errors. ``errors``: {filter label: {key: (runs, steps) errors}}; ``title`` starts each
+    figure's title."""
     figs = {}
-    for key, name, unit in quantities:
+    for key, name, unit, *_ in quantities:
         curves = {label: e[key] for label, e in errors.items()}
         runs = min(len(v) for v in curves.values())
         figs[key] = mc_figure(

@@ -8,7 +8,6 @@ declared. The prose is ``replay/papers/001.md`` (:mod:`.render`). Adding an abla
 row in its ``[[table]]`` (and a comparison in ``[evidence]`` if a claim draws on it); a claim: a ``[[claim]]``.
 """
 
-import itertools
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ import numpy as np
 from replay.filters.p001.aukf import final_estimate, history
 from replay.outputs import plots as draw
 from replay.outputs.palette import colour
-from replay.tune.objectives import lowest_then_consistent
+from replay.tune.grid import lowest_then_consistent, points as grid_points
 from replay.util.errors import ReplayError
 from replay.util.portable import write_document
 
@@ -25,7 +24,7 @@ from .render import fmt, found, render, table as md
 from .rules import Comparison, decide, per_run
 from .tables import Job, Stopwatch, combine, command, commands, evaluate_jobs, footer, row, table
 
-SCHEMA = {  # kind of entry -> its keys ("key?": optional; :func:`check`)
+SCHEMA = {  # kind of entry -> its keys ("key?": optional; :func:`.spec.check`)
     "top level": "dataset runs quick_runs sweep_runs primary metrics cell cell_job cell_rows job quantities plot "
     "tuning table info evidence traces nees relabel claim",
     "tuning": "filter data grid runs seed_offset tie anees label columns",
@@ -71,21 +70,19 @@ def jobs(s: dict, quick: bool, tuned: dict, runs: int, n: int) -> list[Job]:
     return out
 
 
-def tune(s: dict, runs: int, seed: int, data_dir, quiet: bool) -> tuple[dict, str]:
-    """The UKF's scales by ``[tuning]``'s rule (:func:`.lowest_then_consistent`) on its grid, and the grid's table."""
+def tune(s: dict, runs: int, seed: int, data_dir, quiet: bool) -> tuple[dict, str, str]:
+    """The UKF's scales by ``[tuning]``'s rule (:func:`.lowest_then_consistent`) on its grid, their label, the table."""
     t, f = s["tuning"], s["tuning"]["filter"]
-    points = [dict(zip(t["grid"], v)) for v in itertools.product(*t["grid"].values())]
+    points = grid_points(t["grid"])
     grid = [Job(f"tune {p}", s["dataset"], (f,), t["data"], {f: p}, runs=min(runs, t["runs"])) for p in points]
     xs = [ev.rows[0] for ev in evaluate_jobs(grid, runs, seed + t["seed_offset"], data_dir, quiet).values()]
-    rmse = [np.inf if x.get("diverged") else float(x["pos_rmse"]) for x in xs]
-    anees = [float(x["anees"] or np.nan) for x in xs]
-    chosen = lowest_then_consistent(rmse, anees, t["tie"], t["anees"])
+    chosen = lowest_then_consistent(xs, t["tie"], t["anees"])
     if chosen is None:
         raise ReplayError(f"001 tuning: every grid point of the {f.upper()} diverged on the training seeds")
     rows = [[f"{v:g}" for v in p.values()] for p in points]
-    rows = [r + [f"{x['pos_rmse']:.3f}", f"{a:.1f}", ""] for r, x, a in zip(rows, xs, anees)]
+    rows = [r + [f"{x['pos_rmse']:.3f}", f"{float(x['anees'] or np.nan):.1f}", ""] for r, x in zip(rows, xs)]
     rows[chosen][-1] = "**chosen**"
-    return points[chosen], md([*t["grid"], *t["columns"]], rows)
+    return points[chosen], t["label"].format(**points[chosen]), md([*t["grid"], *t["columns"]], rows)
 
 
 def items(evs: dict, rows: list) -> list[tuple]:
@@ -104,16 +101,14 @@ def comparison(evs: dict, c: dict) -> Comparison:
 
 def evidence(s: dict, evs: dict) -> dict:
     """Key -> the comparisons of ``[evidence]`` whose two jobs ran (a full-only job's: none in the quick document)."""
-    out = {}
-    for key, cs in s["evidence"].items():
-        out[key] = [comparison(evs, c) for c in cs if c["a"][0] in evs and c["b"][0] in evs]
-    return out
+    ran = lambda c: c["a"][0] in evs and c["b"][0] in evs
+    return {key: [comparison(evs, c) for c in cs if ran(c)] for key, cs in s["evidence"].items()}
 
 
 def final(ev, i: int, c: dict) -> str:
     """Result ``i``'s mean final estimate of ``[info]`` column ``c`` (:func:`.final_estimate`), formatted."""
-    infos = [e.info for e in ev.results[i].estimates]
-    return format(final_estimate(infos, c["key"], c.get("component"), c.get("abs", False)), c["format"])
+    value = final_estimate(ev.results[i].estimates, c["key"], c.get("component"), c.get("abs", False))
+    return format(value, c["format"])
 
 
 def spec_table(s: dict, evs: dict, t: dict) -> str:
@@ -143,36 +138,33 @@ def cell(s: dict, evs: dict, key: str, tuned: str) -> list[str]:
     return [table(rows, metrics=s["metrics"]), md(s["nees"], [nees_row(r) for r in rows]), "Commands:", commands(rows)]
 
 
-def fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc) -> dict:
-    """The template's placeholders: the primary cell's tables, every cell's, every ``[[table]]``, the figures."""
-    tl, old = s["tuning"]["label"].format(**tuned), papers.old_labels(s)
+def fields(s, evs, verdicts, runs, seed, n, tl, grid_md, quick, doc) -> dict:
+    """The template's placeholders (``tl``: the tuned UKF's label): the cells' tables, every ``[[table]]``, figures."""
     primary, nees, _, cmds = cell(s, evs, s["primary"], tl)
     cells = ["\n\n".join([f"### {c['title']}", *cell(s, evs, c["key"], tl)]) for c in s["cell"] if c["key"] in evs]
-    relabel = [[v.claim.id, old[v.claim.id], v.label, found(v)] for v in verdicts]
-    out = dict(runs=runs, n=n, seed=seed, quick=" --quick" * quick, tuned=tl, grid=grid_md, cells="\n\n".join(cells))
-    out |= dict(tune_runs=s["tuning"]["runs"], primary=primary, nees=nees, commands=cmds, plots=plots(s, evs, doc))
-    out["relabel"] = md(s["relabel"], relabel)
-    return out | {t["name"]: spec_table(s, evs, t) for t in s["table"]}
+    relabel = md(s["relabel"], [[v.claim.id, papers.old_labels(s)[v.claim.id], v.label, found(v)] for v in verdicts])
+    out = dict(runs=runs, n=n, seed=seed, quick=" --quick" * quick, tuned=tl, grid=grid_md, relabel=relabel)
+    out |= dict(primary=primary, nees=nees, commands=cmds, cells="\n\n".join(cells), tune_runs=s["tuning"]["runs"])
+    return out | {"plots": plots(s, evs, doc)} | {t["name"]: spec_table(s, evs, t) for t in s["table"]}
 
 
-def traces_figure(t, infos: list[dict], tr: dict):
+def traces_figure(t, estimates: list, tr: dict):
     """The AUKF's noise-mean estimates (``[traces]``, :func:`.history`) over time: median, 5-95 % band of the runs."""
-    panels = [(name, unit, history(infos, key, j)) for key, j, name, unit in tr["panels"]]
-    return draw.band_panels(t, panels, colour("aukf"), tr["label"], tr["title"].format(runs=len(infos)))
+    panels = [(name, unit, history(estimates, key, j)) for key, j, name, unit in tr["panels"]]
+    return draw.band_panels(t, panels, colour("aukf"), tr["label"], tr["title"].format(runs=len(estimates)))
 
 
 def plots(s: dict, evs: dict, doc: Path) -> str:
     """The figures of ``plot`` (:func:`.rmse_figures`) and ``[traces]`` saved beside ``doc``, as Markdown."""
-    out, quantities, tr, ev = [], [q[:3] for q in s["quantities"]], s["traces"], evs[s["traces"]["job"]]
+    out, quantities, tr, ev = [], s["quantities"], s["traces"], evs[s["traces"]["job"]]
     doc.parent.mkdir(parents=True, exist_ok=True)
     for fig in s["plot"]:
-        arms = items(evs, fig["filters"])
-        errors = {lab: draw.abs_errors(ev.results[i].errors, s["quantities"]) for lab, (ev, i) in arms}
+        errors = {lab: draw.abs_errors(e.results[i].errors, quantities) for lab, (e, i) in items(evs, fig["filters"])}
         figs = draw.rmse_figures(evs[fig["filters"][0][1]].t, errors, quantities, f"001, {fig['title']}")
-        for key, name, _ in quantities:
+        for key, name, *_ in quantities:
             draw.save(figs[key], png := doc.parent / f"001_{fig['file']}_{key}.png")
             out += [f"![{name} over time, {fig['track']}]({png.name})", ""]
-    draw.save(traces_figure(ev.t, [e.info for e in ev.results[0].estimates], tr), doc.parent / "001_traces.png")
+    draw.save(traces_figure(ev.t, ev.results[0].estimates, tr), doc.parent / "001_traces.png")
     return "\n".join(out + [f"![{tr['alt']}](001_traces.png)", "", f"{tr['text']}`{command(ev)}`.", ""])
 
 
@@ -182,10 +174,10 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False, sw
     watch, s, doc = Stopwatch(), load(), Path(doc or "docs/reproduction/001.md")
     runs = runs or s["quick_runs" if quick else "runs"]
     n = min(sweep_runs or s["sweep_runs"], runs)
-    tuned, grid_md = tune(s, runs, seed, data_dir, quiet)
+    tuned, label, grid_md = tune(s, runs, seed, data_dir, quiet)
     evs = evaluate_jobs(jobs(s, quick, tuned, runs, n), runs, seed, data_dir, quiet)
     verdicts = decide(papers.claims(s, "001.toml"), evidence(s, evs), seed=seed)
-    text = render("001", fields(s, evs, verdicts, runs, seed, n, tuned, grid_md, quick, doc), verdicts)
+    text = render("001", fields(s, evs, verdicts, runs, seed, n, label, grid_md, quick, doc), verdicts)
     command_line = f"replay reproduce 001 --runs {runs} --seed {seed}" + " --quick" * quick
     write_document(doc, text + footer(command_line, watch.seconds))
     if not quiet:
