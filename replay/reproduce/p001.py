@@ -46,8 +46,8 @@ def load() -> dict:
     entries += [(k, x) for k in ("cell", "cell_job", "job", "table", "plot") for x in s[k]]
     entries += [(k, x) for k in ("info", "evidence") for xs in s[k].values() for x in xs]
     for kind, e in entries:
-        name = next((repr(e[k]) for k in ("key", "name", "file", "head", "suffix", "job") if k in e), "")
-        papers.check(e, SCHEMA[kind], f"001.toml: {kind} {name}".rstrip())
+        name = next((f" {e[k]!r}" for k in ("key", "name", "file", "head", "suffix", "job") if k in e), "")
+        papers.check(e, SCHEMA[kind], f"001.toml: {kind}{name}")
     planned = {j.key for j in jobs(s, False, {}, 1, 1)}
     used = [r[1] for t in s["table"] for r in t["rows"]] + [f[1] for x in s["plot"] for f in x["filters"]]
     used += [c[x][0] for cs in s["evidence"].values() for c in cs for x in "ab"] + [s["primary"], s["traces"]["job"]]
