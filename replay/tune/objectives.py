@@ -11,8 +11,6 @@
 
 A configuration with a failed or diverged run scores ``inf`` (it is not a usable setting). Over
 several training datasets the objective is the mean of each dataset's.
-
-:func:`lowest_then_consistent` picks one configuration of a grid by RMSE, then ANEES among near ties.
 """
 
 from __future__ import annotations
@@ -76,17 +74,3 @@ def _basic(name: str, ms: list[dict]) -> float:
         v = float(np.mean([m["nees"] for m in ms])) / dof
         return abs(v - 1.0) if math.isfinite(v) else math.inf
     raise ReplayError(f"unknown objective {name!r}")
-
-
-def lowest_then_consistent(rmse, anees, tie: float, dof: float) -> int | None:
-    """Index of the chosen configuration of a grid: the lowest ``rmse`` and, among the configurations within
-    the fraction ``tie`` of it (over noise scales an RMSE fixes only the ratio of Q to R), the ``anees``
-    closest to ``dof`` (consistent; the first in order at equal distance). A non-finite RMSE (a diverged
-    configuration: pass ``inf``) is never chosen, a non-finite ANEES is the farthest; None when no RMSE
-    is finite."""
-    finite = [x for x in rmse if math.isfinite(x)]
-    if not finite:
-        return None
-    near = [i for i, x in enumerate(rmse) if x <= (1 + tie) * min(finite)]
-    distance = [abs(a - dof) if math.isfinite(a) else math.inf for a in anees]
-    return min(near, key=distance.__getitem__)
