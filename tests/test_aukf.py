@@ -6,11 +6,13 @@ known: a constant measurement bias p (eq. 106), a constant process bias q
 sign error in the innovation (z - z^ - p^), for Theta taken with Q^ included,
 or for the wrong points in Gamma.
 """
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from replay.util.errors import ReplayError
-from replay.filters.p001.aukf import AUKF, guard_spd
+from replay.filters.p001.aukf import AUKF, final_estimate, guard_spd, history
 from replay.filters.sigma import UKF
 from replay.model import LinearGaussian
 
@@ -238,3 +240,25 @@ def test_unobservable_drift_is_not_learnt(means):
     else:  # the paper's: q-hat is no estimate of c (here of the opposite sign) and adds its own drift
         assert abs(a.info["history"]["q"][-1000:, 0].mean() - c) > 0.5 * c
         assert err > 1.2 * drift
+
+
+def test_final_estimate_and_history_read_the_runs_info():
+    """Mean over runs of the last Q̂ (its diagonal), q̂ (a component or the mean of |components|), guard firings;
+    the history as (runs, updates) per component."""
+    infos = [
+        {"Q_hat": np.diag([1.0, 3.0]), "q_hat": np.array([-2.0, 4.0]), "guard_q": 2, "history": {"q": np.eye(3)[:, :2]}},
+        {"Q_hat": np.diag([5.0, 7.0]), "q_hat": np.array([2.0, -6.0]), "guard_q": 0, "history": {"q": np.ones((3, 2))}},
+    ]
+    runs = [SimpleNamespace(info=info) for info in infos]
+    assert final_estimate(runs, "Q_hat") == 4.0  # mean of (2, 6)
+    assert final_estimate(runs, "Q_hat", component=1) == 5.0
+    assert final_estimate(runs, "q_hat", component=0) == 0.0
+    assert final_estimate(runs, "q_hat", component=0, magnitude=True) == 2.0
+    assert final_estimate(runs, "q_hat", magnitude=True) == 3.5  # mean of (3, 4)
+    assert final_estimate(runs, "guard_q") == 1.0
+    assert np.array_equal(history(runs, "q", 1), [[0.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
+    model, z, _ = linear_problem(np.eye(2), np.eye(2), 0.01 * np.eye(2), 50, 0)
+    est = AUKF(keep_history=True).run(model, z, np.zeros(2), np.eye(2))
+    assert history([est] * 2, "q", 0).shape == (2, 50)
+    assert np.array_equal(history([est], "q", 0)[0, -1], est.info["q_hat"][0])
+    assert final_estimate([est], "R_hat", component=1) == est.info["R_hat"][1, 1]

@@ -107,9 +107,9 @@ def test_tuned_ukf_rule_breaks_rmse_ties_by_anees(monkeypatch):
     rows[Q[0], R[0]].update(pos_rmse=5.0, anees=400.0)
     rows[Q[-1], R[-1]].update(pos_rmse=5.04, anees=3.5)  # within 1 %
     rows[Q[1], R[1]].update(pos_rmse=5.06, anees=3.0)  # 1.2 %: out
-    tuned, grid = p001.tune(s, 50, 7, None, True)
+    tuned, label, grid = p001.tune(s, 50, 7, None, True)
     assert tuned == {"q_scale": Q[-1], "r_scale": R[-1]}
-    assert grid.count("**chosen**") == 1
+    assert grid.count("**chosen**") == 1 and label == f"UKF tuned (q × {Q[-1]:g}, r × {R[-1]:g})"
     assert calls == [(len(Q) * len(R), {s["tuning"]["runs"]}, 8)]  # at most 20 runs, on master seed + 1
     rows[Q[2], R[2]].update(pos_rmse=1.0, diverged=1)  # not chosen
     assert p001.tune(s, 3, 0, None, True)[0] == tuned
@@ -226,15 +226,15 @@ def _fake_ev(runs=5, steps=40, seed=0, scale=1.0):
 
 def test_error_figures_one_panel_per_filter_with_units_rmse_and_band():
     from replay.outputs.palette import colour
-    from replay.outputs.plots import rmse_figures
-    from replay.reproduce.p001 import load, run_errors
+    from replay.outputs.plots import abs_errors, rmse_figures
+    from replay.reproduce.p001 import load
 
     quantities = load()["quantities"]
 
     t = np.arange(40) * 0.5
     ev, qr = _fake_ev(), _fake_ev(seed=1, scale=2.0)
     errs = {
-        lab: run_errors(e, i, quantities)
+        lab: abs_errors(e.results[i].errors, quantities)
         for lab, e, i in (("UKF", ev, 0), ("AUKF (paper)", ev, 1), ("AUKF (Q̂, R̂)", qr, 0))
     }
     signed = np.stack([e["position"] for e in qr.results[0].errors])
@@ -263,11 +263,13 @@ def test_error_figures_one_panel_per_filter_with_units_rmse_and_band():
 
 
 def test_traces_figure_median_and_band_with_units():
+    from types import SimpleNamespace
+
     from replay.reproduce.p001 import load, traces_figure
 
     rng = np.random.default_rng(3)
     hist = [{"p": rng.standard_normal((30, 2)), "q": rng.standard_normal((30, 3))} for _ in range(6)]
-    fig = traces_figure(np.arange(31.0), hist, load()["traces"])
+    fig = traces_figure(np.arange(31.0), [SimpleNamespace(info={"history": h}) for h in hist], load()["traces"])
     labels = [ax.get_ylabel() for ax in fig.axes]
     assert labels == ["p̂ depth (m)", "p̂ forward velocity (m/s)", "q̂ north (m/step)", "q̂ east (m/step)"]
     line = next(ln for ln in fig.axes[2].get_lines() if ln.get_label() == "AUKF (paper)")

@@ -279,3 +279,19 @@ def guard_spd(M: np.ndarray, scale: np.ndarray, floor: float):
     if is_spd(M, np.outer(scale, scale), floor):
         return M, 0
     return clip_spd(M, scale, floor), 1
+
+
+def final_estimate(estimates: list, key: str, component: int | None = None, magnitude: bool = False) -> float:
+    """Mean over runs (each run's :class:`Estimates`) of the AUKF's final ``info[key]``: of ``q_hat``, ``p_hat``,
+    the diagonal of ``Q_hat``, ``R_hat``, or the firings ``guard_q``, ``guard_r``; of its ``component`` (None:
+    the mean over the components), of the absolute values if ``magnitude``."""
+    values = [np.atleast_1d(np.asarray(e.info[key], float)) for e in estimates]
+    values = [np.diagonal(v) if v.ndim == 2 else v for v in values]
+    values = [np.abs(v) if magnitude else v for v in values]
+    return float(np.mean([v.mean() if component is None else v[component] for v in values]))
+
+
+def history(estimates: list, key: str, column: int) -> np.ndarray:
+    """(runs, updates) array of component ``column`` of the estimate ``key`` (``"q"``, ``"p"``; of ``"Q"``,
+    ``"R"``: a row) at every update, from each run's :class:`Estimates` ``info["history"]`` (``keep_history=True``)."""
+    return np.stack([np.asarray(e.info["history"][key], float)[:, column] for e in estimates])

@@ -191,6 +191,22 @@ def mc_figure(
     return fig
 
 
+def band_panels(t, panels, color, name: str, title: str):
+    """A column of panels with a shared time axis, one per ``(axis name, unit, (runs, steps) values)``: the
+    median and 5-95 % band over the runs (:func:`mc_band`, labelled ``name``) against the last ``steps``
+    times of ``t`` (a series recorded from the first update on)."""
+    fig, axes = figure(len(panels), 1, figsize=(8, 2.1 * len(panels) + 0.6), sharex=True)
+    for ax, (axis, unit, values) in zip(axes[:, 0], panels):
+        mc_band(ax, t[-values.shape[1] :], values, color, name)
+        ax.set_ylabel(label(axis, unit))
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper left")
+    axes[-1, 0].set_xlabel("t (s)")
+    suptitle(fig, title)
+    fig.subplots_adjust(hspace=0.15)
+    return fig
+
+
 def suptitle(fig, text: str):
     """The figure's title above its top edge (``save`` keeps it: the PNG is cropped to its content)."""
     fig.subplots_adjust(top=1 - 0.35 / fig.get_figheight())
@@ -236,12 +252,24 @@ def rmse_curve(err: np.ndarray) -> np.ndarray:
         return np.sqrt(np.nanmean(err**2, axis=0))
 
 
+def abs_errors(errors: list[dict], quantities) -> dict:
+    """``{key: (runs, steps) absolute errors}`` of per-run error dicts (``FilterResult.errors``), one per quantity
+    ``(key, name, unit, error[, column])``: ``|error|`` of each run, of its ``column`` when one is given (the
+    input of :func:`rmse_figures`)."""
+    out = {}
+    for key, _, _, error, *column in quantities:
+        e = np.abs(np.stack([np.asarray(run[error], float) for run in errors]))
+        out[key] = e[:, :, column[0]] if column else e
+    return out
+
+
 def rmse_figures(t, errors: dict, quantities, title: str) -> dict:
-    """One figure per quantity ``(key, name, unit)``: a panel per filter with the RMSE over the runs
-    at each step (the papers' curves) and the 5-95 % band of the runs' absolute errors. ``errors``:
-    {filter label: {key: (runs, steps) errors}}; ``title`` starts each figure's title."""
+    """One figure per quantity ``(key, name, unit, ...)`` (further entries ignored: those of :func:`abs_errors`):
+    a panel per filter with the RMSE over the runs at each step (the papers' curves) and the 5-95 % band of the
+    runs' absolute errors. ``errors``: {filter label: {key: (runs, steps) errors}}; ``title`` starts each
+    figure's title."""
     figs = {}
-    for key, name, unit in quantities:
+    for key, name, unit, *_ in quantities:
         curves = {label: e[key] for label, e in errors.items()}
         runs = min(len(v) for v in curves.values())
         figs[key] = mc_figure(
