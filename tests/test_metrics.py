@@ -1,4 +1,5 @@
 """NEES/NIS consistency, Umeyama alignment, ATE, drift, attitude error, paired comparisons."""
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -127,6 +128,14 @@ def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
     assert lost_track(np.full(4, np.nan), 20.0, 2) is False
 
 
+def test_share_above_counts_steps_whose_error_norm_exceeds_the_threshold():
+    from replay.scoring.metrics import share_above
+
+    err = np.array([[3.0, 4.0, 0.0], [1.0, 1.0, 1.0], [0.0, 0.0, 2.5], [np.nan, 0.0, 0.0]])  # norms 5, 1.73, 2.5, NaN
+    assert share_above(err, 2.0) == 0.5  # 2 of 4 steps: the NaN step is not above but counts
+    assert share_above(err, 1.0) == 0.75 and share_above(err, 5.0) == 0.0
+
+
 def test_lost_tracks_are_counted_not_reported_as_success():
     """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
     176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""
@@ -146,16 +155,16 @@ def test_consistency_flags_collapsed_covariance_and_hides_its_number():
     from replay.scoring.metrics import consistency
 
     rng = np.random.default_rng(3)
-    good = rng.chisquare(3, size=(50, 200))                 # a consistent filter: NEES ~ chi2(3)
+    good = rng.chisquare(3, size=(50, 200))  # a consistent filter: NEES ~ chi2(3)
     out = consistency(good, 3, "anees")
     assert out["anees_flag"] == "consistent" and abs(out["anees"] - 3) < 0.1
     assert consistency(good * 4, 3, "anees")["anees_flag"] == "optimistic"
     assert consistency(good / 4, 3, "anees")["anees_flag"] == "pessimistic"
-    neg = consistency(-good * 1e279, 3, "anees")           # P not positive definite: -4e+279 seen
+    neg = consistency(-good * 1e279, 3, "anees")  # P not positive definite: -4e+279 seen
     assert neg["anees_flag"] == "collapsed" and np.isnan(neg["anees"])
-    bad = consistency(good * 1e230, 3, "anees")            # P shrunk to nothing: 1e+230-size NEES
+    bad = consistency(good * 1e230, 3, "anees")  # P shrunk to nothing: 1e+230-size NEES
     assert bad["anees_flag"] == "collapsed" and np.isnan(bad["anees"])
-    edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")   # just below 1e4 per dof
+    edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")  # just below 1e4 per dof
     assert edge["anees_flag"] == "optimistic" and edge["anees"] == pytest.approx(29970)
 
 
@@ -171,8 +180,7 @@ def test_anees_band_uses_the_tasks_position_dimension():
     from replay.scoring.summary import ensemble
 
     rng = np.random.default_rng(4)
-    cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)}
-            for _ in range(40)]
+    cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)} for _ in range(40)]
     one = ensemble(cols, nees_dof=1)
     assert one["anees_flag"] == "consistent" and abs(one["anees"] - 1) < 0.05
     assert one["anees_lo"] < 1 < one["anees_hi"] < 1.5
