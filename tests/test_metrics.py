@@ -1,5 +1,4 @@
 """NEES/NIS consistency, Umeyama alignment, ATE, drift, attitude error, paired comparisons."""
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -155,16 +154,16 @@ def test_consistency_flags_collapsed_covariance_and_hides_its_number():
     from replay.scoring.metrics import consistency
 
     rng = np.random.default_rng(3)
-    good = rng.chisquare(3, size=(50, 200))  # a consistent filter: NEES ~ chi2(3)
+    good = rng.chisquare(3, size=(50, 200))                 # a consistent filter: NEES ~ chi2(3)
     out = consistency(good, 3, "anees")
     assert out["anees_flag"] == "consistent" and abs(out["anees"] - 3) < 0.1
     assert consistency(good * 4, 3, "anees")["anees_flag"] == "optimistic"
     assert consistency(good / 4, 3, "anees")["anees_flag"] == "pessimistic"
-    neg = consistency(-good * 1e279, 3, "anees")  # P not positive definite: -4e+279 seen
+    neg = consistency(-good * 1e279, 3, "anees")           # P not positive definite: -4e+279 seen
     assert neg["anees_flag"] == "collapsed" and np.isnan(neg["anees"])
-    bad = consistency(good * 1e230, 3, "anees")  # P shrunk to nothing: 1e+230-size NEES
+    bad = consistency(good * 1e230, 3, "anees")            # P shrunk to nothing: 1e+230-size NEES
     assert bad["anees_flag"] == "collapsed" and np.isnan(bad["anees"])
-    edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")  # just below 1e4 per dof
+    edge = consistency(np.full((10, 5), 3e4 * 0.999), 3, "anees")   # just below 1e4 per dof
     assert edge["anees_flag"] == "optimistic" and edge["anees"] == pytest.approx(29970)
 
 
@@ -180,7 +179,8 @@ def test_anees_band_uses_the_tasks_position_dimension():
     from replay.scoring.summary import ensemble
 
     rng = np.random.default_rng(4)
-    cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)} for _ in range(40)]
+    cols = [{"nees": rng.chisquare(1, 300), "nis": rng.chisquare(1, 300), "nis_dof": np.ones(300)}
+            for _ in range(40)]
     one = ensemble(cols, nees_dof=1)
     assert one["anees_flag"] == "consistent" and abs(one["anees"] - 1) < 0.05
     assert one["anees_lo"] < 1 < one["anees_hi"] < 1.5

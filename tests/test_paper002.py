@@ -1,5 +1,4 @@
 """Paper 002 (IGWO-STCPF): STCKF, STCPF, GWO/IGWO, PSO, the swarm PFs and short versions of the experiments."""
-
 from __future__ import annotations
 
 import os
@@ -109,7 +108,7 @@ def engine_at(name, pb, rngs, **params):
 @pytest.mark.parametrize("proposal", ["ckf", "stckf"])
 def test_batched_particle_update_equals_single_filter(proposal):
     pb = sonar_problem()
-    single = CKF() if proposal == "ckf" else STCKF()
+    single = (CKF() if proposal == "ckf" else STCKF())
     s_state = type("S", (), {})()
     s_state.model, s_state.rng = pb.model, np.random.default_rng(0)
     single.start(s_state, pb.x0, pb.P0)
@@ -125,9 +124,8 @@ def test_batched_particle_update_equals_single_filter(proposal):
     assert np.allclose(P, s_state.P, rtol=1e-5, atol=1e-8)
 
 
-@pytest.mark.parametrize(
-    "name,params", [("igwo-stcpf", {"t_max": 4}), ("pso-cpf", {"t_max": 4}), ("gwo-pf", {"t_max": 4}), ("stcpf", {})]
-)
+@pytest.mark.parametrize("name,params", [("igwo-stcpf", {"t_max": 4}), ("pso-cpf", {"t_max": 4}),
+                                         ("gwo-pf", {"t_max": 4}), ("stcpf", {})])
 @pytest.mark.slow
 def test_batched_runs_equal_one_by_one_exactly(name, params):
     pbs = [sonar_problem(s) for s in (1, 2, 3)]
@@ -135,13 +133,8 @@ def test_batched_runs_equal_one_by_one_exactly(name, params):
         p.z = p.z[:25]
     flt = make_filter(name, n_particles=20, **params)
     seq = [flt.run(p.model, p.z, p.x0, p.P0, np.random.default_rng(50 + r)) for r, p in enumerate(pbs)]
-    bat = flt.run_batch(
-        pbs[0].model,
-        np.stack([p.z for p in pbs]),
-        np.stack([p.x0 for p in pbs]),
-        np.stack([p.P0 for p in pbs]),
-        [np.random.default_rng(50 + r) for r in range(3)],
-    )
+    bat = flt.run_batch(pbs[0].model, np.stack([p.z for p in pbs]), np.stack([p.x0 for p in pbs]),
+                        np.stack([p.P0 for p in pbs]), [np.random.default_rng(50 + r) for r in range(3)])
     for a, b in zip(seq, bat):
         assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
         assert a.info.keys() == b.info.keys()
@@ -152,13 +145,9 @@ def test_batched_runs_equal_one_by_one_exactly(name, params):
 
 @pytest.mark.slow
 def test_evaluate_batches_and_matches_a_single_run():
-    kw = dict(
-        task="sonar",
-        filters=("igwo-stcpf", "pf"),
-        seed=3,
-        filter_params={"igwo-stcpf": {"n_particles": 20, "t_max": 3}, "pf": {"n_particles": 50}},
-        dataset_params={"steps": 30},
-    )
+    kw = dict(task="sonar", filters=("igwo-stcpf", "pf"), seed=3,
+              filter_params={"igwo-stcpf": {"n_particles": 20, "t_max": 3}, "pf": {"n_particles": 50}},
+              dataset_params={"steps": 30})
     one = evaluate("sim/auv-sonar", runs=1, **kw)
     three = evaluate("sim/auv-sonar", runs=3, **kw)  # batched: run 0 must be the same numbers
     for a, b in zip(one.results, three.results):
@@ -167,13 +156,8 @@ def test_evaluate_batches_and_matches_a_single_run():
 
 
 def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
-    kw = dict(
-        task="sonar",
-        filters=("stckf", "pf"),
-        seed=1,
-        filter_params={"pf": {"n_particles": 50}},
-        dataset_params={"steps": 20},
-    )
+    kw = dict(task="sonar", filters=("stckf", "pf"), seed=1, filter_params={"pf": {"n_particles": 50}},
+              dataset_params={"steps": 20})
     three, two = evaluate("sim/auv-sonar", runs=3, **kw), evaluate("sim/auv-sonar", runs=2, **kw)
     cut = three.first(2)
     assert cut.config["runs"] == 2 and len(cut.truths) == 2
@@ -244,16 +228,8 @@ def test_batched_gwo_and_pso_equal_separate_swarms():
 def test_igwo_converges_closer_than_gwo_on_a_sphere():
     res = {}
     for improved in (False, True):
-        vals = [
-            gwo_optimize(
-                np.random.default_rng(s).standard_normal((30, 3)) * 10,
-                sphere,
-                np.random.default_rng(100 + s),
-                20,
-                improved,
-            )[2][-1]
-            for s in range(20)
-        ]
+        vals = [gwo_optimize(np.random.default_rng(s).standard_normal((30, 3)) * 10, sphere,
+                             np.random.default_rng(100 + s), 20, improved)[2][-1] for s in range(20)]
         res[improved] = np.median(vals)
     # initial best about 17; both optimise, IGWO's late, steep fall of a(t) converges far tighter
     assert res[False] < 1e-2 and res[True] < 1e-2 * res[False]
@@ -331,7 +307,7 @@ def test_pso_pf_particles_within_bounds_on_the_sonar_task():
     eng = engine_at("pso-pf", pb, [np.random.default_rng(0), np.random.default_rng(1)], n_particles=30)
     lo, hi = np.array(pso.LB_002), np.array(pso.UB_002)
     for k in range(5):
-        eng.step(k, np.repeat(pb.z[k : k + 1], 2, axis=0), np.ones((2, 3), bool))
+        eng.step(k, np.repeat(pb.z[k:k + 1], 2, axis=0), np.ones((2, 3), bool))
         assert np.all(eng.X >= lo - 1e-12) and np.all(eng.X <= hi + 1e-12)
 
 
@@ -341,39 +317,30 @@ def test_named_variants_rebuild_from_their_recorded_parameters():
         assert make_filter(name, **p).params() == p  # what `replay rerun` does
     assert make_filter("pso-pf", t_max=5).t_max == 5
     # the named variants fix their proposal and optimiser and declare only what they use
-    for name, key, value in (
-        ("gwo-pf", "proposal", "prior"),
-        ("igwo-stcpf", "optimizer", "igwo"),
-        ("pso-pf", "iterations", 5),
-        ("pso-pf", "compiled", True),
-        ("gwo-pf", "rho", 0.95),
-        ("igwo-stcpf", "omega_max", 0.9),
-        ("pso-cpf", "xi", 1e-4),
-    ):
+    for name, key, value in (("gwo-pf", "proposal", "prior"), ("igwo-stcpf", "optimizer", "igwo"),
+                             ("pso-pf", "iterations", 5), ("pso-pf", "compiled", True), ("gwo-pf", "rho", 0.95),
+                             ("igwo-stcpf", "omega_max", 0.9), ("pso-cpf", "xi", 1e-4)):
         with pytest.raises(ReplayError, match=f"unknown parameter '{key}'"):
             make_filter(name, **{key: value})
 
 
 # --- bad parameters -------------------------------------------------------------------------
-@pytest.mark.parametrize(
-    "name,params,word",
-    [
-        ("igwo-stcpf", {"n_particles": 0}, "n_particles"),
-        ("stcpf", {"n_particles": -5}, "n_particles"),
-        ("stckf", {"rho": 0.0}, "rho"),
-        ("igwo-stcpf", {"rho": 1.5}, "rho"),
-        ("stckf", {"beta": 0.9}, "beta"),
-        ("igwo-stcpf", {"t_max": -1}, "t_max"),
-        ("pso-cpf", {"lower": [0, 0], "upper": [1, 0]}, "lower must be < upper"),
-        ("pso-pf", {"lower": [0, 0], "upper": None}, "together"),
-        ("pso-pf", {"omega_min": 0.95}, "omega_min"),
-        ("pso-pf", {"t_max": 0}, "t_max"),
-        ("igwo-pf", {"a_end": 3.0}, "a_end"),
-        ("igwo-stcpf", {"n_particles": 1.5}, "n_particles"),
-        ("stcpf", {"compiled": "yes"}, "compiled"),
-        ("igwo-stcpf", {"xi": 0.1}, "xi"),
-    ],
-)
+@pytest.mark.parametrize("name,params,word", [
+    ("igwo-stcpf", {"n_particles": 0}, "n_particles"),
+    ("stcpf", {"n_particles": -5}, "n_particles"),
+    ("stckf", {"rho": 0.0}, "rho"),
+    ("igwo-stcpf", {"rho": 1.5}, "rho"),
+    ("stckf", {"beta": 0.9}, "beta"),
+    ("igwo-stcpf", {"t_max": -1}, "t_max"),
+    ("pso-cpf", {"lower": [0, 0], "upper": [1, 0]}, "lower must be < upper"),
+    ("pso-pf", {"lower": [0, 0], "upper": None}, "together"),
+    ("pso-pf", {"omega_min": 0.95}, "omega_min"),
+    ("pso-pf", {"t_max": 0}, "t_max"),
+    ("igwo-pf", {"a_end": 3.0}, "a_end"),
+    ("igwo-stcpf", {"n_particles": 1.5}, "n_particles"),
+    ("stcpf", {"compiled": "yes"}, "compiled"),
+    ("igwo-stcpf", {"xi": 0.1}, "xi"),
+])
 def test_bad_parameters_refused_in_constructor(name, params, word):
     with pytest.raises(ReplayError, match=word):
         make_filter(name, **params)
@@ -381,23 +348,8 @@ def test_bad_parameters_refused_in_constructor(name, params, word):
 
 @pytest.mark.slow
 def test_cli_refuses_bad_parameter_in_one_line():
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "replay.cli",
-            "eval",
-            "sim/auv-sonar",
-            "--filters",
-            "igwo-stcpf",
-            "-p",
-            "igwo-stcpf.rho=1.5",
-            "-o",
-            "/tmp/never",
-        ],
-        capture_output=True,
-        text=True,
-    )
+    r = subprocess.run([sys.executable, "-m", "replay.cli", "eval", "sim/auv-sonar", "--filters", "igwo-stcpf",
+                        "-p", "igwo-stcpf.rho=1.5", "-o", "/tmp/never"], capture_output=True, text=True)
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0 and "rho" in r.stderr
 
@@ -416,49 +368,30 @@ def test_ungm_model_and_simulator():
 # --- short versions of the experiments ---------------------------------------------------------
 @pytest.mark.slow
 def test_short_ungm_experiment():
-    ev = evaluate(
-        "sim/ungm", task="ungm", filters=("gwo-pf", "igwo-pf"), runs=2, seed=0, dataset_params={"q": 1.0, "r": 1.0}
-    )
+    ev = evaluate("sim/ungm", task="ungm", filters=("gwo-pf", "igwo-pf"), runs=2, seed=0,
+                  dataset_params={"q": 1.0, "r": 1.0})
     for r in ev.results:
         assert r.summary["diverged"] == 0 and 0.3 < r.summary["pos_rmse"] < 6.0
 
 
 @pytest.mark.slow
 def test_short_table5_all_five_filters_paired():
-    ev = evaluate(
-        "sim/auv-sonar",
-        task="sonar",
-        filters=("stckf", "pf", "pso-pf", "pso-cpf", "igwo-stcpf"),
-        runs=1,
-        seed=0,
-        filter_params={
-            "pf": {"n_particles": 100},
-            "igwo-stcpf": {"n_particles": 30, "t_max": 5},
-            "pso-pf": {"n_particles": 30, "t_max": 5},
-            "pso-cpf": {"n_particles": 30, "t_max": 5},
-        },
-    )
+    ev = evaluate("sim/auv-sonar", task="sonar", filters=("stckf", "pf", "pso-pf", "pso-cpf", "igwo-stcpf"),
+                  runs=1, seed=0, filter_params={"pf": {"n_particles": 100},
+                                                 "igwo-stcpf": {"n_particles": 30, "t_max": 5},
+                                                 "pso-pf": {"n_particles": 30, "t_max": 5},
+                                                 "pso-cpf": {"n_particles": 30, "t_max": 5}})
     for r in ev.results:
         assert np.isfinite(r.summary["pos_rmse"]) and r.summary["scored"] == 100
     # the paper's gaps are tens of per cent: far inside one short run's noise, so no ordering is asserted
 
 
-@pytest.mark.skipif(
-    not (BOHAI / "20220822_0_6.csv").exists() and os.environ.get("REPLAY_REQUIRE_SHARED") != "1",
-    reason="Bohai data not found under ../shared/datasets/bohai",
-)
+@pytest.mark.skipif(not (BOHAI / "20220822_0_6.csv").exists() and os.environ.get("REPLAY_REQUIRE_SHARED") != "1",
+                    reason="Bohai data not found under ../shared/datasets/bohai")
 @pytest.mark.slow
 def test_short_bohai_position_experiment():
-    ev = evaluate(
-        "bohai/20220822_0_6",
-        task="position",
-        filters=("stckf", "igwo-stcpf"),
-        runs=1,
-        seed=0,
-        first=150,
-        data_dir=str(BOHAI),
-        filter_params={"igwo-stcpf": {"n_particles": 30, "t_max": 5}},
-    )
+    ev = evaluate("bohai/20220822_0_6", task="position", filters=("stckf", "igwo-stcpf"), runs=1, seed=0,
+                  first=150, data_dir=str(BOHAI), filter_params={"igwo-stcpf": {"n_particles": 30, "t_max": 5}})
     for r in ev.results:
         # R = 2 I3: the raw measurements have 3-D RMSE sqrt(6); any filter must stay near or below it
         assert r.summary["pos_rmse"] < 3.5
@@ -491,16 +424,9 @@ def test_stckf_as_printed_diverges_without_a_repair_and_runs_with_one():
 def test_swarm_filter_with_printed_m_counts_as_divergence_not_a_crash():
     """-p igwo-stcpf.m_form=printed: particles overflow; the swarm's fitness is then not finite, which is
     the run's divergence (it used to fail the elitism assertion and crash replay eval)."""
-    ev = evaluate(
-        "sim/auv-sonar",
-        task="sonar",
-        filters=("igwo-stcpf", "stcpf"),
-        runs=2,
-        filter_params={
-            "igwo-stcpf": {"m_form": "printed", "t_max": 3, "n_particles": 20},
-            "stcpf": {"m_form": "printed", "n_particles": 20},
-        },
-    )
+    ev = evaluate("sim/auv-sonar", task="sonar", filters=("igwo-stcpf", "stcpf"), runs=2,
+                  filter_params={"igwo-stcpf": {"m_form": "printed", "t_max": 3, "n_particles": 20},
+                                 "stcpf": {"m_form": "printed", "n_particles": 20}})
     for r in ev.results:
         assert all(m["diverged"] for m in r.runs), r.name
 
@@ -514,9 +440,8 @@ def test_truth_without_process_noise_keeps_the_sonar_noise():
     b = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3), truth_noise=False)
     m = AUVSonar()
     x = np.asarray(b.meta["initial_state"])
-    truth = np.column_stack(
-        [b.reference["position"].values, b.reference["speed"].values, b.reference["attitude"].values]
-    )
+    truth = np.column_stack([b.reference["position"].values, b.reference["speed"].values,
+                             b.reference["attitude"].values])
     for k in range(len(truth)):
         x = m.f(x, k)
         np.testing.assert_allclose(truth[k, :4], x[:4], atol=1e-9)
@@ -531,14 +456,12 @@ def test_ablation_parameters_change_what_they_say():
     transition prior raises the STCPF's effective sample size; ESS is recorded every step."""
     kw = dict(task="sonar", runs=3, seed=0, dataset_params={"steps": 40})
     ev = evaluate("sim/auv-sonar", filters=("igwo-stcpf",), **kw)
-    obs = evaluate(
-        "sim/auv-sonar", filters=("igwo-stcpf",), filter_params={"igwo-stcpf": {"move_components": "observed"}}, **kw
-    )
+    obs = evaluate("sim/auv-sonar", filters=("igwo-stcpf",), filter_params={"igwo-stcpf": {
+        "move_components": "observed"}}, **kw)
     assert obs.rows[0]["pitch_rmse"] < 0.5 * ev.rows[0]["pitch_rmse"]
     prop = evaluate("sim/auv-sonar", filters=("stcpf",), **kw).results[0]
-    trans = evaluate(
-        "sim/auv-sonar", filters=("stcpf",), filter_params={"stcpf": {"prior_cov": "transition"}}, **kw
-    ).results[0]
+    trans = evaluate("sim/auv-sonar", filters=("stcpf",), filter_params={"stcpf": {"prior_cov": "transition"}},
+                     **kw).results[0]
     for r in (prop, trans):
         for est in r.estimates:
             assert len(est.info["ess"]) == 40 and np.all((est.info["ess"] >= 1 - 1e-9) & (est.info["ess"] <= 100))

@@ -1,5 +1,4 @@
 """The dataset registry: manifests, search order, loading, and no shadowing of `datasets`."""
-
 import os
 import subprocess
 import sys
@@ -23,19 +22,10 @@ SHARED = Path(os.environ.get("REPLAY_SHARED", REPO.parent / "shared"))
 BOHAI = SHARED / "datasets" / "bohai"
 
 LOCAL = ["20220625_0_0", "20220822_0_0", "20220822_0_3", "20220822_0_4", "20220822_0_5", "20220822_0_6"]
-UPSTREAM = [
-    "20210428/1/20210428_1_0.csv",
-    "20220625/0/20220625_0_1.csv",
-    "20220625/0/20220625_0_2.csv",
-    "20220625/1/20220625_1_0.csv",
-    "20220712_0_1.csv",
-    "20220719_6_1.csv",
-    "20220822/0/20220822_0_1.csv",
-    "20220822/0/20220822_0_2.csv",
-    "20220822/0/20220822_0_7.csv",
-    "20220822/0/20220822_0_8.csv",
-    "20230517_0_0.csv",
-]
+UPSTREAM = ["20210428/1/20210428_1_0.csv", "20220625/0/20220625_0_1.csv", "20220625/0/20220625_0_2.csv",
+            "20220625/1/20220625_1_0.csv", "20220712_0_1.csv", "20220719_6_1.csv",
+            "20220822/0/20220822_0_1.csv", "20220822/0/20220822_0_2.csv", "20220822/0/20220822_0_7.csv",
+            "20220822/0/20220822_0_8.csv", "20230517_0_0.csv"]
 # the local six live upstream under <date>/0/
 UPSTREAM += [f"{s[:8]}/0/{s}.csv" for s in LOCAL]
 
@@ -51,11 +41,9 @@ def clean_env(monkeypatch, tmp_path):
 @pytest.fixture
 def fake_adapter(monkeypatch):
     """Replace the adapter lookup with a tiny CSV reader: column `time` -> t."""
-
     def load(path, **options):
         t = np.loadtxt(path, delimiter=",", skiprows=1, usecols=0, ndmin=1)
         return Frame(t, {"x": Channel(t * 2, "m")}, meta={"options": options})
-
     monkeypatch.setattr(registry, "_adapter", lambda name: load)
 
 
@@ -67,7 +55,6 @@ def write_fake(path, n=10):
 
 # ---------------------------------------------------------------- manifests
 
-
 def test_all_bohai_sequences_and_sim_listed():
     known = registry.all_datasets()
     bohai = {i for i in known if i.startswith("bohai/")}
@@ -78,9 +65,8 @@ def test_all_bohai_sequences_and_sim_listed():
         ds = known[ds_id]
         assert ds.id == "bohai/" + Path(ds.file).stem
         assert ds.adapter == "bohai-csv" and ds.kind == "file"
-        assert ds.url == (
-            "https://raw.githubusercontent.com/nature1949/AUV_navigation_dataset/main/" + ds.upstream_path
-        )
+        assert ds.url == ("https://raw.githubusercontent.com/nature1949/AUV_navigation_dataset/main/"
+                          + ds.upstream_path)
         assert ds.upstream_path.endswith(ds.file)
         assert ds.license == "CC0-1.0" and "Electronics" in ds.citation
         assert ds.default_task == "fusion" and ds.description and ds.site
@@ -113,14 +99,8 @@ def test_checksums_registered_for_the_ten_upstream_sums():
 
 def test_rows_match_readme_table():
     rows = {s: registry.get(f"bohai/{s}").rows for s in LOCAL}
-    assert rows == {
-        "20220625_0_0": 8476,
-        "20220822_0_0": 3478,
-        "20220822_0_3": 8500,
-        "20220822_0_4": 7614,
-        "20220822_0_5": 7067,
-        "20220822_0_6": 7509,
-    }
+    assert rows == {"20220625_0_0": 8476, "20220822_0_0": 3478, "20220822_0_3": 8500,
+                    "20220822_0_4": 7614, "20220822_0_5": 7067, "20220822_0_6": 7509}
 
 
 def test_unknown_id_suggests_close_match():
@@ -146,15 +126,10 @@ def test_bad_manifests_are_rejected(tmp_path):
 
 # ---------------------------------------------------------------- locating
 
-
 def test_locate_flat_upstream_and_prefixed_layouts(clean_env):
     ds = registry.get("bohai/20220822_0_7")
-    layouts = {
-        "flat": "20220822_0_7.csv",
-        "upstream": "20220822/0/20220822_0_7.csv",
-        "prefixed": "bohai/20220822_0_7.csv",
-        "prefixed-upstream": "bohai/20220822/0/20220822_0_7.csv",
-    }
+    layouts = {"flat": "20220822_0_7.csv", "upstream": "20220822/0/20220822_0_7.csv",
+               "prefixed": "bohai/20220822_0_7.csv", "prefixed-upstream": "bohai/20220822/0/20220822_0_7.csv"}
     for name, rel in layouts.items():
         root = clean_env / name
         write_fake(root / rel)
@@ -201,7 +176,6 @@ def test_cache_dir_follows_xdg(monkeypatch, tmp_path):
 
 
 # ---------------------------------------------------------------- loading
-
 
 def test_missing_dataset_error_is_one_actionable_line(clean_env):
     (clean_env / "nowhere").mkdir()  # an existing directory without the file (a missing one is refused first)
@@ -281,9 +255,8 @@ def test_file_dataset_options_are_checked_against_the_adapter(clean_env):
     write_fake(clean_env / "d" / "20220822_0_7.csv", n=5)
     with pytest.raises(ReplayError) as err:
         registry.load_frame("bohai/20220822_0_7", data_dir=clean_env / "d", jump=3.0)
-    assert str(err.value) == (
-        "adapter bohai-csv: unknown option 'jump' (known: jump_threshold, max_speed, gps_tolerance, gap_factor)"
-    )
+    assert str(err.value) == ("adapter bohai-csv: unknown option 'jump' "
+                              "(known: jump_threshold, max_speed, gps_tolerance, gap_factor)")
     assert registry.check_params("bohai/20220822_0_7", {"max_speed": 4.0}) == {"max_speed": 4.0}
     with pytest.raises(ReplayError, match=r"^adapter lake: unknown option 'mapping' \(known: max_gap\)$"):
         registry.check_params(str(clean_env / "x.csv"), {"mapping": "m.toml"}, adapter="lake")
@@ -299,7 +272,6 @@ def test_load_real_bohai_file_if_adapter_available(clean_env):
 
 
 # ---------------------------------------------------------------- the datasets/ folder
-
 
 def test_datasets_folder_holds_no_python():
     folder = REPO / "datasets"
@@ -318,6 +290,7 @@ def test_datasets_folder_never_shadows_a_real_datasets_package(tmp_path):
 
 
 # ---------------------------------------------------------------- CLI
+
 
 
 def test_cli_list(clean_env):
