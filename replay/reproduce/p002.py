@@ -8,99 +8,138 @@ also needs its ``${key}`` in ``replay/papers/002.md``). Each row is a filter of 
 
 import json
 import os
+from collections import Counter
 from functools import partial
 
 import numpy as np
 
 from replay.campaign.longest import pool, run_longest_first, workers
 from replay.data import registry
-from replay.filters.p002 import swarm_kernels
+from replay.filters.p002 import pso, swarm_kernels
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
+from replay.scoring.metrics import share_above
 from replay.util.portable import write_document
 
 from . import spec
 from .render import anchor_tag, render, table
 from .rules import Comparison, decide, per_run
-from .tables import Stopwatch, footer
+from .tables import Stopwatch, footer, mean_ci
 
-TOP = dict.fromkeys("grid columns runs quick bounds sequences tune_seq no_sequences exp evidence claim".split(), ...)
-EXP = dict(key=..., task=..., rows=..., dataset="", dp={}, cols=["pos_rmse"], tune=[], runs="mc", first=None)
-EXP |= dict(per_sequence=False, last=[])  # the keys of 002.toml's tables and their defaults (...: required)
-ROW, EVIDENCE = dict(label=..., filter="", params={}, paper=[], dp={}, tp={}), dict(exps=..., compare=...)
-CMP = dict(a=..., b="", target=None, col="pos_rmse", lost=False, gap=None)
-pm = lambda r, c: "n/a" if r.get(c) is None or not np.isfinite(r[c]) else f"{r[c]:.3f} ± {r[f'{c}_ci95']:.3f}"
-name = lambda a: a["label"] + (f" (q × {a['params']['q_scale']:g})" if "q_scale" in a["params"] else "")
-paper = lambda a: " / ".join(f"{x:g}" for x in a["paper"]) or "—"
-WHICH = "Commands ({}: the one that gives the row exactly):\n\n"
-cmds = lambda cs, what="column 'command'": WHICH.format(what) + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
+# The keys of each kind of entry of 002.toml ("key?": optional; [defaults] may give an optional key's default).
+KEYS = dict(
+    exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?",
+    row="label filter? params? paper? dp? tp?",
+    evidence="exps compare",
+    compare="a b? target? col? lost?",
+)
+TOP = "grid columns runs quick above sequences tune_seq no_sequences commands defaults exp evidence claim"
+SWARM = ("gwo", "pso", "stcpf")  # filters whose evaluate cost is ~5 particle filters'
 
 
-def checked(entry, keys: dict, where: str) -> dict:
-    """``entry`` with the defaults of ``keys``; an unknown or a missing key is refused naming the entry (generic)."""
-    bad = [f"unknown {k!r}" for k in entry if k not in keys] if isinstance(entry, dict) else ["not a table"]
-    if bad := bad or [f"missing {k!r}" for k, v in keys.items() if v is ... and k not in entry]:
-        raise ValueError(f"002.toml: {where}: {', '.join(bad)}")
-    return {**keys, **entry}
+def entry(t: dict, raw: dict, kind: str, where: str) -> dict:
+    """``raw`` with the [defaults] of its ``kind``; an unknown or a missing key is refused naming the entry."""
+    return t["defaults"].get(kind, {}) | spec.check(raw, KEYS[kind], f"002.toml: {where}")
 
 
 def load() -> dict:
     """``replay/papers/002.toml``, every key checked; a row's filter defaults to its label, "null" is None."""
-    t, null = checked(spec.load("002"), TOP, "top level"), lambda v: None if v == "null" else v
-    row = lambda r: r | {"filter": r["filter"] or r["label"], "params": {k: null(v) for k, v in r["params"].items()}}
-    rows = lambda e, p: [row(checked(r, ROW, f"exp {e['key']!r} {p} {j + 1}")) for j, r in enumerate(e[p])]
+    t = spec.check(spec.load("002"), TOP, "002.toml: top level")
+    for kind, d in spec.check(t["defaults"], "exp? row? compare?", "002.toml: [defaults]").items():
+        spec.check(d, " ".join(k for k in KEYS[kind].split() if k.endswith("?")), f"002.toml: [defaults] {kind}")
     for i, raw in enumerate(t["exp"]):
-        e = t["exp"][i] = checked(raw, EXP, f"exp {i + 1}")
-        e |= {"rows": rows(e, "rows"), "last": rows(e, "last")}
+        e = t["exp"][i] = entry(t, raw, "exp", f"exp {i + 1}")
+        for part in ("rows", "last"):
+            e[part] = [row(entry(t, r, "row", f"exp {e['key']!r} {part} {j + 1}")) for j, r in enumerate(e[part])]
         if e["runs"] not in t["runs"] or set(e["cols"]) - set(t["columns"]):
             raise ValueError(f"002.toml: exp {e['key']!r}: runs or cols not among those the file's header declares")
+    declared = {e["key"]: e for e in t["exp"]}
     for k, raw in t["evidence"].items():
-        ev = t["evidence"][k] = checked(raw, EVIDENCE, f"evidence {k!r}")
-        ev["compare"] = [checked(c, CMP, f"evidence {k!r}") for c in ev["compare"]]
-        bad = [x for x in ev["exps"] if x.removesuffix(":last") not in {e["key"] for e in t["exp"]}]
-        if bad := bad + [c["a"] for c in ev["compare"] if not c["b"] and c["target"] is None]:
-            raise ValueError(f"002.toml: evidence {k!r}: unknown exps or a comparison without b or target {bad}")
+        ev = t["evidence"][k] = entry(t, raw, "evidence", f"evidence {k!r}")
+        ev["compare"] = [entry(t, c, "compare", f"evidence {k!r}") for c in ev["compare"]]
+        exps = [declared.get(x.removesuffix(":last")) for x in ev["exps"]]
+        bad = [c["a"] for c in ev["compare"] if not c["b"] and "target" not in c]
+        bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if not paper(e, c)]
+        if None in exps or bad:
+            raise ValueError(f"002.toml: evidence {k!r}: unknown exps, or no b, target or paper number for {bad}")
     for c in spec.claims(t, "002.toml"):
         if bad := [k for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k and k not in t["evidence"]]:
             raise ValueError(f"002.toml: claim {c.id!r}: no [evidence] for {bad}")
     return t
 
 
+def row(r: dict) -> dict:
+    """A row with its filter (default: the label) and its parameters ("null" stands for None)."""
+    params = {k: None if v == "null" else v for k, v in r["params"].items()}
+    return r | {"filter": r["filter"] or r["label"], "params": params}
+
+
+def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
+    """The paper's number of the row ``c[arm]`` of experiment ``e`` in the comparison's column (None: not given)."""
+    rows = [r for r in (e["rows"] + e["last"] if e else []) if r["label"] == c[arm]]
+    return dict(zip(e["cols"], rows[0]["paper"])).get(c["col"]) if rows else None
+
+
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
-    """The declared experiments, each ``per_sequence`` one expanded over ``seqs``; ``group``: the declared key."""
-    at = lambda e, s: s and dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
-    return [e | {"group": e["key"]} | (at(e, s) or {}) for e in t["exp"] for s in (seqs if e["per_sequence"] else [""])]
+    """The declared experiments, each ``per_sequence`` one expanded over ``seqs`` as ``<key>-<last 3 characters of
+    the sequence>`` (the rows ``last`` added on the last sequence); ``group``: the declared key."""
+    out = []
+    for e in t["exp"]:
+        if not e["per_sequence"]:
+            out.append(e | {"group": e["key"]})
+        for s in seqs if e["per_sequence"] else []:
+            rows = e["rows"] + e["last"] * (s == seqs[-1])
+            out.append(e | dict(group=e["key"], key=f"{e['key']}-{s[-3:]}", dataset=s, rows=rows))
+    return out
 
 
-def compute(bounds: dict, job) -> dict:
-    """One evaluate call (in a worker): its command; per row the summary, lost flags, z_low (§4.1), per-run values."""
+def calls(e: dict, s: dict) -> list[tuple]:
+    """Experiment ``e``'s evaluate calls as (its key, ((label, filter, params), ...), evaluate's arguments): one per
+    distinct dataset and task parameters and per repeat of a filter, in row order (evaluate adds the measurements)."""
+    rows, seen = {}, Counter()  # (parameters as JSON, n-th call with them) -> rows; (parameters, filter) -> count
+    for a in (a for a in e["rows"] if a["filter"] != "measurements"):
+        p = json.dumps([e["dp"] | a["dp"], a["tp"]], sort_keys=True)
+        seen[p, a["filter"]] += 1
+        rows.setdefault((p, seen[p, a["filter"]]), []).append((a["label"], a["filter"], a["params"]))
+    kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e.get("first"))
+    kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
+    dp_tp = {key: json.loads(key[0]) for key in rows}
+    return [
+        (e["key"], tuple(r), kw | dict(dataset_params=dp_tp[k][0] or None, task_params=dp_tp[k][1] or None))
+        for k, r in rows.items()
+    ]
+
+
+def cost(job: tuple) -> float:
+    """An evaluate call's relative cost: runs × samples used (100 when all) × filters, a swarm filter as 5."""
+    _, rows, kw = job
+    return kw["runs"] * (kw["first"] or 100) * sum(5 if any(s in f for s in SWARM) else 1 for _, f, _ in rows)
+
+
+def compute(above: float, job: tuple) -> dict:
+    """One evaluate call (in a worker): its command and per row the summary, the lost flags, the per-run values of
+    every ``*_rmse`` column and ``above2`` (share of steps with a 3-D error above ``above``), and ``z_low``: the
+    share of true states under the PSO box's depth bound (002 §4.1), averaged over the runs."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
-    z = [float(np.mean(t[:, 2] < bounds["depth"])) for t in ev.truths if t.shape[1] > 2]
+    z = [pso.below_box(t) for t in ev.truths if t.shape[1] > 2]
     for lab, r in ((lab, by[f]) for lab, f, _ in rows + (("raw measurements", "measurements", 0),) if f in by):
         v = {c: per_run(r, c)[0].tolist() for c in r.runs[0] if c.endswith("_rmse")}
-        v["above2"] = [float(np.mean(np.linalg.norm(e["position"], axis=1) > bounds["error"])) for e in r.errors]
+        v["above2"] = [share_above(e["position"], above) for e in r.errors]
         out["rows"][lab] = dict(row=r.summary, v=v, lost=per_run(r)[1].tolist(), z_low=float(np.mean(z)) if z else None)
     return out
 
 
 def run_all(exps, s: dict, ex) -> dict:
-    """Each experiment's rows in evaluate calls, one per distinct dataset and task parameters and per repeat of a
-    filter, in row order, in worker processes: {exp key: {label: row evidence}, "cmd:<key>": [their commands]}."""
-    todo, E = [], {}  # todo: (experiment key, ((label, filter, params), ...), evaluate's arguments)
-    for e in exps:
-        calls, seen = {}, []  # (parameters as JSON, n-th call with them) -> rows; evaluate adds the measurements
-        for a in (a for a in e["rows"] if a["filter"] != "measurements"):
-            seen.append((json.dumps([e["dp"] | a["dp"], a["tp"]], sort_keys=True), a["filter"]))
-            calls.setdefault((seen[-1][0], seen.count(seen[-1]) - 1), []).append((a["label"], a["filter"], a["params"]))
-        kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e["first"])
-        kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
-        for (dp, tp), rows in ((json.loads(key), rows) for (key, _), rows in calls.items()):
-            todo.append((e["key"], tuple(rows), kw | dict(dataset_params=dp or None, task_params=tp or None)))
-    heavy = lambda f: 5 if "gwo" in f or "pso" in f or "stcpf" in f else 1  # cost: a swarm filter ~5 PFs
-    cost = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
-    done = dict(run_longest_first(partial(compute, s["bounds"]), todo, cost, [j[0] for j in todo], ex, s["quiet"]))
+    """Every evaluate call of ``exps`` in worker processes, the costliest first: {experiment key: {label: row
+    evidence, with ``cmd`` the number of its call}, "cmd:<key>": [the commands of its calls]}."""
+    todo, E = [job for e in exps for job in calls(e, s)], {}
+    done = dict(
+        run_longest_first(
+            partial(compute, s["above"]), todo, [cost(j) for j in todo], [j[0] for j in todo], ex, s["quiet"]
+        )
+    )
     for i, (k, _, _) in enumerate(todo):
         (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
         E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
@@ -110,27 +149,58 @@ def run_all(exps, s: dict, ex) -> dict:
 def variants(e: dict, qs: dict, label: str) -> list[dict]:
     """The first row of each filter of ``qs`` (filter -> q_scale values) with ``q_scale`` set, relabelled."""
     base = {f: next(r for r in e["rows"] if r["filter"] == f) for f in qs}
-    new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])
+    new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])  # noqa: E731
     return [base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}} for f in qs for q in qs[f]]
 
 
-def comparison(rows: dict, k: str, c: dict) -> Comparison:
-    """A declared comparison in experiment ``k``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
-    a, b, col, who = rows[c["a"]], rows.get(c["b"]), c["col"], f"{k}: {c['a']}"
-    if c["target"] is not None:
-        return Comparison(f"{who} {col}", a["v"][col], lost_a=a["lost"], target=c["target"], test="interval")
+def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
+    """{experiment key: {filter: the first ``grid`` q_scale of least mean position RMSE}} for each experiment that
+    tunes: a simulation on the seed + 1 (runs "tune"), the Bohai sequence ``tune_seq`` at its rate."""
+    grids = [e for e in exps if e["tune"] and (e["runs"] == "mc" or e["dataset"] == t["tune_seq"])]
+    grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
+    grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
+    G = run_all(grids, s, ex)
+
+    def mean_rmse(g: dict, f: str, q: float) -> float:
+        return np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
+
+    return {g["key"][:-5]: {f: min(t["grid"], key=partial(mean_rmse, g, f)) for f in g["tune"]} for g in grids}
+
+
+def comparison(e: dict, rows: dict, c: dict) -> Comparison:
+    """A declared comparison in experiment ``e``: ``target`` (a number, or "paper": the paper's) in ``a``'s
+    interval; fewer lost (McNemar; the paper's number for ``b`` beside ``a``'s mean); or a < b."""
+    k, a, b, col = e["key"], rows[c["a"]], rows.get(c["b"]), c["col"]
+    if "target" in c:
+        target = paper(e, c) if c["target"] == "paper" else c["target"]
+        return Comparison(f"{k}: {c['a']} {col}", a["v"][col], lost_a=a["lost"], target=target, test="interval")
     if c["lost"]:
-        m = np.mean(a["v"]["pos_rmse"])
-        gap = f" (residual gap: {c['a']} {m:.3f} vs paper {c['gap']}, {m / c['gap']:.1f}×)" if c["gap"] else ""
+        m, p = np.mean(a["v"]["pos_rmse"]), paper(e, c, "b")
+        gap = f" (residual gap: {c['a']} {m:.3f} vs paper {p}, {m / p:.1f}×)" if p else ""
         return Comparison(f"{k}: lost, {c['a']} vs {c['b']}{gap}", (), (), a["lost"], b["lost"], test="mcnemar")
-    return Comparison(f"{who} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
+    return Comparison(f"{k}: {c['a']} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
 
 
 def evidence(t: dict, exps, E: dict) -> dict:
-    """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` (the TOML's comments)."""
-    pick = lambda x: [e["key"] for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]
-    compare = lambda v: [comparison(E[e], e, c) for x in v["exps"] for e in pick(x) for c in v["compare"]]
+    """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` ("<key>:last": the last)."""
+    pick = lambda x: [e for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]  # noqa: E731
+    compare = lambda v: [comparison(e, E[e["key"]], c) for x in v["exps"] for e in pick(x) for c in v["compare"]]  # noqa: E731
     return {k: compare(v) for k, v in t["evidence"].items()}
+
+
+def name(a: dict) -> str:
+    """A row's name in a table: its label, with the process-noise scale of a tuned row."""
+    return a["label"] + (f" (q × {a['params']['q_scale']:g})" if "q_scale" in a["params"] else "")
+
+
+def numbers(a: dict) -> str:
+    """A row's cell "paper": the paper's numbers, one per column."""
+    return " / ".join(f"{x:g}" for x in a["paper"]) or "—"
+
+
+def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
+    """The numbered commands of a table's evaluate calls, under the heading that names where they are cited."""
+    return t["commands"].format(what) + "\n\n" + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
 
 
 def exp_table(ex: list[dict], E: dict, t: dict) -> str:
@@ -140,28 +210,32 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
         w, p, n = r["row"], a["paper"], len(r["lost"])
         ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
         med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
-        out.append([name(a), paper(a), *(pm(w, c) for c in e["cols"]), ratio, f"{med:.3f}", f"{sum(r['lost'])}/{n}"])
-        out[-1] += [f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
+        out.append([name(a), numbers(a), *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
+        out[-1] += [f"{sum(r['lost'])}/{n}", f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
     head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
     tab = table(head + ["µs/step", "command"], out)
-    return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{cmds(E['cmd:' + e['key']])}"
+    return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{command_list(t, E['cmd:' + e['key']])}"
 
 
 def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
     """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
     rows, off = {name(a): a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
-    at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
-    cell = lambda i, r: f"{pm(r['row'], 'pos_rmse')} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
-    body = [[k, paper(a), *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
+
+    def cell(i: int, e: dict, a: dict) -> str:
+        r = E[e["key"]].get(a["label"]) if a in e["rows"] else None
+        return f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
+
+    body = [[k, numbers(a), *(cell(i, e, a) for i, e in enumerate(ex))] for k, a in rows.items()]
     head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
-    return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{cmds(cs, '[n]')}"
+    return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{command_list(t, cs, '[n]')}"
 
 
 def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
     """The verdicts (a claim whose comparisons draw on no experiment is not run) and the template's fields."""
-    ev, groups = evidence(t, exps, E), {d["key"]: [e for e in exps if e["group"] == d["key"]] for d in t["exp"]}
-    tab = lambda d, ex: (sequence_table if d["per_sequence"] else exp_table)(ex, E, t) if ex else t["no_sequences"]
-    fields = {d["key"]: tab(d, groups[d["key"]]) for d in t["exp"]}
+    ev, fields = evidence(t, exps, E), {}
+    for d in t["exp"]:
+        ex = [e for e in exps if e["group"] == d["key"]]
+        fields[d["key"]] = (sequence_table if d["per_sequence"] else exp_table)(ex, E, t) if ex else t["no_sequences"]
     fields |= {"tune_seq": t["tune_seq"], "grid": ", ".join(f"{q:g}" for q in t["grid"])}
     fields |= {"seqs": ", ".join(seqs) or "none found", "z_low": f"{100 * E['t5']['stckf']['z_low']:.1f} %"}
     fields["load"] = ", ".join(f"{x:.1f}" for x in os.getloadavg())  # the machine's load, printed beside the times
@@ -173,29 +247,24 @@ def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
-    """Tune the baselines (each ``tune`` filter's first ``grid`` value of least mean position RMSE on the data the
-    TOML's header names), compute every experiment with the tuned rows, decide the claims, write the document."""
+    """Tune the baselines (:func:`tune`), compute every experiment with the tuned rows (``<row>, q tuned``; none on
+    the tuning sequence), decide the claims, write the document."""
     watch, t = Stopwatch(), load()
-    seqs = [i for i in sorted(registry.all_datasets()) if i.startswith(t["sequences"]) and registry.locate(i, data_dir)]
-    n = t["quick"] if quick else t["runs"]
+    seqs, n = registry.local_ids(t["sequences"], data_dir), t["quick"] if quick else t["runs"]
     mc, bohai = runs or n["mc"], n["bohai"] if quick else max(n["bohai"], runs or n["bohai"])
-    s = dict(seed=seed, data_dir=data_dir, quiet=quiet, mc=mc, tune=max(2, mc // 5), bohai=bohai, bounds=t["bounds"])
+    s = dict(seed=seed, data_dir=data_dir, quiet=quiet, mc=mc, tune=max(2, mc // 5), bohai=bohai, above=t["above"])
     exps = experiments(t, seqs[-n["sequences"] :] if quick else seqs)
-    grids = [e for e in exps if e["tune"] and (e["runs"] == "mc" or e["dataset"] == t["tune_seq"])]
-    grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
-    grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
-    on = lambda e: e["key"] if e["runs"] == "mc" else f"{e['group']}-{t['tune_seq'][-3:]}"  # where e's q is tuned
     with pool(workers()) as ex:
-        G = run_all(grids, s, ex)
-        rmse = lambda g, f, q: np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
-        chosen = {g["key"][:-5]: {f: min(t["grid"], key=partial(rmse, g, f)) for f in g["tune"]} for g in grids}
+        chosen = tune(t, exps, s, ex)
         for e in (e for e in exps if e["dataset"] != t["tune_seq"]):
-            e["rows"] = e["rows"] + variants(e, {f: (q,) for f, q in chosen.get(on(e), {}).items()}, "{base}, q tuned")
+            tuned = chosen.get(e["key"] if e["runs"] == "mc" else f"{e['group']}-{t['tune_seq'][-3:]}", {})
+            e["rows"] = e["rows"] + variants(e, {f: (q,) for f, q in tuned.items()}, "{base}, q tuned")
         E = run_all(exps, s, ex)
     cmd = f"replay reproduce 002{f' --runs {runs}' if runs else ''}{' --quick' if quick else ''} --seed {seed}"
     cmd += " --data-dir ../shared/datasets/bohai" if data_dir else ""
-    text = document(t, exps, E, chosen, seqs, seed) + footer(cmd, watch.seconds)
-    path = write_document(doc or "docs/reproduction/002.md", text)
+    path = write_document(
+        doc or "docs/reproduction/002.md", document(t, exps, E, chosen, seqs, seed) + footer(cmd, watch.seconds)
+    )
     if not quiet:
         print(f"wrote {path} ({watch.seconds:.0f} s)")
     return path
