@@ -27,14 +27,10 @@ from .rules import Comparison, decide, per_run
 from .tables import Stopwatch, footer, mean_ci
 
 # The keys of each kind of entry of 002.toml ("key?": optional; [defaults] may give an optional key's default).
-KEYS = dict(
-    exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?",
-    row="label filter? params? paper? dp? tp?",
-    evidence="exps compare",
-    compare="a b? target? col? lost?",
-)
+KEYS = dict(exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?", evidence="exps compare")
+KEYS |= dict(row="label filter? params? paper? dp? tp?", compare="a b? target? col? lost?")
 TOP = "grid columns runs quick above sequences tune_seq no_sequences commands defaults exp evidence claim"
-SWARM = ("gwo", "pso", "stcpf")  # filters whose evaluate cost is ~5 particle filters'
+SWARM = ("gwo", "pso", "stcpf")  # filters whose evaluate call costs about 5 particle filters'
 
 
 def entry(t: dict, raw: dict, kind: str, where: str) -> dict:
@@ -69,9 +65,11 @@ def load() -> dict:
 
 
 def row(r: dict) -> dict:
-    """A row with its filter (default: the label) and its parameters ("null" stands for None)."""
+    """A row with its filter (default: the label), its parameters ("null": None) and its ``name`` in the tables
+    (the label, with the process-noise scale ``q_scale`` when it sets one)."""
     params = {k: None if v == "null" else v for k, v in r["params"].items()}
-    return r | {"filter": r["filter"] or r["label"], "params": params}
+    q = f" (q × {params['q_scale']:g})" if "q_scale" in params else ""
+    return r | {"filter": r["filter"] or r["label"], "params": params, "name": r["label"] + q}
 
 
 def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
@@ -81,33 +79,28 @@ def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
 
 
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
-    """The declared experiments, each ``per_sequence`` one expanded over ``seqs`` as ``<key>-<last 3 characters of
-    the sequence>`` (the rows ``last`` added on the last sequence); ``group``: the declared key."""
+    """The declared experiments, each ``per_sequence`` one as ``<key>-<last 3 characters>`` on each of ``seqs`` (the
+    rows ``last`` added on the last); ``group``: the declared key."""
     out = []
     for e in t["exp"]:
-        if not e["per_sequence"]:
-            out.append(e | {"group": e["key"]})
-        for s in seqs if e["per_sequence"] else []:
-            rows = e["rows"] + e["last"] * (s == seqs[-1])
-            out.append(e | dict(group=e["key"], key=f"{e['key']}-{s[-3:]}", dataset=s, rows=rows))
+        for s in seqs if e["per_sequence"] else [""]:
+            at = s and dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
+            out.append(e | {"group": e["key"]} | (at or {}))
     return out
 
 
 def calls(e: dict, s: dict) -> list[tuple]:
-    """Experiment ``e``'s evaluate calls as (its key, ((label, filter, params), ...), evaluate's arguments): one per
-    distinct dataset and task parameters and per repeat of a filter, in row order (evaluate adds the measurements)."""
-    rows, seen = {}, Counter()  # (parameters as JSON, n-th call with them) -> rows; (parameters, filter) -> count
-    for a in (a for a in e["rows"] if a["filter"] != "measurements"):
-        p = json.dumps([e["dp"] | a["dp"], a["tp"]], sort_keys=True)
-        seen[p, a["filter"]] += 1
-        rows.setdefault((p, seen[p, a["filter"]]), []).append((a["label"], a["filter"], a["params"]))
+    """Experiment ``e``'s evaluate calls (key, ((label, filter, params), ...), evaluate's arguments): one per distinct
+    dataset and task parameters and per repeat of a filter, in row order (evaluate adds the raw measurements)."""
     kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e.get("first"))
     kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
-    dp_tp = {key: json.loads(key[0]) for key in rows}
-    return [
-        (e["key"], tuple(r), kw | dict(dataset_params=dp_tp[k][0] or None, task_params=dp_tp[k][1] or None))
-        for k, r in rows.items()
-    ]
+    out, seen = {}, Counter()  # (parameters, n-th use of a filter with them) -> (evaluate's arguments, rows)
+    for a in (a for a in e["rows"] if a["filter"] != "measurements"):
+        p = dict(dataset_params=e["dp"] | a["dp"] or None, task_params=a["tp"] or None)
+        use = (json.dumps(p, sort_keys=True), a["filter"])
+        seen[use] += 1
+        out.setdefault((use[0], seen[use]), (kw | p, []))[1].append((a["label"], a["filter"], a["params"]))
+    return [(e["key"], tuple(rows), args) for args, rows in out.values()]
 
 
 def cost(job: tuple) -> float:
@@ -118,7 +111,7 @@ def cost(job: tuple) -> float:
 
 def compute(above: float, job: tuple) -> dict:
     """One evaluate call (in a worker): its command and per row the summary, the lost flags, the per-run values of
-    every ``*_rmse`` column and ``above2`` (share of steps with a 3-D error above ``above``), and ``z_low``: the
+    the ``*_rmse`` columns and ``above2`` (share of steps with a 3-D error above ``above``), and ``z_low``: the
     share of true states under the PSO box's depth bound (002 §4.1), averaged over the runs."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
@@ -135,11 +128,8 @@ def run_all(exps, s: dict, ex) -> dict:
     """Every evaluate call of ``exps`` in worker processes, the costliest first: {experiment key: {label: row
     evidence, with ``cmd`` the number of its call}, "cmd:<key>": [the commands of its calls]}."""
     todo, E = [job for e in exps for job in calls(e, s)], {}
-    done = dict(
-        run_longest_first(
-            partial(compute, s["above"]), todo, [cost(j) for j in todo], [j[0] for j in todo], ex, s["quiet"]
-        )
-    )
+    costs, labels = [cost(j) for j in todo], [j[0] for j in todo]
+    done = dict(run_longest_first(partial(compute, s["above"]), todo, costs, labels, ex, s["quiet"]))
     for i, (k, _, _) in enumerate(todo):
         (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
         E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
@@ -149,8 +139,8 @@ def run_all(exps, s: dict, ex) -> dict:
 def variants(e: dict, qs: dict, label: str) -> list[dict]:
     """The first row of each filter of ``qs`` (filter -> q_scale values) with ``q_scale`` set, relabelled."""
     base = {f: next(r for r in e["rows"] if r["filter"] == f) for f in qs}
-    new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])  # noqa: E731
-    return [base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}} for f in qs for q in qs[f]]
+    new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])
+    return [row(base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}}) for f in qs for q in qs[f]]
 
 
 def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
@@ -160,11 +150,8 @@ def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
     grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
     grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
     G = run_all(grids, s, ex)
-
-    def mean_rmse(g: dict, f: str, q: float) -> float:
-        return np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
-
-    return {g["key"][:-5]: {f: min(t["grid"], key=partial(mean_rmse, g, f)) for f in g["tune"]} for g in grids}
+    rmse = lambda g, f, q: np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
+    return {g["key"][:-5]: {f: min(t["grid"], key=partial(rmse, g, f)) for f in g["tune"]} for g in grids}
 
 
 def comparison(e: dict, rows: dict, c: dict) -> Comparison:
@@ -183,24 +170,9 @@ def comparison(e: dict, rows: dict, c: dict) -> Comparison:
 
 def evidence(t: dict, exps, E: dict) -> dict:
     """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` ("<key>:last": the last)."""
-    pick = lambda x: [e for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]  # noqa: E731
-    compare = lambda v: [comparison(e, E[e["key"]], c) for x in v["exps"] for e in pick(x) for c in v["compare"]]  # noqa: E731
+    pick = lambda x: [e for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]
+    compare = lambda v: [comparison(e, E[e["key"]], c) for x in v["exps"] for e in pick(x) for c in v["compare"]]
     return {k: compare(v) for k, v in t["evidence"].items()}
-
-
-def name(a: dict) -> str:
-    """A row's name in a table: its label, with the process-noise scale of a tuned row."""
-    return a["label"] + (f" (q × {a['params']['q_scale']:g})" if "q_scale" in a["params"] else "")
-
-
-def numbers(a: dict) -> str:
-    """A row's cell "paper": the paper's numbers, one per column."""
-    return " / ".join(f"{x:g}" for x in a["paper"]) or "—"
-
-
-def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
-    """The numbered commands of a table's evaluate calls, under the heading that names where they are cited."""
-    return t["commands"].format(what) + "\n\n" + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
 
 
 def exp_table(ex: list[dict], E: dict, t: dict) -> str:
@@ -210,7 +182,7 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
         w, p, n = r["row"], a["paper"], len(r["lost"])
         ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
         med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
-        out.append([name(a), numbers(a), *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
+        out.append([a["name"], numbers(a), *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
         out[-1] += [f"{sum(r['lost'])}/{n}", f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
     head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
     tab = table(head + ["µs/step", "command"], out)
@@ -219,23 +191,29 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
 
 def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
     """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
-    rows, off = {name(a): a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
-
-    def cell(i: int, e: dict, a: dict) -> str:
-        r = E[e["key"]].get(a["label"]) if a in e["rows"] else None
-        return f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
-
-    body = [[k, numbers(a), *(cell(i, e, a) for i, e in enumerate(ex))] for k, a in rows.items()]
+    rows, off = {a["name"]: a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
+    at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
+    cell = lambda i, r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
+    body = [[k, numbers(a), *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
     head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
     return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{command_list(t, cs, '[n]')}"
 
 
+def numbers(a: dict) -> str:
+    """A row's cell "paper": the paper's numbers, one per column."""
+    return " / ".join(f"{x:g}" for x in a["paper"]) or "—"
+
+
+def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
+    """The numbered commands of a table's evaluate calls, under the heading naming where the table cites them."""
+    return t["commands"].format(what) + "\n\n" + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
+
+
 def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
     """The verdicts (a claim whose comparisons draw on no experiment is not run) and the template's fields."""
-    ev, fields = evidence(t, exps, E), {}
-    for d in t["exp"]:
-        ex = [e for e in exps if e["group"] == d["key"]]
-        fields[d["key"]] = (sequence_table if d["per_sequence"] else exp_table)(ex, E, t) if ex else t["no_sequences"]
+    ev, groups = evidence(t, exps, E), {d["key"]: [e for e in exps if e["group"] == d["key"]] for d in t["exp"]}
+    tab = lambda d, ex: (sequence_table if d["per_sequence"] else exp_table)(ex, E, t) if ex else t["no_sequences"]
+    fields = {d["key"]: tab(d, groups[d["key"]]) for d in t["exp"]}
     fields |= {"tune_seq": t["tune_seq"], "grid": ", ".join(f"{q:g}" for q in t["grid"])}
     fields |= {"seqs": ", ".join(seqs) or "none found", "z_low": f"{100 * E['t5']['stckf']['z_low']:.1f} %"}
     fields["load"] = ", ".join(f"{x:.1f}" for x in os.getloadavg())  # the machine's load, printed beside the times
@@ -262,9 +240,8 @@ def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
         E = run_all(exps, s, ex)
     cmd = f"replay reproduce 002{f' --runs {runs}' if runs else ''}{' --quick' if quick else ''} --seed {seed}"
     cmd += " --data-dir ../shared/datasets/bohai" if data_dir else ""
-    path = write_document(
-        doc or "docs/reproduction/002.md", document(t, exps, E, chosen, seqs, seed) + footer(cmd, watch.seconds)
-    )
+    text = document(t, exps, E, chosen, seqs, seed) + footer(cmd, watch.seconds)
+    path = write_document(doc or "docs/reproduction/002.md", text)
     if not quiet:
         print(f"wrote {path} ({watch.seconds:.0f} s)")
     return path
