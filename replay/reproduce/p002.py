@@ -30,29 +30,24 @@ from .tables import Stopwatch, footer, mean_ci
 KEYS = dict(exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?", evidence="exps compare")
 KEYS |= dict(row="label filter? params? paper? dp? tp?", compare="a b? target? col? lost?")
 TOP = "grid columns runs quick above sequences tune_seq no_sequences commands defaults exp evidence claim"
-SWARM = ("gwo", "pso", "stcpf")  # filters whose evaluate call costs about 5 particle filters'
-
-
-def entry(t: dict, raw: dict, kind: str, where: str) -> dict:
-    """``raw`` with the [defaults] of its ``kind``; an unknown or a missing key is refused naming the entry."""
-    return t["defaults"].get(kind, {}) | spec.check(raw, KEYS[kind], f"002.toml: {where}")
 
 
 def load() -> dict:
-    """``replay/papers/002.toml``, every key checked; a row's filter defaults to its label, "null" is None."""
+    """``replay/papers/002.toml``, every key checked (an entry gets the [defaults] of its kind), the rows completed."""
     t = spec.check(spec.load("002"), TOP, "002.toml: top level")
+    entry = lambda raw, kind, where: t["defaults"].get(kind, {}) | spec.check(raw, KEYS[kind], f"002.toml: {where}")
     for kind, d in spec.check(t["defaults"], "exp? row? compare?", "002.toml: [defaults]").items():
         spec.check(d, " ".join(k for k in KEYS[kind].split() if k.endswith("?")), f"002.toml: [defaults] {kind}")
     for i, raw in enumerate(t["exp"]):
-        e = t["exp"][i] = entry(t, raw, "exp", f"exp {i + 1}")
+        e = t["exp"][i] = entry(raw, "exp", f"exp {i + 1}")
         for part in ("rows", "last"):
-            e[part] = [row(entry(t, r, "row", f"exp {e['key']!r} {part} {j + 1}")) for j, r in enumerate(e[part])]
+            e[part] = [row(entry(r, "row", f"exp {e['key']!r} {part} {j + 1}")) for j, r in enumerate(e[part])]
         if e["runs"] not in t["runs"] or set(e["cols"]) - set(t["columns"]):
             raise ValueError(f"002.toml: exp {e['key']!r}: runs or cols not among those the file's header declares")
     declared = {e["key"]: e for e in t["exp"]}
     for k, raw in t["evidence"].items():
-        ev = t["evidence"][k] = entry(t, raw, "evidence", f"evidence {k!r}")
-        ev["compare"] = [entry(t, c, "compare", f"evidence {k!r}") for c in ev["compare"]]
+        ev = t["evidence"][k] = entry(raw, "evidence", f"evidence {k!r}")
+        ev["compare"] = [entry(c, "compare", f"evidence {k!r}") for c in ev["compare"]]
         exps = [declared.get(x.removesuffix(":last")) for x in ev["exps"]]
         bad = [c["a"] for c in ev["compare"] if not c["b"] and "target" not in c]
         bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if not paper(e, c)]
@@ -65,11 +60,12 @@ def load() -> dict:
 
 
 def row(r: dict) -> dict:
-    """A row with its filter (default: the label), its parameters ("null": None) and its ``name`` in the tables
-    (the label, with the process-noise scale ``q_scale`` when it sets one)."""
+    """A row with its filter (default: the label), its parameters ("null": None) and its cells ``name`` (with the
+    ``q_scale`` it sets) and ``numbers`` (the paper's, one per column) in the tables."""
     params = {k: None if v == "null" else v for k, v in r["params"].items()}
-    q = f" (q × {params['q_scale']:g})" if "q_scale" in params else ""
-    return r | {"filter": r["filter"] or r["label"], "params": params, "name": r["label"] + q}
+    name = r["label"] + (f" (q × {params['q_scale']:g})" if "q_scale" in params else "")
+    numbers = " / ".join(f"{x:g}" for x in r["paper"]) or "—"
+    return r | {"filter": r["filter"] or r["label"], "params": params, "name": name, "numbers": numbers}
 
 
 def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
@@ -79,8 +75,7 @@ def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
 
 
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
-    """The declared experiments, each ``per_sequence`` one as ``<key>-<last 3 characters>`` on each of ``seqs`` (the
-    rows ``last`` added on the last); ``group``: the declared key."""
+    """The experiments, a ``per_sequence`` one on each of ``seqs`` (``group``: the declared key; 002.toml)."""
     out = []
     for e in t["exp"]:
         for s in seqs if e["per_sequence"] else [""]:
@@ -90,8 +85,7 @@ def experiments(t: dict, seqs: list[str]) -> list[dict]:
 
 
 def calls(e: dict, s: dict) -> list[tuple]:
-    """Experiment ``e``'s evaluate calls (key, ((label, filter, params), ...), evaluate's arguments): one per distinct
-    dataset and task parameters and per repeat of a filter, in row order (evaluate adds the raw measurements)."""
+    """Experiment ``e``'s evaluate calls (key, ((label, filter, params), ...), evaluate's arguments) (002.toml)."""
     kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e.get("first"))
     kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
     out, seen = {}, Counter()  # (parameters, n-th use of a filter with them) -> (evaluate's arguments, rows)
@@ -101,12 +95,6 @@ def calls(e: dict, s: dict) -> list[tuple]:
         seen[use] += 1
         out.setdefault((use[0], seen[use]), (kw | p, []))[1].append((a["label"], a["filter"], a["params"]))
     return [(e["key"], tuple(rows), args) for args, rows in out.values()]
-
-
-def cost(job: tuple) -> float:
-    """An evaluate call's relative cost: runs × samples used (100 when all) × filters, a swarm filter as 5."""
-    _, rows, kw = job
-    return kw["runs"] * (kw["first"] or 100) * sum(5 if any(s in f for s in SWARM) else 1 for _, f, _ in rows)
 
 
 def compute(above: float, job: tuple) -> dict:
@@ -125,11 +113,11 @@ def compute(above: float, job: tuple) -> dict:
 
 
 def run_all(exps, s: dict, ex) -> dict:
-    """Every evaluate call of ``exps`` in worker processes, the costliest first: {experiment key: {label: row
-    evidence, with ``cmd`` the number of its call}, "cmd:<key>": [the commands of its calls]}."""
+    """The calls of ``exps``, costliest first: {key: {label: evidence, ``cmd``: its call}, "cmd:<key>": commands}."""
     todo, E = [job for e in exps for job in calls(e, s)], {}
-    costs, labels = [cost(j) for j in todo], [j[0] for j in todo]
-    done = dict(run_longest_first(partial(compute, s["above"]), todo, costs, labels, ex, s["quiet"]))
+    heavy = lambda f: 5 if any(x in f for x in ("gwo", "pso", "stcpf")) else 1  # a swarm filter: about 5 PFs
+    costs = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
+    done = dict(run_longest_first(partial(compute, s["above"]), todo, costs, [j[0] for j in todo], ex, s["quiet"]))
     for i, (k, _, _) in enumerate(todo):
         (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
         E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
@@ -182,7 +170,7 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
         w, p, n = r["row"], a["paper"], len(r["lost"])
         ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
         med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
-        out.append([a["name"], numbers(a), *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
+        out.append([a["name"], a["numbers"], *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
         out[-1] += [f"{sum(r['lost'])}/{n}", f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
     head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
     tab = table(head + ["µs/step", "command"], out)
@@ -194,14 +182,9 @@ def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
     rows, off = {a["name"]: a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
     at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
     cell = lambda i, r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
-    body = [[k, numbers(a), *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
+    body = [[k, a["numbers"], *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
     head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
     return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{command_list(t, cs, '[n]')}"
-
-
-def numbers(a: dict) -> str:
-    """A row's cell "paper": the paper's numbers, one per column."""
-    return " / ".join(f"{x:g}" for x in a["paper"]) or "—"
 
 
 def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
@@ -225,8 +208,7 @@ def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
-    """Tune the baselines (:func:`tune`), compute every experiment with the tuned rows (``<row>, q tuned``; none on
-    the tuning sequence), decide the claims, write the document."""
+    """Tune the baselines, compute every experiment with their tuned rows, decide the claims, write the document."""
     watch, t = Stopwatch(), load()
     seqs, n = registry.local_ids(t["sequences"], data_dir), t["quick"] if quick else t["runs"]
     mc, bohai = runs or n["mc"], n["bohai"] if quick else max(n["bohai"], runs or n["bohai"])
