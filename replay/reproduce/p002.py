@@ -75,7 +75,8 @@ def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
 
 
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
-    """The experiments, a ``per_sequence`` one on each of ``seqs`` (``group``: the declared key; 002.toml)."""
+    """The experiments, a ``per_sequence`` one as ``<key>-<last 3 characters>`` on each of ``seqs`` (the rows
+    ``last`` added on the last); ``group``: the declared key."""
     out = []
     for e in t["exp"]:
         for s in seqs if e["per_sequence"] else [""]:
@@ -85,7 +86,8 @@ def experiments(t: dict, seqs: list[str]) -> list[dict]:
 
 
 def calls(e: dict, s: dict) -> list[tuple]:
-    """Experiment ``e``'s evaluate calls (key, ((label, filter, params), ...), evaluate's arguments) (002.toml)."""
+    """Experiment ``e``'s rows as evaluate calls (key, ((label, filter, params), ...), evaluate's arguments): one per
+    distinct dataset and task parameters and per repeat of a filter, in row order (evaluate adds the measurements)."""
     kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e.get("first"))
     kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
     out, seen = {}, Counter()  # (parameters, n-th use of a filter with them) -> (evaluate's arguments, rows)
