@@ -112,6 +112,8 @@ def test_every_rule_names_evidence_and_equal_arms_decide_nothing():
     assert [c.name for c in ev["b-move"]] == [
         f"{k}-0_6: igwo-stcpf, estimate before the move < igwo-stcpf" for k in ("b10hz", "b1hz")
     ]  # "<key>:last": the last sequence
+    assert [c.target for c in ev["st-box"]] == [1.3373, 0.9998, 1.0090, 0.0790, 0.1117]  # target = "paper": the row's
+    assert ev["b2"][0].target == 0.0 and "vs paper 1.4818, " in ev["pso-box"][0].name  # b's paper number beside a
 
 
 @pytest.fixture
