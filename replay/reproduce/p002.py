@@ -50,7 +50,7 @@ def load() -> dict:
         ev["compare"] = [entry(c, "compare", f"evidence {k!r}") for c in ev["compare"]]
         exps = [declared.get(x.removesuffix(":last")) for x in ev["exps"]]
         bad = [c["a"] for c in ev["compare"] if not c["b"] and "target" not in c]
-        bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if not paper(e, c)]
+        bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if paper(e, c) is None]
         if None in exps or bad:
             raise ValueError(f"002.toml: evidence {k!r}: unknown exps, or no b, target or paper number for {bad}")
     for c in spec.claims(t, "002.toml"):
@@ -60,8 +60,7 @@ def load() -> dict:
 
 
 def row(r: dict) -> dict:
-    """A row with its filter (default: the label), its parameters ("null": None) and its cells ``name`` (with the
-    ``q_scale`` it sets) and ``numbers`` (the paper's, one per column) in the tables."""
+    """A row with its filter (default: the label), parameters ("null": None), table cells ``name`` and ``numbers``."""
     params = {k: None if v == "null" else v for k, v in r["params"].items()}
     name = r["label"] + (f" (q × {params['q_scale']:g})" if "q_scale" in params else "")
     numbers = " / ".join(f"{x:g}" for x in r["paper"]) or "—"
@@ -77,12 +76,9 @@ def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
     """The experiments, a ``per_sequence`` one as ``<key>-<last 3 characters>`` on each of ``seqs`` (the rows
     ``last`` added on the last); ``group``: the declared key."""
-    out = []
-    for e in t["exp"]:
-        for s in seqs if e["per_sequence"] else [""]:
-            at = s and dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
-            out.append(e | {"group": e["key"]} | (at or {}))
-    return out
+    at = lambda e, s: dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
+    on = lambda e: seqs if e["per_sequence"] else [""]  # "": the declared dataset
+    return [e | {"group": e["key"]} | (at(e, s) if s else {}) for e in t["exp"] for s in on(e)]
 
 
 def calls(e: dict, s: dict) -> list[tuple]:
@@ -100,9 +96,8 @@ def calls(e: dict, s: dict) -> list[tuple]:
 
 
 def compute(above: float, job: tuple) -> dict:
-    """One evaluate call (in a worker): its command and per row the summary, the lost flags, the per-run values of
-    the ``*_rmse`` columns and ``above2`` (share of steps with a 3-D error above ``above``), and ``z_low``: the
-    share of true states under the PSO box's depth bound (002 §4.1), averaged over the runs."""
+    """One evaluate call (in a worker): its command; per row the summary, lost flags, per-run ``*_rmse`` and ``above2``
+    (share of steps with a 3-D error above ``above``), ``z_low`` (share of truths under the PSO box's depth bound)."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
@@ -145,8 +140,7 @@ def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
 
 
 def comparison(e: dict, rows: dict, c: dict) -> Comparison:
-    """A declared comparison in experiment ``e``: ``target`` (a number, or "paper": the paper's) in ``a``'s
-    interval; fewer lost (McNemar; the paper's number for ``b`` beside ``a``'s mean); or a < b."""
+    """A declared comparison in experiment ``e``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
     k, a, b, col = e["key"], rows[c["a"]], rows.get(c["b"]), c["col"]
     if "target" in c:
         target = paper(e, c) if c["target"] == "paper" else c["target"]
