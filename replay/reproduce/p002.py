@@ -110,13 +110,14 @@ def compute(above: float, job: tuple) -> dict:
 
 
 def run_all(exps, s: dict, ex) -> dict:
-    """The calls of ``exps``, costliest first: {key: {label: evidence, ``cmd``: its call}, "cmd:<key>": commands}."""
-    todo, E = [job for e in exps for job in calls(e, s)], {}
+    """The calls of ``exps``, costliest first: {key: {label: evidence, ``cmd``: its call's number}, "cmd:<group>": the
+    calls' commands, numbered over the experiment's sequences}."""
+    todo, E, group = [job for e in exps for job in calls(e, s)], {}, {e["key"]: e["group"] for e in exps}
     heavy = lambda f: 5 if any(x in f for x in ("gwo", "pso", "stcpf")) else 1  # a swarm filter: about 5 PFs
     costs = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
     done = dict(run_longest_first(partial(compute, s["above"]), todo, costs, [j[0] for j in todo], ex, s["quiet"]))
     for i, (k, _, _) in enumerate(todo):
-        (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
+        (c := E.setdefault(f"cmd:{group[k]}", [])).append(done[i]["command"])
         E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
     return E
 
@@ -175,12 +176,12 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
 
 def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
     """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
-    rows, off = {a["name"]: a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
+    rows, group = {a["name"]: a for e in ex for a in e["rows"]}, ex[0]["group"]
     at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
-    cell = lambda i, r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
-    body = [[k, a["numbers"], *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
-    head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
-    return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{command_list(t, cs, '[n]')}"
+    cell = lambda r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{r['cmd']}]" if r else "—"
+    body = [[k, a["numbers"], *(cell(at(e, a)) for e in ex)] for k, a in rows.items()]
+    tab = table(["row", "paper", *(e["dataset"] for e in ex)], body)
+    return f"{anchor_tag('#e-' + group)}\n\n{tab}\n\n{command_list(t, E['cmd:' + group], '[n]')}"
 
 
 def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
