@@ -127,6 +127,14 @@ def test_lost_track_needs_a_sustained_stretch_above_the_threshold():
     assert lost_track(np.full(4, np.nan), 20.0, 2) is False
 
 
+def test_share_above_counts_steps_whose_error_norm_exceeds_the_threshold():
+    from replay.scoring.metrics import share_above
+
+    err = np.array([[3.0, 4.0, 0.0], [1.0, 1.0, 1.0], [0.0, 0.0, 2.5], [np.nan, 0.0, 0.0]])  # norms 5, 1.73, 2.5, NaN
+    assert share_above(err, 2.0) == 0.5  # 2 of 4 steps: the NaN step is not above but counts
+    assert share_above(err, 1.0) == 0.75 and share_above(err, 5.0) == 0.0
+
+
 def test_lost_tracks_are_counted_not_reported_as_success():
     """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
     176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""

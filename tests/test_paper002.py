@@ -294,6 +294,14 @@ def test_pso_stays_within_bounds():
     assert pso.ramp(1, 20, 2.0, 1.0) == 2.0 and pso.ramp(20, 20, 1.5, 2.0) == 2.0
 
 
+def test_below_box_is_the_share_of_states_under_the_depth_bound():
+    z = np.array([0.0, -299.0, -300.0, -301.0, -450.0])  # depth z, strictly below -300 m: 2 of 5
+    states = np.zeros((5, 6))
+    states[:, 2] = z
+    assert pso.below_box(states) == 0.4
+    assert pso.below_box(states, axis=3) == 0.0 and pso.below_box(states, axis=3, lower=(0, 0, 0, 1.0)) == 1.0
+
+
 def test_pso_pf_particles_within_bounds_on_the_sonar_task():
     pb = sonar_problem(3)
     eng = engine_at("pso-pf", pb, [np.random.default_rng(0), np.random.default_rng(1)], n_particles=30)

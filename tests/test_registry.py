@@ -137,6 +137,15 @@ def test_locate_flat_upstream_and_prefixed_layouts(clean_env):
     assert registry.locate(ds, clean_env / "empty") is None
 
 
+def test_local_ids_lists_the_ids_of_a_prefix_found_locally(clean_env):
+    root = clean_env / "data"
+    for name in ("20220822_0_7", "20220822_0_5"):
+        write_fake(root / f"{name}.csv")
+    assert registry.local_ids("bohai/20220822_", root) == ["bohai/20220822_0_5", "bohai/20220822_0_7"]
+    assert registry.local_ids("bohai/20220822_0_7", root) == ["bohai/20220822_0_7"]
+    assert registry.local_ids("bohai/", clean_env / "empty") == [] and registry.local_ids("sim/", root) == []
+
+
 def test_locate_root_level_upstream_path(clean_env):
     ds = registry.get("bohai/20220712_0_1")
     assert ds.upstream_path == ds.file == "20220712_0_1.csv"

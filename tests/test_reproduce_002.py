@@ -112,6 +112,8 @@ def test_every_rule_names_evidence_and_equal_arms_decide_nothing():
     assert [c.name for c in ev["b-move"]] == [
         f"{k}-0_6: igwo-stcpf, estimate before the move < igwo-stcpf" for k in ("b10hz", "b1hz")
     ]  # "<key>:last": the last sequence
+    assert [c.target for c in ev["st-box"]] == [1.3373, 0.9998, 1.0090, 0.0790, 0.1117]  # target = "paper": the row's
+    assert ev["b2"][0].target == 0.0 and "vs paper 1.4818, " in ev["pso-box"][0].name  # b's paper number beside a
 
 
 @pytest.fixture
@@ -131,14 +133,32 @@ def copy(tmp_path, monkeypatch):
 @pytest.mark.parametrize(
     "old, new, message",
     [
-        ('{ label = "ckf" },', '{ label = "ckf", parms = { q_scale = 2.0 } },', "exp 'ungm1' rows 4: unknown 'parms'"),
-        ('task = "sonar"', 'tsak = "sonar"', "exp 3: unknown 'tsak'"),
-        ('{ label = "igwo-pf", paper = [2.1829] },', '{ paper = [2.1829] },', "exp 'ungm1' rows 2: missing 'label'"),
+        (
+            '{ label = "ckf" },',
+            '{ label = "ckf", parms = { q_scale = 2.0 } },',
+            "exp 'ungm1' rows 4: unknown key(s) ['parms']",
+        ),
+        ('task = "sonar"', 'tsak = "sonar"', "exp 3: unknown key(s) ['tsak'], missing key(s) ['task']"),
+        (
+            '{ label = "igwo-pf", paper = [2.1829] },',
+            '{ paper = [2.1829] },',
+            "exp 'ungm1' rows 2: missing key(s) ['label']",
+        ),
         ('cols = ["pos_rmse", "x_rmse"', 'cols = ["pos_rmse", "z_rmse"', "exp 't5': runs or cols not among"),
         ('u1 = { exps = ["ungm1"]', 'u1 = { exps = ["ungm3"]', "evidence 'u1': unknown exps"),
-        ('{ a = "gwo-pf", target = 2.4984 }', '{ a = "gwo-pf", traget = 2.4984 }', "evidence 'u1': unknown 'traget'"),
+        (
+            '{ a = "gwo-pf", target = "paper" }',
+            '{ a = "gwo-pf", traget = "paper" }',
+            "evidence 'u1': unknown key(s) ['traget']",
+        ),
+        (
+            '{ a = "gwo-pf", target = "paper" }',
+            '{ a = "ckf", target = "paper" }',
+            "evidence 'u1': unknown exps, or no b, target or paper number for ['ckf']",
+        ),
+        ('row = { filter = ""', 'row = { filtre = ""', "[defaults] row: unknown key(s) ['filtre']"),
         ('u10o = {', 'u10x = {', "claim 'u10o': no [evidence] for ['u10o']"),
-        ('grid = [', 'grids = [', "top level: unknown 'grids'"),
+        ('grid = [', 'grids = [', "top level: unknown key(s) ['grids'], missing key(s) ['grid']"),
     ],
 )
 def test_a_misspelt_or_missing_key_is_refused_naming_the_entry(copy, old, new, message):
@@ -153,13 +173,13 @@ def test_a_row_added_in_the_toml_reaches_an_evaluate_call_and_the_table(copy, mo
     t = copy('  { label = "pf (N = 5000)"', "  " + row + '\n  { label = "pf (N = 5000)"')
     calls = []
 
-    def fake(bounds, job):
+    def fake(above, job):
         calls.append(job)
         rows = {lab: {"row": {"pos_rmse": 1.0, "pos_rmse_ci95": 0.5}, "lost": [False]} for lab, _, _ in job[1]}
         return {"command": f"call {len(calls)}", "rows": rows}
 
     monkeypatch.setattr(p002, "compute", fake)
     t5 = [e for e in p002.experiments(t, []) if e["key"] == "t5"]
-    E = p002.run_all(t5, dict(seed=0, data_dir=None, quiet=True, mc=3, bounds=t["bounds"]), None)
+    E = p002.run_all(t5, dict(seed=0, data_dir=None, quiet=True, mc=3, above=t["above"]), None)
     assert sum(("ckf, Q doubled", "ckf", {"q_scale": 2.0}) in rows for _, rows, _ in calls) == 1
     assert "| ckf, Q doubled (q × 2) | — | 1.000 ± 0.500 | n/a |" in p002.exp_table(t5, E, t)

@@ -29,6 +29,12 @@ LB_002 = (-300.0, -300.0, -300.0, 0.0, -np.pi / 2, -np.pi)
 UB_002 = (300.0, 300.0, 0.0, 10.0, np.pi / 2, np.pi)
 
 
+def below_box(states: np.ndarray, axis: int = 2, lower=LB_002) -> float:
+    """The share of ``states`` (n, d) below the search box's ``lower`` bound on ``axis``; by default the depth z
+    under -300 m (002 §4.1), where a truth leaves the box the swarm's positions are clipped to."""
+    return float(np.mean(np.asarray(states)[:, axis] < lower[axis]))
+
+
 def inertia(t: int, omega_max: float = 0.9, omega_min: float = 0.4, alpha: float = 0.2) -> float:
     """omega(t) = omega_min + (omega_max - omega_min) exp(-alpha (t - 1)), t = 1, 2, ..."""
     return omega_min + (omega_max - omega_min) * np.exp(-alpha * (t - 1))

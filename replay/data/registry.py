@@ -176,6 +176,11 @@ def ids() -> list[str]:
     return list(all_datasets())
 
 
+def local_ids(prefix: str = "", data_dir: str | Path | None = None) -> list[str]:
+    """The sorted ids starting with ``prefix`` whose file is found locally (:func:`locate`; never a sim)."""
+    return [i for i in sorted(all_datasets()) if i.startswith(prefix) and locate(i, data_dir)]
+
+
 def get(dataset_id: str) -> Dataset:
     """The dataset with this id; an unknown id raises ReplayError with close matches."""
     known = all_datasets()

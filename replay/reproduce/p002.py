@@ -8,101 +8,116 @@ also needs its ``${key}`` in ``replay/papers/002.md``). Each row is a filter of 
 
 import json
 import os
+from collections import Counter
 from functools import partial
 
 import numpy as np
 
 from replay.campaign.longest import pool, run_longest_first, workers
 from replay.data import registry
-from replay.filters.p002 import swarm_kernels
+from replay.filters.p002 import pso, swarm_kernels
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
+from replay.scoring.metrics import share_above
 from replay.util.portable import write_document
 
 from . import spec
 from .render import anchor_tag, render, table
 from .rules import Comparison, decide, per_run
-from .tables import Stopwatch, footer
+from .tables import Stopwatch, footer, mean_ci
 
-TOP = dict.fromkeys("grid columns runs quick bounds sequences tune_seq no_sequences exp evidence claim".split(), ...)
-EXP = dict(key=..., task=..., rows=..., dataset="", dp={}, cols=["pos_rmse"], tune=[], runs="mc", first=None)
-EXP |= dict(per_sequence=False, last=[])  # the keys of 002.toml's tables and their defaults (...: required)
-ROW, EVIDENCE = dict(label=..., filter="", params={}, paper=[], dp={}, tp={}), dict(exps=..., compare=...)
-CMP = dict(a=..., b="", target=None, col="pos_rmse", lost=False, gap=None)
-pm = lambda r, c: "n/a" if r.get(c) is None or not np.isfinite(r[c]) else f"{r[c]:.3f} ± {r[f'{c}_ci95']:.3f}"
-name = lambda a: a["label"] + (f" (q × {a['params']['q_scale']:g})" if "q_scale" in a["params"] else "")
-paper = lambda a: " / ".join(f"{x:g}" for x in a["paper"]) or "—"
-WHICH = "Commands ({}: the one that gives the row exactly):\n\n"
-cmds = lambda cs, what="column 'command'": WHICH.format(what) + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
-
-
-def checked(entry, keys: dict, where: str) -> dict:
-    """``entry`` with the defaults of ``keys``; an unknown or a missing key is refused naming the entry (generic)."""
-    bad = [f"unknown {k!r}" for k in entry if k not in keys] if isinstance(entry, dict) else ["not a table"]
-    if bad := bad or [f"missing {k!r}" for k, v in keys.items() if v is ... and k not in entry]:
-        raise ValueError(f"002.toml: {where}: {', '.join(bad)}")
-    return {**keys, **entry}
+# The keys of each kind of entry of 002.toml ("key?": optional; [defaults] may give an optional key's default).
+KEYS = dict(exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?", evidence="exps compare")
+KEYS |= dict(row="label filter? params? paper? dp? tp?", compare="a b? target? col? lost?")
+TOP = "grid columns runs quick above sequences tune_seq no_sequences commands defaults exp evidence claim"
 
 
 def load() -> dict:
-    """``replay/papers/002.toml``, every key checked; a row's filter defaults to its label, "null" is None."""
-    t, null = checked(spec.load("002"), TOP, "top level"), lambda v: None if v == "null" else v
-    row = lambda r: r | {"filter": r["filter"] or r["label"], "params": {k: null(v) for k, v in r["params"].items()}}
-    rows = lambda e, p: [row(checked(r, ROW, f"exp {e['key']!r} {p} {j + 1}")) for j, r in enumerate(e[p])]
+    """``replay/papers/002.toml``, every key checked (an entry gets the [defaults] of its kind), the rows completed."""
+    t = spec.check(spec.load("002"), TOP, "002.toml: top level")
+    entry = lambda raw, kind, where: t["defaults"].get(kind, {}) | spec.check(raw, KEYS[kind], f"002.toml: {where}")
+    for kind, d in spec.check(t["defaults"], "exp? row? compare?", "002.toml: [defaults]").items():
+        spec.check(d, " ".join(k for k in KEYS[kind].split() if k.endswith("?")), f"002.toml: [defaults] {kind}")
     for i, raw in enumerate(t["exp"]):
-        e = t["exp"][i] = checked(raw, EXP, f"exp {i + 1}")
-        e |= {"rows": rows(e, "rows"), "last": rows(e, "last")}
+        e = t["exp"][i] = entry(raw, "exp", f"exp {i + 1}")
+        for part in ("rows", "last"):
+            e[part] = [row(entry(r, "row", f"exp {e['key']!r} {part} {j + 1}")) for j, r in enumerate(e[part])]
         if e["runs"] not in t["runs"] or set(e["cols"]) - set(t["columns"]):
             raise ValueError(f"002.toml: exp {e['key']!r}: runs or cols not among those the file's header declares")
+    declared = {e["key"]: e for e in t["exp"]}
     for k, raw in t["evidence"].items():
-        ev = t["evidence"][k] = checked(raw, EVIDENCE, f"evidence {k!r}")
-        ev["compare"] = [checked(c, CMP, f"evidence {k!r}") for c in ev["compare"]]
-        bad = [x for x in ev["exps"] if x.removesuffix(":last") not in {e["key"] for e in t["exp"]}]
-        if bad := bad + [c["a"] for c in ev["compare"] if not c["b"] and c["target"] is None]:
-            raise ValueError(f"002.toml: evidence {k!r}: unknown exps or a comparison without b or target {bad}")
+        ev = t["evidence"][k] = entry(raw, "evidence", f"evidence {k!r}")
+        ev["compare"] = [entry(c, "compare", f"evidence {k!r}") for c in ev["compare"]]
+        exps = [declared.get(x.removesuffix(":last")) for x in ev["exps"]]
+        bad = [c["a"] for c in ev["compare"] if not c["b"] and "target" not in c]
+        bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if paper(e, c) is None]
+        if None in exps or bad:
+            raise ValueError(f"002.toml: evidence {k!r}: unknown exps, or no b, target or paper number for {bad}")
     for c in spec.claims(t, "002.toml"):
         if bad := [k for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k and k not in t["evidence"]]:
             raise ValueError(f"002.toml: claim {c.id!r}: no [evidence] for {bad}")
     return t
 
 
+def row(r: dict) -> dict:
+    """A row with its filter (default: the label), parameters ("null": None), table cells ``name`` and ``numbers``."""
+    params = {k: None if v == "null" else v for k, v in r["params"].items()}
+    name = r["label"] + (f" (q × {params['q_scale']:g})" if "q_scale" in params else "")
+    numbers = " / ".join(f"{x:g}" for x in r["paper"]) or "—"
+    return r | {"filter": r["filter"] or r["label"], "params": params, "name": name, "numbers": numbers}
+
+
+def paper(e: dict | None, c: dict, arm: str = "a") -> float | None:
+    """The paper's number of the row ``c[arm]`` of experiment ``e`` in the comparison's column (None: not given)."""
+    rows = [r for r in (e["rows"] + e["last"] if e else []) if r["label"] == c[arm]]
+    return dict(zip(e["cols"], rows[0]["paper"])).get(c["col"]) if rows else None
+
+
 def experiments(t: dict, seqs: list[str]) -> list[dict]:
-    """The declared experiments, each ``per_sequence`` one expanded over ``seqs``; ``group``: the declared key."""
-    at = lambda e, s: s and dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
-    return [e | {"group": e["key"]} | (at(e, s) or {}) for e in t["exp"] for s in (seqs if e["per_sequence"] else [""])]
+    """The experiments, a ``per_sequence`` one as ``<key>-<last 3 characters>`` on each of ``seqs`` (the rows
+    ``last`` added on the last); ``group``: the declared key."""
+    at = lambda e, s: dict(key=f"{e['key']}-{s[-3:]}", dataset=s, rows=e["rows"] + e["last"] * (s == seqs[-1]))
+    on = lambda e: seqs if e["per_sequence"] else [""]  # "": the declared dataset
+    return [e | {"group": e["key"]} | (at(e, s) if s else {}) for e in t["exp"] for s in on(e)]
 
 
-def compute(bounds: dict, job) -> dict:
-    """One evaluate call (in a worker): its command; per row the summary, lost flags, z_low (§4.1), per-run values."""
+def calls(e: dict, s: dict) -> list[tuple]:
+    """Experiment ``e``'s rows as evaluate calls (key, ((label, filter, params), ...), evaluate's arguments): one per
+    distinct dataset and task parameters and per repeat of a filter, in row order (evaluate adds the measurements)."""
+    kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e.get("first"))
+    kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
+    out, seen = {}, Counter()  # (parameters, n-th use of a filter with them) -> (evaluate's arguments, rows)
+    for a in (a for a in e["rows"] if a["filter"] != "measurements"):
+        p = dict(dataset_params=e["dp"] | a["dp"] or None, task_params=a["tp"] or None)
+        use = (json.dumps(p, sort_keys=True), a["filter"])
+        seen[use] += 1
+        out.setdefault((use[0], seen[use]), (kw | p, []))[1].append((a["label"], a["filter"], a["params"]))
+    return [(e["key"], tuple(rows), args) for args, rows in out.values()]
+
+
+def compute(above: float, job: tuple) -> dict:
+    """One evaluate call (in a worker): its command; per row the summary, lost flags, per-run ``*_rmse`` and ``above2``
+    (share of steps with a 3-D error above ``above``), ``z_low`` (share of truths under the PSO box's depth bound)."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
-    z = [float(np.mean(t[:, 2] < bounds["depth"])) for t in ev.truths if t.shape[1] > 2]
+    z = [pso.below_box(t) for t in ev.truths if t.shape[1] > 2]
     for lab, r in ((lab, by[f]) for lab, f, _ in rows + (("raw measurements", "measurements", 0),) if f in by):
         v = {c: per_run(r, c)[0].tolist() for c in r.runs[0] if c.endswith("_rmse")}
-        v["above2"] = [float(np.mean(np.linalg.norm(e["position"], axis=1) > bounds["error"])) for e in r.errors]
+        v["above2"] = [share_above(e["position"], above) for e in r.errors]
         out["rows"][lab] = dict(row=r.summary, v=v, lost=per_run(r)[1].tolist(), z_low=float(np.mean(z)) if z else None)
     return out
 
 
 def run_all(exps, s: dict, ex) -> dict:
-    """Each experiment's rows in evaluate calls, one per distinct dataset and task parameters and per repeat of a
-    filter, in row order, in worker processes: {exp key: {label: row evidence}, "cmd:<key>": [their commands]}."""
-    todo, E = [], {}  # todo: (experiment key, ((label, filter, params), ...), evaluate's arguments)
-    for e in exps:
-        calls, seen = {}, []  # (parameters as JSON, n-th call with them) -> rows; evaluate adds the measurements
-        for a in (a for a in e["rows"] if a["filter"] != "measurements"):
-            seen.append((json.dumps([e["dp"] | a["dp"], a["tp"]], sort_keys=True), a["filter"]))
-            calls.setdefault((seen[-1][0], seen.count(seen[-1]) - 1), []).append((a["label"], a["filter"], a["params"]))
-        kw = dict(dataset=e["dataset"], task=e["task"], runs=s[e["runs"]], first=e["first"])
-        kw |= dict(seed=s["seed"] + (e["runs"] == "tune"), data_dir=s["data_dir"] if e["runs"] == "bohai" else None)
-        for (dp, tp), rows in ((json.loads(key), rows) for (key, _), rows in calls.items()):
-            todo.append((e["key"], tuple(rows), kw | dict(dataset_params=dp or None, task_params=tp or None)))
-    heavy = lambda f: 5 if "gwo" in f or "pso" in f or "stcpf" in f else 1  # cost: a swarm filter ~5 PFs
-    cost = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
-    done = dict(run_longest_first(partial(compute, s["bounds"]), todo, cost, [j[0] for j in todo], ex, s["quiet"]))
+    """The calls of ``exps``, costliest first: {key: {label: evidence, ``cmd``: its call's number}, "cmd:<group>": the
+    calls' commands, numbered over the experiment's sequences}."""
+    todo, E, group = [job for e in exps for job in calls(e, s)], {}, {e["key"]: e["group"] for e in exps}
+    heavy = lambda f: 5 if any(x in f for x in ("gwo", "pso", "stcpf")) else 1  # a swarm filter: about 5 PFs
+    costs = [kw["runs"] * (kw["first"] or 100) * sum(heavy(f) for _, f, _ in rows) for _, rows, kw in todo]
+    done = dict(run_longest_first(partial(compute, s["above"]), todo, costs, [j[0] for j in todo], ex, s["quiet"]))
     for i, (k, _, _) in enumerate(todo):
-        (c := E.setdefault(f"cmd:{k}", [])).append(done[i]["command"])
+        (c := E.setdefault(f"cmd:{group[k]}", [])).append(done[i]["command"])
         E.setdefault(k, {}).update({lab: dict(r, cmd=len(c)) for lab, r in done[i]["rows"].items()})
     return E
 
@@ -111,25 +126,37 @@ def variants(e: dict, qs: dict, label: str) -> list[dict]:
     """The first row of each filter of ``qs`` (filter -> q_scale values) with ``q_scale`` set, relabelled."""
     base = {f: next(r for r in e["rows"] if r["filter"] == f) for f in qs}
     new = lambda f, q: dict(label=label.format(f=f, q=q, base=base[f]["label"]), paper=[])
-    return [base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}} for f in qs for q in qs[f]]
+    return [row(base[f] | new(f, q) | {"params": base[f]["params"] | {"q_scale": q}}) for f in qs for q in qs[f]]
 
 
-def comparison(rows: dict, k: str, c: dict) -> Comparison:
-    """A declared comparison in experiment ``k``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
-    a, b, col, who = rows[c["a"]], rows.get(c["b"]), c["col"], f"{k}: {c['a']}"
-    if c["target"] is not None:
-        return Comparison(f"{who} {col}", a["v"][col], lost_a=a["lost"], target=c["target"], test="interval")
+def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
+    """{experiment key: {filter: the first ``grid`` q_scale of least mean position RMSE}} for each experiment that
+    tunes: a simulation on the seed + 1 (runs "tune"), the Bohai sequence ``tune_seq`` at its rate."""
+    grids = [e for e in exps if e["tune"] and (e["runs"] == "mc" or e["dataset"] == t["tune_seq"])]
+    grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
+    grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
+    G = run_all(grids, s, ex)
+    rmse = lambda g, f, q: np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
+    return {g["key"][:-5]: {f: min(t["grid"], key=partial(rmse, g, f)) for f in g["tune"]} for g in grids}
+
+
+def comparison(e: dict, rows: dict, c: dict) -> Comparison:
+    """A declared comparison in experiment ``e``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
+    k, a, b, col = e["key"], rows[c["a"]], rows.get(c["b"]), c["col"]
+    if "target" in c:
+        target = paper(e, c) if c["target"] == "paper" else c["target"]
+        return Comparison(f"{k}: {c['a']} {col}", a["v"][col], lost_a=a["lost"], target=target, test="interval")
     if c["lost"]:
-        m = np.mean(a["v"]["pos_rmse"])
-        gap = f" (residual gap: {c['a']} {m:.3f} vs paper {c['gap']}, {m / c['gap']:.1f}×)" if c["gap"] else ""
+        m, p = np.mean(a["v"]["pos_rmse"]), paper(e, c, "b")
+        gap = f" (residual gap: {c['a']} {m:.3f} vs paper {p}, {m / p:.1f}×)" if p else ""
         return Comparison(f"{k}: lost, {c['a']} vs {c['b']}{gap}", (), (), a["lost"], b["lost"], test="mcnemar")
-    return Comparison(f"{who} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
+    return Comparison(f"{k}: {c['a']} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
 
 
 def evidence(t: dict, exps, E: dict) -> dict:
-    """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` (the TOML's comments)."""
-    pick = lambda x: [e["key"] for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]
-    compare = lambda v: [comparison(E[e], e, c) for x in v["exps"] for e in pick(x) for c in v["compare"]]
+    """Rule key -> its comparisons: each of ``compare`` in each experiment of ``exps`` ("<key>:last": the last)."""
+    pick = lambda x: [e for e in exps if e["group"] == x.split(":")[0]][-1 if ":" in x else 0 :]
+    compare = lambda v: [comparison(e, E[e["key"]], c) for x in v["exps"] for e in pick(x) for c in v["compare"]]
     return {k: compare(v) for k, v in t["evidence"].items()}
 
 
@@ -140,21 +167,26 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
         w, p, n = r["row"], a["paper"], len(r["lost"])
         ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
         med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
-        out.append([name(a), paper(a), *(pm(w, c) for c in e["cols"]), ratio, f"{med:.3f}", f"{sum(r['lost'])}/{n}"])
-        out[-1] += [f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
+        out.append([a["name"], a["numbers"], *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
+        out[-1] += [f"{sum(r['lost'])}/{n}", f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
     head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
     tab = table(head + ["µs/step", "command"], out)
-    return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{cmds(E['cmd:' + e['key']])}"
+    return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{command_list(t, E['cmd:' + e['key']])}"
 
 
 def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
     """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
-    rows, off = {name(a): a for e in ex for a in e["rows"]}, np.cumsum([0] + [len(E[f"cmd:{e['key']}"]) for e in ex])
+    rows, group = {a["name"]: a for e in ex for a in e["rows"]}, ex[0]["group"]
     at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
-    cell = lambda i, r: f"{pm(r['row'], 'pos_rmse')} ({sum(r['lost'])} lost) [{off[i] + r['cmd']}]" if r else "—"
-    body = [[k, paper(a), *(cell(i, at(e, a)) for i, e in enumerate(ex))] for k, a in rows.items()]
-    head, cs = ["row", "paper", *(e["dataset"] for e in ex)], [c for e in ex for c in E[f"cmd:{e['key']}"]]
-    return f"{anchor_tag('#e-' + ex[0]['group'])}\n\n{table(head, body)}\n\n{cmds(cs, '[n]')}"
+    cell = lambda r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{r['cmd']}]" if r else "—"
+    body = [[k, a["numbers"], *(cell(at(e, a)) for e in ex)] for k, a in rows.items()]
+    tab = table(["row", "paper", *(e["dataset"] for e in ex)], body)
+    return f"{anchor_tag('#e-' + group)}\n\n{tab}\n\n{command_list(t, E['cmd:' + group], '[n]')}"
+
+
+def command_list(t: dict, cs: list[str], what: str = "column 'command'") -> str:
+    """The numbered commands of a table's evaluate calls, under the heading naming where the table cites them."""
+    return t["commands"].format(what) + "\n\n" + "\n".join(f"{i}. `{c}`" for i, c in enumerate(cs, 1))
 
 
 def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
@@ -173,24 +205,17 @@ def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):
-    """Tune the baselines (each ``tune`` filter's first ``grid`` value of least mean position RMSE on the data the
-    TOML's header names), compute every experiment with the tuned rows, decide the claims, write the document."""
+    """Tune the baselines, compute every experiment with their tuned rows, decide the claims, write the document."""
     watch, t = Stopwatch(), load()
-    seqs = [i for i in sorted(registry.all_datasets()) if i.startswith(t["sequences"]) and registry.locate(i, data_dir)]
-    n = t["quick"] if quick else t["runs"]
+    seqs, n = registry.local_ids(t["sequences"], data_dir), t["quick"] if quick else t["runs"]
     mc, bohai = runs or n["mc"], n["bohai"] if quick else max(n["bohai"], runs or n["bohai"])
-    s = dict(seed=seed, data_dir=data_dir, quiet=quiet, mc=mc, tune=max(2, mc // 5), bohai=bohai, bounds=t["bounds"])
+    s = dict(seed=seed, data_dir=data_dir, quiet=quiet, mc=mc, tune=max(2, mc // 5), bohai=bohai, above=t["above"])
     exps = experiments(t, seqs[-n["sequences"] :] if quick else seqs)
-    grids = [e for e in exps if e["tune"] and (e["runs"] == "mc" or e["dataset"] == t["tune_seq"])]
-    grids = [e | dict(key=e["key"] + ":grid", runs="tune" if e["runs"] == "mc" else e["runs"]) for e in grids]
-    grids = [g | {"rows": variants(g, dict.fromkeys(g["tune"], t["grid"]), "{f} q×{q:g}")} for g in grids]
-    on = lambda e: e["key"] if e["runs"] == "mc" else f"{e['group']}-{t['tune_seq'][-3:]}"  # where e's q is tuned
     with pool(workers()) as ex:
-        G = run_all(grids, s, ex)
-        rmse = lambda g, f, q: np.mean(G[g["key"]][f"{f} q×{q:g}"]["v"]["pos_rmse"])
-        chosen = {g["key"][:-5]: {f: min(t["grid"], key=partial(rmse, g, f)) for f in g["tune"]} for g in grids}
+        chosen = tune(t, exps, s, ex)
         for e in (e for e in exps if e["dataset"] != t["tune_seq"]):
-            e["rows"] = e["rows"] + variants(e, {f: (q,) for f, q in chosen.get(on(e), {}).items()}, "{base}, q tuned")
+            tuned = chosen.get(e["key"] if e["runs"] == "mc" else f"{e['group']}-{t['tune_seq'][-3:]}", {})
+            e["rows"] = e["rows"] + variants(e, {f: (q,) for f, q in tuned.items()}, "{base}, q tuned")
         E = run_all(exps, s, ex)
     cmd = f"replay reproduce 002{f' --runs {runs}' if runs else ''}{' --quick' if quick else ''} --seed {seed}"
     cmd += " --data-dir ../shared/datasets/bohai" if data_dir else ""

@@ -218,6 +218,12 @@ def lost_track(err_norm: np.ndarray, threshold: float | None, steps: int):
     return bool(longest >= min(int(steps), len(e)))
 
 
+def share_above(err: np.ndarray, threshold: float) -> float:
+    """The share of the steps of one run whose error norm (rows of ``err``, (n, d)) exceeds ``threshold``; a NaN
+    step counts as not above, and every step counts in the denominator."""
+    return float(np.mean(np.linalg.norm(err, axis=1) > threshold))
+
+
 def run_metrics(
     problem, est, alignment: str = "none", divergence_threshold: float | None = None, errors: dict | None = None
 ):
