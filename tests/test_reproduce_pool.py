@@ -59,13 +59,15 @@ def test_p002_jobs_in_two_workers_equal_the_serial_run():
     """Two small experiments of the paper-002 reproduction, serial and in a pool of two: the same
     per-run values, lost flags and leaderboard rows but the timing (each evaluation draws from its own
     seeded streams), keyed by experiment and row."""
-    row = lambda label, params, flt=None: {**p002.ROW, "label": label, "filter": flt or label, "params": params}
-    exp = lambda key, dataset, task, rows, dp=None: {**p002.EXP, "key": key, "dataset": dataset, "task": task,
-                                                     "rows": rows, "dp": dp or {}}
+    defaults = p002.load()["defaults"]  # the rows and experiments as 002.toml's entries are completed
+    row = lambda label, params, flt=None: p002.row({**defaults["row"], "label": label, "filter": flt or label,
+                                                    "params": params})
+    exp = lambda key, dataset, task, rows, dp=None: {**defaults["exp"], "key": key, "group": key, "dataset": dataset,
+                                                     "task": task, "rows": rows, "dp": dp or {}}
     exps = [exp("u", "sim/ungm", "ungm", [row("igwo-pf", {"t_max": 3}), row("pf (N = 50)", {"n_particles": 50}, "pf")]),
             exp("s", "sim/auv-sonar", "sonar", [row("stcpf", {"n_particles": 20}),
                                                  row("pso-pf", {"n_particles": 20, "t_max": 3})], {"steps": 15})]
-    s = {"seed": 3, "data_dir": None, "quiet": True, "mc": 2, "tune": 2, "bohai": 2, "bounds": p002.load()["bounds"]}
+    s = {"seed": 3, "data_dir": None, "quiet": True, "mc": 2, "tune": 2, "bohai": 2, "above": p002.load()["above"]}
     serial = p002.run_all(exps, s, None)
     with pool.pool(2) as ex:
         parallel = p002.run_all(exps, s, ex)
