@@ -16,14 +16,21 @@ pyproject.toml; a new numba is tried here first).
 * :class:`Kernel`: a dispatcher called through its compiled entry point once typed (numba types
   every argument of every call: about 7 µs for each function argument).
 * :func:`from_cache`: a run loop's declared signature loaded from numba's disk cache, or None.
+* One writer at a time per function's cache (:func:`locked_save`, numba's ``save`` for every cache
+  in the process): numba picks a data file's number from the index it read, unlocked, so two
+  worker processes compiling two signatures of one function at once could leave the index
+  naming one signature and the file holding the other's machine code (seen: a segfault).
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
+import itertools
 import os
 import pickle
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -167,6 +174,56 @@ def cfunc(fty, py, cached: bool, label: str = "a model"):
     res._numba_type_ = fty  # numba's typeof reads it
     res.__wrapper_address__ = lambda a=res.address: a  # the protocol numba asks first: no signature check
     return res
+
+
+LOCK_WAIT = 30.0  # s: longest wait for another process's write of one function's cache
+
+
+@contextmanager
+def index_lock(index_path: str):
+    """An exclusive ``flock`` on ``<index>.lock`` while the block runs, waited for at most :data:`LOCK_WAIT`
+    (then, or where there is no ``flock``, the block runs unlocked, as numba's own save does)."""
+    try:
+        import fcntl
+
+        fd = os.open(index_path + ".lock", os.O_CREAT | os.O_RDWR, 0o600)
+    except (ImportError, OSError):
+        fd = None
+    try:
+        end = time.monotonic() + LOCK_WAIT
+        while fd is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > end:
+                    break
+                time.sleep(0.005)
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)  # releases the lock
+
+
+def locked_save(self, key, data):
+    """numba's ``IndexDataCacheFile.save`` as one critical section per function (:func:`index_lock`): read
+    the index, take the key's data file (or the first free number), write the data, then the index that
+    names it. numba's own writes the index first and holds no lock (module docstring); the files'
+    format is numba's, so processes without this still read them."""
+    with index_lock(self._index_path):
+        overloads = self._load_index()
+        name = overloads.get(key)
+        if name is None:
+            used = set(overloads.values())
+            name = next(n for n in map(self._data_name, itertools.count(1)) if n not in used)
+        self._save_data(name, data)
+        if overloads.get(key) != name:
+            overloads[key] = name
+            self._save_index(overloads)
+
+
+NUMBA_SAVE = IndexDataCacheFile.save  # numba's own (the race's control in the tests)
+IndexDataCacheFile.save = locked_save
 
 
 def from_cache(loop, sig) -> bool:
