@@ -208,3 +208,12 @@ def test_list_adapters_bohai_shows_typed_options():
 register("eval-runs-1.5", "eval-runs-abc", "eval-alignment-case", "eval-divergence-threshold-inf",
          "campaign-batch-0", "campaign-dataset-first-0", "adapter-option-out-of-bounds", "adapter-option-unknown",
          "adapter-option-wrong-type", "manifest-seed-negative")
+
+
+@pytest.mark.parametrize("command", [["reproduce", "002", "--quick"], ["tune", "sim/ungm", "-o", "t"],
+                                     ["rerun", __file__]])
+def test_a_data_dir_that_is_not_a_directory_is_refused_before_any_work(command, tmp_path):
+    """--data-dir is declared once for the commands that run (replay.cli.run_options.DATA_DIR) and a mistyped
+    one is refused, not ignored (replay reproduce 002 would otherwise leave out its Bohai rows)."""
+    assert_refused([*command, "--data-dir", str(tmp_path / "nowhere")],
+                   r"^replay: error: --data-dir .*nowhere: no such directory$", cwd=tmp_path)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.run_options import DATA_DIR
 from replay.util.errors import ReplayError
 
 
@@ -158,7 +159,7 @@ def export_outputs(
     type=click.FloatRange(min=0, min_open=True),
     help="Scale of the covariance ellipsoids: semi-axes of this many standard deviations.  [default: 3]",
 )
-@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@DATA_DIR
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir, quiet=False):
     """Export one run of a `replay eval` output directory, or of a campaign's result directory, for

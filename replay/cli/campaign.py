@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.run_options import DATA_DIR
 from replay.util.errors import ReplayError
 from replay.util.files import check_writable, refuse_overlap
 
@@ -47,7 +48,7 @@ def check_names(out, what: str) -> None:
 )
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
-@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@DATA_DIR
 @click.option("--retry-failed", is_flag=True, help="Compute failed units again.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress output.")
 @click.option(

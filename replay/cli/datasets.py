@@ -8,11 +8,16 @@ from __future__ import annotations
 
 import click
 
-from replay.data import dataset_ref, registry
+from replay.cli.run_options import MAPPING
 from replay.cli.view_options import view_options, with_views
+from replay.data import dataset_ref, registry
+from replay.data.fetch import DEFAULT_DEADLINE
+from replay.data.fetch import fetch as fetch_dataset
 from replay.util.errors import ReplayError
-from replay.data.fetch import DEFAULT_DEADLINE, fetch as fetch_dataset
 
+
+# `replay datasets` inspects: a --data-dir that does not exist is only a place where the file is not
+# (the eval-family commands refuse it: replay.cli.run_options.DATA_DIR)
 DATA_DIR = click.option(
     "--data-dir",
     type=click.Path(file_okay=False),
@@ -54,12 +59,7 @@ def list_cmd(data_dir):
 @click.argument("dataset")
 @DATA_DIR
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
-@click.option(
-    "--mapping",
-    default=None,
-    type=click.Path(exists=True, dir_okay=False),
-    help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
-)
+@MAPPING
 @click.option(
     "--dataset-param",
     "dataset_params",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import quiet_notes, run_option
+from replay.cli.run_options import DATA_DIR, MAPPING, quiet_notes, run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 
@@ -45,7 +45,7 @@ from replay.util.errors import ReplayError
     help="If another replay eval is writing to --out, wait for it to finish instead of refusing.",
 )
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
-@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@DATA_DIR
 @click.option("--adapter", default=None, help="Adapter for a plain file (default: chosen from the file).")
 @click.option(
     "--param",
@@ -67,12 +67,7 @@ from replay.util.errors import ReplayError
 @click.option(
     "--baseline", default=None, help="Filter the leaderboard's paired columns compare with (default: the first listed)."
 )
-@click.option(
-    "--mapping",
-    default=None,
-    type=click.Path(exists=True, dir_okay=False),
-    help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
-)
+@MAPPING
 @click.option(
     "--mcap", "mcap_out", default=None, type=click.Path(), help="Also export the run as a Foxglove MCAP file."
 )
@@ -128,8 +123,8 @@ def eval_cmd(
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
-    from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.data.registry import check_data_dir
+    from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.scoring.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
@@ -242,8 +237,8 @@ def _configuration(
 ):
     """``replay eval``'s configuration from its options, checked whole before any data is read:
     (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
-    from replay.data import dataset_ref
     from replay.cli import params as cli_params
+    from replay.data import dataset_ref
     from replay.run.checks import check_recorded
     from replay.run.pipeline import default_task
 

@@ -75,8 +75,8 @@ def _register_optional():
     main.add_command(reproduce_cmd)
 
     main.add_command(score_cmd)
-    from replay.cli.res import res_cmd
     from replay.cli.convert import convert_cmd
+    from replay.cli.res import res_cmd
 
     main.add_command(res_cmd)
     main.add_command(convert_cmd)

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import quiet_notes, run_option
+from replay.cli.run_options import DATA_DIR, quiet_notes, run_option
 from replay.util.errors import ReplayError
 
 
 @click.command("rerun")
 @click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@DATA_DIR
 @click.option(
     "--out",
     "-o",
@@ -33,11 +33,10 @@ from replay.util.errors import ReplayError
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
     """Repeat the run recorded in a manifest.json and check that every recorded result is reproduced exactly."""
-    from replay.run import rerun
-    from replay.outputs.files import check_output, format_table, write_all
-    from replay.util.progress import Progress
-
     from replay.data.registry import check_data_dir
+    from replay.outputs.files import check_output, format_table, write_all
+    from replay.run import rerun
+    from replay.util.progress import Progress
 
     check_data_dir(data_dir, "--data-dir")
     man = rerun.load(manifest_file, allow_modules)  # checked before any computation or import
@@ -60,7 +59,7 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 @click.argument("paper")
 @run_option("runs", "-n", default=None, extra=" Default: the paper's.")
 @run_option("seed", "-s")
-@click.option("--data-dir", default=None, type=click.Path())
+@DATA_DIR
 @click.option(
     "--doc",
     default=None,
@@ -77,11 +76,12 @@ def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
 def reproduce_cmd(paper, runs, seed, data_dir, doc, quick, part, quiet=False):
     """Reproduce a paper's published numbers (PAPER: 000, 001, 002, 003) and print ours beside them."""
     import inspect
-
-    from replay.reproduce import REPRODUCTIONS, run_reproduction
-
     from importlib import import_module
 
+    from replay.data.registry import check_data_dir
+    from replay.reproduce import REPRODUCTIONS, run_reproduction
+
+    check_data_dir(data_dir, "--data-dir")  # a mistyped one would silently leave out 002's Bohai rows
     extra = {}
     module, func = REPRODUCTIONS.get(paper.zfill(3), ":").split(":")
     accepts = inspect.signature(getattr(import_module(module), func)).parameters if module else {}

@@ -15,6 +15,19 @@ import click
 from replay.run.eval_options import BY_NAME
 from replay.util.params import Param
 
+DATA_DIR = click.option(
+    "--data-dir",
+    default=None,
+    type=click.Path(),
+    help="Look here first for dataset files (then $REPLAY_DATA_DIR, then the cache).",
+)
+MAPPING = click.option(
+    "--mapping",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
+)
+
 
 class Declared(click.ParamType):
     """A click type that reads the text as JSON and checks it with a :class:`Param`."""

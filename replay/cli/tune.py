@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import run_option
+from replay.cli.run_options import DATA_DIR, run_option
 from replay.util.errors import ReplayError
 
 
@@ -57,7 +57,7 @@ from replay.util.errors import ReplayError
     type=click.Path(file_okay=False),
     help="Tune directory (study.db, units/, leaderboard.csv, tuned.toml); resumed when it exists.",
 )
-@click.option("--data-dir", default=None, type=click.Path(), help="Where to look for dataset files first.")
+@DATA_DIR
 @click.option(
     "--workers",
     "-w",
@@ -99,12 +99,14 @@ def tune_cmd(
     """Tune each filter's declared parameters on training data and score it on held-out data."""
     from replay.cli import params as cli_params
     from replay.cli.campaign import check_names
+    from replay.data.registry import check_data_dir
     from replay.tune import check, run, space
     from replay.tune.write import format_board
     from replay.util.files import check_writable, refuse_overlap
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
+    check_data_dir(data_dir, "--data-dir")
     entries = (space.entries_from_file(space_file) if space_file else []) + space.entries_from_cli(space_params)
     if not entries:
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from replay.util.errors import DataError, ReplayError
 from replay.util.files import check_writable, refuse_overlap
+from replay.util.staging import alive
 from replay.util.staging import exchange  # noqa: F401 (exchange: re-exported)
 
 MARK_KEY = "replay.output"  # custom_data key of the ROS 2 bags written through staged_bag
@@ -170,16 +171,6 @@ def temp_beside(target) -> Path:
     return target.with_name(f".{target.name}{_TMP}{os.getpid()}")
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _remove(path: Path) -> None:
     if path.is_symlink() or not path.is_dir():
         path.unlink(missing_ok=True)
@@ -193,7 +184,7 @@ def clean_stale(target) -> list[Path]:
     gone = []
     for p in target.parent.glob(glob.escape(f".{target.name}{_TMP}") + "*"):
         pid = p.name[len(target.name) + 1 + len(_TMP) :]
-        if pid.isdigit() and (int(pid) == os.getpid() or not _alive(int(pid))):
+        if pid.isdigit() and (int(pid) == os.getpid() or not alive(int(pid))):
             _remove(p)
             gone.append(p)
     return gone

@@ -33,7 +33,8 @@ def _fault(point: str) -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
 
-def _alive(pid: int) -> bool:
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (this process: yes; one of another user: yes, it cannot be signalled)."""
     if pid == os.getpid():
         return True
     try:
@@ -205,7 +206,7 @@ def recover(target) -> None:
 
     target = Path(target)
     for path, pid, role in sorted(_leftovers(target), key=lambda x: x[2] == "old"):
-        if _alive(pid):
+        if alive(pid):
             continue
         if role == "old" and not os.path.lexists(target):
             os.rename(path, target)
