@@ -217,3 +217,11 @@ def test_a_data_dir_that_is_not_a_directory_is_refused_before_any_work(command, 
     one is refused, not ignored (replay reproduce 002 would otherwise leave out its Bohai rows)."""
     assert_refused([*command, "--data-dir", str(tmp_path / "nowhere")],
                    r"^replay: error: --data-dir .*nowhere: no such directory$", cwd=tmp_path)
+
+
+def test_run_reproduction_refuses_a_missing_data_dir_from_python(tmp_path):
+    from replay.reproduce import run_reproduction
+
+    with pytest.raises(ReplayError, match=r"^data_dir .*nowhere: no such directory$"):
+        run_reproduction("002", data_dir=str(tmp_path / "nowhere"), quick=True, doc=str(tmp_path / "002.md"))
+    assert not (tmp_path / "002.md").exists()

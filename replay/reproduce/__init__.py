@@ -9,6 +9,7 @@ report (``docs/reproduction/<paper>.md`` by default).
 
 from importlib import import_module
 
+from replay.util.data_dirs import check_data_dir
 from replay.util.errors import ReplayError
 
 REPRODUCTIONS: dict[str, str] = {
@@ -26,4 +27,5 @@ def run_reproduction(paper: str, **options):
     except KeyError:
         known = ", ".join(sorted(REPRODUCTIONS)) or "none yet"
         raise ReplayError(f"no reproduction for paper {paper!r} (known: {known})") from None
+    check_data_dir(options.get("data_dir"), "data_dir")  # a mistyped one: 002 would leave out its Bohai rows
     return getattr(import_module(module), func)(**options)
