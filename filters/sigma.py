@@ -192,6 +192,7 @@ class SigmaEngine(KalmanEngine):
         x3, P3 = (x[None], P[None]) if one else (x, P)
         nis = np.empty(len(x3))
         Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
+        gate, done = self.gate(m.nz, mask, rows, len(x3))
         bad = kernels.sigma_update(
             Z,
             dev,
@@ -207,9 +208,11 @@ class SigmaEngine(KalmanEngine):
             self.xi,
             Xn,
             devn,
+            *gate,
         )
         if 0 <= bad < len(x3):
             raise not_pd(bad)
+        self.cut = done()
         if rows is not None:
             self.X[rows], self.dev[rows] = Xn, devn
         self.unmade(bad - len(x3), rows)

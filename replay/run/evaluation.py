@@ -348,6 +348,10 @@ def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterRes
         "min_scored_share": min_scored_share,
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
+    notes += [
+        f"{name}: gating rejected (per run) " + "; ".join(f"{k} {v}" for k, v in counts.items())
+        for name, counts in gating(results).items()
+    ]
     return Evaluation(
         config,
         plain(p0.frame_meta),
@@ -389,3 +393,13 @@ def _filled(rec: dict) -> dict:
         np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None, {"error": rec["error"]}
     )
     return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
+
+
+def gating(results) -> dict:
+    """Per filter: each gated input's rejections per run (replay.filters.gating), where a gate exists."""
+    out = {}
+    for r in results:
+        recs = [rec["rejected"] for rec in sorted(r.records, key=lambda d: d["run"]) if "rejected" in rec]
+        if recs:
+            out[r.name] = {k: [int(d.get(k, 0)) for d in recs] for k in recs[0]}
+    return out
