@@ -188,3 +188,14 @@ def particle_rejects(gates: Gates, model, X, w, z, k, present) -> np.ndarray:
             cut[idx] = True
             hit.append(g)
     return cut, hit
+
+
+def per_filter(results) -> dict:
+    """Per filter result (``name``, ``records``: replay's evaluation): each gated input's
+    rejections per run (``record["rejected"]``), where a gate exists."""
+    out = {}
+    for r in results:
+        recs = [rec["rejected"] for rec in sorted(r.records, key=lambda d: d["run"]) if "rejected" in rec]
+        if recs:
+            out[r.name] = {k: [int(d.get(k, 0)) for d in recs] for k in recs[0]}
+    return out

@@ -28,6 +28,7 @@ from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
+from replay.filters.gating import per_filter
 from replay.run.pipeline import Config, build_problem, config_hash, default_task, plain, run_block
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_params
 from replay.tasks import make_task
@@ -350,7 +351,7 @@ def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterRes
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
     notes += [
         f"{name}: gating rejected (per run) " + "; ".join(f"{k} {v}" for k, v in counts.items())
-        for name, counts in gating(results).items()
+        for name, counts in per_filter(results).items()
     ]
     return Evaluation(
         config,
@@ -393,13 +394,3 @@ def _filled(rec: dict) -> dict:
         np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None, {"error": rec["error"]}
     )
     return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
-
-
-def gating(results) -> dict:
-    """Per filter: each gated input's rejections per run (replay.filters.gating), where a gate exists."""
-    out = {}
-    for r in results:
-        recs = [rec["rejected"] for rec in sorted(r.records, key=lambda d: d["run"]) if "rejected" in rec]
-        if recs:
-            out[r.name] = {k: [int(d.get(k, 0)) for d in recs] for k in recs[0]}
-    return out

@@ -35,7 +35,9 @@ mapping (``docs/bags.md``, "The fusion task"):
   the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
   (noted).
 
-Refused in one line: a frame with no sensor input (naming the tasks that would run), no
+Refused in one line: inputs that constrain neither the speed (no velocity, position or
+differential position) nor the heading (no attitude, rate or position) — every filter would
+dead-reckon its prior and the table rank priors —, a frame with no sensor input (naming the tasks that would run), no
 reference (nothing to score against: how to declare one), an unknown field, a differential
 field with fewer than two messages.
 """
@@ -61,6 +63,7 @@ from .fusion_inputs import (
     has_absolute_position,
     inputs,
     threshold,
+    unconstrained,
     variance,
 )
 
@@ -128,6 +131,19 @@ class FusionTask(Task):
         dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
         t = np.asarray(frame.t, float)
         m = self._measurements(frame, where, found, ref, dims, t)
+        missing = unconstrained(m.index, dims)
+        if missing:
+            raise ReplayError(
+                f"{where}: task fusion: no input constrains the {' or the '.join(missing)} (inputs: "
+                f"{', '.join(m.used)}): every filter would carry its prior there and the table would rank "
+                "priors, not filters; map "
+                + " or ".join(
+                    ["a velocity input (role velocity: a DVL, an odometry twist)"] * ("speed" in missing)
+                    + ["an attitude or gyro input"] * ("heading" in missing)
+                    + ["a position input (gps, pose)"]
+                )
+                + " (docs/bags.md)"
+            )
         model_cls, model, first = self._model(dims, t, m)
         nx = len(model_cls.STATE)
         x0, notes, known = self._prior(frame, ref, dims, nx, m.absolute_pos, m.attitude_at, m.notes, first)

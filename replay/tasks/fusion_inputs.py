@@ -175,3 +175,11 @@ def threshold(entry: dict, label: str) -> float | None:
     if isinstance(value, dict):
         value = value.get(label)
     return None if value is None else float(value)
+
+
+def unconstrained(index, dims: int) -> list[str]:
+    """What no measured state component constrains: "speed" (no position nor body velocity),
+    "heading" (no position, attitude nor rate), given the measured components ``index``."""
+    pos, speed, heading = ((0, 1), (3, 4), (2, 5)) if dims == 2 else ((0, 1), (6, 7), (5, 11))
+    seen = set(int(i) for i in index)
+    return [name for name, comps in (("speed", pos + speed), ("heading", pos + heading)) if not seen & set(comps)]
