@@ -80,27 +80,15 @@ class Tally:
         G = len(self.gates.names) if self.gates is not None else 0
         self.count = np.zeros((M, G), np.int64)
         self.ids = np.arange(M)
-        self._none = {}
 
     def keep(self, ok):
         self.ids = self.ids[ok]
 
-    def args(self, nz_full: int, mask, n: int):
-        """(group, limit2, rej, cut) for an update of ``n`` runs with the components ``mask``."""
-        if self.gates is None:
-            key = (nz_full if mask is None else int(np.count_nonzero(mask)), n)
-            if key not in self._none:
-                self._none[key] = (
-                    np.full(key[0], NO_GROUP, np.int64),
-                    np.empty(0),
-                    np.zeros((n, 0), np.int64),
-                    np.zeros(n, np.int64),
-                )
-            return self._none[key]
+    def args(self, mask, n: int):
+        """(group, limit2, rej, cut) for a gated update of ``n`` runs with the components ``mask``."""
         group = np.asarray(self.gates.group, np.int64)
         group = np.ascontiguousarray(group if mask is None else group[mask])
-        G = len(self.gates.names)
-        return group, self.gates.limit2, np.zeros((n, G), np.int64), np.zeros(n, np.int64)
+        return group, self.gates.limit2, np.zeros((n, len(self.gates.names)), np.int64), np.zeros(n, np.int64)
 
     def add(self, rej, rows=None):
         """Add an update's rejections ``rej`` (n, G) of the active runs ``rows`` (None: all)."""
@@ -114,6 +102,12 @@ class Tally:
                 for name, c, d in zip(self.gates.names, self.count[m], self.gates.limit)
                 if np.isfinite(d)  # the gated inputs only
             }
+
+
+@nb.njit(cache=True)
+def ungated(M, nz):
+    """The gate arguments of an update without gates: no group, no threshold, no count."""
+    return np.full(nz, NO_GROUP, np.int64), np.empty(0), np.zeros((M, 0), np.int64), np.zeros(M, np.int64)
 
 
 @nb.njit(cache=True)

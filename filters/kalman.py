@@ -78,14 +78,7 @@ def kalman_update(x, P, y, H, R, x_angles=(), gate=None):
     one = x.ndim == 1
     x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
     nis = np.empty(len(x2))
-    if gate is None:
-        gate = (
-            np.full(np.shape(y)[-1], -1, np.int64),
-            np.empty(0),
-            np.zeros((len(x2), 0), np.int64),
-            np.zeros(len(x2), np.int64),
-        )
-    bad = kernels.joseph_update(
+    args = (
         x2,
         P3,
         stack_of(y, one),
@@ -93,8 +86,8 @@ def kalman_update(x, P, y, H, R, x_angles=(), gate=None):
         np.ascontiguousarray(R, dtype=float),
         angle_mask(tuple(x_angles), x2.shape[1]),
         nis,
-        *gate,
     )
+    bad = kernels.joseph_update(*args) if gate is None else kernels.joseph_update_gated(*args, *gate)
     if bad >= 0:
         raise not_pd(bad)
     return (x2[0], P3[0], nis[0]) if one else (x2, P3, nis)
@@ -149,7 +142,8 @@ class KalmanEngine:
         self.one = len(X0) == 1
         self.x, self.P = (X0[0].copy(), P0[0].copy()) if self.one else (X0.copy(), P0.copy())
         self.nis1, self.dof1 = np.empty(1), np.empty(1, int)  # one run's NIS and its dof, per step
-        self.tally, self.cut = gating.Tally(self.model, len(X0)), np.zeros(len(X0), np.int64)
+        self.tally, self.cut = gating.Tally(self.model, len(X0)), 0  # cut: components a gate rejected
+        self.gated = self.tally.gates is not None
 
     def keep(self, ok):
         self.tally.keep(ok)
@@ -159,10 +153,10 @@ class KalmanEngine:
     def finish(self, m, info):
         self.tally.info(m, info)
 
-    def gate(self, nz_full, mask, rows, n):
-        """The gate arguments of an update of ``n`` runs (``rows`` of the active ones) and, after it,
-        the tally: (args, done) where done() adds the counts and returns the components cut."""
-        args = self.tally.args(nz_full, mask, n)
+    def gate(self, mask, rows, n):
+        """The gate arguments of a gated update of ``n`` runs (``rows`` of the active ones) and, after
+        it, the tally: (args, done) where done() adds the counts and returns the components cut."""
+        args = self.tally.args(mask, n)
 
         def done():
             self.tally.add(args[2], rows)
@@ -179,14 +173,14 @@ class KalmanEngine:
                 x, P, nis = self.update(x, P, Z[0], k, None)
             elif dof:
                 x, P, nis = self.update(x, P, Z[0][f], k, f)
-            if dof:
+            if dof and self.gated:
                 dof -= int(self.cut[0])
             self.x, self.P = x, P
             self.nis1[0], self.dof1[0] = nis, dof
             return x[None], P[None], self.nis1, self.dof1
         if finite.all():
             self.x, self.P, nis = self.update(x, P, Z, k, None)
-            return self.x, self.P, nis, Z.shape[1] - self.cut
+            return self.x, self.P, nis, np.full(len(x), Z.shape[1]) - self.cut
         nis, dof = np.full(len(x), np.nan), np.zeros(len(x), int)
         for rows, mask in groups(finite):
             z = Z[rows] if mask is None else Z[rows][:, mask]
@@ -291,8 +285,11 @@ class EKFEngine(KalmanEngine):
         R, angles = measurement(m, k, mask)
         if mask is not None:
             H, zh = H[..., mask, :], zh[..., mask]
-        gate, done = self.gate(m.nz, mask, rows, 1 if x.ndim == 1 else len(x))
-        out = kalman_update(x, P, residual(z, zh, angles), H, R, m.x_angles, gate)
+        y = residual(z, zh, angles)
+        if not self.gated:
+            return kalman_update(x, P, y, H, R, m.x_angles)
+        gate, done = self.gate(mask, rows, 1 if x.ndim == 1 else len(x))
+        out = kalman_update(x, P, y, H, R, m.x_angles, gate)
         self.cut = done()
         return out
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .gating import gate
+from .gating import gate, ungated
 from replay.util.kernels import (
     cholesky,
     deviations,
@@ -81,8 +81,7 @@ def kalman_correct(x, P, y, S, Pxz, xmask, nis):
     Returns the first run whose S is not positive definite (that run and the later ones are
     left as they were), or -1."""
     M, nx, nz = Pxz.shape
-    g, l2, rej, cut = np.full(nz, -1), np.empty(0), np.zeros((M, 0), np.int64), np.zeros(M, np.int64)
-    return kalman_correct_into(x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), g, l2, rej, cut)
+    return kalman_correct_into(x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), *ungated(M, nz))
 
 
 @nb.njit(cache=True)
@@ -197,7 +196,13 @@ def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L):
 
 
 @nb.njit(cache=True)
-def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, group, limit2, rej, cut):
+def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
+    """:func:`sigma_update_gated` without gates."""
+    return sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, *ungated(*Z.shape[::2]))
+
+
+@nb.njit(cache=True)
+def sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, group, limit2, rej, cut):
     """The sigma-point update of each run m, in place on x (M, n), P (M, n, n): the
     :func:`innovation_moments` of the points' predictions Z (M, p, nz), then S = Pzz + R and
     :func:`kalman_correct`; then the points X, Xdev (M, p, n) of the corrected (x, P)
@@ -277,7 +282,13 @@ def propagate_cov_into(F, P, Q, out, FP):
 
 
 @nb.njit(cache=True)
-def joseph_update(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
+def joseph_update(x, P, y, H, R, xmask, nis):
+    """:func:`joseph_update_gated` without gates."""
+    return joseph_update_gated(x, P, y, H, R, xmask, nis, *ungated(*y.shape))
+
+
+@nb.njit(cache=True)
+def joseph_update_gated(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
     """The Kalman update in Joseph form, in place on each run m of x (M, n), P (M, n, n), with
     innovations y (M, nz), measurement Jacobians H (M, nz, n) and R (nz, nz) (Bar-Shalom et al.
     2001, §5.2), after the gating of each run (:func:`replay.filters.gating.gate` on S and P H'):

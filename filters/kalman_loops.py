@@ -19,6 +19,7 @@ from numba import types
 from replay.util.kernels import wrap
 
 from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
+from .gating import ungated
 from .kalman_kernels import (
     joseph_update_into,
     propagate_cov_into,
@@ -32,13 +33,6 @@ _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:
 _MASK = types.boolean[::1]
 _COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
-
-
-@nb.njit(cache=True)
-def ungated(M, nz):
-    """The gate arguments of an update without gates (a gated model steps in Python:
-    :func:`replay.filters.kalman.run_kernels`)."""
-    return np.full(nz, -1, np.int64), np.empty(0), np.zeros((M, 0), np.int64), np.zeros(M, np.int64)
 
 
 @nb.njit(cache=True)

@@ -192,8 +192,7 @@ class SigmaEngine(KalmanEngine):
         x3, P3 = (x[None], P[None]) if one else (x, P)
         nis = np.empty(len(x3))
         Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
-        gate, done = self.gate(m.nz, mask, rows, len(x3))
-        bad = kernels.sigma_update(
+        args = (
             Z,
             dev,
             stack_of(z, one),
@@ -208,11 +207,15 @@ class SigmaEngine(KalmanEngine):
             self.xi,
             Xn,
             devn,
-            *gate,
         )
+        if not self.gated:
+            bad = kernels.sigma_update(*args)
+        else:
+            gate, done = self.gate(mask, rows, len(x3))
+            bad = kernels.sigma_update_gated(*args, *gate)
+            self.cut = done()
         if 0 <= bad < len(x3):
             raise not_pd(bad)
-        self.cut = done()
         if rows is not None:
             self.X[rows], self.dev[rows] = Xn, devn
         self.unmade(bad - len(x3), rows)

@@ -154,7 +154,7 @@ def test_gating_rejects_injected_outliers_and_the_ungated_run_is_worse(name):
 
 def test_a_gated_update_is_the_update_without_the_rejected_components():
     """The compiled update with a rejected group equals, to rounding, the update of the other
-    components alone; its py_func (the readable source) gives the same numbers."""
+    components alone; its pure-Python source (tests/pure.py) gives the same numbers."""
     rng = np.random.default_rng(2)
     n, nz = 4, 3
     A = rng.standard_normal((1, n, n))
@@ -165,16 +165,17 @@ def test_a_gated_update_is_the_update_without_the_rejected_components():
     y = np.array([[40.0, -30.0, 0.3]])  # the first two (one group) far out
     group, limit2 = np.array([0, 0, 1], np.int64), np.array([9.0, np.inf])
     outs = []
-    for fun in (kalman_kernels.joseph_update, kalman_kernels.joseph_update.py_func):
+    from pure import pure
+
+    for fun in (kalman_kernels.joseph_update_gated, pure(kalman_kernels.joseph_update_gated)):
         xg, Pg, nis = x.copy(), P.copy(), np.empty(1)
         rej, cut = np.zeros((1, 2), np.int64), np.zeros(1, np.int64)
         assert fun(xg, Pg, y.copy(), H, R, np.zeros(n, bool), nis, group, limit2, rej, cut) == -1
         assert rej.tolist() == [[1, 0]] and cut.tolist() == [2]
         outs.append((xg, Pg, nis))
     xr, Pr, nisr = x.copy(), P.copy(), np.empty(1)
-    none = np.full(1, -1, np.int64), np.empty(0), np.zeros((1, 0), np.int64), np.zeros(1, np.int64)
     kalman_kernels.joseph_update(xr, Pr, y[:, 2:].copy(), H[:, 2:].copy(), R[2:, 2:].copy(), np.zeros(n, bool),
-                                 nisr, *none)
+                                 nisr)
     for xg, Pg, nis in outs:
         np.testing.assert_allclose(xg, xr, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(Pg, Pr, rtol=1e-12, atol=1e-12)
