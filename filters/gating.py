@@ -23,7 +23,8 @@ At every update, each group present is tested alone:
 
 Rejections are counted per run and group (``info["rejected"]``: group name -> count) and the
 rejected components leave the NIS and its degrees of freedom. A filter whose engine does not
-gate is refused on a gated model (:func:`check`), never run ungated in silence.
+gate is refused on a gated model (:func:`check`), never run ungated in silence. Without gates the
+kernels take None for the gate arguments (that branch compiled away: no cost).
 """
 
 from __future__ import annotations
@@ -102,12 +103,6 @@ class Tally:
                 for name, c, d in zip(self.gates.names, self.count[m], self.gates.limit)
                 if np.isfinite(d)  # the gated inputs only
             }
-
-
-@nb.njit(cache=True)
-def ungated(M, nz):
-    """The gate arguments of an update without gates: no group, no threshold, no count."""
-    return np.full(nz, NO_GROUP, np.int64), np.empty(0), np.zeros((M, 0), np.int64), np.zeros(M, np.int64)
 
 
 @nb.njit(cache=True)

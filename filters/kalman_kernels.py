@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .gating import gate, ungated
+from .gating import gate
 from replay.util.kernels import (
     cholesky,
     deviations,
@@ -81,7 +81,9 @@ def kalman_correct(x, P, y, S, Pxz, xmask, nis):
     Returns the first run whose S is not positive definite (that run and the later ones are
     left as they were), or -1."""
     M, nx, nz = Pxz.shape
-    return kalman_correct_into(x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), *ungated(M, nz))
+    return kalman_correct_into(
+        x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), None, None, None, None
+    )
 
 
 @nb.njit(cache=True)
@@ -92,7 +94,8 @@ def kalman_correct_into(x, P, y, S, Pxz, xmask, nis, L, K, group, limit2, rej, c
     the components cut into cut (M,))."""
     M, nx, nz = Pxz.shape
     for m in range(M):
-        cut[m] = gate(y[m], S[m], Pxz[m], group, limit2, rej[m])
+        if limit2 is not None:  # None: no gate (that branch compiled away)
+            cut[m] = gate(y[m], S[m], Pxz[m], group, limit2, rej[m])
         g = gain(S[m], Pxz[m], y[m], L, K)
         if g < 0.0:
             return m
@@ -198,7 +201,7 @@ def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L):
 @nb.njit(cache=True)
 def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
     """:func:`sigma_update_gated` without gates."""
-    return sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, *ungated(*Z.shape[::2]))
+    return sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, None, None, None, None)
 
 
 @nb.njit(cache=True)
@@ -284,7 +287,7 @@ def propagate_cov_into(F, P, Q, out, FP):
 @nb.njit(cache=True)
 def joseph_update(x, P, y, H, R, xmask, nis):
     """:func:`joseph_update_gated` without gates."""
-    return joseph_update_gated(x, P, y, H, R, xmask, nis, *ungated(*y.shape))
+    return joseph_update_gated(x, P, y, H, R, xmask, nis, None, None, None, None)
 
 
 @nb.njit(cache=True)
@@ -339,7 +342,8 @@ def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR, group
         for i in range(nz):
             for j in range(nz):
                 S[i, j] += R[i, j]
-        cut[m] = gate(y[m], S, PHt, group, limit2, rej[m])
+        if limit2 is not None:
+            cut[m] = gate(y[m], S, PHt, group, limit2, rej[m])
         g = gain(S, PHt, y[m], L, K)
         if g < 0.0:
             return m

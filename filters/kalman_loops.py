@@ -19,7 +19,6 @@ from numba import types
 from replay.util.kernels import wrap
 
 from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
-from .gating import ungated
 from .kalman_kernels import (
     joseph_update_into,
     propagate_cov_into,
@@ -62,7 +61,7 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
     z = np.empty((M, nz))
     D, L, Lz, K = np.empty((p, n)), np.empty((n, n)), np.empty((nz, nz)), np.empty((n, nz))
     y, S, Pxz, zh, Dz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz))
-    group, limit2, rej, cut = ungated(M, nz)
+    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
     for k in range(steps):
@@ -128,7 +127,7 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
     Pp, zh = np.empty((M, n, n)), np.empty((M, nz))
     FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
     L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
-    group, limit2, rej, cut = ungated(M, nz)
+    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     for k in range(steps):
         F(x, Pf[k], Fj)
         f(x, Pf[k], xp)
