@@ -134,7 +134,9 @@ def _rmse(est, truth):
 @pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "pf"])
 def test_gating_rejects_injected_outliers_and_the_ungated_run_is_worse(name):
     """Each filter, gated at 5 (Mahalanobis), rejects exactly the 12 outlying fixes and none of the
-    48 good ones; the same run without the gate is pulled 2-6x further off (numbers at seed 3)."""
+    48 good ones; the same run without the gate is pulled further off. Position RMSE (m), gated /
+    ungated / the same data without outliers: EKF 0.653 / 6.567 / 0.633, UKF 0.686 / 6.051 / 0.642,
+    CKF 0.685 / 7.523 / 0.641, PF (500 particles) 1.216 / 2.874 / 2.988."""
     flt = make_filter(name, **({"n_particles": 500} if name == "pf" else {}))
     model, Z, x0, P0, truth, n_bad = _gated_problem(5.0)
     gated = flt.run(model, Z, x0, P0, np.random.default_rng(0))
@@ -145,8 +147,10 @@ def test_gating_rejects_injected_outliers_and_the_ungated_run_is_worse(name):
     e_gated, e_free = _rmse(gated, truth), _rmse(free, truth)
     clean = flt.run(_gated_problem(None, outliers=False)[0], _gated_problem(None, outliers=False)[1], x0, P0,
                     np.random.default_rng(0))
-    assert e_gated < 1.6 * _rmse(clean, truth) + 0.1  # as good as without outliers (within 60 %)
-    assert e_free > 2.0 * e_gated, (e_free, e_gated)
+    if name == "pf":
+        assert e_gated < 1.5 and e_free > 2.0 * e_gated, (e_free, e_gated)
+    else:  # as good as without the outliers (within 10 %), the ungated run 9-11x worse
+        assert e_gated < 1.1 * _rmse(clean, truth) and e_free > 8.0 * e_gated, (e_free, e_gated)
     if name != "pf":  # the NIS leaves out the rejected components: its dof counts only the others
         fixes = np.isfinite(Z[:, 0])
         assert (gated.info["nis_dof"][fixes] == 5).sum() == fixes.sum() - n_bad
