@@ -35,9 +35,10 @@ mapping (``docs/bags.md``, "The fusion task"):
   the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
   (noted).
 
-Refused in one line: inputs that constrain neither the speed (no velocity, position or
-differential position) nor the heading (no attitude, rate or position) — every filter would
-dead-reckon its prior and the table rank priors —, a frame with no sensor input (naming the tasks that would run), no
+Refused in one line: inputs that leave the speed (no velocity, position or differential
+position) or the heading (no attitude, rate or position) unconstrained — every filter would
+carry its prior there and the table rank priors —, a frame with no sensor input (naming the
+tasks that would run), no
 reference (nothing to score against: how to declare one), an unknown field, a differential
 field with fewer than two messages.
 """
