@@ -212,7 +212,8 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
     model's array methods are not its kernels, or a subclass of the engine (a plugin's) changes a
     step, or when the loop is neither compiled nor cached and the job is smaller than
-    ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`)."""
+    ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`), or when the model gates its
+    measurements (:mod:`replay.filters.gating`: the steps count the rejections)."""
     if not own_steps(engine) or gating.active(engine.model) is not None:  # gates: step by step
         return None
     m = engine.model
