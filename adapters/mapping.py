@@ -57,7 +57,7 @@ from .rosmsg import KINDS, kind_of, normalize_type
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise"}
+ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "rejection_threshold"}
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
@@ -148,6 +148,8 @@ class Mapping:
 
 
 def _toml_value(v) -> str:
+    if isinstance(v, (int, float)):
+        return repr(v)
     if isinstance(v, dict):
         return "{ " + ", ".join(f"{k} = {x!r}" for k, x in v.items()) + " }"
     return "[" + ", ".join(f'"{x}"' for x in v) + "]"
@@ -251,19 +253,35 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
 
 def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
     """The fusion task's settings of a [channels] entry: ``fuse`` and ``differential`` (lists of
-    fields), ``noise`` (a table field = variance, in the field's unit squared)."""
+    fields), ``noise`` (a table field = variance, in the field's unit squared),
+    ``rejection_threshold`` (a Mahalanobis distance: one number for every field, or a table
+    field = distance; robot_localization's ``*_rejection_threshold``)."""
     out = {}
-    for key in ("fuse", "differential", "noise"):
+    for key in ("fuse", "differential", "noise", "rejection_threshold"):
         if key not in spec:
             continue
         if ref:
             raise ReplayError(f"{source}: [reference] {name}: {key} is for [channels] entries (the fusion task)")
         value = spec[key]
+        if key == "rejection_threshold" and not isinstance(value, dict):  # one threshold for every field
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+                raise ReplayError(
+                    f"{source}: [channels] {name}: rejection_threshold must be a positive Mahalanobis "
+                    f"distance (got {value!r})"
+                )
+            out[key] = float(value)
+            continue
         fields = list(value) if isinstance(value, (list, dict)) else None
         if fields is None or not all(isinstance(f, str) for f in fields):
             raise ReplayError(
                 f"{source}: [channels] {name}: {key} must be "
-                + ("a table of field = variance" if key == "noise" else "a list of field names")
+                + (
+                    "a table of field = variance"
+                    if key == "noise"
+                    else "a number or a table of field = threshold"
+                    if key == "rejection_threshold"
+                    else "a list of field names"
+                )
                 + f" (fields: {', '.join(FUSION_FIELDS)})"
             )
         bad = [f for f in fields if f not in FUSION_FIELDS]
@@ -275,6 +293,14 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
             for f, v in value.items():
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf"):
                     raise ReplayError(f"{source}: [channels] {name}: noise.{f} must be a positive variance (got {v!r})")
+            value = {f: float(v) for f, v in value.items()}
+        if key == "rejection_threshold":
+            for f, v in value.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf"):
+                    raise ReplayError(
+                        f"{source}: [channels] {name}: rejection_threshold.{f} must be a positive "
+                        f"Mahalanobis distance (got {v!r})"
+                    )
             value = {f: float(v) for f, v in value.items()}
         out[key] = value
     return out

@@ -7,14 +7,18 @@ frame, components, angles, convention)}``; the adapter names the channels
 
 | kind | ROS types | primary field | other fields |
 |---|---|---|---|
-| imu | sensor_msgs/Imu | gyro (rad/s, body) | accel (m/s^2, body), attitude (roll, pitch, yaw; masked when orientation_covariance[0] = -1) |
-| odometry | nav_msgs/Odometry | position (m, header.frame_id) | attitude, velocity (m/s, child_frame_id), rate (rad/s, child_frame_id) |
-| navsatfix | sensor_msgs/NavSatFix, foxglove.LocationFix | position (east, north, up in m, local ENU from UTM) | sigma (sqrt of the covariance diagonal, m), status |
+| imu | sensor_msgs/Imu | gyro (rad/s, body) | accel (m/s^2, body), attitude (roll, pitch, yaw; masked when orientation_covariance[0] = -1); gyro_var, accel_var, attitude_var |
+| odometry | nav_msgs/Odometry | position (m, header.frame_id) | attitude, velocity (m/s, child_frame_id), rate (rad/s, child_frame_id); position_var, attitude_var, velocity_var, rate_var |
+| navsatfix | sensor_msgs/NavSatFix, foxglove.LocationFix | position (east, north, up in m, local ENU from UTM) | sigma (sqrt of the covariance diagonal, m), status; position_var |
 | pressure | sensor_msgs/FluidPressure | depth (m, positive down) | pressure (Pa) |
-| twist | geometry_msgs/TwistStamped, TwistWithCovarianceStamped | velocity (m/s, header.frame_id) | rate (rad/s) |
-| pose | geometry_msgs/PoseStamped, PoseWithCovarianceStamped, foxglove.PoseInFrame | position (m, frame_id) | attitude |
+| twist | geometry_msgs/TwistStamped, TwistWithCovarianceStamped | velocity (m/s, header.frame_id) | rate (rad/s); velocity_var, rate_var (with covariance) |
+| pose | geometry_msgs/PoseStamped, PoseWithCovarianceStamped, foxglove.PoseInFrame | position (m, frame_id) | attitude; position_var, attitude_var (with covariance) |
 | tf | tf2_msgs/TFMessage, geometry_msgs/TransformStamped | one parent -> child pair, read as a pose (:func:`tf_pair`) | attitude |
 | path | nav_msgs/Path | the poses of its last message, read as poses (:func:`path_poses`) | attitude |
+
+``<field>_var``: the diagonal of the message's recorded covariance of that field (x, y, z or
+roll, pitch, yaw; 6x6 pose and twist covariances split in two), raw: zero, negative and ``-1``
+entries are kept for the fusion task to count and replace.
 
 Attitude is (roll, pitch, yaw) in radians from the quaternion, ZYX (yaw about
 z, then pitch about y, then roll about x), angles wrapped to (-pi, pi]; ``yaw``
@@ -120,6 +124,18 @@ def _quat(items) -> np.ndarray:
     return np.array([(q.x, q.y, q.z, q.w) for q in items], float).reshape(-1, 4)
 
 
+def _variances(covs, size: int, first: int, unit: str, frame: str):
+    """The recorded variances of one field: diagonal entries ``first, first + 1, first + 2`` of each
+    message's row-major ``size`` x ``size`` covariance (3: an Imu's or a NavSatFix's; 6: a pose's or
+    a twist's, rotations from 3), raw: 0, negative and ROS's ``-1`` ("not given") are kept, for
+    the fusion task to count and replace; NaN where a message has no covariance of that size."""
+    idx = [(first + i) * (size + 1) for i in range(3)]
+    vals = np.array(
+        [[c[i] for i in idx] if len(c) == size * size else (np.nan,) * 3 for c in (tuple(c) for c in covs)], float
+    ).reshape(-1, 3)
+    return _field(vals, unit, frame, np.isfinite(vals).all(axis=1), XYZ, (), "recorded covariance diagonal")
+
+
 def _field(values, unit, frame="", valid=None, components=(), angles=(), convention=""):
     values = np.asarray(values, float)
     if valid is None:
@@ -195,29 +211,49 @@ def convert(kind: str, msgs: list, geo=None, options: dict | None = None) -> dic
             "gyro": _field(_vec(m.angular_velocity for m in msgs), "rad/s", fid, components=XYZ),
             "accel": _field(_vec(m.linear_acceleration for m in msgs), "m/s^2", fid, components=XYZ),
             "attitude": _attitude([m.orientation for m in msgs], fid, cov0 != -1),
+            "gyro_var": _variances([m.angular_velocity_covariance for m in msgs], 3, 0, "(rad/s)^2", fid),
+            "accel_var": _variances([m.linear_acceleration_covariance for m in msgs], 3, 0, "(m/s^2)^2", fid),
+            "attitude_var": _variances([m.orientation_covariance for m in msgs], 3, 0, "rad^2", fid),
         }
     if kind == "odometry":
         child = str(msgs[0].child_frame_id) if msgs else ""
         poses = [m.pose.pose for m in msgs]
         twists = [m.twist.twist for m in msgs]
+        pcov, tcov = [m.pose.covariance for m in msgs], [m.twist.covariance for m in msgs]
         return {
             "position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
             "attitude": _attitude([p.orientation for p in poses], fid),
             "velocity": _field(_vec(t.linear for t in twists), "m/s", child, components=XYZ),
             "rate": _field(_vec(t.angular for t in twists), "rad/s", child, components=XYZ),
+            "position_var": _variances(pcov, 6, 0, "m^2", fid),
+            "attitude_var": _variances(pcov, 6, 3, "rad^2", fid),
+            "velocity_var": _variances(tcov, 6, 0, "(m/s)^2", child),
+            "rate_var": _variances(tcov, 6, 3, "(rad/s)^2", child),
         }
     if kind == "pose":
         poses = [_pose_of(m) for m in msgs]
-        return {
+        out = {
             "position": _field(_vec(p.position for p in poses), "m", fid, components=XYZ),
             "attitude": _attitude([p.orientation for p in poses], fid),
         }
+        if msgs and hasattr(msgs[0].pose, "covariance"):  # PoseWithCovarianceStamped
+            pcov = [m.pose.covariance for m in msgs]
+            out.update(
+                position_var=_variances(pcov, 6, 0, "m^2", fid), attitude_var=_variances(pcov, 6, 3, "rad^2", fid)
+            )
+        return out
     if kind == "twist":
         twists = [m.twist.twist if hasattr(m.twist, "twist") else m.twist for m in msgs]
-        return {
+        out = {
             "velocity": _field(_vec(t.linear for t in twists), "m/s", fid, components=XYZ),
             "rate": _field(_vec(t.angular for t in twists), "rad/s", fid, components=XYZ),
         }
+        if msgs and hasattr(msgs[0].twist, "covariance"):  # TwistWithCovarianceStamped
+            tcov = [m.twist.covariance for m in msgs]
+            out.update(
+                velocity_var=_variances(tcov, 6, 0, "(m/s)^2", fid), rate_var=_variances(tcov, 6, 3, "(rad/s)^2", fid)
+            )
+        return out
     if kind == "pressure":
         p = np.array([m.fluid_pressure for m in msgs], float)
         rho = float(opt.get("water_density", WATER_DENSITY))
@@ -248,6 +284,7 @@ def convert(kind: str, msgs: list, geo=None, options: dict | None = None) -> dic
                 "UTM (meta crs) minus meta origin; up = altitude - origin altitude",
             ),
             "sigma": _field(np.sqrt(np.abs(cov)), "m", "ENU local", ok, ("east", "north", "up")),
+            "position_var": _variances([m.position_covariance for m in msgs], 3, 0, "m^2", "ENU local"),
             "status": _field(status, "", "", np.ones(len(status), bool)),
         }
     raise ValueError(f"no converter for {kind}")

@@ -56,7 +56,7 @@ import numpy as np
 from replay.util.errors import ProtocolError, ReplayError
 from replay.util.params import Declared
 
-from . import compiled, noise_params  # noqa: F401  compiled: numba's cache written one process at a time
+from . import compiled, gating, noise_params  # noqa: F401  compiled: numba's cache written one process at a time
 
 PER_RUN = ("start", "predict", "update", "estimate", "finish")
 # errors of the user or of the program: raised, never counted as a divergence
@@ -234,6 +234,7 @@ class Filter(Declared):
             engine = self.engine(model, rngs)
         except MemoryError as err:
             _escalate(err, careful, M)
+        gating.check(self, engine, model)
         started = True
         try:
             engine.start(X0, P0)

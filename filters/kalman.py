@@ -41,6 +41,7 @@ import numpy as np
 from replay.util.angles import angle_mask, residual, wrap_components
 from replay.model import Model, remap_indices
 
+from . import gating
 from . import kalman_kernels as kernels
 from . import kalman_loops
 from .base import Filter
@@ -69,14 +70,15 @@ def gain_nis(S, Pxz, y):
     return (K[0], nis[0]) if one else (K, nis)
 
 
-def kalman_update(x, P, y, H, R, x_angles=()):
+def kalman_update(x, P, y, H, R, x_angles=(), gate=None):
     """The Kalman update (module docstring) over one run (x (nx,)) or a stack (M, nx): returns
-    new x, P (Joseph form), NIS; compiled (:func:`replay.filters.kalman_kernels.joseph_update`).
-    LinAlgError when an S is not positive definite."""
+    new x, P (Joseph form), NIS; compiled (:func:`replay.filters.kalman_kernels.joseph_update`),
+    gated with ``gate`` = (group, limit2, rej, cut) (:class:`replay.filters.gating.Tally`; None:
+    no gate). LinAlgError when an S is not positive definite."""
     one = x.ndim == 1
     x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
     nis = np.empty(len(x2))
-    bad = kernels.joseph_update(
+    args = (
         x2,
         P3,
         stack_of(y, one),
@@ -85,6 +87,7 @@ def kalman_update(x, P, y, H, R, x_angles=()):
         angle_mask(tuple(x_angles), x2.shape[1]),
         nis,
     )
+    bad = kernels.joseph_update(*args) if gate is None else kernels.joseph_update_gated(*args, *gate)
     if bad >= 0:
         raise not_pd(bad)
     return (x2[0], P3[0], nis[0]) if one else (x2, P3, nis)
@@ -130,6 +133,8 @@ class KalmanEngine:
     """M runs of a Kalman-family filter: start, keep and the step; subclasses predict and update
     (over any leading axes: one run is held as x (nx,), P (nx, nx))."""
 
+    GATES = True  # its updates gate (replay.filters.gating)
+
     def __init__(self, flt, model, rngs):
         self.flt, self.model = flt, model
 
@@ -137,13 +142,27 @@ class KalmanEngine:
         self.one = len(X0) == 1
         self.x, self.P = (X0[0].copy(), P0[0].copy()) if self.one else (X0.copy(), P0.copy())
         self.nis1, self.dof1 = np.empty(1), np.empty(1, int)  # one run's NIS and its dof, per step
+        self.tally, self.cut = gating.Tally(self.model, len(X0)), 0  # cut: components a gate rejected
+        self.gated = self.tally.gates is not None
 
     def keep(self, ok):
+        self.tally.keep(ok)
         if not self.one:
             self.x, self.P = self.x[ok], self.P[ok]
 
     def finish(self, m, info):
-        pass
+        self.tally.info(m, info)
+
+    def gate(self, mask, rows, n):
+        """The gate arguments of a gated update of ``n`` runs (``rows`` of the active ones) and, after
+        it, the tally: (args, done) where done() adds the counts and returns the components cut."""
+        args = self.tally.args(mask, n)
+
+        def done():
+            self.tally.add(args[2], rows)
+            return args[3]
+
+        return args, done
 
     def step(self, k, Z, finite):
         x, P = self.predict(self.x, self.P, k)
@@ -154,17 +173,19 @@ class KalmanEngine:
                 x, P, nis = self.update(x, P, Z[0], k, None)
             elif dof:
                 x, P, nis = self.update(x, P, Z[0][f], k, f)
+            if dof and self.gated:
+                dof -= int(self.cut[0])
             self.x, self.P = x, P
             self.nis1[0], self.dof1[0] = nis, dof
             return x[None], P[None], self.nis1, self.dof1
         if finite.all():
             self.x, self.P, nis = self.update(x, P, Z, k, None)
-            return self.x, self.P, nis, np.full(len(x), Z.shape[1])
+            return self.x, self.P, nis, np.full(len(x), Z.shape[1]) - self.cut
         nis, dof = np.full(len(x), np.nan), np.zeros(len(x), int)
         for rows, mask in groups(finite):
             z = Z[rows] if mask is None else Z[rows][:, mask]
             x[rows], P[rows], nis[rows] = self.update(x[rows], P[rows], z, k, mask, rows)
-            dof[rows] = z.shape[1]
+            dof[rows] = z.shape[1] - self.cut
         self.x, self.P = x, P
         return x, P, nis, dof
 
@@ -191,8 +212,9 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
     model's array methods are not its kernels, or a subclass of the engine (a plugin's) changes a
     step, or when the loop is neither compiled nor cached and the job is smaller than
-    ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`)."""
-    if not own_steps(engine):
+    ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`), or when the model gates its
+    measurements (:mod:`replay.filters.gating`: the steps count the rejections)."""
+    if not own_steps(engine) or gating.active(engine.model) is not None:  # gates: step by step
         return None
     m = engine.model
     ks = m.kernels()
@@ -264,7 +286,13 @@ class EKFEngine(KalmanEngine):
         R, angles = measurement(m, k, mask)
         if mask is not None:
             H, zh = H[..., mask, :], zh[..., mask]
-        return kalman_update(x, P, residual(z, zh, angles), H, R, m.x_angles)
+        y = residual(z, zh, angles)
+        if not self.gated:
+            return kalman_update(x, P, y, H, R, m.x_angles)
+        gate, done = self.gate(mask, rows, 1 if x.ndim == 1 else len(x))
+        out = kalman_update(x, P, y, H, R, m.x_angles, gate)
+        self.cut = done()
+        return out
 
 
 class EKF(Filter):

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .gating import gate
 from replay.util.kernels import (
     cholesky,
     deviations,
@@ -80,15 +81,21 @@ def kalman_correct(x, P, y, S, Pxz, xmask, nis):
     Returns the first run whose S is not positive definite (that run and the later ones are
     left as they were), or -1."""
     M, nx, nz = Pxz.shape
-    return kalman_correct_into(x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)))
+    return kalman_correct_into(
+        x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), None, None, None, None
+    )
 
 
 @nb.njit(cache=True)
-def kalman_correct_into(x, P, y, S, Pxz, xmask, nis, L, K):
+def kalman_correct_into(x, P, y, S, Pxz, xmask, nis, L, K, group, limit2, rej, cut):
     """:func:`kalman_correct` with its work arrays L (nz, nz), K (nx, nz) given (the run loops
-    allocate them once per run, not once per step)."""
+    allocate them once per run, not once per step), after the gating of each run
+    (:func:`replay.filters.gating.gate`: ``group`` (nz,), ``limit2`` (G,); counts into rej (M, G),
+    the components cut into cut (M,))."""
     M, nx, nz = Pxz.shape
     for m in range(M):
+        if limit2 is not None:  # None: no gate (that branch compiled away)
+            cut[m] = gate(y[m], S[m], Pxz[m], group, limit2, rej[m])
         g = gain(S[m], Pxz[m], y[m], L, K)
         if g < 0.0:
             return m
@@ -193,12 +200,18 @@ def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L):
 
 @nb.njit(cache=True)
 def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
+    """:func:`sigma_update_gated` without gates."""
+    return sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, None, None, None, None)
+
+
+@nb.njit(cache=True)
+def sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, group, limit2, rej, cut):
     """The sigma-point update of each run m, in place on x (M, n), P (M, n, n): the
     :func:`innovation_moments` of the points' predictions Z (M, p, nz), then S = Pzz + R and
     :func:`kalman_correct`; then the points X, Xdev (M, p, n) of the corrected (x, P)
-    (:func:`sigma_points`). Returns -1; or 0 <= m < M, the first run whose S is not positive
-    definite (x, P of runs >= m unchanged, no points); or M + m, the first run whose corrected
-    P has no Cholesky factor (its points, and later runs', not made)."""
+    (:func:`sigma_points`); gated as :func:`kalman_correct_into`. Returns -1; or 0 <= m < M,
+    the first run whose S is not positive definite (x, P of runs >= m unchanged, no points); or
+    M + m, the first run whose corrected P has no Cholesky factor (its points, and later runs', not made)."""
     M, p, nz = Z.shape
     n = x.shape[1]
     return sigma_update_into(
@@ -224,20 +237,26 @@ def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
         np.empty((nz, nz)),
         np.empty((n, nz)),
         np.empty((n, n)),
+        group,
+        limit2,
+        rej,
+        cut,
     )
 
 
 @nb.njit(cache=True)
-def sigma_update_into(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, y, S, Pxz, zh, Dz, Lz, K, L):
+def sigma_update_into(
+    Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, y, S, Pxz, zh, Dz, Lz, K, L, group, limit2, rej, cut
+):
     """:func:`sigma_update` with its work arrays given: y (M, nz), S (M, nz, nz), Pxz (M, n, nz),
-    zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz), L (n, n)."""
+    zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz), L (n, n); the gates and their counts."""
     M, p, nz = Z.shape
     innovation_moments_into(Z, dev, z, wm, wc, zmask, y, S, Pxz, zh, Dz)
     for m in range(M):
         for a in range(nz):
             for b in range(nz):
                 S[m, a, b] += R[a, b]
-    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, Lz, K)
+    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, Lz, K, group, limit2, rej, cut)
     if bad >= 0:
         return bad
     bad = sigma_points_into(x, P, xi, X, Xdev, L)
@@ -267,9 +286,15 @@ def propagate_cov_into(F, P, Q, out, FP):
 
 @nb.njit(cache=True)
 def joseph_update(x, P, y, H, R, xmask, nis):
+    """:func:`joseph_update_gated` without gates."""
+    return joseph_update_gated(x, P, y, H, R, xmask, nis, None, None, None, None)
+
+
+@nb.njit(cache=True)
+def joseph_update_gated(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
     """The Kalman update in Joseph form, in place on each run m of x (M, n), P (M, n, n), with
     innovations y (M, nz), measurement Jacobians H (M, nz, n) and R (nz, nz) (Bar-Shalom et al.
-    2001, §5.2):
+    2001, §5.2), after the gating of each run (:func:`replay.filters.gating.gate` on S and P H'):
 
         S = H P H' + R,  K = P H' S^-1,  x = x + K y  (``xmask`` components wrapped),
         P = (I - K H) P (I - K H)' + K R K',  symmetrised;  nis = y' S^-1 y.
@@ -293,13 +318,17 @@ def joseph_update(x, P, y, H, R, xmask, nis):
         np.empty((n, n)),
         np.empty((n, n)),
         np.empty((n, nz)),
+        group,
+        limit2,
+        rej,
+        cut,
     )
 
 
 @nb.njit(cache=True)
-def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR):
+def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR, group, limit2, rej, cut):
     """:func:`joseph_update` with its work arrays given: PHt, K, KR (n, nz), S, L (nz, nz),
-    A, AP (n, n)."""
+    A, AP (n, n); the gates and their counts as :func:`kalman_correct_into`."""
     M, n = x.shape
     nz = y.shape[1]
     for m in range(M):
@@ -313,6 +342,8 @@ def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR):
         for i in range(nz):
             for j in range(nz):
                 S[i, j] += R[i, j]
+        if limit2 is not None:
+            cut[m] = gate(y[m], S, PHt, group, limit2, rej[m])
         g = gain(S, PHt, y[m], L, K)
         if g < 0.0:
             return m

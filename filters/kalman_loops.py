@@ -61,6 +61,7 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
     z = np.empty((M, nz))
     D, L, Lz, K = np.empty((p, n)), np.empty((n, n)), np.empty((nz, nz)), np.empty((n, nz))
     y, S, Pxz, zh, Dz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz))
+    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
     for k in range(steps):
@@ -99,6 +100,10 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
             Lz,
             K,
             L,
+            group,
+            limit2,
+            rej,
+            cut,
         )
         if 0 <= bad < M:
             return k
@@ -122,6 +127,7 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
     Pp, zh = np.empty((M, n, n)), np.empty((M, nz))
     FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
     L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
+    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     for k in range(steps):
         F(x, Pf[k], Fj)
         f(x, Pf[k], xp)
@@ -141,7 +147,11 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
             for q in range(nz):
                 y[m, q] = Z[m, k, q] - zh[m, q]
             wrap(y[m], zmask)
-        if joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR) >= 0:
+        R_k = R[k % R.shape[0]]
+        if (
+            joseph_update_into(xp, Pp, y, Hj, R_k, xmask, nis[:, k], PHt, S, K, L, A, AP, KR, group, limit2, rej, cut)
+            >= 0
+        ):
             return k
         x[:] = xp
         P[:] = Pp

@@ -41,6 +41,8 @@ def direct_rows(model, x0) -> list[tuple[int, int, float]]:
 
 
 class MeasurementsEngine:
+    GATES = True  # the raw observations, every one: a gate does not apply (replay.filters.gating)
+
     def __init__(self, model, rngs):
         self.model = model
 

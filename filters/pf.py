@@ -37,7 +37,7 @@ import numpy as np
 from replay.model import Model, noise_factor
 from replay.util.params import Param
 
-from . import particles, pf_loop
+from . import gating, particles, pf_loop
 from .base import Filter, on_points
 from .resampling import SCHEMES
 
@@ -96,6 +96,8 @@ def propagate(model, X, k, rngs):
 class PFEngine:
     """M runs of a :class:`ParticleFilter` (or a subclass): particles (M, N, nx)."""
 
+    GATES = True  # its update gates by the particle rule (replay.filters.gating.particle_rejects)
+
     def __init__(self, flt, model, rngs):
         self.flt, self.model, self.rngs = flt, model, list(rngs)
 
@@ -110,15 +112,18 @@ class PFEngine:
         self.resampled = [0] * M
         self.ess_sum, self.ess_steps = np.zeros(M), np.zeros(M, int)  # ESS before resampling, per run
         self.no_nis = np.full(M, np.nan), np.zeros(M, int)  # a PF records no innovation
+        self.tally = gating.Tally(self.model, M)
 
     def keep(self, ok):
         self.ids = self.ids[ok]
+        self.tally.keep(ok)
         self.active = [self.rngs[i] for i in self.ids]
         self.X, self.logw, self.w = self.X[ok], self.logw[ok], self.w[ok]
         self.no_nis = self.no_nis[0][ok], self.no_nis[1][ok]
 
     def finish(self, m, info):
         info["resampled"] = int(self.resampled[m])
+        self.tally.info(m, info)
         if self.ess_steps[m]:
             info["mean_ess"] = float(self.ess_sum[m] / self.ess_steps[m])
 
@@ -135,7 +140,7 @@ class PFEngine:
         """Every step of every run in one compiled loop when it computes what the steps compute
         (:mod:`replay.filters.pf_loop`), else None (the steps below run): this engine itself (not a
         subclass) with the bootstrap weighting."""
-        if type(self) is PFEngine and type(self.flt).weigh is ParticleFilter.weigh:
+        if type(self) is PFEngine and type(self.flt).weigh is ParticleFilter.weigh and not self.tally.gates:
             return pf_loop.run(self, Z, finite)
         return None
 
@@ -144,13 +149,28 @@ class PFEngine:
         self.X = propagate(self.model, self.X, k, self.active)
 
     def update(self, k, Z, finite):
-        """Weights of the runs with a measurement (missing components left out of the likelihood)."""
+        """Weights of the runs with a measurement (missing components left out of the likelihood, and
+        the components a gate rejects: :meth:`gate`)."""
+        finite = self.gate(k, Z, finite)
         if finite.all():
             self.w, self.logw = self.flt.weigh(self.logw, self.loglik(k, Z, None, range(len(Z))))
             return
         rows = np.flatnonzero(finite.any(axis=1))
         if len(rows):
             self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], self.loglik(k, Z, finite, rows))
+
+    def gate(self, k, Z, finite):
+        """``finite`` without the components the gates reject (:func:`replay.filters.gating.particle_rejects`,
+        with the weights before this update), the rejections counted per run."""
+        gates = self.tally.gates
+        if gates is None:
+            return finite
+        finite = np.array(finite)
+        for j in np.flatnonzero(finite.any(axis=1)):
+            cut, hit = gating.particle_rejects(gates, self.model, self.X[j], self.w[j], Z[j], k, finite[j])
+            finite[j] &= ~cut
+            self.tally.count[self.ids[j], hit] += 1
+        return finite
 
     def loglik(self, k, Z, finite, rows):
         """log p(z_k | x^i) (len(rows), N) of the runs ``rows`` (``finite``: measured components)."""

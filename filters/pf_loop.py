@@ -15,8 +15,8 @@ generator with NumPy's own algorithms, sharing its state): the loop gives the
 numbers of the steps bit for bit, and leaves the generator where the steps
 leave it (``tests/test_pf_loop.py``). The steps remain the readable reference
 and the general path: partly missing measurements, models that draw their own noise,
-a non-diagonal Q, time-varying Q or R, other resampling schemes and subclasses
-that change the weighting all step in Python.
+a non-diagonal Q, time-varying Q or R, gated measurements (:mod:`replay.filters.gating`),
+other resampling schemes and subclasses that change the weighting all step in Python.
 """
 
 from __future__ import annotations

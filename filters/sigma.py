@@ -192,7 +192,7 @@ class SigmaEngine(KalmanEngine):
         x3, P3 = (x[None], P[None]) if one else (x, P)
         nis = np.empty(len(x3))
         Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
-        bad = kernels.sigma_update(
+        args = (
             Z,
             dev,
             stack_of(z, one),
@@ -208,6 +208,12 @@ class SigmaEngine(KalmanEngine):
             Xn,
             devn,
         )
+        if not self.gated:
+            bad = kernels.sigma_update(*args)
+        else:
+            gate, done = self.gate(mask, rows, len(x3))
+            bad = kernels.sigma_update_gated(*args, *gate)
+            self.cut = done()
         if 0 <= bad < len(x3):
             raise not_pd(bad)
         if rows is not None:

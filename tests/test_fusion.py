@@ -86,7 +86,7 @@ def test_test1_fusion_short(test1):
     assert prob.params["holdout"] and set(prob.inputs) >= {"gps.position", "odom.velocity", "odom.rate", "imu.gyro"}
     fed = np.isfinite(prob.z[:, 0])
     assert not (fed & prob.truth_valid).any()  # a fed fix is never scored
-    assert any("noise recorded position_covariance" in n for n in prob.notes)
+    assert any(n.startswith("task fusion: [channels] gps position: noise recorded covariance") for n in prob.notes)
     assert ev.rows[0]["pos_rmse"] < 3.0
 
 

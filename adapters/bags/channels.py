@@ -106,7 +106,7 @@ def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> tuple
         return None
     names = {f: _name(e, kind, f) for f in ROLE_FIELDS[role] if f in fields}
     for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-        for f in value:
+        for f in value if isinstance(value, (list, tuple, dict)) else ():
             if f not in fields:
                 raise ReplayError(
                     f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "

@@ -33,12 +33,15 @@ What the returned :class:`~replay.frame.Frame` holds:
   beyond their kind's magnitude limit (at most 1 % of the column) are masked:
   both counted per column, neither drops the column.
 * ``meta["roles"]``: what tasks may use the channels for
-  (:func:`replay.tasks.role_input`): ``gps`` = ``gps_position``; ``imu`` =
+  (:func:`replay.tasks.role_input`): ``gps`` = ``gps_position``; ``velocity`` =
+  ``vf`` (a body forward velocity, as a DVL's) when it follows the track's speed along
+  the heading (``meta["forward_velocity"]``: correlation, median difference; the
+  31-column files; the 36-column files' ``vf`` fails the magnitude check); ``imu`` =
   ``gyro`` when its wz follows the yaw rate. ``meta["channel_columns"]`` maps
   a channel to its columns, so that a task lacking a channel can name the
   report line that removed it.
 * ``meta``: source, sha256, layout, adapter, crs, epsg, origin, rows, time,
-  jumps, speed, yaw_course, gyro_attitude, dropped_columns; gps (36 columns);
+  jumps, speed, yaw_course, gyro_attitude, forward_velocity, dropped_columns; gps (36 columns);
   gps_time_of_day when ``time_gps`` holds one.
 
 Bad input raises :class:`~replay.util.errors.DataError` with one line naming the

@@ -103,3 +103,32 @@ def _gyro_check(t, w, att, report, window=1.0) -> dict:
             f"an attitude angle may not hold what its header says",
         )
     return out
+
+
+def _forward_check(vf, yaw, vel, report, min_corr=0.5) -> tuple[dict, str | None]:
+    """The forward velocity column ``vf`` against the track's speed along the heading
+    (``vel . (cos yaw, sin yaw)``): (record, finding or None). A finding (weak correlation, or a
+    median difference above max(0.3 m/s, half the median speed)) keeps it from being an input."""
+    along = vel[:, 0] * np.cos(yaw) + vel[:, 1] * np.sin(yaw)
+    ok = np.isfinite(vf) & np.isfinite(along)
+    if ok.sum() < 10:
+        return {"samples": int(ok.sum())}, "too few samples to compare with the track's speed"
+    d = vf[ok] - along[ok]
+    corr = float(np.corrcoef(vf[ok], along[ok])[0, 1]) if np.std(vf[ok]) > 0 and np.std(along[ok]) > 0 else 0.0
+    out = {"samples": int(ok.sum()), "corr": corr, "bias": float(np.median(d)), "median_abs": float(np.median(abs(d)))}
+    report.add(
+        "info",
+        "vf",
+        out["samples"],
+        f"forward velocity vs the track's speed along the heading: correlation {corr:.2f}, "
+        f"median difference {out['bias']:+.3f} m/s",
+    )
+    scale = float(np.median(np.abs(along[ok])))
+    if not corr >= min_corr:
+        return out, f"correlation {corr:.2f} < {min_corr:g} with the track's speed along the heading"
+    if out["median_abs"] > max(0.3, 0.5 * scale):
+        return (
+            out,
+            f"disagrees with the track's speed along the heading (median |difference| {out['median_abs']:.2f} m/s)",
+        )
+    return out, None

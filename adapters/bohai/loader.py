@@ -15,7 +15,7 @@ from replay.util.params import Param
 from replay.util.progress import load_stage
 
 from .cells import mask_infinite, mask_isolated, time_unit
-from .checks import _gyro_check, _speed_check, _yaw_check, track_velocity
+from .checks import _forward_check, _gyro_check, _speed_check, _yaw_check, track_velocity
 from .columns import COLS31, COLS36, COLUMNS, GROUPS, check_columns
 from .gps import _fresh_alt, _gps_fixes, _time_of_day
 from .reading import _clean_rows, _drop, _layout, _read, _rows, _time_axis
@@ -131,8 +131,10 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
 
 
 def _roles(channels, meta) -> dict:
-    """What tasks may use the channels for (replay.tasks.role_input): the GPS fixes, and the gyro as
-    an IMU when its wz follows the yaw rate (the adapter's gyro check)."""
+    """What tasks may use the channels for (replay.tasks.role_input): the GPS fixes, the forward
+    velocity ``vf`` (a body velocity, as a DVL's) when it follows the track's speed along the
+    heading (the 31-column files; the 36-column files' ``vf`` holds no velocity and is dropped), and
+    the gyro as an IMU when its wz follows the yaw rate (the adapter's gyro check)."""
     roles = {}
     if "gps_position" in channels:
         roles["gps"] = [
@@ -143,6 +145,8 @@ def _roles(channels, meta) -> dict:
                 "channels": {"position": "gps_position"},
             }
         ]
+    if "vf" in channels:  # checked against the track (_forward_check): the forward speed, as a DVL's
+        roles["velocity"] = [{"entry": "vf", "source": "column vf", "declared": False, "channels": {"velocity": "vf"}}]
     imu = {}
     if "gyro" in channels and meta.get("gyro_attitude", {}).get("wz_yaw", 0.0) >= 0.3:
         imu["gyro"] = "gyro"
@@ -193,6 +197,14 @@ def _sensor_channels(cols, t, vel, lines, report, meta) -> dict:
         meta["yaw_course"] = _yaw_check(channels["attitude"].values[:, 2], vel, report)
     if "attitude" in channels and "gyro" in channels:
         meta["gyro_attitude"] = _gyro_check(t, channels["gyro"].values, channels["attitude"].values, report)
+    if "vf" in passed:  # a body forward velocity (a DVL's) when it follows the track's speed
+        if "attitude" in channels:
+            meta["forward_velocity"], found = _forward_check(cols["vf"], channels["attitude"].values[:, 2], vel, report)
+        else:
+            found = "no attitude to compare it with the track's speed along the heading"
+        if found:
+            _drop(report, meta, "vf", n, found)
+            passed.remove("vf")
     for c in passed:
         kind, unit, frame, desc = COLUMNS[c]
         if kind == "altitude":

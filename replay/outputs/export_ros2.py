@@ -50,6 +50,17 @@ def _get(group, key, n, width):
     return ch.values.reshape(n, -1), ch.valid
 
 
+def _cov(f, i, names, size):
+    """The row-major ``size`` x ``size`` covariance of sample i whose diagonal blocks are the recorded
+    ``<field>_var`` fields ``names`` (rosmsg: 3 entries each, raw), zeros where absent."""
+    c = np.zeros(size * size)
+    for b, name in enumerate(names):
+        vals, ok = f.get(name, (None, None))
+        if vals is not None and ok[i]:
+            c[[(3 * b + j) * (size + 1) for j in range(3)]] = vals[i][:3]
+    return c
+
+
 def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
     """Build one message of ``kind`` from field arrays ``f`` at sample i."""
     T = out.T
@@ -57,20 +68,21 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
     if kind == "imu":
         att_ok = f["attitude"][1][i]
         q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0] if att_ok else np.array([0, 0, 0, 1.0])
-        ocov = np.zeros(9)
-        ocov[0] = 0.0 if att_ok else -1.0
+        ocov = _cov(f, i, ("attitude_var",), 3)
+        if not att_ok:
+            ocov[0] = -1.0
         return T[typ](
             header=hdr,
             orientation=out.quat(q),
             orientation_covariance=ocov,
             angular_velocity=out.vec(f["gyro"][0][i]),
-            angular_velocity_covariance=np.zeros(9),
+            angular_velocity_covariance=_cov(f, i, ("gyro_var",), 3),
             linear_acceleration=out.vec(f["accel"][0][i]),
-            linear_acceleration_covariance=np.zeros(9),
+            linear_acceleration_covariance=_cov(f, i, ("accel_var",), 3),
         )
     if kind == "odometry":
         q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0]
-        return out.odometry(
+        msg = out.odometry(
             ns,
             fid.get("main", ""),
             fid.get("velocity", ""),
@@ -78,17 +90,24 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
             q,
             f["velocity"][0][i],
             f["rate"][0][i],
+            _cov(f, i, ("position_var", "attitude_var"), 6),
         )
+        msg.twist.covariance = _cov(f, i, ("velocity_var", "rate_var"), 6)
+        return msg
     if kind == "pose":
         q = rosmsg.rpy_to_quat(f["attitude"][0][i : i + 1])[0]
         pose = out.pose(f["position"][0][i], q)
         if typ.endswith("PoseWithCovarianceStamped"):
-            pose = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+            pose = T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=pose, covariance=_cov(f, i, ("position_var", "attitude_var"), 6)
+            )
         return T[typ](header=hdr, pose=pose)
     if kind == "twist":
         tw = out.twist(f["velocity"][0][i], f["rate"][0][i])
         if typ.endswith("TwistWithCovarianceStamped"):
-            tw = T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36))
+            tw = T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=tw, covariance=_cov(f, i, ("velocity_var", "rate_var"), 6)
+            )
         return T[typ](header=hdr, twist=tw)
     if kind == "pressure":
         rho = float(params.get("water_density", rosmsg.WATER_DENSITY))
@@ -106,6 +125,8 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
         sig = f["sigma"][0][i]
         cov = np.zeros(9)
         cov[[0, 4, 8]] = np.where(np.isfinite(sig), sig**2, 0.0)
+        if "position_var" in f and f["position_var"][1][i]:  # the recorded diagonal, raw
+            cov = _cov(f, i, ("position_var",), 3)
         return T[typ](
             header=hdr,
             status=T["sensor_msgs/msg/NavSatStatus"](status=status, service=1),

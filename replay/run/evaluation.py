@@ -28,6 +28,7 @@ from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.noise_params import check as check_noise, settings as noise_settings
 from replay.filters.base import Estimates
+from replay.filters.gating import per_filter
 from replay.run.pipeline import Config, build_problem, config_hash, default_task, plain, run_block
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_params
 from replay.tasks import make_task
@@ -348,6 +349,10 @@ def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterRes
         "min_scored_share": min_scored_share,
     }
     notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
+    notes += [
+        f"{name}: gating rejected (per run) " + "; ".join(f"{k} {v}" for k, v in counts.items())
+        for name, counts in per_filter(results).items()
+    ]
     return Evaluation(
         config,
         plain(p0.frame_meta),

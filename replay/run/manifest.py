@@ -13,6 +13,7 @@ import numpy as np
 from replay.data import registry
 from replay.util.version import __version__
 from replay.filters import make_filter
+from replay.filters.gating import per_filter
 from replay.run.pipeline import plain
 from replay.trajectory.recorded import RECORDED_PARAMS, is_recorded
 from replay.tasks import make_task
@@ -104,4 +105,5 @@ def manifest(ev) -> dict:
         "units": ev.units,
         "results": {r.name: dict(r.summary) for r in ev.results},
         **({"failures": f} if (f := failures(ev)) else {}),
+        **({"gating": g} if (g := per_filter(ev.results)) else {}),
     }

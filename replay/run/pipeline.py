@@ -156,6 +156,8 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     problem.frame_meta = dict(
         frame.meta, task_inputs=getattr(problem, "inputs", {}), task_notes=getattr(problem, "notes", [])
     )
+    if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
+        problem.frame_meta["task_noise"] = problem.noise
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
     problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
@@ -287,6 +289,8 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     rec.update({k: v for k, v in getattr(problem, "frame_meta", {}).items() if k == "content_checked"})
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
+    if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)
+        rec["rejected"] = dict(est.info["rejected"])
     if keep:
         rec.update(problem=problem, estimates=est, errors=err)
     return rec

@@ -79,6 +79,7 @@ class Problem:
     divergence_threshold: float | None = None  # m: an error beyond it at any scored sample is a divergence
     inputs: dict = field(default_factory=dict)  # what the task used: input -> "channel (source)"
     notes: list = field(default_factory=list)  # one-line notices (e.g. an optional input not found)
+    noise: dict = field(default_factory=dict)  # input -> where its measurement noise came from (fusion)
     position_unit: str = "m"  # unit of the position axes ("1": dimensionless, e.g. UNGM)
     extra_units: dict = field(default_factory=dict)  # truth_extra name -> unit (e.g. speed: m/s)
 

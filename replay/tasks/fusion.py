@@ -11,9 +11,18 @@ mapping (``docs/bags.md``, "The fusion task"):
   used absolutely or differentially, at its own messages' times (the frame's time axis is
   the union of all messages: at a step, the components of the messages that arrived there
   are measured, the others are missing; gaps are predicted through).
-* **Noise**: a NavSatFix's recorded ``position_covariance`` (its ``_sigma`` channel) where
-  present and positive, else the entry's declared ``noise`` or the task's default per field
-  (``r_*``); the manifest's notes say which was used for every input.
+* **Noise**: the entry's declared ``noise`` where given; else the message's recorded covariance
+  (its diagonal, per component and per message: Odometry pose and twist, Imu orientation,
+  angular velocity and linear acceleration, PoseWithCovarianceStamped,
+  TwistWithCovarianceStamped, NavSatFix; the ``<entry>_<field>_var`` channels), a zero,
+  negative, ``-1``-marked or missing entry replaced by the task's default (``r_*``) and
+  counted; else that default (:func:`replay.tasks.fusion_inputs.variance`). The notes and the
+  manifest's ``task_noise`` say which source every input used and how many were replaced.
+* **Gating**: an entry's ``rejection_threshold`` (a Mahalanobis distance, one for every field or
+  a table per field) gates each of its fields at every update (:mod:`replay.filters.gating`:
+  the innovation's NIS for the Kalman family, the particles' predictive likelihood for the
+  PF); the rejections are counted per filter, run and field (the table's notes, the
+  manifest's ``gating``).
 * **Reference**: the frame's ``position`` reference, for scoring only. When it is the same
   topic as a ``gps`` input (the fix track is the only external position), every
   ``gps_every``-th fix is fed and the others are held out for scoring, as ``gps-odom`` does.
@@ -26,7 +35,10 @@ mapping (``docs/bags.md``, "The fusion task"):
   the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
   (noted).
 
-Refused in one line: a frame with no sensor input (naming the tasks that would run), no
+Refused in one line: inputs that leave the speed (no velocity, position or differential
+position) or the heading (no attitude, rate or position) unconstrained — every filter would
+carry its prior there and the table rank priors —, a frame with no sensor input (naming the
+tasks that would run), no
 reference (nothing to score against: how to declare one), an unknown field, a differential
 field with fewer than two messages.
 """
@@ -37,6 +49,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from replay.filters.gating import Gates
 from replay.models.kinematic import Kinematic2D, Kinematic3D
 from replay.util.errors import ReplayError
 from replay.util.params import Param
@@ -50,6 +63,9 @@ from .fusion_inputs import (
     field_channel,
     has_absolute_position,
     inputs,
+    threshold,
+    unconstrained,
+    variance,
 )
 
 POS = dict(low=0, low_open=True)
@@ -116,6 +132,19 @@ class FusionTask(Task):
         dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
         t = np.asarray(frame.t, float)
         m = self._measurements(frame, where, found, ref, dims, t)
+        missing = unconstrained(m.index, dims)
+        if missing:
+            raise ReplayError(
+                f"{where}: task fusion: no input constrains the {' or the '.join(missing)} (inputs: "
+                f"{', '.join(m.used)}): every filter would carry its prior there and the table would rank "
+                "priors, not filters; map "
+                + " or ".join(
+                    ["a velocity input (role velocity: a DVL, an odometry twist)"] * ("speed" in missing)
+                    + ["an attitude or gyro input"] * ("heading" in missing)
+                    + ["a position input (gps, pose)"]
+                )
+                + " (docs/bags.md)"
+            )
         model_cls, model, first = self._model(dims, t, m)
         nx = len(model_cls.STATE)
         x0, notes, known = self._prior(frame, ref, dims, nx, m.absolute_pos, m.attitude_at, m.notes, first)
@@ -144,6 +173,7 @@ class FusionTask(Task):
             params=params,
             inputs=m.used,
             notes=notes,
+            noise=m.noise,
         )
 
     @staticmethod
@@ -178,6 +208,10 @@ class FusionTask(Task):
             holdout=False,
             absolute_pos=None,
             attitude_at=None,
+            noise={},
+            gate_group=[],
+            gate_names=[],
+            gate_limit=[],
         )
         ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t))
         absolute = has_absolute_position(found)
@@ -228,13 +262,21 @@ class FusionTask(Task):
                 f"task fusion: {key} {label}: " + ("not used in a 2-D state" if not comps else "no valid sample")
             )
             return
-        var, how = self._variance(frame, entry, fld, noise, n, valid)
-        for col, state, sgn, ang in comps:
+        var, how, m.noise[f"{entry['entry']}.{label}"] = variance(
+            frame, entry, label, fld, comps, noise, n, valid, getattr(self, NOISE_PARAM[fld])
+        )
+        limit = threshold(entry, label)
+        if limit is not None:
+            how += f"; gated at Mahalanobis distance {limit:g}"
+        m.gate_names.append(f"{entry['entry']}.{label}")
+        m.gate_limit.append(np.inf if limit is None else limit)
+        for j, (col, state, sgn, ang) in enumerate(comps):
+            m.gate_group.append(len(m.gate_names) - 1)
             z = np.where(valid, vals[:, col], np.nan)
             if ang:
                 m.z_angles.append(len(m.index))
             m.cols.append(z)
-            m.rows_R.append(var)
+            m.rows_R.append(var[:, j])
             m.index.append(state)
             m.sign.append(sgn)
         m.used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
@@ -253,7 +295,10 @@ class FusionTask(Task):
         first = int(np.flatnonzero(np.isfinite(m.Z).any(axis=1))[0])  # the first sensor message
         dt[: first + 1] = 0.0  # before it nothing is known of the motion: the state is held at the start
         q = self._per_state(dims, self.q_position, self.q_attitude, self.q_velocity, self.q_rate)
-        return model_cls, model_cls(dt, q, m.index, m.sign, m.z_angles, R), first
+        model = model_cls(dt, q, m.index, m.sign, m.z_angles, R)
+        if np.isfinite(m.gate_limit).any():  # per-sensor outlier gating (replay.filters.gating)
+            model.gates = Gates(np.array(m.gate_group, np.int64), np.array(m.gate_limit), tuple(m.gate_names))
+        return model_cls, model, first
 
     @staticmethod
     def _per_state(dims, pos, att, vel, rate):
@@ -262,27 +307,6 @@ class FusionTask(Task):
             if dims == 2
             else np.array([pos] * 3 + [att] * 3 + [vel] * 3 + [rate] * 3)
         )
-
-    def _variance(self, frame, entry, fld, noise, n, valid):
-        """(n,) variance per step of a field, and how it was chosen (for the notes)."""
-        if fld in noise:
-            v = float(noise[fld])
-            return np.full(n, v), f"declared {v:g}"
-        v = getattr(self, NOISE_PARAM[fld])
-        sigma = frame.channels.get(f"{entry['entry']}_sigma")
-        if fld == "position" and sigma is not None:
-            s = np.asarray(sigma.values, float).reshape(n, -1)[:, :2]
-            good = sigma.valid & np.isfinite(s).all(axis=1) & (s > 0).all(axis=1)
-            var = np.where(good, np.max(s, axis=1) ** 2, v)  # per message; the larger axis (a diagonal R)
-            bad = int((valid & ~good).sum())
-            if bad < valid.sum():
-                return var, "recorded position_covariance" + (
-                    f" ({bad} of {int(valid.sum())} messages had none usable: not positive or not finite; "
-                    f"{NOISE_PARAM[fld]} = {v:g} used there)"
-                    if bad
-                    else ""
-                )
-        return np.full(n, v), f"default {NOISE_PARAM[fld]} = {v:g}"
 
     @staticmethod
     def _nearest_valid(valid, k):

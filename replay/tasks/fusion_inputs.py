@@ -129,3 +129,57 @@ def differential(t, values, valid, attitude, field: str, where: str):
     att = attitude[prev] if attitude is not None else np.zeros((len(prev), 3))
     R = rotation(att[:, 0], att[:, 1], att[:, 2])
     return cur, np.einsum("kji,kj->ki", R, values[cur] - values[prev]) / dt
+
+
+def variance(frame, entry: dict, label: str, fld: str, comps, noise: dict, n: int, valid, default: float):
+    """(n, len(comps)) variance per step and component of a fused field (``label`` as declared,
+    ``fld`` what it measures), how it was chosen (a note) and the same as a record (the manifest's
+    ``task_noise``). Declared ``noise`` first; else the recorded covariance diagonal (the
+    ``<entry>_<label>_var`` channel of the message's own covariance), an entry that is zero,
+    negative, missing or marked ``-1`` (ROS: "not given", in element 0) replaced by ``default``
+    and counted per message; else ``default``. A differential field takes no recorded covariance:
+    it is that of the pose, not of its change."""
+    if fld in noise:  # by what it measures (a differential position: noise.velocity)
+        v = float(noise[fld])
+        return np.full((n, len(comps)), v), f"declared {v:g}", {"source": "declared", "variance": v}
+    param = f"{NOISE_PARAM[fld]} = {default:g}"
+    out = np.full((n, len(comps)), default)
+    rec = frame.channels.get(f"{entry['entry']}_{label}_var") if label == fld else None
+    record = {"source": "default", "variance": default}
+    if rec is None:
+        why = "" if label == fld else " (differential: a recorded covariance is the pose's, not its change's)"
+        return out, f"default {param}{why}", record
+    raw = np.asarray(rec.values, float).reshape(n, -1)
+    cols = raw[:, [c for c, *_ in comps]]
+    good = rec.valid[:, None] & np.isfinite(cols) & (cols > 0) & (raw[:, :1] != -1)
+    messages = int(valid.sum())
+    bad = int((valid & ~good.all(axis=1)).sum())
+    record = {"source": "recorded", "channel": rec.description, "messages": messages, "replaced": bad}
+    if bad == messages:
+        record.update(source="default", variance=default)
+        return (
+            out,
+            f"default {param} (the recorded covariance of all {messages} messages is zero, negative or -1)",
+            record,
+        )
+    how = "recorded covariance" + (
+        f" ({bad} of {messages} messages had none usable: zero, negative, -1 or missing; {param} there)" if bad else ""
+    )
+    record["default"] = default
+    return np.where(good, cols, default), how, record
+
+
+def threshold(entry: dict, label: str) -> float | None:
+    """The entry's rejection threshold (Mahalanobis distance) of a field, or None (not gated)."""
+    value = entry.get("rejection_threshold")
+    if isinstance(value, dict):
+        value = value.get(label)
+    return None if value is None else float(value)
+
+
+def unconstrained(index, dims: int) -> list[str]:
+    """What no measured state component constrains: "speed" (no position nor body velocity),
+    "heading" (no position, attitude nor rate), given the measured components ``index``."""
+    pos, speed, heading = ((0, 1), (3, 4), (2, 5)) if dims == 2 else ((0, 1), (6, 7), (5, 11))
+    seen = set(int(i) for i in index)
+    return [name for name, comps in (("speed", pos + speed), ("heading", pos + heading)) if not seen & set(comps)]
