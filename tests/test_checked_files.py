@@ -87,3 +87,67 @@ def test_a_version_1_archive_is_refused_saying_how_to_recreate_it(saved):
     _write(out, dict(old, version=1))
     line = refused(["res", out], "archive version 1")
     assert "recreate it with replay score REF EST... --save-results" in line
+
+
+STAMPS_NS = [1403636579758555392, 1403636579763555584, 1403636579768555520, 1403636579773555712,
+             1403636579778555392]
+
+
+def _euroc(path, stamps_ns):
+    rows = [f"{k},{0.1 * i},{-0.2 * i},{0.3},1.0,0.0,0.0,0.0" for i, k in enumerate(stamps_ns)]
+    path.write_text("#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def _exact_ns(spec, **kw):
+    from replay.trajectory import io
+
+    return io.load(str(spec), exact=True, **kw).ns.tolist()
+
+
+@pytest.mark.parametrize("name, fmt", [("o.tum", None), ("k/o.kitti", None), ("o.csv", None),
+                                       ("o_euroc.csv", "euroc"), ("o.mcap", None)])
+def test_integer_nanoseconds_survive_every_format(tmp_path, name, fmt):
+    src = _euroc(tmp_path / "data.csv", STAMPS_NS)
+    out = tmp_path / name
+    ok(["convert", src, out, *(["--format", fmt] if fmt else []), "--in-format", "euroc"])
+    back = f"{out}:/pose" if name.endswith(".mcap") else out
+    assert _exact_ns(back, **({"fmt": fmt} if fmt else {})) == STAMPS_NS
+    if name.endswith(".tum"):  # written as decimal seconds, not the float's 17 digits
+        assert out.read_text().splitlines()[1].split()[0] == "1403636579.758555392"
+    # and back to EuRoC: the very integers
+    again = tmp_path / "again.csv"
+    ok(["convert", back, again, "--format", "euroc"])
+    assert [int(line.split(",")[0]) for line in again.read_text().splitlines()[1:]] == STAMPS_NS
+
+
+def test_odd_fractional_seconds_survive(tmp_path):
+    stamps = ["0.1", "0.30000000000000004", "1.0000000005", "1.0000000015", "12.3456789012345", "1403636579.758555392"]
+    src = tmp_path / "a.tum"
+    src.write_text("".join(f"{s} {k} 0 0 0 0 0 1\n" for k, s in enumerate(stamps)))
+    ok(["convert", src, tmp_path / "e.csv", "--format", "euroc"])
+    got = [int(line.split(",")[0]) for line in (tmp_path / "e.csv").read_text().splitlines()[1:]]
+    # to the nearest ns, ties to even: 1.0000000005 -> ...000, 1.0000000015 -> ...002
+    assert got == [100000000, 300000000, 1000000000, 1000000002, 12345678901, 1403636579758555392]
+    ok(["convert", src, tmp_path / "b.tum"])
+    from replay.trajectory import io
+
+    a, b = io.load(str(src)), io.load(str(tmp_path / "b.tum"))
+    assert np.array_equal(a.t, b.t)  # the floats too: the shortest text where it is the same ns
+    assert _exact_ns(tmp_path / "b.tum") == got
+
+
+def test_kitti_times_of_other_poses_are_never_overwritten(files):
+    gt = files / "gt.tum"
+    other = files / "other.tum"
+    write_tum(other, make(20.0 + np.arange(60) * 0.1, np.eye(60, 3), np.tile([0.0, 0, 0, 1], (60, 1)), source="o"))
+    ok(["convert", gt, files / "k" / "a.kitti"])
+    times = (files / "k" / "times.txt").read_text()
+    line = refused(["convert", other, files / "k" / "b.kitti"], "times.txt: exists and holds other stamps")
+    assert "--force" in line and not (files / "k" / "b.kitti").exists()
+    assert (files / "k" / "times.txt").read_text() == times
+    ok(["convert", gt, files / "k" / "a2.kitti"])  # the same stamps: nothing re-timed
+    ok(["convert", other, files / "k" / "b.kitti", "--force"])
+    from replay.trajectory import io
+
+    assert io.load(str(files / "k" / "b.kitti")).t[0] == 20.0

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.trajectory import stamps
 from replay.trajectory.base import Trajectory, make
 from replay.util.errors import DataError
 from replay.util.tf_tree import compose, path_between, tf_edges
@@ -105,7 +106,8 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
         t = [_seconds(ps.header.stamp) for ps in poses]
         p = [_xyz(ps.pose.position) for ps in poses]
         q = [_xyzw(ps.pose.orientation) for ps in poses]
-        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose")
+        ns = stamps.of_header(ps.header.stamp for ps in poses)
+        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose", ns=ns)
     t = [_seconds(m.header.stamp) for m in msgs]
     if kind == "sensor_msgs/msg/NavSatFix":
         return _fixes(src, msgs, np.array(t), name)
@@ -120,7 +122,8 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
             cov = np.array([np.asarray(m.pose.covariance, float) for m in msgs]).reshape(-1, 6, 6)
             if not cov.any():
                 cov = None  # all zeros: no covariance recorded
-    return make(t, p, q, cov, source=src, name=name, rows=np.arange(len(t)), unit="message")
+    ns = stamps.of_header(m.header.stamp for m in msgs)
+    return make(t, p, q, cov, source=src, name=name, rows=np.arange(len(t)), unit="message", ns=ns)
 
 
 def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
