@@ -151,3 +151,31 @@ def test_kitti_times_of_other_poses_are_never_overwritten(files):
     from replay.trajectory import io
 
     assert io.load(str(files / "k" / "b.kitti")).t[0] == 20.0
+
+
+def test_campaign_results_refuses_what_is_not_a_result(files):
+    """A trajectory, a foreign CSV, a binary file, an empty leaderboard: one line naming the file (was a
+    table of NaN); runs=True on a file or a missing path: one line (was a traceback / an empty table)."""
+    import replay
+    from replay.util.errors import ReplayError
+
+    (files / "other.csv").write_text("a,b\n1,2\n")
+    (files / "bin.dat").write_bytes(b"\x00\xff\x01binary")
+    (files / "head.csv").write_text("dataset,task,filter,runs,pos_rmse\n")
+    ok(["score", files / "gt.tum", files / "est.tum", "-o", files / "lb.csv"])
+    for name, message in (("gt.tum", "its header lacks dataset, task, filter, runs"),
+                          ("other.csv", "its header lacks dataset, task, filter, runs"),
+                          ("bin.dat", "not UTF-8 text"), ("head.csv", "an empty leaderboard")):
+        with pytest.raises(ReplayError, match=message) as e:
+            replay.campaign_results(files / name)
+        assert str(files / name) in str(e.value) and "\n" not in str(e.value)
+    df = replay.campaign_results(files / "lb.csv")
+    assert len(df) == 1 and df["filter"].iloc[0] == "recorded:est" and df["pos_rmse"].iloc[0] > 0.1
+    with pytest.raises(ReplayError, match="lb.csv: not a directory: runs=True reads the directory"):
+        replay.campaign_results(files / "lb.csv", runs=True)
+    with pytest.raises(ReplayError, match="absent: no such directory"):
+        replay.campaign_results(files / "absent", runs=True)
+    (files / "ev").mkdir()
+    (files / "ev" / "runs.csv").write_text("x,y\n1,2\n")
+    with pytest.raises(ReplayError, match=r"runs.csv: not the runs of a replay eval output \(its header lacks"):
+        replay.campaign_results(files / "ev", runs=True)
