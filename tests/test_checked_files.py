@@ -179,3 +179,35 @@ def test_campaign_results_refuses_what_is_not_a_result(files):
     (files / "ev" / "runs.csv").write_text("x,y\n1,2\n")
     with pytest.raises(ReplayError, match=r"runs.csv: not the runs of a replay eval output \(its header lacks"):
         replay.campaign_results(files / "ev", runs=True)
+
+
+CAMPAIGN = """\
+[campaign]
+name = "outs"
+runs = 1
+seed = 1
+
+[[dataset]]
+id = "sim/auv-sonar"
+params = { steps = 20 }
+
+[[filter]]
+name = "ukf"
+"""
+
+
+def test_campaign_out_refuses_a_foreign_directory_as_eval_does(tmp_path):
+    (tmp_path / "c.toml").write_text(CAMPAIGN)
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep me")
+    camp = refused(["campaign", "run", tmp_path / "c.toml", "--out", foreign, "-w", "1", "-q"], "notes.txt")
+    ev = refused(["eval", "sim/auv-sonar", "--filters", "ukf", "--runs", "1", "--out", foreign], "notes.txt")
+    assert camp == ev.replace("replay eval output", "replay campaign output")  # one rule, one wording
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"] and (foreign / "notes.txt").read_text() == "keep me"
+    # a campaign's own directory is run again; another kind of output is refused
+    (foreign / "notes.txt").unlink()
+    ok(["campaign", "run", tmp_path / "c.toml", "--out", foreign, "-w", "1", "-q"])
+    assert "nothing to do" in ok(["campaign", "run", tmp_path / "c.toml", "--out", foreign, "-w", "1", "-q"])
+    refused(["eval", "sim/auv-sonar", "--filters", "ukf", "--runs", "1", "--out", foreign],
+            "not a replay eval output (it holds 'campaign.lock')")
