@@ -110,7 +110,7 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
         return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose", ns=ns)
     t = [_seconds(m.header.stamp) for m in msgs]
     if kind == "sensor_msgs/msg/NavSatFix":
-        return _fixes(src, msgs, np.array(t), name)
+        return _fixes(src, msgs, np.array(t), name, stamps.of_header(m.header.stamp for m in msgs))
     if kind == "geometry_msgs/msg/TransformStamped":
         p = [_xyz(m.transform.translation) for m in msgs]
         q = [_xyzw(m.transform.rotation) for m in msgs]
@@ -126,7 +126,7 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
     return make(t, p, q, cov, source=src, name=name, rows=np.arange(len(t)), unit="message", ns=ns)
 
 
-def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
+def _fixes(src: str, msgs, t: np.ndarray, name: str, ns: np.ndarray) -> Trajectory:
     from replay.adapters.geodesy import Geo
 
     lat = np.array([m.latitude for m in msgs], float)
@@ -141,7 +141,15 @@ def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
     cov = np.array([np.asarray(m.position_covariance, float) for m in msgs]).reshape(-1, 3, 3)
     idx = np.flatnonzero(ok)
     return make(
-        t[idx], enu[idx], None, cov[idx] if cov[idx].any() else None, source=src, name=name, rows=idx, unit="message"
+        t[idx],
+        enu[idx],
+        None,
+        cov[idx] if cov[idx].any() else None,
+        source=src,
+        name=name,
+        rows=idx,
+        unit="message",
+        ns=ns[idx],
     )
 
 
