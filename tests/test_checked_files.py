@@ -68,6 +68,24 @@ def test_an_edited_statistic_is_refused(saved):
     assert ok(["res", out, "--format", "csv"]) == table
 
 
+def test_a_resealed_edit_disagrees_with_the_errors_kept(files):
+    """An edit whose seal was recomputed (the checksum is not a signature): the statistics are recomputed
+    from ape.parquet / rpe.parquet and must agree."""
+    out = files / "rpe"
+    ok(["score", files / "gt.tum", files / "est.tum", "--rpe", "--save-results", out])
+    meta = json.loads((out / "results.json").read_text())
+    assert set(meta["estimates"][0]["stats"]) == {"ape", "rpe"}
+    table = ok(["res", out, "--format", "csv"])
+    for kind, key in (("ape", "rmse"), ("rpe", "mean"), ("ape", "n")):
+        edited = json.loads(json.dumps(meta))
+        st = edited["estimates"][0]["stats"][kind]["trans"]
+        st[key] = 0.001 if key != "n" else st[key] - 1
+        _write(out, edited, reseal=True)
+        refused(["res", out], f"results.json: est {kind} trans {key} ")
+    _write(out, meta)
+    assert ok(["res", out, "--format", "csv"]) == table
+
+
 def test_an_emptied_file_list_is_refused(saved):
     out, meta = saved
     _write(out, dict(meta, files={}))

@@ -17,8 +17,10 @@ results), read back by ``replay res`` without the inputs.
 :func:`load` verifies all of it before anything is used, and refuses in one line naming the file: a
 ``results.json`` whose content differs from its own SHA-256 (an edited statistic), a ``files`` list that
 is empty or lacks ``ape.parquet`` or ``leaderboard.csv`` (every archive has both), a listed file that is
-missing or whose SHA-256 differs. The checksums detect damage and edits, not a forger who recomputes
-them. Archives of version 1 (before the seal) are refused with the command that recreates them: their
+missing or whose SHA-256 differs; then every APE/RPE statistic is recomputed from the errors kept in
+``ape.parquet``/``rpe.parquet`` and must agree (relative 1e-9), so an edit whose checksums were
+recomputed is refused too (the per-length statistics and the leaderboard rows are covered by the
+checksums only). Archives of version 1 (before the seal) are refused with the command that recreates them: their
 statistics were never covered by a checksum, so nothing they print could be verified.
 * ``ape.parquet`` — per matched pose: ``estimate``, ``t`` (reference stamp), ``t_estimate``, one column per
   relation, ``err_x, err_y, err_z`` (aligned estimate minus reference) and ``ref_x, ref_y, ref_z``;
@@ -220,7 +222,43 @@ def load(path) -> Archive:
     _verify(p, shown, m)
     if not m.get("estimates"):
         raise ReplayError(f"{shown}: an empty results archive (no estimate)")
+    _agree(p, shown, m)
     return Archive(p, m, shown)
+
+
+def _agree(p: Path, shown: str, m: dict) -> None:
+    """Every APE/RPE statistic of ``results.json`` recomputed from ``ape.parquet``/``rpe.parquet``
+    (relative 1e-9): the numbers printed are those of the errors kept, whatever the checksums say."""
+    import pandas as pd
+
+    from replay.trajectory.pose_error import statistics
+
+    tables = {}
+    for e in m["estimates"]:
+        for kind, by_rel in (e.get("stats") or {}).items():
+            if kind not in tables:
+                f = p / f"{kind}.parquet"
+                tables[kind] = pd.read_parquet(f) if f"{kind}.parquet" in m["files"] else None
+            t = tables[kind]
+            rows = t[t["estimate"] == e["name"]] if t is not None and "estimate" in t else None
+            for rel, st in by_rel.items():
+                if rows is None or rel not in rows:
+                    raise ReplayError(f"{shown}/{META}: {e['name']} {kind} {rel}: no such errors in {kind}.parquet")
+                v = rows[rel].to_numpy(float)
+                v = v if len(v) == st.get("n") else v[~np.isnan(v)]
+                found = statistics(v) | {"n": len(v)}
+                for k, want in st.items():
+                    got = found.get(k)
+                    same = (
+                        got is not None
+                        and want is not None
+                        and ((math.isnan(got) and math.isnan(want)) or math.isclose(got, want, rel_tol=1e-9, abs_tol=0))
+                    )
+                    if not same:
+                        raise ReplayError(
+                            f"{shown}/{META}: {e['name']} {kind} {rel} {k} {want!r} disagrees with its errors in "
+                            f"{kind}.parquet ({got!r}): edited or damaged"
+                        )
 
 
 def _verify(p: Path, shown: str, m: dict) -> None:
