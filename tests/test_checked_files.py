@@ -229,3 +229,16 @@ def test_campaign_out_refuses_a_foreign_directory_as_eval_does(tmp_path):
     assert "nothing to do" in ok(["campaign", "run", tmp_path / "c.toml", "--out", foreign, "-w", "1", "-q"])
     refused(["eval", "sim/auv-sonar", "--filters", "ukf", "--runs", "1", "--out", foreign],
             "not a replay eval output (it holds 'campaign.lock')")
+
+
+def test_stamps_beyond_integer_nanoseconds(tmp_path):
+    """3e12 s does not fit int64 ns: written in seconds as it is, refused for EuRoC and MCAP (was a wrapped
+    integer, then a traceback) before anything is written."""
+    src = tmp_path / "big.tum"
+    src.write_text("".join(f"{k}e12 {k} 0 0 0 0 0 1\n" for k in (1, 2, 3)))
+    ok(["convert", src, tmp_path / "o.tum"])
+    assert [line.split()[0] for line in (tmp_path / "o.tum").read_text().splitlines()[1:]] == [
+        "1000000000000.0", "2000000000000.0", "3000000000000.0"]
+    for args in ([tmp_path / "o.mcap"], [tmp_path / "e.csv", "--format", "euroc"]):
+        refused(["convert", src, *args], "big.tum: a stamp of 3e+12 s is beyond integer nanoseconds")
+        assert not args[0].exists()

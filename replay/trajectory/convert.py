@@ -53,6 +53,8 @@ def check(tr: Trajectory, fmt: str) -> None:
         raise ReplayError(
             f"{tr.source or tr.name}: positions only (no orientation): {fmt} needs one; write --format csv (t, x, y, z)"
         )
+    if fmt in ("euroc", "mcap"):
+        stamps.ns_of(tr)  # integer ns: refused beyond int64
 
 
 def _lines(m: np.ndarray, sep: str = " ") -> str:
@@ -101,7 +103,7 @@ def refuse_other_times(times, tr: Trajectory) -> None:
         held = stamps.of_text(read_bytes(p, "a times file").decode("utf-8", "replace").split())
     except OSError:
         held = None
-    same = held is not None and np.array_equal(held, stamps.ns_of(tr))
+    same = held is not None and stamps.fits(tr.t) and np.array_equal(held, stamps.ns_of(tr))
     if not same:
         raise ReplayError(
             f"{times}: exists and holds other stamps (it may time other KITTI poses in {p.parent}): refusing to "

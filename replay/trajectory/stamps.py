@@ -24,10 +24,14 @@ import numpy as np
 
 NS = 10**9
 TOL_NS = 1000  # kept stamps further than this from the float stamps are not the trajectory's (never used)
+LIMIT = 2**63 - 1  # int64 nanoseconds: +-9.2e9 s (the years 1677-2262)
 
 
 def _ns(value: Decimal) -> int:
-    return int(value.to_integral_value(rounding=ROUND_HALF_EVEN))
+    n = int(value.to_integral_value(rounding=ROUND_HALF_EVEN))
+    if abs(n) > LIMIT:
+        raise OverflowError(f"{n} ns")
+    return n
 
 
 def of_text(tokens, ns_per_unit: int | Decimal = NS) -> np.ndarray | None:
@@ -50,13 +54,27 @@ def per_unit(factor: float) -> Decimal:
 
 
 def of_floats(t) -> np.ndarray:
-    """Float seconds rounded exactly to the nearest ns."""
+    """Float seconds rounded exactly to the nearest ns (``OverflowError`` beyond int64 ns: :func:`fits`)."""
     return np.array([_ns(Decimal(x) * NS) for x in np.asarray(t, float).tolist()], dtype=np.int64)
+
+
+def fits(t) -> bool:
+    """Whether every stamp (s) is within integer nanoseconds (int64: the years 1677-2262)."""
+    return bool(np.all(np.abs(np.asarray(t, float)) < LIMIT / NS))
 
 
 def ns_of(tr) -> np.ndarray:
     """The stamps of ``tr`` in integer ns: the kept ones (:attr:`Trajectory.ns`) when they are the
-    trajectory's, else :func:`of_floats`."""
+    trajectory's, else :func:`of_floats`; a stamp beyond int64 ns is refused in one line naming the source."""
+    from replay.util.errors import DataError
+
+    if not fits(tr.t):
+        top = float(np.max(np.abs(tr.t)))
+        raise DataError(
+            tr.source or tr.name,
+            f"a stamp of {top:.6g} s is beyond integer nanoseconds (|t| < 9.2e9 s, the years 1677-2262): "
+            "write it in seconds (tum, kitti, csv)",
+        )
     exact = of_floats(tr.t)
     kept = getattr(tr, "ns", None)
     if kept is not None and len(kept) == len(exact) and np.all(np.abs(kept - exact) <= TOL_NS):
@@ -72,6 +90,8 @@ def _decimal(n: int) -> str:
 
 def seconds_text(tr) -> list[str]:
     """Each stamp of ``tr`` as seconds text that reads back as the same nanosecond (module docstring)."""
+    if not fits(tr.t):  # beyond integer ns: the float's shortest text, as it is
+        return [repr(x) for x in np.asarray(tr.t, float).tolist()]
     out = []
     for x, n in zip(np.asarray(tr.t, float).tolist(), ns_of(tr).tolist()):
         short = repr(x)
