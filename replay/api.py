@@ -155,7 +155,12 @@ def campaign_results(out, *, runs: bool = False):
 
     from replay.campaign.store import Store
 
-    if not (Path(out) / "units").is_dir() and Path(out).is_dir():
+    if not Path(out).is_dir():
+        raise ReplayError(
+            f"{out}: {'not a directory' if Path(out).exists() else 'no such directory'}: runs=True reads the "
+            "directory of a campaign or of a replay eval output"
+        )
+    if not (Path(out) / "units").is_dir():
         return _eval_runs(Path(out))
     store, rows = Store(out), []
     for h, cfg in store.configs():
@@ -191,7 +196,12 @@ def _eval_runs(out):
         )
         raise ReplayError(f"{out}: no units/ and no runs.csv: {what}")
     with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+        reader = csv.DictReader(fh)
+        rows = list(reader)
+    lacking = [c for c in ("filter", "run", "status") if c not in (reader.fieldnames or [])]
+    if lacking or not rows:
+        what = f"its header lacks {', '.join(lacking)}" if lacking else "a header, no row"
+        raise ReplayError(f"{path}: not the runs of a replay eval output ({what})")
 
     def cell(k, v):
         if k == "params":

@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from replay.cli.main import main
 from replay.trajectory.base import make
 from replay.trajectory.files import write_tum
+from replay.util import sealed
 
 
 @pytest.fixture
@@ -83,6 +84,9 @@ def test_res_refusals(files):
     refused(["res", out], "ape.parquet: damaged")
     (out / "ape.parquet").write_bytes(data)
     (out / "results.json").write_text(json.dumps(dict(meta, estimates=[])))
+    refused(["res", out], "results.json: content differs from its SHA-256")
+    empty = dict(meta, estimates=[])
+    (out / "results.json").write_text(json.dumps(dict(empty, results_sha256=sealed.digest(empty, "results_sha256"))))
     refused(["res", out], "an empty results archive")
     (out / "results.json").write_text(json.dumps(dict(meta, version=99)))
     refused(["res", out], "archive version 99")

@@ -184,6 +184,12 @@ def test_disk_too_small_for_the_units_refused_before_work(store, tmp_path, monke
     out = tmp_path / "out"
     monkeypatch.setattr(os, "statvfs", lambda p: SimpleNamespace(f_flag=0, f_bfree=2, f_bavail=2, f_frsize=4096))
     assert_refused(["campaign", "run", d / "c.toml", "-o", out, "-w", "1", "-q"],
+                   rf"--out {out}: not enough space on the file system of {tmp_path} \(8192 bytes free, at "
+                   r"least 1048576 needed\)")  # replay eval's output check (1 MB) comes before the units' estimate
+    from replay.util import staging
+
+    monkeypatch.setattr(staging, "MIN_FREE", 4096)  # that one passed: the units' own estimate refuses
+    assert_refused(["campaign", "run", d / "c.toml", "-o", out, "-w", "1", "-q"],
                    rf"--out {out}: not enough space on the file system of {out} \(8192 bytes free, at least "
                    r"24576 needed\)")
     assert not list((out / "units").rglob("*.json*"))

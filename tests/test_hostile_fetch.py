@@ -117,18 +117,50 @@ def test_cut_at_a_line_end_is_refused_where_rows_and_span_are_declared(server, t
     assert json.loads((dest / "checksums.json").read_text())["20220822_0_7.csv"]["declared_checked"] is True
 
 
-def test_cut_at_a_line_end_without_declaration_is_flagged_not_good(server, tmp_path, bohai_dir):
-    """Nothing declared: the cut body (60 % of 0_6, at a line end, no Content-Length) is stored, but said
-    unconfirmed, and every leaderboard row on it carries content_checked False (a whole registered
-    file: True)."""
+def test_cut_at_a_line_end_is_refused_where_the_size_is_declared(server, tmp_path, monkeypatch):
+    """A manifest declaring only ``size`` (no checksum, no rows): a body cut at a line end, no Content-Length,
+    is refused against it and never stored (issue 33, item 6); the whole body is stored."""
+    src, man = registry.manifests_dir(), tmp_path / "manifests"
+    shutil.copytree(src, man)
+    whole = csv_body(10)
+    text = (man / "bohai.toml").read_text()
+    (man / "bohai.toml").write_text(
+        text.replace('id = "bohai/20220822_0_7"\n', f'id = "bohai/20220822_0_7"\nsize = {len(whole)}\n'))
+    monkeypatch.setattr(registry, "manifests_dir", lambda: man)
+    assert registry.get(UNREG).size == len(whole) and registry.get(UNREG).rows is None
+    srv, base = server
+    short = cut(whole, 0.6)
+    srv.routes = {PATHS[UNREG]: lambda h: answer(h, short, length=None)}
+    dest, env = tmp_path / "d", env_for(base, tmp_path)
+    assert_refused(["datasets", "fetch", UNREG, "--dest", dest],
+                   rf"cannot download bohai/20220822_0_7: got {len(short)} bytes, the registered size is "
+                   rf"{len(whole)} \(url", env=env)
+    assert not dest.exists() or list(dest.iterdir()) == []
+    srv.routes = {PATHS[UNREG]: lambda h: answer(h, whole, length=None)}
+    assert_ok(["datasets", "fetch", UNREG, "--dest", dest], env=env)
+    assert (dest / "20220822_0_7.csv").read_bytes() == whole
+
+
+def test_cut_at_a_line_end_without_declaration_is_never_stored(server, tmp_path, bohai_dir):
+    """Nothing declared and no Content-Length: the cut body (60 % of 0_6, at a line end) could not be told
+    from a whole file, so it is refused and nothing is stored (issue 33, item 6). With the length announced
+    (and received whole), nothing declared: stored, said unconfirmed, and every leaderboard row on it
+    carries content_checked False (a whole registered file: True)."""
     import replay
 
     srv, base = server
     body = cut((bohai_dir / "20220822_0_6.csv").read_bytes(), 0.6)
     srv.routes = {PATHS[UNREG]: lambda h: answer(h, body, length=None)}
     dest, env = tmp_path / "d", env_for(base, tmp_path)
+    assert_refused(["datasets", "fetch", UNREG, "--dest", dest],
+                   r"cannot download bohai/20220822_0_7: the server announced no size and .*bohai\.toml declares "
+                   r"no size, rows or span_s for bohai/20220822_0_7: a body cut at a line end could not be told "
+                   r"from the whole file; the download was discarded", env=env)
+    assert not (dest / "20220822_0_7.csv").exists() and not (dest / "checksums.json").exists()
+    assert not dest.exists() or not [p for p in dest.iterdir() if p.name.endswith(".part")]
+    srv.routes = {PATHS[UNREG]: lambda h: answer(h, body)}  # Content-Length announced and received
     out = assert_ok(["datasets", "fetch", UNREG, "--dest", dest], env=env).stdout
-    assert "no size announced by the server" in out and "4505 rows" in out
+    assert "as announced by the server" in out and "4505 rows" in out
     assert "nothing published to check it against: rows using it say content_checked=false" in out
     assert json.loads((dest / "checksums.json").read_text())["20220822_0_7.csv"]["declared_checked"] is False
     ev = replay.evaluate(UNREG, filters=["ekf"], first=100, data_dir=dest)

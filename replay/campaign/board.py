@@ -10,6 +10,7 @@ finished without divergence.
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -107,8 +108,7 @@ def read_dir(d) -> list[dict]:
     path = d / "leaderboard.csv" if d.is_dir() else d
     if not path.is_file():
         raise ReplayError(f"{d}: no campaign units/ and no leaderboard.csv")
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = read_leaderboard(path)
     for row in rows:
         row.setdefault("label", row.get("filter", ""))
         for k, v in row.items():
@@ -116,6 +116,37 @@ def read_dir(d) -> list[dict]:
                 row[k] = float(v) if k not in HEAD + ["alignment", "version", "config_hash"] else v
             except (TypeError, ValueError):
                 pass
+    return rows
+
+
+NEEDED = ("dataset", "task", "filter", "runs")  # in every leaderboard replay writes (eval, score -o, campaign)
+
+
+def read_leaderboard(path: Path) -> list[dict]:
+    """The rows of a leaderboard CSV, refused in one line naming it unless it is one: UTF-8 text whose
+    header holds :data:`NEEDED` and at least one row (a trajectory, another CSV, a binary file would
+    otherwise read as a table of NaN)."""
+    from replay.util.regular import read_bytes
+
+    what = "not a replay leaderboard (written by replay eval, replay score -o or replay campaign run)"
+    try:
+        text = read_bytes(path, "a leaderboard").decode("utf-8")
+    except UnicodeDecodeError:
+        raise ReplayError(f"{path}: {what}: not UTF-8 text") from None
+    except OSError as e:
+        raise ReplayError(f"{path}: cannot read ({e.strerror or e})") from None
+    try:
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        rows = list(reader)
+    except csv.Error as e:
+        raise ReplayError(f"{path}: {what}: {str(e)[:80]}") from None
+    lacking = [c for c in NEEDED if c not in (reader.fieldnames or [])]
+    if lacking:
+        raise ReplayError(f"{path}: {what}: its header lacks {', '.join(lacking)}")
+    if not rows:
+        raise ReplayError(f"{path}: an empty leaderboard (a header, no row)")
+    if any(None in row or None in row.values() for row in rows):
+        raise ReplayError(f"{path}: {what}: a row has more or fewer cells than the header")
     return rows
 
 

@@ -22,6 +22,22 @@ from pathlib import Path
 from replay.util.errors import ReplayError
 
 LOCK_NAME = "campaign.lock"
+KIND = "replay campaign"
+OWN = {LOCK_NAME, "campaign.toml", "configs.json", "units", "leaderboard.csv", "paired.csv", "tune", "report"}
+CORE = {LOCK_NAME, "configs.json", "units"}  # one of these is there from the first moment of a run
+
+
+def campaign_dir(path: Path) -> bool:
+    """Whether the directory ``path`` is a campaign's result directory (``replay campaign run --out``
+    checks it with :func:`replay.util.staging.check_output_dir`, the rule of ``replay eval --out``):
+    every entry one the campaign writes (:data:`OWN`, or a ``.NAME.PID.tmp`` of a write) and one of
+    :data:`CORE` present. Anything else in it is someone else's, and the directory is refused."""
+    try:
+        names = os.listdir(path)
+    except OSError:
+        return False
+    own = all(n in OWN or (n.startswith(".") and n.endswith(".tmp")) for n in names)
+    return own and bool(CORE & set(names))
 
 
 def holder(path: Path) -> str:

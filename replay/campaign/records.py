@@ -22,11 +22,12 @@ the configuration's directory to recompute it with a checksum).
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 
 import numpy as np
+
+from replay.util import sealed
 
 KEY = "record_sha256"
 RTOL = 1e-9
@@ -34,15 +35,14 @@ RTOL = 1e-9
 
 def canonical(record: dict) -> bytes:
     """The bytes the checksum covers: the record without :data:`KEY`, keys sorted, compact."""
-    body = {k: v for k, v in record.items() if k != KEY}
-    return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True).encode()
+    return sealed.canonical(record, KEY)
 
 
 def seal(record: dict, default) -> dict:
     """The record as a reader gets it back (one JSON round trip, ``default`` for numpy values)
     with its checksum."""
     plain = json.loads(json.dumps(record, default=default))
-    plain[KEY] = hashlib.sha256(canonical(plain)).hexdigest()
+    plain[KEY] = sealed.digest(plain, KEY)
     return plain
 
 
@@ -50,7 +50,7 @@ def problem(path: Path, record: dict) -> str | None:
     """None when the record is intact or has no checksum, else one line naming ``path``."""
     if KEY not in record:
         return None
-    if record[KEY] != hashlib.sha256(canonical(record)).hexdigest():
+    if record[KEY] != sealed.digest(record, KEY):
         return f"{path}: content differs from the checksum it holds (record edited or damaged)"
     return None
 

@@ -18,7 +18,7 @@ import click
     metavar="tum|kitti|euroc|csv|mcap",
     default=None,
     help="Output format (default: from OUT's extension: .tum/.txt TUM, .kitti, .csv plain CSV, .mcap). "
-    "KITTI writes times.txt beside OUT.",
+    "KITTI writes times.txt beside OUT (an existing times.txt with other stamps is refused unless --force).",
 )
 @click.option(
     "--in-format",
@@ -39,7 +39,12 @@ import click
 )
 @click.option("--topic", default="/pose", show_default=True, help="MCAP output: the topic of the PoseStamped messages.")
 @click.option("--frame-id", default="map", show_default=True, help="MCAP output: header.frame_id of the messages.")
-def convert_cmd(source, out, fmt, in_fmt, kitti_times, columns, time_unit, topic, frame_id):
+@click.option(
+    "--force",
+    is_flag=True,
+    help="KITTI: replace a times.txt beside OUT that holds other stamps (it re-times the poses it belonged to).",
+)
+def convert_cmd(source, out, fmt, in_fmt, kitti_times, columns, time_unit, topic, frame_id, force):
     """Write the trajectory SOURCE (a file, RECORDING:TOPIC or RECORDING:tf:PARENT,CHILD) to OUT."""
     from replay.trajectory import convert, io
     from replay.util import outfile
@@ -52,8 +57,10 @@ def convert_cmd(source, out, fmt, in_fmt, kitti_times, columns, time_unit, topic
         if path is not None:
             refuse_overlap(path, inputs, what)
             outfile.check(path, what)
-    tr = io.load(source, fmt=in_fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit)
+    tr = io.load(source, fmt=in_fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit, exact=True)
     convert.check(tr, fmt)
+    if times is not None and not force:
+        convert.refuse_other_times(times, tr)
     if fmt == "mcap":
         outfile.write(out, "OUT", lambda tmp: convert.write_mcap(tmp, tr, topic=topic, frame_id=frame_id))
     else:

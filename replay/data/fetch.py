@@ -21,9 +21,13 @@ the dataset and the URL:
   every line and a final line end), then the row count and time span the manifest
   declares (``rows``, ``span_s``), where it declares them. A dataset whose adapter has
   no content check is not downloaded at all. The sha256 seen is kept in ``checksums.json``
-  beside the file, never as a registered checksum. Known limit: with nothing declared, a
-  body cut exactly at a line end, from a server that gave no size, passes; it is then
-  ``content_checked`` false in every leaderboard row that uses it (``checksums.check_loaded``).
+  beside the file, never as a registered checksum;
+* a body whose length nothing confirms is never stored: without a registered size or checksum,
+  a declared ``size``, ``rows`` or ``span_s``, and a ``Content-Length`` from the server, a body
+  cut exactly at a line end would pass every check above, so it is refused (declare ``rows`` and
+  ``span_s`` in the manifest, or fetch from a server that announces the size). A body whose
+  announced length is confirmed but with nothing declared is stored, ``content_checked`` false
+  in every leaderboard row that uses it (``checksums.check_loaded``).
 
 Time: ``timeout`` bounds each wait for the server (connect, each read), and
 ``deadline`` the whole download, redirects included: when it passes, the open
@@ -376,6 +380,12 @@ def _download(ds: Dataset, src: str, dest: Path, target: Path, timeout: float, d
                 fail(f"the content check failed: {e}; the download was discarded")
             if why:
                 fail(f"the body holds {why}: cut short or another file; the download was discarded")
+        if not (ds.sha256 or ds.size or declares(ds) or announced is not None):
+            fail(
+                f"the server announced no size and {ds.manifest} declares no size, rows or span_s for {ds.id}: "
+                "a body cut at a line end could not be told from the whole file; the download was discarded "
+                "(declare rows and span_s, or use a server that sends Content-Length)"
+            )
         try:
             os.replace(tmp, target)
         except OSError as e:

@@ -10,8 +10,18 @@ results), read back by ``replay res`` without the inputs.
   ``config_hash``; per estimate: ``name``, ``source``, ``trial_of``/``trial`` (``--trials``), ``matched``,
   the alignment ``transform`` (``R`` 3x3, ``t``, ``scale``: x -> scale R x + t), the statistics of every
   APE/RPE relation and, with ``--lengths``, per length; ``leaderboard``: the rows ``-o`` writes; ``files``:
-  the SHA-256 of every other file (checked when read). Floats are written in full (JSON's shortest
-  round-trip text; ``NaN`` for a missing number).
+  the SHA-256 of every other file; ``results_sha256``: the SHA-256 of ``results.json`` itself (its canonical
+  JSON without that key, :mod:`replay.util.sealed`), so the statistics are covered too. Floats are written
+  in full (JSON's shortest round-trip text; ``NaN`` for a missing number).
+
+:func:`load` verifies all of it before anything is used, and refuses in one line naming the file: a
+``results.json`` whose content differs from its own SHA-256 (an edited statistic), a ``files`` list that
+is empty or lacks ``ape.parquet`` or ``leaderboard.csv`` (every archive has both), a listed file that is
+missing or whose SHA-256 differs; then every APE/RPE statistic is recomputed from the errors kept in
+``ape.parquet``/``rpe.parquet`` and must agree (relative 1e-9), so an edit whose checksums were
+recomputed is refused too (the per-length statistics and the leaderboard rows are covered by the
+checksums only). Archives of version 1 (before the seal) are refused with the command that recreates them: their
+statistics were never covered by a checksum, so nothing they print could be verified.
 * ``ape.parquet`` — per matched pose: ``estimate``, ``t`` (reference stamp), ``t_estimate``, one column per
   relation, ``err_x, err_y, err_z`` (aligned estimate minus reference) and ``ref_x, ref_y, ref_z``;
 * ``rpe.parquet`` — per pair (when the RPE was computed): ``estimate``, ``t_i``, ``t_j``, the relations,
@@ -32,12 +42,15 @@ import numpy as np
 
 from replay.run.pipeline import config_hash, plain
 from replay.trajectory.lengths import ERRORS as LENGTH_ERRORS
+from replay.util import sealed
 from replay.util.errors import ReplayError
 
 KIND = "replay score results"
 FORMAT = "replay-score-results"
-VERSION = 1
+VERSION = 2  # 2: results.json sealed (results_sha256); 1 is refused (load)
 META = "results.json"
+SEAL = "results_sha256"
+REQUIRED = ("ape.parquet", "leaderboard.csv")
 WHAT = "--save-results"
 
 
@@ -166,6 +179,8 @@ def save(result, out, *, reference: str | None = None) -> Path:
         rows = result.output_rows()
         write_csv(rows, d / "leaderboard.csv", columns(rows))
         content["files"] = {f.name: _sha256(f) for f in sorted(d.iterdir()) if f.is_file()}
+        content = json.loads(json.dumps(content))  # what a reader parses: the seal is of that
+        content[SEAL] = sealed.digest(content, SEAL)
         (d / META).write_text(json.dumps(content, indent=1) + "\n")
     return Path(out)
 
@@ -204,17 +219,73 @@ def load(path) -> Archive:
             if isinstance(m, dict)
             else f"{shown}/{META}: not a replay score results file"
         )
-    if m.get("version") != VERSION:
-        raise ReplayError(f"{shown}/{META}: archive version {m.get('version')!r}, this replay reads {VERSION}")
+    _verify(p, shown, m)
     if not m.get("estimates"):
         raise ReplayError(f"{shown}: an empty results archive (no estimate)")
-    for name, digest in (m.get("files") or {}).items():
+    _agree(p, shown, m)
+    return Archive(p, m, shown)
+
+
+def _agree(p: Path, shown: str, m: dict) -> None:
+    """Every APE/RPE statistic of ``results.json`` recomputed from ``ape.parquet``/``rpe.parquet``
+    (relative 1e-9): the numbers printed are those of the errors kept, whatever the checksums say."""
+    import pandas as pd
+
+    from replay.trajectory.pose_error import statistics
+
+    tables = {}
+    for e in m["estimates"]:
+        for kind, by_rel in (e.get("stats") or {}).items():
+            if kind not in tables:
+                f = p / f"{kind}.parquet"
+                tables[kind] = pd.read_parquet(f) if f"{kind}.parquet" in m["files"] else None
+            t = tables[kind]
+            rows = t[t["estimate"] == e["name"]] if t is not None and "estimate" in t else None
+            for rel, st in by_rel.items():
+                if rows is None or rel not in rows:
+                    raise ReplayError(f"{shown}/{META}: {e['name']} {kind} {rel}: no such errors in {kind}.parquet")
+                v = rows[rel].to_numpy(float)
+                v = v if len(v) == st.get("n") else v[~np.isnan(v)]
+                found = statistics(v) | {"n": len(v)}
+                for k, want in st.items():
+                    got = found.get(k)
+                    same = (
+                        got is not None
+                        and want is not None
+                        and ((math.isnan(got) and math.isnan(want)) or math.isclose(got, want, rel_tol=1e-9, abs_tol=0))
+                    )
+                    if not same:
+                        raise ReplayError(
+                            f"{shown}/{META}: {e['name']} {kind} {rel} {k} {want!r} disagrees with its errors in "
+                            f"{kind}.parquet ({got!r}): edited or damaged"
+                        )
+
+
+def _verify(p: Path, shown: str, m: dict) -> None:
+    """The version, the seal of ``results.json`` and every listed file's SHA-256 (module docstring)."""
+    again = f"recreate it with replay score REF EST... --save-results {shown}"
+    if m.get("version") == 1:
+        raise ReplayError(
+            f"{shown}/{META}: archive version 1, written before results.json carried its own SHA-256: its "
+            f"statistics cannot be verified; {again}"
+        )
+    if m.get("version") != VERSION:
+        raise ReplayError(f"{shown}/{META}: archive version {m.get('version')!r}, this replay reads {VERSION}")
+    if m.get(SEAL) != sealed.digest(m, SEAL):
+        raise ReplayError(f"{shown}/{META}: content differs from its SHA-256 ({SEAL}): edited or damaged; {again}")
+    files = m.get("files")
+    if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
+        raise ReplayError(f"{shown}/{META}: 'files' is not a table of file names and SHA-256s; {again}")
+    lacking = [f for f in REQUIRED if f not in files]
+    if lacking:
+        listed = "lists no files" if not files else f"does not list {', '.join(lacking)}"
+        raise ReplayError(f"{shown}/{META}: {listed} (every archive holds {', '.join(REQUIRED)}); {again}")
+    for name, digest in files.items():
         q = p / name
-        if "/" in name or not q.is_file():
+        if "/" in name or name in (".", "..", META) or not q.is_file():
             raise ReplayError(f"{shown}: {name} is missing (listed in {META})")
         if _sha256(q) != digest:
             raise ReplayError(f"{shown}/{name}: damaged (its SHA-256 differs from the one in {META})")
-    return Archive(p, m, shown)
 
 
 def finite(v):

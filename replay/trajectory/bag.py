@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.trajectory import stamps
 from replay.trajectory.base import Trajectory, make
 from replay.util.errors import DataError
 from replay.util.tf_tree import compose, path_between, tf_edges
@@ -105,10 +106,11 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
         t = [_seconds(ps.header.stamp) for ps in poses]
         p = [_xyz(ps.pose.position) for ps in poses]
         q = [_xyzw(ps.pose.orientation) for ps in poses]
-        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose")
+        ns = stamps.of_header(ps.header.stamp for ps in poses)
+        return make(t, p, q, source=f"{src} (last Path message)", name=name, rows=np.arange(len(t)), unit="pose", ns=ns)
     t = [_seconds(m.header.stamp) for m in msgs]
     if kind == "sensor_msgs/msg/NavSatFix":
-        return _fixes(src, msgs, np.array(t), name)
+        return _fixes(src, msgs, np.array(t), name, stamps.of_header(m.header.stamp for m in msgs))
     if kind == "geometry_msgs/msg/TransformStamped":
         p = [_xyz(m.transform.translation) for m in msgs]
         q = [_xyzw(m.transform.rotation) for m in msgs]
@@ -120,10 +122,11 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
             cov = np.array([np.asarray(m.pose.covariance, float) for m in msgs]).reshape(-1, 6, 6)
             if not cov.any():
                 cov = None  # all zeros: no covariance recorded
-    return make(t, p, q, cov, source=src, name=name, rows=np.arange(len(t)), unit="message")
+    ns = stamps.of_header(m.header.stamp for m in msgs)
+    return make(t, p, q, cov, source=src, name=name, rows=np.arange(len(t)), unit="message", ns=ns)
 
 
-def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
+def _fixes(src: str, msgs, t: np.ndarray, name: str, ns: np.ndarray) -> Trajectory:
     from replay.adapters.geodesy import Geo
 
     lat = np.array([m.latitude for m in msgs], float)
@@ -138,7 +141,15 @@ def _fixes(src: str, msgs, t: np.ndarray, name: str) -> Trajectory:
     cov = np.array([np.asarray(m.position_covariance, float) for m in msgs]).reshape(-1, 3, 3)
     idx = np.flatnonzero(ok)
     return make(
-        t[idx], enu[idx], None, cov[idx] if cov[idx].any() else None, source=src, name=name, rows=idx, unit="message"
+        t[idx],
+        enu[idx],
+        None,
+        cov[idx] if cov[idx].any() else None,
+        source=src,
+        name=name,
+        rows=idx,
+        unit="message",
+        ns=ns[idx],
     )
 
 

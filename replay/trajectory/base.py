@@ -33,6 +33,7 @@ class Trajectory:
     cov: np.ndarray | None = None
     name: str = ""
     source: str = ""  # file (and topic) it was read from, for messages
+    ns: np.ndarray | None = None  # the stamps in integer ns, exactly as read (replay.trajectory.stamps)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -49,6 +50,7 @@ class Trajectory:
             p=self.p[idx],
             q=None if self.q is None else self.q[idx],
             cov=None if self.cov is None else self.cov[idx],
+            ns=None if self.ns is None else self.ns[idx],
         )
 
     def to_pandas(self):
@@ -123,10 +125,21 @@ def _where(rows, i: int, unit: str) -> str:
 
 
 def make(
-    t, p, q=None, cov=None, *, source, name: str = "", rows=None, unit: str = "row", min_poses: int = MIN_POSES
+    t,
+    p,
+    q=None,
+    cov=None,
+    *,
+    source,
+    name: str = "",
+    rows=None,
+    unit: str = "row",
+    min_poses: int = MIN_POSES,
+    ns=None,
 ) -> Trajectory:
     """A checked :class:`Trajectory` (module docstring). ``rows`` gives each pose's line number
-    (or message index) for the messages; ``unit`` names it ("row", "message")."""
+    (or message index) for the messages; ``unit`` names it ("row", "message"); ``ns``: the stamps in
+    integer nanoseconds as read (:mod:`replay.trajectory.stamps`), kept when there is one per pose."""
     t = np.asarray(t, float).reshape(-1)
     p = np.asarray(p, float).reshape(-1, 3)
     n = len(t)
@@ -171,4 +184,5 @@ def make(
         cov = np.asarray(cov, float)
         if cov.shape not in ((n, 6, 6), (n, 3, 3)):
             raise DataError(source, f"covariance of shape {cov.shape}: expected ({n}, 6, 6) or ({n}, 3, 3)")
-    return Trajectory(t, p, q, cov, name=name or str(source), source=str(source))
+    ns = None if ns is None or len(ns) != n else np.asarray(ns, np.int64)
+    return Trajectory(t, p, q, cov, name=name or str(source), source=str(source), ns=ns)

@@ -10,9 +10,11 @@
 | ``mcap`` | ``geometry_msgs/msg/PoseStamped`` (ROS 2 CDR, the definition in the schema) on one topic, ``header.stamp`` and log time the pose's stamp in ns | ``FILE.mcap:/topic`` |
 
 Numbers are written in full (the shortest text that reads back as the same float), so a file read
-back gives the numbers written: positions and stamps exactly, orientations to rounding (the
-reader normalises quaternions; KITTI stores rotation matrices). EuRoC and MCAP stamps are integer
-nanoseconds (the stamp rounded to the nearest ns). A trajectory without orientations (NavSatFix) is
+back gives the numbers written: positions exactly, orientations to rounding (the reader normalises
+quaternions; KITTI stores rotation matrices). Stamps survive to the nanosecond in every format
+(:mod:`replay.trajectory.stamps`): EuRoC and MCAP write integer nanoseconds, the seconds formats
+each stamp's shortest float text, or ``SEC.NNNNNNNNN`` where that text would be another ns
+(``1403636579758555392`` ns is written ``1403636579.758555392``, not ``1403636579.7585554``). A trajectory without orientations (NavSatFix) is
 written only as CSV: the other formats would need an orientation it does not have. The covariance is
 not written.
 """  # noqa: E501 (Markdown table)
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.trajectory import quat
+from replay.trajectory import quat, stamps
 from replay.trajectory.base import Trajectory
 from replay.util.errors import ReplayError
 
@@ -51,42 +53,62 @@ def check(tr: Trajectory, fmt: str) -> None:
         raise ReplayError(
             f"{tr.source or tr.name}: positions only (no orientation): {fmt} needs one; write --format csv (t, x, y, z)"
         )
+    if fmt in ("euroc", "mcap"):
+        stamps.ns_of(tr)  # integer ns: refused beyond int64
 
 
 def _lines(m: np.ndarray, sep: str = " ") -> str:
     return "".join(sep.join(map(repr, row)) + "\n" for row in m.tolist())
 
 
-def ns(t) -> np.ndarray:
-    """Stamps in integer nanoseconds (nearest)."""
-    return np.round(np.asarray(t, float) * 1e9).astype(np.int64)
+def _stamped(first, m: np.ndarray, sep: str = " ") -> str:
+    """Lines of a stamp's text (or integer) then the row of ``m``."""
+    return "".join(f"{k}{sep}" + sep.join(map(repr, row)) + "\n" for k, row in zip(first, m.tolist()))
 
 
 def text(tr: Trajectory, fmt: str) -> str:
     """The file content of ``tr`` as ``tum``, ``kitti`` (poses only: :func:`kitti_times`), ``euroc`` or ``csv``."""
     check(tr, fmt)
     if fmt == "tum":
-        return "# t x y z qx qy qz qw\n" + _lines(np.column_stack([tr.t, tr.p, tr.q]))
+        return "# t x y z qx qy qz qw\n" + _stamped(stamps.seconds_text(tr), np.column_stack([tr.p, tr.q]))
     if fmt == "kitti":
         R = quat.to_matrix(tr.q)
         return _lines(np.concatenate([R, tr.p[:, :, None]], axis=2).reshape(-1, 12))
     if fmt == "euroc":
         body = np.column_stack([tr.p, tr.q[:, [3, 0, 1, 2]]])
-        return (
-            EUROC_HEADER
-            + "\n"
-            + "".join(f"{k}," + ",".join(map(repr, row)) + "\n" for k, row in zip(ns(tr.t).tolist(), body.tolist()))
-        )
+        return EUROC_HEADER + "\n" + _stamped(stamps.ns_of(tr).tolist(), body, ",")
     if fmt == "csv":
         cols = [tr.t, tr.p] + ([tr.q] if tr.q is not None else [])
         head = "t,x,y,z" + (",qx,qy,qz,qw" if tr.q is not None else "")
-        return head + "\n" + _lines(np.column_stack(cols), ",")
+        return head + "\n" + _stamped(stamps.seconds_text(tr), np.column_stack(cols[1:]), ",")
     raise ReplayError(f"format {fmt!r}: not a text format")
 
 
 def kitti_times(tr: Trajectory) -> str:
-    """The ``times.txt`` of KITTI poses: one stamp (s) per line."""
-    return _lines(tr.t[:, None])
+    """The ``times.txt`` of KITTI poses: one stamp (s) per line, to the ns (:mod:`.stamps`)."""
+    return "".join(s + "\n" for s in stamps.seconds_text(tr))
+
+
+def refuse_other_times(times, tr: Trajectory) -> None:
+    """Refuse a ``times.txt`` that exists and holds other stamps than ``tr``'s: it belongs to other KITTI
+    poses in that directory, which it would re-time (``replay convert --force`` replaces it)."""
+    from pathlib import Path
+
+    from replay.util.regular import read_bytes
+
+    p = Path(times)
+    if not p.is_file():
+        return
+    try:
+        held = stamps.of_text(read_bytes(p, "a times file").decode("utf-8", "replace").split())
+    except OSError:
+        held = None
+    same = held is not None and stamps.fits(tr.t) and np.array_equal(held, stamps.ns_of(tr))
+    if not same:
+        raise ReplayError(
+            f"{times}: exists and holds other stamps (it may time other KITTI poses in {p.parent}): refusing to "
+            "overwrite it; write OUT into another directory, or give --force to replace it"
+        )
 
 
 def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "map") -> int:
@@ -98,7 +120,7 @@ def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "m
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     name = "geometry_msgs/msg/PoseStamped"
-    stamps = ns(tr.t)
+    ns = stamps.ns_of(tr)
     with open(path, "wb") as fh:
         w = Writer(fh, compression=CompressionType.ZSTD)
         w.start(profile="ros2", library="replay")
@@ -106,7 +128,7 @@ def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "m
             name=name, encoding="ros2msg", data=ts.generate_msgdef(name, ros_version=2)[0].encode()
         )
         channel = w.register_channel(topic=topic, message_encoding="cdr", schema_id=schema)
-        for k, (stamp, p, q) in enumerate(zip(stamps.tolist(), tr.p.tolist(), tr.q.tolist())):
+        for k, (stamp, p, q) in enumerate(zip(ns.tolist(), tr.p.tolist(), tr.q.tolist())):
             sec, nsec = divmod(stamp, 1_000_000_000)
             header = T["std_msgs/msg/Header"](
                 stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id

@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.trajectory import layout, quat
+from dataclasses import replace
+
+from replay.trajectory import layout, quat, stamps
 from replay.trajectory.base import Trajectory, make
 from replay.trajectory.layout import TIME_UNITS
 from replay.util.errors import DataError
@@ -108,14 +110,27 @@ def _matrix(path: Path, numbers, tokens, ncols: int | None, what: str, min_cols:
         raise
 
 
-def read_tum(path, *, name: str = "") -> Trajectory:
+def _first_column(path: Path, numbers, sep: str | None = None):
+    """The first token of each data line (``numbers``: their line numbers): the stamps' text."""
+    lines = _text(path).splitlines()
+    return [(lines[k - 1].split(sep) if sep else lines[k - 1].split())[0] for k in numbers]
+
+
+def _exact(tr: Trajectory, tokens, ns_per_unit=stamps.NS) -> Trajectory:
+    """``tr`` keeping its stamps in integer ns as the text gives them (:mod:`.stamps`)."""
+    return replace(tr, ns=stamps.of_text(tokens, ns_per_unit)) if tr.ns is None else tr
+
+
+def read_tum(path, *, name: str = "", exact: bool = False) -> Trajectory:
+    """``exact``: keep the stamps in integer ns too (:mod:`.stamps`; a second pass over the text)."""
     path = Path(path)
     fast = _fast_matrix(path, 8)
     if fast is None:  # anything irregular: the line-by-line reader, which names the line
         numbers, tokens, _ = _rows(path, None)
         fast = numbers, _matrix(path, numbers, tokens, 8, "TUM: t x y z qx qy qz qw")
     numbers, m = fast
-    return make(m[:, 0], m[:, 1:4], m[:, 4:8], source=path, name=name, rows=numbers)
+    tr = make(m[:, 0], m[:, 1:4], m[:, 4:8], source=path, name=name, rows=numbers)
+    return _exact(tr, _first_column(path, numbers)) if exact else tr
 
 
 def _fast_matrix(path: Path, ncols: int):
@@ -157,7 +172,7 @@ def kitti_times_path(path: Path, times=None) -> Path:
     )
 
 
-def read_kitti(path, *, times=None, name: str = "") -> Trajectory:
+def read_kitti(path, *, times=None, name: str = "", exact: bool = False) -> Trajectory:
     path = Path(path)
     numbers, tokens, _ = _rows(path, None)
     m = _matrix(path, numbers, tokens, 12, "KITTI: the 3x4 matrix [R p] row by row")
@@ -178,17 +193,19 @@ def read_kitti(path, *, times=None, name: str = "") -> Trajectory:
             f"the 3x3 block is not a rotation (|R'R - I| = {err[i]:.3g}, det = {det[i]:.6g}; tolerance {ROT_TOL:g})",
             row=int(numbers[i]),
         )
-    return make(stamps, M[:, :, 3], quat.from_matrix(R), source=path, name=name, rows=numbers)
+    tr = make(stamps, M[:, :, 3], quat.from_matrix(R), source=path, name=name, rows=numbers)
+    return _exact(tr, [r[0] for r in tt]) if exact else tr
 
 
-def read_euroc(path, *, name: str = "") -> Trajectory:
+def read_euroc(path, *, name: str = "", exact: bool = False) -> Trajectory:
     path = Path(path)
     numbers, tokens, _ = _rows(path, ",")
     m = _matrix(
         path, numbers, tokens, None, "EuRoC: timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z, ...", min_cols=8
     )
     q = m[:, [5, 6, 7, 4]]
-    return make(m[:, 0] / 1e9, m[:, 1:4], q, source=path, name=name, rows=numbers)
+    tr = make(m[:, 0] / 1e9, m[:, 1:4], q, source=path, name=name, rows=numbers)
+    return _exact(tr, [r[0] for r in tokens], 1) if exact else tr
 
 
 def parse_columns(spec) -> dict:
@@ -224,7 +241,13 @@ def parse_columns(spec) -> dict:
 
 
 def read_csv(
-    path, *, columns, time_unit: str | None = None, name: str = "", header_unit: str | None = None
+    path,
+    *,
+    columns,
+    time_unit: str | None = None,
+    name: str = "",
+    header_unit: str | None = None,
+    exact: bool = False,
 ) -> Trajectory:
     """A CSV (``,`` or ``;``; or whitespace) of declared ``columns``; stamps in ``time_unit``, else in the
     unit the header names (``header_unit``), else seconds where they can be (:func:`layout.seconds`)."""
@@ -266,16 +289,24 @@ def read_csv(
         )
     tname = head[index["t"]] if head is not None and index["t"] < len(head) else f"column {index['t'] + 1}"
     factor = layout.seconds(path, col("t"), tname, header_unit, time_unit)
-    return make(col("t") * factor, p, q, source=path, name=name, rows=numbers)
+    tr = make(col("t") * factor, p, q, source=path, name=name, rows=numbers)
+    return _exact(tr, [r[index["t"]] for r in tokens], stamps.per_unit(factor)) if exact else tr
 
 
 def read(
-    path, *, fmt: str | None = None, kitti_times=None, columns=None, time_unit: str | None = None, name: str = ""
+    path,
+    *,
+    fmt: str | None = None,
+    kitti_times=None,
+    columns=None,
+    time_unit: str | None = None,
+    name: str = "",
+    exact: bool = False,
 ) -> Trajectory:
     """Read a trajectory file of format ``fmt`` (``csv`` when ``columns`` are given; else decided by
     :func:`replay.trajectory.layout.decide`: the header's names, then the layouts TUM and KITTI
     have alone; an ambiguous file is refused naming the choices). ``time_unit``: of a CSV's stamps
-    (default: the unit its header names, else seconds)."""
+    (default: the unit its header names, else seconds); ``exact``: keep the stamps in integer ns too."""
     path = Path(path)
     if not path.exists():
         raise DataError(path, "no such file")
@@ -294,12 +325,12 @@ def read(
     if fmt == "csv" and columns is None:
         raise DataError(path, "a plain CSV needs its columns declared (--columns t=...,x=...,y=...,z=...,qx=...)")
     if fmt == "tum":
-        return read_tum(path, name=name)
+        return read_tum(path, name=name, exact=exact)
     if fmt == "kitti":
-        return read_kitti(path, times=kitti_times, name=name)
+        return read_kitti(path, times=kitti_times, name=name, exact=exact)
     if fmt == "euroc":
-        return read_euroc(path, name=name)
-    return read_csv(path, columns=columns, time_unit=time_unit, name=name, header_unit=header_unit)
+        return read_euroc(path, name=name, exact=exact)
+    return read_csv(path, columns=columns, time_unit=time_unit, name=name, header_unit=header_unit, exact=exact)
 
 
 def write_tum(path, traj: Trajectory) -> None:

@@ -51,14 +51,22 @@ def load(
     time_unit: str | None = None,
     name: str = "",
     rec=None,
+    exact: bool = False,
 ) -> Trajectory:
     """The trajectory of ``spec`` (module docstring); ``fmt``, ``kitti_times``, ``columns`` and
     ``time_unit`` apply to files (:func:`replay.trajectory.files.read`); ``rec``: the recording,
-    when already read (:func:`load_all`)."""
+    when already read (:func:`load_all`); ``exact``: files keep their stamps in integer ns too
+    (:mod:`replay.trajectory.stamps`; recordings always do)."""
     path, topic = split(spec)
     if topic is None:
         return files.read(
-            path, fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit, name=name or path.name
+            path,
+            fmt=fmt,
+            kitti_times=kitti_times,
+            columns=columns,
+            time_unit=time_unit,
+            name=name or path.name,
+            exact=exact,
         )
     if not topic:
         raise DataError(spec, "empty topic after ':'")

@@ -58,7 +58,7 @@ def interpolate(tr: Trajectory, t) -> Trajectory:
     p = tr.p[k] + f[:, None] * (tr.p[k + 1] - tr.p[k])
     q = None if tr.q is None else quat.slerp(tr.q[k], tr.q[k + 1], f)
     cov = None if tr.cov is None else tr.cov[k] + f[:, None, None] * (tr.cov[k + 1] - tr.cov[k])
-    return replace(tr, t=t, p=p, q=q, cov=cov)
+    return replace(tr, t=t, p=p, q=q, cov=cov, ns=None)
 
 
 def thin(ref: Trajectory, downsample: int | None = None, motion_filter=None) -> np.ndarray:
