@@ -68,6 +68,11 @@ from replay.util.errors import ReplayError
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
 @click.option("--allow-overlap", is_flag=True, help="Allow training and test data to overlap (flagged on every row).")
+@click.option(
+    "--wait",
+    is_flag=True,
+    help="If another replay tune is writing to --out, wait for it to finish instead of refusing.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress display.")
 def tune_cmd(
     dataset,
@@ -94,6 +99,7 @@ def tune_cmd(
     dask_local,
     scheduler,
     allow_overlap,
+    wait,
     quiet,
 ):
     """Tune each filter's declared parameters on training data and score it on held-out data."""
@@ -111,9 +117,13 @@ def tune_cmd(
     if not entries:
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")
     d = Path(out)
-    if d.is_dir() and any(d.iterdir()) and not (d / "study.db").is_file():
+    from replay.campaign.lock import LOCK_NAME
+
+    started = {LOCK_NAME}  # a tune that has taken its lock and not yet made study.db (--wait for it)
+    ours = (d / "study.db").is_file() or (d / "tune.json").is_file()  # tune.json: a study.db moved aside
+    if d.is_dir() and not {p.name for p in d.iterdir()} <= started and not ours:
         raise ReplayError(
-            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db); "
+            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db, no tune.json); "
             "give a new or a tune directory"
         )
     if d.exists() and not d.is_dir():
@@ -143,7 +153,7 @@ def tune_cmd(
     check_names(out, "--out")
     refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file], "--out")
     check_writable(out, "--out")
-    res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet)
+    res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet, wait=wait)
     click.echo(format_board(res["rows"]))
     budget = res["budget"]
     same = len(set(budget.values())) == 1
