@@ -131,3 +131,27 @@ def test_a_new_tune_directory_holding_only_the_lock_is_waited_for(tmp_path):
     (d / "tune.json").unlink()
     res = tune(d, "--trials", "1")  # the units and leaderboard of someone else's run: not a tune directory
     assert res.exit_code == 2 and "not a replay tune output (no study.db, no tune.json)" in res.output
+
+
+def test_tune_takes_mapping_like_eval(shared_dir, tmp_path, monkeypatch):
+    """``replay tune --mapping FILE`` is ``--dataset-param mapping=<FILE's absolute path>`` (issue 35
+    item 3): the same study, resumed with nothing to compute, the same leaderboard."""
+    from pathlib import Path
+
+    bag = shared_dir / "datasets" / "bags" / "robot_localization" / "test1.bag"
+    mapping = Path(__file__).resolve().parents[1] / "docs" / "mappings" / "rl_test1_fusion.toml"
+    monkeypatch.chdir(mapping.parent)  # a relative --mapping: resolved as replay eval does
+    args = ["tune", str(bag), "--task", "fusion", "--filters", "ekf", "--train-segment", "0.6", "--first", "2000",
+            "--runs", "1", "--trials", "2", "-p", "ekf.q_scale=log[0.1,10]", "-q", "--out", str(tmp_path / "t")]
+    res = CliRunner().invoke(main, [*args, "--mapping", mapping.name])
+    assert res.exit_code == 0, res.output
+    import json
+
+    asked = json.loads((tmp_path / "t" / "tune.json").read_text())
+    assert [p["mapping"] for _, p in asked["train"] + asked["test"]] == [str(mapping)] * 2
+    board, before = (tmp_path / "t" / "leaderboard.csv").read_bytes(), units(tmp_path / "t")
+    res = CliRunner().invoke(main, [*args, "--dataset-param", f"mapping={mapping}"])
+    assert res.exit_code == 0, res.output  # another configuration would be refused (its fingerprint)
+    assert (tmp_path / "t" / "leaderboard.csv").read_bytes() == board and units(tmp_path / "t") == before
+    rows = board.decode().splitlines()
+    assert rows[1].split(",")[2:4] == ["ekf", "ekf (default)"] and "measurements" in board.decode()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR, run_option
+from replay.cli.run_options import DATA_DIR, MAPPING, run_option
 from replay.util.errors import ReplayError
 
 
@@ -58,6 +58,7 @@ from replay.util.errors import ReplayError
     help="Tune directory (study.db, units/, leaderboard.csv, tuned.toml); resumed when it exists.",
 )
 @DATA_DIR
+@MAPPING
 @click.option(
     "--workers",
     "-w",
@@ -95,6 +96,7 @@ def tune_cmd(
     dataset_params,
     out,
     data_dir,
+    mapping,
     workers,
     dask_local,
     scheduler,
@@ -139,7 +141,7 @@ def tune_cmd(
         seed=seed,
         task=task,
         task_params=cli_params.task_params(task_params, task),
-        dataset_params=cli_params.dataset_params(dataset_params),
+        dataset_params=cli_params.dataset_inputs(dataset_params, mapping),  # --mapping as in replay eval
         view={"rate": rate, "window": window},
         first=first,
         data_dir=data_dir,
@@ -151,7 +153,8 @@ def tune_cmd(
         batch=-(-runs // parallel) if parallel and runs > 0 else None,
     )  # a trial's runs over the workers
     check_names(out, "--out")
-    refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file], "--out")
+    given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
+    refuse_overlap(Path(out), given, "--out")
     check_writable(out, "--out")
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet, wait=wait)
     click.echo(format_board(res["rows"]))
