@@ -155,3 +155,30 @@ def test_tune_takes_mapping_like_eval(shared_dir, tmp_path, monkeypatch):
     assert (tmp_path / "t" / "leaderboard.csv").read_bytes() == board and units(tmp_path / "t") == before
     rows = board.decode().splitlines()
     assert rows[1].split(",")[2:4] == ["ekf", "ekf (default)"] and "measurements" in board.decode()
+
+
+HOT = """
+import os, sqlite3, sys
+con = sqlite3.connect(sys.argv[1], isolation_level=None)
+con.execute("PRAGMA cache_size = 1")  # spill to the file: the journal holds the pages it overwrote
+con.execute("BEGIN")
+con.execute("CREATE TABLE junk (x)")
+con.executemany("INSERT INTO junk VALUES (?)", [("x" * 500,)] * 2000)
+con.execute("UPDATE trial_values SET value = value + 1")
+os.kill(os.getpid(), 9)
+"""
+
+
+def test_a_journal_left_hot_by_a_killed_writer_is_not_damage(done, tmp_path):
+    """``kill -9`` inside a write leaves ``study.db-journal``: SQLite rolls it back on the next open,
+    so the tune resumes with the study as it was committed (a read-only check would call it damaged)."""
+    import subprocess
+    import sys
+
+    d = tmp_path / "t"
+    shutil.copytree(done, d)
+    killed = subprocess.run([sys.executable, "-c", HOT, str(d / "study.db")])
+    assert killed.returncode == -9 and (d / "study.db-journal").stat().st_size > 0
+    res = tune(d)
+    assert res.exit_code == 0, res.output
+    assert (d / "leaderboard.csv").read_bytes() == (done / "leaderboard.csv").read_bytes()

@@ -66,15 +66,17 @@ def damaged(path: Path, why, units=None) -> ReplayError:
 
 
 def check_file(path: Path, units=None) -> None:
-    """Refuse a damaged ``study.db`` (module docstring) before Optuna opens it for writing; an absent
-    file is a new study. Read-only: the file is not changed."""
+    """Refuse a damaged ``study.db`` (module docstring) before Optuna opens it; an absent file is a
+    new study. Only read (a hot journal of a killed writer is rolled back, as SQLite always does)."""
     path = Path(path)
     if not path.exists():
         return
     from urllib.parse import quote
 
     try:
-        con = sqlite3.connect(f"file:{quote(str(path.resolve()))}?mode=ro", uri=True)
+        # read-write, not read-only: a journal left hot by a killed tune is rolled back (SQLite's own
+        # recovery, what Optuna's next open does); a read-only connection would call it damaged
+        con = sqlite3.connect(f"file:{quote(str(path.resolve()))}?mode=rw", uri=True)
         try:
             ok = con.execute("PRAGMA quick_check").fetchone()[0]
             tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
