@@ -111,3 +111,10 @@ def test_a_part_with_too_few_samples_is_refused_naming_the_option(tmp_path, args
     refused(tmp_path, "sim/linear", "--filters", "kf", "--dataset-param", "steps=60", "--runs", "1", "--trials",
             "1", "-p", "task.q=log[0.1,10]", "-q", *args, match=match)
     assert parts.MIN_SAMPLES.default == 10
+
+
+def test_a_registered_recording_and_a_copy_of_its_file_overlap(bohai_dir, tmp_path):
+    copy = tmp_path / "copy.csv"
+    copy.write_bytes((bohai_dir / "20220822_0_0.csv").read_bytes())
+    refused(tmp_path, "--train", "bohai/20220822_0_0", "--test", str(copy), "--data-dir", str(bohai_dir), *KF,
+            match=f"bohai/20220822_0_0 and {copy} are the same data (sha256 db16c328bc2ffbc8), both reading 0..349.592 s")
