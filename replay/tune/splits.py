@@ -55,7 +55,7 @@ def make(
     split=None,
     seed: int = 0,
 ) -> Split:
-    """The split the options ask for (exactly one way; its overlap is checked by :func:`refuse_overlap`)."""
+    """The split the options ask for (exactly one way; its parts and overlap are checked by :func:`check_parts`)."""
     ways = [
         w for w, v in (("--train-segment", train_segment), ("--train/--test", train or test), ("--split", split)) if v
     ]
