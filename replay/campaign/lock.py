@@ -50,14 +50,14 @@ def holder(path: Path) -> str:
 
 
 @contextmanager
-def locked(out, wait: bool = False):
-    """Hold the campaign lock of result directory ``out`` (which must exist) for the block."""
+def locked(out, wait: bool = False, who: str = "campaign"):
+    """Hold the campaign lock of result directory ``out`` (which must exist) for the block
+    (``who``: what the other process is, in the refusal)."""
     path = Path(out) / LOCK_NAME
     with lock_file(
         path,
         wait,
-        busy=f"{path}: another campaign process (pid {{pid}}) is writing to {out}; "
-        "wait for it to finish or pass --wait",
+        busy=f"{path}: another {who} process (pid {{pid}}) is writing to {out}; wait for it to finish or pass --wait",
         what="the campaign lock",
     ) as p:
         yield p

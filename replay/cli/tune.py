@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR, run_option
+from replay.cli.run_options import DATA_DIR, MAPPING, run_option
 from replay.util.errors import ReplayError
 
 
@@ -58,6 +58,7 @@ from replay.util.errors import ReplayError
     help="Tune directory (study.db, units/, leaderboard.csv, tuned.toml); resumed when it exists.",
 )
 @DATA_DIR
+@MAPPING
 @click.option(
     "--workers",
     "-w",
@@ -68,6 +69,11 @@ from replay.util.errors import ReplayError
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://host:8786.")
 @click.option("--allow-overlap", is_flag=True, help="Allow training and test data to overlap (flagged on every row).")
+@click.option(
+    "--wait",
+    is_flag=True,
+    help="If another replay tune is writing to --out, wait for it to finish instead of refusing.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress display.")
 def tune_cmd(
     dataset,
@@ -90,10 +96,12 @@ def tune_cmd(
     dataset_params,
     out,
     data_dir,
+    mapping,
     workers,
     dask_local,
     scheduler,
     allow_overlap,
+    wait,
     quiet,
 ):
     """Tune each filter's declared parameters on training data and score it on held-out data."""
@@ -111,9 +119,13 @@ def tune_cmd(
     if not entries:
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")
     d = Path(out)
-    if d.is_dir() and any(d.iterdir()) and not (d / "study.db").is_file():
+    from replay.campaign.lock import LOCK_NAME
+
+    started = {LOCK_NAME}  # a tune that has taken its lock and not yet made study.db (--wait for it)
+    ours = (d / "study.db").is_file() or (d / "tune.json").is_file()  # tune.json: a study.db moved aside
+    if d.is_dir() and not {p.name for p in d.iterdir()} <= started and not ours:
         raise ReplayError(
-            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db); "
+            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db, no tune.json); "
             "give a new or a tune directory"
         )
     if d.exists() and not d.is_dir():
@@ -129,7 +141,7 @@ def tune_cmd(
         seed=seed,
         task=task,
         task_params=cli_params.task_params(task_params, task),
-        dataset_params=cli_params.dataset_params(dataset_params),
+        dataset_params=cli_params.dataset_inputs(dataset_params, mapping),  # --mapping as in replay eval
         view={"rate": rate, "window": window},
         first=first,
         data_dir=data_dir,
@@ -141,9 +153,10 @@ def tune_cmd(
         batch=-(-runs // parallel) if parallel and runs > 0 else None,
     )  # a trial's runs over the workers
     check_names(out, "--out")
-    refuse_overlap(Path(out), [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file], "--out")
+    given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
+    refuse_overlap(Path(out), given, "--out")
     check_writable(out, "--out")
-    res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet)
+    res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet, wait=wait)
     click.echo(format_board(res["rows"]))
     budget = res["budget"]
     same = len(set(budget.values())) == 1

@@ -62,11 +62,11 @@ def prepare(
         test=test,
         split=split,
         seed=seed,
-        allow_overlap=allow_overlap,
     )
     refs = {d: dataset_ref.resolve(d) for d, _ in s.train + s.test}  # each id parsed once
     checked = [(d, plain(registry.check_params(refs[d].target, p))) for d, p in s.train + s.test]  # canonical
     s.train, s.test = checked[: len(s.train)], checked[len(s.train) :]
+    splits.check_parts(s, seed=seed, first=first, data_dir=data_dir, refs=refs, allow_overlap=allow_overlap)
     first_ds, first_p = s.train[0]
     task = task or default_task(refs[first_ds], first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
     make_task(task, **(task_params or {}))

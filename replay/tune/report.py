@@ -49,7 +49,11 @@ def make_report(d: Path, out: Path | None = None) -> Path:
         _gap_table(rows),
     ]
     for name in asked["filters"]:
-        st = optuna.load_study(study_name=name, storage=store)
+        try:
+            st = optuna.load_study(study_name=name, storage=store)
+        except Exception as err:  # noqa: BLE001 — a damaged file: one line
+            raise studies.damaged(d / "study.db", err) from None
+        studies.read_back(st, (asked.get("space") or {}).get(name), d / "study.db")
         done = studies.complete(st)[: asked["trials"]]
         if not done:
             continue

@@ -181,11 +181,11 @@ def tune(
     out.mkdir(parents=True, exist_ok=True)
     units = Path(store_dir) if store_dir is not None else out
     with ExitStack() as held:
-        held.enter_context(locked(out, wait=wait))
+        held.enter_context(locked(out, wait=wait, who="replay tune"))
         if units != out:
-            held.enter_context(locked(units, wait=wait))
-        store = studies.storage(out)
-        opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db") for f in t.filters}
+            held.enter_context(locked(units, wait=wait, who="replay tune or campaign"))
+        store = studies.storage(out, units)
+        opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db", units) for f in t.filters}
         write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))

@@ -6,7 +6,8 @@
 * ``--split seeds`` (simulated data): one dataset, training on master seed S and testing on S + 1
   (every run's streams are drawn from (seed, run, stream): disjoint).
 
-Overlap (the same data on both sides) is refused unless ``allow_overlap``; then every row says so.
+Overlap (the same data on both sides, decided on content by :mod:`.parts` once the parts are read)
+is refused unless ``allow_overlap``; then every row says so.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ class Split:
     tuned_on: str
     tested_on: str
     overlap: str | None = None  # what train and test share (allowed with --allow-overlap)
+    train_option: str = ""  # the option that made each side, named in refusals
+    test_option: str = ""
 
 
 def _fraction(text: str) -> float:
@@ -51,9 +54,8 @@ def make(
     test=None,
     split=None,
     seed: int = 0,
-    allow_overlap: bool = False,
 ) -> Split:
-    """The split the options ask for (exactly one way), checked for overlap."""
+    """The split the options ask for (exactly one way; its parts and overlap are checked by :func:`check_parts`)."""
     ways = [
         w for w, v in (("--train-segment", train_segment), ("--train/--test", train or test), ("--split", split)) if v
     ]
@@ -72,6 +74,7 @@ def make(
         tr, te = split_views({"segment": _fraction(train_segment)})
         a, b = [(dataset, {**view, **tr})], [(dataset, {**view, **te})]
         s = Split(a, b, None, None, _describe(a, None), _describe(b, None))
+        s.train_option = s.test_option = f"--train-segment {train_segment}"
     elif train or test:
         if not (train and test):
             raise ReplayError("--train and --test go together (comma-separated dataset ids each)")
@@ -80,6 +83,7 @@ def make(
         a = [(d.strip(), dict(view)) for d in train.split(",") if d.strip()]
         b = [(d.strip(), dict(view)) for d in test.split(",") if d.strip()]
         s = Split(a, b, None, None, _describe(a, None), _describe(b, None))
+        s.train_option, s.test_option = f"--train {train}", f"--test {test}"
     else:
         if split != "seeds":
             raise ReplayError(f"--split {split!r}: the only split by option is 'seeds' (simulated data)")
@@ -87,26 +91,34 @@ def make(
             raise ReplayError("--split seeds needs a DATASET (simulated)")
         a, b = [(dataset, dict(view))], [(dataset, dict(view))]
         s = Split(a, b, seed, seed + 1, _describe(a, seed), _describe(b, seed + 1))
-    s.overlap = overlap(s, dataset)
+        s.train_option = s.test_option = "--split seeds"
+    return s
+
+
+def check_parts(s: Split, *, seed: int, first, data_dir, refs: dict, allow_overlap: bool) -> None:
+    """Read every part (:func:`replay.tune.parts.read`: each holds enough samples), set ``s.overlap``
+    from their content and refuse it unless ``allow_overlap``."""
+    from . import parts
+
+    read = {}
+    for side, items, part_seed, option in (
+        ("training", s.train, s.train_seed, s.train_option),
+        ("test", s.test, s.test_seed, s.test_option),
+    ):
+        part_seed = seed if part_seed is None else part_seed
+        read[side] = []
+        for d, p in items:
+            desc = _describe([(d, p)], part_seed if refs[d].is_sim else None)
+            where = f"{option}: the {side} part {desc}"
+            read[side].append(
+                (desc, parts.read(d, p, seed=part_seed, first=first, data_dir=data_dir, ref=refs[d], where=where))
+            )
+    s.overlap = parts.overlap(read["training"], read["test"])
+    if s.overlap and s.train_seed is not None:  # simulations under two seeds never meet: a recording
+        s.overlap += " (a recording: its samples are the same under every seed)"
     if s.overlap and not allow_overlap:
         raise ReplayError(
             f"training data ({s.tuned_on}) and test data ({s.tested_on}) overlap: {s.overlap}; a "
             "filter would be scored on data it was tuned on (pass --allow-overlap to tune anyway: "
             "every row is then flagged)"
         )
-    return s
-
-
-def overlap(s: Split, dataset) -> str | None:
-    """What the training and test data share (:func:`replay.data.splits.check_disjoint`), or None."""
-    from replay.data.splits import check_disjoint
-
-    if s.train_seed is not None:
-        return check_disjoint({"seed": s.train_seed}, {"seed": s.test_seed}, allow_overlap=True, dataset=dataset)
-    found = []
-    for d, p in s.train:
-        for e, q in s.test:
-            what = check_disjoint({"datasets": [d], **p}, {"datasets": [e], **q}, allow_overlap=True)
-            if what:
-                found.append(what)
-    return "; ".join(found) or None
