@@ -131,6 +131,11 @@ def test_a_baseline_that_loses_its_track_cannot_support_the_claim():
     assert "Working baselines: A < B: mean 0.493 [0.476, 0.509], p_adj = 1" in cell
     v, = decide([claim(Rule("p", "paper", "A - B", test="t", declared="before", max_lost=0.2))], ev)
     assert v.label == REPRODUCED and v.broken == []  # 2 of 10 is not more than a declared 20 %
+    ev = {"p": [better(lost_b=np.ones(10, bool))]}  # an ablation's lost runs are evidence: max_lost = 1 keeps them
+    v, = decide([claim(Rule("p", "paper", "A - B", test="t", declared="before", max_lost=1.0))], ev)
+    assert v.label == REPRODUCED and v.broken == []
+    with pytest.raises(ValueError, match=r"max_lost 1.5: a share of runs in \[0, 1\]"):
+        Rule("p", "paper", "A - B", max_lost=1.5)
 
 
 @pytest.mark.parametrize(

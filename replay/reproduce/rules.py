@@ -82,7 +82,8 @@ class Rule:
     ``mechanism_text``: those of the ablation of :data:`MECHANISM`; ``family``: a Holm family
     shared with other claims ("" = the claim's own); ``declared``: "before" or "post hoc" (module docstring);
     ``max_lost``: the share of lost runs above which a baseline (``lost_b``) cannot support a positive
-    label; ``working``: the evidence key of comparisons against working baselines, printed beside."""
+    label (1: arm b is an ablation of the filter, not a baseline, and its lost runs are evidence); ``working``:
+    the evidence key of comparisons against working baselines, printed beside."""
 
     decides: str
     cells: str
@@ -102,8 +103,8 @@ class Rule:
     def __post_init__(self):
         if self.declared not in DECLARED:
             raise ValueError(f"rule declared {self.declared!r}: one of {', '.join(map(repr, DECLARED))}")
-        if not 0 <= self.max_lost < 1:
-            raise ValueError(f"rule max_lost {self.max_lost}: a share of runs in [0, 1)")
+        if not 0 <= self.max_lost <= 1:
+            raise ValueError(f"rule max_lost {self.max_lost}: a share of runs in [0, 1]")
         if self.test not in TESTS:
             raise ValueError(f"rule test {self.test!r}: one of {', '.join(TESTS)}")
         if not 0 < self.alpha < 1:
