@@ -33,7 +33,7 @@ def test_quick_document_opens_with_the_verdicts_each_with_its_rule_and_evidence(
     text = quick.read_text(encoding="utf-8")
     head = text.split("\n## ", 2)
     assert head[0].startswith("# Reproduction of paper 002") and head[1].startswith("Verdict")
-    assert "| claim | paper | verdict | rule (declared before the run) | test |" in head[1]
+    assert "| claim | paper | verdict | rule | when declared | test |" in head[1]
     rows = [r for r in head[1].splitlines() if r.startswith("| ") and "](#e-" in r]
     from replay.reproduce.p002 import load
 
@@ -89,7 +89,7 @@ def test_parts_are_refused_in_one_line():
 
 
 def test_every_rule_names_evidence_and_equal_arms_decide_nothing():
-    """Each claim's rule (declared before the run) names comparisons the evidence builder makes; with
+    """Each claim's rule (declared beside it) names comparisons the evidence builder makes; with
     every row the same numbers, no ordering holds and no paper number far from them is inside."""
     rng = np.random.default_rng(0)
     same = rng.normal(50.0, 1.0, 20).tolist()
@@ -159,6 +159,17 @@ def copy(tmp_path, monkeypatch):
         ('row = { filter = ""', 'row = { filtre = ""', "[defaults] row: unknown key(s) ['filtre']"),
         ('u10o = {', 'u10x = {', "claim 'u10o': no [evidence] for ['u10o']"),
         ('grid = [', 'grids = [', "top level: unknown key(s) ['grids'], missing key(s) ['grid']"),
+        (  # the Bohai mechanism as it was: a pair under the claim's interval test, which has no target to hold
+            'b = "igwo-stcpf", test = "auto" }',
+            'b = "igwo-stcpf" }',
+            "claim 'b': evidence 'b-move', entry a = 'igwo-stcpf, estimate before the move': an interval test "
+            "without a target (the paper's number)",
+        ),
+        (  # a paired test without a pair
+            'u1o = { exps = ["ungm1"], compare = [{ a = "igwo-pf", b = "gwo-pf" }] }',
+            'u1o = { exps = ["ungm1"], compare = [{ a = "igwo-pf" , target = 2.0, test = "t" }] }',
+            "claim 'u1o': evidence 'u1o', entry a = 'igwo-pf': a paired test (t) without a pair (no b arm)",
+        ),
     ],
 )
 def test_a_misspelt_or_missing_key_is_refused_naming_the_entry(copy, old, new, message):
@@ -175,11 +186,25 @@ def test_a_row_added_in_the_toml_reaches_an_evaluate_call_and_the_table(copy, mo
 
     def fake(above, job):
         calls.append(job)
-        rows = {lab: {"row": {"pos_rmse": 1.0, "pos_rmse_ci95": 0.5}, "lost": [False]} for lab, _, _ in job[1]}
+        rows = {lab: {"row": {"pos_rmse": 1.0, "pos_rmse_ci95": 0.5}, "lost": [False], "v": {"mean3": [0.75]}}
+                for lab, _, _ in job[1]}
         return {"command": f"call {len(calls)}", "rows": rows}
 
     monkeypatch.setattr(p002, "compute", fake)
     t5 = [e for e in p002.experiments(t, []) if e["key"] == "t5"]
     E = p002.run_all(t5, dict(seed=0, data_dir=None, quiet=True, mc=3, above=t["above"]), None)
     assert sum(("ckf, Q doubled", "ckf", {"q_scale": 2.0}) in rows for _, rows, _ in calls) == 1
-    assert "| ckf, Q doubled (q × 2) | — | 1.000 ± 0.500 | n/a |" in p002.exp_table(t5, E, t)
+    assert "| ckf, Q doubled (q × 2) | — | 1.000 ± 0.500 | 0.750 | n/a |" in p002.exp_table(t5, E, t)  # RMSE, mean
+
+
+def test_mean_euclidean_error_and_the_raw_error_beside_each_bohai_comparison():
+    err = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0], [np.nan, 1.0, 1.0], [1.0, 2.0, 2.0]])
+    assert p002.mean_norm(err) == pytest.approx((5.0 + 0.0 + 3.0) / 3)  # the NaN step left out
+    assert np.isnan(p002.mean_norm(np.full((2, 3), np.nan)))
+    rows = {lab: dict(v={"pos_rmse": [2.4, 2.5]}, lost=[False, False], row={"pos_rmse": x})
+            for lab, x in (("igwo-stcpf", 2.45), ("ckf", 3.1), ("raw measurements", np.sqrt(6)))}
+    entry = dict(a="igwo-stcpf", b="ckf", col="pos_rmse", lost=False, test="")
+    bohai = p002.comparison(dict(key="b1hz-0_6", runs="bohai", rows=[], last=[]), rows, entry)
+    assert bohai.name == "b1hz-0_6 (raw measurements 2.449 m): igwo-stcpf < ckf"
+    sonar = p002.comparison(dict(key="t6", runs="mc", rows=[], last=[]), rows, entry)
+    assert sonar.name == "t6: igwo-stcpf < ckf"

@@ -229,18 +229,23 @@ def declared(R: dict, p: dict) -> dict:
 
 def evidence(R: dict, T: dict, p: dict) -> dict:
     """The comparisons the rules name: :func:`declared`, then best (each filter tuned), cost (GPF's µs per step
-    against the margin × MMPF's over the grid), lead-q (first vs last κ per sensor level) and lead-r (1 R vs the
-    lowest sensor level per κ) of GPF's :func:`lead`."""
+    against the margin × MMPF's over the grid), lead-q@paper (GPF − the best baseline in the paper's cell), lead-q
+    (first vs last κ, the paper's sensors) and lead-r@paper / lead-r@other (1 R vs the lowest sensor level at the
+    paper's κ / at every other κ) of GPF's :func:`lead`."""
     ev, at = declared(R, p), tuned(T, R, p["grid"])
     ev["best"] = [paired(f"{ch}: GPF − {lab}", at[("GPF", ch)][2], at[(lab, ch)][2], ch) for ch in CH for lab in OTHERS]
     gpf, mmpf = ([R[c][lab]["row"]["us_per_step"] for c in p["grid"]] for lab in ("GPF", "MMPF"))
     name = f"GPF − {MARGIN:g} × MMPF, µs per step over the grid cells"
     ev["cost"] = [Comparison(name, gpf, [MARGIN * u for u in mmpf])]
-    k, lo = p["kappas"], [n for n in p["noises"] if n is not None]
-    rows = [("lead-q", f"sensors {Cell(n, 1).noise_text}", Cell(n, k[0]), Cell(n, k[-1])) for n in p["noises"]]
-    rows += [("lead-r", f"κ = {x:g}", Cell(max(lo), x), Cell(min(lo), x)) for x in k]
+    k, lo, at = p["kappas"], [n for n in p["noises"] if n is not None], KEY["paper"]
+    rows = [("lead-q", f"sensors {at.noise_text}", Cell(at.noise, k[0]), Cell(at.noise, k[-1]))]
+    tag = lambda x: "lead-r@paper" if x == at.kappa else "lead-r@other"
+    rows += [(tag(x), f"κ = {x:g}", Cell(max(lo), x), Cell(min(lo), x)) for x in k]
     for key, name, x, y in rows:
         ev.setdefault(key, []).extend(paired(f"{name}, {ch}", lead(R[x], ch), lead(R[y], ch), ch, "lead") for ch in CH)
+    best = {ch: lead(R[at], ch)["best"] for ch in CH}  # the lead in the paper's setting: GPF − the best baseline
+    gpf = lambda ch: paired(f"κ = {at.kappa:g}, {ch}: GPF − {best[ch]}", R[at]["GPF"], R[at][best[ch]], ch)
+    ev["lead-q@paper"] = [gpf(ch) for ch in CH]
     return ev
 
 

@@ -19,16 +19,18 @@ from replay.filters.p002 import pso, swarm_kernels
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
 from replay.scoring.metrics import share_above
+from replay.scoring.significance import t_interval
 from replay.util.portable import write_document
 
 from . import spec
 from .render import anchor_tag, render, table
-from .rules import Comparison, decide, per_run
+from .rules import Comparison, decide, per_run, undecidable
 from .tables import Stopwatch, footer, mean_ci
 
 # The keys of each kind of entry of 002.toml ("key?": optional; [defaults] may give an optional key's default).
 KEYS = dict(exp="key task rows dataset? dp? cols? tune? runs? first? per_sequence? last?", evidence="exps compare")
-KEYS |= dict(row="label filter? params? paper? dp? tp?", compare="a b? target? col? lost?")
+KEYS |= dict(row="label filter? params? paper? dp? tp?", compare="a b? target? col? lost? test?")
+MEAN3 = "mean Euclidean error (m)"  # the column beside the RMSE: mean over steps of |e_k| (3-D in sonar and Bohai)
 TOP = "grid columns runs quick above sequences tune_seq no_sequences commands defaults exp evidence claim"
 
 
@@ -53,10 +55,28 @@ def load() -> dict:
         bad += [c["a"] for c in ev["compare"] if c.get("target") == "paper" for e in exps if paper(e, c) is None]
         if None in exps or bad:
             raise ValueError(f"002.toml: evidence {k!r}: unknown exps, or no b, target or paper number for {bad}")
-    for c in spec.claims(t, "002.toml"):
-        if bad := [k for k in (c.rule.decides, c.rule.condition, c.rule.mechanism) if k and k not in t["evidence"]]:
-            raise ValueError(f"002.toml: claim {c.id!r}: no [evidence] for {bad}")
+    check_claims(t)
     return t
+
+
+def check_claims(t: dict) -> None:
+    """Refuse, before any run, a claim whose rule names an undeclared evidence key or whose test cannot decide one of
+    its entries (:func:`replay.reproduce.rules.undecidable`: an interval without a target, a paired test without b)."""
+    for c in spec.claims(t, "002.toml"):
+        keys = [k for k in (c.rule.decides, c.rule.condition, c.rule.mechanism, c.rule.working) if k]
+        if bad := [k for k in keys if k not in t["evidence"]]:
+            raise ValueError(f"002.toml: claim {c.id!r}: no [evidence] for {bad}")
+        for k, x in ((k, x) for k in keys for x in t["evidence"][k]["compare"]):
+            entry = x | ({"target": 0.0} if "target" in x else {})  # the paper's numbers: checked by load
+            probe = comparison(dict(key=k, runs="", rows=[], last=[]), blank(x), entry)
+            if why := undecidable(probe, probe.test or c.rule.test):
+                raise ValueError(f"002.toml: claim {c.id!r}: evidence {k!r}, entry a = {x['a']!r}: {why}")
+
+
+def blank(c: dict) -> dict:
+    """Rows standing in for a compare entry's arms before any run (one run each), to check its test decides it."""
+    r = dict(v={c["col"]: [0.0], "pos_rmse": [0.0]}, lost=[False], row={})
+    return {c["a"]: r} | ({c["b"]: r} if c["b"] else {})
 
 
 def row(r: dict) -> dict:
@@ -96,8 +116,9 @@ def calls(e: dict, s: dict) -> list[tuple]:
 
 
 def compute(above: float, job: tuple) -> dict:
-    """One evaluate call (in a worker): its command; per row the summary, lost flags, per-run ``*_rmse`` and ``above2``
-    (share of steps with a 3-D error above ``above``), ``z_low`` (share of truths under the PSO box's depth bound)."""
+    """One evaluate call (in a worker): its command; per row the summary, lost flags, per-run ``*_rmse``, ``above2``
+    (share of steps with a 3-D error above ``above``) and ``mean3`` (mean over steps of the Euclidean position error),
+    ``z_low`` (share of truths under the PSO box's depth bound)."""
     _, rows, kw = job
     ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
@@ -105,8 +126,22 @@ def compute(above: float, job: tuple) -> dict:
     for lab, r in ((lab, by[f]) for lab, f, _ in rows + (("raw measurements", "measurements", 0),) if f in by):
         v = {c: per_run(r, c)[0].tolist() for c in r.runs[0] if c.endswith("_rmse")}
         v["above2"] = [share_above(e["position"], above) for e in r.errors]
+        v["mean3"] = [mean_norm(e["position"]) for e in r.errors]
         out["rows"][lab] = dict(row=r.summary, v=v, lost=per_run(r)[1].tolist(), z_low=float(np.mean(z)) if z else None)
     return out
+
+
+def mean_norm(err: np.ndarray) -> float:
+    """The mean over steps of the Euclidean norm of one run's position errors (rows of ``err``; NaN steps left out)."""
+    n = np.linalg.norm(err, axis=1)
+    n = n[np.isfinite(n)]
+    return float(n.mean()) if len(n) else float("nan")
+
+
+def mean3(r: dict) -> str:
+    """A row's mean Euclidean error over runs ± its 95 % t half-width (runs with a finite value)."""
+    m, h = t_interval(r["v"]["mean3"])
+    return mean_ci({"pos_rmse": m, "pos_rmse_ci95": h})
 
 
 def run_all(exps, s: dict, ex) -> dict:
@@ -143,14 +178,17 @@ def tune(t: dict, exps: list[dict], s: dict, ex) -> dict:
 def comparison(e: dict, rows: dict, c: dict) -> Comparison:
     """A declared comparison in experiment ``e``: ``target`` in ``a``'s interval, fewer lost (McNemar), or a < b."""
     k, a, b, col = e["key"], rows[c["a"]], rows.get(c["b"]), c["col"]
+    if e["runs"] == "bohai" and "raw measurements" in rows:  # every Bohai cell states the raw error it compares with
+        k += f" (raw measurements {rows['raw measurements']['row']['pos_rmse']:.3f} m)"
     if "target" in c:
         target = paper(e, c) if c["target"] == "paper" else c["target"]
-        return Comparison(f"{k}: {c['a']} {col}", a["v"][col], lost_a=a["lost"], target=target, test="interval")
+        name, test = f"{k}: {c['a']} {col}", c["test"] or "interval"
+        return Comparison(name, a["v"][col], lost_a=a["lost"], target=target, test=test)
     if c["lost"]:
         m, p = np.mean(a["v"]["pos_rmse"]), paper(e, c, "b")
         gap = f" (residual gap: {c['a']} {m:.3f} vs paper {p}, {m / p:.1f}×)" if p else ""
         return Comparison(f"{k}: lost, {c['a']} vs {c['b']}{gap}", (), (), a["lost"], b["lost"], test="mcnemar")
-    return Comparison(f"{k}: {c['a']} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"])
+    return Comparison(f"{k}: {c['a']} < {c['b']}", a["v"][col], b["v"][col], a["lost"], b["lost"], test=c["test"])
 
 
 def evidence(t: dict, exps, E: dict) -> dict:
@@ -167,19 +205,23 @@ def exp_table(ex: list[dict], E: dict, t: dict) -> str:
         w, p, n = r["row"], a["paper"], len(r["lost"])
         ratio = f"{w['pos_rmse'] / p[0]:.2f}" if p and np.isfinite(w.get("pos_rmse", np.nan)) else "—"
         med, us = w.get("pos_rmse_median", np.nan), w.get("us_per_step", np.nan)
-        out.append([a["name"], a["numbers"], *(mean_ci(w, c) for c in e["cols"]), ratio, f"{med:.3f}"])
+        cols = [mean_ci(w, c) for c in e["cols"]]
+        out.append([a["name"], a["numbers"], cols[0], mean3(r), *cols[1:], ratio, f"{med:.3f}"])
         out[-1] += [f"{sum(r['lost'])}/{n}", f"{w.get('diverged', 0)}/{n}", f"{us:.0f}", r["cmd"]]
-    head = ["row", "paper", *(t["columns"][c] for c in e["cols"]), "ours ÷ paper", "median", "lost", "diverged"]
+    heads = [t["columns"][c] for c in e["cols"]]
+    head = ["row", "paper", heads[0], MEAN3, *heads[1:], "ours ÷ paper", "median", "lost", "diverged"]
     tab = table(head + ["µs/step", "command"], out)
     return f"{anchor_tag('#e-' + e['key'])}\n\n{tab}\n\n{command_list(t, E['cmd:' + e['key']])}"
 
 
 def sequence_table(ex: list[dict], E: dict, t: dict) -> str:
-    """Rows x sequences: mean position RMSE ± 95 % (lost runs) [the command that gives it]."""
+    """Rows x sequences: mean position RMSE ± 95 % (mean Euclidean error ± 95 %; lost runs; the raw measurements'
+    RMSE on that sequence) [the command that gives it]."""
     rows, group = {a["name"]: a for e in ex for a in e["rows"]}, ex[0]["group"]
     at = lambda e, a: E[e["key"]].get(a["label"]) if a in e["rows"] else None
-    cell = lambda r: f"{mean_ci(r['row'])} ({sum(r['lost'])} lost) [{r['cmd']}]" if r else "—"
-    body = [[k, a["numbers"], *(cell(at(e, a)) for e in ex)] for k, a in rows.items()]
+    raw = lambda e: f"{E[e['key']].get('raw measurements', {}).get('row', {}).get('pos_rmse', np.nan):.3f}"
+    cell = lambda r, e: f"{mean_ci(r['row'])} (mean {mean3(r)}; {sum(r['lost'])} lost; raw {raw(e)}) [{r['cmd']}]"
+    body = [[k, a["numbers"], *(cell(at(e, a), e) if at(e, a) else "—" for e in ex)] for k, a in rows.items()]
     tab = table(["row", "paper", *(e["dataset"] for e in ex)], body)
     return f"{anchor_tag('#e-' + group)}\n\n{tab}\n\n{command_list(t, E['cmd:' + group], '[n]')}"
 
@@ -200,8 +242,19 @@ def document(t: dict, exps, E: dict, chosen: dict, seqs, seed: int) -> str:
     swarm_kernels.entropy_weights(np.array([1.0, 1.5, 10.0]), 1e-12, 1e-4, w := np.empty(3))  # 002 §3.2.2
     fields["entropy"] = "(" + ", ".join(f"{x:.3f}" for x in w) + ")"
     fields["tuned"] = "; ".join(f"{k}: " + ", ".join(f"{f} × {q:g}" for f, q in v.items()) for k, v in chosen.items())
+    fields["b_raw"] = raw_text([e for e in exps if e["group"] == "b1hz"], E)
     claims = [c for c in spec.claims(t, "002.toml") if ev[c.rule.decides]]
     return render("002", fields, decide(claims, ev, seed=seed))
+
+
+def raw_text(ex: list[dict], E: dict) -> str:
+    """IGWO-STCPF's position RMSE over the sequences of ``ex`` beside the raw measurements' (the error it compares
+    with), as ranges over the sequences."""
+    span = lambda lab: [E[e["key"]][lab]["row"]["pos_rmse"] for e in ex if lab in E[e["key"]]]
+    ig, raw = span("igwo-stcpf"), span("raw measurements")
+    if not ig or not raw:
+        return "(no Bohai sequence found)"
+    return f"IGWO-STCPF {min(ig):.3f}–{max(ig):.3f} m, the raw measurements {min(raw):.3f}–{max(raw):.3f} m"
 
 
 def run(runs=None, seed=0, data_dir=None, doc=None, quick=False, quiet=False):

@@ -9,9 +9,11 @@ The template must hold ``${verdicts}`` (the verdict table, :func:`verdict_table`
 first ``## `` section other than ``## Verdict``: each document opens with its verdicts.
 
 The verdict table has one row per claim: the claim (the paper's words), the paper's number,
-the label, the rule declared before the run, the test, the Holm-adjusted p-values or
-intervals of the deciding comparisons (with the stated condition's or the ablation's when they
-decided, and the residual gap beside a *recovered* row), and a link to the evidence row.
+the label, the rule, when it was declared (before any run of its evidence, or post hoc), the
+test, the Holm-adjusted p-values or intervals of the deciding comparisons (with the stated
+condition's or the ablation's when they decided, the residual gap beside a *recovered* row, a
+baseline that lost too many runs to support the claim and the working baselines' results), and
+a link to the evidence row.
 An evidence row carries the anchor :func:`anchor_tag` of its claim's ``evidence``; :func:`fmt`
 and :func:`pm` print a mean ± half-width and a paired difference in the tables.
 """
@@ -26,7 +28,7 @@ import numpy as np
 
 from replay.scoring.significance import pairs, t_interval
 
-from .rules import MECHANISM, RECOVERED, Verdict, counts
+from .rules import DECLARED, MECHANISM, RECOVERED, RECOVERED_POST, Verdict, counts
 from .spec import PAPERS
 from .tables import cell
 
@@ -66,7 +68,7 @@ def anchor_tag(evidence: str) -> str:
 def found(v: Verdict) -> str:
     """The verdict table's evidence cell of ``v``: the deciding outcomes, and the condition's or ablation's."""
     out = "; ".join(o.text() for o in v.deciding)
-    if v.label == RECOVERED:
+    if v.label in (RECOVERED, RECOVERED_POST):
         out = (
             "under the condition: " + "; ".join(o.text() for o in v.support) + f". Residual gap in the paper's "
             f"setting: {v.gap}"
@@ -76,6 +78,18 @@ def found(v: Verdict) -> str:
     for kind, words in (("condition", "Stated condition, not met"), ("mechanism", "Ablation, not shown")):
         if v.tried.get(kind):
             out += f". {words}: " + "; ".join(o.text() for o in v.tried[kind])
+    return out + baselines(v)
+
+
+def baselines(v: Verdict) -> str:
+    """The deciding comparisons whose baseline lost too many runs to support the claim, and the working baselines."""
+    share = lambda o: f"{int(sum(o.comparison.lost_b))}/{len(o.comparison.lost_b)}"
+    out = ""
+    if v.broken:
+        out += f". Baseline(s) losing more than {100 * v.claim.rule.max_lost:g} % of runs (not at their best: cannot "
+        out += "support the claim): " + "; ".join(f"{o.comparison.name}: b lost {share(o)}" for o in v.broken)
+    if v.working:
+        out += ". Working baselines: " + "; ".join(o.text() for o in v.working)
     return out
 
 
@@ -87,6 +101,7 @@ def verdict_table(verdicts: list[Verdict]) -> str:
             v.claim.paper,
             f"**{v.label}**",
             v.rule,
+            DECLARED[v.claim.rule.declared],
             v.tests,
             found(v),
             f"[{v.claim.evidence.lstrip('#')}]({v.claim.evidence})",
@@ -97,7 +112,8 @@ def verdict_table(verdicts: list[Verdict]) -> str:
         "claim",
         "paper",
         "verdict",
-        "rule (declared before the run)",
+        "rule",
+        "when declared",
         "test",
         "adjusted p / interval (deciding comparisons)",
         "evidence",

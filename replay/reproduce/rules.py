@@ -1,11 +1,13 @@
-"""Verdicts a referee signs: four labels, rules declared beside each claim before the run, one decision.
+"""Verdicts a referee signs: the labels, rules declared beside each claim, one decision.
 
 The vocabulary (:data:`LABELS`):
 
 * :data:`REPRODUCED` — the paper's number or ordering holds within our interval **in the paper's own
-  setting** (the rule's ``decides`` comparisons);
+  setting** (the rule's ``decides`` comparisons), by a rule declared before any run of its evidence;
 * :data:`RECOVERED` — it does not there, but holds under a condition named in the rule before the run
   (``condition``, ``condition_text``); the residual gap in the paper's setting is printed beside it;
+* :data:`EXPLORATORY` and :data:`RECOVERED_POST` — the same two outcomes under a rule written after
+  runs of its evidence had been seen (``declared = "post hoc"``): such a rule can give no more;
 * :data:`MECHANISM` — not reproduced, and an ablation named in the rule (``mechanism``,
   ``mechanism_text``) shows why;
 * :data:`NOT` — not reproduced.
@@ -18,7 +20,12 @@ its evidence (a mapping ``key -> [Comparison, ...]`` filled from the runs) and c
 condition and mechanism), and applies the rules in the order above. Nothing is chosen after
 seeing the data: a condition or an ablation that the rule does not name cannot rescue a claim,
 and a claim that holds in 1 of 12 cells holds only if its rule asks for one cell and that cell
-survives the Holm adjustment over the 12.
+survives the Holm adjustment over the 12. Each rule records when it was declared (``declared``:
+``"before"`` any run of its evidence was seen, else ``"post hoc"``; git history decides, checked by
+``tests/test_reproduce_declared.py``). A comparison against a baseline that lost more than
+``max_lost`` of its runs (``lost_b``) cannot support a positive label (a baseline not at its best);
+``working`` names comparisons against working baselines, printed beside the verdict. A comparison
+its test cannot decide (an interval without a target, a paired test without a pair) is refused.
 
 Tests (:data:`TESTS`; every p-value one-sided, "a < b": list the arm claimed smaller as ``a``):
 
@@ -45,9 +52,14 @@ from replay.scoring import significance as sig
 
 REPRODUCED = "reproduced"
 RECOVERED = "recovered under a stated condition"
+EXPLORATORY = "exploratory"
+RECOVERED_POST = "recovered under a stated post-hoc condition"
 MECHANISM = "not reproduced — mechanism shown"
 NOT = "not reproduced"
-LABELS = (REPRODUCED, RECOVERED, MECHANISM, NOT)
+LABELS = (REPRODUCED, RECOVERED, EXPLORATORY, RECOVERED_POST, MECHANISM, NOT)
+CAPPED = {REPRODUCED: EXPLORATORY, RECOVERED: RECOVERED_POST}  # the most a post-hoc rule can give
+DECLARED = {"before": "before any run of its evidence", "post hoc": "post hoc: after runs of its evidence were seen"}
+PAIRED = ("auto", "t", "wilcoxon")
 TESTS = ("auto", "t", "wilcoxon", "mcnemar", "fisher", "interval")
 TEST_NAMES = {
     "t": "paired t",
@@ -68,7 +80,10 @@ class Rule:
     every one; ``"majority"``: more than half); ``condition``/``condition_text``: the evidence
     key and the words of the stated condition of :data:`RECOVERED`; ``mechanism`` and
     ``mechanism_text``: those of the ablation of :data:`MECHANISM`; ``family``: a Holm family
-    shared with other claims ("" = the claim's own)."""
+    shared with other claims ("" = the claim's own); ``declared``: "before" or "post hoc" (module docstring);
+    ``max_lost``: the share of lost runs above which a baseline (``lost_b``) cannot support a positive
+    label (1: arm b is an ablation of the filter, not a baseline, and its lost runs are evidence); ``working``:
+    the evidence key of comparisons against working baselines, printed beside."""
 
     decides: str
     cells: str
@@ -81,8 +96,15 @@ class Rule:
     mechanism: str = ""
     mechanism_text: str = ""
     family: str = ""
+    declared: str = "post hoc"
+    max_lost: float = 0.1
+    working: str = ""
 
     def __post_init__(self):
+        if self.declared not in DECLARED:
+            raise ValueError(f"rule declared {self.declared!r}: one of {', '.join(map(repr, DECLARED))}")
+        if not 0 <= self.max_lost <= 1:
+            raise ValueError(f"rule max_lost {self.max_lost}: a share of runs in [0, 1]")
         if self.test not in TESTS:
             raise ValueError(f"rule test {self.test!r}: one of {', '.join(TESTS)}")
         if not 0 < self.alpha < 1:
@@ -108,7 +130,7 @@ class Rule:
         )
         out = f"{self.statistic}; cells: {self.cells}; {how}"
         if self.condition_text:
-            out += f"; stated condition: {self.condition_text}"
+            out += f"; stated {'' if self.declared == 'before' else 'post-hoc '}condition: {self.condition_text}"
         if self.mechanism_text:
             out += f"; ablation: {self.mechanism_text}"
         return out
@@ -189,6 +211,8 @@ class Verdict:
     support: list = field(default_factory=list)
     gap: str = ""
     tried: dict = field(default_factory=dict)
+    broken: list = field(default_factory=list)  # deciding outcomes against a baseline that lost too many runs
+    working: list = field(default_factory=list)  # outcomes against working baselines (the rule's ``working``)
 
 
 def per_run(result, metric: str = "pos_rmse") -> tuple[np.ndarray, np.ndarray]:
@@ -251,6 +275,31 @@ def _keys(rule: Rule) -> list[str]:
     return [k for k in (rule.decides, rule.condition, rule.mechanism) if k]
 
 
+def undecidable(c: Comparison, test: str) -> str:
+    """Why ``test`` cannot decide comparison ``c`` ("" when it can): an interval without a target, a
+    paired test without a pair, McNemar without lost flags, Fisher without counts."""
+    if test == "interval" and c.target is None:
+        return "an interval test without a target (the paper's number)"
+    if test in PAIRED and (len(c.a) == 0 or len(c.b) == 0):
+        return f"a paired test ({test}) without a pair (no b arm)"
+    if test == "mcnemar" and (c.lost_a is None or c.lost_b is None):
+        return "an exact McNemar test without the lost flags of both arms"
+    if test == "fisher" and c.counts is None:
+        return "a Fisher test without lost counts"
+    return ""
+
+
+def check_decidable(cl: Claim, evidence: dict) -> None:
+    """Refuse (``ValueError``, one line naming the claim) a key the claim's rule names that is missing, empty,
+    or holds a comparison its declared test cannot decide (:func:`undecidable`)."""
+    for key in [*_keys(cl.rule), *[cl.rule.working] * bool(cl.rule.working)]:
+        if not evidence.get(key):
+            raise ValueError(f"claim {cl.id!r}: no evidence under {key!r}")
+        for c in evidence[key]:
+            if why := undecidable(c, c.test or cl.rule.test):
+                raise ValueError(f"claim {cl.id!r}: {key!r} comparison {c.name!r}: {why} cannot decide it")
+
+
 def holm_adjust(outcomes: list[Outcome], alpha: float = 0.05) -> int:
     """Holm over ``outcomes`` (one family): set each one's ``p_adj`` and ``holds`` (``p_adj < alpha``);
     return how many hold."""
@@ -261,19 +310,19 @@ def holm_adjust(outcomes: list[Outcome], alpha: float = 0.05) -> int:
 
 def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
     """Test every comparison the claims draw on, Holm-adjust each family, apply each rule (module
-    docstring). ``evidence``: ``key -> [Comparison, ...]``; a key a rule names must be there and
-    non-empty (raises ``ValueError`` naming the claim). ``seed`` seeds the bootstrap intervals."""
+    docstring). ``evidence``: ``key -> [Comparison, ...]``; a key a rule names must be there, non-empty
+    and decidable by its test (:func:`check_decidable`). ``seed`` seeds the bootstrap intervals."""
     ids = [c.id for c in claims]
     if len(set(ids)) != len(ids):
         raise ValueError(f"claim ids repeat: {sorted({i for i in ids if ids.count(i) > 1})}")
+    for cl in claims:
+        check_decidable(cl, evidence)
     rng = np.random.default_rng(seed)
     fam_of = {cl.id: cl.rule.family or f"claim:{cl.id}" for cl in claims}
     tested: dict[tuple[str, str], list[Outcome]] = {}  # (family, key): a key shared in a family counts once
     families: dict[str, list[Outcome]] = {}
     for cl in claims:
         for key in _keys(cl.rule):
-            if not evidence.get(key):
-                raise ValueError(f"claim {cl.id!r}: no evidence under {key!r}")
             if (fam_of[cl.id], key) not in tested:
                 outs = [test_one(c, c.test or cl.rule.test, rng) for c in evidence[key]]
                 tested[(fam_of[cl.id], key)] = outs
@@ -284,7 +333,17 @@ def decide(claims: list[Claim], evidence: dict, seed: int = 0) -> list[Verdict]:
             raise ValueError(f"claim {cl.id!r}: family {fam_of[cl.id]!r} has two alphas")
     for name, fam in families.items():
         holm_adjust(fam, alpha[name])
-    return [_verdict(cl, {k: tested[(fam_of[cl.id], k)] for k in _keys(cl.rule)}) for cl in claims]
+    working = {cl.id: _working(cl, evidence, rng) for cl in claims}
+    return [_verdict(cl, {k: tested[(fam_of[cl.id], k)] for k in _keys(cl.rule)}, working[cl.id]) for cl in claims]
+
+
+def _working(cl: Claim, evidence: dict, rng: np.random.Generator) -> list[Outcome]:
+    """The outcomes against the rule's working baselines, Holm-adjusted among themselves (printed, not deciding)."""
+    if not cl.rule.working:
+        return []
+    outs = [test_one(c, c.test or cl.rule.test, rng) for c in evidence[cl.rule.working]]
+    holm_adjust([o for o in outs if o.test != "interval"], cl.rule.alpha)
+    return outs
 
 
 def _enough(outs: list[Outcome], need: int | None) -> bool:
@@ -294,17 +353,25 @@ def _enough(outs: list[Outcome], need: int | None) -> bool:
     return n == len(outs) if need is None else n >= need
 
 
-def _verdict(cl: Claim, out: dict) -> Verdict:
+def broken(outs: list[Outcome], max_lost: float) -> list[Outcome]:
+    """The outcomes whose baseline (arm ``b``, of an ordering test) lost more than ``max_lost`` of its runs."""
+    lost = lambda o: np.asarray(o.comparison.lost_b, bool)
+    paired = [o for o in outs if o.test in PAIRED and o.comparison.lost_b is not None]
+    return [o for o in paired if len(lost(o)) and lost(o).mean() > max_lost]
+
+
+def _verdict(cl: Claim, out: dict, working: list) -> Verdict:
     r = cl.rule
     dec = out[r.decides]
-    tests = ", ".join(dict.fromkeys(TEST_NAMES[o.test] for os in out.values() for o in os))
-    v = Verdict(cl, NOT, r.text(), tests, deciding=dec)
-    if _enough(dec, r.need):
-        v.label = REPRODUCED
+    tests = ", ".join(dict.fromkeys(TEST_NAMES[o.test] for os in [*out.values(), working] for o in os))
+    v = Verdict(cl, NOT, r.text(), tests, deciding=dec, broken=broken(dec, r.max_lost), working=working)
+    cap = (lambda lab: lab) if r.declared == "before" else (lambda lab: CAPPED.get(lab, lab))
+    if _enough(dec, r.need) and not v.broken:
+        v.label = cap(REPRODUCED)
         return v
     for kind, key, label in (("condition", r.condition, RECOVERED), ("mechanism", r.mechanism, MECHANISM)):
-        if key and _enough(out[key], None):
-            v.label, v.support = label, out[key]
+        if key and _enough(out[key], None) and not (label == RECOVERED and broken(out[key], r.max_lost)):
+            v.label, v.support = cap(label), out[key]
             v.gap = "; ".join(o.text() for o in dec) if label == RECOVERED else ""
             return v
         if key:

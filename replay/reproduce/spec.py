@@ -11,7 +11,10 @@ anchor of its evidence row::
     paper = "GPF < MMPF < EKF (figures only)"
     evidence = "#e-order"
     old = "deviation explained (holds in 1/12 cells)"
-    rule = { decides = "depth@paper", cells = "the paper's setting", statistic = "per-run depth RMSE" }
+    rule = { declared = "before", decides = "depth@paper", cells = "the paper's setting", statistic = "depth RMSE" }
+
+``declared`` (required): ``"before"`` only for a rule committed before any run of its evidence was seen
+(git history decides: ``tests/test_reproduce_declared.py``), else ``"post hoc"``.
 
 Every key is checked: an unknown one is refused naming the file and the claim, so a misspelt rule
 field cannot silently fall back to its default. The experiments' tables are read by the paper's
@@ -66,7 +69,7 @@ def claims(spec: dict, where: str = "paper") -> list[Claim]:
         bad = set(c) - CLAIM_KEYS or set(c.get("rule", {})) - RULE_KEYS
         if bad:
             raise ValueError(f"{name}: unknown key(s) {sorted(bad)}")
-        missing = CLAIM_KEYS - {"old"} - set(c)
+        missing = CLAIM_KEYS - {"old"} - set(c) | {"rule.declared"} - {f"rule.{k}" for k in c.get("rule", {})}
         if missing:
             raise ValueError(f"{name}: missing {sorted(missing)}")
         out.append(Claim(c["id"], c["words"], c["paper"], Rule(**c["rule"]), c["evidence"]))
