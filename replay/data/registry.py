@@ -21,7 +21,6 @@ import difflib
 import functools
 import inspect
 import sys
-import tomllib
 from dataclasses import dataclass, fields
 from importlib import import_module
 from pathlib import Path
@@ -39,6 +38,7 @@ from replay.data.checksums import (
     with_registered,
 )
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
+from replay.util import tomlfile
 from replay.util.errors import DataError, ReplayError
 from replay.util.params import Param, validate
 from replay.util.progress import Loading
@@ -134,10 +134,7 @@ def _read_manifests(directory: str) -> dict[str, Dataset]:
 
 
 def _read_manifest(path: Path) -> list[Dataset]:
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ReplayError(f"{path}: cannot read manifest: {e}") from None
+    doc, _ = tomlfile.load(path, "a dataset manifest")
     entries = doc.pop("dataset", [])
     defaults = doc  # top-level keys apply to every entry
     if not isinstance(entries, list):

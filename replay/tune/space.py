@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import json
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from replay.util import tomlfile
 from replay.util.errors import ReplayError
 
 _SPEC = re.compile(r"^\s*(log|choice)?\s*\[(.*)\]\s*$", re.S)
@@ -150,12 +150,7 @@ def entries_from_cli(params) -> list[tuple[str, object, str]]:
 def entries_from_file(path) -> list[tuple[str, object, str]]:
     """A TOML search-space file -> [(key, value, where)] (``FILE: KEY`` in messages)."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ReplayError(f"--space {path}: cannot read ({e.strerror})") from None
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ReplayError(f"--space {path}: not a TOML file ({str(e).splitlines()[0]})") from None
+    doc, _ = tomlfile.load(path, "a search space", f"--space {path}")
     out = []
     for owner, table in doc.items():
         if not isinstance(table, dict):
