@@ -50,8 +50,8 @@ def _read(path: Path):
         raise DataError(path, "not a file")
     try:
         with open(path, "rb") as fh:
-            first = fh.readline()
-            blank = not first.strip()
+            first, seen = _first_line(fh)
+            blank = not seen.strip()
             while blank and (chunk := fh.read(1 << 20)):  # up to the first non-blank byte
                 blank = not chunk.strip()
         if blank:
@@ -64,6 +64,18 @@ def _read(path: Path):
     except OSError as err:
         raise DataError(path, f"cannot read: {err.strerror or err}") from None
     return table, lines, stream.sha.hexdigest()
+
+
+def _first_line(fh, chunk: int = 1 << 16) -> tuple[bytes, bytes]:
+    """(the first line, every byte read) of a binary file: a line ends at LF, CRLF or a lone CR
+    (old Mac files, where one ``readline`` would be the whole file)."""
+    head = b""
+    while block := fh.read(chunk):
+        head += block
+        end = re.search(rb"[\r\n]", block)
+        if end:
+            return head[: len(head) - len(block) + end.start()], head
+    return head, head
 
 
 def _parse(path, source, first: bytes):
