@@ -66,13 +66,13 @@ def read_bytes(path, what: str = "a data file", limit: int | None = None) -> byt
         os.close(fd)
 
 
-def read_text(path, what: str, source=None) -> str:
-    """The UTF-8 text of the small regular file ``path`` (at most :data:`MAX_TEXT` bytes), or one
+def read_text(path, what: str, source=None, limit: int = MAX_TEXT) -> str:
+    """The UTF-8 text of the small regular file ``path`` (at most ``limit`` bytes), or one
     line naming it (``source``: how the user named it, e.g. ``--space FILE``): missing, a
     directory, a FIFO or a device, too large, unreadable or not UTF-8 text."""
     source = path if source is None else source
     try:
-        raw = read_bytes(path, what, MAX_TEXT)
+        raw = read_bytes(path, what, limit)
     except DataError as e:
         raise DataError(source, str(e).removeprefix(f"{path}: ")) from None
     except FileNotFoundError:
