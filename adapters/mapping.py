@@ -51,6 +51,7 @@ from pathlib import Path
 from replay.util import tomlfile
 from replay.util.errors import ReplayError, listed, shown
 
+from .mapping_fields import check_field_lists
 from .rosmsg import KINDS, kind_of, normalize_type
 
 
@@ -58,7 +59,6 @@ TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estima
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
 ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise"}
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
-DIFFERENTIAL_FIELDS = ("position", "attitude")  # pose deltas: a body velocity, a body rate
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
@@ -278,36 +278,6 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
         out[key] = value
     check_field_lists(out.get("fuse"), out.get("differential"), f"{source}: [channels] {name}")
     return out
-
-
-def check_field_lists(fuse, differential, where: str) -> None:
-    """An entry's declared ``fuse`` and ``differential`` lists (None: not declared) mean one thing:
-    not empty, no field twice, only pose fields differential, no field both absolute and differential."""
-    for key, fields in (("fuse", fuse), ("differential", differential)):
-        if fields is not None and not fields:
-            raise ReplayError(
-                f"{where}: {key} = [] names no field: leave it out ("
-                + (
-                    'the role\'s default), or set role = "none" to keep the channel out of every task'
-                    if key == "fuse"
-                    else "no field is differential by default)"
-                )
-            )
-        twice = next((f for i, f in enumerate(fields or ()) if f in fields[:i]), None)
-        if twice is not None:
-            raise ReplayError(f"{where}: {key} names {shown(twice)} twice (a field is fused once)")
-    bad = [f for f in differential or () if f not in DIFFERENTIAL_FIELDS]
-    if bad:
-        raise ReplayError(
-            f"{where}: differential {shown(bad[0])}: only pose fields are differential (position: deltas as "
-            f"a body velocity, attitude: as body rates); fuse {shown(bad[0])} as it is"
-        )
-    both = [f for f in fuse or () if f in (differential or ())]
-    if both:
-        raise ReplayError(
-            f"{where}: {shown(both[0])} is in both fuse and differential: a field is used one way "
-            "(absolute in fuse, or as deltas in differential)"
-        )
 
 
 def _pair(source: str, group: str, name: str, spec: dict):

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
-from replay.adapters.mapping import check_field_lists
+from replay.adapters.mapping_fields import check_field_lists
 from replay.util.errors import ReplayError, shown
 
 FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")
