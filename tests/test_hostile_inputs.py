@@ -244,3 +244,21 @@ def test_a_reference_covering_the_run_adds_nothing(tmp_path):
     res = fusion_eval(tmp_path, ref_seconds=99.0)
     row = next(csv.DictReader(open(tmp_path / "o" / "leaderboard.csv")))
     assert int(row["scored"]) == 400 and int(row["masked"]) == 0 and "covers" not in res.stderr
+
+
+def test_a_huge_csv_cell_is_quoted_by_its_start(tmp_path):
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_bohai import COLS36, synthetic_table, write_lines
+
+    from replay.adapters.bohai import load
+
+    def edit(lines):
+        cells = lines[3].split(",")
+        cells[COLS36.index("roll")] = "z" * 10**6
+        lines[3] = ",".join(cells)
+
+    path = write_lines(tmp_path / "huge.csv", synthetic_table(), edit)
+    with pytest.raises(DataError) as info:
+        load(path)
+    assert "non-numeric value 'zzz" in str(info.value) and "... (1000000 characters) in column roll" in str(info.value)
+    assert len(str(info.value)) < 300

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 
 from .columns import COLS31, COLS36
 
@@ -95,7 +95,7 @@ def _parse(path, source, first: bytes):
     header = [c.strip() for c in header]  # (pandas renames a repeated name to NAME.1)
     twice = [c for i, c in enumerate(header) if c in header[:i]]
     if twice:
-        raise DataError(path, f"column {twice[0]!r} appears twice in the header", row=1)
+        raise DataError(path, f"column {shown(twice[0])} appears twice in the header", row=1)
     if len(table) == 0:
         raise DataError(path, "header only, no data rows")
     lines = np.arange(len(table)) + 2  # header is line 1; blank lines stay rows
@@ -113,7 +113,7 @@ def _parse(path, source, first: bytes):
         table[c] = num
     if bad_at is not None:
         i, c, v = bad_at
-        raise DataError(path, f"non-numeric value {str(v)!r} in column {c}", row=int(lines[i]))
+        raise DataError(path, f"non-numeric value {shown(str(v))} in column {c}", row=int(lines[i]))
     return table.astype(float), lines
 
 
