@@ -195,12 +195,13 @@ def test_bohai_cr_only_file_loads_exactly_as_its_lf_version(tmp_path):
 
 # ------------------------------------------------------------ item 4: NaN odometry, a reference ending early
 
-NAN_AT = (5, 17, 33, 250)
+NAN_AT = (5, 17, 33, 250)  # a NaN linear twist
+ALL_NAN = 300  # a NaN position and linear twist
 
 
 def make_bag(path: Path, ref_seconds: float) -> Path:
-    """40 s: /odom Odometry at 10 Hz (1 m/s east; a NaN linear twist at NAN_AT), /gt PoseStamped at
-    10 Hz for the first ``ref_seconds``."""
+    """40 s: /odom Odometry at 10 Hz (1 m/s east; a NaN linear twist at NAN_AT and ALL_NAN, a NaN
+    position at ALL_NAN), /gt PoseStamped at 10 Hz for the first ``ref_seconds``."""
     out = BagOut(path)
     T = out.T
     odom = out.connection("/odom", "nav_msgs/msg/Odometry")
@@ -208,8 +209,9 @@ def make_bag(path: Path, ref_seconds: float) -> Path:
     q0, z3 = (0.0, 0.0, 0.0, 1.0), np.zeros(3)
     for k in range(400):
         s = T0 + k * 10**8
-        v = (np.nan, 0.0, 0.0) if k in NAN_AT else (1.0, 0.0, 0.0)
-        out.write(odom, s, out.odometry(s, "odom", "base", (k / 10, 0, 0), q0, v, z3))
+        v = (np.nan, 0.0, 0.0) if k in NAN_AT or k == ALL_NAN else (1.0, 0.0, 0.0)
+        p = (np.nan, 0.0, 0.0) if k == ALL_NAN else (k / 10, 0, 0)
+        out.write(odom, s, out.odometry(s, "odom", "base", p, q0, v, z3))
         if k / 10 < ref_seconds:
             out.write(gt, s, T["geometry_msgs/msg/PoseStamped"](header=out.header(s, "map"),
                                                                 pose=out.pose((k / 10, 0, 0), q0)))
@@ -230,8 +232,9 @@ def test_nan_odometry_counted_and_an_early_reference_scored_honestly(tmp_path):
     res = fusion_eval(tmp_path, ref_seconds=10.0)
     report = json.loads((tmp_path / "o" / "manifest.json").read_text())["adapter_report"]
     lost = [e for e in report if e["action"] == "masked" and e["what"] == "odom_velocity"]
-    assert [e["count"] for e in lost] == [len(NAN_AT)] and "NaN or inf" in lost[0]["reason"]
-    assert f"odom velocity: {len(NAN_AT)} messages not used (/odom: velocity NaN or inf" in res.stderr
+    assert [e["count"] for e in lost] == [len(NAN_AT) + 1] and "NaN or inf" in lost[0]["reason"]
+    assert [e["count"] for e in report if e["action"] == "masked" and e["what"] == "odom"] == [1]
+    assert f"odom velocity: {len(NAN_AT) + 1} messages not used (/odom: velocity NaN or inf" in res.stderr
     # the reference: 100 samples over 9.9 s of a 39.9 s run; the 300 it would have given after its
     # end (at its 0.1 s step) count as masked: 100 / 400 = 25 % scored, under min_scored_share 0.5
     assert "the reference covers 9.9 s of the run's 39.9 s (25 %: 0.0 s to 9.9 s)" in res.stderr

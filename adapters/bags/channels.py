@@ -132,11 +132,14 @@ def _report_entry(report: Report, e, topic_type: str, fields: dict, kind: str, m
             f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
             "NaN, unnormalised quaternion)",
         )
-    for fname, (_, valid, *_) in fields.items():  # a field lost where the message is otherwise usable
-        lost = primary & ~np.asarray(valid, bool)
-        if fname != rosmsg.PRIMARY[kind] and lost.any():
-            why = "NaN/inf, not a unit quaternion or declared unknown" if fname == "attitude" else "NaN or inf"
-            report.add("masked", _name(e, kind, fname), int(lost.sum()), f"{e.topic}: {fname} {why} in these messages")
+    for fname, (values, valid, *_) in fields.items():  # every other field's lost messages (NaN twist)
+        lost = ~np.asarray(valid, bool)
+        if fname == rosmsg.PRIMARY[kind] or not lost.any():
+            continue
+        if np.array_equal(lost, ~primary) and np.isfinite(np.asarray(values, float)[lost]).all():
+            continue  # masked with its message only (a NO_FIX fix's sigma): the line above says it
+        why = "NaN/inf, not a unit quaternion or declared unknown" if fname == "attitude" else "NaN or inf"
+        report.add("masked", _name(e, kind, fname), int(lost.sum()), f"{e.topic}: {fname} {why} in these messages")
 
 
 def place_entries(rec: Recording, mp: Mapping, time: str, srcs: Sources, axis, report: Report) -> Placed:
