@@ -138,6 +138,13 @@ def test_toml_nesting_bomb_is_one_line_everywhere(tmp_path, kind):
     assert_refused(["campaign", "run", bomb, "-o", tmp_path / "c"], rf"bomb\.toml: {deep}")
 
 
+def test_json_nesting_bomb_in_a_manifest_is_one_line(tmp_path):
+    for text in ("[" * 100_000 + "]" * 100_000, '{"config": ' + "[" * 40 + "]" * 40 + "}"):
+        (tmp_path / "manifest.json").write_text(text)
+        assert_refused(["rerun", tmp_path / "manifest.json"],
+                       rf"manifest\.json: not a replay manifest \(objects or arrays nested more than {MAX_DEPTH} deep")
+
+
 def test_depth_counts_without_recursion():
     doc = x = {}
     for _ in range(100_000):

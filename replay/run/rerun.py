@@ -61,6 +61,7 @@ from replay.trajectory.recorded import is_recorded
 from replay.scoring.summary import TIMING
 from replay.util.errors import ReplayError
 from replay.util.regular import read_text
+from replay.util.tomlfile import MAX_DEPTH, depth
 from replay.util.plugins import TARGET
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
@@ -106,9 +107,13 @@ def load(path, allow_modules=()) -> dict:
     if not raw.strip():
         raise ReplayError(f"{path}: empty file, not a replay manifest")
     try:
-        man = json.loads(raw)
+        man, deep = json.loads(raw), False
     except ValueError as err:
         raise ReplayError(f"{path}: not a replay manifest (not valid JSON: {str(err).splitlines()[0]})") from None
+    except RecursionError:  # too deep for the parser
+        man, deep = None, True
+    if deep or depth(man) > MAX_DEPTH:
+        raise ReplayError(f"{path}: not a replay manifest (objects or arrays nested more than {MAX_DEPTH} deep)")
     check(man, path, allow_modules)
     return man
 
