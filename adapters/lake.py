@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from replay.util.angles import wrap
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 from replay.adapters.lake_units import (
     RANGES,
     SI,
@@ -177,7 +177,7 @@ def _columns(path, table, units_line, report) -> dict[tuple[bool, str], str]:
             )
         if unit not in UNITS[kind]:
             raise DataError(
-                path, f"column {col}: unit {unit!r} not recognised for {kind} (known: {', '.join(UNITS[kind])})"
+                path, f"column {col}: unit {shown(unit)} not recognised for {kind} (known: {', '.join(UNITS[kind])})"
             )
         cols[(ref, kind)] = col
     if (False, "time") not in cols:

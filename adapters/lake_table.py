@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 
 
 KINDS = {
@@ -102,5 +102,5 @@ def numeric(path, table, col, first_line) -> np.ndarray:
     bad = num.isna().to_numpy() & s.notna().to_numpy()
     if bad.any():
         i = int(np.argmax(bad))
-        raise DataError(path, f"column {col}: non-numeric value {table[col].iloc[i]!r}", row=first_line + i)
+        raise DataError(path, f"column {col}: non-numeric value {shown(table[col].iloc[i])}", row=first_line + i)
     return num.to_numpy(dtype=float)

@@ -45,13 +45,13 @@ first moves them onto the reference (replay.trajectory.recorded.RECORDED_PARAMS)
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.util.errors import DataError, ReplayError
-from replay.util.regular import read_bytes
+from replay.util import tomlfile
+from replay.util.errors import ReplayError, listed, shown
 
+from .mapping_fields import check_field_lists
 from .rosmsg import KINDS, kind_of, normalize_type
 
 
@@ -158,42 +158,35 @@ def _toml_value(v) -> str:
 def load_mapping(path) -> Mapping:
     """Read and check a mapping file; errors name the file and the key."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(read_bytes(path, "a mapping").decode("utf-8"))
-    except FileNotFoundError:
-        raise DataError(path, "no such mapping file") from None
-    except IsADirectoryError:
-        raise DataError(path, "a directory, not a mapping file") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise DataError(path, f"cannot read mapping: {e}") from None
+    doc, _ = tomlfile.load(path, "a mapping")
     return from_dict(doc, str(path))
 
 
 def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
     unknown = sorted(set(doc) - TOP_KEYS)
     if unknown:
-        raise ReplayError(f"{source}: unknown key(s) {', '.join(unknown)} (known: {', '.join(sorted(TOP_KEYS))})")
+        raise ReplayError(f"{source}: unknown key(s) {listed(unknown)} (known: {', '.join(sorted(TOP_KEYS))})")
     time = doc.get("time", "header")
     if time not in ("header", "log"):
-        raise ReplayError(f"{source}: time must be \"header\" or \"log\" (got {time!r})")
+        raise ReplayError(f"{source}: time must be \"header\" or \"log\" (got {shown(time)})")
     until = doc.get("until")
     if until is not None and (
         isinstance(until, bool) or not isinstance(until, (int, float)) or not until > 0 or until == float("inf")
     ):
-        raise ReplayError(f"{source}: until must be a positive number of seconds (got {until!r})")
+        raise ReplayError(f"{source}: until must be a positive number of seconds (got {shown(until)})")
     allow = doc.get("allow_truncated", False)
     if not isinstance(allow, bool):
-        raise ReplayError(f"{source}: allow_truncated must be true or false (got {allow!r})")
+        raise ReplayError(f"{source}: allow_truncated must be true or false (got {shown(allow)})")
     params = doc.get("params", {})
     if not isinstance(params, dict):
         raise ReplayError(f"{source}: [params] must be a table of name = number")
     params = dict(params)
     bad = sorted(set(params) - PARAM_KEYS)
     if bad:
-        raise ReplayError(f"{source}: unknown param(s) {', '.join(bad)} (known: {', '.join(sorted(PARAM_KEYS))})")
+        raise ReplayError(f"{source}: unknown param(s) {listed(bad)} (known: {', '.join(sorted(PARAM_KEYS))})")
     for key, value in params.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-            raise ReplayError(f"{source}: [params] {key} must be a positive finite number (got {value!r})")
+            raise ReplayError(f"{source}: [params] {key} must be a positive finite number (got {shown(value)})")
     entries, estimates = [], []
     for group, ref in (("channels", False), ("reference", True), ("estimates", False)):
         table = doc.get(group, {})
@@ -201,9 +194,11 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
             raise ReplayError(f"{source}: [{group}] must be a table of name = topic")
         keys = ESTIMATE_KEYS if group == "estimates" else ENTRY_KEYS
         for name, spec in table.items():
-            if group != "estimates" and not CHANNEL_NAME.fullmatch(name):
+            if group == "estimates":
+                _estimate_name(source, name)  # before it is quoted in any other message
+            elif not CHANNEL_NAME.fullmatch(name):
                 raise ReplayError(
-                    f"{source}: [{group}] {name!r}: a channel name is a letter, then letters, "
+                    f"{source}: [{group}] {shown(name)}: a channel name is a letter, then letters, "
                     "digits and _ (at most 64; it names the frame channel and the exported topic "
                     "/sensors/<name>)"
                 )
@@ -214,12 +209,13 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
             extra = sorted(set(spec) - keys)
             if extra:
                 raise ReplayError(
-                    f"{source}: [{group}] {name}: unknown key(s) {', '.join(extra)} (known: {', '.join(sorted(keys))})"
+                    f"{source}: [{group}] {name}: unknown key(s) {listed(extra)} (known: {', '.join(sorted(keys))})"
                 )
             typ = spec.get("type")
             if typ is not None and (not isinstance(typ, str) or kind_of(typ) is None):
                 raise ReplayError(
-                    f"{source}: [{group}] {name}: unknown message type {typ!r} (supported: {', '.join(sorted(KINDS))})"
+                    f"{source}: [{group}] {name}: unknown message type {shown(typ)} "
+                    f"(supported: {', '.join(sorted(KINDS))})"
                 )
             frame, child = _pair(source, group, name, spec)
             if group == "estimates":
@@ -232,12 +228,12 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
                 )
             if role is not None and role not in ROLE_KINDS:
                 raise ReplayError(
-                    f"{source}: [channels] {name}: unknown role {role!r} (known: {', '.join(ROLE_KINDS)})"
+                    f"{source}: [channels] {name}: unknown role {shown(role)} (known: {', '.join(ROLE_KINDS)})"
                 )
             if role is not None and typ is not None and pose_like(kind_of(typ)) not in ROLE_KINDS[role]:
                 raise ReplayError(
                     f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
-                    f"{role!r} (it takes {kinds_for(role)})"
+                    f"{shown(role)} (it takes {kinds_for(role)})"
                 )
             fusion = _fusion(source, name, spec, ref)
             entries.append(
@@ -287,12 +283,15 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
         bad = [f for f in fields if f not in FUSION_FIELDS]
         if bad:
             raise ReplayError(
-                f"{source}: [channels] {name}: {key}: unknown field {bad[0]!r} (fields: {', '.join(FUSION_FIELDS)})"
+                f"{source}: [channels] {name}: {key}: unknown field {shown(bad[0])} "
+                f"(fields: {', '.join(FUSION_FIELDS)})"
             )
         if key == "noise":
             for f, v in value.items():
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf"):
-                    raise ReplayError(f"{source}: [channels] {name}: noise.{f} must be a positive variance (got {v!r})")
+                    raise ReplayError(
+                        f"{source}: [channels] {name}: noise.{f} must be a positive variance (got {shown(v)})"
+                    )
             value = {f: float(v) for f, v in value.items()}
         if key == "rejection_threshold":
             for f, v in value.items():
@@ -303,6 +302,7 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
                     )
             value = {f: float(v) for f, v in value.items()}
         out[key] = value
+    check_field_lists(out.get("fuse"), out.get("differential"), f"{source}: [channels] {name}")
     return out
 
 
@@ -311,20 +311,15 @@ def _pair(source: str, group: str, name: str, spec: dict):
     frame, child = spec.get("frame"), spec.get("child")
     for key, value in (("frame", frame), ("child", child)):
         if value is not None and (not isinstance(value, str) or not value.strip("/")):
-            raise ReplayError(f"{source}: [{group}] {name}: {key} must be a frame name (got {value!r})")
+            raise ReplayError(f"{source}: [{group}] {name}: {key} must be a frame name (got {shown(value)})")
     if (frame is None) != (child is None):
         raise ReplayError(f"{source}: [{group}] {name}: a TF pair needs both frame (the parent) and child")
     return (frame.strip("/"), child.strip("/")) if frame is not None else (None, None)
 
 
 def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
-    """One ``[estimates]`` entry, checked (name, message kind, association defaults)."""
-    if not ESTIMATE_NAME.fullmatch(name) or name == "none":
-        raise ReplayError(
-            f"{source}: [estimates] {name!r}: a name of letters, digits and _ . + - (at most 64, "
-            "starting with a letter or digit, not 'none'; it names the leaderboard row "
-            "recorded:<name> and its files)"
-        )
+    """One ``[estimates]`` entry, checked (message kind, association defaults; its name by
+    :func:`_estimate_name`)."""
     if typ is not None and kind_of(typ) not in ESTIMATE_KINDS:
         raise ReplayError(
             f"{source}: [estimates] {name}: a {normalize_type(typ)} is not a trajectory "
@@ -345,17 +340,26 @@ def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
                 raise ReplayError(
                     f"{source}: [estimates] {name}: {key} must be a finite number of seconds"
                     + (" >= 0" if low is not None else "")
-                    + f" (got {v!r})"
+                    + f" (got {shown(v)})"
                 )
             params[key] = float(v)
     if "align" in spec:
         if spec["align"] not in ESTIMATE_ALIGN:
             raise ReplayError(
                 f"{source}: [estimates] {name}: align must be one of {', '.join(ESTIMATE_ALIGN)} "
-                f"(got {spec['align']!r})"
+                f"(got {shown(spec['align'])})"
             )
         params["align"] = spec["align"]
     return Entry(name, spec["topic"], normalize_type(typ) if typ else None, False, None, frame, child, True, params)
+
+
+def _estimate_name(source: str, name: str) -> None:
+    if not ESTIMATE_NAME.fullmatch(name) or name == "none":
+        raise ReplayError(
+            f"{source}: [estimates] {shown(name)}: a name of letters, digits and _ . + - (at most 64, "
+            "starting with a letter or digit, not 'none'; it names the leaderboard row "
+            "recorded:<name> and its files)"
+        )
 
 
 def pose_like(kind: str | None) -> str | None:
@@ -384,6 +388,6 @@ def role_of(entry: Entry, msgtype: str, source: str) -> str | None:
     if kind not in ROLE_KINDS[entry.role]:
         raise ReplayError(
             f"{source}: [channels] {entry.name}: topic {entry.topic} is a {msgtype}, which "
-            f"cannot have role {entry.role!r} (it takes {kinds_for(entry.role)})"
+            f"cannot have role {shown(entry.role)} (it takes {kinds_for(entry.role)})"
         )
     return entry.role

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import functools
 
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 from replay.util.params import Param
 
 
@@ -24,7 +24,7 @@ def check(adapter: str, params: tuple[Param, ...], given: dict) -> dict:
     known = {p.name: p for p in params}
     for name in given:
         if name not in known:
-            raise ReplayError(f"adapter {adapter}: unknown option {name!r} (known: {', '.join(known) or 'none'})")
+            raise ReplayError(f"adapter {adapter}: unknown option {shown(name)} (known: {', '.join(known) or 'none'})")
     return {name: known[name].check(value, f"adapter {adapter}") for name, value in given.items()}
 
 

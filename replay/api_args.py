@@ -23,7 +23,7 @@ from replay.run.eval_options import BY_NAME as EVAL
 from replay.scoring.summary import MIN_SCORED_SHARE
 from replay.trajectory.files import FORMATS
 from replay.trajectory.pose_error import DELTA_UNITS, EVO_NAMES, RELATIONS
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 from replay.util.params import Param
 
 
@@ -249,7 +249,8 @@ def _metric_in(ev, metric, owner):
     known = sorted({k for r in ev.rows for k, v in r.items() if isinstance(v, (int, float))})
     if metric not in known:
         raise ReplayError(
-            f"{owner}: metric {metric!r} is not a leaderboard column (numeric columns: {', '.join(known[:12])}, ...)"
+            f"{owner}: metric {shown(metric)} is not a leaderboard column "
+            f"(numeric columns: {', '.join(known[:12])}, ...)"
         )
 
 
@@ -277,7 +278,7 @@ def checked(name: str, fn):
             if kind is inspect.Parameter.VAR_KEYWORD:
                 if name in CLOSED and (bad := [k for k in value if k not in decl and k not in CLOSED[name]]):
                     known = [k for k in (*decl, *CLOSED[name]) if k not in sig.parameters or k == key]
-                    raise ReplayError(f"replay.{name}: unknown option {bad[0]!r} (known: {', '.join(known)})")
+                    raise ReplayError(f"replay.{name}: unknown option {shown(bad[0])} (known: {', '.join(known)})")
                 bound.arguments[key] = {k: decl[k].check(v) if k in decl else v for k, v in value.items()}
             elif key in decl:
                 bound.arguments[key] = decl[key].check(value)

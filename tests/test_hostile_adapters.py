@@ -273,7 +273,7 @@ BAG_REFUSED = [  # id, how to make the input ((tmp_path, base bag) -> path), map
     ("bag-without-messages", lambda d, base: make_bag(d / "b", empty=True), None, None,
      r"no topic of a supported type to map"),
     ("mapping-toml-syntax", lambda d, base: base, '[channels\ngps = "/fix"\n', None,
-     r"m\.toml: cannot read mapping: .*line 1"),
+     r"m\.toml: not valid TOML: .*line 1"),
     ("mapping-unknown-key", lambda d, base: base, "topics = 1\n" + GOOD_MAP, None,
      r"m\.toml: unknown key\(s\) topics"),
     ("mapping-unknown-entry-key", lambda d, base: base, '[channels]\ngps = { topic = "/fix", tpye = "x" }\n',

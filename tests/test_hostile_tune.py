@@ -105,7 +105,7 @@ def test_space_file(tmp_path):
     f.write_text('pf = 3\n')
     refused(tmp_path, "--space", str(f), match="expected FILTER.PARAM = SPEC")
     f.write_text('[pf\n')
-    refused(tmp_path, "--space", str(f), match="not a TOML file")
+    refused(tmp_path, "--space", str(f), match="not valid TOML")
 
 
 def test_out_that_is_not_a_tune_directory(tmp_path):

@@ -116,7 +116,8 @@ def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> tuple
     return role, {**row, **e.fusion}
 
 
-def _report_entry(report: Report, e, topic_type: str, primary, m: int, n: int, time: str) -> None:
+def _report_entry(report: Report, e, topic_type: str, fields: dict, kind: str, m: int, n: int, time: str) -> None:
+    primary = np.asarray(fields[rosmsg.PRIMARY[kind]][1], bool)
     report.add(
         "info",
         e.name,
@@ -131,6 +132,14 @@ def _report_entry(report: Report, e, topic_type: str, primary, m: int, n: int, t
             f"{e.topic}: messages with no usable value (e.g. NavSatFix status < 0 / NO_FIX, "
             "NaN, unnormalised quaternion)",
         )
+    for fname, (values, valid, *_) in fields.items():  # every other field's lost messages (NaN twist)
+        lost = ~np.asarray(valid, bool)
+        if fname == rosmsg.PRIMARY[kind] or not lost.any():
+            continue
+        if np.array_equal(lost, ~primary) and np.isfinite(np.asarray(values, float)[lost]).all():
+            continue  # masked with its message only (a NO_FIX fix's sigma): the line above says it
+        why = "NaN/inf, not a unit quaternion or declared unknown" if fname == "attitude" else "NaN or inf"
+        report.add("masked", _name(e, kind, fname), int(lost.sum()), f"{e.topic}: {fname} {why} in these messages")
 
 
 def place_entries(rec: Recording, mp: Mapping, time: str, srcs: Sources, axis, report: Report) -> Placed:
@@ -150,5 +159,5 @@ def place_entries(rec: Recording, mp: Mapping, time: str, srcs: Sources, axis, r
         role = _role_row(mp, e, topic_type, fields, kind)
         if role is not None:
             placed.roles.setdefault(role[0], []).append(role[1])
-        _report_entry(report, e, topic_type, fields[rosmsg.PRIMARY[kind]][1], len(idx), n, time)
+        _report_entry(report, e, topic_type, fields, kind, len(idx), n, time)
     return placed

@@ -14,7 +14,7 @@ import numpy as np
 from replay.adapters.geodesy import Geo, plausible_latlon
 from replay.frame import Frame, Report
 from replay.adapters.options import declare
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 from replay.util.params import Param
 
 from .. import rosmsg
@@ -144,7 +144,7 @@ def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame
     mp = mp or proposed[0]
     time = time or mp.time
     if time not in ("header", "log"):
-        raise DataError(path, f"time must be 'header' or 'log' (got {time!r})")
+        raise DataError(path, f"time must be 'header' or 'log' (got {shown(time)})")
     allow = mp.allow_truncated if allow_truncated is None else bool(allow_truncated)
     opts = {**mp.params, **params}
     report = Report()

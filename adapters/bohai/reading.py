@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 
 from .columns import COLS31, COLS36
 
@@ -50,8 +50,8 @@ def _read(path: Path):
         raise DataError(path, "not a file")
     try:
         with open(path, "rb") as fh:
-            first = fh.readline()
-            blank = not first.strip()
+            first, seen = _first_line(fh)
+            blank = not seen.strip()
             while blank and (chunk := fh.read(1 << 20)):  # up to the first non-blank byte
                 blank = not chunk.strip()
         if blank:
@@ -64,6 +64,18 @@ def _read(path: Path):
     except OSError as err:
         raise DataError(path, f"cannot read: {err.strerror or err}") from None
     return table, lines, stream.sha.hexdigest()
+
+
+def _first_line(fh, chunk: int = 1 << 16) -> tuple[bytes, bytes]:
+    """(the first line, every byte read) of a binary file: a line ends at LF, CRLF or a lone CR
+    (old Mac files, where one ``readline`` would be the whole file)."""
+    head = b""
+    while block := fh.read(chunk):
+        head += block
+        end = re.search(rb"[\r\n]", block)
+        if end:
+            return head[: len(head) - len(block) + end.start()], head
+    return head, head
 
 
 def _parse(path, source, first: bytes):
@@ -83,7 +95,7 @@ def _parse(path, source, first: bytes):
     header = [c.strip() for c in header]  # (pandas renames a repeated name to NAME.1)
     twice = [c for i, c in enumerate(header) if c in header[:i]]
     if twice:
-        raise DataError(path, f"column {twice[0]!r} appears twice in the header", row=1)
+        raise DataError(path, f"column {shown(twice[0])} appears twice in the header", row=1)
     if len(table) == 0:
         raise DataError(path, "header only, no data rows")
     lines = np.arange(len(table)) + 2  # header is line 1; blank lines stay rows
@@ -101,7 +113,7 @@ def _parse(path, source, first: bytes):
         table[c] = num
     if bad_at is not None:
         i, c, v = bad_at
-        raise DataError(path, f"non-numeric value {str(v)!r} in column {c}", row=int(lines[i]))
+        raise DataError(path, f"non-numeric value {shown(str(v))} in column {c}", row=int(lines[i]))
     return table.astype(float), lines
 
 

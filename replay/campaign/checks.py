@@ -6,7 +6,7 @@ import os
 import re
 from pathlib import Path
 
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, listed, shown
 
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
 
@@ -29,7 +29,7 @@ class Where:
         return 1
 
     def error(self, key: str, what: str, value=None) -> ReplayError:
-        return ReplayError(f"{self.path}:{self.line(key, value)}: {key}: {what}")
+        return ReplayError(f"{self.path}:{self.line(key, value)}: {listed([str(key)])}: {what}")
 
 
 def check_name(where, name: str) -> None:
@@ -66,7 +66,7 @@ def check_type(where, key, value, typ):
     if typ is float and isinstance(value, int) and not isinstance(value, bool):
         ok = True
     if not ok:
-        raise where.error(key, f"expected {typ.__name__}, got {type(value).__name__} {value!r}")
+        raise where.error(key, f"expected {typ.__name__}, got {type(value).__name__} {shown(value)}")
 
 
 def check_keys(where, table: dict, allowed: dict, what: str):

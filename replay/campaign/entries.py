@@ -15,7 +15,7 @@ from replay.campaign.checks import check_keys, check_params
 from replay.run.eval_options import BY_NAME as EVAL
 from replay.run.pipeline import plain as _plain
 from replay.trajectory.recorded import recorded_params
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
 
 DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
@@ -50,7 +50,7 @@ def task_tables(where, doc: dict) -> dict:
             raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
         if not isinstance(tp, dict):
             raise where.error(tname, "expected a table of task parameters")
-        check_params(where, f"task {tname!r}", _class_of(TASKS, tname).PARAMS, tp)
+        check_params(where, f"task {shown(tname)}", _class_of(TASKS, tname).PARAMS, tp)
     return tables
 
 
@@ -98,7 +98,7 @@ def _tasks(where, tasks) -> list:
         raise where.error("tasks", "empty list of tasks")
     for t in tasks:
         if not isinstance(t, str) or t not in TASKS:
-            raise where.error("tasks", f"unknown task {t!r} (known: {', '.join(sorted(TASKS))})", t)
+            raise where.error("tasks", f"unknown task {shown(t)} (known: {', '.join(sorted(TASKS))})", t)
     return tasks
 
 
@@ -111,8 +111,8 @@ def _dataset_params(where, path: Path, ref, params: dict) -> dict:
         params["mapping"] = str((path.parent / params["mapping"]).resolve())  # relative to this file
     if ref.is_sim:
         own = {k: v for k, v in params.items() if k not in VIEW_NAMES}  # the views: checked below
-        check_params(where, f"dataset {ref.id!r}", registry.generator(ref.entry).PARAMS, own)
-        check_params(where, f"dataset {ref.id!r}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
+        check_params(where, f"dataset {shown(ref.id)}", registry.generator(ref.entry).PARAMS, own)
+        check_params(where, f"dataset {shown(ref.id)}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
     try:
         return _plain(registry.check_params(ref.target, params, adapter=ref.adapter if ref.is_path else None))
     except ReplayError as e:
@@ -173,7 +173,7 @@ def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapt
         if not isinstance(name, str) or name not in declared:
             raise where.error(
                 "recorded",
-                f"no recorded estimate {name!r} in {ds_id} (its mapping's [estimates] "
+                f"no recorded estimate {shown(name)} in {ds_id} (its mapping's [estimates] "
                 f"declare: {', '.join(declared) or 'none'})",
                 name,
             )
@@ -201,17 +201,17 @@ def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tu
     if name is None:
         raise where.error("filter", "every [[filter]] needs a name")
     if name not in FILTERS:
-        raise where.error("name", f"unknown filter {name!r} (known: {', '.join(sorted(FILTERS))})", name)
+        raise where.error("name", f"unknown filter {shown(name)} (known: {', '.join(sorted(FILTERS))})", name)
     declared = _class_of(FILTERS, name).PARAMS
     base, grid = entry.get("params", {}), entry.get("grid", {})
-    check_params(where, f"filter {name!r}", declared, base)
+    check_params(where, f"filter {shown(name)}", declared, base)
     for key, values in grid.items():
         if not isinstance(values, list):
             raise where.error(key, f"grid values must be a list, got {type(values).__name__}")
         if not values:
             raise where.error(key, "empty grid: give at least one value")
         for v in values:
-            check_params(where, f"filter {name!r}", declared, {key: v})
+            check_params(where, f"filter {shown(name)}", declared, {key: v})
     keys = list(grid)
     combos = math.prod(len(grid[k]) for k in keys)
     if (held + combos) * runs > max_units:  # before building them (a grid multiplies)
@@ -235,4 +235,4 @@ def _made(where, name: str, params: dict) -> dict:
     except ReplayError as e:
         raise where.error(name, str(e), name) from None
     except Exception as e:  # a constructor's own validation
-        raise where.error(name, f"filter {name!r}: {e}", name) from None
+        raise where.error(name, f"filter {shown(name)}: {e}", name) from None

@@ -55,7 +55,6 @@ configuration, with the same hash.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -65,6 +64,7 @@ from replay.run.eval_options import BY_NAME as EVAL
 from replay.run.pipeline import Config
 from replay.trajectory.recorded import RECORDED
 from replay.run.pipeline import plain as _plain
+from replay.util import tomlfile
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -141,18 +141,7 @@ def load(path) -> Campaign:
 
 def _read(path: Path) -> tuple[dict, Where]:
     """The parsed TOML of a campaign file and its :class:`Where`; unknown sections refused."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ReplayError(f"{path}: cannot read campaign file: {e.strerror}") from None
-    except UnicodeDecodeError as e:
-        raise ReplayError(
-            f"{path}: not a campaign file (not UTF-8 text: byte {e.start}); a campaign is a TOML file"
-        ) from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ReplayError(f"{path}: not valid TOML: {e}") from None
+    doc, text = tomlfile.load(path, "a campaign file")
     where = Where(path, text)
     for key in doc:
         if key not in SECTIONS:

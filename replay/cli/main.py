@@ -11,7 +11,7 @@ import sys
 import click
 
 from replay.cli.examples import add_examples
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, bounded
 from replay.util.version import __version__
 
 
@@ -20,7 +20,7 @@ class Main(click.Group):
         try:
             return super().invoke(ctx)
         except ReplayError as err:
-            click.echo(f"replay: error: {err}", err=True)
+            click.echo(f"replay: error: {bounded(err)}", err=True)
             ctx.exit(2)
         except MemoryError as err:  # not predicted (replay.run.resources): said as such, never "diverged"
             click.echo(f"replay: error: out of memory{f' ({err})' if str(err) else ''}", err=True)

@@ -25,7 +25,7 @@ import difflib
 import json
 from dataclasses import dataclass
 
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 
 
 def parse(item: str, option: str) -> tuple[str, object]:
@@ -33,7 +33,7 @@ def parse(item: str, option: str) -> tuple[str, object]:
     key, sep, text = item.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise ReplayError(f"{option} {item!r}: expected NAME=VALUE")
+        raise ReplayError(f"{option} {shown(item)}: expected NAME=VALUE")
     try:
         value = json.loads(text)
     except json.JSONDecodeError:
@@ -84,7 +84,8 @@ def split_filters(names) -> tuple[list, list | None]:
     for n in chosen:
         if n == RECORDED or (n == f"{RECORDED}none" and len(chosen) > 1):
             raise ReplayError(
-                f"--filters {n!r}: expected recorded:<name> (an [estimates] name of the mapping) or recorded:none alone"
+                f"--filters {shown(n)}: expected recorded:<name> (an [estimates] name of the mapping) "
+                "or recorded:none alone"
             )
     if len(set(names)) != len(names):
         raise ReplayError(f"--filters: a name is listed twice ({', '.join(names)})")
@@ -110,22 +111,23 @@ def filter_params(items, filters) -> dict:
             from replay.trajectory.recorded import RECORDED_PARAMS
 
             if any(f.startswith("recorded:") for f in filters) and name not in filters:
-                raise ReplayError(f"-p {item}: {name!r} is not in --filters ({', '.join(filters)})")
+                raise ReplayError(f"-p {item}: {shown(name)} is not in --filters ({', '.join(filters)})")
             given = out.setdefault(name, {})
             if param in given:
                 raise ReplayError(f"-p {name}.{param}: given twice ({_text(given[param])} and {_text(value)})")
-            given[param] = check_one(RECORDED_PARAMS, param, value, f"recorded estimate {name[9:]!r}")
+            given[param] = check_one(RECORDED_PARAMS, param, value, f"recorded estimate {shown(name[9:])}")
             continue
         if name not in FILTERS:
             raise ReplayError(
-                f"-p {item}: unknown filter {name!r}{_suggest(name, FILTERS)} (known: {', '.join(sorted(FILTERS))})"
+                f"-p {item}: unknown filter {shown(name)}{_suggest(name, FILTERS)} "
+                f"(known: {', '.join(sorted(FILTERS))})"
             )
         if name not in filters:
-            raise ReplayError(f"-p {item}: filter {name!r} is not in --filters ({', '.join(filters)})")
+            raise ReplayError(f"-p {item}: filter {shown(name)} is not in --filters ({', '.join(filters)})")
         given = out.setdefault(name, {})
         if param in given:
             raise ReplayError(f"-p {name}.{param}: given twice ({_text(given[param])} and {_text(value)})")
-        given[param] = check_one(filter_declarations(name), param, value, f"filter {name!r}")
+        given[param] = check_one(filter_declarations(name), param, value, f"filter {shown(name)}")
     return out
 
 
@@ -207,7 +209,7 @@ def check_config(
     filters = [n for n in filters if not n.startswith("recorded:")]  # recorded: checked with the frame
     extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
     if extra:
-        raise ReplayError(f"-p {extra[0]}: filter {extra[0]!r} is not in --filters ({', '.join(filters)})")
+        raise ReplayError(f"-p {extra[0]}: filter {shown(extra[0])} is not in --filters ({', '.join(filters)})")
     ref = dataset_ref.resolve(dataset, adapter)
     dparams = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)
     if task is None and not ref.is_path:

@@ -21,7 +21,6 @@ import difflib
 import functools
 import inspect
 import sys
-import tomllib
 from dataclasses import dataclass, fields
 from importlib import import_module
 from pathlib import Path
@@ -39,7 +38,8 @@ from replay.data.checksums import (
     with_registered,
 )
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
-from replay.util.errors import DataError, ReplayError
+from replay.util import tomlfile
+from replay.util.errors import DataError, ReplayError, shown
 from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
@@ -134,10 +134,7 @@ def _read_manifests(directory: str) -> dict[str, Dataset]:
 
 
 def _read_manifest(path: Path) -> list[Dataset]:
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ReplayError(f"{path}: cannot read manifest: {e}") from None
+    doc, _ = tomlfile.load(path, "a dataset manifest")
     entries = doc.pop("dataset", [])
     defaults = doc  # top-level keys apply to every entry
     if not isinstance(entries, list):
@@ -149,7 +146,7 @@ def _make_dataset(path: Path, entry: dict) -> Dataset:
     ds_id = entry.get("id")
     where = f"{path}: dataset {ds_id}"
     if not isinstance(ds_id, str) or "/" not in ds_id:
-        raise ReplayError(f"{path}: every [[dataset]] needs an id of the form 'prefix/name' (got {ds_id!r})")
+        raise ReplayError(f"{path}: every [[dataset]] needs an id of the form 'prefix/name' (got {shown(ds_id)})")
     unknown = sorted(set(entry) - MANIFEST_KEYS)
     if unknown:
         raise ReplayError(f"{where}: unknown field(s) {', '.join(unknown)}")
@@ -168,7 +165,7 @@ def _make_dataset(path: Path, entry: dict) -> Dataset:
         entry["sha256"] = sha
     size = entry.get("size")
     if size is not None and (isinstance(size, bool) or not isinstance(size, int) or size < 1):
-        raise ReplayError(f"{where}: size must be a positive number of bytes (got {size!r})")
+        raise ReplayError(f"{where}: size must be a positive number of bytes (got {shown(size)})")
     return with_registered(Dataset(kind=kind, manifest=str(path), **entry), where)
 
 
@@ -192,7 +189,7 @@ def get(dataset_id: str) -> Dataset:
     if conflict:
         raise ReplayError(conflict)
     raise ReplayError(
-        f"unknown dataset {dataset_id!r}{_suggest(dataset_id, known)}; `replay datasets list` shows them all"
+        f"unknown dataset {shown(dataset_id)}{_suggest(dataset_id, known)}; `replay datasets list` shows them all"
     )
 
 
@@ -304,15 +301,18 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
     elif is_path(dataset):
         path = Path(dataset).expanduser()
         name = adapter or (adapter_for(path) if path.exists() or path.suffix else None)
-        return {**(_check_options(name, params) if name else params), **views.check(chosen, f"dataset {dataset!r}")}
+        return {
+            **(_check_options(name, params) if name else params),
+            **views.check(chosen, f"dataset {shown(dataset)}"),
+        }
     else:
         ds = get(dataset)
     own = (
-        validate(generator(ds).PARAMS, params, f"dataset {ds.id!r}")
+        validate(generator(ds).PARAMS, params, f"dataset {shown(ds.id)}")
         if ds.kind == "sim"
         else _check_options(ds.adapter, params)
     )
-    return {**own, **views.check(chosen, f"dataset {ds.id!r}")}
+    return {**own, **views.check(chosen, f"dataset {shown(ds.id)}")}
 
 
 def _check_options(adapter: str, params: dict) -> dict:
@@ -326,7 +326,9 @@ def _check_options(adapter: str, params: dict) -> dict:
     names = [p.name for p in sig if p.kind == p.KEYWORD_ONLY]
     unknown = [k for k in params if k not in names]
     if unknown and not any(p.kind == p.VAR_KEYWORD for p in sig):
-        raise ReplayError(f"adapter {adapter}: unknown option {unknown[0]!r} (known: {', '.join(names) or 'none'})")
+        raise ReplayError(
+            f"adapter {adapter}: unknown option {shown(unknown[0])} (known: {', '.join(names) or 'none'})"
+        )
     return params
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from replay.trajectory.recorded import is_recorded
 from replay.util import covcols
 from replay.util.errors import DataError, ReplayError
+from replay.util.regular import read_text
 
 
 def is_campaign(path) -> bool:
@@ -160,7 +161,7 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     check_run(run, None, out)
     estimates, manifest = {}, {}
     if (Path(out) / "campaign.toml").is_file():
-        manifest["campaign.toml"] = (Path(out) / "campaign.toml").read_text()
+        manifest["campaign.toml"] = read_text(Path(out) / "campaign.toml", "a campaign file")
     for name, (h, c) in zip(names, chosen):
         r = 0 if is_recorded(c["filter"]) else run
         unit = store.units / h

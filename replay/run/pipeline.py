@@ -54,7 +54,7 @@ from replay.run.canonical import config_hash, plain  # noqa: F401 (the pipeline'
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, metrics, scorer
-from replay.tasks import make_task, reference_present, source_of
+from replay.tasks import make_task, reference_coverage, reference_present, source_of
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
 from replay.util.errors import ReplayError
@@ -152,6 +152,9 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     frame = load_frame(c, run, data_dir, ds)
     task = make_task(c["task"], **c["task_params"])
     problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
+    problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
+    problem.truth_missing, note = reference_coverage(problem.t, problem.truth_present)  # an early end
+    problem.notes = list(problem.notes) + ([note] if note else [])
     # the manifest's "dataset" section: the frame's metadata plus what the task used and noted
     problem.frame_meta = dict(
         frame.meta, task_inputs=getattr(problem, "inputs", {}), task_notes=getattr(problem, "notes", [])
@@ -160,7 +163,6 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
         problem.frame_meta["task_noise"] = problem.noise
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
-    problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
     problem.source = source_of(frame)
     return problem
 

@@ -60,6 +60,8 @@ from replay.run.pipeline import Config, config_hash, is_sim
 from replay.trajectory.recorded import is_recorded
 from replay.scoring.summary import TIMING
 from replay.util.errors import ReplayError
+from replay.util.regular import read_text
+from replay.util.tomlfile import MAX_DEPTH, depth
 from replay.util.plugins import TARGET
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
@@ -101,18 +103,17 @@ def load(path, allow_modules=()) -> dict:
 
     ``allow_modules``: modules a ``module:Class`` name of the manifest may import (:func:`check_sources`)."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise ReplayError(f"{path}: cannot read the manifest ({err.strerror})") from None
+    raw = read_text(path, "a replay manifest", limit=1 << 30)  # a regular file (a FIFO would block), UTF-8
     if not raw.strip():
         raise ReplayError(f"{path}: empty file, not a replay manifest")
     try:
-        man = json.loads(raw)
-    except UnicodeDecodeError:
-        raise ReplayError(f"{path}: not a replay manifest (not UTF-8 text)") from None
+        man, deep = json.loads(raw), False
     except ValueError as err:
         raise ReplayError(f"{path}: not a replay manifest (not valid JSON: {str(err).splitlines()[0]})") from None
+    except RecursionError:  # too deep for the parser
+        man, deep = None, True
+    if deep or depth(man) > MAX_DEPTH:
+        raise ReplayError(f"{path}: not a replay manifest (objects or arrays nested more than {MAX_DEPTH} deep)")
     check(man, path, allow_modules)
     return man
 

@@ -62,6 +62,7 @@ def score_run(problem, est, err: dict | None = None) -> dict:
     m["scored"] = int(ok.sum())
     present = getattr(problem, "truth_present", None)  # where the reference has a sample at all
     m["masked"] = int((~problem.truth_valid if present is None else present & ~problem.truth_valid).sum())
+    m["masked"] += getattr(problem, "truth_missing", 0)  # a reference ending early: its samples not given
     m["us_per_step"] = est.us_per_step
     m["diverged"] = bool(est.diverged)
     return m

@@ -240,3 +240,26 @@ def reference_present(frame, n: int):
     if t is None or len(t.valid) != n:
         return None
     return np.asarray(t.valid, bool)
+
+
+def reference_coverage(t, present) -> tuple[int, str | None]:
+    """(missing, note) of a reference present only at some steps of the time axis ``t``
+    (:func:`reference_present`) that starts after the run or ends before it: the samples its own
+    rate (its median step) would have given outside its span count as masked (``missing``), so
+    the ``scored`` share says how much of the run was scored; the note says how much of the run's
+    time span the reference covers. (0, None) when it covers the run."""
+    if present is None or present.sum() < 2:
+        return 0, None
+    t = np.asarray(t, float)
+    at = t[present]
+    step = float(np.median(np.diff(at)))
+    before, after = at[0] - t[0], t[-1] - at[-1]
+    missing = int(before // step + after // step) if step > 0 else 0
+    if missing <= 0:
+        return 0, None
+    span, run = at[-1] - at[0], t[-1] - t[0]
+    return missing, (
+        f"the reference covers {span:.1f} s of the run's {run:.1f} s ({100 * span / run:.0f} %: "
+        f"{at[0] - t[0]:.1f} s to {at[-1] - t[0]:.1f} s); the {missing} samples it would have "
+        "given outside (at its median step) count as masked: no result there is scored"
+    )

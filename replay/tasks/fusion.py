@@ -281,6 +281,8 @@ class FusionTask(Task):
             m.sign.append(sgn)
         m.used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
         m.notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "") + f": noise {how}")
+        for r in (r for r in frame.report.entries if r.action == "masked" and r.what == name):  # the adapter's
+            m.notes.append(f"task fusion: {key} {label}: {r.count} messages not used ({r.reason})")
         if fld == "position" and m.absolute_pos is None:
             m.absolute_pos = (np.flatnonzero(valid)[0], vals, comps, valid)
         if fld == "attitude" and m.attitude_at is None:

@@ -20,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
-from replay.util.errors import ReplayError
+from replay.adapters.mapping_fields import check_field_lists
+from replay.util.errors import ReplayError, shown
 
 FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")
 DEFAULT_FUSE = {
@@ -106,11 +107,12 @@ def configured(entry: dict, role: str, where: str, absolute: bool = False) -> tu
     default = DEFAULT_FUSE[role]
     if role == "imu" and absolute and not entry.get("attitude_enu"):
         default = ("gyro",)
+    for f in [*(entry.get("fuse") or ()), *(entry.get("differential") or ())]:
+        if f not in FIELDS:
+            raise ReplayError(f"{where}: unknown field {shown(f)} (known: {', '.join(FIELDS)})")
+    check_field_lists(entry.get("fuse"), entry.get("differential"), where)  # as a mapping's are checked
     fuse = tuple(entry.get("fuse") or default)
     diff = tuple(entry.get("differential") or ())
-    for f in fuse + diff:
-        if f not in FIELDS:
-            raise ReplayError(f"{where}: unknown field {f!r} (known: {', '.join(FIELDS)})")
     return tuple(f for f in fuse if f not in diff), diff, dict(entry.get("noise") or {})
 
 
@@ -120,6 +122,8 @@ def differential(t, values, valid, attitude, field: str, where: str):
     idx = np.flatnonzero(valid & np.isfinite(values).all(axis=1))
     if len(idx) < 2:
         raise ReplayError(f"{where}: a differential {field} needs at least 2 messages (got {len(idx)})")
+    if field == "position" and attitude is None:  # the deltas are rotated into the body frame by it
+        raise ReplayError(f"{where}: a differential position needs the input's attitude, which it lacks")
     prev, cur = idx[:-1], idx[1:]
     dt = (t[cur] - t[prev])[:, None]
     if field == "attitude":

@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from replay.util.errors import DataError
+from replay.util.errors import DataError, shown
 
 MIN_POSES = 3
 QUAT_COLUMNS = ("qx", "qy", "qz", "qw")  # of to_pandas / from_pandas
@@ -85,12 +85,12 @@ class Trajectory:
         wanted = ["t", "x", "y", "z", *quat]
         twice = [c for c in wanted if list(df.columns).count(c) > 1]
         if twice:
-            raise DataError(source, f"column {twice[0]!r} appears twice")
+            raise DataError(source, f"column {shown(twice[0])} appears twice")
         bad = [c for c in wanted if df[c].dtype.kind not in "iuf"]
         if bad:
             raise DataError(
                 source,
-                f"column {bad[0]!r} is not numeric (dtype {df[bad[0]].dtype}): t in seconds, positions in metres",
+                f"column {shown(bad[0])} is not numeric (dtype {df[bad[0]].dtype}): t in seconds, positions in metres",
             )
         values = df[wanted].to_numpy(float)
         return make(

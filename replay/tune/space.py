@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import json
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from replay.util.errors import ReplayError
+from replay.util import tomlfile
+from replay.util.errors import ReplayError, shown
 
 _SPEC = re.compile(r"^\s*(log|choice)?\s*\[(.*)\]\s*$", re.S)
 
@@ -66,7 +66,7 @@ def _value(text: str, where: str):
     except ValueError:
         if re.fullmatch(r"[A-Za-z_][\w\-]*", text):
             return text  # a bare word: a string choice
-        raise ReplayError(f"{where}: {text!r} is not a number or a value") from None
+        raise ReplayError(f"{where}: {shown(text)} is not a number or a value") from None
 
 
 def parse_value(raw, where: str):
@@ -76,10 +76,10 @@ def parse_value(raw, where: str):
             return None, raw
         return "choice", raw
     if not isinstance(raw, str):
-        raise ReplayError(f"{where}: expected log[a,b], [a,b] or choice[...], got {raw!r}")
+        raise ReplayError(f"{where}: expected log[a,b], [a,b] or choice[...], got {shown(raw)}")
     m = _SPEC.match(raw)
     if not m:
-        raise ReplayError(f"{where}: {raw!r} is not log[a,b], [a,b] or choice[v1,v2,...]")
+        raise ReplayError(f"{where}: {shown(raw)} is not log[a,b], [a,b] or choice[v1,v2,...]")
     parts = [p for p in m.group(2).split(",")]
     if m.group(2).strip() == "":
         parts = []
@@ -90,7 +90,7 @@ def make_dim(owner: str, name: str, raw, declarations, where: str) -> Dim:
     """Check one entry against the parameter's declaration."""
     known = {p.name: p for p in declarations}
     if name not in known:
-        raise ReplayError(f"{where}: {owner} has no parameter {name!r} (known: {', '.join(known) or 'none'})")
+        raise ReplayError(f"{where}: {owner} has no parameter {shown(name)} (known: {', '.join(known) or 'none'})")
     p = known[name]
     word, vals = parse_value(raw, where)
     if word == "choice":
@@ -106,13 +106,13 @@ def make_dim(owner: str, name: str, raw, declarations, where: str) -> Dim:
         raise ReplayError(f"{where}: a range takes two bounds [a, b] (got {len(vals)})")
     a, b = vals
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
-        raise ReplayError(f"{where}: range bounds must be numbers (got {a!r}, {b!r})")
+        raise ReplayError(f"{where}: range bounds must be numbers (got {shown(a)}, {shown(b)})")
     if p.type not in (int, float):
         raise ReplayError(f"{where}: {owner}.{name} is {p.accepts()}: give choice[...], not a range")
     if not a < b:
-        raise ReplayError(f"{where}: empty or inverted range [{a!r}, {b!r}] (need low < high)")
+        raise ReplayError(f"{where}: empty or inverted range [{shown(a)}, {shown(b)}] (need low < high)")
     if word == "log" and a <= 0:
-        raise ReplayError(f"{where}: a log range needs positive bounds (got low {a!r})")
+        raise ReplayError(f"{where}: a log range needs positive bounds (got low {shown(a)})")
     ints = all(isinstance(v, int) for v in vals)
     if p.type is float and ints and word != "log":
         raise ReplayError(
@@ -121,13 +121,14 @@ def make_dim(owner: str, name: str, raw, declarations, where: str) -> Dim:
         )
     if p.type is int and not ints:
         raise ReplayError(
-            f"{where}: {owner}.{name} is an integer parameter: the range needs integer bounds (got [{a!r}, {b!r}])"
+            f"{where}: {owner}.{name} is an integer parameter: the range needs integer bounds "
+            f"(got [{shown(a)}, {shown(b)}])"
         )
     for v in vals:
         try:
             p.check(v, owner)
         except ReplayError as e:
-            raise ReplayError(f"{where}: bound {v!r}: {e}") from None
+            raise ReplayError(f"{where}: bound {shown(v)}: {e}") from None
     kind = "log" if word == "log" else ("int" if p.type is int else "float")
     if kind == "log" and p.type is int:
         raise ReplayError(f"{where}: log ranges are for float parameters; {owner}.{name} is an integer: use [a, b]")
@@ -141,7 +142,7 @@ def entries_from_cli(params) -> list[tuple[str, object, str]]:
         key, eq, spec = text.partition("=")
         if not eq or "." not in key:
             raise ReplayError(
-                f"--param {text!r}: expected FILTER.PARAM=SPEC or task.PARAM=SPEC, e.g. 'ukf.alpha=log[1e-3,1]'"
+                f"--param {shown(text)}: expected FILTER.PARAM=SPEC or task.PARAM=SPEC, e.g. 'ukf.alpha=log[1e-3,1]'"
             )
         out.append((key.strip(), spec, f"--param {key.strip()}"))
     return out
@@ -150,12 +151,7 @@ def entries_from_cli(params) -> list[tuple[str, object, str]]:
 def entries_from_file(path) -> list[tuple[str, object, str]]:
     """A TOML search-space file -> [(key, value, where)] (``FILE: KEY`` in messages)."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ReplayError(f"--space {path}: cannot read ({e.strerror})") from None
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise ReplayError(f"--space {path}: not a TOML file ({str(e).splitlines()[0]})") from None
+    doc, _ = tomlfile.load(path, "a search space", f"--space {path}")
     out = []
     for owner, table in doc.items():
         if not isinstance(table, dict):
@@ -180,19 +176,19 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
         if owner == "task":
             if getattr(task_class(task), "SYNTHETIC", False):  # its parameters also draw the measurements
                 raise ReplayError(
-                    f"{where}: task {task!r} draws its measurements from the reference with its own "
+                    f"{where}: task {shown(task)} draws its measurements from the reference with its own "
                     "parameters: searching them would score every trial on other data; search the "
                     "filters' noise settings instead (FILTER.q_scale, FILTER.r_scale, ...)"
                 )
-            dim = make_dim(f"task {task!r}", name, raw, task_class(task).PARAMS, where)
+            dim = make_dim(f"task {shown(task)}", name, raw, task_class(task).PARAMS, where)
             for f in filters:
                 per[f].append(Dim("task", name, dim.kind, dim.low, dim.high, dim.choices))
             continue
         if owner not in FILTERS:
-            raise ReplayError(f"{where}: unknown filter {owner!r} (known: {', '.join(sorted(FILTERS))})")
+            raise ReplayError(f"{where}: unknown filter {shown(owner)} (known: {', '.join(sorted(FILTERS))})")
         if owner not in per:
-            raise ReplayError(f"{where}: filter {owner!r} is not among --filters ({', '.join(filters)})")
-        dim = make_dim(f"filter {owner!r}", name, raw, _declared(owner), where)
+            raise ReplayError(f"{where}: filter {shown(owner)} is not among --filters ({', '.join(filters)})")
+        dim = make_dim(f"filter {shown(owner)}", name, raw, _declared(owner), where)
         per[owner].append(Dim(owner, name, dim.kind, dim.low, dim.high, dim.choices))
     return per
 

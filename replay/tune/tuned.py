@@ -15,7 +15,10 @@ def tuned_params(path, task: str | None = None) -> tuple[list, dict, dict, str]:
     """(filters, {filter: params}, task params, task) of a tuned file."""
     from replay.campaign import spec
 
-    camp = spec.load(path)
+    try:
+        camp = spec.load(path)
+    except ReplayError as e:  # the file named: as the user gave it
+        raise ReplayError(f"--tuned {e}") from None
     cfgs = [c for c in camp.configs if task is None or c.task == task]
     if not cfgs:
         raise ReplayError(f"--tuned {path}: no configuration of task {task!r} in it")

@@ -29,7 +29,7 @@ import os
 from dataclasses import dataclass, replace
 from typing import Any
 
-from replay.util.errors import ReplayError
+from replay.util.errors import SHOWN, ReplayError, shown
 
 TYPES = (int, float, bool, str, list, dict, os.PathLike)
 
@@ -174,10 +174,12 @@ def _show(v) -> str:
     if v is None:
         return "null"
     if isinstance(v, str):
-        return repr(v)
+        return shown(v)
     if isinstance(v, tuple):
-        return "[" + ", ".join(_show(x) for x in v) + "]"
-    return str(v)
+        text = "[" + ", ".join(_show(x) for x in v) + "]"
+        return text if len(text) <= 2 * SHOWN else f"{text[: 2 * SHOWN]}... ({len(v)} items)"
+    text = str(v)
+    return text if len(text) <= SHOWN else f"{text[:SHOWN]}... ({len(text)} characters)"
 
 
 def validate(params: tuple[Param, ...], given: dict, owner: str) -> dict:

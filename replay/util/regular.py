@@ -3,7 +3,9 @@
 ``/dev/zero`` never ends, a FIFO blocks until some writer appears (even ``open`` does), and
 ``/dev/urandom`` is endless noise; none of them is a data file. :func:`check_regular` looks
 with ``stat`` (which never blocks) and :func:`read_bytes` opens without blocking and checks the
-opened file again, so a path swapped after the check is still refused.
+opened file again, so a path swapped after the check is still refused. :func:`read_text` is the
+one reader of the small text files a user names (mappings, campaign files, ``--space``,
+``--tuned``, dataset manifests): a regular file of at most :data:`MAX_TEXT` bytes of UTF-8.
 """
 
 from __future__ import annotations
@@ -43,15 +45,41 @@ def check_regular(path, what: str = "a data file", *, dir_ok: bool = False) -> N
     raise _refuse(path, mode, what)
 
 
-def read_bytes(path, what: str = "a data file") -> bytes:
-    """The bytes of the regular file ``path``; anything else is refused before reading
-    (``FileNotFoundError`` and other ``OSError`` propagate for the caller to word)."""
+MAX_TEXT = 16 * 2**20  # bytes: a mapping, a campaign or a search space is a few kB
+
+
+def read_bytes(path, what: str = "a data file", limit: int | None = None) -> bytes:
+    """The bytes of the regular file ``path``; anything else (or, with ``limit``, a file larger
+    than ``limit`` bytes) is refused before reading (``FileNotFoundError`` and other ``OSError``
+    propagate for the caller to word)."""
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            raise _refuse(path, mode, what)
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise _refuse(path, info.st_mode, what)
         with os.fdopen(fd, "rb", closefd=False) as fh:
-            return fh.read()
+            data = fh.read() if limit is None else fh.read(limit + 1)
+        if limit is not None and max(len(data), info.st_size) > limit:
+            raise DataError(path, f"larger than {limit} bytes: refusing to read it as {what}")
+        return data
     finally:
         os.close(fd)
+
+
+def read_text(path, what: str, source=None, limit: int = MAX_TEXT) -> str:
+    """The UTF-8 text of the small regular file ``path`` (at most ``limit`` bytes), or one
+    line naming it (``source``: how the user named it, e.g. ``--space FILE``): missing, a
+    directory, a FIFO or a device, too large, unreadable or not UTF-8 text."""
+    source = path if source is None else source
+    try:
+        raw = read_bytes(path, what, limit)
+    except DataError as e:
+        raise DataError(source, str(e).removeprefix(f"{path}: ")) from None
+    except FileNotFoundError:
+        raise DataError(source, f"no such file (expected {what})") from None
+    except OSError as e:
+        raise DataError(source, f"cannot read {what}: {e.strerror}") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise DataError(source, f"not {what} (not UTF-8 text: byte {e.start})") from None
