@@ -57,6 +57,8 @@ def pm(v, ci, sig: int = 3) -> str:
         return "–"
     if not math.isfinite(ci):
         return num(v, sig)
+    if ci == 0:  # deterministic runs (replay.scoring.scorer.deterministic): an interval of exactly 0
+        return f"{num(v, sig)} ± 0"
     if not 1e-3 <= abs(v) < 1e5:
         return f"{num(v, sig)} ± {num(ci, 2)}"
     dec = max(_decimals(v, sig), _decimals(ci, 1) if 0 < ci < 10 ** -_decimals(v, sig) else 0)
@@ -75,6 +77,16 @@ def diff(d, ci) -> str:
         return pm(d, ci)
     dec = _decimals(ci, 2)
     return f"{d:+.{dec}f} ± {ci:.{dec}f}"
+
+
+def _apart(best, nxt) -> str:
+    """Whether two rows' intervals overlap; two deterministic rows (intervals of 0) have no interval
+    to compare: their difference is exact."""
+    cb, cn = _f(best.get("pos_rmse_ci95")), _f(nxt.get("pos_rmse_ci95"))
+    if cb == 0 and cn == 0:
+        return "both deterministic (interval 0): the difference is exact"
+    lo, hi = _f(best["pos_rmse"]) + cb, _f(nxt["pos_rmse"]) - cn
+    return "intervals " + ("disjoint" if lo < hi else "overlap")
 
 
 def consistency(row, prefix: str) -> str:
@@ -211,11 +223,7 @@ def summary_rows(sections) -> list[dict]:
                     f"difference {diff(*p)} m: {verdict(*p, best['label'], nxt['label'])}"
                 )
             else:
-                lo = _f(best["pos_rmse"]) + _f(best.get("pos_rmse_ci95"))
-                hi = _f(nxt["pos_rmse"]) - _f(nxt.get("pos_rmse_ci95"))
-                note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; intervals " + (
-                    "disjoint" if lo < hi else "overlap"
-                )
+                note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; " + _apart(best, nxt)
         flags = [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
         flags += [f"{r['label']}: lost {summary.lost_cell(r)}" for r in sec.rows if _f(r.get("lost")) > 0]
         flags += [f"{r['label']}: {int(_f(r['diverged']))} diverged" for r in sec.rows if _f(r.get("diverged")) > 0]

@@ -96,12 +96,29 @@ def units(problem) -> dict:
     return out
 
 
+# Runs whose values differ by less than this share of the largest are one deterministic value: a
+# deterministic filter's runs computed in one batch can differ in the last bits (sums taken in
+# another order: about 1e-16 relative), a Monte Carlo spread is many orders of magnitude larger.
+DETERMINISTIC_REL = 1e-12
+
+
+def deterministic(values) -> bool:
+    """Whether the finite ``values`` (two or more) are one value up to rounding: all bitwise equal,
+    or their range at most :data:`DETERMINISTIC_REL` times the largest magnitude."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    return len(v) >= 2 and float(np.ptp(v)) <= DETERMINISTIC_REL * float(np.max(np.abs(v)))
+
+
 def ci95(values) -> float:
-    """Half-width of the 95 % Student-t interval of the mean of ``values``."""
+    """Half-width of the 95 % Student-t interval of the mean of ``values``; exactly 0 for values
+    that are one value up to rounding (:func:`deterministic`), not the 1e-16 of their last bits."""
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     if len(v) < 2:
         return float("nan")
+    if deterministic(v):
+        return 0.0
     return float(t_ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)))
 
 
