@@ -85,3 +85,58 @@ def test_explicit_runs_and_seed_win_and_another_dataset_is_noted(tuned, tmp_path
     assert (params, first, got) == ({"steps": 9}, 7, run)  # another dataset: as given, and said
     assert note.endswith("tested on sim/lake-depth (rate=4.0, segment=0.6:1); sim/linear is evaluated as given "
                          "(only its filter and task parameters)"), note
+
+
+def _row(label, train, test, **extra):
+    return {"label": label, "filter": label.split()[0], "train_score": train, "test_score": test, **extra}
+
+
+def test_board_notes_say_when_tuning_made_every_filter_worse_and_name_the_better_rows():
+    from replay.tune.write import board_notes
+
+    rows = [_row("ekf (default)", 3.9, 3.71), _row("ekf (tuned)", 2.1, 6.33), _row("pf (default)", 5.0, 4.0),
+            _row("pf (tuned)", 4.0, 4.5), _row("measurements (raw observations)", "", 2.4)]
+    assert board_notes(rows) == [
+        "ekf: tuning made it worse on the held-out data (test 6.3300 against 3.7100 for the defaults; training "
+        "2.1000 against 3.9000): the better row is ekf (default)",
+        "pf: tuning made it worse on the held-out data (test 4.5000 against 4.0000 for the defaults; training "
+        "4.0000 against 5.0000): the better row is pf (default)",
+        "every tuned filter is worse on the held-out data than its defaults: the better rows are ekf (default), "
+        "pf (default) (the tuned.toml written holds the tuned settings all the same)",
+    ]
+    rows[3]["test_score"] = 3.9  # pf improved: only ekf is named, no line about every filter
+    assert len(board_notes(rows)) == 1 and board_notes(rows)[0].startswith("ekf: tuning made it worse")
+    rows[1]["test_score"] = 3.0
+    assert board_notes(rows) == []
+
+
+def test_board_notes_explain_failed_trials_and_mark_rows_that_never_move():
+    from replay.tune.write import board_notes, format_board
+
+    rows = [_row("ekf (default)", 82.963, 82.963, still=True), _row("ekf (tuned)", 82.963, 82.963, still=True)]
+    notes = board_notes(rows, {"pf": ["2 of 2 runs diverged (a setting with a diverged run is not usable)"] * 2})
+    assert notes == [
+        "ekf (default): not ranked: never moves: every estimate stays at its start, so its error is the start's, "
+        "not a filter's",
+        "ekf (tuned): not ranked: never moves: every estimate stays at its start, so its error is the start's, "
+        "not a filter's",
+        "pf: 2 trial(s) failed (the progress line's 'failed'), scored infinity: 2 of 2 runs diverged (a setting "
+        "with a diverged run is not usable) (2x)",
+    ]
+    for r in rows:
+        r.update(tuned_on="x", objective="mean_rmse", trials=0, pos_rmse=82.963, lost=0, runs=2)
+    assert "ekf (tuned) (not ranked)" in format_board(rows)
+
+
+def test_why_a_trial_scores_infinity():
+    from replay.tune.objectives import value, why_inf
+
+    ok = {"status": "done", "metrics": {"diverged": False, "pos_rmse": 1.0}}
+    div = {"status": "done", "metrics": {"diverged": True, "pos_rmse": 9.0}}
+    bad = {"status": "failed", "error": "MemoryError"}
+    w = {"mean_rmse": 1.0}
+    assert value(w, [ok, ok]) == 1.0 and why_inf(w, [ok, ok]) == ""
+    assert value(w, [ok, div]) == float("inf")
+    assert why_inf(w, [ok, div]) == "1 of 2 runs diverged (a setting with a diverged run is not usable)"
+    assert why_inf(w, [ok, bad]) == "1 of 2 runs failed (MemoryError)"
+    assert why_inf({"nll": 1.0}, [ok]) == "objective nll not finite (e.g. no likelihood or NEES)"

@@ -39,6 +39,7 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
+from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
 
 
@@ -53,6 +54,14 @@ def deterministic_row(row, metrics) -> bool:
     cis = [row.get(f"{k}_ci95", np.nan) for k in metrics]
     cis = [c for c in cis if isinstance(c, (int, float)) and np.isfinite(c)]
     return row["runs"] > 1 and bool(cis) and all(c == 0 for c in cis)
+
+
+def _mark_cell(row) -> str:
+    """The table's mark of a row that is not a filter's error (:func:`replay.scoring.summary.marks`)."""
+    tags = (["still"] if str(row.get("still")) == "True" else []) + (
+        ["ref=input"] if row.get("reference_input") else []
+    )
+    return f" ({', '.join(tags)})" if tags else ""
 
 
 def format_table(ev: Evaluation) -> str:
@@ -71,7 +80,8 @@ def format_table(ev: Evaluation) -> str:
     minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
     body, warnings = [], []
     for row in rows:
-        cells = [row["filter"]]
+        cells = [row["filter"] + _mark_cell(row)]
+        warnings += [f"{row['filter']}: not ranked: {m}" for m in marks(row)]
         same = deterministic_row(row, metrics)
         for k in metrics:
             v, c = row.get(k, np.nan), row.get(f"{k}_ci95", np.nan)

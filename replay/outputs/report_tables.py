@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from replay.scoring import summary
+from replay.scoring.marks import marks
 from replay.outputs.palette import Palette
 
 TIE = 1e-6  # paired differences below this (m) are ties
@@ -121,7 +122,8 @@ COLUMNS = [
 
 def leaderboard(rows, pal: Palette) -> str:
     """One section's leaderboard: rounded, with flags; the lowest position RMSE in bold."""
-    best = min((r for r in rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]), default=None)
+    ranked = (r for r in rows if math.isfinite(_f(r.get("pos_rmse"))) and not marks(r))  # marks: never the best
+    best = min(ranked, key=lambda r: _f(r["pos_rmse"]), default=None)
     cols = [(h, fn) for h, fn in COLUMNS if any(fn(r) not in ("–", "", "nan") for r in rows)]
     out = ["<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h, _ in cols) + "</tr>"]
     for r in rows:
@@ -203,7 +205,11 @@ def summary_rows(sections) -> list[dict]:
     out = []
     for sec in sections:
         rows = sorted((r for r in sec.rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]))
+        marked = [f"{r['label']}: not ranked: {m}" for r in sec.rows for m in marks(r)]
+        rows = [r for r in rows if not marks(r)]  # a row that is not a filter's error is never the best
         if not rows:
+            if marked:
+                out.append(dict(section=sec.title, best="", ties=[], value="–", runs="–", note="", flags=marked))
             continue
         best = rows[0]
         ties, rest = [], []
@@ -224,7 +230,7 @@ def summary_rows(sections) -> list[dict]:
                 )
             else:
                 note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; " + _apart(best, nxt)
-        flags = [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
+        flags = marked + [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
         flags += [f"{r['label']}: lost {summary.lost_cell(r)}" for r in sec.rows if _f(r.get("lost")) > 0]
         flags += [f"{r['label']}: {int(_f(r['diverged']))} diverged" for r in sec.rows if _f(r.get("diverged")) > 0]
         out.append(
@@ -245,7 +251,7 @@ def summary_table(sections, pal: Palette) -> str:
     head = ["dataset / task", "lowest position RMSE", "mean, 95 % interval (m)", "runs", "compared", "flags"]
     out = ["<table class='summary'><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"]
     for s in summary_rows(sections):
-        best = swatch(pal.colour(s["best"])) + f"<b>{html.escape(s['best'])}</b>"
+        best = swatch(pal.colour(s["best"])) + f"<b>{html.escape(s['best'])}</b>" if s["best"] else "none ranked"
         if s["ties"]:
             best += " tied with " + ", ".join(swatch(pal.colour(t)) + html.escape(t) for t in s["ties"])
         cells = [

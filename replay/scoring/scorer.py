@@ -64,7 +64,24 @@ def score_run(problem, est, err: dict | None = None) -> dict:
     m["masked"] = int((~problem.truth_valid if present is None else present & ~problem.truth_valid).sum())
     m["us_per_step"] = est.us_per_step
     m["diverged"] = bool(est.diverged)
+    m["still"] = still(est.x[:, list(problem.position_index)])
     return m
+
+
+# A position estimate that moves less than this share of its magnitude (at least 1 m) over a whole
+# run has not moved: what a filter with no position input and no velocity it uses gives (every
+# estimate its start), whose error is the start's, not a filter's.
+STILL_REL = 1e-9
+
+
+def still(positions) -> bool:
+    """Whether a run's position estimates (n, d) never move: every finite estimate within
+    :data:`STILL_REL` x max(1, largest coordinate) of the first (False with fewer than 2)."""
+    p = np.asarray(positions, float)
+    p = p[np.isfinite(p).all(axis=1)] if p.ndim == 2 else p[:0]
+    if len(p) < 2:
+        return False
+    return bool(np.max(np.abs(p - p[0])) <= STILL_REL * max(1.0, float(np.max(np.abs(p)))))
 
 
 def within(t, spans) -> np.ndarray:
