@@ -1,8 +1,11 @@
-"""Progress of long work: a live bar on a terminal, one plain line every ~10 s otherwise, nothing quiet.
+"""Progress of long work: a live bar on a terminal (tqdm's), one plain line every ~10 s otherwise,
+nothing quiet.
 
 Work comes in items of unequal cost: each item carries a weight (its expected cost,
-e.g. runs x particles), and the ETA extrapolates the time per unit of weight done so
-far to the weight left — heavy items last do not make it lie. Time spent compiling
+e.g. runs x (4 + particles / 20)), and the ETA extrapolates the time per unit of weight
+done since the first item finished to the weight left — heavy items last do not make it
+lie, and the first item's one-time work (kernels loaded, data generated) does not make it
+70x too long. Time spent compiling
 numba kernels (once per machine, then cached: tens of seconds on a first run) is no
 work done: it is left out of that rate (:func:`compile_seconds`) and shown apart; while
 it lasts the bar says so instead of an ETA. Notes logged meanwhile (:class:`NoteHandler`)
@@ -92,6 +95,35 @@ def particle_weight(params: dict, runs: int) -> float:
         return float(runs) * (RUN_OVERHEAD + 1.0)
 
 
+def _bar(stream, label: str):
+    """A tqdm bar on ``stream`` that draws only when told (:meth:`Progress._draw`): the label, the
+    share of the weight done, ``#`` cells and :class:`Progress`'s own tail (its ETA leaves out the
+    first item and the compilations, which tqdm's rate would not)."""
+    import shutil
+
+    from tqdm import tqdm
+
+    class Bar(tqdm):
+        monitor_interval = 0  # no monitor thread: nothing draws but _draw
+        tail = ""
+
+        @property
+        def format_dict(self):
+            return {**super().format_dict, "tail": self.tail}
+
+    return Bar(
+        total=1.0,
+        file=stream,
+        desc=label,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}|{tail}",
+        ascii=" 123456789#",
+        ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120),
+        delay=float("inf"),  # never drawn by tqdm itself (its first refresh is ours)
+        nrows=1000,  # a terminal of unknown height (a pty of 0 rows) would make tqdm hide its one bar
+        leave=True,
+    )
+
+
 class Progress:
     """``update(n, weight=...)`` after each finished item; ``close()`` at the end."""
 
@@ -112,6 +144,7 @@ class Progress:
         self.done = self.failed = 0
         self.weight_done = 0.0
         self.first = None  # (time, compile seconds, weight done) when the first item finished
+        self._tq = None  # the terminal's bar (tqdm), drawn by _draw only
         self.t0 = self.last = time.monotonic()
         self.c0 = compile_seconds(self.t0)
         self.bar = None
@@ -129,29 +162,30 @@ class Progress:
         self._drawn = 0.0
         if self.bar:
             _BAR["live"] = self
+            if self._tq is None:
+                self._tq = _bar(self.stream, self.label)
 
-    def _draw(self, final: bool = False) -> None:
-        """The bar on one terminal line, redrawn in place (at most 5 times a second)."""
-        now = time.monotonic()
-        if not final and now - self._drawn < 0.2:
-            return
-        self._drawn = now
-        import shutil
-
-        cols = min(shutil.get_terminal_size((100, 24)).columns or 100, 120)
-        frac = min(1.0, self.weight_done / self.total_weight) if self.total_weight else 1.0
+    def _tail(self, now: float) -> str:
+        """What follows the bar: the count, failures, the elapsed time and the ETA (or that kernels compile)."""
         eta = self.eta(now)
         fail = f", {self.failed} failed" if self.failed else ""
-        tail = f" {self._count()} {self.unit}s{fail} [{now - self.t0:.0f} s" + (
+        return f" {self._count()} {self.unit}s{fail} [{now - self.t0:.0f} s" + (
             ", compiling kernels (one time, cached)...]"
             if compiling()
             else self._compiling(now) + (f", ETA {eta:.0f} s]" if eta == eta else "]")
         )
-        head = f"{self.label}: {100 * frac:3.0f}%|"
-        width = max(10, cols - len(head) - len(tail) - 2)
-        fill = int(round(frac * width))
-        self.stream.write("\r" + head + "#" * fill + " " * (width - fill) + "|" + tail)
-        self.stream.flush()
+
+    def _draw(self, final: bool = False) -> None:
+        """The bar on one terminal line (tqdm's, weighted: its share is the weight done), redrawn in
+        place at most 5 times a second."""
+        now = time.monotonic()
+        if not final and now - self._drawn < 0.2:
+            return
+        self._drawn = now
+        self._tq.total = self.total_weight or 1.0
+        self._tq.n = min(self.weight_done, self._tq.total) if self.total_weight else 1.0
+        self._tq.tail = self._tail(now)
+        self._tq.refresh()
 
     def update(self, n: int = 1, failed: int = 0, weight: float | None = None) -> None:
         w = float(n if weight is None else weight)
@@ -210,6 +244,10 @@ class Progress:
             self._draw(final=True)
             self.stream.write("\n")
             self.stream.flush()
+        if self._tq is not None:
+            self._tq.disable = True  # closed without drawing again (its line is finished above)
+            self._tq.close()
+            self._tq = None
         self.bar = False
         if _BAR["live"] is self:
             _BAR["live"] = None
