@@ -41,6 +41,44 @@ if not _KEEP and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
 os.environ["REPLAY_CACHE_DIR"] = str(SESSION_CACHE)
 
 
+CHECKOUT = Path(__file__).resolve().parents[1]
+_NOT_OUTPUTS = {".pytest_cache", "__pycache__", ".coverage", ".hypothesis", ".ruff_cache"}
+
+
+def checkout_entries(root: Path = CHECKOUT) -> set:
+    """The checkout's top-level entries and ``runs/<dataset>/<task>`` (where ``replay eval`` writes
+    by default), as relative paths."""
+    out = {n for n in os.listdir(root) if n not in _NOT_OUTPUTS and not n.endswith(".egg-info")}
+    runs = root / "runs"
+    for a in os.listdir(runs) if runs.is_dir() else []:
+        out.add(f"runs/{a}")
+        if (runs / a).is_dir():
+            out.update(f"runs/{a}/{b}" for b in os.listdir(runs / a))
+    return out
+
+
+def pytest_sessionstart(session):
+    session.config.checkout_before = checkout_entries()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """The suite leaves the checkout as it found it (issue 40: empty directories under runs/): tests
+    write in tmp_path. Whatever appeared in the checkout fails the session, named (the controller
+    only, under pytest-xdist)."""
+    before = getattr(session.config, "checkout_before", None)
+    if before is None or hasattr(session.config, "workerinput"):
+        return
+    new = sorted(checkout_entries() - before)
+    if new:
+        import sys
+
+        sys.stderr.write(
+            f"\nthe tests left {len(new)} new entries in the checkout {CHECKOUT} (tests must write in "
+            f"tmp_path): {', '.join(new[:20])}\n"
+        )
+        session.exitstatus = 1
+
+
 def pytest_unconfigure(config):
     if not _KEEP:
         kernel_store.save(SESSION_CACHE / "kernels", KERNEL_STORE)

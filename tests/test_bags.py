@@ -228,7 +228,8 @@ def _cut(src: Path, dst: Path, frac: float) -> Path:
 
 
 @pytest.mark.parametrize("frac", [0.02, 0.5, 0.95])
-def test_truncated_files(bagdir, tmp_path, frac):
+def test_truncated_files(bagdir, tmp_path, frac, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a refused eval's numbered directory would be made here (issue 40: not the checkout)
     bag = _cut(bagdir / "robot_localization/test1.bag", tmp_path / "t.bag", frac)
     _one_line_error(["eval", bag, "--task", "gps-odom"], str(bag), "truncated")
     mc = _cut(bagdir / "derived/rl_test1_60s_mcap/rl_test1_60s_mcap.mcap", tmp_path / "t.mcap", frac)
@@ -239,6 +240,7 @@ def test_truncated_files(bagdir, tmp_path, frac):
     db.chmod(0o644)
     _cut(bagdir / "derived/rl_test1_60s_sqlite3/rl_test1_60s_sqlite3.db3", db, frac)
     _one_line_error(["eval", d, "--task", "gps-odom", "--mapping", RL_MAP], str(d))
+    assert not (tmp_path / "runs").exists()  # the refused runs left no directory
 
 
 def test_truncated_mcap_prefix_flagged_when_allowed(bagdir, tmp_path):

@@ -218,7 +218,7 @@ def test_identical_runs_say_deterministic_not_plus_minus_zero(lake, tmp_path):
     res = assert_ok(["eval", lake / "lake.csv", "--adapter", "lake", "--filters", "ekf", "--runs", 5, "-q", "-o",
                      tmp_path / "o"])
     assert "±" not in res.stdout.split("\nRMSE:")[0]
-    assert "ekf: deterministic: 1 distinct run (the 5 runs are identical; no interval)" in res.stdout
+    assert "ekf: deterministic: 1 distinct run (the 5 runs are identical up to rounding; interval 0)" in res.stdout
     import csv
 
     row = next(csv.DictReader(open(tmp_path / "o" / "leaderboard.csv")))

@@ -85,3 +85,33 @@ def test_campaign_modules_do_not_import_scipy_stats():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "False"
+
+
+def test_runs_equal_up_to_rounding_have_an_interval_of_exactly_zero():
+    """Issue 40 item 4: a deterministic filter's runs computed in one batch differ in their last bits
+    (1.3053891220575129 and its neighbours): the interval is 0, not 1.7e-16; a real spread is kept."""
+    from replay.scoring import significance
+    from replay.scoring.scorer import aggregate, ci95, deterministic
+
+    v = 1.3053891220575129
+    ulps = np.array([v, np.nextafter(v, 2), v, np.nextafter(v, 0), v])
+    assert np.ptp(ulps) > 0 and deterministic(ulps) and ci95(ulps) == 0.0
+    assert significance.t_interval(ulps) == (pytest.approx(v, rel=1e-15), 0.0)
+    assert ci95([v] * 4) == 0.0 and ci95([0.0, 0.0]) == 0.0
+    spread = np.array([v, v * (1 + 1e-9)])  # above the 1e-12 bound: an interval
+    assert not deterministic(spread) and ci95(spread) > 0
+    assert ci95(spread) == pytest.approx(12.706204736174707 * np.std(spread, ddof=1) / np.sqrt(2), rel=1e-12)
+    runs = [{"diverged": False, "pos_rmse": x, "us_per_step": 1.0, "scored": 1, "masked": 0} for x in ulps]
+    agg = aggregate(runs)
+    assert agg["pos_rmse_ci95"] == 0.0 and agg["pos_rmse"] == pytest.approx(v, rel=1e-15)
+
+
+def test_the_report_prints_a_zero_interval_as_zero_and_two_deterministic_rows_as_exact():
+    from replay.outputs import report_tables as rt
+
+    assert rt.pm(1.3053891220575129, 0.0) == "1.31 ± 0"
+    assert rt.pm(1.3053891220575129, 1.7e-16) == "1.3053891220575129 ± 0.0000000000000002"  # the issue's text
+    a = {"pos_rmse": 1.3, "pos_rmse_ci95": 0.0}
+    assert rt._apart(a, {"pos_rmse": 1.4, "pos_rmse_ci95": 0.0}) == "both deterministic (interval 0): the difference is exact"
+    assert rt._apart(a, {"pos_rmse": 1.4, "pos_rmse_ci95": 0.05}) == "intervals disjoint"
+    assert rt._apart(a, {"pos_rmse": 1.4, "pos_rmse_ci95": 0.2}) == "intervals overlap"

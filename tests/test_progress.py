@@ -12,13 +12,52 @@ from replay.util.errors import ReplayError
 from replay.util.progress import Progress, particle_weight
 
 
-def test_eta_weights_items_by_cost():
-    p = Progress(3, stream=io.StringIO(), total_weight=100.0, every=1e9)
-    p.t0 -= 10.0                      # 10 s elapsed
-    p.update(2, weight=20.0)          # two cheap items done: 20 % of the work
-    assert p.eta(p.t0 + 10.0) == pytest.approx(40.0)  # 10 s per 20 -> 40 s for the 80 left, not 5 s
-    assert particle_weight({"n_particles": 1000}, 10) == 500 and particle_weight({}, 10) == 10
-    assert particle_weight({"n_particles": 100, "t_max": 20}, 1) == 100
+def test_eta_weights_items_by_cost_and_leaves_out_the_first_item():
+    p = Progress(4, stream=io.StringIO(), total_weight=100.0, every=1e9)
+    p.update(1, weight=5.0)           # the first item: it carries the one-time work (no rate yet)
+    assert p.eta() != p.eta()         # NaN: no ETA from the first item alone (issue 40: 74x too long)
+    t1 = p.first[0]
+    p.update(2, weight=20.0)          # two cheap items since: 20 of the work in 10 s
+    assert p.eta(t1 + 10.0) == pytest.approx(37.5)  # 10 s per 20 -> 37.5 s for the 75 left, not 5 s
+    # per run: 4 (the work besides the filter) + particles / 20 x iterations
+    assert particle_weight({"n_particles": 1000}, 10) == 540 and particle_weight({}, 10) == 50
+    assert particle_weight({"n_particles": 100, "t_max": 20}, 1) == 104
+
+
+def test_the_count_never_passes_its_total():
+    out = io.StringIO()
+    p = Progress(11, stream=out, label="eval", unit="run", every=0.0)
+    p.update(20)  # a caller's overshoot (issue 40: "20/11 runs (182 %)") is not shown
+    assert out.getvalue().startswith("eval: 11/11 runs (100 % of the work)")
+
+
+def test_eval_with_a_recorded_estimate_counts_its_one_run(tmp_path):
+    """A recorded estimate is one run: an eval of 5 runs with one filter and one recorded estimate
+    counts 5 + 1 (it counted 5 + 5 and passed its total)."""
+    import numpy as np
+
+    import replay
+    from replay.sim.auv_bag import make_bag
+
+    make_bag(tmp_path / "bag", np.random.default_rng(0), duration=20.0)
+    (tmp_path / "m.toml").write_text(
+        'time = "header"\n[channels]\ndvl = { topic = "/dvl/twist", type = '
+        '"geometry_msgs/msg/TwistWithCovarianceStamped" }\n[reference]\nposition = { topic = "/reference/pose", '
+        'type = "geometry_msgs/msg/PoseStamped" }\n[estimates]\ntruth = { topic = "/reference/pose", '
+        'type = "geometry_msgs/msg/PoseStamped" }\n'
+    )
+    counts = []
+
+    class Counting(Progress):
+        def update(self, n=1, failed=0, weight=None):
+            super().update(n, failed, weight)
+            counts.append((self.done, self.total, self.weight_done, self.total_weight))
+
+    ev = replay.evaluate(str(tmp_path / "bag"), filters=["ekf"], runs=5, recorded=None,
+                         dataset_params={"mapping": str(tmp_path / "m.toml")}, progress=Counting(0, stream=io.StringIO()))
+    assert [r.name for r in ev.results] == ["ekf", "recorded:truth"]
+    assert [c[:2] for c in counts] == [(5, 6), (6, 6)]  # 5 runs of ekf, then the recording's one
+    assert counts[-1][2] == pytest.approx(counts[-1][3])  # the weight done is the whole weight
 
 
 def test_plain_lines_when_not_a_terminal_and_nothing_when_quiet():
@@ -136,18 +175,20 @@ def test_rerun_and_export_show_a_bar_on_a_terminal_and_nothing_with_q(tmp_path):
 
 def test_eta_leaves_out_the_time_spent_compiling_kernels(monkeypatch):
     """The issue's case: a first run's ETA (1243 s for a run of 80 s) extrapolated the one-time
-    compilation of its kernels. 80 s elapsed of which 70 compiling, 10 % of the work done."""
+    compilation of its kernels. 80 s since the first item, of which 70 compiling, 10 % of the work done."""
     from replay.util import progress
 
     monkeypatch.setitem(progress._CLOCK, "total", 5.0)  # compiled before this progress: not counted
     monkeypatch.setitem(progress._CLOCK, "depth", 0)
     out = io.StringIO()
     p = Progress(10, stream=out, total_weight=100.0, every=0.0, label="eval", unit="run")
+    p.update(1, weight=10.0)  # the first item (left out of the rate)
     p.t0 -= 80.0
+    p.first = (p.first[0] - 80.0, *p.first[1:])  # 80 s since the first item, 70 of them compiling
     progress._CLOCK["total"] += 70.0
     p.update(1, weight=10.0)
-    assert p.eta(p.t0 + 80.0) == pytest.approx(90.0)  # (80 - 70) s per 10 -> 90 s for the 90 left, not 720
-    assert out.getvalue().rstrip().endswith("elapsed 80 s, 70 s compiling kernels, ETA 90 s")
+    assert p.eta(p.first[0] + 80.0) == pytest.approx(80.0)  # (80 - 70) s per 10 -> 80 s for the 80 left, not 640
+    assert out.getvalue().rstrip().endswith("elapsed 80 s, 70 s compiling kernels, ETA 80 s")
     monkeypatch.setitem(progress._CLOCK, "depth", 1)  # compiling now: the bar says so instead of an ETA
     monkeypatch.setitem(progress._CLOCK, "start", p.t0 + 80.0)
     tty = _Tty()

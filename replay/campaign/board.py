@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.scoring import summary
+from replay.scoring.marks import marks
 from replay.util.errors import ReplayError
 from replay.util.files import write_csv
 
@@ -213,7 +214,7 @@ def format_rows(rows) -> str:
             + [
                 str(r.get("dataset", "")),
                 str(r.get("task", "")),
-                str(r.get("label") or r.get("filter")),
+                str(r.get("label") or r.get("filter")) + (" (not ranked)" if marks(r) else ""),
                 f"{pm:.4f}" + (f" ±{pc:.4f}" if np.isfinite(pc) else ""),
                 f"{_num(r.get('pos_rmse_median')):.4f}",
                 f"{_num(r.get('ate')):.4f}",
@@ -227,4 +228,5 @@ def format_rows(rows) -> str:
     fmt = lambda cells: "  ".join(
         c.ljust(w) if i < 3 + sourced else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
     )
-    return "\n".join([fmt(head), *(fmt(b) for b in body)])
+    notes = [f"{r.get('label') or r.get('filter')}: not ranked: {m}" for r in rows for m in marks(r)]
+    return "\n".join([fmt(head), *(fmt(b) for b in body), *notes])

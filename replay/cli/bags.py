@@ -117,6 +117,11 @@ def export_outputs(
         finally:
             progress.close()
         click.echo(f"wrote {target}{slash} ({n} messages; run {loaded['run']}: {tracks})")
+        click.echo(
+            f"  open it in Foxglove: File > Open local file... > {Path(target).name} (3D panel: /replay/<track>/pose)"
+            if slash == ""
+            else f"  play it: ros2 bag play {target} (replay inspect {target} lists its topics)"
+        )
 
 
 @click.command("export")  # examples: replay.cli.examples

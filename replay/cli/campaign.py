@@ -102,7 +102,7 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
         )
     for name, t in tunes:  # replay tune at scale: every tune's units in one store, OUT/tune
         from replay.tune import run as tune_run
-        from replay.tune.write import format_board
+        from replay.tune.write import board_notes, format_board
 
         res = tune_run.tune(
             t,
@@ -116,6 +116,8 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
         )
         click.echo(f"tune {name} ({t.split.tuned_on} -> {t.split.tested_on}; {t.trials} trials per filter):")
         click.echo(format_board(res["rows"]))
+        for line in board_notes(res["rows"], res.get("failed")):
+            click.echo(line)
         click.echo("wrote " + ", ".join(str(p) for p in res["paths"].values()))
 
 

@@ -90,7 +90,9 @@ from replay.util.errors import ReplayError
     "--tuned",
     default=None,
     type=click.Path(exists=True, dir_okay=False),
-    help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.",
+    help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters; on the "
+    "dataset it was tested on, also its test data (views, --first, dataset parameters; a differing one is "
+    "refused) and its --runs, --seed, --alignment unless given, so that it gives the tune's held-out rows.",
 )
 @view_options
 def eval_cmd(
@@ -131,6 +133,7 @@ def eval_cmd(
     min_scored_share = MIN_SCORED_SHARE.check(
         MIN_SCORED_SHARE.default if min_scored_share is None else min_scored_share, "--min-scored-share"
     )
+    run = dict(runs=runs, seed=seed, first=first, alignment=alignment, divergence_threshold=divergence_threshold)
     ref, names, recorded, fparams, tparams, dparams, task = _configuration(
         dataset,
         task,
@@ -143,9 +146,9 @@ def eval_cmd(
         tuned,
         (rate, window, segment),
         adapter,
-        first,
+        run,
         data_dir,
-        seed,
+        quiet,
     )
     numbered, inputs = _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir)
     from contextlib import ExitStack
@@ -160,19 +163,15 @@ def eval_cmd(
             quiet,
             task=task,
             filters=names,
-            runs=runs,
-            seed=seed,
-            first=first,
             data_dir=data_dir,
             filter_params=fparams,
             task_params=tparams,
             adapter=adapter,
             dataset_params=dparams or None,
-            alignment=alignment,
-            divergence_threshold=divergence_threshold,
             baseline=baseline,
             recorded=recorded,
             min_scored_share=min_scored_share,
+            **run,
         )
         _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
     _failed_filters(ev)
@@ -231,12 +230,13 @@ def _configuration(
     tuned,
     views,
     adapter,
-    first,
+    run,
     data_dir,
-    seed,
+    quiet,
 ):
     """``replay eval``'s configuration from its options, checked whole before any data is read:
-    (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
+    (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task).
+    ``run`` (runs, seed, first, alignment, divergence_threshold) is updated in place from ``--tuned``."""
     from replay.cli import params as cli_params
     from replay.data import dataset_ref
     from replay.run.checks import check_recorded
@@ -261,10 +261,27 @@ def _configuration(
         tparams = {**t_tparams, **tparams}
     dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), *views)
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, handed down
+    if tuned:  # the data the tune tested on: its views, first, runs and seed (issue 40 item 1)
+        dparams, run["first"], new, note = _tuned_data(tuned, ref, dparams, run)
+        run.update(new)
+        if note and not quiet:
+            click.echo(f"replay: note: {note}", err=True)
     cli_params.check_config(ref, task, names, fparams, tparams, dparams, adapter=adapter)
     check_recorded(ref.id, recorded or [], dparams)  # before any recording is read
-    task = task or default_task(ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams, seed=seed)
+    task = task or default_task(
+        ref, first=run["first"], data_dir=data_dir, adapter=adapter, dataset_params=dparams, seed=run["seed"]
+    )
     return ref, names, recorded, fparams, tparams, dparams, task
+
+
+def _tuned_data(tuned, ref, dparams, run):
+    """:func:`replay.tune.tuned.tuned_data` with the run options given on the command line."""
+    from replay.tune.tuned import RUN_OPTIONS, tuned_data
+
+    ctx = click.get_current_context()
+    given = {k for k in RUN_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT}
+    opts = {k: run[k] for k in RUN_OPTIONS}
+    return tuned_data(tuned, ref, dparams, run["first"], opts, given)
 
 
 def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, ros2_out, data_dir) -> None:

@@ -109,7 +109,7 @@ def tune_cmd(
     from replay.cli.campaign import check_names
     from replay.data.registry import check_data_dir
     from replay.tune import check, run, space
-    from replay.tune.write import format_board
+    from replay.tune.write import board_notes, format_board
     from replay.util.files import check_writable, refuse_overlap
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
@@ -158,6 +158,8 @@ def tune_cmd(
     check_writable(out, "--out")
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet, wait=wait)
     click.echo(format_board(res["rows"]))
+    for line in board_notes(res["rows"], res.get("failed")):
+        click.echo(line)
     budget = res["budget"]
     same = len(set(budget.values())) == 1
     click.echo(

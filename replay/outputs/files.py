@@ -39,6 +39,7 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
+from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
 
 
@@ -47,11 +48,20 @@ def leaderboard_rows(ev: Evaluation) -> list[dict]:
     return ev.rows
 
 
-def distinct_runs(result) -> int:
-    """How many different runs a filter's result holds (its per-run numbers compared exactly, timing
-    aside): 1 for a deterministic filter on data without synthesised noise, whatever ``--runs``."""
-    keys = [k for k in (result.runs[0] if result.runs else {}) if k not in ("us_per_step", "seconds")]
-    return len({tuple(repr(run.get(k)) for k in keys) for run in result.runs})
+def deterministic_row(row, metrics) -> bool:
+    """Whether a row's runs are one run: several runs, and every metric's interval that is a number
+    exactly 0 (:func:`replay.scoring.scorer.deterministic`: equal up to rounding, 1e-12 relative)."""
+    cis = [row.get(f"{k}_ci95", np.nan) for k in metrics]
+    cis = [c for c in cis if isinstance(c, (int, float)) and np.isfinite(c)]
+    return row["runs"] > 1 and bool(cis) and all(c == 0 for c in cis)
+
+
+def _mark_cell(row) -> str:
+    """The table's mark of a row that is not a filter's error (:func:`replay.scoring.summary.marks`)."""
+    tags = (["still"] if str(row.get("still")) == "True" else []) + (
+        ["ref=input"] if row.get("reference_input") else []
+    )
+    return f" ({', '.join(tags)})" if tags else ""
 
 
 def format_table(ev: Evaluation) -> str:
@@ -68,11 +78,11 @@ def format_table(ev: Evaluation) -> str:
         + ["anees", "us/step", "diverged", "lost", "scored"]
     )
     minimum = ev.config.get("min_scored_share", MIN_SCORED_SHARE.default)
-    distinct = {r.name: distinct_runs(r) for r in ev.results}
     body, warnings = [], []
     for row in rows:
-        cells = [row["filter"]]
-        same = row["runs"] > 1 and distinct.get(row["filter"]) == 1
+        cells = [row["filter"] + _mark_cell(row)]
+        warnings += [f"{row['filter']}: not ranked: {m}" for m in marks(row)]
+        same = deterministic_row(row, metrics)
         for k in metrics:
             v, c = row.get(k, np.nan), row.get(f"{k}_ci95", np.nan)
             cells.append(f"{v:.4f}" + (f" ±{c:.4f}" if np.isfinite(c) and not same else ""))
@@ -90,7 +100,8 @@ def format_table(ev: Evaluation) -> str:
         body.append(cells)
         if same:
             warnings.append(
-                f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical; no interval)"
+                f"{row['filter']}: deterministic: 1 distinct run (the {row['runs']} runs are identical up to "
+                "rounding; interval 0)"
             )
         if scored_share(row) < minimum:
             warnings.append(

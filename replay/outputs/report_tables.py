@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from replay.scoring import summary
+from replay.scoring.marks import marks
 from replay.outputs.palette import Palette
 
 TIE = 1e-6  # paired differences below this (m) are ties
@@ -57,6 +58,8 @@ def pm(v, ci, sig: int = 3) -> str:
         return "–"
     if not math.isfinite(ci):
         return num(v, sig)
+    if ci == 0:  # deterministic runs (replay.scoring.scorer.deterministic): an interval of exactly 0
+        return f"{num(v, sig)} ± 0"
     if not 1e-3 <= abs(v) < 1e5:
         return f"{num(v, sig)} ± {num(ci, 2)}"
     dec = max(_decimals(v, sig), _decimals(ci, 1) if 0 < ci < 10 ** -_decimals(v, sig) else 0)
@@ -75,6 +78,16 @@ def diff(d, ci) -> str:
         return pm(d, ci)
     dec = _decimals(ci, 2)
     return f"{d:+.{dec}f} ± {ci:.{dec}f}"
+
+
+def _apart(best, nxt) -> str:
+    """Whether two rows' intervals overlap; two deterministic rows (intervals of 0) have no interval
+    to compare: their difference is exact."""
+    cb, cn = _f(best.get("pos_rmse_ci95")), _f(nxt.get("pos_rmse_ci95"))
+    if cb == 0 and cn == 0:
+        return "both deterministic (interval 0): the difference is exact"
+    lo, hi = _f(best["pos_rmse"]) + cb, _f(nxt["pos_rmse"]) - cn
+    return "intervals " + ("disjoint" if lo < hi else "overlap")
 
 
 def consistency(row, prefix: str) -> str:
@@ -109,7 +122,8 @@ COLUMNS = [
 
 def leaderboard(rows, pal: Palette) -> str:
     """One section's leaderboard: rounded, with flags; the lowest position RMSE in bold."""
-    best = min((r for r in rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]), default=None)
+    ranked = (r for r in rows if math.isfinite(_f(r.get("pos_rmse"))) and not marks(r))  # marks: never the best
+    best = min(ranked, key=lambda r: _f(r["pos_rmse"]), default=None)
     cols = [(h, fn) for h, fn in COLUMNS if any(fn(r) not in ("–", "", "nan") for r in rows)]
     out = ["<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h, _ in cols) + "</tr>"]
     for r in rows:
@@ -191,7 +205,11 @@ def summary_rows(sections) -> list[dict]:
     out = []
     for sec in sections:
         rows = sorted((r for r in sec.rows if math.isfinite(_f(r.get("pos_rmse")))), key=lambda r: _f(r["pos_rmse"]))
+        marked = [f"{r['label']}: not ranked: {m}" for r in sec.rows for m in marks(r)]
+        rows = [r for r in rows if not marks(r)]  # a row that is not a filter's error is never the best
         if not rows:
+            if marked:
+                out.append(dict(section=sec.title, best="", ties=[], value="–", runs="–", note="", flags=marked))
             continue
         best = rows[0]
         ties, rest = [], []
@@ -211,12 +229,8 @@ def summary_rows(sections) -> list[dict]:
                     f"difference {diff(*p)} m: {verdict(*p, best['label'], nxt['label'])}"
                 )
             else:
-                lo = _f(best["pos_rmse"]) + _f(best.get("pos_rmse_ci95"))
-                hi = _f(nxt["pos_rmse"]) - _f(nxt.get("pos_rmse_ci95"))
-                note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; intervals " + (
-                    "disjoint" if lo < hi else "overlap"
-                )
-        flags = [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
+                note = f"next: {nxt['label']} {pm(nxt['pos_rmse'], nxt.get('pos_rmse_ci95'))} m; " + _apart(best, nxt)
+        flags = marked + [f"{r['label']}: ANEES collapsed" for r in sec.rows if r.get("anees_flag") == "collapsed"]
         flags += [f"{r['label']}: lost {summary.lost_cell(r)}" for r in sec.rows if _f(r.get("lost")) > 0]
         flags += [f"{r['label']}: {int(_f(r['diverged']))} diverged" for r in sec.rows if _f(r.get("diverged")) > 0]
         out.append(
@@ -237,7 +251,7 @@ def summary_table(sections, pal: Palette) -> str:
     head = ["dataset / task", "lowest position RMSE", "mean, 95 % interval (m)", "runs", "compared", "flags"]
     out = ["<table class='summary'><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"]
     for s in summary_rows(sections):
-        best = swatch(pal.colour(s["best"])) + f"<b>{html.escape(s['best'])}</b>"
+        best = swatch(pal.colour(s["best"])) + f"<b>{html.escape(s['best'])}</b>" if s["best"] else "none ranked"
         if s["ties"]:
             best += " tied with " + ", ".join(swatch(pal.colour(t)) + html.escape(t) for t in s["ties"])
         cells = [

@@ -71,10 +71,26 @@ def claimed_run_dir(dataset: str, task: str, root: Path = Path("runs")):
     """Claim the next numbered directory ``runs/<dataset>/<task>/NNN`` for the block (module
     docstring); if no set was published into it by the end of the block, it is removed."""
     base = root / readable_name(dataset) / task
+    made = [p for p in (base, *base.parents) if not p.exists() and p != Path(".")]  # deepest first
     with ExitStack() as stack:
+        d = _claim(base, stack)
+        try:
+            yield d
+        finally:  # nothing published (an error, or no set written): the claim goes
+            if os.path.isdir(d) and os.listdir(d) == [CLAIM]:
+                shutil.rmtree(d, ignore_errors=True)
+                _remove_empty(made)
+
+
+def _claim(base: Path, stack: ExitStack) -> Path:
+    """Make ``base``, take its next number and lock the claim in ``stack``. A refused run may remove
+    an empty ``base`` (:func:`_remove_empty`) between this run's mkdir and its lock: then again."""
+    for attempt in range(10):
         try:
             base.mkdir(parents=True, exist_ok=True)
             with _base_locked(base):
+                if not base.is_dir():  # removed by a refused run after our mkdir: make it again
+                    continue
                 _clean(base)
                 n = max((int(p.name) for p in _numbered(base)), default=0) + 1
                 while True:
@@ -85,13 +101,31 @@ def claimed_run_dir(dataset: str, task: str, root: Path = Path("runs")):
                     except FileExistsError:
                         n += 1
                 stack.enter_context(lock_file(d / CLAIM, busy=f"{d}: claimed by pid {{pid}}", what="the claim"))
-        except OSError as err:
-            raise ReplayError(f"{base}: cannot create a run directory ({err.strerror})") from None
+                return d
+        except (OSError, ReplayError) as err:
+            if base.is_dir() or attempt == 9:
+                if isinstance(err, ReplayError):
+                    raise
+                raise ReplayError(f"{base}: cannot create a run directory ({err.strerror})") from None
+    raise ReplayError(f"{base}: cannot create a run directory (removed again and again)")
+
+
+def _remove_empty(made: list[Path]) -> None:
+    """The directories a refused run created (``runs/<dataset>/<task>``, deepest first) removed while
+    empty, the task's under its lock: a refused ``replay eval`` leaves nothing behind. One another
+    run uses is not empty (its claim is in it) and stays; a run that finds it gone makes it again."""
+    if not made:
+        return
+    try:
+        with _base_locked(made[0]):
+            os.rmdir(made[0])
+    except (OSError, ReplayError):  # not empty (another run's), or already gone
+        return
+    for p in made[1:]:
         try:
-            yield d
-        finally:  # nothing published (an error, or no set written): the claim goes
-            if os.path.isdir(d) and os.listdir(d) == [CLAIM]:
-                shutil.rmtree(d, ignore_errors=True)
+            os.rmdir(p)
+        except OSError:
+            return
 
 
 def finished(path: Path) -> bool:

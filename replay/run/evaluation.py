@@ -306,8 +306,9 @@ def _run_config(cfg: Config, s: SimpleNamespace, built: dict | None, progress) -
     runs, batch = s.runs, s.batch
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
     recs = []
-    for start in range(0, 1 if is_recorded(cfg.filter) else runs, batch):
-        block = list(range(start, min(runs, start + batch)))
+    n = 1 if is_recorded(cfg.filter) else runs  # a recorded estimate: run 0 only (20/11 runs counted before)
+    for start in range(0, n, batch):
+        block = list(range(start, min(n, start + batch)))
         recs += [_filled(r) for r in run_block(c, block, s.data_dir, keep=True, strict=True, built=built)]
         if progress is not None:
             progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))

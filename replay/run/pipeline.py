@@ -53,7 +53,7 @@ from replay.filters.noise_params import apply as apply_noise
 from replay.run.canonical import config_hash, plain  # noqa: F401 (the pipeline's names too)
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
-from replay.scoring import likelihood, metrics, scorer
+from replay.scoring import likelihood, marks, metrics, scorer
 from replay.tasks import make_task, reference_coverage, reference_present, source_of
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
@@ -289,6 +289,9 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     m["seconds"] = wall
     rec = {"run": run, "status": "done", "metrics": m, "series": cols}
     rec.update({k: v for k, v in getattr(problem, "frame_meta", {}).items() if k == "content_checked"})
+    shared = marks.reference_inputs(getattr(problem, "frame_meta", {}), c["filter"])
+    if shared:
+        rec["reference_input"] = shared
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
     if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)

@@ -65,7 +65,24 @@ def score_run(problem, est, err: dict | None = None) -> dict:
     m["masked"] += getattr(problem, "truth_missing", 0)  # a reference ending early: its samples not given
     m["us_per_step"] = est.us_per_step
     m["diverged"] = bool(est.diverged)
+    m["still"] = still(est.x[:, list(problem.position_index)])
     return m
+
+
+# A position estimate that moves less than this share of its magnitude (at least 1 m) over a whole
+# run has not moved: what a filter with no position input and no velocity it uses gives (every
+# estimate its start), whose error is the start's, not a filter's.
+STILL_REL = 1e-9
+
+
+def still(positions) -> bool:
+    """Whether a run's position estimates (n, d) never move: every finite estimate within
+    :data:`STILL_REL` x max(1, largest coordinate) of the first (False with fewer than 2)."""
+    p = np.asarray(positions, float)
+    p = p[np.isfinite(p).all(axis=1)] if p.ndim == 2 else p[:0]
+    if len(p) < 2:
+        return False
+    return bool(np.max(np.abs(p - p[0])) <= STILL_REL * max(1.0, float(np.max(np.abs(p)))))
 
 
 def within(t, spans) -> np.ndarray:
@@ -97,12 +114,29 @@ def units(problem) -> dict:
     return out
 
 
+# Runs whose values differ by less than this share of the largest are one deterministic value: a
+# deterministic filter's runs computed in one batch can differ in the last bits (sums taken in
+# another order: about 1e-16 relative), a Monte Carlo spread is many orders of magnitude larger.
+DETERMINISTIC_REL = 1e-12
+
+
+def deterministic(values) -> bool:
+    """Whether the finite ``values`` (two or more) are one value up to rounding: all bitwise equal,
+    or their range at most :data:`DETERMINISTIC_REL` times the largest magnitude."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    return len(v) >= 2 and float(np.ptp(v)) <= DETERMINISTIC_REL * float(np.max(np.abs(v)))
+
+
 def ci95(values) -> float:
-    """Half-width of the 95 % Student-t interval of the mean of ``values``."""
+    """Half-width of the 95 % Student-t interval of the mean of ``values``; exactly 0 for values
+    that are one value up to rounding (:func:`deterministic`), not the 1e-16 of their last bits."""
     v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     if len(v) < 2:
         return float("nan")
+    if deterministic(v):
+        return 0.0
     return float(t_ppf(0.975, len(v) - 1) * v.std(ddof=1) / np.sqrt(len(v)))
 
 

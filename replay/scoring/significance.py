@@ -62,13 +62,18 @@ def holm(pvalues) -> np.ndarray:
 
 
 def t_interval(x, level: float = 0.95) -> tuple[float, float]:
-    """Mean of ``x`` (NaN left out) and the half-width of its Student-t interval (NaN below 2 values)."""
+    """Mean of ``x`` (NaN left out) and the half-width of its Student-t interval (NaN below 2 values;
+    exactly 0 for values equal up to rounding, :func:`replay.scoring.scorer.deterministic`)."""
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
     if len(x) == 0:
         return float("nan"), float("nan")
     if len(x) < 2:
         return float(x.mean()), float("nan")
+    from replay.scoring.scorer import deterministic
+
+    if deterministic(x):  # one value up to rounding: an interval of exactly 0
+        return float(x.mean()), 0.0
     half = stats.t.ppf(0.5 + level / 2, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
     return float(x.mean()), float(half)
 

@@ -126,6 +126,11 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         version=version,
         config_hash=h,
     )
+    if ok and all(r["metrics"].get("still") is True for r in ok):  # issue 40: not a filter's error
+        row["still"] = True
+    shared = next((r["reference_input"] for r in done if r.get("reference_input")), "")
+    if shared:  # the reference is one of the row's inputs: a topic scored against itself
+        row["reference_input"] = shared
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)

@@ -59,6 +59,21 @@ def value(weights: dict[str, float], records: list[dict]) -> float:
     return float(sum(w * _basic(name, [r["metrics"] for r in done]) for name, w in weights.items()))
 
 
+def why_inf(weights: dict[str, float], records: list[dict]) -> str:
+    """Why :func:`value` is infinite for these records (one phrase), or '' when it is finite."""
+    done = [r for r in records if r.get("status") == "done"]
+    if not records:
+        return "no run was computed"
+    if len(done) < len(records):
+        err = next((r.get("error") for r in records if r.get("status") != "done" and r.get("error")), "")
+        return f"{len(records) - len(done)} of {len(records)} runs failed" + (f" ({err})" if err else "")
+    div = sum(bool(r["metrics"]["diverged"]) for r in done)
+    if div:
+        return f"{div} of {len(done)} runs diverged (a setting with a diverged run is not usable)"
+    bad = [n for n in weights if not math.isfinite(_basic(n, [r["metrics"] for r in done]))]
+    return f"objective {', '.join(bad)} not finite (e.g. no likelihood or NEES)" if bad else ""
+
+
 def _basic(name: str, ms: list[dict]) -> float:
     if name == "mean_rmse":
         return float(np.mean([m["pos_rmse"] for m in ms]))

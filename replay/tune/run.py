@@ -153,6 +153,10 @@ class Runner:
             execute.store_job(self.store, job, results, self.saved)
         return [self.store.records(config_hash(c.as_dict())) for c in cfgs]
 
+    def why_inf(self, cfgs: list[Config]) -> str:
+        """Why the objective over ``cfgs`` is infinite (:func:`objectives.why_inf`, the first such dataset)."""
+        return next((w for w in (objectives.why_inf(self.t.weights, r) for r in self.records(cfgs)) if w), "")
+
     def score(self, cfgs: list[Config]) -> float:
         """The objective over ``cfgs`` (the mean of each dataset's)."""
         vals = [objectives.value(self.t.weights, recs) for recs in self.records(cfgs)]
@@ -190,30 +194,42 @@ def tune(
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
+        failed: dict = {}  # filter -> why each of its trials of this invocation scored inf
+        cost = {f: {p: _cost(t.configs(p, f, {}), t.runs) for p in ("train", "test")} for f in t.filters}
         progress = Progress(
-            sum(todo.values()) + 2 * len(t.filters), quiet, progress_stream, label="tune", unit="step"
-        )  # the trials, then each filter's default and tuned held-out scoring
+            sum(todo.values()) + 2 * len(t.filters),
+            quiet,
+            progress_stream,
+            label="tune",
+            unit="step",
+            total_weight=sum(todo[f] * cost[f]["train"] + 2 * cost[f]["test"] for f in t.filters),
+        )  # the trials, then each filter's default and tuned held-out scoring, weighted by their cost
         try:
             with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
                 run = Runner(t, units, mapper)
                 for name, st in opened.items():
                     for _ in range(todo[name]):
                         trial, params = studies.next_trial(st, t.dims[name], t.seed, name, t.defaults(name))
-                        value = run.score(t.configs("train", name, params))
+                        cfgs = t.configs("train", name, params)
+                        value = run.score(cfgs)
                         st.tell(trial, value)
-                        progress.update(1, 0 if math.isfinite(value) else 1)
-                rows = _board(t, run, opened, progress)
+                        progress.update(1, 0 if math.isfinite(value) else 1, weight=cost[name]["train"])
+                        if not math.isfinite(value):  # said after the board: why the trial scored inf
+                            failed.setdefault(name, []).append(run.why_inf(cfgs))
+                rows = _board(t, run, opened, lambda name: progress.update(1, weight=cost[name]["test"]))
         finally:
             progress.close()
         from replay.util.files import write_csv
 
-        write_csv(rows, out / "leaderboard.csv", COLUMNS)
+        marked = [k for k in ("still", "reference_input") if any(r.get(k) for r in rows)]  # summary.marks
+        write_csv(rows, out / "leaderboard.csv", COLUMNS + marked)
         paths = {"leaderboard": out / "leaderboard.csv", "study": out / "study.db"}
         paths.update(write_tuned(t, out, rows))
     return {
         "rows": rows,
         "budget": {f: min(t.trials, len(studies.complete(s))) for f, s in opened.items()},
         "paths": paths,
+        "failed": failed,
     }
 
 
@@ -241,7 +257,22 @@ def _asked(t: Tune) -> dict:
     )
 
 
-def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
+def _cost(cfgs: list[Config], runs: int) -> float:
+    """The expected cost of ``runs`` runs of each configuration (:func:`particle_weight`), each in
+    proportion to its share of the log (a view ``segment = "A:B"``: B - A)."""
+    from replay.util.progress import particle_weight
+
+    def share(c):
+        a, _, b = str(c.dataset_params.get("segment", "0:1")).partition(":")
+        try:
+            return max(0.05, float(b or 1) - float(a or 0))
+        except ValueError:
+            return 1.0
+
+    return sum(particle_weight(c.filter_params, runs) * share(c) for c in cfgs)
+
+
+def _board(t: Tune, run: Runner, opened: dict, done) -> list[dict]:
     rows = []
     for name, st in opened.items():
         best = studies.best(st, t.trials)
@@ -251,7 +282,7 @@ def _board(t: Tune, run: Runner, opened: dict, progress) -> list[dict]:
             train_score = run.score(train)
             test_recs = run.records(test)
             test_score = float(sum(objectives.value(t.weights, r) for r in test_recs) / len(test_recs))
-            progress.update(1)
+            done(name)
             per = [_row(run.store, x, recs) for x, recs in zip(test, test_recs)]  # one per test dataset
             c = test[0].as_dict()
             rows.append(
@@ -349,4 +380,9 @@ def _pooled(rows) -> dict:
 
     out = {k: float(np.mean([num(r, k) for r in rows])) for k in ("pos_rmse", "pos_rmse_median", "anees")}
     out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
+    if rows and all(r.get("still") for r in rows):  # issue 40: marked on the board (summary.marks)
+        out["still"] = True
+    shared = next((r["reference_input"] for r in rows if r.get("reference_input")), "")
+    if shared:
+        out["reference_input"] = shared
     return out

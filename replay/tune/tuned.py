@@ -35,3 +35,54 @@ def tuned_params(path, task: str | None = None) -> tuple[list, dict, dict, str]:
             filters.append(c.filter)
         fparams[c.filter], tparams = dict(c.filter_params), dict(c.task_params)
     return filters, fparams, tparams or {}, tasks.pop()
+
+
+RUN_OPTIONS = ("runs", "seed", "alignment", "divergence_threshold")  # of the file's [campaign] table
+
+
+def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) -> tuple[dict, object, dict, str | None]:
+    """The data the tune tested on, for ``replay eval DATASET --tuned FILE``: (dataset parameters,
+    ``first``, run options, a note or None).
+
+    When the file holds ``DATASET`` (its test data), its dataset parameters (the views ``rate``,
+    ``window``, ``segment`` and the generator's or adapter's own), its ``first``, and the run
+    options of its ``[campaign]`` table not given on the command line (``given``: ``runs``,
+    ``seed``, ...) are applied, so that the command gives the tune's held-out rows; a dataset
+    parameter or ``--first`` of the command line that differs from the file is refused in one
+    line. Another dataset takes the file's filter and task parameters only, with a note saying so.
+    """
+    from replay.campaign import spec
+    from replay.data import registry
+    from replay.run.pipeline import plain
+
+    camp = spec.load(path)
+    same = [c for c in camp.configs if c.dataset in (ref.id, str(ref.path.resolve()) if ref.path else None)]
+    if not same:
+        tested = ", ".join(sorted({_describe(c.dataset, c.dataset_params) for c in camp.configs}))
+        note = (
+            f"--tuned {path}: tested on {tested}; {ref.id} is evaluated as given (only its filter and task parameters)"
+        )
+        return dataset_params, first, run, note
+    c = same[0]
+    mine = plain(registry.check_params(ref.target, dataset_params, adapter=ref.adapter if ref.is_path else None))
+    for k in dataset_params:
+        if mine.get(k) != c.dataset_params.get(k):
+            recorded = f"{k}={c.dataset_params[k]}" if k in c.dataset_params else f"no {k}"
+            raise ReplayError(
+                f"--tuned {path}: the tune tested on {recorded} for {ref.id}, the command line gives "
+                f"{k}={dataset_params[k]}; leave it out to evaluate on the tune's test data"
+            )
+    if first is not None and first != c.first:
+        raise ReplayError(
+            f"--tuned {path}: the tune tested on first={c.first} for {ref.id}, the command line gives "
+            f"--first {first}; leave it out"
+        )
+    run = {**run, **{k: getattr(c, k) if k != "runs" else camp.runs for k in RUN_OPTIONS if k not in given}}
+    return dict(c.dataset_params), c.first, run, None
+
+
+def _describe(dataset: str, params: dict) -> str:
+    from replay.data import views
+
+    shown = views.split(params)[0]
+    return dataset + (" (" + ", ".join(f"{k}={v}" for k, v in shown.items()) + ")" if shown else "")

@@ -84,7 +84,7 @@ def format_board(rows) -> str:
     for r in rows:
         body.append(
             [
-                r["label"],
+                r["label"] + (" (not ranked)" if _marked(r) else ""),
                 r["tuned_on"],
                 r["objective"],
                 str(r["trials"]),
@@ -98,6 +98,56 @@ def format_board(rows) -> str:
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
     return "\n".join([line(head), *(line(b) for b in body)])
+
+
+def board_notes(rows, failed: dict | None = None) -> list[str]:
+    """The lines under the board: rows that are not a filter's error (never moving, scored against
+    an input: :func:`replay.scoring.summary.marks`), tuned rows worse than their defaults on the
+    held-out data (and which row is better), and why trials scored infinity (``failed``: filter ->
+    a reason per such trial)."""
+    from collections import Counter
+
+    from replay.scoring.marks import marks
+
+    out = [f"{r['label']}: not ranked: {m}" for r in rows for m in marks(r)]
+    pairs = {}
+    for r in rows:
+        if r["label"].endswith(("(default)", "(tuned)")):
+            pairs.setdefault(r["filter"], {})[r["label"].rsplit(" ", 1)[1]] = r
+    worse = []
+    for name, p in pairs.items():
+        d, t = p.get("(default)"), p.get("(tuned)")
+        if d is None or t is None or not _worse(t["test_score"], d["test_score"]):
+            continue
+        worse.append(name)
+        out.append(
+            f"{name}: tuning made it worse on the held-out data (test {_num(t['test_score'])} against "
+            f"{_num(d['test_score'])} for the defaults; training {_num(t['train_score'])} against "
+            f"{_num(d['train_score'])}): the better row is {d['label']}"
+        )
+    if worse and len(worse) == len(pairs):
+        out.append(
+            "every tuned filter is worse on the held-out data than its defaults: the better rows are "
+            + ", ".join(pairs[n]["(default)"]["label"] for n in worse)
+            + " (the tuned.toml written holds the tuned settings all the same)"
+        )
+    for name, why in (failed or {}).items():
+        counts = ", ".join(f"{k} ({n}x)" if n > 1 else k for k, n in Counter(why).items())
+        out.append(f"{name}: {len(why)} trial(s) failed (the progress line's 'failed'), scored infinity: {counts}")
+    return out
+
+
+def _worse(tuned, default) -> bool:
+    try:
+        return float(tuned) > float(default)
+    except (TypeError, ValueError):
+        return False
+
+
+def _marked(r) -> bool:
+    from replay.scoring.marks import marks
+
+    return bool(marks(r))
 
 
 def _short(r) -> str:
