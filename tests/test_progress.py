@@ -42,7 +42,8 @@ def test_eval_with_a_recorded_estimate_counts_its_one_run(tmp_path):
     make_bag(tmp_path / "bag", np.random.default_rng(0), duration=20.0)
     (tmp_path / "m.toml").write_text(
         'time = "header"\n[channels]\ndvl = { topic = "/dvl/twist", type = '
-        '"geometry_msgs/msg/TwistWithCovarianceStamped" }\n[reference]\nposition = { topic = "/reference/pose", '
+        '"geometry_msgs/msg/TwistWithCovarianceStamped" }\n'
+        'imu = { topic = "/imu/data", type = "sensor_msgs/msg/Imu", fuse = ["gyro"] }\n[reference]\nposition = { topic = "/reference/pose", '
         'type = "geometry_msgs/msg/PoseStamped" }\n[estimates]\ntruth = { topic = "/reference/pose", '
         'type = "geometry_msgs/msg/PoseStamped" }\n'
     )
