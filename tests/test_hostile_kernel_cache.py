@@ -22,6 +22,7 @@ from hostile import register
 
 from replay.filters.compiled import copies, files, loops, numba_internals, rows
 from replay.models.random_walk import RandomWalkPosition
+from replay.util import kernel_cache
 
 register("kcache-nbc-random-bytes", "kcache-nbi-reduce-pickle", "kcache-nbi-truncated", "kcache-unsealed-plain-numba",
          "kcache-dir-open-to-others", "kcache-dir-is-a-file", "kcache-dir-read-only", "kcache-cli-dir-is-a-file",
@@ -37,7 +38,9 @@ X = np.arange(6.0).reshape(3, 2)
 def cache(tmp_path, monkeypatch):
     """An empty kernel cache of this test; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    report = {"rewritten": 0, "pruned": 0, "damaged": 0}
+    monkeypatch.setattr(files, "CACHE_REPORT", report)
+    monkeypatch.setattr(kernel_cache, "CACHE_REPORT", report)
     monkeypatch.setattr(loops, "_rows", {})
     monkeypatch.setattr(copies, "_bound", {})
     before = set(sys.modules)
@@ -75,7 +78,7 @@ def test_random_bytes_over_nbc_detected_removed_counted_same_numbers(cache, capl
     assert hits == 0 and np.array_equal(got, want)
     assert files.CACHE_REPORT["damaged"] == 1
     assert "kernel cache: 1 damaged file of random_walk removed and compiled again" in caplog.text
-    assert all(numba_internals.unseal(f.read_bytes()) is not None for f in _files(cache, ".nb?"))  # sealed anew
+    assert all(kernel_cache.unseal(f.read_bytes()) is not None for f in _files(cache, ".nb?"))  # sealed anew
     assert _f_rows(_copy())[1] == 1 and files.CACHE_REPORT["damaged"] == 1
 
 
@@ -111,9 +114,9 @@ def test_full_disk_means_not_cached_not_an_error(cache, monkeypatch, caplog):
     def full(*_a, **_k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(files, "_noted", set())
+    monkeypatch.setattr(kernel_cache, "_noted", set())
     mod = _copy()  # the copy's text written; numba's files next, on a full disk
-    monkeypatch.setattr(numba_internals, "write_private", full)
+    monkeypatch.setattr(kernel_cache, "write_private", full)
     monkeypatch.setattr(copies, "write_private", full)
     out, hits = _f_rows(mod)
     assert hits == 0 and np.array_equal(out, X) and not _files(cache, ".nb?")
@@ -133,7 +136,7 @@ def test_truncated_index_and_unsealed_plain_numba_files_are_recompiled(cache):
     assert np.array_equal(_f_rows(_copy())[0], want) and files.CACHE_REPORT["damaged"] == 1
     # a file as plain numba writes it (no seal) is not read either
     nbc = _files(cache, ".nbc")[0]
-    nbc.write_bytes(numba_internals.unseal(nbc.read_bytes()))
+    nbc.write_bytes(kernel_cache.unseal(nbc.read_bytes()))
     got, hits = _f_rows(_copy())
     assert hits == 0 and np.array_equal(got, want) and files.CACHE_REPORT["damaged"] == 2
 
@@ -143,9 +146,9 @@ def test_plain_numba_reading_a_sealed_index_sees_another_version():
     unpickles the rest (nor fails) should some numba cache of a copy not be sealed."""
     from numba.core.caching import IndexDataCacheFile
 
-    raw = numba_internals.seal(pickle.dumps("0.0") + pickle.dumps(("stamp", {"key": "x.1.nbc"})))
-    assert numba_internals.unseal(raw) is not None
-    assert numba_internals.unseal(raw[:-1] + b"!") is None and numba_internals.unseal(raw[:50]) is None
+    raw = kernel_cache.seal(pickle.dumps("0.0") + pickle.dumps(("stamp", {"key": "x.1.nbc"})))
+    assert kernel_cache.unseal(raw) is not None
+    assert kernel_cache.unseal(raw[:-1] + b"!") is None and kernel_cache.unseal(raw[:50]) is None
     plain = IndexDataCacheFile("/nonexistent", "x", "stamp")
     f = __import__("io").BytesIO(raw)
     assert pickle.load(f) != plain._version  # the version check numba makes first
@@ -155,7 +158,7 @@ def test_rows_cfuncs_are_sealed_and_checked(cache):
     """loops.row_kernels' cfuncs share the copy's numba cache: written sealed, damage counted."""
     a = loops.row_kernels(MODEL, (0, 1))
     found = _files(cache, ".nb?")
-    assert found and all(numba_internals.unseal(f.read_bytes()) is not None for f in found)
+    assert found and all(kernel_cache.unseal(f.read_bytes()) is not None for f in found)
     nbc = _files(cache, ".nbc")
     assert len(nbc) == 2  # f_rows, h_rows
     for f in nbc:
@@ -183,7 +186,7 @@ def test_cache_directory_is_owner_only(cache):
 
 @pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0, reason="needs root to give a directory away")
 def test_cache_dir_of_another_user_is_not_used(cache, monkeypatch, caplog):
-    monkeypatch.setattr(files, "_noted", set())
+    monkeypatch.setattr(kernel_cache, "_noted", set())
     cache.mkdir(parents=True, mode=0o700)
     os.chown(cache, 65534, 65534)
     mod = _copy()
@@ -206,7 +209,7 @@ def test_unusable_cache_dir_compiles_in_memory_with_one_note(where, tmp_path, mo
             (root / "kernels").rmdir()
             pytest.skip("/sys/fs is writable here")
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(root))
-    monkeypatch.setattr(files, "_noted", set())
+    monkeypatch.setattr(kernel_cache, "_noted", set())
     # the process's row kernels compiled by earlier tests (cached on disk then) are not what is tested
     monkeypatch.setattr(loops, "_rows", {})
     monkeypatch.setattr(copies, "_bound", {})
