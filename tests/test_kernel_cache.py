@@ -14,7 +14,7 @@ import pytest
 from replay.filters.compiled import copies, files
 from replay.filters.p002 import stcpf
 from replay.models.random_walk import RandomWalkPosition
-from replay.util import kernel_cache
+from replay.util import kernel_cache as kc
 
 PREFIX = "replay_compiled_"
 MODEL = PREFIX + "0badcafe_"
@@ -27,7 +27,7 @@ def cache(tmp_path, monkeypatch):
     monkeypatch.setattr(copies, "_bound", {})
     report = {"rewritten": 0, "pruned": 0, "damaged": 0}
     monkeypatch.setattr(files, "CACHE_REPORT", report)
-    monkeypatch.setattr(kernel_cache, "CACHE_REPORT", report)
+    monkeypatch.setattr(kc, "CACHE_REPORT", report)
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:

@@ -1,6 +1,6 @@
 """Two processes writing one function's numba cache at once (two workers compiling two signatures): with
 numba's own save the index ends naming keys whose data file holds another key's code, or loses keys; with
-replay/util/kernel_cache.locked_save every key is kept and loads its own data."""
+replay.util.kernel_cache's locked_save every key is kept and loads its own data."""
 import multiprocessing as mp
 
 import pytest

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR, MAPPING, quiet_notes, run_option
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, quiet_notes, run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 
@@ -92,6 +92,7 @@ from replay.util.errors import ReplayError
     type=click.Path(exists=True, dir_okay=False),
     help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters.",
 )
+@ALLOW_MODULE
 @view_options
 def eval_cmd(
     dataset,
@@ -120,6 +121,7 @@ def eval_cmd(
     window,
     segment,
     tuned,
+    allow_modules=(),
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
@@ -146,6 +148,7 @@ def eval_cmd(
         first,
         data_dir,
         seed,
+        allow_modules,
     )
     numbered, inputs = _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir)
     from contextlib import ExitStack
@@ -234,6 +237,7 @@ def _configuration(
     first,
     data_dir,
     seed,
+    allow_modules=(),
 ):
     """``replay eval``'s configuration from its options, checked whole before any data is read:
     (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task)."""
@@ -255,7 +259,7 @@ def _configuration(
         from replay.tune.tuned import tuned_params
 
         given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
-        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
+        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task, allow_modules)
         names = names if given else t_names
         fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
         tparams = {**t_tparams, **tparams}

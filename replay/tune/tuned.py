@@ -11,11 +11,12 @@ from __future__ import annotations
 from replay.util.errors import ReplayError
 
 
-def tuned_params(path, task: str | None = None) -> tuple[list, dict, dict, str]:
-    """(filters, {filter: params}, task params, task) of a tuned file."""
+def tuned_params(path, task: str | None = None, allow_modules=()) -> tuple[list, dict, dict, str]:
+    """(filters, {filter: params}, task params, task) of a tuned file; a ``module:Class`` filter or
+    task of a module not in ``allow_modules`` is refused before anything is imported."""
     from replay.campaign import spec
 
-    camp = spec.load(path)
+    camp = spec.load(path, allow_modules, reader="--tuned")
     cfgs = [c for c in camp.configs if task is None or c.task == task]
     if not cfgs:
         raise ReplayError(f"--tuned {path}: no configuration of task {task!r} in it")

@@ -44,6 +44,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from numba.core.caching import Cache, IndexDataCacheFile
+from numba.np.ufunc.wrappers import _GufuncWrapper
 
 log = logging.getLogger("replay.kernels")
 CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (did not match
@@ -331,10 +332,29 @@ def _adopting(method):
     return wrapped
 
 
+def _paired_wrapper(self, wrapper_name):
+    """numba's ``_GufuncWrapper._compile_wrapper`` (a gufunc's loop, cached under its signature only),
+    checked: the cached loop calls its kernel by a name holding the compiling process's function
+    counter, so a loop cached by one process beside a kernel compiled by another (concurrent cold
+    starts) names a function this process does not have: a null pointer, a segfault on every later
+    call. Such a loop is built again here (and its cache entry replaced), never called."""
+    lib = _GufuncWrapper.numba_compile_wrapper(self, wrapper_name)
+    if self.is_parfors or lib.get_pointer_to_function(wrapper_name):
+        return lib
+    count(1, getattr(self.py_func, "__name__", "a gufunc") + "'s array form (a loop of another compilation)")
+    lib = self.context.codegen().create_library(str(self))
+    lib.enable_object_caching()
+    self._build_wrapper(lib, wrapper_name)
+    self.cache.save_overload(self.cres.signature, lib)
+    return lib
+
+
 if not hasattr(IndexDataCacheFile, "numba_save"):  # numba's own methods, kept once per process (a reload too)
     IndexDataCacheFile.numba_save, IndexDataCacheFile.numba_load = IndexDataCacheFile.save, IndexDataCacheFile.load
     Cache.numba_load_overload, Cache.numba_save_overload = Cache.load_overload, Cache.save_overload
+    _GufuncWrapper.numba_compile_wrapper = _GufuncWrapper._compile_wrapper
 NUMBA_SAVE, NUMBA_LOAD = IndexDataCacheFile.numba_save, IndexDataCacheFile.numba_load  # (the tests' control)
 IndexDataCacheFile.save, IndexDataCacheFile.load = locked_save, locked_load
 Cache.load_overload = _adopting(Cache.numba_load_overload)
 Cache.save_overload = _adopting(Cache.numba_save_overload)
+_GufuncWrapper._compile_wrapper = _paired_wrapper
