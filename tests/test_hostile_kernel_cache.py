@@ -1,7 +1,7 @@
 """A damaged or hostile kernel cache (``$REPLAY_CACHE_DIR/kernels``; corpus: tests/hostile.py).
 
 numba's cache files of a bound copy (``.nbi`` index, ``.nbc`` machine code: pickles) are sealed
-with their SHA-256 (replay/util/kernel_cache.py): a damaged one is never unpickled, it is
+with an HMAC under this user's key (replay.util.kernel_cache): a damaged one is never unpickled, it is
 removed, counted and compiled again, and the numbers are those of the undamaged cache. A cache
 directory that cannot be used compiles in memory with one note. Each test has its own
 ``REPLAY_CACHE_DIR``; the small random-walk model's rows kernels compile in about a second.
