@@ -368,3 +368,38 @@ def test_model_kernels_own_numba_cache_is_sealed_and_damage_rebuilt(tmp_path):
     assert again.returncode == 0 and again.stdout == first.stdout
     assert "damaged file" in again.stderr and "random_walk" in again.stderr
     assert all(kc.unseal(p.read_bytes()) is not None for p in (tmp_path / "numba").rglob("*.nb[ic]"))
+
+
+GUFUNC = '''
+import sys
+import numpy as np, numba as nb
+from replay.util import kernel_cache  # noqa: F401
+if sys.argv[1] == "shift":  # compile something first: this process's function counter moves on
+    nb.njit(lambda x: x + 1)(1)
+def k(x, p, out):
+    for i in range(x.shape[0]):
+        out[i] = 2.0 * x[i] + p[0]
+g = nb.guvectorize(["void(f8[:], f8[:], f8[:])"], "(n),(p),(n)", cache=True)(k)
+out = np.empty((2, 3))
+g(np.arange(6.0).reshape(2, 3), np.array([1.0]), out)
+print(out.tolist())
+'''
+
+
+def test_gufunc_loop_cached_beside_another_compilation_of_its_kernel_is_built_again(tmp_path):
+    """The crash of issue 33: a gufunc's loop cached by one process beside its kernel compiled by another
+    (the kernel's cache entry gone, or written by a concurrent process) names a function this process
+    does not have; numba's own cache then calls a null pointer (segfault). Built again here: the numbers."""
+    (tmp_path / "gk.py").write_text(GUFUNC)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "PYTHONPATH": str(tmp_path)}
+    run = lambda how: subprocess.run([sys.executable, str(tmp_path / "gk.py"), how], env=env,  # noqa: E731
+                                     capture_output=True, text=True, timeout=300)
+    first = run("plain")
+    assert first.returncode == 0 and first.stdout.strip() == "[[1.0, 3.0, 5.0], [7.0, 9.0, 11.0]]", first.stderr
+    kernel_index = [p for p in (tmp_path / "numba").rglob("gk.k-*.nbi")]
+    assert len(kernel_index) == 1 and list((tmp_path / "numba").rglob("guf-gk.k-*.nbi"))
+    kernel_index[0].unlink()  # the kernel is compiled again, the loop is loaded from the cache
+    again = run("shift")
+    assert again.returncode == 0, f"exit {again.returncode}: {again.stderr[-500:]}"
+    assert again.stdout == first.stdout and "a loop of another compilation" in again.stderr
+    assert run("plain").stdout == first.stdout  # and the entry it rewrote serves the next process

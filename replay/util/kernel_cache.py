@@ -232,6 +232,14 @@ def locked_load(self, key):
 # ------------------------------------------------------------------------------------ sealed files
 
 
+def _remove(path) -> None:
+    """Remove a file not to be read (a read-only cache: left, and never read either)."""
+    try:
+        Path(path).unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
 class SealedCacheFile(IndexDataCacheFile):
     """numba's index and data files of one function of replay, sealed, locked and bound to their
     signature (module docstring); the class of its cache file once :func:`adopt` saw it."""
@@ -243,7 +251,7 @@ class SealedCacheFile(IndexDataCacheFile):
             raw = f.read()
         payload = unseal(raw)
         if payload is None and cache_key() is not None:  # damaged: never unpickled; removed, compiled again
-            Path(path).unlink(missing_ok=True)
+            _remove(path)
             count(1, self.label)
         return payload
 
@@ -255,7 +263,7 @@ class SealedCacheFile(IndexDataCacheFile):
         if payload is None:  # its data files are orphans now: removed, or a new index could name them
             if cache_key() is not None:
                 for p in Path(self._cache_path).glob(self._index_name[: -len("nbi")] + "*.nbc"):
-                    p.unlink(missing_ok=True)
+                    _remove(p)
             return {}
         f = io.BytesIO(payload)
         if pickle.load(f) != self._version:
