@@ -56,3 +56,17 @@ def test_an_engine_that_changes_a_step_steps_in_python():
     plain, mine = UKF().run_batch(model, Z, X0, P0, rngs), InflatingUKF().run_batch(model, Z, X0, P0, rngs)
     for a, b in zip(plain, mine):
         assert np.all(np.diagonal(b.P, axis1=-2, axis2=-1) > np.diagonal(a.P, axis1=-2, axis2=-1))
+
+
+def test_every_module_with_cached_kernels_imports_the_cache_guard():
+    """numba's cache of a function is locked and sealed only once replay.util.kernel_cache is imported:
+    every module defining ``cache=True`` functions imports it first (a model's kernels may be the first
+    thing a process compiles, before any filter is imported)."""
+    missing = []
+    for d in ("replay", "filters", "adapters"):
+        for p in (ROOT / d).rglob("*.py"):
+            text = p.read_text()
+            if "cache=True" in text and p.name not in ("kernel_cache.py", "copies.py"):
+                if "from replay.util import kernel_cache" not in text:
+                    missing.append(str(p.relative_to(ROOT)))
+    assert missing == []
