@@ -17,6 +17,7 @@ them once per run, not once per step); the plain forms allocate them and call th
 from __future__ import annotations
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 from .gating import gate

@@ -13,6 +13,7 @@ one compilation (cached by numba) serves every model. When a loop runs:
 from __future__ import annotations
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 from numba import types
 

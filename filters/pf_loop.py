@@ -24,6 +24,7 @@ from __future__ import annotations
 from time import perf_counter
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 from numba import types
 

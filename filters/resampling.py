@@ -11,6 +11,7 @@ ancestor of position u is the first j with c_j > u.
 from __future__ import annotations
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 

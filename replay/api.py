@@ -123,16 +123,25 @@ def register_task(cls, *, name: str | None = None) -> str:
 
 
 def run_campaign(
-    campaign, *, out, workers: int | None = None, data_dir=None, quiet: bool = True, retry_failed: bool = False
+    campaign,
+    *,
+    out,
+    workers: int | None = None,
+    data_dir=None,
+    quiet: bool = True,
+    retry_failed: bool = False,
+    allow_modules=(),
 ):
     """Run a campaign file (TOML, ``campaigns/example.toml``) into ``out``: its leaderboard as a
-    DataFrame (one row per configuration; ``df.attrs["counts"]``: units computed, failed, ...)."""
+    DataFrame (one row per configuration; ``df.attrs["counts"]``: units computed, failed, ...).
+    A filter or task the file names as ``package.module:Class`` is refused before anything is
+    imported unless ``allow_modules`` holds its module (a class of this session: register it)."""
     from pathlib import Path
 
     from replay.campaign import execute, spec
     from replay.util.files import check_writable, refuse_overlap
 
-    c = spec.load(campaign)
+    c = spec.load(campaign, allow_modules)
     refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
     check_writable(Path(out), "out")
     counts = execute.run(c, Path(out), workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)

@@ -14,6 +14,7 @@ import pytest
 from replay.filters.compiled import copies, files
 from replay.filters.p002 import stcpf
 from replay.models.random_walk import RandomWalkPosition
+from replay.util import kernel_cache as kc
 
 PREFIX = "replay_compiled_"
 MODEL = PREFIX + "0badcafe_"
@@ -24,7 +25,9 @@ def cache(tmp_path, monkeypatch):
     """An empty kernel cache; the process's copies and counts restored afterwards."""
     monkeypatch.setenv("REPLAY_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(copies, "_bound", {})
-    monkeypatch.setattr(files, "CACHE_REPORT", {"rewritten": 0, "pruned": 0, "damaged": 0})
+    report = {"rewritten": 0, "pruned": 0, "damaged": 0}
+    monkeypatch.setattr(files, "CACHE_REPORT", report)
+    monkeypatch.setattr(kc, "CACHE_REPORT", report)
     before = set(sys.modules)
     yield tmp_path / "kernels"
     for name in set(sys.modules) - before:

@@ -1,12 +1,12 @@
 """Two processes writing one function's numba cache at once (two workers compiling two signatures): with
 numba's own save the index ends naming keys whose data file holds another key's code, or loses keys; with
-filters/compiled/numba_internals.locked_save every key is kept and loads its own data."""
+replay.util.kernel_cache's locked_save every key is kept and loads its own data."""
 import multiprocessing as mp
 
 import pytest
 from numba.core.caching import IndexDataCacheFile
 
-from replay.filters.compiled import numba_internals
+from replay.util import kernel_cache as numba_internals
 
 KEYS = 40
 

@@ -15,7 +15,8 @@ only calls it:
 * :class:`Kernel` — a kernel called through its compiled entry point once typed;
 * :func:`split`, :func:`threads`, :func:`grain` — index ranges on threads (:mod:`.threadpool`).
 
-Only :mod:`.numba_internals` reaches into numba's internals. Fallbacks (docs/architecture.md,
+Only :mod:`.numba_internals` reaches into numba's internals (and :mod:`replay.util.kernel_cache`,
+for numba's cache files of every replay function, the model kernels' included). Fallbacks (docs/architecture.md,
 "How a compiled step is called"): with ``NUMBA_DISABLE_JIT=1`` every kernel, copy, cfunc and
 loop is its Python function (the same numbers); a cache directory that cannot be used compiles
 in memory (one note), a damaged cache file is removed and compiled again; a model without

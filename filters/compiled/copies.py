@@ -117,11 +117,14 @@ def load(name: str, text: str, label: str = "a model", what: str = "kernels"):
     path = directory / f"{name}.py"
     try:
         if why is None and not _matches(path, name.rsplit("_", 1)[1]):
-            if path.exists():  # machine code compiled from the wrong text
+            wrong = path.exists()
+            if wrong:  # machine code compiled from the wrong text
                 _drop_numba_cache(directory, name)
                 files.CACHE_REPORT["rewritten"] += 1
                 log.warning("kernel cache: %s did not match its hash; rewritten (compiled again)", path.name)
-            write_private(path, text.encode("utf-8"))  # atomic: concurrent processes write the same text
+            # atomic; an absent copy is written by the first of concurrent processes only, so that all
+            # see one file time (numba's index is valid for its source file's time and size only)
+            write_private(path, text.encode("utf-8"), replace=wrong)
     except OSError as e:  # e.g. a full disk
         why = f"kernel cache {directory}: cannot write {path.name} ({e.strerror or e})"
     if why is not None:  # the templates' decorators without numba's disk cache: same machine code

@@ -2,50 +2,23 @@
 
 What the cache trusts: the owner's own files. The directory is kept owner-only (0700, files
 0600); one writable by others is made owner-only, one owned by another user is not used
-(:func:`private_dir`). Nothing here knows numba.
+(:func:`private_dir`). Nothing here knows numba; numba's files of the copies are sealed
+with this user's key (:mod:`replay.util.kernel_cache`).
 """
 
 from __future__ import annotations
 
-import logging
 import os
 import stat
 import uuid
 from pathlib import Path
 
-log = logging.getLogger("replay.kernels")
-CACHE_REPORT = {"rewritten": 0, "pruned": 0, "damaged": 0}  # this process: copies rewritten (did not match
-# their hash), removed (old), numba cache files removed (seal did not match)
-_noted: set = set()
+from replay.util.kernel_cache import CACHE_REPORT, cache_root, log, note_once, write_private  # noqa: F401
 
 
 def cache_dir() -> Path:
     """``$REPLAY_CACHE_DIR/kernels`` (default ``~/.cache/replay/kernels``)."""
-    root = os.environ.get("REPLAY_CACHE_DIR") or os.path.join(os.environ.get("XDG_CACHE_HOME") or "~/.cache", "replay")
-    return Path(root).expanduser() / "kernels"
-
-
-def note_once(msg: str) -> None:
-    if msg not in _noted:
-        _noted.add(msg)
-        log.warning(msg)
-
-
-def write_private(path, data: bytes) -> None:
-    """Write ``data`` to ``path`` owner-only (0600) and atomically: a crash leaves old or new."""
-    path = str(path)
-    tmp = f"{path}.tmp.{uuid.uuid4().hex[:16]}"
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    return cache_root() / "kernels"
 
 
 def private_dir(directory: Path) -> str | None:

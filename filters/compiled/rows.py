@@ -13,6 +13,7 @@ run), not one per state. The arithmetic of each state is the kernel's own.
 """
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 
 # MODEL KERNELS: replay.filters.compiled.bind puts here the import of one model's f, h, F, H
 

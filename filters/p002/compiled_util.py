@@ -28,6 +28,7 @@ from collections import namedtuple
 from typing import NamedTuple
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 from replay.filters.particles import moments as particle_moments  # the one particle bookkeeping

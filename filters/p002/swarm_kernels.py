@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 

@@ -67,6 +67,7 @@ from replay.run.pipeline import plain as _plain
 from replay.util import tomlfile
 from replay.util.errors import ReplayError
 from replay.util.params import Param
+from replay.util.plugins import refuse_unallowed
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and the API, one declaration
@@ -97,10 +98,13 @@ class Campaign:
     where: object = None  # finds a key's line for messages about the file
 
 
-def load(path) -> Campaign:
-    """Read and check a campaign file; returns its configurations (no work done)."""
+def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
+    """Read and check a campaign file; returns its configurations (no work done). A filter or task
+    named ``package.module:Class`` is refused before anything is imported unless its module is in
+    ``allow_modules`` (:func:`check_sources`)."""
     path = Path(path)
     doc, where = _read(path)
+    check_sources(where, doc, allow_modules, reader)
     head = _head(where, doc, path)
     task_params = entries.task_tables(where, doc)
     datasets, filters = _entry_lists(where, doc)
@@ -137,6 +141,25 @@ def load(path) -> Campaign:
     return Campaign(
         path, head["name"], runs, head["seed"], head["batch"], head["data_dir"], configs, doc.get("tune"), where
     )
+
+
+def _names(doc: dict) -> list[tuple[str, str, object]]:
+    """(key, kind, name) of every filter and task the file names: ``[[filter]]``, ``[[dataset]]`` tasks,
+    ``[task.NAME]`` tables and the ``[tune]`` filters (their shapes are checked later)."""
+    lists = lambda v: v if isinstance(v, list) else []  # noqa: E731
+    out = [("name", "filter", f.get("name")) for f in lists(doc.get("filter")) if isinstance(f, dict)]
+    for d in lists(doc.get("dataset")):
+        out += [("tasks", "task", t) for t in lists(d.get("tasks") if isinstance(d, dict) else None)]
+    out += [("task", "task", t) for t in (doc.get("task") if isinstance(doc.get("task"), dict) else {})]
+    tune = doc.get("tune") if isinstance(doc.get("tune"), dict) else {}
+    return out + [("filters", "filter", n) for n in lists(tune.get("filters"))]
+
+
+def check_sources(where, doc: dict, allow_modules=(), reader: str = "a campaign file") -> None:
+    """The rule of ``replay rerun`` (:func:`replay.util.plugins.refuse_unallowed`) for every filter and
+    task a campaign file names: a ``module:Class`` of a module not allowed is refused, nothing imported."""
+    for key, kind, name in _names(doc):
+        refuse_unallowed(name, allow_modules, f"{where.path}:{where.line(key, name)}: {key}", kind, reader)
 
 
 def _read(path: Path) -> tuple[dict, Where]:

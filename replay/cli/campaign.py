@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR
 from replay.util.errors import ReplayError
 from replay.util.files import check_writable, refuse_overlap
 
@@ -50,20 +50,21 @@ def check_names(out, what: str) -> None:
 @click.option("--dask-local", default=None, type=click.IntRange(1), help="Start a Dask LocalCluster of N workers.")
 @DATA_DIR
 @click.option("--retry-failed", is_flag=True, help="Compute failed units again.")
+@ALLOW_MODULE
 @click.option("--quiet", "-q", is_flag=True, help="No progress output.")
 @click.option(
     "--wait",
     is_flag=True,
     help="If another campaign process is writing to the result directory, wait for it instead of refusing.",
 )
-def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet, wait):
+def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet, wait, allow_modules=()):
     """Run the units of campaign FILE not yet stored in the result directory."""
     from replay.campaign import board, execute, lock, spec
     from replay.util.staging import check_output_dir
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
-    c = spec.load(file)
+    c = spec.load(file, allow_modules)  # a module:Class name refused before anything is imported
     from replay.tune import campaign as tune_campaign
 
     tunes = tune_campaign.plan(c, data_dir)  # a [tune] table: checked before any unit too

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR, MAPPING, quiet_notes, run_option
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, quiet_notes, run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
 
@@ -94,6 +94,7 @@ from replay.util.errors import ReplayError
     "dataset it was tested on, also its test data (views, --first, dataset parameters; a differing one is "
     "refused) and its --runs, --seed, --alignment unless given, so that it gives the tune's held-out rows.",
 )
+@ALLOW_MODULE
 @view_options
 def eval_cmd(
     dataset,
@@ -122,6 +123,7 @@ def eval_cmd(
     window,
     segment,
     tuned,
+    allow_modules=(),
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
@@ -149,6 +151,7 @@ def eval_cmd(
         run,
         data_dir,
         quiet,
+        allow_modules,
     )
     numbered, inputs = _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir)
     from contextlib import ExitStack
@@ -233,6 +236,7 @@ def _configuration(
     run,
     data_dir,
     quiet,
+    allow_modules=(),
 ):
     """``replay eval``'s configuration from its options, checked whole before any data is read:
     (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task).
@@ -255,7 +259,7 @@ def _configuration(
         from replay.tune.tuned import tuned_params
 
         given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
-        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task)
+        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task, allow_modules)
         names = names if given else t_names
         fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
         tparams = {**t_tparams, **tparams}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import DATA_DIR, quiet_notes, run_option
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, quiet_notes, run_option
 from replay.util.errors import ReplayError
 
 
@@ -22,14 +22,7 @@ from replay.util.errors import ReplayError
     type=click.Path(),
     help="Also write the rerun's leaderboard, manifest and estimates to this directory.",
 )
-@click.option(
-    "--allow-module",
-    "allow_modules",
-    multiple=True,
-    metavar="MODULE",
-    help="Let the manifest name a filter, task or adapter as 'MODULE:Class' (importing MODULE runs its "
-    "code); without it only built-in and installed (entry-point) ones are loaded. Repeatable.",
-)
+@ALLOW_MODULE
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
 def rerun_cmd(manifest_file, data_dir, out, allow_modules=(), quiet=False):
     """Repeat the run recorded in a manifest.json and check that every recorded result is reproduced exactly."""

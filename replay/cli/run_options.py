@@ -27,6 +27,14 @@ MAPPING = click.option(
     type=click.Path(exists=True, dir_okay=False),
     help="Topic mapping (TOML) for a bag or MCAP file (docs/bags.md).",
 )
+ALLOW_MODULE = click.option(
+    "--allow-module",
+    "allow_modules",
+    multiple=True,
+    metavar="MODULE",
+    help="Let the file this command reads name a filter, task or adapter as 'MODULE:Class' (importing MODULE "
+    "runs its code); without it only built-in and installed (entry-point) ones are loaded. Repeatable.",
+)
 
 
 class Declared(click.ParamType):

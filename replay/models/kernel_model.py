@@ -48,6 +48,7 @@ def array_form(kernel, matrix: bool):
     """The gufunc ``g(x, p, out)`` applying the one-state numba ``kernel`` over the leading axes
     of ``x`` (..., n) and ``out`` (..., m) (or (..., m, n) when ``matrix``); ``p`` is shared."""
     import numba as nb
+    from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 
     if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT=1: the plain-Python kernel, state by state
         return _Loop(kernel)

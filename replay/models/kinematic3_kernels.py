@@ -15,6 +15,7 @@ Jacobian has no short closed form worth a second text of the equations.
 from __future__ import annotations
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 from replay.models.kinematic_select import H, h  # noqa: F401 (the module's measurement kernels)

@@ -18,6 +18,7 @@ step, by :meth:`UNGM.kernel_params`), ``p_h`` empty.
 from __future__ import annotations
 
 import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 
 
 @nb.njit(cache=True)

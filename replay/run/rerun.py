@@ -62,7 +62,7 @@ from replay.scoring.summary import TIMING
 from replay.util.errors import ReplayError
 from replay.util.regular import read_text
 from replay.util.tomlfile import MAX_DEPTH, depth
-from replay.util.plugins import TARGET
+from replay.util.plugins import refuse_unallowed
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
 HASH = re.compile(r"^[0-9a-f]{16}$")
@@ -178,18 +178,10 @@ def check_sources(cfg: dict, path, allow_modules=()) -> None:
     Built-in names, installed entry points (their distributions were installed by the user)
     and names registered in this session are resolved without such a name; nothing is
     imported here. A manifest received from elsewhere thus runs only code already chosen."""
-    allowed = {allow_modules} if isinstance(allow_modules, str) else set(allow_modules or ())
     named = [("config.filters", "filter", n) for n in cfg["filters"] if not is_recorded(n)]
     named += [("config.task", "task", cfg["task"]), ("config.adapter", "adapter", cfg["adapter"])]
     for key, kind, name in named:
-        if isinstance(name, str) and TARGET.fullmatch(name):
-            module = name.partition(":")[0]
-            if module not in allowed:
-                raise ReplayError(
-                    f"{path}: {key}: {name!r:.120} would import the module {module}: a rerun loads "
-                    f"only built-in and installed (entry-point) {kind}s; if you trust that module, "
-                    f"pass --allow-module {module}"
-                )
+        refuse_unallowed(name, allow_modules, f"{path}: {key}", kind, "a rerun")
 
 
 def _check_filter(cfg: dict, results: dict, name: str, bad) -> None:

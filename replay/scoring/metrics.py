@@ -82,6 +82,7 @@ def lstsq_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 @functools.cache
 def _lstsq_each():
     import numba  # here: scoring without a singular covariance never imports numba (about 0.5 s)
+    from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 
     @numba.njit(cache=True)
     def each(A, b, rcond, out):

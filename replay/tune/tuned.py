@@ -11,12 +11,13 @@ from __future__ import annotations
 from replay.util.errors import ReplayError
 
 
-def tuned_params(path, task: str | None = None) -> tuple[list, dict, dict, str]:
-    """(filters, {filter: params}, task params, task) of a tuned file."""
+def tuned_params(path, task: str | None = None, allow_modules=()) -> tuple[list, dict, dict, str]:
+    """(filters, {filter: params}, task params, task) of a tuned file; a ``module:Class`` filter or
+    task of a module not in ``allow_modules`` is refused before anything is imported."""
     from replay.campaign import spec
 
     try:
-        camp = spec.load(path)
+        camp = spec.load(path, allow_modules, reader="--tuned")
     except ReplayError as e:  # the file named: as the user gave it
         raise ReplayError(f"--tuned {e}") from None
     cfgs = [c for c in camp.configs if task is None or c.task == task]

@@ -108,6 +108,20 @@ def discover(group: str, kind: str, valid=NAME.fullmatch) -> tuple[dict, dict, l
     return plugins, conflicts, problems
 
 
+def refuse_unallowed(name, allowed, where: str, kind: str, reader: str) -> None:
+    """The one rule for names read from a file (a manifest, a campaign file, a ``tuned.toml``): a
+    ``package.module:Class`` name is refused, before anything is imported, unless its module is in
+    ``allowed`` (``--allow-module``); built-in, installed (entry-point) and this session's names have
+    no ``:`` and pass. One line: ``where``, the name, the module, what ``reader`` loads, the flag."""
+    if isinstance(name, str) and TARGET.fullmatch(name):
+        module = name.partition(":")[0]
+        if module not in ({allowed} if isinstance(allowed, str) else set(allowed or ())):
+            raise ReplayError(
+                f"{where}: {name!r:.120} would import the module {module}: {reader} loads only built-in "
+                f"and installed (entry-point) {kind}s; if you trust that module, pass --allow-module {module}"
+            )
+
+
 def load_target(target: str):
     """The object ``"module:attribute"`` names (the attribute may be dotted)."""
     module, _, attr = target.partition(":")
