@@ -96,7 +96,9 @@ def test_nav2_odometry_against_amcl(shared_dir):
                          dataset_params={"mapping": str(MAPPINGS / "nav2_turtlebot_fusion.toml")})
     by = {r["filter"]: r for r in ev.rows}
     assert by["ekf"]["pos_rmse"] == pytest.approx(0.7198, abs=5e-4)
-    assert by["ckf"]["pos_rmse"] == pytest.approx(1.3016, abs=5e-4)
+    # the CKF was 1.30 m while its predicted mean was the points' (pulled inwards once the heading is
+    # uncertain); its mean is f(mean) for a dead-reckoned pose (Model.mean_at_f): it agrees with the EKF
+    assert by["ckf"]["pos_rmse"] == pytest.approx(0.7198, abs=5e-4)
     assert by["recorded:wheel_odometry"]["pos_rmse"] == pytest.approx(0.4958, abs=5e-4)  # SE(3)-aligned
 
 
