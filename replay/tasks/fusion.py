@@ -211,7 +211,7 @@ class FusionTask(Task):
         if is_diff:
             att_name = field_channel(frame, entry, "attitude")
             att = frame.channels[att_name].values if att_name else None
-            rows, derived = differential(ctx.t, vals, valid, att, fld, f"{where}: {key}")
+            rows, derived = differential(ctx.t, vals, valid, att, fld, f"{where}: {key}", ctx.dims == 3)
             vals = np.full((n, 3), np.nan)
             vals[rows] = derived
             valid = np.zeros(n, bool)
@@ -322,10 +322,12 @@ class FusionTask(Task):
             att = frame.reference.get("position_attitude")
             if att is not None and att.valid.any():
                 k = self._nearest_valid(att.valid, first)
-                x0[yaw_i] = att.values[k, 2]
-                known.append(yaw_i)
+                angles = [yaw_i] if dims == 2 else [3, 4, 5]  # 3-D: roll and pitch too (the known start)
+                x0[angles] = att.values[k, 3 - len(angles) : 3]
+                known += angles
                 notes = notes + [
-                    "task fusion: no attitude input: the start heading is the reference's "
-                    "(nearest the first sensor message)"
+                    "task fusion: no attitude input: the start "
+                    + ("heading" if dims == 2 else "attitude (roll, pitch, yaw)")
+                    + " is the reference's (nearest the first sensor message)"
                 ]
         return x0, notes, known
