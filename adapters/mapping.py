@@ -57,7 +57,7 @@ from .rosmsg import KINDS, kind_of, normalize_type
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise"}
+ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "twist_frame"}
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
@@ -253,6 +253,13 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
     """The fusion task's settings of a [channels] entry: ``fuse`` and ``differential`` (lists of
     fields), ``noise`` (a table field = variance, in the field's unit squared)."""
     out = {}
+    if "twist_frame" in spec:  # an Odometry's twist: in its child frame (REP 105) or its parent's
+        if ref or spec["twist_frame"] not in ("child", "parent"):
+            raise ReplayError(
+                f"{source}: [{'reference' if ref else 'channels'}] {name}: twist_frame must be \"child\" or "
+                f"\"parent\" on a [channels] entry (got {spec['twist_frame']!r})"
+            )
+        out["twist_frame"] = spec["twist_frame"]
     for key in ("fuse", "differential", "noise"):
         if key not in spec:
             continue

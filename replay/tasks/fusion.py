@@ -42,6 +42,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
+from .fusion_frames import twist_in_body
 from .fusion_inputs import (
     NOISE_PARAM,
     components,
@@ -208,6 +209,10 @@ class FusionTask(Task):
         vals = np.asarray(ch.values, float).reshape(n, -1)
         valid = ch.valid & np.isfinite(vals).all(axis=1)
         label = fld
+        if not is_diff and fld in ("velocity", "rate") and "nav_msgs/msg/Odometry" in entry["source"]:
+            vals, note = twist_in_body(frame, entry, fld, vals, valid, where, key)  # REP 105, or declared
+            valid = valid & np.isfinite(vals).all(axis=1)
+            m.notes.append(note)
         if is_diff:
             att_name = field_channel(frame, entry, "attitude")
             att = frame.channels[att_name].values if att_name else None
