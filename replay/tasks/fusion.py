@@ -24,7 +24,9 @@ mapping (``docs/bags.md``, "The fusion task"):
   so; no other reference sample reaches a filter. Before the first sensor message the state
   is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else
   the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
-  (noted).
+  (noted; in 3-D its roll and pitch too).
+* **Frames**: an odometry's twist is the body's (REP 105's child frame) or declared
+  (``twist_frame``): :mod:`replay.tasks.fusion_frames`; every decision is a note.
 
 Refused in one line: a frame with no sensor input (naming the tasks that would run), no
 reference (nothing to score against: how to declare one), an unknown field, a differential
