@@ -57,7 +57,7 @@ from .rosmsg import KINDS, kind_of, normalize_type
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "twist_frame"}
+ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "twist_frame", "mount"}
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
@@ -260,6 +260,19 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
                 f"\"parent\" on a [channels] entry (got {spec['twist_frame']!r})"
             )
         out["twist_frame"] = spec["twist_frame"]
+    if "mount" in spec:  # an IMU's mounting: the rotation base_link -> sensor (roll, pitch, yaw; rad)
+        m = spec["mount"]
+        ok = (
+            isinstance(m, list)
+            and len(m) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in m)
+        )
+        if ref or not ok or not all(abs(float(v)) < 10 for v in m):
+            raise ReplayError(
+                f"{source}: [{'reference' if ref else 'channels'}] {name}: mount must be [roll, pitch, yaw] (rad, "
+                f"the sensor's rotation in the body frame) on a [channels] entry (got {m!r})"
+            )
+        out["mount"] = [float(v) for v in m]
     for key in ("fuse", "differential", "noise"):
         if key not in spec:
             continue

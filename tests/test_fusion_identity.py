@@ -129,3 +129,60 @@ def test_mean_at_f_run_loop_equals_the_step_engine(tmp_path, name, monkeypatch):
     err = np.linalg.norm(slow.x[:, :2] - pb.truth_position[:, :2], axis=1)
     assert np.sqrt(np.mean(err**2)) < 0.1
 
+
+
+def imu_frame(yaw_sign=1.0, mount=None):
+    """A frame of one IMU turning at 0.2 sin(0.5 t) rad/s about the body z for 30 s (20 Hz), its gyro and
+    orientation seen through ``mount`` (the sensor's rotation in the body), its yaw reversed
+    (``yaw_sign`` -1: NED-like) or not."""
+    from types import SimpleNamespace
+
+    from replay.models.kinematic import rotation as rot
+
+    t = np.arange(0, 30, 0.05)
+    body_att = np.column_stack([0 * t, 0 * t, 0.4 * (1 - np.cos(0.5 * t))])
+    Rm = rot(*np.asarray(mount or (0, 0, 0), float))
+    rate = np.column_stack([0 * t, 0 * t, 0.2 * np.sin(0.5 * t)])
+    gyro = rate @ Rm  # omega_imu = R_m' omega_body
+    R = np.einsum("kij,jl->kil", rot(*body_att.T), Rm)  # R_world_imu = R_world_body R_m
+    att = np.column_stack([np.arctan2(R[:, 2, 1], R[:, 2, 2]), -np.arcsin(R[:, 2, 0]), np.arctan2(R[:, 1, 0], R[:, 0, 0])])
+    att[:, 2] *= yaw_sign
+    ch = SimpleNamespace(values=gyro, valid=np.ones(len(t), bool), description="imu gyro")
+    entry = {"entry": "imu", "source": "/imu (sensor_msgs/msg/Imu)", "channels": {"gyro": "imu"}}
+    if mount:
+        entry["mount"] = list(mount)
+    return SimpleNamespace(t=t, channels={"imu": ch}), entry, att
+
+
+def test_imu_mount_rotates_gyro_and_attitude_into_the_body():
+    from replay.tasks.fusion_frames import imu_yaw_sense, mounted
+
+    mount = (np.pi / 2, 0.0, -np.pi / 2)  # test1.bag's IMU (robot_localization's test launch)
+    frame, entry, att = imu_frame(mount=mount)
+    gyro, note = mounted(entry, "gyro", frame.channels["imu"].values, "[channels] imu")
+    np.testing.assert_allclose(gyro[:, :2], 0, atol=1e-12)
+    np.testing.assert_allclose(gyro[:, 2], 0.2 * np.sin(0.5 * frame.t), atol=1e-12)
+    assert "declared: rotated into the body frame" in note
+    body, _ = mounted(entry, "attitude", att, "[channels] imu")
+    np.testing.assert_allclose(body[:, :2], 0, atol=1e-9)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (body[:, 2] - 0.4 * (1 - np.cos(0.5 * frame.t))))), 0, atol=1e-9)
+    ok = np.ones(len(frame.t), bool)
+    assert "turns with the gyro's z (correlation 1.00" in imu_yaw_sense(frame, entry, body, ok, "w", "[channels] imu")
+    entry.pop("mount")  # not declared: the sensor's z is not the yaw axis; undecided, said
+    assert "does not follow (undecided" in imu_yaw_sense(frame, entry, att, ok, "w", "[channels] imu")
+
+
+def test_imu_yaw_turning_against_its_gyro_refused():
+    from replay.tasks.fusion_frames import imu_yaw_sense
+
+    frame, entry, att = imu_frame(yaw_sign=-1.0)
+    with pytest.raises(ReplayError, match=r"^w: \[channels\] imu: /imu .*turns against .*correlation -1.00"):
+        imu_yaw_sense(frame, entry, att, np.ones(len(frame.t), bool), "w", "[channels] imu")
+
+
+def test_mount_refused_where_it_cannot_be(tmp_path):
+    write_odometry_bag(tmp_path / "b", duration=5.0)
+    for extra, msg in ((", mount = [1, 2]", r"mount must be \[roll, pitch, yaw\]"),
+                       (", mount = [0, 0, 0.5]", r"mount is for an Imu \(not nav_msgs/msg/Odometry\)")):
+        with pytest.raises(ReplayError, match=msg):
+            rmse(tmp_path / "b", mapping(tmp_path / f"m{len(extra)}.toml", extra=extra), 2, filters=("ekf",))

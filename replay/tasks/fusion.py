@@ -44,7 +44,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
-from .fusion_frames import twist_in_body
+from .fusion_frames import imu_yaw_sense, mounted, twist_in_body
 from .fusion_inputs import (
     NOISE_PARAM,
     components,
@@ -215,6 +215,11 @@ class FusionTask(Task):
             vals, note = twist_in_body(frame, entry, fld, vals, valid, where, key)  # REP 105, or declared
             valid = valid & np.isfinite(vals).all(axis=1)
             m.notes.append(note)
+        if role == "imu" and fld in ("gyro", "attitude") and not is_diff:
+            vals, note = mounted(entry, fld, vals, key)
+            m.notes.append(note)
+        if role == "imu" and fld == "attitude" and not is_diff:
+            m.notes.append(imu_yaw_sense(frame, entry, vals, valid, where, key))
         if is_diff:
             att_name = field_channel(frame, entry, "attitude")
             att = frame.channels[att_name].values if att_name else None

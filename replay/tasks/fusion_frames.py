@@ -97,3 +97,59 @@ def evident_frame(t, pos, att, vel, valid, min_speed=0.2):
         if miss[b_] > 3 * miss[a_] and miss[b_] > scale:
             return a_
     return None
+
+
+def imu_yaw_sense(frame, entry, att_vals, valid, where, key):
+    """The note on a fused IMU attitude's convention, or a refusal in one line: its yaw (in the
+    body frame, after any ``mount``) must turn the way its gyro's body z says (z up, REP 103's ENU
+    and FLU). Over windows of about 1 s, the yaw's change and the integrated gyro z correlate
+    below -0.5: a NED orientation (yaw clockwise from north) beside a z-up gyro, or the reverse,
+    refused; above 0.5: ENU, noted; between, or their spreads more than 2 times apart (a gyro z
+    that does not turn): undecided, noted (the sensor's axes may not be the body's: ``mount``)."""
+    g = frame.channels.get(field_channel(frame, entry, "gyro") or "")
+    if g is None:
+        return f"task fusion: {key} attitude: no gyro beside it: its yaw convention (ENU) is not checked"
+    gyro = mounted(entry, "gyro", np.asarray(g.values, float).reshape(len(frame.t), -1), key)[0]
+    idx = np.flatnonzero(valid & g.valid & np.isfinite(gyro).all(axis=1) & np.isfinite(att_vals[:, 2]))
+    t = np.asarray(frame.t, float)[idx]
+    if len(idx) < 20 or t[-1] - t[0] < 10.0:
+        return f"task fusion: {key} attitude: too few messages to check its yaw convention against the gyro"
+    w = max(1, int(round(1.0 / np.median(np.diff(t)))))
+    turned = np.concatenate([[0.0], np.cumsum((gyro[idx][1:, 2] + gyro[idx][:-1, 2]) / 2 * np.diff(t))])
+    yaw = np.unwrap(np.asarray(att_vals, float)[idx, 2])
+    dy, dg = yaw[w:] - yaw[:-w], turned[w:] - turned[:-w]
+    scale = np.std(dy) / max(np.std(dg), 1e-300)  # near 1 when the gyro's z is the axis the yaw turns about
+    c = float(np.corrcoef(dy, dg)[0, 1]) if 0.5 < scale < 2.0 else 0.0
+    if c < -0.5:
+        raise ReplayError(
+            f"{where}: {key}: {entry['source']}'s orientation yaw turns against its angular velocity about z "
+            f"(correlation {c:.2f} over 1 s): a NED orientation (yaw clockwise from north) beside a z-up gyro, "
+            'or the reverse; fuse = ["gyro"] only'
+        )
+    sense = "turns with" if c > 0.5 else "does not follow (undecided; mount = [roll, pitch, yaw] if not z up)"
+    return f"task fusion: {key} attitude: its yaw {sense} the gyro's z (correlation {c:.2f} over 1 s)"
+
+
+def mounted(entry, fld, vals, key):
+    """(values in the body frame, note) of an IMU's ``gyro`` or ``attitude`` declared ``mount =
+    [roll, pitch, yaw]`` (the sensor's rotation R_m in the body frame, as a static transform
+    base_link -> imu_link, robot_localization's use of it): omega_body = R_m omega_imu,
+    R_world_body = R_world_imu R_m'. Not declared: as recorded (noted)."""
+    mount = entry.get("mount")
+    if mount is None:
+        return vals, f"task fusion: {key} {fld}: no mount declared: the sensor's axes are the body's"
+    Rm = rotation(np.array([mount], float))[0]
+    ok = np.isfinite(vals).all(axis=1)
+    out = np.full(vals.shape, np.nan)
+    if fld == "attitude":
+        R = np.einsum("kij,lj->kil", rotation(vals[ok]), Rm)  # R_world_imu R_m'
+        out[ok] = np.column_stack(
+            [
+                np.arctan2(R[:, 2, 1], R[:, 2, 2]),
+                -np.arcsin(np.clip(R[:, 2, 0], -1, 1)),
+                np.arctan2(R[:, 1, 0], R[:, 0, 0]),
+            ]
+        )
+    else:
+        out[ok] = vals[ok] @ Rm.T
+    return out, f"task fusion: {key} {fld}: mount = {mount} declared: rotated into the body frame"
