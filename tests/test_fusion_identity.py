@@ -203,3 +203,15 @@ def test_test1_odometry_alone_pf_within_its_interval_with_the_odometry_noise(tes
                          task_params=dict(q_attitude=1e-6, q_position=1e-4, r_rate=1e-4, r_velocity=1e-4))
     row = ev.rows[0]
     assert row["pos_rmse"] - row["pos_rmse_ci95"] <= 3.6 and row["pos_rmse"] < 5.0, row
+
+
+def test_an_edited_mapping_is_read_again_in_the_same_process(tmp_path):
+    """The frame of a file is read once per process while the file is unchanged; the mapping is part
+    of what it is read with: rewritten (same path, same second), the next evaluation reads it again
+    (it gave the first mapping's refusal)."""
+    write_odometry_bag(tmp_path / "b", child="base_link", twist_in="parent")
+    mp = mapping(tmp_path / "m.toml")
+    with pytest.raises(ReplayError, match="child_frame_id is 'base_link'"):
+        rmse(tmp_path / "b", mp, 2, filters=("ekf",))
+    by, _ = rmse(tmp_path / "b", mapping(mp, extra=', twist_frame = "parent"'), 2, filters=("ekf",))
+    assert by["ekf"] < 0.3
