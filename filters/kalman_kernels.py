@@ -138,19 +138,21 @@ def sigma_points_into(x, P, xi, X, dev, L):
 
 
 @nb.njit(cache=True)
-def sigma_moments(Y, wm, wc, mask, Q, mean, cov):
+def sigma_moments(Y, wm, wc, mask, Q, mean, cov, at_f=False):
     """The predicted moments of each run m of the points Y (M, p, n) (the unscented transform):
     mean[m] = sum wm_i Y_i (circular for ``mask``), cov[m] = sum wc_i D_i D_i' + Q with
-    D_i = Y_i - mean[m] (``mask`` wrapped)."""
-    return sigma_moments_into(Y, wm, wc, mask, Q, mean, cov, np.empty(Y.shape[1:]))
+    D_i = Y_i - mean[m] (``mask`` wrapped). ``at_f``: mean[m] is given (f of the prior mean,
+    :attr:`replay.model.Model.mean_at_f`) and kept; the covariance is taken about it."""
+    return sigma_moments_into(Y, wm, wc, mask, Q, mean, cov, np.empty(Y.shape[1:]), at_f)
 
 
 @nb.njit(cache=True)
-def sigma_moments_into(Y, wm, wc, mask, Q, mean, cov, D):
+def sigma_moments_into(Y, wm, wc, mask, Q, mean, cov, D, at_f=False):
     """:func:`sigma_moments` with its work array D (p, n) given."""
     M, p, n = Y.shape
     for m in range(M):
-        point_mean(Y[m], wm, mask, mean[m])
+        if not at_f:
+            point_mean(Y[m], wm, mask, mean[m])
         deviations(Y[m], mean[m], mask, D)
         weighted_outer(D, D, wc, cov[m])
         for a in range(n):
@@ -183,19 +185,20 @@ def innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, zh, Dz):
 
 
 @nb.njit(cache=True)
-def sigma_predict(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev):
+def sigma_predict(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, at_f=False):
     """The sigma-point prediction of each run m and the points of the update (one call per step):
-    :func:`sigma_moments` of the propagated points Y (M, p, n) into mean, cov, then
-    :func:`sigma_points` of (mean, cov) into X, dev. Returns -1, or the first run whose
-    predicted covariance is not positive definite (its points, and later runs', not made)."""
+    :func:`sigma_moments` of the propagated points Y (M, p, n) into mean, cov (``at_f``: mean
+    given), then :func:`sigma_points` of (mean, cov) into X, dev. Returns -1, or the first run
+    whose predicted covariance is not positive definite (its points, and later runs', not made)."""
     n = Y.shape[2]
-    return sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, np.empty(Y.shape[1:]), np.empty((n, n)))
+    D, L = np.empty(Y.shape[1:]), np.empty((n, n))
+    return sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L, at_f)
 
 
 @nb.njit(cache=True)
-def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L):
+def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L, at_f=False):
     """:func:`sigma_predict` with its work arrays D (p, n), L (n, n) given."""
-    sigma_moments_into(Y, wm, wc, xmask, Q, mean, cov, D)
+    sigma_moments_into(Y, wm, wc, xmask, Q, mean, cov, D, at_f)
     return sigma_points_into(mean, cov, xi, X, dev, L)
 
 

@@ -42,18 +42,19 @@ def apply_rows(fun, X, p, out):
         fun(X[m], p, out[m])
 
 
-SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
+SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, types.boolean, _MASK, _MASK, *_OUT)
 EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
 
 
 @nb.njit(cache=True, nogil=True)
-def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
+def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, Xout, Pout, nis):
     """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
     Z (M, steps, nz), every component present at the steps k where ``seen[k]``, none at the
     others (no update there: the prediction is the estimate, its NIS NaN); per step k: Pf[k],
-    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step). Writes
+    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step); ``at_f``:
+    the predicted mean is f(x) (:attr:`replay.model.Model.mean_at_f`). Writes
     Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
     a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
     M, steps, nz = Z.shape
@@ -65,9 +66,15 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
     group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
+    xc = np.empty((M, n))
     for k in range(steps):
         apply_rows(f, X, Pf[k], Y)
-        if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L) >= 0:
+        if at_f:
+            f(x, Pf[k], xc)
+            for m in range(M):
+                wrap(xc[m], xmask)
+            x[:] = xc
+        if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L, at_f) >= 0:
             return k
         if not seen[k]:
             Xout[:, k] = x

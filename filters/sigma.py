@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from replay.util.angles import angle_mask
+from replay.util.angles import angle_mask, wrap_components
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
@@ -66,7 +66,7 @@ def predict(model, x, P, k, xi, wm, wc):
     one = x.ndim == 1
     Y = on_points(model.f, sigma_points(x, P, xi)[0], k)
     Y3 = stack_of(Y, one)
-    xm, Pm = np.empty(Y3.shape[::2]), np.empty((len(Y3),) + (Y3.shape[2],) * 2)
+    xm, Pm = mean_at_f(model, x, k, one, Y3.shape), np.empty((len(Y3),) + (Y3.shape[2],) * 2)
     kernels.sigma_moments(
         Y3,
         wm,
@@ -75,8 +75,17 @@ def predict(model, x, P, k, xi, wm, wc):
         np.ascontiguousarray(model.process_cov(k), dtype=float),
         xm,
         Pm,
+        model.mean_at_f,
     )
     return (xm[0], Pm[0]) if one else (xm, Pm)
+
+
+def mean_at_f(model, x, k, one, shape):
+    """The predicted means' array (M, nx): f(x) with its angles wrapped when the model's mean is
+    f(mean) (:attr:`replay.model.Model.mean_at_f`; the moments keep it), else unset."""
+    if not model.mean_at_f:
+        return np.empty(shape[::2])
+    return stack_of(wrap_components(model.f(x, k), model.x_angles), one).copy()
 
 
 def innovation(model, x, P, z, k, mask, xi, wm, wc):
@@ -146,7 +155,16 @@ class SigmaEngine(KalmanEngine):
 
     def run_all(self, Z, finite):
         return kalman.run_kernels(
-            self, Z, finite, (0, 1), kalman_loops.sigma_run, kalman_loops.SIGMA_RUN, self.xi, self.wm, self.wc
+            self,
+            Z,
+            finite,
+            (0, 1),
+            kalman_loops.sigma_run,
+            kalman_loops.SIGMA_RUN,
+            self.xi,
+            self.wm,
+            self.wc,
+            bool(self.model.mean_at_f),
         )
 
     def points(self, rows):
@@ -162,7 +180,7 @@ class SigmaEngine(KalmanEngine):
         one, m = x.ndim == 1, self.model
         Y = on_points(m.f, self.points(None)[0], k)
         M, p, nx = Y.shape
-        xm, Pm = np.empty((M, nx)), np.empty((M, nx, nx))
+        xm, Pm = mean_at_f(m, x, k, one, Y.shape), np.empty((M, nx, nx))
         self.X, self.dev = np.empty(Y.shape), np.empty(Y.shape)
         self.missing = np.zeros(M, bool)
         self.unmade(
@@ -177,6 +195,7 @@ class SigmaEngine(KalmanEngine):
                 Pm,
                 self.X,
                 self.dev,
+                m.mean_at_f,
             )
         )
         return (xm[0], Pm[0]) if one else (xm, Pm)

@@ -45,6 +45,9 @@ class Model:
     R: np.ndarray
     jacobian_step: float = 1e-6
     vector_jacobians: bool = False  # True when F and H also take stacks of states (..., nx)
+    # Sigma-point filters: the predicted mean is f(mean) and the points give only the covariance,
+    # about it (UKF-M, Brossard, Barrau & Bonnabel 2020), for a dead-reckoned pose (replay.models.kinematic)
+    mean_at_f: bool = False
 
     # --- dynamics and measurement -------------------------------------------------
     def f(self, x: np.ndarray, k: int) -> np.ndarray:

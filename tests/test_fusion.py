@@ -73,7 +73,7 @@ def test_test1_fusion_beside_the_recorded_wheel_odometry(test1, tmp_path):
     # time, and the reference is the GPS itself): every filter is flagged worse than its input
     assert float(rows["measurements"]["pos_rmse"]) == pytest.approx(1.0785, abs=1e-3)
     assert all(rows[f]["worse_than_measurements"] == "True" for f in ("ekf", "ukf", "ckf", "pf"))
-    for name in ("ekf", "ukf", "ckf"):  # 1.48, 1.39, 1.39 m at the held-out fixes
+    for name in ("ekf", "ukf", "ckf"):  # 1.217, 1.217, 1.218 m at the held-out fixes (the IMU mounted)
         assert 1.0 < float(rows[name]["pos_rmse"]) < 2.0
     assert float(rows["recorded:wheel_odometry"]["pos_rmse"]) > 5.0  # 6.41 m even after an SE(3) fit
     assert "synthetic" not in out
@@ -96,7 +96,9 @@ def test_nav2_odometry_against_amcl(shared_dir):
                          dataset_params={"mapping": str(MAPPINGS / "nav2_turtlebot_fusion.toml")})
     by = {r["filter"]: r for r in ev.rows}
     assert by["ekf"]["pos_rmse"] == pytest.approx(0.7198, abs=5e-4)
-    assert by["ckf"]["pos_rmse"] == pytest.approx(1.3016, abs=5e-4)
+    # the CKF was 1.30 m while its predicted mean was the points' (pulled inwards once the heading is
+    # uncertain); its mean is f(mean) for a dead-reckoned pose (Model.mean_at_f): it agrees with the EKF
+    assert by["ckf"]["pos_rmse"] == pytest.approx(0.7198, abs=5e-4)
     assert by["recorded:wheel_odometry"]["pos_rmse"] == pytest.approx(0.4958, abs=5e-4)  # SE(3)-aligned
 
 

@@ -105,8 +105,12 @@ def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> tuple
     if not role or role == "none":
         return None
     names = {f: _name(e, kind, f) for f in ROLE_FIELDS[role] if f in fields}
+    if "twist_frame" in e.fusion and kind != "odometry":
+        raise ReplayError(f"{mp.source}: [channels] {e.name}: twist_frame is for an Odometry (not {topic_type})")
+    if "mount" in e.fusion and kind != "imu":
+        raise ReplayError(f"{mp.source}: [channels] {e.name}: mount is for an Imu (not {topic_type})")
     for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-        for f in value if isinstance(value, (list, tuple, dict)) else ():
+        for f in () if key in ("twist_frame", "mount") else value if isinstance(value, (list, tuple, dict)) else ():
             if f not in fields:
                 raise ReplayError(
                     f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "

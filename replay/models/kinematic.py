@@ -43,6 +43,7 @@ class Kinematic(KernelModel):
 
     STATE: tuple = ()
     ANGLES: tuple = ()
+    mean_at_f = True  # a dead-reckoned pose: the sigma-point filters' predicted mean is f(mean)
 
     def __init__(self, dt, q, index, sign, z_angles, R_steps):
         self.nx, self.nz = len(self.STATE), len(index)

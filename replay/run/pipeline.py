@@ -129,8 +129,9 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
         data_dir,
         c.get("adapter"),
         json.dumps(c["dataset_params"], sort_keys=True),
-        _file_state(c["dataset"] if ds is None else ds, data_dir),
-    )
+        _file_state(c["dataset"] if ds is None else ds, data_dir)
+        + (_file_state(c["dataset_params"]["mapping"], None) if c["dataset_params"].get("mapping") else ()),
+    )  # the mapping file's state too: an edited mapping is read again
 
 
 def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:

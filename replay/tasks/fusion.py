@@ -33,7 +33,9 @@ mapping (``docs/bags.md``, "The fusion task"):
   so; no other reference sample reaches a filter. Before the first sensor message the state
   is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else
   the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
-  (noted).
+  (noted; in 3-D its roll and pitch too).
+* **Frames**: an odometry's twist is the body's (REP 105's child frame) or declared
+  (``twist_frame``): :mod:`replay.tasks.fusion_frames`; every decision is a note.
 
 Refused in one line: inputs that leave the speed (no velocity, position or differential
 position) or the heading (no attitude, rate or position) unconstrained — every filter would
@@ -55,6 +57,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
+from .fusion_frames import imu_yaw_sense, mounted, twist_in_body
 from .fusion_inputs import (
     NOISE_PARAM,
     components,
@@ -242,10 +245,19 @@ class FusionTask(Task):
         vals = np.asarray(ch.values, float).reshape(n, -1)
         valid = ch.valid & np.isfinite(vals).all(axis=1)
         label = fld
+        if not is_diff and fld in ("velocity", "rate") and "nav_msgs/msg/Odometry" in entry["source"]:
+            vals, note = twist_in_body(frame, entry, fld, vals, valid, where, key)  # REP 105, or declared
+            valid = valid & np.isfinite(vals).all(axis=1)
+            m.notes.append(note)
+        if role == "imu" and fld in ("gyro", "attitude") and not is_diff:
+            vals, note = mounted(entry, fld, vals, key)
+            m.notes.append(note)
+        if role == "imu" and fld == "attitude" and not is_diff:
+            m.notes.append(imu_yaw_sense(frame, entry, vals, valid, where, key))
         if is_diff:
             att_name = field_channel(frame, entry, "attitude")
             att = frame.channels[att_name].values if att_name else None
-            rows, derived = differential(ctx.t, vals, valid, att, fld, f"{where}: {key}")
+            rows, derived = differential(ctx.t, vals, valid, att, fld, f"{where}: {key}", ctx.dims == 3)
             vals = np.full((n, 3), np.nan)
             vals[rows] = derived
             valid = np.zeros(n, bool)
@@ -348,10 +360,12 @@ class FusionTask(Task):
             att = frame.reference.get("position_attitude")
             if att is not None and att.valid.any():
                 k = self._nearest_valid(att.valid, first)
-                x0[yaw_i] = att.values[k, 2]
-                known.append(yaw_i)
+                angles = [yaw_i] if dims == 2 else [3, 4, 5]  # 3-D: roll and pitch too (the known start)
+                x0[angles] = att.values[k, 3 - len(angles) : 3]
+                known += angles
                 notes = notes + [
-                    "task fusion: no attitude input: the start heading is the reference's "
-                    "(nearest the first sensor message)"
+                    "task fusion: no attitude input: the start "
+                    + ("heading" if dims == 2 else "attitude (roll, pitch, yaw)")
+                    + " is the reference's (nearest the first sensor message)"
                 ]
         return x0, notes, known

@@ -116,9 +116,14 @@ def configured(entry: dict, role: str, where: str, absolute: bool = False) -> tu
     return tuple(f for f in fuse if f not in diff), diff, dict(entry.get("noise") or {})
 
 
-def differential(t, values, valid, attitude, field: str, where: str):
+def differential(t, values, valid, attitude, field: str, where: str, body_rates: bool = False):
     """(rows, (m, 3) derived measurements) of a differential field: body velocity from position
-    deltas (rotated by the previous message's attitude), or body rates from attitude deltas."""
+    deltas (rotated by the previous message's attitude), or rates from attitude deltas: the
+    Euler-angle deltas over dt (the yaw rate of a 2-D state), or with ``body_rates`` the body
+    rates of the relative rotation R_prev' R_cur (its rotation vector over dt; a 3-D state's
+    p, q, r are body rates, not Euler-angle rates)."""
+    from replay.models.kinematic import rotation
+
     idx = np.flatnonzero(valid & np.isfinite(values).all(axis=1))
     if len(idx) < 2:
         raise ReplayError(f"{where}: a differential {field} needs at least 2 messages (got {len(idx)})")
@@ -126,9 +131,15 @@ def differential(t, values, valid, attitude, field: str, where: str):
         raise ReplayError(f"{where}: a differential position needs the input's attitude, which it lacks")
     prev, cur = idx[:-1], idx[1:]
     dt = (t[cur] - t[prev])[:, None]
+    if field == "attitude" and body_rates:
+        rel = np.einsum("kji,kjl->kil", *(rotation(*values[i].T) for i in (prev, cur)))
+        vee = np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], 1) / 2
+        s = np.linalg.norm(vee, axis=1)
+        angle = np.arctan2(s, (np.trace(rel, axis1=1, axis2=2) - 1) / 2)
+        scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 1.0)
+        return cur, vee * scale[:, None] / dt
     if field == "attitude":
         return cur, wrap(values[cur] - values[prev]) / dt
-    from replay.models.kinematic import rotation
 
     att = attitude[prev] if attitude is not None else np.zeros((len(prev), 3))
     R = rotation(att[:, 0], att[:, 1], att[:, 2])
