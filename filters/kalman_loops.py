@@ -30,7 +30,8 @@ from .kalman_kernels import (
 COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
 _MASK = types.boolean[::1]
-_COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
+_INDEX = types.int64[:, ::1]
+_COMMON = (_S2, _S3, _S3, _INDEX, _S2, _S2, _S3, _S3)  # x, P, Z, sel, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
 
 
@@ -41,49 +42,76 @@ def apply_rows(fun, X, p, out):
         fun(X[m], p, out[m])
 
 
+@nb.njit(cache=True)
+def measured(Z, k, sel, zmask, R, z, zm, Rs):
+    """The components measured at step k, ``sel[k] = [d, i_0 .. i_{d-1}]`` (in order): z[m] =
+    Z[m, k, i], their angle flags zm and R restricted to them, Rs = R[i][:, i] (what the steps
+    take with ``mask``: :func:`replay.filters.kalman.measurement`). Returns d."""
+    d = sel[k, 0]
+    for q in range(d):
+        s = sel[k, 1 + q]
+        zm[q] = zmask[s]
+        for m in range(z.shape[0]):
+            z[m, q] = Z[m, k, s]
+        for r in range(d):
+            Rs[q, r] = R[s, sel[k, 1 + r]]
+    return d
+
+
 SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
 EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
 
 
 @nb.njit(cache=True, nogil=True)
-def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
+def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, Pout, nis):
     """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
-    Z (M, steps, nz), every component present at the steps k where ``seen[k]``, none at the
-    others (no update there: the prediction is the estimate, its NIS NaN); per step k: Pf[k],
-    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step). Writes
-    Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
-    a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    Z (M, steps, nz); ``sel[k] = [d, i_0 .. i_{d-1}]`` the components measured at step k, the
+    same for every run (:func:`measured`; d = 0: no update, the prediction is the estimate, its
+    NIS NaN); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the
+    same at every step). Writes Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps).
+    Returns -1, or the step at which a covariance had no Cholesky factor (the caller redoes the
+    runs step by step)."""
     M, steps, nz = Z.shape
     p, n = xi.shape
     X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
-    z = np.empty((M, nz))
-    D, L, Lz, K = np.empty((p, n)), np.empty((n, n)), np.empty((nz, nz)), np.empty((n, nz))
-    y, S, Pxz, zh, Dz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz))
+    D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty(n * nz), np.empty(nz, np.bool_)
+    wz, wy, wS, wPxz, wZ = (
+        np.empty(M * nz),
+        np.empty(M * nz),
+        np.empty(M * nz * nz),
+        np.empty(M * n * nz),
+        np.empty(M * p * nz),
+    )
+    zh, wDz, wLz, wR = np.empty(nz), np.empty(p * nz), np.empty(nz * nz), np.empty(nz * nz)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
     for k in range(steps):
         apply_rows(f, X, Pf[k], Y)
         if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L) >= 0:
             return k
-        if not seen[k]:
+        d = sel[k, 0]
+        if d == 0:
             Xout[:, k] = x
             Pout[:, k] = P
             nis[:, k] = np.nan
             continue
         apply_rows(h, X, Ph[k], Zp)
+        z, Rs, Zc = wz[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d)), wZ[: M * p * d].reshape((M, p, d))
+        measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
         for m in range(M):
-            for q in range(nz):
-                z[m, q] = Z[m, k, q]
+            for i in range(p):
+                for q in range(d):
+                    Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
         bad = sigma_update_into(
-            Zp,
+            Zc,
             dev,
             z,
             wm,
             wc,
-            zmask,
-            R[k % R.shape[0]],
+            zm[:d],
+            Rs,
             x,
             P,
             xmask,
@@ -91,13 +119,13 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
             xi,
             X,
             dev,
-            y,
-            S,
-            Pxz,
-            zh,
-            Dz,
-            Lz,
-            K,
+            wy[: M * d].reshape((M, d)),
+            wS[: M * d * d].reshape((M, d, d)),
+            wPxz[: M * n * d].reshape((M, n, d)),
+            zh[:d],
+            wDz[: p * d].reshape((p, d)),
+            wLz[: d * d].reshape((d, d)),
+            K[: n * d].reshape((n, d)),
             L,
         )
         if 0 <= bad < M:
@@ -110,25 +138,27 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout,
 
 
 @nb.njit(cache=True, nogil=True)
-def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
     """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
     :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
-    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`)
-    in one loop. Arguments as :func:`sigma_run`. Returns -1, or the step at which S had no
-    Cholesky factor."""
+    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`
+    on the measured components) in one loop. Arguments as :func:`sigma_run`. Returns -1, or the
+    step at which S had no Cholesky factor."""
     M, steps, nz = Z.shape
     n = x.shape[1]
-    Fj, Hj, xp, y = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
-    Pp, zh = np.empty((M, n, n)), np.empty((M, nz))
-    FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
-    L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
+    Fj, Hj, xp, zh = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
+    Pp, FP, A, AP = np.empty((M, n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    wz, wy, wH, wR = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * n), np.empty(nz * nz)
+    PHt, S, K, L, KR = np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz)
+    zm = np.empty(nz, np.bool_)
     for k in range(steps):
         F(x, Pf[k], Fj)
         f(x, Pf[k], xp)
         for m in range(M):
             wrap(xp[m], xmask)
         propagate_cov_into(Fj, P, Q[k % Q.shape[0]], Pp, FP)
-        if not seen[k]:
+        d = sel[k, 0]
+        if d == 0:
             x[:] = xp
             P[:] = Pp
             Xout[:, k] = x
@@ -137,11 +167,36 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
             continue
         H(xp, Ph[k], Hj)
         h(xp, Ph[k], zh)
+        z, y, Rs = wz[: M * d].reshape((M, d)), wy[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d))
+        Hs = wH[: M * d * n].reshape((M, d, n))
+        measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
         for m in range(M):
-            for q in range(nz):
-                y[m, q] = Z[m, k, q] - zh[m, q]
-            wrap(y[m], zmask)
-        if joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR) >= 0:
+            for q in range(d):
+                s = sel[k, 1 + q]
+                y[m, q] = z[m, q] - zh[m, s]
+                for j in range(n):
+                    Hs[m, q, j] = Hj[m, s, j]
+            wrap(y[m], zm[:d])
+        nd = n * d
+        if (
+            joseph_update_into(
+                xp,
+                Pp,
+                y,
+                Hs,
+                Rs,
+                xmask,
+                nis[:, k],
+                PHt[:nd].reshape((n, d)),
+                S[: d * d].reshape((d, d)),
+                K[:nd].reshape((n, d)),
+                L[: d * d].reshape((d, d)),
+                A,
+                AP,
+                KR[:nd].reshape((n, d)),
+            )
+            >= 0
+        ):
             return k
         x[:] = xp
         P[:] = Pp
