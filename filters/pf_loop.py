@@ -235,12 +235,14 @@ def likelihood_factors(R, finite):
     numbers), one per distinct pair of measured components and R; None when one has no factor."""
     steps, nz = finite.shape
     sel = measured_steps(finite)
-    if len(R) == 1:
-        keys = finite
-    else:
+    keys = finite.astype(float)
+    if len(R) > 1:
         both = finite[:, :, None] & finite[:, None, :]
-        keys = np.concatenate([finite, np.where(both, R, 0.0).reshape(steps, -1)], axis=1)
-    _, first, fac = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        keys = np.concatenate([keys, np.where(both, R, 0.0).reshape(steps, -1)], axis=1)
+    keys = np.ascontiguousarray(keys)  # each row one value of its bytes: a 1-d unique (fast)
+    _, first, fac = np.unique(
+        keys.view(np.dtype((np.void, keys.itemsize * keys.shape[1]))).ravel(), return_index=True, return_inverse=True
+    )
     U = len(first)
     rdiag, rL, rinv, rconst = np.zeros(U, bool), np.zeros((U, nz, nz)), np.zeros((U, nz)), np.zeros(U)
     for u, k in enumerate(first):
