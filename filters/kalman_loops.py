@@ -76,15 +76,17 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, 
     M, steps, nz = Z.shape
     p, n = xi.shape
     X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
-    D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty(n * nz), np.empty(nz, np.bool_)
-    wz, wy, wS, wPxz, wZ = (
-        np.empty(M * nz),
-        np.empty(M * nz),
-        np.empty(M * nz * nz),
-        np.empty(M * n * nz),
+    D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty((n, nz)), np.empty(nz, np.bool_)
+    z, y, S, Pxz = np.empty((M, nz)), np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz))
+    zh, Dz, Lz = np.empty(nz), np.empty((p, nz)), np.empty((nz, nz))
+    wz, wy, wS, wPxz = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * nz), np.empty(M * n * nz)
+    wZ, wDz, wLz, wR, wK = (
         np.empty(M * p * nz),
+        np.empty(p * nz),
+        np.empty(nz * nz),
+        np.empty(nz * nz),
+        np.empty(n * nz),
     )
-    zh, wDz, wLz, wR = np.empty(nz), np.empty(p * nz), np.empty(nz * nz), np.empty(nz * nz)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
     for k in range(steps):
@@ -98,36 +100,65 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, 
             nis[:, k] = np.nan
             continue
         apply_rows(h, X, Ph[k], Zp)
-        z, Rs, Zc = wz[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d)), wZ[: M * p * d].reshape((M, p, d))
-        measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
-        for m in range(M):
-            for i in range(p):
-                for q in range(d):
-                    Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
-        bad = sigma_update_into(
-            Zc,
-            dev,
-            z,
-            wm,
-            wc,
-            zm[:d],
-            Rs,
-            x,
-            P,
-            xmask,
-            nis[:, k],
-            xi,
-            X,
-            dev,
-            wy[: M * d].reshape((M, d)),
-            wS[: M * d * d].reshape((M, d, d)),
-            wPxz[: M * n * d].reshape((M, n, d)),
-            zh[:d],
-            wDz[: p * d].reshape((p, d)),
-            wLz[: d * d].reshape((d, d)),
-            K[: n * d].reshape((n, d)),
-            L,
-        )
+        if d == nz:  # every component: the arrays as they are
+            for m in range(M):
+                for q in range(nz):
+                    z[m, q] = Z[m, k, q]
+            bad = sigma_update_into(
+                Zp,
+                dev,
+                z,
+                wm,
+                wc,
+                zmask,
+                R[k % R.shape[0]],
+                x,
+                P,
+                xmask,
+                nis[:, k],
+                xi,
+                X,
+                dev,
+                y,
+                S,
+                Pxz,
+                zh,
+                Dz,
+                Lz,
+                K,
+                L,
+            )
+        else:  # the measured components, into work arrays of their size
+            zd, Rs, Zc = wz[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d)), wZ[: M * p * d].reshape((M, p, d))
+            measured(Z, k, sel, zmask, R[k % R.shape[0]], zd, zm, Rs)
+            for m in range(M):
+                for i in range(p):
+                    for q in range(d):
+                        Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
+            bad = sigma_update_into(
+                Zc,
+                dev,
+                zd,
+                wm,
+                wc,
+                zm[:d],
+                Rs,
+                x,
+                P,
+                xmask,
+                nis[:, k],
+                xi,
+                X,
+                dev,
+                wy[: M * d].reshape((M, d)),
+                wS[: M * d * d].reshape((M, d, d)),
+                wPxz[: M * n * d].reshape((M, n, d)),
+                zh[:d],
+                wDz[: p * d].reshape((p, d)),
+                wLz[: d * d].reshape((d, d)),
+                wK[: n * d].reshape((n, d)),
+                L,
+            )
         if 0 <= bad < M:
             return k
         Xout[:, k] = x
@@ -148,8 +179,10 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
     n = x.shape[1]
     Fj, Hj, xp, zh = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
     Pp, FP, A, AP = np.empty((M, n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    y, PHt, S, K = np.empty((M, nz)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
+    L, KR = np.empty((nz, nz)), np.empty((n, nz))
     wz, wy, wH, wR = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * n), np.empty(nz * nz)
-    PHt, S, K, L, KR = np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz)
+    wPHt, wS, wK, wL, wKR = np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz)
     zm = np.empty(nz, np.bool_)
     for k in range(steps):
         F(x, Pf[k], Fj)
@@ -167,36 +200,41 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
             continue
         H(xp, Ph[k], Hj)
         h(xp, Ph[k], zh)
-        z, y, Rs = wz[: M * d].reshape((M, d)), wy[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d))
-        Hs = wH[: M * d * n].reshape((M, d, n))
-        measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
-        for m in range(M):
-            for q in range(d):
-                s = sel[k, 1 + q]
-                y[m, q] = z[m, q] - zh[m, s]
-                for j in range(n):
-                    Hs[m, q, j] = Hj[m, s, j]
-            wrap(y[m], zm[:d])
-        nd = n * d
-        if (
-            joseph_update_into(
+        if d == nz:  # every component: the arrays as they are (no copies)
+            for m in range(M):
+                for q in range(nz):
+                    y[m, q] = Z[m, k, q] - zh[m, q]
+                wrap(y[m], zmask)
+            bad = joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR)
+        else:  # the measured components, into work arrays of their size
+            z, yd, Rs = wz[: M * d].reshape((M, d)), wy[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d))
+            Hs = wH[: M * d * n].reshape((M, d, n))
+            measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
+            for m in range(M):
+                for q in range(d):
+                    s = sel[k, 1 + q]
+                    yd[m, q] = z[m, q] - zh[m, s]
+                    for j in range(n):
+                        Hs[m, q, j] = Hj[m, s, j]
+                wrap(yd[m], zm[:d])
+            nd, dd = n * d, d * d
+            bad = joseph_update_into(
                 xp,
                 Pp,
-                y,
+                yd,
                 Hs,
                 Rs,
                 xmask,
                 nis[:, k],
-                PHt[:nd].reshape((n, d)),
-                S[: d * d].reshape((d, d)),
-                K[:nd].reshape((n, d)),
-                L[: d * d].reshape((d, d)),
+                wPHt[:nd].reshape((n, d)),
+                wS[:dd].reshape((d, d)),
+                wK[:nd].reshape((n, d)),
+                wL[:dd].reshape((d, d)),
                 A,
                 AP,
-                KR[:nd].reshape((n, d)),
+                wKR[:nd].reshape((n, d)),
             )
-            >= 0
-        ):
+        if bad >= 0:
             return k
         x[:] = xp
         P[:] = Pp

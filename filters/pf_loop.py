@@ -94,14 +94,17 @@ def pf_run(
         d = sel[k, 0]
         if d > 0:  # weight (no measurement: the weights stay)
             h(X, Ph[k], zh)
-            zc = wz[: N * d].reshape((N, d))
-            for q in range(d):
-                s = sel[k, 1 + q]
-                z[q], zm[q] = Z[k, s], zmask[s]
-                for i in range(N):
-                    zc[i, q] = zh[i, s]
             u = fac[k]
-            gauss_loglik(zc, z[:d], zm[:d], rdiag[u], rL[u, :d, :d], rinv[u, :d], rconst[u], ll)
+            if d == nz:  # every component: the arrays as they are
+                gauss_loglik(zh, Z[k], zmask, rdiag[u], rL[u], rinv[u], rconst[u], ll)
+            else:  # the measured components
+                zc = wz[: N * d].reshape((N, d))
+                for q in range(d):
+                    s = sel[k, 1 + q]
+                    z[q], zm[q] = Z[k, s], zmask[s]
+                    for i in range(N):
+                        zc[i, q] = zh[i, s]
+                gauss_loglik(zc, z[:d], zm[:d], rdiag[u], rL[u, :d, :d], rinv[u, :d], rconst[u], ll)
             for i in range(N):
                 logw[i] += ll[i]
             weights(logw, w)
