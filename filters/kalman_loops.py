@@ -58,6 +58,29 @@ def measured(Z, k, sel, zmask, R, z, zm, Rs):
     return d
 
 
+@nb.njit(cache=True)
+def sigma_update_subset(Zp, dev, Z, k, sel, zmask, R, wm, wc, x, P, xmask, nis, xi, X, L, zm, work):
+    """:func:`sigma_update_into` on the components measured at step k (:func:`measured`), its work
+    arrays views of the flat ``work`` sized for those d components (the points' predictions Zp
+    (M, p, nz) gathered into (M, p, d))."""
+    M, p, nz = Zp.shape
+    n, d = x.shape[1], sel[k, 0]
+    a, b, c = M * d, M * d + d * d, M * d + d * d + M * p * d  # the views' offsets in ``work``
+    z, Rs, Zc = work[:a].reshape((M, d)), work[a:b].reshape((d, d)), work[b:c].reshape((M, p, d))
+    measured(Z, k, sel, zmask, R, z, zm, Rs)
+    for m in range(M):
+        for i in range(p):
+            for q in range(d):
+                Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
+    a, b = c + M * d, c + M * d + M * d * d
+    y, S, Pxz = work[c:a].reshape((M, d)), work[a:b].reshape((M, d, d)), work[b : b + M * n * d].reshape((M, n, d))
+    c = b + M * n * d
+    zh, Dz = work[c : c + d], work[c + d : c + d + p * d].reshape((p, d))
+    a = c + d + p * d
+    Lz, K = work[a : a + d * d].reshape((d, d)), work[a + d * d : a + d * d + n * d].reshape((n, d))
+    return sigma_update_into(Zc, dev, z, wm, wc, zm[:d], Rs, x, P, xmask, nis, xi, X, dev, y, S, Pxz, zh, Dz, Lz, K, L)
+
+
 SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, _MASK, _MASK, *_OUT)
 EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
 
@@ -79,14 +102,7 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, 
     D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty((n, nz)), np.empty(nz, np.bool_)
     z, y, S, Pxz = np.empty((M, nz)), np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz))
     zh, Dz, Lz = np.empty(nz), np.empty((p, nz)), np.empty((nz, nz))
-    wz, wy, wS, wPxz = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * nz), np.empty(M * n * nz)
-    wZ, wDz, wLz, wR, wK = (
-        np.empty(M * p * nz),
-        np.empty(p * nz),
-        np.empty(nz * nz),
-        np.empty(nz * nz),
-        np.empty(n * nz),
-    )
+    work = np.empty(M * nz * (2 + p + nz + n) + nz * (1 + p + 2 * nz + n))  # of a subset's update
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
     for k in range(steps):
@@ -128,36 +144,9 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, xmask, zmask, Xout, 
                 K,
                 L,
             )
-        else:  # the measured components, into work arrays of their size
-            zd, Rs, Zc = wz[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d)), wZ[: M * p * d].reshape((M, p, d))
-            measured(Z, k, sel, zmask, R[k % R.shape[0]], zd, zm, Rs)
-            for m in range(M):
-                for i in range(p):
-                    for q in range(d):
-                        Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
-            bad = sigma_update_into(
-                Zc,
-                dev,
-                zd,
-                wm,
-                wc,
-                zm[:d],
-                Rs,
-                x,
-                P,
-                xmask,
-                nis[:, k],
-                xi,
-                X,
-                dev,
-                wy[: M * d].reshape((M, d)),
-                wS[: M * d * d].reshape((M, d, d)),
-                wPxz[: M * n * d].reshape((M, n, d)),
-                zh[:d],
-                wDz[: p * d].reshape((p, d)),
-                wLz[: d * d].reshape((d, d)),
-                wK[: n * d].reshape((n, d)),
-                L,
+        else:  # the measured components
+            bad = sigma_update_subset(
+                Zp, dev, Z, k, sel, zmask, R[k % R.shape[0]], wm, wc, x, P, xmask, nis[:, k], xi, X, L, zm, work
             )
         if 0 <= bad < M:
             return k
