@@ -4,7 +4,10 @@
 :mod:`replay.filters.kalman_kernels` in the order the step-by-step engines call them
 (:class:`replay.filters.sigma.SigmaEngine`, :class:`replay.filters.kalman.EKFEngine`),
 with work arrays allocated once per call, so they give the engines' numbers bit for bit
-(``tests/test_batched.py``). The model's one-state kernels are first-class function
+(``tests/test_batched.py``). A step may measure a subset of the components, the same for every
+run (sensors at their own rates: the fusion task); its update is the steps' update with ``mask``:
+the measured components gathered in order, R and the angle flags restricted to them
+(:func:`measured`), work arrays of their size. The model's one-state kernels are first-class function
 arguments of one declared type (:data:`replay.filters.compiled.ROWS_KERNEL`, ``JACOBIAN_ROWS``):
 one compilation (cached by numba) serves every model. When a loop runs:
 :func:`replay.filters.compiled.loop_ready`.
