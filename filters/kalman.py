@@ -202,7 +202,11 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     M, steps, nz = Z.shape
     if not (finite == finite[:1]).all():  # runs measuring different components at a step: steps
         return None
-    if ks is None or not derived_from_kernels(m) or not loop_ready(loop, sig, M * steps >= kalman_loops.COMPILE_AT):
+    if (
+        ks is None
+        or not derived_from_kernels(m)
+        or not loop_ready(loop, sig, M * steps >= kalman_loops.COMPILE_AT, M * steps, kalman_loops.COMPILE_AT)
+    ):
         return None
     stacks, covs = param_stacks(m, steps), cov_stacks(m, steps)
     if stacks is None or covs is None:  # parameters, Q or R of another shape at some step (ragged)

@@ -169,7 +169,7 @@ def run(engine, Z, finite):
     if (
         not applies(engine, m)
         or not all(isinstance(g, np.random.Generator) for g in engine.active)
-        or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)
+        or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT, M * steps * N, COMPILE_AT)
     ):
         return None
     stacks, covs = param_stacks(m, steps), cov_stacks(m, steps)

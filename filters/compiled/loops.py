@@ -57,20 +57,24 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
 
 
 _ready: set = set()
+_waiting: dict = {}  # loop -> work this process did without it (not compiled, not cached)
 
 
-def loop_ready(loop, sig, compile_ok: bool) -> bool:
+def loop_ready(loop, sig, compile_ok: bool, work: float = 0.0, at: float = math.inf) -> bool:
     """Whether the run loop ``loop`` can be called with its declared signature ``sig``: compiled in
     this process, or loaded from numba's disk cache, or (``compile_ok``) compiled now (about 10 s,
-    once per machine). Compiled lazily, not at import: a short run never waits for it. With
-    numba's JIT disabled the loop is its Python function: always ready."""
+    once per machine). Compiled lazily, not at import: a short run never waits for it; but many
+    short runs in one process (a tune's trials) compile it once their ``work`` (run-steps or
+    particle-steps) adds up to ``at``. With numba's JIT disabled the loop is its Python function:
+    always ready."""
     if (loop, id(sig)) in _ready:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
         return True
     if numba_internals.jit_disabled():
         return True
     if not loop.signatures:
         if not numba_internals.from_cache(loop, sig):
-            if not compile_ok:
+            _waiting[loop] = _waiting.get(loop, 0.0) + work
+            if not (compile_ok or _waiting[loop] >= at):
                 return False
             log.info("compiling the run loop %s (about 12 s, once per machine; cached for later runs)", loop.__name__)
         loop.compile(sig)
