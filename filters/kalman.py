@@ -39,13 +39,14 @@ from time import perf_counter
 import numpy as np
 
 from replay.util.angles import angle_mask, residual, wrap_components
-from replay.model import Model, remap_indices
+from replay.model import remap_indices
 
 from . import gating
 from . import kalman_kernels as kernels
 from . import kalman_loops
 from .base import Filter
-from .compiled import bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
+from .compiled import bound, cov_stacks, derived_from_kernels, grain, loop_ready
+from .compiled import measured_steps, param_stacks, row_kernels, split
 
 
 def stack_of(a, one: bool):
@@ -209,8 +210,10 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     """Run ``loop`` (:func:`replay.filters.kalman_loops.sigma_run` or ``ekf_run``, declared type
     ``sig``) over the engine's runs for the measurements Z (M, steps, nz): the model's one-state
     kernels (their rows forms, first-class functions: :func:`replay.filters.compiled.row_kernels`), its
-    parameters, Q and R at every step. None (the caller steps in Python, same numbers) when the
-    model's array methods are not its kernels, or a subclass of the engine (a plugin's) changes a
+    parameters, Q and R at every step (:func:`replay.filters.compiled.cov_stacks`), the components
+    measured at each step (the same for every run; :func:`replay.filters.compiled.measured_steps`).
+    None (the caller steps in Python, same numbers) when the runs measure different components at
+    a step, or the model's array methods are not its kernels, or a subclass of the engine (a plugin's) changes a
     step, or when the loop is neither compiled nor cached and the job is smaller than
     ``COMPILE_AT`` run-steps (:func:`replay.filters.compiled.loop_ready`), or when the model gates its
     measurements (:mod:`replay.filters.gating`: the steps count the rejections)."""
@@ -219,26 +222,19 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     m = engine.model
     ks = m.kernels()
     M, steps, nz = Z.shape
-    seen = finite[0].all(axis=1)
-    if not (finite == seen[None, :, None]).all():  # missing for some runs, or some components: steps
+    if not (finite == finite[:1]).all():  # runs measuring different components at a step: steps
         return None
-    if ks is None or not derived_from_kernels(m) or not loop_ready(loop, sig, M * steps >= kalman_loops.COMPILE_AT):
+    if (
+        ks is None
+        or not derived_from_kernels(m)
+        or not loop_ready(loop, sig, M * steps >= kalman_loops.COMPILE_AT, M * steps, kalman_loops.COMPILE_AT)
+    ):
         return None
-    stacks = param_stacks(m, steps)
-    try:  # Q, R of another shape at some step (ragged): no stack, step by step instead
-        Q, R = (
-            np.ascontiguousarray(
-                getattr(m, c)[None]
-                if getattr(type(m), f) is getattr(Model, f)
-                else [getattr(m, f)(k) for k in range(steps)],
-                dtype=float,
-            )
-            for f, c in (("process_cov", "Q"), ("measurement_cov", "R"))
-        )  # constant: a stack of one
-    except ValueError:
+    stacks, covs = param_stacks(m, steps), cov_stacks(m, steps)
+    if stacks is None or covs is None:  # parameters, Q or R of another shape at some step (ragged)
         return None
-    if stacks is None:
-        return None
+    Q, R = covs
+    sel = measured_steps(finite[0])
     x, P = np.array(stack_of(engine.x, engine.one)), np.array(stack_of(engine.P, engine.one))
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     call = bound(loop, *row_kernels(m, kernels_needed))
@@ -246,14 +242,14 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     masks = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
 
     def runs(lo, hi):  # the runs are independent: the same numbers on any thread
-        return call(x[lo:hi], P[lo:hi], Z[lo:hi], seen, *stacks, Q, R, *args, *masks, X[lo:hi], PP[lo:hi], nis[lo:hi])
+        return call(x[lo:hi], P[lo:hi], Z[lo:hi], sel, *stacks, Q, R, *args, *masks, X[lo:hi], PP[lo:hi], nis[lo:hi])
 
     t0 = perf_counter()
     bad = max(split(runs, M, grain=grain(4.0 * steps)))  # about 4 µs a run-step
     engine.seconds = perf_counter() - t0  # the computation, without loading the compiled code
     if bad >= 0:
         return False
-    return X, PP, nis, np.where(seen, nz, 0)[None].repeat(M, axis=0)
+    return X, PP, nis, sel[:, 0][None].repeat(M, axis=0)
 
 
 def own_steps(engine) -> bool:

@@ -4,7 +4,10 @@
 :mod:`replay.filters.kalman_kernels` in the order the step-by-step engines call them
 (:class:`replay.filters.sigma.SigmaEngine`, :class:`replay.filters.kalman.EKFEngine`),
 with work arrays allocated once per call, so they give the engines' numbers bit for bit
-(``tests/test_batched.py``). The model's one-state kernels are first-class function
+(``tests/test_batched.py``). A step may measure a subset of the components, the same for every
+run (sensors at their own rates: the fusion task); its update is the steps' update with ``mask``:
+the measured components gathered in order, R and the angle flags restricted to them
+(:func:`measured`), work arrays of their size. The model's one-state kernels are first-class function
 arguments of one declared type (:data:`replay.filters.compiled.ROWS_KERNEL`, ``JACOBIAN_ROWS``):
 one compilation (cached by numba) serves every model. When a loop runs:
 :func:`replay.filters.compiled.loop_ready`.
@@ -31,7 +34,8 @@ from .kalman_kernels import (
 COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
 _MASK = types.boolean[::1]
-_COMMON = (_S2, _S3, _S3, _MASK, _S2, _S2, _S3, _S3)  # x, P, Z, seen, Pf, Ph, Q, R
+_INDEX = types.int64[:, ::1]
+_COMMON = (_S2, _S3, _S3, _INDEX, _S2, _S2, _S3, _S3)  # x, P, Z, sel, Pf, Ph, Q, R
 _OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
 
 
@@ -42,27 +46,94 @@ def apply_rows(fun, X, p, out):
         fun(X[m], p, out[m])
 
 
+@nb.njit(cache=True)
+def measured(Z, k, sel, zmask, R, z, zm, Rs):
+    """The components measured at step k, ``sel[k] = [d, i_0 .. i_{d-1}]`` (in order): z[m] =
+    Z[m, k, i], their angle flags zm and R restricted to them, Rs = R[i][:, i] (what the steps
+    take with ``mask``: :func:`replay.filters.kalman.measurement`). Returns d."""
+    d = sel[k, 0]
+    for q in range(d):
+        s = sel[k, 1 + q]
+        zm[q] = zmask[s]
+        for m in range(z.shape[0]):
+            z[m, q] = Z[m, k, s]
+        for r in range(d):
+            Rs[q, r] = R[s, sel[k, 1 + r]]
+    return d
+
+
+@nb.njit(cache=True)
+def sigma_update_subset(Zp, dev, Z, k, sel, zmask, R, wm, wc, x, P, xmask, nis, xi, X, L, zm, work):
+    """:func:`sigma_update_into` on the components measured at step k (:func:`measured`), its work
+    arrays views of the flat ``work`` sized for those d components (the points' predictions Zp
+    (M, p, nz) gathered into (M, p, d))."""
+    M, p, nz = Zp.shape
+    n, d = x.shape[1], sel[k, 0]
+    a, b, c = M * d, M * d + d * d, M * d + d * d + M * p * d  # the views' offsets in ``work``
+    z, Rs, Zc = work[:a].reshape((M, d)), work[a:b].reshape((d, d)), work[b:c].reshape((M, p, d))
+    measured(Z, k, sel, zmask, R, z, zm, Rs)
+    for m in range(M):
+        for i in range(p):
+            for q in range(d):
+                Zc[m, i, q] = Zp[m, i, sel[k, 1 + q]]
+    a, b = c + M * d, c + M * d + M * d * d
+    y, S, Pxz = work[c:a].reshape((M, d)), work[a:b].reshape((M, d, d)), work[b : b + M * n * d].reshape((M, n, d))
+    c = b + M * n * d
+    zh, Dz = work[c : c + d], work[c + d : c + d + p * d].reshape((p, d))
+    a = c + d + p * d
+    Lz, K = work[a : a + d * d].reshape((d, d)), work[a + d * d : a + d * d + n * d].reshape((n, d))
+    return sigma_update_into(
+        Zc,
+        dev,
+        z,
+        wm,
+        wc,
+        zm[:d],
+        Rs,
+        x,
+        P,
+        xmask,
+        nis,
+        xi,
+        X,
+        dev,
+        y,
+        S,
+        Pxz,
+        zh,
+        Dz,
+        Lz,
+        K,
+        L,
+        None,
+        None,
+        None,
+        None,
+    )
+
+
 SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, types.boolean, _MASK, _MASK, *_OUT)
 EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
 
 
 @nb.njit(cache=True, nogil=True)
-def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, Xout, Pout, nis):
+def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, Xout, Pout, nis):
     """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
-    Z (M, steps, nz), every component present at the steps k where ``seen[k]``, none at the
-    others (no update there: the prediction is the estimate, its NIS NaN); per step k: Pf[k],
-    Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the same at every step); ``at_f``:
-    the predicted mean is f(x) (:attr:`replay.model.Model.mean_at_f`). Writes
-    Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at which
-    a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    Z (M, steps, nz); ``sel[k] = [d, i_0 .. i_{d-1}]`` the components measured at step k, the
+    same for every run (:func:`measured`; d = 0: no update, the prediction is the estimate, its
+    NIS NaN); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the
+    same at every step); ``at_f``: the predicted mean is f(x) (:attr:`replay.model.Model.mean_at_f`).
+    Writes Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at
+    which a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
     M, steps, nz = Z.shape
     p, n = xi.shape
     X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
-    z = np.empty((M, nz))
-    D, L, Lz, K = np.empty((p, n)), np.empty((n, n)), np.empty((nz, nz)), np.empty((n, nz))
-    y, S, Pxz, zh, Dz = np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz)), np.empty(nz), np.empty((p, nz))
+    D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty((n, nz)), np.empty(nz, np.bool_)
+    z, y, S, Pxz = np.empty((M, nz)), np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz))
+    zh, Dz, Lz = np.empty(nz), np.empty((p, nz)), np.empty((nz, nz))
+    work = np.empty(M * nz * (2 + p + nz + n) + nz * (1 + p + 2 * nz + n))  # of a subset's update
     group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     if sigma_points_into(x, P, xi, X, dev, L) >= 0:
         return 0
@@ -76,43 +147,49 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask,
             x[:] = xc
         if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L, at_f) >= 0:
             return k
-        if not seen[k]:
+        d = sel[k, 0]
+        if d == 0:
             Xout[:, k] = x
             Pout[:, k] = P
             nis[:, k] = np.nan
             continue
         apply_rows(h, X, Ph[k], Zp)
-        for m in range(M):
-            for q in range(nz):
-                z[m, q] = Z[m, k, q]
-        bad = sigma_update_into(
-            Zp,
-            dev,
-            z,
-            wm,
-            wc,
-            zmask,
-            R[k % R.shape[0]],
-            x,
-            P,
-            xmask,
-            nis[:, k],
-            xi,
-            X,
-            dev,
-            y,
-            S,
-            Pxz,
-            zh,
-            Dz,
-            Lz,
-            K,
-            L,
-            group,
-            limit2,
-            rej,
-            cut,
-        )
+        if d == nz:  # every component: the arrays as they are
+            for m in range(M):
+                for q in range(nz):
+                    z[m, q] = Z[m, k, q]
+            bad = sigma_update_into(
+                Zp,
+                dev,
+                z,
+                wm,
+                wc,
+                zmask,
+                R[k % R.shape[0]],
+                x,
+                P,
+                xmask,
+                nis[:, k],
+                xi,
+                X,
+                dev,
+                y,
+                S,
+                Pxz,
+                zh,
+                Dz,
+                Lz,
+                K,
+                L,
+                group,
+                limit2,
+                rej,
+                cut,
+            )
+        else:  # the measured components
+            bad = sigma_update_subset(
+                Zp, dev, Z, k, sel, zmask, R[k % R.shape[0]], wm, wc, x, P, xmask, nis[:, k], xi, X, L, zm, work
+            )
         if 0 <= bad < M:
             return k
         Xout[:, k] = x
@@ -123,18 +200,21 @@ def sigma_run(f, h, x, P, Z, seen, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask,
 
 
 @nb.njit(cache=True, nogil=True)
-def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
     """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
     :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
-    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`)
-    in one loop. Arguments as :func:`sigma_run`. Returns -1, or the step at which S had no
-    Cholesky factor."""
+    :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`
+    on the measured components) in one loop. Arguments as :func:`sigma_run`. Returns -1, or the
+    step at which S had no Cholesky factor."""
     M, steps, nz = Z.shape
     n = x.shape[1]
-    Fj, Hj, xp, y = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
-    Pp, zh = np.empty((M, n, n)), np.empty((M, nz))
-    FP, PHt, S, K = np.empty((n, n)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
-    L, A, AP, KR = np.empty((nz, nz)), np.empty((n, n)), np.empty((n, n)), np.empty((n, nz))
+    Fj, Hj, xp, zh = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
+    Pp, FP, A, AP = np.empty((M, n, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    y, PHt, S, K = np.empty((M, nz)), np.empty((n, nz)), np.empty((nz, nz)), np.empty((n, nz))
+    L, KR = np.empty((nz, nz)), np.empty((n, nz))
+    wz, wy, wH, wR = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * n), np.empty(nz * nz)
+    wPHt, wS, wK, wL, wKR = np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz)
+    zm = np.empty(nz, np.bool_)
     group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
     for k in range(steps):
         F(x, Pf[k], Fj)
@@ -142,7 +222,8 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
         for m in range(M):
             wrap(xp[m], xmask)
         propagate_cov_into(Fj, P, Q[k % Q.shape[0]], Pp, FP)
-        if not seen[k]:
+        d = sel[k, 0]
+        if d == 0:
             x[:] = xp
             P[:] = Pp
             Xout[:, k] = x
@@ -151,15 +232,47 @@ def ekf_run(f, h, F, H, x, P, Z, seen, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, n
             continue
         H(xp, Ph[k], Hj)
         h(xp, Ph[k], zh)
-        for m in range(M):
-            for q in range(nz):
-                y[m, q] = Z[m, k, q] - zh[m, q]
-            wrap(y[m], zmask)
-        R_k = R[k % R.shape[0]]
-        if (
-            joseph_update_into(xp, Pp, y, Hj, R_k, xmask, nis[:, k], PHt, S, K, L, A, AP, KR, group, limit2, rej, cut)
-            >= 0
-        ):
+        if d == nz:  # every component: the arrays as they are (no copies)
+            for m in range(M):
+                for q in range(nz):
+                    y[m, q] = Z[m, k, q] - zh[m, q]
+                wrap(y[m], zmask)
+            bad = joseph_update_into(
+                xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR, group, limit2, rej, cut
+            )
+        else:  # the measured components, into work arrays of their size
+            z, yd, Rs = wz[: M * d].reshape((M, d)), wy[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d))
+            Hs = wH[: M * d * n].reshape((M, d, n))
+            measured(Z, k, sel, zmask, R[k % R.shape[0]], z, zm, Rs)
+            for m in range(M):
+                for q in range(d):
+                    s = sel[k, 1 + q]
+                    yd[m, q] = z[m, q] - zh[m, s]
+                    for j in range(n):
+                        Hs[m, q, j] = Hj[m, s, j]
+                wrap(yd[m], zm[:d])
+            nd, dd = n * d, d * d
+            bad = joseph_update_into(
+                xp,
+                Pp,
+                yd,
+                Hs,
+                Rs,
+                xmask,
+                nis[:, k],
+                wPHt[:nd].reshape((n, d)),
+                wS[:dd].reshape((d, d)),
+                wK[:nd].reshape((n, d)),
+                wL[:dd].reshape((d, d)),
+                A,
+                AP,
+                wKR[:nd].reshape((n, d)),
+                group,
+                limit2,
+                rej,
+                cut,
+            )
+        if bad >= 0:
             return k
         x[:] = xp
         P[:] = Pp

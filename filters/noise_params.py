@@ -178,7 +178,8 @@ def plan(flt, model) -> dict:
 
 
 class _Scaled:
-    """``process_cov``/``measurement_cov`` of a time-varying model times a scale."""
+    """``process_cov``/``measurement_cov`` of a time-varying model times a scale (or its stack of
+    every step, ``process_covs``/``measurement_covs``: the same products)."""
 
     def __init__(self, fun, scale: float):
         self.fun, self.scale = fun, scale
@@ -213,6 +214,8 @@ def _noisy(model, todo: dict):
         setattr(new, name, base * scale if scale != 1.0 else base)
         if _own(model, cov):  # time-varying (a replacement was refused): its own values, scaled
             setattr(new, cov, _Scaled(getattr(model, cov), scale))
+            if hasattr(model, cov + "s"):  # its stack of every step (the run loops'), scaled alike
+                setattr(new, cov + "s", _Scaled(getattr(model, cov + "s"), scale))
     if hasattr(new, "refresh_noise"):
         new.refresh_noise()
     return new

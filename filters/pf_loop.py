@@ -3,7 +3,8 @@
 For one run, every step k (module docstring of :mod:`replay.filters.pf`)::
 
     propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (particles.perturb)
-    weight      l^i <- l^i + log N(z_k; h(x^i), R)          (replay.util.kernels.gauss_loglik)
+    weight      l^i <- l^i + log N(z_k; h(x^i), R_k)        (replay.util.kernels.gauss_loglik; the
+                components measured at k only, R_k restricted to them)
     normalise   w, l <- particles.weights(l)                   (log domain)
     estimate    x_k, P_k <- particles.moments(x, w)          (circular means for angles)
     resample    when ESS = 1 / sum w^2 < threshold * N (particles.ess_rows): systematic
@@ -13,10 +14,14 @@ The same kernels as the step-by-step engine, and the same draws from the same
 ``numpy.random.Generator`` in the same order (numba draws from a NumPy
 generator with NumPy's own algorithms, sharing its state): the loop gives the
 numbers of the steps bit for bit, and leaves the generator where the steps
-leave it (``tests/test_pf_loop.py``). The steps remain the readable reference
-and the general path: partly missing measurements, models that draw their own noise,
-a non-diagonal Q, time-varying Q or R, gated measurements (:mod:`replay.filters.gating`),
-other resampling schemes and subclasses that change the weighting all step in Python.
+leave it (``tests/test_pf_loop.py``). Q and R may change from step to step
+(:func:`replay.filters.compiled.cov_stacks`) and any component may be missing at a step (the
+fusion task's sensors: each message measures a few components); the factors of R are those
+``Model.loglik`` takes (``noise_factor``), made once per distinct pattern and R before the loop.
+The steps remain the readable reference and the general path: models that draw their own
+noise or weigh their own likelihood, a non-diagonal Q, gated measurements
+(:mod:`replay.filters.gating`), other resampling schemes and subclasses
+that change the weighting all step in Python.
 """
 
 from __future__ import annotations
@@ -32,7 +37,8 @@ from replay.model import Model, noise_factor
 from replay.util.angles import angle_mask
 from replay.util.kernels import LOG_2PI, gauss_loglik
 
-from .compiled import ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
+from .compiled import ROWS_KERNEL, bound, cov_stacks, derived_from_kernels, grain, loop_ready
+from .compiled import measured_steps, param_stacks, row_kernels, split
 from .particles import ess_rows, moments, perturb, roughen, weights
 from .resampling import SCHEMES, invert_sorted, systematic
 
@@ -50,10 +56,11 @@ def pf_run(
     logw,
     w,
     Z,
-    seen,
+    sel,
     Pf,
     Ph,
     qsd,
+    fac,
     rdiag,
     rL,
     rinv,
@@ -68,24 +75,38 @@ def pf_run(
     ess,
 ):
     """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
-    w (N,) their log-weights and weights (all changed in place); Z (steps, nz), ``seen[k]``
-    whether z_k is there (else no weighting at k); Pf[k], Ph[k] the
-    kernels' parameters; qsd (n,) the process noise's standard deviations; R as ``gauss_loglik``
-    takes it (rdiag, rL, rinv, rconst); ``limit`` = threshold * N; roughening constant
-    ``rough`` = K; ``logw0`` = -log N. Writes Xout (steps, n), Pout (steps, n, n) and ess (steps,),
-    the ESS before resampling. Returns the number of resampling steps."""
+    w (N,) their log-weights and weights (all changed in place); Z (steps, nz); ``sel[k] = [d,
+    i_0 .. i_{d-1}]`` the components measured at step k (:func:`replay.filters.compiled.measured_steps`;
+    d = 0: no weighting at k); Pf[k], Ph[k] the kernels' parameters; qsd[k] the process noise's
+    standard deviations (n,) (a stack of one: the same at every step); R of the measured
+    components at step k as ``gauss_loglik`` takes it: entry u = fac[k] of rdiag (U,), rL (U, nz,
+    nz), rinv (U, nz), rconst (U,) (its top-left d x d, first d); ``limit`` = threshold * N;
+    roughening constant ``rough`` = K; ``logw0`` = -log N. Writes Xout (steps, n), Pout (steps,
+    n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
     N, n = X.shape
     steps, nz = Z.shape
     Y, zh, ll = np.empty((N, n)), np.empty((N, nz)), np.empty(N)
+    wz, z, zm = np.empty(N * nz), np.empty(nz), np.empty(nz, np.bool_)
     a, e1 = np.empty(N, np.int64), np.empty(1)
     count = 0
     for k in range(steps):
         f(X, Pf[k], Y)  # propagate: f on every particle, then the noise
-        perturb(Y, qsd, g)
+        perturb(Y, qsd[k % qsd.shape[0]], g)
         X, Y = Y, X
-        if seen[k]:  # weight (no measurement: the weights stay)
+        d = sel[k, 0]
+        if d > 0:  # weight (no measurement: the weights stay)
             h(X, Ph[k], zh)
-            gauss_loglik(zh, Z[k], zmask, rdiag, rL, rinv, rconst, ll)
+            u = fac[k]
+            if d == nz:  # every component: the arrays as they are
+                gauss_loglik(zh, Z[k], zmask, rdiag[u], rL[u], rinv[u], rconst[u], ll)
+            else:  # the measured components
+                zc = wz[: N * d].reshape((N, d))
+                for q in range(d):
+                    s = sel[k, 1 + q]
+                    z[q], zm[q] = Z[k, s], zmask[s]
+                    for i in range(N):
+                        zc[i, q] = zh[i, s]
+                gauss_loglik(zc, z[:d], zm[:d], rdiag[u], rL[u, :d, :d], rinv[u, :d], rconst[u], ll)
             for i in range(N):
                 logw[i] += ll[i]
             weights(logw, w)
@@ -109,6 +130,7 @@ def pf_run(
 
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
+_I2 = types.int64[:, ::1]
 PF_RUN = types.int64(
     ROWS_KERNEL,
     ROWS_KERNEL,
@@ -117,14 +139,15 @@ PF_RUN = types.int64(
     _V,
     _V,
     _M,
+    _I2,
+    _M,
+    _M,
+    _M,
+    types.int64[::1],
     types.boolean[::1],
-    _M,
-    _M,
-    _V,
-    types.boolean,
+    _M3,
     _M,
     _V,
-    types.float64,
     types.boolean[::1],
     types.boolean[::1],
     types.float64,
@@ -145,40 +168,29 @@ def run(engine, Z, finite):
     m, flt = engine.model, engine.flt
     M, steps, nz = Z.shape
     N = flt.n_particles
-    seen = finite.all(axis=2)
-    if (seen != finite.any(axis=2)).any():  # some measurement partly missing: the steps mask components
-        return None
     if (
         not applies(engine, m)
         or not all(isinstance(g, np.random.Generator) for g in engine.active)
-        or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT)
+        or not loop_ready(pf_run, PF_RUN, M * steps * N >= COMPILE_AT, M * steps * N, COMPILE_AT)
     ):
         return None
-    try:  # a covariance without a factor: the steps meet it and record the divergence
-        (qdiag, qsd, _, _), (rdiag, rL, rinv, logdet) = noise_factor(m.Q), noise_factor(m.R)
-    except np.linalg.LinAlgError:
+    stacks, covs = param_stacks(m, steps), cov_stacks(m, steps)
+    if stacks is None or covs is None:
         return None
-    stacks = param_stacks(m, steps)
-    if not qdiag or stacks is None:
-        return None
-    rL = np.ascontiguousarray(np.zeros((0, 0)) if rdiag else rL)
-    rinv = np.ascontiguousarray(rinv if rdiag else np.zeros(0))
+    qsd = process_sd(covs[0])
+    sels, factors = [], {}
+    for j in range(M):  # runs measuring the same components share their factors of R
+        key = finite[j].tobytes()
+        if key not in factors:
+            factors[key] = likelihood_factors(covs[1], finite[j])
+        sels.append(factors[key])
+    if qsd is None or any(f is None for f in factors.values()):  # a covariance without a factor, a
+        return None  # non-diagonal Q: the steps meet it (and record a divergence) or draw it
     call = bound(pf_run, *row_kernels(m, (0, 1)))
     xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
     X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
-    qsd = np.ascontiguousarray(qsd)
-    fixed = (
-        rdiag,
-        rL,
-        rinv,
-        logdet + nz * LOG_2PI,
-        xmask,
-        zmask,
-        flt.ess_threshold * N,
-        float(flt.roughening),
-        float(engine.logw0),
-    )
+    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0))
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
@@ -187,9 +199,10 @@ def run(engine, Z, finite):
                 engine.active[j],
                 *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
                 Z[j],
-                seen[j],
+                sels[j][0],
                 *stacks,
                 qsd,
+                *sels[j][1:],
                 *fixed,
                 X[j],
                 P[j],
@@ -209,16 +222,60 @@ def run(engine, Z, finite):
     return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
 
 
+def process_sd(Q):
+    """The standard deviations (S, n) of a stack of diagonal process noise covariances Q (S, n, n)
+    (``noise_factor``'s), or None when one is not diagonal or not positive (the steps handle it)."""
+    d = np.diagonal(Q, axis1=1, axis2=2)
+    off = Q.copy()
+    off[:, np.arange(Q.shape[1]), np.arange(Q.shape[1])] = 0.0
+    if not np.isfinite(Q).all() or off.any() or (d <= 0).any():
+        return None
+    return np.ascontiguousarray(np.sqrt(d))
+
+
+def likelihood_factors(R, finite):
+    """``(sel, fac, rdiag, rL, rinv, rconst)`` of one run (:func:`pf_run`): the components measured
+    at each step of ``finite`` (steps, nz), and the factors of R (a stack (steps, nz, nz), or of
+    one) restricted to them, those of ``noise_factor`` (what ``Model.loglik`` uses: the same
+    numbers), one per distinct pair of measured components and R; None when one has no factor."""
+    steps, nz = finite.shape
+    sel = measured_steps(finite)
+    keys = finite.astype(float)
+    if len(R) > 1:
+        both = finite[:, :, None] & finite[:, None, :]
+        keys = np.concatenate([keys, np.where(both, R, 0.0).reshape(steps, -1)], axis=1)
+    keys = np.ascontiguousarray(keys)  # each row one value of its bytes: a 1-d unique (fast)
+    _, first, fac = np.unique(
+        keys.view(np.dtype((np.void, keys.itemsize * keys.shape[1]))).ravel(), return_index=True, return_inverse=True
+    )
+    U = len(first)
+    rdiag, rL, rinv, rconst = np.zeros(U, bool), np.zeros((U, nz, nz)), np.zeros((U, nz)), np.zeros(U)
+    for u, k in enumerate(first):
+        mask = finite[k]
+        d = int(mask.sum())
+        if not d:
+            continue
+        try:
+            rdiag[u], L, inv, logdet = noise_factor(R[k % len(R)][np.ix_(mask, mask)])
+        except np.linalg.LinAlgError:
+            return None
+        rconst[u] = logdet + d * LOG_2PI
+        if rdiag[u]:
+            rinv[u, :d] = inv
+        else:
+            rL[u, :d, :d] = L
+    return sel, np.ascontiguousarray(fac.ravel(), dtype=np.int64), rdiag, rL, rinv, rconst
+
+
 def applies(engine, model) -> bool:
     """Whether the loop computes what the steps compute for this model (the engine is the plain
     bootstrap one, :meth:`replay.filters.pf.PFEngine.run_all`): systematic resampling, the
-    model's own kernels, its noise drawn by the filter (no ``sample_f`` of its own), Q and R
-    constant."""
+    model's own kernels and Gaussian likelihood, its noise drawn by the filter (no ``sample_f``
+    of its own)."""
     return (
         SCHEMES.get(engine.flt.resampling) is systematic  # the scheme the loop computes, not a replacement
         and model.kernels() is not None
         and derived_from_kernels(model)
         and type(model).sample_f is Model.sample_f
-        and type(model).process_cov is Model.process_cov
-        and type(model).measurement_cov is Model.measurement_cov
+        and type(model).loglik is Model.loglik
     )

@@ -343,3 +343,36 @@ def test_whole_run_loop_skips_the_update_of_missing_rows(sonar_problems, name, m
         assert np.array_equal(a.info["nis"], b.info["nis"], equal_nan=True)
         assert np.array_equal(a.info["nis_dof"], b.info["nis_dof"]) and a.info["nis_dof"][6] == 0
         assert np.isnan(a.info["nis"][20]) and np.isfinite(a.info["nis"][21])
+
+
+@pytest.mark.slow  # compiles the two run loops when numba's cache lacks them (~12 s, once)
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
+def test_whole_run_loop_updates_the_measured_components_only(sonar_problems, name, monkeypatch):
+    """Components missing at a step for every run (sensors at their own rates, as in the fusion
+    task): the loop updates with the measured ones (R, angles restricted to them), as the steps
+    do, bit for bit; NIS with their count as degrees of freedom."""
+    pbs = sonar_problems[:3]
+    Z = np.stack([pb.z for pb in pbs])
+    Z[:, 5:9, 0] = np.nan  # range missing: elevation and azimuth (an angle) only
+    Z[:, 12:15, 1:] = np.nan
+    Z[:, 20] = np.nan
+    X0, P0 = np.stack([pb.x0 for pb in pbs]), np.stack([pb.P0 for pb in pbs])
+    used, fast, slow = loop_then_steps(make_filter(name), pbs[0].model, Z, X0, P0, monkeypatch)
+    assert isinstance(used[0], tuple)
+    for a, b in zip(fast, slow):
+        assert np.isfinite(a.x).all()
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert np.array_equal(a.info["nis"], b.info["nis"], equal_nan=True)
+        assert np.array_equal(a.info["nis_dof"], b.info["nis_dof"])
+        assert list(a.info["nis_dof"][[4, 5, 12, 20]]) == [3, 2, 1, 0]
+
+
+def loop_then_steps(flt, model, Z, X0, P0, monkeypatch):
+    """(what run_kernels returned, the runs with the loop allowed, the runs stepped in Python)."""
+    from replay.filters import kalman
+
+    used, real = [], kalman.run_kernels
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: used.append(real(*a)) or used[-1])
+    fast = flt.run_batch(model, Z, X0, P0, [None] * len(Z))
+    monkeypatch.setattr(kalman, "run_kernels", lambda *a: None)
+    return used, fast, flt.run_batch(model, Z, X0, P0, [None] * len(Z))

@@ -53,3 +53,28 @@ def test_rows_forms_equal_the_models_array_methods_bit_for_bit():
             out = np.full(ref.shape, np.nan)
             call(fn, X, p, out)
             assert np.array_equal(out, ref)
+
+
+def test_many_short_jobs_compile_the_loop_once_their_work_adds_up(monkeypatch):
+    """A job too short to pay for compiling a missing loop steps in Python; the jobs of one process
+    (a tune's trials) add up, and the one that reaches the threshold compiles it."""
+
+    class Loop:
+        __name__, signatures, compiled = "loop", [], []
+
+        def compile(self, sig):
+            self.compiled.append(sig)
+
+        def disable_compile(self):
+            pass
+
+    monkeypatch.setattr(loops.numba_internals, "jit_disabled", lambda: False)
+    monkeypatch.setattr(loops.numba_internals, "from_cache", lambda loop, sig: False)
+    loop, sig = Loop(), object()
+    assert [loops.loop_ready(loop, sig, False, 40.0, 100.0) for _ in range(2)] == [False, False]
+    assert loop.compiled == []
+    assert loops.loop_ready(loop, sig, False, 40.0, 100.0)  # 120 >= 100: compiled now
+    assert loop.compiled == [sig] and loops.loop_ready(loop, sig, False)
+    other = Loop()
+    other.compiled = []
+    assert not loops.loop_ready(other, sig, False, 99.0, 100.0)  # its own count

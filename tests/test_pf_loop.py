@@ -73,11 +73,49 @@ def test_steps_without_measurement_keep_the_weights(monkeypatch):
     assert e1 == e2
 
 
-def test_what_the_loop_does_not_compute_steps_in_python(monkeypatch):
+def test_partly_missing_measurements_give_the_numbers_of_the_steps(monkeypatch):
+    """A step that measures some components (run 1 at step 5, every run at steps 20-29: one
+    component each) is weighted by those alone, with R restricted to them, in the loop too."""
     model, Z, X0, P0 = walk(missing_rows=False)
-    Z[1, 5, 0] = np.nan  # partly missing: the steps mask the component
-    used, fast, slow, _, _ = both(make_filter("pf", n_particles=50), model, Z, X0, P0, monkeypatch)
-    assert used == [None]
+    Z[1, 5, 0] = np.nan
+    Z[:, 20:25, 1:] = np.nan
+    Z[:, 25:30, :2] = np.nan
+    used, fast, slow, e1, e2 = both(make_filter("pf", n_particles=50), model, Z, X0, P0, monkeypatch)
+    assert isinstance(used[0], tuple)  # the loop ran
+    for a, b in zip(fast, slow):
+        assert np.isfinite(a.x).all()
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+        assert a.info["resampled"] == b.info["resampled"] == 60
+    assert e1 == e2
+
+
+class _VaryingWalk(RandomWalkPosition):
+    """The random walk with a process noise that grows and a measurement noise per step."""
+
+    def process_cov(self, k):
+        return self.Q * (1.0 + 0.1 * k)
+
+    def measurement_cov(self, k):
+        return self.R * (1.0 + (k % 3))
+
+
+def test_time_varying_noise_gives_the_numbers_of_the_steps(monkeypatch):
+    _, Z, X0, P0 = walk()
+    model = _VaryingWalk(0.5 * np.eye(3), np.diag([1.0, 2.0, 0.5]))
+    Z[2, 40, 1] = np.nan
+    used, fast, slow, e1, e2 = both(make_filter("pf", n_particles=60, roughening=0.1), model, Z, X0, P0, monkeypatch)
+    assert isinstance(used[0], tuple)
+    for a, b in zip(fast, slow):
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+    assert e1 == e2
+    late = fast[0].P[-1].diagonal()  # the noise did change: the last spread is that of the larger Q
+    model.process_cov = lambda k: model.Q
+    const = make_filter("pf", n_particles=60, roughening=0.1).run_batch(model, Z, X0, P0,
+                                                                         [np.random.default_rng(m) for m in range(3)])
+    assert (late > const[0].P[-1].diagonal()).all()
+
+
+def test_what_the_loop_does_not_compute_steps_in_python(monkeypatch):
     used, *_ = both(make_filter("pf", n_particles=50, resampling="multinomial"), *walk(), monkeypatch)
     assert used == [None]
     used, *_ = both(make_filter("wf-pf", n_particles=50), *walk(), monkeypatch)

@@ -8,8 +8,8 @@ only calls it:
 * :func:`bind` — a template module that calls a model's kernels ``f, h, F, H`` as globals,
   copied with that model's imports and cached on disk, content-keyed and sealed
   (:mod:`.copies`, :mod:`.files`);
-* :func:`row_kernels`, :func:`loop_ready`, :func:`bound`, :func:`param_stacks`,
-  :func:`derived_from_kernels` — the whole-run loops' model kernels (rows forms, cfuncs of the
+* :func:`row_kernels`, :func:`loop_ready`, :func:`bound`, :func:`param_stacks`, :func:`cov_stacks`,
+  :func:`measured_steps`, :func:`derived_from_kernels` — the whole-run loops' model kernels (rows forms, cfuncs of the
   declared types :data:`ROWS_KERNEL`, :data:`JACOBIAN_ROWS`), when a loop may run, and its call
   with the argument typing done once (:mod:`.loops`);
 * :class:`Kernel` — a kernel called through its compiled entry point once typed;
@@ -24,7 +24,8 @@ kernels, or a filter engine that is not the library's own, steps in Python.
 """
 
 from .copies import bind
-from .loops import JACOBIAN_ROWS, ROWS_KERNEL, bound, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels
+from .loops import JACOBIAN_ROWS, ROWS_KERNEL, bound, cov_stacks, derived_from_kernels, grain, loop_ready
+from .loops import measured_steps, param_stacks, row_kernels
 from .numba_internals import Kernel
 from .threadpool import split, threads
 
@@ -34,9 +35,11 @@ __all__ = [
     "ROWS_KERNEL",
     "bind",
     "bound",
+    "cov_stacks",
     "derived_from_kernels",
     "grain",
     "loop_ready",
+    "measured_steps",
     "param_stacks",
     "row_kernels",
     "split",

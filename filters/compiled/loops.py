@@ -57,20 +57,24 @@ def row_kernels(model, needed=(0, 1, 2, 3)):
 
 
 _ready: set = set()
+_waiting: dict = {}  # loop -> work this process did without it (not compiled, not cached)
 
 
-def loop_ready(loop, sig, compile_ok: bool) -> bool:
+def loop_ready(loop, sig, compile_ok: bool, work: float = 0.0, at: float = math.inf) -> bool:
     """Whether the run loop ``loop`` can be called with its declared signature ``sig``: compiled in
     this process, or loaded from numba's disk cache, or (``compile_ok``) compiled now (about 10 s,
-    once per machine). Compiled lazily, not at import: a short run never waits for it. With
-    numba's JIT disabled the loop is its Python function: always ready."""
+    once per machine). Compiled lazily, not at import: a short run never waits for it; but many
+    short runs in one process (a tune's trials) compile it once their ``work`` (run-steps or
+    particle-steps) adds up to ``at``. With numba's JIT disabled the loop is its Python function:
+    always ready."""
     if (loop, id(sig)) in _ready:  # numba's ``loop.signatures`` costs 35 µs a call, hashing ``sig`` 30
         return True
     if numba_internals.jit_disabled():
         return True
     if not loop.signatures:
         if not numba_internals.from_cache(loop, sig):
-            if not compile_ok:
+            _waiting[loop] = _waiting.get(loop, 0.0) + work
+            if not (compile_ok or _waiting[loop] >= at):
                 return False
             log.info("compiling the run loop %s (about 12 s, once per machine; cached for later runs)", loop.__name__)
         loop.compile(sig)
@@ -134,3 +138,43 @@ def fingerprint(model, steps: int):
         else:
             return None
     return tuple(parts)
+
+
+def measured_steps(finite) -> np.ndarray:
+    """The components measured at each step, for the run loops: ``finite`` (steps, nz) -> ``sel``
+    (steps, nz + 1) int64, row k = [d, i_0 .. i_{d-1}, ...]: the d measured components of step k
+    in increasing order (the rest of the row is not read). d = nz: all; d = 0: no update."""
+    finite = np.asarray(finite, bool)
+    sel = np.empty((len(finite), finite.shape[1] + 1), np.int64)
+    sel[:, 0] = finite.sum(axis=1)
+    sel[:, 1:] = np.argsort(~finite, axis=1, kind="stable")
+    return sel
+
+
+def cov_stacks(model, steps: int):
+    """``(Q, R)``: the model's process and measurement noise covariances of every step, stacks
+    (steps, n, n), or a stack of one (1, n, n) when the model's are constant (``model.Q``,
+    ``model.R``); None when they change shape from step to step (the caller steps in Python).
+
+    A time-varying model may give a whole stack at once, ``process_covs(steps)`` and
+    ``measurement_covs(steps)`` (the first ``steps`` matrices, equal to its ``process_cov(k)``,
+    ``measurement_cov(k)``): used unless the instance replaces the one-step method without the
+    stack (a wrapper that changes the numbers, e.g. a scale, must wrap both); else one call per step."""
+    from replay.model import Model
+
+    out = []
+    for one, many, const in (("process_cov", "process_covs", "Q"), ("measurement_cov", "measurement_covs", "R")):
+        if getattr(type(model), one) is getattr(Model, one) and one not in vars(model):
+            got = np.asarray(getattr(model, const), dtype=float)[None]
+        elif hasattr(model, many) and (one not in vars(model) or many in vars(model)):
+            got = getattr(model, many)(steps)
+        else:
+            try:
+                got = [getattr(model, one)(k) for k in range(steps)]
+            except ValueError:
+                return None
+        try:
+            out.append(np.ascontiguousarray(got, dtype=float))
+        except ValueError:  # ragged
+            return None
+    return tuple(out)

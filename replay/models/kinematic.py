@@ -68,6 +68,22 @@ class Kinematic(KernelModel):
     def measurement_cov(self, k):
         return np.diag(self.R_steps[k])
 
+    def process_covs(self, steps):
+        """``process_cov(k)`` of the first ``steps`` steps, one stack (steps, nx, nx) (the run loops')."""
+        return _diagonals(self.q * np.maximum(self.dt[:steps], 1e-9)[:, None])
+
+    def measurement_covs(self, steps):
+        """``measurement_cov(k)`` of the first ``steps`` steps, one stack (steps, nz, nz)."""
+        return _diagonals(self.R_steps[:steps])
+
+
+def _diagonals(d):
+    """(steps, n, n) diagonal matrices of the rows of ``d`` (steps, n)."""
+    out = np.zeros(d.shape + d.shape[-1:])
+    i = np.arange(d.shape[-1])
+    out[:, i, i] = d
+    return out
+
 
 class Kinematic2D(Kinematic):
     STATE = ("east", "north", "yaw", "u", "v", "r")
