@@ -51,14 +51,14 @@ from pathlib import Path
 from replay.util import tomlfile
 from replay.util.errors import ReplayError, listed, shown
 
-from .mapping_fields import check_field_lists
+from .mapping_fields import check_field_lists, frame_declarations
 from .rosmsg import KINDS, kind_of, normalize_type
 
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
 ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "rejection_threshold"}
-ENTRY_KEYS |= {"twist_frame", "mount"}  # frame declarations (replay.tasks.fusion_frames)
+ENTRY_KEYS |= {"twist_frame", "mount"}  # frame declarations (mapping_fields.frame_declarations)
 FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
@@ -253,27 +253,7 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
     fields), ``noise`` (a table field = variance, in the field's unit squared),
     ``rejection_threshold`` (a Mahalanobis distance: one number for every field, or a table
     field = distance; robot_localization's ``*_rejection_threshold``)."""
-    out = {}
-    if "twist_frame" in spec:  # an Odometry's twist: in its child frame (REP 105) or its parent's
-        if ref or spec["twist_frame"] not in ("child", "parent"):
-            raise ReplayError(
-                f"{source}: [{'reference' if ref else 'channels'}] {name}: twist_frame must be \"child\" or "
-                f"\"parent\" on a [channels] entry (got {shown(spec['twist_frame'])})"
-            )
-        out["twist_frame"] = spec["twist_frame"]
-    if "mount" in spec:  # an IMU's mounting: the rotation base_link -> sensor (roll, pitch, yaw; rad)
-        m = spec["mount"]
-        ok = (
-            isinstance(m, list)
-            and len(m) == 3
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in m)
-        )
-        if ref or not ok or not all(abs(float(v)) < 10 for v in m):
-            raise ReplayError(
-                f"{source}: [{'reference' if ref else 'channels'}] {name}: mount must be [roll, pitch, yaw] (rad, "
-                f"the sensor's rotation in the body frame) on a [channels] entry (got {shown(m)})"
-            )
-        out["mount"] = [float(v) for v in m]
+    out = frame_declarations(spec, f"{source}: [{'reference' if ref else 'channels'}] {name}", ref)
     for key in ("fuse", "differential", "noise", "rejection_threshold"):
         if key not in spec:
             continue

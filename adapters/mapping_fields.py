@@ -38,3 +38,31 @@ def check_field_lists(fuse, differential, where: str) -> None:
             f"{where}: {shown(both[0])} is in both fuse and differential: a field is used one way "
             "(absolute in fuse, or as deltas in differential)"
         )
+
+
+def frame_declarations(spec: dict, where: str, ref: bool) -> dict:
+    """An entry's frame declarations for the fusion task (docs/bags.md): ``twist_frame`` (an
+    Odometry's twist in its child frame, REP 105, or its parent's) and ``mount`` (an IMU's
+    rotation in the body frame, [roll, pitch, yaw] rad); only on a [channels] entry."""
+    out = {}
+    if "twist_frame" in spec:  # an Odometry's twist: in its child frame (REP 105) or its parent's
+        if ref or spec["twist_frame"] not in ("child", "parent"):
+            raise ReplayError(
+                f"{where}: twist_frame must be \"child\" or "
+                f"\"parent\" on a [channels] entry (got {shown(spec['twist_frame'])})"
+            )
+        out["twist_frame"] = spec["twist_frame"]
+    if "mount" in spec:  # an IMU's mounting: the rotation base_link -> sensor (roll, pitch, yaw; rad)
+        m = spec["mount"]
+        ok = (
+            isinstance(m, list)
+            and len(m) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in m)
+        )
+        if ref or not ok or not all(abs(float(v)) < 10 for v in m):
+            raise ReplayError(
+                f"{where}: mount must be [roll, pitch, yaw] (rad, "
+                f"the sensor's rotation in the body frame) on a [channels] entry (got {shown(m)})"
+            )
+        out["mount"] = [float(v) for v in m]
+    return out

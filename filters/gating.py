@@ -36,6 +36,7 @@ import numpy as np
 
 from replay.util.angles import residual
 from replay.util.errors import ReplayError
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 from replay.util.kernels import cholesky, whitened_norm2
 
 NO_GROUP = -1
