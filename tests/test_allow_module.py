@@ -35,6 +35,11 @@ def plugin(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path / "mods"))
     yield marker
     sys.modules.pop(MODULE, None)
+    from replay.filters import FILTERS
+    from replay.tasks import TASKS
+
+    FILTERS.refresh()  # the refused load is remembered as a problem (replay list prints it): not for other tests
+    TASKS.refresh()
 
 
 @pytest.mark.parametrize(
