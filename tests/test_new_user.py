@@ -105,7 +105,6 @@ def test_the_first_ten_minutes_eval_report_and_export_print_what_the_page_shows(
 
 
 @pytest.mark.slow
-@pytest.mark.skip(reason="after the issue-36 merge section 7 (quick reproduction) output differs from the page; to be regenerated (session note 2026-11-29)")
 def test_the_first_ten_minutes_campaign_and_reproduction_print_what_the_page_shows(tmp_path, shared_dir):
     """Sections 6-7: the campaign (Bohai from ../shared, as the campaign file finds it) and
     ``replay reproduce 002 --quick`` (about 30-50 s)."""
