@@ -7,26 +7,14 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from replay.cli.main import main
 from replay.trajectory.base import make
 from replay.trajectory.files import write_tum
 from replay.util import sealed
 
-
-def refused(args, message):
-    r = CliRunner().invoke(main, list(map(str, args)))
-    lines = r.output.strip().splitlines()
-    assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("replay: error:"), r.output
-    assert message in lines[0], r.output
-    return lines[0]
+from cli_helpers import ok, refused
 
 
-def ok(args):
-    r = CliRunner().invoke(main, list(map(str, args)))
-    assert r.exit_code == 0, r.output
-    return r.output
 
 
 @pytest.fixture

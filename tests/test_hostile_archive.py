@@ -16,6 +16,8 @@ from replay.trajectory.base import make
 from replay.trajectory.files import write_tum
 from replay.util import sealed
 
+from cli_helpers import refused
+
 
 @pytest.fixture
 def files(tmp_path):
@@ -30,12 +32,6 @@ def files(tmp_path):
     return tmp_path
 
 
-def refused(args, message, *, cwd=None):
-    r = CliRunner().invoke(main, list(map(str, args)))
-    lines = r.output.strip().splitlines()
-    assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith("replay: error:"), r.output
-    assert message in lines[0], r.output
-    return lines[0]
 
 
 def test_trials_refusals(files):
