@@ -33,8 +33,8 @@ def twist_in_body(frame, entry, fld, vals, valid, where, key):
     """(values in the body frame, note) of an Odometry entry's fused ``velocity`` or ``rate``."""
     name = field_channel(frame, entry, fld)
     child = str(frame.channels[name].frame or "").strip("/")
-    declared = entry.get("twist_frame")
-    topic = entry["source"]
+    declared = entry.twist_frame
+    topic = entry.source
     pos, att = (frame.channels.get(field_channel(frame, entry, f) or "") for f in ("position", "attitude"))
     if declared is None and not child:
         raise ReplayError(
@@ -122,7 +122,7 @@ def imu_yaw_sense(frame, entry, att_vals, valid, where, key):
     c = float(np.corrcoef(dy, dg)[0, 1]) if 0.5 < scale < 2.0 else 0.0
     if c < -0.5:
         raise ReplayError(
-            f"{where}: {key}: {entry['source']}'s orientation yaw turns against its angular velocity about z "
+            f"{where}: {key}: {entry.source}'s orientation yaw turns against its angular velocity about z "
             f"(correlation {c:.2f} over 1 s): a NED orientation (yaw clockwise from north) beside a z-up gyro, "
             'or the reverse; fuse = ["gyro"] only'
         )
@@ -135,7 +135,7 @@ def mounted(entry, fld, vals, key):
     [roll, pitch, yaw]`` (the sensor's rotation R_m in the body frame, as a static transform
     base_link -> imu_link, robot_localization's use of it): omega_body = R_m omega_imu,
     R_world_body = R_world_imu R_m'. Not declared: as recorded (noted)."""
-    mount = entry.get("mount")
+    mount = None if entry.mount is None else list(entry.mount)
     if mount is None:
         return vals, f"task fusion: {key} {fld}: no mount declared: the sensor's axes are the body's"
     Rm = rotation(np.array([mount], float))[0]
