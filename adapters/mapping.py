@@ -59,7 +59,7 @@ from .rosmsg import KINDS, kind_of, normalize_type
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
 ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "rejection_threshold"}
-ENTRY_KEYS |= {"twist_frame", "mount"}  # frame declarations (mapping_fields.frame_declarations)
+ENTRY_KEYS |= {"twist_frame", "mount", "lever_arm"}  # frame declarations (mapping_fields.frame_declarations)
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be

@@ -275,7 +275,8 @@ class SensorInput:
     settings of the entry, None where not declared: ``fuse`` and ``differential`` (field
     lists), ``noise`` (field -> variance), ``rejection_threshold`` (a Mahalanobis distance, or
     field -> distance), ``twist_frame`` (``child`` or ``parent``), ``mount`` (declared
-    [roll, pitch, yaw] of the sensor in the body frame). Found by the adapter:
+    [roll, pitch, yaw] of the sensor in the body frame), ``lever_arm`` (declared [x, y, z] of a GPS
+    antenna in the body frame). Found by the adapter:
     ``attitude_enu`` (its attitude was checked east-north-up), ``recorded_mount`` (the
     recording's static transform body -> the message's frame, a :class:`Mount`)."""
 
@@ -290,6 +291,7 @@ class SensorInput:
     rejection_threshold: float | dict | None = None
     twist_frame: str | None = None
     mount: tuple | None = None
+    lever_arm: tuple | None = None
     attitude_enu: bool | None = None
     recorded_mount: Mount | None = None
 
@@ -306,7 +308,16 @@ class SensorInput:
     def as_dict(self) -> dict:
         """Its entry in a manifest's ``roles`` (the keys that are set)."""
         out = {"entry": self.entry, "source": self.source, "declared": self.declared, "channels": dict(self.channels)}
-        for key in ("twist_frame", "mount", "fuse", "differential", "noise", "rejection_threshold", "attitude_enu"):
+        for key in (
+            "twist_frame",
+            "mount",
+            "lever_arm",
+            "fuse",
+            "differential",
+            "noise",
+            "rejection_threshold",
+            "attitude_enu",
+        ):
             value = getattr(self, key)
             if value is not None:
                 out[key] = list(value) if isinstance(value, tuple) else value
@@ -317,7 +328,7 @@ class SensorInput:
 
 def make_input(role: str, entry: str, source: str, channels: dict, declared: bool = False, **settings) -> SensorInput:
     """A :class:`SensorInput` from a mapping entry's settings (lists as tuples, numbers as floats)."""
-    for key in ("fuse", "differential", "mount"):
+    for key in ("fuse", "differential", "mount", "lever_arm"):
         if settings.get(key) is not None:
             settings[key] = tuple(settings[key])
     return SensorInput(role, entry, source, dict(channels), declared, **settings)

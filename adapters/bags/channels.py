@@ -13,7 +13,7 @@ from replay.util.errors import DataError, ReplayError
 
 from .. import rosmsg
 from ..mapping import Mapping, role_of
-from . import sources
+from . import mounts, sources
 from .recording import Recording
 
 
@@ -25,6 +25,7 @@ class Sources:
     other: dict = field(default_factory=dict)
     fields: dict = field(default_factory=dict)
     kinds: dict = field(default_factory=dict)
+    frames: dict = field(default_factory=dict)  # (header.frame_id, child_frame_id): mounts.frames_of
 
 
 @dataclass
@@ -45,6 +46,7 @@ def read_sources(rec: Recording, mp: Mapping, time: str, geo, opts: dict) -> Sou
         src = sources.key(e)
         if src not in srcs.fields:
             msgs, logs, srcs.kinds[src] = sources.messages(rec, e)
+            srcs.frames[src] = mounts.frames_of(msgs)
             srcs.stamps[src], srcs.other[src] = sources.stamps(rec, e, msgs, logs, time)
             srcs.fields[src] = rosmsg.convert(srcs.kinds[src], msgs, geo, opts)
     return srcs
@@ -100,8 +102,19 @@ def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> roles
         raise ReplayError(f"{mp.source}: [channels] {e.name}: twist_frame is for an Odometry (not {topic_type})")
     if "mount" in e.fusion and kind != "imu":
         raise ReplayError(f"{mp.source}: [channels] {e.name}: mount is for an Imu (not {topic_type})")
+    if "lever_arm" in e.fusion and roles.get(role).mount != "lever_arm":
+        arms = ", ".join(r.name for r in roles.ROLES.values() if r.mount == "lever_arm")
+        raise ReplayError(
+            f"{mp.source}: [channels] {e.name}: lever_arm is for an antenna's fixes (role {arms}; not {role})"
+        )
     for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-        for f in () if key in ("twist_frame", "mount") else value if isinstance(value, (list, tuple, dict)) else ():
+        for f in (
+            ()
+            if key in ("twist_frame", "mount", "lever_arm")
+            else value
+            if isinstance(value, (list, tuple, dict))
+            else ()
+        ):
             if f not in fields:
                 raise ReplayError(
                     f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "

@@ -21,7 +21,7 @@ from .. import rosmsg
 from ..mapping import Mapping, from_dict, load_mapping
 from ..mapping_propose import propose
 from . import estimates as recorded
-from . import sources
+from . import mounts, sources
 from .channels import place_entries, read_sources
 from .reading import read
 from .recording import Recording, Topic
@@ -140,7 +140,7 @@ def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame
         return proposed[0].topics
 
     until = until if until is not None else (mp.until if mp else None)
-    rec = read(path, mp.topics if mp else choose, until)
+    rec = read(path, mounts.with_static(mp.topics if mp else choose), until)
     mp = mp or proposed[0]
     time = time or mp.time
     if time not in ("header", "log"):
@@ -204,7 +204,7 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     estimates = recorded.build(rec, mp, time, geo, t0, report, _reference_span(mp, srcs.stamps))
     meta = _frame_meta(rec, mp, time, t0, sim, until, estimates, geo)
     epoch = None if sim else t0 / 1e9
-    roles = tuple(placed.roles)
+    roles = mounts.attach(rec, mp, placed.roles, srcs.frames, srcs.kinds, report)  # /tf_static
     return Frame((axis - t0) / 1e9, placed.channels, placed.reference, epoch, meta, report, estimates, roles)
 
 

@@ -161,8 +161,8 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     problem.frame_meta = dict(
         frame.meta, task_inputs=getattr(problem, "inputs", {}), task_notes=getattr(problem, "notes", [])
     )
-    if frame.roles is not None:  # the adapter's sensor inputs, as the manifest records them
-        problem.frame_meta["roles"] = roles.as_meta(frame.roles)
+    if frame.roles is not None:  # the adapter's sensor inputs (Frame.roles), as the manifest records them
+        problem.frame_meta.update(roles=roles.as_meta(frame.roles))
     if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
         problem.frame_meta["task_noise"] = problem.noise
     problem.frame_report = frame.report

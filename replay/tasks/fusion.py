@@ -57,7 +57,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
-from .fusion_frames import imu_yaw_sense, mounted, twist_in_body
+from .fusion_frames import heading_source, imu_yaw_sense, lever_arm, mounted, twist_in_body
 from .fusion_inputs import (
     configured,
     differential,
@@ -226,8 +226,8 @@ class FusionTask(Task):
             gate_names=[],
             gate_limit=[],
         )
-        ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t))
         absolute = has_absolute_position(found)
+        ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t), found=found, absolute=absolute)
         for entry in found:
             key = f"[channels] {entry.entry}"
             fuse, diff, noise = configured(entry, f"{where}: {key}", absolute)
@@ -262,6 +262,11 @@ class FusionTask(Task):
         if role.mount == "rotation" and role.field(fld).axes and not is_diff:
             vals, note = mounted(entry, fld, vals, key)
             m.notes.append(note)
+        arm = entry.lever_arm is not None or entry.recorded_mount is not None
+        if role.mount == "lever_arm" and fld == "position" and not is_diff and arm:
+            head = heading_source(frame, ctx.found, where, ctx.absolute)  # the antenna's offset turned by it
+            vals, valid, note = lever_arm(frame, entry, vals, valid, head, key)
+            m.notes += [note] if note else []
         if fld == "attitude" and "gyro" in role.fields and not is_diff:
             m.notes.append(imu_yaw_sense(frame, entry, vals, valid, where, key))
         if is_diff:
