@@ -181,3 +181,19 @@ def test_lever_arm_declared_only_on_an_antenna(tmp_path):
         from_dict({"channels": {"g": {"topic": "/fix", "lever_arm": [1, 2]}}}, "m.toml")
     mp = from_dict({"channels": {"g": {"topic": "/fix", "lever_arm": [1, 2, 0.5]}}}, "m.toml")
     assert mp.entries[0].fusion == {"lever_arm": [1.0, 2.0, 0.5]}
+
+
+def test_recorded_lever_arm_applied_with_the_fused_imu_attitude(recorded):
+    d, _ = recorded
+    (d / "g.toml").write_text('[channels]\nodom = { topic = "/odom", fuse = ["velocity"] }\n'
+                              'imu = { topic = "/imu", fuse = ["gyro", "attitude"] }\ngps = "/fix"\n'
+                              '[reference]\nposition = "/fix"\n')
+    _, notes = ekf(d / "with_tf", d / "g.toml")
+    assert ("task fusion: [channels] gps position: lever arm from /tf_static base_link -> gps_link = "
+            "[0.8, -0.3, 1.1]: moved to the body origin by the attitude of imu (/imu (sensor_msgs/msg/Imu))") in notes
+    assert ("task fusion: [channels] imu attitude: mount from /tf_static base_link -> imu_link = "
+            "[1.570796327, 0.0, -1.570796327]: rotated into the body frame") in notes
+    (d / "g2.toml").write_text((d / "g.toml").read_text().replace('"gyro", "attitude"', '"gyro"'))
+    _, notes = ekf(d / "with_tf", d / "g2.toml")  # no fused attitude: the heading at the fixes is unknown
+    assert any(n.startswith("task fusion: [channels] gps position: lever arm from /tf_static base_link -> "
+                            "gps_link = [0.8, -0.3, 1.1] NOT applied") for n in notes), notes
