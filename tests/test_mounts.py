@@ -174,8 +174,14 @@ def test_mount_rotation_sources():
     assert mount_rotation(close) == ([0.1, 0.0, 0.0005], "mount = [0.1, 0.0, 0.0005] declared")  # within 1 mrad
 
 
-def test_lever_arm_declared_only_on_an_antenna(tmp_path):
+def test_lever_arm_declared_only_on_an_antenna(recorded):
     from replay.adapters.mapping import from_dict
+
+    d, _ = recorded
+    with pytest.raises(ReplayError, match=r"\[channels\] imu: lever_arm is for an antenna's fixes \(role gps; not imu\)"):
+        bags.load(d / "with_tf", mapping={"channels": {"imu": {"topic": "/imu", "lever_arm": [1, 0, 0]}}})
+    f = bags.load(d / "with_tf", mapping={"channels": {"gps": {"topic": "/fix", "lever_arm": [1, 0, 0]}}})
+    assert f.roles[0].lever_arm == (1.0, 0.0, 0.0) and f.roles[0].recorded_mount.child == "gps_link"
 
     with pytest.raises(ReplayError, match=r"lever_arm must be \[x, y, z\]"):
         from_dict({"channels": {"g": {"topic": "/fix", "lever_arm": [1, 2]}}}, "m.toml")

@@ -63,7 +63,7 @@ def ekf(problem):
 
 def test_a_barometer_is_one_role_entry(monkeypatch):
     task = FusionTask()
-    with pytest.raises(ReplayError, match="baro: unknown role 'barometer'"):
+    with pytest.raises(ReplayError, match="generated: task fusion: baro: unknown role 'barometer'"):
         task.build(generated(np.random.default_rng(1), "barometer"), np.random.default_rng(0))
     monkeypatch.setitem(ROLES, "barometer", BAROMETER)  # the one entry
     baro = task.build(generated(np.random.default_rng(1), "barometer"), np.random.default_rng(0))

@@ -107,14 +107,10 @@ def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> roles
         raise ReplayError(
             f"{mp.source}: [channels] {e.name}: lever_arm is for an antenna's fixes (role {arms}; not {role})"
         )
-    for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-        for f in (
-            ()
-            if key in ("twist_frame", "mount", "lever_arm")
-            else value
-            if isinstance(value, (list, tuple, dict))
-            else ()
-        ):
+    for key, value in e.fusion.items():  # the fusion task's field lists: fields this message has
+        if key in ("twist_frame", "mount", "lever_arm") or not isinstance(value, (list, tuple, dict)):
+            continue
+        for f in value:
             if f not in fields:
                 raise ReplayError(
                     f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "

@@ -51,6 +51,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from replay import roles
 from replay.filters.gating import Gates
 from replay.models.kinematic import Kinematic2D, Kinematic3D
 from replay.util.errors import ReplayError
@@ -194,8 +195,8 @@ class FusionTask(Task):
         """The frame's position reference; refused without a sensor input or a valid reference."""
         if not found:
             raise ReplayError(
-                f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
-                "pose; docs/bags.md); tasks that need none: position, sonar (synthetic "
+                f"{where}: task fusion: no sensor input (roles {', '.join(roles.ROLES)}; docs/bags.md); "
+                "tasks that need none: position, sonar (synthetic "
                 "measurements from the reference)"
             )
         ref = frame.reference.get("position")

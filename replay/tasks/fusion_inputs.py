@@ -24,6 +24,8 @@ from replay.roles import Component, SensorInput, check_field_lists
 from replay.util.angles import wrap
 from replay.util.errors import ReplayError, shown
 
+from . import source_of
+
 
 def components(field: str, dims: int, role: str) -> tuple[Component, ...]:
     """``(channel column, state component, sign, angle)`` of a field of ``role`` in the 2-D or 3-D state."""
@@ -59,8 +61,12 @@ def has_absolute_position(found) -> bool:
 
 
 def inputs(frame) -> list[SensorInput]:
-    """Every sensor input of the frame (not role ``none``), roles in :data:`replay.roles.ROLES` order."""
-    return roles.ordered(frame.roles)
+    """Every sensor input of the frame (not role ``none``), roles in :data:`replay.roles.ROLES` order;
+    an input of an unknown role refused in one line naming the frame's source."""
+    try:
+        return roles.ordered(frame.roles)
+    except ReplayError as e:
+        raise ReplayError(f"{source_of(frame)}: task fusion: {e}") from None
 
 
 def configured(entry: SensorInput, where: str, absolute: bool = False) -> tuple[tuple, tuple, dict]:
