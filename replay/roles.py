@@ -296,7 +296,7 @@ class SensorInput:
     recorded_mount: Mount | None = None
 
     @property
-    def kind(self) -> Role:
+    def spec(self) -> Role:
         """Its :class:`Role` (a ReplayError naming the entry when the role is unknown)."""
         if self.role not in ROLES:
             raise ReplayError(
@@ -336,10 +336,10 @@ def make_input(role: str, entry: str, source: str, channels: dict, declared: boo
 
 def ordered(inputs) -> list[SensorInput]:
     """The inputs of every role but ``none``, roles in :data:`ROLES` order (each role's in the
-    adapter's order); an unknown role is refused (:attr:`SensorInput.kind`)."""
+    adapter's order); an unknown role is refused (:attr:`SensorInput.spec`)."""
     inputs = [i for i in inputs or () if i.role != NONE]
     for i in inputs:
-        i.kind  # noqa: B018 - refuses an unknown role
+        i.spec  # refuses an unknown role
     return [i for name in ROLES for i in inputs if i.role == name]
 
 

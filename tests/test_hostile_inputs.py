@@ -69,7 +69,7 @@ def test_roles_of_another_adapter_are_checked_as_a_mapping_is():
     with pytest.raises(ReplayError, match="x: unknown field 'heading'"):
         configured(SensorInput("pose", "p", "", fuse=("heading",)), "x")
     with pytest.raises(ReplayError, match="b: unknown role 'barometer'"):
-        SensorInput("barometer", "b", "").kind
+        SensorInput("barometer", "b", "").spec
     # the default fuse minus a declared differential field: pose deltas replace the absolute pose
     assert configured(SensorInput("pose", "p", "", differential=("position",)), "x")[:2] == (("attitude",), ("position",))
 

@@ -112,3 +112,20 @@ def test_roles_are_one_table_and_serialise_as_the_manifest_did():
                                              "noise": {"rate": 0.1}}]}
     none = SensorInput("none", "x", "")
     assert ordered([SensorInput("imu", "i", ""), none, SensorInput("gps", "g", "")])[0].entry == "g"
+
+
+def test_a_role_without_recorded_covariance_takes_the_default(monkeypatch):
+    from types import SimpleNamespace
+
+    from replay.tasks.fusion_inputs import variance
+
+    n = 4
+    var = Channel(np.full((n, 3), 0.25), "(m/s)^2", "base_link", description="/dvl velocity_var")
+    frame = SimpleNamespace(channels={"dvl_velocity_var": var})
+    comps = ROLES["velocity"].components("velocity", 2)
+    ok = np.ones(n, bool)
+    v, how, rec = variance(frame, SensorInput("velocity", "dvl", ""), "velocity", "velocity", comps, {}, n, ok, 0.04)
+    assert rec["source"] == "recorded" and np.all(v == 0.25)
+    monkeypatch.setitem(ROLES, "dvl", Role("dvl", ("twist",), ("velocity",), ("velocity",), recorded_covariance=False))
+    v, how, rec = variance(frame, SensorInput("dvl", "dvl", ""), "velocity", "velocity", comps, {}, n, ok, 0.04)
+    assert rec == {"source": "default", "variance": 0.04} and np.all(v == 0.04) and how == "default r_velocity = 0.04"

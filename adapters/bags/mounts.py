@@ -59,7 +59,7 @@ def attach(rec, mp, inputs, frames: dict, kinds: dict, report) -> tuple:
     out = []
     for inp in inputs:
         sensor = frames.get(by_entry[inp.entry], ("", ""))[0]
-        if inp.kind.mount is None or not sensor or sensor == body:
+        if inp.spec.mount is None or not sensor or sensor == body:
             out.append(inp)
             continue
         found = tf_tree.static_between(edges, body, sensor)

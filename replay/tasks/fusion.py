@@ -76,13 +76,13 @@ POS = dict(low=0, low_open=True)
 def _spatial_only(entry) -> bool:
     """Whether an input's default fields measure only what a 2-D state lacks (depth): ``dims = auto``
     takes the 3-D state for it."""
-    return any(not entry.kind.components(f, 2) for f in entry.kind.fuse)
+    return any(not entry.spec.components(f, 2) for f in entry.spec.fuse)
 
 
 def beside_fixes(entry, fuse) -> bool:
     """Whether the role's default was narrowed beside absolute positions (an IMU's attitude left out)."""
-    default = entry.kind.fuse_beside_fixes
-    return default is not None and entry.fuse is None and tuple(fuse) == tuple(default) != entry.kind.fuse
+    default = entry.spec.fuse_beside_fixes
+    return default is not None and entry.fuse is None and tuple(fuse) == tuple(default) != entry.spec.fuse
 
 
 class FusionTask(Task):
@@ -246,7 +246,7 @@ class FusionTask(Task):
     def _add_field(self, frame, ctx, m, entry, key, fld, is_diff, noise):
         """One field of one input into the record ``m`` (or a note why it is not used); what the
         field measures, how it is mounted and its frame: its role (:mod:`replay.roles`)."""
-        where, n, role = ctx.where, ctx.n, entry.kind
+        where, n, role = ctx.where, ctx.n, entry.spec
         name = field_channel(frame, entry, fld)
         if name is None:
             raise ReplayError(

@@ -237,7 +237,7 @@ def heading_source(frame, found, where, absolute):
             continue
         ch = frame.channels[name]
         vals = np.asarray(ch.values, float).reshape(len(frame.t), -1)
-        if entry.kind.mount == "rotation":
+        if entry.spec.mount == "rotation":
             vals = mounted(entry, "attitude", vals, "")[0]
         return vals, ch.valid & np.isfinite(vals).all(axis=1), f"{entry.entry} ({entry.source})"
     return None

@@ -54,7 +54,7 @@ def field_channel(frame, entry: SensorInput, field: str) -> str | None:
 def has_absolute_position(found) -> bool:
     """Whether an input gives absolute positions (a gps or pose input, or a declared one)."""
     for entry in found:
-        fuse = entry.fuse or entry.kind.fuse
+        fuse = entry.fuse or entry.spec.fuse
         if "position" in fuse and "position" not in (entry.differential or ()):
             return True
     return False
@@ -79,7 +79,7 @@ def configured(entry: SensorInput, where: str, absolute: bool = False) -> tuple[
     150-180 degrees (``Role.fuse_beside_fixes``). Declare ``fuse = ["gyro", "attitude"]`` when it
     is east-north-up; an adapter that has checked it (Bohai: yaw against the course) marks it
     ``attitude_enu``."""
-    role = entry.kind
+    role = entry.spec
     default = role.fuse
     if role.fuse_beside_fixes is not None and absolute and not entry.attitude_enu:
         default = role.fuse_beside_fixes
@@ -136,7 +136,7 @@ def variance(frame, entry: SensorInput, label: str, fld: str, comps, noise: dict
         return np.full((n, len(comps)), v), f"declared {v:g}", {"source": "declared", "variance": v}
     param = f"{noise_param(entry.role, fld)} = {default:g}"
     out = np.full((n, len(comps)), default)
-    recorded = entry.kind.recorded_covariance and label == fld
+    recorded = entry.spec.recorded_covariance and label == fld
     rec = frame.channels.get(f"{entry.entry}_{label}_var") if recorded else None
     record = {"source": "default", "variance": default}
     if rec is None:
