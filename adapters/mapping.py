@@ -23,10 +23,10 @@ field, e.g. a position) and ``name_<field>`` for its other fields (see
 
 **Roles.** A sensor entry also has a *role*: what a task may use it for,
 whatever its name. By default the role follows the message type
-(:data:`DEFAULT_ROLE`: NavSatFix -> ``gps``, Odometry -> ``odometry``, Imu ->
+(:func:`replay.roles.default_role`: NavSatFix -> ``gps``, Odometry -> ``odometry``, Imu ->
 ``imu``, FluidPressure -> ``depth``, Twist -> ``velocity``, Pose -> ``pose``);
 ``role = "..."`` in the entry declares another one that the type can supply
-(:data:`ROLE_KINDS`, e.g. a DVL twist as ``odometry``, a pose as ``gps``), and
+(``replay.roles.ROLES``, e.g. a DVL twist as ``odometry``, a pose as ``gps``), and
 ``role = "none"`` keeps a channel out of every task's inputs. Tasks find their
 inputs by role (:func:`replay.tasks.role_input`), never by channel name.
 
@@ -48,42 +48,23 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from replay import roles
 from replay.util import tomlfile
 from replay.util.errors import ReplayError, listed, shown
 
-from .mapping_fields import check_field_lists, frame_declarations
+from .mapping_fields import frame_declarations
 from .rosmsg import KINDS, kind_of, normalize_type
 
 
 TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
 PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
 ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "rejection_threshold"}
-ENTRY_KEYS |= {"twist_frame", "mount"}  # frame declarations (mapping_fields.frame_declarations)
-FUSION_FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")  # replay.tasks.fusion_inputs
+ENTRY_KEYS |= {"twist_frame", "mount", "lever_arm"}  # frame declarations (mapping_fields.frame_declarations)
 ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
 ESTIMATE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")  # it names a row and a file (fullmatch)
 CHANNEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")  # a frame channel and a topic token /sensors/<name>
-
-# role -> the message kinds (rosmsg.KINDS) that can supply it
-ROLE_KINDS = {
-    "gps": ("navsatfix", "pose"),  # position fixes
-    "odometry": ("odometry", "twist"),  # forward speed and yaw rate in the vehicle frame
-    "imu": ("imu",),  # body angular rates (gyro)
-    "depth": ("pressure",),
-    "velocity": ("twist", "odometry"),
-    "pose": ("pose", "odometry"),
-    "none": ("navsatfix", "odometry", "imu", "pressure", "twist", "pose"),
-}
-DEFAULT_ROLE = {
-    "navsatfix": "gps",
-    "odometry": "odometry",
-    "imu": "imu",
-    "pressure": "depth",
-    "twist": "velocity",
-    "pose": "pose",
-}
 
 
 @dataclass
@@ -92,7 +73,7 @@ class Entry:
     topic: str
     type: str | None = None  # expected message type (checked when given)
     reference: bool = False
-    role: str | None = None  # declared role (None: from the message type, DEFAULT_ROLE)
+    role: str | None = None  # declared role (None: from the message type, replay.roles.default_role)
     frame: str | None = None  # TF pair: parent frame (TFMessage / TransformStamped topics)
     child: str | None = None  # TF pair: child frame
     estimate: bool = False  # an [estimates] entry
@@ -227,11 +208,11 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
                 raise ReplayError(
                     f"{source}: [reference] {name}: a reference has no role (roles are for [channels] entries)"
                 )
-            if role is not None and role not in ROLE_KINDS:
+            if role is not None and role not in roles.names():
                 raise ReplayError(
-                    f"{source}: [channels] {name}: unknown role {shown(role)} (known: {', '.join(ROLE_KINDS)})"
+                    f"{source}: [channels] {name}: unknown role {shown(role)} (known: {', '.join(roles.names())})"
                 )
-            if role is not None and typ is not None and pose_like(kind_of(typ)) not in ROLE_KINDS[role]:
+            if role is not None and typ is not None and pose_like(kind_of(typ)) not in roles.kinds_of(role):
                 raise ReplayError(
                     f"{source}: [channels] {name}: a {normalize_type(typ)} cannot have role "
                     f"{shown(role)} (it takes {kinds_for(role)})"
@@ -279,13 +260,13 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
                     if key == "rejection_threshold"
                     else "a list of field names"
                 )
-                + f" (fields: {', '.join(FUSION_FIELDS)})"
+                + f" (fields: {', '.join(roles.known_fields())})"
             )
-        bad = [f for f in fields if f not in FUSION_FIELDS]
+        bad = [f for f in fields if f not in roles.known_fields()]
         if bad:
             raise ReplayError(
                 f"{source}: [channels] {name}: {key}: unknown field {shown(bad[0])} "
-                f"(fields: {', '.join(FUSION_FIELDS)})"
+                f"(fields: {', '.join(roles.known_fields())})"
             )
         if key == "noise":
             for f, v in value.items():
@@ -303,7 +284,7 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
                     )
             value = {f: float(v) for f, v in value.items()}
         out[key] = value
-    check_field_lists(out.get("fuse"), out.get("differential"), f"{source}: [channels] {name}")
+    roles.check_field_lists(out.get("fuse"), out.get("differential"), f"{source}: [channels] {name}")
     return out
 
 
@@ -371,7 +352,7 @@ def pose_like(kind: str | None) -> str | None:
 def kinds_for(role: str) -> str:
     """The message types that can have ``role``, in words (for error messages)."""
     return ", ".join(
-        t.split("/")[-1] for t, k in KINDS.items() if k in ROLE_KINDS[role] and not t.startswith("foxglove")
+        t.split("/")[-1] for t, k in KINDS.items() if k in roles.kinds_of(role) and not t.startswith("foxglove")
     )
 
 
@@ -385,8 +366,8 @@ def role_of(entry: Entry, msgtype: str, source: str) -> str | None:
         return None
     kind = pose_like(kind_of(msgtype))
     if entry.role is None:
-        return DEFAULT_ROLE.get(kind)
-    if kind not in ROLE_KINDS[entry.role]:
+        return roles.default_role(kind)
+    if kind not in roles.kinds_of(entry.role):
         raise ReplayError(
             f"{source}: [channels] {entry.name}: topic {entry.topic} is a {msgtype}, which "
             f"cannot have role {shown(entry.role)} (it takes {kinds_for(entry.role)})"

@@ -26,6 +26,10 @@ Every adapter produces a :class:`Frame`; every task consumes one. Conventions:
   changes what the filters see), its positions in the recording's frame, its
   orientation and its position covariance when recorded. They are data for the
   scorer (leaderboard rows ``recorded:<name>``), never inputs of a filter.
+* **Roles** (``Frame.roles``): the sensor inputs the adapter found, typed records
+  (:class:`replay.roles.SensorInput`: role, entry, source, channels by field, the mapping's
+  fusion settings); tasks find their inputs by role through them. None: the adapter declares
+  none (simulated frames; tasks fall back to channels named after the role).
 * **Report**: the adapter's account of every sample or channel it dropped,
   flagged, masked or repaired. Nothing is removed silently.
 """
@@ -178,6 +182,8 @@ class Frame:
     meta: dict = field(default_factory=dict)
     report: Report = field(default_factory=Report)
     estimates: dict[str, RecordedEstimate] = field(default_factory=dict)
+    # the sensor inputs the adapter found (replay.roles.SensorInput); None: it declares none
+    roles: tuple | None = None
 
     def to_pandas(self, *, reference: bool = False, masks: bool = False, time: str = "relative"):
         """The sensor channels (``reference=True``: the reference) as a DataFrame (:mod:`replay.util.dataframes`)."""
@@ -214,6 +220,7 @@ class Frame:
             meta,
             self.report,
             {k: e.until(end) for k, e in self.estimates.items()},
+            self.roles,
         )
 
     def summary(self) -> list[str]:

@@ -6,8 +6,12 @@ CKF, which agree within 5 %; on generated recordings with known truth (tests/odo
 2-D and 3-D, 10 Hz and 100 Hz, with and without an empty child_frame_id) and on
 robot_localization's test1.bag. The twist's frame: REP 105 (child_frame_id), or declared
 (``twist_frame``); an empty child frame or a twist the pose contradicts is refused in one line."""
+import dataclasses
+
 import numpy as np
 import pytest
+
+from replay.roles import SensorInput
 
 import replay
 from odom_recordings import mapping, write_odometry_bag
@@ -148,9 +152,8 @@ def imu_frame(yaw_sign=1.0, mount=None):
     att = np.column_stack([np.arctan2(R[:, 2, 1], R[:, 2, 2]), -np.arcsin(R[:, 2, 0]), np.arctan2(R[:, 1, 0], R[:, 0, 0])])
     att[:, 2] *= yaw_sign
     ch = SimpleNamespace(values=gyro, valid=np.ones(len(t), bool), description="imu gyro")
-    entry = {"entry": "imu", "source": "/imu (sensor_msgs/msg/Imu)", "channels": {"gyro": "imu"}}
-    if mount:
-        entry["mount"] = list(mount)
+    entry = SensorInput("imu", "imu", "/imu (sensor_msgs/msg/Imu)", {"gyro": "imu"},
+                        mount=tuple(mount) if mount else None)
     return SimpleNamespace(t=t, channels={"imu": ch}), entry, att
 
 
@@ -168,7 +171,7 @@ def test_imu_mount_rotates_gyro_and_attitude_into_the_body():
     np.testing.assert_allclose(np.angle(np.exp(1j * (body[:, 2] - 0.4 * (1 - np.cos(0.5 * frame.t))))), 0, atol=1e-9)
     ok = np.ones(len(frame.t), bool)
     assert "turns with the gyro's z (correlation 1.00" in imu_yaw_sense(frame, entry, body, ok, "w", "[channels] imu")
-    entry.pop("mount")  # not declared: the sensor's z is not the yaw axis; undecided, said
+    entry = dataclasses.replace(entry, mount=None)  # not declared: the sensor's z is not the yaw axis; undecided, said
     assert "does not follow (undecided" in imu_yaw_sense(frame, entry, att, ok, "w", "[channels] imu")
 
 

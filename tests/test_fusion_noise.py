@@ -16,6 +16,7 @@ from replay.filters import kalman_kernels
 from replay.filters.gating import Gates
 from replay.frame import Channel
 from replay.models.kinematic import Kinematic2D
+from replay.roles import SensorInput
 from replay.tasks.fusion_inputs import components, variance
 from replay.util.errors import ReplayError
 
@@ -56,7 +57,7 @@ def _frame(var_rows):
 
 def test_recorded_variance_per_message_bad_ones_replaced_and_counted():
     frame = _frame([[0.01, 0.02, 9], [0.0, 0.02, 9], [-1, 0.02, 9], [0.03, -0.5, 9], [np.nan] * 3])
-    entry = {"entry": "odom"}
+    entry = SensorInput("odometry", "odom", "/odom (nav_msgs/msg/Odometry)")
     comps = components("velocity", 2, "odometry")  # u, v
     valid = np.array([True, True, True, True, False])
     var, how, rec = variance(frame, entry, "velocity", "velocity", comps, {}, 5, valid, 0.04)
@@ -246,7 +247,7 @@ def test_bohai_36_columns_keep_refusing_the_mislabelled_vf(tmp_path):
     the GPS fixes are the input that constrains the speed."""
     path = write_bohai(tmp_path / "b36.csv", 36, "garbage")
     ev = replay.evaluate(str(path), adapter="bohai-csv", task="fusion", filters=["ekf"], runs=1)
-    assert "vf" in ev.frame_meta["dropped_columns"] and "velocity" not in ev.frame_meta["roles"]
+    assert "vf" in ev.frame_meta["dropped_columns"] and "velocity" not in ev.frame_meta.get("roles")
     assert set(ev.results[0].records[0]["problem"].inputs) == {
         "gps_position.position", "gyro.gyro", "gyro.attitude", "reference"}
     assert ev.rows[0]["pos_rmse"] < 1.0

@@ -16,6 +16,7 @@ from hostile import assert_ok, assert_refused, register
 from test_hostile_score import deadline  # a FIFO opened after all fails instead of hanging
 from replay.adapters.bags.writer import BagOut
 from replay.adapters.mapping import from_dict, load_mapping
+from replay.roles import SensorInput
 from replay.tasks.fusion_inputs import configured, differential
 from replay.util.errors import DataError, ReplayError, bounded, shown
 from replay.util.regular import MAX_TEXT
@@ -62,11 +63,15 @@ def test_mapping_field_lists_that_mean_one_thing_pass():
 def test_roles_of_another_adapter_are_checked_as_a_mapping_is():
     """A frame's roles from elsewhere (the Python API) meet the same rules in the task."""
     with pytest.raises(ReplayError, match="x: fuse names 'rate' twice"):
-        configured({"fuse": ["rate", "rate"]}, "odometry", "x")
+        configured(SensorInput("odometry", "o", "", fuse=("rate", "rate")), "x")
     with pytest.raises(ReplayError, match="x: 'position' is in both"):
-        configured({"fuse": ["position"], "differential": ["position"]}, "pose", "x")
+        configured(SensorInput("pose", "p", "", fuse=("position",), differential=("position",)), "x")
+    with pytest.raises(ReplayError, match="x: unknown field 'heading'"):
+        configured(SensorInput("pose", "p", "", fuse=("heading",)), "x")
+    with pytest.raises(ReplayError, match="b: unknown role 'barometer'"):
+        SensorInput("barometer", "b", "").spec
     # the default fuse minus a declared differential field: pose deltas replace the absolute pose
-    assert configured({"differential": ["position"]}, "pose", "x")[:2] == (("attitude",), ("position",))
+    assert configured(SensorInput("pose", "p", "", differential=("position",)), "x")[:2] == (("attitude",), ("position",))
 
 
 def test_differential_position_without_attitude_refused():

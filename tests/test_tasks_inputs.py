@@ -18,6 +18,7 @@ from replay.adapters.mapping import from_dict, role_of
 from replay.run.evaluation import evaluate
 from replay.frame import Channel, Frame
 from replay.models.noise import Covariance
+from replay.roles import as_meta, of_role
 from replay.tasks import TASKS, make_task, role_input, task_class, why_missing
 from replay.util.errors import ReplayError
 from test_hostile_adapters import GOOD_MAP, make_bag
@@ -93,31 +94,32 @@ def test_legacy_frames_without_roles_use_the_role_names():
     n = 4
     frame = Frame(np.arange(n, dtype=float), {"gps": Channel(np.zeros((n, 3)), "m"),
                                               "odom_velocity": Channel(np.zeros((n, 3)), "m/s")})
-    assert role_input(frame, "gps", "t")["channels"] == {"position": "gps"}
+    assert role_input(frame, "gps", "t").channels == {"position": "gps"}
     assert role_input(frame, "odometry", "t") is None  # no channel named odom
-    frame.meta["roles"] = {}
+    frame.roles = ()
     assert role_input(frame, "gps", "t") is None  # an adapter that declares roles: by role only
 
 
 def test_bohai_roles_gps_gyro_only_when_it_follows_the_yaw_and_attitude(bohai_dir):
-    roles = load_bohai(bohai_dir / "20220822_0_6.csv").meta["roles"]
-    assert roles["gps"][0]["channels"] == {"position": "gps_position"}
-    assert roles["imu"][0]["channels"] == {"gyro": "gyro", "attitude": "attitude"}
-    assert roles["imu"][0]["attitude_enu"]  # its yaw follows the course over ground (0.11 rad)
+    gps, *_, imu = load_bohai(bohai_dir / "20220822_0_6.csv").roles
+    assert (gps.role, gps.channels) == ("gps", {"position": "gps_position"})
+    assert (imu.role, imu.channels) == ("imu", {"gyro": "gyro", "attitude": "attitude"})
+    assert imu.attitude_enu  # its yaw follows the course over ground (0.11 rad)
     f0 = load_bohai(bohai_dir / "20220822_0_0.csv")  # wz does not follow the yaw rate (correlation -0.03)
     assert f0.meta["gyro_attitude"]["wz_yaw"] < 0.3
     # and its yaw is 1.45 rad off the course: the attitude alone, not marked east-north-up
-    assert f0.meta["roles"]["imu"][0]["channels"] == {"attitude": "attitude"}
-    assert not f0.meta["roles"]["imu"][0]["attitude_enu"]
+    imu = of_role(f0.roles, "imu")[0]
+    assert imu.channels == {"attitude": "attitude"} and imu.attitude_enu is False
 
 
 def test_bag_meta_roles(tmp_path):
     bag = make_bag(tmp_path / "b")
     f = bags.load(bag, mapping={"channels": {"g": "/fix", "w": {"topic": "/wheel", "role": "velocity"}}})
-    assert f.meta["roles"]["gps"][0]["channels"] == {"position": "g"}
-    assert f.meta["roles"]["velocity"][0] == {"entry": "w", "source": "/wheel (nav_msgs/msg/Odometry)",
+    roles = as_meta(f.roles)  # as the manifest records them
+    assert roles["gps"][0]["channels"] == {"position": "g"}
+    assert roles["velocity"][0] == {"entry": "w", "source": "/wheel (nav_msgs/msg/Odometry)",
                                               "declared": True, "channels": {"velocity": "w_velocity"}}
-    assert "odometry" not in f.meta["roles"]
+    assert "odometry" not in roles and "roles" not in f.meta
 
 
 # ---------------------------------------------------------------- noise parameters (item 2)

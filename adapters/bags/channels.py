@@ -7,23 +7,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from replay import roles
 from replay.frame import Channel, Report
 from replay.util.errors import DataError, ReplayError
 
 from .. import rosmsg
 from ..mapping import Mapping, role_of
-from . import sources
+from . import mounts, sources
 from .recording import Recording
-
-# role -> the message fields (rosmsg converters) a task may take from an entry of that role
-ROLE_FIELDS = {
-    "gps": ("position",),
-    "odometry": ("velocity", "rate"),
-    "imu": ("gyro", "accel", "attitude"),
-    "depth": ("depth",),
-    "velocity": ("velocity",),
-    "pose": ("position", "attitude"),
-}
 
 
 @dataclass
@@ -34,6 +25,7 @@ class Sources:
     other: dict = field(default_factory=dict)
     fields: dict = field(default_factory=dict)
     kinds: dict = field(default_factory=dict)
+    frames: dict = field(default_factory=dict)  # (header.frame_id, child_frame_id): mounts.frames_of
 
 
 @dataclass
@@ -43,7 +35,7 @@ class Placed:
     other_name: str
     channels: dict = field(default_factory=dict)
     reference: dict = field(default_factory=dict)
-    roles: dict = field(default_factory=dict)
+    roles: list = field(default_factory=list)  # replay.roles.SensorInput, in the mapping's order
     made: dict = field(default_factory=dict)  # (group, channel name) -> the entry that made it
 
 
@@ -54,6 +46,7 @@ def read_sources(rec: Recording, mp: Mapping, time: str, geo, opts: dict) -> Sou
         src = sources.key(e)
         if src not in srcs.fields:
             msgs, logs, srcs.kinds[src] = sources.messages(rec, e)
+            srcs.frames[src] = mounts.frames_of(msgs)
             srcs.stamps[src], srcs.other[src] = sources.stamps(rec, e, msgs, logs, time)
             srcs.fields[src] = rosmsg.convert(srcs.kinds[src], msgs, geo, opts)
     return srcs
@@ -100,24 +93,30 @@ def _other_time(e, other, idx, n: int, t0: int, other_name: str) -> Channel:
     )
 
 
-def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> tuple[str, dict] | None:
+def _role_row(mp: Mapping, e, topic_type: str, fields: dict, kind: str) -> roles.SensorInput | None:
     role = role_of(e, topic_type, mp.source)
-    if not role or role == "none":
+    if not role or role == roles.NONE:
         return None
-    names = {f: _name(e, kind, f) for f in ROLE_FIELDS[role] if f in fields}
+    names = {f: _name(e, kind, f) for f in roles.get(role).fields if f in fields}
     if "twist_frame" in e.fusion and kind != "odometry":
         raise ReplayError(f"{mp.source}: [channels] {e.name}: twist_frame is for an Odometry (not {topic_type})")
     if "mount" in e.fusion and kind != "imu":
         raise ReplayError(f"{mp.source}: [channels] {e.name}: mount is for an Imu (not {topic_type})")
-    for key, value in e.fusion.items():  # the fusion task's fields: ones this message has
-        for f in () if key in ("twist_frame", "mount") else value if isinstance(value, (list, tuple, dict)) else ():
+    if "lever_arm" in e.fusion and roles.get(role).mount != "lever_arm":
+        arms = ", ".join(r.name for r in roles.ROLES.values() if r.mount == "lever_arm")
+        raise ReplayError(
+            f"{mp.source}: [channels] {e.name}: lever_arm is for an antenna's fixes (role {arms}; not {role})"
+        )
+    for key, value in e.fusion.items():  # the fusion task's field lists: fields this message has
+        if key in ("twist_frame", "mount", "lever_arm") or not isinstance(value, (list, tuple, dict)):
+            continue
+        for f in value:
             if f not in fields:
                 raise ReplayError(
                     f"{mp.source}: [channels] {e.name}: {key} names {f!r}, which a "
                     f"{topic_type} lacks (it has: {', '.join(fields)})"
                 )
-    row = {"entry": e.name, "source": f"{e.topic} ({topic_type})", "declared": e.role is not None, "channels": names}
-    return role, {**row, **e.fusion}
+    return roles.make_input(role, e.name, f"{e.topic} ({topic_type})", names, e.role is not None, **e.fusion)
 
 
 def _report_entry(report: Report, e, topic_type: str, fields: dict, kind: str, m: int, n: int, time: str) -> None:
@@ -162,6 +161,6 @@ def place_entries(rec: Recording, mp: Mapping, time: str, srcs: Sources, axis, r
         group[other_key] = _other_time(e, srcs.other[src], idx, n, t0, placed.other_name)
         role = _role_row(mp, e, topic_type, fields, kind)
         if role is not None:
-            placed.roles.setdefault(role[0], []).append(role[1])
+            placed.roles.append(role)
         _report_entry(report, e, topic_type, fields, kind, len(idx), n, time)
     return placed

@@ -21,7 +21,7 @@ from .. import rosmsg
 from ..mapping import Mapping, from_dict, load_mapping
 from ..mapping_propose import propose
 from . import estimates as recorded
-from . import sources
+from . import mounts, sources
 from .channels import place_entries, read_sources
 from .reading import read
 from .recording import Recording, Topic
@@ -140,7 +140,7 @@ def load(path, *, mapping, time, until, allow_truncated, **conversions) -> Frame
         return proposed[0].topics
 
     until = until if until is not None else (mp.until if mp else None)
-    rec = read(path, mp.topics if mp else choose, until)
+    rec = read(path, mounts.with_static(mp.topics if mp else choose), until)
     mp = mp or proposed[0]
     time = time or mp.time
     if time not in ("header", "log"):
@@ -202,10 +202,10 @@ def build_frame(rec: Recording, mp: Mapping, time: str, opts: dict, report: Repo
     placed = place_entries(rec, mp, time, srcs, axis, report)
     _report_axis(report, srcs.stamps, len(axis), time, t0, sim)
     estimates = recorded.build(rec, mp, time, geo, t0, report, _reference_span(mp, srcs.stamps))
-    meta = _frame_meta(rec, mp, time, t0, sim, until, placed.roles, estimates, geo)
-    return Frame(
-        (axis - t0) / 1e9, placed.channels, placed.reference, None if sim else t0 / 1e9, meta, report, estimates
-    )
+    meta = _frame_meta(rec, mp, time, t0, sim, until, estimates, geo)
+    epoch = None if sim else t0 / 1e9
+    roles = mounts.attach(rec, mp, placed.roles, srcs.frames, srcs.kinds, report)  # /tf_static
+    return Frame((axis - t0) / 1e9, placed.channels, placed.reference, epoch, meta, report, estimates, roles)
 
 
 def _projection(rec: Recording, mp: Mapping) -> Geo | None:
@@ -234,7 +234,7 @@ def _reference_span(mp: Mapping, stamps: dict) -> tuple[int, int] | None:
     return (min(int(s[0]) for s in refs), max(int(s[-1]) for s in refs)) if refs else None
 
 
-def _frame_meta(rec: Recording, mp: Mapping, time, t0, sim, until, roles, estimates, geo) -> dict:
+def _frame_meta(rec: Recording, mp: Mapping, time, t0, sim, until, estimates, geo) -> dict:
     meta = {
         "adapter": "bags",
         "source": str(rec.path),
@@ -246,7 +246,6 @@ def _frame_meta(rec: Recording, mp: Mapping, time, t0, sim, until, roles, estima
         "truncated": rec.truncated,
         "sha256": _sha256(rec.path),
         "mapping": json.loads(json.dumps(_mapping_dict(mp))),
-        "roles": roles,
         "estimates": recorded.meta(estimates),
         "topics": {k: {"type": v.type, "count": v.count, "read": len(v.msgs)} for k, v in rec.topics.items()},
     }

@@ -32,7 +32,7 @@ What the returned :class:`~replay.frame.Frame` holds:
   column to the same reason. ``inf`` cells are missing values, and a few cells
   beyond their kind's magnitude limit (at most 1 % of the column) are masked:
   both counted per column, neither drops the column.
-* ``meta["roles"]``: what tasks may use the channels for
+* ``Frame.roles`` (:class:`replay.roles.SensorInput` records): what tasks may use the channels for
   (:func:`replay.tasks.role_input`): ``gps`` = ``gps_position``; ``velocity`` =
   ``vf`` (a body forward velocity, as a DVL's) when it follows the track's speed along
   the heading (``meta["forward_velocity"]``: correlation, median difference; the

@@ -10,6 +10,7 @@ import pyproj
 from replay.adapters.options import declare
 from replay.adapters.geodesy import plausible_latlon, project, utm_epsg
 from replay.frame import Channel, Frame, Report
+from replay.roles import SensorInput
 from replay.util.errors import DataError
 from replay.util.params import Param
 from replay.util.progress import load_stage
@@ -126,27 +127,19 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
         "gps_position": ["lat_gps", "lon_gps"],
         "gps_alt": ["alt_gps"],
     }
-    meta["roles"] = _roles(channels, meta)
-    return Frame(t, channels, reference, None, meta, report)
+    return Frame(t, channels, reference, None, meta, report, roles=_roles(channels, meta))
 
 
-def _roles(channels, meta) -> dict:
+def _roles(channels, meta) -> tuple:
     """What tasks may use the channels for (replay.tasks.role_input): the GPS fixes, the forward
     velocity ``vf`` (a body velocity, as a DVL's) when it follows the track's speed along the
     heading (the 31-column files; the 36-column files' ``vf`` holds no velocity and is dropped), and
     the gyro as an IMU when its wz follows the yaw rate (the adapter's gyro check)."""
-    roles = {}
+    found = []
     if "gps_position" in channels:
-        roles["gps"] = [
-            {
-                "entry": "gps_position",
-                "source": "columns lat_gps, lon_gps",
-                "declared": False,
-                "channels": {"position": "gps_position"},
-            }
-        ]
+        found.append(SensorInput("gps", "gps_position", "columns lat_gps, lon_gps", {"position": "gps_position"}))
     if "vf" in channels:  # checked against the track (_forward_check): the forward speed, as a DVL's
-        roles["velocity"] = [{"entry": "vf", "source": "column vf", "declared": False, "channels": {"velocity": "vf"}}]
+        found.append(SensorInput("velocity", "vf", "column vf", {"velocity": "vf"}))
     imu = {}
     if "gyro" in channels and meta.get("gyro_attitude", {}).get("wz_yaw", 0.0) >= 0.3:
         imu["gyro"] = "gyro"
@@ -155,16 +148,10 @@ def _roles(channels, meta) -> dict:
     if imu:
         # its yaw is east-north-up when it follows the course over ground (the adapter's yaw check)
         enu = meta.get("yaw_course", {}).get("median_abs_rad", np.inf) < 0.5
-        roles["imu"] = [
-            {
-                "entry": "gyro" if "gyro" in imu else "attitude",
-                "declared": False,
-                "channels": imu,
-                "source": "columns " + ", ".join(COLUMNS_OF[f] for f in imu),
-                "attitude_enu": bool(enu),
-            }
-        ]
-    return roles
+        source = "columns " + ", ".join(COLUMNS_OF[f] for f in imu)
+        entry = "gyro" if "gyro" in imu else "attitude"
+        found.append(SensorInput("imu", entry, source, imu, attitude_enu=bool(enu)))
+    return tuple(found)
 
 
 COLUMNS_OF = {"gyro": "wx, wy, wz", "attitude": "roll, pitch, yaw"}

@@ -110,6 +110,13 @@ def _describe(frame) -> None:
     click.echo("report:" if lines else "report: nothing dropped, repaired or flagged")
     for line in lines:
         click.echo(f"  {line}")
+    if frame.roles is not None:  # the sensor inputs a task may use (replay.roles.SensorInput)
+        click.echo("roles:" if frame.roles else "roles: no sensor input")
+        for i in frame.roles:
+            chans = ", ".join(f"{f} {c}" for f, c in i.channels.items())
+            m = i.recorded_mount
+            mount = f"; /tf_static {m.parent} -> {m.child}" if m else ""
+            click.echo(f"  {i.role}: {i.entry} = {i.source} ({chans}){mount}")
     click.echo("meta:")
     for key, value in frame.meta.items():
         click.echo(f"  {key}: {_short(str(value), 100)}")

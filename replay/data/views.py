@@ -250,7 +250,7 @@ def _rebuild(frame, t, channels, reference, offset, view, report=None):
     meta = dict(frame.meta, view=view)
     epoch = None if frame.epoch is None else frame.epoch + offset
     report = report if report is not None else Report(list(frame.report.entries))
-    return Frame(t, channels, reference, epoch, meta, report, estimates)
+    return Frame(t, channels, reference, epoch, meta, report, estimates, frame.roles)
 
 
 def grid_index(t: np.ndarray, rate: float) -> np.ndarray:

@@ -46,6 +46,7 @@ from time import perf_counter
 
 import numpy as np
 
+from replay import roles
 from replay.data import dataset_ref, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
@@ -136,15 +137,15 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
 
 def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_params=None, seed=0) -> str:
     """The task when none is named: the registry's, the adapter's, else ``fusion`` for a recording
-    with sensor inputs (``meta["roles"]``), ``position`` (rows marked ``synthetic``) without.
+    with sensor inputs (``Frame.roles``), ``position`` (rows marked ``synthetic``) without.
     ``dataset``: an id or a :class:`replay.data.dataset_ref.DatasetRef`."""
     ref = dataset_ref.resolve(dataset)
     if ref.entry is not None and ref.entry.default_task:
         return ref.entry.default_task
     cfg = {"dataset": ref.id, "dataset_params": dataset_params or {}, "first": first, "seed": seed, "adapter": adapter}
-    meta = load_frame(cfg, 0, data_dir, ds=ref.entry).meta
-    sensors = any(e for role, e in (meta.get("roles") or {}).items() if role != "none")
-    return meta.get("default_task") or ("fusion" if sensors else "position")
+    frame = load_frame(cfg, 0, data_dir, ds=ref.entry)
+    sensors = any(i.role != roles.NONE for i in frame.roles or ())
+    return frame.meta.get("default_task") or ("fusion" if sensors else "position")
 
 
 def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
@@ -160,6 +161,8 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     problem.frame_meta = dict(
         frame.meta, task_inputs=getattr(problem, "inputs", {}), task_notes=getattr(problem, "notes", [])
     )
+    if frame.roles is not None:  # the adapter's sensor inputs (Frame.roles), as the manifest records them
+        problem.frame_meta.update(roles=roles.as_meta(frame.roles))
     if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
         problem.frame_meta["task_noise"] = problem.noise
     problem.frame_report = frame.report

@@ -111,7 +111,7 @@ def _gps(frame):
         found = role_input(frame, "gps", "plot_track")
     except ReplayError:
         return None
-    ch = frame.channels.get((found or {}).get("channels", {}).get("position", ""))
+    ch = frame.channels.get(found.channels.get("position", "") if found else "")
     return ch if ch is not None and np.ndim(ch.values) == 2 else None
 
 

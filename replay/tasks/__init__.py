@@ -10,8 +10,8 @@ declares its parameters (``PARAMS``, :mod:`replay.util.params`): they are
 checked strictly when the task is made, before any data is read.
 
 **Inputs.** A task finds optional sensor inputs by *role* (:func:`role_input`:
-the adapter's ``meta["roles"]``, declared in a bag mapping or detected from the
-message type), never by a channel's name, and records in ``Problem.inputs``
+the adapter's ``Frame.roles``, :class:`replay.roles.SensorInput` records declared in a bag
+mapping or detected from the message type), never by a channel's name, and records in ``Problem.inputs``
 which channels it used (the pipeline puts them in the manifest, beside the
 frame's metadata, as ``task_inputs``). A task that finds none of an optional
 input says so in ``Problem.notes`` (``task_notes`` in the manifest). A task
@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from replay.roles import SensorInput, of_role
 from replay.util.errors import ReplayError
 from replay.util.params import Declared, Param
 from replay.util.plugins import Registry, class_problem
@@ -154,7 +155,7 @@ def describe(frame, name: str, group: str = "channels") -> str:
     return f"{name} ({ch.description})" if ch.description else name
 
 
-# frames whose adapter declares no roles (no ``meta["roles"]``): a channel named as the role
+# frames whose adapter declares no roles (``Frame.roles`` None): a channel named as the role
 LEGACY_ROLES = {
     "gps": ("gps", {"position": "gps"}),
     "odometry": ("odom", {"velocity": "odom_velocity", "rate": "odom_rate"}),
@@ -162,27 +163,27 @@ LEGACY_ROLES = {
 }
 
 
-def role_input(frame, role: str, task: str) -> dict | None:
-    """The frame's input of ``role``: ``{"entry", "source", "channels": {field: channel name}}`` or None.
+def role_input(frame, role: str, task: str) -> SensorInput | None:
+    """The frame's input of ``role`` (a :class:`replay.roles.SensorInput`: ``entry``, ``source``,
+    ``channels`` = {field: channel name}) or None.
 
     Adapters that know what their channels are (bags: from the mapping's ``role`` or the
-    message type; bohai-csv) list them in ``meta["roles"]``; the lookup is by role only,
+    message type; bohai-csv) list them in ``Frame.roles``; the lookup is by role only,
     whatever the channels are called. Two inputs of one role are refused (one line: keep
-    one, e.g. ``role = "none"`` on the others in the mapping). A frame without
-    ``meta["roles"]`` (simulated frames) falls back to a channel named after the role.
+    one, e.g. ``role = "none"`` on the others in the mapping). A frame whose ``roles`` is None
+    (simulated frames) falls back to a channel named after the role.
     """
-    roles = frame.meta.get("roles")
-    if roles is None:
+    if frame.roles is None:
         if role not in LEGACY_ROLES or LEGACY_ROLES[role][0] not in frame.channels:
             return None
         entry, chans = LEGACY_ROLES[role]
         chans = {k: v for k, v in chans.items() if v in frame.channels}
-        return {"entry": entry, "source": frame.channels[entry].description, "declared": False, "channels": chans}
-    found = [r for r in roles.get(role, []) if any(c in frame.channels for c in r["channels"].values())]
+        return SensorInput(role, entry, frame.channels[entry].description, chans)
+    found = [r for r in of_role(frame.roles, role) if any(c in frame.channels for c in r.channels.values())]
     if len(found) > 1:
         raise ReplayError(
             f"{source_of(frame)}: task {task}: {len(found)} inputs have role {role} ("
-            + ", ".join(f"{r['entry']} = {r['source']}" for r in found)
+            + ", ".join(f"{r.entry} = {r.source}" for r in found)
             + "): keep one (role = \"none\" on the others in the mapping)"
         )
     return found[0] if found else None

@@ -51,16 +51,15 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from replay import roles
 from replay.filters.gating import Gates
 from replay.models.kinematic import Kinematic2D, Kinematic3D
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import Problem, Task, describe, source_of
-from .fusion_frames import imu_yaw_sense, mounted, twist_in_body
+from .fusion_frames import heading_source, imu_yaw_sense, lever_arm, mounted, twist_in_body
 from .fusion_inputs import (
-    NOISE_PARAM,
-    components,
     configured,
     differential,
     field_channel,
@@ -72,6 +71,18 @@ from .fusion_inputs import (
 )
 
 POS = dict(low=0, low_open=True)
+
+
+def _spatial_only(entry) -> bool:
+    """Whether an input's default fields measure only what a 2-D state lacks (depth): ``dims = auto``
+    takes the 3-D state for it."""
+    return any(not entry.spec.components(f, 2) for f in entry.spec.fuse)
+
+
+def beside_fixes(entry, fuse) -> bool:
+    """Whether the role's default was narrowed beside absolute positions (an IMU's attitude left out)."""
+    default = entry.spec.fuse_beside_fixes
+    return default is not None and entry.fuse is None and tuple(fuse) == tuple(default) != entry.spec.fuse
 
 
 class FusionTask(Task):
@@ -132,7 +143,7 @@ class FusionTask(Task):
         where = source_of(frame)
         found = inputs(frame)
         ref = self._require(frame, where, found)
-        dims = 3 if self.dims == "3" or (self.dims == "auto" and any(r == "depth" for r, _ in found)) else 2
+        dims = 3 if self.dims == "3" or (self.dims == "auto" and any(map(_spatial_only, found))) else 2
         t = np.asarray(frame.t, float)
         m = self._measurements(frame, where, found, ref, dims, t)
         missing = unconstrained(m.index, dims)
@@ -184,8 +195,8 @@ class FusionTask(Task):
         """The frame's position reference; refused without a sensor input or a valid reference."""
         if not found:
             raise ReplayError(
-                f"{where}: task fusion: no sensor input (roles gps, odometry, imu, depth, velocity, "
-                "pose; docs/bags.md); tasks that need none: position, sonar (synthetic "
+                f"{where}: task fusion: no sensor input (roles {', '.join(roles.ROLES)}; docs/bags.md); "
+                "tasks that need none: position, sonar (synthetic "
                 "measurements from the reference)"
             )
         ref = frame.reference.get("position")
@@ -216,43 +227,48 @@ class FusionTask(Task):
             gate_names=[],
             gate_limit=[],
         )
-        ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t))
         absolute = has_absolute_position(found)
-        for role, entry in found:
-            key = f"[channels] {entry['entry']}"
-            fuse, diff, noise = configured(entry, role, f"{where}: {key}", absolute)
-            if role == "imu" and "attitude" not in fuse and not entry.get("fuse") and "attitude" in entry["channels"]:
+        ctx = SimpleNamespace(where=where, ref=ref, dims=dims, t=t, n=len(frame.t), found=found, absolute=absolute)
+        for entry in found:
+            key = f"[channels] {entry.entry}"
+            fuse, diff, noise = configured(entry, f"{where}: {key}", absolute)
+            if beside_fixes(entry, fuse) and "attitude" in entry.channels:
                 m.notes.append(
                     f"task fusion: {key}: attitude not fused beside absolute positions (an IMU's yaw "
                     "is in its own world frame; declare fuse = [\"gyro\", \"attitude\"] if it is ENU)"
                 )
             for fld in fuse + diff:
-                self._add_field(frame, ctx, m, role, entry, key, fld, fld in diff, noise)
+                self._add_field(frame, ctx, m, entry, key, fld, fld in diff, noise)
         if not m.index:
             raise ReplayError(f"{where}: task fusion: none of the inputs has a valid sample")
         return m
 
-    def _add_field(self, frame, ctx, m, role, entry, key, fld, is_diff, noise):
-        """One field of one input into the record ``m`` (or a note why it is not used)."""
-        where, n = ctx.where, ctx.n
+    def _add_field(self, frame, ctx, m, entry, key, fld, is_diff, noise):
+        """One field of one input into the record ``m`` (or a note why it is not used); what the
+        field measures, how it is mounted and its frame: its role (:mod:`replay.roles`)."""
+        where, n, role = ctx.where, ctx.n, entry.spec
         name = field_channel(frame, entry, fld)
         if name is None:
             raise ReplayError(
-                f"{where}: {key}: no field {fld!r} in {entry['source']} "
-                f"(it has: {', '.join(sorted(entry['channels']))})"
+                f"{where}: {key}: no field {fld!r} in {entry.source} (it has: {', '.join(sorted(entry.channels))})"
             )
         ch = frame.channels[name]
         vals = np.asarray(ch.values, float).reshape(n, -1)
         valid = ch.valid & np.isfinite(vals).all(axis=1)
         label = fld
-        if not is_diff and fld in ("velocity", "rate") and "nav_msgs/msg/Odometry" in entry["source"]:
+        if not is_diff and role.field(fld).twist and "nav_msgs/msg/Odometry" in entry.source:
             vals, note = twist_in_body(frame, entry, fld, vals, valid, where, key)  # REP 105, or declared
             valid = valid & np.isfinite(vals).all(axis=1)
             m.notes.append(note)
-        if role == "imu" and fld in ("gyro", "attitude") and not is_diff:
+        if role.mount == "rotation" and role.field(fld).axes and not is_diff:
             vals, note = mounted(entry, fld, vals, key)
             m.notes.append(note)
-        if role == "imu" and fld == "attitude" and not is_diff:
+        arm = entry.lever_arm is not None or entry.recorded_mount is not None
+        if role.mount == "lever_arm" and fld == "position" and not is_diff and arm:
+            head = heading_source(frame, ctx.found, where, ctx.absolute)  # the antenna's offset turned by it
+            vals, valid, note = lever_arm(frame, entry, vals, valid, head, key)
+            m.notes += [note] if note else []
+        if fld == "attitude" and "gyro" in role.fields and not is_diff:
             m.notes.append(imu_yaw_sense(frame, entry, vals, valid, where, key))
         if is_diff:
             att_name = field_channel(frame, entry, "attitude")
@@ -262,25 +278,25 @@ class FusionTask(Task):
             vals[rows] = derived
             valid = np.zeros(n, bool)
             valid[rows] = True
-            fld = "velocity" if fld == "position" else "rate"
-        if role == "gps" and fld == "position" and ctx.ref.description == ch.description:
+            fld = role.field(fld).differential
+        if role.holdout and fld == "position" and ctx.ref.description == ch.description:
             idx = np.flatnonzero(valid)
             fed = np.zeros(n, bool)
             fed[idx[:: self.gps_every]] = True
             valid, m.fed_gps, m.holdout = fed, fed, True
-        comps = [c for c in components(fld, ctx.dims, role) if c[0] < vals.shape[1]]
+        comps = [c for c in role.components(fld, ctx.dims) if c[0] < vals.shape[1]]
         if not comps or not valid.any():
             m.notes.append(
                 f"task fusion: {key} {label}: " + ("not used in a 2-D state" if not comps else "no valid sample")
             )
             return
-        var, how, m.noise[f"{entry['entry']}.{label}"] = variance(
-            frame, entry, label, fld, comps, noise, n, valid, getattr(self, NOISE_PARAM[fld])
+        var, how, m.noise[f"{entry.entry}.{label}"] = variance(
+            frame, entry, label, fld, comps, noise, n, valid, getattr(self, role.field(fld).noise)
         )
         limit = threshold(entry, label)
         if limit is not None:
             how += f"; gated at Mahalanobis distance {limit:g}"
-        m.gate_names.append(f"{entry['entry']}.{label}")
+        m.gate_names.append(f"{entry.entry}.{label}")
         m.gate_limit.append(np.inf if limit is None else limit)
         for j, (col, state, sgn, ang) in enumerate(comps):
             m.gate_group.append(len(m.gate_names) - 1)
@@ -291,7 +307,7 @@ class FusionTask(Task):
             m.rows_R.append(var[:, j])
             m.index.append(state)
             m.sign.append(sgn)
-        m.used[f"{entry['entry']}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
+        m.used[f"{entry.entry}.{label}"] = describe(frame, name) + (" (differential)" if is_diff else "")
         m.notes.append(f"task fusion: {key} {label}" + (" (differential)" if is_diff else "") + f": noise {how}")
         for r in (r for r in frame.report.entries if r.action == "masked" and r.what == name):  # the adapter's
             m.notes.append(f"task fusion: {key} {label}: {r.count} messages not used ({r.reason})")

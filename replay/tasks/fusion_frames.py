@@ -24,7 +24,7 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 
-from .fusion_inputs import field_channel
+from .fusion_inputs import configured, field_channel
 
 HOW = 'declare twist_frame = "child" (body) or "parent" (header frame) on the mapping entry'
 
@@ -33,8 +33,8 @@ def twist_in_body(frame, entry, fld, vals, valid, where, key):
     """(values in the body frame, note) of an Odometry entry's fused ``velocity`` or ``rate``."""
     name = field_channel(frame, entry, fld)
     child = str(frame.channels[name].frame or "").strip("/")
-    declared = entry.get("twist_frame")
-    topic = entry["source"]
+    declared = entry.twist_frame
+    topic = entry.source
     pos, att = (frame.channels.get(field_channel(frame, entry, f) or "") for f in ("position", "attitude"))
     if declared is None and not child:
         raise ReplayError(
@@ -122,7 +122,7 @@ def imu_yaw_sense(frame, entry, att_vals, valid, where, key):
     c = float(np.corrcoef(dy, dg)[0, 1]) if 0.5 < scale < 2.0 else 0.0
     if c < -0.5:
         raise ReplayError(
-            f"{where}: {key}: {entry['source']}'s orientation yaw turns against its angular velocity about z "
+            f"{where}: {key}: {entry.source}'s orientation yaw turns against its angular velocity about z "
             f"(correlation {c:.2f} over 1 s): a NED orientation (yaw clockwise from north) beside a z-up gyro, "
             'or the reverse; fuse = ["gyro"] only'
         )
@@ -131,11 +131,11 @@ def imu_yaw_sense(frame, entry, att_vals, valid, where, key):
 
 
 def mounted(entry, fld, vals, key):
-    """(values in the body frame, note) of an IMU's ``gyro`` or ``attitude`` declared ``mount =
-    [roll, pitch, yaw]`` (the sensor's rotation R_m in the body frame, as a static transform
+    """(values in the body frame, note) of an IMU's ``gyro`` or ``attitude`` mounted with the rotation
+    R_m of :func:`mount_rotation` (the sensor's axes in the body frame, the static transform
     base_link -> imu_link, robot_localization's use of it): omega_body = R_m omega_imu,
-    R_world_body = R_world_imu R_m'. Not declared: as recorded (noted)."""
-    mount = entry.get("mount")
+    R_world_body = R_world_imu R_m'. Neither declared nor recorded: as recorded (noted)."""
+    mount, how = mount_rotation(entry)
     if mount is None:
         return vals, f"task fusion: {key} {fld}: no mount declared: the sensor's axes are the body's"
     Rm = rotation(np.array([mount], float))[0]
@@ -152,4 +152,92 @@ def mounted(entry, fld, vals, key):
         )
     else:
         out[ok] = vals[ok] @ Rm.T
-    return out, f"task fusion: {key} {fld}: mount = {mount} declared: rotated into the body frame"
+    return out, f"task fusion: {key} {fld}: {how}: rotated into the body frame"
+
+
+def _recorded(m) -> str:
+    return f"/tf_static {m.parent} -> {m.child}"
+
+
+def mount_rotation(entry):
+    """([roll, pitch, yaw] of the sensor in the body frame, or None; how it was chosen): the declared
+    ``mount`` wins over the recording's ``/tf_static`` (a disagreement beyond 1 mrad is said)."""
+    rec = entry.recorded_mount
+    if entry.mount is None:
+        if rec is None:
+            return None, ""
+        return list(rec.rotation), f"mount from {_recorded(rec)} = {[round(v, 9) + 0.0 for v in rec.rotation]}"
+    how = f"mount = {list(entry.mount)} declared"
+    if rec is not None:
+        a, b = rotation(np.array([entry.mount, rec.rotation], float))
+        gap = np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))
+        if gap > 1e-3:
+            said = [round(v, 9) + 0.0 for v in rec.rotation]
+            how += f" (it differs from {_recorded(rec)} = {said} by {gap:.3g} rad; declared wins)"
+    return list(entry.mount), how
+
+
+def lever_arm(frame, entry, vals, valid, heading, key):
+    """(fixes moved to the body origin, their validity, note) of a GPS input whose antenna sits at
+    ``l`` in the body frame (declared ``lever_arm``, else the recording's ``/tf_static``), as
+    robot_localization corrects a fix: p_body = p_antenna - R(roll, pitch, yaw) l, the attitude
+    being the body's at the fix. ``heading``: (attitude values (n, 3) in the body frame, their
+    validity, what they are) of a fused attitude input, or None: then the lever arm is not applied
+    (the heading is unknown; said). A fix without an attitude within 0.5 s is not used (counted)."""
+    rec = entry.recorded_mount
+    if entry.lever_arm is not None:
+        arm, how = np.asarray(entry.lever_arm, float), f"lever_arm = {list(entry.lever_arm)} declared"
+        if rec is not None and np.linalg.norm(np.subtract(rec.translation, arm)) > 1e-3:
+            how += f" (it differs from {_recorded(rec)} = {[round(v, 6) for v in rec.translation]}; declared wins)"
+    elif rec is not None:
+        arm, how = np.asarray(rec.translation, float), f"lever arm from {_recorded(rec)} = "
+        how += str([round(v, 6) for v in rec.translation])
+    else:
+        return vals, valid, None
+    if heading is None:
+        return (
+            vals,
+            valid,
+            (
+                f"task fusion: {key} position: {how} NOT applied: no fused attitude input gives the heading at the "
+                f"fixes, so they stay the antenna's (up to {np.linalg.norm(arm):.3g} m off the body origin)"
+            ),
+        )
+    att, att_ok, what = heading
+    t = np.asarray(frame.t, float)
+    idx = np.flatnonzero(att_ok)
+    rows = np.flatnonzero(valid)
+    out, ok = np.array(vals, float), np.array(valid, bool)
+    if len(idx):  # the nearest attitude sample of each fix
+        j = np.clip(np.searchsorted(t[idx], t[rows]), 0, len(idx) - 1)
+        prev = np.clip(j - 1, 0, len(idx) - 1)
+        j = np.where(np.abs(t[idx[prev]] - t[rows]) < np.abs(t[idx[j]] - t[rows]), prev, j)
+        near = np.where(np.abs(t[idx[j]] - t[rows]) <= 0.5, idx[j], -1)
+    else:
+        near = np.full(len(rows), -1)
+    lost = rows[near < 0]
+    ok[lost] = False
+    use, at = rows[near >= 0], near[near >= 0]
+    a = np.asarray(att, float)[at]
+    shift = np.einsum("kij,j->ki", rotation(a), arm)
+    out[use, : min(3, out.shape[1])] -= shift[:, : min(3, out.shape[1])]
+    note = f"task fusion: {key} position: {how}: moved to the body origin by the attitude of {what}"
+    if len(lost):
+        note += f"; {len(lost)} fixes without an attitude within 0.5 s not used"
+    return out, ok, note
+
+
+def heading_source(frame, found, where, absolute):
+    """(attitude (n, 3) in the body frame, validity, what it is) of the first input that fuses an
+    absolute attitude (its mount applied), or None: the heading a lever arm is turned by."""
+    for entry in found:
+        fuse = configured(entry, f"{where}: [channels] {entry.entry}", absolute)[0]
+        name = field_channel(frame, entry, "attitude") if "attitude" in fuse else None
+        if name is None:
+            continue
+        ch = frame.channels[name]
+        vals = np.asarray(ch.values, float).reshape(len(frame.t), -1)
+        if entry.spec.mount == "rotation":
+            vals = mounted(entry, "attitude", vals, "")[0]
+        return vals, ch.valid & np.isfinite(vals).all(axis=1), f"{entry.entry} ({entry.source})"
+    return None

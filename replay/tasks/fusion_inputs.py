@@ -1,16 +1,16 @@
 """The inputs of the ``fusion`` task: which channel measures which state components.
 
-Every sensor input of the frame (``meta["roles"]``: declared in a bag mapping or detected
-from the message type; role ``none`` is never an input) is read through its *fields*
-(the channels of one topic: ``position``, ``attitude``, ``velocity``, ``rate``, ``gyro``,
-``depth``). By default a role fuses what its message type carries for navigation
-(:data:`DEFAULT_FUSE`), as robot_localization's per-sensor ``*_config`` would be set for
-it; a mapping entry may say otherwise (``fuse = [...]``, ``differential = [...]``,
+Every sensor input of the frame (``Frame.roles``: :class:`replay.roles.SensorInput` records
+declared in a bag mapping or detected from the message type; role ``none`` is never an input)
+is read through its *fields* (the channels of one topic: ``position``, ``attitude``,
+``velocity``, ``rate``, ``gyro``, ``depth``). By default a role fuses what its message type
+carries for navigation (``Role.fuse``), as robot_localization's per-sensor ``*_config`` would
+be set for it; a mapping entry may say otherwise (``fuse = [...]``, ``differential = [...]``,
 ``noise = {field = variance}``; ``docs/bags.md``).
 
 A field maps to state components of the 2-D or 3-D kinematic state
-(:mod:`replay.models.kinematic`) with a sign (depth = -up) and, for angles, a wrap:
-:func:`components`. A *differential* field (pose deltas of an odometry) becomes a
+(:mod:`replay.models.kinematic`) with a sign (depth = -up) and, for angles, a wrap: the role's
+:class:`replay.roles.Field` (:func:`components`). A *differential* field (pose deltas of an odometry) becomes a
 body-velocity (position) or a yaw-rate (attitude) measurement at the later message:
 ``v_body = R(yaw_prev)^T (p_k - p_prev) / (t_k - t_prev)``.
 """
@@ -19,62 +19,33 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay import roles
+from replay.roles import Component, SensorInput, check_field_lists
 from replay.util.angles import wrap
-from replay.adapters.mapping_fields import check_field_lists
 from replay.util.errors import ReplayError, shown
 
-FIELDS = ("position", "attitude", "velocity", "rate", "gyro", "depth")
-DEFAULT_FUSE = {
-    "gps": ("position",),
-    "odometry": ("velocity", "rate"),
-    "imu": ("gyro", "attitude"),
-    "depth": ("depth",),
-    "velocity": ("velocity",),
-    "pose": ("position", "attitude"),
-}
-# the default noise variance of a field, by its task parameter (per component)
-NOISE_PARAM = {
-    "position": "r_position",
-    "attitude": "r_attitude",
-    "velocity": "r_velocity",
-    "rate": "r_rate",
-    "gyro": "r_rate",
-    "depth": "r_depth",
-}
+from . import source_of
 
 
-def components(field: str, dims: int, role: str) -> list[tuple[int, int, float, bool]]:
-    """``(channel column, state component, sign, angle)`` of a field in the 2-D or 3-D state."""
-    if dims == 2:
-        table = {
-            "position": [(0, 0, 1.0, False), (1, 1, 1.0, False)],
-            "attitude": [(2, 2, 1.0, True)],
-            "velocity": [(0, 3, 1.0, False), (1, 4, 1.0, False)],
-            "rate": [(2, 5, 1.0, False)],
-            "gyro": [(2, 5, 1.0, False)],
-            "depth": [],
-        }
-    else:
-        table = {
-            "position": [(0, 0, 1.0, False), (1, 1, 1.0, False)] + ([] if role == "gps" else [(2, 2, 1.0, False)]),
-            "attitude": [(i, 3 + i, 1.0, True) for i in range(3)],
-            "velocity": [(i, 6 + i, 1.0, False) for i in range(3)],
-            "rate": [(i, 9 + i, 1.0, False) for i in range(3)],
-            "gyro": [(i, 9 + i, 1.0, False) for i in range(3)],
-            "depth": [(0, 2, -1.0, False)],
-        }
-    return table[field]
+def components(field: str, dims: int, role: str) -> tuple[Component, ...]:
+    """``(channel column, state component, sign, angle)`` of a field of ``role`` in the 2-D or 3-D state."""
+    return roles.get(role).components(field, dims)
 
 
-def field_channel(frame, entry: dict, field: str) -> str | None:
+def noise_param(role: str, field: str) -> str:
+    """The task parameter (``r_*``) of a field's default variance."""
+    return roles.get(role).field(field).noise
+
+
+def field_channel(frame, entry: SensorInput, field: str) -> str | None:
     """The channel holding ``field`` of a role entry (its declared channel, or ``<entry>_<field>``,
     or the entry's primary channel when that is the field), or None."""
-    for name in (entry["channels"].get(field), f"{entry['entry']}_{field}", entry["entry"]):
+    for name in (entry.channels.get(field), f"{entry.entry}_{field}", entry.entry):
         ch = frame.channels.get(name) if name else None
         if ch is not None and (
-            name == entry["channels"].get(field)
+            name == entry.channels.get(field)
             or str(ch.description).endswith(f" {field}")
-            or name == f"{entry['entry']}_{field}"
+            or name == f"{entry.entry}_{field}"
         ):
             return name
     return None
@@ -82,38 +53,44 @@ def field_channel(frame, entry: dict, field: str) -> str | None:
 
 def has_absolute_position(found) -> bool:
     """Whether an input gives absolute positions (a gps or pose input, or a declared one)."""
-    for role, entry in found:
-        fuse = entry.get("fuse") or DEFAULT_FUSE[role]
-        if "position" in fuse and "position" not in (entry.get("differential") or ()):
+    for entry in found:
+        fuse = entry.fuse or entry.spec.fuse
+        if "position" in fuse and "position" not in (entry.differential or ()):
             return True
     return False
 
 
-def inputs(frame) -> list[tuple[str, dict]]:
-    """``(role, entry)`` of every sensor input of the frame, roles in a fixed order."""
-    roles = frame.meta.get("roles") or {}
-    return [(role, e) for role in DEFAULT_FUSE for e in roles.get(role, [])]
+def inputs(frame) -> list[SensorInput]:
+    """Every sensor input of the frame (not role ``none``), roles in :data:`replay.roles.ROLES` order;
+    an input of an unknown role refused in one line naming the frame's source."""
+    try:
+        return roles.ordered(frame.roles)
+    except ReplayError as e:
+        raise ReplayError(f"{source_of(frame)}: task fusion: {e}") from None
 
 
-def configured(entry: dict, role: str, where: str, absolute: bool = False) -> tuple[tuple, tuple, dict]:
+def configured(entry: SensorInput, where: str, absolute: bool = False) -> tuple[tuple, tuple, dict]:
     """(fused fields, differential fields, noise) of an entry: its declaration or the role's default.
 
     An IMU's attitude is fused by default only where no absolute position input exists (dead
     reckoning, where it is the only heading reference): beside GPS fixes in a projected frame
     its yaw is in the IMU's own world frame (magnetic north, an arbitrary start), as on
     robot_localization's test1.bag, where it differs from the course over ground by about
-    150-180 degrees. Declare ``fuse = ["gyro", "attitude"]`` when it is east-north-up; an
-    adapter that has checked it (Bohai: yaw against the course) marks it ``attitude_enu``."""
-    default = DEFAULT_FUSE[role]
-    if role == "imu" and absolute and not entry.get("attitude_enu"):
-        default = ("gyro",)
-    for f in [*(entry.get("fuse") or ()), *(entry.get("differential") or ())]:
-        if f not in FIELDS:
-            raise ReplayError(f"{where}: unknown field {shown(f)} (known: {', '.join(FIELDS)})")
-    check_field_lists(entry.get("fuse"), entry.get("differential"), where)  # as a mapping's are checked
-    fuse = tuple(entry.get("fuse") or default)
-    diff = tuple(entry.get("differential") or ())
-    return tuple(f for f in fuse if f not in diff), diff, dict(entry.get("noise") or {})
+    150-180 degrees (``Role.fuse_beside_fixes``). Declare ``fuse = ["gyro", "attitude"]`` when it
+    is east-north-up; an adapter that has checked it (Bohai: yaw against the course) marks it
+    ``attitude_enu``."""
+    role = entry.spec
+    default = role.fuse
+    if role.fuse_beside_fixes is not None and absolute and not entry.attitude_enu:
+        default = role.fuse_beside_fixes
+    known = roles.known_fields()
+    for f in [*(entry.fuse or ()), *(entry.differential or ())]:
+        if f not in known:
+            raise ReplayError(f"{where}: unknown field {shown(f)} (known: {', '.join(known)})")
+    check_field_lists(entry.fuse, entry.differential, where)  # as a mapping's are checked
+    fuse = tuple(entry.fuse or default)
+    diff = tuple(entry.differential or ())
+    return tuple(f for f in fuse if f not in diff), diff, dict(entry.noise or {})
 
 
 def differential(t, values, valid, attitude, field: str, where: str, body_rates: bool = False):
@@ -146,7 +123,7 @@ def differential(t, values, valid, attitude, field: str, where: str, body_rates:
     return cur, np.einsum("kji,kj->ki", R, values[cur] - values[prev]) / dt
 
 
-def variance(frame, entry: dict, label: str, fld: str, comps, noise: dict, n: int, valid, default: float):
+def variance(frame, entry: SensorInput, label: str, fld: str, comps, noise: dict, n: int, valid, default: float):
     """(n, len(comps)) variance per step and component of a fused field (``label`` as declared,
     ``fld`` what it measures), how it was chosen (a note) and the same as a record (the manifest's
     ``task_noise``). Declared ``noise`` first; else the recorded covariance diagonal (the
@@ -157,9 +134,10 @@ def variance(frame, entry: dict, label: str, fld: str, comps, noise: dict, n: in
     if fld in noise:  # by what it measures (a differential position: noise.velocity)
         v = float(noise[fld])
         return np.full((n, len(comps)), v), f"declared {v:g}", {"source": "declared", "variance": v}
-    param = f"{NOISE_PARAM[fld]} = {default:g}"
+    param = f"{noise_param(entry.role, fld)} = {default:g}"
     out = np.full((n, len(comps)), default)
-    rec = frame.channels.get(f"{entry['entry']}_{label}_var") if label == fld else None
+    recorded = entry.spec.recorded_covariance and label == fld
+    rec = frame.channels.get(f"{entry.entry}_{label}_var") if recorded else None
     record = {"source": "default", "variance": default}
     if rec is None:
         why = "" if label == fld else " (differential: a recorded covariance is the pose's, not its change's)"
@@ -184,9 +162,9 @@ def variance(frame, entry: dict, label: str, fld: str, comps, noise: dict, n: in
     return np.where(good, cols, default), how, record
 
 
-def threshold(entry: dict, label: str) -> float | None:
+def threshold(entry: SensorInput, label: str) -> float | None:
     """The entry's rejection threshold (Mahalanobis distance) of a field, or None (not gated)."""
-    value = entry.get("rejection_threshold")
+    value = entry.rejection_threshold
     if isinstance(value, dict):
         value = value.get(label)
     return None if value is None else float(value)

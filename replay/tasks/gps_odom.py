@@ -129,14 +129,14 @@ class GpsOdomTask(Task):
         where = source_of(frame)
         gps_in = role_input(frame, "gps", self.name)
         ref = frame.reference.get("position")
-        if gps_in is None or "position" not in gps_in["channels"]:
+        if gps_in is None or "position" not in gps_in.channels:
             raise missing(
                 frame,
                 self.name,
                 "a gps input (a NavSatFix topic, or a topic with role = \"gps\" in the mapping; docs/bags.md)",
                 ("gps", "gps_position"),
             )
-        gps_name = gps_in["channels"]["position"]
+        gps_name = gps_in.channels["position"]
         gps = frame.channels[gps_name]
         if ref is None:
             raise missing(
@@ -162,7 +162,7 @@ class GpsOdomTask(Task):
             found = role_input(frame, role, self.name)
             used = []
             for col, fname, comp in fields:
-                name = (found or {}).get("channels", {}).get(fname)
+                name = (found.channels if found else {}).get(fname)
                 ch = frame.channels.get(name) if name else None
                 if ch is None or ch.width <= comp:
                     continue
@@ -172,7 +172,7 @@ class GpsOdomTask(Task):
                     used.append(name)
                     inputs[f"{role}_{fname}"] = describe(frame, name)
             if not used:
-                absent.append(role if found is None else f"{role} ({found['entry']}: no valid sample)")
+                absent.append(role if found is None else f"{role} ({found.entry}: no valid sample)")
         notes = []
         if len(absent) == 2:
             notes.append(

@@ -104,3 +104,20 @@ def compose(edges, steps):
             ep = -quat.rotate(eq, ep)
         p, q = p + quat.rotate(q, ep), quat.multiply(q, eq)
     return times, p, q
+
+
+def static_between(edges, parent: str, child: str):
+    """(p, q) of the constant transform parent -> child through static edges only (``/tf_static``:
+    a sensor's mounting, e.g. ``base_link -> imu_link``), or None when no static path joins them."""
+    static = {key: e for key, e in edges.items() if e[3]}
+    steps = path_between(static, parent, child)
+    if steps is None:
+        return None
+    p, q = np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])
+    for key, fwd in steps:
+        ep, eq = static[key][1][-1], static[key][2][-1]
+        if not fwd:  # inverse: (R', -R' p)
+            eq = quat.conjugate(eq)
+            ep = -quat.rotate(eq, ep)
+        p, q = p + quat.rotate(q, ep), quat.multiply(q, eq)
+    return p, q
