@@ -27,8 +27,8 @@ from replay.run import tables
 from replay.run.evaluation import DEFAULT_FILTERS
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.run.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
-from replay.run.score_api import score  # noqa: F401 — re-exported
-from replay.run.score_result import ScoreResult  # noqa: F401 — re-exported
+from replay.trajectory.score_api import score  # noqa: F401 — re-exported
+from replay.trajectory.score_result import ScoreResult  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError

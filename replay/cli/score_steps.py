@@ -69,7 +69,7 @@ def checked(options: dict) -> SimpleNamespace:
     """The command's options, checked whole before any file is read (one line each), with what
     follows from them: the alignment method, the parsed lengths, the relations, the trial sets and
     every source to read."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
     from replay.trajectory import io
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
     from replay.trajectory.plot import paths as plot_paths
@@ -114,7 +114,7 @@ def checked(options: dict) -> SimpleNamespace:
             refuse_overlap(path, inputs, what)
             outfile.check(path, what, suffixes)
     if o.save_results:
-        from replay.run import archive
+        from replay.trajectory import archive
 
         archive.check(o.save_results, inputs)
     return o
@@ -122,7 +122,7 @@ def checked(options: dict) -> SimpleNamespace:
 
 def load(o: SimpleNamespace) -> tuple:
     """(the reference, the estimates) as trajectories, named; each recording read once."""
-    from replay.run.score_result import estimate_name
+    from replay.trajectory.score_result import estimate_name
     from replay.trajectory import io
 
     columns, columns_of = io.split_columns(o.columns, [o.reference, *o.sources])
@@ -141,7 +141,7 @@ def load(o: SimpleNamespace) -> tuple:
 
 
 def settings(o: SimpleNamespace) -> dict:
-    from replay.run.score_result import settings as score_settings
+    from replay.trajectory.score_result import settings as score_settings
 
     return score_settings(
         align=o.method,
@@ -163,8 +163,8 @@ def settings(o: SimpleNamespace) -> dict:
 
 def score_all(o: SimpleNamespace, ref, ests):
     """Every estimate scored and printed as evo prints it (trials in their table): a ScoreResult."""
-    from replay.run import trials as trial_sets
-    from replay.run.score_result import ScoreResult, leaderboard_row
+    from replay.trajectory import trials as trial_sets
+    from replay.trajectory.score_result import ScoreResult, leaderboard_row
     from replay.trajectory import io, score
 
     opts, scores, summary, first = settings(o), {}, [], len(o.estimates)
@@ -210,7 +210,7 @@ def _print_score(o: SimpleNamespace, s, opts: dict) -> None:
 
 def _print_tables(o: SimpleNamespace, result, summary: list) -> None:
     """The trial sets' tables, and with several estimates one line each (evo_res's table)."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
 
     rows = result.output_rows()
     for name in o.sets:
@@ -239,7 +239,7 @@ def write(o: SimpleNamespace, result) -> None:
         outfile.write(o.out, "--out", lambda tmp: write_csv(rows, tmp, leaderboard_columns(rows)))
         click.echo(f"leaderboard: {o.out}")
     if o.save_results:
-        from replay.run import archive
+        from replay.trajectory import archive
 
         archive.save(result, o.save_results, reference=o.reference)
         click.echo(f"results: {o.save_results} (replay res {o.save_results})")
@@ -254,7 +254,7 @@ def write(o: SimpleNamespace, result) -> None:
             + (f" (removed the earlier {', '.join(map(str, removed))})" if removed else "")
         )
     if o.trial_plot:
-        from replay.run import boxplots
+        from replay.trajectory import boxplots
 
         boxplots.write(o.trial_plot, result)
         click.echo(f"trials plot: {o.trial_plot}")

@@ -1,11 +1,11 @@
 """``replay.score`` from Python (:func:`score`): the options of ``replay score``, sources as paths,
-Trajectory objects or DataFrames, the result a :class:`replay.run.score_result.ScoreResult`."""
+Trajectory objects or DataFrames, the result a :class:`replay.trajectory.score_result.ScoreResult`."""
 
 from __future__ import annotations
 
 import os
 
-from replay.run.score_result import ScoreResult, estimate_name, leaderboard_row, settings, unique
+from replay.trajectory.score_result import ScoreResult, estimate_name, leaderboard_row, settings, unique
 from replay.trajectory import io
 from replay.trajectory import score as score_one
 from replay.trajectory.base import Trajectory
@@ -74,9 +74,9 @@ def score(
     ``downsample``, ``motion_filter`` ((metres, degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`);
     ``trials``: trials of one estimator each, ``{name: glob or [sources]}`` (or one glob, or a list of
     ``NAME=GLOB``; ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated
-    (``ScoreResult.trials()``, :mod:`replay.run.trials`).
+    (``ScoreResult.trials()``, :mod:`replay.trajectory.trials`).
     """
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
 
     sets = trial_sets.parse_api(trials)
     trial_sets.not_reference(sets, reference, "trials")
@@ -152,7 +152,7 @@ def _load(reference, items: list, names: list, **file_options) -> tuple:
 
 def _scored(ref, ests, specs, names, members, opts, *, lost_threshold, lost_steps) -> ScoreResult:
     """Each estimate scored (trials marked as such) into a :class:`ScoreResult`."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
 
     ref_spec = specs[0] or f"<{ref.name}>"
     dataset = io.label(specs[0]) if specs[0] else ref.name

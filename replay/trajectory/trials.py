@@ -26,7 +26,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from replay.run.canonical import config_hash
+from replay.util.canonical import config_hash
 from replay.scoring import scorer
 from replay.scoring.summary import lost_share
 from replay.trajectory.io import RECORDING_SUFFIXES

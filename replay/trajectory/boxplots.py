@@ -92,7 +92,7 @@ def save(path, fig, what: str):
 
 def write(path, result, what: str = "--trials-plot"):
     """``replay score --trials-plot``: the boxplots of ``result`` (a ScoreResult)."""
-    from replay.run.archive import frames
+    from replay.trajectory.archive import frames
 
     return save(path, figure(panels(frames(result), result.settings["relations"][0])), what)
 

@@ -1,4 +1,4 @@
-"""The result of ``replay.score`` (:class:`ScoreResult`; the call: :func:`replay.run.score_api.score`)
+"""The result of ``replay.score`` (:class:`ScoreResult`; the call: :func:`replay.trajectory.score_api.score`)
 and the leaderboard rows of ``replay score`` (:func:`leaderboard_row`): one code path, so that the
 Python call and the command line give the same numbers.
 
@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from replay.run.canonical import config_hash
+from replay.util.canonical import config_hash
 from replay.trajectory import io, row_metrics
 from replay.trajectory.base import Trajectory
 from replay.trajectory.pose_error import UNITS, statistics
@@ -233,7 +233,7 @@ class ScoreResult:
 
     def output_rows(self) -> list:
         """The rows ``replay score -o`` writes: each estimate (one row per length with ``lengths``), then each
-        trial set's trials and aggregated rows (:func:`replay.run.trials.rows`)."""
+        trial set's trials and aggregated rows (:func:`replay.trajectory.trials.rows`)."""
         from replay.trajectory import lengths as by_length
 
         return _grouped(
@@ -246,15 +246,16 @@ class ScoreResult:
 
     def save(self, path):
         """Write the results archive of ``replay score --save-results`` into the directory ``path``
-        (:mod:`replay.run.archive`; read back by ``replay res``); refused onto or inside an input."""
-        from replay.run import archive
+        (:mod:`replay.trajectory.archive`; read back by ``replay res``); refused onto or inside an input."""
+        from replay.trajectory import archive
 
         archive.check(path, [io.split(spec)[0] for spec in getattr(self, "sources", ())])
         return archive.save(self, path, reference=getattr(self, "reference_spec", None))
 
     def trials(self):
         """The trial sets (``trials=``): each trial's row and the aggregated row (``trial`` empty: mean over
-        trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.run.trials`), one per length with ``lengths``."""
+        trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.trajectory.trials`), one per length
+        with ``lengths``."""
         import pandas as pd
 
         from replay.scoring.summary import columns
@@ -296,7 +297,7 @@ class ScoreResult:
 
 def _grouped(rows: list) -> list:
     """``rows`` of plain estimates first, then each trial set's rows and aggregated rows."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
 
     plain, sets = [], {}
     for row in rows:
