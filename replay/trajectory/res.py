@@ -25,6 +25,9 @@ import math
 from replay.trajectory.archive import finite
 from replay.util.errors import ReplayError
 from replay.util.files import csv_text
+from replay.trajectory.lengths import UNITS as REL
+from replay.trajectory.pose_error import UNITS
+from replay.trajectory.trials import aggregate, aggregated_keys
 
 TABLES = ("stats", "trials")
 FORMATS = ("csv", "md", "latex")
@@ -33,8 +36,6 @@ STATS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 
 
 def _units():
-    from replay.trajectory.lengths import UNITS as REL
-    from replay.trajectory.pose_error import UNITS
 
     return UNITS, REL
 
@@ -83,7 +84,6 @@ def stats_rows(archives) -> list[dict]:
 
 
 def trials_rows(archives) -> list[dict]:
-    from replay.trajectory.trials import aggregated_keys
 
     out = []
     for a in archives:
@@ -119,7 +119,6 @@ def across(boards) -> list[dict]:
     """Trials-table rows of the recorded estimates of ``replay eval`` / campaign outputs: ``boards`` is
     ``[(shown, leaderboard rows)]``; the ``recorded:<name>`` rows of one name and task in different
     directories (one per recording) are aggregated as trials (:func:`replay.trajectory.trials.aggregate`)."""
-    from replay.trajectory.trials import aggregate, aggregated_keys
 
     groups = {}
     for shown, board in boards:

@@ -3,6 +3,7 @@ Trajectory objects or DataFrames, the result a :class:`replay.trajectory.score_r
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 from replay.trajectory.score_result import ScoreResult, estimate_name, leaderboard_row, settings, unique
@@ -10,10 +11,11 @@ from replay.trajectory import io
 from replay.trajectory import score as score_one
 from replay.trajectory.base import Trajectory
 from replay.util.errors import ReplayError
+from replay.trajectory import trials as trial_sets
+from replay.trajectory import lengths as by_length
 
 
 def _trajectory(item, name: str) -> Trajectory:
-    import dataclasses
 
     if isinstance(item, Trajectory):
         return dataclasses.replace(item, name=name)
@@ -76,13 +78,10 @@ def score(
     ``NAME=GLOB``; ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated
     (``ScoreResult.trials()``, :mod:`replay.trajectory.trials`).
     """
-    from replay.trajectory import trials as trial_sets
 
     sets = trial_sets.parse_api(trials)
     trial_sets.not_reference(sets, reference, "trials")
     if lengths is not None:
-        from replay.trajectory import lengths as by_length
-
         lengths = by_length.parse(lengths if isinstance(lengths, str) else ",".join(f"{v:g}" for v in lengths))
     items = list(estimates) if isinstance(estimates, (list, tuple)) else [] if estimates is None else [estimates]
     if not items and not sets:
@@ -152,7 +151,6 @@ def _load(reference, items: list, names: list, **file_options) -> tuple:
 
 def _scored(ref, ests, specs, names, members, opts, *, lost_threshold, lost_steps) -> ScoreResult:
     """Each estimate scored (trials marked as such) into a :class:`ScoreResult`."""
-    from replay.trajectory import trials as trial_sets
 
     ref_spec = specs[0] or f"<{ref.name}>"
     dataset = io.label(specs[0]) if specs[0] else ref.name

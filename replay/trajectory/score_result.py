@@ -22,6 +22,15 @@ from replay.trajectory import io, row_metrics
 from replay.trajectory.base import Trajectory
 from replay.trajectory.pose_error import UNITS, statistics
 from replay.util.errors import ReplayError
+from replay.util.version import __version__
+from replay.trajectory import lengths as by_length
+from replay.scoring.summary import columns
+from replay.trajectory import archive
+from replay.trajectory import trials as trial_sets
+
+# pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
+# matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
+# archives or plots, and every other command, load neither.
 
 
 def estimate_name(spec, taken: set) -> str:
@@ -105,7 +114,6 @@ def leaderboard_row(
 ) -> dict:
     """The leaderboard row (:mod:`replay.scoring.summary` schema) of the score ``s`` of the estimate
     ``estimate`` (its source) named ``name`` against ``reference`` (its source; ``dataset``: its label)."""
-    from replay.util.version import __version__
 
     cfg = {"reference": reference, "estimate": estimate, **settings}
     row = {
@@ -210,8 +218,6 @@ class ScoreResult:
         ``replay score --lengths -o`` writes (``length``, ``length_m``, ``rel_<error>_<stat>``)."""
         import pandas as pd
 
-        from replay.trajectory import lengths as by_length
-
         if "lengths" not in self.settings:
             raise ReplayError("lengths(): no lengths were asked for (give lengths='10%,20%,...' or metres)")
         rows = [
@@ -226,15 +232,12 @@ class ScoreResult:
         (every digit kept, as in the CSV; with ``trials=``, each trial and then each set's aggregated row)."""
         import pandas as pd
 
-        from replay.scoring.summary import columns
-
         rows = _grouped(self.rows)
         return pd.DataFrame(rows, columns=columns(rows))
 
     def output_rows(self) -> list:
         """The rows ``replay score -o`` writes: each estimate (one row per length with ``lengths``), then each
         trial set's trials and aggregated rows (:func:`replay.trajectory.trials.rows`)."""
-        from replay.trajectory import lengths as by_length
 
         return _grouped(
             [
@@ -247,7 +250,6 @@ class ScoreResult:
     def save(self, path):
         """Write the results archive of ``replay score --save-results`` into the directory ``path``
         (:mod:`replay.trajectory.archive`; read back by ``replay res``); refused onto or inside an input."""
-        from replay.trajectory import archive
 
         archive.check(path, [io.split(spec)[0] for spec in getattr(self, "sources", ())])
         return archive.save(self, path, reference=getattr(self, "reference_spec", None))
@@ -257,8 +259,6 @@ class ScoreResult:
         trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.trajectory.trials`), one per length
         with ``lengths``."""
         import pandas as pd
-
-        from replay.scoring.summary import columns
 
         rows = [r for r in self.output_rows() if "trial" in r]
         if not rows:
@@ -297,7 +297,6 @@ class ScoreResult:
 
 def _grouped(rows: list) -> list:
     """``rows`` of plain estimates first, then each trial set's rows and aggregated rows."""
-    from replay.trajectory import trials as trial_sets
 
     plain, sets = [], {}
     for row in rows:

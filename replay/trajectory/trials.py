@@ -21,6 +21,7 @@ from __future__ import annotations
 import glob
 import json
 import math
+import os
 import re
 from contextlib import contextmanager
 
@@ -81,7 +82,6 @@ def parse(specs, what: str = "--trials") -> dict:
 
 def not_reference(sets: dict, reference, what: str = "--trials") -> None:
     """Refuse a trial that is the reference itself (a glob such as ``*.tum`` catching ``gt.tum``)."""
-    import os
 
     if not isinstance(reference, (str, os.PathLike)):
         return
