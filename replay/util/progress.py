@@ -192,6 +192,8 @@ class Progress:
             _BAR["live"] = self
         self._tq.total = self.total_weight or 1.0
         self._tq.n = min(self.weight_done, self._tq.total) if self.total_weight else 1.0
+        if self._tq is None:  # opened at the first line (a note before it redraws nothing)
+            self._tq = _Bar(self.stream, self._head(), bar=False)
         self._tq.tail = tail
         self._tq.refresh()
 
@@ -311,8 +313,7 @@ class Loading:
     def __enter__(self):
         Loading.active.append(self)
         if not self.quiet:
-            self._tq = _Bar(self.stream, self._head(), bar=False)  # drawn by tqdm, its tail ours
-            self.tty = self._tq.tty
+            self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
             self._stop = threading.Event()
             self._thread = threading.Thread(target=self._beat, name="replay-loading", daemon=True)
             self._thread.start()
@@ -328,7 +329,8 @@ class Loading:
                 el = time.monotonic() - self.t0
                 end = "done" if kind is None else "stopped"
                 self._write(f"{end} in {el:.0f} s")
-            self._tq.end() if self.shown else self._tq.close()
+            if self._tq is not None:
+                self._tq.end()
         return False
 
     def _head(self) -> str:
@@ -349,6 +351,8 @@ class Loading:
 
     def _write(self, tail: str) -> None:
         """tqdm draws ``head: tail`` (in place on a terminal, a line of its own elsewhere)."""
+        if self._tq is None:  # opened at the first line (a note before it redraws nothing)
+            self._tq = _Bar(self.stream, self._head(), bar=False)
         self._tq.tail = tail
         self._tq.refresh()
 
