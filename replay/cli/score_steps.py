@@ -29,7 +29,6 @@ REL_TITLES = {
     "point_distance_error_ratio": "point distance error ratio",
 }
 DELTA_UNITS = {"f": "frames", "m": "m", "d": "deg", "r": "rad", "s": "s"}
-PREPARE = ("sync_method", "t_start", "t_end", "downsample", "motion_filter", "project_to_plane")
 
 
 def resolve_align(align, a_flag, s_flag) -> str:
@@ -140,23 +139,27 @@ def load(o: SimpleNamespace) -> tuple:
     return ref, ests
 
 
-def settings(o: SimpleNamespace) -> dict:
-    from replay.trajectory.score_result import settings as score_settings
+def options(o: SimpleNamespace):
+    """The command's options that decide the numbers, as the one record the library takes."""
+    from replay.trajectory.score_options import PREPARE, ScoreOptions
 
-    return score_settings(
+    return ScoreOptions(
         align=o.method,
         n_to_align=o.n_to_align,
         align_origin=o.align_origin,
         t_max_diff=o.t_max_diff,
         t_offset=o.t_offset,
         relations=o.relations,
-        delta=(o.delta or 1.0) if o.want_rpe else None,
+        rpe=o.rpe,
+        delta=o.delta,
         delta_unit=o.delta_unit,
         delta_tol=o.delta_tol,
         all_pairs=o.all_pairs,
         pairs_from_reference=o.pairs_from_reference,
         lengths=o.lengths,
         lengths_method=o.lengths_method,
+        lost_threshold=o.lost_threshold,
+        lost_steps=o.lost_steps,
         **{k: getattr(o, k) for k in PREPARE},
     )
 
@@ -167,7 +170,7 @@ def score_all(o: SimpleNamespace, ref, ests):
     from replay.trajectory.score_result import ScoreResult, leaderboard_row
     from replay.trajectory import io, score
 
-    opts, scores, summary, first = settings(o), {}, [], len(o.estimates)
+    opts, scores, summary, first = options(o).settings(), {}, [], len(o.estimates)
     for k, (spec, name, est) in enumerate(zip(o.sources, o.names, ests)):
         with trial_sets.naming(o.members[k - first] if k >= first else None):
             s = score(ref, est, **opts)

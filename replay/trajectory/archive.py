@@ -6,7 +6,7 @@ results), read back by ``replay res`` without the inputs.
 ``DIR`` is replaced only when it is an archive of ours):
 
 * ``results.json`` — ``format``, ``version``, the replay version, the reference (source, name, poses,
-  first and last stamp), the settings (those of :func:`replay.trajectory.score_result.settings`) and their
+  first and last stamp), the settings (those of :meth:`replay.trajectory.score_options.ScoreOptions.settings`) and their
   ``config_hash``; per estimate: ``name``, ``source``, ``trial_of``/``trial`` (``--trials``), ``matched``,
   the alignment ``transform`` (``R`` 3x3, ``t``, ``scale``: x -> scale R x + t), the statistics of every
   APE/RPE relation and, with ``--lengths``, per length; ``leaderboard``: the rows ``-o`` writes; ``files``:

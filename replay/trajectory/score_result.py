@@ -6,8 +6,8 @@ Inputs are sources as the CLI takes them (a TUM, KITTI, EuRoC or CSV file, ``BAG
 ``BAG:tf:PARENT->CHILD``), :class:`replay.trajectory.Trajectory` objects or pandas DataFrames
 (columns ``t, x, y, z`` and optionally ``qx, qy, qz, qw``: :meth:`Trajectory.from_pandas`).
 Each estimate is associated, aligned and scored by :func:`replay.trajectory.score` with the
-settings of :func:`settings` (those of ``replay score``); its leaderboard row is
-:func:`leaderboard_row`, the row ``replay score -o`` writes.
+settings of :meth:`replay.trajectory.score_options.ScoreOptions.settings` (those of ``replay score``);
+its leaderboard row is :func:`leaderboard_row`, the row ``replay score -o`` writes.
 """
 
 from __future__ import annotations
@@ -45,60 +45,6 @@ def unique(base: str, taken: set) -> str:
         name, k = f"{base}#{k}", k + 1
     taken.add(name)
     return name
-
-
-def settings(
-    *,
-    align: str,
-    n_to_align,
-    align_origin: bool,
-    t_max_diff: float,
-    t_offset: float,
-    relations,
-    delta,
-    delta_unit: str,
-    delta_tol: float,
-    all_pairs: bool,
-    pairs_from_reference: bool,
-    lengths=None,
-    lengths_method: str = "rpg",
-    **prepare,
-) -> dict:
-    """The keyword arguments of :func:`replay.trajectory.score` (and of the configuration hash) for
-    the options of ``replay score``; ``delta``: None for no RPE; ``lengths``: the relative errors over
-    lengths (``--lengths``), in the settings only when asked for; ``prepare``: evo's trajectory options
-    (:data:`PREPARE`: window, sync method, downsampling, motion filter, projection), in the settings
-    only where they differ from their defaults (so the hash of a plain call is unchanged)."""
-    out = dict(
-        align=align,
-        n_to_align=n_to_align,
-        align_origin=align_origin,
-        t_max_diff=t_max_diff,
-        t_offset=t_offset,
-        relations=relations,
-        delta=delta,
-        delta_unit=delta_unit,
-        all_pairs=all_pairs,
-        rel_tol=delta_tol,
-        pairs_from_reference=pairs_from_reference,
-    )
-    if lengths:
-        out.update(lengths=lengths, lengths_method=lengths_method)
-    if unknown := set(prepare) - set(PREPARE):
-        raise TypeError(f"settings: unknown option {sorted(unknown)[0]!r}")
-    out.update({k: v for k, v in prepare.items() if v != PREPARE[k]})
-    return out
-
-
-# evo's trajectory options (replay.trajectory.prepare) and their defaults
-PREPARE = {
-    "sync_method": "nearest",
-    "t_start": None,
-    "t_end": None,
-    "downsample": None,
-    "motion_filter": None,
-    "project_to_plane": None,
-}
 
 
 def leaderboard_row(
