@@ -2,6 +2,7 @@
 takes more than 10 parameters. The functions still over it are listed here, each to be brought under
 (numba kernels take arrays, not records: theirs need a packed form); the list may only shrink."""
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,6 +26,7 @@ OVER = {  # file:function -> parameters, as measured when the rule was written
 }
 
 
+@functools.cache
 def counts() -> dict:
     """{file:function: parameters (self and cls aside; *args and **kw count one each)} outside replay/cli/."""
     out = {}
