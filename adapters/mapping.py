@@ -48,6 +48,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import tomli_w
+
 from replay import roles
 from replay.util import tomlfile
 from replay.util.errors import ReplayError, listed, shown
@@ -104,37 +106,26 @@ class Mapping:
         return list(dict.fromkeys(e.topic for e in self.entries + self.estimates))
 
     def to_toml(self) -> str:
-        lines = [f'time = "{self.time}"']
+        """The mapping file (``load_mapping`` reads it back to this mapping), written by tomli-w."""
+        doc: dict = {"time": self.time}
         if self.until is not None:
-            lines.append(f"until = {self.until!r}")
+            doc["until"] = self.until
+        if self.allow_truncated:
+            doc["allow_truncated"] = True
         for group in ("channels", "reference", "estimates"):
             chosen = [e for e in self.entries + self.estimates if e.group == group]
             if group == "estimates" and not chosen:
                 continue
-            lines += ["", f"[{group}]"]
-            for e in chosen:
-                extra = "".join(
-                    f', {k} = "{v}"'
-                    for k, v in (("type", e.type), ("role", e.role), ("frame", e.frame), ("child", e.child))
-                    if v
-                )
-                extra += "".join(
-                    f", {k} = {v!r}" if not isinstance(v, str) else f', {k} = "{v}"' for k, v in e.params.items()
-                )
-                extra += "".join(f", {k} = {_toml_value(v)}" for k, v in e.fusion.items())
-                key = e.name if re.fullmatch(r"[A-Za-z0-9_-]+", e.name) else f'"{e.name}"'
-                lines.append(f'{key} = {{ topic = "{e.topic}"{extra} }}')
+            doc[group] = {e.name: _entry_doc(e) for e in chosen}
         if self.params:
-            lines += ["", "[params]"] + [f"{k} = {v!r}" for k, v in self.params.items()]
-        return "\n".join(lines) + "\n"
+            doc["params"] = dict(self.params)
+        return tomli_w.dumps(doc)
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {x!r}" for k, x in v.items()) + " }"
-    return "[" + ", ".join(f'"{x}"' for x in v) + "]"
+def _entry_doc(e: Entry) -> dict:
+    """An entry's table: its topic, the declarations it has, its estimate and fusion keys."""
+    pairs = (("type", e.type), ("role", e.role), ("frame", e.frame), ("child", e.child))
+    return {"topic": e.topic, **{k: v for k, v in pairs if v}, **e.params, **e.fusion}
 
 
 def load_mapping(path) -> Mapping:

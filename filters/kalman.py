@@ -38,6 +38,7 @@ from time import perf_counter
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import angle_mask, residual, wrap_components
 from replay.model import remap_indices
 
@@ -305,4 +306,5 @@ class KalmanFilter(EKF):
     """The Kalman filter: exact for :class:`replay.model.LinearGaussian` models."""
 
     name = "kf"
+    CASE = Case("sim/ungm", "ungm", first=30)
     PARAMS = ()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from .base import Filter
 
 
@@ -72,6 +73,7 @@ class Measurements(Filter):
     """The latest direct observation of each state component (module docstring)."""
 
     name = "measurements"
+    CASE = Case("sim/lake-depth", "depth", first=60)
     PARAMS = ()
 
     def engine(self, model, rngs):

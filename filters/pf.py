@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.model import Model, noise_factor
 from replay.util.params import Param
 
@@ -46,6 +47,7 @@ class ParticleFilter(Filter):
     """Bootstrap PF with systematic resampling, log-domain weights and optional roughening."""
 
     name = "pf"
+    CASE = Case(params={"n_particles": 150, "roughening": 0.5})
     PARAMS = (
         Param("n_particles", int, 1000, "particles per run", low=1),
         Param("resampling", str, "systematic", "resampling scheme", choices=tuple(SCHEMES)),

@@ -37,6 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import angle_mask, wrap_components
 from replay.util.errors import ReplayError
 from replay.util.params import Param
@@ -296,6 +297,7 @@ class UKF(SigmaPointFilter):
     """
 
     name = "ukf"
+    CASE = Case(params={"alpha": 0.8})
     PARAMS = (
         Param(
             "alpha",

@@ -9,7 +9,8 @@ The Python API (``docs/python.md``), imported on first use::
 
 Every name of :data:`__all__` is a function of :mod:`replay.api`, imported on first use.
 ``replay.evaluate`` and ``replay.score`` are those functions; the modules behind them are
-:mod:`replay.run.evaluation` and :mod:`replay.scoring.scorer` (no submodule shares an API name).
+:mod:`replay.run.evaluation`, :mod:`replay.scoring.scorer` and :mod:`replay.trajectory.score_api`
+(no submodule shares an API name).
 """
 
 import importlib as _importlib

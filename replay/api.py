@@ -19,7 +19,7 @@ import inspect
 import os
 
 
-from replay.api_args import ARGS, checked
+from replay.api_args import ARGS, checked, default
 from replay.data import registry
 
 
@@ -27,8 +27,10 @@ from replay.run import tables
 from replay.run.evaluation import DEFAULT_FILTERS
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.run.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
-from replay.run.score_api import score  # noqa: F401 — re-exported
-from replay.run.score_result import ScoreResult  # noqa: F401 — re-exported
+from replay.trajectory import lengths as by_length
+from replay.trajectory import score_api
+from replay.trajectory.score_options import ScoreOptions
+from replay.trajectory.score_result import ScoreResult  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError
@@ -322,6 +324,47 @@ def refresh_plugins() -> None:
     FILTERS.refresh()
     TASKS.refresh()
     plugins.refresh()
+
+
+# how the trajectories are read and named: the rest of replay.score's keywords are its ScoreOptions
+SCORE_SOURCES = ("names", "trials", "fmt", "kitti_times", "columns", "time_unit")
+
+
+def score(reference, estimates=None, **options) -> ScoreResult:
+    """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
+
+    ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
+    ``RECORDING:TOPIC``, ``RECORDING:tf:PARENT->CHILD``, a Trajectory or a DataFrame (``t, x, y, z``
+    and optionally ``qx, qy, qz, qw``). The options are the CLI's long options (docs/evo.md), declared
+    in ``replay.api_args.ARGS["score"]``: ``align`` none, yaw, se3 (evo's ``-a``), sim3 (``-as``) or
+    scale (``-s``); ``pose_relation`` (``-r``, one or a list); ``rpe``, ``delta``, ``delta_unit``,
+    ``delta_tol``, ``all_pairs``, ``pairs_from_reference`` (the RPE); ``fmt``, ``kitti_times``,
+    ``columns``, ``time_unit`` (files); ``names``: one per estimate (default: the topic, else the file
+    stem, else the trajectory's name); ``lengths`` (``"10%,20%"`` or a list of those strings),
+    ``lengths_method``: the relative errors over lengths (``ScoreResult.lengths()``); evo's trajectory
+    options ``sync_method``, ``t_start``, ``t_end``, ``downsample``, ``motion_filter`` ((metres,
+    degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`); ``trials``: trials of one
+    estimator each, ``{name: glob or [sources]}`` (or one glob, or a list of ``NAME=GLOB``;
+    ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated (``ScoreResult.trials()``,
+    :mod:`replay.trajectory.trials`). The options become one record (:class:`ScoreOptions`), the
+    declarations' defaults filled in.
+    """
+    given = {k: options[k] if k in options else default(d) for k, d in ARGS["score"].items()}
+    del given["reference"], given["estimates"]
+    sources = {k: given.pop(k) for k in SCORE_SOURCES}
+    relation, lengths = given.pop("pose_relation"), given.pop("lengths")
+    if lengths is not None:
+        lengths = by_length.parse(lengths if isinstance(lengths, str) else ",".join(f"{v:g}" for v in lengths))
+    motion = given.pop("motion_filter")
+    opts = ScoreOptions(
+        **given,
+        relations=list(dict.fromkeys([relation] if isinstance(relation, str) else relation)),
+        lengths=lengths,
+        motion_filter=None if motion is None else tuple(motion),
+    )
+    if "point_distance_error_ratio" in opts.relations and not opts.want_rpe:
+        raise ReplayError("pose_relation point_distance_error_ratio is an RPE relation: add rpe=True (or a delta)")
+    return score_api.score(reference, estimates, opts, **sources)
 
 
 def _checked() -> None:

@@ -235,7 +235,16 @@ ARGS: dict[str, dict] = {
     "refresh_plugins": {},
 }
 # the functions whose keyword options are all declared: an unknown one is refused with the known ones
-CLOSED = {"evaluate": ("recorded", "progress")}
+CLOSED = {"evaluate": ("recorded", "progress"), "score": ()}
+
+
+def default(decl):
+    """The default of a declaration (a :class:`Param`'s; an optional one's None; a list's, its item's)."""
+    if isinstance(decl, Several):
+        return None if decl.optional else default(decl.item)
+    if isinstance(decl, Either):
+        return default(decl.options[0])
+    return getattr(decl, "default", None)
 
 
 def _run_in(source, run, owner):

@@ -15,6 +15,7 @@ import sys
 
 import pytest
 from hostile import assert_ok, assert_refused, register
+from builtin_cases import group_id, groups
 
 from replay.run import rerun
 
@@ -337,30 +338,24 @@ def test_one_rmse_changed_by_one_percent_is_refused_for_every_registered_filter(
     assert rerun.differences(man, _ev(man["results"], {})) == []
 
 
-GROUPS = {  # every registered filter on a dataset its model fits (20 runs: the swarm filters' old tolerance)
-    "sim/auv-sonar": ["ekf", "ukf", "ckf", "pf", "stckf", "stcpf", "igwo-stcpf", "pso-cpf", "measurements"],
-    "sim/ungm": ["gwo-pf", "igwo-pf", "pso-pf"],
-    "sim/lake-depth": ["gpf", "mmpf"],
-    "sim/linear": ["kf"],
-    "sim/sauv-current": ["aukf"],
-    "sim/uav-formation": ["wf-pf"],
-}
+GROUPS = groups()  # every built-in filter on the case it declares (its CASE: tests/builtin_cases.py)
 
 
 def test_groups_cover_every_registered_filter():
     from replay.filters import FILTERS
-    assert sorted(f for fs in GROUPS.values() for f in fs) == sorted(FILTERS)
+    assert sorted(f for *_, fs in GROUPS for f in fs) == sorted(FILTERS.builtin)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("dataset", list(GROUPS))
-def test_rerun_of_every_filter_is_exact_and_refuses_one_percent(dataset, tmp_path):
+@pytest.mark.parametrize("group", GROUPS, ids=[group_id(g) for g in GROUPS])
+def test_rerun_of_every_filter_is_exact_and_refuses_one_percent(group, tmp_path):
     """Each registered filter, run and rerun: equal; each RMSE raised by 1 %: refused,
     naming every filter."""
-    filters = GROUPS[dataset]
-    task = {"sim/ungm": ["--task", "ungm"], "sim/lake-depth": ["--task", "depth"]}.get(dataset, [])
-    assert_ok(["eval", dataset, *task, "-f", ",".join(filters), "--runs", "3", "--first", "60", "-o",
-               tmp_path / "ev", "-q"])
+    dataset, task, first, params = group
+    filters = list(params)
+    sets = [f"-p{f}.{k}={json.dumps(v)}" for f, ps in params.items() for k, v in ps.items()]
+    assert_ok(["eval", dataset, "--task", task, "-f", ",".join(filters), *sets, "--runs", "3", "--first",
+               str(first or 60), "-o", tmp_path / "ev", "-q"])
     path = tmp_path / "ev" / "manifest.json"
     assert "reproduced: every recorded result equals" in assert_ok(["rerun", "-q", path]).stdout
     man = json.loads(path.read_text())

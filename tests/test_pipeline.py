@@ -14,31 +14,14 @@ import pytest
 from click.testing import CliRunner
 
 from replay.cli import main
+from builtin_cases import group_id, groups
 from replay.filters import FILTERS
 from replay.run.pipeline import Config, config_hash, run_block
 
-# dataset, dataset params, first, task, {filter: non-default params}
-GROUPS = [
-    ("sim/auv-sonar", {"steps": 30}, None, "sonar", {
-        "ekf": {}, "ukf": {"alpha": 0.8}, "ckf": {},
-        "pf": {"n_particles": 150, "roughening": 0.5},
-        "stckf": {"rho": 0.9},
-        "stcpf": {"n_particles": 12},
-        "igwo-stcpf": {"n_particles": 12, "t_max": 3},
-        "pso-pf": {"n_particles": 20, "t_max": 3},
-        "pso-cpf": {"n_particles": 12, "t_max": 3},
-        "wf-pf": {"n_particles": 150, "alpha": 0.5},
-    }),
-    ("sim/ungm", {}, 30, "ungm", {
-        "kf": {}, "gwo-pf": {"n_particles": 30, "t_max": 3}, "igwo-pf": {"n_particles": 30, "t_max": 4},
-    }),
-    ("sim/lake-depth", {}, 60, "depth", {
-        "gpf": {"n_particles": 200, "n_grey": 20}, "mmpf": {"n_particles": 150}, "measurements": {},
-    }),
-    ("sim/sauv-current", {}, 80, "dead-reckoning", {
-        "aukf": {"forgetting": 0.95},
-    }),
-]
+# dataset, dataset params, first, task, {filter: non-default params}: derived from each built-in filter's
+# declared CASE (tests/builtin_cases.py), one group per dataset, task and length
+GROUPS = [(dataset, {}, first, task, filters) for dataset, task, first, filters in groups()]
+IDS = [group_id(g) for g in groups()]
 RUNS, SEED = 3, 5
 TIMING = ("us_per_step", "version")
 
@@ -69,7 +52,7 @@ def _campaign(path, dataset, dparams, first, task, filters):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("group", GROUPS, ids=[g[0] for g in GROUPS])
+@pytest.mark.parametrize("group", GROUPS, ids=IDS)
 def test_eval_and_campaign_give_identical_rows(tmp_path, group):
     dataset, dparams, first, task, filters = group
     args = ["eval", dataset, "--task", task, "--filters", ",".join(filters), "--runs", str(RUNS),
@@ -81,13 +64,16 @@ def test_eval_and_campaign_give_identical_rows(tmp_path, group):
     runner = CliRunner()
     res = runner.invoke(main, args, catch_exceptions=False)
     assert res.exit_code == 0, res.output
-    camp = _campaign(tmp_path / "c.toml", dataset, dparams, first, task, filters)
+    ev = _rows(tmp_path / "eval" / "leaderboard.csv")
+    assert list(ev)[: len(filters)] == list(filters) and set(ev) - set(filters) <= {"measurements"}
+    rows = {name: filters.get(name, {}) for name in ev}  # with eval's own baseline row, where the task gives one
+    camp = _campaign(tmp_path / "c.toml", dataset, dparams, first, task, rows)
     res = runner.invoke(main, ["campaign", "run", str(camp), "-o", str(tmp_path / "camp"), "-w", "1", "-q"],
                         catch_exceptions=False)
     assert res.exit_code == 0, res.output
-    ev, cp = _rows(tmp_path / "eval" / "leaderboard.csv"), _rows(tmp_path / "camp" / "leaderboard.csv")
-    assert list(ev) == list(cp) == list(filters)
-    for name in filters:
+    cp = _rows(tmp_path / "camp" / "leaderboard.csv")
+    assert list(cp) == list(ev)
+    for name in rows:
         assert ev[name] == cp[name], name
         assert ev[name]["runs"] == str(RUNS)
     if "pf" in filters:  # the roughening parameter reached the filter through both doors

@@ -196,6 +196,7 @@ def test_eta_leaves_out_the_time_spent_compiling_kernels(monkeypatch):
     bar = Progress(10, stream=tty, total_weight=100.0)
     bar._draw(final=True)
     assert "compiling kernels (one time, cached)...]" in tty.getvalue() and "ETA" not in tty.getvalue()
+    assert "progress:   0%|" in tty.getvalue()  # tqdm draws the label and the share
     bar.close()
 
 
@@ -226,7 +227,35 @@ def test_numba_compilations_are_timed_and_notes_erase_the_bar():
     h = progress.NoteHandler(tty)
     h.emit(logging.LogRecord("replay", logging.INFO, __file__, 1, "a note", None, None))
     text = tty.getvalue()
-    assert "1/4 units" in text and text.endswith("]\r\033[Ka note\n")  # the bar erased, the note on its own line
-    bar.update(1)
-    assert tty.getvalue()[len(text):].startswith("\r") and "2/4 units" in tty.getvalue()[len(text):]
+    before, after = text.split("a note\n")
+    assert "1/4 units" in before and before.endswith(" \r")  # tqdm erased the bar: the note on its own line
+    assert after.startswith("\r") and "1/4 units" in after  # and drew the bar again below it
     bar.close()
+    assert tty.getvalue().endswith("\n")
+
+
+def test_every_display_is_tqdm_s_and_off_a_terminal_each_is_a_plain_line():
+    """The bar, the plain lines and the load heartbeat are tqdm instances (tqdm draws each), and off
+    a terminal a display is a line of its own: no carriage return, no padding."""
+    import tqdm
+
+    from replay.util import progress
+
+    out = io.StringIO()
+    p = Progress(3, stream=out, label="eval", unit="run", every=0.0)
+    p.update(1)
+    assert isinstance(p._tq, tqdm.tqdm) and p._tq in tqdm.tqdm._instances
+    p.update(2)
+    p.close()
+    lines = out.getvalue().split("\n")
+    assert lines[0].startswith("eval: 1/3 runs (33 % of the work), elapsed 0 s") and lines[-1] == ""
+    assert lines[1].startswith("eval: 3/3 runs (100 % of the work), elapsed 0 s") and len(lines) == 3
+    assert "\r" not in out.getvalue() and not p._tq
+    tty = _Tty()
+    with progress.Loading("f.csv", 2000, quiet=False, stream=tty, after=0.0, every=0.01) as ld:
+        import time
+        deadline = time.monotonic() + 5
+        while not ld.shown and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert isinstance(ld._tq, tqdm.tqdm)
+    assert tty.getvalue().startswith("\rload f.csv (2.0 kB): 0 s") and tty.getvalue().endswith("done in 0 s\n")

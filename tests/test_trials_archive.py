@@ -88,7 +88,7 @@ def test_trials_from_python_equal_the_cli(line):
 
 
 def test_glob_in_natural_order(tmp_path):
-    from replay.run.trials import parse
+    from replay.trajectory.trials import parse
 
     for k in (1, 2, 10):
         (tmp_path / f"r{k}.txt").write_text("")

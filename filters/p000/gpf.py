@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import residual, wrap_components
 from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky
@@ -59,6 +60,7 @@ class GreyParticleFilter(Filter):
     """GPF: grey-model particles plus wavelet-estimated measurement noise (paper 000)."""
 
     name = "gpf"
+    CASE = Case("sim/lake-depth", "depth", {"n_particles": 200, "n_grey": 20}, first=60)
     PARAMS = (
         Param("n_particles", int, 1000, "particles N (000 §3: 1000)", low=2),
         Param("n_grey", int, 100, "grey particles N_grey among the N (000 §3: 100, N_grey : N_std = 1 : 9)", low=0),

@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import wrap_components
 from replay.util.errors import ReplayError
 from replay.util.params import Param
@@ -76,6 +77,7 @@ class MultipleModelPF(Filter):
     """Jump-Markov bootstrap PF over motion modes (module docstring)."""
 
     name = "mmpf"
+    CASE = Case("sim/lake-depth", "depth", {"n_particles": 150}, first=60)
     PARAMS = (
         Param("n_particles", int, 1000, "particles N", low=2),
         Rows(

@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import residual, weighted_mean, wrap_components
 from replay.util.linalg import cholesky
 
@@ -93,6 +94,7 @@ class AUKF(UKF):
     """UKF with on-line fading-memory estimates of q, p, Q, R (001 eq. 92–110)."""
 
     name = "aukf"
+    CASE = Case("sim/sauv-current", "dead-reckoning", {"forgetting": 0.95}, first=80)
     PARAMS = UKF.PARAMS + (
         Param(
             "forgetting",

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import residual
 from replay.util.errors import ReplayError
 from replay.util.params import Param
@@ -113,6 +114,7 @@ class STCKF(CKF):
     """CKF with the strong-tracking fading factor of 002 §2.2.2 (rho = 0.95, beta = 1.2)."""
 
     name = "stckf"
+    CASE = Case(params={"rho": 0.9})
     PARAMS = CKF.PARAMS + STCKF_PARAMS + (REPAIR, FORM)
 
     def check(self):

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.angles import wrap_components
 from replay.util.errors import ReplayError
 from replay.util.kernels import LOG_2PI, gauss_logpdf
@@ -85,6 +86,7 @@ class CubatureParticleFilter(Filter):
     """
 
     name = "stcpf"
+    CASE = Case(params={"n_particles": 12})
     PARAMS = (
         Param("n_particles", int, 100, "particles per run (002 §4.1: N = 100)", low=1),
         Param(

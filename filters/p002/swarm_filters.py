@@ -3,6 +3,7 @@ engine: :mod:`replay.filters.p002.igwo_stcpf`)."""
 
 from __future__ import annotations
 
+from replay.filters.case import Case
 from replay.filters.p002.igwo_stcpf import (
     GWO_NAMES,
     PROPOSAL_NAMES,
@@ -17,6 +18,7 @@ class IGWOSTCPF(SwarmParticleFilter):
     """IGWO-STCPF (002, §3.3): STCKF importance density, IGWO in place of resampling."""
 
     name, proposal, optimizer = "igwo-stcpf", "stckf", "igwo"
+    CASE = Case(params={"n_particles": 12, "t_max": 3})
     PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES)
 
 
@@ -24,6 +26,7 @@ class GWOPF(SwarmParticleFilter):
     """Bootstrap PF with standard GWO in place of resampling (002, §3.2 benchmark 1)."""
 
     name, proposal, optimizer = "gwo-pf", "prior", "gwo"
+    CASE = Case("sim/ungm", "ungm", {"n_particles": 30, "t_max": 3}, first=30)
     PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *PSO_NAMES, *PROPOSAL_NAMES)
 
 
@@ -31,6 +34,7 @@ class IGWOPF(GWOPF):
     """Bootstrap PF with IGWO in place of resampling (002, §3.2 benchmark 1)."""
 
     name, proposal, optimizer = "igwo-pf", "prior", "igwo"
+    CASE = Case("sim/ungm", "ungm", {"n_particles": 30, "t_max": 4}, first=30)
 
 
 class PSOPF(SwarmParticleFilter):
@@ -42,6 +46,7 @@ class PSOPF(SwarmParticleFilter):
     """
 
     name, proposal, optimizer = "pso-pf", "prior", "pso"
+    CASE = Case(params={"n_particles": 20, "t_max": 3})
     PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *PROPOSAL_NAMES)
 
 
@@ -49,4 +54,5 @@ class PSOCPF(SwarmParticleFilter):
     """PSO-CPF baseline (002, §4.1): PSO-PF with a per-particle CKF importance density (``t_max`` iterations)."""
 
     name, proposal, optimizer = "pso-cpf", "ckf", "pso"
+    CASE = Case(params={"n_particles": 12, "t_max": 3})
     PARAMS = without(SwarmParticleFilter.PARAMS, "proposal", "optimizer", *GWO_NAMES, *STCKF_NAMES)

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.filters.case import Case
 from replay.util.params import Param
 
 from .. import particles
@@ -56,6 +57,7 @@ class WeightFactorPF(ParticleFilter):
     """Bootstrap PF with weight floor and weight exponent α (003 eq. 22, 27)."""
 
     name = "wf-pf"
+    CASE = Case(params={"n_particles": 150, "alpha": 0.5})
     PARAMS = (
         _PF["n_particles"],
         Param(

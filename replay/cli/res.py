@@ -1,7 +1,7 @@
 """``replay res DIR...``: re-tabulate and re-plot saved results (``replay score --save-results``), as evo_res.
 
-Registered in :mod:`replay.cli.main`. The tables are :mod:`replay.run.res`'s, the archive
-:mod:`replay.run.archive`'s, the figure :mod:`replay.run.boxplots`'s.
+Registered in :mod:`replay.cli.main`. The tables are :mod:`replay.trajectory.res`'s, the archive
+:mod:`replay.trajectory.archive`'s, the figure :mod:`replay.trajectory.boxplots`'s.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def res_cmd(dirs, table, fmt, digits, out, plot_path):
     Given replay eval or campaign outputs, --table trials aggregates their recorded estimates (recorded:NAME
     rows) across the recordings, one trial per directory.
     """
-    from replay.run import archive, boxplots, res
+    from replay.trajectory import archive, boxplots, res
     from replay.util import outfile
     from replay.util.files import refuse_overlap
 

@@ -29,7 +29,6 @@ REL_TITLES = {
     "point_distance_error_ratio": "point distance error ratio",
 }
 DELTA_UNITS = {"f": "frames", "m": "m", "d": "deg", "r": "rad", "s": "s"}
-PREPARE = ("sync_method", "t_start", "t_end", "downsample", "motion_filter", "project_to_plane")
 
 
 def resolve_align(align, a_flag, s_flag) -> str:
@@ -69,7 +68,7 @@ def checked(options: dict) -> SimpleNamespace:
     """The command's options, checked whole before any file is read (one line each), with what
     follows from them: the alignment method, the parsed lengths, the relations, the trial sets and
     every source to read."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
     from replay.trajectory import io
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
     from replay.trajectory.plot import paths as plot_paths
@@ -114,7 +113,7 @@ def checked(options: dict) -> SimpleNamespace:
             refuse_overlap(path, inputs, what)
             outfile.check(path, what, suffixes)
     if o.save_results:
-        from replay.run import archive
+        from replay.trajectory import archive
 
         archive.check(o.save_results, inputs)
     return o
@@ -122,7 +121,7 @@ def checked(options: dict) -> SimpleNamespace:
 
 def load(o: SimpleNamespace) -> tuple:
     """(the reference, the estimates) as trajectories, named; each recording read once."""
-    from replay.run.score_result import estimate_name
+    from replay.trajectory.score_result import estimate_name
     from replay.trajectory import io
 
     columns, columns_of = io.split_columns(o.columns, [o.reference, *o.sources])
@@ -140,34 +139,38 @@ def load(o: SimpleNamespace) -> tuple:
     return ref, ests
 
 
-def settings(o: SimpleNamespace) -> dict:
-    from replay.run.score_result import settings as score_settings
+def options(o: SimpleNamespace):
+    """The command's options that decide the numbers, as the one record the library takes."""
+    from replay.trajectory.score_options import PREPARE, ScoreOptions
 
-    return score_settings(
+    return ScoreOptions(
         align=o.method,
         n_to_align=o.n_to_align,
         align_origin=o.align_origin,
         t_max_diff=o.t_max_diff,
         t_offset=o.t_offset,
         relations=o.relations,
-        delta=(o.delta or 1.0) if o.want_rpe else None,
+        rpe=o.rpe,
+        delta=o.delta,
         delta_unit=o.delta_unit,
         delta_tol=o.delta_tol,
         all_pairs=o.all_pairs,
         pairs_from_reference=o.pairs_from_reference,
         lengths=o.lengths,
         lengths_method=o.lengths_method,
+        lost_threshold=o.lost_threshold,
+        lost_steps=o.lost_steps,
         **{k: getattr(o, k) for k in PREPARE},
     )
 
 
 def score_all(o: SimpleNamespace, ref, ests):
     """Every estimate scored and printed as evo prints it (trials in their table): a ScoreResult."""
-    from replay.run import trials as trial_sets
-    from replay.run.score_result import ScoreResult, leaderboard_row
+    from replay.trajectory import trials as trial_sets
+    from replay.trajectory.score_result import ScoreResult, leaderboard_row
     from replay.trajectory import io, score
 
-    opts, scores, summary, first = settings(o), {}, [], len(o.estimates)
+    opts, scores, summary, first = options(o).settings(), {}, [], len(o.estimates)
     for k, (spec, name, est) in enumerate(zip(o.sources, o.names, ests)):
         with trial_sets.naming(o.members[k - first] if k >= first else None):
             s = score(ref, est, **opts)
@@ -210,7 +213,7 @@ def _print_score(o: SimpleNamespace, s, opts: dict) -> None:
 
 def _print_tables(o: SimpleNamespace, result, summary: list) -> None:
     """The trial sets' tables, and with several estimates one line each (evo_res's table)."""
-    from replay.run import trials as trial_sets
+    from replay.trajectory import trials as trial_sets
 
     rows = result.output_rows()
     for name in o.sets:
@@ -239,7 +242,7 @@ def write(o: SimpleNamespace, result) -> None:
         outfile.write(o.out, "--out", lambda tmp: write_csv(rows, tmp, leaderboard_columns(rows)))
         click.echo(f"leaderboard: {o.out}")
     if o.save_results:
-        from replay.run import archive
+        from replay.trajectory import archive
 
         archive.save(result, o.save_results, reference=o.reference)
         click.echo(f"results: {o.save_results} (replay res {o.save_results})")
@@ -254,7 +257,7 @@ def write(o: SimpleNamespace, result) -> None:
             + (f" (removed the earlier {', '.join(map(str, removed))})" if removed else "")
         )
     if o.trial_plot:
-        from replay.run import boxplots
+        from replay.trajectory import boxplots
 
         boxplots.write(o.trial_plot, result)
         click.echo(f"trials plot: {o.trial_plot}")

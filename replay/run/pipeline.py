@@ -51,7 +51,7 @@ from replay.data import dataset_ref, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
-from replay.run.canonical import config_hash, plain  # noqa: F401 (the pipeline's names too)
+from replay.util.canonical import config_hash, plain  # noqa: F401 (the pipeline's names too)
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, marks, metrics, scorer

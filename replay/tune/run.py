@@ -57,7 +57,7 @@ COLUMNS = [
 
 @dataclass
 class Tune:
-    """What ``replay tune`` was asked (checked by :func:`replay.tune.cli_check.check`)."""
+    """What ``replay tune`` was asked (built and checked by :func:`replay.tune.check.prepare`)."""
 
     task: str
     filters: list

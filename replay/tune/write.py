@@ -7,6 +7,8 @@ import json
 import math
 from pathlib import Path
 
+import tomli_w
+
 from replay.util.files import write_bytes
 
 
@@ -30,51 +32,37 @@ def write_tuned(t, out: Path, rows) -> dict:
 
 
 def _toml(t, rows, task_params: dict) -> str:
-    lines = [
-        "# written by replay tune: the tuned configurations on the held-out data",
+    """The campaign file of ``rows`` (written by tomli-w), under two comment lines naming its origin."""
+    head = (
+        "# written by replay tune: the tuned configurations on the held-out data\n"
         f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
-        + ", ".join(f"{r['filter']} {r['trials']}" for r in rows),
-        "[campaign]",
-        'name = "tuned"',
-        f"runs = {t.runs}",
-        f"seed = {rows[0]['_test'][0].seed}",
-        f'alignment = "{t.alignment}"',
-    ]
+        + ", ".join(f"{r['filter']} {r['trials']}" for r in rows)
+        + "\n"
+    )
+    campaign = {"name": "tuned", "runs": t.runs, "seed": rows[0]["_test"][0].seed, "alignment": t.alignment}
     if t.data_dir:
-        lines.append(f"data_dir = {json.dumps(str(Path(t.data_dir).resolve()))}")
+        campaign["data_dir"] = str(Path(t.data_dir).resolve())
+    datasets = []
     for d, p in t.split.test:
-        lines += ["", "[[dataset]]", f"id = {json.dumps(d)}", f"tasks = [{json.dumps(t.task)}]"]
-        if p:
-            lines.append("params = " + _inline(p))
+        datasets.append({"id": d, "tasks": [t.task], **({"params": p} if p else {})})
         if t.first is not None:
-            lines.append(f"first = {t.first}")
-    lines += ["", f"[task.{json.dumps(t.task)}]"] + [
-        f"{k} = {_val(v)}" for k, v in task_params.items() if v is not None
-    ]
-    for r in rows:
-        lines += [
-            "",
-            "[[filter]]",
-            f"name = {json.dumps(r['filter'])}",
-            "params = " + _inline(r["_test"][0].filter_params),
-        ]
-    return "\n".join(lines) + "\n"
+            datasets[-1]["first"] = t.first
+    doc = {
+        "campaign": campaign,
+        "dataset": datasets,
+        "task": {t.task: task_params},
+        "filter": [{"name": r["filter"], "params": r["_test"][0].filter_params} for r in rows],
+    }
+    return head + tomli_w.dumps(_no_none(doc))
 
 
-def _val(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf") if not math.isnan(v) else "nan"
+def _no_none(v):
+    """``v`` without the keys whose value is None (TOML has no null: an unset parameter is left out)."""
     if isinstance(v, dict):
-        return _inline(v)
+        return {k: _no_none(x) for k, x in v.items() if x is not None}
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_val(x) for x in v) + "]"
-    return json.dumps(v)
-
-
-def _inline(d: dict) -> str:
-    return "{ " + ", ".join(f"{json.dumps(k)} = {_val(v)}" for k, v in d.items() if v is not None) + " }"
+        return [_no_none(x) for x in v]
+    return v
 
 
 def format_board(rows) -> str:

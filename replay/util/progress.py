@@ -1,5 +1,5 @@
-"""Progress of long work: a live bar on a terminal (tqdm's), one plain line every ~10 s otherwise,
-nothing quiet.
+"""Progress of long work, drawn by tqdm (:class:`_Bar`): a live bar on a terminal, one plain line
+every ~10 s otherwise (a log reads line by line), nothing quiet. What is ours is what tqdm cannot know:
 
 Work comes in items of unequal cost: each item carries a weight (its expected cost,
 e.g. runs x (4 + particles / 20)), and the ETA extrapolates the time per unit of weight
@@ -9,15 +9,18 @@ lie, and the first item's one-time work (kernels loaded, data generated) does no
 numba kernels (once per machine, then cached: tens of seconds on a first run) is no
 work done: it is left out of that rate (:func:`compile_seconds`) and shown apart; while
 it lasts the bar says so instead of an ETA. Notes logged meanwhile (:class:`NoteHandler`)
-take their own line, not the bar's.
+take their own line, not the bar's (tqdm's ``external_write_mode``).
 """
 
 from __future__ import annotations
 
 import logging
+import shutil
 import sys
 import threading
 import time
+
+from tqdm import tqdm
 
 _CLOCK = {"depth": 0, "start": 0.0, "total": 0.0, "listening": False}  # numba's outermost compilations
 _LOCK = threading.Lock()
@@ -66,15 +69,15 @@ def compiling() -> bool:
 
 
 class NoteHandler(logging.StreamHandler):
-    """A logging handler for one-line notes: a live progress bar is erased first (it is drawn again
-    at the next update), so a note never lands on the bar's line."""
+    """A logging handler for one-line notes: on a terminal, tqdm erases its live bars on this stream
+    first and draws them again below the note (:meth:`tqdm.external_write_mode`), so a note never
+    lands on a bar's line; elsewhere a progress line is a line of its own already."""
 
     def emit(self, record):
-        bar = _BAR["live"]
-        if bar is not None and bar.stream is self.stream and bar._drawn:
-            self.stream.write("\r\033[K")
-            bar._drawn = 0.0
-        super().emit(record)
+        if not getattr(self.stream, "isatty", lambda: False)():
+            return super().emit(record)
+        with tqdm.external_write_mode(file=self.stream):
+            super().emit(record)
 
 
 # What a run costs besides its filter (the data generated or cut, the scoring, the per-step table),
@@ -95,37 +98,57 @@ def particle_weight(params: dict, runs: int) -> float:
         return float(runs) * (RUN_OVERHEAD + 1.0)
 
 
-def _bar(stream, label: str):
-    """A tqdm bar on ``stream`` that draws only when told (:meth:`Progress._draw`): the label, the
-    share of the weight done, ``#`` cells and :class:`Progress`'s own tail (its ETA leaves out the
-    first item and the compilations, which tqdm's rate would not)."""
-    import shutil
+class _Bar(tqdm):
+    """tqdm drawing only when told (:meth:`refresh`): the label, then (on a terminal, when ``bar``) the
+    share of the weight done and ``#`` cells, then a tail of ours (:class:`Progress`'s ETA leaves out
+    the first item and the compilations, which tqdm's rate would not). On a terminal tqdm redraws its
+    line in place; elsewhere (a log, a pipe) each refresh is one plain line of its own."""
 
-    from tqdm import tqdm
+    monitor_interval = 0  # no monitor thread: nothing draws but refresh
 
-    class Bar(tqdm):
-        monitor_interval = 0  # no monitor thread: nothing draws but _draw
-        tail = ""
+    def __init__(self, stream, label: str, bar: bool):
+        self.tail = ""
+        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        super().__init__(
+            total=1.0,
+            file=stream,
+            desc=label,
+            bar_format="{desc}: {percentage:3.0f}%|{bar}|{tail}" if bar and self.tty else "{desc}: {tail}",
+            ascii=" 123456789#",
+            ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120) if self.tty else 10**6,
+            delay=float("inf"),  # never drawn by tqdm itself (every refresh is ours)
+            nrows=1000,  # a terminal of unknown height (a pty of 0 rows) would make tqdm hide its one bar
+            leave=False,  # the last line is finished by its owner (:meth:`end`)
+        )
 
-        @property
-        def format_dict(self):
-            return {**super().format_dict, "tail": self.tail}
+    @property
+    def format_dict(self):
+        return {**super().format_dict, "tail": self.tail}
 
-    return Bar(
-        total=1.0,
-        file=stream,
-        desc=label,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}|{tail}",
-        ascii=" 123456789#",
-        ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120),
-        delay=float("inf"),  # never drawn by tqdm itself (its first refresh is ours)
-        nrows=1000,  # a terminal of unknown height (a pty of 0 rows) would make tqdm hide its one bar
-        leave=True,
-    )
+    def display(self, msg=None, pos=None):
+        if self.tty:
+            return super().display(msg, pos)
+        if msg is None:  # off a terminal: the line on a line of its own (no carriage return, no padding)
+            self.fp.write(str(self) + "\n")
+            self.fp.flush()
+        return True
+
+    def clear(self, nolock=False):
+        if self.tty:  # a line written off a terminal stays
+            super().clear(nolock)
+
+    def end(self) -> None:
+        """Finish the terminal's line (the next output starts below it), then close."""
+        if self.tty:
+            self.fp.write("\n")
+            self.fp.flush()
+        self.close()
 
 
 class Progress:
-    """``update(n, weight=...)`` after each finished item; ``close()`` at the end."""
+    """``update(n, weight=...)`` after each finished item; ``close()`` at the end. Drawn by tqdm
+    (:class:`_Bar`): a live bar on a terminal redrawn at most 5 times a second, one plain line every
+    ``every`` seconds (and at the end) otherwise, nothing when ``quiet``."""
 
     def __init__(
         self,
@@ -141,29 +164,38 @@ class Progress:
         self.total, self.quiet, self.every, self.label, self.unit = total, quiet, every, label, unit
         self.total_weight = float(total_weight if total_weight is not None else total)
         self.stream = stream or sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.done = self.failed = 0
         self.weight_done = 0.0
         self.first = None  # (time, compile seconds, weight done) when the first item finished
-        self._tq = None  # the terminal's bar (tqdm), drawn by _draw only
+        self._tq = None  # tqdm's display, opened at the first draw
+        self._drawn = 0.0
         self.t0 = self.last = time.monotonic()
         self.c0 = compile_seconds(self.t0)
-        self.bar = None
-        self._open()
+
+    @property
+    def bar(self) -> bool:
+        """Whether the display is a live bar (on a terminal, not quiet, the amount of work known)."""
+        return bool(not self.quiet and self.total and self.tty)
 
     def start(self, total: int, total_weight: float | None = None) -> None:
         """Set the amount of work once it is known (before the first update)."""
         self.total = total
         self.total_weight = float(total_weight if total_weight is not None else total)
         _listen()  # the work's modules are imported by now: numba too if it compiles
-        self._open()
 
-    def _open(self) -> None:
-        self.bar = bool(not self.quiet and self.total and getattr(self.stream, "isatty", lambda: False)())
-        self._drawn = 0.0
-        if self.bar:
+    def _show(self, tail: str) -> None:
+        """tqdm draws the label, (on a terminal) the weighted share and its cells, then ``tail``."""
+        if self._tq is None:
+            self._tq = _Bar(self.stream, self.label, bar=True)
+        if self.tty:
             _BAR["live"] = self
-            if self._tq is None:
-                self._tq = _bar(self.stream, self.label)
+        self._tq.total = self.total_weight or 1.0
+        self._tq.n = min(self.weight_done, self._tq.total) if self.total_weight else 1.0
+        if self._tq is None:  # opened at the first line (a note before it redraws nothing)
+            self._tq = _Bar(self.stream, self._head(), bar=False)
+        self._tq.tail = tail
+        self._tq.refresh()
 
     def _tail(self, now: float) -> str:
         """What follows the bar: the count, failures, the elapsed time and the ETA (or that kernels compile)."""
@@ -176,16 +208,12 @@ class Progress:
         )
 
     def _draw(self, final: bool = False) -> None:
-        """The bar on one terminal line (tqdm's, weighted: its share is the weight done), redrawn in
-        place at most 5 times a second."""
+        """The terminal's bar, redrawn in place at most 5 times a second."""
         now = time.monotonic()
         if not final and now - self._drawn < 0.2:
             return
         self._drawn = now
-        self._tq.total = self.total_weight or 1.0
-        self._tq.n = min(self.weight_done, self._tq.total) if self.total_weight else 1.0
-        self._tq.tail = self._tail(now)
-        self._tq.refresh()
+        self._show(self._tail(now))
 
     def update(self, n: int = 1, failed: int = 0, weight: float | None = None) -> None:
         w = float(n if weight is None else weight)
@@ -203,8 +231,7 @@ class Progress:
         now = time.monotonic()
         if now - self.last >= self.every or self.done >= self.total:
             self.last = now
-            self.stream.write(self.line(now) + "\n")
-            self.stream.flush()
+            self._show(self._body(now))
 
     def eta(self, now=None) -> float:
         """Seconds left: time per unit of weight done since the first item finished, times the weight
@@ -224,31 +251,30 @@ class Progress:
         c = compile_seconds(now) - self.c0
         return f", {c:.0f} s compiling kernels" if c >= 0.5 else ""
 
-    def line(self, now=None) -> str:
-        now = now or time.monotonic()
-        el = now - self.t0
+    def _body(self, now) -> str:
+        """The plain line after its label: the count, the share of the work, failures, times."""
         pct = min(100.0, 100.0 * self.weight_done / self.total_weight) if self.total_weight else 100.0
         fail = f", {self.failed} failed" if self.failed else ""
         eta = self.eta(now)
         return (
-            f"{self.label}: {self._count()} {self.unit}s ({pct:.0f} % of the work){fail}, "
-            f"elapsed {el:.0f} s{self._compiling(now)}" + (f", ETA {eta:.0f} s" if eta == eta else "")
+            f"{self._count()} {self.unit}s ({pct:.0f} % of the work){fail}, "
+            f"elapsed {now - self.t0:.0f} s{self._compiling(now)}" + (f", ETA {eta:.0f} s" if eta == eta else "")
         )
+
+    def line(self, now=None) -> str:
+        """The plain line (off a terminal): ``label: body``."""
+        return f"{self.label}: {self._body(now or time.monotonic())}"
 
     def _count(self) -> str:
         """``done/total``, never past the total (a caller's count that overshoots is its bug, not shown)."""
         return f"{min(self.done, self.total) if self.total else self.done}/{self.total}"
 
     def close(self) -> None:
-        if self.bar and self.done:
-            self._draw(final=True)
-            self.stream.write("\n")
-            self.stream.flush()
         if self._tq is not None:
-            self._tq.disable = True  # closed without drawing again (its line is finished above)
-            self._tq.close()
+            if self.bar and self.done:
+                self._draw(final=True)
+            self._tq.end()
             self._tq = None
-        self.bar = False
         if _BAR["live"] is self:
             _BAR["live"] = None
 
@@ -276,21 +302,17 @@ class Loading:
         every: float = 10.0,
     ):
         if quiet is None:
-            import logging
-
             quiet = not logging.getLogger("replay").isEnabledFor(logging.INFO)
         self.label, self.size, self.quiet, self.after, self.every = label, size, quiet, after, every
         self.stream = stream or sys.stderr
         self.stage, self.share = "", None
         self.shown = False
         self.t0 = time.monotonic()
-        self._thread = self._stop = None
+        self._thread = self._stop = self._tq = None
 
     def __enter__(self):
         Loading.active.append(self)
         if not self.quiet:
-            import threading
-
             self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
             self._stop = threading.Event()
             self._thread = threading.Thread(target=self._beat, name="replay-loading", daemon=True)
@@ -306,7 +328,9 @@ class Loading:
             if self.shown:
                 el = time.monotonic() - self.t0
                 end = "done" if kind is None else "stopped"
-                self._write(f"{self._head()}: {end} in {el:.0f} s", final=True)
+                self._write(f"{end} in {el:.0f} s")
+            if self._tq is not None:
+                self._tq.end()
         return False
 
     def _head(self) -> str:
@@ -314,26 +338,28 @@ class Loading:
         return f"load {self.label}{size}"
 
     def line(self, now=None) -> str:
+        return f"{self._head()}: {self._body(now)}"
+
+    def _body(self, now=None) -> str:
         el = (now or time.monotonic()) - self.t0
-        text = f"{self._head()}: {el:.0f} s"
+        text = f"{el:.0f} s"
         if self.stage:
             text += f", {self.stage}"
         if self.share:
             text += f" ({100 * self.share:.0f} % of the work, ETA {el / self.share * (1 - self.share):.0f} s)"
         return text
 
-    def _write(self, text: str, final: bool = False) -> None:
-        if self.tty:
-            self.stream.write("\r" + text.ljust(getattr(self, "_width", 0)) + ("\n" if final else ""))
-            self._width = len(text)
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
+    def _write(self, tail: str) -> None:
+        """tqdm draws ``head: tail`` (in place on a terminal, a line of its own elsewhere)."""
+        if self._tq is None:  # opened at the first line (a note before it redraws nothing)
+            self._tq = _Bar(self.stream, self._head(), bar=False)
+        self._tq.tail = tail
+        self._tq.refresh()
 
     def _beat(self) -> None:
         wait = self.after
         while not self._stop.wait(wait):
-            self._write(self.line())
+            self._write(self._body())
             self.shown = True
             wait = 1.0 if self.tty else self.every
 

@@ -9,6 +9,14 @@ boxplots. Each panel has one box per estimate (each trial of a trial set is one,
 from __future__ import annotations
 
 import numpy as np
+from replay.trajectory.lengths import UNITS as REL_UNITS
+from replay.trajectory.pose_error import UNITS
+from replay.util import outfile
+from replay.trajectory.archive import frames
+
+# pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
+# matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
+# archives or plots, and every other command, load neither.
 
 FORMATS = ("png", "pdf", "svg", "eps")
 
@@ -19,8 +27,6 @@ def _unit(u: str) -> str:
 
 def panels(tables: dict, relation: str, label=lambda name: name) -> list:
     """``[(title, {box label: values})]`` of the archive tables (``ape``, ``rpe``, ``lengths`` DataFrames)."""
-    from replay.trajectory.lengths import UNITS as REL_UNITS
-    from replay.trajectory.pose_error import UNITS
 
     out = []
     for kind in ("ape", "rpe"):
@@ -84,7 +90,6 @@ def figure(boxes: list, over_time=None):
 
 
 def save(path, fig, what: str):
-    from replay.util import outfile
 
     path = outfile.check(path, what, FORMATS)
     return outfile.write(path, what, lambda tmp: fig.savefig(tmp, dpi=110, format=path.suffix.lower()[1:]))
@@ -92,14 +97,12 @@ def save(path, fig, what: str):
 
 def write(path, result, what: str = "--trials-plot"):
     """``replay score --trials-plot``: the boxplots of ``result`` (a ScoreResult)."""
-    from replay.run.archive import frames
 
     return save(path, figure(panels(frames(result), result.settings["relations"][0])), what)
 
 
 def write_res(path, archives, what: str = "--plot"):
     """``replay res --plot``: the APE over time and the boxplots of every estimate of the archives."""
-    from replay.trajectory.pose_error import UNITS
 
     boxes, series, ylabel = [], {}, ""
     for a in archives:

@@ -1,19 +1,21 @@
 """``replay.score`` from Python (:func:`score`): the options of ``replay score``, sources as paths,
-Trajectory objects or DataFrames, the result a :class:`replay.run.score_result.ScoreResult`."""
+Trajectory objects or DataFrames, the result a :class:`replay.trajectory.score_result.ScoreResult`."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
-from replay.run.score_result import ScoreResult, estimate_name, leaderboard_row, settings, unique
+from replay.trajectory.score_options import ScoreOptions
+from replay.trajectory.score_result import ScoreResult, estimate_name, leaderboard_row, unique
 from replay.trajectory import io
 from replay.trajectory import score as score_one
 from replay.trajectory.base import Trajectory
 from replay.util.errors import ReplayError
+from replay.trajectory import trials as trial_sets
 
 
 def _trajectory(item, name: str) -> Trajectory:
-    import dataclasses
 
     if isinstance(item, Trajectory):
         return dataclasses.replace(item, name=name)
@@ -29,96 +31,39 @@ def _default_name(item, taken: set, k: int) -> str:
 
 def score(
     reference,
-    estimates=None,
+    estimates,
+    options: ScoreOptions,
     *,
-    align: str = "none",
-    n_to_align=None,
-    align_origin: bool = False,
-    t_max_diff: float = 0.01,
-    t_offset: float = 0.0,
-    pose_relation="trans",
-    rpe: bool = False,
-    delta=None,
-    delta_unit: str = "f",
-    delta_tol: float = 0.1,
-    all_pairs: bool = False,
-    pairs_from_reference: bool = False,
+    names=None,
+    trials=None,
     fmt=None,
     kitti_times=None,
     columns=None,
     time_unit=None,
-    lost_threshold=None,
-    lost_steps: int = 10,
-    names=None,
-    lengths=None,
-    lengths_method: str = "rpg",
-    sync_method: str = "nearest",
-    t_start=None,
-    t_end=None,
-    downsample=None,
-    motion_filter=None,
-    project_to_plane=None,
-    trials=None,
 ) -> ScoreResult:
-    """Score ``estimates`` against ``reference`` as ``replay score`` does: a :class:`ScoreResult`.
+    """Score ``estimates`` against ``reference`` as ``replay score`` does, with ``options`` (the record the
+    API builds from ``replay.score``'s keywords, :func:`replay.api.score`): a :class:`ScoreResult`.
 
     ``reference``, ``estimates`` (one or a list): a trajectory file (TUM, KITTI, EuRoC, CSV),
     ``RECORDING:TOPIC``, ``RECORDING:tf:PARENT->CHILD``, a Trajectory or a DataFrame (``t, x, y, z``
-    and optionally ``qx, qy, qz, qw``). The options are the CLI's long options (docs/evo.md):
-    ``align`` none, yaw, se3 (evo's ``-a``), sim3 (``-as``) or scale (``-s``); ``pose_relation``
-    (``-r``, one or a list); ``rpe``, ``delta``, ``delta_unit``, ``delta_tol``, ``all_pairs``,
-    ``pairs_from_reference`` (the RPE); ``fmt``, ``kitti_times``, ``columns``, ``time_unit`` (files);
-    ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's name);
-    ``lengths`` (``"10%,20%"`` or a list of those strings), ``lengths_method``: the relative errors over
-    lengths (``ScoreResult.lengths()``); evo's trajectory options ``sync_method``, ``t_start``, ``t_end``,
-    ``downsample``, ``motion_filter`` ((metres, degrees)), ``project_to_plane`` (:mod:`replay.trajectory.prepare`);
-    ``trials``: trials of one estimator each, ``{name: glob or [sources]}`` (or one glob, or a list of
-    ``NAME=GLOB``; ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated
-    (``ScoreResult.trials()``, :mod:`replay.run.trials`).
+    and optionally ``qx, qy, qz, qw``); ``fmt``, ``kitti_times``, ``columns``, ``time_unit``: how files
+    are read; ``names``: one per estimate (default: the topic, else the file stem, else the trajectory's
+    name); ``trials``: trials of one estimator each, ``{name: glob or [sources]}`` (or one glob, or a
+    list of ``NAME=GLOB``; ``estimates`` may then be empty), scored as ``NAME/1``.. and aggregated
+    (``ScoreResult.trials()``, :mod:`replay.trajectory.trials`).
     """
-    from replay.run import trials as trial_sets
-
     sets = trial_sets.parse_api(trials)
     trial_sets.not_reference(sets, reference, "trials")
-    if lengths is not None:
-        from replay.trajectory import lengths as by_length
-
-        lengths = by_length.parse(lengths if isinstance(lengths, str) else ",".join(f"{v:g}" for v in lengths))
     items = list(estimates) if isinstance(estimates, (list, tuple)) else [] if estimates is None else [estimates]
     if not items and not sets:
         raise ReplayError("score: no estimate (give estimates, or trials=)")
-    relations = list(dict.fromkeys([pose_relation] if isinstance(pose_relation, str) else pose_relation))
-    want_rpe = rpe or delta is not None or all_pairs
-    if "point_distance_error_ratio" in relations and not want_rpe:
-        raise ReplayError("pose_relation point_distance_error_ratio is an RPE relation: add rpe=True (or a delta)")
     names = _names(items, names)
     members = trial_sets.members(sets)
     items, names = items + [m[3] for m in members], names + [m[0] for m in members]
     specs, ref, ests = _load(
         reference, items, names, fmt=fmt, kitti_times=kitti_times, columns=columns, time_unit=time_unit
     )
-    opts = settings(
-        align=align,
-        n_to_align=n_to_align,
-        align_origin=align_origin,
-        t_max_diff=t_max_diff,
-        t_offset=t_offset,
-        relations=relations,
-        delta=(delta or 1.0) if want_rpe else None,
-        delta_unit=delta_unit,
-        delta_tol=delta_tol,
-        all_pairs=all_pairs,
-        pairs_from_reference=pairs_from_reference,
-        lengths=lengths,
-        lengths_method=lengths_method,
-        sync_method=sync_method,
-        t_start=t_start,
-        t_end=t_end,
-        downsample=downsample,
-        motion_filter=None if motion_filter is None else tuple(motion_filter),
-        project_to_plane=project_to_plane,
-    )
-    return _scored(ref, ests, specs, names, members, opts, lost_threshold=lost_threshold, lost_steps=lost_steps)
+    return _scored(ref, ests, specs, names, members, options)
 
 
 def _names(items: list, names) -> list:
@@ -150,10 +95,9 @@ def _load(reference, items: list, names: list, **file_options) -> tuple:
     return specs, ref, ests
 
 
-def _scored(ref, ests, specs, names, members, opts, *, lost_threshold, lost_steps) -> ScoreResult:
+def _scored(ref, ests, specs, names, members, options: ScoreOptions) -> ScoreResult:
     """Each estimate scored (trials marked as such) into a :class:`ScoreResult`."""
-    from replay.run import trials as trial_sets
-
+    opts = options.settings()
     ref_spec = specs[0] or f"<{ref.name}>"
     dataset = io.label(specs[0]) if specs[0] else ref.name
     scores, rows = {}, []
@@ -170,8 +114,8 @@ def _scored(ref, ests, specs, names, members, opts, *, lost_threshold, lost_step
                 estimate=spec or f"<{name}>",
                 name=name,
                 settings=opts,
-                lost_threshold=lost_threshold,
-                lost_steps=lost_steps,
+                lost_threshold=options.lost_threshold,
+                lost_steps=options.lost_steps,
             )
         )
     for row, (_, set_name, k, src) in zip(rows[len(rows) - len(members) :], members):

@@ -21,12 +21,13 @@ from __future__ import annotations
 import glob
 import json
 import math
+import os
 import re
 from contextlib import contextmanager
 
 import numpy as np
 
-from replay.run.canonical import config_hash
+from replay.util.canonical import config_hash
 from replay.scoring import scorer
 from replay.scoring.summary import lost_share
 from replay.trajectory.io import RECORDING_SUFFIXES
@@ -81,7 +82,6 @@ def parse(specs, what: str = "--trials") -> dict:
 
 def not_reference(sets: dict, reference, what: str = "--trials") -> None:
     """Refuse a trial that is the reference itself (a glob such as ``*.tum`` catching ``gt.tum``)."""
-    import os
 
     if not isinstance(reference, (str, os.PathLike)):
         return

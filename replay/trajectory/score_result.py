@@ -1,4 +1,4 @@
-"""The result of ``replay.score`` (:class:`ScoreResult`; the call: :func:`replay.run.score_api.score`)
+"""The result of ``replay.score`` (:class:`ScoreResult`; the call: :func:`replay.trajectory.score_api.score`)
 and the leaderboard rows of ``replay score`` (:func:`leaderboard_row`): one code path, so that the
 Python call and the command line give the same numbers.
 
@@ -6,8 +6,8 @@ Inputs are sources as the CLI takes them (a TUM, KITTI, EuRoC or CSV file, ``BAG
 ``BAG:tf:PARENT->CHILD``), :class:`replay.trajectory.Trajectory` objects or pandas DataFrames
 (columns ``t, x, y, z`` and optionally ``qx, qy, qz, qw``: :meth:`Trajectory.from_pandas`).
 Each estimate is associated, aligned and scored by :func:`replay.trajectory.score` with the
-settings of :func:`settings` (those of ``replay score``); its leaderboard row is
-:func:`leaderboard_row`, the row ``replay score -o`` writes.
+settings of :meth:`replay.trajectory.score_options.ScoreOptions.settings` (those of ``replay score``);
+its leaderboard row is :func:`leaderboard_row`, the row ``replay score -o`` writes.
 """
 
 from __future__ import annotations
@@ -17,11 +17,20 @@ import math
 
 import numpy as np
 
-from replay.run.canonical import config_hash
+from replay.util.canonical import config_hash
 from replay.trajectory import io, row_metrics
 from replay.trajectory.base import Trajectory
 from replay.trajectory.pose_error import UNITS, statistics
 from replay.util.errors import ReplayError
+from replay.util.version import __version__
+from replay.trajectory import lengths as by_length
+from replay.scoring.summary import columns
+from replay.trajectory import archive
+from replay.trajectory import trials as trial_sets
+
+# pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
+# matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
+# archives or plots, and every other command, load neither.
 
 
 def estimate_name(spec, taken: set) -> str:
@@ -38,60 +47,6 @@ def unique(base: str, taken: set) -> str:
     return name
 
 
-def settings(
-    *,
-    align: str,
-    n_to_align,
-    align_origin: bool,
-    t_max_diff: float,
-    t_offset: float,
-    relations,
-    delta,
-    delta_unit: str,
-    delta_tol: float,
-    all_pairs: bool,
-    pairs_from_reference: bool,
-    lengths=None,
-    lengths_method: str = "rpg",
-    **prepare,
-) -> dict:
-    """The keyword arguments of :func:`replay.trajectory.score` (and of the configuration hash) for
-    the options of ``replay score``; ``delta``: None for no RPE; ``lengths``: the relative errors over
-    lengths (``--lengths``), in the settings only when asked for; ``prepare``: evo's trajectory options
-    (:data:`PREPARE`: window, sync method, downsampling, motion filter, projection), in the settings
-    only where they differ from their defaults (so the hash of a plain call is unchanged)."""
-    out = dict(
-        align=align,
-        n_to_align=n_to_align,
-        align_origin=align_origin,
-        t_max_diff=t_max_diff,
-        t_offset=t_offset,
-        relations=relations,
-        delta=delta,
-        delta_unit=delta_unit,
-        all_pairs=all_pairs,
-        rel_tol=delta_tol,
-        pairs_from_reference=pairs_from_reference,
-    )
-    if lengths:
-        out.update(lengths=lengths, lengths_method=lengths_method)
-    if unknown := set(prepare) - set(PREPARE):
-        raise TypeError(f"settings: unknown option {sorted(unknown)[0]!r}")
-    out.update({k: v for k, v in prepare.items() if v != PREPARE[k]})
-    return out
-
-
-# evo's trajectory options (replay.trajectory.prepare) and their defaults
-PREPARE = {
-    "sync_method": "nearest",
-    "t_start": None,
-    "t_end": None,
-    "downsample": None,
-    "motion_filter": None,
-    "project_to_plane": None,
-}
-
-
 def leaderboard_row(
     s,
     *,
@@ -105,7 +60,6 @@ def leaderboard_row(
 ) -> dict:
     """The leaderboard row (:mod:`replay.scoring.summary` schema) of the score ``s`` of the estimate
     ``estimate`` (its source) named ``name`` against ``reference`` (its source; ``dataset``: its label)."""
-    from replay.util.version import __version__
 
     cfg = {"reference": reference, "estimate": estimate, **settings}
     row = {
@@ -210,8 +164,6 @@ class ScoreResult:
         ``replay score --lengths -o`` writes (``length``, ``length_m``, ``rel_<error>_<stat>``)."""
         import pandas as pd
 
-        from replay.trajectory import lengths as by_length
-
         if "lengths" not in self.settings:
             raise ReplayError("lengths(): no lengths were asked for (give lengths='10%,20%,...' or metres)")
         rows = [
@@ -226,15 +178,12 @@ class ScoreResult:
         (every digit kept, as in the CSV; with ``trials=``, each trial and then each set's aggregated row)."""
         import pandas as pd
 
-        from replay.scoring.summary import columns
-
         rows = _grouped(self.rows)
         return pd.DataFrame(rows, columns=columns(rows))
 
     def output_rows(self) -> list:
         """The rows ``replay score -o`` writes: each estimate (one row per length with ``lengths``), then each
-        trial set's trials and aggregated rows (:func:`replay.run.trials.rows`)."""
-        from replay.trajectory import lengths as by_length
+        trial set's trials and aggregated rows (:func:`replay.trajectory.trials.rows`)."""
 
         return _grouped(
             [
@@ -246,18 +195,16 @@ class ScoreResult:
 
     def save(self, path):
         """Write the results archive of ``replay score --save-results`` into the directory ``path``
-        (:mod:`replay.run.archive`; read back by ``replay res``); refused onto or inside an input."""
-        from replay.run import archive
+        (:mod:`replay.trajectory.archive`; read back by ``replay res``); refused onto or inside an input."""
 
         archive.check(path, [io.split(spec)[0] for spec in getattr(self, "sources", ())])
         return archive.save(self, path, reference=getattr(self, "reference_spec", None))
 
     def trials(self):
         """The trial sets (``trials=``): each trial's row and the aggregated row (``trial`` empty: mean over
-        trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.run.trials`), one per length with ``lengths``."""
+        trials, ``<m>_median``, ``<m>_ci95``, ``lost``; :mod:`replay.trajectory.trials`), one per length
+        with ``lengths``."""
         import pandas as pd
-
-        from replay.scoring.summary import columns
 
         rows = [r for r in self.output_rows() if "trial" in r]
         if not rows:
@@ -296,7 +243,6 @@ class ScoreResult:
 
 def _grouped(rows: list) -> list:
     """``rows`` of plain estimates first, then each trial set's rows and aggregated rows."""
-    from replay.run import trials as trial_sets
 
     plain, sets = [], {}
     for row in rows:

@@ -1,4 +1,4 @@
-"""``replay res DIR...``: tables of saved results (:mod:`replay.run.archive`) without the inputs, as
+"""``replay res DIR...``: tables of saved results (:mod:`replay.trajectory.archive`) without the inputs, as
 evo_res and rpg_trajectory_evaluation's cached results and LaTeX tables.
 
 Two tables (:func:`rows`):
@@ -22,9 +22,12 @@ from __future__ import annotations
 
 import math
 
-from replay.run.archive import finite
+from replay.trajectory.archive import finite
 from replay.util.errors import ReplayError
 from replay.util.files import csv_text
+from replay.trajectory.lengths import UNITS as REL
+from replay.trajectory.pose_error import UNITS
+from replay.trajectory.trials import aggregate, aggregated_keys
 
 TABLES = ("stats", "trials")
 FORMATS = ("csv", "md", "latex")
@@ -33,8 +36,6 @@ STATS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 
 
 def _units():
-    from replay.trajectory.lengths import UNITS as REL
-    from replay.trajectory.pose_error import UNITS
 
     return UNITS, REL
 
@@ -83,7 +84,6 @@ def stats_rows(archives) -> list[dict]:
 
 
 def trials_rows(archives) -> list[dict]:
-    from replay.run.trials import aggregated_keys
 
     out = []
     for a in archives:
@@ -118,8 +118,7 @@ def trials_rows(archives) -> list[dict]:
 def across(boards) -> list[dict]:
     """Trials-table rows of the recorded estimates of ``replay eval`` / campaign outputs: ``boards`` is
     ``[(shown, leaderboard rows)]``; the ``recorded:<name>`` rows of one name and task in different
-    directories (one per recording) are aggregated as trials (:func:`replay.run.trials.aggregate`)."""
-    from replay.run.trials import aggregate, aggregated_keys
+    directories (one per recording) are aggregated as trials (:func:`replay.trajectory.trials.aggregate`)."""
 
     groups = {}
     for shown, board in boards:

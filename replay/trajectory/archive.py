@@ -6,7 +6,7 @@ results), read back by ``replay res`` without the inputs.
 ``DIR`` is replaced only when it is an archive of ours):
 
 * ``results.json`` — ``format``, ``version``, the replay version, the reference (source, name, poses,
-  first and last stamp), the settings (those of :func:`replay.run.score_result.settings`) and their
+  first and last stamp), the settings (those of :meth:`replay.trajectory.score_options.ScoreOptions.settings`) and their
   ``config_hash``; per estimate: ``name``, ``source``, ``trial_of``/``trial`` (``--trials``), ``matched``,
   the alignment ``transform`` (``R`` 3x3, ``t``, ``scale``: x -> scale R x + t), the statistics of every
   APE/RPE relation and, with ``--lengths``, per length; ``leaderboard``: the rows ``-o`` writes; ``files``:
@@ -40,10 +40,20 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.run.pipeline import config_hash, plain
+from replay.util.canonical import config_hash, plain
 from replay.trajectory.lengths import ERRORS as LENGTH_ERRORS
 from replay.util import sealed
 from replay.util.errors import ReplayError
+from replay.trajectory.lengths import statistics as length_stats
+from replay.trajectory.pose_error import statistics
+from replay.util.version import __version__
+from replay.scoring.summary import columns
+from replay.util.files import write_csv
+from replay.util.staging import check_output_dir, staged_dir
+
+# pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
+# matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
+# archives or plots, and every other command, load neither.
 
 KIND = "replay score results"
 FORMAT = "replay-score-results"
@@ -56,7 +66,6 @@ WHAT = "--save-results"
 
 def check(out, inputs) -> None:
     """Every check of ``DIR`` that can be made before scoring (one line naming it)."""
-    from replay.util.staging import check_output_dir
 
     check_output_dir(out, inputs, kind=KIND, what=WHAT)
 
@@ -100,9 +109,6 @@ def frames(result) -> dict:
 
 def meta(result, reference: str | None = None) -> dict:
     """The content of ``results.json`` but ``files`` (module docstring)."""
-    from replay.trajectory.lengths import statistics as length_stats
-    from replay.trajectory.pose_error import statistics
-    from replay.util.version import __version__
 
     ref = result.reference
     settings = plain(result.settings)
@@ -167,9 +173,6 @@ def _sha256(path: Path) -> str:
 
 def save(result, out, *, reference: str | None = None) -> Path:
     """Write the archive of ``result`` into the directory ``out`` as one set (module docstring)."""
-    from replay.scoring.summary import columns
-    from replay.util.files import write_csv
-    from replay.util.staging import staged_dir
 
     content = meta(result, reference)
     tables = frames(result)
@@ -230,8 +233,6 @@ def _agree(p: Path, shown: str, m: dict) -> None:
     """Every APE/RPE statistic of ``results.json`` recomputed from ``ape.parquet``/``rpe.parquet``
     (relative 1e-9): the numbers printed are those of the errors kept, whatever the checksums say."""
     import pandas as pd
-
-    from replay.trajectory.pose_error import statistics
 
     tables = {}
     for e in m["estimates"]:
