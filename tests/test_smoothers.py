@@ -231,3 +231,31 @@ def test_sim_linear_smoothed_below_filtered_and_consistent():
     assert rts["pos_rmse_vs_kf"] < -rts["pos_rmse_vs_kf_ci95"] < 0
     assert rts["anees_lo"] <= rts["anees"] <= rts["anees_hi"] and rts["anees_flag"] == "consistent"
     assert 2.8 < rts["anees"] < 3.2
+
+
+def test_gap_to_the_best_smoother_paired_over_runs():
+    """The leaderboard's gap columns (replay/scoring/gap.py): each row's per-run pos_rmse minus the
+    best smoother's in the same run, averaged, with the t interval; the ratio likewise; the best
+    smoother's row names itself; the eval table and the report cell print them; none without a smoother."""
+    from replay import evaluate
+    from replay.outputs.files import format_table
+    from replay.scoring import gap
+    from replay.scoring.significance import t_interval
+
+    ev = evaluate("sim/linear", filters=["kf", "kf+rts", "ukf+rts"], runs=6, dataset_params={"steps": 80})
+    res = {r.name: r for r in ev.results}
+    rows = {r["filter"]: r for r in ev.rows}
+    best = min(("kf+rts", "ukf+rts"), key=lambda f: rows[f]["pos_rmse"])
+    a = np.array([m["pos_rmse"] for m in res["kf"].runs])
+    b = np.array([m["pos_rmse"] for m in res[best].runs])
+    kf = rows["kf"]
+    assert kf["gap_to"] == best and rows[best]["gap_to"] == best and rows[best]["gap_m"] == 0.0
+    assert kf["gap_m"] == pytest.approx((a - b).mean(), rel=1e-12) and kf["gap_m"] > 0
+    assert kf["gap_m_ci95"] == pytest.approx(t_interval(a - b)[1], rel=1e-12)
+    assert (kf["gap_ratio"], kf["gap_ratio_ci95"]) == pytest.approx(t_interval(a / b), rel=1e-12)
+    assert kf["gap_ratio"] > 1.0
+    table = format_table(ev)
+    assert f"gap to the best smoother ({best})" in table and f"  kf: {gap.cell(kf)}" in table
+    assert gap.cell(rows[best]) == "(best smoother)" and gap.cell({"gap_to": ""}) == "–"
+    plain = evaluate("sim/linear", filters=["kf", "ukf"], runs=2, dataset_params={"steps": 30})
+    assert not any("gap_to" in r for r in plain.rows) and "gap to" not in format_table(plain)
