@@ -78,7 +78,7 @@ def timed(name: str, pbs, repeat: int):
             t0 = time.perf_counter()
             forward()
             t1 = time.perf_counter()
-            _, _, bad = smoothers.backward_pass(sm, model, X, P)
+            _, _, bad, _ = smoothers.backward_pass(sm, model, X, P)
             t2 = time.perf_counter()
             assert bad < 0, name
             best_f, best_b = min(best_f, t1 - t0), min(best_b, t2 - t1)

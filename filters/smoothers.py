@@ -113,9 +113,8 @@ def smooth(flt: RTSSmoother, model, out: list[Estimates]) -> list[Estimates]:
             continue
         X = np.ascontiguousarray([out[m].x[:length] for m in rows], dtype=float)
         P = np.ascontiguousarray([out[m].P[:length] for m in rows], dtype=float)
-        t0 = perf_counter()
-        Xs, Ps, bad = backward_pass(flt, model, X, P)
-        per_step = (perf_counter() - t0) / (length * len(rows))
+        Xs, Ps, bad, secs = backward_pass(flt, model, X, P)
+        per_step = secs / (length * len(rows))
         if bad >= 0 and len(rows) > 1:  # which run failed: each alone (a run's numbers do not depend on its batch)
             for m in rows:
                 res[m] = _smoothed(out[m], *_one(flt, model, out[m], length), length, per_step)
@@ -126,7 +125,7 @@ def smooth(flt: RTSSmoother, model, out: list[Estimates]) -> list[Estimates]:
 
 
 def _one(flt, model, est, length):
-    Xs, Ps, bad = backward_pass(flt, model, est.x[None, :length].copy(), est.P[None, :length].copy())
+    Xs, Ps, bad, _ = backward_pass(flt, model, est.x[None, :length].copy(), est.P[None, :length].copy())
     return Xs[0], Ps[0], bad
 
 
@@ -142,8 +141,9 @@ def _smoothed(est: Estimates, xs, Ps, bad: int, length: int, per_step: float) ->
 
 
 def backward_pass(flt: RTSSmoother, model, X, P):
-    """(Xs, Ps, bad): the backward pass over the filtered X (M, steps, nx), P (M, steps, nx, nx);
-    bad -1, or the step whose prediction had no Cholesky factor. Compiled when the model's
+    """(Xs, Ps, bad, seconds): the backward pass over the filtered X (M, steps, nx), P (M, steps, nx,
+    nx); bad -1, or the step whose prediction had no Cholesky factor; the seconds of its computation
+    (not the one-time loading of compiled code, as the forward loops' ``engine.seconds``). Compiled when the model's
     kernels are its methods and the loop is ready (:func:`replay.filters.compiled.loop_ready`,
     the forward loops' threshold); else the loop's Python text with the model's methods."""
     M, steps, nx = X.shape
@@ -160,11 +160,14 @@ def backward_pass(flt: RTSSmoother, model, X, P):
         def runs(lo, hi):  # the runs are independent: the same numbers on any thread
             return call(X[lo:hi], P[lo:hi], stacks[0], Q, *extra, xmask, Xs[lo:hi], Ps[lo:hi])
 
-        return Xs, Ps, max(split(runs, M, grain=grain(4.0 * steps)))
+        t0 = perf_counter()
+        bad = max(split(runs, M, grain=grain(4.0 * steps)))
+        return Xs, Ps, bad, perf_counter() - t0
     steps_k = np.arange(steps, dtype=float)[:, None]  # the Python path's "parameters": the step
     fns = [_python_rows(model, i) for i in needed]
+    t0 = perf_counter()
     bad = getattr(loop, "py_func", loop)(*fns, X, P, steps_k, Q, *extra, xmask, Xs, Ps)
-    return Xs, Ps, bad
+    return Xs, Ps, bad, perf_counter() - t0
 
 
 def _python_rows(model, i: int):
