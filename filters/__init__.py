@@ -44,6 +44,7 @@ FILTERS = Registry(
         "ukf+rts": "replay.filters.smoothers:UKFRTS",
         "ckf+rts": "replay.filters.smoothers:CKFRTS",
         "pf": "replay.filters.pf:ParticleFilter",
+        "pf+ffbsi": "replay.filters.ffbsi:FFBSi",
         "gpf": "replay.filters.p000.gpf:GreyParticleFilter",
         "mmpf": "replay.filters.p000.mmpf:MultipleModelPF",
         "stckf": "replay.filters.p002.stckf:STCKF",

@@ -339,7 +339,7 @@ def test_one_rmse_changed_by_one_percent_is_refused_for_every_registered_filter(
 
 GROUPS = {  # every registered filter on a dataset its model fits (20 runs: the swarm filters' old tolerance)
     "sim/auv-sonar": ["ekf", "ukf", "ckf", "pf", "stckf", "stcpf", "igwo-stcpf", "pso-cpf", "measurements",
-                      "ekf+rts", "ukf+rts", "ckf+rts"],
+                      "ekf+rts", "ukf+rts", "ckf+rts", "pf+ffbsi"],
     "sim/ungm": ["gwo-pf", "igwo-pf", "pso-pf"],
     "sim/lake-depth": ["gpf", "mmpf"],
     "sim/linear": ["kf", "kf+rts"],
