@@ -27,10 +27,13 @@ from __future__ import annotations
 
 from time import perf_counter
 
+import numba as nb
+from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
 
 from replay.model import Model
-from replay.util.angles import wrap_components
+from replay.util.angles import angle_mask
+from replay.util.kernels import wrap
 from replay.util.errors import ReplayError
 from replay.util.linalg import cholesky
 from replay.util.params import Param
@@ -110,6 +113,7 @@ def backward_draws(model, hist: list, J: int, rng) -> np.ndarray:
     of one run (module docstring), drawn from ``rng``."""
     n = len(hist)
     X, w = hist[-1]
+    mask = np.array(angle_mask(model.x_angles, X.shape[1]))
     traj = np.empty((n, J, X.shape[1]))
     traj[-1] = X[_draw(np.broadcast_to(w, (J, len(w))), rng)]
     for k in range(n - 2, -1, -1):
@@ -121,10 +125,11 @@ def backward_draws(model, hist: list, J: int, rng) -> np.ndarray:
                 f"filter 'pf+ffbsi': the process noise Q of step {k + 1} is not positive definite: "
                 "the transition density of the backward draws does not exist"
             ) from None
-        d = wrap_components(traj[k + 1][:, None, :] - model.f(X, k + 1)[None], model.x_angles)  # (J, N, nx)
-        white = np.linalg.solve(L, d.reshape(-1, d.shape[-1]).T).T.reshape(d.shape)
+        logp = np.empty((J, len(w)))
         with np.errstate(divide="ignore"):
-            logp = np.log(w)[None] - 0.5 * np.einsum("jni,jni->jn", white, white)
+            logw = np.log(w)
+        mu = np.ascontiguousarray(model.f(X, k + 1), dtype=float)
+        transition_logw(traj[k + 1], mu, np.linalg.inv(L), mask, logw, logp)
         logp -= logp.max(axis=1, keepdims=True)
         p = np.exp(logp)
         traj[k] = X[_draw(p / p.sum(axis=1, keepdims=True), rng)]
@@ -136,3 +141,24 @@ def _draw(p: np.ndarray, rng) -> np.ndarray:
     c = np.cumsum(p, axis=1)
     u = rng.random(len(p)) * c[:, -1]
     return np.minimum((c < u[:, None]).sum(axis=1), p.shape[1] - 1)
+
+
+@nb.njit(cache=True)
+def transition_logw(Xn, mu, Linv, mask, logw, out):
+    """out[j, i] = logw[i] - |Linv d|^2 / 2, d = Xn[j] - mu[i] with the ``mask`` components wrapped: the
+    log-weights of the backward draw of trajectory j (Linv = L^-1, lower, L L' = Q; the Gaussian's
+    constant is the same for every i and left out)."""
+    J, nx = Xn.shape
+    d = np.empty(nx)
+    for j in range(J):
+        for i in range(mu.shape[0]):
+            for a in range(nx):
+                d[a] = Xn[j, a] - mu[i, a]
+            wrap(d, mask)
+            s = 0.0
+            for a in range(nx):
+                t = 0.0
+                for b in range(a + 1):
+                    t += Linv[a, b] * d[b]
+                s += t * t
+            out[j, i] = logw[i] - 0.5 * s
