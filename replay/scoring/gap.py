@@ -1,7 +1,8 @@
 """The gap to the offline optimum: each row against the best smoother row on the same measurements.
 
 Replay is offline, so a smoother (a row whose filter class declares ``OFFLINE = True``: the
-RTS rows ``kf+rts``, ``ekf+rts``, ``ukf+rts``, ``ckf+rts``, :mod:`replay.filters.smoothers`)
+RTS rows ``kf+rts``, ``ekf+rts``, ``ukf+rts``, ``ckf+rts``, :mod:`replay.filters.smoothers`, and
+``pf+ffbsi``, :mod:`replay.filters.ffbsi`)
 uses every measurement of a run, after each step too: on the same model and inputs it bounds
 what a causal filter reaches. Where such a row ran in a group of configurations on the same
 measurements (:func:`replay.scoring.summary.group_key`), the best of them (lowest mean
