@@ -28,9 +28,10 @@ GROUPS = [
         "pso-pf": {"n_particles": 20, "t_max": 3},
         "pso-cpf": {"n_particles": 12, "t_max": 3},
         "wf-pf": {"n_particles": 150, "alpha": 0.5},
+        "ekf+rts": {}, "ukf+rts": {"alpha": 0.8}, "ckf+rts": {}, "pf+ffbsi": {"n_particles": 150, "trajectories": 20},
     }),
     ("sim/ungm", {}, 30, "ungm", {
-        "kf": {}, "gwo-pf": {"n_particles": 30, "t_max": 3}, "igwo-pf": {"n_particles": 30, "t_max": 4},
+        "kf": {}, "kf+rts": {}, "gwo-pf": {"n_particles": 30, "t_max": 3}, "igwo-pf": {"n_particles": 30, "t_max": 4},
     }),
     ("sim/lake-depth", {}, 60, "depth", {
         "gpf": {"n_particles": 200, "n_grey": 20}, "mmpf": {"n_particles": 150}, "measurements": {},
