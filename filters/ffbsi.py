@@ -5,7 +5,7 @@ from each run's generator) stepping through its engine's steps (:class:`Recordin
 compiled whole-run loop keeps no history), which keeps every step's particles and weights
 {x^i_k, w^i_k} (after the step's resampling: the same filtering distribution). Then, for each
 run, J = ``trajectories`` backward trajectories are drawn (Godsill, Doucet & West 2004;
-Särkkä 2013, Algorithm 11.4):
+Särkkä 2013, §11.2, the backward-simulation particle smoother):
 
     x~_n ~ sum_i w^i_n delta(x - x^i_n)
     for k = n-1 .. 1:  w~^i_k ∝ w^i_k N(x~_{k+1}; f(x^i_k, k+1), Q_{k+1}),   x~_k = x^i_k with probability w~^i_k

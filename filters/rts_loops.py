@@ -5,9 +5,9 @@ from the next-to-last down to the first, given the filtered means m_k and covari
 of the forward pass and the smoothed m^s_{k+1}, P^s_{k+1} (m^s_n = m_n, P^s_n = P_n):
 
     prediction   m-_{k+1}, P-_{k+1} and the cross-covariance C_{k+1} of x_k and x_{k+1}
-                 RTS / ERTS (Theorem 8.2, eq. 8.6; Algorithm 9.1):
+                 RTS / ERTS (Theorem 8.2, eq. 8.6; §9.1):
                      m-_{k+1} = f(m_k),  P-_{k+1} = F_x P_k F_x' + Q_{k+1},  C_{k+1} = P_k F_x'
-                 URTS / cubature RTS (Särkkä 2008; Algorithms 9.3 and 9.5, the
+                 URTS / cubature RTS (Särkkä 2008; §9.3 and §9.5, the
                  unscented and the cubature rule on the same equations):
                      X_i = m_k + L_k xi_i (L_k L_k' = P_k),  Y_i = f(X_i)
                      m-_{k+1} = sum wm_i Y_i,  P-_{k+1} = sum wc_i (Y_i - m-)(Y_i - m-)' + Q_{k+1}

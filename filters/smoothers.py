@@ -5,8 +5,9 @@ A smoother row is its forward filter (:class:`replay.filters.kalman.EKF`,
 parameters) run by the one run loop (:meth:`replay.filters.base.Filter.run_batch`), followed by
 the backward pass of :mod:`replay.filters.rts_loops` over all of its runs at once: the
 estimates of step k are then those given every measurement of the run, before and after k
-(Särkkä 2013, Theorem 8.2 and Algorithms 9.1, 9.3, 9.5). Replay is offline: the smoother
-bounds what a causal filter of the same model can reach on a recording.
+(Särkkä 2013, Theorem 8.2 and §9.1, §9.3, §9.5: the extended, unscented and cubature RTS
+smoothers). Replay is offline: the smoother bounds what a causal filter of the same model can
+reach on a recording.
 
 * The backward pass is compiled where the forward pass is (the model's kernels in their rows
   forms, :func:`replay.filters.compiled.row_kernels`, a loop compiled once per machine and
@@ -62,7 +63,7 @@ class RTSSmoother(Filter):
 
 
 class EKFRTS(RTSSmoother):
-    """The EKF and the extended RTS smoother (Särkkä 2013, Algorithm 9.1; eq. 8.6 on a linear model)."""
+    """The EKF and the extended RTS smoother (Särkkä 2013, §9.1; eq. 8.6 on a linear model)."""
 
     name = "ekf+rts"
     FORWARD = EKF
@@ -86,7 +87,7 @@ class SigmaRTS(RTSSmoother):
 
 
 class UKFRTS(SigmaRTS):
-    """The UKF and the unscented RTS smoother (Särkkä 2008; Särkkä 2013, Algorithm 9.3)."""
+    """The UKF and the unscented RTS smoother (Särkkä 2008; Särkkä 2013, §9.3)."""
 
     name = "ukf+rts"
     FORWARD = UKF
@@ -94,7 +95,7 @@ class UKFRTS(SigmaRTS):
 
 
 class CKFRTS(SigmaRTS):
-    """The CKF and the cubature RTS smoother (Särkkä 2013, Algorithm 9.5: the Gaussian RTS
+    """The CKF and the cubature RTS smoother (Särkkä 2013, §9.5: the Gaussian RTS
     smoother with the third-degree spherical-radial rule)."""
 
     name = "ckf+rts"
