@@ -62,7 +62,7 @@ class RecordingEngine(PFEngine):
 
 
 class FFBSi(ParticleFilter):
-    """The bootstrap PF and the FFBSi smoother (module docstring)."""
+    """The bootstrap PF and forward-filtering backward-simulation (Godsill, Doucet & West 2004): J trajectories."""
 
     name = "pf+ffbsi"
     OFFLINE = True  # uses every measurement of a run (replay.scoring.gap)
