@@ -341,3 +341,22 @@ def test_ffbsi_refuses_what_it_cannot_keep():
     big = make_filter("pf+ffbsi", n_particles=10**8)
     with pytest.raises(ReplayError, match=r"pf\+ffbsi.*needs .* GB .*fewer n_particles"):
         big.run(m, z, x0, P0, np.random.default_rng(0))
+
+
+def test_report_shows_the_gap_column(tmp_path):
+    """`replay report` on an eval with a smoother row: the column "gap to the best smoother", the
+    smoother's own cell and the filter's signed gap with its ratio."""
+    from click.testing import CliRunner
+
+    from replay.cli import main
+
+    out = tmp_path / "ev"
+    args = ["eval", "sim/linear", "-f", "kf,kf+rts", "--runs", "3", "--dataset-param", "steps=50", "-q", "-o", out]
+    for cmd in (args, ["report", out]):
+        res = CliRunner().invoke(main, [str(a) for a in cmd])
+        assert res.exit_code == 0, res.output
+    html = (out / "report" / "report.html").read_text()
+    assert "<th>gap to the best smoother</th>" in html and "<td>(best smoother)</td>" in html
+    import re
+
+    assert re.search(r"<td>\+\d\.\d+ ±\d\.\d+ m \(×1\.\d+ ±\d\.\d+\)</td>", html)
