@@ -16,7 +16,7 @@ import sys
 
 import pytest
 
-FILTERS = ("ekf", "ukf", "ckf", "pf")
+FILTERS = ("ekf", "ukf", "ckf", "pf", "ekf+rts", "ukf+rts", "ckf+rts")
 SCORES = ("pos_rmse", "x_rmse", "y_rmse", "z_rmse", "pitch_rmse", "yaw_rmse", "ate", "final_err", "nees")
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.scoring import summary
+from replay.scoring import gap, summary
 from replay.scoring.marks import marks
 from replay.util.errors import ReplayError
 from replay.util.files import write_csv
@@ -70,7 +70,8 @@ def campaign_rows(
     else:
         rows.sort(key=lambda r: (r["dataset"], r["task"], r["filter"], r["params"]))
     summary.label(rows)
-    return summary.against_measurements(summary.add_paired(rows, configs, records, baseline), configs)
+    rows = gap.add_gap(summary.add_paired(rows, configs, records, baseline), configs, records)
+    return summary.against_measurements(rows, configs)
 
 
 def paired_rows(out, rows, metric_names=("pos_rmse", "ate"), *, collected=None) -> list[dict]:

@@ -39,6 +39,7 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
+from replay.scoring import gap
 from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
 
@@ -152,7 +153,7 @@ def format_table(ev: Evaluation) -> str:
         "scored: share of the reference samples scored (the rest masked); ! = under min_scored_share "
         f"({minimum:g})"
     )
-    return "\n".join([title, line(head), *(line(b) for b in body), *warnings, note])
+    return "\n".join([title, line(head), *(line(b) for b in body), *gap.lines(rows), *warnings, note])
 
 
 def write_leaderboard(rows: list[dict], path: Path) -> None:

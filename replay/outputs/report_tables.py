@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from replay.scoring import summary
+from replay.scoring import gap, summary
 from replay.scoring.marks import marks
 from replay.outputs.palette import Palette
 
@@ -114,6 +114,7 @@ COLUMNS = [
     ("ATE (m)", lambda r: pm(r.get("ate"), r.get("ate_ci95"))),
     ("final error (m)", lambda r: pm(r.get("final_err"), r.get("final_err_ci95"))),
     ("drift (%)", lambda r: pm(r.get("drift_pct"), r.get("drift_pct_ci95"))),
+    ("gap to the best smoother", gap.cell),
     ("ANEES", lambda r: consistency(r, "anees")),
     ("ANIS", lambda r: consistency(r, "anis")),
     ("µs/step", lambda r: num(r.get("us_per_step"))),

@@ -22,7 +22,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from replay.data import dataset_ref, registry
-from replay.scoring import scorer, summary
+from replay.scoring import gap, scorer, summary
 from replay.util.progress import particle_weight
 from replay.util.version import __version__
 from replay.filters import make_filter
@@ -137,9 +137,8 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
             __version__,
         )
     rows = summary.label([r.summary for r in results])
-    rows = summary.add_paired(
-        rows, {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}, baseline
-    )
+    configs, records = {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}
+    rows = gap.add_gap(summary.add_paired(rows, configs, records, baseline), configs, records)
     return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
 
 
