@@ -92,6 +92,10 @@ class Graph:
         self.all_steps = np.arange(n)
         self._params = {}
 
+    def by_step(self) -> dict:
+        """step -> (measured components, whitener of their R) of every step with a measurement."""
+        return {int(k): (cols, W[i]) for steps, cols, W in self.groups for i, k in enumerate(steps)}
+
     def _at(self, name, X, steps):
         if hasattr(self.model, "at_steps"):
             key = (id(steps), len(steps))
@@ -217,6 +221,10 @@ class Smoother(Filter):
 
     name = "smoother"
 
+    def __init__(self, **params):
+        gtsam_module(self.name)  # refused when made, before any row runs: one line naming the extra
+        super().__init__(**params)
+
     def engine(self, model, rngs):
         raise ReplayError(f"filter {self.name!r} is a smoother: it runs over the whole recording (run_batch)")
 
@@ -225,7 +233,6 @@ class Smoother(Filter):
         raise NotImplementedError
 
     def run_batch(self, model, Z, X0, P0, rngs) -> list[Estimates]:
-        gtsam_module(self.name)
         if gating.active(model) is not None:
             raise ReplayError(f"filter {self.name!r} cannot gate measurements: remove the rejection_threshold")
         from time import perf_counter
@@ -263,7 +270,7 @@ def initial_track(model, z, x0, P0):
 
 
 class GtsamBatch(Smoother):
-    """``gtsam-batch``: the MAP track of the whole run by Levenberg-Marquardt (module docstring)."""
+    """Smoother (not causal): the MAP track of the whole run, a factor graph by Levenberg-Marquardt (GTSAM)."""
 
     name = "gtsam-batch"
     PARAMS = (
