@@ -54,6 +54,9 @@ class GtsamLag(Smoother):
         t = np.concatenate([[0.0], np.cumsum(np.asarray(dt, float)[:n])])  # key k + 1 is step k; key 0 the prior
         params = gtsam.ISAM2Params()
         params.setFactorization("QR")  # the zero-dt steps make stiff process factors: QR, not Cholesky
+        exact = gtsam.ISAM2GaussNewtonParams()
+        exact.setWildfireThreshold(0.0)  # every state's update back-substituted, however small
+        params.setOptimizationParams(exact)
         smoother = gtsam.IncrementalFixedLagSmoother(self.lag, params)
         measured = graph.by_step()
         X, P = np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan)
