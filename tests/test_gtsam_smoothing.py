@@ -155,3 +155,29 @@ def test_a_reference_file_of_another_recording_is_refused(tmp_path):
     frame.meta["dataset"] = "sim/linear"
     with pytest.raises(ReplayError, match="made from bohai/20220822_0_3, not from this recording"):
         replace(frame, path)
+
+
+def test_at_steps_is_the_model_step_by_step_and_the_smoother_uses_the_kinematic_model():
+    """KernelModel.at_steps (every step at once, the steps' own dt) equals f, F, h, H step by step;
+    on a kinematic model the batch smoother lowers the graph's error from the EKF's track."""
+    from replay.models.kinematic import Kinematic2D
+
+    n = 40
+    rng = np.random.default_rng(3)
+    dt = rng.uniform(0.05, 0.2, n)
+    model = Kinematic2D(dt, np.full(6, 0.1), [0, 1, 3, 5], [1.0, 1.0, 1.0, 1.0], [], np.full((n, 4), 0.05))
+    X = rng.normal(size=(n, 6))
+    params = model.step_params(range(n))
+    for name in "fhFH":
+        each = np.stack([getattr(model, name)(X[k], k) for k in range(n)])
+        assert np.array_equal(model.at_steps(name, X, params), each), name
+    t = np.cumsum(dt)
+    truth = np.column_stack([2 * np.cos(0.3 * t), 2 * np.sin(0.3 * t), 0.3 * t + np.pi / 2,
+                             np.full(n, 0.6), np.zeros(n), np.full(n, 0.3)])
+    z = truth[:, [0, 1, 3, 5]] + rng.normal(0, 0.2, (n, 4))
+    z[::3, :2] = np.nan  # fixes at some steps only
+    est = run("gtsam-batch", model, z, truth[0], np.eye(6) * 0.1)
+    assert est.info["graph_error"] < est.info["graph_error_start"]
+    assert np.all(np.abs(est.x[:, 2]) <= np.pi)  # the heading wrapped in the estimates
+    P = est.P
+    assert np.allclose(P, np.swapaxes(P, 1, 2)) and (np.linalg.eigvalsh(P) > 0).all()
