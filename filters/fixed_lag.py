@@ -51,7 +51,8 @@ class GtsamLag(Smoother):
             )
         graph = Graph(model, z, x0, P0)
         n, nx = graph.n, graph.nx
-        t = np.concatenate([[0.0], np.cumsum(np.asarray(dt, float)[:n])])  # key k + 1 is step k; key 0 the prior
+        steps = np.broadcast_to(np.asarray(dt, float), (n,)) if np.ndim(dt) == 0 else np.asarray(dt, float)[:n]
+        t = np.concatenate([[0.0], np.cumsum(steps)])  # key k + 1 is step k; key 0 the prior (a constant dt too)
         params = gtsam.ISAM2Params()
         params.setFactorization("QR")  # the zero-dt steps make stiff process factors: QR, not Cholesky
         exact = gtsam.ISAM2GaussNewtonParams()

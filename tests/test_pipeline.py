@@ -28,6 +28,7 @@ GROUPS = [
         "pso-pf": {"n_particles": 20, "t_max": 3},
         "pso-cpf": {"n_particles": 12, "t_max": 3},
         "wf-pf": {"n_particles": 150, "alpha": 0.5},
+        "gtsam-batch": {}, "gtsam-lag": {"lag": 0.5},
     }),
     ("sim/ungm", {}, 30, "ungm", {
         "kf": {}, "gwo-pf": {"n_particles": 30, "t_max": 3}, "igwo-pf": {"n_particles": 30, "t_max": 4},
