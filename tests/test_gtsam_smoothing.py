@@ -136,6 +136,9 @@ def test_bohai_smoothed_track_is_the_reference_of_a_second_eval(bohai_dir, tmp_p
     meta = json.loads((second / "manifest.json").read_text())
     prov = meta["dataset"]["reference_provenance"]
     assert prov["reference"] == line and prov["filter"] == "gtsam-batch" and prov["dataset"] == "bohai/20220822_0_3"
+    import hashlib
+
+    assert prov["sha256"] == hashlib.sha256(tum.read_bytes()).hexdigest()
     assert meta["config"]["dataset_params"]["reference"] == str(tum)
     # the second evaluation's reference is the smoothed track, sample for sample (rebuilt from its manifest)
     smoothed = read_estimates(first / "estimates" / "gtsam-batch.csv.gz")

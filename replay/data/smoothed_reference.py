@@ -18,6 +18,7 @@ written from another dataset than this one is refused in one line.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import replace as changed
 from pathlib import Path
 
@@ -96,7 +97,13 @@ def replace(frame, path, source: str = "dataset"):
         ref["position"] = changed(ref["position"], components=tuple(old.components[:dims]))
     meta = dict(
         frame.meta,
-        reference_provenance={"reference": line, "file": Path(path).name, "samples": int(ok.sum()), **header},
+        reference_provenance={
+            "reference": line,
+            "file": Path(path).name,
+            "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest(),  # rerun: the same file?
+            "samples": int(ok.sum()),
+            **header,
+        },
     )
     out = type(frame)(frame.t, dict(frame.channels), ref, frame.epoch, meta, _report(frame), dict(frame.estimates))
     out.report.add(
