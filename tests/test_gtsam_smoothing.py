@@ -129,6 +129,8 @@ def test_bohai_smoothed_track_is_the_reference_of_a_second_eval(bohai_dir, tmp_p
     line = "smoothed, gtsam-batch over gps_position + gyro"
     assert f"reference: {line}" in res.output
     assert f"# reference: {line}" in tum.read_text()
+    res = CliRunner().invoke(main, ["convert", str(tum), str(tmp_path / "smoothed.mcap")])  # the MCAP form
+    assert res.exit_code == 0 and res.output.startswith(f"{len(load_run(first, bohai_dir)['problem'].t)} poses")
     res = CliRunner().invoke(main, ["eval", *common, "-f", "ekf", "--dataset-param", f"reference={tum}",
                                     "-o", str(second)])
     assert res.exit_code == 0, res.output
