@@ -30,6 +30,8 @@ one line naming it, and every other row runs.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from replay.util.errors import ReplayError
@@ -173,11 +175,11 @@ def _stack(model, kind: str, n: int):
 
 
 def levenberg_marquardt(gtsam, graph: Graph, X, max_iterations: int, tolerance: float):
-    """(X at the minimum, its linearised graph, iterations): GTSAM's LM schedule (module docstring)
-    over our relinearisation; stops when an accepted step lowers the error by less than
-    ``tolerance`` (relative) or lambda passes 1e5."""
+    """(X at the minimum, its linearised graph, iterations, converged): GTSAM's LM schedule (module
+    docstring) over our relinearisation; converged when an accepted step lowers the error by less
+    than ``tolerance`` (relative) or lambda passes 1e5 (no step lowers it); else the iterations ran out."""
     lam, err = 1e-5, graph.error(X)
-    it = 0
+    it, converged = 0, False
     lin = graph.linear(gtsam, X)
     unit, zero = gtsam.noiseModel.Unit.Create(graph.nx), np.zeros(graph.nx)
     order = gtsam.Ordering()  # along the chain: no fill-in, no COLAMD at every iteration
@@ -197,12 +199,14 @@ def levenberg_marquardt(gtsam, graph: Graph, X, max_iterations: int, tolerance: 
             err, lam = new, max(lam / 10.0, 1e-12)
             lin = graph.linear(gtsam, X)
             if done:
+                converged = True
                 break
         else:
             lam *= 10.0
             if lam > 1e5:
+                converged = True
                 break
-    return X, lin, it
+    return X, lin, it, converged
 
 
 def marginals(gtsam, lin, n: int, nx: int):
@@ -290,8 +294,18 @@ class GtsamBatch(Smoother):
         graph = Graph(model, z, x0, P0)
         X = initial_track(model, z, x0, P0)
         start = graph.error(X)
-        X, lin, iterations = levenberg_marquardt(gtsam, graph, X, self.max_iterations, self.tolerance)
+        X, lin, iterations, converged = levenberg_marquardt(gtsam, graph, X, self.max_iterations, self.tolerance)
+        if not converged:  # the best track found, not the optimum: said, not hidden
+            logging.getLogger("replay").warning(
+                f"filter {self.name!r}: Levenberg-Marquardt did not converge in {iterations} iterations "
+                "(max_iterations): its track is the best found, not the optimum"
+            )
         P = marginals(gtsam, lin, graph.n, graph.nx)
         x = wrap_rows(X[1:].copy(), graph.x_angles)
-        info = {"iterations": iterations, "graph_error_start": start, "graph_error": graph.error(X)}
+        info = {
+            "iterations": iterations,
+            "converged": converged,
+            "graph_error_start": start,
+            "graph_error": graph.error(X),
+        }
         return x, P, info

@@ -207,3 +207,18 @@ def test_test1_gtsam_batch_halves_the_tuned_ekf_on_the_held_out_fixes(shared_dir
     assert by["ekf"] == pytest.approx(0.482, abs=2e-3)
     assert by["gtsam-batch"] == pytest.approx(0.2415, abs=2e-3)
     assert by["gtsam-batch"] < by["gtsam-lag"] < by["ekf"]  # 0.242 < 0.292 < 0.482
+
+
+def test_a_smoother_that_runs_out_of_iterations_says_so(caplog):
+    from replay.models.kinematic import Kinematic2D
+
+    n = 30
+    model = Kinematic2D(np.full(n, 0.1), np.full(6, 0.1), [0, 1, 3, 5], [1.0] * 4, [], np.full((n, 4), 0.01))
+    z = np.column_stack([np.linspace(0, 3, n), np.linspace(0, 1, n), np.full(n, 1.0), np.full(n, 0.4)])
+    x0 = np.array([0.0, 0.0, 2.5, 0.0, 0.0, 0.0])  # heading far off: more than one iteration needed
+    with caplog.at_level("WARNING", logger="replay"):
+        est = run("gtsam-batch", model, z, x0, np.eye(6), max_iterations=1)
+    assert est.info["converged"] is False and est.info["iterations"] == 1
+    assert "did not converge in 1 iterations" in caplog.text
+    done = run("gtsam-batch", model, z, x0, np.eye(6))
+    assert done.info["converged"] and done.info["graph_error"] <= est.info["graph_error"]
