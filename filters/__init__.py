@@ -57,6 +57,8 @@ FILTERS = Registry(
         "aukf": "replay.filters.p001.aukf:AUKF",
         "wf-pf": "replay.filters.p003.wfpf:WeightFactorPF",
         "measurements": "replay.filters.measurements:Measurements",
+        "gtsam-batch": "replay.filters.factor_graph:GtsamBatch",
+        "gtsam-lag": "replay.filters.fixed_lag:GtsamLag",
     },
     check=_check,
 )

@@ -143,6 +143,15 @@ def export_outputs(
     "reference; replaces only a bag replay wrote.",
 )
 @click.option(
+    "--tum",
+    "tum_out",
+    default=None,
+    type=click.Path(),
+    help="A `replay eval` output: write one row (--filter; default: its only smoother row, e.g. "
+    "gtsam-batch) as a TUM track with its provenance header, the reference of another evaluation "
+    "(replay eval ... --dataset-param reference=FILE).",
+)
+@click.option(
     "--run",
     "run",
     default=0,
@@ -166,19 +175,27 @@ def export_outputs(
 )
 @DATA_DIR
 @click.option("--quiet", "-q", is_flag=True, help="No progress display and no notes (errors still print).")
-def export_cmd(run_dir, mcap_out, ros2_out, run, dataset, task, filter_, config, sigma, data_dir, quiet=False):
+def export_cmd(run_dir, mcap_out, ros2_out, tum_out, run, dataset, task, filter_, config, sigma, data_dir, quiet=False):
     """Export one run of a `replay eval` output directory, or of a campaign's result directory, for
     Foxglove (MCAP) or `ros2 bag play`.
 
     A campaign export holds the configurations that ran on the same measurements (one dataset and
     task); choose them with --dataset, --task, --filter and --config when it holds several.
     """
-    if not (mcap_out or ros2_out):
-        raise ReplayError("export: give --mcap FILE and/or --ros2-bag DIR")
+    if not (mcap_out or ros2_out or tum_out):
+        raise ReplayError("export: give --mcap FILE, --ros2-bag DIR and/or --tum FILE")
     if quiet:  # the library's notes (logger "replay") down to warnings, as replay eval -q does
         import logging
 
         logging.getLogger("replay").setLevel(logging.WARNING)
+    if tum_out:
+        from replay.outputs.export_reference import write_reference
+
+        n, line = write_reference(run_dir, tum_out, filter_, run=run, data_dir=data_dir)
+        click.echo(f"wrote {tum_out} ({n} poses; reference: {line})")
+        if not (mcap_out or ros2_out):
+            return
+        filter_ = None  # it chose the TUM row; the MCAP and bag hold every row of an eval output
     export_outputs(
         run_dir,
         mcap_out,

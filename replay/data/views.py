@@ -75,6 +75,14 @@ VIEW_PARAMS = (
         "keep the share A:B of the duration (0 <= A < B <= 1, e.g. 0:0.6, 0.6:1); applied after window",
         optional=True,
     ),
+    Param(
+        "reference",
+        str,
+        None,
+        "a track written by replay export --tum (a smoothed row) as the position reference, its "
+        "provenance printed and recorded (replay.data.smoothed_reference); applied after the other views",
+        optional=True,
+    ),
 )
 NAMES = tuple(p.name for p in VIEW_PARAMS)
 _NUM = r"\s*(\d+(?:\.\d*)?(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)?\s*"
@@ -152,6 +160,11 @@ def apply(frame, views: dict, source: str = "dataset"):
     """``frame`` cut and resampled by ``views`` (checked by :func:`check`); ``frame`` itself when
     there are none. A new frame: the input frame (perhaps cached) and its report are not changed."""
     views = check(views, source)
+    if "reference" in views:  # a smoothed track as the reference: on the frame the other views made
+        from replay.data.smoothed_reference import replace
+
+        reference = views.pop("reference")
+        return replace(apply(frame, views, source), reference, source)
     if not views:
         return frame
     n0, t = len(frame.t), frame.t

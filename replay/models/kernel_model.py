@@ -65,7 +65,7 @@ class _Loop:
 
     def ufunc(self, x, p, out):
         for idx in np.ndindex(x.shape[:-1]):
-            self.kernel(x[idx], p, out[idx])
+            self.kernel(x[idx], p[idx] if p.ndim > 1 else p, out[idx])  # p per state (at_steps) or shared
 
 
 _forms: dict = {}  # model class -> array forms of its kernels (f, h, F, H)
@@ -129,6 +129,23 @@ class KernelModel(Model):
         """Jacobian of h at ``x`` (nx,) -> (nz, nx), or at a stack (..., nx) -> (..., nz, nx)."""
         x = self._states(x)
         return self._apply(3, x, self.kernel_params(k)[1], x.shape[:-1] + (self.nz, self.nx))
+
+    def step_params(self, steps) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel parameters ``(p_f, p_h)`` of the steps ``steps``, stacked (for :meth:`at_steps`)."""
+        pairs = [self.kernel_params(int(k)) for k in steps]
+        return np.stack([a for a, _ in pairs]), np.stack([b for _, b in pairs])
+
+    def at_steps(self, name: str, x, params):
+        """``name`` (``"f"``, ``"h"``, ``"F"`` or ``"H"``) of the state ``x[i]`` at step ``i`` of
+        ``params`` (:meth:`step_params` of the steps), for a stack ``x`` (m, nx), in one call of the
+        array form (a smoother linearising every step at once)."""
+        i = "fhFH".index(name)
+        x = self._states(x)
+        p = params[i % 2]
+        rows = (self.nx, self.nz)[i % 2]
+        out = np.empty(x.shape[:1] + ((rows,) if i < 2 else (rows, self.nx)))
+        self._forms()[1][i](x, p, out)
+        return out
 
 
 def _module_kernels(name: str):

@@ -121,6 +121,9 @@ def format_table(ev: Evaluation) -> str:
     title = f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}" + (
         f"  first={cfg['first']}" if cfg["first"] else ""
     )
+    provenance = (getattr(ev, "frame_meta", None) or {}).get("reference_provenance")
+    if provenance:  # a smoothed track as the reference (replay.data.smoothed_reference): never silently
+        title += f"\nreference: {provenance['reference']} ({provenance['file']})"
     worse = [r["label"] for r in ev.rows if r.get("worse_than_measurements") is True]
     if worse:
         title += (
