@@ -296,6 +296,10 @@ def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, 
     for note in [] if quiet else ev.frame_meta.get("task_notes", []):
         click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
+    from replay.scoring import outages
+
+    if outages.is_outages(ev):  # fusion score=outages: the end-of-outage errors, the headline
+        click.echo(outages.format_headline(outages.tables(ev)[1]))
     for note in ev.notes:
         click.echo(note)
     _fresh(out, numbered or force)  # again at publication
