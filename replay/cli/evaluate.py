@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.eval_tune import tune_options
 from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, quiet_notes, run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
@@ -96,6 +97,7 @@ from replay.util.errors import ReplayError
 )
 @ALLOW_MODULE
 @view_options
+@tune_options
 def eval_cmd(
     dataset,
     task,
@@ -123,10 +125,19 @@ def eval_cmd(
     window,
     segment,
     tuned,
+    tune_trials=None,
+    tune_repeats=None,
+    train_segment=None,
+    tune_space=None,
     allow_modules=(),
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
+    if tune_trials is not None or tune_repeats is not None or train_segment is not None or tune_space is not None:
+        from replay.cli import eval_tune
+
+        given = dict(params=params, tuned=tuned, mcap=mcap_out, ros2_bag=ros2_out, baseline=baseline)
+        return eval_tune.from_cli(dataset, tune_trials, tune_repeats, train_segment, tune_space, given, locals())
     from replay.data.registry import check_data_dir
     from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.scoring.summary import MIN_SCORED_SHARE
