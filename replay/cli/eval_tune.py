@@ -4,7 +4,8 @@ Each filter's declared noise (:func:`replay.tune.repeat.default_space`, or ``--t
 tuned with ``N`` trials on the training part (``--train-segment``, default 0.6 of a recording; a
 simulation's seed split), ``--tune-repeats`` times with other sampler seeds (:mod:`replay.tune.repeat`,
 the ``replay tune`` machinery), and scored on the held-out rest. Prints and writes (``OUT/tuned.csv``,
-``OUT/ranking.csv``) the default and tuned rows with their intervals over tunes x runs, and the ranking.
+``OUT/ranking.csv``) the default and tuned rows with their intervals over tunes x runs, and the ranking;
+with ``--tune-grid G``, the optimiser's distance from a grid optimum (:mod:`replay.tune.grid_check`).
 """
 
 from __future__ import annotations
@@ -36,6 +37,18 @@ TUNE_OPTIONS = (
         help="With --tune: the first fraction of a recording tuned on (default 0.6); the rest is scored.",
     ),
     click.option(
+        "--tune-objective",
+        default=None,
+        help="With --tune: the objective, as replay tune --objective takes it (default mean_rmse).",
+    ),
+    click.option(
+        "--tune-grid",
+        default=None,
+        type=int,
+        help="With --tune: also score a grid of G points per searched parameter on the first tune's training "
+        "data and report the tuned values' distance from its optimum (where a grid is cheap: at most 400 points).",
+    ),
+    click.option(
         "--tune-space",
         default=None,
         type=click.Path(dir_okay=False, exists=True),
@@ -51,14 +64,19 @@ def tune_options(f):
     return f
 
 
-def from_cli(dataset, trials, repeats, train_segment, space_file, given: dict, o: dict):
-    """``replay eval``'s options (``o``: its arguments) with ``--tune``; ``given``: options it does not take."""
+def from_cli(dataset, o: dict):
+    """``replay eval``'s options (``o``: its arguments) with ``--tune``."""
     from replay.cli import params as cli_params
     from replay.cli.view_options import with_views
     from replay.data.registry import check_data_dir
 
-    if trials is None:
-        raise ReplayError("--tune-repeats, --train-segment and --tune-space go with --tune N")
+    if o["tune_trials"] is None:
+        raise ReplayError(
+            "--tune-repeats, --train-segment, --tune-space, --tune-objective and --tune-grid go with --tune N"
+        )
+    given = dict(
+        params=o["params"], tuned=o["tuned"], mcap=o["mcap_out"], ros2_bag=o["ros2_out"], baseline=o["baseline"]
+    )
     bad = [k for k, v in given.items() if v]
     if bad:
         raise ReplayError(
@@ -72,10 +90,12 @@ def from_cli(dataset, trials, repeats, train_segment, space_file, given: dict, o
     tparams = cli_params.task_params(o["task_params"], o["task"])
     run(
         dataset,
-        trials=trials,
-        repeats=repeats,
-        train_segment=train_segment,
-        space_file=space_file,
+        trials=o["tune_trials"],
+        repeats=o["tune_repeats"],
+        train_segment=o["train_segment"],
+        space_file=o["tune_space"],
+        grid=o["tune_grid"],
+        objective=o["tune_objective"] or "mean_rmse",
         filters=o["filters"],
         task=o["task"],
         task_params=tparams,
@@ -90,7 +110,22 @@ def from_cli(dataset, trials, repeats, train_segment, space_file, given: dict, o
     )
 
 
-def run(dataset, *, trials, repeats, train_segment, space_file, filters, task, task_params, dataset_params, out, **o):
+def run(
+    dataset,
+    *,
+    trials,
+    repeats,
+    train_segment,
+    space_file,
+    grid,
+    objective,
+    filters,
+    task,
+    task_params,
+    dataset_params,
+    out,
+    **o,
+):
     """Check, tune ``repeats`` times, print and write the rows and the ranking (module docstring)."""
     from replay.data.dataset_ref import simulated
     from replay.tune import check, repeat, space
@@ -108,7 +143,7 @@ def run(dataset, *, trials, repeats, train_segment, space_file, filters, task, t
         filters=names,
         entries=entries,
         trials=trials,
-        objective="mean_rmse",
+        objective=objective,
         runs=o["runs"],
         seed=o["seed"],
         task=task,
@@ -129,6 +164,12 @@ def run(dataset, *, trials, repeats, train_segment, space_file, filters, task, t
     lines = repeat.ranking(res)
     for line in lines:
         click.echo(line)
+    if grid is not None:  # the optimiser's distance from a grid optimum (replay.tune.grid_check)
+        from replay.tune import grid_check
+
+        res["grid"] = grid_check.distances(t, Path(out), res["tunes"][0]["rows"], grid)
+        for line in grid_check.format_rows(res["grid"]):
+            click.echo(line)
     write_csv(res["rows"], Path(out) / "tuned.csv", list(res["rows"][0]))
     write_csv(res["pairs"], Path(out) / "ranking.csv", ["a", "b", "difference", "ci95", "different"])
     click.echo(f"wrote {Path(out) / 'tuned.csv'}, {Path(out) / 'ranking.csv'}")

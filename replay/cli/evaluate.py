@@ -129,15 +129,16 @@ def eval_cmd(
     tune_repeats=None,
     train_segment=None,
     tune_space=None,
+    tune_grid=None,
+    tune_objective=None,
     allow_modules=(),
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
-    if tune_trials is not None or tune_repeats is not None or train_segment is not None or tune_space is not None:
+    if any(v is not None for v in (tune_trials, tune_repeats, train_segment, tune_space, tune_grid, tune_objective)):
         from replay.cli import eval_tune
 
-        given = dict(params=params, tuned=tuned, mcap=mcap_out, ros2_bag=ros2_out, baseline=baseline)
-        return eval_tune.from_cli(dataset, tune_trials, tune_repeats, train_segment, tune_space, given, locals())
+        return eval_tune.from_cli(dataset, locals())  # --tune N: replay.tune.repeat
     from replay.data.registry import check_data_dir
     from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.scoring.summary import MIN_SCORED_SHARE
