@@ -10,9 +10,15 @@ from replay.scoring import outages
 def test_verdict_decides_only_outside_the_interval():
     rows = [dict(kind="tuned", filter="a", pos_rmse=1.0), dict(kind="tuned", filter="b", pos_rmse=1.2)]
     assert fusion_doc.verdict([dict(a="a", b="b", difference=-0.2, ci95=0.05, different=True)], rows) == (
-        "**a** is best, by 0.200 ± 0.050 m over b")
+        "**a** is best: 0.200 ± 0.050 m below b")
     text = fusion_doc.verdict([dict(a="a", b="b", difference=-0.2, ci95=0.3, different=False)], rows)
     assert text.startswith("the recording cannot decide between a and b")
+    rows.append(dict(kind="tuned", filter="c", pos_rmse=2.0))
+    pairs = [dict(a="a", b="b", difference=-0.2, ci95=0.3, different=False),
+             dict(a="a", b="c", difference=-1.0, ci95=0.1, different=True)]
+    assert fusion_doc.verdict(pairs, rows).endswith("; a is 1.000 ± 0.100 m below c")
+    rows[1]["still"] = True
+    assert "never move" in fusion_doc.verdict(pairs, rows)
 
 
 def test_short_generation_on_a_generated_recording(tmp_path):

@@ -77,7 +77,13 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     _, heads = outages.tables(ev)
     names = [h["filter"] for h in heads]
     vs = {f: outages.paired(ev, f, "measurements") for f in names if f != "measurements" and "measurements" in names}
-    return {"heads": heads, "vs_hold": vs}
+    pairs = [
+        dict(zip(("a", "b", "difference", "ci95", "different"), (a, b, *outages.paired(ev, a, b))))
+        for a in filters
+        for b in filters
+        if a != b
+    ]
+    return {"heads": heads, "vs_hold": vs, "pairs": pairs}
 
 
 def tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work) -> dict:
@@ -104,20 +110,25 @@ def _f(x, nd=2) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.{nd}f}"
 
 
-def verdict(pairs, rows) -> str:
-    tuned = sorted((r for r in rows if r["kind"] == "tuned"), key=lambda r: r["pos_rmse"])
+def verdict(pairs, rows, score="pos_rmse", unit="held-out difference over tunes x runs") -> str:
+    tuned = sorted((r for r in rows if r.get("kind", "tuned") == "tuned"), key=lambda r: r[score])
+    if any(r.get("still") for r in tuned):
+        return (
+            "the recording cannot decide: on the held-out part the estimates of "
+            + ", ".join(r["filter"] for r in tuned if r.get("still"))
+            + " never move (no input there moves them): their error is the start's, not a filter's"
+        )
     if len(tuned) < 2:
         return "one filter: nothing to rank"
     best = tuned[0]["filter"]
     diffs = [p for p in pairs if p["a"] == best]
-    if all(p["different"] for p in diffs):
-        return f"**{best}** is best, by " + ", ".join(
-            f"{-p['difference']:.3f} ± {p['ci95']:.3f} m over {p['b']}" for p in diffs
-        )
+    won = [f"{-p['difference']:.3f} ± {p['ci95']:.3f} m below {p['b']}" for p in diffs if p["different"]]
     tied = [p["b"] for p in diffs if not p["different"]]
+    if not tied:
+        return f"**{best}** is best: " + ", ".join(won)
     return (
-        f"the recording cannot decide between {best} and {', '.join(tied)}: the interval of their held-out "
-        "difference over tunes x runs includes zero (the tuning's own spread is as large as the gap)"
+        f"the recording cannot decide between {best} and {', '.join(tied)} (the interval of their {unit} "
+        "includes zero)" + (f"; {best} is " + ", ".join(won) if won else "")
     )
 
 
@@ -135,7 +146,8 @@ def render(results, settings) -> str:
         "across events, at the filters' defaults. *hold last fix* is the `measurements` row there. This",
         "reference is a fix no filter has seen. **Tuned** (`replay eval --tune`, `replay/tune/repeat.py`): each",
         "filter's declared noise tuned on the first 60 % against the recording's reference, scored on the rest;",
-        "± is the 95 % interval over tunes x runs; *fixes alone* is the fed GPS held between fixes. The",
+        "± is the 95 % interval over tunes x runs; *fixes alone* is the fed GPS held between fixes; *still*: the",
+        "estimate never moves on the held-out part (no input there moves it), so its error is the start's. The",
         "held-out fixes of the default protocol sit next to fed ones, and GPS errors are time-correlated: an",
         "interval across them would be far too narrow, so per-event intervals are given for outages only.",
         "Bohai has no recorded onboard estimate besides its navigation solution, which is its reference.",
@@ -158,6 +170,13 @@ def render(results, settings) -> str:
                 f"| {name} | {_f(h['mean_error'])} ± {_f(h['mean_error_ci95'])} | {_f(h['median_error'])} | "
                 f"{_f(h['max_error'])} | {dcell} |"
             )
+        filt = [h for h in o["heads"] if h["filter"] != "measurements" and not h["filter"].startswith("recorded:")]
+        lines += [
+            "",
+            "Verdict (outages, defaults): "
+            + verdict(o["pairs"], filt, "mean_error", "end-of-outage difference, event by event, across events")
+            + ".",
+        ]
         if any(h["filter"].startswith("recorded:") for h in o["heads"]):
             lines += [
                 "",
@@ -169,7 +188,7 @@ def render(results, settings) -> str:
         lines.append("|---|---|---|---|")
         for r in tr["rows"]:
             label = "fixes alone (measurements)" if r["kind"] == "measurements" else r["label"]
-            label = label.replace("(default)", "(defaults, not tuned)")
+            label = label.replace("(default)", "(defaults, not tuned)") + (" — still" if r.get("still") else "")
             lines.append(f"| {label} | {_f(r['pos_rmse'], 3)} | {_f(r['ci95'], 3)} | {r['tunes']} x {r['runs']} |")
         lines += [
             "",
@@ -191,7 +210,15 @@ def generate(recordings, out, work, *, filters, trials, repeats, runs, data_dir,
         key = rec["id"].replace("/", "_")
         cache = work / f"{key}.json"
         if cache.is_file():
-            results.append((rec, json.loads(cache.read_text())))
+            res = json.loads(cache.read_text())
+            if "outages" in res and "pairs" not in res["outages"]:  # a cache of an earlier version: completed
+                started = time.time()
+                res["outages"] = outage_result(rec, filters, runs, data_dir, bags_dir, root)
+                res["seconds"] = res.get("seconds", 0.0) + time.time() - started
+            if "tuned" in res and any("still" not in r for r in res["tuned"]["rows"]):  # resumed: nothing computed
+                res["tuned"] = tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work / key)
+            write_atomic(cache, json.dumps(res, default=float))
+            results.append((rec, res))
             continue
         started = time.time()
         try:

@@ -62,7 +62,7 @@ def run_repeats(t, out, repeats: int = REPEATS, *, quiet: bool = False, **backen
         tune(shifted(t, k), out / f"tune-{k}", quiet=quiet, store_dir=out / "units", **backend) for k in range(repeats)
     ]
     store = Store(out / "units")
-    X = {}  # (filter, kind) -> (K, runs)
+    X, still = {}, {}  # (filter, kind) -> (K, runs); -> whether a tune's row never moved (summary.marks)
     for k, res in enumerate(tunes):
         for row in res["rows"]:
             kind = "measurements" if row["filter"] == "measurements" else row["label"].split("(")[-1].rstrip(")")
@@ -72,8 +72,9 @@ def run_repeats(t, out, repeats: int = REPEATS, *, quiet: bool = False, **backen
                 for rec in store.records(config_hash(c.as_dict()))
             ]
             X.setdefault((row["filter"], kind), []).append(vals)
+            still[(row["filter"], kind)] = still.get((row["filter"], kind), False) or bool(row.get("still"))
     X = {key: np.array(v, float) for key, v in X.items()}
-    rows = [_row(name, kind, x, tunes) for (name, kind), x in X.items()]
+    rows = [dict(_row(name, kind, x, tunes), still=still[(name, kind)]) for (name, kind), x in X.items()]
     tuned = sorted((n for n, k in X if k == "tuned"), key=lambda n: np.nanmean(X[(n, "tuned")]))
     pairs = [compare(X[(a, "tuned")], X[(b, "tuned")], a, b) for i, a in enumerate(tuned) for b in tuned[i + 1 :]]
     return {"rows": rows, "pairs": pairs, "tunes": tunes, "X": X}
