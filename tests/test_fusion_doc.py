@@ -35,6 +35,7 @@ def test_short_generation_on_a_generated_recording(tmp_path):
     assert "| hold last fix (measurements) |" in text and "3 events" in text
     assert "| ekf (defaults, not tuned) |" in text and "| ekf (tuned) |" in text and "2 x 1 |" in text
     assert "one filter: nothing to rank" in text
+    assert "| 1 | 59–100 |" in text and "| 3 | 239–270 |" in text  # each dive: its span
     again = fusion_doc.generate([rec], tmp_path / "fusion2.md", tmp_path / "work", filters=["ekf"], trials=2,
                                 repeats=2, runs=1, data_dir=None, bags_dir=None, root=tmp_path, command="CMD")
     strip = lambda s: s.split("\n", 3)[3]  # noqa: E731  (the header's time differs)

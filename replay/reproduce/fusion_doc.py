@@ -74,7 +74,7 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
         dataset_params=_dparams(rec, root) or None,
         task_params={"score": "outages", **rec["outage"]},
     )
-    _, heads = outages.tables(ev)
+    events, heads = outages.tables(ev)
     names = [h["filter"] for h in heads]
     vs = {f: outages.paired(ev, f, "measurements") for f in names if f != "measurements" and "measurements" in names}
     pairs = [
@@ -83,7 +83,7 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
         for b in filters
         if a != b
     ]
-    return {"heads": heads, "vs_hold": vs, "pairs": pairs}
+    return {"heads": heads, "vs_hold": vs, "pairs": pairs, "events": events}
 
 
 def tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work) -> dict:
@@ -132,6 +132,23 @@ def verdict(pairs, rows, score="pos_rmse", unit="held-out difference over tunes 
     )
 
 
+def _per_event(o) -> list:
+    """Each outage of the recording: its span and every row's end-of-outage error (± over runs where > 1)."""
+    names = [h["filter"] for h in o["heads"]]
+    by = {(e["filter"], e["event"]): e for e in o["events"]}
+    out = ["", "Per outage (m):", "", "| outage | start–end (s) | " + " | ".join(names) + " |"]
+    out.append("|---" * (len(names) + 2) + "|")
+    for k in sorted({e["event"] for e in o["events"]}):
+        first = by[(names[0], k)]
+        cells = []
+        for n in names:
+            e = by[(n, k)]
+            ci = e["error_ci95"]
+            cells.append(_f(e["error"], 1) + (f" ± {ci:.1f}" if ci is not None and np.isfinite(ci) and ci > 0 else ""))
+        out.append(f"| {k} | {first['start_s']:.0f}–{first['end_s']:.0f} | " + " | ".join(cells) + " |")
+    return out
+
+
 def render(results, settings) -> str:
     lines = [
         "# Fusion on the shared recordings",
@@ -151,6 +168,8 @@ def render(results, settings) -> str:
         "held-out fixes of the default protocol sit next to fed ones, and GPS errors are time-correlated: an",
         "interval across them would be far too narrow, so per-event intervals are given for outages only.",
         "Bohai has no recorded onboard estimate besides its navigation solution, which is its reference.",
+        "The best single sensor alone: the GPS (*fixes alone*, *hold last fix*); gyro and attitude alone give no",
+        "position; test1.bag's wheel odometry integrated onboard is its `recorded:wheel_odometry` row.",
         "",
     ]
     for rec, res in results:
@@ -170,6 +189,8 @@ def render(results, settings) -> str:
                 f"| {name} | {_f(h['mean_error'])} ± {_f(h['mean_error_ci95'])} | {_f(h['median_error'])} | "
                 f"{_f(h['max_error'])} | {dcell} |"
             )
+        if not rec["outage"]:  # the recording's own outages (dives): each one
+            lines += _per_event(o)
         filt = [h for h in o["heads"] if h["filter"] != "measurements" and not h["filter"].startswith("recorded:")]
         lines += [
             "",
@@ -211,7 +232,7 @@ def generate(recordings, out, work, *, filters, trials, repeats, runs, data_dir,
         cache = work / f"{key}.json"
         if cache.is_file():
             res = json.loads(cache.read_text())
-            if "outages" in res and "pairs" not in res["outages"]:  # a cache of an earlier version: completed
+            if "outages" in res and "events" not in res["outages"]:  # a cache of an earlier version: completed
                 started = time.time()
                 res["outages"] = outage_result(rec, filters, runs, data_dir, bags_dir, root)
                 res["seconds"] = res.get("seconds", 0.0) + time.time() - started
