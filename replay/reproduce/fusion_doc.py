@@ -177,47 +177,53 @@ def render(results, settings) -> str:
         if "error" in res:
             lines += [f"Not computed: {res['error']}", ""]
             continue
-        o = res["outages"]
-        own = "its own outages (gaps > 10 s)" if not rec["outage"] else "withheld windows and its own gaps"
-        lines += [f"Outage protocol ({own}; {o['heads'][0]['events']} events, at the filters' defaults):", ""]
-        lines += ["| row | end-of-outage error (m) | median | max | minus hold-last-fix (m) |", "|---|---|---|---|---|"]
-        for h in o["heads"]:
-            name = "hold last fix (measurements)" if h["filter"] == "measurements" else h["filter"]
-            d = o["vs_hold"].get(h["filter"])
-            dcell = "–" if d is None else f"{d[0]:+.2f} ± {_f(d[1])}" + (" (different)" if d[2] else "")
-            lines.append(
-                f"| {name} | {_f(h['mean_error'])} ± {_f(h['mean_error_ci95'])} | {_f(h['median_error'])} | "
-                f"{_f(h['max_error'])} | {dcell} |"
-            )
-        if not rec["outage"]:  # the recording's own outages (dives): each one
-            lines += _per_event(o)
-        filt = [h for h in o["heads"] if h["filter"] != "measurements" and not h["filter"].startswith("recorded:")]
-        lines += [
-            "",
-            "Verdict (outages, defaults): "
-            + verdict(o["pairs"], filt, "mean_error", "end-of-outage difference, event by event, across events")
-            + ".",
-        ]
-        if any(h["filter"].startswith("recorded:") for h in o["heads"]):
-            lines += [
-                "",
-                "A `recorded:` row is the recording's own estimate, moved onto the reference by the fit its "
-                "mapping declares, fitted on these same few fixes: optimistic.",
-            ]
-        tr = res["tuned"]
-        lines += ["", "Tuned and default, held out (last 40 %):", "", "| row | pos RMSE (m) | ± 95 % | tunes x runs |"]
-        lines.append("|---|---|---|---|")
-        for r in tr["rows"]:
-            label = "fixes alone (measurements)" if r["kind"] == "measurements" else r["label"]
-            label = label.replace("(default)", "(defaults, not tuned)") + (" — still" if r.get("still") else "")
-            lines.append(f"| {label} | {_f(r['pos_rmse'], 3)} | {_f(r['ci95'], 3)} | {r['tunes']} x {r['runs']} |")
-        lines += [
-            "",
-            "Verdict (tuned, against the recording's reference): " + verdict(tr["pairs"], tr["rows"]) + ".",
-            "",
-        ]
+        lines += _outage_section(rec, res["outages"]) + _tuned_section(res["tuned"])
     lines += ["## Not run", ""] + [f"- {x}" for x in NOT_RUN] + [""]
     return "\n".join(lines)
+
+
+def _outage_section(rec, o) -> list:
+    own = "its own outages (gaps > 10 s)" if not rec["outage"] else "withheld windows and its own gaps"
+    lines = [f"Outage protocol ({own}; {o['heads'][0]['events']} events, at the filters' defaults):", ""]
+    lines += ["| row | end-of-outage error (m) | median | max | minus hold-last-fix (m) |", "|---|---|---|---|---|"]
+    for h in o["heads"]:
+        name = "hold last fix (measurements)" if h["filter"] == "measurements" else h["filter"]
+        d = o["vs_hold"].get(h["filter"])
+        dcell = "–" if d is None else f"{d[0]:+.2f} ± {_f(d[1])}" + (" (different)" if d[2] else "")
+        lines.append(
+            f"| {name} | {_f(h['mean_error'])} ± {_f(h['mean_error_ci95'])} | {_f(h['median_error'])} | "
+            f"{_f(h['max_error'])} | {dcell} |"
+        )
+    if not rec["outage"]:  # the recording's own outages (dives): each one
+        lines += _per_event(o)
+    filt = [h for h in o["heads"] if h["filter"] != "measurements" and not h["filter"].startswith("recorded:")]
+    lines += [
+        "",
+        "Verdict (outages, defaults): "
+        + verdict(o["pairs"], filt, "mean_error", "end-of-outage difference, event by event, across events")
+        + ".",
+    ]
+    if any(h["filter"].startswith("recorded:") for h in o["heads"]):
+        lines += [
+            "",
+            "A `recorded:` row is the recording's own estimate, moved onto the reference by the fit its "
+            "mapping declares, fitted on these same few fixes: optimistic.",
+        ]
+    return lines
+
+
+def _tuned_section(tr) -> list:
+    lines = ["", "Tuned and default, held out (last 40 %):", "", "| row | pos RMSE (m) | ± 95 % | tunes x runs |"]
+    lines.append("|---|---|---|---|")
+    for r in tr["rows"]:
+        label = "fixes alone (measurements)" if r["kind"] == "measurements" else r["label"]
+        label = label.replace("(default)", "(defaults, not tuned)") + (" — still" if r.get("still") else "")
+        lines.append(f"| {label} | {_f(r['pos_rmse'], 3)} | {_f(r['ci95'], 3)} | {r['tunes']} x {r['runs']} |")
+    return lines + [
+        "",
+        "Verdict (tuned, against the recording's reference): " + verdict(tr["pairs"], tr["rows"]) + ".",
+        "",
+    ]
 
 
 def generate(recordings, out, work, *, filters, trials, repeats, runs, data_dir, bags_dir, root, command):
