@@ -186,7 +186,7 @@ class FusionTask(Task):
             noise=m.noise,
         )
         if m.outage is not None:
-            pb.truth_present = valid_ref  # the reference exists at the resurfacing fixes only
+            pb.reference_extent = valid_ref  # the reference exists at the resurfacing fixes only (its scored share)
         return pb
 
     @staticmethod
