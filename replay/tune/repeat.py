@@ -114,7 +114,9 @@ def _row(name: str, kind: str, x, tunes) -> dict:
     return dict(
         filter=name,
         kind=kind,
-        label="measurements (raw observations)" if kind == "measurements" else f"{name} ({kind})",
+        label={"measurements": "measurements (raw observations)", "default": f"{name} (defaults, not tuned)"}.get(
+            kind, f"{name} ({kind})"
+        ),
         tunes=x.shape[0],
         runs=x.shape[1],
         pos_rmse=mean,
@@ -144,10 +146,11 @@ def format_rows(rows: list[dict]) -> str:
     for r in rows:
         lines.append(
             f"{r['label']:<34}{r['tunes']:>6}{r['runs']:>6}{r['pos_rmse']:>12.4f}{r['ci95']:>10.4f}"
-            f"{r['tune_spread']:>13.4f}"
+            f"{r['tune_spread']:>13.4f}" + ("  still" if r.get("still") else "")
         )
     lines.append(
         "pos_rmse: held-out position RMSE, mean over tunes x runs; ± 95 %: Student-t interval of the per-tune "
-        "means (covers the runs and the tuning); tune spread: standard deviation of the per-tune means"
+        "means (covers the runs and the tuning); tune spread: standard deviation of the per-tune means; still: the "
+        "estimate never moves on the held-out part (its error is the start's, not a filter's)"
     )
     return "\n".join(lines)
