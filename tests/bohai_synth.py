@@ -22,10 +22,11 @@ def track(seconds=300.0, rate=10.0):
     return t, east, north, yaw, speed, r
 
 
-def write(path, layout: int, forward: str = "real", seed: int = 0, seconds=300.0):
+def write(path, layout: int, forward: str = "real", seed: int = 0, seconds=300.0, dives=()):
     """A generated log at ``path``. ``forward``: "real" (the speed plus N(0.006, 0.03) m/s),
     "noise" (a column unrelated to the motion, within the limits) or "garbage" (the 36-column
-    files' vf: |value| up to 80)."""
+    files' vf: |value| up to 80). ``dives``: ``[(t0, t1), ...]`` s, spans in which the 36-column
+    layout's GPS columns hold the last fix (no fix under water)."""
     g = np.random.default_rng(seed)
     t, east, north, yaw, speed, r = track(seconds)
     n = len(t)
@@ -49,6 +50,9 @@ def write(path, layout: int, forward: str = "real", seed: int = 0, seconds=300.0
     }
     if layout == 36:
         fix = (np.arange(n) // 10) * 10  # a fix per second, held between
+        for t0, t1 in dives:  # under water: the last fix before the dive, held
+            under = (t >= t0) & (t < t1)
+            fix[under] = fix[np.flatnonzero(under)[0] - 1]
         cols.update(lat_gps=lat[fix] + 2e-6 * g.standard_normal(n)[fix], lon_gps=lon[fix], alt_gps=np.full(n, 0.5),
                     depth=np.zeros(n), height=small(1.0) ** 2, time_gps=np.zeros(n))
     names = COLS36 if layout == 36 else COLS31

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.eval_tune import tune_options
 from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, quiet_notes, run_option
 from replay.cli.view_options import view_options, with_views
 from replay.util.errors import ReplayError
@@ -96,6 +97,7 @@ from replay.util.errors import ReplayError
 )
 @ALLOW_MODULE
 @view_options
+@tune_options
 def eval_cmd(
     dataset,
     task,
@@ -123,10 +125,20 @@ def eval_cmd(
     window,
     segment,
     tuned,
+    tune_trials=None,
+    tune_repeats=None,
+    train_segment=None,
+    tune_space=None,
+    tune_grid=None,
+    tune_objective=None,
     allow_modules=(),
 ):
     """Run filters on DATASET (an id such as bohai/20220822_0_6, or a file), print and write the leaderboard."""
     quiet_notes(quiet)  # before default_task, which may load the file (its progress is a note)
+    if any(v is not None for v in (tune_trials, tune_repeats, train_segment, tune_space, tune_grid, tune_objective)):
+        from replay.cli import eval_tune
+
+        return eval_tune.from_cli(dataset, locals())  # --tune N: replay.tune.repeat
     from replay.data.registry import check_data_dir
     from replay.outputs.rundirs import claimed_run_dir, out_locked
     from replay.scoring.summary import MIN_SCORED_SHARE
@@ -296,6 +308,10 @@ def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, 
     for note in [] if quiet else ev.frame_meta.get("task_notes", []):
         click.echo(f"replay: note: {note}", err=True)
     click.echo(format_table(ev))
+    from replay.scoring import outages
+
+    if outages.is_outages(ev):  # fusion score=outages: the end-of-outage errors, the headline
+        click.echo(outages.format_headline(outages.tables(ev)[1]))
     for note in ev.notes:
         click.echo(note)
     _fresh(out, numbered or force)  # again at publication

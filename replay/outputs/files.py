@@ -39,7 +39,7 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
-from replay.scoring import gap
+from replay.scoring import gap, outages
 from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
 
@@ -369,6 +369,7 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
         write_estimates(ev, stage)
         write_runs(ev, stage / "runs.csv")
         write_atomic(stage / "manifest.json", json.dumps(manifest(ev), indent=2, default=str))
+        outages.write(ev, stage)  # fusion score=outages: outages.csv, outages_summary.csv
     return {
         "leaderboard": out / "leaderboard.csv",
         "manifest": out / "manifest.json",

@@ -154,8 +154,9 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     frame = load_frame(c, run, data_dir, ds)
     task = make_task(c["task"], **c["task_params"])
     problem = task.judge(task.build(frame, rng_for(c["seed"], run, TASK)))
-    problem.truth_present = reference_present(frame, len(problem.truth_valid))  # for the masked count
-    problem.truth_missing, note = reference_coverage(problem.t, problem.truth_present)  # an early end
+    own = getattr(problem, "reference_extent", None)  # a task's own reference (fusion score=outages): its extent
+    problem.truth_present = reference_present(frame, len(problem.truth_valid)) if own is None else own
+    problem.truth_missing, note = reference_coverage(problem.t, problem.truth_present) if own is None else (0, None)
     problem.notes = list(problem.notes) + ([note] if note else [])
     # the manifest's "dataset" section: the frame's metadata plus what the task used and noted
     problem.frame_meta = dict(

@@ -26,6 +26,8 @@ mapping (``docs/bags.md``, "The fusion task"):
 * **Reference**: the frame's ``position`` reference, for scoring only. When it is the same
   topic as a ``gps`` input (the fix track is the only external position), every
   ``gps_every``-th fix is fed and the others are held out for scoring, as ``gps-odom`` does.
+  With ``score=outages`` the reference is instead the first fix after each outage, withheld
+  from every filter (:mod:`replay.tasks.outages`).
 * **Prior**: the first fed absolute position (and attitude) where there is one. Without any
   absolute position input (dead reckoning: DVL + IMU + depth, odometry + IMU), nothing
   fixes the origin: the start position is the reference's sample nearest the first sensor
@@ -40,9 +42,8 @@ mapping (``docs/bags.md``, "The fusion task"):
 Refused in one line: inputs that leave the speed (no velocity, position or differential
 position) or the heading (no attitude, rate or position) unconstrained — every filter would
 carry its prior there and the table rank priors —, a frame with no sensor input (naming the
-tasks that would run), no
-reference (nothing to score against: how to declare one), an unknown field, a differential
-field with fewer than two messages.
+tasks that would run), no reference (nothing to score against: how to declare one), an unknown
+field, a differential field with fewer than two messages.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ from replay.models.kinematic import Kinematic2D, Kinematic3D
 from replay.util.errors import ReplayError
 from replay.util.params import Param
 
-from . import Problem, Task, describe, source_of
+from . import Problem, Task, describe, outages, source_of
 from .fusion_frames import heading_source, imu_yaw_sense, lever_arm, mounted, twist_in_body
 from .fusion_inputs import (
     configured,
@@ -137,7 +138,7 @@ class FusionTask(Task):
             unit="m^2 or rad^2",
             **POS,
         ),
-    )
+    ) + outages.PARAMS
 
     def build(self, frame, rng):
         where = source_of(frame)
@@ -169,17 +170,22 @@ class FusionTask(Task):
         valid_ref = ref.valid & np.isfinite(ref.values[:, :d]).all(axis=1)
         if m.holdout:
             valid_ref &= ~m.fed_gps
+        truth, extra = np.asarray(ref.values[:, :d], float), {}
+        if self.score == "outages":  # the resurfacing fixes: the only reference (replay.tasks.outages)
+            if m.outage is None:
+                raise ReplayError(f"{where}: task fusion: score=outages needs a gps position input (its fixes)")
+            truth, valid_ref, extra = outages.reference(m.outage, d, len(t), t, where)
         m.used["reference"] = describe(frame, "position", "reference")
-        params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(m.holdout))
+        params = dict(self.params(), state=list(model_cls.STATE), holdout=bool(m.holdout), **extra)
         axes = ("x", "y", "z")[:d]
         angle_index = {"yaw": 5 if dims == 3 else 2}
-        return Problem(
+        pb = Problem(
             model,
             m.Z,
             x0,
             P0,
             t,
-            np.asarray(ref.values[:, :d], float),
+            truth,
             valid_ref,
             tuple(range(d)),
             axes,
@@ -189,6 +195,9 @@ class FusionTask(Task):
             notes=notes,
             noise=m.noise,
         )
+        if m.outage is not None:
+            pb.reference_extent = valid_ref  # the reference exists at the resurfacing fixes only (its scored share)
+        return pb
 
     @staticmethod
     def _require(frame, where, found):
@@ -220,6 +229,7 @@ class FusionTask(Task):
             notes=[f"task fusion: {dims}-D state"],
             fed_gps=None,
             holdout=False,
+            outage=None,
             absolute_pos=None,
             attitude_at=None,
             noise={},
@@ -244,8 +254,7 @@ class FusionTask(Task):
         return m
 
     def _add_field(self, frame, ctx, m, entry, key, fld, is_diff, noise):
-        """One field of one input into the record ``m`` (or a note why it is not used); what the
-        field measures, how it is mounted and its frame: its role (:mod:`replay.roles`)."""
+        """One field of one input into ``m`` (or a note why not); its meaning, mount, frame: its role."""
         where, n, role = ctx.where, ctx.n, entry.spec
         name = field_channel(frame, entry, fld)
         if name is None:
@@ -279,7 +288,11 @@ class FusionTask(Task):
             valid = np.zeros(n, bool)
             valid[rows] = True
             fld = role.field(fld).differential
-        if role.holdout and fld == "position" and ctx.ref.description == ch.description:
+        if role.holdout and fld == "position" and self.score == "outages":
+            if m.outage is not None:
+                raise ReplayError(f"{where}: task fusion: score=outages takes one gps position input, not two")
+            valid, m.outage = outages.withhold(self, valid, vals, ctx.t, where)
+        elif role.holdout and fld == "position" and ctx.ref.description == ch.description:
             idx = np.flatnonzero(valid)
             fed = np.zeros(n, bool)
             fed[idx[:: self.gps_every]] = True
