@@ -112,7 +112,8 @@ def _dataset_params(where, path: Path, ref, params: dict) -> dict:
     if ref.is_sim:
         own = {k: v for k, v in params.items() if k not in VIEW_NAMES}  # the views: checked below
         check_params(where, f"dataset {shown(ref.id)}", registry.generator(ref.entry).PARAMS, own)
-        check_params(where, f"dataset {shown(ref.id)}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
+        views = {k: v for k, v in params.items() if k not in own and k != "fault"}  # fault: below
+        check_params(where, f"dataset {shown(ref.id)}", VIEW_PARAMS, views)
     try:
         return _plain(registry.check_params(ref.target, params, adapter=ref.adapter if ref.is_path else None))
     except ReplayError as e:

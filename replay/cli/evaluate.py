@@ -122,6 +122,7 @@ def eval_cmd(
     rate,
     window,
     segment,
+    fault,
     tuned,
     allow_modules=(),
 ):
@@ -146,7 +147,7 @@ def eval_cmd(
         mapping,
         baseline,
         tuned,
-        (rate, window, segment),
+        (rate, window, segment, fault),
         adapter,
         run,
         data_dir,

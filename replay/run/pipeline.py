@@ -46,7 +46,7 @@ from time import perf_counter
 
 import numpy as np
 
-from replay.data import dataset_ref, registry
+from replay.data import dataset_ref, fault_apply, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
@@ -58,7 +58,7 @@ from replay.tasks import make_task, reference_coverage, reference_present, sourc
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
 from replay.util.errors import ReplayError
-from replay.util.seeds import DATA, TASK, filter_rng, rng_for
+from replay.util.seeds import DATA, FAULT, TASK, filter_rng, rng_for
 
 
 @dataclass(frozen=True)
@@ -112,6 +112,12 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
     """The frame of ``run``: drawn from the run's data stream for a simulator, read once for a file
     (``ds``: the dataset's registry entry, :func:`resolve`, when the caller has it already)."""
     c = config.as_dict() if isinstance(config, Config) else config
+    injected = c["dataset_params"].get("fault")
+    if injected:  # the clean frame (a file's read once), then the run's own fault draw (replay.data.faults)
+        clean = load_frame(
+            dict(c, dataset_params={k: v for k, v in c["dataset_params"].items() if k != "fault"}), run, data_dir, ds
+        )
+        return fault_apply.apply(clean, injected, rng_for(c["seed"], run, FAULT), str(c["dataset"]))
     ds = resolve(c["dataset"]) if ds is False else ds
     if ds is not None and ds.kind == "sim":  # the entry itself: the registry looks it up no more
         return registry.load_frame(
