@@ -209,3 +209,48 @@ def test_eval_runs_draw_their_own_faults_and_rerun_reproduces(tmp_path):
         np.testing.assert_array_equal(hit, (u < 0.2) & ((clean.t < 20) | (clean.t >= 30)))  # then the outage
         hits.append(hit)
     assert not np.array_equal(*hits)
+
+
+# ---------------------------------------------------------------- sweeps, scores, recovery
+
+def test_campaign_fault_tables_sweep_and_robustness_score(tmp_path):
+    from replay.campaign import spec
+    from replay.outputs import robustness
+
+    (tmp_path / "c.toml").write_text(
+        '[campaign]\nruns = 3\n\n[[dataset]]\nid = "sim/linear"\nparams = { steps = 60 }\n\n'
+        '[[fault]]\nchannel = "z"\nkind = "outliers"\njump = 40\nsweep = { p = [0, 0.1, 0.3] }\n\n'
+        '[[fault]]\nchannel = "z"\nkind = "outage"\nt0 = 10\nd = 5\n\n[[filter]]\nname = "kf"\n'
+    )
+    camp = spec.load(tmp_path / "c.toml")
+    assert [c.dataset_params["fault"] for c in camp.configs] == [
+        [f"z:outliers:p={p},jump=40", "z:outage:t0=10,d=5"] for p in ("0", "0.1", "0.3")
+    ]
+    res = CliRunner().invoke(main, ["campaign", "run", str(tmp_path / "c.toml"), "-o", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 0, res.output
+    rows = replay.campaign_results(tmp_path / "o").to_dict("records")
+    (sweep,) = robustness.sweeps(rows)
+    assert sweep["parameter"] == "p" and sweep["fault"] == "z:outliers:p=*,jump=40 + z:outage:t0=10,d=5"
+    lines, scores = robustness.table(sweep)
+    y = [r["pos_rmse"] for r in sorted(lines, key=lambda r: r["p"])]
+    assert y[0] < y[1] < y[2]  # more outliers, more error
+    assert scores["kf"] == pytest.approx(((y[0] + y[1]) / 2 * 0.1 + (y[1] + y[2]) / 2 * 0.2) / 0.3)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        '[campaign]\nruns = 1\n\n[[dataset]]\nid = "sim/linear"\n\n[[fault]]\nchannel = "z"\nkind = "dropout"\n'
+        "sweep = { p = [0.1, 1.5] }\n\n[[filter]]\nname = \"kf\"\n"
+    )
+    with pytest.raises(ReplayError, match=r"bad.toml:\d+: fault: fault z:dropout: p must be a finite number in \[0, 1\]"):
+        spec.load(bad)
+
+
+def test_robustness_score_and_recovery_time_known_values():
+    from replay.outputs.robustness import recovery_time, score
+
+    assert score([(0, 1.0), (10, 3.0), (30, 3.0)]) == pytest.approx((20 + 60) / 30)
+    t = np.arange(0, 100.0)
+    err = np.full(100, 1.0)
+    err[40:60] = 10.0  # the outage [40, 50), the error back below 2 m at t = 60
+    err[60:] = 1.5
+    assert recovery_time(t, err, 40, 50) == 10.0
+    assert np.isnan(recovery_time(t, np.where(t >= 40, 5.0, 1.0), 40, 50))  # never recovers
