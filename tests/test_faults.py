@@ -146,6 +146,16 @@ def test_refused_when_applied(spec, message):
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
+def test_campaign_fault_table_on_a_missing_channel_is_refused_before_any_unit(tmp_path):
+    (tmp_path / "c.toml").write_text(
+        '[campaign]\nruns = 1\n\n[[dataset]]\nid = "sim/linear"\n\n[[fault]]\nchannel = "lidar"\n'
+        'kind = "dropout"\np = 0.1\n\n[[filter]]\nname = "kf"\n'
+    )
+    res = CliRunner().invoke(main, ["campaign", "run", str(tmp_path / "c.toml"), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "c.toml:8: fault: sim/linear: fault lidar:dropout:p=0.1: no channel 'lidar'" in res.output
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize(
     "spec, message",
     [
@@ -157,6 +167,8 @@ def test_refused_when_applied(spec, message):
         ("gps:delay:d=-1", "d must be a finite number > 0"),
         ("gps:outage:t0=1,d=5,every=5", "must be longer than the outage"),
         ("gps", "expected CHANNEL:KIND:NAME=VALUE"),
+        ("lidar:dropout:p=0.1", "sim/linear: fault lidar:dropout:p=0.1: no channel 'lidar' (channels: z)"),
+        ("z:outage:t0=0,d=1000", "removes every sample of channel z (500 valid)"),
     ],
 )
 def test_bad_specifications_one_line_in_api_cli_and_campaign(spec, message, tmp_path):

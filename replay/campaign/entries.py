@@ -71,7 +71,7 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
             ref.id,
         )
     params = _dataset_params(where, path, ref, dict(entry.get("params", {})))
-    if ref.is_sim and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
+    if (ref.is_sim and VIEW_NAMES & params.keys()) or "fault" in params:  # a view or fault it cannot take: now
         _load_once(where, ref.id, params, first, data_dir)
     recorded = _recorded(where, entry, ref.id, params, first, data_dir, ref.adapter)
     return DatasetEntry(ref.id, params, first, tasks, recorded)

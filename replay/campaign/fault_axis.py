@@ -64,3 +64,18 @@ def with_faults(params: dict, extra: list[str]) -> dict:
     if not extra:
         return params
     return dict(params, fault=list(params.get("fault") or []) + list(extra))
+
+
+def check_frames(where, ds_entries, extras: list[list[str]], data_dir) -> None:
+    """Run 0's frame of every dataset under every fault list, so that a fault on a channel the
+    dataset lacks (or one that removes every sample) is refused before any unit, in one line."""
+    from replay.campaign.entries import _frame0
+
+    for ds in ds_entries:
+        for extra in extras:
+            if not extra:
+                continue
+            try:
+                _frame0(ds.id, with_faults(ds.params, extra), ds.first, data_dir)
+            except ReplayError as e:
+                raise where.error("fault", str(e), extra[0].split(":")[0]) from None

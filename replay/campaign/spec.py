@@ -121,6 +121,7 @@ def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
             "filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with recorded estimates)"
         )
     extras = fault_axis.variants(where, doc)  # [[fault]] tables: one fault list per sweep combination
+    fault_axis.check_frames(where, ds_entries, extras, head["data_dir"])
     configs = [
         Config(
             ds.id,
