@@ -38,6 +38,7 @@ the task's reference and the run is scored by the same
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 from dataclasses import dataclass
@@ -200,14 +201,26 @@ def same_model(a, b) -> bool:
         return True
     if type(a) is not type(b) or (va := vars(a)).keys() != (vb := vars(b)).keys():
         return False
-    for k in va:
-        x, y = va[k], vb[k]
-        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
-            if not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
-                return False
-        elif x is not y and x != y:
-            return False
-    return True
+    return all(_same(va[k], vb[k]) for k in va)
+
+
+def _same(x, y) -> bool:
+    """Equal values: arrays element-wise (shape too), dataclasses (a gate's settings), lists, tuples and
+    dicts item by item; anything whose ``==`` is not a truth value (an array inside) is not equal."""
+    if x is y:
+        return True
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        return np.shape(x) == np.shape(y) and np.array_equal(x, y)
+    if dataclasses.is_dataclass(x) and type(x) is type(y):
+        return all(_same(getattr(x, f.name), getattr(y, f.name)) for f in dataclasses.fields(x))
+    if isinstance(x, (list, tuple)) and type(x) is type(y):
+        return len(x) == len(y) and all(_same(u, v) for u, v in zip(x, y))
+    if isinstance(x, dict) and isinstance(y, dict):
+        return x.keys() == y.keys() and all(_same(x[k], y[k]) for k in x)
+    try:
+        return bool(x == y)
+    except (ValueError, TypeError):
+        return False
 
 
 def run_block(
