@@ -266,3 +266,22 @@ def test_robustness_score_and_recovery_time_known_values():
     err[60:] = 1.5
     assert recovery_time(t, err, 40, 50) == 10.0
     assert np.isnan(recovery_time(t, np.where(t >= 40, 5.0, 1.0), 40, 50))  # never recovers
+
+
+def test_models_with_a_gate_of_arrays_are_compared_field_by_field():
+    # a gated mapping's runs: the model holds a dataclass of arrays; `==` on it raised "truth value ambiguous"
+    from dataclasses import dataclass
+
+    from replay.run.pipeline import same_model
+
+    @dataclass
+    class Gate:
+        threshold: np.ndarray
+
+    class Model:
+        def __init__(self, th):
+            self.gate, self.n = Gate(np.array(th, float)), 6
+
+    assert same_model(Model([5.0, 5.0]), Model([5.0, 5.0]))
+    assert not same_model(Model([5.0, 5.0]), Model([5.0, 4.0]))
+    assert not same_model(Model([5.0, 5.0]), Model([5.0, 5.0, 5.0]))

@@ -17,6 +17,7 @@ the outage's length before it, or what there is); NaN when it never does.
 from __future__ import annotations
 
 import math
+import re
 from collections import defaultdict
 
 import numpy as np
@@ -81,11 +82,36 @@ def table(sweep: dict, metric: str = "pos_rmse") -> tuple[list[dict], dict]:
     """(one row per filter and intensity, {filter: robustness score}) of a sweep."""
     lines, curves = [], defaultdict(list)
     for x, row in sweep["rows"]:
-        name = str(row.get("label") or row.get("filter"))
+        name = curve(row)
         m, ci, lost = _float(row.get(metric)), _float(row.get(f"{metric}_ci95")), _float(row.get("lost_share"))
         lines.append({"filter": name, sweep["parameter"]: x, metric: m, f"{metric}_ci95": ci, "lost_share": lost})
         curves[name].append((x, m))
     return lines, {name: score(pts) for name, pts in curves.items()}
+
+
+def curve(row) -> str:
+    """The curve a row belongs to: its label without the ``#k`` that tells a report's equal labels apart."""
+    return re.sub(r" #\d+$", "", str(row.get("label") or row.get("filter")))
+
+
+def recoveries(sweep: dict, series: dict, factor: float = 2.0) -> dict:
+    """{(filter, intensity): (mean seconds to recover over the runs that do, runs that never do, runs)} of
+    an outage sweep (``series``: {row label: {run: {"t", "err"}}}, the report's); {} for another fault."""
+    channel_kind = sweep["fault"].split(":")[:2]
+    if channel_kind[1] != "outage" or sweep["parameter"] != "d":
+        return {}
+    t0 = float(re.search(r"t0=([0-9.eE+-]+)", sweep["fault"]).group(1))
+    out = {}
+    for d, row in sweep["rows"]:
+        runs = series.get(str(row.get("label")), {})
+        times = []
+        for s in runs.values():
+            err = np.asarray(s["err"], float)
+            norm = np.where(np.isfinite(err).any(axis=1), np.sqrt(np.nansum(err**2, axis=1)), np.nan)
+            times.append(recovery_time(s["t"], norm, t0, t0 + d, factor) if d > 0 else 0.0)
+        done = [x for x in times if np.isfinite(x)]
+        out[(curve(row), d)] = (float(np.mean(done)) if done else math.nan, len(times) - len(done), len(times))
+    return out
 
 
 def score(points) -> float:
@@ -97,9 +123,11 @@ def score(points) -> float:
     return float(np.sum((y[1:] + y[:-1]) / 2 * np.diff(x)) / (x[-1] - x[0]))
 
 
-def markdown(sweep: dict, metric: str = "pos_rmse") -> str:
-    """The sweep's table (Markdown): filters as rows, intensities as columns, then the score."""
+def markdown(sweep: dict, metric: str = "pos_rmse", series: dict | None = None) -> str:
+    """The sweep's table (Markdown): filters as rows, intensities as columns, then the score; for an
+    outage sweep with ``series`` (:func:`recoveries`), the seconds to recover after each outage."""
     lines, scores = table(sweep, metric)
+    rec = recoveries(sweep, series or {})
     xs = sorted({r[sweep["parameter"]] for r in lines})
     head = "| filter | " + " | ".join(f"{sweep['parameter']}={x:g}" for x in xs) + " | score (AUC/range) |"
     out = [f"{sweep['dataset']} ({sweep['task']}), fault {sweep['fault']}: {metric} (± 95 %; lost share)", "", head]
@@ -109,6 +137,9 @@ def markdown(sweep: dict, metric: str = "pos_rmse") -> str:
         for x in xs:
             r = next((r for r in lines if r["filter"] == name and r[sweep["parameter"]] == x), None)
             cells.append("" if r is None else f"{r[metric]:.3g} ± {r[f'{metric}_ci95']:.2g}; {r['lost_share']:.0%}")
+            if (name, x) in rec and x > 0:
+                mean, never, n = rec[(name, x)]
+                cells[-1] += f"; recovers in {mean:.3g} s" + (f" ({never} of {n} runs never)" if never else "")
         out.append(f"| {name} | " + " | ".join(cells) + f" | {scores[name]:.3g} |")
     return "\n".join(out)
 
