@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
@@ -61,7 +62,7 @@ def sweeps(rows) -> list[dict]:
         if len({v for v, _ in items}) < 2:
             continue
         dataset, task, channel, kind, name, others, rest = key
-        shown = f"{channel}:{kind}:" + ",".join([f"{name}=*"] + [f"{k}={v}" for k, v in others])
+        shown = f"{channel}:{kind}:" + ",".join(f"{k}={'*' if k == name else v}" for k, v in others)
         out.append(
             {
                 "dataset": dataset,
@@ -75,7 +76,8 @@ def sweeps(rows) -> list[dict]:
 
 
 def _others(values: dict, name: str) -> tuple:
-    return tuple((k, faults._num(v)) for k, v in values.items() if k != name and v is not None)
+    """The fault's parameters in declaration order, the swept one as ``*`` (the sweep's key and name)."""
+    return tuple((k, "*" if k == name else faults._num(v)) for k, v in values.items() if v is not None)
 
 
 def table(sweep: dict, metric: str = "pos_rmse") -> tuple[list[dict], dict]:
@@ -130,7 +132,8 @@ def markdown(sweep: dict, metric: str = "pos_rmse", series: dict | None = None) 
     rec = recoveries(sweep, series or {})
     xs = sorted({r[sweep["parameter"]] for r in lines})
     head = "| filter | " + " | ".join(f"{sweep['parameter']}={x:g}" for x in xs) + " | score (AUC/range) |"
-    out = [f"{sweep['dataset']} ({sweep['task']}), fault {sweep['fault']}: {metric} (± 95 %; lost share)", "", head]
+    data = Path(sweep["dataset"]).name if Path(sweep["dataset"]).is_absolute() else sweep["dataset"]  # no home
+    out = [f"{data} ({sweep['task']}), fault {sweep['fault']}: {metric} (± 95 %; lost share)", "", head]
     out.append("|---" * (len(xs) + 2) + "|")
     for name in scores:
         cells = []
@@ -159,7 +162,7 @@ def figure(sweep: dict, metric: str = "pos_rmse", palette=None):
         ax.fill_between(x, y - np.nan_to_num(ci), y + np.nan_to_num(ci), color=color, alpha=0.2)
     ax.set_xlabel(sweep["parameter"])
     ax.set_ylabel(metric)
-    ax.set_title(f"{sweep['dataset']}: {sweep['fault']}", fontsize=9)
+    ax.set_title(f"{Path(str(sweep['dataset'])).name}: {sweep['fault']}", fontsize=9)
     ax.legend(fontsize=8)
     return fig
 
