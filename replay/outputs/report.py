@@ -139,6 +139,15 @@ def _robustness(sections, pal, out: Path) -> list[str]:
                 "score is the area under the curve divided by the intensity range (lower: more robust)."
                 "</figcaption></figure>"
             )
+            over_time = robustness.outage_figure(sweep, sec.runs, palette=pal)
+            if over_time is not None:
+                png = plots.save(over_time, out / f"outage_{k}.png", dpi=100)
+                b64 = base64.b64encode(png.read_bytes()).decode()
+                parts.append(
+                    f"<figure><img alt='outage {k}' src='data:image/png;base64,{b64}'><figcaption>The position "
+                    "error over time across the longest outage of the sweep (shaded), median over the runs."
+                    "</figcaption></figure>"
+                )
     if tables:
         (out / "robustness.md").write_text("\n\n".join(tables) + "\n", encoding="utf-8")
     return parts

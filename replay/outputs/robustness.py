@@ -160,9 +160,43 @@ def figure(sweep: dict, metric: str = "pos_rmse", palette=None):
         color = palette.colour(name) if palette is not None else None
         ax.plot(x, y, marker="o", color=color, label=f"{name} (score {scores[name]:.3g})")
         ax.fill_between(x, y - np.nan_to_num(ci), y + np.nan_to_num(ci), color=color, alpha=0.2)
-    ax.set_xlabel(sweep["parameter"])
-    ax.set_ylabel(metric)
+    kind = sweep["fault"].split(":")[1]
+    unit = next((p.unit for p in faults.KINDS[kind] if p.name == sweep["parameter"]), "")
+    ax.set_xlabel(plots.label(f"{kind} {sweep['parameter']}", unit or None))
+    ax.set_ylabel(
+        plots.label("position RMSE" if metric == "pos_rmse" else metric, "m" if metric == "pos_rmse" else None)
+    )
     ax.set_title(f"{Path(str(sweep['dataset'])).name}: {sweep['fault']}", fontsize=9)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def outage_figure(sweep: dict, series: dict, palette=None):
+    """The position error over time across the longest outage of an outage sweep: per filter the
+    median over the runs of the error norm at each scored step, the outage shaded; None for another fault."""
+    from replay.outputs import plots
+
+    if sweep["fault"].split(":")[1] != "outage" or sweep["parameter"] != "d":
+        return None
+    t0 = float(re.search(r"t0=([0-9.eE+-]+)", sweep["fault"]).group(1))
+    d = max(x for x, _ in sweep["rows"])
+    fig, axes = plots.figure()
+    ax = axes[0, 0]
+    for x, row in sweep["rows"]:
+        runs = series.get(str(row.get("label")), {})
+        if x != d or not runs:
+            continue
+        first = next(iter(runs.values()))
+        err = np.stack([np.asarray(s["err"], float) for s in runs.values()])
+        norm = np.where(np.isfinite(err).any(axis=2), np.sqrt(np.nansum(err**2, axis=2)), np.nan)
+        ok = np.isfinite(norm).any(axis=0)
+        med = np.nanmedian(norm[:, ok], axis=0)
+        name = curve(row)
+        ax.plot(np.asarray(first["t"], float)[ok], med, color=palette.colour(name) if palette else None, label=name)
+    ax.axvspan(t0, t0 + d, color="0.85", label=f"outage ({d:g} s)")
+    ax.set_xlabel(plots.label("time", "s"))
+    ax.set_ylabel(plots.label("position error (median over runs)", "m"))
+    ax.set_title(f"{Path(str(sweep['dataset'])).name}: {sweep['fault'].replace('d=*', f'd={d:g}')}", fontsize=9)
     ax.legend(fontsize=8)
     return fig
 
