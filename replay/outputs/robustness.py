@@ -142,7 +142,10 @@ def markdown(sweep: dict, metric: str = "pos_rmse", series: dict | None = None) 
             cells.append("" if r is None else f"{r[metric]:.3g} ± {r[f'{metric}_ci95']:.2g}; {r['lost_share']:.0%}")
             if (name, x) in rec and x > 0:
                 mean, never, n = rec[(name, x)]
-                cells[-1] += f"; recovers in {mean:.3g} s" + (f" ({never} of {n} runs never)" if never else "")
+                if never == n:
+                    cells[-1] += "; never recovers"
+                else:
+                    cells[-1] += f"; recovers in {mean:.3g} s" + (f" ({never} of {n} runs never)" if never else "")
         out.append(f"| {name} | " + " | ".join(cells) + f" | {scores[name]:.3g} |")
     return "\n".join(out)
 
