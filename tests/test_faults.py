@@ -285,3 +285,20 @@ def test_models_with_a_gate_of_arrays_are_compared_field_by_field():
     assert same_model(Model([5.0, 5.0]), Model([5.0, 5.0]))
     assert not same_model(Model([5.0, 5.0]), Model([5.0, 4.0]))
     assert not same_model(Model([5.0, 5.0]), Model([5.0, 5.0, 5.0]))
+
+
+def test_report_of_an_outage_sweep_writes_its_table_recovery_and_figures(tmp_path):
+    from replay.outputs.report import make_report
+
+    (tmp_path / "c.toml").write_text(
+        '[campaign]\nruns = 2\n\n[[dataset]]\nid = "sim/linear"\nparams = { steps = 80 }\n\n'
+        '[[fault]]\nchannel = "z"\nkind = "outage"\nt0 = 20\nsweep = { d = [0, 10, 30] }\n\n'
+        '[[filter]]\nname = "kf"\n'
+    )
+    res = CliRunner().invoke(main, ["campaign", "run", str(tmp_path / "c.toml"), "-o", str(tmp_path / "o"), "-q"])
+    assert res.exit_code == 0, res.output
+    make_report(tmp_path / "o")
+    text = (tmp_path / "o" / "report" / "robustness.md").read_text()
+    assert "fault z:outage:t0=20,d=*" in text and "| kf |" in text and "recovers in" in text
+    assert (tmp_path / "o" / "report" / "degradation_0.png").stat().st_size > 0
+    assert (tmp_path / "o" / "report" / "outage_0.png").stat().st_size > 0
