@@ -302,3 +302,28 @@ def test_report_of_an_outage_sweep_writes_its_table_recovery_and_figures(tmp_pat
     assert "fault z:outage:t0=20,d=*" in text and "| kf |" in text and "recovers in" in text
     assert (tmp_path / "o" / "report" / "degradation_0.png").stat().st_size > 0
     assert (tmp_path / "o" / "report" / "outage_0.png").stat().st_size > 0
+
+
+KINDS = ["z:dropout:p=0.3", "z:outage:t0=5,d=10,every=20", "z:outliers:p=0.2,s=3,df=3", "z:bias:b=[1,-1,0.5],t0=10",
+         "z:drift:s=0.2,t0=5", "z:scale:k=1.5", "z:delay:d=2", "z:jitter:s=1.5", "z:clock_offset:c=-1,skew=2000",
+         "z:rate:f=0.5", "z:quantize:step=0.5"]
+
+
+def test_the_list_covers_every_kind():
+    assert sorted(s.split(":")[1] for s in KINDS) == sorted(faults.KINDS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("spec", KINDS)
+def test_every_kind_in_the_manifest_and_rerun_exactly(spec, tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "e"
+    res = runner.invoke(main, ["eval", "sim/linear", "-f", "kf", "-n", "2", "--dataset-param", "steps=40",
+                               "--fault", spec, "-o", str(out), "-q"], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["config"]["dataset_params"]["fault"] == [spec]  # already canonical
+    assert man["dataset"]["faults"][0]["fault"] == spec
+    assert any(spec in e["reason"] for e in man["adapter_report"])
+    res = runner.invoke(main, ["rerun", str(out / "manifest.json"), "-q"], catch_exceptions=False)
+    assert res.exit_code == 0 and "reproduced" in res.output, res.output
