@@ -122,6 +122,8 @@ def test_rate_decimates_a_channel():
     # grid 0, 4, ..., 100: the grid point 100 takes t = 99, within its half period [98, 102)
     assert np.flatnonzero(out.channels["gps"].valid).tolist() == list(range(0, N, 4)) + [99]
     assert _counts(out, "dropped") == {"gps": 74}
+    fast = _apply("gps:rate:f=1e300")  # above the channel's rate: nothing dropped (and no grid of 1e300 points)
+    assert fast.channels["gps"].valid.all() and _counts(fast, "dropped") == {"gps": 0}
 
 
 def test_each_fault_has_its_own_stream():

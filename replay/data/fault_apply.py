@@ -109,7 +109,15 @@ def _outage(t, valid, v, rng):
 def _rate(t, valid, v, rng):
     from replay.data.views import pick
 
-    n_grid = int(min(t[-1] * v["f"] + 0.5, 2.0**62)) + 1
+    gaps = np.diff(t[valid])
+    if not len(gaps) or 1.0 / v["f"] <= gaps.min():  # a period below every gap: each sample keeps its point
+        return _kept(valid, np.zeros(len(valid), bool))
+    n_grid = int(t[-1] * v["f"] + 0.5) + 1
+    if n_grid > 10 * len(t) + 10:  # as the rate view: a grid mostly empty (and its memory)
+        raise ReplayError(
+            f"fault rate:f={v['f']:g}: {n_grid} grid points over {len(t)} samples; give a rate below "
+            f"{10 * len(t) / max(t[-1], 1e-300):.3g} Hz (or at least 1 / the smallest gap between samples)"
+        )
     idx = pick(t, valid, v["f"], n_grid)
     keep = np.zeros(len(valid), bool)
     keep[idx[idx >= 0]] = True
