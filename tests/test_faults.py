@@ -126,6 +126,13 @@ def test_rate_decimates_a_channel():
     assert fast.channels["gps"].valid.all() and _counts(fast, "dropped") == {"gps": 0}
 
 
+def test_rate_refuses_a_grid_of_more_than_ten_points_per_sample():
+    t = np.r_[0.0, 1e-6, np.arange(1.0, 99.0)]  # two samples 1 µs apart: a period of 10 µs decimates them
+    f = Frame(t, {"gps": Channel(t, "m")}, {"position": Channel(t, "m")}, None, {})
+    with pytest.raises(ReplayError, match=r"^test: fault gps:rate:f=100000: 9800001 grid points over 100 samples"):
+        fault_apply.apply(f, ["gps:rate:f=1e5"], rng_for(0, 0, FAULT), "test")
+
+
 def test_each_fault_has_its_own_stream():
     a = _apply(["gps:dropout:p=0.3", "odom:outliers:p=0.5,s=1"], seed=3)
     b = _apply(["gps:dropout:p=0.6", "odom:outliers:p=0.5,s=1"], seed=3)

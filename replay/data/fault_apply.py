@@ -30,7 +30,10 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
         n_before = int(target.valid.sum())
         if kind in decl.MOVES:
             group = _companions(channels, channel)
-            moved, done = _MOVE[kind](t, target.valid, values, stream)
+            try:
+                moved, done = _MOVE[kind](t, target.valid, values, stream)
+            except ReplayError as e:
+                raise ReplayError(f"{source}: fault {spec}: {e}") from None
             for name in group:
                 channels[name] = _moved(channels[name], moved)
         else:
@@ -115,7 +118,7 @@ def _rate(t, valid, v, rng):
     n_grid = int(t[-1] * v["f"] + 0.5) + 1
     if n_grid > 10 * len(t) + 10:  # as the rate view: a grid mostly empty (and its memory)
         raise ReplayError(
-            f"fault rate:f={v['f']:g}: {n_grid} grid points over {len(t)} samples; give a rate below "
+            f"{n_grid} grid points over {len(t)} samples; give a rate below "
             f"{10 * len(t) / max(t[-1], 1e-300):.3g} Hz (or at least 1 / the smallest gap between samples)"
         )
     idx = pick(t, valid, v["f"], n_grid)
