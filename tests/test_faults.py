@@ -147,6 +147,7 @@ def test_each_fault_has_its_own_stream():
         ("lidar:dropout:p=0.1", "no channel 'lidar'"),
         ("position:dropout:p=0.1", "a reference channel: faults apply to sensor channels only"),
         ("gps:bias:b=[1,2,3]", "b holds 3 values, the channel has 2 component(s)"),
+        ("gps:scale:k=1e308", "makes values of the channel non-finite"),
     ],
 )
 def test_refused_when_applied(spec, message):

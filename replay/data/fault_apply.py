@@ -37,7 +37,8 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
             for name in group:
                 channels[name] = _moved(channels[name], moved)
         else:
-            channels[channel], done = _alter(kind, t, target, values, stream, f"{source}: fault {spec}")
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused in _alter, not warned
+                channels[channel], done = _alter(kind, t, target, values, stream, f"{source}: fault {spec}")
         left = int(channels[channel].valid.sum())
         if left == 0:
             raise ReplayError(f"{source}: fault {spec} removes every sample of channel {channel} ({n_before} valid)")
@@ -209,6 +210,8 @@ def _alter(kind, t, ch, v, rng, owner):
         before = x[idx].copy()
         x[idx] = np.round(x[idx] / v["step"]) * v["step"]
         changed = idx[np.any(x[idx] != before, axis=1)]
+    if not np.isfinite(x[idx]).all():
+        raise ReplayError(f"{owner}: makes values of the channel non-finite (overflow); give a smaller value")
     values = x.reshape(ch.values.shape)
     out = Channel(values, ch.unit, ch.frame, ch.valid.copy(), ch.components, ch.angles, ch.convention, ch.description)
     return out, {"altered": int(len(changed))}
