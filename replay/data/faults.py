@@ -37,8 +37,9 @@ whole message: the channel and its companions (the channels named ``CHANNEL_...`
 the same samples: a fix's ``gps_sigma``, an odometry's ``odom_velocity``); the others alter the
 channel's values only. Each fault adds report lines (``dropped``, ``altered``, ``shifted``) and an
 entry of ``meta["faults"]``. Refused in one line: an unknown kind or parameter, a value out of its
-bounds, a channel the frame does not have (or a reference channel), a bias of the wrong width and a
-fault that leaves the channel no valid sample.
+bounds, a channel the frame does not have (or a reference channel), a bias of the wrong width, a
+value that overflows the channel, a ``rate`` grid of more than 10 points per sample and a fault
+that leaves the channel no valid sample.
 """
 
 from __future__ import annotations
