@@ -140,3 +140,15 @@ def test_why_a_trial_scores_infinity():
     assert why_inf(w, [ok, div]) == "1 of 2 runs diverged (a setting with a diverged run is not usable)"
     assert why_inf(w, [ok, bad]) == "1 of 2 runs failed (MemoryError)"
     assert why_inf({"nll": 1.0}, [ok]) == "objective nll not finite (e.g. no likelihood or NEES)"
+
+
+def test_eval_tuned_with_a_fault_stresses_the_clean_tune_on_its_test_data(tuned, tmp_path):
+    # issue 38 item 4: the configuration tuned on clean data, stressed by a fault on its own test data
+    res = _eval(tmp_path, "f", "--tuned", str(tuned / "tuned.toml"), "--fault", "depth:bias:b=2,t0=10")
+    assert res.exit_code == 0, res.output
+    m = _results(tmp_path / "f")
+    params = m["config"]["dataset_params"]
+    assert params["rate"] == 4.0 and params["segment"] == "0.6:1" and params["fault"] == ["depth:bias:b=[2],t0=10"]
+    res = _eval(tmp_path, "c", "--tuned", str(tuned / "tuned.toml"))
+    assert res.exit_code == 0, res.output
+    assert m["results"]["ekf"]["pos_rmse"] != _results(tmp_path / "c")["results"]["ekf"]["pos_rmse"]

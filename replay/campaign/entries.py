@@ -71,7 +71,7 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
             ref.id,
         )
     params = _dataset_params(where, path, ref, dict(entry.get("params", {})))
-    if ref.is_sim and VIEW_NAMES & params.keys():  # a view the simulation cannot take: now
+    if (ref.is_sim and VIEW_NAMES & params.keys()) or "fault" in params:  # a view or fault it cannot take: now
         _load_once(where, ref.id, params, first, data_dir)
     recorded = _recorded(where, entry, ref.id, params, first, data_dir, ref.adapter)
     return DatasetEntry(ref.id, params, first, tasks, recorded)
@@ -112,7 +112,8 @@ def _dataset_params(where, path: Path, ref, params: dict) -> dict:
     if ref.is_sim:
         own = {k: v for k, v in params.items() if k not in VIEW_NAMES}  # the views: checked below
         check_params(where, f"dataset {shown(ref.id)}", registry.generator(ref.entry).PARAMS, own)
-        check_params(where, f"dataset {shown(ref.id)}", VIEW_PARAMS, {k: v for k, v in params.items() if k not in own})
+        views = {k: v for k, v in params.items() if k not in own and k != "fault"}  # fault: below
+        check_params(where, f"dataset {shown(ref.id)}", VIEW_PARAMS, views)
     try:
         return _plain(registry.check_params(ref.target, params, adapter=ref.adapter if ref.is_path else None))
     except ReplayError as e:

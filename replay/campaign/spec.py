@@ -30,6 +30,12 @@ A campaign is a TOML file::
     params = { mapping = "maps/evo_ros_example.toml" }
     recorded = ["ORB-SLAM"]   # recorded estimates scored as rows recorded:<name>; default: all
 
+    [[fault]]                 # optional: a fault injected into every dataset (replay.campaign.fault_axis)
+    channel = "gps"
+    kind = "outage"
+    t0 = 120
+    sweep = { d = [0, 30, 60, 120] }   # one configuration per value: a robustness sweep
+
 **Recorded estimates.** A dataset read by the bags adapter whose mapping declares
 ``[estimates]`` adds one configuration ``recorded:<name>`` per estimate (all by
 default; ``recorded = [...]`` chooses, ``recorded = []`` none), beside the filters,
@@ -58,7 +64,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from replay.campaign import entries
+from replay.campaign import entries, fault_axis
 from replay.campaign.checks import MAX_NAME_BYTES, Where, check_name, check_params  # noqa: F401
 from replay.run.eval_options import BY_NAME as EVAL
 from replay.run.pipeline import Config
@@ -81,7 +87,7 @@ CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and 
         "data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)", optional=True
     ),
 )
-SECTIONS = ("campaign", "dataset", "task", "filter", "tune")
+SECTIONS = ("campaign", "dataset", "task", "filter", "tune", "fault")  # [[fault]]: replay.campaign.fault_axis
 _Where = Where  # the name it had
 
 
@@ -114,10 +120,12 @@ def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
         raise where.error(
             "filter", "the campaign needs at least one [[filter]] (or a [[dataset]] with recorded estimates)"
         )
+    extras = fault_axis.variants(where, doc)  # [[fault]] tables: one fault list per sweep combination
+    fault_axis.check_frames(where, ds_entries, extras, head["data_dir"])
     configs = [
         Config(
             ds.id,
-            ds.params,
+            fault_axis.with_faults(ds.params, extra),
             ds.first,
             t,
             canonical,
@@ -128,6 +136,7 @@ def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
             head["divergence_threshold"],
         )
         for ds in ds_entries
+        for extra in extras
         for t, canonical in _tasks(where, ds.tasks, task_params)
         for name, fp in flt_entries + [(RECORDED + k, v) for k, v in ds.recorded.items()]
     ]

@@ -67,7 +67,9 @@ def list_cmd(data_dir):
     help="Dataset parameter NAME=VALUE (repeatable; as for `replay eval`).",
 )
 @view_options
-def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), rate=None, window=None, segment=None):
+def info_cmd(
+    dataset, data_dir, adapter=None, mapping=None, dataset_params=(), rate=None, window=None, segment=None, fault=()
+):
     """Manifest fields, location and, when present, what loading it gives.
 
     DATASET is what `replay eval` takes: a registered id, or a file (a CSV, a ROS 1 .bag, a
@@ -77,7 +79,7 @@ def info_cmd(dataset, data_dir, adapter=None, mapping=None, dataset_params=(), r
 
     ref = dataset_ref.resolve(dataset, adapter)
     dparams = registry.check_params(
-        ref.target, with_views(dataset_inputs(dataset_params, mapping), rate, window, segment), adapter=adapter
+        ref.target, with_views(dataset_inputs(dataset_params, mapping), rate, window, segment, fault), adapter=adapter
     )
     config = {"dataset": dataset, "dataset_params": dparams, "first": None, "seed": 0, "adapter": adapter}
     if ref.is_path:

@@ -124,6 +124,7 @@ def _table(kind):
 
 def _datasets(problems):
     from replay.data import registry
+    from replay.data.faults import HELP as FAULT_HELP
     from replay.data.views import VIEW_PARAMS
 
     out = []
@@ -133,6 +134,7 @@ def _datasets(problems):
         else:
             lines = [f"{INDENT}(a recording read by the {ds.adapter} adapter: `replay list adapters`)"]
         lines += [line + " (a view: every dataset)" for line in _declared(VIEW_PARAMS)]
+        lines.append(f"{INDENT}fault = null: injected sensor faults, {FAULT_HELP} (every dataset; docs/robustness.md)")
         doc = plain_text(ds.description)
         if ds.manifest.startswith("entry point of "):
             doc += f" (plugin: {ds.manifest[len('entry point of ') :].split(', ')[0]})"

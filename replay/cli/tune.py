@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from replay.cli.run_options import DATA_DIR, MAPPING, run_option
+from replay.cli.view_options import fault_option, with_views
 from replay.util.errors import ReplayError
 
 
@@ -48,6 +49,7 @@ from replay.util.errors import ReplayError
 @run_option("first")
 @click.option("--rate", default=None, type=float, help="Dataset view: resample at this rate (Hz).")
 @click.option("--window", default=None, help="Dataset view: START:END seconds, or #i:j samples.")
+@fault_option
 @click.option("--task-param", "task_params", multiple=True, help="Task parameter NAME=VALUE (repeatable).")
 @click.option("--dataset-param", "dataset_params", multiple=True, help="Dataset parameter NAME=VALUE (repeatable).")
 @click.option(
@@ -92,6 +94,7 @@ def tune_cmd(
     first,
     rate,
     window,
+    fault,
     task_params,
     dataset_params,
     out,
@@ -141,7 +144,7 @@ def tune_cmd(
         seed=seed,
         task=task,
         task_params=cli_params.task_params(task_params, task),
-        dataset_params=cli_params.dataset_inputs(dataset_params, mapping),  # --mapping as in replay eval
+        dataset_params=with_views(cli_params.dataset_inputs(dataset_params, mapping), fault=fault),  # as replay eval
         view={"rate": rate, "window": window},
         first=first,
         data_dir=data_dir,

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from replay.data import views
+from replay.data import fault_apply, views
 from replay.data.checksums import (
     CHECKSUMS_FILE,
     CONTENT_CHECKED,
@@ -247,15 +247,17 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None, ad
     check_data_dir(data_dir)
     shown = str(dataset.id if isinstance(dataset, Dataset) else dataset)
     chosen, params = views.split(check_params(dataset, params, adapter=adapter))
+    faulty = fault_apply.stream(rng) if chosen.get("fault") else None  # before a simulator draws from rng
     if isinstance(dataset, Dataset):
         ds = dataset
     elif is_path(dataset):
-        return views.apply(_load_path(Path(dataset), adapter, params), chosen, shown).head(first)
+        frame = views.apply(_load_path(Path(dataset), adapter, params), chosen, shown).head(first)
+        return fault_apply.apply(frame, chosen.get("fault"), faulty, shown)
     else:
         ds = get(dataset)
     frame = _load_sim(ds, rng, params) if ds.kind == "sim" else _load_file(ds, data_dir, params)
     frame.meta["dataset"] = ds.id
-    return views.apply(frame, chosen, shown).head(first)
+    return fault_apply.apply(views.apply(frame, chosen, shown).head(first), chosen.get("fault"), faulty, shown)
 
 
 def is_path(dataset) -> bool:

@@ -23,7 +23,9 @@ they are part of ``dataset_params``: of the configuration hash, the manifest,
   channel. The report counts per channel the valid samples not taken
   (``dropped``), the grid points masked and the largest time shift.
 
-Order: window, then segment, then rate. The cut frame's times are re-based by
+Order: window, then segment, then rate. The dataset parameter ``fault`` (injected sensor faults,
+:mod:`replay.data.faults`) is checked here with the views, and applied after them and ``first``,
+with the run's fault stream (:mod:`replay.data.fault_apply`). The cut frame's times are re-based by
 the offset of its first sample from the original first sample, so it starts
 where the original started (``t = 0`` for a recording: the frame convention);
 the grid starts there too. ``meta["view"]`` keeps the offset (``offset_s``), the
@@ -84,7 +86,7 @@ VIEW_PARAMS = (
         optional=True,
     ),
 )
-NAMES = tuple(p.name for p in VIEW_PARAMS)
+NAMES = tuple(p.name for p in VIEW_PARAMS) + ("fault",)  # and the injected faults (replay.data.faults)
 _NUM = r"\s*(\d+(?:\.\d*)?(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)?\s*"
 _WINDOW_HELP = "START:END in seconds from the first sample (e.g. 60:120, 60:, :120.5) or #I:J sample indices"
 
@@ -107,6 +109,10 @@ def check(views: dict, owner: str = "") -> dict:
         elif p.name == "segment":
             value = _fmt_bounds(*_parse_segment(value, where))
         out[p.name] = value
+    if views.get("fault") is not None:
+        from replay.data import faults
+
+        out["fault"] = faults.check(views["fault"], owner)
     return out
 
 
@@ -159,7 +165,7 @@ def _fmt_window(index: bool, lo, hi) -> str:
 def apply(frame, views: dict, source: str = "dataset"):
     """``frame`` cut and resampled by ``views`` (checked by :func:`check`); ``frame`` itself when
     there are none. A new frame: the input frame (perhaps cached) and its report are not changed."""
-    views = check(views, source)
+    views = {k: v for k, v in check(views, source).items() if k != "fault"}  # faults: fault_apply, per run
     if "reference" in views:  # a smoothed track as the reference: on the frame the other views made
         from replay.data.smoothed_reference import replace
 

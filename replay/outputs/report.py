@@ -105,6 +105,7 @@ def make_report(d: Path, out: Path | None = None) -> Path:
                 f"<figure><img alt='{name} {html.escape(sec.title)}' src='data:image/png;base64,{b64}'>"
                 f"<figcaption>{html.escape(CAPTIONS[name])}</figcaption></figure>"
             )
+    parts += _robustness(sections, pal, out)
     page = (
         "<!doctype html><html><head><meta charset='utf-8'>"
         f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\">"
@@ -115,3 +116,38 @@ def make_report(d: Path, out: Path | None = None) -> Path:
     path = out / "report.html"
     path.write_text(page, encoding="utf-8")
     return path
+
+
+def _robustness(sections, pal, out: Path) -> list[str]:
+    """The robustness sweeps of a campaign (``[[fault]]`` with ``sweep``): each one's table (metric
+    per intensity, lost share, the robustness score, the time to recover after an outage) and its
+    degradation curves; the tables also in ``robustness.md``."""
+    from replay.outputs import robustness
+
+    parts, tables = [], []
+    for sec in sections:
+        for sweep in robustness.sweeps(sec.rows):
+            k = len(tables)
+            tables.append(robustness.markdown(sweep, series=sec.runs))
+            parts += ["<h2>Robustness</h2>"] if k == 0 else []
+            parts.append(f"<pre>{html.escape(tables[-1])}</pre>")
+            png = plots.save(robustness.figure(sweep, palette=pal), out / f"degradation_{k}.png", dpi=100)
+            b64 = base64.b64encode(png.read_bytes()).decode()
+            parts.append(
+                f"<figure><img alt='degradation {k}' src='data:image/png;base64,{b64}'><figcaption>Degradation "
+                "curve: the mean position RMSE over the runs at each intensity, the band its 95 % interval; the "
+                "score is the area under the curve divided by the intensity range (lower: more robust)."
+                "</figcaption></figure>"
+            )
+            over_time = robustness.outage_figure(sweep, sec.runs, palette=pal)
+            if over_time is not None:
+                png = plots.save(over_time, out / f"outage_{k}.png", dpi=100)
+                b64 = base64.b64encode(png.read_bytes()).decode()
+                parts.append(
+                    f"<figure><img alt='outage {k}' src='data:image/png;base64,{b64}'><figcaption>The position "
+                    "error over time across the longest outage of the sweep (shaded), median over the runs."
+                    "</figcaption></figure>"
+                )
+    if tables:
+        (out / "robustness.md").write_text("\n\n".join(tables) + "\n", encoding="utf-8")
+    return parts

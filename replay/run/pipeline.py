@@ -38,6 +38,7 @@ the task's reference and the run is scored by the same
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 from dataclasses import dataclass
@@ -47,7 +48,7 @@ from time import perf_counter
 import numpy as np
 
 from replay import roles
-from replay.data import dataset_ref, registry
+from replay.data import dataset_ref, fault_apply, registry
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
@@ -59,7 +60,7 @@ from replay.tasks import make_task, reference_coverage, reference_present, sourc
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
 from replay.util.errors import ReplayError
-from replay.util.seeds import DATA, TASK, filter_rng, rng_for
+from replay.util.seeds import DATA, FAULT, TASK, filter_rng, rng_for
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,12 @@ def load_frame(config: Config | dict, run: int, data_dir=None, ds=False):
     """The frame of ``run``: drawn from the run's data stream for a simulator, read once for a file
     (``ds``: the dataset's registry entry, :func:`resolve`, when the caller has it already)."""
     c = config.as_dict() if isinstance(config, Config) else config
+    injected = c["dataset_params"].get("fault")
+    if injected:  # the clean frame (a file's read once), then the run's own fault draw (replay.data.faults)
+        clean = load_frame(
+            dict(c, dataset_params={k: v for k, v in c["dataset_params"].items() if k != "fault"}), run, data_dir, ds
+        )
+        return fault_apply.apply(clean, injected, rng_for(c["seed"], run, FAULT), str(c["dataset"]))
     ds = resolve(c["dataset"]) if ds is False else ds
     if ds is not None and ds.kind == "sim":  # the entry itself: the registry looks it up no more
         return registry.load_frame(
@@ -198,14 +205,26 @@ def same_model(a, b) -> bool:
         return True
     if type(a) is not type(b) or (va := vars(a)).keys() != (vb := vars(b)).keys():
         return False
-    for k in va:
-        x, y = va[k], vb[k]
-        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
-            if not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
-                return False
-        elif x is not y and x != y:
-            return False
-    return True
+    return all(_same(va[k], vb[k]) for k in va)
+
+
+def _same(x, y) -> bool:
+    """Equal values: arrays element-wise (shape too), dataclasses (a gate's settings), lists, tuples and
+    dicts item by item; anything whose ``==`` is not a truth value (an array inside) is not equal."""
+    if x is y:
+        return True
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        return np.shape(x) == np.shape(y) and np.array_equal(x, y)
+    if dataclasses.is_dataclass(x) and type(x) is type(y):
+        return all(_same(getattr(x, f.name), getattr(y, f.name)) for f in dataclasses.fields(x))
+    if isinstance(x, (list, tuple)) and type(x) is type(y):
+        return len(x) == len(y) and all(_same(u, v) for u, v in zip(x, y))
+    if isinstance(x, dict) and isinstance(y, dict):
+        return x.keys() == y.keys() and all(_same(x[k], y[k]) for k in x)
+    try:
+        return bool(x == y)
+    except (ValueError, TypeError):
+        return False
 
 
 def run_block(

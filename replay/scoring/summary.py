@@ -136,7 +136,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row["content_checked"] = all(checked)
     view = [(k, cfg["dataset_params"][k]) for k in VIEWS if k in (cfg.get("dataset_params") or {})]
     if view:  # a view of the dataset (replay/data/views.py): rows of one dataset at two rates are told apart
-        row["view"] = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in view)
+        show = lambda v: f"{v:g}" if isinstance(v, float) else ";".join(v) if isinstance(v, list) else str(v)  # noqa: E731
+        row["view"] = " ".join(f"{k}={show(v)}" for k, v in view)  # faults: fault=SPEC;SPEC
     return row
 
 

@@ -50,7 +50,9 @@ def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) ->
     options of its ``[campaign]`` table not given on the command line (``given``: ``runs``,
     ``seed``, ...) are applied, so that the command gives the tune's held-out rows; a dataset
     parameter or ``--first`` of the command line that differs from the file is refused in one
-    line. Another dataset takes the file's filter and task parameters only, with a note saying so.
+    line; but for injected faults (``fault``, :mod:`replay.data.faults`) on a tune made without them:
+    the tuned configuration stressed on its own test data. Another dataset takes the file's filter
+    and task parameters only, with a note saying so.
     """
     from replay.campaign import spec
     from replay.data import registry
@@ -66,8 +68,9 @@ def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) ->
         return dataset_params, first, run, note
     c = same[0]
     mine = plain(registry.check_params(ref.target, dataset_params, adapter=ref.adapter if ref.is_path else None))
+    stress = "fault" in dataset_params and "fault" not in c.dataset_params  # the clean tune under faults
     for k in dataset_params:
-        if mine.get(k) != c.dataset_params.get(k):
+        if mine.get(k) != c.dataset_params.get(k) and not (k == "fault" and stress):
             recorded = f"{k}={c.dataset_params[k]}" if k in c.dataset_params else f"no {k}"
             raise ReplayError(
                 f"--tuned {path}: the tune tested on {recorded} for {ref.id}, the command line gives "
@@ -79,7 +82,7 @@ def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) ->
             f"--first {first}; leave it out"
         )
     run = {**run, **{k: getattr(c, k) if k != "runs" else camp.runs for k in RUN_OPTIONS if k not in given}}
-    return dict(c.dataset_params), c.first, run, None
+    return dict(c.dataset_params, **({"fault": mine["fault"]} if stress else {})), c.first, run, None
 
 
 def _describe(dataset: str, params: dict) -> str:

@@ -4,7 +4,8 @@ With :class:`numpy.random.SeedSequence` and the user's seed ``S``:
 
 * ``(S, run, 0)``: the dataset (a simulator's truth and sensor noise);
 * ``(S, run, 1)``: the task (synthesised measurement noise, the prior draw);
-* ``(S, run, 2, crc32(filter name))``: the filter's own randomness.
+* ``(S, run, 2, crc32(filter name))``: the filter's own randomness;
+* ``(S, run, 3)``: injected faults (:mod:`replay.data.faults`; one child stream per fault).
 
 So in a given run every filter sees the same measurements (common random
 numbers: paired comparisons have tight intervals), and adding a filter changes
@@ -17,7 +18,7 @@ import zlib
 
 import numpy as np
 
-DATA, TASK, FILTER = 0, 1, 2
+DATA, TASK, FILTER, FAULT = 0, 1, 2, 3
 
 
 def rng_for(seed: int, run: int, *stream: int) -> np.random.Generator:
