@@ -23,6 +23,8 @@ OVER = {  # file:function -> parameters, as measured when the rule was written
     "replay/sim/lake_depth.py:make_frame": 11, "replay/campaign/execute.py:_run_locked": 11,
     "filters/p002/pso.py:optimize": 11, "filters/kalman_kernels.py:joseph_update_gated": 11,
     "filters/kalman_kernels.py:sigma_predict": 11, "filters/kalman_kernels.py:innovation_moments_into": 11,
+    # compiled kernels (numba: arrays in, no records), added with the RTS smoothers (issue 39)
+    "filters/rts_loops.py:rts_correct": 14, "filters/rts_loops.py:sigma_smooth_run": 12,
 }
 
 

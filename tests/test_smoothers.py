@@ -272,10 +272,11 @@ def test_rts_on_a_recording_without_gtsam(shared_dir):
 
     bag = shared_dir / "datasets" / "bags" / "robot_localization" / "test1.bag"
     mapping = Path(__file__).resolve().parents[1] / "docs" / "mappings" / "rl_test1_fusion.toml"
+    had_gtsam = "gtsam" in sys.modules  # another test of this worker may have run a GTSAM row
     ev = evaluate(str(bag), task="fusion", filters=["ekf", "ekf+rts"], runs=1, first=3000,
                   dataset_params={"mapping": str(mapping)}, recorded=())
     rows = {r["filter"]: r for r in ev.rows}
-    assert "gtsam" not in sys.modules
+    assert had_gtsam or "gtsam" not in sys.modules
     assert rows["ekf+rts"]["pos_rmse"] == pytest.approx(1.3880, abs=2e-3)
     assert rows["ekf"]["pos_rmse"] == pytest.approx(1.6542, abs=2e-3)
     assert rows["ekf"]["gap_to"] == "ekf+rts" and rows["ekf"]["gap_m"] == pytest.approx(0.2663, abs=2e-3)

@@ -226,7 +226,8 @@ def _tuned_section(tr) -> list:
     ]
 
 
-def generate(recordings, out, work, *, filters, trials, repeats, runs, data_dir, bags_dir, root, command):
+def generate(recordings, out, work, *, filters, trials, repeats, runs, dirs, command):
+    data_dir, bags_dir, root = dirs  # the Bohai folder, the bags' folder, the checkout (mappings)
     from replay.util.errors import ReplayError
     from replay.util.files import write_atomic
 
@@ -291,9 +292,7 @@ def main(argv=None):
         trials=a.trials,
         repeats=a.repeats,
         runs=a.runs,
-        data_dir=a.data_dir,
-        bags_dir=a.bags_dir,
-        root=root,
+        dirs=(a.data_dir, a.bags_dir, root),
         command=command,
     )
 

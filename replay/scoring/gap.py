@@ -28,7 +28,6 @@ import math
 import numpy as np
 
 from replay.scoring import metrics
-from replay.scoring.significance import t_interval
 
 COLUMNS = ("gap_to", "gap_m", "gap_m_ci95", "gap_ratio", "gap_ratio_ci95")
 
@@ -57,6 +56,7 @@ def _mean(row) -> float:
 def add_gap(rows: list[dict], configs: dict, records: dict) -> list[dict]:
     """Add the :data:`COLUMNS` to ``rows`` (in place; module docstring); ``configs``: config hash
     -> configuration, ``records``: config hash -> its run records."""
+    from replay.scoring.significance import t_interval  # scipy.stats: only where a smoother row ran
     from replay.scoring.summary import group_key, per_run
 
     groups = {}
