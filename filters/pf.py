@@ -35,10 +35,13 @@ from __future__ import annotations
 import numpy as np
 
 from replay.model import Model, noise_factor
+from replay.util.angles import angle_mask
+from replay.util.errors import ReplayError
 from replay.util.params import Param
 
 from . import gating, particles, pf_loop
 from .base import Filter, on_points
+from .compiled import measured_steps
 from .resampling import SCHEMES
 
 
@@ -56,6 +59,15 @@ class ParticleFilter(Filter):
             "resample when ESS < ess_threshold * N (1: every step, 0: never)",
             low=0.0,
             high=1.0,
+        ),
+        Param(
+            "proposal",
+            str,
+            "auto",
+            "importance density: bootstrap (the prior), optimal (p(x_k | x_k-1, z_k) where the "
+            "measurement selects state components, Q and R diagonal: Doucet et al. 2000), auto: "
+            "optimal where it applies (the fusion task's kinematic models, no gate), else bootstrap",
+            choices=("auto", "bootstrap", "optimal"),
         ),
         Param(
             "roughening",
@@ -93,6 +105,32 @@ def propagate(model, X, k, rngs):
     return Y
 
 
+def optimal_applies(flt, model, X0) -> bool:
+    """Whether the engine uses the optimal proposal (the ``proposal`` parameter): the model
+    declares a selection measurement (``model.selection()``), draws no noise of its own, weighs
+    by the Gaussian likelihood, has no gate, and its h is that selection at the start states
+    (a wrapper that changes h is caught); ``proposal = "optimal"`` where it does not apply is
+    refused, ``auto`` falls back to the bootstrap."""
+    proposal = getattr(flt, "proposal", "bootstrap")  # a subclass without the parameter: the bootstrap
+    if proposal == "bootstrap":
+        return False
+    sel = pf_loop.selection(model)
+    ok = (
+        sel is not None
+        and type(model).sample_f is Model.sample_f
+        and type(model).loglik is Model.loglik
+        and gating.active(model) is None
+        and np.array_equal(np.asarray(model.h(X0, 0), float), X0[:, sel[0]] * sel[1])
+    )
+    if not ok and proposal == "optimal":
+        raise ReplayError(
+            f"pf: proposal = \"optimal\" needs a model whose measurement selects state components "
+            f"with diagonal Q and R and no gate (the fusion task's); {type(model).__name__} is not one: "
+            "use proposal = \"auto\" or \"bootstrap\""
+        )
+    return ok
+
+
 class PFEngine:
     """M runs of a :class:`ParticleFilter` (or a subclass): particles (M, N, nx)."""
 
@@ -103,6 +141,7 @@ class PFEngine:
 
     def start(self, X0, P0):
         M, N = len(X0), self.flt.n_particles
+        self.optimal = optimal_applies(self.flt, self.model, X0)
         self.ids = np.arange(M)
         self.active = list(self.rngs)
         self.X = particles.gaussian(X0, P0, N, self.rngs)
@@ -128,8 +167,11 @@ class PFEngine:
             info["mean_ess"] = float(self.ess_sum[m] / self.ess_steps[m])
 
     def step(self, k, Z, finite):
-        self.propagate(k)
-        self.update(k, Z, finite)
+        if self.optimal:
+            self.propose(k, Z, finite)
+        else:
+            self.propagate(k)
+            self.update(k, Z, finite)
         x, P = particles.estimate(self.X, self.w, self.model.x_angles)
         self.ess_sum[self.ids] += particles.ess(self.w)
         self.ess_steps[self.ids] += 1
@@ -147,6 +189,24 @@ class PFEngine:
     def propagate(self, k):
         """x^i ~ p(x_k | x^i_{k-1}) for every active run (:func:`propagate`)."""
         self.X = propagate(self.model, self.X, k, self.active)
+
+    def propose(self, k, Z, finite):
+        """The optimal proposal's propagation and weighting of every active run
+        (:func:`replay.filters.particles.propose`, each run from its own generator)."""
+        m = self.model
+        idx, sgn = (np.ascontiguousarray(a) for a in pf_loop.selection(m))
+        Y = on_points(m.f, self.X, k)
+        sd = np.sqrt(np.diag(m.process_cov(k)))
+        rvar = np.ascontiguousarray(np.diag(m.measurement_cov(k)), dtype=float)
+        zmask = np.array(angle_mask(m.z_angles, m.nz))
+        ll = np.zeros(Y.shape[:2])
+        for j, g in enumerate(self.active):
+            sel = measured_steps(finite[j][None])[0]
+            particles.propose(Y[j], sd, np.ascontiguousarray(Z[j], dtype=float), sel, idx, sgn, rvar, zmask, ll[j], g)
+        self.X = Y
+        rows = np.flatnonzero(finite.any(axis=1))
+        if len(rows):
+            self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], ll[rows])
 
     def update(self, k, Z, finite):
         """Weights of the runs with a measurement (missing components left out of the likelihood, and

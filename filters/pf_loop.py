@@ -39,7 +39,7 @@ from replay.util.kernels import LOG_2PI, gauss_loglik
 
 from .compiled import ROWS_KERNEL, bound, cov_stacks, derived_from_kernels, grain, loop_ready
 from .compiled import measured_steps, param_stacks, row_kernels, split
-from .particles import ess_rows, moments, perturb, roughen, weights
+from .particles import ess_rows, moments, perturb, propose, roughen, weights
 from .resampling import SCHEMES, invert_sorted, systematic
 
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
@@ -70,6 +70,10 @@ def pf_run(
     limit,
     rough,
     logw0,
+    opt,
+    sidx,
+    ssgn,
+    rvar,
     Xout,
     Pout,
     ess,
@@ -91,10 +95,17 @@ def pf_run(
     count = 0
     for k in range(steps):
         f(X, Pf[k], Y)  # propagate: f on every particle, then the noise
-        perturb(Y, qsd[k % qsd.shape[0]], g)
+        if opt:  # the optimal proposal: moved and drawn given z_k, ll its predictive likelihood
+            propose(Y, qsd[k % qsd.shape[0]], Z[k], sel[k], sidx, ssgn, rvar[k % rvar.shape[0]], zmask, ll, g)
+        else:
+            perturb(Y, qsd[k % qsd.shape[0]], g)
         X, Y = Y, X
         d = sel[k, 0]
-        if d > 0:  # weight (no measurement: the weights stay)
+        if d > 0 and opt:
+            for i in range(N):
+                logw[i] += ll[i]
+            weights(logw, w)
+        elif d > 0:  # weight (no measurement: the weights stay)
             h(X, Ph[k], zh)
             u = fac[k]
             if d == nz:  # every component: the arrays as they are
@@ -153,6 +164,10 @@ PF_RUN = types.int64(
     types.float64,
     types.float64,
     types.float64,
+    types.boolean,
+    types.int64[::1],
+    _V,
+    _M,
     _M,
     _M3,
     _V,
@@ -190,7 +205,10 @@ def run(engine, Z, finite):
     xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
     X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
-    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0))
+    opt = bool(engine.optimal)
+    sidx, ssgn = selection(m) if opt else (np.zeros(0, np.int64), np.zeros(0))
+    rvar = np.ascontiguousarray(np.diagonal(covs[1], axis1=1, axis2=2)) if opt else np.zeros((1, nz))
+    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0), opt, sidx, ssgn, rvar)
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
@@ -220,6 +238,16 @@ def run(engine, Z, finite):
             engine.ess_sum[engine.ids[j]] += np.cumsum(E[j])[-1]
             engine.ess_steps[engine.ids[j]] += steps
     return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
+
+
+def selection(model):
+    """``(index, sign)`` float/int arrays of a model whose h selects state components
+    (``model.selection()``), else None."""
+    sel = getattr(model, "selection", None)
+    if sel is None:
+        return None
+    index, sign = sel()
+    return np.asarray(index, np.int64), np.asarray(sign, float)
 
 
 def process_sd(Q):
