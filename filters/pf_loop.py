@@ -5,6 +5,8 @@ For one run, every step k (module docstring of :mod:`replay.filters.pf`)::
     propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (particles.perturb)
     weight      l^i <- l^i + log N(z_k; h(x^i), R_k)        (replay.util.kernels.gauss_loglik; the
                 components measured at k only, R_k restricted to them)
+    (optimal proposal, ``opt``: both at once, particles.propose: drawn from the Kalman update of
+    f(x^i) by z_k, l^i <- l^i + log N(z_k; sign f(x^i), sign^2 Q + R_k), the measured components only)
     normalise   w, l <- particles.weights(l)                   (log domain)
     estimate    x_k, P_k <- particles.moments(x, w)          (circular means for angles)
     resample    when ESS = 1 / sum w^2 < threshold * N (particles.ess_rows): systematic
