@@ -23,8 +23,9 @@ components, ``h(x) = sign * x[index]`` with Q and R diagonal (the kinematic mode
 closed form (Doucet, Godsill & Andrieu 2000, §II.D) and used by default (``auto``):
 each particle's measured components are drawn from the Kalman update of f(x^i) with Q by the
 measurement and weighted by the predictive p(z_k | x^i_{k-1}) =
-N(z; sign f(x^i), sign^2 Q + R) (:func:`replay.filters.particles.propose`); with a gate
-(:mod:`replay.filters.gating`) or any other model, ``auto`` is the bootstrap.
+N(z; sign f(x^i), sign^2 Q + R) (:func:`replay.filters.particles.propose`); a gate
+(:mod:`replay.filters.gating`) judges the predicted particles f(x^i) with Q added to the
+spread; with any other model ``auto`` is the bootstrap.
 
 The estimate is the posterior mean E[x_k | z_1..k]. When nothing measures the heading it
 spreads as the declared noise says (the odometry's recorded yaw-rate variance and
@@ -87,7 +88,7 @@ class ParticleFilter(Filter):
             "auto",
             "importance density: bootstrap (the prior), optimal (p(x_k | x_k-1, z_k) where the "
             "measurement selects state components, Q and R diagonal: Doucet et al. 2000), auto: "
-            "optimal where it applies (the fusion task's kinematic models, no gate), else bootstrap",
+            "optimal where it applies (the fusion task's kinematic models), else bootstrap",
             choices=("auto", "bootstrap", "optimal"),
         ),
         Param(
@@ -129,7 +130,7 @@ def propagate(model, X, k, rngs):
 def optimal_applies(flt, model, X0) -> bool:
     """Whether the engine uses the optimal proposal (the ``proposal`` parameter): the model
     declares a selection measurement (``model.selection()``), draws no noise of its own, weighs
-    by the Gaussian likelihood, has no gate, and its h is that selection at the start states
+    by the Gaussian likelihood, and its h is that selection at the start states
     (a wrapper that changes h is caught); ``proposal = "optimal"`` where it does not apply is
     refused, ``auto`` falls back to the bootstrap."""
     proposal = getattr(flt, "proposal", "bootstrap")  # a subclass without the parameter: the bootstrap
@@ -140,13 +141,12 @@ def optimal_applies(flt, model, X0) -> bool:
         sel is not None
         and type(model).sample_f is Model.sample_f
         and type(model).loglik is Model.loglik
-        and gating.active(model) is None
         and np.array_equal(np.asarray(model.h(X0, 0), float), X0[:, sel[0]] * sel[1])
     )
     if not ok and proposal == "optimal":
         raise ReplayError(
             f"pf: proposal = \"optimal\" needs a model whose measurement selects state components "
-            f"with diagonal Q and R and no gate (the fusion task's); {type(model).__name__} is not one: "
+            f"with diagonal Q and R (the fusion task's); {type(model).__name__} is not one: "
             "use proposal = \"auto\" or \"bootstrap\""
         )
     return ok
@@ -221,6 +221,7 @@ class PFEngine:
         rvar = np.ascontiguousarray(np.diag(m.measurement_cov(k)), dtype=float)
         zmask = np.array(angle_mask(m.z_angles, m.nz))
         ll = np.zeros(Y.shape[:2])
+        finite = self.gate(k, Z, finite, Y, sgn**2 * sd[idx] ** 2)  # the predictive: f(x^i), Q + R
         for j, g in enumerate(self.active):
             sel = measured_steps(finite[j][None])[0]
             particles.propose(Y[j], sd, np.ascontiguousarray(Z[j], dtype=float), sel, idx, sgn, rvar, zmask, ll[j], g)
@@ -240,7 +241,7 @@ class PFEngine:
         if len(rows):
             self.w[rows], self.logw[rows] = self.flt.weigh(self.logw[rows], self.loglik(k, Z, finite, rows))
 
-    def gate(self, k, Z, finite):
+    def gate(self, k, Z, finite, X=None, extra=None):
         """``finite`` without the components the gates reject (:func:`replay.filters.gating.particle_rejects`,
         with the weights before this update), the rejections counted per run."""
         gates = self.tally.gates
@@ -248,7 +249,8 @@ class PFEngine:
             return finite
         finite = np.array(finite)
         for j in np.flatnonzero(finite.any(axis=1)):
-            cut, hit = gating.particle_rejects(gates, self.model, self.X[j], self.w[j], Z[j], k, finite[j])
+            Xj = self.X[j] if X is None else X[j]
+            cut, hit = gating.particle_rejects(gates, self.model, Xj, self.w[j], Z[j], k, finite[j], extra)
             finite[j] &= ~cut
             self.tally.count[self.ids[j], hit] += 1
         return finite

@@ -123,3 +123,15 @@ def test_optimal_refused_where_it_does_not_apply():
     boot = make_filter("pf", n_particles=10, proposal="bootstrap").run_batch(model, Z, np.zeros((1, 2)),
                                                                           np.eye(2)[None], [np.random.default_rng(0)])
     assert np.array_equal(auto[0].x, boot[0].x)  # auto: the bootstrap where the optimal does not apply
+
+
+@pytest.mark.parametrize("proposal", ["bootstrap", "optimal"])
+def test_gates_reject_the_injected_outliers_with_either_proposal(proposal):
+    """tests/test_fusion_noise.py's 12 outlying fixes among 60: both proposals reject exactly
+    those (the optimal one judges f(x^i) with Q added to the particles' spread)."""
+    from test_fusion_noise import _gated_problem
+
+    model, Z, x0, P0, truth, n_bad = _gated_problem(5.0)
+    r = make_filter("pf", n_particles=500, proposal=proposal).run(model, Z, x0, P0, np.random.default_rng(0))
+    assert r.info["rejected"] == {"gps.position": n_bad}
+    assert np.sqrt(np.mean(np.sum((r.x[:, :2] - truth) ** 2, axis=1))) < 1.5
