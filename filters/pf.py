@@ -152,6 +152,21 @@ def optimal_applies(flt, model, X0) -> bool:
     return ok
 
 
+def identity_at_start(model, X0, P0) -> bool:
+    """Whether the first step's transition is the identity on the prior (the fusion task's steps
+    before the first message: dt = 0) and every P0 diagonal: then the prior's spread can be the
+    first proposal's (:meth:`PFEngine.start`). Checked exactly at x0 and x0 +- one prior
+    standard deviation along each axis."""
+    X0, P0 = np.asarray(X0, float), np.asarray(P0, float)
+    M, n = X0.shape
+    d = np.diagonal(P0, axis1=1, axis2=2)
+    if not np.array_equal(P0, d[:, :, None] * np.eye(n)) or (d < 0).any():
+        return False
+    steps = np.sqrt(d)[:, None, :] * np.concatenate([np.zeros((1, n)), np.eye(n), -np.eye(n)])[None]
+    pts = X0[:, None, :] + steps
+    return bool(np.array_equal(np.asarray(on_points(model.f, pts, 0), float), pts))
+
+
 class PFEngine:
     """M runs of a :class:`ParticleFilter` (or a subclass): particles (M, N, nx)."""
 
@@ -165,7 +180,15 @@ class PFEngine:
         self.optimal = optimal_applies(self.flt, self.model, X0)
         self.ids = np.arange(M)
         self.active = list(self.rngs)
-        self.X = particles.gaussian(X0, P0, N, self.rngs)
+        self.sd0 = None  # the first step's proposal spread, when it carries the prior (below)
+        if self.optimal and identity_at_start(self.model, X0, P0):
+            # x_0 = f(x_-1) + q = x_-1 + q ~ N(x0, P0 + Q_0): the first proposal draws from that prior's
+            # update by z_0 (equal weights), not from N(x0, P0) particles a sharp z_0 leaves one of
+            self.X = np.repeat(np.asarray(X0, float)[:, None, :], N, axis=1)
+            q0 = np.diag(self.model.process_cov(0))
+            self.sd0 = np.sqrt(np.diagonal(P0, axis1=1, axis2=2) + q0)
+        else:
+            self.X = particles.gaussian(X0, P0, N, self.rngs)
         self.logw0 = -np.log(N)
         self.logw = np.full((M, N), -np.log(N))
         self.w = np.full((M, N), 1.0 / N)
@@ -177,6 +200,7 @@ class PFEngine:
     def keep(self, ok):
         self.ids = self.ids[ok]
         self.tally.keep(ok)
+        self.sd0 = None if self.sd0 is None else self.sd0[ok]
         self.active = [self.rngs[i] for i in self.ids]
         self.X, self.logw, self.w = self.X[ok], self.logw[ok], self.w[ok]
         self.no_nis = self.no_nis[0][ok], self.no_nis[1][ok]
@@ -218,13 +242,15 @@ class PFEngine:
         idx, sgn = (np.ascontiguousarray(a) for a in pf_loop.selection(m))
         Y = on_points(m.f, self.X, k)
         sd = np.sqrt(np.diag(m.process_cov(k)))
+        sd = self.sd0 if k == 0 and self.sd0 is not None else np.broadcast_to(sd, (len(Y), len(sd)))
         rvar = np.ascontiguousarray(np.diag(m.measurement_cov(k)), dtype=float)
         zmask = np.array(angle_mask(m.z_angles, m.nz))
         ll = np.zeros(Y.shape[:2])
-        finite = self.gate(k, Z, finite, Y, sgn**2 * sd[idx] ** 2)  # the predictive: f(x^i), Q + R
+        finite = self.gate(k, Z, finite, Y, sgn**2 * sd[:, idx] ** 2)  # the predictive: f(x^i), Q + R
         for j, g in enumerate(self.active):
             sel = measured_steps(finite[j][None])[0]
-            particles.propose(Y[j], sd, np.ascontiguousarray(Z[j], dtype=float), sel, idx, sgn, rvar, zmask, ll[j], g)
+            z = np.ascontiguousarray(Z[j], dtype=float)
+            particles.propose(Y[j], np.ascontiguousarray(sd[j]), z, sel, idx, sgn, rvar, zmask, ll[j], g)
         self.X = Y
         rows = np.flatnonzero(finite.any(axis=1))
         if len(rows):
@@ -250,7 +276,8 @@ class PFEngine:
         finite = np.array(finite)
         for j in np.flatnonzero(finite.any(axis=1)):
             Xj = self.X[j] if X is None else X[j]
-            cut, hit = gating.particle_rejects(gates, self.model, Xj, self.w[j], Z[j], k, finite[j], extra)
+            ex = None if extra is None else extra[j]
+            cut, hit = gating.particle_rejects(gates, self.model, Xj, self.w[j], Z[j], k, finite[j], ex)
             finite[j] &= ~cut
             self.tally.count[self.ids[j], hit] += 1
         return finite

@@ -76,6 +76,7 @@ def pf_run(
     sidx,
     ssgn,
     rvar,
+    sd0,
     Xout,
     Pout,
     ess,
@@ -87,7 +88,9 @@ def pf_run(
     standard deviations (n,) (a stack of one: the same at every step); R of the measured
     components at step k as ``gauss_loglik`` takes it: entry u = fac[k] of rdiag (U,), rL (U, nz,
     nz), rinv (U, nz), rconst (U,) (its top-left d x d, first d); ``limit`` = threshold * N;
-    roughening constant ``rough`` = K; ``logw0`` = -log N. Writes Xout (steps, n), Pout (steps,
+    roughening constant ``rough`` = K; ``logw0`` = -log N; ``opt``: the optimal proposal of the
+    selection ``sidx``, ``ssgn`` with R's variances ``rvar`` (a stack); ``sd0``: the first step's
+    spread (qsd[0], or the prior's with it: PFEngine.start). Writes Xout (steps, n), Pout (steps,
     n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
     N, n = X.shape
     steps, nz = Z.shape
@@ -97,10 +100,11 @@ def pf_run(
     count = 0
     for k in range(steps):
         f(X, Pf[k], Y)  # propagate: f on every particle, then the noise
+        sdk = sd0 if k == 0 else qsd[k % qsd.shape[0]]
         if opt:  # the optimal proposal: moved and drawn given z_k, ll its predictive likelihood
-            propose(Y, qsd[k % qsd.shape[0]], Z[k], sel[k], sidx, ssgn, rvar[k % rvar.shape[0]], zmask, ll, g)
+            propose(Y, sdk, Z[k], sel[k], sidx, ssgn, rvar[k % rvar.shape[0]], zmask, ll, g)
         else:
-            perturb(Y, qsd[k % qsd.shape[0]], g)
+            perturb(Y, sdk, g)
         X, Y = Y, X
         d = sel[k, 0]
         if d > 0 and opt:
@@ -170,6 +174,7 @@ PF_RUN = types.int64(
     types.int64[::1],
     _V,
     _M,
+    _V,
     _M,
     _M3,
     _V,
@@ -224,6 +229,7 @@ def run(engine, Z, finite):
                 qsd,
                 *sels[j][1:],
                 *fixed,
+                qsd[0] if engine.sd0 is None else np.ascontiguousarray(engine.sd0[j]),
                 X[j],
                 P[j],
                 E[j],

@@ -58,10 +58,12 @@ def test_two_sensors_of_one_state_are_one_joint_update():
     assert abs(Y.var() / var - 1) < 0.02 and abs(Y.mean() - var * (2 + 8)) < 4 * math.sqrt(var / N)
 
 
-def kinematic(steps=80, runs=3):
-    """A 2-D kinematic model measuring u, v, r (some steps only r, some nothing) and yaw."""
+def kinematic(steps=80, runs=3, held=False):
+    """A 2-D kinematic model measuring u, v, r (some steps only r, some nothing) and yaw; ``held``:
+    the first step's dt = 0 (the fusion task's steps before the first message)."""
     rng = np.random.default_rng(4)
     dt = np.full(steps, 0.1)
+    dt[0] = 0.0 if held else dt[0]
     R = np.tile([0.01, 0.01, 0.02, 0.05], (steps, 1)) * (1 + (np.arange(steps) % 3))[:, None]
     model = Kinematic2D(dt, np.array([0.01, 0.01, 0.01, 0.5, 0.5, 0.5]), [3, 4, 5, 2], [1, 1, 1, 1], [3], R)
     Z = np.empty((runs, steps, 4))
@@ -69,15 +71,16 @@ def kinematic(steps=80, runs=3):
     Z[..., 3] = 0.1 * np.arange(steps) * 0.1
     Z += 0.05 * rng.normal(size=Z.shape)
     Z[:, :, 3] = np.where(np.arange(steps) % 10 == 0, Z[:, :, 3], np.nan)
-    Z[1, 20:30, :2] = np.nan
+    Z[min(1, runs - 1), 20:30, :2] = np.nan
     Z[:, 40:45] = np.nan
     X0 = np.zeros((runs, 6))
     return model, Z, X0, np.stack([np.eye(6) * 0.1] * runs)
 
 
 @pytest.mark.slow  # compiles the loop when numba's cache does not have it
-def test_loop_equals_the_steps_with_the_optimal_proposal(monkeypatch):
-    model, Z, X0, P0 = kinematic()
+@pytest.mark.parametrize("held", [False, True])
+def test_loop_equals_the_steps_with_the_optimal_proposal(monkeypatch, held):
+    model, Z, X0, P0 = kinematic(held=held)
     assert loop_ready(pf_loop.pf_run, pf_loop.PF_RUN, True)
     used, real = [], pf_loop.run
     flt = make_filter("pf", n_particles=200, roughening=0.1)
@@ -135,3 +138,27 @@ def test_gates_reject_the_injected_outliers_with_either_proposal(proposal):
     r = make_filter("pf", n_particles=500, proposal=proposal).run(model, Z, x0, P0, np.random.default_rng(0))
     assert r.info["rejected"] == {"gps.position": n_bad}
     assert np.sqrt(np.mean(np.sum((r.x[:, :2] - truth) ** 2, axis=1))) < 1.5
+
+
+def test_a_held_first_step_draws_from_the_prior_updated_by_the_first_message():
+    """dt = 0 at the first step (f the identity there): the first proposal carries the prior P0,
+    so a first message far sharper than P0 (velocity sd 0.01 against 1 m/s) leaves every particle
+    its weight (ESS = N at that step) instead of the one particle nearest it, and the particles'
+    u is the Kalman update of the prior: mean 1.5 * 1 / (1 + 1e-4), sd 0.01."""
+    model, Z, X0, P0 = kinematic(steps=1, runs=1, held=True)
+    Z[:] = np.nan
+    Z[0, 0, 0] = 1.5
+    model.R_steps[:, 0] = 1e-4
+    P0 = np.eye(6)[None] * 1.0
+    from replay.filters.pf import PFEngine
+
+    eng = PFEngine(make_filter("pf", n_particles=4000), model, [np.random.default_rng(0)])
+    eng.start(X0, P0)
+    assert eng.sd0 is not None and (eng.X == 0).all()
+    eng.propose(0, Z[:, 0], np.isfinite(Z[:, 0]))
+    assert np.allclose(eng.w, 1 / 4000, rtol=1e-12)
+    u = eng.X[0, :, 3]
+    assert abs(u.mean() - 1.5 / (1 + 1e-4)) < 4 * 0.01 / np.sqrt(4000) and abs(u.std() / 0.01 - 1) < 0.05
+    eng2 = PFEngine(make_filter("pf", n_particles=4000), kinematic(steps=1, runs=1)[0], [np.random.default_rng(0)])
+    eng2.start(X0, P0)
+    assert eng2.sd0 is None  # dt > 0 at the first step: the particles drawn from P0 as before
