@@ -153,9 +153,11 @@ def gate(y, S, B, group, limit2, rej):
     return cut
 
 
-def particle_rejects(gates: Gates, model, X, w, z, k, present) -> np.ndarray:
+def particle_rejects(gates: Gates, model, X, w, z, k, present, extra=None) -> np.ndarray:
     """The components of one run's measurement ``z`` (nz,) rejected by the particle rule (module
-    docstring), as a mask (nz,) (``present``: the components measured), and the groups rejected."""
+    docstring), as a mask (nz,) (``present``: the components measured), and the groups rejected.
+    ``extra`` (nz,): variances added to S (the process noise of the measured components when ``X``
+    are the predicted particles f(x^i) before it is drawn: the PF's optimal proposal)."""
     group, limit2 = np.asarray(gates.group), gates.limit2
     cut, hit = np.zeros(len(z), bool), []
     Zp = None
@@ -173,6 +175,8 @@ def particle_rejects(gates: Gates, model, X, w, z, k, present) -> np.ndarray:
             zh[i] = np.arctan2(w @ np.sin(H[:, i]), w @ np.cos(H[:, i]))
         D = residual(H, zh, angles)
         S = (D * w[:, None]).T @ D + np.asarray(model.measurement_cov(k), float)[np.ix_(idx, idx)]
+        if extra is not None:
+            S[np.diag_indices(len(idx))] += extra[idx]
         y = residual(z[idx], zh, angles)
         if float(y @ np.linalg.solve(S, y)) > limit2[g]:
             cut[idx] = True

@@ -37,7 +37,7 @@ import numpy as np
 
 from replay.util.angles import angle_mask
 from replay.util.kernels import point_mean as weighted_mean  # the w-weighted (circular) mean of rows
-from replay.util.kernels import wrap
+from replay.util.kernels import LOG_2PI, wrap, wrap_angle
 
 from .resampling import SCHEMES
 
@@ -129,6 +129,49 @@ def roughen(X, K, g):
         sd[q] = K * (hi - lo) * shrink
     perturb(X, sd, g)
     return X
+
+
+@nb.njit(cache=True)
+def propose(Y, sd, z, sel, idx, sgn, rvar, zmask, ll, g):
+    """One run's locally optimal proposal (Doucet, Godsill & Andrieu 2000, §II.D) for a
+    measurement that selects state components, ``h(x) = sgn * x[idx]`` with diagonal Q and R:
+    particles Y (N, n) = f(x^i) are moved in place to a draw of p(x_k | x^i_{k-1}, z_k) and
+    ``ll`` (N,) gets the predictive log-likelihoods log p(z_k | x^i_{k-1}) (the weight factor).
+
+    Per particle, from prior mean f(x^i) and variances sd^2, for each measured component j
+    (``sel = [d, j_0 .. j_{d-1}]``; s = idx[j], a = sgn[j]) in turn (a sequential Kalman update,
+    exact for a diagonal R, several components of one state included)::
+
+        S = a^2 v_s + R_j,  r = z_j - a m_s (wrapped: ``zmask``),  ll += log N(r; 0, S)
+        m_s += v_s a r / S,  v_s -= v_s^2 a^2 / S
+
+    then x^i = m + sqrt(v) e, e ~ N(0, I) drawn from ``g`` particle by particle, component by
+    component (:func:`perturb`'s order). No measured component (d = 0): :func:`perturb` itself,
+    ``ll`` untouched."""
+    d = sel[0]
+    if d == 0:
+        perturb(Y, sd, g)
+        return
+    N, n = Y.shape
+    v = np.empty(n)
+    for i in range(N):
+        for q in range(n):
+            v[q] = sd[q] * sd[q]
+        s_ll = 0.0
+        for c in range(d):
+            j = sel[1 + c]
+            s, a = idx[j], sgn[j]
+            S = a * a * v[s] + rvar[j]
+            r = z[j] - a * Y[i, s]
+            if zmask[j]:
+                r = wrap_angle(r)
+            s_ll -= 0.5 * (r * r / S + math.log(S) + LOG_2PI)
+            K = v[s] * a / S
+            Y[i, s] += K * r
+            v[s] -= K * a * v[s]
+        ll[i] = s_ll
+        for q in range(n):
+            Y[i, q] += g.standard_normal() * math.sqrt(v[q])
 
 
 # --- Python API: allocate, call the kernels ---------------------------------------------

@@ -5,6 +5,8 @@ For one run, every step k (module docstring of :mod:`replay.filters.pf`)::
     propagate   x^i <- f(x^i) + sd * e^i,   e^i ~ N(0, I) from the run's generator   (particles.perturb)
     weight      l^i <- l^i + log N(z_k; h(x^i), R_k)        (replay.util.kernels.gauss_loglik; the
                 components measured at k only, R_k restricted to them)
+    (optimal proposal, ``opt``: both at once, particles.propose: drawn from the Kalman update of
+    f(x^i) by z_k, l^i <- l^i + log N(z_k; sign f(x^i), sign^2 Q + R_k), the measured components only)
     normalise   w, l <- particles.weights(l)                   (log domain)
     estimate    x_k, P_k <- particles.moments(x, w)          (circular means for angles)
     resample    when ESS = 1 / sum w^2 < threshold * N (particles.ess_rows): systematic
@@ -39,7 +41,7 @@ from replay.util.kernels import LOG_2PI, gauss_loglik
 
 from .compiled import ROWS_KERNEL, bound, cov_stacks, derived_from_kernels, grain, loop_ready
 from .compiled import measured_steps, param_stacks, row_kernels, split
-from .particles import ess_rows, moments, perturb, roughen, weights
+from .particles import ess_rows, moments, perturb, propose, roughen, weights
 from .resampling import SCHEMES, invert_sorted, systematic
 
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
@@ -70,6 +72,11 @@ def pf_run(
     limit,
     rough,
     logw0,
+    opt,
+    sidx,
+    ssgn,
+    rvar,
+    sd0,
     Xout,
     Pout,
     ess,
@@ -81,7 +88,9 @@ def pf_run(
     standard deviations (n,) (a stack of one: the same at every step); R of the measured
     components at step k as ``gauss_loglik`` takes it: entry u = fac[k] of rdiag (U,), rL (U, nz,
     nz), rinv (U, nz), rconst (U,) (its top-left d x d, first d); ``limit`` = threshold * N;
-    roughening constant ``rough`` = K; ``logw0`` = -log N. Writes Xout (steps, n), Pout (steps,
+    roughening constant ``rough`` = K; ``logw0`` = -log N; ``opt``: the optimal proposal of the
+    selection ``sidx``, ``ssgn`` with R's variances ``rvar`` (a stack); ``sd0``: the first step's
+    spread (qsd[0], or the prior's with it: PFEngine.start). Writes Xout (steps, n), Pout (steps,
     n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
     N, n = X.shape
     steps, nz = Z.shape
@@ -91,10 +100,18 @@ def pf_run(
     count = 0
     for k in range(steps):
         f(X, Pf[k], Y)  # propagate: f on every particle, then the noise
-        perturb(Y, qsd[k % qsd.shape[0]], g)
+        sdk = sd0 if k == 0 else qsd[k % qsd.shape[0]]
+        if opt:  # the optimal proposal: moved and drawn given z_k, ll its predictive likelihood
+            propose(Y, sdk, Z[k], sel[k], sidx, ssgn, rvar[k % rvar.shape[0]], zmask, ll, g)
+        else:
+            perturb(Y, sdk, g)
         X, Y = Y, X
         d = sel[k, 0]
-        if d > 0:  # weight (no measurement: the weights stay)
+        if d > 0 and opt:
+            for i in range(N):
+                logw[i] += ll[i]
+            weights(logw, w)
+        elif d > 0:  # weight (no measurement: the weights stay)
             h(X, Ph[k], zh)
             u = fac[k]
             if d == nz:  # every component: the arrays as they are
@@ -153,6 +170,11 @@ PF_RUN = types.int64(
     types.float64,
     types.float64,
     types.float64,
+    types.boolean,
+    types.int64[::1],
+    _V,
+    _M,
+    _V,
     _M,
     _M3,
     _V,
@@ -190,7 +212,10 @@ def run(engine, Z, finite):
     xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
     X, P, E = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     Z = np.ascontiguousarray(Z, dtype=float)
-    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0))
+    opt = bool(engine.optimal)
+    sidx, ssgn = selection(m) if opt else (np.zeros(0, np.int64), np.zeros(0))
+    rvar = np.ascontiguousarray(np.diagonal(covs[1], axis1=1, axis2=2)) if opt else np.zeros((1, nz))
+    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0), opt, sidx, ssgn, rvar)
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
@@ -204,6 +229,7 @@ def run(engine, Z, finite):
                 qsd,
                 *sels[j][1:],
                 *fixed,
+                qsd[0] if engine.sd0 is None else np.ascontiguousarray(engine.sd0[j]),
                 X[j],
                 P[j],
                 E[j],
@@ -220,6 +246,16 @@ def run(engine, Z, finite):
             engine.ess_sum[engine.ids[j]] += np.cumsum(E[j])[-1]
             engine.ess_steps[engine.ids[j]] += steps
     return X, P, np.full((M, steps), np.nan), np.zeros((M, steps), int)
+
+
+def selection(model):
+    """``(index, sign)`` float/int arrays of a model whose h selects state components
+    (``model.selection()``), else None."""
+    sel = getattr(model, "selection", None)
+    if sel is None:
+        return None
+    index, sign = sel()
+    return np.asarray(index, np.int64), np.asarray(sign, float)
 
 
 def process_sd(Q):

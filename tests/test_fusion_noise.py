@@ -137,7 +137,8 @@ def test_gating_rejects_injected_outliers_and_the_ungated_run_is_worse(name):
     """Each filter, gated at 5 (Mahalanobis), rejects exactly the 12 outlying fixes and none of the
     48 good ones; the same run without the gate is pulled further off. Position RMSE (m), gated /
     ungated / the same data without outliers: EKF 0.653 / 6.567 / 0.633, UKF 0.686 / 6.051 / 0.642,
-    CKF 0.685 / 7.523 / 0.641, PF (500 particles) 1.216 / 2.874 / 2.988."""
+    CKF 0.685 / 7.523 / 0.641, PF (500 particles, its optimal proposal: the gate judges f(x^i) with
+    Q added) 0.685 / 2.485 / 0.620 (the bootstrap proposal: 1.216 / 2.874 / 2.988)."""
     flt = make_filter(name, **({"n_particles": 500} if name == "pf" else {}))
     model, Z, x0, P0, truth, n_bad = _gated_problem(5.0)
     gated = flt.run(model, Z, x0, P0, np.random.default_rng(0))
@@ -148,8 +149,8 @@ def test_gating_rejects_injected_outliers_and_the_ungated_run_is_worse(name):
     e_gated, e_free = _rmse(gated, truth), _rmse(free, truth)
     clean = flt.run(_gated_problem(None, outliers=False)[0], _gated_problem(None, outliers=False)[1], x0, P0,
                     np.random.default_rng(0))
-    if name == "pf":
-        assert e_gated < 1.5 and e_free > 2.0 * e_gated, (e_free, e_gated)
+    if name == "pf":  # within 15 % of the run without outliers, the ungated run 3.6x worse
+        assert e_gated < 1.15 * _rmse(clean, truth) and e_free > 3.0 * e_gated, (e_free, e_gated)
     else:  # as good as without the outliers (within 10 %), the ungated run 9-11x worse
         assert e_gated < 1.1 * _rmse(clean, truth) and e_free > 8.0 * e_gated, (e_free, e_gated)
     if name != "pf":  # the NIS leaves out the rejected components: its dof counts only the others

@@ -62,6 +62,11 @@ class Kinematic(KernelModel):
     def kernel_params(self, k):
         return self._p_f[k], self._p_h
 
+    def selection(self):
+        """``(index, sign)``: h(x) = sign * x[index], Q and R diagonal at every step (what the
+        particle filter's optimal proposal needs: :func:`replay.filters.particles.propose`)."""
+        return self.index, self.sign
+
     def process_cov(self, k):
         return np.diag(self.q * max(self.dt[k], 1e-9))
 
