@@ -90,12 +90,12 @@ def test_the_problem_and_its_model_are_never_changed():
 def test_default_configurations_keep_their_hashes():
     """Hashes computed on main before the settings existed (sim/auv-sonar steps=40, position, seed 3)."""
     assert config_hash(_cfg({})) == "b4f59638819c3dc8"
-    assert config_hash(_cfg({}, flt="pf")) == "d915cb34f3791fc8"
+    assert config_hash(_cfg({}, flt="pf")) == "417e5837a3ca8c0b"  # d915cb34f3791fc8 before pf.proposal (issue 34)
     assert config_hash(_cfg({}, flt="ukf")) == "1060d516bc82d9d8"
     assert config_hash(_cfg({}, flt="mmpf")) == "89c2c39f847773b0"
     assert config_hash(_cfg({"q_scale": 1, "Q": None, "r_scale": 1.0})) == "b4f59638819c3dc8"  # = the defaults
     assert make_filter("pf").params() == {"n_particles": 1000, "resampling": "systematic", "ess_threshold": 1.0,
-                                          "roughening": 0.0}
+                                          "roughening": 0.0, "proposal": "auto"}
     h = config_hash(_cfg({"q_scale": 0.3}))
     assert h != "b4f59638819c3dc8" and h != config_hash(_cfg({"q_scale": 0.31}))
     assert make_filter("ukf", R=[[2, 0.5], [0.5, 2]]).params()["R"] == [[2.0, 0.5], [0.5, 2.0]]

@@ -191,7 +191,7 @@ def test_declared_parameters_of_the_kalman_family_and_pf():
     assert make_filter("ukf").params() == {"alpha": 0.5, "beta": 2.0, "kappa": 0.0}
     assert make_filter("ckf").params() == {} and make_filter("ekf").params() == {}
     assert make_filter("pf").params() == {"n_particles": 1000, "resampling": "systematic", "ess_threshold": 1.0,
-                                          "roughening": 0.0}
+                                          "roughening": 0.0, "proposal": "auto"}
     assert make_filter("wf-pf").params() == {"n_particles": 1000, "alpha": 0.75, "weight_floor": 1e-99,
                                              "resampling": "systematic", "ess_threshold": 1.0}
     for name, bad in (("ukf", {"alpha": 0.0}), ("ukf", {"beta": -1.0}), ("ukf", {"alpha": True}),

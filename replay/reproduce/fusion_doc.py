@@ -61,10 +61,10 @@ def _dparams(rec, root):
 
 def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     """The outage protocol at defaults: headline rows and each filter against hold-last-fix."""
-    import replay
+    from replay.api import evaluate
     from replay.scoring import outages
 
-    ev = replay.evaluate(
+    ev = evaluate(
         _dataset(rec, bags_dir),
         task="fusion",
         filters=list(filters),
