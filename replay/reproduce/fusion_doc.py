@@ -61,7 +61,7 @@ def _dparams(rec, root):
 
 def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     """The outage protocol at defaults: headline rows and each filter against hold-last-fix."""
-    from replay.api import evaluate
+    from replay.run.evaluation import evaluate
     from replay.scoring import outages
 
     ev = evaluate(
