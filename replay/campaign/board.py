@@ -70,7 +70,7 @@ def campaign_rows(
     else:
         rows.sort(key=lambda r: (r["dataset"], r["task"], r["filter"], r["params"]))
     summary.label(rows)
-    return summary.against_measurements(summary.add_paired(rows, configs, records, baseline), configs)
+    return summary.against_measurements(summary.add_paired(rows, configs, records, baseline), configs, records)
 
 
 def paired_rows(out, rows, metric_names=("pos_rmse", "ate"), *, collected=None) -> list[dict]:

@@ -140,7 +140,9 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     rows = summary.add_paired(
         rows, {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}, baseline
     )
-    return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
+    return summary.against_measurements(
+        rows, {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}
+    )
 
 
 def evaluate(
