@@ -4,7 +4,9 @@
   a filter given no position input and no velocity it uses; its error is the start's.
 * ``reference_input``: the reference is read from a topic the row also takes as input (a bag's
   mapping declaring one topic as the reference and as a fused input or a recorded estimate): the
-  row is scored against its own input (the recorded odometry scores exactly 0).
+  row is scored against its own input (the recorded odometry scores exactly 0). Not a filter row whose
+  task withholds the scored samples from every filter (``holdout``: every gps_every-th fix fed, scored
+  at the others; :mod:`replay.scoring.provenance` states that sharing in the table's header instead).
 
 :func:`reference_inputs` finds the second from a run's frame metadata (the mapping, the roles and
 the task's inputs); :func:`marks` gives the phrases the tables print.
