@@ -11,7 +11,7 @@ Topics (standard ROS 2 types only; header stamps = log times + ``latency``):
 |---|---|---|---|
 | ``/dvl/twist`` | geometry_msgs/TwistWithCovarianceStamped | 5 Hz | body-frame velocity + N(0, sigma_dvl^2) |
 | ``/pressure`` | sensor_msgs/FluidPressure | 4 Hz | p_atm + rho g depth + N(0, sigma_p^2) |
-| ``/imu/data`` | sensor_msgs/Imu | 20 Hz | body rates (+ N(0, sigma_gyro^2) on each axis), attitude (yaw + N(0, sigma_yaw^2); roll and pitch exactly 0), acceleration exactly gravity |
+| ``/imu/data`` | sensor_msgs/Imu | 20 Hz | body rates + N(0, sigma_gyro^2), attitude (below), gravity |
 | ``/reference/pose`` | geometry_msgs/PoseStamped | 10 Hz | true position (ENU, up = -depth) and heading |
 
 Which channels carry noise: the DVL velocity (3 axes), the pressure, the gyro (3 axes) and the yaw.
