@@ -34,6 +34,9 @@ def test_a_simulation_scores_against_its_truth_at_defaults(tmp_path):
     assert rec == {"kind": "simulated truth", "source": "the simulator's true state", "independent": True,
                    "shares": ""}
     assert _manifest(tmp_path / "o")["results"]["kf"]["reference"] == "simulated truth"
+    from replay.outputs.report import make_report
+
+    assert "<p class='note'>reference: simulated truth</p>" in make_report(tmp_path / "o").read_text()
     given = _eval("sim/linear", "-f", "kf", "--runs", 2, "-q", "-p", "kf.q_scale=2", "-o", tmp_path / "p")
     assert "defaults (not tuned" not in given  # a parameter set by hand is not the defaults
 
