@@ -110,3 +110,14 @@ def test_the_flag_needs_a_significant_paired_difference_and_an_independent_refer
     assert noisy["worse_than_measurements"] is False
     assert _flag([1.0] * 3, [0.5] * 3, shares="gps.position (the same topic)")["worse_than_measurements"] == ""
     assert _flag([1.0], [0.5])["worse_than_measurements"] == ""  # one run: no interval, no judgement
+
+
+def test_the_tune_board_names_the_reference():
+    from replay.tune.write import board_notes
+
+    rows = [{"label": f"ekf ({k})", "filter": "ekf", "test_score": 1.0, "train_score": 1.0,
+             "reference": "onboard solution", "reference_shares": "gps_position.position (built from the GPS)"}
+            for k in ("default", "tuned")]
+    notes = board_notes(rows)
+    assert notes[:2] == ["reference: onboard solution",
+                         "reference shares a source with a fed input: gps_position.position (built from the GPS)"]
