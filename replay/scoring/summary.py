@@ -86,7 +86,7 @@ ENSEMBLE = [
     "anis_inside",
     "anis_flag",
 ]
-TAIL = ["measurements", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
+TAIL = ["measurements", "reference", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
 # what the filters of a row were given (issue 24): "sensors" (the recording's own), "synthetic"
 # (a recording's reference plus the task's noise: a number about the task's noise generator, not
 # about the vehicle), "simulated" (a simulated dataset), "recorded" (a recorded estimate: no filter)
@@ -124,6 +124,7 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row.update({k: ("" if v is None else v) for k, v in done[0]["metrics"].items() if k.endswith("_unaligned")})
     row.update(
         measurements=measurements(cfg),
+        reference=next((r["reference"] for r in done if r.get("reference")), ""),  # provenance.py
         scored=agg["scored"],
         masked=agg["masked"],
         us_per_step=agg["us_per_step"],
@@ -136,9 +137,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     shared = next((r["reference_input"] for r in done if r.get("reference_input")), "")
     if shared:  # the reference is one of the row's inputs: a topic scored against itself
         row["reference_input"] = shared
-    for k in ("reference", "reference_shares"):  # issue 35: where the reference comes from (provenance.py)
-        if v := next((r[k] for r in done if r.get(k)), ""):
-            row[k] = v
+    if shares := next((r["reference_shares"] for r in done if r.get("reference_shares")), ""):
+        row["reference_shares"] = shares  # the fed inputs that share a source with the reference
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)
