@@ -121,3 +121,13 @@ def test_the_tune_board_names_the_reference():
     notes = board_notes(rows)
     assert notes[:2] == ["reference: onboard solution",
                          "reference shares a source with a fed input: gps_position.position (built from the GPS)"]
+
+
+def test_a_task_that_scores_against_the_withheld_fixes_says_so(bohai_dir, tmp_path):
+    """dead-reckoning with score=fixes: the reference is the GPS's first fix after each dive, withheld."""
+    text = _eval("bohai/20220822_0_6", "--data-dir", bohai_dir, "--task", "dead-reckoning", "--task-param",
+                 "score=fixes", "-f", "ekf", "--runs", 1, "-q", "-o", tmp_path / "o")
+    head = text.split("\nfilter ")[0]
+    assert "reference: fed sensor (the first GPS fix after each dive, withheld from the filters)" in head
+    assert "reference shares a source with a fed input: gps (the same GPS: its other fixes are fed)" in head
+    assert "what is compared: each filter's error at the resurfacing fixes it was not given" in head

@@ -168,6 +168,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
         {**c["task_params"], **(problem.params or {})},
         simulated=dataset_ref.simulated(c["dataset"]),
         synthetic=bool(getattr(task, "SYNTHETIC", False)),
+        declared=getattr(problem, "reference_provenance", None),  # a task scoring against its own reference
     )
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only

@@ -47,10 +47,14 @@ def fed_channels(inputs: dict) -> dict:
     return {k: str(v).split(" ")[0] for k, v in (inputs or {}).items() if k not in ("reference", "z0")}
 
 
-def provenance(frame_meta: dict, inputs: dict, task_params: dict, *, simulated: bool, synthetic: bool) -> dict:
-    """The reference's provenance record for a run (module docstring)."""
+def provenance(
+    frame_meta: dict, inputs: dict, task_params: dict, *, simulated: bool, synthetic: bool, declared=None
+) -> dict:
+    """The reference's provenance record for a run (module docstring); ``declared``: a task's own record,
+    when the task scores against something else than the frame's reference (the same form as the frame's
+    ``meta["reference_provenance"]``, which it replaces; its ``compared`` replaces the default statement)."""
     fed = fed_channels(inputs)
-    declared = frame_meta.get("reference_provenance")
+    declared = declared or frame_meta.get("reference_provenance")
     ref_desc = str((inputs or {}).get("reference", "the recording's reference"))
     shares, every = {}, None
     if simulated:
@@ -84,6 +88,8 @@ def provenance(frame_meta: dict, inputs: dict, task_params: dict, *, simulated: 
             "fixes, and a filter behind the held fix measures how the sensor's errors are correlated in "
             "time, not whether fusion hurts"
         )
+    elif shares and isinstance(declared, dict) and declared.get("compared"):
+        out["compared"] = str(declared["compared"])
     elif shares:
         out["compared"] = (
             "an error is the distance to a solution built from a fed input, not to the truth: where that "
