@@ -131,3 +131,15 @@ def test_a_task_that_scores_against_the_withheld_fixes_says_so(bohai_dir, tmp_pa
     assert "reference: fed sensor (the first GPS fix after each dive, withheld from the filters)" in head
     assert "reference shares a source with a fed input: gps (the same GPS: its other fixes are fed)" in head
     assert "what is compared: each filter's error at the resurfacing fixes it was not given" in head
+
+
+def test_the_campaign_table_names_the_reference():
+    from replay.campaign.board import format_rows
+
+    row = {"dataset": "bohai/x", "task": "fusion", "filter": "ekf", "label": "ekf", "pos_rmse": 1.0, "runs": 1,
+           "diverged": 0, "lost": 0, "reference": "onboard solution", "reference_shares": "gps_position.position (b)"}
+    text = format_rows([row, dict(row, dataset="sim/y", reference="simulated truth", reference_shares="")])
+    head, first, second, note = text.splitlines()
+    assert head.split()[-1] == "reference" and first.endswith("onboard solution (shares an input)")
+    assert second.endswith("simulated truth")
+    assert note == "bohai/x: the reference shares a source with a fed input: gps_position.position (b)"
