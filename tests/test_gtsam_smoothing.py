@@ -134,10 +134,11 @@ def test_bohai_smoothed_track_is_the_reference_of_a_second_eval(bohai_dir, tmp_p
     res = CliRunner().invoke(main, ["eval", *common, "-f", "ekf", "--dataset-param", f"reference={tum}",
                                     "-o", str(second)])
     assert res.exit_code == 0, res.output
-    assert f"reference: {line} (smoothed.tum)" in res.output.splitlines()[1]  # under the title
+    assert f"reference: smoothed track ({line}; smoothed.tum)" in res.output.splitlines()[1]  # under the title
     meta = json.loads((second / "manifest.json").read_text())
     prov = meta["dataset"]["reference_provenance"]
     assert prov["reference"] == line and prov["filter"] == "gtsam-batch" and prov["dataset"] == "bohai/20220822_0_3"
+    assert meta["dataset"]["reference"]["kind"] == "smoothed track" and not meta["dataset"]["reference"]["independent"]
     import hashlib
 
     assert prov["sha256"] == hashlib.sha256(tum.read_bytes()).hexdigest()

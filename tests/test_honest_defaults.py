@@ -40,8 +40,11 @@ def test_bohai_position_measurements_row_flags_the_pf(bohai_dir, tmp_path):
     assert set(rows) == {"ekf", "pf", "measurements"}
     assert float(rows["measurements"]["pos_rmse"]) == pytest.approx(2.4466, abs=1e-3)
     assert rows["pf"]["worse_than_measurements"] == "True" and rows["ekf"]["worse_than_measurements"] == "False"
-    assert "worse than its own measurements (the measurements row: the raw observations, scored alike): pf" \
-        in res.output
+    assert ("worse than its own measurements (the measurements row: the raw observations, scored alike; paired "
+            "over runs, ± the 95 % interval): pf (+") in res.output
+    diff, half = map(float, rows["pf"]["worse_than_measurements_by"].split(" ± "))
+    assert diff - half > 5  # the PF's paired excess over the raw observations, far outside its interval
+    assert "reference: onboard solution" in res.output and "defaults (not tuned" in res.output
     assert all(r["measurements"] == "synthetic" for r in rows.values())
 
 

@@ -105,6 +105,12 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
             description="navigation solution lat/lon in UTM minus origin; masked where displaced (see meta['jumps'])",
         )
     }
+    meta["reference_provenance"] = {  # issue 35: printed on every table (replay/scoring/provenance.py)
+        "kind": "onboard solution",
+        "source": "the vehicle's navigation solution (lat/lon): its GPS on the surface, its own dead reckoning "
+        "after a dive",
+        "built_from": {"gps_position": "the navigation solution is built from the GPS fixes on the surface"},
+    }
     vel = track_velocity(t, pos, valid)
     meta["speed"] = _speed_check(vel, report)
 

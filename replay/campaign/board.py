@@ -71,7 +71,7 @@ def campaign_rows(
         rows.sort(key=lambda r: (r["dataset"], r["task"], r["filter"], r["params"]))
     summary.label(rows)
     rows = gap.add_gap(summary.add_paired(rows, configs, records, baseline), configs, records)
-    return summary.against_measurements(rows, configs)
+    return summary.against_measurements(rows, configs, records)
 
 
 def paired_rows(out, rows, metric_names=("pos_rmse", "ate"), *, collected=None) -> list[dict]:
@@ -206,6 +206,7 @@ def format_rows(rows) -> str:
         "diverged",
         "lost",
         "us/step",
+        "reference",
     ]
     body = []
     for r in rows:
@@ -223,6 +224,7 @@ def format_rows(rows) -> str:
                 f"{int(_num(r.get('diverged')) or 0)}/{int(_num(r.get('runs')) or 0)}",
                 summary.lost_cell(r),
                 f"{_num(r.get('us_per_step')):.1f}",
+                str(r.get("reference") or "?") + (" (shares an input)" if r.get("reference_shares") else ""),
             ]
         )
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
@@ -230,4 +232,6 @@ def format_rows(rows) -> str:
         c.ljust(w) if i < 3 + sourced else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
     )
     notes = [f"{r.get('label') or r.get('filter')}: not ranked: {m}" for r in rows for m in marks(r)]
+    shared = sorted({(str(r.get("dataset")), str(r["reference_shares"])) for r in rows if r.get("reference_shares")})
+    notes += [f"{d}: the reference shares a source with a fed input: {sh}" for d, sh in shared]
     return "\n".join([fmt(head), *(fmt(b) for b in body), *notes])

@@ -48,7 +48,7 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
         counts.append(entry)
         _report(report, spec, channel, entry)
     meta = dict(frame.meta, faults=counts)
-    return Frame(frame.t, channels, frame.reference, frame.epoch, meta, report, frame.estimates)
+    return Frame(frame.t, channels, frame.reference, frame.epoch, meta, report, frame.estimates, frame.roles)
 
 
 def stream(rng) -> np.random.Generator:

@@ -19,6 +19,7 @@ written from another dataset than this one is refused in one line.
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import replace as changed
 from pathlib import Path
 
@@ -61,6 +62,15 @@ def read(path) -> tuple[dict, np.ndarray]:
     return header, data
 
 
+def _inputs(header: dict) -> dict:
+    """{task input: frame channel} the smoothed track was computed from (the header's ``inputs``)."""
+    try:
+        found = json.loads(header.get("inputs") or "{}")
+    except ValueError:
+        return {}
+    return {str(k): str(v) for k, v in found.items()} if isinstance(found, dict) else {}
+
+
 def provenance_line(header: dict, path) -> str:
     return header.get("reference") or f"{Path(path).name} (TUM, no provenance recorded)"
 
@@ -97,7 +107,13 @@ def replace(frame, path, source: str = "dataset"):
         ref["position"] = changed(ref["position"], components=tuple(old.components[:dims]))
     meta = dict(
         frame.meta,
-        reference_provenance={
+        reference_provenance={  # the form replay.scoring.provenance reads: kind, source, built_from
+            "kind": "smoothed track",
+            "source": f"{line}; {Path(path).name}",
+            "built_from": {
+                ch: f"the smoothed track was computed from it ({header.get('filter', 'a smoother')})"
+                for ch in sorted(set(_inputs(header).values()))
+            },
             "reference": line,
             "file": Path(path).name,
             "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest(),  # rerun: the same file?
@@ -105,7 +121,9 @@ def replace(frame, path, source: str = "dataset"):
             **header,
         },
     )
-    out = type(frame)(frame.t, dict(frame.channels), ref, frame.epoch, meta, _report(frame), dict(frame.estimates))
+    out = type(frame)(
+        frame.t, dict(frame.channels), ref, frame.epoch, meta, _report(frame), dict(frame.estimates), frame.roles
+    )
     out.report.add(
         "replaced",
         "reference position",

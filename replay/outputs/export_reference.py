@@ -19,6 +19,7 @@ import json
 
 import numpy as np
 
+from replay.scoring.provenance import fed_channels
 from replay.outputs.run_data import enu_axes, enu_yaw, heading_index, load_run, ned, to_enu
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic
@@ -81,6 +82,7 @@ def write_reference(run_dir, path, name: str | None = None, run: int = 0, data_d
         "time": "seconds from the recording's first sample",
         "frame": "east-north-up, the recording's local coordinates",
         "dims": str(len(problem.position_index)),
+        "inputs": json.dumps(fed_channels(getattr(problem, "inputs", {}) or {}), sort_keys=True),
     }
     rows = np.column_stack([t, pos, q])[ok]
     body = "\n".join(" ".join(f"{v:.17g}" for v in r) for r in rows)

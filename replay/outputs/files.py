@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.run.evaluation import Evaluation
-from replay.run.manifest import manifest
+from replay.run.manifest import defaults_only, manifest
 from replay.scoring.summary import (
     MIN_SCORED_SHARE,
     SYNTHETIC,
@@ -39,7 +39,7 @@ from replay.util import covcols
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
 from replay.util.staging import check_output_dir, is_report_dir, staged_dir
-from replay.scoring import gap, outages
+from replay.scoring import gap, outages, provenance
 from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
 
@@ -121,14 +121,18 @@ def format_table(ev: Evaluation) -> str:
     title = f"{cfg['dataset']}  task={cfg['task']}  runs={cfg['runs']}  seed={cfg['seed']}" + (
         f"  first={cfg['first']}" if cfg["first"] else ""
     )
-    provenance = (getattr(ev, "frame_meta", None) or {}).get("reference_provenance")
-    if provenance:  # a smoothed track as the reference (replay.data.smoothed_reference): never silently
-        title += f"\nreference: {provenance['reference']} ({provenance['file']})"
-    worse = [r["label"] for r in ev.rows if r.get("worse_than_measurements") is True]
+    title += "".join("\n" + line for line in provenance.header(ev.frame_meta.get("reference")))
+    if defaults_only(cfg):
+        title += "\nfilters: defaults (not tuned; replay tune tunes them)"
+    worse = [
+        f"{r['label']} (+{r['worse_than_measurements_by']} m)"
+        for r in ev.rows
+        if r.get("worse_than_measurements") is True
+    ]
     if worse:
         title += (
             "\nworse than its own measurements (the measurements row: the raw observations, scored "
-            "alike): " + ", ".join(worse)
+            "alike; paired over runs, ± the 95 % interval): " + ", ".join(worse)
         )
     if any(r.get("measurements") == SYNTHETIC for r in ev.rows):
         title += (
@@ -149,7 +153,8 @@ def format_table(ev: Evaluation) -> str:
             else ""
         )
         + "anees: mean position NEES over runs and steps (about the number of position axes if "
-        "consistent; 'collapsed' when the covariance has shrunk to nothing)\n"
+        "consistent: judged against the 95 % band of that mean, runs x steps x axes degrees of freedom over "
+        "the NEES's time correlation; 'collapsed' when the covariance has shrunk to nothing)\n"
         f"diverged: numerical failure (left out of the means); lost: the track was lost "
         f"(position error above lost_threshold m for lost_steps samples: {rule or 'not judged'}; "
         "kept in the means); * = lost runs make up most of the mean\n"

@@ -96,6 +96,15 @@ def make_report(d: Path, out: Path | None = None) -> Path:
     ]
     for i, sec in enumerate(sections):
         parts += [f"<h2 id='s{i}'>{html.escape(sec.title)}</h2>", report_tables.leaderboard(sec.rows, pal)]
+        ref = sorted(
+            {(str(r.get("reference")), str(r.get("reference_shares") or "")) for r in sec.rows if r.get("reference")}
+        )
+        parts += [  # issue 35: where the reference comes from (replay/scoring/provenance.py), on every table
+            f"<p class='note'>reference: {html.escape(k)}"
+            + (f"; it shares a source with a fed input: {html.escape(sh)}" if sh else "")
+            + "</p>"
+            for k, sh in ref
+        ]
         if sec.paired:
             parts.append(report_tables.paired(sec, pal))
         for name, fig in report_plots.section_figures(sec, pal):

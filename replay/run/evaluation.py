@@ -139,7 +139,7 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     rows = summary.label([r.summary for r in results])
     configs, records = {r.config_hash: r.config for r in results}, {r.config_hash: r.records for r in results}
     rows = gap.add_gap(summary.add_paired(rows, configs, records, baseline), configs, records)
-    return summary.against_measurements(rows, {r.config_hash: r.config for r in results})
+    return summary.against_measurements(rows, configs, records)
 
 
 def evaluate(

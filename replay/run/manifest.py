@@ -94,6 +94,15 @@ def command_line(config: dict) -> str:
     return " ".join(parts)
 
 
+def defaults_only(config: dict) -> bool:
+    """Whether every filter and the task ran at their declared defaults (the command that repeats the
+    run names no ``-p`` of a filter and no ``--task-param``; a recorded estimate's ``align`` is no
+    tuning): its table says "defaults (not tuned)"."""
+    parts = shlex.split(command_line(config))
+    given = [v for k, v in zip(parts, parts[1:]) if k == "-p" and not v.startswith(("recorded:", "measurements."))]
+    return not given and "--task-param" not in parts
+
+
 def manifest(ev) -> dict:
     return {
         "config": ev.config,

@@ -55,7 +55,7 @@ from replay.filters.noise_params import apply as apply_noise
 from replay.util.canonical import config_hash, plain  # noqa: F401 (the pipeline's names too)
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
-from replay.scoring import likelihood, marks, metrics, scorer
+from replay.scoring import likelihood, marks, metrics, provenance, scorer
 from replay.tasks import make_task, reference_coverage, reference_present, source_of
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
@@ -173,6 +173,14 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
         problem.frame_meta.update(roles=roles.as_meta(frame.roles))
     if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
         problem.frame_meta["task_noise"] = problem.noise
+    problem.frame_meta["reference"] = provenance.provenance(  # issue 35: printed on every table
+        frame.meta,
+        problem.frame_meta["task_inputs"],
+        {**c["task_params"], **(problem.params or {})},
+        simulated=dataset_ref.simulated(c["dataset"]),
+        synthetic=bool(getattr(task, "SYNTHETIC", False)),
+        declared=getattr(problem, "reference_provenance", None),  # a task scoring against its own reference
+    )
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
     problem.source = source_of(frame)
@@ -314,8 +322,13 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
     rec = {"run": run, "status": "done", "metrics": m, "series": cols}
     rec.update({k: v for k, v in getattr(problem, "frame_meta", {}).items() if k == "content_checked"})
     shared = marks.reference_inputs(getattr(problem, "frame_meta", {}), c["filter"])
-    if shared:
-        rec["reference_input"] = shared
+    if shared and not (not is_recorded(c["filter"]) and (problem.params or {}).get("holdout")):
+        rec["reference_input"] = shared  # a held-out fix is never fed: not scored against its own input
+    ref = getattr(problem, "frame_meta", {}).get("reference") or {}
+    if ref:  # where the reference comes from (replay/scoring/provenance.py), on every row
+        rec["reference"] = ref["kind"]
+    if ref.get("shares"):  # the reference shares a source with a fed input
+        rec["reference_shares"] = ref["shares"]
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
     if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)

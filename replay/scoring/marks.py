@@ -4,7 +4,9 @@
   a filter given no position input and no velocity it uses; its error is the start's.
 * ``reference_input``: the reference is read from a topic the row also takes as input (a bag's
   mapping declaring one topic as the reference and as a fused input or a recorded estimate): the
-  row is scored against its own input (the recorded odometry scores exactly 0).
+  row is scored against its own input (the recorded odometry scores exactly 0). Not a filter row whose
+  task withholds the scored samples from every filter (``holdout``: every gps_every-th fix fed, scored
+  at the others; :mod:`replay.scoring.provenance` states that sharing in the table's header instead).
 
 :func:`reference_inputs` finds the second from a run's frame metadata (the mapping, the roles and
 the task's inputs); :func:`marks` gives the phrases the tables print.
@@ -17,19 +19,15 @@ def reference_inputs(frame_meta: dict, filter_name: str) -> str:
     """What of a row's input is read from the reference's own topic (a bag whose mapping declares
     one topic as the reference and as a fused input, or as a recorded estimate): the score then
     measures the topic against itself, not an error. '' when nothing is shared, or unknown."""
-    mapping = frame_meta.get("mapping")
-    if not isinstance(mapping, dict):
+    from replay.scoring.provenance import input_topics
+
+    topic_of, ref_topics = input_topics(frame_meta)
+    if not ref_topics:
         return ""
-    entries = [e for e in mapping.get("entries", []) if isinstance(e, dict)]
-    ref_topics = {e.get("topic") for e in entries if e.get("reference")}
     if filter_name.startswith("recorded:"):
         src = ((frame_meta.get("estimates") or {}).get(filter_name[len("recorded:") :]) or {}).get("source")
         topic = str(src).rsplit(" (", 1)[0] if src else None
         return f"recorded from {topic}, the reference's topic" if topic in ref_topics else ""
-    topic_of = {e.get("name"): e.get("topic") for e in entries}
-    for items in (frame_meta.get("roles") or {}).values():  # channels of a role -> their entry
-        for item in items if isinstance(items, list) else []:
-            topic_of.update({ch: topic_of.get(item.get("entry")) for ch in (item.get("channels") or {}).values()})
     inputs = frame_meta.get("task_inputs") or {}
     shared = sorted(
         {k: topic_of.get(str(v).split(" ")[0]) for k, v in inputs.items() if k != "reference"}.items(),

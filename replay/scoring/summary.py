@@ -39,6 +39,11 @@ covariance gives no number worth printing);
 the file: its registered checksum, or the rows and time span its upstream listing declares
 (:func:`replay.data.checksums.check_loaded`); False flags a file accepted on its structure alone;
 
+``reference`` — where the reference comes from (:mod:`replay.scoring.provenance`: ``simulated truth``,
+``onboard solution``, ``fed sensor``, ...; the manifest's ``dataset.reference`` holds the whole record),
+``reference_shares`` — the fed inputs that share a source with it (then ``worse_than_measurements`` is
+empty: the table states what is compared instead);
+
 ``scored, masked`` — reference samples scored and skipped (masked reference),
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
 over the batch); ``alignment, version, config_hash``.
@@ -81,7 +86,7 @@ ENSEMBLE = [
     "anis_inside",
     "anis_flag",
 ]
-TAIL = ["measurements", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
+TAIL = ["measurements", "reference", "scored", "masked", "us_per_step", "alignment", "version", "config_hash"]
 # what the filters of a row were given (issue 24): "sensors" (the recording's own), "synthetic"
 # (a recording's reference plus the task's noise: a number about the task's noise generator, not
 # about the vehicle), "simulated" (a simulated dataset), "recorded" (a recorded estimate: no filter)
@@ -119,6 +124,7 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row.update({k: ("" if v is None else v) for k, v in done[0]["metrics"].items() if k.endswith("_unaligned")})
     row.update(
         measurements=measurements(cfg),
+        reference=next((r["reference"] for r in done if r.get("reference")), ""),  # provenance.py
         scored=agg["scored"],
         masked=agg["masked"],
         us_per_step=agg["us_per_step"],
@@ -131,6 +137,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
     shared = next((r["reference_input"] for r in done if r.get("reference_input")), "")
     if shared:  # the reference is one of the row's inputs: a topic scored against itself
         row["reference_input"] = shared
+    if shares := next((r["reference_shares"] for r in done if r.get("reference_shares")), ""):
+        row["reference_shares"] = shares  # the fed inputs that share a source with the reference
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)
@@ -153,21 +161,34 @@ def measurements(cfg: dict) -> str:
     return SYNTHETIC if getattr(task_class(cfg["task"]), "SYNTHETIC", False) else "sensors"
 
 
-def against_measurements(rows: list[dict], configs: dict) -> list[dict]:
+def against_measurements(rows: list[dict], configs: dict, records: dict | None = None) -> list[dict]:
     """With a ``measurements`` row (the raw observations, :mod:`replay.filters.measurements`):
     ``worse_than_measurements`` on every filter row run on the same measurements (:func:`group_key`;
-    ``configs``: config hash -> configuration) — true when the filter's mean position RMSE
-    exceeds that of the input it reads (its lost runs included)."""
+    ``configs``: config hash -> configuration; ``records``: config hash -> its run records) — true
+    only when the paired difference of the per-run position RMSE (this row's minus the raw
+    observations' in the same run) lies above zero with its 95 % interval, and by more than rounding
+    (1e-9 of the RMSE: a 1.3e-13 m difference is the same number), and the reference is independent
+    of the measurements (a row with ``reference_shares`` gets ``""``: the table states what is
+    compared instead). ``worse_than_measurements_by`` holds the difference and its half-width."""
     key = lambda r: group_key(configs[r["config_hash"]])  # noqa: E731
     meas = {key(r): r for r in rows if r["filter"] == "measurements"}
     for r in rows:
         m = meas.get(key(r))
         if m is None or r is m or str(r["filter"]).startswith("recorded:"):
             continue
-        try:
-            r["worse_than_measurements"] = bool(float(r["pos_rmse"]) > float(m["pos_rmse"]))
-        except (TypeError, ValueError, KeyError):
-            r["worse_than_measurements"] = ""
+        r["worse_than_measurements"] = ""
+        if r.get("reference_shares") or m.get("reference_shares") or records is None:
+            continue
+        mine, ref = per_run(records[r["config_hash"]], "pos_rmse"), per_run(records[m["config_hash"]], "pos_rmse")
+        common = sorted(set(mine) & set(ref))
+        p = metrics.paired([mine[k] for k in common], [ref[k] for k in common])
+        diff, half = p["diff"], p["diff_ci95"]
+        scale = max(abs(float(r.get("pos_rmse", 0) or 0)), abs(float(m.get("pos_rmse", 0) or 0)))
+        if not (np.isfinite(diff) and np.isfinite(half)):
+            continue  # one run: no interval, no judgement
+        r["worse_than_measurements"] = bool(diff - half > 1e-9 * scale)
+        if r["worse_than_measurements"]:
+            r["worse_than_measurements_by"] = f"{diff:.4g} ± {half:.2g}"
     return rows
 
 

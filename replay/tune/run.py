@@ -221,7 +221,9 @@ def tune(
             progress.close()
         from replay.util.files import write_csv
 
-        marked = [k for k in ("still", "reference_input") if any(r.get(k) for r in rows)]  # summary.marks
+        marked = [
+            k for k in ("still", "reference_input", "reference", "reference_shares") if any(r.get(k) for r in rows)
+        ]
         write_csv(rows, out / "leaderboard.csv", COLUMNS + marked)
         paths = {"leaderboard": out / "leaderboard.csv", "study": out / "study.db"}
         paths.update(write_tuned(t, out, rows))
@@ -382,7 +384,7 @@ def _pooled(rows) -> dict:
     out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
     if rows and all(r.get("still") for r in rows):  # issue 40: marked on the board (summary.marks)
         out["still"] = True
-    shared = next((r["reference_input"] for r in rows if r.get("reference_input")), "")
-    if shared:
-        out["reference_input"] = shared
+    for k in ("reference_input", "reference", "reference_shares"):  # marks; the reference's provenance
+        if v := next((r[k] for r in rows if r.get(k)), ""):
+            out[k] = v
     return out
