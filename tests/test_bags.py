@@ -67,7 +67,7 @@ def test_inspect_proposes_sensible_mappings(bagdir):
     assert entries("evo/nav2_turtlebot.mcap") == {("odom", "/odom", False), ("pose", "/amcl_pose", False)}
     res = run_cli("inspect", bagdir / "robot_localization/test1.bag")
     assert res.exit_code == 0
-    assert "11865" in res.output and "2.50" in res.output and 'position = { topic = "/fix"' in res.output
+    assert "11865" in res.output and "2.50" in res.output and '[reference.position]\ntopic = "/fix"' in res.output
 
 
 def test_frame_axis_union_and_both_times(bagdir):
