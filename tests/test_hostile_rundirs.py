@@ -225,19 +225,26 @@ def test_identical_runs_say_deterministic_not_plus_minus_zero(lake, tmp_path):
     assert float(row["pos_rmse_ci95"]) == 0.0 and row["runs"] == "5"  # the CSV columns are unchanged
 
 
+def _table(text: str) -> tuple[str, str]:
+    """(the table's column header, its first row): the lines after the title's notes (reference, defaults)."""
+    lines = text.splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("filter "))
+    return lines[i], lines[i + 1]
+
+
 def test_mostly_masked_reference_is_flagged(lake, tmp_path):
     """7 of 1800 reference samples left (99.6 % masked): the row is flagged, not shown as a full result."""
     res = assert_ok(["eval", lake / "masked.csv", "--adapter", "lake", "--filters", "ekf", "-q", "-o", tmp_path / "o"])
-    head, row = res.stdout.splitlines()[1:3]
+    head, row = _table(res.stdout)
     assert head.split()[-1] == "scored" and row.split()[-1] == "0.4%!"
     assert ("ekf: scored on 7 of 1800 reference samples (0.4%; the rest masked), under min_scored_share=0.5: "
             "its numbers describe only the samples scored") in res.stdout
     assert json.loads((tmp_path / "o" / "manifest.json").read_text())["config"]["min_scored_share"] == 0.5
     full = assert_ok(["eval", lake / "lake.csv", "--adapter", "lake", "--filters", "ekf", "-q", "-o", tmp_path / "p"])
-    assert full.stdout.splitlines()[2].split()[-1] == "97.7%" and "scored on" not in full.stdout
+    assert _table(full.stdout)[1].split()[-1] == "97.7%" and "scored on" not in full.stdout
     low = assert_ok(["eval", lake / "masked.csv", "--adapter", "lake", "--filters", "ekf", "-q", "-o", tmp_path / "q",
                      "--min-scored-share", "0.001"])
-    assert low.stdout.splitlines()[2].split()[-1] == "0.4%"
+    assert _table(low.stdout)[1].split()[-1] == "0.4%"
 
 
 def test_bohai_cut_case_is_flagged(tmp_path):
@@ -248,7 +255,7 @@ def test_bohai_cut_case_is_flagged(tmp_path):
     ev = replay.evaluate("sim/ungm", filters=["ekf"], runs=1)
     ev.rows[0].update(scored=11, masked=2989)
     text = format_table(ev)
-    assert text.splitlines()[2].split()[-1] == "0.4%!"
+    assert _table(text)[1].split()[-1] == "0.4%!"
     assert "ekf: scored on 11 of 3000 reference samples (0.4%; the rest masked)" in text
 
 
