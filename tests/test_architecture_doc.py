@@ -5,7 +5,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "architecture.md").read_text()
-SKIP = {"__pycache__", "build", "dist", "img", "mappings", "reproduction"}
+SKIP = {"runs", "__pycache__", "build", "dist", "img", "mappings", "reproduction"}
 
 
 def _section(title: str) -> str:
