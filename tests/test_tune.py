@@ -202,6 +202,11 @@ def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
 
 
 def test_local_pool_gives_the_serial_rows(tmp_path):
+    """A trial's runs spread over the workers (one run per job here), with the serial numbers."""
+    from replay.campaign.execute import spread_block
+
+    assert [spread_block(2, 25, 2, None), spread_block(5, 25, 2, None), spread_block(5, 2, 2, None)] == [1, 3, 2]
+    assert spread_block(5, 25, 1, None) == 5 and spread_block(5, 25, 2, "tcp://x:8786") == 25  # Dask: declared
     tune(tmp_path / "serial")
     tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes
     assert board(tmp_path / "pool") == board(tmp_path / "serial")

@@ -341,6 +341,17 @@ def open_backend(workers, scheduler, dask_local, connect_timeout: float, n_jobs:
     return _processes(min(workers, n_jobs)), f"processes({min(workers, n_jobs)})"
 
 
+def spread_block(runs: int, batch: int, workers, distributed) -> int:
+    """Runs per job of one trial: at most ``batch``, and few enough that a trial's runs spread over
+    the local workers (trials run one after another; 5 runs in one block of 25 kept one of two cores
+    idle). Numbers do not depend on it: a run's depend only on (seed, run), whatever its block.
+    A Dask cluster keeps the declared block (its worker count is not known here)."""
+    if distributed:
+        return batch
+    w = workers or os.cpu_count() or 1
+    return max(1, min(batch, -(-runs // w)))
+
+
 def store_job(store: Store, job: Job, results, saved: set) -> None:
     """A finished job's units into ``store`` (its ``config.json`` with the configuration's first units)."""
     if job.config_hash not in saved:

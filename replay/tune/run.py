@@ -143,11 +143,12 @@ class Tune:
 class Runner:
     """Computes configurations as campaign units in ``out`` on one backend, kept open."""
 
-    def __init__(self, t: Tune, out: Path, backend):
+    def __init__(self, t: Tune, out: Path, backend, block: int | None = None):
         self.t, self.out, self.store, self.mapper, self.saved = t, out, Store(out), backend, set()
+        self.block = block or t.batch  # runs per job (a trial's runs spread over the workers)
 
     def records(self, cfgs: list[Config]) -> list[list[dict]]:
-        camp = Campaign(None, "tune", self.t.runs, 0, self.t.batch, self.t.data_dir, list(cfgs))
+        camp = Campaign(None, "tune", self.t.runs, 0, self.block, self.t.data_dir, list(cfgs))
         jobs = execute.plan(camp, self.store, data_dir=self.t.data_dir)
         for job, results in self.mapper(jobs):
             execute.store_job(self.store, job, results, self.saved)
@@ -192,7 +193,8 @@ def tune(
         opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db", units) for f in t.filters}
         write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
-        n_jobs = -(-t.runs // t.batch) * max(len(t.split.train), len(t.split.test))
+        block = execute.spread_block(t.runs, t.batch, workers, scheduler or dask_local)
+        n_jobs = -(-t.runs // block) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
         failed: dict = {}  # filter -> why each of its trials of this invocation scored inf
         cost = {f: {p: _cost(t.configs(p, f, {}), t.runs) for p in ("train", "test")} for f in t.filters}
@@ -206,7 +208,7 @@ def tune(
         )  # the trials, then each filter's default and tuned held-out scoring, weighted by their cost
         try:
             with ctx as mapper, np.errstate(all="ignore"):  # diverged runs' NaNs: counted, not warned
-                run = Runner(t, units, mapper)
+                run = Runner(t, units, mapper, block)
                 for name, st in opened.items():
                     for _ in range(todo[name]):
                         trial, params = studies.next_trial(st, t.dims[name], t.seed, name, t.defaults(name))
