@@ -180,6 +180,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
         simulated=dataset_ref.simulated(c["dataset"]),
         synthetic=bool(getattr(task, "SYNTHETIC", False)),
         declared=getattr(problem, "reference_provenance", None),  # a task scoring against its own reference
+        unconstrained=getattr(problem, "unconstrained", ()),  # an angle nothing measures (fusion_heading.py)
     )
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
