@@ -58,6 +58,24 @@ def test_unconstrained_heading_said_on_the_table_and_in_the_manifest(tmp_path, f
     assert manifest(ev)["dataset"]["reference"]["unconstrained"] == [line]
 
 
+def test_the_line_rides_on_every_row_and_board(tmp_path):
+    """The leaderboard's rows carry it (``unconstrained``: leaderboard.csv, read back), and the boards of
+    a campaign (``replay campaign``, ``replay compare``) and of ``replay tune`` print it under the table."""
+    from replay.campaign.board import format_rows, read_leaderboard
+    from replay.outputs.files import write_all
+    from replay.tune.write import board_notes
+
+    ev = evaluate(tmp_path)
+    (line,) = lines(ev)
+    assert [r["unconstrained"] for r in ev.rows] == [line]
+    paths = write_all(ev, tmp_path / "out", what="--out")
+    rows = read_leaderboard(paths["leaderboard"])
+    assert rows[0]["unconstrained"] == line
+    assert f"{rows[0]['dataset']}: {line}" in format_rows(rows).splitlines()
+    assert line in board_notes([dict(r, label="ekf (default)") for r in rows])
+    assert "unconstrained" not in evaluate(tmp_path, 'fuse = ["velocity", "rate", "attitude"]').rows[0]
+
+
 def test_no_line_when_the_heading_is_measured_or_known(tmp_path):
     """An attitude input, an absolute position (the course between fixes), or a declared model whose
     heading stays within the 1 % shrink (sd 0.02 rad after 60 s): no line, and none on the table."""

@@ -281,7 +281,10 @@ def own_track(shared_dir, tmp_path, file, topic, fuse, filters=("ekf", "ukf", "c
     return by, path, ev
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] * (n == "nav2_turtlebot")) for n in RECORDINGS])
+SLOW_READ = {"nav2_turtlebot"}  # 8 s: the MCAP's /tf read with it
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] * (n in SLOW_READ)) for n in RECORDINGS])
 @pytest.mark.parametrize("fuse", [VR, DIFF])
 def test_shared_recording_odometry_alone_gives_its_track_back(shared_dir, tmp_path, name, fuse):
     """EKF = UKF = CKF to 1e-4 m: nav2_turtlebot.mcap (TurtleBot /odom, child base_footprint, 34.3 m)

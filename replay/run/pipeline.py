@@ -330,6 +330,8 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
         rec["reference"] = ref["kind"]
     if ref.get("shares"):  # the reference shares a source with a fed input
         rec["reference_shares"] = ref["shares"]
+    if ref.get("unconstrained"):  # an attitude angle nothing measures (replay/tasks/fusion_heading.py)
+        rec["unconstrained"] = " | ".join(ref["unconstrained"])
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
     if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)
