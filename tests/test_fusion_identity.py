@@ -281,7 +281,7 @@ def own_track(shared_dir, tmp_path, file, topic, fuse, filters=("ekf", "ukf", "c
     return by, path, ev
 
 
-SLOW_READ = {"nav2_turtlebot"}  # 8 s: the MCAP's /tf read with it
+SLOW_READ = {"nav2_turtlebot"}  # 8 s in a fresh process (2 s once read)
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] * (n in SLOW_READ)) for n in RECORDINGS])
