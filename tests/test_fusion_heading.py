@@ -17,7 +17,7 @@ from replay.outputs.files import format_table
 from replay.run.manifest import manifest
 from replay.tasks.fusion_heading import SHRINK_LIMIT, angle_sd
 
-VR = 'fuse = ["velocity", "rate"]'
+VR, DIFF = 'fuse = ["velocity", "rate"]', 'differential = ["position", "attitude"]'
 LINE = re.compile(
     r"^(?P<angle>heading \(yaw\)|roll|pitch) unconstrained: no fused input measures it absolutely \(inputs: "
     r"(?P<inputs>[^)]*(?:\(differential\)[^)]*)*)\); the declared model's sd of it reaches (?P<sd>[0-9.]+) rad at "
@@ -39,7 +39,7 @@ def lines(ev):
     return (ev.frame_meta["reference"] or {}).get("unconstrained", [])
 
 
-@pytest.mark.parametrize("fuse", [VR, 'differential = ["position", "attitude"]'])
+@pytest.mark.parametrize("fuse", [VR, DIFF])
 def test_unconstrained_heading_said_on_the_table_and_in_the_manifest(tmp_path, fuse):
     """Generated odometry (60 s, 102 m, twist variances the task's defaults): the heading's sd reaches
     0.95 rad (velocity + rate) and 0.79 rad (differential: the derived rate's variance), the EKF's own."""
@@ -53,7 +53,7 @@ def test_unconstrained_heading_said_on_the_table_and_in_the_manifest(tmp_path, f
     np.testing.assert_allclose(sd, np.sqrt(P[:, 2, 2]), rtol=1e-8)  # the EKF's heading sd at every step
     assert float(got["sd"]) == pytest.approx(sd[-1], abs=0.005) and 0.7 < sd[-1] < 1.0
     assert float(got["f"]) == pytest.approx(math.exp(-sd[-1] ** 2 / 2), rel=1e-3)
-    assert ("(differential)" in got["inputs"]) == fuse.startswith("differential")
+    assert ("(differential)" in got["inputs"]) == (fuse == DIFF)
     assert line in format_table(ev).splitlines()  # on the table, under the reference's lines
     assert manifest(ev)["dataset"]["reference"]["unconstrained"] == [line]
 
@@ -114,22 +114,24 @@ def arc_mean(track, sd):
 
 
 @pytest.mark.slow
-def test_test1_pf_is_the_posterior_mean_the_note_predicts(shared_dir, tmp_path):
-    """test1.bag's wheel odometry alone (velocity + rate, the recorded covariances, 359 m): the note
-    gives the heading's sd 2.27 rad and the factor 0.0765. The PF (1000 particles, 5 runs) is 40.28 ±
-    5.47 m from the odometry's track, every run lost, where the arc's mean the EKF's heading variance
-    predicts is 41.39 m from it: the PF estimates the declared model's posterior mean, within its Monte
-    Carlo interval; its particles' heading sd (mean over runs) is the model's within 10 % while under
-    1 rad, before the circle bounds it. f(mean) (the EKF, 0.69 m) lies far outside that interval."""
+@pytest.mark.parametrize("fuse,sd_end,factor", [(VR, "2.27", "0.0765"), (DIFF, "2.06", "0.119")])
+def test_test1_pf_is_the_posterior_mean_the_note_predicts(shared_dir, tmp_path, fuse, sd_end, factor):
+    """test1.bag's wheel odometry alone (the recorded covariances, 359 m): the note gives the heading's
+    sd 2.27 rad and the factor 0.0765 (velocity + rate; differential 2.06 rad, 0.119). The PF (1000
+    particles, 5 runs) is 40.28 ± 5.47 m from the odometry's track (differential 44.30 ± 8.28 m), every
+    run lost, where the arc's mean the EKF's heading variance predicts is 41.39 m from it (37.73 m):
+    the PF estimates the declared model's posterior mean, within its Monte Carlo interval; its
+    particles' heading sd (mean over runs) is the model's within 10 % while under 1 rad, before the
+    circle bounds it. f(mean) (the EKF, 0.69 and 0.43 m) lies far outside that interval."""
     topic = "/husky_velocity_controller/odom"
     mp = tmp_path / "m.toml"
-    mp.write_text(f'[channels]\nodom = {{ topic = "{topic}", {VR} }}\n[reference]\nposition = "{topic}"\n')
+    mp.write_text(f'[channels]\nodom = {{ topic = "{topic}", {fuse} }}\n[reference]\nposition = "{topic}"\n')
     bag = shared_dir / "datasets" / "bags" / "robot_localization" / "test1.bag"
     ev = replay.evaluate(str(bag), dataset_params={"mapping": str(mp)}, filters=["ekf", "pf"], task="fusion",
                          recorded=(), task_params={"dims": "2"}, runs=5)
     (line,) = lines(ev)
     got = LINE.match(line)
-    assert got and got["sd"] == "2.27" and got["f"] == "0.0765", line
+    assert got and got["sd"] == sd_end and got["f"] == factor, line
     assert line in format_table(ev).splitlines()
     pb = ev.results[0].records[0]["problem"]
     sd = angle_sd(pb.model, pb.z, pb.P0, 2, 5)
