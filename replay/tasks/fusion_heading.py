@@ -16,7 +16,8 @@ measured; the position and velocity states never feed back into it), so this 2 x
 recursion over the measurement steps is exactly the EKF's variance of the 2-D heading, at a few
 microseconds a step, before any filter runs and the same for every row. In 3-D the Euler-angle
 rates couple roll, pitch and yaw; each angle is taken with its own body rate (level), an
-approximation there. It is the model's number, not a filter's: a particle filter's spread
+approximation there. It is the task's declared model (a filter's own ``q_scale`` / ``r_scale``,
+as ``replay tune`` sets them, scale it further), not a filter's number: a particle filter's spread
 of an angle saturates near the circle's (pi / sqrt 3 = 1.81 rad) and cannot say how far past it
 the model's is.
 
