@@ -260,3 +260,56 @@ def test_an_edited_mapping_is_read_again_in_the_same_process(tmp_path):
         rmse(tmp_path / "b", mp, 2, filters=("ekf",))
     by, _ = rmse(tmp_path / "b", mapping(mp, extra=', twist_frame = "parent"'), 2, filters=("ekf",))
     assert by["ekf"] < 0.3
+
+
+# Every shared recording with an odometry (../shared/datasets/bags/README.md; evo/ROS_example.bag has
+# PoseStamped tracks only): (file, odometry topic, its path in m). test1.bag: above.
+RECORDINGS = {
+    "nav2_turtlebot": ("evo/nav2_turtlebot.mcap", "/odom", 34.32),
+    "rl_test1_60s_mcap": ("derived/rl_test1_60s_mcap", "/husky_velocity_controller/odom", 58.23),
+    "rl_test1_60s_sqlite3": ("derived/rl_test1_60s_sqlite3", "/husky_velocity_controller/odom", 58.23),
+}
+
+
+def own_track(shared_dir, tmp_path, file, topic, fuse, filters=("ekf", "ukf", "ckf")):
+    """The odometry on ``topic`` fused alone and scored against its own recorded track: ({filter: RMSE}, path)."""
+    mp = tmp_path / "m.toml"
+    mp.write_text(f'[channels]\nodom = {{ topic = "{topic}", {fuse} }}\n[reference]\nposition = "{topic}"\n')
+    by, ev = rmse(shared_dir / "datasets" / "bags" / file, mp, 2, filters=filters)
+    ref = ev.results[0].records[0]["problem"].truth_position
+    path = float(np.linalg.norm(np.diff(ref[np.isfinite(ref).all(axis=1)], axis=0), axis=1).sum())
+    return by, path, ev
+
+
+SLOW_READ = {"nav2_turtlebot"}  # 8 s in a fresh process (2 s once read)
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] * (n in SLOW_READ)) for n in RECORDINGS])
+@pytest.mark.parametrize("fuse", [VR, DIFF])
+def test_shared_recording_odometry_alone_gives_its_track_back(shared_dir, tmp_path, name, fuse):
+    """EKF = UKF = CKF to 1e-4 m: nav2_turtlebot.mcap (TurtleBot /odom, child base_footprint, 34.3 m)
+    0.078 m (velocity + rate), 0.076 m (differential); the first 60 s of test1.bag as ROS 2 bags (MCAP and
+    sqlite3 storage, 58.2 m) 0.426 m and 0.401 m, the same numbers from either storage."""
+    file, topic, length = RECORDINGS[name]
+    by, path, _ = own_track(shared_dir, tmp_path, file, topic, fuse)
+    assert path == pytest.approx(length, abs=0.01)
+    assert_identity(by, path)
+    expect = {"nav2_turtlebot": (0.078, 0.076)}.get(name, (0.426, 0.401))[fuse == DIFF]
+    assert max(by.values()) == pytest.approx(expect, abs=0.002), by
+
+
+@pytest.mark.slow
+def test_test3_groovy_odometry_has_no_track_to_give_back(shared_dir, tmp_path):
+    """test3_groovy.bag (AR.Drone, 138 s) cannot give its odometry back: its /ardrone/odometry/raw pose
+    never leaves x = y = 0 (25,217 messages; z is the altitude), its orientation quaternions are all
+    zero (no attitude: a differential attitude is refused, 0 valid messages) and its twist's angular
+    rates are all zero while the horizontal speed averages 0.58 m/s. Fused as velocity + rate, the
+    filters integrate that twist (EKF = UKF = CKF: 15.25 m from a track of path 0.00 m): what the
+    twist says and what the pose records are two different things, and the pose is no track."""
+    topic = "/ardrone/odometry/raw"
+    by, path, ev = own_track(shared_dir, tmp_path, "robot_localization/test3_groovy.bag", topic, VR)
+    assert path < 1e-9  # the recorded pose does not move
+    travelled = np.linalg.norm(np.diff(ev.results[0].estimates[0].x[:, :2], axis=0), axis=1).sum()
+    assert travelled > 50.0 and all(v == pytest.approx(15.25, abs=0.05) for v in by.values()), (travelled, by)
+    with pytest.raises(ReplayError, match=r"a differential attitude needs at least 2 messages \(got 0\)"):
+        own_track(shared_dir, tmp_path, "robot_localization/test3_groovy.bag", topic, DIFF, filters=("ekf",))

@@ -71,6 +71,10 @@ def test_bool_str_list_and_optional():
     assert s.check("multinomial") == "multinomial"
     assert refused(s, "stratified") == ("filter 'x': resampling must be one of systematic, multinomial "
                                         "(got 'stratified')")
+    d = Param("dims", str, "auto", "", choices=("auto", "2", "3"))  # --task-param dims=2 parses as a number
+    assert d.check(2) == "2" and d.check("3") == "3"
+    assert refused(d, 4) == "filter 'x': dims must be one of auto, 2, 3 (got 4)" and refused(d, True).endswith("(got true)")
+    assert refused(s, 2).endswith("(got 2)")
     v = Param("x0", list, (0.0, 0.0), "", length=2)
     assert v.check([1, 2]) == (1.0, 2.0)
     assert refused(v, [1, 2, 3]) == "filter 'x': x0 must be a list of numbers of length 2 (got [1, 2, 3])"

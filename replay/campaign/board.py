@@ -234,4 +234,6 @@ def format_rows(rows) -> str:
     notes = [f"{r.get('label') or r.get('filter')}: not ranked: {m}" for r in rows for m in marks(r)]
     shared = sorted({(str(r.get("dataset")), str(r["reference_shares"])) for r in rows if r.get("reference_shares")})
     notes += [f"{d}: the reference shares a source with a fed input: {sh}" for d, sh in shared]
+    free = sorted({(str(r.get("dataset")), str(r["unconstrained"])) for r in rows if r.get("unconstrained")})
+    notes += [f"{d}: {line}" for d, lines in free for line in lines.split(" | ")]  # fusion_heading.py
     return "\n".join([fmt(head), *(fmt(b) for b in body), *notes])

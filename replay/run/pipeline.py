@@ -180,6 +180,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
         simulated=dataset_ref.simulated(c["dataset"]),
         synthetic=bool(getattr(task, "SYNTHETIC", False)),
         declared=getattr(problem, "reference_provenance", None),  # a task scoring against its own reference
+        unconstrained=getattr(problem, "unconstrained", ()),  # an angle nothing measures (fusion_heading.py)
     )
     problem.frame_report = frame.report
     problem.recorded = frame.estimates  # for the scorer of recorded:<name> configurations only
@@ -329,6 +330,8 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
         rec["reference"] = ref["kind"]
     if ref.get("shares"):  # the reference shares a source with a fed input
         rec["reference_shares"] = ref["shares"]
+    if ref.get("unconstrained"):  # an attitude angle nothing measures (replay/tasks/fusion_heading.py)
+        rec["unconstrained"] = " | ".join(ref["unconstrained"])
     if est.info.get("error"):
         rec["metrics"]["error"] = est.info["error"]
     if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)

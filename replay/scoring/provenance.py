@@ -48,11 +48,21 @@ def fed_channels(inputs: dict) -> dict:
 
 
 def provenance(
-    frame_meta: dict, inputs: dict, task_params: dict, *, simulated: bool, synthetic: bool, declared=None
+    frame_meta: dict,
+    inputs: dict,
+    task_params: dict,
+    *,
+    simulated: bool,
+    synthetic: bool,
+    declared=None,
+    unconstrained=(),
 ) -> dict:
     """The reference's provenance record for a run (module docstring); ``declared``: a task's own record,
     when the task scores against something else than the frame's reference (the same form as the frame's
-    ``meta["reference_provenance"]``, which it replaces; its ``compared`` replaces the default statement)."""
+    ``meta["reference_provenance"]``, which it replaces; its ``compared`` replaces the default statement);
+    ``unconstrained``: the task's lines on state it fuses nothing to fix (``Problem.unconstrained``: an
+    attitude angle no input measures, :mod:`replay.tasks.fusion_heading`), what a distance to the
+    reference then means; kept as the record's ``unconstrained`` and printed under it."""
     fed = fed_channels(inputs)
     declared = declared or frame_meta.get("reference_provenance")
     ref_desc = str((inputs or {}).get("reference", "the recording's reference"))
@@ -101,6 +111,8 @@ def provenance(
             "the measurements are the reference plus the task's own noise: the table measures how well each "
             "filter removes that noise"
         )
+    if unconstrained:
+        out["unconstrained"] = [str(line) for line in unconstrained]
     return out
 
 
@@ -114,4 +126,4 @@ def header(record: dict | None) -> list[str]:
         lines.append(f"what is compared: {record['compared']}")
     elif record.get("kind") == "recorded reference":
         lines[0] += "; its independence of the inputs is not declared"
-    return lines
+    return lines + list(record.get("unconstrained") or ())

@@ -42,7 +42,8 @@ the file: its registered checksum, or the rows and time span its upstream listin
 ``reference`` — where the reference comes from (:mod:`replay.scoring.provenance`: ``simulated truth``,
 ``onboard solution``, ``fed sensor``, ...; the manifest's ``dataset.reference`` holds the whole record),
 ``reference_shares`` — the fed inputs that share a source with it (then ``worse_than_measurements`` is
-empty: the table states what is compared instead);
+empty: the table states what is compared instead); ``unconstrained`` — the record's lines on an attitude
+angle no input measures (:mod:`replay.tasks.fusion_heading`), joined by `` | ``;
 
 ``scored, masked`` — reference samples scored and skipped (masked reference),
 mean over runs; ``us_per_step`` — median filter time per step (µs; amortised
@@ -139,6 +140,8 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         row["reference_input"] = shared
     if shares := next((r["reference_shares"] for r in done if r.get("reference_shares")), ""):
         row["reference_shares"] = shares  # the fed inputs that share a source with the reference
+    if free := next((r["unconstrained"] for r in done if r.get("unconstrained")), ""):
+        row["unconstrained"] = free  # an attitude angle no input measures: what a distance then means
     checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)

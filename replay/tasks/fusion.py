@@ -1,49 +1,46 @@
 """``fusion``: the recording's own sensors, fused by a kinematic model — no synthetic measurement.
 
-What robot_localization's ``ekf_localization_node`` does on a robot, run offline with every
-filter of ``replay`` and scored against the recording's reference. Configured by the
-mapping (``docs/bags.md``, "The fusion task"):
+What robot_localization's ``ekf_localization_node`` does on a robot, run offline with every filter of ``replay``
+and scored against the recording's reference. Configured by the mapping (``docs/bags.md``, "The fusion task"):
 
-* **State**: 2-D ``[east, north, yaw, u, v, r]`` or 3-D ``[east, north, up, roll, pitch, yaw,
-  u, v, w, p, q, r]`` (:mod:`replay.models.kinematic`); ``dims = "auto"`` takes 3-D when the
-  recording has a depth input, else 2-D. The choice is printed in the notes and recorded.
-* **Inputs**: every sensor input of the frame (:mod:`replay.tasks.fusion_inputs`), each field
-  used absolutely or differentially, at its own messages' times (the frame's time axis is
-  the union of all messages: at a step, the components of the messages that arrived there
-  are measured, the others are missing; gaps are predicted through).
-* **Noise**: the entry's declared ``noise`` where given; else the message's recorded covariance
-  (its diagonal, per component and per message: Odometry pose and twist, Imu orientation,
-  angular velocity and linear acceleration, PoseWithCovarianceStamped,
-  TwistWithCovarianceStamped, NavSatFix; the ``<entry>_<field>_var`` channels), a zero,
-  negative, ``-1``-marked or missing entry replaced by the task's default (``r_*``) and
-  counted; else that default (:func:`replay.tasks.fusion_inputs.variance`). The notes and the
-  manifest's ``task_noise`` say which source every input used and how many were replaced.
-* **Gating**: an entry's ``rejection_threshold`` (a Mahalanobis distance, one for every field or
-  a table per field) gates each of its fields at every update (:mod:`replay.filters.gating`:
-  the innovation's NIS for the Kalman family, the particles' predictive likelihood for the
-  PF); the rejections are counted per filter, run and field (the table's notes, the
-  manifest's ``gating``).
-* **Reference**: the frame's ``position`` reference, for scoring only. When it is the same
-  topic as a ``gps`` input (the fix track is the only external position), every
-  ``gps_every``-th fix is fed and the others are held out for scoring, as ``gps-odom`` does.
-  With ``score=outages`` the reference is instead the first fix after each outage, withheld
-  from every filter (:mod:`replay.tasks.outages`).
-* **Prior**: the first fed absolute position (and attitude) where there is one. Without any
-  absolute position input (dead reckoning: DVL + IMU + depth, odometry + IMU), nothing
-  fixes the origin: the start position is the reference's sample nearest the first sensor
-  message (the known start of a dead-reckoning run, variance ``p0_known``), and a note says
-  so; no other reference sample reaches a filter. Before the first sensor message the state
-  is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else
-  the direction between the first fed fixes at least 2 m apart, else the reference's first attitude
-  (noted; in 3-D its roll and pitch too).
-* **Frames**: an odometry's twist is the body's (REP 105's child frame) or declared
-  (``twist_frame``): :mod:`replay.tasks.fusion_frames`; every decision is a note.
+* **State**: 2-D ``[east, north, yaw, u, v, r]`` or 3-D ``[east, north, up, roll, pitch, yaw, u, v, w, p, q,
+  r]`` (:mod:`replay.models.kinematic`); ``dims = "auto"`` takes 3-D when the recording has a depth input, else
+  2-D. The choice is printed in the notes and recorded.
+* **Inputs**: every sensor input of the frame (:mod:`replay.tasks.fusion_inputs`), each field used absolutely or
+  differentially, at its own messages' times (the frame's time axis is the union of all messages: at a step, the
+  components of the messages that arrived there are measured, the others are missing; gaps are predicted
+  through).
+* **Noise**: the entry's declared ``noise`` where given; else the message's recorded covariance (its diagonal,
+  per component and per message: Odometry pose and twist, Imu orientation, angular velocity and linear
+  acceleration, PoseWithCovarianceStamped, TwistWithCovarianceStamped, NavSatFix; the ``<entry>_<field>_var``
+  channels), a zero, negative, ``-1``-marked or missing entry replaced by the task's default (``r_*``) and
+  counted; else that default (:func:`replay.tasks.fusion_inputs.variance`). The notes and the manifest's
+  ``task_noise`` say which source every input used and how many were replaced.
+* **Gating**: an entry's ``rejection_threshold`` (a Mahalanobis distance, one for every field or a table per
+  field) gates each of its fields at every update (:mod:`replay.filters.gating`: the innovation's NIS for the
+  Kalman family, the particles' predictive likelihood for the PF); the rejections are counted per filter, run
+  and field (the table's notes, the manifest's ``gating``).
+* **Reference**: the frame's ``position`` reference, for scoring only. When it is the same topic as a ``gps``
+  input (the fix track is the only external position), every ``gps_every``-th fix is fed and the others are held
+  out for scoring, as ``gps-odom`` does. With ``score=outages`` the reference is instead the first fix after
+  each outage, withheld from every filter (:mod:`replay.tasks.outages`).
+* **Prior**: the first fed absolute position (and attitude) where there is one. Without any absolute position
+  input (dead reckoning: DVL + IMU + depth, odometry + IMU), nothing fixes the origin: the start position is the
+  reference's sample nearest the first sensor message (the known start of a dead-reckoning run, variance
+  ``p0_known``), and a note says so; no other reference sample reaches a filter. Before the first sensor message
+  the state is held (dt = 0: nothing is known of the motion). Heading: the first attitude measurement, else the
+  direction between the first fed fixes at least 2 m apart, else the reference's first attitude (noted; in 3-D
+  its roll and pitch too).
+* **Frames**: an odometry's twist is the body's (REP 105's child frame) or declared (``twist_frame``):
+  :mod:`replay.tasks.fusion_frames`; every decision is a note.
+* **Unconstrained angles**: an attitude angle no input measures absolutely, whose declared sd grows past
+  :data:`replay.tasks.fusion_heading.SHRINK_LIMIT`: one line on the table and in the manifest
+  (``Problem.unconstrained``, the reference's record): the PF's posterior mean lies inside the arc.
 
-Refused in one line: inputs that leave the speed (no velocity, position or differential
-position) or the heading (no attitude, rate or position) unconstrained — every filter would
-carry its prior there and the table rank priors —, a frame with no sensor input (naming the
-tasks that would run), no reference (nothing to score against: how to declare one), an unknown
-field, a differential field with fewer than two messages.
+Refused in one line: inputs that leave the speed (no velocity, position or differential position) or the heading
+(no attitude, rate or position) unconstrained — every filter would carry its prior there and the table rank
+priors —, a frame with no sensor input (naming the tasks that would run), no reference (nothing to score
+against: how to declare one), an unknown field, a differential field with fewer than two messages.
 """
 
 from __future__ import annotations
@@ -60,6 +57,7 @@ from replay.util.params import Param
 
 from . import Problem, Task, describe, outages, source_of
 from .fusion_frames import heading_source, imu_yaw_sense, lever_arm, mounted, twist_in_body
+from .fusion_heading import unconstrained_angles
 from .fusion_inputs import (
     configured,
     differential,
@@ -197,6 +195,7 @@ class FusionTask(Task):
         )
         if m.outage is not None:
             pb.reference_extent = valid_ref  # the reference exists at the resurfacing fixes only (its scored share)
+        pb.unconstrained = unconstrained_angles(model, m.Z, P0, dims, m.used)
         return pb
 
     @staticmethod

@@ -224,7 +224,9 @@ def tune(
         from replay.util.files import write_csv
 
         marked = [
-            k for k in ("still", "reference_input", "reference", "reference_shares") if any(r.get(k) for r in rows)
+            k
+            for k in ("still", "reference_input", "reference", "reference_shares", "unconstrained")
+            if any(r.get(k) for r in rows)
         ]
         write_csv(rows, out / "leaderboard.csv", COLUMNS + marked)
         paths = {"leaderboard": out / "leaderboard.csv", "study": out / "study.db"}
@@ -386,7 +388,7 @@ def _pooled(rows) -> dict:
     out.update({k: int(sum(num(r, k) for r in rows if math.isfinite(num(r, k)))) for k in ("lost", "diverged")})
     if rows and all(r.get("still") for r in rows):  # issue 40: marked on the board (summary.marks)
         out["still"] = True
-    for k in ("reference_input", "reference", "reference_shares"):  # marks; the reference's provenance
+    for k in ("reference_input", "reference", "reference_shares", "unconstrained"):  # marks; the reference's
         if v := next((r[k] for r in rows if r.get(k)), ""):
             out[k] = v
     return out

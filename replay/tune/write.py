@@ -100,9 +100,12 @@ def board_notes(rows, failed: dict | None = None) -> list[str]:
     out = [f"{r['label']}: not ranked: {m}" for r in rows for m in marks(r)]
     kinds = sorted({str(r["reference"]) for r in rows if r.get("reference")})  # issue 35: on every table
     shares = sorted({str(r["reference_shares"]) for r in rows if r.get("reference_shares")})
-    out[:0] = [f"reference: {', '.join(kinds)}"] * bool(kinds) + [
-        f"reference shares a source with a fed input: {s}" for s in shares
-    ]
+    free = sorted({line for r in rows if r.get("unconstrained") for line in str(r["unconstrained"]).split(" | ")})
+    out[:0] = (
+        [f"reference: {', '.join(kinds)}"] * bool(kinds)
+        + [f"reference shares a source with a fed input: {s}" for s in shares]
+        + free
+    )
     pairs = {}
     for r in rows:
         if r["label"].endswith(("(default)", "(tuned)")):

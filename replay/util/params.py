@@ -104,6 +104,8 @@ class Param:
         if self.type is bool:
             return isinstance(v, bool), v
         if self.type is str:
+            if _is_integer(v) and self.choices and str(int(v)) in self.choices:  # dims=2 read as a number
+                v = str(int(v))
             return isinstance(v, str) and (self.choices is None or v in self.choices), v
         if self.type is dict:
             return isinstance(v, dict) and all(isinstance(k, str) for k in v), v
