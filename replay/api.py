@@ -24,7 +24,7 @@ from replay.data import registry
 
 
 from replay.run import tables
-from replay.run.evaluation import DEFAULT_FILTERS
+from replay.run.eval_options import DEFAULT_FILTERS, EvalOptions
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.run.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
 from replay.trajectory import lengths as by_length
@@ -52,14 +52,16 @@ def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = N
     """Run ``filters`` on ``dataset`` and score them: an :class:`replay.run.evaluation.Evaluation`.
 
     ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
-    docstring). ``options``: those of :func:`replay.run.evaluation.evaluate` (``task``, ``runs``,
+    docstring). ``options``: the fields of :class:`replay.run.eval_options.EvalOptions` (``task``, ``runs``,
     ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
-    ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``.
+    ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``, and
+    ``progress``; they become one record, passed whole to :func:`replay.run.evaluation.evaluate`.
     """
     from replay.run.evaluation import evaluate as run
 
     names, params = filter_names(filters, filter_params)
-    return run(os.fspath(dataset), filters=names, filter_params=params, **options)
+    progress = options.pop("progress", None)
+    return run(os.fspath(dataset), EvalOptions(filters=names, filter_params=params, **options), progress=progress)
 
 
 def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict]:

@@ -76,7 +76,7 @@ def test_campaign_runs_every_unit_then_does_no_work(serial, tmp_path):
 
 def test_campaign_numbers_equal_replay_eval(serial):
     """The campaign's (batched) runs give `replay eval`'s (one-by-one) numbers."""
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     out, _ = serial
     ev = evaluate("sim/auv-sonar", filters=["ekf", "ukf", "pf"], runs=6, seed=3, dataset_params={"steps": 30},

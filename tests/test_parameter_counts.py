@@ -13,7 +13,7 @@ OVER = {  # file:function -> parameters, as measured when the rule was written
     "replay/trajectory/scoring.py:score": 21, "filters/p002/compiled.py:swarm_move": 21,
     "filters/p002/compiled.py:cubature_step": 21, "replay/tune/check.py:prepare": 20,
     "filters/p002/compiled.py:cubature_threads": 20, "filters/p002/compiled.py:swarm": 19,
-    "filters/kalman_loops.py:sigma_run": 19, "replay/run/evaluation.py:evaluate": 18,
+    "filters/kalman_loops.py:sigma_run": 19,
     "filters/kalman_loops.py:sigma_update_subset": 18, "filters/kalman_kernels.py:joseph_update_into": 18,
     "filters/kalman_kernels.py:sigma_update_gated": 18, "filters/kalman_loops.py:ekf_run": 17,
     "replay/sim/sauv_current.py:make_frame": 16, "filters/kalman_kernels.py:sigma_update": 14,

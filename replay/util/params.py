@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from replay.util.errors import SHOWN, ReplayError, shown
@@ -232,3 +232,20 @@ class Declared:
     def params(self) -> dict:
         """Every declared parameter and its value (lists as lists), for manifests and leaderboards."""
         return {p.name: (list(v) if isinstance(v := getattr(self, p.name), tuple) else v) for p in self.PARAMS}
+
+
+def declared_fields(cls, params: tuple[Param, ...]):
+    """``cls`` (a dataclass of options) checked against its declarations, at import: each of ``params`` is a
+    field whose default is the declaration's (one declaration: the record cannot drift from it)."""
+    have = {f.name: f for f in fields(cls)}
+    for p in params:
+        if p.name not in have or have[p.name].default != p.default:
+            raise TypeError(f"{cls.__name__}.{p.name}: not a field defaulting to its declaration's {p.default!r}")
+    return cls
+
+
+def check_fields(record, params: tuple[Param, ...], owner: str = "") -> None:
+    """Each declared field of the frozen ``record`` checked by its declaration, in order, and stored
+    normalised (:meth:`Param.check`: one line naming the parameter, what it accepts and the value)."""
+    for p in params:
+        object.__setattr__(record, p.name, p.check(getattr(record, p.name), owner))
