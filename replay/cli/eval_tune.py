@@ -129,6 +129,7 @@ def run(
     """Check, tune ``repeats`` times, print and write the rows and the ranking (module docstring)."""
     from replay.data.dataset_ref import simulated
     from replay.tune import check, repeat, space
+    from replay.tune.options import TuneOptions
     from replay.util.files import write_csv
 
     if out is None:
@@ -139,21 +140,23 @@ def run(
     if sim and train_segment is not None:
         raise ReplayError("--train-segment: a simulation is tuned on one seed and scored on another (no segment)")
     t = check.prepare(
-        dataset,
-        filters=names,
-        entries=entries,
-        trials=trials,
-        objective=objective,
-        runs=o["runs"],
-        seed=o["seed"],
-        task=task,
-        task_params=task_params,
-        dataset_params=dataset_params,
-        first=o["first"],
-        data_dir=o["data_dir"],
-        train_segment=None if sim else (train_segment or "0.6"),
-        split="seeds" if sim else None,
-        alignment=o["alignment"],
+        TuneOptions(
+            dataset=dataset,
+            filters=names,
+            entries=entries,
+            trials=trials,
+            objective=objective,
+            runs=o["runs"],
+            seed=o["seed"],
+            task=task,
+            task_params=task_params,
+            dataset_params=dataset_params,
+            first=o["first"],
+            data_dir=o["data_dir"],
+            train_segment=None if sim else (train_segment or "0.6"),
+            split="seeds" if sim else None,
+            alignment=o["alignment"],
+        )
     )
     res = repeat.run_repeats(t, Path(out), repeat.REPEATS if repeats is None else repeats, quiet=o["quiet"])
     click.echo(

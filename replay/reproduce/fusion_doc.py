@@ -89,19 +89,22 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
 
 def tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work) -> dict:
     from replay.tune import check, repeat
+    from replay.tune.options import TuneOptions
 
     t = check.prepare(
-        _dataset(rec, bags_dir),
-        filters=list(filters),
-        entries=repeat.default_space(filters),
-        trials=trials,
-        objective="mean_rmse",
-        runs=runs,
-        seed=0,
-        task="fusion",
-        dataset_params=_dparams(rec, root),
-        data_dir=data_dir,
-        train_segment="0.6",
+        TuneOptions(
+            dataset=_dataset(rec, bags_dir),
+            filters=list(filters),
+            entries=repeat.default_space(filters),
+            trials=trials,
+            objective="mean_rmse",
+            runs=runs,
+            seed=0,
+            task="fusion",
+            dataset_params=_dparams(rec, root),
+            data_dir=data_dir,
+            train_segment="0.6",
+        )
     )
     res = repeat.run_repeats(t, work, repeats, quiet=True)
     return {"rows": res["rows"], "pairs": res["pairs"]}
