@@ -148,7 +148,8 @@ def run_campaign(
     c = spec.load(campaign, allow_modules)
     refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
     check_writable(Path(out), "out")
-    counts = execute.run(c, Path(out), workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
+    how = execute.RunOptions(workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
+    counts = execute.run(c, Path(out), how)
     df = _rows(counts.pop("rows"))
     df.attrs["counts"] = counts
     return df
