@@ -129,7 +129,6 @@ def run(
     """Check, tune ``repeats`` times, print and write the rows and the ranking (module docstring)."""
     from replay.data.dataset_ref import simulated
     from replay.tune import check, repeat, space
-    from replay.tune.options import TuneOptions
     from replay.util.files import write_csv
 
     if out is None:
@@ -140,7 +139,7 @@ def run(
     if sim and train_segment is not None:
         raise ReplayError("--train-segment: a simulation is tuned on one seed and scored on another (no segment)")
     t = check.prepare(
-        TuneOptions(
+        check.TuneOptions(
             dataset=dataset,
             filters=names,
             entries=entries,

@@ -112,7 +112,6 @@ def tune_cmd(
     from replay.cli.campaign import check_names
     from replay.data.registry import check_data_dir
     from replay.tune import check, run, space
-    from replay.tune.options import TuneOptions
     from replay.tune.write import board_notes, format_board
     from replay.util.files import check_writable, refuse_overlap
 
@@ -136,7 +135,7 @@ def tune_cmd(
         raise ReplayError(f"--out {out}: not a directory")
     parallel = workers or dask_local or (scheduler and 4)
     t = check.prepare(
-        TuneOptions(
+        check.TuneOptions(
             dataset=dataset,
             filters=filters.split(","),
             entries=entries,
