@@ -28,7 +28,9 @@ fixed blocks of runs.
 from __future__ import annotations
 
 import gc
+import logging
 import os
+from concurrent.futures import as_completed
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -122,11 +124,9 @@ def _serial(jobs):
 
 @contextmanager
 def _processes(workers: int):
-    from concurrent.futures import as_completed
-
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow.parquet  # noqa: F401 -- lazy on purpose: only a forked pool's parent needs it
     frozen = method == "fork" and not gc.get_freeze_count()
     if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
         gc.freeze()
@@ -148,14 +148,12 @@ def _processes(workers: int):
 @contextmanager
 def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster, as_completed  # lazy: an optional extra, heavy to import
     except ImportError:
         raise ReplayError(
             "Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
             "(it adds dask[distributed])"
         ) from None
-    import logging
-
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     try:

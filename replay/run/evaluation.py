@@ -36,6 +36,8 @@ from replay.run.eval_options import BY_NAME, DEFAULTS, EvalOptions
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
 from replay.run.checks import check_filters, check_memory, check_recorded, recorded_rows
+from replay.run import plots, tables
+from replay.filters.measurements import direct_rows
 
 
 BATCH = DEFAULTS["batch"]  # runs per block: the campaign default (``[campaign] batch``)
@@ -76,27 +78,19 @@ class Evaluation:
 
     def leaderboard(self):
         """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.leaderboard(self)
 
     def estimates(self, filter: str, *, run: int | None = None):
         """A filter's estimates as a DataFrame, one row per run and step (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.estimates(self, filter, run=run)
 
     def errors(self, filter: str, *, run: int | None = None):
         """A filter's errors against the reference as a DataFrame, one row per run and step
         (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.errors(self, filter, run=run)
 
     def plot_errors(self, **options):
         """Position error over time, RMSE across runs per filter: a matplotlib Figure (:mod:`replay.run.plots`)."""
-        from replay.run import plots
-
         return plots.plot_errors(self, **options)
 
     def first(self, n: int) -> "Evaluation":
@@ -316,8 +310,6 @@ MEASUREMENTS = "measurements"  # replay.filters.measurements
 def observes_position(problem) -> bool:
     """Whether every position component of the problem's state is observed directly (a fix):
     then the ``measurements`` row (the raw observations, scored alike) is added to the table."""
-    from replay.filters.measurements import direct_rows
-
     if problem.z.shape[0] == 0:
         return False
     seen = {i for j, i, _ in direct_rows(problem.model, problem.x0) if np.isfinite(problem.z[:, j]).any()}

@@ -29,6 +29,7 @@ import numpy as np
 
 from replay.scoring import align as alignment
 from replay.scoring import metrics
+from replay.trajectory import lengths as by_length
 from replay.trajectory import pose_error, prepare, quat
 from replay.trajectory.associate import T_MAX_DIFF, associate
 from replay.trajectory.base import Trajectory
@@ -175,8 +176,6 @@ def _add_rpe(out: Score, relations, o: Settings) -> None:
 def _by_length(ref: Trajectory, r: Trajectory, e: Trajectory, lengths, method: str, scale: float) -> dict:
     """Relative errors over lengths (:mod:`replay.trajectory.lengths`) of the matched estimate as recorded;
     ``ref`` is the windowed reference, whose path length is the total."""
-    from replay.trajectory import lengths as by_length
-
     items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
     return by_length.relative_errors(
         ref_path_length=float(by_length.distances(ref.p)[-1]),
