@@ -52,6 +52,7 @@ import numpy as np
 import gauge as machine_gauge
 
 from replay.data import registry
+from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import evaluate
 from replay.util.seeds import rng_for
 from replay.filters import make_filter
@@ -185,7 +186,7 @@ def main():
             print(f"IGWO-STCPF batched x{a.batch}, amortised: {b * 1e3:.3f} ms per run-step (no target)")
     if not a.skip_table:
         t0 = time.perf_counter()
-        evaluate("sim/auv-sonar", task="sonar", filters=FIVE, runs=a.table_runs, seed=0, filter_params=PARAMS)
+        evaluate("sim/auv-sonar", EvalOptions(task="sonar", filters=FIVE, runs=a.table_runs, seed=0, filter_params=PARAMS))
         wall = time.perf_counter() - t0
         target = TABLE5_TARGET_S * a.table_runs / 100
         verdicts.append((f"Table 5, five filters, {a.table_runs} runs, s", wall, f"<= {target:.0f}",

@@ -146,7 +146,7 @@ def bench_campaign(repeat=1, runs=200):
             for w in (1, 2):
                 m0, c0 = cpu(resource.RUSAGE_SELF), cpu(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
-                execute.run(spec.load(path), Path(d) / f"out{w}_{k}", workers=w, quiet=True)
+                execute.run(spec.load(path), Path(d) / f"out{w}_{k}", execute.RunOptions(workers=w, quiet=True))
                 walls[w].append(time.perf_counter() - t0)
                 print(f"  --workers {w}: wall {walls[w][-1]:.2f} s, CPU main {cpu(resource.RUSAGE_SELF) - m0:.2f} s "
                       f"+ workers {cpu(resource.RUSAGE_CHILDREN) - c0:.2f} s (load average {os.getloadavg()[0]:.1f})")

@@ -15,26 +15,36 @@ campaign's worker processes need a packaged plugin or a ``"module:Class"`` name.
 
 from __future__ import annotations
 
+import csv
+import importlib
 import inspect
+import json
 import os
-
+from pathlib import Path
 
 from replay.api_args import ARGS, checked, default
-from replay.data import registry
-
-
+from replay.data import plugins, registry
+from replay.data.plugins import ADAPTERS, dataset_entries
 from replay.run import tables
-from replay.run.evaluation import DEFAULT_FILTERS
+from replay.run.eval_options import DEFAULT_FILTERS, EvalOptions
 from replay.filters import FILTERS, make_filter  # noqa: F401 — re-exported
 from replay.run.plots import plot_errors, plot_paired, plot_rmse, plot_track  # noqa: F401 — re-exported
+from replay.scoring import summary
 from replay.trajectory import lengths as by_length
+from replay.trajectory import load
 from replay.trajectory import score_api
 from replay.trajectory.score_options import ScoreOptions
 from replay.trajectory.score_result import ScoreResult  # noqa: F401 — re-exported
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError
+from replay.util.files import check_writable, refuse_overlap
 from replay.util.plugins import NAME
+
+# Kept lazy, in the functions that need them (import time after ``import replay.api``, measured): the
+# evaluation pipeline (replay.run.evaluation 2.4 s, replay.filters.base 1.6 s, replay.run.pipeline 1.9 s),
+# the campaign runner (replay.campaign.execute 2.6 s), the campaign store (replay.campaign.board, .store: 0.1 s), the
+# MCAP export (replay.outputs.export_mcap, .export_safety: 0.15 s) and pandas: replay.load_frame pays for none of them.
 
 __all__ = sorted(ARGS)  # the public names: replay.__all__ (tests/test_hostile_api.py checks both)
 
@@ -52,21 +62,23 @@ def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = N
     """Run ``filters`` on ``dataset`` and score them: an :class:`replay.run.evaluation.Evaluation`.
 
     ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
-    docstring). ``options``: those of :func:`replay.run.evaluation.evaluate` (``task``, ``runs``,
+    docstring). ``options``: the fields of :class:`replay.run.eval_options.EvalOptions` (``task``, ``runs``,
     ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
-    ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``.
+    ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``, and
+    ``progress``; they become one record, passed whole to :func:`replay.run.evaluation.evaluate`.
     """
-    from replay.run.evaluation import evaluate as run
+    from replay.run.evaluation import evaluate as run  # lazy: module comment
 
     names, params = filter_names(filters, filter_params)
-    return run(os.fspath(dataset), filters=names, filter_params=params, **options)
+    progress = options.pop("progress", None)
+    return run(os.fspath(dataset), EvalOptions(filters=names, filter_params=params, **options), progress=progress)
 
 
 def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict]:
     """(names, filter_params) of ``filters`` given as names, classes or instances."""
     if isinstance(filters, str):
         filters = [f.strip() for f in filters.split(",") if f.strip()]
-    from replay.filters.base import Filter
+    from replay.filters.base import Filter  # lazy: module comment
 
     if not isinstance(filters, (list, tuple)) or not all(
         isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters
@@ -138,15 +150,14 @@ def run_campaign(
     DataFrame (one row per configuration; ``df.attrs["counts"]``: units computed, failed, ...).
     A filter or task the file names as ``package.module:Class`` is refused before anything is
     imported unless ``allow_modules`` holds its module (a class of this session: register it)."""
-    from pathlib import Path
 
-    from replay.campaign import execute, spec
-    from replay.util.files import check_writable, refuse_overlap
+    from replay.campaign import execute, spec  # lazy: module comment
 
     c = spec.load(campaign, allow_modules)
     refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
     check_writable(Path(out), "out")
-    counts = execute.run(c, Path(out), workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
+    how = execute.RunOptions(workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
+    counts = execute.run(c, Path(out), how)
     df = _rows(counts.pop("rows"))
     df.attrs["counts"] = counts
     return df
@@ -156,15 +167,13 @@ def campaign_results(out, *, runs: bool = False):
     """A result directory (a campaign's, or a ``replay eval`` output) as one DataFrame: its
     leaderboard rows; ``runs=True``: one row per configuration and run with every per-run metric
     (a campaign's units, or an eval output's ``runs.csv``)."""
-    from replay.campaign import board
+    from replay.campaign import board  # lazy: module comment
 
     if not runs:
         return _rows(board.read_dir(out))
-    import pandas as pd
+    import pandas as pd  # lazy: module comment
 
-    from pathlib import Path
-
-    from replay.campaign.store import Store
+    from replay.campaign.store import Store  # lazy: module comment
 
     if not Path(out).is_dir():
         raise ReplayError(
@@ -193,10 +202,8 @@ def campaign_results(out, *, runs: bool = False):
 
 def _eval_runs(out):
     """The per-run rows of a ``replay eval`` output (``runs.csv``; floats read back bit for bit)."""
-    import csv
-    import json
 
-    import pandas as pd
+    import pandas as pd  # lazy: module comment
 
     path = out / "runs.csv"
     if not path.is_file():
@@ -228,16 +235,13 @@ def _eval_runs(out):
 
 
 def _rows(rows):
-    import pandas as pd
-
-    from replay.scoring import summary
+    import pandas as pd  # lazy: module comment
 
     return pd.DataFrame(rows, columns=summary.columns(rows) if rows else None)
 
 
 def load_trajectory(source, **options):
     """A trajectory from a file or a bag topic: :func:`replay.trajectory.load`."""
-    from replay.trajectory import load
 
     return load(source, **options)
 
@@ -246,9 +250,9 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
     """Write run ``run`` of an evaluation (reference, each filter's track and error, the sensors)
     as a Foxglove MCAP file; returns the number of messages. ``data_dir``: where the dataset
     was found (the frame is read again). An existing file is replaced only if replay wrote it."""
-    from replay.outputs.export_mcap import write_mcap
-    from replay.outputs.export_safety import check_target, dataset_inputs
-    from replay.run.pipeline import load_frame as frame_of_run
+    from replay.outputs.export_mcap import write_mcap  # lazy: module comment
+    from replay.outputs.export_safety import check_target, dataset_inputs  # lazy: module comment
+    from replay.run.pipeline import load_frame as frame_of_run  # lazy: module comment
 
     cfg = evaluation.results[0].config
     check_target(
@@ -271,13 +275,12 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
 def list_plugins():
     """Every plugin (entry point) of the four groups, and every problem: a DataFrame with
     ``kind, name, origin, target, problem`` (``replay list plugins`` prints the same)."""
-    import pandas as pd
+    import pandas as pd  # lazy: module comment
 
     return pd.DataFrame(plugin_rows(), columns=["kind", "name", "origin", "target", "problem"])
 
 
 def plugin_rows() -> list[dict]:
-    from replay.data.plugins import ADAPTERS, dataset_entries
 
     rows = []
     for kind, reg in (("filter", FILTERS), ("task", TASKS), ("adapter", ADAPTERS)):
@@ -316,9 +319,6 @@ def plugin_rows() -> list[dict]:
 
 def refresh_plugins() -> None:
     """Discover the installed plugins again (after ``pip install`` in a running session)."""
-    import importlib
-
-    from replay.data import plugins
 
     importlib.invalidate_caches()
     FILTERS.refresh()

@@ -59,7 +59,7 @@ def board_rows(out):
 def serial(tmp_path_factory):
     d = tmp_path_factory.mktemp("serial")
     c = spec.load(write(d, SMALL))
-    counts = execute.run(c, d / "out", workers=1, quiet=True)
+    counts = execute.run(c, d / "out", execute.RunOptions(workers=1, quiet=True))
     return d / "out", counts
 
 
@@ -69,14 +69,14 @@ def test_campaign_runs_every_unit_then_does_no_work(serial, tmp_path):
     rows = board_rows(out)
     assert [r["label"] for r in rows] == ["ekf", "ukf(alpha=0.5)", "ukf(alpha=1.0)", "pf"]  # campaign file order
     assert all(r["runs"] == "6" and r["task"] == "sonar" for r in rows)
-    again = execute.run(spec.load(write(tmp_path, SMALL)), out, workers=1, quiet=True)
+    again = execute.run(spec.load(write(tmp_path, SMALL)), out, execute.RunOptions(workers=1, quiet=True))
     assert again["units"] == 0 and again["stored_before"] == 24
     assert board_rows(out) == rows
 
 
 def test_campaign_numbers_equal_replay_eval(serial):
     """The campaign's (batched) runs give `replay eval`'s (one-by-one) numbers."""
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     out, _ = serial
     ev = evaluate("sim/auv-sonar", filters=["ekf", "ukf", "pf"], runs=6, seed=3, dataset_params={"steps": 30},
@@ -91,14 +91,14 @@ def test_campaign_numbers_equal_replay_eval(serial):
 def test_interrupted_and_resumed_equals_uninterrupted(serial, tmp_path):
     out = tmp_path / "out"
     c = spec.load(write(tmp_path, SMALL))
-    first = execute.run(c, out, workers=1, quiet=True, limit=3)
+    first = execute.run(c, out, execute.RunOptions(workers=1, quiet=True, limit=3))
     assert first["units"] == 9
     # debris of a run killed while writing: a temporary file and a table without its record
     store = board.Store(out)
     h = next(h for h, _ in store.configs() if 5 not in store.stored_runs(h))
     (out / "units" / h / ".5.parquet.123.tmp").write_bytes(b"half")
     (out / "units" / h / "5.parquet").write_bytes(b"half-written")
-    rest = execute.run(c, out, workers=2, quiet=True)  # resumed on a process pool
+    rest = execute.run(c, out, execute.RunOptions(workers=2, quiet=True))  # resumed on a process pool
     assert rest["units"] == 15 and rest["backend"].startswith("processes")
     assert board_rows(out) == board_rows(serial[0])
 
@@ -115,7 +115,7 @@ def test_block_resumed_with_one_run_left_equals_uninterrupted(serial, tmp_path):
         if cfg["filter"] in ("ukf", "ekf"):
             (out / "units" / h / "4.json").unlink()
             (out / "units" / h / "4.parquet").unlink()
-    rest = execute.run(spec.load(write(tmp_path, SMALL)), out, workers=1, quiet=True)
+    rest = execute.run(spec.load(write(tmp_path, SMALL)), out, execute.RunOptions(workers=1, quiet=True))
     assert rest["units"] == 3
     assert board_rows(out) == board_rows(serial[0])
 
@@ -143,7 +143,7 @@ def test_killed_subprocess_resumes_to_identical_results(serial, tmp_path):
 def test_dask_local_cluster_equals_serial(serial, tmp_path):
     pytest.importorskip("distributed")
     c = spec.load(write(tmp_path, SMALL))
-    counts = execute.run(c, tmp_path / "out", dask_local=2, quiet=True)
+    counts = execute.run(c, tmp_path / "out", execute.RunOptions(dask_local=2, quiet=True))
     assert counts["backend"] == "dask" and counts["done"] == 24
     assert board_rows(tmp_path / "out") == board_rows(serial[0])
 
@@ -172,7 +172,7 @@ def test_exception_inside_a_filter_is_that_runs_divergence(tmp_path, monkeypatch
     plan = spec.load(write(tmp_path, SMALL))
     monkeypatch.setitem(resampling.SCHEMES, "systematic", broken)
     out = tmp_path / "out"
-    counts = execute.run(plan, out, workers=1, quiet=True)
+    counts = execute.run(plan, out, execute.RunOptions(workers=1, quiet=True))
     assert counts["failed"] == 0 and counts["done"] == 24
     rows = {r["label"]: r for r in board_rows(out)}
     assert rows["pf"]["diverged"] == "6" and rows["pf"]["runs"] == "6" and rows["pf"]["pos_rmse"] == "nan"
@@ -197,7 +197,7 @@ def test_failing_unit_is_recorded_and_campaign_goes_on(tmp_path, monkeypatch):
     plan = spec.load(write(tmp_path, SMALL))
     monkeypatch.setattr(pipeline, "build_problem", flaky)
     out = tmp_path / "out"
-    counts = execute.run(plan, out, workers=1, quiet=True)
+    counts = execute.run(plan, out, execute.RunOptions(workers=1, quiet=True))
     assert counts["failed"] == 4 and counts["done"] == 20
     rows = board_rows(out)
     assert all(r["failed"] == "1" and r["runs"] == "5" for r in rows)
@@ -260,8 +260,8 @@ def test_paired_and_consistency_columns(serial):
 def test_extended_campaign_computes_only_the_new_filters(serial, tmp_path):
     only_ekf = SMALL.split("[[filter]]")[0] + '[[filter]]\nname = "ekf"\n'
     out = tmp_path / "out"
-    assert execute.run(spec.load(write(tmp_path, only_ekf, "a.toml")), out, workers=1, quiet=True)["units"] == 6
-    more = execute.run(spec.load(write(tmp_path, SMALL, "b.toml")), out, workers=1, quiet=True)
+    assert execute.run(spec.load(write(tmp_path, only_ekf, "a.toml")), out, execute.RunOptions(workers=1, quiet=True))["units"] == 6
+    more = execute.run(spec.load(write(tmp_path, SMALL, "b.toml")), out, execute.RunOptions(workers=1, quiet=True))
     assert more["units"] == 18 and more["stored_before"] == 6
     assert board_rows(out) == board_rows(serial[0])
 

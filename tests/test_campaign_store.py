@@ -78,7 +78,7 @@ def _board_bytes(out):
 def test_leaderboard_of_the_run_is_a_fresh_reads(tmp_path):
     plan = spec.load(write(tmp_path, SMALL))
     out = tmp_path / "out"
-    execute.run(plan, out, workers=1, quiet=True)  # summarised by the Store that wrote the units
+    execute.run(plan, out, execute.RunOptions(workers=1, quiet=True))  # summarised by the Store that wrote the units
     written = _board_bytes(out)
     board.summarise(out, [config_hash(c.as_dict()) for c in plan.configs])  # from the files
     assert _board_bytes(out) == written
@@ -99,11 +99,11 @@ def test_a_pool_gets_the_heaviest_jobs_first(tmp_path, monkeypatch):
 
     monkeypatch.setattr(execute, "_processes", fake_pool)
     plan = spec.load(write(tmp_path, SMALL))
-    counts = execute.run(plan, tmp_path / "out", workers=2, quiet=True)
+    counts = execute.run(plan, tmp_path / "out", execute.RunOptions(workers=2, quiet=True))
     assert counts["backend"] == "processes(2)" and counts["done"] == 24
     assert order == [("pf", 0), ("pf", 3), ("ekf", 0), ("ekf", 3), ("ukf", 0), ("ukf", 3), ("ukf", 0), ("ukf", 3)]
     serial = tmp_path / "serial"
-    execute.run(plan, serial, workers=1, quiet=True)
+    execute.run(plan, serial, execute.RunOptions(workers=1, quiet=True))
     strip = lambda p: [{k: v for k, v in r.items() if k != "us_per_step"}
                        for r in csv.DictReader(p.read_text().splitlines())]
     assert strip(serial / "leaderboard.csv") == strip(tmp_path / "out" / "leaderboard.csv")

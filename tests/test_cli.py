@@ -40,7 +40,7 @@ def test_eval_sim_writes_leaderboard_and_manifest(tmp_path):
 
 
 def test_same_seed_same_numbers_other_seed_other_numbers(tmp_path):
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     a = evaluate("sim/auv-sonar", filters=["ukf"], runs=2, seed=1)
     b = evaluate("sim/auv-sonar", filters=["ukf"], runs=2, seed=1)
@@ -50,7 +50,7 @@ def test_same_seed_same_numbers_other_seed_other_numbers(tmp_path):
 
 
 def test_adding_a_filter_changes_no_other_filter():
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     a = evaluate("sim/auv-sonar", filters=["ukf"], runs=2, seed=3)
     b = evaluate("sim/auv-sonar", filters=["pf", "ekf", "ukf"], runs=2, seed=3,

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay.cli import main
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
 
 def _eval(tmp_path, *args):

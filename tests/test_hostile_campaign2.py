@@ -213,7 +213,7 @@ def test_grid_writes_one_index_not_a_flushed_file_per_configuration(tmp_path, mo
     from io import StringIO
 
     stream = StringIO()
-    counts = execute.run(c, tmp_path / "out", workers=1, limit=1, progress_stream=stream)
+    counts = execute.run(c, tmp_path / "out", execute.RunOptions(workers=1, limit=1, progress_stream=stream))
     assert "campaign: checking stored units: 40/40 configurations" in stream.getvalue()
     assert counts["done"] == 3 and len(list((tmp_path / "out" / "units").glob("*/config.json"))) == 1
     listed = json.loads((tmp_path / "out" / "configs.json").read_text())["configs"]

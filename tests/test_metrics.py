@@ -139,7 +139,7 @@ def test_share_above_counts_steps_whose_error_norm_exceeds_the_threshold():
 def test_lost_tracks_are_counted_not_reported_as_success():
     """The README's first command: the bootstrap PF loses 2 of 20 tracks on sim/auv-sonar (errors of
     176.6 and 50.8 m); they are counted, shown beside a median, and dominate the mean."""
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     ev = evaluate("sim/auv-sonar", filters=("ekf", "pf"), runs=20, seed=0)
     ekf, pf = ev.rows

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 from replay.outputs.files import write_all
 from replay.util.errors import ReplayError
 from replay.util.staging import MARKER, publish_dir, recover

@@ -11,7 +11,7 @@ import pytest
 
 from replay.data import registry
 from replay.util.errors import ReplayError
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 from replay.filters import make_filter
 from replay.filters.p002 import compiled_util, gwo, pso
 from replay.filters.sigma import CKF

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 from replay.sim.sauv_current import make_frame
 
 NOISE_FREE = {"dvl_percent": 0.0, "ahrs_sigma_deg": 0.0, "acc_bias": 0.0, "acc_noise_density": 0.0}

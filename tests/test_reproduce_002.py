@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 from replay.reproduce import p002, rules, spec
 from replay.util.portable import check_portable
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
 
 SIGMA1 = 0.4 * np.pi / 180  # 003 §4.1

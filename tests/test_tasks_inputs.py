@@ -15,7 +15,7 @@ from hostile import assert_ok
 from replay.adapters import bags
 from replay.adapters.bohai import load as load_bohai
 from replay.adapters.mapping import from_dict, role_of
-from replay.run.evaluation import evaluate
+from replay import evaluate  # the API: keywords in, one EvalOptions record built
 from replay.frame import Channel, Frame
 from replay.models.noise import Covariance
 from replay.roles import as_meta, of_role

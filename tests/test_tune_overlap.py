@@ -8,6 +8,7 @@ from replay.adapters.bohai import COLS36
 from replay.cli import main
 from replay.data import dataset_ref
 from replay.tune import check, parts
+from replay.tune.options import TuneOptions
 
 KF = ["--filters", "kf", "--runs", "1", "--trials", "1", "--task", "position", "-p", "kf.q_scale=log[0.1,10]", "-q"]
 
@@ -85,8 +86,8 @@ def test_two_views_of_one_content_overlap_iff_their_time_spans_intersect(tmp_pat
 
 
 def _prepare(**kw):
-    return check.prepare(filters=["kf"], entries=[("kf.q_scale", "log[0.1,10]", "--param kf.q_scale")], trials=1,
-                         objective="mean_rmse", runs=1, seed=0, task="position", **kw)
+    return check.prepare(TuneOptions(filters=["kf"], entries=[("kf.q_scale", "log[0.1,10]", "--param kf.q_scale")],
+                                     trials=1, objective="mean_rmse", runs=1, seed=0, task="position", **kw))
 
 
 def test_apart_segments_of_a_window_and_other_content_are_not_flagged(tmp_path):

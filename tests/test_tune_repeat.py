@@ -10,6 +10,7 @@ from scipy import stats
 from replay.cli import main as cli
 from replay.scoring.significance import paired_t
 from replay.tune import check, repeat
+from replay.tune.options import TuneOptions
 from replay.tune.space import entries_from_cli
 
 
@@ -27,8 +28,8 @@ def test_two_identical_filters_are_not_called_different(tmp_path):
     Within one tune a paired test over its runs calls it significant; over 3 tunes x runs it is not."""
     dims = ["log[0.01,10]", "log[0.1,20]"]
     entries = entries_from_cli([f"{f}.{p}={d}" for f in ("kf", "ekf") for p, d in zip(("q_scale", "r_scale"), dims)])
-    t = check.prepare("sim/linear", filters=["kf", "ekf"], entries=entries, trials=12, objective="mean_rmse",
-                      runs=4, seed=0, dataset_params={"steps": 100}, split="seeds")
+    t = check.prepare(TuneOptions(dataset="sim/linear", filters=["kf", "ekf"], entries=entries, trials=12,
+                                  objective="mean_rmse", runs=4, seed=0, dataset_params={"steps": 100}, split="seeds"))
     res = repeat.run_repeats(t, tmp_path / "rep", 3, quiet=True)
     (pair,) = res["pairs"]
     assert not pair["different"] and pair["ci95"] > abs(pair["difference"]), pair

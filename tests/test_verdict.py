@@ -27,7 +27,7 @@ def _pos_rmse(job, ev):  # a reducer: what comes back from the worker instead of
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_evaluate_jobs_in_plan_order_and_reduced_in_the_worker(monkeypatch, workers):
     from replay.campaign.longest import Job, evaluate_jobs
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     monkeypatch.setenv("REPLAY_WORKERS", workers)
     data = {"steps": 30, "q": 0.3, "r": 2.0}

@@ -74,7 +74,7 @@ def test_glint_logpdf_integrates_to_one_1d():
 
 
 def test_formation_end_to_end_and_diagonal_fast_path():
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     g = Glint(np.diag([25.0, 1e-4]), np.diag([25.0, 4e-4]), eps=0.75)
     e = np.random.default_rng(0).standard_normal((7, 2)) * [5, 0.01]
@@ -126,7 +126,7 @@ def test_bearing_glint_excess_kurtosis(ratio, eps):
 def test_distinct_particles_counted_after_resampling():
     """The engine records per step the distinct particles after resampling (the ancestors kept):
     within [1, N], equal to the distinct ancestors of the systematic draw, and α < 1 keeps more."""
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
     from replay.filters.p003.wfpf import distinct, mean_distinct
 
     X = np.arange(12.0).reshape(6, 2)
@@ -147,7 +147,7 @@ def test_counting_changes_no_estimate():
     from replay.filters.p003.wfpf import mean_distinct
     from replay.filters.pf import PFEngine
     from replay.run.pipeline import build_problem
-    from replay.run.evaluation import evaluate
+    from replay import evaluate  # the API: keywords in, one EvalOptions record built
 
     ev = evaluate("sim/uav-formation", filters=("wf-pf",), runs=1, seed=3)
     pb = build_problem(ev.results[0].config, 0)

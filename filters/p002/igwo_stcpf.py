@@ -309,13 +309,13 @@ class SwarmEngine(Engine):
             fitness,
             self.active_rngs(),
             flt.t_max,
-            flt.omega_max,
-            flt.omega_min,
-            flt.omega_decay,
-            flt.c1,
-            flt.c2,
             project,
             self.movable(k, mask),
+            omega_max=flt.omega_max,
+            omega_min=flt.omega_min,
+            alpha=flt.omega_decay,
+            c1=flt.c1,
+            c2=flt.c2,
         )
         self.gain_sum[self.ids] += best[:, 0] - best[:, -1]
         self.moves[self.ids] += 1

@@ -16,6 +16,8 @@ the swarm replaces resampling, and the positions are its population.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .swarm_kernels import pso_best, pso_velocity
@@ -45,21 +47,22 @@ def ramp(t: int, iterations: int, start: float, end: float) -> float:
     return start + (end - start) * (t - 1) / max(iterations - 1, 1)
 
 
-def optimize(
-    X: np.ndarray,
-    fitness,
-    rng,
-    iterations: int = 20,
-    omega_max: float = 0.9,
-    omega_min: float = 0.4,
-    alpha: float = 0.2,
-    c1=(2.0, 1.0),
-    c2=(1.5, 2.0),
-    project=None,
-    movable=None,
-):
+@dataclass(frozen=True)
+class Coefficients:
+    """PSO's coefficients: the inertia weight from ``omega_max`` to ``omega_min`` (:func:`inertia`, ``alpha``)
+    and the acceleration coefficients ``c1``, ``c2`` ramped from their first to their second value (:func:`ramp`)."""
+
+    omega_max: float = 0.9
+    omega_min: float = 0.4
+    alpha: float = 0.2
+    c1: tuple = (2.0, 1.0)
+    c2: tuple = (1.5, 2.0)
+
+
+def optimize(X: np.ndarray, fitness, rng, iterations: int = 20, project=None, movable=None, **coefficients):
     """Run PSO on positions ``X`` (N, d); ``project`` maps positions into the bounds; ``movable``
-    (M, d) bool (None: all): the components the particles move in (velocity 0 in the others).
+    (M, d) bool (None: all): the components the particles move in (velocity 0 in the others);
+    ``coefficients``: the fields of :class:`Coefficients` (one record; an unknown name is a TypeError).
 
     Returns final positions, their fitness, and the swarm's best fitness before
     and after each iteration (non-increasing). Batched like
@@ -70,6 +73,7 @@ def optimize(
     the numbers of the numpy reading kept as the test oracle ``tests/oracle_p002.py``, bit for
     bit); ``fitness`` and ``project`` are called between them.
     """
+    c = Coefficients(**coefficients)
     X, rngs, fitness, project, single = as_runs(X, rng, fitness, project)
     M = len(X)
     keep = None if movable is None else np.ascontiguousarray(np.asarray(movable, float).reshape(M, -1))
@@ -83,8 +87,8 @@ def optimize(
     best = np.empty((iterations + 1, M))  # rows: contiguous for the kernel; transposed on return
     _best(X, f, pbest, pf, g, best[0])  # f = pf: only the swarm's best
     t = np.arange(1, iterations + 1)
-    w = inertia(t, omega_max, omega_min, alpha)
-    scales = np.stack([ramp(t, iterations, *c1), ramp(t, iterations, *c2)], axis=1)  # (iterations, 2)
+    w = inertia(t, c.omega_max, c.omega_min, c.alpha)
+    scales = np.stack([ramp(t, iterations, *c.c1), ramp(t, iterations, *c.c2)], axis=1)  # (iterations, 2)
     R = scaled_draws(rngs, (iterations, 2) + X.shape[1:], scales)  # (M, iterations, 2, N, d): c1(t) r1, c2(t) r2
     for i in range(iterations):  # V = w V + c1 r1 (pbest - X) + c2 r2 (g - X); X = X + V
         _velocity(V, X, pbest, g, R, i, float(w[i]), keep)

@@ -28,8 +28,11 @@ fixed blocks of runs.
 from __future__ import annotations
 
 import gc
+import logging
 import os
+from concurrent.futures import as_completed
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 from replay.run.pipeline import config_hash, runs_of
@@ -121,11 +124,9 @@ def _serial(jobs):
 
 @contextmanager
 def _processes(workers: int):
-    from concurrent.futures import as_completed
-
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow.parquet  # noqa: F401 -- lazy on purpose: only a forked pool's parent needs it
     frozen = method == "fork" and not gc.get_freeze_count()
     if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
         gc.freeze()
@@ -147,14 +148,12 @@ def _processes(workers: int):
 @contextmanager
 def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster, as_completed  # lazy: an optional extra, heavy to import
     except ImportError:
         raise ReplayError(
             "Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
             "(it adds dask[distributed])"
         ) from None
-    import logging
-
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     try:
@@ -198,46 +197,39 @@ def _result(fut, job):
         ]
 
 
-def run(
-    campaign: Campaign,
-    out,
-    *,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dask_local: int | None = None,
-    quiet: bool = False,
-    retry_failed: bool = False,
-    data_dir=None,
-    limit: int | None = None,
-    connect_timeout: float = 5.0,
-    progress_stream=None,
-    wait: bool = False,
-) -> dict:
+@dataclass(frozen=True)
+class RunOptions:
+    """How a campaign is computed, never what it computes (the numbers do not depend on these): the
+    backend (``workers``, ``scheduler``, ``dask_local``, ``connect_timeout``: module docstring), the
+    progress (``quiet``, ``progress_stream``), ``retry_failed`` (compute failed units again), ``data_dir``
+    (where the datasets are found), ``limit`` (stop after that many jobs: tests of resuming) and ``wait``
+    (block until a running campaign on the directory has finished instead of refusing)."""
+
+    workers: int | None = None
+    scheduler: str | None = None
+    dask_local: int | None = None
+    quiet: bool = False
+    retry_failed: bool = False
+    data_dir: os.PathLike | str | None = None
+    limit: int | None = None
+    connect_timeout: float = 5.0
+    progress_stream: object = None
+    wait: bool = False
+
+
+def run(campaign: Campaign, out, options: RunOptions | None = None) -> dict:
     """Compute every unit of ``campaign`` not yet stored intact in ``out``; write the leaderboard.
 
-    Holds the directory's campaign lock throughout (:mod:`.lock`; ``wait``: block until a
-    running campaign on ``out`` has finished instead of refusing). ``limit`` stops after that
-    many jobs (for tests of resuming). Returns counts; ``damaged`` lists the damaged units
+    Holds the directory's campaign lock throughout (:mod:`.lock`). ``options``: a :class:`RunOptions`
+    (None: the defaults). Returns counts; ``damaged`` lists the damaged units
     found and computed again, ``rewritten`` the damaged ``config.json`` files replaced (one
     line each, naming the file).
     """
-    out = Path(out)
+    out, o = Path(out), options or RunOptions()
     try:
         out.mkdir(parents=True, exist_ok=True)
-        with locked(out, wait=wait):
-            return _run_locked(
-                campaign,
-                out,
-                workers,
-                scheduler,
-                dask_local,
-                quiet,
-                retry_failed,
-                data_dir,
-                limit,
-                connect_timeout,
-                progress_stream,
-            )
+        with locked(out, wait=o.wait):
+            return _run_locked(campaign, out, o)
     except OSError as err:  # a full or read-only disk, a name too long: the stored units are intact
         for name in ("leaderboard.csv", "paired.csv"):
             try:
@@ -251,19 +243,7 @@ def run(
         ) from None
 
 
-def _run_locked(
-    campaign,
-    out,
-    workers,
-    scheduler,
-    dask_local,
-    quiet,
-    retry_failed,
-    data_dir,
-    limit,
-    connect_timeout,
-    progress_stream,
-) -> dict:
+def _run_locked(campaign, out, o: RunOptions) -> dict:
     store = Store(out)
     hashes = [config_hash(c.as_dict()) for c in campaign.configs]
     stored_before = 0
@@ -281,16 +261,16 @@ def _run_locked(
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
     checking = None
     if len(campaign.configs) >= PLAN_PROGRESS:  # what it does before the first unit, and how far
-        checking = Progress(len(campaign.configs), quiet, progress_stream, total_weight=None)
+        checking = Progress(len(campaign.configs), o.quiet, o.progress_stream, total_weight=None)
         checking.label, checking.unit = "campaign: checking stored units", "configuration"
     try:
-        jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir, checking)
+        jobs, damaged, stored = _plan(campaign, store, o.retry_failed, o.data_dir, checking)
     finally:
         if checking is not None:
             checking.close()
     stored_before += stored
-    if limit is not None:
-        jobs = jobs[:limit]
+    if o.limit is not None:
+        jobs = jobs[: o.limit]
     scheduled = {(j.config_hash, r) for j in jobs for r in j.runs}
     total = sum(len(j.runs) for j in jobs)
     counts = {
@@ -307,13 +287,13 @@ def _run_locked(
     if jobs:
         check_noise(jobs, campaign.path)  # per-filter Q, R, P0 of the task model's size: before any unit
         check_space(out, "--out", need=total * UNIT_BYTES)  # before any work: at least this much
-        backend, counts["backend"] = open_backend(workers, scheduler, dask_local, connect_timeout, len(jobs))
+        backend, counts["backend"] = open_backend(o.workers, o.scheduler, o.dask_local, o.connect_timeout, len(jobs))
         weights = {
             (j.config_hash, tuple(j.runs)): particle_weight(j.config["filter_params"], len(j.runs)) for j in jobs
         }
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
-        progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
+        progress = Progress(total, o.quiet, o.progress_stream, total_weight=sum(weights.values()))
         saved = set()
         try:
             with backend as mapper:

@@ -30,6 +30,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from replay.campaign.workers import process_pool
+from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import evaluate
 from replay.util.errors import ReplayError
 
@@ -112,7 +113,7 @@ def _evaluate(args):
     job, runs, seed, data_dir, reduce = args
     params = dict(dataset_params=job.dataset_params or None, filter_params=job.filter_params)
     params |= dict(task_params=job.task_params or None, runs=job.runs or runs, seed=seed + job.seed)
-    ev = evaluate(job.dataset, filters=job.filters, data_dir=data_dir, **params)
+    ev = evaluate(job.dataset, EvalOptions(filters=job.filters, data_dir=data_dir, **params))
     return ev if reduce is None else reduce(job, ev)
 
 

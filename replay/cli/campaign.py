@@ -75,13 +75,15 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     counts = execute.run(
         c,
         out,
-        workers=workers,
-        scheduler=scheduler,
-        dask_local=dask_local,
-        quiet=quiet,
-        retry_failed=retry_failed,
-        data_dir=data_dir,
-        wait=wait,
+        execute.RunOptions(
+            workers=workers,
+            scheduler=scheduler,
+            dask_local=dask_local,
+            quiet=quiet,
+            retry_failed=retry_failed,
+            data_dir=data_dir,
+            wait=wait,
+        ),
     )
     for key, what in (
         ("rewritten", "rewrote {n} damaged configuration file{s}"),

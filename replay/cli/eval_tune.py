@@ -139,21 +139,23 @@ def run(
     if sim and train_segment is not None:
         raise ReplayError("--train-segment: a simulation is tuned on one seed and scored on another (no segment)")
     t = check.prepare(
-        dataset,
-        filters=names,
-        entries=entries,
-        trials=trials,
-        objective=objective,
-        runs=o["runs"],
-        seed=o["seed"],
-        task=task,
-        task_params=task_params,
-        dataset_params=dataset_params,
-        first=o["first"],
-        data_dir=o["data_dir"],
-        train_segment=None if sim else (train_segment or "0.6"),
-        split="seeds" if sim else None,
-        alignment=o["alignment"],
+        check.TuneOptions(
+            dataset=dataset,
+            filters=names,
+            entries=entries,
+            trials=trials,
+            objective=objective,
+            runs=o["runs"],
+            seed=o["seed"],
+            task=task,
+            task_params=task_params,
+            dataset_params=dataset_params,
+            first=o["first"],
+            data_dir=o["data_dir"],
+            train_segment=None if sim else (train_segment or "0.6"),
+            split="seeds" if sim else None,
+            alignment=o["alignment"],
+        )
     )
     res = repeat.run_repeats(t, Path(out), repeat.REPEATS if repeats is None else repeats, quiet=o["quiet"])
     click.echo(

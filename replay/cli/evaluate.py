@@ -223,13 +223,14 @@ def _recheck_output_set(out: Path, inputs, replace: bool, mcap_out, ros2_out, da
 
 def _evaluate(ref, quiet: bool, **options):
     """:func:`replay.run.evaluation.evaluate` with a progress display (none when ``quiet``)."""
+    from replay.run.eval_options import EvalOptions
     from replay.run.evaluation import evaluate
     from replay.util.progress import Progress
 
     quiet_notes(quiet)
     progress = Progress(0, quiet, label="eval", unit="run")
     try:
-        return evaluate(ref, progress=progress, **options)
+        return evaluate(ref, EvalOptions(**options), progress=progress)
     finally:
         progress.close()
 

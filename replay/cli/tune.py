@@ -135,26 +135,30 @@ def tune_cmd(
         raise ReplayError(f"--out {out}: not a directory")
     parallel = workers or dask_local or (scheduler and 4)
     t = check.prepare(
-        dataset,
-        filters=filters.split(","),
-        entries=entries,
-        trials=trials,
-        objective=objective,
-        runs=runs,
-        seed=seed,
-        task=task,
-        task_params=cli_params.task_params(task_params, task),
-        dataset_params=with_views(cli_params.dataset_inputs(dataset_params, mapping), fault=fault),  # as replay eval
-        view={"rate": rate, "window": window},
-        first=first,
-        data_dir=data_dir,
-        train_segment=train_segment,
-        train=train,
-        test=test,
-        split=split,
-        allow_overlap=allow_overlap,
-        batch=-(-runs // parallel) if parallel and runs > 0 else None,
-    )  # a trial's runs over the workers
+        check.TuneOptions(
+            dataset=dataset,
+            filters=filters.split(","),
+            entries=entries,
+            trials=trials,
+            objective=objective,
+            runs=runs,
+            seed=seed,
+            task=task,
+            task_params=cli_params.task_params(task_params, task),
+            dataset_params=with_views(
+                cli_params.dataset_inputs(dataset_params, mapping), fault=fault
+            ),  # as replay eval
+            view={"rate": rate, "window": window},
+            first=first,
+            data_dir=data_dir,
+            train_segment=train_segment,
+            train=train,
+            test=test,
+            split=split,
+            allow_overlap=allow_overlap,
+            batch=-(-runs // parallel) if parallel and runs > 0 else None,  # a trial's runs over the workers
+        )
+    )
     check_names(out, "--out")
     given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
     refuse_overlap(Path(out), given, "--out")

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import warnings
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,7 +41,7 @@ STAT = {"median": "median", "mean": "mean", "rmse": "RMSE"}
 def figure(nrows: int = 1, ncols: int = 1, figsize=(8, 4.5), **kw):
     """(Figure, axes array (nrows, ncols)) made without pyplot: no backend is switched, no global
     figure is kept (nothing to close; in a notebook the returned figure displays itself)."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: 1.3 s to import (measured), only when a figure is drawn
 
     fig = Figure(figsize=figsize)
     return fig, fig.subplots(nrows, ncols, squeeze=False, **kw)
@@ -97,7 +98,7 @@ def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.2
 
 def chi2_limits(dof, runs: int, p: float = 0.95):
     """Two-sided ``p`` band of the average of ``runs`` chi-square(``dof``) values (NaN where dof <= 0)."""
-    from scipy import stats
+    from scipy import stats  # lazy: 1.0 s to import (measured), only for a chi-square band
 
     dof = np.asarray(dof, float)
     a = (1 - p) / 2
@@ -143,26 +144,30 @@ def masked_spans(ax, t, valid, text="reference masked"):
         )
 
 
-def mc_figure(
-    t,
-    curves: dict,
-    name: str,
-    unit: str | None,
-    title: str,
-    stat: str = "median",
-    q=(5, 95),
-    logy: bool = False,
-    palette: Palette | None = None,
-    xlabel: str = "t (s)",
-    ncols: int = 3,
-    join=(),
-):
+@dataclass(frozen=True)
+class Panels:
+    """How :func:`mc_figure` draws its panels: the centre line ``stat`` (median, mean or rmse: :data:`STAT`) and
+    the ``q`` percentile band, a log y axis (``logy``), the colours (``palette``, default: one per label), the x
+    axis label, the panels per row (``ncols``) and the labels of sparse tracks (``join``: :func:`joined`)."""
+
+    stat: str = "median"
+    q: tuple = (5, 95)
+    logy: bool = False
+    palette: Palette | None = None
+    xlabel: str = "t (s)"
+    ncols: int = 3
+    join: tuple | list | set = ()
+
+
+def mc_figure(t, curves: dict, name: str, unit: str | None, title: str, **panels):
     """One panel per filter: its centre line and ``q`` band over runs, the others' centre lines
     in grey for context; shared axes. ``curves``: {label: (runs, steps) values against ``t``}
     (signed or absolute errors; with ``stat="rmse"`` the line is the RMSE over the runs at each
     step and the band the ``q`` percentiles of the values themselves: pass absolute errors);
-    ``join``: the labels of sparse tracks (:func:`joined`)."""
-    pal = palette or Palette(curves)
+    ``panels``: the fields of :class:`Panels` (one record; an unknown name is a TypeError)."""
+    o = Panels(**panels)
+    stat, q, join, ncols = o.stat, o.q, o.join, o.ncols
+    pal = o.palette or Palette(curves)
     n = len(curves)
     cols = min(n, ncols)
     rows = -(-n // cols)
@@ -177,7 +182,7 @@ def mc_figure(
         ax.set_title(
             f"{lab}: {STAT[stat]} over {runs} runs" + (f", band {q[0]:g}-{q[1]:g} %" if runs > 1 else ""), fontsize=9
         )
-        if logy and (np.asarray(v, float) > 0).any():  # all zero (an estimate equal to the reference): linear
+        if o.logy and (np.asarray(v, float) > 0).any():  # all zero (an estimate equal to the reference): linear
             ax.set_yscale("log")
         ax.grid(alpha=0.3)
     for ax in axes.flat[n:]:
@@ -185,7 +190,7 @@ def mc_figure(
     for ax in axes[:, 0]:
         ax.set_ylabel(label(name, unit))
     for ax in axes[-1, :]:
-        ax.set_xlabel(xlabel)
+        ax.set_xlabel(o.xlabel)
     suptitle(fig, title)
     fig.subplots_adjust(hspace=0.3, wspace=0.06)
     return fig
@@ -221,7 +226,7 @@ def save(fig, path, dpi: int = 100):
 
 def artist_colours(figures) -> dict:
     """{gid: set of '#rrggbb'} over every line, band, bar and marker of ``figures`` that carries a gid."""
-    from matplotlib.colors import to_hex
+    from matplotlib.colors import to_hex  # lazy: matplotlib, as in figure()
 
     out: dict[str, set] = {}
 

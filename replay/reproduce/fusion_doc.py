@@ -61,11 +61,11 @@ def _dparams(rec, root):
 
 def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     """The outage protocol at defaults: headline rows and each filter against hold-last-fix."""
+    from replay.run.eval_options import EvalOptions
     from replay.run.evaluation import evaluate
     from replay.scoring import outages
 
-    ev = evaluate(
-        _dataset(rec, bags_dir),
+    options = EvalOptions(
         task="fusion",
         filters=list(filters),
         runs=runs,
@@ -74,6 +74,7 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
         dataset_params=_dparams(rec, root) or None,
         task_params={"score": "outages", **rec["outage"]},
     )
+    ev = evaluate(_dataset(rec, bags_dir), options)
     events, heads = outages.tables(ev)
     names = [h["filter"] for h in heads]
     vs = {f: outages.paired(ev, f, "measurements") for f in names if f != "measurements" and "measurements" in names}
@@ -88,19 +89,22 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
 
 def tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work) -> dict:
     from replay.tune import check, repeat
+    from replay.tune.options import TuneOptions
 
     t = check.prepare(
-        _dataset(rec, bags_dir),
-        filters=list(filters),
-        entries=repeat.default_space(filters),
-        trials=trials,
-        objective="mean_rmse",
-        runs=runs,
-        seed=0,
-        task="fusion",
-        dataset_params=_dparams(rec, root),
-        data_dir=data_dir,
-        train_segment="0.6",
+        TuneOptions(
+            dataset=_dataset(rec, bags_dir),
+            filters=list(filters),
+            entries=repeat.default_space(filters),
+            trials=trials,
+            objective="mean_rmse",
+            runs=runs,
+            seed=0,
+            task="fusion",
+            dataset_params=_dparams(rec, root),
+            data_dir=data_dir,
+            train_segment="0.6",
+        )
     )
     res = repeat.run_repeats(t, work, repeats, quiet=True)
     return {"rows": res["rows"], "pairs": res["pairs"]}

@@ -19,6 +19,7 @@ import numpy as np
 
 from replay.campaign.longest import pool, run_longest_first, workers
 from replay.models.depth import R_FIXED, paper_Q
+from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
 from replay.run.pipeline import plain
@@ -163,7 +164,7 @@ def compute(job) -> dict:
     cell, labels, runs, seed, duration = job
     f = dict(VARIANTS[lab] for lab in labels)
     kw = dict(dataset_params=cell.dataset_params(duration), task_params=cell.task_params(), filter_params=f)
-    ev = evaluate(EXP["dataset"], task=EXP["task"], filters=list(f), runs=runs, seed=seed, **kw)
+    ev = evaluate(EXP["dataset"], EvalOptions(task=EXP["task"], filters=list(f), runs=runs, seed=seed, **kw))
     out = {"cell": cell, "seed": seed, "command": command_line(ev.config), "t": np.asarray(ev.t, float), "filters": {}}
     out["maneuvers"] = plain(ev.frame_meta["maneuvers"])
     for lab, res, row in zip(labels, ev.results, ev.rows):

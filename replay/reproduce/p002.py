@@ -16,6 +16,7 @@ import numpy as np
 from replay.campaign.longest import pool, run_longest_first, workers
 from replay.data import registry
 from replay.filters.p002 import pso, swarm_kernels
+from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import evaluate
 from replay.run.manifest import command_line
 from replay.scoring.metrics import share_above
@@ -120,7 +121,9 @@ def compute(above: float, job: tuple) -> dict:
     (share of steps with a 3-D error above ``above``) and ``mean3`` (mean over steps of the Euclidean position error),
     ``z_low`` (share of truths under the PSO box's depth bound)."""
     _, rows, kw = job
-    ev = evaluate(filters=tuple(f for _, f, _ in rows), filter_params={f: p for _, f, p in rows if p} or None, **kw)
+    fp = {f: p for _, f, p in rows if p} or None
+    kw = {k: v for k, v in kw.items() if k != "dataset"}
+    ev = evaluate(job[2]["dataset"], EvalOptions(filters=tuple(f for _, f, _ in rows), filter_params=fp, **kw))
     by, out = {r.name: r for r in ev.results}, {"command": command_line(ev.config), "rows": {}}
     z = [pso.below_box(t) for t in ev.truths if t.shape[1] > 2]
     for lab, r in ((lab, by[f]) for lab, f, _ in rows + (("raw measurements", "measurements", 0),) if f in by):

@@ -16,7 +16,7 @@ on the task's reference; their notes (what was associated) are ``Evaluation.note
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -32,13 +32,14 @@ from replay.filters.gating import per_filter
 from replay.run.pipeline import Config, build_problem, config_hash, default_task, plain, run_block
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_params
 from replay.tasks import make_task
-from replay.run.eval_options import DEFAULTS, validate_eval_options
+from replay.run.eval_options import BY_NAME, DEFAULTS, EvalOptions
 from replay.util.errors import ReplayError
 from replay.util.lookup import params_of
 from replay.run.checks import check_filters, check_memory, check_recorded, recorded_rows
+from replay.run import plots, tables
+from replay.filters.measurements import direct_rows
 
 
-DEFAULT_FILTERS = ("ekf", "ukf", "ckf", "pf")
 BATCH = DEFAULTS["batch"]  # runs per block: the campaign default (``[campaign] batch``)
 
 
@@ -77,34 +78,24 @@ class Evaluation:
 
     def leaderboard(self):
         """The leaderboard as a DataFrame: the columns and values of ``leaderboard.csv`` (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.leaderboard(self)
 
     def estimates(self, filter: str, *, run: int | None = None):
         """A filter's estimates as a DataFrame, one row per run and step (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.estimates(self, filter, run=run)
 
     def errors(self, filter: str, *, run: int | None = None):
         """A filter's errors against the reference as a DataFrame, one row per run and step
         (:mod:`replay.run.tables`)."""
-        from replay.run import tables
-
         return tables.errors(self, filter, run=run)
 
     def plot_errors(self, **options):
         """Position error over time, RMSE across runs per filter: a matplotlib Figure (:mod:`replay.run.plots`)."""
-        from replay.run import plots
-
         return plots.plot_errors(self, **options)
 
     def first(self, n: int) -> "Evaluation":
         """This evaluation restricted to its first ``n`` runs: the numbers of an ``n``-run
         evaluation (a run's seeds and numbers depend only on (seed, run))."""
-        from replay.run.eval_options import BY_NAME
-
         n = BY_NAME["runs"].check(n)
         if n >= self.config["runs"]:
             return self
@@ -142,98 +133,42 @@ def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     return summary.against_measurements(rows, configs, records)
 
 
-def evaluate(
-    dataset: str,
-    *,
-    task: str | None = None,
-    filters=DEFAULT_FILTERS,
-    runs: int = DEFAULTS["runs"],
-    seed: int = DEFAULTS["seed"],
-    first: int | None = None,
-    data_dir=None,
-    task_params: dict | None = None,
-    filter_params: dict | None = None,
-    dataset_params: dict | None = None,
-    adapter: str | None = None,
-    alignment: str = DEFAULTS["alignment"],
-    divergence_threshold: float | None = None,
-    baseline: str | None = None,
-    batch: int = BATCH,
-    recorded=(),
-    progress=None,
-    min_scored_share: float = summary.MIN_SCORED_SHARE.default,
-) -> Evaluation:
-    """Run ``filters`` ``runs`` times on ``dataset`` under ``task``; score every run (module docstring).
+def evaluate(dataset, options: EvalOptions | None = None, *, progress=None) -> Evaluation:
+    """Run ``options.filters`` ``options.runs`` times on ``dataset`` under ``options.task``; score every run
+    (module docstring). ``options``: an :class:`EvalOptions` (checked when made; None: the defaults).
 
     ``filters`` may also name recorded estimates (``recorded:<name>``); ``recorded`` adds
     more by name, or, when None, every estimate the frame holds that ``filters`` does not name.
     ``min_scored_share`` (:data:`replay.scoring.summary.MIN_SCORED_SHARE`) is recorded in the configuration:
-    the printed table flags rows scored on less of the reference.
+    the printed table flags rows scored on less of the reference. ``progress``: a
+    :class:`replay.util.progress.Progress` told of each block of runs done.
     """
-    min_scored_share = summary.MIN_SCORED_SHARE.check(min_scored_share)
-    registry.check_data_dir(data_dir)
-    s = _resolve(
-        dataset,
-        task=task,
-        filters=filters,
-        runs=runs,
-        seed=seed,
-        first=first,
-        data_dir=data_dir,
-        task_params=task_params,
-        filter_params=filter_params,
-        dataset_params=dataset_params,
-        adapter=adapter,
-        alignment=alignment,
-        divergence_threshold=divergence_threshold,
-        baseline=baseline,
-        batch=batch,
-        recorded=recorded,
-    )
-    configs, built = _configs(s, task_params)
+    o = EvalOptions() if options is None else options
+    registry.check_data_dir(o.data_dir)
+    s = _resolve(dataset, o)
+    configs, built = _configs(s, o.task_params)
     _start_progress(progress, configs, s.runs)
     results = [_run_config(cfg, s, built if cfg is configs[0] else None, progress) for cfg in configs]
-    return _assemble(s, configs, results, min_scored_share)
+    return _assemble(s, configs, results, o.min_scored_share)
 
 
-_EVAL_OPTIONS = (
-    "task",
-    "runs",
-    "seed",
-    "first",
-    "data_dir",
-    "adapter",
-    "task_params",
-    "dataset_params",
-    "alignment",
-    "divergence_threshold",
-    "baseline",
-    "batch",
-)  # the options validate_eval_options checks, in the order given to it
-
-
-def _resolve(dataset, *, filters, filter_params, dataset_params, recorded, **given) -> SimpleNamespace:
-    """The checked and resolved settings of an evaluation (the options validated, the filters made,
+def _resolve(dataset, o: EvalOptions) -> SimpleNamespace:
+    """The resolved settings of an evaluation (the options checked when ``o`` was made; the filters made,
     the dataset id parsed, the task named, the recorded rows found), in the order ``evaluate`` checks them."""
-    options = dict(given, dataset_params=dataset_params)
-    opts = validate_eval_options({k: options[k] for k in _EVAL_OPTIONS})
-    s = SimpleNamespace(**given)
-    s.runs, s.seed, s.first, s.divergence_threshold, s.batch = (
-        opts[k] for k in ("runs", "seed", "first", "divergence_threshold", "batch")
-    )
-    filters, s.filter_params = check_filters(filters, filter_params, recorded)
+    s = SimpleNamespace(**{f.name: getattr(o, f.name) for f in fields(o)})
+    filters, s.filter_params = check_filters(o.filters, o.filter_params, o.recorded)
     s.offline = [n for n in filters if not is_recorded(n)]
     s.instances = [make_filter(name, **s.filter_params.get(name, {})) for name in s.offline]  # validated up front
-    adapter, data_dir, first, seed = s.adapter, s.data_dir, s.first, s.seed
+    adapter, data_dir, first, seed, recorded = o.adapter, o.data_dir, o.first, o.seed, o.recorded
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
     s.dataset = ref.id  # what the configurations and the manifest record
-    s.dataset_params = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)  # canonical
+    s.dataset_params = registry.check_params(ref.target, o.dataset_params or {}, adapter=adapter)  # canonical
     check_recorded(
         s.dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], s.dataset_params
     )
-    s.task_name = s.task or default_task(
+    s.task_name = o.task or default_task(
         ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=s.dataset_params, seed=seed
     )
     s.names, s.estimates = recorded_rows(ref, filters, recorded, seed, first, s.dataset_params, adapter, data_dir)
@@ -375,8 +310,6 @@ MEASUREMENTS = "measurements"  # replay.filters.measurements
 def observes_position(problem) -> bool:
     """Whether every position component of the problem's state is observed directly (a fix):
     then the ``measurements`` row (the raw observations, scored alike) is added to the table."""
-    from replay.filters.measurements import direct_rows
-
     if problem.z.shape[0] == 0:
         return False
     seen = {i for j, i, _ in direct_rows(problem.model, problem.x0) if np.isfinite(problem.z[:, j]).any()}

@@ -55,7 +55,8 @@ import json
 import re
 from pathlib import Path
 
-from replay.run.eval_options import BY_NAME as EVAL
+from replay.run.eval_options import BY_NAME as EVAL, EvalOptions
+from replay.run.evaluation import evaluate
 from replay.run.pipeline import Config, config_hash, is_sim
 from replay.trajectory.recorded import is_recorded
 from replay.scoring.summary import TIMING
@@ -268,11 +269,8 @@ def repeat(man: dict, data_dir=None, progress=None):
     """Run the manifest's configuration again: the :class:`replay.run.evaluation.Evaluation`.
 
     ``progress``: a :class:`replay.util.progress.Progress` told of each run done (as ``replay eval``'s)."""
-    from replay.run.evaluation import evaluate
-
     cfg = man["config"]
-    return evaluate(
-        cfg["dataset"],
+    options = EvalOptions(
         task=cfg["task"],
         filters=cfg["filters"],
         runs=cfg["runs"],
@@ -286,8 +284,8 @@ def repeat(man: dict, data_dir=None, progress=None):
         alignment=cfg["alignment"],
         divergence_threshold=cfg["divergence_threshold"],
         baseline=cfg.get("baseline"),
-        progress=progress,
     )
+    return evaluate(cfg["dataset"], options, progress=progress)
 
 
 def differences(man: dict, ev) -> list[str]:

@@ -17,23 +17,27 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, make_dataclass
 
 from replay.util.params import Param, _is_number, validate
 
 
-def generator(params: tuple[Param, ...]):
+def generator(params: tuple[Param, ...], record: bool = False):
     """Decorate ``make_frame(rng, **params)``: validate ``params`` against ``params`` first.
 
-    The decorated function carries the declarations as ``PARAMS``.
+    The decorated function carries the declarations as ``PARAMS``. ``record=True``: the function receives
+    the values as one record, ``make_frame(rng, p)`` (a frozen dataclass with one field per declaration,
+    in their order), instead of one keyword each; it is still called ``make_frame(rng, **params)``.
     """
 
     def wrap(make_frame):
         owner = f"simulator {make_frame.__module__}"
+        kind = make_dataclass("Params", [p.name for p in params], frozen=True) if record else None
 
         @functools.wraps(make_frame)
         def make(rng, **given):
-            return make_frame(rng, **validate(params, given, owner))
+            values = validate(params, given, owner)
+            return make_frame(rng, kind(**values)) if record else make_frame(rng, **values)
 
         make.PARAMS = params
         return make

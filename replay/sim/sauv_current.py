@@ -328,50 +328,32 @@ def _reference(tr, att_true):
     }
 
 
-@generator(PARAMS)
-def make_frame(
-    rng: np.random.Generator,
-    *,
-    T,
-    strength,
-    length_scale,
-    grid,
-    origin_en,
-    dive_pitch_deg,
-    cruise_s,
-    heading0_deg,
-    depth_full_scale,
-    dvl_track,
-    dvl_percent,
-    acc_bias,
-    acc_noise_density,
-    ahrs_sigma_deg,
-    ahrs_tau,
-) -> Frame:
+@generator(PARAMS, record=True)
+def make_frame(rng: np.random.Generator, p) -> Frame:
     """Simulate the A→G mission in the current field; sensors from ``rng``."""
-    t, u, pitch, heading = mission(T, dive_pitch_deg, cruise_s, 30.0, heading0_deg)
-    tr = _truth(t, u, pitch, heading, T, origin_en, grid, length_scale, strength)
+    t, u, pitch, heading = mission(p.T, p.dive_pitch_deg, p.cruise_s, 30.0, p.heading0_deg)
+    tr = _truth(t, u, pitch, heading, p.T, p.origin_en, p.grid, p.length_scale, p.strength)
     noise = SimpleNamespace(
-        depth_full_scale=depth_full_scale,
-        dvl_track=dvl_track,
-        dvl_percent=dvl_percent,
-        acc_bias=acc_bias,
-        acc_noise_density=acc_noise_density,
-        ahrs_sigma_deg=ahrs_sigma_deg,
-        ahrs_tau=ahrs_tau,
+        depth_full_scale=p.depth_full_scale,
+        dvl_track=p.dvl_track,
+        dvl_percent=p.dvl_percent,
+        acc_bias=p.acc_bias,
+        acc_noise_density=p.acc_noise_density,
+        ahrs_sigma_deg=p.ahrs_sigma_deg,
+        ahrs_tau=p.ahrs_tau,
     )
-    sn = _sensors(rng, tr, pitch, heading, T, noise)
+    sn = _sensors(rng, tr, pitch, heading, p.T, noise)
     meta = {
         "source": "synthetic: replay.sim.sauv_current",
         "synthetic": True,
         "crs": None,
-        "dt": T,
-        "strength": strength,
-        "length_scale": length_scale,
-        "grid": grid,
-        "depth_full_scale": depth_full_scale,
-        "ahrs_tau": ahrs_tau,
-        "dvl_track": dvl_track,
+        "dt": p.T,
+        "strength": p.strength,
+        "length_scale": p.length_scale,
+        "grid": p.grid,
+        "depth_full_scale": p.depth_full_scale,
+        "ahrs_tau": p.ahrs_tau,
+        "dvl_track": p.dvl_track,
         "initial_state_ned": np.concatenate([tr.pos[0], tr.v_b[0], tr.a_b[0], [heading[0]]]).tolist(),
     }
-    return Frame(t, _channels(sn, dvl_track), _reference(tr, sn.att_true), None, meta)
+    return Frame(t, _channels(sn, p.dvl_track), _reference(tr, sn.att_true), None, meta)

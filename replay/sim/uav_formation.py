@@ -85,26 +85,24 @@ PARAMS = (
 )
 
 
-@generator(PARAMS)
-def make_frame(
-    rng: np.random.Generator, *, steps, T, leg, turn_rate, accel_sigma, eps, range_sigma, sigma1, sigma2, x0, leader0
-) -> Frame:
-    """Simulate ``steps`` samples of both aircraft and the follower's radar from ``rng``."""
-    noise = glint_003(eps, range_sigma, sigma1, sigma2)
-    w = turn_schedule(steps, leg, turn_rate)
-    lead = np.empty((steps, 4))
-    fol = np.empty((steps, 4))
-    xl, xf = np.asarray(leader0, float), np.asarray(x0, float)
-    dummy = Formation(np.zeros((steps, 2)), w, T, accel_sigma**2 * np.eye(2), noise)
-    for k in range(steps):  # first sample one step after x0
+@generator(PARAMS, record=True)
+def make_frame(rng: np.random.Generator, p) -> Frame:
+    """Simulate ``p.steps`` samples of both aircraft and the follower's radar from ``rng``."""
+    noise = glint_003(p.eps, p.range_sigma, p.sigma1, p.sigma2)
+    w = turn_schedule(p.steps, p.leg, p.turn_rate)
+    lead = np.empty((p.steps, 4))
+    fol = np.empty((p.steps, 4))
+    xl, xf = np.asarray(p.leader0, float), np.asarray(p.x0, float)
+    dummy = Formation(np.zeros((p.steps, 2)), w, p.T, p.accel_sigma**2 * np.eye(2), noise)
+    for k in range(p.steps):  # first sample one step after x0
         xl = dummy.f(xl, k)
         xf = dummy.sample_f(xf, k, rng)
         lead[k], fol[k] = xl, xf
     d = lead[:, :2] - fol[:, :2]  # eq. 6 for every step at once
     z = np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0])])
-    z = z + noise.sample(rng, steps)
+    z = z + noise.sample(rng, p.steps)
     z[:, 1] = wrap(z[:, 1])
-    t = T * np.arange(1, steps + 1)
+    t = p.T * np.arange(1, p.steps + 1)
     channels = {
         "radar": Channel(
             z,
@@ -126,12 +124,12 @@ def make_frame(
         "source": "synthetic: replay.sim.uav_formation",
         "synthetic": True,
         "crs": None,
-        "dt": T,
-        "initial_state": list(map(float, x0)),
-        "accel_sigma": accel_sigma,
-        "eps": eps,
-        "range_sigma": range_sigma,
-        "sigma1": sigma1,
-        "sigma2": sigma2,
+        "dt": p.T,
+        "initial_state": list(map(float, p.x0)),
+        "accel_sigma": p.accel_sigma,
+        "eps": p.eps,
+        "range_sigma": p.range_sigma,
+        "sigma1": p.sigma1,
+        "sigma2": p.sigma2,
     }
     return Frame(t, channels, reference, None, meta)

@@ -23,12 +23,13 @@ matched poses and ``anees*`` its 95 % chi-square(3) band and share of poses insi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from replay.scoring import align as alignment
 from replay.scoring import metrics
+from replay.trajectory import lengths as by_length
 from replay.trajectory import pose_error, prepare, quat
 from replay.trajectory.associate import T_MAX_DIFF, associate
 from replay.trajectory.base import Trajectory
@@ -69,71 +70,59 @@ def _align(ref: Trajectory, est: Trajectory, method: str, n_to_align, origin: bo
     return moved, (R, t, c)
 
 
-def score(
-    ref: Trajectory,
-    est: Trajectory,
-    *,
-    align: str = "none",
-    n_to_align: int | None = None,
-    align_origin: bool = False,
-    t_max_diff: float = T_MAX_DIFF,
-    t_offset: float = 0.0,
-    relations=("trans",),
-    delta: float | None = None,
-    delta_unit: str = "f",
-    all_pairs: bool = False,
-    rel_tol: float = 0.1,
-    pairs_from_reference: bool = False,
-    lengths=None,
-    lengths_method: str = "rpg",
-    sync_method: str = "nearest",
-    t_start=None,
-    t_end=None,
-    downsample: int | None = None,
-    motion_filter=None,
-    project_to_plane: str | None = None,
-) -> Score:
+@dataclass(frozen=True)
+class Settings:
+    """The keyword arguments of :func:`score`, one record (:meth:`replay.trajectory.score_options.ScoreOptions.settings`
+    gives them; the defaults are evo's): alignment (``align``, ``n_to_align``, ``align_origin``), association
+    (``t_max_diff``, ``t_offset``, ``sync_method``), the pose ``relations``, the RPE (``delta``: None for none,
+    ``delta_unit``, ``all_pairs``, ``rel_tol``, ``pairs_from_reference``), the relative errors over ``lengths``
+    and evo's trajectory options (:mod:`replay.trajectory.prepare`)."""
+
+    align: str = "none"
+    n_to_align: int | None = None
+    align_origin: bool = False
+    t_max_diff: float = T_MAX_DIFF
+    t_offset: float = 0.0
+    relations: tuple | list = ("trans",)
+    delta: float | None = None
+    delta_unit: str = "f"
+    all_pairs: bool = False
+    rel_tol: float = 0.1
+    pairs_from_reference: bool = False
+    lengths: str | list | None = None
+    lengths_method: str = "rpg"
+    sync_method: str = "nearest"
+    t_start: float | None = None
+    t_end: float | None = None
+    downsample: int | None = None
+    motion_filter: tuple | list | None = None
+    project_to_plane: str | None = None
+
+
+def score(ref: Trajectory, est: Trajectory, **settings) -> Score:
     """Associate, align and compute the APE (and the RPE when ``delta`` is given); module docstring and
-    :mod:`replay.trajectory.prepare` (time window, interpolation, downsampling, motion filter, projection)."""
-    relations = [pose_error.relation(r) for r in relations]
-    _require_orientations(ref, est, relations, delta, delta_unit)
-    if sync_method not in prepare.SYNC_METHODS:
-        raise ReplayError(f"sync_method {sync_method!r}: expected one of {', '.join(prepare.SYNC_METHODS)}")
-    ref, est = prepare.window(ref, t_start, t_end), prepare.window(est, t_start, t_end, t_offset)
-    i_est, r, e = _matched(ref, est, t_max_diff, t_offset, sync_method, downsample, motion_filter)
-    moved, transform = _align(r, e, align, n_to_align, align_origin)
-    if project_to_plane is not None:  # after the alignment, as evo
-        r, e, moved = (prepare.project(x, project_to_plane) for x in (r, e, moved))
-    options = dict(
-        align=align,
-        n_to_align=n_to_align,
-        align_origin=align_origin,
-        t_max_diff=t_max_diff,
-        t_offset=t_offset,
-        relations=relations,
-        delta=delta,
-        delta_unit=delta_unit,
-        all_pairs=all_pairs,
-        rel_tol=rel_tol,
-        pairs_from_reference=pairs_from_reference,
-        lengths=lengths,
-        lengths_method=lengths_method,
-        sync_method=sync_method,
-        t_start=t_start,
-        t_end=t_end,
-        downsample=downsample,
-        motion_filter=motion_filter,
-        project_to_plane=project_to_plane,
-    )
+    :mod:`replay.trajectory.prepare` (time window, interpolation, downsampling, motion filter, projection).
+    ``settings``: the fields of :class:`Settings` (one record; an unknown name is a TypeError)."""
+    o = Settings(**settings)
+    relations = [pose_error.relation(r) for r in o.relations]
+    _require_orientations(ref, est, relations, o.delta, o.delta_unit)
+    if o.sync_method not in prepare.SYNC_METHODS:
+        raise ReplayError(f"sync_method {o.sync_method!r}: expected one of {', '.join(prepare.SYNC_METHODS)}")
+    ref, est = prepare.window(ref, o.t_start, o.t_end), prepare.window(est, o.t_start, o.t_end, o.t_offset)
+    i_est, r, e = _matched(ref, est, o)
+    moved, transform = _align(r, e, o.align, o.n_to_align, o.align_origin)
+    if o.project_to_plane is not None:  # after the alignment, as evo
+        r, e, moved = (prepare.project(x, o.project_to_plane) for x in (r, e, moved))
+    options = dict({f.name: getattr(o, f.name) for f in fields(o)}, relations=relations)
     out = Score(r, e, moved, transform, options, unmatched=len(est) - len(np.unique(i_est)))
     for rel in relations:
         if rel != "point_distance_error_ratio":
             out.ape[rel] = pose_error.ape(p_ref=r.p, q_ref=r.q, p_est=moved.p, q_est=moved.q, relation=rel)
     out.ape_axes = pose_error.ape_axes(p_ref=r.p, p_est=moved.p)
-    if delta is not None:
-        _add_rpe(out, relations, delta, delta_unit, all_pairs, rel_tol, pairs_from_reference)
-    if lengths:
-        out.lengths = _by_length(ref, r, e, lengths, lengths_method, scale=float(transform[2]))
+    if o.delta is not None:
+        _add_rpe(out, relations, o)
+    if o.lengths:
+        out.lengths = _by_length(ref, r, e, o.lengths, o.lengths_method, scale=float(transform[2]))
     return out
 
 
@@ -152,12 +141,13 @@ def _require_orientations(ref: Trajectory, est: Trajectory, relations, delta, de
                 )
 
 
-def _matched(ref: Trajectory, est: Trajectory, t_max_diff, t_offset, sync_method, downsample, motion_filter):
+def _matched(ref: Trajectory, est: Trajectory, o: Settings):
     """The associated poses (evo's sync, then downsampling and motion filter): the matched estimate
     indices and the matched reference and estimate."""
-    i_ref, i_est = associate(ref, est, t_max_diff=t_max_diff, t_offset=t_offset)
+    t_offset, downsample, motion_filter = o.t_offset, o.downsample, o.motion_filter
+    i_ref, i_est = associate(ref, est, t_max_diff=o.t_max_diff, t_offset=t_offset)
     r, e = ref.take(i_ref), est.take(i_est)
-    if sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
+    if o.sync_method == "interpolation":  # the denser one resampled at the other's matched stamps (evo)
         r, e = (
             (r, prepare.interpolate(est, r.t - t_offset))
             if len(est) > len(ref)
@@ -169,12 +159,12 @@ def _matched(ref: Trajectory, est: Trajectory, t_max_diff, t_offset, sync_method
     return i_est, r, e
 
 
-def _add_rpe(out: Score, relations, delta, delta_unit, all_pairs, rel_tol, pairs_from_reference) -> None:
-    """The RPE of each relation over the pairs ``delta`` apart (on the reference or the aligned estimate)."""
+def _add_rpe(out: Score, relations, o: Settings) -> None:
+    """The RPE of each relation over the pairs ``o.delta`` apart (on the reference or the aligned estimate)."""
     r, moved = out.reference, out.aligned
-    base = r if pairs_from_reference else moved
+    base = r if o.pairs_from_reference else moved
     i, j = pose_error.pairs(
-        p=base.p, q=base.q, t=base.t, delta=delta, unit=delta_unit, all_pairs=all_pairs, rel_tol=rel_tol
+        p=base.p, q=base.q, t=base.t, delta=o.delta, unit=o.delta_unit, all_pairs=o.all_pairs, rel_tol=o.rel_tol
     )
     out.rpe_pairs = (i, j)
     for rel in relations:
@@ -186,8 +176,6 @@ def _add_rpe(out: Score, relations, delta, delta_unit, all_pairs, rel_tol, pairs
 def _by_length(ref: Trajectory, r: Trajectory, e: Trajectory, lengths, method: str, scale: float) -> dict:
     """Relative errors over lengths (:mod:`replay.trajectory.lengths`) of the matched estimate as recorded;
     ``ref`` is the windowed reference, whose path length is the total."""
-    from replay.trajectory import lengths as by_length
-
     items = by_length.parse(lengths) if isinstance(lengths, str) else list(lengths)
     return by_length.relative_errors(
         ref_path_length=float(by_length.distances(ref.p)[-1]),

@@ -26,6 +26,7 @@ from replay.run.eval_options import DEFAULTS
 from replay.util.errors import ReplayError
 
 from . import check, run
+from .options import TuneOptions
 
 KEYS = {"filters": list, "trials": int, "objective": str, "split": dict, "space": dict, "allow_overlap": bool}
 
@@ -67,11 +68,12 @@ def plan(c, data_dir=None) -> list[tuple[str, run.Tune]]:
         alignment=c.configs[0].alignment if c.configs else DEFAULTS["alignment"],
         batch=c.batch,
     )
+    prepare = lambda **given: check.prepare(TuneOptions(**given))  # the record of each tune, then checked
     out = []
     try:
         if "train" in split or "test" in split:
             ids = lambda side: ",".join(split.get(side) or []) if isinstance(split.get(side), list) else None
-            out.append(("train-test", check.prepare(None, train=ids("train"), test=ids("test"), seed=c.seed, **common)))
+            out.append(("train-test", prepare(train=ids("train"), test=ids("test"), seed=c.seed, **common)))
             return out
         seen = set()
         for cfg in c.configs:
@@ -84,8 +86,8 @@ def plan(c, data_dir=None) -> list[tuple[str, run.Tune]]:
             seed = split.get("seeds", c.seed)
             if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
                 raise c.where.error("split", f"seeds must be an integer >= 0 (got {seed!r})")
-            t = check.prepare(
-                cfg.dataset,
+            t = prepare(
+                dataset=cfg.dataset,
                 task=cfg.task,
                 task_params=cfg.task_params,
                 dataset_params=dp,

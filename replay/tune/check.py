@@ -2,47 +2,23 @@
 
 from __future__ import annotations
 
+from replay.data import dataset_ref, registry
+from replay.filters import make_filter
 from replay.run.eval_options import DEFAULTS
+from replay.run.pipeline import build_problem, default_task, plain
+from replay.scoring import likelihood
+from replay.tasks import make_task
 from replay.util.errors import ReplayError
 
 from . import objectives, space, splits
+from .options import TuneOptions
 from .run import Tune
 
 
-def prepare(
-    dataset,
-    *,
-    filters,
-    entries,
-    trials,
-    objective,
-    runs,
-    seed,
-    task=None,
-    task_params=None,
-    dataset_params=None,
-    view=None,
-    first=None,
-    data_dir=None,
-    train_segment=None,
-    train=None,
-    test=None,
-    split=None,
-    allow_overlap=False,
-    alignment=DEFAULTS["alignment"],
-    batch=None,
-) -> Tune:
-    """The checked :class:`Tune` (no trial run, no file written)."""
-    from replay.data import dataset_ref, registry
-    from replay.run.eval_options import validate_eval_options
-    from replay.filters import make_filter
-    from replay.run.pipeline import default_task, plain
-    from replay.tasks import make_task
-
-    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
-        raise ReplayError(f"--trials {trials}: at least 1 trial per filter")
-    validate_eval_options({"runs": runs, "seed": seed, "first": first, "alignment": alignment})
-    registry.check_data_dir(data_dir)
+def prepare(o: TuneOptions) -> Tune:
+    """The checked :class:`Tune` of the options ``o`` (no trial run, no file written)."""
+    registry.check_data_dir(o.data_dir)
+    filters, seed, first, data_dir, task = o.filters, o.seed, o.first, o.data_dir, o.task
     names = [f.strip() for f in filters if f.strip()]
     if not names:
         raise ReplayError("--filters: no filter named")
@@ -52,40 +28,40 @@ def prepare(
         make_filter(n)  # unknown: one line naming the known ones
     if len(set(names)) < len(names):
         raise ReplayError(f"--filters {','.join(names)}: a filter named twice")
-    weights = objectives.parse(objective)
-    view = {k: v for k, v in (view or {}).items() if v is not None}
+    weights = objectives.parse(o.objective)
+    view = {k: v for k, v in (o.view or {}).items() if v is not None}
     s = splits.make(
-        dataset,
-        {**(dataset_params or {}), **view},
-        train_segment=train_segment,
-        train=train,
-        test=test,
-        split=split,
+        o.dataset,
+        {**(o.dataset_params or {}), **view},
+        train_segment=o.train_segment,
+        train=o.train,
+        test=o.test,
+        split=o.split,
         seed=seed,
     )
     refs = {d: dataset_ref.resolve(d) for d, _ in s.train + s.test}  # each id parsed once
     checked = [(d, plain(registry.check_params(refs[d].target, p))) for d, p in s.train + s.test]  # canonical
     s.train, s.test = checked[: len(s.train)], checked[len(s.train) :]
-    splits.check_parts(s, seed=seed, first=first, data_dir=data_dir, refs=refs, allow_overlap=allow_overlap)
+    splits.check_parts(s, seed=seed, first=first, data_dir=data_dir, refs=refs, allow_overlap=o.allow_overlap)
     first_ds, first_p = s.train[0]
     task = task or default_task(refs[first_ds], first=first, data_dir=data_dir, dataset_params=first_p, seed=seed)
-    make_task(task, **(task_params or {}))
-    dims = space.build(entries, names, task)
+    make_task(task, **(o.task_params or {}))
+    dims = space.build(o.entries, names, task)
     t = Tune(
         task,
         names,
         dims,
-        trials,
-        objective,
+        o.trials,
+        o.objective,
         weights,
         s,
-        runs,
+        o.runs,
         seed,
-        dict(task_params or {}),
+        dict(o.task_params or {}),
         first,
-        alignment,
+        o.alignment,
         data_dir,
-        batch or DEFAULTS["batch"],
+        o.batch or DEFAULTS["batch"],
     )
     if "nll" in weights:
         _check_nll(t)
@@ -94,9 +70,6 @@ def prepare(
 
 def _check_nll(t: Tune) -> None:
     """The likelihood objective only where the runs record it (:mod:`replay.scoring.likelihood`)."""
-    from replay.scoring import likelihood
-    from replay.run.pipeline import build_problem
-
     for name in t.filters:
         why = likelihood.provides(name)
         if why is not None:

@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
+
+import numpy as np
 
 from replay.util.errors import SHOWN, ReplayError, shown
 
@@ -147,16 +149,9 @@ def _bound(x) -> str:
 def _is_number(v) -> bool:
     if isinstance(v, bool):
         return False
-    try:
-        import numpy as np
-
-        if isinstance(v, np.bool_):
-            return False
-        if isinstance(v, (np.integer, np.floating)):
-            return True
-    except ImportError:  # pragma: no cover
-        pass
-    return isinstance(v, (int, float))
+    if isinstance(v, np.bool_):
+        return False
+    return isinstance(v, (int, float, np.integer, np.floating))
 
 
 def _is_integer(v) -> bool:
@@ -165,8 +160,6 @@ def _is_integer(v) -> bool:
         return False
     if isinstance(v, int):
         return True
-    import numpy as np
-
     return isinstance(v, np.integer)
 
 
@@ -234,3 +227,20 @@ class Declared:
     def params(self) -> dict:
         """Every declared parameter and its value (lists as lists), for manifests and leaderboards."""
         return {p.name: (list(v) if isinstance(v := getattr(self, p.name), tuple) else v) for p in self.PARAMS}
+
+
+def declared_fields(cls, params: tuple[Param, ...]):
+    """``cls`` (a dataclass of options) checked against its declarations, at import: each of ``params`` is a
+    field whose default is the declaration's (one declaration: the record cannot drift from it)."""
+    have = {f.name: f for f in fields(cls)}
+    for p in params:
+        if p.name not in have or have[p.name].default != p.default:
+            raise TypeError(f"{cls.__name__}.{p.name}: not a field defaulting to its declaration's {p.default!r}")
+    return cls
+
+
+def check_fields(record, params: tuple[Param, ...], owner: str = "") -> None:
+    """Each declared field of the frozen ``record`` checked by its declaration, in order, and stored
+    normalised (:meth:`Param.check`: one line naming the parameter, what it accepts and the value)."""
+    for p in params:
+        object.__setattr__(record, p.name, p.check(getattr(record, p.name), owner))
