@@ -27,10 +27,10 @@ def test_tuned_toml_paths_resolve_from_a_third_working_directory(tmp_path, monke
     make_bag(tmp_path / "data" / "auv", np.random.default_rng(3), duration=30.0)
     (tmp_path / "checkout" / "maps").mkdir(parents=True)
     (tmp_path / "checkout" / "maps" / "auv.toml").write_text(MAPPING.read_text())
-    monkeypatch.chdir(tmp_path / "checkout")  # relative dataset and mapping, --out in another folder
+    monkeypatch.chdir(tmp_path / "checkout")  # relative dataset, mapping and data dir; --out in another folder
     _cli("tune", "../data/auv", "--mapping", "maps/auv.toml", "-t", "fusion", "--train-segment", "0.6",
          "-f", "ekf", "-p", "ekf.q_scale=log[2,10]", "--trials", "2", "-n", "1", "-q",
-         "--out", "../results/deep/t")
+         "--data-dir", "../data", "--out", "../results/deep/t")
     tuned = tmp_path / "results" / "deep" / "t" / "tuned.toml"
     text = tuned.read_text()
     assert str(tmp_path) not in text  # no machine path, the comment lines included
@@ -39,6 +39,7 @@ def test_tuned_toml_paths_resolve_from_a_third_working_directory(tmp_path, monke
     assert ds["id"] == "../../../data/auv"  # relative to the file's folder results/deep/t
     assert ds["params"]["mapping"] == "../../../checkout/maps/auv.toml"
     assert ds["params"]["segment"] == "0.6:1"
+    assert doc["campaign"]["data_dir"] == "../../../data"
     q = doc["filter"][0]["params"]["q_scale"]
     assert 2 <= q <= 10  # the default (1) is outside the space: the tuned value is written
     row = next(r for r in _board(tmp_path / "results" / "deep" / "t") if r["label"] == "ekf (tuned)")
