@@ -105,7 +105,6 @@ def test_the_first_ten_minutes_eval_report_and_export_print_what_the_page_shows(
 
 
 @pytest.mark.slow
-@pytest.mark.skip(reason="section 6's campaign table differs from the page after the 2026-11-29 merges (reference provenance, gap columns): regenerate the page (session note)")
 def test_the_first_ten_minutes_campaign_and_reproduction_print_what_the_page_shows(tmp_path, shared_dir):
     """Sections 6-7: the campaign (Bohai from ../shared, as the campaign file finds it) and
     ``replay reproduce 002 --quick`` (about 30-50 s)."""

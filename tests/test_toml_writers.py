@@ -38,7 +38,7 @@ def test_tuned_toml_reads_back_as_the_campaign_it_describes(tmp_path):
     test = SimpleNamespace(seed=7, task_params={"q": 1.0, "r": None, "lost_threshold": 20.0},
                            filter_params={"q_scale": 0.1 + 0.2, "r_scale": 1e-300, "unset": None})
     rows = [{"filter": "kf", "trials": 8, "tuned_on": "sim/linear", "_test": [test]}]
-    text = _toml(t, rows, test.task_params)
+    text = _toml(t, rows, test.task_params, tmp_path)
     assert text.startswith("# written by replay tune") and "# tuned on sim/linear; objective pos_rmse" in text
     doc = tomllib.loads(text)
     assert doc["campaign"] == {"name": "tuned", "runs": 3, "seed": 7, "alignment": "se3"}

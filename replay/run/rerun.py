@@ -47,11 +47,17 @@ for every registered filter), so a rerun says "reproduced" only when every recor
 manifest with one RMSE changed by 1 % (or by one unit in the last place) is refused. A
 ``rerun_rtol`` that an earlier version recorded beside a swarm filter's row is not compared
 and loosens nothing.
+
+A manifest written before the reference provenance (no ``dataset.reference``: read as that older
+format, :func:`before_provenance`) is rerun as it was then: the columns added with it
+(:data:`SINCE_PROVENANCE`) are not compared, and ``worse_than_measurements`` is compared under its
+rule of then (the mean position RMSE above the raw measurements'); a note says so in one line.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import re
 from pathlib import Path
 
@@ -70,6 +76,9 @@ HASH = re.compile(r"^[0-9a-f]{16}$")
 _NUM = (int, float)
 NOT_COMPARED = frozenset(TIMING) | {"version", "rerun_rtol"}  # not compared (rerun_rtol: older manifests)
 ECHOES = ("dataset", "task", "filter", "seed", "first", "alignment")  # row columns that repeat the configuration
+# row columns added with the reference provenance (manifest key dataset.reference; 2026-11-29)
+SINCE_PROVENANCE = frozenset({"reference", "reference_shares", "worse_than_measurements_by"})
+log = logging.getLogger(__name__)
 
 
 def _is(value, kinds) -> bool:
@@ -291,7 +300,8 @@ def repeat(man: dict, data_dir=None, progress=None):
 def differences(man: dict, ev) -> list[str]:
     """What the rerun ``ev`` did not reproduce of the manifest ``man`` (empty: everything):
     the dataset checksum, the configuration, the hashes and every compared column (module docstring)."""
-    cfg, out = man["config"], []
+    cfg, out, then = man["config"], [], before_provenance(man)
+    rows = {r.name: _as_written(r.summary) for r in ev.results}
     if cfg["dataset_sha256"] != ev.config.get("dataset_sha256"):
         out.append(f"dataset checksum {cfg['dataset_sha256']} -> {ev.config.get('dataset_sha256')}")
     again = _as_written(ev.config)
@@ -305,7 +315,9 @@ def differences(man: dict, ev) -> list[str]:
                 f"{r.name}: configuration {cfg['config_hashes'][r.name]} -> {r.config_hash} "
                 f"(this version fills in other parameters)"
             )
-        new = {k: v for k, v in _as_written(r.summary).items() if k not in NOT_COMPARED}
+        new = {
+            k: v for k, v in (_as_then(rows[r.name], rows) if then else rows[r.name]).items() if k not in NOT_COMPARED
+        }
         old = {k: v for k, v in was.items() if k not in NOT_COMPARED}
         for k in sorted(set(new) - set(old)):
             out.append(f"{r.name}.{k}: not recorded (deleted from the manifest?) -> {_show(new[k])}")
@@ -314,6 +326,25 @@ def differences(man: dict, ev) -> list[str]:
         for k in [k for k in old if k in new]:  # in the leaderboard's order: the headline columns first
             if not same(old[k], new[k]):
                 out.append(f"{r.name}.{k}: {_show(old[k])} -> {_show(new[k])}")
+    return out
+
+
+def before_provenance(man: dict) -> bool:
+    """Whether ``man`` was written before the reference provenance: its ``dataset`` record has no
+    ``reference`` (every manifest written since has one)."""
+    return not (isinstance(man.get("dataset"), dict) and "reference" in man["dataset"])
+
+
+def _as_then(row: dict, rows: dict) -> dict:
+    """A rerun's row as a manifest written before the reference provenance recorded it: without the
+    columns added with it, ``worse_than_measurements`` by its rule of then (the row's mean position
+    RMSE above that of the ``measurements`` row; ``rows``: the rerun's rows by filter)."""
+    out = {k: v for k, v in row.items() if k not in SINCE_PROVENANCE}
+    if "worse_than_measurements" in out and "measurements" in rows:
+        try:
+            out["worse_than_measurements"] = float(row["pos_rmse"]) > float(rows["measurements"]["pos_rmse"])
+        except (TypeError, ValueError, KeyError):
+            out["worse_than_measurements"] = ""
     return out
 
 
@@ -338,6 +369,13 @@ def _show(value) -> str:
 
 def verify(man: dict, ev, path) -> None:
     """Raise a one-line :class:`ReplayError` unless ``ev`` reproduces the manifest exactly."""
+    if before_provenance(man):
+        log.info(
+            "%s was written before the reference provenance (no dataset.reference): its columns %s are not "
+            "compared, worse_than_measurements is compared under its rule of then (mean RMSE above the measurements')",
+            path,
+            ", ".join(sorted(SINCE_PROVENANCE)),
+        )
     diff = differences(man, ev)
     if diff:
         more = (

@@ -12,8 +12,11 @@ is refused unless ``allow_overlap``; then every row says so.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
+from replay.data.splits import split_views
+from replay.tune import parts
 from replay.util.errors import ReplayError
 
 
@@ -40,9 +43,15 @@ def _fraction(text: str) -> float:
     return f
 
 
-def _describe(parts, seed) -> str:
-    text = " + ".join(d + "".join(f" {k}={v}" for k, v in sorted(p.items())) for d, p in parts)
+def _describe(items, seed) -> str:
+    text = " + ".join(d + "".join(f" {k}={_shown(k, v)}" for k, v in sorted(p.items())) for d, p in items)
     return text + (f" (seed {seed})" if seed is not None else "")
+
+
+def _shown(key: str, value):
+    """A view's value as shown; a mapping's file (made absolute when read) relative to the working
+    directory, as given: no absolute path of the machine in the board and the files it heads."""
+    return os.path.relpath(value) if key == "mapping" and isinstance(value, str) and os.path.isabs(value) else value
 
 
 def make(
@@ -67,8 +76,6 @@ def make(
     if train_segment is not None:
         if not dataset:
             raise ReplayError("--train-segment needs a DATASET")
-        from replay.data.splits import split_views
-
         if "segment" in view:
             raise ReplayError("--train-segment: the dataset view already has a segment; give one or the other")
         tr, te = split_views({"segment": _fraction(train_segment)})
@@ -98,8 +105,6 @@ def make(
 def check_parts(s: Split, *, seed: int, first, data_dir, refs: dict, allow_overlap: bool) -> None:
     """Read every part (:func:`replay.tune.parts.read`: each holds enough samples), set ``s.overlap``
     from their content and refuse it unless ``allow_overlap``."""
-    from . import parts
-
     read = {}
     for side, items, part_seed, option in (
         ("training", s.train, s.train_seed, s.train_option),

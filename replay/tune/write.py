@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from collections import Counter
 from pathlib import Path
 
 import tomli_w
 
+from replay.data.registry import is_path
+from replay.scoring.marks import marks
 from replay.util.files import write_bytes
 
 
@@ -26,13 +30,17 @@ def write_tuned(t, out: Path, rows) -> dict:
     files = {}
     for i, (key, rs) in enumerate(groups.items()):
         path = out / ("tuned.toml" if len(groups) == 1 else f"tuned-{rs[0]['filter']}.toml")
-        write_bytes(path, _toml(t, rs, json.loads(key)).encode())
+        write_bytes(path, _toml(t, rs, json.loads(key), out).encode())
         files["tuned" if len(groups) == 1 else f"tuned-{rs[0]['filter']}"] = path
     return files
 
 
-def _toml(t, rows, task_params: dict) -> str:
-    """The campaign file of ``rows`` (written by tomli-w), under two comment lines naming its origin."""
+def _toml(t, rows, task_params: dict, out: Path) -> str:
+    """The campaign file of ``rows`` (written by tomli-w), under two comment lines naming its origin.
+
+    Its paths (a recording's id, a mapping, ``data_dir``) are written relative to the file's folder
+    ``out``, as a campaign file's paths are read (:mod:`replay.campaign.spec`): the file works from
+    any working directory, and holds no absolute path of the machine that wrote it."""
     head = (
         "# written by replay tune: the tuned configurations on the held-out data\n"
         f"# tuned on {rows[0]['tuned_on']}; objective {t.objective}; trials per filter: "
@@ -41,9 +49,12 @@ def _toml(t, rows, task_params: dict) -> str:
     )
     campaign = {"name": "tuned", "runs": t.runs, "seed": rows[0]["_test"][0].seed, "alignment": t.alignment}
     if t.data_dir:
-        campaign["data_dir"] = str(Path(t.data_dir).resolve())
+        campaign["data_dir"] = _relative(t.data_dir, out)
     datasets = []
     for d, p in t.split.test:
+        if isinstance(p.get("mapping"), str) and Path(p["mapping"]).is_file():
+            p = {**p, "mapping": _relative(p["mapping"], out)}
+        d = _relative(d, out) if is_path(d) else d  # a registered id (sim/..., bohai/...) as it is
         datasets.append({"id": d, "tasks": [t.task], **({"params": p} if p else {})})
         if t.first is not None:
             datasets[-1]["first"] = t.first
@@ -54,6 +65,11 @@ def _toml(t, rows, task_params: dict) -> str:
         "filter": [{"name": r["filter"], "params": r["_test"][0].filter_params} for r in rows],
     }
     return head + tomli_w.dumps(_no_none(doc))
+
+
+def _relative(path: str, folder: Path) -> str:
+    """``path`` (absolute, or relative to the working directory) relative to ``folder``."""
+    return os.path.relpath(Path(path).expanduser().resolve(), Path(folder).resolve())
 
 
 def _no_none(v):
@@ -93,10 +109,6 @@ def board_notes(rows, failed: dict | None = None) -> list[str]:
     an input: :func:`replay.scoring.summary.marks`), tuned rows worse than their defaults on the
     held-out data (and which row is better), and why trials scored infinity (``failed``: filter ->
     a reason per such trial)."""
-    from collections import Counter
-
-    from replay.scoring.marks import marks
-
     out = [f"{r['label']}: not ranked: {m}" for r in rows for m in marks(r)]
     kinds = sorted({str(r["reference"]) for r in rows if r.get("reference")})  # issue 35: on every table
     shares = sorted({str(r["reference_shares"]) for r in rows if r.get("reference_shares")})
@@ -141,8 +153,6 @@ def _worse(tuned, default) -> bool:
 
 
 def _marked(r) -> bool:
-    from replay.scoring.marks import marks
-
     return bool(marks(r))
 
 
