@@ -28,19 +28,20 @@ fixed blocks of runs.
 from __future__ import annotations
 
 import gc
+import logging
 import os
+from concurrent.futures import as_completed
 from contextlib import contextmanager
 from pathlib import Path
 
 from replay.run.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
 from replay.util.staging import check_space
-from replay.util.progress import particle_weight
+from replay.util.progress import Progress, particle_weight
 
 from . import board, index
 from .lock import locked
 from .noise_check import check_noise
-from .progress import Progress
 from .spec import Campaign
 from replay.util.files import sync_dir, write_bytes, write_json
 
@@ -121,11 +122,9 @@ def _serial(jobs):
 
 @contextmanager
 def _processes(workers: int):
-    from concurrent.futures import as_completed
-
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow.parquet  # noqa: F401  (lazy: only for forked workers; a serial run does not load it)
     frozen = method == "fork" and not gc.get_freeze_count()
     if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
         gc.freeze()
@@ -147,14 +146,12 @@ def _processes(workers: int):
 @contextmanager
 def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster, as_completed  # lazy: an optional dependency
     except ImportError:
         raise ReplayError(
             "Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "
             "(it adds dask[distributed])"
         ) from None
-    import logging
-
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     try:
@@ -281,8 +278,9 @@ def _run_locked(
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
     checking = None
     if len(campaign.configs) >= PLAN_PROGRESS:  # what it does before the first unit, and how far
-        checking = Progress(len(campaign.configs), quiet, progress_stream, total_weight=None)
-        checking.label, checking.unit = "campaign: checking stored units", "configuration"
+        checking = Progress(
+            len(campaign.configs), quiet, progress_stream, label="campaign: checking stored units", unit="configuration"
+        )
     try:
         jobs, damaged, stored = _plan(campaign, store, retry_failed, data_dir, checking)
     finally:
@@ -313,7 +311,7 @@ def _run_locked(
         }
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
-        progress = Progress(total, quiet, progress_stream, total_weight=sum(weights.values()))
+        progress = Progress(total, quiet, progress_stream, label="campaign", total_weight=sum(weights.values()))
         saved = set()
         try:
             with backend as mapper:
