@@ -11,15 +11,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from replay.campaign.checks import check_keys, check_params
-from replay.run.eval_options import BY_NAME as EVAL
+from replay.campaign.checks import check_params
 from replay.run.pipeline import plain as _plain
 from replay.trajectory.recorded import recorded_params
 from replay.util.errors import ReplayError, shown
 from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
-
-DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
-FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
 
 
 @dataclass
@@ -48,21 +44,16 @@ def task_tables(where, doc: dict) -> dict:
     for tname, tp in tables.items():
         if tname not in TASKS:
             raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
-        if not isinstance(tp, dict):
-            raise where.error(tname, "expected a table of task parameters")
         check_params(where, f"task {shown(tname)}", _class_of(TASKS, tname).PARAMS, tp)
     return tables
 
 
 def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntry:
-    """One ``[[dataset]]`` checked: its id, tasks, ``first``, parameters and recorded estimates."""
-    check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
-    if "id" not in entry:
-        raise where.error("dataset", "every [[dataset]] needs an id")
+    """One ``[[dataset]]`` checked (its keys and their types by their declaration,
+    :data:`replay.campaign.spec.DATASET`): its id, tasks, ``first``, parameters and recorded estimates."""
     ref = _dataset_of(where, path, entry["id"])
     tasks = _tasks(where, entry.get("tasks", [(ref.entry and ref.entry.default_task) or "position"]))
     first = entry.get("first")
-    check_params(where, "[[dataset]]", (EVAL["first"],), {"first": first})  # replay eval's declaration
     if ref.kind == "file" and ref.locate(data_dir) is None:
         raise where.error(
             "id",
@@ -197,10 +188,7 @@ def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tu
     """One ``[[filter]]``: one configuration per combination of its grid (``held``: those before it)."""
     from replay.filters import FILTERS
 
-    check_keys(where, entry, FILTER_KEYS, "[[filter]]")
-    name = entry.get("name")
-    if name is None:
-        raise where.error("filter", "every [[filter]] needs a name")
+    name = entry["name"]  # its keys checked by their declaration (replay.campaign.spec.FILTER)
     if name not in FILTERS:
         raise where.error("name", f"unknown filter {shown(name)} (known: {', '.join(sorted(FILTERS))})", name)
     declared = _class_of(FILTERS, name).PARAMS
