@@ -68,9 +68,9 @@ def test_plain_lines_when_not_a_terminal_and_nothing_when_quiet():
     p.update(1)
     assert out.getvalue().splitlines()[-1].startswith("eval: 2/2 runs (100 % of the work)")
     q = io.StringIO()
-    p = Progress(2, quiet=True, stream=q, every=0.0)
-    p.update(2)
-    assert q.getvalue() == ""
+    p = Progress(2, quiet=True, stream=q, every=0.0, total_weight=10.0)
+    p.update(2, weight=10.0)
+    assert q.getvalue() == "" and p.done == 2 and p.weight_done == 10.0  # quiet: counted all the same
 
 
 def _in_pty(args, cwd):

@@ -16,6 +16,15 @@ from replay.run.pipeline import plain as _plain
 from replay.trajectory.recorded import recorded_params
 from replay.util.errors import ReplayError, shown
 from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
+from replay.util.lookup import resolve
+from replay.tasks import TASKS
+from replay.data import dataset_ref
+from replay.data import registry
+from replay.data.dataset_ref import DatasetRef
+from replay.run.pipeline import load_frame
+from replay.adapters.bags import resolve_mapping
+from replay.filters import FILTERS
+from replay.filters import make_filter
 
 
 @dataclass
@@ -31,14 +40,12 @@ class DatasetEntry:
 
 
 def _class_of(registry: dict, name: str):
-    from replay.util.lookup import resolve
 
     return resolve(registry, name, "component")
 
 
 def task_tables(where, doc: dict) -> dict:
     """The ``[task.NAME]`` tables: {task: parameters}, each checked against the task's declarations."""
-    from replay.tasks import TASKS
 
     tables = doc.get("task", {})
     for tname, tp in tables.items():
@@ -71,7 +78,6 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
 def _dataset_of(where, path: Path, ds_id: str):
     """The :class:`~replay.data.dataset_ref.DatasetRef` of an id: a registered one, or a recording's path
     (relative to the campaign file; its id becomes the absolute path)."""
-    from replay.data import dataset_ref
 
     ref = _recording(where, path, ds_id)
     if ref is not None:
@@ -83,7 +89,6 @@ def _dataset_of(where, path: Path, ds_id: str):
 
 
 def _tasks(where, tasks) -> list:
-    from replay.tasks import TASKS
 
     if not tasks:
         raise where.error("tasks", "empty list of tasks")
@@ -96,7 +101,6 @@ def _tasks(where, tasks) -> list:
 def _dataset_params(where, path: Path, ref, params: dict) -> dict:
     """A dataset's parameters canonical: a mapping relative to the campaign file made absolute, a
     simulator's and the views checked line by line, an adapter's options checked."""
-    from replay.data import registry
 
     if isinstance(params.get("mapping"), str) and (path.parent / params["mapping"]).is_file():
         params["mapping"] = str((path.parent / params["mapping"]).resolve())  # relative to this file
@@ -114,8 +118,6 @@ def _dataset_params(where, path: Path, ref, params: dict) -> dict:
 def _recording(where, path: Path, ds_id: str):
     """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): its reference
     (the absolute path, the adapter chosen from the file); None for a registered id."""
-    from replay.data import registry
-    from replay.data.dataset_ref import DatasetRef
 
     if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
         return None
@@ -130,7 +132,6 @@ def _recording(where, path: Path, ds_id: str):
 
 
 def _frame0(ds_id, ds_params: dict, first, data_dir):
-    from replay.run.pipeline import load_frame
 
     return load_frame(
         {"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0, "adapter": None}, 0, data_dir
@@ -152,8 +153,6 @@ def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapt
     if adapter == "bags":
         try:
             if ds_params.get("mapping") is not None:
-                from replay.adapters.bags import resolve_mapping
-
                 declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
             else:  # the proposed mapping: read the recording
                 declared = {k: e.params for k, e in _frame0(ds_id, ds_params, first, data_dir).estimates.items()}
@@ -186,7 +185,6 @@ def filters(where, entries: list, runs: int, max_units: int) -> list[tuple[str, 
 
 def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tuple[str, dict]]:
     """One ``[[filter]]``: one configuration per combination of its grid (``held``: those before it)."""
-    from replay.filters import FILTERS
 
     name = entry["name"]  # its keys checked by their declaration (replay.campaign.spec.FILTER)
     if name not in FILTERS:
@@ -217,7 +215,6 @@ def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tu
 
 def _made(where, name: str, params: dict) -> dict:
     """The canonical parameters of filter ``name`` made with ``params`` (its constructor checks relations)."""
-    from replay.filters import make_filter
 
     try:
         return _plain(make_filter(name, **params).params())

@@ -64,11 +64,11 @@ def pool(n: int):
 def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, quiet: bool = False, prefix: str = ""):
     """``fn(args[i])`` for every i, the largest ``costs`` first, in ``executor`` (a pool of
     :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes; the progress
-    (:class:`replay.util.progress.Progress` labelled ``<prefix>jobs``, weighted by ``costs``) names the
+    (:class:`replay.util.progress.Progress` labelled ``<prefix>reproduce``, weighted by ``costs``) names the
     last job done, a line per job off a terminal, nothing when ``quiet``."""
     order = longest_first(costs)
     weight = sum(costs) if all(c > 0 for c in costs) else None  # a cost of 0: count jobs instead
-    bar = Progress(len(order), quiet, every=0.0, label=f"{prefix}jobs", unit="job", total_weight=weight)
+    bar = Progress(len(order), quiet, every=0.0, label=f"{prefix}reproduce", unit="job", total_weight=weight)
 
     def note(i):
         bar.set_postfix_str(f"{labels[i]} done", refresh=False)

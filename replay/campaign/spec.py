@@ -75,6 +75,7 @@ from replay.util.errors import ReplayError
 from replay.util.params import Param
 from replay.util.tomlschema import Each, Table, Value
 from replay.util.plugins import refuse_unallowed
+from replay.tasks import make_task
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and the API, one declaration
@@ -260,7 +261,6 @@ def _entry_lists(where, doc: dict) -> tuple[list, list]:
 
 def _tasks(where, tasks: list, task_params: dict) -> list[tuple[str, dict]]:
     """(task, canonical parameters) of each task of a dataset entry."""
-    from replay.tasks import make_task
 
     out = []
     for t in tasks:

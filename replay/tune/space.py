@@ -26,6 +26,9 @@ from pathlib import Path
 from replay.util import tomlfile, tomlschema
 from replay.util.tomlschema import Each, Table
 from replay.util.errors import ReplayError, shown
+from replay.filters import FILTERS
+from replay.tasks import task_class
+from replay.util.lookup import resolve
 
 SPACE = Each(  # the one declaration of a search-space file: its entries' values are checked by make_dim
     "space",
@@ -168,8 +171,6 @@ def entries_from_file(path) -> list[tuple[str, object, str]]:
 
 def build(entries, filters, task: str) -> dict[str, list[Dim]]:
     """{filter: [Dim]} for each filter (task entries in each); unknown owners refused."""
-    from replay.filters import FILTERS
-    from replay.tasks import task_class
 
     per = {f: [] for f in filters}
     seen = set()
@@ -200,7 +201,5 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
 
 def _declared(name: str):
     """The declared parameters of filter ``name``."""
-    from replay.util.lookup import resolve
-    from replay.filters import FILTERS
 
     return resolve(FILTERS, name, "filter").PARAMS

@@ -151,6 +151,9 @@ class Progress(_Settings):
         self.done += n
         self.failed += failed
         w = float(n if weight is None else weight)
+        if self.disable:  # quiet: counted, never drawn (tqdm's update would not count)
+            self.n += w
+            return
         first = self.first is None
         if first:
             now = time.monotonic()
