@@ -137,3 +137,20 @@ def test_search_space_errors_come_from_its_declaration(tmp_path, bad, want):
     with pytest.raises(ReplayError) as err:
         space.entries_from_file(path)
     _one_line(err.value, f"{path}: ", want)
+
+
+def test_the_manifest_declaration_is_the_dataset_record_and_drives_its_errors(tmp_path):
+    """A dataset manifest's [[dataset]] entry is declared by the fields of registry.Dataset (one place):
+    an unknown key, and each declared key given a wrong type, is one line naming the manifest and the id."""
+    from replay.data import registry
+
+    assert set(registry.MANIFEST.known()) == registry.MANIFEST_KEYS
+    good = {"id": "x/a", "generator": "m:f"}
+    assert registry._make_dataset(tmp_path / "m.toml", dict(good)).kind == "sim"
+    cases = [("zzz_typo", 1, "zzz_typo: unknown key")]
+    cases += [(p.name, _wrong(p), f"{p.name} must be {p.accepts()}") for p in registry.MANIFEST.keys if p.name != "id"]
+    cases += [("size", 0, "size must be an integer >= 1"), ("rows", -1, "rows must be an integer >= 0")]
+    for key, bad, want in cases:
+        with pytest.raises(ReplayError) as err:
+            registry._make_dataset(tmp_path / "m.toml", {**good, key: bad})
+        _one_line(err.value, f"{tmp_path / 'm.toml'}: dataset x/a: ", want)
