@@ -44,6 +44,8 @@ from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
 from replay.util.tomlschema import Table
+from replay.adapters.options import check
+from replay.data.plugins import ADAPTERS, dataset_entries  # the built-in adapters and the plugins
 from replay.data.formats import adapter_for, looks_like_path
 
 # Adapter used for a plain file path, by extension.
@@ -118,7 +120,6 @@ def plugin_problems() -> list[str]:
 
 
 def _plugins() -> tuple[dict, list]:
-    from replay.data.plugins import dataset_entries
 
     entries, _, problems = dataset_entries(_read_manifests(str(manifests_dir())))
     out, problems = {}, list(problems)
@@ -189,7 +190,6 @@ def get(dataset_id: str) -> Dataset:
     known = all_datasets()
     if dataset_id in known:
         return known[dataset_id]
-    from replay.data.plugins import dataset_entries
 
     conflict = dataset_entries()[1].get(dataset_id)
     if conflict:
@@ -325,7 +325,6 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
 def _check_options(adapter: str, params: dict) -> dict:
     """``params`` checked against ``adapter``'s declarations; a plugin declaring none: their names."""
-    from replay.adapters.options import check
 
     declared = adapter_options(adapter)
     if declared is not None:
@@ -341,7 +340,6 @@ def _check_options(adapter: str, params: dict) -> dict:
 
 
 def _adapter(name: str):
-    from replay.data.plugins import ADAPTERS  # the built-in adapters and the plugins
 
     try:
         return ADAPTERS.load(name)
