@@ -76,6 +76,10 @@ def _cases(tables, doc):
                 yield f"{table.name}-{decl.name}-type", mutated(lambda t, k=decl.name, v=bad: t.update({k: v})), text
             elif isinstance(decl, (Table, Each)):
                 yield f"{table.name}-{decl.name}-type", mutated(lambda t, k=decl.name: t.update({k: 7})), decl.name
+            if isinstance(decl, Each):  # an entry that is not a table
+                entry, bad = decl.entry, [7] if decl.array else {"n": 7}
+                want = f"{entry.title.format(name='n')}: expected {entry.expect}"
+                yield f"{table.name}-{decl.name}-entry", mutated(lambda t, k=decl.name, v=bad: t.update({k: v})), want
 
 
 def _one_line(err: ReplayError, name: str, want: str) -> None:
