@@ -43,8 +43,9 @@ with the mapping's association settings as its parameters; it has one unit (run 
 a recorded estimate is deterministic). A campaign may have no ``[[filter]]`` when it
 scores recorded estimates only.
 
-Everything is checked before any work starts (:func:`load`): a file that is not
-UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
+Everything is checked before any work starts (:func:`load`): the file's sections, keys,
+their types and required keys by its one declaration :data:`FILE` (:mod:`replay.util.tomlschema`);
+then a file that is not UTF-8 text, an unknown dataset, task, filter or parameter, a
 ``[campaign]`` value or a parameter of the wrong type or out of the bounds its
 declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
 and ``batch`` at most :data:`replay.run.eval_options.MAX_RUNS` (one declaration with ``replay eval``),
