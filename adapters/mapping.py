@@ -51,19 +51,77 @@ from pathlib import Path
 import tomli_w
 
 from replay import roles
-from replay.util import tomlfile
-from replay.util.errors import ReplayError, listed, shown
+from replay.util import tomlfile, tomlschema
+from replay.util.errors import ReplayError, shown
+from replay.util.params import Param
+from replay.util.tomlschema import Each, Table, Value
 
 from .mapping_fields import frame_declarations
 from .rosmsg import KINDS, kind_of, normalize_type
 
 
-TOP_KEYS = {"time", "until", "allow_truncated", "channels", "reference", "estimates", "params"}
-PARAM_KEYS = {"water_density", "atmospheric_pressure", "gravity"}
-ENTRY_KEYS = {"topic", "type", "role", "frame", "child", "fuse", "differential", "noise", "rejection_threshold"}
-ENTRY_KEYS |= {"twist_frame", "mount", "lever_arm"}  # frame declarations (mapping_fields.frame_declarations)
-ESTIMATE_KEYS = {"topic", "type", "frame", "child", "t_max_diff", "t_offset", "align"}
 ESTIMATE_ALIGN = ("none", "yaw", "se3", "sim3")  # replay.scoring.align.ALIGNMENTS
+_POSITIVE = dict(low=0.0, low_open=True, optional=True)
+_PAIR = (
+    Param("topic", str, None, "the topic (name = \"/topic\" says it alone)"),
+    Value("type", (str,), "the expected message type (checked when given)"),
+    Value("frame", (str,), "a TF pair's parent frame (with child)"),
+    Value("child", (str,), "a TF pair's child frame (with frame)"),
+)
+CHANNEL = Table(  # a [channels] (or [reference]) entry; a reference refuses the fusion keys (_fusion)
+    "channels",
+    "[channels] {name}",
+    (
+        *_PAIR,
+        Value("role", (str,), "what a task may use it for (replay.roles.ROLES; none: no task)"),
+        Value("fuse", (list,), "the fields fused (the fusion task)", str, "a list of field names"),
+        Value("differential", (list,), "the fields fused as differences", str, "a list of field names"),
+        Value("noise", (dict,), "field = variance (the field's unit squared)", None, "a table of field = variance"),
+        Value(
+            "rejection_threshold", (float, int, dict), "Mahalanobis", None, "a number or a table of field = threshold"
+        ),
+        Value("twist_frame", (str,), "an Odometry's twist frame: child or parent"),
+        Value("mount", (list,), "an IMU's rotation in the body frame, [roll, pitch, yaw] rad"),
+        Value("lever_arm", (list,), "a GPS antenna's position in the body frame, [x, y, z] m"),
+    ),
+    required=("topic",),
+    shorthand="topic",
+)
+REFERENCE = Table("reference", "[reference] {name}", CHANNEL.keys, ("topic",), shorthand="topic")
+ESTIMATE = Table(
+    "estimates",
+    "[estimates] {name}",
+    (
+        *_PAIR,
+        Param("t_max_diff", float, None, "s: the largest time difference associated", low=0.0, optional=True),
+        Param("t_offset", float, None, "s: added to the estimate's times", optional=True),
+        Param("align", str, None, "the fit onto the reference", choices=ESTIMATE_ALIGN, optional=True),
+    ),
+    required=("topic",),
+    shorthand="topic",
+)
+PARAMS = Table(
+    "params",
+    "[params]",
+    (
+        Param("water_density", float, None, "kg/m^3 (a depth from a pressure)", **_POSITIVE),
+        Param("atmospheric_pressure", float, None, "Pa (a depth from a pressure)", **_POSITIVE),
+        Param("gravity", float, None, "m/s^2 (a depth from a pressure)", **_POSITIVE),
+    ),
+)
+MAPPING = Table(  # the one declaration of a mapping file (the checks it cannot state: from_dict)
+    "mapping",
+    "",
+    (
+        Param("time", str, "header", "header (header.stamp) or log (the receive time)", choices=("header", "log")),
+        Param("until", float, None, "s: only messages logged within this long of the first one", **_POSITIVE),
+        Param("allow_truncated", bool, False, "use what precedes a truncation (flagged in the report)"),
+        Each("channels", CHANNEL, doc="sensor channels: name = topic or name = {topic, ...}"),
+        Each("reference", REFERENCE, doc="reference channels, same form"),
+        Each("estimates", ESTIMATE, doc="recorded estimates scored as rows recorded:<name>"),
+        PARAMS,
+    ),
+)
 ESTIMATE_KINDS = ("odometry", "pose", "navsatfix", "tf", "path")  # what a recorded estimate may be
 ESTIMATE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")  # it names a row and a file (fullmatch)
 CHANNEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")  # a frame channel and a topic token /sensors/<name>
@@ -136,37 +194,12 @@ def load_mapping(path) -> Mapping:
 
 
 def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
-    unknown = sorted(set(doc) - TOP_KEYS)
-    if unknown:
-        raise ReplayError(f"{source}: unknown key(s) {listed(unknown)} (known: {', '.join(sorted(TOP_KEYS))})")
-    time = doc.get("time", "header")
-    if time not in ("header", "log"):
-        raise ReplayError(f"{source}: time must be \"header\" or \"log\" (got {shown(time)})")
-    until = doc.get("until")
-    if until is not None and (
-        isinstance(until, bool) or not isinstance(until, (int, float)) or not until > 0 or until == float("inf")
-    ):
-        raise ReplayError(f"{source}: until must be a positive number of seconds (got {shown(until)})")
-    allow = doc.get("allow_truncated", False)
-    if not isinstance(allow, bool):
-        raise ReplayError(f"{source}: allow_truncated must be true or false (got {shown(allow)})")
-    params = doc.get("params", {})
-    if not isinstance(params, dict):
-        raise ReplayError(f"{source}: [params] must be a table of name = number")
-    params = dict(params)
-    bad = sorted(set(params) - PARAM_KEYS)
-    if bad:
-        raise ReplayError(f"{source}: unknown param(s) {listed(bad)} (known: {', '.join(sorted(PARAM_KEYS))})")
-    for key, value in params.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-            raise ReplayError(f"{source}: [params] {key} must be a positive finite number (got {shown(value)})")
+    tomlschema.check(MAPPING, doc, lambda key, text: ReplayError(f"{source}: {text}"))
+    time, until = doc.get("time", "header"), doc.get("until")
+    allow, params = doc.get("allow_truncated", False), dict(doc.get("params", {}))
     entries, estimates = [], []
     for group, ref in (("channels", False), ("reference", True), ("estimates", False)):
-        table = doc.get(group, {})
-        if not isinstance(table, dict):
-            raise ReplayError(f"{source}: [{group}] must be a table of name = topic")
-        keys = ESTIMATE_KEYS if group == "estimates" else ENTRY_KEYS
-        for name, spec in table.items():
+        for name, spec in doc.get(group, {}).items():
             if group == "estimates":
                 _estimate_name(source, name)  # before it is quoted in any other message
             elif not CHANNEL_NAME.fullmatch(name):
@@ -177,15 +210,10 @@ def from_dict(doc: dict, source: str = "(mapping)") -> Mapping:
                 )
             if isinstance(spec, str):
                 spec = {"topic": spec}
-            if not isinstance(spec, dict) or not isinstance(spec.get("topic"), str) or not spec["topic"]:
+            if not spec["topic"]:
                 raise ReplayError(f"{source}: [{group}] {name}: give a topic (name = \"/topic\")")
-            extra = sorted(set(spec) - keys)
-            if extra:
-                raise ReplayError(
-                    f"{source}: [{group}] {name}: unknown key(s) {listed(extra)} (known: {', '.join(sorted(keys))})"
-                )
             typ = spec.get("type")
-            if typ is not None and (not isinstance(typ, str) or kind_of(typ) is None):
+            if typ is not None and kind_of(typ) is None:
                 raise ReplayError(
                     f"{source}: [{group}] {name}: unknown message type {shown(typ)} "
                     f"(supported: {', '.join(sorted(KINDS))})"
@@ -240,19 +268,7 @@ def _fusion(source: str, name: str, spec: dict, ref: bool) -> dict:
                 )
             out[key] = float(value)
             continue
-        fields = list(value) if isinstance(value, (list, dict)) else None
-        if fields is None or not all(isinstance(f, str) for f in fields):
-            raise ReplayError(
-                f"{source}: [channels] {name}: {key} must be "
-                + (
-                    "a table of field = variance"
-                    if key == "noise"
-                    else "a number or a table of field = threshold"
-                    if key == "rejection_threshold"
-                    else "a list of field names"
-                )
-                + f" (fields: {', '.join(roles.known_fields())})"
-            )
+        fields = list(value)  # a list of names or a table (their types: CHANNEL's declaration)
         bad = [f for f in fields if f not in roles.known_fields()]
         if bad:
             raise ReplayError(
@@ -299,30 +315,7 @@ def _estimate(source: str, name: str, spec: dict, typ, frame, child) -> Entry:
             "(an estimate is an Odometry, PoseStamped, PoseWithCovarianceStamped, TFMessage / "
             "TransformStamped pair, Path or NavSatFix)"
         )
-    params = {}
-    for key, low in (("t_max_diff", 0.0), ("t_offset", None)):
-        if key in spec:
-            v = spec[key]
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float))
-                or v != v
-                or abs(v) == float("inf")
-                or (low is not None and v < low)
-            ):
-                raise ReplayError(
-                    f"{source}: [estimates] {name}: {key} must be a finite number of seconds"
-                    + (" >= 0" if low is not None else "")
-                    + f" (got {shown(v)})"
-                )
-            params[key] = float(v)
-    if "align" in spec:
-        if spec["align"] not in ESTIMATE_ALIGN:
-            raise ReplayError(
-                f"{source}: [estimates] {name}: align must be one of {', '.join(ESTIMATE_ALIGN)} "
-                f"(got {shown(spec['align'])})"
-            )
-        params["align"] = spec["align"]
+    params = {k: ESTIMATE.known()[k].check(spec[k]) for k in ("t_max_diff", "t_offset", "align") if k in spec}
     return Entry(name, spec["topic"], normalize_type(typ) if typ else None, False, None, frame, child, True, params)
 
 

@@ -27,13 +27,13 @@ from test_hostile_campaign import store  # noqa: F401 -- the fixture: a computed
 STORES = ["store-edited-metric", "store-legacy-record-edited", "store-unit-dir-is-file", "store-unit-dir-missing",
           "store-index-edited", "store-config-json-removed"]
 CAMPAIGN_FILES = {  # id: ((old, new, ...) edits of CAMPAIGN, expected refusal)
-    "campaign-seed-negative": (("seed = 1", "seed = -1"), r"c\.toml:4: seed: \[campaign\]: seed must be an integer "
+    "campaign-seed-negative": (("seed = 1", "seed = -1"), r"c\.toml:4: \[campaign\]: seed must be an integer "
                                                           r"in \[0, 9223372036854775807\] \(got -1\)"),
     "campaign-runs-billion": (("runs = 3", "runs = 1000000000"),
-                              r"c\.toml:3: runs: \[campaign\]: runs must be an integer in \[1, 1000000\] "
+                              r"c\.toml:3: \[campaign\]: runs must be an integer in \[1, 1000000\] "
                               r"\(got 1000000000\)"),
     "campaign-divergence-negative": (("batch = 3", "batch = 3\ndivergence_threshold = -5.0"),
-                                     r"c\.toml:6: divergence_threshold: \[campaign\]: divergence_threshold must be "
+                                     r"c\.toml:6: \[campaign\]: divergence_threshold must be "
                                      r"a finite number > 0"),
     "campaign-name-300-chars": (('name = "hostile"', f'name = "{"n" * 300}"'),
                                 r"c\.toml:2: name: 'n{40}\.\.\.' is not a plain name \(it is 300 bytes long, at "

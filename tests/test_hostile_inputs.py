@@ -180,7 +180,7 @@ def test_a_huge_value_in_a_mapping_file_and_a_campaign_file(tmp_path):
     line = assert_refused(["campaign", "run", camp, "-o", tmp_path / "c"], r"c\.toml:5: tasks: unknown task 'tt")
     assert len(line) < 400 and "(1000000 characters)" in line
     camp.write_text(f'[campaign]\nruns = 1\n{"k" * 10**5} = 1\n')
-    line = assert_refused(["campaign", "run", camp, "-o", tmp_path / "c"], r"c\.toml:3: 'kkk.*unknown key")
+    line = assert_refused(["campaign", "run", camp, "-o", tmp_path / "c"], r"c\.toml:3: \[campaign\]: 'kkk.*unknown key")
     assert len(line) < 400 and "(100000 characters)" in line
 
 

@@ -35,7 +35,10 @@ def test_serial_runner_goes_longest_first_and_reports_each(capsys):
     assert [i for i, _ in got] == [1, 2, 0] and [r[0] for _, r in got] == [4, 9, 1]
     assert {r[1] for _, r in got} == {os.getpid()}  # one worker: this process
     err = capsys.readouterr().err.splitlines()
-    assert [line.split(" done at")[0] for line in err] == ["[1/3] p: b", "[2/3] p: c", "[3/3] p: a"]
+    assert [line.split(" (")[0] + ", " + line.split(", ")[-1] for line in err] == [
+        "p: reproduce: 1/3 jobs, b done", "p: reproduce: 2/3 jobs, c done", "p: reproduce: 3/3 jobs, a done"
+    ]  # tqdm's lines off a terminal: one per job, the costliest first
+    assert "(62 % of the work)" in err[0] and "(100 % of the work)" in err[2]  # weighted by the costs 5, 2, 1
 
 
 @pytest.mark.slow

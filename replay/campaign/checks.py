@@ -6,7 +6,7 @@ import os
 import re
 from pathlib import Path
 
-from replay.util.errors import ReplayError, listed, shown
+from replay.util.errors import ReplayError, listed
 
 MAX_NAME_BYTES = 240  # the name makes the directory runs/campaign-<name> (file names: 255 bytes)
 
@@ -59,21 +59,6 @@ def check_name(where, name: str) -> None:
             f"runs/campaign-<name>): use letters, digits, '-', '_' or '.'",
             name,
         )
-
-
-def check_type(where, key, value, typ):
-    ok = isinstance(value, typ) and not (typ in (int, float) and isinstance(value, bool))
-    if typ is float and isinstance(value, int) and not isinstance(value, bool):
-        ok = True
-    if not ok:
-        raise where.error(key, f"expected {typ.__name__}, got {type(value).__name__} {shown(value)}")
-
-
-def check_keys(where, table: dict, allowed: dict, what: str):
-    for key, value in table.items():
-        if key not in allowed:
-            raise where.error(key, f"unknown key in {what} (known: {', '.join(sorted(allowed))})")
-        check_type(where, key, value, allowed[key])
 
 
 def check_params(where, owner: str, declarations, params: dict) -> None:

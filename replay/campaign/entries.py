@@ -11,15 +11,20 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from replay.campaign.checks import check_keys, check_params
-from replay.run.eval_options import BY_NAME as EVAL
+from replay.campaign.checks import check_params
 from replay.run.pipeline import plain as _plain
 from replay.trajectory.recorded import recorded_params
 from replay.util.errors import ReplayError, shown
 from replay.data.views import NAMES as VIEW_NAMES, VIEW_PARAMS
-
-DATASET_KEYS = {"id": str, "tasks": list, "params": dict, "first": int, "recorded": list}
-FILTER_KEYS = {"name": str, "params": dict, "grid": dict}
+from replay.util.lookup import resolve
+from replay.tasks import TASKS
+from replay.data import dataset_ref
+from replay.data import registry
+from replay.data.dataset_ref import DatasetRef
+from replay.run.pipeline import load_frame
+from replay.adapters.bags import resolve_mapping
+from replay.filters import FILTERS
+from replay.filters import make_filter
 
 
 @dataclass
@@ -35,34 +40,27 @@ class DatasetEntry:
 
 
 def _class_of(registry: dict, name: str):
-    from replay.util.lookup import resolve
 
     return resolve(registry, name, "component")
 
 
 def task_tables(where, doc: dict) -> dict:
     """The ``[task.NAME]`` tables: {task: parameters}, each checked against the task's declarations."""
-    from replay.tasks import TASKS
 
     tables = doc.get("task", {})
     for tname, tp in tables.items():
         if tname not in TASKS:
             raise where.error(tname, f"unknown task (known: {', '.join(sorted(TASKS))})")
-        if not isinstance(tp, dict):
-            raise where.error(tname, "expected a table of task parameters")
         check_params(where, f"task {shown(tname)}", _class_of(TASKS, tname).PARAMS, tp)
     return tables
 
 
 def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntry:
-    """One ``[[dataset]]`` checked: its id, tasks, ``first``, parameters and recorded estimates."""
-    check_keys(where, entry, DATASET_KEYS, "[[dataset]]")
-    if "id" not in entry:
-        raise where.error("dataset", "every [[dataset]] needs an id")
+    """One ``[[dataset]]`` checked (its keys and their types by their declaration,
+    :data:`replay.campaign.spec.DATASET`): its id, tasks, ``first``, parameters and recorded estimates."""
     ref = _dataset_of(where, path, entry["id"])
     tasks = _tasks(where, entry.get("tasks", [(ref.entry and ref.entry.default_task) or "position"]))
     first = entry.get("first")
-    check_params(where, "[[dataset]]", (EVAL["first"],), {"first": first})  # replay eval's declaration
     if ref.kind == "file" and ref.locate(data_dir) is None:
         raise where.error(
             "id",
@@ -80,7 +78,6 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
 def _dataset_of(where, path: Path, ds_id: str):
     """The :class:`~replay.data.dataset_ref.DatasetRef` of an id: a registered one, or a recording's path
     (relative to the campaign file; its id becomes the absolute path)."""
-    from replay.data import dataset_ref
 
     ref = _recording(where, path, ds_id)
     if ref is not None:
@@ -92,7 +89,6 @@ def _dataset_of(where, path: Path, ds_id: str):
 
 
 def _tasks(where, tasks) -> list:
-    from replay.tasks import TASKS
 
     if not tasks:
         raise where.error("tasks", "empty list of tasks")
@@ -105,7 +101,6 @@ def _tasks(where, tasks) -> list:
 def _dataset_params(where, path: Path, ref, params: dict) -> dict:
     """A dataset's parameters canonical: a mapping relative to the campaign file made absolute, a
     simulator's and the views checked line by line, an adapter's options checked."""
-    from replay.data import registry
 
     if isinstance(params.get("mapping"), str) and (path.parent / params["mapping"]).is_file():
         params["mapping"] = str((path.parent / params["mapping"]).resolve())  # relative to this file
@@ -123,8 +118,6 @@ def _dataset_params(where, path: Path, ref, params: dict) -> dict:
 def _recording(where, path: Path, ds_id: str):
     """A ``[[dataset]]`` id that is a recording's path (relative to the campaign file): its reference
     (the absolute path, the adapter chosen from the file); None for a registered id."""
-    from replay.data import registry
-    from replay.data.dataset_ref import DatasetRef
 
     if ds_id in registry.all_datasets() or not registry.is_path(str(path.parent / ds_id)):
         return None
@@ -139,7 +132,6 @@ def _recording(where, path: Path, ds_id: str):
 
 
 def _frame0(ds_id, ds_params: dict, first, data_dir):
-    from replay.run.pipeline import load_frame
 
     return load_frame(
         {"dataset": ds_id, "dataset_params": ds_params, "first": first, "seed": 0, "adapter": None}, 0, data_dir
@@ -161,8 +153,6 @@ def _recorded(where, entry: dict, ds_id, ds_params: dict, first, data_dir, adapt
     if adapter == "bags":
         try:
             if ds_params.get("mapping") is not None:
-                from replay.adapters.bags import resolve_mapping
-
                 declared = {e.name: e.params for e in resolve_mapping(ds_params["mapping"]).estimates}
             else:  # the proposed mapping: read the recording
                 declared = {k: e.params for k, e in _frame0(ds_id, ds_params, first, data_dir).estimates.items()}
@@ -195,12 +185,8 @@ def filters(where, entries: list, runs: int, max_units: int) -> list[tuple[str, 
 
 def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tuple[str, dict]]:
     """One ``[[filter]]``: one configuration per combination of its grid (``held``: those before it)."""
-    from replay.filters import FILTERS
 
-    check_keys(where, entry, FILTER_KEYS, "[[filter]]")
-    name = entry.get("name")
-    if name is None:
-        raise where.error("filter", "every [[filter]] needs a name")
+    name = entry["name"]  # its keys checked by their declaration (replay.campaign.spec.FILTER)
     if name not in FILTERS:
         raise where.error("name", f"unknown filter {shown(name)} (known: {', '.join(sorted(FILTERS))})", name)
     declared = _class_of(FILTERS, name).PARAMS
@@ -229,7 +215,6 @@ def _filter(where, entry: dict, runs: int, held: int, max_units: int) -> list[tu
 
 def _made(where, name: str, params: dict) -> dict:
     """The canonical parameters of filter ``name`` made with ``params`` (its constructor checks relations)."""
-    from replay.filters import make_filter
 
     try:
         return _plain(make_filter(name, **params).params())

@@ -38,12 +38,11 @@ from pathlib import Path
 from replay.run.pipeline import config_hash, runs_of
 from replay.util.errors import ReplayError
 from replay.util.staging import check_space
-from replay.util.progress import particle_weight
+from replay.util.progress import Progress, particle_weight
 
 from . import board, index
 from .lock import locked
 from .noise_check import check_noise
-from .progress import Progress
 from .spec import Campaign
 from replay.util.files import sync_dir, write_bytes, write_json
 
@@ -261,8 +260,13 @@ def _run_locked(campaign, out, o: RunOptions) -> dict:
         write_bytes(out / "campaign.toml", campaign.path.read_bytes())
     checking = None
     if len(campaign.configs) >= PLAN_PROGRESS:  # what it does before the first unit, and how far
-        checking = Progress(len(campaign.configs), o.quiet, o.progress_stream, total_weight=None)
-        checking.label, checking.unit = "campaign: checking stored units", "configuration"
+        checking = Progress(
+            len(campaign.configs),
+            o.quiet,
+            o.progress_stream,
+            label="campaign: checking stored units",
+            unit="configuration",
+        )
     try:
         jobs, damaged, stored = _plan(campaign, store, o.retry_failed, o.data_dir, checking)
     finally:
@@ -293,7 +297,7 @@ def _run_locked(campaign, out, o: RunOptions) -> dict:
         }
         if counts["backend"] != "serial":  # the longest first: the short ones then even out the workers' ends
             jobs = sorted(jobs, key=lambda j: -weights[(j.config_hash, tuple(j.runs))])
-        progress = Progress(total, o.quiet, o.progress_stream, total_weight=sum(weights.values()))
+        progress = Progress(total, o.quiet, o.progress_stream, label="campaign", total_weight=sum(weights.values()))
         saved = set()
         try:
             with backend as mapper:

@@ -24,6 +24,7 @@ import itertools
 
 from replay.data import faults
 from replay.util.errors import ReplayError
+from replay.campaign.entries import _frame0
 
 MAX_SWEEP = 1000
 
@@ -31,9 +32,7 @@ MAX_SWEEP = 1000
 def variants(where, doc: dict) -> list[list[str]]:
     """The fault lists the campaign's configurations take, one per combination of the sweeps
     (``[[]]``: no ``[[fault]]``)."""
-    tables = doc.get("fault", [])
-    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
-        raise where.error("fault", "expected [[fault]] tables (channel, kind, the kind's parameters, sweep)")
+    tables = doc.get("fault", [])  # [[fault]] tables: checked by their declaration (replay.campaign.spec.FAULT)
     choices = []
     for table in tables:
         table = dict(table)
@@ -69,7 +68,6 @@ def with_faults(params: dict, extra: list[str]) -> dict:
 def check_frames(where, ds_entries, extras: list[list[str]], data_dir) -> None:
     """Run 0's frame of every dataset under every fault list, so that a fault on a channel the
     dataset lacks (or one that removes every sample) is refused before any unit, in one line."""
-    from replay.campaign.entries import _frame0
 
     for ds in ds_entries:
         for extra in extras:

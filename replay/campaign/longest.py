@@ -8,7 +8,7 @@ A reproduction lists independent evaluations (``replay eval`` configurations);
 :func:`run_longest_first` computes them in ``REPLAY_WORKERS`` processes (default
 2, :func:`workers`), the most expensive first so that the last ones to finish are
 short (the workers end together), and yields ``(index, result)`` as each one
-finishes, with one progress line each on stderr. One worker runs them in this
+finishes, the progress on stderr (tqdm: a bar on a terminal, a line per job otherwise). One worker runs them in this
 process, in the same order. Every evaluation draws from its own seeded streams
 (``replay.util.seeds``: (seed, run, stream)), so where and in which order it runs
 changes no number: the results equal those of the serial run.
@@ -23,8 +23,6 @@ not run four threads.
 from __future__ import annotations
 
 import os
-import sys
-import time
 from concurrent.futures import as_completed
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -33,6 +31,7 @@ from replay.campaign.workers import process_pool
 from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import evaluate
 from replay.util.errors import ReplayError
+from replay.util.progress import Progress
 
 
 def workers() -> int:
@@ -65,33 +64,36 @@ def pool(n: int):
 
 def run_longest_first(fn, args: list, costs: list, labels: list, executor=None, quiet: bool = False, prefix: str = ""):
     """``fn(args[i])`` for every i, the largest ``costs`` first, in ``executor`` (a pool of
-    :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes,
-    with the line ``[done/total] <prefix><labels[i]> done at <s> s`` on stderr unless ``quiet``."""
+    :func:`pool`; None: here, one after another). Yields ``(i, result)`` as each finishes; the progress
+    (:class:`replay.util.progress.Progress` labelled ``<prefix>reproduce``, weighted by ``costs``) names the
+    last job done, a line per job off a terminal, nothing when ``quiet``."""
     order = longest_first(costs)
-    t0, n = time.perf_counter(), len(order)
+    weight = sum(costs) if all(c > 0 for c in costs) else None  # a cost of 0: count jobs instead
+    bar = Progress(len(order), quiet, every=0.0, label=f"{prefix}reproduce", unit="job", total_weight=weight)
 
-    def note(k, i):
-        if not quiet:
-            print(
-                f"[{k}/{n}] {prefix}{labels[i]} done at {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True
-            )
+    def note(i):
+        bar.set_postfix_str(f"{labels[i]} done", refresh=False)
+        bar.update(1, weight=costs[i] if weight else None)
 
-    if executor is None:
-        for k, i in enumerate(order, 1):
-            out = fn(args[i])
-            note(k, i)
-            yield i, out
-        return
-    futures = {executor.submit(fn, args[i]): i for i in order}
     try:
-        for k, fut in enumerate(as_completed(futures), 1):
-            i = futures[fut]
-            out = fut.result()
-            note(k, i)
-            yield i, out
+        if executor is None:
+            for i in order:
+                out = fn(args[i])
+                note(i)
+                yield i, out
+            return
+        futures = {executor.submit(fn, args[i]): i for i in order}
+        try:
+            for fut in as_completed(futures):
+                i = futures[fut]
+                out = fut.result()
+                note(i)
+                yield i, out
+        finally:
+            for fut in futures:
+                fut.cancel()
     finally:
-        for fut in futures:
-            fut.cancel()
+        bar.close()
 
 
 @dataclass
@@ -119,7 +121,7 @@ def _evaluate(args):
 
 def evaluate_jobs(jobs: list[Job], runs: int, seed: int, data_dir=None, quiet=False, prefix="", reduce=None) -> dict:
     """``{key: Evaluation}`` of ``jobs`` in the plan's order, computed in worker processes the costliest first
-    (runs × particles, 30 for a filter without; a progress line each on stderr unless ``quiet``). ``reduce(job,
+    (runs × particles, 30 for a filter without; the progress on stderr unless ``quiet``). ``reduce(job,
     evaluation)``, a module-level function, runs in the worker and its result comes back instead of the
     evaluation (a run's records can weigh a megabyte)."""
     keys = [j.key for j in jobs]

@@ -43,8 +43,9 @@ with the mapping's association settings as its parameters; it has one unit (run 
 a recorded estimate is deterministic). A campaign may have no ``[[filter]]`` when it
 scores recorded estimates only.
 
-Everything is checked before any work starts (:func:`load`): a file that is not
-UTF-8 text, an unknown section, key, dataset, task, filter or parameter, a
+Everything is checked before any work starts (:func:`load`): the file's sections, keys,
+their types and required keys by its one declaration :data:`FILE` (:mod:`replay.util.tomlschema`);
+then a file that is not UTF-8 text, an unknown dataset, task, filter or parameter, a
 ``[campaign]`` value or a parameter of the wrong type or out of the bounds its
 declaration states (:data:`CAMPAIGN_PARAMS`, :mod:`replay.util.params`: ``runs``
 and ``batch`` at most :data:`replay.run.eval_options.MAX_RUNS` (one declaration with ``replay eval``),
@@ -70,10 +71,12 @@ from replay.run.eval_options import BY_NAME as EVAL
 from replay.run.pipeline import Config
 from replay.trajectory.recorded import RECORDED
 from replay.run.pipeline import plain as _plain
-from replay.util import tomlfile
+from replay.util import tomlfile, tomlschema
 from replay.util.errors import ReplayError
 from replay.util.params import Param
+from replay.util.tomlschema import Each, Table, Value
 from replay.util.plugins import refuse_unallowed
+from replay.tasks import make_task
 
 MAX_UNITS = 10_000_000  # units (configurations x runs) of one campaign
 CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and the API, one declaration
@@ -87,7 +90,58 @@ CAMPAIGN_PARAMS = (  # the [campaign] table: the run options of replay eval and 
         "data_dir", str, None, "where file datasets are looked for first (relative to the campaign file)", optional=True
     ),
 )
-SECTIONS = ("campaign", "dataset", "task", "filter", "tune", "fault")  # [[fault]]: replay.campaign.fault_axis
+CAMPAIGN = Table("campaign", "[campaign]", CAMPAIGN_PARAMS, doc="the run options")
+DATASET = Table(
+    "dataset",
+    "[[dataset]]",
+    (
+        Param("id", str, None, "a registered dataset id, or a recording's path (relative to this file)"),
+        Value("tasks", (list,), "the tasks run on it (default: the dataset's default task)", item=str),
+        Param("params", dict, None, "passed to the generator or adapter; the views rate, window, segment"),
+        EVAL["first"],
+        Value("recorded", (list,), "the recorded estimates scored (default: all; [] none)", item=str),
+    ),
+    required=("id",),
+)
+FILTER = Table(
+    "filter",
+    "[[filter]]",
+    (
+        Param("name", str, None, "a filter of replay list filters"),
+        Param("params", dict, None, "its parameters (checked by its declarations)"),
+        Param("grid", dict, None, "parameter = [values]: one configuration per combination"),
+    ),
+    required=("name",),
+)
+TUNE = Table(  # replay tune at scale: the rest is checked by replay.tune.campaign
+    "tune",
+    "[tune]",
+    (
+        Value("filters", (list,), "the filters tuned (default: the campaign's [[filter]] names)", item=str),
+        Param("trials", int, 50, "trials per filter"),
+        Param("objective", str, "mean_rmse", "as --objective"),
+        Param("split", dict, None, "{ segment = 0.6 }, { seeds = S } or { train = [ids], test = [ids] }"),
+        Param("space", dict, None, "FILTER.PARAM = SPEC (replay.tune.space)"),
+        Param("allow_overlap", bool, False, "allow the train and test data to overlap"),
+    ),
+    doc="replay tune at scale (replay.tune.campaign)",
+)
+FAULT = Table(  # a fault of replay.data.faults: its channel, kind and parameters are checked by faults.check
+    "fault", "[[fault]]", open=True, expect="a table (channel, kind, the kind's parameters, sweep)"
+)
+FILE = Table(  # the one declaration of a campaign file (entries.py, fault_axis.py and tune check the rest)
+    "campaign file",
+    "",
+    (
+        CAMPAIGN,
+        Each("dataset", DATASET, array=True, doc="the datasets"),
+        Each("task", Table("task", "[task.{name}]", open=True), doc="task parameters (the task's declarations)"),
+        Each("filter", FILTER, array=True, doc="the filters"),
+        TUNE,
+        Each("fault", FAULT, array=True, doc="faults injected into every dataset (replay.campaign.fault_axis)"),
+    ),
+)
+SECTIONS = tuple(FILE.known())
 _Where = Where  # the name it had
 
 
@@ -172,28 +226,17 @@ def check_sources(where, doc: dict, allow_modules=(), reader: str = "a campaign 
 
 
 def _read(path: Path) -> tuple[dict, Where]:
-    """The parsed TOML of a campaign file and its :class:`Where`; unknown sections refused."""
+    """The parsed TOML of a campaign file and its :class:`Where`, checked by its declaration :data:`FILE`."""
     doc, text = tomlfile.load(path, "a campaign file")
     where = Where(path, text)
-    for key in doc:
-        if key not in SECTIONS:
-            raise where.error(key, f"unknown section (known: {', '.join(SECTIONS)})")
-    if "tune" in doc and not isinstance(doc["tune"], dict):
-        raise where.error("tune", "expected a table [tune]")
+    tomlschema.check(FILE, doc, lambda key, text: ReplayError(f"{path}:{where.line(key)}: {text}"))
     return doc, where
 
 
 def _head(where, doc: dict, path: Path) -> dict:
     """The ``[campaign]`` table checked (:data:`CAMPAIGN_PARAMS`), every default filled in, ``name``
     defaulting to the file's stem and ``data_dir`` made absolute (relative to the file)."""
-    head = doc.get("campaign", {})
-    if not isinstance(head, dict):
-        raise where.error("campaign", "expected a table [campaign]")
-    known = sorted(p.name for p in CAMPAIGN_PARAMS)
-    for key in head:
-        if key not in known:
-            raise where.error(key, f"unknown key in [campaign] (known: {', '.join(known)})")
-    check_params(where, "[campaign]", CAMPAIGN_PARAMS, head)
+    head = doc.get("campaign", {})  # checked by its declaration (FILE)
     out = {p.name: p.check(head[p.name]) if p.name in head else p.default for p in CAMPAIGN_PARAMS}
     out["name"] = head.get("name", path.stem)
     check_name(where, out["name"])
@@ -219,7 +262,6 @@ def _entry_lists(where, doc: dict) -> tuple[list, list]:
 
 def _tasks(where, tasks: list, task_params: dict) -> list[tuple[str, dict]]:
     """(task, canonical parameters) of each task of a dataset entry."""
-    from replay.tasks import make_task
 
     out = []
     for t in tasks:

@@ -38,11 +38,14 @@ from replay.data.checksums import (
     with_registered,
 )
 from replay.util.data_dirs import cache_dir, cache_variable, check_data_dir, search_roots  # noqa: F401
-from replay.util import tomlfile
+from replay.util import tomlfile, tomlschema
 from replay.util.errors import DataError, ReplayError, shown
 from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
+from replay.util.tomlschema import Table
+from replay.adapters.options import check
+from replay.data.plugins import ADAPTERS, dataset_entries  # the built-in adapters and the plugins
 from replay.data.formats import adapter_for, looks_like_path
 
 # Adapter used for a plain file path, by extension.
@@ -78,6 +81,16 @@ class Dataset:
 
 
 MANIFEST_KEYS = {f.name for f in fields(Dataset)} - {"kind", "manifest"}
+_TYPES, _LOW = {"str": str, "int": int, "float": float}, {"size": 1, "rows": 0, "span_s": 0}
+MANIFEST = Table(  # a manifest's [[dataset]] entry, declared once: by the fields of Dataset (their types)
+    "dataset",
+    "",
+    tuple(
+        Param(f.name, _TYPES[f.type.split(" |")[0]], None, f.name, low=_LOW.get(f.name), optional=True)
+        for f in fields(Dataset)
+        if f.name in MANIFEST_KEYS
+    ),
+)
 
 
 # ---------------------------------------------------------------- manifests
@@ -107,7 +120,6 @@ def plugin_problems() -> list[str]:
 
 
 def _plugins() -> tuple[dict, list]:
-    from replay.data.plugins import dataset_entries
 
     entries, _, problems = dataset_entries(_read_manifests(str(manifests_dir())))
     out, problems = {}, list(problems)
@@ -147,9 +159,7 @@ def _make_dataset(path: Path, entry: dict) -> Dataset:
     where = f"{path}: dataset {ds_id}"
     if not isinstance(ds_id, str) or "/" not in ds_id:
         raise ReplayError(f"{path}: every [[dataset]] needs an id of the form 'prefix/name' (got {shown(ds_id)})")
-    unknown = sorted(set(entry) - MANIFEST_KEYS)
-    if unknown:
-        raise ReplayError(f"{where}: unknown field(s) {', '.join(unknown)}")
+    tomlschema.check(MANIFEST, entry, lambda key, text: ReplayError(f"{where}: {text}"))
     if ("file" in entry) == ("generator" in entry):
         raise ReplayError(f"{where}: give exactly one of `file` (a recording) or `generator` (a simulator)")
     kind = "file" if "file" in entry else "sim"
@@ -163,9 +173,6 @@ def _make_dataset(path: Path, entry: dict) -> Dataset:
         if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
             raise ReplayError(f"{where}: sha256 must be 64 hex digits")
         entry["sha256"] = sha
-    size = entry.get("size")
-    if size is not None and (isinstance(size, bool) or not isinstance(size, int) or size < 1):
-        raise ReplayError(f"{where}: size must be a positive number of bytes (got {shown(size)})")
     return with_registered(Dataset(kind=kind, manifest=str(path), **entry), where)
 
 
@@ -183,7 +190,6 @@ def get(dataset_id: str) -> Dataset:
     known = all_datasets()
     if dataset_id in known:
         return known[dataset_id]
-    from replay.data.plugins import dataset_entries
 
     conflict = dataset_entries()[1].get(dataset_id)
     if conflict:
@@ -319,7 +325,6 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
 def _check_options(adapter: str, params: dict) -> dict:
     """``params`` checked against ``adapter``'s declarations; a plugin declaring none: their names."""
-    from replay.adapters.options import check
 
     declared = adapter_options(adapter)
     if declared is not None:
@@ -335,7 +340,6 @@ def _check_options(adapter: str, params: dict) -> dict:
 
 
 def _adapter(name: str):
-    from replay.data.plugins import ADAPTERS  # the built-in adapters and the plugins
 
     try:
         return ADAPTERS.load(name)

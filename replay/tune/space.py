@@ -23,9 +23,18 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from replay.util import tomlfile
+from replay.util import tomlfile, tomlschema
+from replay.util.tomlschema import Each, Table
 from replay.util.errors import ReplayError, shown
+from replay.filters import FILTERS
+from replay.tasks import task_class
+from replay.util.lookup import resolve
 
+SPACE = Each(  # the one declaration of a search-space file: its entries' values are checked by make_dim
+    "space",
+    Table("owner", "{name}", open=True, expect="FILTER.PARAM = SPEC (a table of parameters per filter)"),
+    doc="FILTER (or task) = { PARAM = SPEC }: log[a, b], [a, b] or choice[...] per parameter",
+)
 _SPEC = re.compile(r"^\s*(log|choice)?\s*\[(.*)\]\s*$", re.S)
 
 
@@ -152,10 +161,9 @@ def entries_from_file(path) -> list[tuple[str, object, str]]:
     """A TOML search-space file -> [(key, value, where)] (``FILE: KEY`` in messages)."""
     path = Path(path)
     doc, _ = tomlfile.load(path, "a search space", f"--space {path}")
+    tomlschema.check_each(SPACE, doc, lambda key, text: ReplayError(f"{path}: {text}"))
     out = []
     for owner, table in doc.items():
-        if not isinstance(table, dict):
-            raise ReplayError(f"{path}: {owner}: expected FILTER.PARAM = SPEC (a table of parameters per filter)")
         for name, value in table.items():
             out.append((f"{owner}.{name}", value, f"{path}: {owner}.{name}"))
     return out
@@ -163,8 +171,6 @@ def entries_from_file(path) -> list[tuple[str, object, str]]:
 
 def build(entries, filters, task: str) -> dict[str, list[Dim]]:
     """{filter: [Dim]} for each filter (task entries in each); unknown owners refused."""
-    from replay.filters import FILTERS
-    from replay.tasks import task_class
 
     per = {f: [] for f in filters}
     seen = set()
@@ -195,7 +201,5 @@ def build(entries, filters, task: str) -> dict[str, list[Dim]]:
 
 def _declared(name: str):
     """The declared parameters of filter ``name``."""
-    from replay.util.lookup import resolve
-    from replay.filters import FILTERS
 
     return resolve(FILTERS, name, "filter").PARAMS

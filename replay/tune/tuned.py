@@ -9,12 +9,15 @@ test data) gives the rows ``replay tune`` scored on its held-out data.
 from __future__ import annotations
 
 from replay.util.errors import ReplayError
+from replay.campaign import spec
+from replay.data import registry
+from replay.run.pipeline import plain
+from replay.data import views
 
 
 def tuned_params(path, task: str | None = None, allow_modules=()) -> tuple[list, dict, dict, str]:
     """(filters, {filter: params}, task params, task) of a tuned file; a ``module:Class`` filter or
     task of a module not in ``allow_modules`` is refused before anything is imported."""
-    from replay.campaign import spec
 
     try:
         camp = spec.load(path, allow_modules, reader="--tuned")
@@ -54,9 +57,6 @@ def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) ->
     the tuned configuration stressed on its own test data. Another dataset takes the file's filter
     and task parameters only, with a note saying so.
     """
-    from replay.campaign import spec
-    from replay.data import registry
-    from replay.run.pipeline import plain
 
     camp = spec.load(path)
     same = [c for c in camp.configs if c.dataset in (ref.id, str(ref.path.resolve()) if ref.path else None)]
@@ -86,7 +86,6 @@ def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) ->
 
 
 def _describe(dataset: str, params: dict) -> str:
-    from replay.data import views
 
     shown = views.split(params)[0]
     return dataset + (" (" + ", ".join(f"{k}={v}" for k, v in shown.items()) + ")" if shown else "")
