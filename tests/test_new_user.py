@@ -61,6 +61,7 @@ def _normal(lines: list[str]) -> list[str]:
             line = line[:start] + "#" + line[col:]
         line = re.sub(r" {2,}", "  ", re.sub(r"\d+(\.\d+)? s\b", "T s", line))  # widths follow the cells
         line = re.sub(r"^(\[\d+/\d+\]) \S+ done at", r"\1 done at", line)  # jobs of a pool: any order
+        line = re.sub(r"^(\w+: \d+/\d+ jobs) \(.*, \S+ done$", r"\1 done", line)  # share, ETA and name vary
         if line.strip() and line.strip() != "...":
             out.append(line)
     return out
