@@ -63,26 +63,6 @@ def inspect_cmd(path, write_mapping):
         click.echo(f"wrote {write_mapping}")
 
 
-def check_export_targets(mcap_out, ros2_out, inputs) -> None:
-    """Refuse export targets before any work: onto or inside an input, onto each other,
-    unwritable, or replacing something this tool did not write (one line each)."""
-    from replay.outputs.export_safety import check_target
-
-    if mcap_out:
-        check_target(mcap_out, inputs, "mcap", others=[ros2_out])
-    if ros2_out:
-        check_target(ros2_out, inputs, "ros2", others=[mcap_out])
-
-
-def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_dir=None) -> None:
-    """For `replay eval --mcap/--ros2-bag`: the same refusals, before the evaluation runs
-    (the inputs: the dataset's files, the mapping and the output directory ``out_dir``)."""
-    from replay.outputs.export_safety import dataset_inputs
-
-    if mcap_out or ros2_out:
-        check_export_targets(mcap_out, ros2_out, [out_dir] + dataset_inputs(dataset, mapping, data_dir))
-
-
 def export_outputs(
     run_dir, mcap_out=None, ros2_out=None, data_dir=None, run: int = 0, select=None, sigma=None, quiet: bool = False
 ) -> None:
@@ -96,14 +76,14 @@ def export_outputs(
     """
     from replay.outputs.export_mcap import write_run_mcap
     from replay.outputs.export_ros2 import write_run_ros2
-    from replay.outputs.export_safety import run_inputs
+    from replay.outputs.export_safety import check_exports, run_inputs
     from replay.outputs.run_data import load_run
     from replay.util.progress import Progress
 
     inputs = run_inputs(run_dir, data_dir)
-    check_export_targets(mcap_out, ros2_out, inputs)
+    check_exports(mcap_out, ros2_out, inputs)
     loaded = load_run(run_dir, data_dir, run=run, select=select)
-    check_export_targets(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
+    check_exports(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
     tracks = ", ".join(loaded["estimates"])
     for target, write, label, slash in (
         (mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p), "export mcap", ""),

@@ -236,7 +236,7 @@ def write_mcap(
     complete; an existing ``mcap_path`` is replaced only if replay wrote it.
     """
     from replay.outputs import foxglove_scene as scene
-    from replay.outputs.export_safety import staged_file
+    from replay.outputs.export_safety import export_set
 
     sigma = scene.SIGMA if sigma is None else float(sigma)
     if not (np.isfinite(sigma) and sigma > 0):
@@ -245,7 +245,7 @@ def write_mcap(
     ns_frame = time_ns(frame, frame.t)
     axes_enu, is_ned = enu_axes(problem), ned(problem)
     colours = scene.colours(estimates)
-    with staged_file(mcap_path, "--mcap") as tmp:
+    with export_set(mcap_path, "mcap").staged() as tmp:
         out = McapOut(tmp, compression=compression, chunk_size=chunk_size, window=window, name=mcap_path)
         for name, data in (metadata or {}).items():
             out.w.add_metadata(name, data)

@@ -25,7 +25,7 @@ No Foxglove JSON/protobuf channel ever goes into these bags. The writer,
 :class:`~replay.adapters.bags.writer.BagOut`, is the ``bags`` adapter's inverse.
 
 Both write the bag inside a hidden temporary directory beside the target and swap it
-in when complete (``replay.outputs.export_safety.staged_dir``); the bag's
+in when complete (``replay.outputs.export_safety.export_set``); the bag's
 ``metadata.yaml`` carries ``custom_data: {replay.output: ...}``, the mark that lets a
 later export replace it. An existing directory without that mark is never replaced.
 """
@@ -38,7 +38,7 @@ import numpy as np
 
 from replay.adapters import rosmsg
 from replay.adapters.bags.writer import BagOut
-from replay.outputs.export_safety import MARK_KEY, staged_dir
+from replay.outputs.export_safety import MARK_KEY, export_set
 from replay.util import covcols
 from replay.util.errors import ReplayError
 
@@ -152,7 +152,7 @@ def write_frame_bag(frame, path) -> int:
     params = mapping.get("params") or {}
     geo = (lambda enu: enu_to_geodetic(enu, frame.meta)) if frame.meta.get("crs") else None
     other = "header_time" if mapping.get("time") == "log" else "log_time"
-    with staged_dir(path, "bag") as tmp:
+    with export_set(path, "ros2", what="bag").staged(create=False) as tmp:
         return _write_frame(
             BagOut(tmp, {MARK_KEY: "frame bag"}, compression="zstd"), frame, mapping, n, ns, t0, params, geo, other
         )
@@ -221,7 +221,7 @@ def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None, pro
 def write_run_ros2(run: dict, path, progress=None) -> int:
     """The odometry bag of a loaded run (``run_data.load_run``), staged and swapped in at ``path``;
     ``progress``: a :class:`replay.util.progress.Progress` told of the messages written."""
-    with staged_dir(path, "--ros2-bag") as tmp:
+    with export_set(path, "ros2").staged(create=False) as tmp:
         return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}, compression="zstd"), run, progress)
 
 
