@@ -9,7 +9,10 @@ from pathlib import Path
 
 import tomli_w
 
+from replay.campaign.lock import LOCK_NAME
+from replay.util.errors import ReplayError
 from replay.util.files import write_bytes
+from replay.util.output_set import OutputSet
 
 
 def write_tuned(t, out: Path, rows) -> dict:
@@ -156,3 +159,21 @@ def _num(v) -> str:
     except (TypeError, ValueError):
         return str(v)
     return f"{v:.4f}" if math.isfinite(v) else str(v)
+
+
+def output_set(out, inputs=()) -> OutputSet:
+    """``replay tune --out`` as an :class:`OutputSet` (``check()`` it before any trial): never onto
+    or inside an input, writable, and absent, empty or a tune's own directory (a study is resumed)."""
+    return OutputSet(out, what="--out", inputs=inputs, rule=_tune_dir)
+
+
+def _tune_dir(d: Path, out) -> None:
+    started = {LOCK_NAME}  # a tune that has taken its lock and not yet made study.db (--wait for it)
+    ours = (d / "study.db").is_file() or (d / "tune.json").is_file()  # tune.json: a study.db moved aside
+    if d.is_dir() and not {p.name for p in d.iterdir()} <= started and not ours:
+        raise ReplayError(
+            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db, no tune.json); "
+            "give a new or a tune directory"
+        )
+    if d.exists() and not d.is_dir():
+        raise ReplayError(f"--out {out}: not a directory")

@@ -78,6 +78,15 @@ class OutputSet:
     def check(self, contents: bool = True) -> Path:
         """Every refusal that can be made before computing (one line each); returns the target
         resolved. ``contents=False``: the location only (a directory claimed and filled later)."""
+        target = self._apart()
+        check_space(self.shown, self.what)
+        check_writable(self.shown, self.what)
+        if contents:
+            self.rule(target if self.kind else Path(self.shown), self.shown)
+        return target
+
+    def _apart(self) -> Path:
+        """Refuse a target onto, around or inside an input or another target; returns it resolved."""
         target = refuse_overlap(self.shown, self.inputs, self.what)
         for other in self.others:
             b = Path(other).resolve()
@@ -85,10 +94,6 @@ class OutputSet:
                 raise ReplayError(
                     f"{self.what} {self.shown}: overlaps the other export target {other}; give separate paths"
                 )
-        check_space(self.shown, self.what)
-        check_writable(self.shown, self.what)
-        if contents:
-            self.rule(target if self.kind else Path(self.shown), self.shown)
         return target
 
     # ------------------------------------------------------------ claim
@@ -124,11 +129,12 @@ class OutputSet:
     def staged(self, create: bool = True):
         """A fresh temporary sibling to write the whole output into (``create=False``: a directory
         not yet made, for a writer that makes it itself). On a normal exit it is fsynced (a set
-        gets its marker listing its files), the target is checked again (it may have changed during
-        the computation) and replaced in one step; on an exception the sibling is removed and the
+        gets its marker listing its files), the target is checked again (not an input, ours: it may
+        have changed during the computation) and replaced in one step; on an exception the sibling is removed and the
         target untouched. An ``OSError`` (full disk, read-only, file too large) is one line."""
         target, staging, made = self.target.resolve(), self.staging(), []
         try:
+            self._apart()
             self.recover()
             self.rule(target if self.kind else self.target, self.shown)
             made = [q for q in (target.parent, *target.parent.parents) if not q.exists()][::-1]
@@ -161,6 +167,7 @@ class OutputSet:
                 mark = {"tool": "replay", "kind": self.kind, "files": _tree_files(staging)}
                 (staging / MARKER).write_text(json.dumps(mark, indent=1) + "\n")
             fsync_tree(staging)
+        self._apart()
         self.rule(target if self.kind else self.target, self.shown)
         if self.file:
             os.replace(staging, target)
