@@ -144,8 +144,8 @@ def _owned(kind: str, what: str):
 
 def export_set(out, kind: str, inputs=(), others=(), what: str | None = None) -> OutputSet:
     """The output set of an export to ``out`` (``kind`` "mcap": a file; "ros2": a bag directory,
-    staged not yet made: the bag writer makes it). ``check()`` it before anything is computed;
-    write it in ``with export_set(...).staged(create=False) as tmp``."""
+    staged nested: the bag writer makes it and names its file after it). ``check()`` it before
+    anything is computed; write it in ``with export_set(...).staged(nested=True) as tmp``."""
     what = what or ("--mcap" if kind == "mcap" else "--ros2-bag")
     return OutputSet(
         out,

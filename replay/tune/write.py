@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from pathlib import Path
 
 import tomli_w
 
 from replay.campaign.lock import LOCK_NAME
+from replay.scoring.marks import marks
 from replay.util.errors import ReplayError
 from replay.util.files import write_bytes
 from replay.util.output_set import OutputSet
@@ -96,9 +98,6 @@ def board_notes(rows, failed: dict | None = None) -> list[str]:
     an input: :func:`replay.scoring.summary.marks`), tuned rows worse than their defaults on the
     held-out data (and which row is better), and why trials scored infinity (``failed``: filter ->
     a reason per such trial)."""
-    from collections import Counter
-
-    from replay.scoring.marks import marks
 
     out = [f"{r['label']}: not ranked: {m}" for r in rows for m in marks(r)]
     kinds = sorted({str(r["reference"]) for r in rows if r.get("reference")})  # issue 35: on every table
@@ -141,7 +140,6 @@ def _worse(tuned, default) -> bool:
 
 
 def _marked(r) -> bool:
-    from replay.scoring.marks import marks
 
     return bool(marks(r))
 

@@ -13,7 +13,7 @@ directory checks, ``replay score --save-results`` and the MCAP / ROS 2 bag expor
    only if it is our own earlier output of the same kind (the ownership ``rule``: by default the
    marker of :func:`replay.util.staging.check_replaceable`).
 3. **stage** (:meth:`OutputSet.staged`): a temporary sibling ``.NAME.staging-PID`` (a directory,
-   or a file with ``file=True``) to write into.
+   or a file with ``file=True``) to write into (``nested``: the directory ``.NAME.staging-PID/NAME``).
 4. **publish** (at the end of the ``staged`` block): the sibling fsynced, the target checked
    again and replaced in one step (:func:`replay.util.staging.publish_dir` for a directory,
    ``rename`` for a file), the parent fsynced.
@@ -126,13 +126,15 @@ class OutputSet:
         return target.with_name(f".{target.name}.staging-{os.getpid()}")
 
     @contextmanager
-    def staged(self, create: bool = True):
-        """A fresh temporary sibling to write the whole output into (``create=False``: a directory
-        not yet made, for a writer that makes it itself). On a normal exit it is fsynced (a set
-        gets its marker listing its files), the target is checked again (not an input, ours: it may
-        have changed during the computation) and replaced in one step; on an exception the sibling is removed and the
-        target untouched. An ``OSError`` (full disk, read-only, file too large) is one line."""
+    def staged(self, nested: bool = False):
+        """A fresh temporary sibling to write the whole output into (``nested``: a path named like the
+        target inside it, not yet made, for a writer that makes the directory itself and names its
+        files after it: a ROS 2 bag). On a normal exit it is fsynced (a set gets its marker listing
+        its files), the target is checked again (not an input, ours: it may have changed during the
+        computation) and replaced in one step; on an exception the sibling is removed and the target
+        untouched. An ``OSError`` (full disk, read-only, file too large) is one line."""
         target, staging, made = self.target.resolve(), self.staging(), []
+        inner = staging / target.name if nested else staging
         try:
             self._apart()
             self.recover()
@@ -141,11 +143,13 @@ class OutputSet:
             for d in made:
                 d.mkdir()
             _remove(staging)
-            if create and not self.file:
+            if not self.file:
                 staging.mkdir()
-            yield staging
+            yield inner
             _fault("written")
-            self._publish(staging, target)
+            self._publish(inner, target)
+            if nested:
+                _remove(staging)
         except BaseException as exc:
             _remove(staging)
             for d in reversed(made):
