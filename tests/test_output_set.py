@@ -68,6 +68,9 @@ def test_what_is_not_ours_is_refused_in_one_line_and_kept(tmp_path):
     assert contents(out) == {"a": "1", "added.txt": "the user's"}
     with pytest.raises(ReplayError, match=r"holds a 'test set' output, not a other output"):
         OutputSet(out, "other").check()
+    with pytest.raises(ReplayError, match=r"^output .*out: exists; refusing to replace it"):
+        OutputSet(out).check()  # neither a kind nor a rule: nothing existing is ours
+    assert OutputSet(tmp_path / "empty").check() == (tmp_path / "empty").resolve()
 
 
 def test_refused_onto_around_or_inside_an_input(tmp_path):

@@ -73,6 +73,10 @@ class OutputSet:
     # ------------------------------------------------------------ check
 
     def _marker_rule(self, path: Path, shown) -> None:
+        if self.kind is None:  # no way to tell an output of ours: only an absent or empty target
+            if os.path.lexists(path) and (not path.is_dir() or path.is_symlink() or any(path.iterdir())):
+                raise ReplayError(f"{self.what} {shown}: exists; refusing to replace it: choose another {self.what}")
+            return
         check_replaceable(path, self.kind, self.what, self.legacy, shown=shown)
 
     def check(self, contents: bool = True) -> Path:
