@@ -36,9 +36,9 @@ from replay.util.files import check_writable, refuse_overlap
 from replay.util.lock import lock_file
 from replay.util.staging import (
     MARKER,
-    _fault,
-    _fsync_path,
-    _tree_files,
+    fault_point,
+    fsync_path,
+    tree_files,
     check_replaceable,
     check_space,
     fsync_tree,
@@ -59,16 +59,15 @@ class OutputSet:
     ``failed``: the line of a failed write (``{why}``: the system's reason).
     """
 
-    def __init__(self, target, kind=None, *, what="output", inputs=(), others=(), legacy=None, rule=None, **opts):
+    def __init__(
+        self, target, kind=None, *, what="output", inputs=(), others=(), legacy=None, rule=None, file=False, failed=KEPT
+    ):
         self.shown, self.target = target, Path(target)
         self.kind, self.what, self.legacy = kind, what, legacy
         self.inputs = [p for p in inputs if p is not None]
         self.others = [p for p in others if p is not None]
         self.rule = rule or self._marker_rule
-        self.file = opts.pop("file", False)
-        self.failed = opts.pop("failed", KEPT)
-        if opts:
-            raise TypeError(f"OutputSet: unknown options {sorted(opts)}")
+        self.file, self.failed = file, failed
 
     # ------------------------------------------------------------ check
 
@@ -150,7 +149,7 @@ class OutputSet:
             if not self.file:
                 staging.mkdir()
             yield inner
-            _fault("written")
+            fault_point("written")
             self._publish(inner, target)
             if nested:
                 _remove(staging)
@@ -169,17 +168,17 @@ class OutputSet:
 
     def _publish(self, staging: Path, target: Path) -> None:
         if self.file:
-            _fsync_path(staging)
+            fsync_path(staging)
         else:
             if self.kind:
-                mark = {"tool": "replay", "kind": self.kind, "files": _tree_files(staging)}
+                mark = {"tool": "replay", "kind": self.kind, "files": tree_files(staging)}
                 (staging / MARKER).write_text(json.dumps(mark, indent=1) + "\n")
             fsync_tree(staging)
         self._apart()
         self.rule(target if self.kind else self.target, self.shown)
         if self.file:
             os.replace(staging, target)
-            _fsync_path(target.parent, directory=True)
+            fsync_path(target.parent, directory=True)
         else:
             publish_dir(staging, target)
 

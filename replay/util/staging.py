@@ -32,7 +32,7 @@ MARKER = ".replay-output.json"
 MIN_FREE = 1 << 20  # bytes: a location with less free space than this is refused as full
 
 
-def _fault(point: str) -> None:
+def fault_point(point: str) -> None:
     if os.environ.get("REPLAY_FAULT") == point:
         os.kill(os.getpid(), signal.SIGKILL)
 
@@ -50,7 +50,7 @@ def alive(pid: int) -> bool:
     return True
 
 
-def _fsync_path(path, directory: bool = False) -> None:
+def fsync_path(path, directory: bool = False) -> None:
     fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
     try:
         os.fsync(fd)
@@ -62,11 +62,11 @@ def fsync_tree(root) -> None:
     """fsync every file and directory under ``root`` (so that a rename publishes complete data)."""
     for dirpath, _dirs, files in os.walk(root):
         for f in files:
-            _fsync_path(os.path.join(dirpath, f))
-        _fsync_path(dirpath, directory=True)
+            fsync_path(os.path.join(dirpath, f))
+        fsync_path(dirpath, directory=True)
 
 
-def _tree_files(root: Path) -> list[str]:
+def tree_files(root: Path) -> list[str]:
     return sorted(str(Path(d, f).relative_to(root).as_posix()) for d, _dirs, files in os.walk(root) for f in files)
 
 
@@ -140,7 +140,7 @@ def check_replaceable(target, kind: str, what: str = "output", legacy=None, show
             for f in (
                 [e.name]
                 if not e.is_dir() or e.is_symlink()
-                else [str(Path(e.name, f).as_posix()) for f in _tree_files(e)]
+                else [str(Path(e.name, f).as_posix()) for f in tree_files(e)]
             )
             if f not in listed
         ]
@@ -238,16 +238,16 @@ def publish_dir(staging, target) -> None:
             if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
     if not placed and exchange(staging, target):
-        _fault("swapped")
+        fault_point("swapped")
         shutil.rmtree(staging, ignore_errors=True)
     elif not placed:
         old = target.with_name(f".{target.name}.old-{os.getpid()}")
         os.rename(target, old)
-        _fault("aside")
+        fault_point("aside")
         try:
             os.rename(staging, target)
         except OSError:
             os.rename(old, target)  # put the old set back before reporting the failure
             raise
         shutil.rmtree(old, ignore_errors=True)
-    _fsync_path(target.parent, directory=True)
+    fsync_path(target.parent, directory=True)
