@@ -140,12 +140,10 @@ def run_campaign(
     imported unless ``allow_modules`` holds its module (a class of this session: register it)."""
     from pathlib import Path
 
-    from replay.campaign import execute, spec
-    from replay.util.files import check_writable, refuse_overlap
+    from replay.campaign import execute, lock, spec
 
     c = spec.load(campaign, allow_modules)
-    refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
-    check_writable(Path(out), "out")
+    lock.output_set(out, [c.data_dir, data_dir], what="out").check()  # the rule of the CLI's --out
     counts = execute.run(c, Path(out), workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
     df = _rows(counts.pop("rows"))
     df.attrs["counts"] = counts

@@ -53,7 +53,7 @@ def locked(out, wait: bool = False, who: str = "campaign"):
         yield p
 
 
-def output_set(out, inputs=()) -> OutputSet:
+def output_set(out, inputs=(), what: str = "--out") -> OutputSet:
     """The result directory ``out`` of a campaign as an :class:`OutputSet` (``check()`` it before
     any unit): never onto or inside the data; absent, empty, or a campaign's own directory."""
-    return OutputSet(out, KIND, what="--out", inputs=inputs, legacy=campaign_dir)
+    return OutputSet(out, KIND, what=what, inputs=inputs, legacy=campaign_dir)

@@ -168,7 +168,6 @@ def eval_cmd(
     output = EvalOutput(
         ref, dataset, task, out, force=force, mapping=mapping, exports=(mcap_out, ros2_out), data_dir=data_dir
     )
-    output.check()
     with output.claimed(wait):  # a claimed numbered directory, or --out's lock, until published
         ev = _evaluate(
             ref,

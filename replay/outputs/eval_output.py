@@ -2,9 +2,9 @@
 exports (``--mcap``, ``--ros2-bag``), checked before the computation, claimed for it and published
 after it, each step through :class:`replay.util.output_set.OutputSet`.
 
-``output.check()`` (before anything is computed), then ``with output.claimed(wait) as out:``
-(the numbered directory claimed, or ``--out``'s lock held, and everything checked again now that
-no other ``replay eval`` writes there), compute, ``output.publish(ev)`` (checked once more, the
+``with output.claimed(wait) as out:`` (everything checked before anything is computed, then the
+numbered directory claimed, or ``--out``'s lock held, and everything checked again now that no
+other ``replay eval`` writes there), compute, ``output.publish(ev)`` (checked once more, the
 set written in one step, ``latest`` moved to a numbered directory).
 """
 
@@ -44,7 +44,9 @@ class EvalOutput:
     @contextmanager
     def claimed(self, wait: bool = False):
         """The output directory claimed for the block (a new numbered one, or ``--out`` under its
-        lock; ``wait``: for another writer of ``--out``), checked again; yields it."""
+        lock; ``wait``: for another writer of ``--out``), checked before (:meth:`check`: a refused
+        run claims nothing) and again once claimed; yields it."""
+        self.check()
         with ExitStack() as held:
             if self.numbered:
                 self.out = held.enter_context(claimed_run_dir(self.dataset, self.task))
