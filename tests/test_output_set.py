@@ -13,6 +13,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -133,6 +134,7 @@ def test_a_file_is_replaced_in_one_step_and_only_by_its_rule(tmp_path):
 CHILD = """
 import sys
 from pathlib import Path
+from pathlib import Path
 from replay.util.output_set import OutputSet
 target, file = Path(sys.argv[1]), sys.argv[2] == "file"
 with OutputSet(target, None if file else "test set", rule=(lambda p, s: None) if file else None, file=file).staged() as d:
@@ -216,3 +218,15 @@ def test_concurrent_claims_refused_with_the_holders_pid_or_waited_for(tmp_path):
         assert (tmp_path / "out.released").exists()
         assert (tmp_path / ".out.lock").read_text() == f"{os.getpid()}\n"  # the holder's pid, now ours
     short.wait()
+
+
+def test_the_campaign_api_refuses_a_directory_that_is_not_a_campaigns(tmp_path):
+    """replay.run_campaign's out has the rule of `replay campaign run --out` (the campaign's OutputSet)."""
+    import replay
+
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine")
+    with pytest.raises(ReplayError, match=r"^out .*theirs: is a non-empty directory that is not a replay campaign"):
+        replay.run_campaign(Path(__file__).parents[1] / "campaigns" / "example.toml", out=theirs, workers=1)
+    assert sorted(p.name for p in theirs.iterdir()) == ["notes.txt"]
