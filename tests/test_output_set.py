@@ -230,3 +230,25 @@ def test_the_campaign_api_refuses_a_directory_that_is_not_a_campaigns(tmp_path):
     with pytest.raises(ReplayError, match=r"^out .*theirs: is a non-empty directory that is not a replay campaign"):
         replay.run_campaign(Path(__file__).parents[1] / "campaigns" / "example.toml", out=theirs, workers=1)
     assert sorted(p.name for p in theirs.iterdir()) == ["notes.txt"]
+
+
+def test_inspect_write_mapping_never_onto_or_inside_the_bag(tmp_path):
+    """`replay inspect BAG --write-mapping FILE`: FILE written in one step, refused onto or inside BAG."""
+    import numpy as np
+    from hostile import assert_ok, assert_refused
+
+    from replay.sim.auv_bag import make_bag
+
+    bag = tmp_path / "auv"
+    make_bag(bag, np.random.default_rng(3), duration=5.0)
+    before = sorted((p.name, p.stat().st_size) for p in bag.iterdir())
+    assert_refused(["inspect", bag, "--write-mapping", bag / "map.toml"],
+                   r"--write-mapping .*auv/map\.toml: lies inside the input .*auv; refusing to write there")
+    assert sorted((p.name, p.stat().st_size) for p in bag.iterdir()) == before
+    assert_ok(["inspect", bag, "--write-mapping", tmp_path / "m" / "map.toml"])
+    import tomllib
+
+    mapping = tomllib.loads((tmp_path / "m" / "map.toml").read_text())
+    assert mapping["channels"]["dvl"]["topic"] == "/dvl/twist"
+    assert mapping["reference"]["position"]["topic"] == "/reference/pose"
+    assert sorted(p.name for p in (tmp_path / "m").iterdir()) == ["map.toml"]  # no temporary left

@@ -25,7 +25,12 @@ from replay.util.errors import ReplayError
 def inspect_cmd(path, write_mapping):
     """List the topics of a bag or MCAP (type, count, rate, span) and propose a topic mapping."""
     from replay.adapters.bags import inspect
+    from replay.util import outfile
+    from replay.util.files import refuse_overlap
 
+    if write_mapping:  # before the bag is read: a writable file, never onto or inside the bag
+        outfile.check(write_mapping, "--write-mapping")
+        refuse_overlap(write_mapping, [path], "--write-mapping")
     info = inspect(path)
     click.echo(f"{info['path']}  format={info['format']}  messages={info['messages']}  span={info['span_s']:.3f} s")
     if info["truncated"]:
@@ -59,7 +64,7 @@ def inspect_cmd(path, write_mapping):
     if write_mapping:
         if not mp.entries:
             raise ReplayError(f"{path}: nothing to map, {write_mapping} not written")
-        Path(write_mapping).write_text(mp.to_toml())
+        outfile.write(write_mapping, "--write-mapping", lambda tmp: Path(tmp).write_text(mp.to_toml()))
         click.echo(f"wrote {write_mapping}")
 
 
