@@ -252,3 +252,24 @@ def test_inspect_write_mapping_never_onto_or_inside_the_bag(tmp_path):
     assert mapping["channels"]["dvl"]["topic"] == "/dvl/twist"
     assert mapping["reference"]["position"]["topic"] == "/reference/pose"
     assert sorted(p.name for p in (tmp_path / "m").iterdir()) == ["map.toml"]  # no temporary left
+
+
+def test_eval_tune_out_is_checked_before_any_tune(tmp_path):
+    """`replay eval --tune N --out DIR`: DIR absent, empty or a --tune directory; never a foreign one."""
+    from hostile import assert_refused
+
+    from replay.tune.write import repeats_set
+
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine")
+    assert_refused(["eval", "sim/linear", "-f", "kf", "--tune", "3", "--out", theirs],
+                   r"^replay: error: --out .*theirs: holds 'notes.txt', which is not part of a replay eval --tune output")
+    assert sorted(p.name for p in theirs.iterdir()) == ["notes.txt"]
+    ours = tmp_path / "ours"
+    for d in ("tune-0", "tune-1", "units"):
+        (ours / d).mkdir(parents=True)
+    (ours / "tuned.csv").write_text("")
+    assert repeats_set(ours).check() == ours.resolve()
+    with pytest.raises(ReplayError, match="lies inside the input"):
+        repeats_set(ours / "tune-0", [ours]).check()

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -175,3 +177,25 @@ def _tune_dir(d: Path, out) -> None:
         )
     if d.exists() and not d.is_dir():
         raise ReplayError(f"--out {out}: not a directory")
+
+
+REPEATS_OWN = {"units", "tuned.csv", "ranking.csv"}  # with tune-K/: what ``replay eval --tune --out`` writes
+
+
+def repeats_set(out, inputs=()) -> OutputSet:
+    """``replay eval --tune N --out`` as an :class:`OutputSet` (``check()`` it before any tune):
+    never onto or inside an input, writable, and absent, empty or a ``--tune`` directory (resumed)."""
+    return OutputSet(out, what="--out", inputs=inputs, rule=_repeats_dir)
+
+
+def _repeats_dir(d: Path, out) -> None:
+    if d.exists() and not d.is_dir():
+        raise ReplayError(f"--out {out}: not a directory")
+    names = sorted(os.listdir(d)) if d.is_dir() else []
+    own = REPEATS_OWN | {LOCK_NAME}
+    for n in names:
+        if not (n in own or re.fullmatch(r"tune-\d+", n) or (n.startswith(".") and n.endswith(".tmp"))):
+            raise ReplayError(
+                f"--out {out}: holds {n!r}, which is not part of a replay eval --tune output; "
+                "give a new or a --tune directory"
+            )
