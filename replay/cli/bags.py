@@ -74,34 +74,25 @@ def export_outputs(
     """Export one run of an evaluation directory (or of a campaign's configurations chosen by
     ``select``) as a Foxglove MCAP and/or a ROS 2 bag.
 
-    Both targets are checked before the run is loaded (once, for both exports), and
-    again against the dataset file the load resolved; each is written to a hidden
-    temporary beside it and moved into place when complete. Progress over the messages
-    written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none if ``quiet``.
+    Done by :func:`replay.outputs.exports.export_run` (which owns the targets' output sets); progress
+    over the messages written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none
+    if ``quiet``; a line per export on stdout.
     """
-    from replay.outputs.export_mcap import write_run_mcap
-    from replay.outputs.export_ros2 import write_run_ros2
-    from replay.outputs.export_safety import check_exports, run_inputs
-    from replay.outputs.run_data import load_run
+    from replay.outputs.exports import LABELS, export_run
     from replay.util.progress import Progress
 
-    inputs = run_inputs(run_dir, data_dir)
-    check_exports(mcap_out, ros2_out, inputs)
-    loaded = load_run(run_dir, data_dir, run=run, select=select)
-    check_exports(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
-    tracks = ", ".join(loaded["estimates"])
-    for target, write, label, slash in (
-        (mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p), "export mcap", ""),
-        (ros2_out, lambda p: write_run_ros2(loaded, ros2_out, progress=p), "export ros2 bag", "/"),
+    for done in export_run(
+        run_dir,
+        mcap_out,
+        ros2_out,
+        data_dir=data_dir,
+        run=run,
+        select=select,
+        sigma=sigma,
+        progress=lambda kind: Progress(0, quiet, label=LABELS[kind], unit="message"),
     ):
-        if not target:
-            continue
-        progress = Progress(0, quiet, label=label, unit="message")
-        try:
-            n = write(progress)
-        finally:
-            progress.close()
-        click.echo(f"wrote {target}{slash} ({n} messages; run {loaded['run']}: {tracks})")
+        target, slash, tracks = done["target"], "/" if done["kind"] == "ros2" else "", ", ".join(done["tracks"])
+        click.echo(f"wrote {target}{slash} ({done['messages']} messages; run {done['run']}: {tracks})")
         click.echo(
             f"  open it in Foxglove: File > Open local file... > {Path(target).name} (3D panel: /replay/<track>/pose)"
             if slash == ""

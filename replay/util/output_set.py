@@ -1,8 +1,13 @@
 """One output of a command, written so that a crash leaves the old output or the new one, never a mix.
 
 Every command that writes a result writes it through an :class:`OutputSet`: ``replay eval`` (its
-``--out`` or a numbered run directory), ``replay campaign run --out``, ``replay tune``'s
-directory checks, ``replay score --save-results`` and the MCAP / ROS 2 bag exports. Its steps:
+``--out`` or a numbered run directory: :mod:`replay.outputs.eval_output`), the MCAP / ROS 2 bag
+exports (:mod:`replay.outputs.export_safety`), ``replay score --save-results``
+(:mod:`replay.trajectory.archive`), the single output files (``-o``, ``--plot``,
+``--write-mapping``: :mod:`replay.util.outfile`), and, checked the same way though they are
+stores filled unit by unit under their own lock, the directories of ``replay campaign run``
+(:func:`replay.campaign.lock.output_set`), ``replay tune`` and ``replay eval --tune``
+(:mod:`replay.tune.write`). Its steps:
 
 1. **claim** (:meth:`OutputSet.claim`): hold the lock ``.NAME.lock`` beside the target for the
    run (:mod:`replay.util.lock`); a second writer refuses in one line naming the holder's pid, or
