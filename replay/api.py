@@ -38,7 +38,6 @@ from replay.trajectory.score_result import ScoreResult  # noqa: F401 — re-expo
 from replay.tasks import TASKS, make_task  # noqa: F401 — re-exported
 from replay.util.dataframes import frame_table, report_table  # noqa: F401 — re-exported
 from replay.util.errors import ReplayError
-from replay.util.files import check_writable, refuse_overlap
 from replay.util.plugins import NAME
 
 # Kept lazy, in the functions that need them (import time after ``import replay.api``, measured): the
@@ -151,11 +150,10 @@ def run_campaign(
     A filter or task the file names as ``package.module:Class`` is refused before anything is
     imported unless ``allow_modules`` holds its module (a class of this session: register it)."""
 
-    from replay.campaign import execute, spec  # lazy: module comment
+    from replay.campaign import execute, lock, spec  # lazy: module comment
 
     c = spec.load(campaign, allow_modules)
-    refuse_overlap(Path(out), [c.data_dir, data_dir], "out")
-    check_writable(Path(out), "out")
+    lock.output_set(out, [c.data_dir, data_dir], what="out").check()  # the rule of the CLI's --out
     how = execute.RunOptions(workers=workers, data_dir=data_dir, quiet=quiet, retry_failed=retry_failed)
     counts = execute.run(c, Path(out), how)
     df = _rows(counts.pop("rows"))

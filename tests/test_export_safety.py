@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 from hostile import assert_ok, assert_refused
 
-from replay.outputs.export_safety import clean_stale, exchange, publish_dir, temp_beside
+from replay.outputs.export_safety import export_set
+from replay.util.staging import exchange, publish_dir
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +45,7 @@ def digest(path: Path) -> str:
 
 
 def hidden(target: Path) -> list[str]:
-    return sorted(p.name for p in target.parent.iterdir() if p.name.startswith(f".{target.name}.replay-tmp-"))
+    return sorted(p.name for p in target.parent.iterdir() if p.name.startswith(f".{target.name}.staging-"))
 
 
 def child(patch: str, args, limit=None) -> subprocess.CompletedProcess:
@@ -71,17 +72,17 @@ KILL_IN_BAG = """
     from replay.adapters.bags import writer
     write = writer.BagOut.write
     def dying(self, *a):
-        if self.count == 50 and ".replay-tmp-" in str(self.path):  # the export, not the sim's own bag
+        if self.count == 50 and ".staging-" in str(self.path):  # the export, not the sim's own bag
             os.kill(os.getpid(), signal.SIGKILL)
         write(self, *a)
     writer.BagOut.write = dying
 """
 KILL_BETWEEN_RENAMES = """
-    from replay.outputs import export_safety
-    export_safety.exchange = lambda a, b: False  # as on a file system without RENAME_EXCHANGE
+    from replay.util import staging
+    staging.exchange = lambda a, b: False  # as on a file system without RENAME_EXCHANGE
     rename = os.rename
     def dying(a, b):
-        if ".replay-tmp-" in str(a):  # the second rename: the new bag into place
+        if ".staging-" in str(a):  # the second rename: the new bag into place
             os.kill(os.getpid(), signal.SIGKILL)
         rename(a, b)
     os.rename = dying
@@ -118,14 +119,17 @@ def test_kill_during_ros2_export_leaves_old(run, tmp_path):
 @pytest.mark.slow
 def test_kill_between_the_two_renames_leaves_none(run, tmp_path):
     """Without RENAME_EXCHANGE the swap takes two renames; a kill between them leaves no bag
-    (the old one in the hidden directory), which the next export removes."""
+    (the old one moved aside to .bag.old-PID), which the next export puts back, then replaces."""
     target = tmp_path / "bag"
     assert_ok(["export", run, "--ros2-bag", target])
+    before = digest(target)
     res = child(KILL_BETWEEN_RENAMES, ["export", run, "--ros2-bag", target])
     assert res.returncode == -signal.SIGKILL
     assert not target.exists() and len(hidden(target)) == 1
+    aside = tmp_path / f".bag.old-{hidden(target)[0].rsplit('-', 1)[1]}"
+    assert digest(aside) == before
     assert_ok(["export", run, "--ros2-bag", target])
-    assert hidden(target) == [] and (target / "metadata.yaml").is_file()
+    assert hidden(target) == [] and not aside.exists() and digest(target) == before
 
 
 @pytest.mark.slow
@@ -145,14 +149,13 @@ def test_stale_temporaries_of_dead_exports_only(tmp_path):
     target = tmp_path / "r.mcap"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    (tmp_path / f".r.mcap.replay-tmp-{dead.pid}").write_bytes(b"partial")
-    (tmp_path / f".r.mcap.replay-tmp-{dead.pid + 1000000}").mkdir()  # no such process either
-    (tmp_path / ".r.mcap.replay-tmp-1").write_bytes(b"init is alive")  # a live process: kept
-    (tmp_path / ".r.mcap.replay-tmp-x").write_bytes(b"not ours")  # not a pid: kept
-    gone = clean_stale(target)
-    assert len(gone) == 2
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".r.mcap.replay-tmp-1", ".r.mcap.replay-tmp-x"]
-    assert temp_beside(target).name == f".r.mcap.replay-tmp-{os.getpid()}"
+    (tmp_path / f".r.mcap.staging-{dead.pid}").write_bytes(b"partial")
+    (tmp_path / f".r.mcap.staging-{dead.pid + 1000000}").mkdir()  # no such process either
+    (tmp_path / ".r.mcap.staging-1").write_bytes(b"init is alive")  # a live process: kept
+    (tmp_path / ".r.mcap.staging-x").write_bytes(b"not ours")  # not a pid: kept
+    export_set(target, "mcap").recover()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".r.mcap.staging-1", ".r.mcap.staging-x"]
+    assert export_set(target, "mcap").staging().name == f".r.mcap.staging-{os.getpid()}"
 
 
 def test_directory_swap(tmp_path):
@@ -163,10 +166,9 @@ def test_directory_swap(tmp_path):
     (new / "b").write_text("new")
     publish_dir(new, old)
     assert [p.name for p in old.iterdir()] == ["b"]
-    # RENAME_EXCHANGE: the old directory is now where the new one was; else moved to <new>.old
-    moved = new if new.exists() else new.with_name("new.old")
-    assert [p.name for p in moved.iterdir()] == ["a"]
-    assert exchange(old, moved) in (True, False)  # supported here or not, never an exception
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # the old directory removed, by either swap
+    (tmp_path / "c").mkdir()
+    assert exchange(old, tmp_path / "c") in (True, False)  # supported here or not, never an exception
 
 
 def test_estimates_read_one_run_and_stop(tmp_path):
@@ -204,14 +206,14 @@ def test_library_write_never_replaces_a_foreign_file(tmp_path):
 
     target = tmp_path / "theirs.mcap"
     target.write_bytes(b"\x89MCAP0\r\nsomeone else's")
-    with pytest.raises(ReplayError, match="theirs.mcap: exists and was not written by replay"):
+    with pytest.raises(ReplayError, match="theirs.mcap: exists and is not an MCAP written by replay"):
         write_mcap(target, *synthetic_run(n=800))
     assert target.read_bytes() == b"\x89MCAP0\r\nsomeone else's" and hidden(target) == []
 
 
 def test_eval_exports_checked_before_the_evaluation(tmp_path):
     """`replay eval --mcap/--ros2-bag` can refuse its export targets before computing anything."""
-    from replay.cli.bags import check_eval_exports
+    from replay.outputs.export_safety import check_eval_exports
     from replay.util.errors import ReplayError
 
     data, mapping = tmp_path / "log.csv", tmp_path / "map.toml"

@@ -25,7 +25,12 @@ from replay.util.errors import ReplayError
 def inspect_cmd(path, write_mapping):
     """List the topics of a bag or MCAP (type, count, rate, span) and propose a topic mapping."""
     from replay.adapters.bags import inspect
+    from replay.util import outfile
+    from replay.util.files import refuse_overlap
 
+    if write_mapping:  # before the bag is read: a writable file, never onto or inside the bag
+        outfile.check(write_mapping, "--write-mapping")
+        refuse_overlap(write_mapping, [path], "--write-mapping")
     info = inspect(path)
     click.echo(f"{info['path']}  format={info['format']}  messages={info['messages']}  span={info['span_s']:.3f} s")
     if info["truncated"]:
@@ -59,28 +64,8 @@ def inspect_cmd(path, write_mapping):
     if write_mapping:
         if not mp.entries:
             raise ReplayError(f"{path}: nothing to map, {write_mapping} not written")
-        Path(write_mapping).write_text(mp.to_toml())
+        outfile.write(write_mapping, "--write-mapping", lambda tmp: Path(tmp).write_text(mp.to_toml()))
         click.echo(f"wrote {write_mapping}")
-
-
-def check_export_targets(mcap_out, ros2_out, inputs) -> None:
-    """Refuse export targets before any work: onto or inside an input, onto each other,
-    unwritable, or replacing something this tool did not write (one line each)."""
-    from replay.outputs.export_safety import check_target
-
-    if mcap_out:
-        check_target(mcap_out, inputs, "mcap", others=[ros2_out])
-    if ros2_out:
-        check_target(ros2_out, inputs, "ros2", others=[mcap_out])
-
-
-def check_eval_exports(out_dir, mcap_out, ros2_out, dataset, mapping=None, data_dir=None) -> None:
-    """For `replay eval --mcap/--ros2-bag`: the same refusals, before the evaluation runs
-    (the inputs: the dataset's files, the mapping and the output directory ``out_dir``)."""
-    from replay.outputs.export_safety import dataset_inputs
-
-    if mcap_out or ros2_out:
-        check_export_targets(mcap_out, ros2_out, [out_dir] + dataset_inputs(dataset, mapping, data_dir))
 
 
 def export_outputs(
@@ -89,34 +74,25 @@ def export_outputs(
     """Export one run of an evaluation directory (or of a campaign's configurations chosen by
     ``select``) as a Foxglove MCAP and/or a ROS 2 bag.
 
-    Both targets are checked before the run is loaded (once, for both exports), and
-    again against the dataset file the load resolved; each is written to a hidden
-    temporary beside it and moved into place when complete. Progress over the messages
-    written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none if ``quiet``.
+    Done by :func:`replay.outputs.exports.export_run` (which owns the targets' output sets); progress
+    over the messages written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none
+    if ``quiet``; a line per export on stdout.
     """
-    from replay.outputs.export_mcap import write_run_mcap
-    from replay.outputs.export_ros2 import write_run_ros2
-    from replay.outputs.export_safety import run_inputs
-    from replay.outputs.run_data import load_run
+    from replay.outputs.exports import LABELS, export_run
     from replay.util.progress import Progress
 
-    inputs = run_inputs(run_dir, data_dir)
-    check_export_targets(mcap_out, ros2_out, inputs)
-    loaded = load_run(run_dir, data_dir, run=run, select=select)
-    check_export_targets(mcap_out, ros2_out, inputs + [loaded["frame"].meta.get("path")])
-    tracks = ", ".join(loaded["estimates"])
-    for target, write, label, slash in (
-        (mcap_out, lambda p: write_run_mcap(loaded, mcap_out, sigma=sigma, progress=p), "export mcap", ""),
-        (ros2_out, lambda p: write_run_ros2(loaded, ros2_out, progress=p), "export ros2 bag", "/"),
+    for done in export_run(
+        run_dir,
+        mcap_out,
+        ros2_out,
+        data_dir=data_dir,
+        run=run,
+        select=select,
+        sigma=sigma,
+        progress=lambda kind: Progress(0, quiet, label=LABELS[kind], unit="message"),
     ):
-        if not target:
-            continue
-        progress = Progress(0, quiet, label=label, unit="message")
-        try:
-            n = write(progress)
-        finally:
-            progress.close()
-        click.echo(f"wrote {target}{slash} ({n} messages; run {loaded['run']}: {tracks})")
+        target, slash, tracks = done["target"], "/" if done["kind"] == "ros2" else "", ", ".join(done["tracks"])
+        click.echo(f"wrote {target}{slash} ({done['messages']} messages; run {done['run']}: {tracks})")
         click.echo(
             f"  open it in Foxglove: File > Open local file... > {Path(target).name} (3D panel: /replay/<track>/pose)"
             if slash == ""

@@ -60,7 +60,6 @@ def check_names(out, what: str) -> None:
 def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, quiet, wait, allow_modules=()):
     """Run the units of campaign FILE not yet stored in the result directory."""
     from replay.campaign import board, execute, lock, spec
-    from replay.util.staging import check_output_dir
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
@@ -71,7 +70,7 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
     out = Path(out) if out else Path("runs") / f"campaign-{c.name}"
     check_names(out, "--out")
     # never onto or inside the data; absent, empty or a campaign's own directory: replay eval's rule
-    check_output_dir(out, [c.data_dir, data_dir], kind=lock.KIND, what="--out", legacy=lock.campaign_dir)
+    lock.output_set(out, [c.data_dir, data_dir]).check()
     counts = execute.run(
         c,
         out,

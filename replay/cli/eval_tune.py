@@ -133,6 +133,10 @@ def run(
 
     if out is None:
         raise ReplayError("--tune: give --out DIR (the tunes' directory: tune-K/, units/, tuned.csv, ranking.csv)")
+    from replay.tune.write import repeats_set
+
+    mapping = (dataset_params or {}).get("mapping")  # --out before any tune: never onto an input, ours resumed
+    repeats_set(out, [o["data_dir"], dataset if Path(dataset).exists() else None, space_file, mapping]).check()
     names = [f.strip() for f in filters.split(",") if f.strip() and f.strip() != "measurements"]
     entries = space.entries_from_file(space_file) if space_file else repeat.default_space(names)
     sim = simulated(dataset)

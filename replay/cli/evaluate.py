@@ -4,7 +4,6 @@ registered by :mod:`replay.cli.main`."""
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import click
 
@@ -141,7 +140,7 @@ def eval_cmd(
 
         return eval_tune.from_cli(dataset, locals())  # --tune N: replay.tune.repeat
     from replay.data.registry import check_data_dir
-    from replay.outputs.rundirs import claimed_run_dir, out_locked
+    from replay.outputs.eval_output import EvalOutput
     from replay.scoring.summary import MIN_SCORED_SHARE
 
     check_data_dir(data_dir, "--data-dir")
@@ -166,14 +165,10 @@ def eval_cmd(
         quiet,
         allow_modules,
     )
-    numbered, inputs = _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir)
-    from contextlib import ExitStack
-
-    with ExitStack() as held:  # a claimed numbered directory, or --out's lock, until published
-        out = held.enter_context(claimed_run_dir(dataset, task)) if numbered else Path(out)
-        if not numbered:
-            held.enter_context(out_locked(out, wait))
-        _recheck_output_set(out, inputs, numbered or force, mcap_out, ros2_out, dataset, mapping, data_dir)
+    output = EvalOutput(
+        ref, dataset, task, out, force=force, mapping=mapping, exports=(mcap_out, ros2_out), data_dir=data_dir
+    )
+    with output.claimed(wait):  # a claimed numbered directory, or --out's lock, until published
         ev = _evaluate(
             ref,
             quiet,
@@ -189,36 +184,8 @@ def eval_cmd(
             min_scored_share=min_scored_share,
             **run,
         )
-        _publish(ev, out, numbered, force, quiet, mcap_out, ros2_out, data_dir)
+        _publish(ev, output, quiet)
     _failed_filters(ev)
-
-
-def _check_output_set(ref, dataset, task, out, force, mapping, mcap_out, ros2_out, data_dir) -> tuple[bool, object]:
-    """The output set checked before the computation (inputs, writable, space, ownership): whether
-    the output directory is a new numbered one, and the run's inputs."""
-    from replay.outputs.files import check_location, check_output, eval_inputs
-    from replay.outputs.rundirs import new_run_dir
-
-    numbered = out is None
-    inputs = eval_inputs(ref, data_dir, mapping)
-    if numbered:  # the location, before claiming a number in it
-        check_location(new_run_dir(dataset, task), inputs, "--out")
-    else:
-        check_output(Path(out), inputs, "--out")
-        _fresh(Path(out), force)
-    _check_exports(
-        new_run_dir(dataset, task) if numbered else Path(out), mcap_out, ros2_out, dataset, mapping, data_dir
-    )
-    return numbered, inputs
-
-
-def _recheck_output_set(out: Path, inputs, replace: bool, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
-    """The output set checked again, now that no other replay eval writes there."""
-    from replay.outputs.files import check_output
-
-    check_output(out, inputs, "--out")
-    _fresh(out, replace)
-    _check_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
 
 
 def _evaluate(ref, quiet: bool, **options):
@@ -302,10 +269,9 @@ def _tuned_data(tuned, ref, dparams, run):
     return tuned_data(tuned, ref, dparams, run["first"], opts, given)
 
 
-def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, ros2_out, data_dir) -> None:
-    """Print the leaderboard and write the output set (then the exports) into ``out``."""
-    from replay.outputs.files import format_table, write_all
-    from replay.outputs.rundirs import mark_latest
+def _publish(ev, output, quiet: bool) -> None:
+    """Print the leaderboard and write the output set (then the exports): ``output.publish``."""
+    from replay.outputs.files import format_table
 
     for note in [] if quiet else ev.frame_meta.get("task_notes", []):
         click.echo(f"replay: note: {note}", err=True)
@@ -316,38 +282,13 @@ def _publish(ev, out: Path, numbered: bool, force: bool, quiet: bool, mcap_out, 
         click.echo(outages.format_headline(outages.tables(ev)[1]))
     for note in ev.notes:
         click.echo(note)
-    _fresh(out, numbered or force)  # again at publication
-    paths = write_all(ev, out, what="--out")
-    if numbered:
-        mark_latest(out)
+    paths = output.publish(ev)
     click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+    mcap_out, ros2_out = output.exports
     if mcap_out or ros2_out:
         from replay.cli.bags import export_outputs
 
-        export_outputs(out, mcap_out, ros2_out, data_dir=data_dir, quiet=quiet)
-
-
-def _check_exports(out: Path, mcap_out, ros2_out, dataset, mapping, data_dir) -> None:
-    """--mcap and --ros2-bag: not inside or around the output directory, writable (before computing)."""
-    for opt, path in (("--mcap", mcap_out), ("--ros2-bag", ros2_out)):
-        if path and (
-            Path(path).resolve().is_relative_to(out.resolve()) or out.resolve().is_relative_to(Path(path).resolve())
-        ):
-            raise ReplayError(f"{opt} {path}: overlaps the output directory {out}, which is replaced as a whole")
-    if mcap_out or ros2_out:
-        from replay.cli.bags import check_eval_exports
-
-        check_eval_exports(out, mcap_out, ros2_out, dataset, mapping, data_dir)
-
-
-def _fresh(out: Path, replace: bool) -> None:
-    """Without --force, refuse an --out that holds an output (checked at the start and again
-    before publication, under --out's lock)."""
-    if not replace and out.is_dir() and any(out.iterdir()):
-        raise ReplayError(
-            f"--out {out}: holds an earlier replay eval output; pass --force to replace it, "
-            "or leave out --out for a new numbered directory"
-        )
+        export_outputs(output.out, mcap_out, ros2_out, data_dir=output.data_dir, quiet=quiet)
 
 
 def _failed_filters(ev) -> None:

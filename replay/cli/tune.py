@@ -112,8 +112,7 @@ def tune_cmd(
     from replay.cli.campaign import check_names
     from replay.data.registry import check_data_dir
     from replay.tune import check, run, space
-    from replay.tune.write import board_notes, format_board
-    from replay.util.files import check_writable, refuse_overlap
+    from replay.tune.write import board_notes, format_board, output_set
 
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise ReplayError("give at most one of --workers, --scheduler, --dask-local")
@@ -121,18 +120,9 @@ def tune_cmd(
     entries = (space.entries_from_file(space_file) if space_file else []) + space.entries_from_cli(space_params)
     if not entries:
         raise ReplayError("no search space: give --space FILE.toml or --param FILTER.PARAM=SPEC")
-    d = Path(out)
-    from replay.campaign.lock import LOCK_NAME
-
-    started = {LOCK_NAME}  # a tune that has taken its lock and not yet made study.db (--wait for it)
-    ours = (d / "study.db").is_file() or (d / "tune.json").is_file()  # tune.json: a study.db moved aside
-    if d.is_dir() and not {p.name for p in d.iterdir()} <= started and not ours:
-        raise ReplayError(
-            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db, no tune.json); "
-            "give a new or a tune directory"
-        )
-    if d.exists() and not d.is_dir():
-        raise ReplayError(f"--out {out}: not a directory")
+    given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
+    output = output_set(out, given)
+    output.rule(Path(out), out)  # its contents first: a foreign directory refused before the data is read
     parallel = workers or dask_local or (scheduler and 4)
     t = check.prepare(
         check.TuneOptions(
@@ -160,9 +150,7 @@ def tune_cmd(
         )
     )
     check_names(out, "--out")
-    given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
-    refuse_overlap(Path(out), given, "--out")
-    check_writable(out, "--out")
+    output.check()
     res = run.tune(t, out, workers=workers, scheduler=scheduler, dask_local=dask_local, quiet=quiet, wait=wait)
     click.echo(format_board(res["rows"]))
     for line in board_notes(res["rows"], res.get("failed")):

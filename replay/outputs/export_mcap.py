@@ -44,6 +44,17 @@ import json
 
 import numpy as np
 
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+from foxglove_schemas_protobuf.Pose_pb2 import Pose
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
+
+from replay.adapters.geodesy import enu_to_geodetic
+from replay.outputs import foxglove_scene as scene
+from replay.outputs.export_safety import check_target, export_set, run_inputs
+from replay.outputs.foxglove_scene import ROOT, SIGMA, plan_transforms
+from replay.outputs.pb_columns import Rows, embed, encode
+from replay.util.version import __version__
 from replay.util import covcols
 from replay.outputs.run_data import enu_axes, enu_yaw, load_run, ned, read_estimates, time_ns, to_enu, track_index
 from replay.util.errors import ReplayError
@@ -100,12 +111,6 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None
     ``pos(rows)``, ``yaw(rows)``: ENU positions (n, 3) and yaws (NaN: none) of those
     rows, taken when a window is written (no copy of the whole track is kept).
     """
-    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
-    from foxglove_schemas_protobuf.Pose_pb2 import Pose
-    from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
-    from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
-
-    from replay.outputs.pb_columns import Rows, embed, encode
 
     idx = np.flatnonzero(ok)
     if not len(idx):
@@ -132,7 +137,6 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None
         return body, np.array([len(body)])
 
     def fixes(sel):
-        from replay.adapters.geodesy import enu_to_geodetic
 
         lat, lon, alt = enu_to_geodetic(rows(sel)[0], geo_meta)
         return encode(
@@ -146,8 +150,6 @@ def _plan_track(out: McapOut, prefix: str, ns, pos, yaw, ok, geo_meta, body=None
     if geo_meta:
         out.plan(out.proto_channel(f"{prefix}/fix", LocationFix), t, fixes)
     if body:
-        from replay.outputs.foxglove_scene import plan_transforms
-
         plan_transforms(out, f"{prefix}/tf", body, ns, pos, lambda rows: _yaw_quat(yaw(rows)), ok)
 
 
@@ -177,7 +179,6 @@ def export_run(run_dir, mcap_path, data_dir=None, run: int = 0, select=None, sig
     Refused before anything is read or written: a target that is an input of the run
     (or inside one), or an existing file not written by replay (``export_safety``).
     """
-    from replay.outputs.export_safety import check_target, run_inputs
 
     inputs = run_inputs(run_dir, data_dir)
     check_target(mcap_path, inputs, "mcap")
@@ -201,8 +202,6 @@ def write_run_mcap(run: dict, mcap_path, sigma=None, progress=None) -> int:
 
 def export_info(run: dict, sigma=None) -> dict:
     """The ``replay.export`` metadata: what was exported from where."""
-    from replay.util.version import __version__
-    from replay.outputs.foxglove_scene import ROOT, SIGMA
 
     return {
         "source": str(run.get("source", "")),
@@ -235,8 +234,6 @@ def write_mcap(
     Written to a hidden temporary file beside ``mcap_path`` and renamed over it when
     complete; an existing ``mcap_path`` is replaced only if replay wrote it.
     """
-    from replay.outputs import foxglove_scene as scene
-    from replay.outputs.export_safety import staged_file
 
     sigma = scene.SIGMA if sigma is None else float(sigma)
     if not (np.isfinite(sigma) and sigma > 0):
@@ -245,7 +242,7 @@ def write_mcap(
     ns_frame = time_ns(frame, frame.t)
     axes_enu, is_ned = enu_axes(problem), ned(problem)
     colours = scene.colours(estimates)
-    with staged_file(mcap_path, "--mcap") as tmp:
+    with export_set(mcap_path, "mcap").staged() as tmp:
         out = McapOut(tmp, compression=compression, chunk_size=chunk_size, window=window, name=mcap_path)
         for name, data in (metadata or {}).items():
             out.w.add_metadata(name, data)

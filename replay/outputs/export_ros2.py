@@ -25,7 +25,7 @@ No Foxglove JSON/protobuf channel ever goes into these bags. The writer,
 :class:`~replay.adapters.bags.writer.BagOut`, is the ``bags`` adapter's inverse.
 
 Both write the bag inside a hidden temporary directory beside the target and swap it
-in when complete (``replay.outputs.export_safety.staged_dir``); the bag's
+in when complete (``replay.outputs.export_safety.export_set``); the bag's
 ``metadata.yaml`` carries ``custom_data: {replay.output: ...}``, the mark that lets a
 later export replace it. An existing directory without that mark is never replaced.
 """
@@ -38,7 +38,10 @@ import numpy as np
 
 from replay.adapters import rosmsg
 from replay.adapters.bags.writer import BagOut
-from replay.outputs.export_safety import MARK_KEY, staged_dir
+from replay.adapters.geodesy import enu_to_geodetic
+from replay.outputs.export_safety import check_target, run_inputs
+from replay.outputs.run_data import enu_axes, enu_yaw, load_run, ned, time_ns, to_enu, track_index
+from replay.outputs.export_safety import MARK_KEY, export_set
 from replay.util import covcols
 from replay.util.errors import ReplayError
 
@@ -141,7 +144,6 @@ def _message(out: BagOut, kind, typ, ns, i, f, fid, params, geo):
 
 def write_frame_bag(frame, path) -> int:
     """Write the mapped topics of a ``bags`` frame back as a ROS 2 bag; returns messages written."""
-    from replay.adapters.geodesy import enu_to_geodetic
 
     mapping = frame.meta.get("mapping")
     if not mapping or "t0_ns" not in frame.meta:
@@ -152,7 +154,7 @@ def write_frame_bag(frame, path) -> int:
     params = mapping.get("params") or {}
     geo = (lambda enu: enu_to_geodetic(enu, frame.meta)) if frame.meta.get("crs") else None
     other = "header_time" if mapping.get("time") == "log" else "log_time"
-    with staged_dir(path, "bag") as tmp:
+    with export_set(path, "ros2", what="bag").staged(nested=True) as tmp:
         return _write_frame(
             BagOut(tmp, {MARK_KEY: "frame bag"}, compression="zstd"), frame, mapping, n, ns, t0, params, geo, other
         )
@@ -208,8 +210,6 @@ def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None, pro
     Refused before anything is read or written: a target that is an input of the run
     (or inside one), or an existing directory that is not a bag this tool wrote.
     """
-    from replay.outputs.export_safety import check_target, run_inputs
-    from replay.outputs.run_data import load_run
 
     inputs = run_inputs(run_dir, data_dir)
     check_target(path, inputs, "ros2")
@@ -221,7 +221,7 @@ def export_run_ros2(run_dir, path, data_dir=None, run: int = 0, select=None, pro
 def write_run_ros2(run: dict, path, progress=None) -> int:
     """The odometry bag of a loaded run (``run_data.load_run``), staged and swapped in at ``path``;
     ``progress``: a :class:`replay.util.progress.Progress` told of the messages written."""
-    with staged_dir(path, "--ros2-bag") as tmp:
+    with export_set(path, "ros2").staged(nested=True) as tmp:
         return _write_run(BagOut(tmp, {MARK_KEY: "replay export"}, compression="zstd"), run, progress)
 
 
@@ -244,7 +244,6 @@ PROGRESS_EVERY = 4096  # messages between two progress updates
 
 
 def _write_run(out, run, progress=None) -> int:
-    from replay.outputs.run_data import enu_axes, enu_yaw, ned, time_ns, to_enu, track_index
 
     frame, problem = run["frame"], run["problem"]
     axes, is_ned = enu_axes(problem), ned(problem)

@@ -6,7 +6,7 @@ baseline filter (the first listed unless ``--baseline`` names one).
 
 The files are written as one set (:func:`write_all`): into a staging directory
 beside the output directory, then moved into place in one step
-(:func:`replay.util.staging.staged_dir`), so that a full disk, a kill or an error
+(:class:`replay.util.output_set.OutputSet`), so that a full disk, a kill or an error
 leaves the previous set or the new one, never a mix. An existing output
 directory is replaced only when it is a whole ``replay eval`` output (its marker,
 or a replay manifest and nothing else); it must not be, hold or lie inside an
@@ -36,9 +36,12 @@ from replay.scoring.summary import (
     scored_share,
 )
 from replay.util import covcols
+from replay.data import dataset_ref
 from replay.util.errors import ReplayError
 from replay.util.files import write_atomic, write_csv
-from replay.util.staging import check_output_dir, is_report_dir, staged_dir
+from replay.util.lock import held, holder
+from replay.util.output_set import OutputSet
+from replay.util.staging import is_report_dir
 from replay.scoring import gap, outages, provenance
 from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
@@ -277,8 +280,6 @@ CLAIM = ".replay-claim"  # in a numbered directory being computed: its process's
 def claim_holder(path) -> int | None:
     """The pid of the live process computing into ``path`` (a directory holding only its claim;
     -1 when the pid is not yet written), None if it is not a claimed directory or its process died."""
-    from replay.campaign.lock import held, holder
-
     try:
         if os.listdir(path) != [CLAIM]:
             return None
@@ -316,24 +317,28 @@ def owned(path: Path) -> bool:
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
-    from replay.data import dataset_ref
-
     return dataset_ref.resolve(dataset).inputs(data_dir, mapping)
 
 
 def check_output(out, inputs=(), what: str = "--out") -> Path:
     """Before computing: refuse (one line) an output directory that is, holds or lies inside an
     input, is not writable, is on a read-only or full file system, or exists and is not a whole
-    ``replay eval`` output. Returns it resolved."""
+    ``replay eval`` output (:meth:`OutputSet.check`). Returns it resolved."""
     check_name_lengths(out, what)
     refuse_claimed(out, what)
-    return check_output_dir(out, inputs, kind=KIND, what=what, legacy=owned)
+    return output_set(out, inputs, what).check()
 
 
 def check_location(out, inputs=(), what: str = "--out") -> Path:
     """:func:`check_output` but for the contents: for a numbered directory about to be claimed."""
     check_name_lengths(out, what)
-    return check_output_dir(out, inputs, kind=None, what=what)
+    return OutputSet(out, what=what, inputs=inputs).check(contents=False)
+
+
+def output_set(out, inputs=(), what: str = "--out") -> OutputSet:
+    """The :class:`OutputSet` of a ``replay eval`` output directory: an existing one is replaced only
+    when its marker names :data:`KIND`, or it is an output of before markers, or a dead run's claim."""
+    return OutputSet(out, KIND, what=what, inputs=inputs, legacy=owned)
 
 
 def check_name_lengths(out, what: str = "output", room: int = 17) -> None:
@@ -369,7 +374,7 @@ def write_all(ev: Evaluation, out: Path, *, what: str = "output") -> dict:
     out = Path(out)
     mapping = (ev.config.get("dataset_params") or {}).get("mapping")
     check_output(out, [ev.frame_meta.get("path"), mapping], what)
-    with staged_dir(out, kind=KIND, what=what, legacy=owned) as stage:
+    with output_set(out, [ev.frame_meta.get("path"), mapping], what).staged() as stage:
         write_leaderboard(leaderboard_rows(ev), stage / "leaderboard.csv")
         write_estimates(ev, stage)
         write_runs(ev, stage / "runs.csv")

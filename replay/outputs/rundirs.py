@@ -6,13 +6,13 @@ directory itself, held for milliseconds) the next number is created with ``mkdir
 one on a collision) and a claim file ``NNN/.replay-claim`` holding the pid is created and
 locked for the whole run. A directory holding only a claim is a run being computed: no other
 process takes or replaces it. The finished set replaces the claimed directory in one step
-(:func:`replay.util.staging.publish_dir`), which checks the claim again. A claim whose process
+(:meth:`replay.util.output_set.OutputSet.staged`), which checks the claim again. A claim whose process
 died (the kernel released its lock) and staging directories of dead processes are removed by
 the next claim. ``latest`` is swapped atomically (a new symbolic link renamed over it) to the
 highest-numbered finished directory, under the same lock.
 
 An explicit ``--out DIR`` is held for the whole run by the lock file ``.DIR.lock`` beside it
-(:func:`out_locked`, the campaign lock of :mod:`replay.campaign.lock`): a second writer refuses
+(:func:`out_locked`: :meth:`replay.util.output_set.OutputSet.claim`): a second writer refuses
 in one line naming the holder's pid, or with ``--wait`` waits for it. The lock file stays.
 """
 
@@ -24,9 +24,10 @@ import shutil
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from replay.campaign.lock import lock_file
 from replay.outputs.files import CLAIM, KIND, claim_holder, legacy_output, readable_name
 from replay.util.errors import ReplayError
+from replay.util.lock import lock_file
+from replay.util.output_set import OutputSet
 from replay.util.staging import read_marker, recover
 
 
@@ -153,16 +154,6 @@ def mark_latest(out: Path) -> None:
             tmp.unlink(missing_ok=True)
 
 
-@contextmanager
 def out_locked(out, wait: bool = False):
-    """Hold ``--out``'s lock (``.NAME.lock`` beside it) for the block (module docstring)."""
-    target = Path(out).resolve()
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise ReplayError(f"--out {out}: cannot create {target.parent} ({err.strerror})") from None
-    busy = (
-        f"--out {out}: another replay eval process (pid {{pid}}) is writing to it; wait for it to finish or pass --wait"
-    )
-    with lock_file(target.parent / f".{target.name}.lock", wait, busy=busy, what="the --out lock"):
-        yield target
+    """Hold ``--out``'s lock (``.NAME.lock`` beside it) for the block: :meth:`OutputSet.claim`."""
+    return OutputSet(out, what="--out").claim(wait)

@@ -2,7 +2,7 @@
 results), read back by ``replay res`` without the inputs.
 
 ``DIR`` holds one set, written into a staging directory beside it and moved into place in one step
-(:func:`replay.util.files.staged_dir`: a crash leaves the previous archive or the new one; an existing
+(:class:`replay.util.output_set.OutputSet`: a crash leaves the previous archive or the new one; an existing
 ``DIR`` is replaced only when it is an archive of ours):
 
 * ``results.json`` — ``format``, ``version``, the replay version, the reference (source, name, poses,
@@ -49,7 +49,7 @@ from replay.trajectory.pose_error import statistics
 from replay.util.version import __version__
 from replay.scoring.summary import columns
 from replay.util.files import write_csv
-from replay.util.staging import check_output_dir, staged_dir
+from replay.util.output_set import OutputSet
 
 # pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
 # matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
@@ -66,8 +66,7 @@ WHAT = "--save-results"
 
 def check(out, inputs) -> None:
     """Every check of ``DIR`` that can be made before scoring (one line naming it)."""
-
-    check_output_dir(out, inputs, kind=KIND, what=WHAT)
+    OutputSet(out, KIND, what=WHAT, inputs=inputs).check()
 
 
 def _trial_of(row: dict):
@@ -176,7 +175,7 @@ def save(result, out, *, reference: str | None = None) -> Path:
 
     content = meta(result, reference)
     tables = frames(result)
-    with staged_dir(out, kind=KIND, what=WHAT) as d:
+    with OutputSet(out, KIND, what=WHAT).staged() as d:
         for name, df in tables.items():
             df.to_parquet(d / f"{name}.parquet", index=False)
         rows = result.output_rows()

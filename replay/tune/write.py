@@ -6,14 +6,18 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections import Counter
 from pathlib import Path
 
 import tomli_w
 
+from replay.campaign.lock import LOCK_NAME
 from replay.data.registry import is_path
 from replay.scoring.marks import marks
+from replay.util.errors import ReplayError
 from replay.util.files import write_bytes
+from replay.util.output_set import OutputSet
 
 
 def write_tuned(t, out: Path, rows) -> dict:
@@ -169,3 +173,43 @@ def _num(v) -> str:
     except (TypeError, ValueError):
         return str(v)
     return f"{v:.4f}" if math.isfinite(v) else str(v)
+
+
+def output_set(out, inputs=()) -> OutputSet:
+    """``replay tune --out`` as an :class:`OutputSet` (``check()`` it before any trial): never onto
+    or inside an input, writable, and absent, empty or a tune's own directory (a study is resumed)."""
+    return OutputSet(out, what="--out", inputs=inputs, rule=_tune_dir)
+
+
+def _tune_dir(d: Path, out) -> None:
+    started = {LOCK_NAME}  # a tune that has taken its lock and not yet made study.db (--wait for it)
+    ours = (d / "study.db").is_file() or (d / "tune.json").is_file()  # tune.json: a study.db moved aside
+    if d.is_dir() and not {p.name for p in d.iterdir()} <= started and not ours:
+        raise ReplayError(
+            f"--out {out}: a non-empty directory that is not a replay tune output (no study.db, no tune.json); "
+            "give a new or a tune directory"
+        )
+    if d.exists() and not d.is_dir():
+        raise ReplayError(f"--out {out}: not a directory")
+
+
+REPEATS_OWN = {"units", "tuned.csv", "ranking.csv"}  # with tune-K/: what ``replay eval --tune --out`` writes
+
+
+def repeats_set(out, inputs=()) -> OutputSet:
+    """``replay eval --tune N --out`` as an :class:`OutputSet` (``check()`` it before any tune):
+    never onto or inside an input, writable, and absent, empty or a ``--tune`` directory (resumed)."""
+    return OutputSet(out, what="--out", inputs=inputs, rule=_repeats_dir)
+
+
+def _repeats_dir(d: Path, out) -> None:
+    if d.exists() and not d.is_dir():
+        raise ReplayError(f"--out {out}: not a directory")
+    names = sorted(os.listdir(d)) if d.is_dir() else []
+    own = REPEATS_OWN | {LOCK_NAME}
+    for n in names:
+        if not (n in own or re.fullmatch(r"tune-\d+", n) or (n.startswith(".") and n.endswith(".tmp"))):
+            raise ReplayError(
+                f"--out {out}: holds {n!r}, which is not part of a replay eval --tune output; "
+                "give a new or a --tune directory"
+            )

@@ -6,8 +6,9 @@ an extension the writer does not support, a path that is a directory or another 
 and a location where a file cannot actually be created (probed by creating and removing a
 temporary file or directory there: permission bits alone do not tell, e.g. for root or a
 read-only mount). Missing parent directories are fine: :func:`write` creates them, as ``mkdir -p``
-would, then writes a temporary file beside the target, fsyncs it and renames it into place, so
-a crash leaves the old file or the new one, never a part. A symbolic link keeps pointing where it
+would, then writes a temporary file beside the target, fsyncs it and renames it into place
+(:class:`replay.util.output_set.OutputSet`), so a crash leaves the old file or the new one,
+never a part. A symbolic link keeps pointing where it
 did: the file it points to is replaced. Nothing is written under /dev, /proc or /sys (``-o
 /dev/stdout`` would otherwise rename a file over the link itself).
 """
@@ -20,6 +21,7 @@ import tempfile
 from pathlib import Path
 
 from replay.util.errors import ReplayError
+from replay.util.output_set import OutputSet
 from replay.util.regular import kind
 
 NAME_MAX = 230  # bytes of a file name: 255 on common file systems, less the temporary file's suffix
@@ -73,21 +75,13 @@ def check(path, what: str, suffixes=None) -> Path:
 
 def write(path, what: str, writer) -> Path:
     """``writer(tmp)`` writes the content to the temporary path ``tmp``; it is fsynced and renamed onto
-    ``path`` (parents created). Any ``OSError`` is one line naming ``what`` and ``path``."""
+    ``path`` (parents created) by :meth:`OutputSet.staged`. Any ``OSError`` is one line naming
+    ``what`` and ``path``."""
     p = Path(os.path.realpath(path)) if os.path.islink(path) else Path(path)  # a link: its target replaced
-    tmp = p.with_name(f".{p.name[:200]}.{os.getpid()}.tmp")
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
+    with OutputSet(p, what=what, rule=_checked, file=True, failed="cannot write ({why})").staged() as tmp:
         writer(tmp)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, p)
-    except OSError as e:
-        raise ReplayError(f"{what} {path}: cannot write ({_reason(e)})") from None
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return p
+
+
+def _checked(path, shown) -> None:
+    """The ownership rule of an output file: none beyond :func:`check` (any regular file is replaced)."""

@@ -1,10 +1,10 @@
-"""Output directories written as one set, so that a crash leaves the old set or the new one.
+"""The steps under :class:`replay.util.output_set.OutputSet`: ownership, space, publish, recover.
 
 A command that writes a set of files (``replay eval``: leaderboard, estimates, manifest) writes
 them into a staging directory beside the target, ``<parent>/.<name>.staging-<pid>``, fsyncs them,
-records what it wrote in an ownership marker and moves the whole directory into place in one
-step (:func:`publish_dir`). A crash, a kill or a full disk at any point leaves the previous set
-or the new one under the target's name, never a mix; leftovers of dead processes are removed
+records what it wrote in an ownership marker (:data:`MARKER`) and moves the whole directory into
+place in one step (:func:`publish_dir`). A crash, a kill or a full disk at any point leaves the
+previous set or the new one under the target's name, never a mix; leftovers of dead processes are removed
 (or, for an old set moved aside by the fallback swap, put back) by the next write.
 
 Test hooks (fault injection, used by tests/test_outputs_safety.py): ``REPLAY_FAULT=<point>``
@@ -14,22 +14,26 @@ kills the process with SIGKILL at that point (``written``, ``aside``, ``swapped`
 
 from __future__ import annotations
 
+import ctypes
+import errno
+import json
 import os
+import re
+import shutil
+import signal
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 
-from replay.util.files import check_writable, refuse_overlap, shown
+from replay.util.errors import ReplayError
+from replay.util.files import shown
 
 
 MARKER = ".replay-output.json"
 MIN_FREE = 1 << 20  # bytes: a location with less free space than this is refused as full
 
 
-def _fault(point: str) -> None:
+def fault_point(point: str) -> None:
     if os.environ.get("REPLAY_FAULT") == point:
-        import signal
-
         os.kill(os.getpid(), signal.SIGKILL)
 
 
@@ -46,7 +50,7 @@ def alive(pid: int) -> bool:
     return True
 
 
-def _fsync_path(path, directory: bool = False) -> None:
+def fsync_path(path, directory: bool = False) -> None:
     fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
     try:
         os.fsync(fd)
@@ -58,18 +62,16 @@ def fsync_tree(root) -> None:
     """fsync every file and directory under ``root`` (so that a rename publishes complete data)."""
     for dirpath, _dirs, files in os.walk(root):
         for f in files:
-            _fsync_path(os.path.join(dirpath, f))
-        _fsync_path(dirpath, directory=True)
+            fsync_path(os.path.join(dirpath, f))
+        fsync_path(dirpath, directory=True)
 
 
-def _tree_files(root: Path) -> list[str]:
+def tree_files(root: Path) -> list[str]:
     return sorted(str(Path(d, f).relative_to(root).as_posix()) for d, _dirs, files in os.walk(root) for f in files)
 
 
 def read_marker(path) -> dict | None:
     """The ownership marker of an output directory (``None`` without a readable one)."""
-    import json
-
     try:
         mark = json.loads((Path(path) / MARKER).read_text())
     except (OSError, ValueError):
@@ -90,15 +92,14 @@ def is_report_dir(entry: Path) -> bool:
 def check_replaceable(target, kind: str, what: str = "output", legacy=None, shown=None) -> None:
     """Refuse ``target`` unless it is absent, an empty directory, or a whole ``kind`` output of ours.
 
-    Ours: a directory whose marker (written by :func:`staged_dir`) names ``kind`` and lists every
-    file in it, or, for sets written before markers existed, one that ``legacy(path)`` accepts.
+    Ours: a directory whose marker (written by :meth:`replay.util.output_set.OutputSet.staged`)
+    names ``kind`` and lists every file in it, or, for sets written before markers existed, one
+    that ``legacy(path)`` accepts.
     A ``report/`` directory of ``replay report`` inside it is part of the set. Anything else —
     a file, a directory another program wrote, a set to which a file was added — is refused
     with one line (naming ``shown``, default ``target``), so that replacing the set never
     removes what the user put there.
     """
-    from replay.util.errors import ReplayError
-
     p = Path(target)
     target = target if shown is None else shown
     if not os.path.lexists(p):
@@ -139,7 +140,7 @@ def check_replaceable(target, kind: str, what: str = "output", legacy=None, show
             for f in (
                 [e.name]
                 if not e.is_dir() or e.is_symlink()
-                else [str(Path(e.name, f).as_posix()) for f in _tree_files(e)]
+                else [str(Path(e.name, f).as_posix()) for f in tree_files(e)]
             )
             if f not in listed
         ]
@@ -153,8 +154,6 @@ def check_replaceable(target, kind: str, what: str = "output", legacy=None, show
 def check_space(out, what: str = "output", need: int | None = None) -> None:
     """Refuse an output location whose file system is read-only or has less than ``need`` bytes
     (default :data:`MIN_FREE`) free."""
-    from replay.util.errors import ReplayError
-
     need = MIN_FREE if need is None else need
     p = Path(out).resolve()
     probe = next((q for q in (p, *p.parents) if q.is_dir()), None)
@@ -171,26 +170,8 @@ def check_space(out, what: str = "output", need: int | None = None) -> None:
         )
 
 
-def check_output_dir(out, inputs=(), *, kind: str, what: str = "output", legacy=None) -> Path:
-    """Every check of an output directory that can be made before computing it; returns it resolved.
-
-    Not an input and not around or inside one (:func:`refuse_overlap`), a writable location
-    (:func:`check_writable`) on a file system that is neither read-only nor full
-    (:func:`check_space`), and either absent, empty, or a whole output of ours
-    (:func:`check_replaceable`). Each refusal is one line naming ``out``.
-    """
-    target = refuse_overlap(out, inputs, what)
-    check_space(out, what)
-    check_writable(out, what)
-    if kind is not None:  # None: the location only (a directory claimed later)
-        check_replaceable(target, kind, what, legacy, shown=out)
-    return target
-
-
 def _leftovers(target: Path):
     """(path, pid, role) of staging and moved-aside directories of ``target`` left in its parent."""
-    import re
-
     pat = re.compile(rf"^\.{re.escape(target.name)}\.(staging|old)-(\d+)$")
     try:
         names = os.listdir(target.parent)
@@ -202,16 +183,16 @@ def _leftovers(target: Path):
 def recover(target) -> None:
     """Clean up after a writer of ``target`` that died: remove its staging directory; put back an
     old set it had moved aside if no new set reached the target, else remove that old set."""
-    import shutil
-
     target = Path(target)
     for path, pid, role in sorted(_leftovers(target), key=lambda x: x[2] == "old"):
         if alive(pid):
             continue
         if role == "old" and not os.path.lexists(target):
             os.rename(path, target)
-        else:
+        elif path.is_dir() and not path.is_symlink():
             shutil.rmtree(path, ignore_errors=True)
+        else:  # a staged file (an export, an output file)
+            path.unlink(missing_ok=True)
 
 
 _RENAME_EXCHANGE = 2
@@ -224,9 +205,6 @@ def exchange(a: Path, b: Path) -> bool:
     """Swap two paths atomically (Linux renameat2 RENAME_EXCHANGE); False where not supported."""
     if os.environ.get("REPLAY_NO_EXCHANGE") == "1" or not sys.platform.startswith("linux"):
         return False
-    import ctypes
-    import errno
-
     try:
         fn = ctypes.CDLL(None, use_errno=True).renameat2
     except (OSError, AttributeError):
@@ -250,9 +228,6 @@ def publish_dir(staging, target) -> None:
     renamed in, the old one removed (a crash between the two renames is repaired by :func:`recover`
     on the next write, which puts the old set back). The parent directory is fsynced.
     """
-    import errno
-    import shutil
-
     staging, target = Path(staging), Path(target)
     placed = False
     if not os.path.lexists(target):
@@ -263,66 +238,16 @@ def publish_dir(staging, target) -> None:
             if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
     if not placed and exchange(staging, target):
-        _fault("swapped")
+        fault_point("swapped")
         shutil.rmtree(staging, ignore_errors=True)
     elif not placed:
         old = target.with_name(f".{target.name}.old-{os.getpid()}")
         os.rename(target, old)
-        _fault("aside")
+        fault_point("aside")
         try:
             os.rename(staging, target)
         except OSError:
             os.rename(old, target)  # put the old set back before reporting the failure
             raise
         shutil.rmtree(old, ignore_errors=True)
-    _fsync_path(target.parent, directory=True)
-
-
-@contextmanager
-def staged_dir(target, *, kind: str, what: str = "output", legacy=None):
-    """Context manager: a fresh staging directory to write a whole output set into.
-
-    ``with staged_dir(out, kind="replay eval") as d: ...write files into d...`` — on a normal
-    exit the files are fsynced, the marker listing them is written, ``out`` is checked again
-    (it may have changed during the computation) and the set is published in one step
-    (:func:`publish_dir`); on an exception the staging directory is removed and ``out`` is
-    untouched. An ``OSError`` (full disk, read-only file system, file too large) becomes one
-    line saying that the previous output is unchanged.
-    """
-    import json
-    import shutil
-
-    from replay.util.errors import ReplayError
-
-    given = target
-    target = Path(target).resolve()
-    staging = target.with_name(f".{target.name}.staging-{os.getpid()}")
-    made = []
-    try:
-        recover(target)
-        check_replaceable(target, kind, what, legacy, shown=given)
-        for d in reversed([q for q in (target.parent, *target.parent.parents) if not q.exists()]):
-            d.mkdir()
-            made.append(d)
-        shutil.rmtree(staging, ignore_errors=True)
-        staging.mkdir()
-        yield staging
-        _fault("written")
-        mark = {"tool": "replay", "kind": kind, "files": _tree_files(staging)}
-        (staging / MARKER).write_text(json.dumps(mark, indent=1) + "\n")
-        fsync_tree(staging)
-        check_replaceable(target, kind, what, legacy, shown=given)
-        publish_dir(staging, target)
-    except BaseException as exc:
-        shutil.rmtree(staging, ignore_errors=True)
-        for d in reversed(made):
-            try:
-                d.rmdir()
-            except OSError:
-                pass
-        if isinstance(exc, OSError):
-            why = exc.strerror or str(exc)
-            raise ReplayError(
-                f"{what} {given}: cannot write ({why}); the previous output, if any, is unchanged"
-            ) from None
-        raise
+    fsync_path(target.parent, directory=True)
