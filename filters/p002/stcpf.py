@@ -65,6 +65,7 @@ from ..compiled import Kernel, bind, split, threads
 from . import compiled_util
 from .stack import fast_residual
 from .stckf import STCKF_PARAMS
+from . import compiled
 
 PROPOSALS = ("prior", "ckf", "stckf")
 GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run
@@ -73,8 +74,6 @@ GRAIN_RUNS = 1000  # the same for batched runs
 
 def bound_kernels(kernels):
     """:mod:`.compiled` bound to the model kernels ``(f, h, F, H)`` (:func:`replay.filters.compiled.bind`)."""
-    from . import compiled
-
     return bind(compiled, kernels, "the paper-002 filter kernels (about 20-40 s)")
 
 

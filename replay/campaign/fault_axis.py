@@ -24,6 +24,7 @@ import itertools
 
 from replay.data import faults
 from replay.util.errors import ReplayError
+from replay.campaign.entries import _frame0
 
 MAX_SWEEP = 1000
 
@@ -69,8 +70,6 @@ def with_faults(params: dict, extra: list[str]) -> dict:
 def check_frames(where, ds_entries, extras: list[list[str]], data_dir) -> None:
     """Run 0's frame of every dataset under every fault list, so that a fault on a channel the
     dataset lacks (or one that removes every sample) is refused before any unit, in one line."""
-    from replay.campaign.entries import _frame0
-
     for ds in ds_entries:
         for extra in extras:
             if not extra:

@@ -44,6 +44,9 @@ from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
 from replay.data.formats import adapter_for, looks_like_path
+from replay.data.plugins import dataset_entries
+from replay.adapters.options import check
+from replay.data.plugins import ADAPTERS
 
 # Adapter used for a plain file path, by extension.
 FIRST = Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True)
@@ -107,8 +110,6 @@ def plugin_problems() -> list[str]:
 
 
 def _plugins() -> tuple[dict, list]:
-    from replay.data.plugins import dataset_entries
-
     entries, _, problems = dataset_entries(_read_manifests(str(manifests_dir())))
     out, problems = {}, list(problems)
     for ds_id, where, entry in entries:
@@ -183,7 +184,6 @@ def get(dataset_id: str) -> Dataset:
     known = all_datasets()
     if dataset_id in known:
         return known[dataset_id]
-    from replay.data.plugins import dataset_entries
 
     conflict = dataset_entries()[1].get(dataset_id)
     if conflict:
@@ -319,8 +319,6 @@ def check_params(dataset, params: dict, *, adapter: str | None = None) -> dict:
 
 def _check_options(adapter: str, params: dict) -> dict:
     """``params`` checked against ``adapter``'s declarations; a plugin declaring none: their names."""
-    from replay.adapters.options import check
-
     declared = adapter_options(adapter)
     if declared is not None:
         return check(adapter, declared, params)
@@ -335,8 +333,6 @@ def _check_options(adapter: str, params: dict) -> dict:
 
 
 def _adapter(name: str):
-    from replay.data.plugins import ADAPTERS  # the built-in adapters and the plugins
-
     try:
         return ADAPTERS.load(name)
     except ImportError as e:

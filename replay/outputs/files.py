@@ -42,6 +42,8 @@ from replay.util.staging import check_output_dir, is_report_dir, staged_dir
 from replay.scoring import gap, outages, provenance
 from replay.scoring.marks import marks
 from replay.scoring.scorer import rmse_over_time
+from replay.campaign.lock import held, holder
+from replay.data import dataset_ref
 
 
 def leaderboard_rows(ev: Evaluation) -> list[dict]:
@@ -277,8 +279,6 @@ CLAIM = ".replay-claim"  # in a numbered directory being computed: its process's
 def claim_holder(path) -> int | None:
     """The pid of the live process computing into ``path`` (a directory holding only its claim;
     -1 when the pid is not yet written), None if it is not a claimed directory or its process died."""
-    from replay.campaign.lock import held, holder
-
     try:
         if os.listdir(path) != [CLAIM]:
             return None
@@ -316,8 +316,6 @@ def owned(path: Path) -> bool:
 def eval_inputs(dataset: str, data_dir=None, mapping=None) -> list[Path]:
     """The files ``replay eval DATASET`` reads: the dataset file or bag directory (a plain path, or
     a registered file dataset where it is found), and the topic mapping."""
-    from replay.data import dataset_ref
-
     return dataset_ref.resolve(dataset).inputs(data_dir, mapping)
 
 

@@ -63,6 +63,7 @@ from replay.util.errors import ReplayError
 from replay.util.regular import read_text
 from replay.util.tomlfile import MAX_DEPTH, depth
 from replay.util.plugins import refuse_unallowed
+from replay.run.evaluation import evaluate
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
 HASH = re.compile(r"^[0-9a-f]{16}$")
@@ -268,8 +269,6 @@ def repeat(man: dict, data_dir=None, progress=None):
     """Run the manifest's configuration again: the :class:`replay.run.evaluation.Evaluation`.
 
     ``progress``: a :class:`replay.util.progress.Progress` told of each run done (as ``replay eval``'s)."""
-    from replay.run.evaluation import evaluate
-
     cfg = man["config"]
     return evaluate(
         cfg["dataset"],

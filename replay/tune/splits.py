@@ -15,6 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from replay.util.errors import ReplayError
+from . import parts
+from replay.data.splits import split_views
 
 
 @dataclass
@@ -67,7 +69,6 @@ def make(
     if train_segment is not None:
         if not dataset:
             raise ReplayError("--train-segment needs a DATASET")
-        from replay.data.splits import split_views
 
         if "segment" in view:
             raise ReplayError("--train-segment: the dataset view already has a segment; give one or the other")
@@ -98,8 +99,6 @@ def make(
 def check_parts(s: Split, *, seed: int, first, data_dir, refs: dict, allow_overlap: bool) -> None:
     """Read every part (:func:`replay.tune.parts.read`: each holds enough samples), set ``s.overlap``
     from their content and refuse it unless ``allow_overlap``."""
-    from . import parts
-
     read = {}
     for side, items, part_seed, option in (
         ("training", s.train, s.train_seed, s.train_option),

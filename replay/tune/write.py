@@ -10,6 +10,8 @@ from pathlib import Path
 import tomli_w
 
 from replay.util.files import write_bytes
+from collections import Counter
+from replay.scoring.marks import marks
 
 
 def write_tuned(t, out: Path, rows) -> dict:
@@ -93,10 +95,6 @@ def board_notes(rows, failed: dict | None = None) -> list[str]:
     an input: :func:`replay.scoring.summary.marks`), tuned rows worse than their defaults on the
     held-out data (and which row is better), and why trials scored infinity (``failed``: filter ->
     a reason per such trial)."""
-    from collections import Counter
-
-    from replay.scoring.marks import marks
-
     out = [f"{r['label']}: not ranked: {m}" for r in rows for m in marks(r)]
     kinds = sorted({str(r["reference"]) for r in rows if r.get("reference")})  # issue 35: on every table
     shares = sorted({str(r["reference_shares"]) for r in rows if r.get("reference_shares")})
@@ -138,8 +136,6 @@ def _worse(tuned, default) -> bool:
 
 
 def _marked(r) -> bool:
-    from replay.scoring.marks import marks
-
     return bool(marks(r))
 
 

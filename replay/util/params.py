@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from replay.util.errors import SHOWN, ReplayError, shown
+import numpy as np
 
 TYPES = (int, float, bool, str, list, dict, os.PathLike)
 
@@ -145,16 +146,9 @@ def _bound(x) -> str:
 def _is_number(v) -> bool:
     if isinstance(v, bool):
         return False
-    try:
-        import numpy as np
-
-        if isinstance(v, np.bool_):
-            return False
-        if isinstance(v, (np.integer, np.floating)):
-            return True
-    except ImportError:  # pragma: no cover
-        pass
-    return isinstance(v, (int, float))
+    if isinstance(v, np.bool_):
+        return False
+    return isinstance(v, (int, float, np.integer, np.floating))
 
 
 def _is_integer(v) -> bool:
@@ -163,7 +157,6 @@ def _is_integer(v) -> bool:
         return False
     if isinstance(v, int):
         return True
-    import numpy as np
 
     return isinstance(v, np.integer)
 
