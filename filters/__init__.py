@@ -69,5 +69,4 @@ FILTERS = Registry(
 
 def make_filter(name: str, **params):
     """Instantiate the filter registered as ``name`` with ``params``."""
-
     return instantiate(FILTERS, name, "filter", **params)

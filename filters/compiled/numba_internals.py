@@ -62,7 +62,6 @@ def guard(module, label: str) -> int:
 def cfunc(fty, py, cached: bool, label: str = "a model"):
     """``numba.cfunc(fty.signature, cache=cached)(py)`` with its cache sealed before it is read,
     passed to a compiled function as the first-class function type ``fty`` without a check."""
-
     res = CFunc(py, sigutils.normalize_signature(fty.signature), locals={}, options={})
     if cached:
         res.enable_caching()

@@ -91,7 +91,6 @@ def process_pool(n: int):
     """A process pool of ``n`` of our workers (:func:`init_worker`): each ends with this process
     and gets cores // n BLAS and compiled-kernel threads, so n workers on n cores do not run
     n² threads. Campaigns and reproductions both start theirs here."""
-
     return ProcessPoolExecutor(
         max_workers=n,
         mp_context=mp.get_context(start_method()),

@@ -78,7 +78,6 @@ def _unique(label: str, taken) -> str:
 
 
 def load_campaign(d: Path) -> list[Section]:
-
     store = Store(d)
     rows = board.read_dir(d)
     by_hash = {r.get("config_hash"): r for r in rows}

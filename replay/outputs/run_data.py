@@ -96,7 +96,6 @@ def check_run(run, runs, where) -> None:
 def frame_and_problem(cfg: dict, run: int, data_dir=None):
     """The frame of ``run`` (a simulator draws it from the run's data stream) and the task problem
     rebuilt on the run's task stream, as the evaluation did."""
-
     dparams, tparams = dict(cfg.get("dataset_params") or {}), dict(cfg.get("task_params") or {})
     frame = registry.load_frame(
         cfg["dataset"],
@@ -122,7 +121,6 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     prefixes). They must share the measurements (``replay.scoring.summary.group_key``); each is
     a track named by its leaderboard label (the filter, plus the parameters that differ).
     A configuration whose run is not stored (or damaged, or failed) is refused."""
-
     select, store = {k: _split(v) for k, v in (select or {}).items()}, Store(out)
     chosen = [
         (h, c)

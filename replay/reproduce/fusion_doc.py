@@ -66,7 +66,6 @@ def _dparams(rec, root):
 
 def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     """The outage protocol at defaults: headline rows and each filter against hold-last-fix."""
-
     ev = evaluate(
         _dataset(rec, bags_dir),
         task="fusion",

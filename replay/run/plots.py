@@ -107,7 +107,6 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
 
 def _gps(frame):
     """The frame's GPS position channel (found by role, as the tasks do), or None."""
-
     try:
         found = role_input(frame, "gps", "plot_track")
     except ReplayError:

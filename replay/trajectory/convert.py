@@ -111,7 +111,6 @@ def refuse_other_times(times, tr: Trajectory) -> None:
 
 def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "map") -> int:
     """``tr`` as ``geometry_msgs/msg/PoseStamped`` messages on ``topic`` of a new MCAP file; returns the count."""
-
     check(tr, "mcap")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types

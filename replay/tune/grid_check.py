@@ -38,7 +38,6 @@ def axis(d, g: int) -> list:
 
 def distances(t, out, tuned_rows: list[dict], g: int) -> list[dict]:
     """One row per filter (module docstring); ``tuned_rows``: the first tune's board rows."""
-
     if g < 2:
         raise ReplayError(f"--tune-grid {g}: at least 2 points per parameter")
     out = Path(out)

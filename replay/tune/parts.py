@@ -53,7 +53,6 @@ class Part:
 def read(dataset: str, params: dict, *, seed: int, first, data_dir, ref, where: str) -> Part:
     """The :class:`Part` of ``dataset`` under ``params`` (canonical, views included); ``where``
     names the option that made it in the one-line refusals (a view that keeps too little)."""
-
     chosen, own = views.split(params)
     cfg = {"dataset": ref.id, "dataset_params": own, "first": None, "seed": seed, "adapter": None}
     base = load_frame(cfg, 0, data_dir, ds=ref.entry)  # the whole recording (cached per file)
