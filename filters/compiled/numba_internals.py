@@ -17,12 +17,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numba.core import config
+from numba.core import config, sigutils
 from numba.core.caching import Cache
 from numba.core.dispatcher import Dispatcher
 
 from replay.util.kernel_cache import adopt, cache_key, count, unseal
-from numba.core import sigutils
 from numba.core.ccallback import CFunc
 
 

@@ -62,10 +62,9 @@ from ..base import Filter
 from ..pf import propagate
 from ..resampling import SCHEMES
 from ..compiled import Kernel, bind, split, threads
-from . import compiled_util
+from . import compiled_util, compiled
 from .stack import fast_residual
 from .stckf import STCKF_PARAMS
-from . import compiled
 
 PROPOSALS = ("prior", "ckf", "stckf")
 GRAIN = 50  # particles per thread at least, in the compiled cubature step of one run

@@ -52,7 +52,7 @@ import numpy as np
 from replay.util.version import __version__
 from replay.util.errors import ReplayError
 
-from . import records as sealing
+from . import records as sealing, index
 from .encode import (
     SUMMARY_COLUMNS,
     describe,
@@ -65,7 +65,6 @@ from .encode import (
 )
 from replay.util.files import json_default, sync_dir, write_bytes, write_json
 from replay.run.pipeline import config_hash as hash_of
-from . import index
 from concurrent.futures import ThreadPoolExecutor
 
 RUN_FILE = re.compile(r"^(\d+)\.json$")

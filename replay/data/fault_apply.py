@@ -11,9 +11,8 @@ import numpy as np
 
 from replay.data import faults as decl
 from replay.util.errors import ReplayError
-from replay.frame import Frame, Report
+from replay.frame import Frame, Report, Channel
 from replay.util.seeds import FAULT, rng_for
-from replay.frame import Channel
 from replay.data.views import pick
 
 

@@ -44,9 +44,8 @@ from replay.util.params import Param, validate
 from replay.util.progress import Loading
 from replay.util.regular import check_regular
 from replay.data.formats import adapter_for, looks_like_path
-from replay.data.plugins import dataset_entries
+from replay.data.plugins import dataset_entries, ADAPTERS
 from replay.adapters.options import check
-from replay.data.plugins import ADAPTERS
 
 # Adapter used for a plain file path, by extension.
 FIRST = Param("first", int, None, "use only the first N samples (null: all)", unit="samples", low=1, optional=True)

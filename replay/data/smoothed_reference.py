@@ -26,8 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.util.errors import DataError, ReplayError
-from replay.frame import Channel
-from replay.frame import Report
+from replay.frame import Channel, Report
 
 MATCH_S = 1e-3  # a frame sample and a pose of the file are the same instant within this (s)
 

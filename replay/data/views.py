@@ -49,8 +49,7 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 from replay.util.params import Param
-from replay.frame import Frame, Report
-from replay.frame import Channel
+from replay.frame import Frame, Report, Channel
 from replay.data import faults
 from replay.data.smoothed_reference import replace
 

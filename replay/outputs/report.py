@@ -29,10 +29,9 @@ import base64
 import html
 from pathlib import Path
 
-from replay.outputs import plots, report_plots, report_tables
+from replay.outputs import plots, report_plots, report_tables, robustness
 from replay.outputs.palette import Palette
 from replay.outputs.report_data import load
-from replay.outputs import robustness
 
 STYLE = (
     "body{font-family:sans-serif;margin:2em;max-width:1400px;color:#222}"

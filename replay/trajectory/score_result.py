@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from replay.util.canonical import config_hash
-from replay.trajectory import io, row_metrics
+from replay.trajectory import io, row_metrics, plot
 from replay.trajectory.base import Trajectory
 from replay.trajectory.pose_error import UNITS, statistics
 from replay.util.errors import ReplayError
@@ -27,7 +27,6 @@ from replay.trajectory import lengths as by_length
 from replay.scoring.summary import columns
 from replay.trajectory import archive
 from replay.trajectory import trials as trial_sets
-from replay.trajectory import plot
 
 # pandas (1.5 s to import, measured with `python -X importtime` on the 2-core machine under load) and
 # matplotlib (1.3 s) are imported inside the functions that need them: `replay score` without tables,
