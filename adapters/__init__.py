@@ -7,6 +7,8 @@ masked or repaired. ``ADAPTERS`` maps the adapter names used in dataset
 manifests (``datasets/*.toml``) to ``"module:function"``.
 """
 
+from replay.util.lookup import resolve
+
 ADAPTERS = {
     "bohai-csv": "replay.adapters.bohai:load",
     "lake": "replay.adapters.lake:load",
@@ -16,6 +18,4 @@ ADAPTERS = {
 
 def get_adapter(name: str):
     """The loader function registered under ``name``."""
-    from replay.util.lookup import resolve
-
     return resolve(ADAPTERS, name, "adapter")

@@ -12,6 +12,7 @@ or the per-run ``predict``/``update``, with valid ``PARAMS`` (``docs/plugins.md`
 
 from replay.util.params import Param  # for plugins: from replay.filters import Filter, Param
 from replay.util.plugins import Registry, class_problem
+from replay.util.lookup import instantiate
 
 PROTOCOL = ("Estimates", "Filter", "State")  # replay.filters.base, importable from here (plugins)
 __all__ = ["FILTERS", "Param", "make_filter", *PROTOCOL]
@@ -19,7 +20,8 @@ __all__ = ["FILTERS", "Param", "make_filter", *PROTOCOL]
 
 def __getattr__(name):
     if name in PROTOCOL:
-        from replay.filters import base
+        # lazy: start-up, plugins import this package: replay.filters.base pulls numba and scipy (measured ~1 s)
+        from replay.filters import base  # noqa: PLC0415
 
         return getattr(base, name)
     raise AttributeError(f"module 'replay.filters' has no attribute {name!r}")
@@ -27,7 +29,8 @@ def __getattr__(name):
 
 def _check(obj):
     """What keeps ``obj`` from being a filter, or None."""
-    from replay.filters.base import Filter
+    # lazy: start-up, plugins import this package: replay.filters.base pulls numba and scipy (measured ~1 s)
+    from replay.filters.base import Filter  # noqa: PLC0415
 
     return class_problem(obj, Filter, "replay.filters.base.Filter", (("engine",), ("predict", "update")))
 
@@ -66,6 +69,4 @@ FILTERS = Registry(
 
 def make_filter(name: str, **params):
     """Instantiate the filter registered as ``name`` with ``params``."""
-    from replay.util.lookup import instantiate
-
     return instantiate(FILTERS, name, "filter", **params)

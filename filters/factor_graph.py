@@ -39,6 +39,8 @@ from replay.util.params import Param
 
 from . import gating
 from .base import Estimates, Filter
+from .kalman import EKF
+from time import perf_counter
 
 INSTALL = 'pip install "replay-nav[smooth]"'
 
@@ -46,7 +48,8 @@ INSTALL = 'pip install "replay-nav[smooth]"'
 def gtsam_module(name: str):
     """The ``gtsam`` module, or a one-line ReplayError naming the extra that installs it."""
     try:
-        import gtsam
+        # lazy: optional, gtsam is the [smooth] extra: its absence is refused in one line
+        import gtsam  # noqa: PLC0415
     except ImportError:
         raise ReplayError(f"filter {name!r} needs GTSAM, which is not installed: {INSTALL}") from None
     return gtsam
@@ -239,7 +242,6 @@ class Smoother(Filter):
     def run_batch(self, model, Z, X0, P0, rngs) -> list[Estimates]:
         if gating.active(model) is not None:
             raise ReplayError(f"filter {self.name!r} cannot gate measurements: remove the rejection_threshold")
-        from time import perf_counter
 
         out, seen = [], []
         for m in range(len(Z)):
@@ -263,8 +265,6 @@ def _equal(a, b) -> bool:
 def initial_track(model, z, x0, P0):
     """(n + 1, nx) starting states: x0, then the EKF's filtered means (the motion model alone from
     where the EKF diverged, if it did)."""
-    from .kalman import EKF
-
     est = EKF().run(model, z, x0, P0)
     X = np.vstack([np.asarray(x0, float)[None], est.x])
     for k in range(len(z)):

@@ -39,6 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from replay.util.dataframes import frame_table
 
 
 @dataclass
@@ -187,8 +188,6 @@ class Frame:
 
     def to_pandas(self, *, reference: bool = False, masks: bool = False, time: str = "relative"):
         """The sensor channels (``reference=True``: the reference) as a DataFrame (:mod:`replay.util.dataframes`)."""
-        from replay.util.dataframes import frame_table
-
         return frame_table(self, reference=reference, masks=masks, time=time)
 
     def __post_init__(self):

@@ -20,6 +20,8 @@ from numba import types
 
 from . import copies, numba_internals, rows
 from .files import log
+from replay.models.kernel_model import KernelModel
+from replay.model import Model
 
 THREAD_WORK_US = 1000.0  # work per thread at least (waking a thread costs tens of µs)
 _VEC, _S2, _S3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
@@ -29,8 +31,6 @@ JACOBIAN_ROWS = types.FunctionType(types.void(_S2, _VEC, _S3))  # F, H: (X, p, J
 
 def derived_from_kernels(model) -> bool:
     """True when the model's f, h, F, H are those a KernelModel derives from its kernels."""
-    from replay.models.kernel_model import KernelModel
-
     return all(getattr(type(model), n) is getattr(KernelModel, n) for n in ("f", "h", "F", "H"))
 
 
@@ -160,8 +160,6 @@ def cov_stacks(model, steps: int):
     ``measurement_covs(steps)`` (the first ``steps`` matrices, equal to its ``process_cov(k)``,
     ``measurement_cov(k)``): used unless the instance replaces the one-step method without the
     stack (a wrapper that changes the numbers, e.g. a scale, must wrap both); else one call per step."""
-    from replay.model import Model
-
     out = []
     for one, many, const in (("process_cov", "process_covs", "Q"), ("measurement_cov", "measurement_covs", "R")):
         if getattr(type(model), one) is getattr(Model, one) and one not in vars(model):

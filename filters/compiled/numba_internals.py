@@ -17,11 +17,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numba.core import config
+from numba.core import config, sigutils
 from numba.core.caching import Cache
 from numba.core.dispatcher import Dispatcher
 
 from replay.util.kernel_cache import adopt, cache_key, count, unseal
+from numba.core.ccallback import CFunc
 
 
 def jit_disabled() -> bool:
@@ -60,9 +61,6 @@ def guard(module, label: str) -> int:
 def cfunc(fty, py, cached: bool, label: str = "a model"):
     """``numba.cfunc(fty.signature, cache=cached)(py)`` with its cache sealed before it is read,
     passed to a compiled function as the first-class function type ``fty`` without a check."""
-    from numba.core import sigutils
-    from numba.core.ccallback import CFunc
-
     res = CFunc(py, sigutils.normalize_signature(fty.signature), locals={}, options={})
     if cached:
         res.enable_caching()

@@ -62,7 +62,7 @@ from ..base import Filter
 from ..pf import propagate
 from ..resampling import SCHEMES
 from ..compiled import Kernel, bind, split, threads
-from . import compiled_util
+from . import compiled_util, compiled
 from .stack import fast_residual
 from .stckf import STCKF_PARAMS
 
@@ -73,8 +73,6 @@ GRAIN_RUNS = 1000  # the same for batched runs
 
 def bound_kernels(kernels):
     """:mod:`.compiled` bound to the model kernels ``(f, h, F, H)`` (:func:`replay.filters.compiled.bind`)."""
-    from . import compiled
-
     return bind(compiled, kernels, "the paper-002 filter kernels (about 20-40 s)")
 
 

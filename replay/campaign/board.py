@@ -21,6 +21,7 @@ from replay.util.errors import ReplayError
 from replay.util.files import write_csv
 
 from .store import Store
+from replay.util.regular import read_bytes
 
 PAIRED = ["dataset", "task", "a", "b", "metric", "n", "diff", "diff_ci95", "a_better"]
 
@@ -128,8 +129,6 @@ def read_leaderboard(path: Path) -> list[dict]:
     """The rows of a leaderboard CSV, refused in one line naming it unless it is one: UTF-8 text whose
     header holds :data:`NEEDED` and at least one row (a trajectory, another CSV, a binary file would
     otherwise read as a table of NaN)."""
-    from replay.util.regular import read_bytes
-
     what = "not a replay leaderboard (written by replay eval, replay score -o or replay campaign run)"
     try:
         text = read_bytes(path, "a leaderboard").decode("utf-8")

@@ -19,7 +19,8 @@ def to_arrow(values):
     """A 1-D numpy array as a pyarrow Array. Integer and float columns go through their
     buffer: ``pa.array(ndarray)`` imports pandas (about 1 s), once in every worker and
     again in the main process when the leaderboard reads the tables back."""
-    import pyarrow as pa
+    # lazy: start-up, pyarrow measured ~180 ms, needed only to write or read a table
+    import pyarrow as pa  # noqa: PLC0415
 
     v = np.ascontiguousarray(values)
     if v.ndim == 1 and v.dtype.kind in "iuf" and v.dtype.isnative:
@@ -29,7 +30,8 @@ def to_arrow(values):
 
 def to_numpy(column) -> np.ndarray:
     """A pyarrow (Chunked)Array as numpy; without pandas for integer/float columns without nulls."""
-    import pyarrow as pa
+    # lazy: start-up, pyarrow measured ~180 ms, needed only to write or read a table
+    import pyarrow as pa  # noqa: PLC0415
 
     arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
     if arr.null_count == 0 and (pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type)):
@@ -42,8 +44,9 @@ def parquet_bytes(series: dict) -> bytes:
     """A unit's per-step table (dict of equal-length arrays) as the bytes of a Parquet file.
     Plain encoding: a dictionary of the float columns (distinct values) doubles the writing
     time and makes larger files."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    # lazy: start-up, pyarrow measured ~180 ms, needed only to write or read a table
+    import pyarrow as pa  # noqa: PLC0415
+    import pyarrow.parquet as pq  # noqa: PLC0415
 
     sink = pa.BufferOutputStream()
     table = pa.Table.from_arrays([to_arrow(np.asarray(v)) for v in series.values()], names=list(series))
@@ -77,8 +80,9 @@ def summary_columns(series: dict) -> dict:
 
 def footer(source):
     """(rows, column names) of a Parquet file or buffer; raises OSError/ValueError when unreadable."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    # lazy: start-up, pyarrow measured ~180 ms, needed only to write or read a table
+    import pyarrow as pa  # noqa: PLC0415
+    import pyarrow.parquet as pq  # noqa: PLC0415
 
     src = pa.BufferReader(source) if isinstance(source, bytes) else source
     try:

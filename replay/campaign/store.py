@@ -52,7 +52,7 @@ import numpy as np
 from replay.util.version import __version__
 from replay.util.errors import ReplayError
 
-from . import records as sealing
+from . import records as sealing, index
 from .encode import (
     SUMMARY_COLUMNS,
     describe,
@@ -64,6 +64,8 @@ from .encode import (
     to_numpy,
 )
 from replay.util.files import json_default, sync_dir, write_bytes, write_json
+from replay.run.pipeline import config_hash as hash_of
+from concurrent.futures import ThreadPoolExecutor
 
 RUN_FILE = re.compile(r"^(\d+)\.json$")
 LEGACY_COLUMNS = ("k", "t", "nees", "nis", "nis_dof")  # read by the leaderboard (replay.scoring.summary)
@@ -197,8 +199,6 @@ class Store:
     def read_config(self, config_hash: str) -> tuple[dict | None, str | None]:
         """(config, None) or (None, problem): ``config.json`` must be a JSON object whose
         configuration hash is its directory's name."""
-        from replay.run.pipeline import config_hash as hash_of
-
         path = self.units / config_hash / "config.json"
         try:
             raw = path.read_bytes()
@@ -226,8 +226,6 @@ class Store:
         ``config.json`` (or unit records without one), an entry of ``units/`` that is not a
         directory, or a configuration of the index without its directory raises a
         :class:`ReplayError` naming it. ``listed``: the index's configurations, when read already."""
-        from . import index
-
         problem = None
         if listed is None:
             listed, _, problem = index.read(self.out)
@@ -265,8 +263,6 @@ class Store:
 
     def data_dirs(self) -> dict:
         """{dataset id: the ``data_dir`` the campaign ran it with} (empty for an older store)."""
-        from . import index
-
         return index.read(self.out)[1]
 
     def series(self, config_hash: str, run: int, columns=None, sha256: str | None = None):
@@ -275,8 +271,9 @@ class Store:
         ``sha256``: the checksum of the table that its record holds and :meth:`scan` found on
         disk; when this Store wrote that very table, the columns it kept of it are returned
         without reading the file (the values the file holds, bit for bit)."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        # lazy: start-up, pyarrow measured ~180 ms, needed only to write or read a table
+        import pyarrow as pa  # noqa: PLC0415
+        import pyarrow.parquet as pq  # noqa: PLC0415
 
         kept = self._kept.get((config_hash, run))
         if (
@@ -352,8 +349,6 @@ class Store:
         """Store a job's units, then flush the directory once. The units are written by a few
         threads: their flushes then share the file system's journal commits (25 records one
         after the other: 6-100 ms; side by side: a tenth of that)."""
-        from concurrent.futures import ThreadPoolExecutor
-
         with ThreadPoolExecutor(max(1, min(WRITERS, len(results)))) as pool:
             for _ in pool.map(lambda res: self.write(config_hash, res, sync=False), results):
                 pass

@@ -34,6 +34,12 @@ import threading
 import time
 
 from replay.util.errors import ReplayError
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
+import asyncio
+import ctypes
+
+from threadpoolctl import threadpool_limits
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
@@ -42,8 +48,6 @@ def _pdeathsig(sig: int) -> bool:
     if not sys.platform.startswith("linux"):
         return False
     try:
-        import ctypes
-
         libc = ctypes.CDLL(None, use_errno=True)
         return libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
     except (OSError, AttributeError):
@@ -63,10 +67,6 @@ def limit_threads(n: int) -> None:
     """At most ``n`` BLAS/OpenMP threads in this process (``threadpoolctl``), so that
     N workers on N cores do not each start N threads that compete for the cores."""
     global _limits
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        return
     _limits = threadpool_limits(limits=n)
 
 
@@ -84,8 +84,6 @@ def init_worker(parent_pid: int, blas_threads: int | None = None, poll: float = 
 
 def start_method() -> str:
     """fork on Linux (workers start with everything the parent imported), spawn elsewhere."""
-    import multiprocessing as mp
-
     return "fork" if sys.platform == "linux" and "fork" in mp.get_all_start_methods() else "spawn"
 
 
@@ -93,9 +91,6 @@ def process_pool(n: int):
     """A process pool of ``n`` of our workers (:func:`init_worker`): each ends with this process
     and gets cores // n BLAS and compiled-kernel threads, so n workers on n cores do not run
     n² threads. Campaigns and reproductions both start theirs here."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     return ProcessPoolExecutor(
         max_workers=n,
         mp_context=mp.get_context(start_method()),
@@ -116,10 +111,9 @@ def connect_scheduler(address: str, timeout: float):
     that answered it as a Dask scheduler is then given to ``Client`` (``timeout`` again).
     Not covered: a scheduler that answers this handshake and stalls on the next one.
     """
-    import asyncio
-
-    from distributed import Client
-    from distributed.comm import connect
+    # lazy: optional, dask's distributed is the [campaign] extra
+    from distributed import Client  # noqa: PLC0415
+    from distributed.comm import connect  # noqa: PLC0415
 
     async def handshake():  # connect() gives up on the TCP connection itself after `timeout`
         comm = await asyncio.wait_for(connect(address, timeout=timeout), 1.25 * timeout + 0.1)

@@ -200,7 +200,8 @@ def bohai_csv(path: Path) -> Content:
     file must end with a line end (a body cut inside its last line has none). The rows and
     the span of the ``time`` column are counted for :func:`declared_mismatch`.
     """
-    from replay.adapters.bohai import COLS31, COLS36
+    # lazy: start-up, the Bohai adapter's package imports pandas, pyarrow and pyproj (+290 ms CPU on `replay --help`)
+    from replay.adapters.bohai import COLS31, COLS36  # noqa: PLC0415
 
     with open(path, "rb") as f:
         head = f.read(4096)

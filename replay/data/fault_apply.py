@@ -11,6 +11,9 @@ import numpy as np
 
 from replay.data import faults as decl
 from replay.util.errors import ReplayError
+from replay.frame import Frame, Report, Channel
+from replay.util.seeds import FAULT, rng_for
+from replay.data.views import pick
 
 
 def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
@@ -18,7 +21,6 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
     ``frame`` itself when there are none."""
     if not specs:
         return frame
-    from replay.frame import Frame, Report
 
     specs = decl.check(specs, source)
     streams = rng.spawn(len(specs))
@@ -54,8 +56,6 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
 def stream(rng) -> np.random.Generator:
     """The fault stream of ``registry.load_frame(rng=...)``: a seed S (None: 0) gives run 0's of
     ``replay eval --seed S`` (:data:`replay.util.seeds.FAULT`), a Generator a child of it."""
-    from replay.util.seeds import FAULT, rng_for
-
     if isinstance(rng, np.random.Generator):
         return rng.spawn(1)[0]
     return rng_for(0 if rng is None else int(rng), 0, FAULT)
@@ -82,8 +82,6 @@ def _companions(channels, channel) -> list[str]:
 
 def _moved(ch, moved):
     """``ch`` with its valid samples moved: ``moved[i]`` is the new index of sample i, -1 lost."""
-    from replay.frame import Channel
-
     values = np.full_like(ch.values, np.nan)
     valid = np.zeros(len(ch.valid), bool)
     src = np.flatnonzero(ch.valid & (moved >= 0))
@@ -111,8 +109,6 @@ def _outage(t, valid, v, rng):
 
 
 def _rate(t, valid, v, rng):
-    from replay.data.views import pick
-
     gaps = np.diff(t[valid])
     if not len(gaps) or 1.0 / v["f"] <= gaps.min():  # a period below every gap: each sample keeps its point
         return _kept(valid, np.zeros(len(valid), bool))
@@ -175,8 +171,6 @@ _MOVE = {
 
 def _alter(kind, t, ch, v, rng, owner):
     """(the channel with its values altered, the counts)."""
-    from replay.frame import Channel
-
     x = ch.values.reshape(len(ch.values), -1).copy()
     idx = np.flatnonzero(ch.valid)
     width = x.shape[1]

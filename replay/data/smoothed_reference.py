@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.util.errors import DataError, ReplayError
+from replay.frame import Channel, Report
 
 MATCH_S = 1e-3  # a frame sample and a pose of the file are the same instant within this (s)
 
@@ -135,13 +136,9 @@ def replace(frame, path, source: str = "dataset"):
 
 
 def _channel(values, valid, description):
-    from replay.frame import Channel
-
     axes = ("x", "y", "z")[: values.shape[1]]
     return Channel(values, "m", "enu", valid, axes, (), "", description)
 
 
 def _report(frame):
-    from replay.frame import Report
-
     return Report(list(frame.report.entries))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from replay.data import views
 from replay.util.errors import ReplayError
+from replay.data.dataset_ref import simulated
 
 SEED_MAX = 2**63 - 1
 
@@ -114,8 +115,6 @@ def _overlap(train: dict, test: dict, dataset) -> str | None:
 
 
 def _simulated(dataset: str) -> bool:
-    from replay.data.dataset_ref import simulated
-
     return simulated(dataset)
 
 

@@ -49,6 +49,9 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 from replay.util.params import Param
+from replay.frame import Frame, Report, Channel
+from replay.data import faults
+from replay.data.smoothed_reference import replace
 
 VIEW_PARAMS = (
     Param(
@@ -110,8 +113,6 @@ def check(views: dict, owner: str = "") -> dict:
             value = _fmt_bounds(*_parse_segment(value, where))
         out[p.name] = value
     if views.get("fault") is not None:
-        from replay.data import faults
-
         out["fault"] = faults.check(views["fault"], owner)
     return out
 
@@ -167,8 +168,6 @@ def apply(frame, views: dict, source: str = "dataset"):
     there are none. A new frame: the input frame (perhaps cached) and its report are not changed."""
     views = {k: v for k, v in check(views, source).items() if k != "fault"}  # faults: fault_apply, per run
     if "reference" in views:  # a smoothed track as the reference: on the frame the other views made
-        from replay.data.smoothed_reference import replace
-
         reference = views.pop("reference")
         return replace(apply(frame, views, source), reference, source)
     if not views:
@@ -246,8 +245,6 @@ def _describe(views: dict) -> str:
 
 
 def _rebuild(frame, t, channels, reference, offset, view, report=None):
-    from replay.frame import Frame, Report
-
     start, end = float(t[0]), float(t[-1])
     estimates = {}
     for name, e in frame.estimates.items():
@@ -293,8 +290,6 @@ def pick(t: np.ndarray, valid: np.ndarray, rate: float, n_grid: int) -> np.ndarr
 
 def resample(frame, rate: float):
     """``frame`` on the grid ``i / rate`` (module docstring); one report line per channel."""
-    from replay.frame import Channel, Report
-
     report = Report(list(frame.report.entries))  # the input frame's report stays as it was
     t = frame.t - frame.t[0]
     n_grid = int(min(t[-1] * rate + 0.5, 2.0**62)) + 1

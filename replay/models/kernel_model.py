@@ -47,8 +47,9 @@ _MATRIX = ("void(f8[:], f8[:], f8[:, :])", "(n),(p),(m,n)")
 def array_form(kernel, matrix: bool):
     """The gufunc ``g(x, p, out)`` applying the one-state numba ``kernel`` over the leading axes
     of ``x`` (..., n) and ``out`` (..., m) (or (..., m, n) when ``matrix``); ``p`` is shared."""
-    import numba as nb
-    from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
+    # lazy: start-up, the model protocol imports this module: numba measured ~800 ms, only to compile
+    import numba as nb  # noqa: PLC0415
+    from replay.util import kernel_cache  # noqa: PLC0415, F401  numba's cache of replay's kernels: locked, sealed
 
     if not hasattr(kernel, "py_func"):  # NUMBA_DISABLE_JIT=1: the plain-Python kernel, state by state
         return _Loop(kernel)

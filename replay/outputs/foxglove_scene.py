@@ -28,6 +28,10 @@ variances alone only for an output written before the covariances were kept).
 from __future__ import annotations
 
 import numpy as np
+from replay.outputs.palette import Palette
+from replay.outputs.pb_columns import encode
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 
 ROOT = "map"
 THIN = 0.02  # diameter of an axis the task has no variance for, relative to the largest
@@ -45,8 +49,6 @@ def rgba(hex_colour: str) -> tuple[float, float, float, float]:
 
 def colours(names) -> dict:
     """The report's colour of every filter (one page: all of them), as RGBA."""
-    from replay.outputs.palette import Palette
-
     pal = Palette(list(names))
     return {n: rgba(pal.colour(n)) for n in names}
 
@@ -128,10 +130,6 @@ def _stamp(ns) -> dict:
 def plan_ellipsoids(out, topic: str, name: str, ns, pos, cov, ok, sigma: float, colour) -> None:
     """``/replay/<name>/covariance``: one SceneUpdate per row ``ok``; ``pos(rows)`` ENU positions,
     ``cov(rows)`` ENU covariances (:func:`enu_covariance`), taken when a window is written."""
-    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
-
-    from replay.outputs.pb_columns import encode
-
     idx = np.flatnonzero(ok)
     if not len(idx):
         return
@@ -157,10 +155,6 @@ def plan_ellipsoids(out, topic: str, name: str, ns, pos, cov, ok, sigma: float, 
 
 def plan_transforms(out, topic: str, child: str, ns, pos, quat, ok) -> None:
     """``map -> child`` FrameTransforms at rows ``ok``; ``pos(rows)``, ``quat(rows)`` (x, y, z, w)."""
-    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
-
-    from replay.outputs.pb_columns import encode
-
     idx = np.flatnonzero(ok)
     if not len(idx):
         return

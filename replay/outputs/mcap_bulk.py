@@ -65,6 +65,8 @@ from mcap.records import (
 from mcap.writer import MCAP0_MAGIC
 
 from replay.util.errors import ReplayError
+import zstandard
+import lz4.frame
 
 _MSG_HEADER = np.dtype(
     [
@@ -265,12 +267,8 @@ class BulkWriter:
 
     def _compress(self, data) -> bytes:
         if self.compression == "zstd":
-            import zstandard
-
             return zstandard.ZstdCompressor(level=1).compress(data)
         if self.compression == "lz4":
-            import lz4.frame
-
             return lz4.frame.compress(data)
         return bytes(data)
 

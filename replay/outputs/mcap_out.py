@@ -8,12 +8,12 @@ import json
 import numpy as np
 
 from replay.util.errors import ReplayError
+from google.protobuf.descriptor_pb2 import FileDescriptorProto, FileDescriptorSet
+from replay.outputs.mcap_bulk import BulkWriter
 
 
 def file_descriptor_set(message_class) -> bytes:
     """The FileDescriptorSet of a generated protobuf class and all its dependencies."""
-    from google.protobuf.descriptor_pb2 import FileDescriptorProto, FileDescriptorSet
-
     fds, seen, todo = FileDescriptorSet(), set(), [message_class.DESCRIPTOR.file]
     while todo:
         fd = todo.pop()
@@ -39,8 +39,6 @@ class McapOut:
     """
 
     def __init__(self, path, compression: str = "zstd", chunk_size: int = 4 << 20, window: int = 1 << 16, name=None):
-        from replay.outputs.mcap_bulk import BulkWriter
-
         self.w = BulkWriter(path, compression=compression, chunk_size=chunk_size, name=name)
         self.schemas, self.channels, self.count, self.window = {}, {}, 0, window
         self.plans: list[tuple] = []  # (channel id, sorted times, message order, encode)

@@ -29,7 +29,7 @@ import base64
 import html
 from pathlib import Path
 
-from replay.outputs import plots, report_plots, report_tables
+from replay.outputs import plots, report_plots, report_tables, robustness
 from replay.outputs.palette import Palette
 from replay.outputs.report_data import load
 
@@ -131,8 +131,6 @@ def _robustness(sections, pal, out: Path) -> list[str]:
     """The robustness sweeps of a campaign (``[[fault]]`` with ``sweep``): each one's table (metric
     per intensity, lost share, the robustness score, the time to recover after an outage) and its
     degradation curves; the tables also in ``robustness.md``."""
-    from replay.outputs import robustness
-
     parts, tables = [], []
     for sec in sections:
         for sweep in robustness.sweeps(sec.rows):

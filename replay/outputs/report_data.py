@@ -25,6 +25,9 @@ import numpy as np
 
 from replay.trajectory.recorded import is_recorded
 from replay.util.errors import ReplayError
+from replay.campaign import board
+from replay.campaign.store import Store
+from replay.campaign.board import read_dir
 
 
 @dataclass
@@ -75,9 +78,6 @@ def _unique(label: str, taken) -> str:
 
 
 def load_campaign(d: Path) -> list[Section]:
-    from replay.campaign import board
-    from replay.campaign.store import Store
-
     store = Store(d)
     rows = board.read_dir(d)
     by_hash = {r.get("config_hash"): r for r in rows}
@@ -118,8 +118,6 @@ def load_campaign(d: Path) -> list[Section]:
 
 
 def load_eval(d: Path) -> list[Section]:
-    from replay.campaign.board import read_dir
-
     rows = read_dir(d)
     try:
         cfg = json.loads((d / "manifest.json").read_text())["config"]

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from replay.data import faults
+from replay.outputs import plots
 
 
 def _float(v) -> float:
@@ -152,8 +153,6 @@ def markdown(sweep: dict, metric: str = "pos_rmse", series: dict | None = None) 
 
 def figure(sweep: dict, metric: str = "pos_rmse", palette=None):
     """The degradation curves of a sweep: intensity on x, the metric on y, a band of ± its 95 % half-width."""
-    from replay.outputs import plots
-
     lines, scores = table(sweep, metric)
     fig, axes = plots.figure()
     ax = axes[0, 0]
@@ -177,8 +176,6 @@ def figure(sweep: dict, metric: str = "pos_rmse", palette=None):
 def outage_figure(sweep: dict, series: dict, palette=None):
     """The position error over time across the longest outage of an outage sweep: per filter the
     median over the runs of the error norm at each scored step, the outage shaded; None for another fault."""
-    from replay.outputs import plots
-
     if sweep["fault"].split(":")[1] != "outage" or sweep["parameter"] != "d":
         return None
     t0 = float(re.search(r"t0=([0-9.eE+-]+)", sweep["fault"]).group(1))

@@ -28,6 +28,11 @@ from replay.trajectory.recorded import is_recorded
 from replay.util import covcols
 from replay.util.errors import DataError, ReplayError
 from replay.util.regular import read_text
+from replay.data import registry
+from replay.tasks import make_task
+from replay.util.seeds import DATA, TASK, rng_for
+from replay.scoring import summary
+from replay.campaign.store import RERUN_HINT, Store
 
 
 def is_campaign(path) -> bool:
@@ -91,10 +96,6 @@ def check_run(run, runs, where) -> None:
 def frame_and_problem(cfg: dict, run: int, data_dir=None):
     """The frame of ``run`` (a simulator draws it from the run's data stream) and the task problem
     rebuilt on the run's task stream, as the evaluation did."""
-    from replay.data import registry
-    from replay.tasks import make_task
-    from replay.util.seeds import DATA, TASK, rng_for
-
     dparams, tparams = dict(cfg.get("dataset_params") or {}), dict(cfg.get("task_params") or {})
     frame = registry.load_frame(
         cfg["dataset"],
@@ -120,9 +121,6 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
     prefixes). They must share the measurements (``replay.scoring.summary.group_key``); each is
     a track named by its leaderboard label (the filter, plus the parameters that differ).
     A configuration whose run is not stored (or damaged, or failed) is refused."""
-    from replay.scoring import summary
-    from replay.campaign.store import RERUN_HINT, Store
-
     select, store = {k: _split(v) for k, v in (select or {}).items()}, Store(out)
     chosen = [
         (h, c)

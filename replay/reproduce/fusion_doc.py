@@ -19,6 +19,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from replay.run.eval_options import EvalOptions
+from replay.run.evaluation import evaluate
+from replay.scoring import outages
+from replay.tune import check, repeat
+from replay.tune.options import TuneOptions
+from replay.util.errors import ReplayError
+from replay.util.files import write_atomic
 
 WINDOWS = {"outage": 30.0, "outage_every": 90.0}  # withheld windows where the recording has no outage of its own
 BOHAI_REF = (
@@ -61,10 +68,6 @@ def _dparams(rec, root):
 
 def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
     """The outage protocol at defaults: headline rows and each filter against hold-last-fix."""
-    from replay.run.eval_options import EvalOptions
-    from replay.run.evaluation import evaluate
-    from replay.scoring import outages
-
     options = EvalOptions(
         task="fusion",
         filters=list(filters),
@@ -88,9 +91,6 @@ def outage_result(rec, filters, runs, data_dir, bags_dir, root) -> dict:
 
 
 def tuned_result(rec, filters, trials, repeats, runs, data_dir, bags_dir, root, work) -> dict:
-    from replay.tune import check, repeat
-    from replay.tune.options import TuneOptions
-
     t = check.prepare(
         TuneOptions(
             dataset=_dataset(rec, bags_dir),
@@ -232,8 +232,6 @@ def _tuned_section(tr) -> list:
 
 def generate(recordings, out, work, *, filters, trials, repeats, runs, dirs, command):
     data_dir, bags_dir, root = dirs  # the Bohai folder, the bags' folder, the checkout (mappings)
-    from replay.util.errors import ReplayError
-    from replay.util.files import write_atomic
 
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)

@@ -7,6 +7,8 @@ from __future__ import annotations
 from replay.run.pipeline import build_problem, load_frame
 from replay.trajectory.recorded import RECORDED, is_recorded
 from replay.util.errors import ReplayError
+from replay.run.resources import available_memory, check_kept, check_particles
+from replay.adapters.bags import resolve_mapping
 
 
 def check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
@@ -36,8 +38,6 @@ def check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
 def check_memory(configs: list, runs: int, batch: int, data_dir) -> dict | None:
     """Before any work: refuse particles or kept runs that cannot fit in memory (:mod:`replay.run.resources`),
     sized on run 0's problem of the first configuration, which is returned ({0: problem}: not built twice)."""
-    from replay.run.resources import available_memory, check_kept, check_particles
-
     offline = [c for c in configs if not is_recorded(c.filter)]
     if not offline or (avail := available_memory()) is None:
         return
@@ -56,7 +56,6 @@ def check_recorded(dataset, names, dataset_params) -> None:
     mapping = (dataset_params or {}).get("mapping")
     if not wanted or mapping is None:
         return
-    from replay.adapters.bags import resolve_mapping
 
     declared = [e.name for e in resolve_mapping(mapping).estimates]
     unknown = [n for n in wanted if n not in declared]

@@ -17,6 +17,7 @@ from replay.filters.gating import per_filter
 from replay.run.pipeline import plain
 from replay.trajectory.recorded import RECORDED_PARAMS, is_recorded
 from replay.tasks import make_task
+import scipy
 
 
 def failures(ev) -> dict:
@@ -30,8 +31,6 @@ def failures(ev) -> dict:
 
 
 def versions() -> dict:
-    import scipy
-
     return {
         "replay": __version__,
         "python": platform.python_version(),

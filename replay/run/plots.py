@@ -23,12 +23,15 @@ import numpy as np
 from replay.run import tables
 from replay.trajectory.recorded import is_recorded
 from replay.util.series import joined, line
+from replay.tasks import role_input
+from replay.util.errors import ReplayError
 
 
 def _axes(ax, size=(7.0, 4.0)):
     if ax is not None:
         return ax.figure, ax
-    from matplotlib.figure import Figure
+    # lazy: start-up, the Python API (replay.api) imports this module: matplotlib measured ~1.1 s
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     fig = Figure(figsize=size, layout="constrained")
     return fig, fig.add_subplot()
@@ -104,9 +107,6 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
 
 def _gps(frame):
     """The frame's GPS position channel (found by role, as the tasks do), or None."""
-    from replay.tasks import role_input
-    from replay.util.errors import ReplayError
-
     try:
         found = role_input(frame, "gps", "plot_track")
     except ReplayError:

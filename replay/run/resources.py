@@ -24,7 +24,8 @@ def available_memory() -> int | None:
     """Bytes this process may still allocate (see the module docstring), or None when unknown."""
     avail = None
     try:
-        import psutil
+        # lazy: optional, psutil is not a dependency (the kernel's figures otherwise)
+        import psutil  # noqa: PLC0415
 
         avail = int(psutil.virtual_memory().available)
     except Exception:  # noqa: BLE001 — psutil absent or unusable: the kernel's own figures
@@ -37,7 +38,8 @@ def available_memory() -> int | None:
             except (ValueError, OSError, AttributeError):
                 avail = None
     try:
-        import resource
+        # lazy: POSIX only (no resource module on Windows)
+        import resource  # noqa: PLC0415
 
         soft = resource.getrlimit(resource.RLIMIT_AS)[0]
         if soft != resource.RLIM_INFINITY and soft > 0:

@@ -28,6 +28,8 @@ import math
 import numpy as np
 
 from replay.scoring import metrics
+from replay.filters import FILTERS
+from replay.scoring.summary import group_key, per_run
 
 COLUMNS = ("gap_to", "gap_m", "gap_m_ci95", "gap_ratio", "gap_ratio_ci95")
 
@@ -35,8 +37,6 @@ COLUMNS = ("gap_to", "gap_m", "gap_m_ci95", "gap_ratio", "gap_ratio_ci95")
 def offline(name: str) -> bool:
     """Whether the built-in filter ``name`` is a smoother (its class's ``OFFLINE``); plugins,
     recorded estimates and names that do not load: False (nothing is imported for them)."""
-    from replay.filters import FILTERS
-
     if not isinstance(name, str) or name not in FILTERS.builtin:
         return False
     try:
@@ -56,8 +56,8 @@ def _mean(row) -> float:
 def add_gap(rows: list[dict], configs: dict, records: dict) -> list[dict]:
     """Add the :data:`COLUMNS` to ``rows`` (in place; module docstring); ``configs``: config hash
     -> configuration, ``records``: config hash -> its run records."""
-    from replay.scoring.significance import t_interval  # scipy.stats: only where a smoother row ran
-    from replay.scoring.summary import group_key, per_run
+    # lazy: start-up, scipy.stats (measured ~2 s to import) only where a smoother row ran
+    from replay.scoring.significance import t_interval  # noqa: PLC0415
 
     groups = {}
     for row in rows:

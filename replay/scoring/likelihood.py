@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.kernels import LOG_2PI, gauss_logpdf
+from replay.filters import make_filter
+from replay.filters.noise_params import apply
 
 NLL_FILTERS = ("kf", "ekf", "ukf", "ckf")  # exact Kalman filters on a linear model
 
@@ -70,8 +72,6 @@ def of_run(config: dict, problem, est, series) -> dict:
     give it, computed under the filter's noise settings; ``{}`` otherwise."""
     if provides(config["filter"]) is not None or linear_matrices(problem.model) is None:
         return {}
-    from replay.filters import make_filter
-    from replay.filters.noise_params import apply
 
     model, P0 = apply(make_filter(config["filter"], **config["filter_params"]), problem.model, problem.P0[None])
     return {"nll": innovation_nll(problem, est, series["nis"], series["nis_dof"], model, P0[0])}

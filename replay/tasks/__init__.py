@@ -29,6 +29,7 @@ from replay.roles import SensorInput, of_role
 from replay.util.errors import ReplayError
 from replay.util.params import Declared, Param
 from replay.util.plugins import Registry, class_problem
+from replay.util.lookup import resolve
 
 
 def _check(obj):
@@ -132,8 +133,6 @@ class Task(Declared):
 
 def task_class(name: str) -> type[Task]:
     """The class registered as ``name``; an unknown name -> one-line ReplayError listing the known."""
-    from replay.util.lookup import resolve
-
     return resolve(TASKS, name, "task")
 
 

@@ -13,6 +13,7 @@ from replay.models.ungm import UNGM
 from replay.util.params import Param
 
 from . import Problem, Task
+from replay.util.errors import ReplayError
 
 
 class UNGMTask(Task):
@@ -43,8 +44,6 @@ class UNGMTask(Task):
     )
 
     def build(self, frame, rng):
-        from replay.util.errors import ReplayError
-
         if "z" not in frame.channels or "position" not in frame.reference:
             raise ReplayError("task ungm: needs a frame from sim/ungm (channel 'z', reference 'position')")
         meta = frame.meta

@@ -75,7 +75,8 @@ def _trial_of(row: dict):
 
 def frames(result) -> dict:
     """The per-pose, per-pair and per-sub-trajectory tables of a :class:`ScoreResult` (module docstring)."""
-    import pandas as pd
+    # lazy: start-up, pandas measured ~740 ms: `replay score` imports this module, pandas only for tables
+    import pandas as pd  # noqa: PLC0415
 
     ape = result.errors("ape")
     ref = np.concatenate([s.reference.p for s in result.scores.values()])
@@ -194,7 +195,8 @@ class Archive:
         self.path, self.meta, self.shown = path, meta, shown
 
     def table(self, name: str):
-        import pandas as pd
+        # lazy: start-up, pandas measured ~740 ms: `replay score` imports this module, pandas only for tables
+        import pandas as pd  # noqa: PLC0415
 
         f = self.path / f"{name}.parquet"
         return pd.read_parquet(f) if name + ".parquet" in self.meta["files"] else None
@@ -231,7 +233,8 @@ def load(path) -> Archive:
 def _agree(p: Path, shown: str, m: dict) -> None:
     """Every APE/RPE statistic of ``results.json`` recomputed from ``ape.parquet``/``rpe.parquet``
     (relative 1e-9): the numbers printed are those of the errors kept, whatever the checksums say."""
-    import pandas as pd
+    # lazy: start-up, pandas measured ~740 ms: `replay score` imports this module, pandas only for tables
+    import pandas as pd  # noqa: PLC0415
 
     tables = {}
     for e in m["estimates"]:

@@ -32,6 +32,7 @@ from replay.trajectory.base import Trajectory, make
 from replay.util.errors import DataError
 from replay.util.tf_tree import compose, path_between, tf_edges
 from replay.util.tf_tree import seconds as _seconds, xyz as _xyz, xyzw as _xyzw
+from replay.adapters.geodesy import Geo
 
 POSE_TYPES = (
     "nav_msgs/msg/Odometry",
@@ -50,7 +51,8 @@ def read_recording(path, topics):
 
 
 def _read(path: Path, topics):
-    from replay.adapters.bags import read
+    # lazy: start-up, the bags package measured ~120-200 ms on `import replay.trajectory`
+    from replay.adapters.bags import read  # noqa: PLC0415
 
     rec = read(path, topics=topics)
     if rec.truncated:
@@ -127,8 +129,6 @@ def read_topic(path, topic: str, *, name: str = "", rec=None) -> Trajectory:
 
 
 def _fixes(src: str, msgs, t: np.ndarray, name: str, ns: np.ndarray) -> Trajectory:
-    from replay.adapters.geodesy import Geo
-
     lat = np.array([m.latitude for m in msgs], float)
     lon = np.array([m.longitude for m in msgs], float)
     alt = np.array([m.altitude for m in msgs], float)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from replay.util.errors import DataError, shown
+from replay.trajectory import quat
 
 MIN_POSES = 3
 QUAT_COLUMNS = ("qx", "qy", "qz", "qw")  # of to_pandas / from_pandas
@@ -56,7 +57,8 @@ class Trajectory:
     def to_pandas(self):
         """The poses as a DataFrame: columns ``t`` (s), ``x, y, z`` (m) and, with an orientation,
         ``qx, qy, qz, qw``; ``attrs``: ``name``, ``source`` (the covariance is left out)."""
-        import pandas as pd
+        # lazy: start-up, pandas measured ~740 ms: the trajectory core stays numpy-only
+        import pandas as pd  # noqa: PLC0415
 
         cols = {"t": self.t, "x": self.p[:, 0], "y": self.p[:, 1], "z": self.p[:, 2]}
         if self.q is not None:
@@ -104,8 +106,6 @@ class Trajectory:
 
     def transformed(self, R: np.ndarray, t: np.ndarray, c: float = 1.0) -> Trajectory:
         """The trajectory moved by x -> c R x + t (orientations rotated by R, covariance by c R)."""
-        from replay.trajectory import quat
-
         R = np.asarray(R, float)
         p = c * self.p @ R.T + t
         q = None if self.q is None else quat.multiply(quat.from_matrix(R), self.q)

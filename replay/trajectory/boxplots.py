@@ -57,7 +57,8 @@ def _group(name: str) -> str:
 
 def figure(boxes: list, over_time=None):
     """A figure of the panels (:func:`panels`); ``over_time``: ``(ylabel, {name: (t, values)})`` drawn on top."""
-    from matplotlib.figure import Figure
+    # lazy: start-up, `replay score` imports this module and plots only on request: matplotlib measured ~1.1 s
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     n = len(boxes)
     ncols = min(3, max(n, 1))

@@ -26,6 +26,10 @@ import numpy as np
 from replay.trajectory import quat, stamps
 from replay.trajectory.base import Trajectory
 from replay.util.errors import ReplayError
+from pathlib import Path
+from replay.util.regular import read_bytes
+from mcap.writer import CompressionType, Writer
+from rosbags.typesys import Stores, get_typestore
 
 FORMATS = ("tum", "kitti", "euroc", "csv", "mcap")
 SUFFIXES = {".tum": "tum", ".txt": "tum", ".kitti": "kitti", ".csv": "csv", ".mcap": "mcap"}
@@ -34,8 +38,6 @@ EUROC_HEADER = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w []
 
 def fmt_of(path, fmt: str | None) -> str:
     """The output format: ``fmt``, else the extension's (.tum/.txt TUM, .kitti, .csv plain CSV, .mcap)."""
-    from pathlib import Path
-
     if fmt is not None:
         if fmt not in FORMATS:
             raise ReplayError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
@@ -92,10 +94,6 @@ def kitti_times(tr: Trajectory) -> str:
 def refuse_other_times(times, tr: Trajectory) -> None:
     """Refuse a ``times.txt`` that exists and holds other stamps than ``tr``'s: it belongs to other KITTI
     poses in that directory, which it would re-time (``replay convert --force`` replaces it)."""
-    from pathlib import Path
-
-    from replay.util.regular import read_bytes
-
     p = Path(times)
     if not p.is_file():
         return
@@ -113,9 +111,6 @@ def refuse_other_times(times, tr: Trajectory) -> None:
 
 def write_mcap(path, tr: Trajectory, *, topic: str = "/pose", frame_id: str = "map") -> int:
     """``tr`` as ``geometry_msgs/msg/PoseStamped`` messages on ``topic`` of a new MCAP file; returns the count."""
-    from mcap.writer import CompressionType, Writer
-    from rosbags.typesys import Stores, get_typestore
-
     check(tr, "mcap")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types

@@ -35,6 +35,7 @@ from replay.trajectory.base import Trajectory, make
 from replay.trajectory.layout import TIME_UNITS
 from replay.util.errors import DataError
 from replay.util.regular import read_bytes
+from replay.adapters.rosmsg import rpy_to_quat
 
 FORMATS = ("tum", "kitti", "euroc", "csv")
 ROT_TOL = 1e-3
@@ -279,8 +280,6 @@ def read_csv(
     if "qw" in index:
         q = np.column_stack([col("qx"), col("qy"), col("qz"), col("qw")])
     elif "yaw" in index:
-        from replay.adapters.rosmsg import rpy_to_quat
-
         zero = np.zeros(len(m))
         q = rpy_to_quat(
             np.column_stack(

@@ -28,6 +28,8 @@ from replay.util.errors import ReplayError
 from replay.trajectory.plot_series import REFERENCE, first_stamp
 from replay.trajectory.plot_series import rpy as rpy_figure
 from replay.trajectory.plot_series import xyz as xyz_figure
+from replay.util import outfile
+import logging
 
 
 FORMATS = ("png", "pdf", "svg", "eps")  # the extensions --plot writes
@@ -97,7 +99,8 @@ def draw_track(ax, p, cols, **kw):
 
 def figure(reference, scores: dict, *, relation: str | None = None, mode: str = "xy"):
     """The ``trajectories`` figure of the full ``reference`` and ``scores`` {name: Score}."""
-    from matplotlib.figure import Figure
+    # lazy: start-up, `replay score` imports this module and plots only on request: matplotlib measured ~1.1 s
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     cols = check_mode(mode)
     with_rpe = any(s.rpe for s in scores.values())
@@ -160,8 +163,9 @@ def rpe_times(s, rel: str, t0: float):
 
 def error_map(reference, scores: dict, *, relation: str | None = None, mode: str = "xy"):
     """The ``map`` figure: one panel per estimate, its aligned track coloured by its APE (colour bar)."""
-    from matplotlib.collections import LineCollection
-    from matplotlib.figure import Figure
+    # lazy: start-up, `replay score` imports this module and plots only on request: matplotlib measured ~1.1 s
+    from matplotlib.collections import LineCollection  # noqa: PLC0415
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     cols = check_mode(mode)
     have = {name: s for name, s in scores.items() if relation_of(s, relation) in s.ape}
@@ -187,7 +191,8 @@ def error_map(reference, scores: dict, *, relation: str | None = None, mode: str
         segs = np.stack([pts[:-1], pts[1:]], axis=1)
         err = s.ape[rel]
         if len(cols) == 3:
-            from mpl_toolkits.mplot3d.art3d import Line3DCollection as Lines
+            # lazy: start-up, `replay score` imports this module and plots only on request: matplotlib measured ~1.1 s
+            from mpl_toolkits.mplot3d.art3d import Line3DCollection as Lines  # noqa: PLC0415
         else:
             Lines = LineCollection
         lc = Lines(segs, cmap="jet", lw=2.0, gid=name, label=name)
@@ -241,10 +246,6 @@ def write(
     each atomically, creating missing parent directories; returns (paths written, paths removed: a
     figure of an earlier call that this one does not draw, e.g. ``_rpy`` without orientations, which
     would otherwise be taken for this call's). An unsupported extension or a write error is one line."""
-    from replay.util import outfile
-
-    import logging
-
     outfile.check(path, what, FORMATS)
     where, written = paths(path), []
     ps = logging.getLogger("matplotlib.backends.backend_ps")  # "no transparency" for every eps: rendered opaque

@@ -7,6 +7,7 @@ z-y-x (evo's ``sxyz`` Euler angles), in (-180, 180] deg.
 from __future__ import annotations
 
 import numpy as np
+from replay.trajectory import quat
 
 
 AXES = ("x", "y", "z")
@@ -23,8 +24,6 @@ def first_stamp(scores) -> float:
 
 def euler_deg(q) -> np.ndarray:
     """(n, 3) roll, pitch, yaw in degrees of unit quaternions ``q`` (n, 4: x y z w)."""
-    from replay.trajectory import quat
-
     R = quat.to_matrix(np.asarray(q, float))
     roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
     pitch = -np.arcsin(np.clip(R[:, 2, 0], -1.0, 1.0))
@@ -33,7 +32,8 @@ def euler_deg(q) -> np.ndarray:
 
 
 def _panels(reference, scores: dict, ref_values, values_of, names, unit: str, title: str):
-    from matplotlib.figure import Figure
+    # lazy: start-up, `replay score` imports this module and plots only on request: matplotlib measured ~1.1 s
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     fig = Figure(figsize=(11.0, 7.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)

@@ -15,6 +15,8 @@ from replay.scoring.align import ALIGNMENTS, align, apply
 from replay.trajectory.associate import associate_times
 from replay.util.errors import ReplayError
 from replay.util.params import Param, validate
+from replay.filters.base import Estimates
+from replay.scoring.metrics import run_metrics
 
 RECORDED = "recorded:"  # the filter name of a recorded estimate's configuration: recorded:<name>
 RECORDED_PARAMS = (
@@ -63,8 +65,6 @@ def recorded_estimates(problem, name: str, params: dict):
     block where recorded and positive definite (NEES), NaN elsewhere. Fewer than 3
     associated poses: one line naming the file and topic.
     """
-    from replay.filters.base import Estimates  # here: importing the filters costs ~50 MB
-
     rec = getattr(problem, "recorded", {}).get(name)
     src = getattr(problem, "source", "dataset")
     if rec is None:
@@ -123,8 +123,6 @@ UNALIGNED = ("pos_rmse", "nees", "lost")
 def unaligned_metrics(problem, est, divergence_threshold=None) -> dict:
     """``pos_rmse_unaligned``, ``nees_unaligned``, ``lost_unaligned``: the numbers of a recorded track
     before its ``align`` fit (empty when it was not moved), beside the aligned ones of every column."""
-    from replay.scoring.metrics import run_metrics
-
     raw = est.info.get("unaligned")
     if raw is None:
         return {}

@@ -21,6 +21,7 @@ from __future__ import annotations
 from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
 
 import numpy as np
+from replay.util.errors import DataError
 
 NS = 10**9
 TOL_NS = 1000  # kept stamps further than this from the float stamps are not the trajectory's (never used)
@@ -66,8 +67,6 @@ def fits(t) -> bool:
 def ns_of(tr) -> np.ndarray:
     """The stamps of ``tr`` in integer ns: the kept ones (:attr:`Trajectory.ns`) when they are the
     trajectory's, else :func:`of_floats`; a stamp beyond int64 ns is refused in one line naming the source."""
-    from replay.util.errors import DataError
-
     if not fits(tr.t):
         top = float(np.max(np.abs(tr.t)))
         raise DataError(

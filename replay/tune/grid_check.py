@@ -20,6 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from replay.util.errors import ReplayError
+from replay.campaign import execute
+from replay.campaign.lock import locked
+from .grid import points
+from .run import Runner
 
 MAX_POINTS = 400
 
@@ -34,12 +38,6 @@ def axis(d, g: int) -> list:
 
 def distances(t, out, tuned_rows: list[dict], g: int) -> list[dict]:
     """One row per filter (module docstring); ``tuned_rows``: the first tune's board rows."""
-    from replay.campaign import execute
-    from replay.campaign.lock import locked
-
-    from .grid import points
-    from .run import Runner
-
     if g < 2:
         raise ReplayError(f"--tune-grid {g}: at least 2 points per parameter")
     out = Path(out)

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 from replay.util.errors import ReplayError
 from replay.util.params import Param
+from replay.data import views
+from replay.run.pipeline import load_frame
 
 MIN_SAMPLES = Param(
     "min_samples",
@@ -51,9 +53,6 @@ class Part:
 def read(dataset: str, params: dict, *, seed: int, first, data_dir, ref, where: str) -> Part:
     """The :class:`Part` of ``dataset`` under ``params`` (canonical, views included); ``where``
     names the option that made it in the one-line refusals (a view that keeps too little)."""
-    from replay.data import views
-    from replay.run.pipeline import load_frame
-
     chosen, own = views.split(params)
     cfg = {"dataset": ref.id, "dataset_params": own, "first": None, "seed": seed, "adapter": None}
     base = load_frame(cfg, 0, data_dir, ds=ref.entry)  # the whole recording (cached per file)

@@ -28,6 +28,9 @@ import numpy as np
 from replay.campaign.store import Store
 from replay.run.pipeline import config_hash
 from replay.scoring.significance import t_interval
+from replay.filters import make_filter
+from replay.util.errors import ReplayError
+from .run import tune
 
 REPEATS = 3  # tunes per filter, each with its own sampler seed
 STRIDE = 1000  # tune k's seeds: the given ones + STRIDE * k
@@ -37,8 +40,6 @@ PARTICLES = "[100, 2000]"
 
 def default_space(filters) -> list[tuple[str, str, str]]:
     """The search-space entries (:func:`replay.tune.space.entries_from_cli`'s form) of the module docstring."""
-    from replay.filters import make_filter
-
     out = []
     for f in filters:
         out += [(f"{f}.q_scale", SCALES, "--tune"), (f"{f}.r_scale", SCALES, "--tune")]
@@ -50,10 +51,6 @@ def default_space(filters) -> list[tuple[str, str, str]]:
 def run_repeats(t, out, repeats: int = REPEATS, *, quiet: bool = False, **backend) -> dict:
     """Tune ``t`` (a checked :class:`replay.tune.run.Tune`) ``repeats`` times; returns
     ``{"rows": per filter and kind, "pairs": every tuned pair, "tunes": [each tune's result]}``."""
-    from replay.util.errors import ReplayError
-
-    from .run import tune
-
     if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 2:
         raise ReplayError(f"--tune-repeats {repeats}: at least 2 tunes (an interval over tunes needs two)")
     out = Path(out)

@@ -15,6 +15,10 @@ import math
 from pathlib import Path
 
 from replay.util.errors import ReplayError
+from replay.outputs import plots
+from replay.outputs.report import STYLE
+from . import study as studies
+import optuna
 
 
 def is_tune_dir(d: Path) -> bool:
@@ -22,13 +26,6 @@ def is_tune_dir(d: Path) -> bool:
 
 
 def make_report(d: Path, out: Path | None = None) -> Path:
-    import optuna
-
-    from replay.outputs import plots
-    from replay.outputs.report import STYLE
-
-    from . import study as studies
-
     d = Path(d)
     out = Path(out) if out else d / "report"
     out.mkdir(parents=True, exist_ok=True)

@@ -36,14 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from replay.util.errors import ReplayError
+from urllib.parse import quote
+import optuna
 
 ATTR = "replay_fingerprint"
 N_STARTUP = 10  # random trials before TPE models the history (Optuna's default)
 
 
 def _optuna():
-    import optuna
-
     optuna.logging.set_verbosity(logging.WARNING)
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
     return optuna
@@ -71,7 +71,6 @@ def check_file(path: Path, units=None) -> None:
     path = Path(path)
     if not path.exists():
         return
-    from urllib.parse import quote
 
     try:
         # read-write, not read-only: a journal left hot by a killed tune is rolled back (SQLite's own

@@ -9,6 +9,7 @@ from io import StringIO
 from pathlib import Path
 
 import numpy as np
+from replay.util.errors import ReplayError
 
 
 def write_atomic(path, text: str) -> None:
@@ -92,8 +93,6 @@ def refuse_overlap(out, inputs, what: str = "output") -> Path:
     is the input. Returns the resolved output path. Raises :class:`ReplayError` with one
     line naming both paths.
     """
-    from replay.util.errors import ReplayError
-
     target = Path(out).resolve()
     for src in inputs:
         if src is None:
@@ -110,8 +109,6 @@ def refuse_overlap(out, inputs, what: str = "output") -> Path:
 
 def check_writable(out, what: str = "output") -> None:
     """Refuse, before any computation, an output whose nearest existing parent is not writable."""
-    from replay.util.errors import ReplayError
-
     p = Path(out).resolve()
     probe = p if p.exists() else next((q for q in p.parents if q.exists()), None)
     if probe is not None and probe.exists() and not probe.is_dir():

@@ -180,7 +180,8 @@ def index_lock(index_path: str, exclusive: bool = True):
     for at most :data:`LOCK_WAIT` (then, or where there is no ``flock`` or no directory yet, the block
     runs unlocked, as numba's own load and save do)."""
     try:
-        import fcntl
+        # lazy: POSIX only (no fcntl on Windows: the block runs unlocked)
+        import fcntl  # noqa: PLC0415
 
         fd = os.open(index_path + ".lock", os.O_CREAT | os.O_RDWR, 0o600)
     except (ImportError, OSError):

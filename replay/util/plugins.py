@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from importlib import import_module
 
 from replay.util.errors import ReplayError
+from replay.util.params import Param
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_+-]*")  # usable in --filters a,b and in -p NAME.param=...
 _IDENT = r"[A-Za-z_]\w*"
@@ -295,8 +296,6 @@ def describe(obj) -> str:
 
 def declaration_problem(params) -> str | None:
     """What is wrong with a ``PARAMS`` declaration (:mod:`replay.util.params`), or None."""
-    from replay.util.params import Param
-
     if not isinstance(params, (tuple, list)):
         return f"PARAMS must be a tuple of replay.util.params.Param (got {type(params).__name__})"
     seen = set()
