@@ -66,7 +66,8 @@ def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = N
     ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``, and
     ``progress``; they become one record, passed whole to :func:`replay.run.evaluation.evaluate`.
     """
-    from replay.run.evaluation import evaluate as run  # lazy: module comment
+    # lazy: module comment
+    from replay.run.evaluation import evaluate as run  # noqa: PLC0415
 
     names, params = filter_names(filters, filter_params)
     progress = options.pop("progress", None)
@@ -77,7 +78,8 @@ def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict
     """(names, filter_params) of ``filters`` given as names, classes or instances."""
     if isinstance(filters, str):
         filters = [f.strip() for f in filters.split(",") if f.strip()]
-    from replay.filters.base import Filter  # lazy: module comment
+    # lazy: module comment
+    from replay.filters.base import Filter  # noqa: PLC0415
 
     if not isinstance(filters, (list, tuple)) or not all(
         isinstance(f, (str, Filter)) or inspect.isclass(f) and issubclass(f, Filter) for f in filters
@@ -150,7 +152,8 @@ def run_campaign(
     A filter or task the file names as ``package.module:Class`` is refused before anything is
     imported unless ``allow_modules`` holds its module (a class of this session: register it)."""
 
-    from replay.campaign import execute, lock, spec  # lazy: module comment
+    # lazy: module comment
+    from replay.campaign import execute, lock, spec  # noqa: PLC0415
 
     c = spec.load(campaign, allow_modules)
     lock.output_set(out, [c.data_dir, data_dir], what="out").check()  # the rule of the CLI's --out
@@ -165,13 +168,16 @@ def campaign_results(out, *, runs: bool = False):
     """A result directory (a campaign's, or a ``replay eval`` output) as one DataFrame: its
     leaderboard rows; ``runs=True``: one row per configuration and run with every per-run metric
     (a campaign's units, or an eval output's ``runs.csv``)."""
-    from replay.campaign import board  # lazy: module comment
+    # lazy: module comment
+    from replay.campaign import board  # noqa: PLC0415
 
     if not runs:
         return _rows(board.read_dir(out))
-    import pandas as pd  # lazy: module comment
+    # lazy: module comment
+    import pandas as pd  # noqa: PLC0415
 
-    from replay.campaign.store import Store  # lazy: module comment
+    # lazy: module comment
+    from replay.campaign.store import Store  # noqa: PLC0415
 
     if not Path(out).is_dir():
         raise ReplayError(
@@ -201,7 +207,8 @@ def campaign_results(out, *, runs: bool = False):
 def _eval_runs(out):
     """The per-run rows of a ``replay eval`` output (``runs.csv``; floats read back bit for bit)."""
 
-    import pandas as pd  # lazy: module comment
+    # lazy: module comment
+    import pandas as pd  # noqa: PLC0415
 
     path = out / "runs.csv"
     if not path.is_file():
@@ -233,7 +240,8 @@ def _eval_runs(out):
 
 
 def _rows(rows):
-    import pandas as pd  # lazy: module comment
+    # lazy: module comment
+    import pandas as pd  # noqa: PLC0415
 
     return pd.DataFrame(rows, columns=summary.columns(rows) if rows else None)
 
@@ -248,9 +256,14 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
     """Write run ``run`` of an evaluation (reference, each filter's track and error, the sensors)
     as a Foxglove MCAP file; returns the number of messages. ``data_dir``: where the dataset
     was found (the frame is read again). An existing file is replaced only if replay wrote it."""
-    from replay.outputs.export_mcap import write_mcap  # lazy: module comment
-    from replay.outputs.export_safety import check_target, dataset_inputs  # lazy: module comment
-    from replay.run.pipeline import load_frame as frame_of_run  # lazy: module comment
+    # lazy: module comment
+    from replay.outputs.export_mcap import write_mcap  # noqa: PLC0415
+
+    # lazy: module comment
+    from replay.outputs.export_safety import check_target, dataset_inputs  # noqa: PLC0415
+
+    # lazy: module comment
+    from replay.run.pipeline import load_frame as frame_of_run  # noqa: PLC0415
 
     cfg = evaluation.results[0].config
     check_target(
@@ -273,7 +286,8 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
 def list_plugins():
     """Every plugin (entry point) of the four groups, and every problem: a DataFrame with
     ``kind, name, origin, target, problem`` (``replay list plugins`` prints the same)."""
-    import pandas as pd  # lazy: module comment
+    # lazy: module comment
+    import pandas as pd  # noqa: PLC0415
 
     return pd.DataFrame(plugin_rows(), columns=["kind", "name", "origin", "target", "problem"])
 

@@ -14,12 +14,14 @@ chained as its cause).
 from __future__ import annotations
 
 import functools
+import importlib
 import inspect
 import os
 from dataclasses import dataclass, replace
 
 from replay.scoring.align import ALIGNMENTS
 from replay.run.eval_options import BY_NAME as EVAL
+from replay.run.failures import describe
 from replay.scoring.summary import MIN_SCORED_SHARE
 from replay.trajectory.files import FORMATS
 from replay.trajectory.pose_error import DELTA_UNITS, EVO_NAMES, RELATIONS
@@ -39,8 +41,6 @@ class Kind:
     optional: bool = False
 
     def check(self, value, owner: str = ""):
-        import importlib
-
         wants = [getattr(importlib.import_module(m), a) for m, _, a in (o.partition(":") for o in self.of.split("|"))]
         ok = (value is None and self.optional) or any(
             inspect.isclass(value) and issubclass(value, w) if self.cls else isinstance(value, w) for w in wants
@@ -298,8 +298,6 @@ def checked(name: str, fn):
         except ReplayError:
             raise
         except GUARDED + (MemoryError,) as err:
-            from replay.run.failures import describe
-
             raise ReplayError(f"replay.{name}: {describe(err)[:300]}") from err
 
     return call

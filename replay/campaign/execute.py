@@ -125,7 +125,8 @@ def _serial(jobs):
 def _processes(workers: int):
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
-        import pyarrow.parquet  # noqa: F401 -- lazy on purpose: only a forked pool's parent needs it
+        # lazy: only a forked pool's parent needs it
+        import pyarrow.parquet  # noqa: F401, PLC0415
     frozen = method == "fork" and not gc.get_freeze_count()
     if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
         gc.freeze()
@@ -147,7 +148,8 @@ def _processes(workers: int):
 @contextmanager
 def _dask(scheduler: str | None, n_local: int | None, connect_timeout: float):
     try:
-        from distributed import Client, LocalCluster, as_completed  # lazy: an optional extra, heavy to import
+        # lazy: an optional extra, heavy to import
+        from distributed import Client, LocalCluster, as_completed  # noqa: PLC0415
     except ImportError:
         raise ReplayError(
             "Dask is not installed: from a checkout of replay, pip install -e \".[campaign]\" "

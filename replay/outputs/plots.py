@@ -41,7 +41,8 @@ STAT = {"median": "median", "mean": "mean", "rmse": "RMSE"}
 def figure(nrows: int = 1, ncols: int = 1, figsize=(8, 4.5), **kw):
     """(Figure, axes array (nrows, ncols)) made without pyplot: no backend is switched, no global
     figure is kept (nothing to close; in a notebook the returned figure displays itself)."""
-    from matplotlib.figure import Figure  # lazy: 1.3 s to import (measured), only when a figure is drawn
+    # lazy: 1.3 s to import (measured), only when a figure is drawn
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     fig = Figure(figsize=figsize)
     return fig, fig.subplots(nrows, ncols, squeeze=False, **kw)
@@ -98,7 +99,8 @@ def mc_band(ax, t, values, color, name=None, q=(5, 95), stat="median", alpha=0.2
 
 def chi2_limits(dof, runs: int, p: float = 0.95):
     """Two-sided ``p`` band of the average of ``runs`` chi-square(``dof``) values (NaN where dof <= 0)."""
-    from scipy import stats  # lazy: 1.0 s to import (measured), only for a chi-square band
+    # lazy: 1.0 s to import (measured), only for a chi-square band
+    from scipy import stats  # noqa: PLC0415
 
     dof = np.asarray(dof, float)
     a = (1 - p) / 2
@@ -226,7 +228,8 @@ def save(fig, path, dpi: int = 100):
 
 def artist_colours(figures) -> dict:
     """{gid: set of '#rrggbb'} over every line, band, bar and marker of ``figures`` that carries a gid."""
-    from matplotlib.colors import to_hex  # lazy: matplotlib, as in figure()
+    # lazy: matplotlib, as in figure()
+    from matplotlib.colors import to_hex  # noqa: PLC0415
 
     out: dict[str, set] = {}
 

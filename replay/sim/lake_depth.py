@@ -293,7 +293,8 @@ def make_frame(rng: np.random.Generator, p) -> Frame:
 
 def write_example(path, rng: np.random.Generator, **params) -> Frame:
     """Write one synthetic lake-trial log (reference at half rate, one short and one long gap)."""
-    from replay.adapters.lake_write import write  # lazy: it imports pandas (0.55 s measured), for this file only
+    # lazy: it imports pandas (0.55 s measured), for this file only
+    from replay.adapters.lake_write import write  # noqa: PLC0415
 
     frame = make_frame(rng, **{**EXAMPLE, **params})
     write(

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from replay.models.kinematic import rotation as _rotation
 from replay.util.errors import ReplayError
 
 from .fusion_inputs import configured, field_channel
@@ -62,9 +63,7 @@ def twist_in_body(frame, entry, fld, vals, valid, where, key):
 
 
 def rotation(att):
-    from replay.models.kinematic import rotation as r
-
-    return r(att[:, 0], att[:, 1], att[:, 2])
+    return _rotation(att[:, 0], att[:, 1], att[:, 2])
 
 
 def evident_frame(t, pos, att, vel, valid, min_speed=0.2):

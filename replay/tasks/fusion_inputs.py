@@ -21,6 +21,7 @@ import numpy as np
 
 from replay import roles
 from replay.roles import Component, SensorInput, check_field_lists
+from replay.models.kinematic import rotation
 from replay.util.angles import wrap
 from replay.util.errors import ReplayError, shown
 
@@ -99,8 +100,6 @@ def differential(t, values, valid, attitude, field: str, where: str, body_rates:
     Euler-angle deltas over dt (the yaw rate of a 2-D state), or with ``body_rates`` the body
     rates of the relative rotation R_prev' R_cur (its rotation vector over dt; a 3-D state's
     p, q, r are body rates, not Euler-angle rates)."""
-    from replay.models.kinematic import rotation
-
     idx = np.flatnonzero(valid & np.isfinite(values).all(axis=1))
     if len(idx) < 2:
         raise ReplayError(f"{where}: a differential {field} needs at least 2 messages (got {len(idx)})")

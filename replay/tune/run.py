@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,12 +22,17 @@ from replay.campaign import execute
 from replay.campaign.lock import locked
 from replay.campaign.spec import Campaign
 from replay.campaign.store import Store
-from replay.util.files import write_json
+from replay.util.files import write_csv, write_json
 from replay.run.eval_options import DEFAULTS
-from replay.run.pipeline import Config, config_hash, plain
-from replay.util.progress import Progress
+from replay.run.evaluation import observes_position
+from replay.run.pipeline import Config, build_problem, config_hash, plain
+from replay.filters import make_filter
+from replay.scoring import summary
+from replay.tasks import make_task
+from replay.util.progress import Progress, particle_weight
 
 from . import objectives, study as studies
+from .space import _declared
 from .splits import Split
 from replay.tune.write import write_tuned
 
@@ -75,9 +81,6 @@ class Tune:
     batch: int = DEFAULTS["batch"]
 
     def config(self, dataset, dparams, seed, name, fparams, tparams) -> Config:
-        from replay.filters import make_filter
-        from replay.tasks import make_task
-
         task = plain(make_task(self.task, **{**self.task_params, **tparams}).params())
         return Config(
             dataset,
@@ -106,10 +109,6 @@ class Tune:
     def defaults(self, name: str) -> dict | None:
         """{key: default} of filter ``name``'s searched parameters, or None when a default lies outside
         the space (the first trial of a study is the defaults, so tuning never ends worse on training)."""
-        from replay.tasks import make_task
-
-        from .space import _declared
-
         have = {
             **{f"{name}.{p.name}": p.default for p in _declared(name)},  # params() leaves out default noise
             **{f"task.{k}": v for k, v in make_task(self.task, **self.task_params).params().items()},
@@ -180,8 +179,6 @@ def tune(
     """Run (or resume) every filter's study, score default and tuned configurations on the test
     data, write ``leaderboard.csv`` and ``tuned.toml``; returns {"rows", "budget", "paths"}.
     ``store_dir``: where the units are stored (default ``out``; a campaign's tunes share one)."""
-    from contextlib import ExitStack
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     units = Path(store_dir) if store_dir is not None else out
@@ -221,8 +218,6 @@ def tune(
                 rows = _board(t, run, opened, lambda name: progress.update(1, weight=cost[name]["test"]))
         finally:
             progress.close()
-        from replay.util.files import write_csv
-
         marked = [
             k
             for k in ("still", "reference_input", "reference", "reference_shares", "unconstrained")
@@ -266,7 +261,6 @@ def _asked(t: Tune) -> dict:
 def _cost(cfgs: list[Config], runs: int) -> float:
     """The expected cost of ``runs`` runs of each configuration (:func:`particle_weight`), each in
     proportion to its share of the log (a view ``segment = "A:B"``: B - A)."""
-    from replay.util.progress import particle_weight
 
     def share(c):
         a, _, b = str(c.dataset_params.get("segment", "0:1")).partition(":")
@@ -323,9 +317,6 @@ def _board(t: Tune, run: Runner, opened: dict, done) -> list[dict]:
 def _measurements_row(t: Tune, run: Runner) -> list[dict]:
     """The raw observations scored on the test data (the ``measurements`` row of ``replay eval``),
     where the task observes every position component directly: a filter worse than its input shows."""
-    from replay.run.evaluation import observes_position
-    from replay.run.pipeline import build_problem
-
     test = [
         t.config(d, p, t.split.test_seed if t.split.test_seed is not None else t.seed, "measurements", {}, {})
         for d, p in t.split.test
@@ -361,8 +352,6 @@ def _measurements_row(t: Tune, run: Runner) -> list[dict]:
 
 def _row(store, cfg: Config, recs) -> dict:
     """The leaderboard row (:func:`replay.scoring.summary.config_row`) of a configuration's stored records."""
-    from replay.scoring import summary
-
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
     sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
     return summary.config_row(

@@ -59,7 +59,8 @@ class Dim:
         return f"{'log' if self.kind == 'log' else ''}[{self.low!r}, {self.high!r}]"
 
     def distribution(self):
-        import optuna.distributions as d
+        # lazy: optuna takes ~1 s to import, only when a study is made (replay tune)
+        import optuna.distributions as d  # noqa: PLC0415
 
         if self.kind == "choice":
             return d.CategoricalDistribution(list(self.choices))

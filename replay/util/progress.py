@@ -29,7 +29,8 @@ def _listen() -> None:
     here: a download's progress does not load it)."""
     if _CLOCK["listening"] or "numba" not in sys.modules:
         return
-    from numba.core import event  # lazy: only when numba is loaded already (start-up time of the CLI)
+    # lazy: only when numba is loaded already (start-up time of the CLI)
+    from numba.core import event  # noqa: PLC0415
 
     class _Clock(event.Listener):
         def on_start(self, ev):
