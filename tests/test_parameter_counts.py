@@ -8,24 +8,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 10
 OVER = {  # file:function -> parameters, as measured when the rule was written
-    "filters/kalman_kernels.py:sigma_update_into": 26,
-    "filters/pf_loop.py:pf_run": 29,  # compiled; +5: the optimal proposal's arrays (issue 34)
     "replay/trajectory/scoring.py:score": 21, "filters/p002/compiled.py:swarm_move": 21,
     "filters/p002/compiled.py:cubature_step": 21, "replay/tune/check.py:prepare": 20,
     "filters/p002/compiled.py:cubature_threads": 20, "filters/p002/compiled.py:swarm": 19,
-    "filters/kalman_loops.py:sigma_run": 19, "replay/run/evaluation.py:evaluate": 18,
-    "filters/kalman_loops.py:sigma_update_subset": 18, "filters/kalman_kernels.py:joseph_update_into": 18,
-    "filters/kalman_kernels.py:sigma_update_gated": 18, "filters/kalman_loops.py:ekf_run": 17,
-    "replay/sim/sauv_current.py:make_frame": 16, "filters/kalman_kernels.py:sigma_update": 14,
+    "replay/run/evaluation.py:evaluate": 18,
+    "replay/sim/sauv_current.py:make_frame": 16,
     "filters/p002/compiled.py:fitness_rows": 13, "filters/p002/compiled.py:particle_fading": 13,
-    "filters/kalman_kernels.py:kalman_correct_into": 13, "filters/kalman_kernels.py:sigma_predict_into": 13,
     "replay/sim/uav_formation.py:make_frame": 12, "replay/outputs/plots.py:mc_figure": 12,
     "replay/campaign/execute.py:run": 12, "filters/p002/compiled_util.py:fading_factor": 12,
     "replay/sim/lake_depth.py:make_frame": 11, "replay/campaign/execute.py:_run_locked": 11,
-    "filters/p002/pso.py:optimize": 11, "filters/kalman_kernels.py:joseph_update_gated": 11,
-    "filters/kalman_kernels.py:sigma_predict": 11, "filters/kalman_kernels.py:innovation_moments_into": 11,
-    # compiled kernels (numba: arrays in, no records), added with the RTS smoothers (issue 39)
-    "filters/rts_loops.py:rts_correct": 14, "filters/rts_loops.py:sigma_smooth_run": 12,
+    "filters/p002/pso.py:optimize": 11,
 }
 
 

@@ -17,8 +17,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numba.core import config
+from numba.core import config, sigutils
 from numba.core.caching import Cache
+from numba.core.ccallback import CFunc
 from numba.core.dispatcher import Dispatcher
 
 from replay.util.kernel_cache import adopt, cache_key, count, unseal
@@ -60,9 +61,6 @@ def guard(module, label: str) -> int:
 def cfunc(fty, py, cached: bool, label: str = "a model"):
     """``numba.cfunc(fty.signature, cache=cached)(py)`` with its cache sealed before it is read,
     passed to a compiled function as the first-class function type ``fty`` without a check."""
-    from numba.core import sigutils
-    from numba.core.ccallback import CFunc
-
     res = CFunc(py, sigutils.normalize_signature(fty.signature), locals={}, options={})
     if cached:
         res.enable_caching()
@@ -80,9 +78,13 @@ def from_cache(loop, sig) -> bool:
 
 def _key(args):
     """What numba's typing of ``args`` depends on: dtype, dimensions and layout (C, F or neither) of
-    arrays, the type of anything else."""
+    arrays, the type and the fields' keys of a tuple (the packed arguments), the type of anything else."""
     return tuple(
-        (a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous) if isinstance(a, np.ndarray) else type(a)
+        (a.dtype.num, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous)
+        if isinstance(a, np.ndarray)
+        else (type(a), _key(a))
+        if isinstance(a, tuple)
+        else type(a)
         for a in args
     )
 
