@@ -10,8 +10,11 @@ over the leaves of :mod:`replay.util.kernels`. Every function takes stacks
 same loops, so a run's numbers do not depend on the other runs of its stack
 (one run is a stack of one). Each function's un-jitted ``py_func`` is the
 readable reference (``tests/pure.py``: equal bit for bit). The ``*_into`` forms take their
-work arrays from the caller (the whole-run loops of :mod:`replay.filters.kalman_loops` allocate
-them once per run, not once per step); the plain forms allocate them and call the ``_into`` form.
+work arrays from the caller, as one tuple ``work`` (the whole-run loops of
+:mod:`replay.filters.kalman_loops` allocate them once per run, not once per step); the plain forms
+allocate them and call the ``_into`` form. Arrays that travel together are packed into the
+namedtuples below (:data:`Rule`, :data:`Meas`, :data:`Points`; a gated update's
+:data:`replay.filters.gating.Gate`), so no kernel takes more than 10 arguments.
 """
 
 from __future__ import annotations
