@@ -238,10 +238,8 @@ def sigma_update_gated(meas, dev, rule, x, P, xmask, nis, pts, gates):
         np.empty((M, nz)),
         np.empty((M, nz, nz)),
         np.empty((M, n, nz)),
-        np.empty(nz),
-        np.empty((p, nz)),
-        np.empty((nz, nz)),
-        np.empty((n, nz)),
+        (np.empty(nz), np.empty((p, nz))),
+        (np.empty((nz, nz)), np.empty((n, nz))),
         np.empty((n, n)),
     )
     return sigma_update_into(meas, dev, rule, x, P, xmask, nis, pts, work, gates)
@@ -249,17 +247,18 @@ def sigma_update_gated(meas, dev, rule, x, P, xmask, nis, pts, gates):
 
 @nb.njit(cache=True)
 def sigma_update_into(meas, dev, rule, x, P, xmask, nis, pts, work, gates):
-    """:func:`sigma_update_gated` with its work arrays ``work`` given: y (M, nz), S (M, nz, nz),
-    Pxz (M, n, nz), zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz), L (n, n)."""
+    """:func:`sigma_update_gated` with its work arrays ``work`` = (y, S, Pxz, (zh, Dz), (Lz, K), L)
+    given: y (M, nz), S (M, nz, nz), Pxz (M, n, nz), zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz),
+    L (n, n) (the pairs as the callees take them: no tuple built per call)."""
     M, p, nz = meas.Z.shape
-    y, S, Pxz, zh, Dz, Lz, K, L = work
-    innovation_moments_into(meas.Z, dev, meas.z, rule.wm, rule.wc, meas.mask, y, S, Pxz, (zh, Dz))
+    y, S, Pxz, moments_work, correct_work, L = work
+    innovation_moments_into(meas.Z, dev, meas.z, rule.wm, rule.wc, meas.mask, y, S, Pxz, moments_work)
     R = meas.R
     for m in range(M):
         for a in range(nz):
             for b in range(nz):
                 S[m, a, b] += R[a, b]
-    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, (Lz, K), gates)
+    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, correct_work, gates)
     if bad >= 0:
         return bad
     bad = sigma_points_into(x, P, rule.xi, pts.X, pts.dev, L)

@@ -97,7 +97,7 @@ def sigma_update_subset(Zp, obs, k, rule, x, P, xmask, nis, pts, work):
     a = c + d + p * d
     Lz, K = work[a : a + d * d].reshape((d, d)), work[a + d * d : a + d * d + n * d].reshape((n, d))
     meas = Meas(Zc, z, Rs, zm[:d])
-    return sigma_update_into(meas, pts.dev, rule, x, P, xmask, nis, pts, (y, S, Pxz, zh, Dz, Lz, K, L), None)
+    return sigma_update_into(meas, pts.dev, rule, x, P, xmask, nis, pts, (y, S, Pxz, (zh, Dz), (Lz, K), L), None)
 
 
 SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, RULE, types.boolean, _MASK, _OUT)
@@ -127,7 +127,8 @@ def sigma_run(f, h, x, P, obs, par, rule, at_f, xmask, out):
     z, y, S, Pxz = np.empty((M, nz)), np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz))
     zh, Dz, Lz = np.empty(nz), np.empty((p, nz)), np.empty((nz, nz))
     work = np.empty(M * nz * (2 + p + nz + n) + nz * (1 + p + 2 * nz + n))  # of a subset's update
-    pts = Points(X, dev)
+    pts = Points(X, dev)  # the records and work tuples built once, not per step
+    predict_work, update_work, subset_work = (D, L), (y, S, Pxz, (zh, Dz), (Lz, K), L), (L, zm, work)
     if sigma_points_into(x, P, rule.xi, X, dev, L) >= 0:
         return 0
     xc = np.empty((M, n))
@@ -138,7 +139,7 @@ def sigma_run(f, h, x, P, obs, par, rule, at_f, xmask, out):
             for m in range(M):
                 wrap(xc[m], xmask)
             x[:] = xc
-        if sigma_predict_into(Y, rule, xmask, Q[k % Q.shape[0]], x, P, pts, (D, L), at_f) >= 0:
+        if sigma_predict_into(Y, rule, xmask, Q[k % Q.shape[0]], x, P, pts, predict_work, at_f) >= 0:
             return k
         d = sel[k, 0]
         if d == 0:
@@ -152,11 +153,10 @@ def sigma_run(f, h, x, P, obs, par, rule, at_f, xmask, out):
                 for q in range(nz):
                     z[m, q] = Z[m, k, q]
             meas = Meas(Zp, z, R[k % R.shape[0]], zmask)
-            work8 = (y, S, Pxz, zh, Dz, Lz, K, L)
-            bad = sigma_update_into(meas, dev, rule, x, P, xmask, nis[:, k], pts, work8, None)  # no gate: a
+            bad = sigma_update_into(meas, dev, rule, x, P, xmask, nis[:, k], pts, update_work, None)  # no gate: a
             # gated model steps in Python (kalman.run_kernels)
         else:  # the measured components
-            bad = sigma_update_subset(Zp, obs, k, rule, x, P, xmask, nis[:, k], pts, (L, zm, work))
+            bad = sigma_update_subset(Zp, obs, k, rule, x, P, xmask, nis[:, k], pts, subset_work)
         if 0 <= bad < M:
             return k
         Xout[:, k] = x

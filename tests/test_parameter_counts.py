@@ -8,14 +8,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 10
 OVER = {  # file:function -> parameters, as measured when the rule was written
-    "replay/trajectory/scoring.py:score": 21, "filters/p002/compiled.py:swarm_move": 21,
-    "filters/p002/compiled.py:cubature_step": 21, "replay/tune/check.py:prepare": 20,
-    "filters/p002/compiled.py:cubature_threads": 20, "filters/p002/compiled.py:swarm": 19,
+    "replay/trajectory/scoring.py:score": 21,
+    "replay/tune/check.py:prepare": 20,
     "replay/run/evaluation.py:evaluate": 18,
     "replay/sim/sauv_current.py:make_frame": 16,
-    "filters/p002/compiled.py:fitness_rows": 13, "filters/p002/compiled.py:particle_fading": 13,
     "replay/sim/uav_formation.py:make_frame": 12, "replay/outputs/plots.py:mc_figure": 12,
-    "replay/campaign/execute.py:run": 12, "filters/p002/compiled_util.py:fading_factor": 12,
+    "replay/campaign/execute.py:run": 12,
     "replay/sim/lake_depth.py:make_frame": 11, "replay/campaign/execute.py:_run_locked": 11,
     "filters/p002/pso.py:optimize": 11,
 }
