@@ -23,12 +23,13 @@ At every update, each group present is tested alone:
 
 Rejections are counted per run and group (``info["rejected"]``: group name -> count) and the
 rejected components leave the NIS and its degrees of freedom. A filter whose engine does not
-gate is refused on a gated model (:func:`check`), never run ungated in silence. Without gates the
-kernels take None for the gate arguments (that branch compiled away: no cost).
+gate is refused on a gated model (:func:`check`), never run ungated in silence. The kernels take a
+gated update's arrays as one :data:`Gate`; without gates, None (that branch compiled away: no cost).
 """
 
 from __future__ import annotations
 
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numba as nb
@@ -38,6 +39,8 @@ from replay.util.angles import residual
 from replay.util.errors import ReplayError
 from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 from replay.util.kernels import cholesky, whitened_norm2
+
+Gate = namedtuple("Gate", "group limit2 rej cut")  # a gated update's arrays (:meth:`Tally.args`)
 
 NO_GROUP = -1
 
@@ -87,10 +90,10 @@ class Tally:
         self.ids = self.ids[ok]
 
     def args(self, mask, n: int):
-        """(group, limit2, rej, cut) for a gated update of ``n`` runs with the components ``mask``."""
+        """The :data:`Gate` (group, limit2, rej, cut) of a gated update of ``n`` runs with the components ``mask``."""
         group = np.asarray(self.gates.group, np.int64)
         group = np.ascontiguousarray(group if mask is None else group[mask])
-        return group, self.gates.limit2, np.zeros((n, len(self.gates.names)), np.int64), np.zeros(n, np.int64)
+        return Gate(group, self.gates.limit2, np.zeros((n, len(self.gates.names)), np.int64), np.zeros(n, np.int64))
 
     def add(self, rej, rows=None):
         """Add an update's rejections ``rej`` (n, G) of the active runs ``rows`` (None: all)."""

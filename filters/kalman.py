@@ -75,7 +75,7 @@ def gain_nis(S, Pxz, y):
 def kalman_update(x, P, y, H, R, x_angles=(), gate=None):
     """The Kalman update (module docstring) over one run (x (nx,)) or a stack (M, nx): returns
     new x, P (Joseph form), NIS; compiled (:func:`replay.filters.kalman_kernels.joseph_update`),
-    gated with ``gate`` = (group, limit2, rej, cut) (:class:`replay.filters.gating.Tally`; None:
+    gated with ``gate``, a :data:`replay.filters.gating.Gate` (:class:`replay.filters.gating.Tally`; None:
     no gate). LinAlgError when an S is not positive definite."""
     one = x.ndim == 1
     x2, P3 = np.array(x[None] if one else x, dtype=float), np.array(P[None] if one else P, dtype=float)
@@ -89,7 +89,7 @@ def kalman_update(x, P, y, H, R, x_angles=(), gate=None):
         angle_mask(tuple(x_angles), x2.shape[1]),
         nis,
     )
-    bad = kernels.joseph_update(*args) if gate is None else kernels.joseph_update_gated(*args, *gate)
+    bad = kernels.joseph_update(*args) if gate is None else kernels.joseph_update_gated(*args, gate)
     if bad >= 0:
         raise not_pd(bad)
     return (x2[0], P3[0], nis[0]) if one else (x2, P3, nis)
@@ -161,8 +161,8 @@ class KalmanEngine:
         args = self.tally.args(mask, n)
 
         def done():
-            self.tally.add(args[2], rows)
-            return args[3]
+            self.tally.add(args.rej, rows)
+            return args.cut
 
         return args, done
 
@@ -240,10 +240,12 @@ def run_kernels(engine, Z, finite, kernels_needed, loop, sig, *args):
     X, PP, nis = np.empty((M, steps, m.nx)), np.empty((M, steps, m.nx, m.nx)), np.empty((M, steps))
     call = bound(loop, *row_kernels(m, kernels_needed))
     Z = np.ascontiguousarray(Z, dtype=float)
-    masks = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
+    xmask, zmask = np.array(angle_mask(m.x_angles, m.nx)), np.array(angle_mask(m.z_angles, nz))
+    par = kalman_loops.Params(*stacks, Q)
 
     def runs(lo, hi):  # the runs are independent: the same numbers on any thread
-        return call(x[lo:hi], P[lo:hi], Z[lo:hi], sel, *stacks, Q, R, *args, *masks, X[lo:hi], PP[lo:hi], nis[lo:hi])
+        obs, out = kalman_loops.Obs(Z[lo:hi], sel, R, zmask), kalman_loops.Out(X[lo:hi], PP[lo:hi], nis[lo:hi])
+        return call(x[lo:hi], P[lo:hi], obs, par, *args, xmask, out)
 
     t0 = perf_counter()
     bad = max(split(runs, M, grain=grain(4.0 * steps)))  # about 4 µs a run-step

@@ -10,11 +10,16 @@ over the leaves of :mod:`replay.util.kernels`. Every function takes stacks
 same loops, so a run's numbers do not depend on the other runs of its stack
 (one run is a stack of one). Each function's un-jitted ``py_func`` is the
 readable reference (``tests/pure.py``: equal bit for bit). The ``*_into`` forms take their
-work arrays from the caller (the whole-run loops of :mod:`replay.filters.kalman_loops` allocate
-them once per run, not once per step); the plain forms allocate them and call the ``_into`` form.
+work arrays from the caller, as one tuple ``work`` (the whole-run loops of
+:mod:`replay.filters.kalman_loops` allocate them once per run, not once per step); the plain forms
+allocate them and call the ``_into`` form. Arrays that travel together are packed into the
+namedtuples below (:data:`Rule`, :data:`Meas`, :data:`Points`; a gated update's
+:data:`replay.filters.gating.Gate`), so no kernel takes more than 10 arguments.
 """
 
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numba as nb
 from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
@@ -32,6 +37,13 @@ from replay.util.kernels import (
     whitened_norm2,
     wrap,
 )
+
+# The arrays that travel together, packed (numba takes namedtuples of arrays as arguments; their
+# fields unpack at no cost in the compiled code):
+Rule = namedtuple("Rule", "xi wm wc")  # a sigma-point rule: unit points xi (p, n), weights wm, wc (p,)
+Meas = namedtuple("Meas", "Z z R mask")  # the points' predicted measurements Z (M, p, nz), the
+# measurements z (M, nz), their noise R (nz, nz) and angle flags (nz,)
+Points = namedtuple("Points", "X dev")  # sigma points X (M, p, n) and their deviations from the mean
 
 
 @nb.njit(cache=True)
@@ -82,21 +94,21 @@ def kalman_correct(x, P, y, S, Pxz, xmask, nis):
     Returns the first run whose S is not positive definite (that run and the later ones are
     left as they were), or -1."""
     M, nx, nz = Pxz.shape
-    return kalman_correct_into(
-        x, P, y, S, Pxz, xmask, nis, np.empty((nz, nz)), np.empty((nx, nz)), None, None, None, None
-    )
+    return kalman_correct_into(x, P, y, S, Pxz, xmask, nis, (np.empty((nz, nz)), np.empty((nx, nz))), None)
 
 
 @nb.njit(cache=True)
-def kalman_correct_into(x, P, y, S, Pxz, xmask, nis, L, K, group, limit2, rej, cut):
-    """:func:`kalman_correct` with its work arrays L (nz, nz), K (nx, nz) given (the run loops
-    allocate them once per run, not once per step), after the gating of each run
-    (:func:`replay.filters.gating.gate`: ``group`` (nz,), ``limit2`` (G,); counts into rej (M, G),
-    the components cut into cut (M,))."""
+def kalman_correct_into(x, P, y, S, Pxz, xmask, nis, work, gates):
+    """:func:`kalman_correct` with its work arrays ``work`` = (L (nz, nz), K (nx, nz)) given (the run
+    loops allocate them once per run, not once per step), after the gating of each run
+    (:func:`replay.filters.gating.gate` with ``gates``, a :class:`replay.filters.gating.Gate`:
+    ``group`` (nz,), ``limit2`` (G,); counts into rej (M, G), the components cut into cut (M,);
+    None: no gate)."""
     M, nx, nz = Pxz.shape
+    L, K = work
     for m in range(M):
-        if limit2 is not None:  # None: no gate (that branch compiled away)
-            cut[m] = gate(y[m], S[m], Pxz[m], group, limit2, rej[m])
+        if gates is not None:  # None: no gate (that branch compiled away)
+            gates.cut[m] = gate(y[m], S[m], Pxz[m], gates.group, gates.limit2, gates.rej[m])
         g = gain(S[m], Pxz[m], y[m], L, K)
         if g < 0.0:
             return m
@@ -167,13 +179,14 @@ def innovation_moments(Z, dev, z, wm, wc, mask, y, Pzz, Pxz):
     measurement zh = sum wm_i Z_i (circular for ``mask``), Dz_i = Z_i - zh (wrapped),
     y = z - zh (wrapped), Pzz = sum wc_i Dz_i Dz_i', Pxz = sum wc_i dev_i Dz_i'."""
     M, p, nz = Z.shape
-    return innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, np.empty(nz), np.empty((p, nz)))
+    return innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, (np.empty(nz), np.empty((p, nz))))
 
 
 @nb.njit(cache=True)
-def innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, zh, Dz):
-    """:func:`innovation_moments` with its work arrays zh (nz,), Dz (p, nz) given."""
+def innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, work):
+    """:func:`innovation_moments` with its work arrays ``work`` = (zh (nz,), Dz (p, nz)) given."""
     M, p, nz = Z.shape
+    zh, Dz = work
     for m in range(M):
         point_mean(Z[m], wm, mask, zh)
         deviations(Z[m], zh, mask, Dz)
@@ -185,85 +198,70 @@ def innovation_moments_into(Z, dev, z, wm, wc, mask, y, Pzz, Pxz, zh, Dz):
 
 
 @nb.njit(cache=True)
-def sigma_predict(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, at_f=False):
+def sigma_predict(Y, rule, xmask, Q, mean, cov, pts, at_f=False):
     """The sigma-point prediction of each run m and the points of the update (one call per step):
-    :func:`sigma_moments` of the propagated points Y (M, p, n) into mean, cov (``at_f``: mean
-    given), then :func:`sigma_points` of (mean, cov) into X, dev. Returns -1, or the first run
+    :func:`sigma_moments` of the propagated points Y (M, p, n) with the weights of ``rule`` (a
+    :data:`Rule`) into mean, cov (``at_f``: mean given), then :func:`sigma_points` of (mean, cov)
+    with its unit points into ``pts`` (:data:`Points`: X, dev). Returns -1, or the first run
     whose predicted covariance is not positive definite (its points, and later runs', not made)."""
     n = Y.shape[2]
-    D, L = np.empty(Y.shape[1:]), np.empty((n, n))
-    return sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L, at_f)
+    return sigma_predict_into(Y, rule, xmask, Q, mean, cov, pts, (np.empty(Y.shape[1:]), np.empty((n, n))), at_f)
 
 
 @nb.njit(cache=True)
-def sigma_predict_into(Y, wm, wc, xmask, Q, xi, mean, cov, X, dev, D, L, at_f=False):
-    """:func:`sigma_predict` with its work arrays D (p, n), L (n, n) given."""
-    sigma_moments_into(Y, wm, wc, xmask, Q, mean, cov, D, at_f)
-    return sigma_points_into(mean, cov, xi, X, dev, L)
+def sigma_predict_into(Y, rule, xmask, Q, mean, cov, pts, work, at_f=False):
+    """:func:`sigma_predict` with its work arrays ``work`` = (D (p, n), L (n, n)) given."""
+    D, L = work
+    sigma_moments_into(Y, rule.wm, rule.wc, xmask, Q, mean, cov, D, at_f)
+    return sigma_points_into(mean, cov, rule.xi, pts.X, pts.dev, L)
 
 
 @nb.njit(cache=True)
-def sigma_update(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev):
+def sigma_update(meas, dev, rule, x, P, xmask, nis, pts):
     """:func:`sigma_update_gated` without gates."""
-    return sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, None, None, None, None)
+    return sigma_update_gated(meas, dev, rule, x, P, xmask, nis, pts, None)
 
 
 @nb.njit(cache=True)
-def sigma_update_gated(Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, group, limit2, rej, cut):
+def sigma_update_gated(meas, dev, rule, x, P, xmask, nis, pts, gates):
     """The sigma-point update of each run m, in place on x (M, n), P (M, n, n): the
-    :func:`innovation_moments` of the points' predictions Z (M, p, nz), then S = Pzz + R and
-    :func:`kalman_correct`; then the points X, Xdev (M, p, n) of the corrected (x, P)
-    (:func:`sigma_points`); gated as :func:`kalman_correct_into`. Returns -1; or 0 <= m < M,
-    the first run whose S is not positive definite (x, P of runs >= m unchanged, no points); or
-    M + m, the first run whose corrected P has no Cholesky factor (its points, and later runs', not made)."""
-    M, p, nz = Z.shape
+    :func:`innovation_moments` of the points' predictions ``meas.Z`` (M, p, nz) (``meas`` a
+    :data:`Meas`: with the measurements z, R, the angle flags; ``dev`` (M, p, n) the points' state
+    deviations), then S = Pzz + R and :func:`kalman_correct`; then the points ``pts`` (X, dev
+    (M, p, n)) of the corrected (x, P) (:func:`sigma_points`); gated as :func:`kalman_correct_into`.
+    Returns -1; or 0 <= m < M, the first run whose S is not positive definite (x, P of runs >= m
+    unchanged, no points); or M + m, the first run whose corrected P has no Cholesky factor (its
+    points, and later runs', not made)."""
+    M, p, nz = meas.Z.shape
     n = x.shape[1]
-    return sigma_update_into(
-        Z,
-        dev,
-        z,
-        wm,
-        wc,
-        zmask,
-        R,
-        x,
-        P,
-        xmask,
-        nis,
-        xi,
-        X,
-        Xdev,
+    work = (
         np.empty((M, nz)),
         np.empty((M, nz, nz)),
         np.empty((M, n, nz)),
-        np.empty(nz),
-        np.empty((p, nz)),
-        np.empty((nz, nz)),
-        np.empty((n, nz)),
+        (np.empty(nz), np.empty((p, nz))),
+        (np.empty((nz, nz)), np.empty((n, nz))),
         np.empty((n, n)),
-        group,
-        limit2,
-        rej,
-        cut,
     )
+    return sigma_update_into(meas, dev, rule, x, P, xmask, nis, pts, work, gates)
 
 
 @nb.njit(cache=True)
-def sigma_update_into(
-    Z, dev, z, wm, wc, zmask, R, x, P, xmask, nis, xi, X, Xdev, y, S, Pxz, zh, Dz, Lz, K, L, group, limit2, rej, cut
-):
-    """:func:`sigma_update` with its work arrays given: y (M, nz), S (M, nz, nz), Pxz (M, n, nz),
-    zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz), L (n, n); the gates and their counts."""
-    M, p, nz = Z.shape
-    innovation_moments_into(Z, dev, z, wm, wc, zmask, y, S, Pxz, zh, Dz)
+def sigma_update_into(meas, dev, rule, x, P, xmask, nis, pts, work, gates):
+    """:func:`sigma_update_gated` with its work arrays ``work`` = (y, S, Pxz, (zh, Dz), (Lz, K), L)
+    given: y (M, nz), S (M, nz, nz), Pxz (M, n, nz), zh (nz,), Dz (p, nz), Lz (nz, nz), K (n, nz),
+    L (n, n) (the pairs as the callees take them: no tuple built per call)."""
+    M, p, nz = meas.Z.shape
+    y, S, Pxz, moments_work, correct_work, L = work
+    innovation_moments_into(meas.Z, dev, meas.z, rule.wm, rule.wc, meas.mask, y, S, Pxz, moments_work)
+    R = meas.R
     for m in range(M):
         for a in range(nz):
             for b in range(nz):
                 S[m, a, b] += R[a, b]
-    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, Lz, K, group, limit2, rej, cut)
+    bad = kalman_correct_into(x, P, y, S, Pxz, xmask, nis, correct_work, gates)
     if bad >= 0:
         return bad
-    bad = sigma_points_into(x, P, xi, X, Xdev, L)
+    bad = sigma_points_into(x, P, rule.xi, pts.X, pts.dev, L)
     return -1 if bad < 0 else M + bad
 
 
@@ -291,11 +289,11 @@ def propagate_cov_into(F, P, Q, out, FP):
 @nb.njit(cache=True)
 def joseph_update(x, P, y, H, R, xmask, nis):
     """:func:`joseph_update_gated` without gates."""
-    return joseph_update_gated(x, P, y, H, R, xmask, nis, None, None, None, None)
+    return joseph_update_gated(x, P, y, H, R, xmask, nis, None)
 
 
 @nb.njit(cache=True)
-def joseph_update_gated(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
+def joseph_update_gated(x, P, y, H, R, xmask, nis, gates):
     """The Kalman update in Joseph form, in place on each run m of x (M, n), P (M, n, n), with
     innovations y (M, nz), measurement Jacobians H (M, nz, n) and R (nz, nz) (Bar-Shalom et al.
     2001, §5.2), after the gating of each run (:func:`replay.filters.gating.gate` on S and P H'):
@@ -307,14 +305,7 @@ def joseph_update_gated(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
     left as they were), or -1."""
     M, n = x.shape
     nz = y.shape[1]
-    return joseph_update_into(
-        x,
-        P,
-        y,
-        H,
-        R,
-        xmask,
-        nis,
+    work = (
         np.empty((n, nz)),
         np.empty((nz, nz)),
         np.empty((n, nz)),
@@ -322,19 +313,17 @@ def joseph_update_gated(x, P, y, H, R, xmask, nis, group, limit2, rej, cut):
         np.empty((n, n)),
         np.empty((n, n)),
         np.empty((n, nz)),
-        group,
-        limit2,
-        rej,
-        cut,
     )
+    return joseph_update_into(x, P, y, H, R, xmask, nis, work, gates)
 
 
 @nb.njit(cache=True)
-def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR, group, limit2, rej, cut):
-    """:func:`joseph_update` with its work arrays given: PHt, K, KR (n, nz), S, L (nz, nz),
-    A, AP (n, n); the gates and their counts as :func:`kalman_correct_into`."""
+def joseph_update_into(x, P, y, H, R, xmask, nis, work, gates):
+    """:func:`joseph_update_gated` with its work arrays ``work`` = (PHt, S, K, L, A, AP, KR) given:
+    PHt, K, KR (n, nz), S, L (nz, nz), A, AP (n, n)."""
     M, n = x.shape
     nz = y.shape[1]
+    PHt, S, K, L, A, AP, KR = work
     for m in range(M):
         for i in range(n):
             for j in range(nz):
@@ -346,8 +335,8 @@ def joseph_update_into(x, P, y, H, R, xmask, nis, PHt, S, K, L, A, AP, KR, group
         for i in range(nz):
             for j in range(nz):
                 S[i, j] += R[i, j]
-        if limit2 is not None:
-            cut[m] = gate(y[m], S, PHt, group, limit2, rej[m])
+        if gates is not None:
+            gates.cut[m] = gate(y[m], S, PHt, gates.group, gates.limit2, gates.rej[m])
         g = gain(S, PHt, y[m], L, K)
         if g < 0.0:
             return m

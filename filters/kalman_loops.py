@@ -15,6 +15,8 @@ one compilation (cached by numba) serves every model. When a loop runs:
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 from replay.util import kernel_cache  # noqa: F401  numba's cache of replay's kernels: locked, sealed
 import numpy as np
@@ -24,6 +26,9 @@ from replay.util.kernels import wrap
 
 from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
 from .kalman_kernels import (
+    Meas,
+    Points,
+    Rule,
     joseph_update_into,
     propagate_cov_into,
     sigma_points_into,
@@ -32,11 +37,17 @@ from .kalman_kernels import (
 )
 
 COMPILE_AT = 200_000  # run-steps from which a missing run loop is compiled (~10 s, once per machine)
+# The loops' arguments that travel together (namedtuples of arrays; fields as in :func:`sigma_run`):
+Obs = namedtuple("Obs", "Z sel R mask")  # measurements (M, steps, nz), measured components, R, angle flags
+Params = namedtuple("Params", "Pf Ph Q")  # per step: the kernels' parameters and Q
+Out = namedtuple("Out", "X P nis")  # the estimates written: (M, steps, n), (M, steps, n, n), (M, steps)
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
 _MASK = types.boolean[::1]
 _INDEX = types.int64[:, ::1]
-_COMMON = (_S2, _S3, _S3, _INDEX, _S2, _S2, _S3, _S3)  # x, P, Z, sel, Pf, Ph, Q, R
-_OUT = (_S3, _S4, _S2)  # Xout, Pout, nis
+_record = types.BaseTuple.from_types  # the numba type of a namedtuple of these field types
+_COMMON = (_S2, _S3, _record((_S3, _INDEX, _S3, _MASK), Obs), _record((_S2, _S2, _S3), Params))  # x, P, obs, par
+_OUT = _record((_S3, _S4, _S2), Out)
+RULE = _record((_S2, _VEC, _VEC), Rule)
 
 
 @nb.njit(cache=True)
@@ -63,15 +74,18 @@ def measured(Z, k, sel, zmask, R, z, zm, Rs):
 
 
 @nb.njit(cache=True)
-def sigma_update_subset(Zp, dev, Z, k, sel, zmask, R, wm, wc, x, P, xmask, nis, xi, X, L, zm, work):
-    """:func:`sigma_update_into` on the components measured at step k (:func:`measured`), its work
-    arrays views of the flat ``work`` sized for those d components (the points' predictions Zp
-    (M, p, nz) gathered into (M, p, d))."""
+def sigma_update_subset(Zp, obs, k, rule, x, P, xmask, nis, pts, work):
+    """:func:`sigma_update_into` on the components measured at step k (:func:`measured` of the
+    :data:`Obs` ``obs``), its work arrays views of the flat ``work[2]`` sized for those d components
+    (the points' predictions Zp (M, p, nz) gathered into (M, p, d)); ``work[:2]`` = (L (n, n),
+    zm (nz,) bool)."""
     M, p, nz = Zp.shape
+    sel = obs.sel
     n, d = x.shape[1], sel[k, 0]
+    L, zm, work = work
     a, b, c = M * d, M * d + d * d, M * d + d * d + M * p * d  # the views' offsets in ``work``
     z, Rs, Zc = work[:a].reshape((M, d)), work[a:b].reshape((d, d)), work[b:c].reshape((M, p, d))
-    measured(Z, k, sel, zmask, R, z, zm, Rs)
+    measured(obs.Z, k, sel, obs.mask, obs.R[k % obs.R.shape[0]], z, zm, Rs)
     for m in range(M):
         for i in range(p):
             for q in range(d):
@@ -82,60 +96,40 @@ def sigma_update_subset(Zp, dev, Z, k, sel, zmask, R, wm, wc, x, P, xmask, nis, 
     zh, Dz = work[c : c + d], work[c + d : c + d + p * d].reshape((p, d))
     a = c + d + p * d
     Lz, K = work[a : a + d * d].reshape((d, d)), work[a + d * d : a + d * d + n * d].reshape((n, d))
-    return sigma_update_into(
-        Zc,
-        dev,
-        z,
-        wm,
-        wc,
-        zm[:d],
-        Rs,
-        x,
-        P,
-        xmask,
-        nis,
-        xi,
-        X,
-        dev,
-        y,
-        S,
-        Pxz,
-        zh,
-        Dz,
-        Lz,
-        K,
-        L,
-        None,
-        None,
-        None,
-        None,
-    )
+    meas = Meas(Zc, z, Rs, zm[:d])
+    return sigma_update_into(meas, pts.dev, rule, x, P, xmask, nis, pts, (y, S, Pxz, (zh, Dz), (Lz, K), L), None)
 
 
-SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, _S2, _VEC, _VEC, types.boolean, _MASK, _MASK, *_OUT)
-EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _MASK, *_OUT)
+SIGMA_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, *_COMMON, RULE, types.boolean, _MASK, _OUT)
+EKF_RUN = types.int64(ROWS_KERNEL, ROWS_KERNEL, JACOBIAN_ROWS, JACOBIAN_ROWS, *_COMMON, _MASK, _OUT)
 
 
 @nb.njit(cache=True, nogil=True)
-def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, Xout, Pout, nis):
+def sigma_run(f, h, x, P, obs, par, rule, at_f, xmask, out):
     """M runs of a UKF/CKF over every step: the steps of
     :class:`replay.filters.sigma.SigmaEngine` (points of the state, f, :func:`sigma_predict`, h,
     :func:`sigma_update`) in one loop. x (M, n), P (M, n, n) start values (changed in place);
-    Z (M, steps, nz); ``sel[k] = [d, i_0 .. i_{d-1}]`` the components measured at step k, the
-    same for every run (:func:`measured`; d = 0: no update, the prediction is the estimate, its
-    NIS NaN); per step k: Pf[k], Ph[k] the kernels' parameters, Q[k], R[k] (a stack of one: the
-    same at every step); ``at_f``: the predicted mean is f(x) (:attr:`replay.model.Model.mean_at_f`).
-    Writes Xout (M, steps, n), Pout (M, steps, n, n), nis (M, steps). Returns -1, or the step at
-    which a covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    ``obs`` (:data:`Obs`): Z (M, steps, nz); ``sel[k] = [d, i_0 .. i_{d-1}]`` the components
+    measured at step k, the same for every run (:func:`measured`; d = 0: no update, the prediction
+    is the estimate, its NIS NaN); R[k] (a stack of one: the same at every step) and the angle
+    flags of z; ``par`` (:data:`Params`), per step k: Pf[k], Ph[k] the kernels' parameters, Q[k]
+    (a stack of one as R); ``rule``: the :data:`replay.filters.kalman_kernels.Rule`; ``at_f``: the
+    predicted mean is f(x) (:attr:`replay.model.Model.mean_at_f`). Writes ``out`` (:data:`Out`):
+    X (M, steps, n), P (M, steps, n, n), nis (M, steps). Returns -1, or the step at which a
+    covariance had no Cholesky factor (the caller redoes the runs step by step)."""
+    Z, sel, R, zmask = obs
+    Pf, Ph, Q = par
+    Xout, Pout, nis = out
     M, steps, nz = Z.shape
-    p, n = xi.shape
+    p, n = rule.xi.shape
     X, dev, Y, Zp = np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, n)), np.empty((M, p, nz))
     D, L, K, zm = np.empty((p, n)), np.empty((n, n)), np.empty((n, nz)), np.empty(nz, np.bool_)
     z, y, S, Pxz = np.empty((M, nz)), np.empty((M, nz)), np.empty((M, nz, nz)), np.empty((M, n, nz))
     zh, Dz, Lz = np.empty(nz), np.empty((p, nz)), np.empty((nz, nz))
     work = np.empty(M * nz * (2 + p + nz + n) + nz * (1 + p + 2 * nz + n))  # of a subset's update
-    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
-    if sigma_points_into(x, P, xi, X, dev, L) >= 0:
+    pts = Points(X, dev)  # the records and work tuples built once, not per step
+    predict_work, update_work, subset_work = (D, L), (y, S, Pxz, (zh, Dz), (Lz, K), L), (L, zm, work)
+    if sigma_points_into(x, P, rule.xi, X, dev, L) >= 0:
         return 0
     xc = np.empty((M, n))
     for k in range(steps):
@@ -145,7 +139,7 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, 
             for m in range(M):
                 wrap(xc[m], xmask)
             x[:] = xc
-        if sigma_predict_into(Y, wm, wc, xmask, Q[k % Q.shape[0]], xi, x, P, X, dev, D, L, at_f) >= 0:
+        if sigma_predict_into(Y, rule, xmask, Q[k % Q.shape[0]], x, P, pts, predict_work, at_f) >= 0:
             return k
         d = sel[k, 0]
         if d == 0:
@@ -158,38 +152,11 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, 
             for m in range(M):
                 for q in range(nz):
                     z[m, q] = Z[m, k, q]
-            bad = sigma_update_into(
-                Zp,
-                dev,
-                z,
-                wm,
-                wc,
-                zmask,
-                R[k % R.shape[0]],
-                x,
-                P,
-                xmask,
-                nis[:, k],
-                xi,
-                X,
-                dev,
-                y,
-                S,
-                Pxz,
-                zh,
-                Dz,
-                Lz,
-                K,
-                L,
-                group,
-                limit2,
-                rej,
-                cut,
-            )
+            meas = Meas(Zp, z, R[k % R.shape[0]], zmask)
+            bad = sigma_update_into(meas, dev, rule, x, P, xmask, nis[:, k], pts, update_work, None)  # no gate: a
+            # gated model steps in Python (kalman.run_kernels)
         else:  # the measured components
-            bad = sigma_update_subset(
-                Zp, dev, Z, k, sel, zmask, R[k % R.shape[0]], wm, wc, x, P, xmask, nis[:, k], xi, X, L, zm, work
-            )
+            bad = sigma_update_subset(Zp, obs, k, rule, x, P, xmask, nis[:, k], pts, subset_work)
         if 0 <= bad < M:
             return k
         Xout[:, k] = x
@@ -200,12 +167,15 @@ def sigma_run(f, h, x, P, Z, sel, Pf, Ph, Q, R, xi, wm, wc, at_f, xmask, zmask, 
 
 
 @nb.njit(cache=True, nogil=True)
-def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, nis):
+def ekf_run(f, h, F, H, x, P, obs, par, xmask, out):
     """M runs of the EKF over every step (measurements as in :func:`sigma_run`): the steps of
     :class:`replay.filters.kalman.EKFEngine` (F and f at the state, x wrapped,
     :func:`propagate_cov`; H and h at the prediction, y = z - h wrapped, :func:`joseph_update`
     on the measured components) in one loop. Arguments as :func:`sigma_run`. Returns -1, or the
     step at which S had no Cholesky factor."""
+    Z, sel, R, zmask = obs
+    Pf, Ph, Q = par
+    Xout, Pout, nis = out
     M, steps, nz = Z.shape
     n = x.shape[1]
     Fj, Hj, xp, zh = np.empty((M, n, n)), np.empty((M, nz, n)), np.empty((M, n)), np.empty((M, nz))
@@ -215,7 +185,7 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
     wz, wy, wH, wR = np.empty(M * nz), np.empty(M * nz), np.empty(M * nz * n), np.empty(nz * nz)
     wPHt, wS, wK, wL, wKR = np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz), np.empty(nz * nz), np.empty(n * nz)
     zm = np.empty(nz, np.bool_)
-    group = limit2 = rej = cut = None  # no gate: a gated model steps in Python (kalman.run_kernels)
+    work = (PHt, S, K, L, A, AP, KR)
     for k in range(steps):
         F(x, Pf[k], Fj)
         f(x, Pf[k], xp)
@@ -237,9 +207,8 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
                 for q in range(nz):
                     y[m, q] = Z[m, k, q] - zh[m, q]
                 wrap(y[m], zmask)
-            bad = joseph_update_into(
-                xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], PHt, S, K, L, A, AP, KR, group, limit2, rej, cut
-            )
+            bad = joseph_update_into(xp, Pp, y, Hj, R[k % R.shape[0]], xmask, nis[:, k], work, None)  # no gate: a
+            # gated model steps in Python (kalman.run_kernels)
         else:  # the measured components, into work arrays of their size
             z, yd, Rs = wz[: M * d].reshape((M, d)), wy[: M * d].reshape((M, d)), wR[: d * d].reshape((d, d))
             Hs = wH[: M * d * n].reshape((M, d, n))
@@ -252,14 +221,7 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
                         Hs[m, q, j] = Hj[m, s, j]
                 wrap(yd[m], zm[:d])
             nd, dd = n * d, d * d
-            bad = joseph_update_into(
-                xp,
-                Pp,
-                yd,
-                Hs,
-                Rs,
-                xmask,
-                nis[:, k],
+            sub = (
                 wPHt[:nd].reshape((n, d)),
                 wS[:dd].reshape((d, d)),
                 wK[:nd].reshape((n, d)),
@@ -267,11 +229,8 @@ def ekf_run(f, h, F, H, x, P, Z, sel, Pf, Ph, Q, R, xmask, zmask, Xout, Pout, ni
                 A,
                 AP,
                 wKR[:nd].reshape((n, d)),
-                group,
-                limit2,
-                rej,
-                cut,
             )
+            bad = joseph_update_into(xp, Pp, yd, Hs, Rs, xmask, nis[:, k], sub, None)
         if bad >= 0:
             return k
         x[:] = xp

@@ -28,6 +28,7 @@ that change the weighting all step in Python.
 
 from __future__ import annotations
 
+from collections import namedtuple
 from time import perf_counter
 
 import numba as nb
@@ -47,51 +48,37 @@ from .resampling import SCHEMES, invert_sorted, systematic
 # particle-steps from which the missing loop is compiled (~2 s, once per machine; it saves
 # 0.2-0.3 µs per particle-step against the steps: their Python and numpy calls per run and step)
 COMPILE_AT = 10_000_000
+# :func:`pf_run`'s arguments that travel together (namedtuples: numba unpacks them at no cost)
+Cloud = namedtuple("Cloud", "X logw w")  # the particles (N, n), their log-weights and weights (N,)
+Obs = namedtuple("Obs", "Z sel mask fac rdiag rL rinv rconst")  # the measurements, the components measured
+# at each step, their angle flags and the factors of R (:func:`likelihood_factors`)
+Params = namedtuple("Params", "Pf Ph qsd sd0")  # per step: the kernels' parameters, the process noise's sd
+Proposal = namedtuple("Proposal", "opt sidx ssgn rvar")  # the optimal proposal (``opt``) and its arrays
+Resampling = namedtuple("Resampling", "limit rough logw0")  # threshold * N, roughening K, -log N
+Out = namedtuple("Out", "X P ess")  # the estimates written: (steps, n), (steps, n, n), ESS (steps,)
 
 
 @nb.njit(cache=True, nogil=True)
-def pf_run(
-    f,
-    h,
-    g,
-    X,
-    logw,
-    w,
-    Z,
-    sel,
-    Pf,
-    Ph,
-    qsd,
-    fac,
-    rdiag,
-    rL,
-    rinv,
-    rconst,
-    xmask,
-    zmask,
-    limit,
-    rough,
-    logw0,
-    opt,
-    sidx,
-    ssgn,
-    rvar,
-    sd0,
-    Xout,
-    Pout,
-    ess,
-):
-    """Every step of one run of the bootstrap PF (module docstring). X (N, n) particles, logw and
-    w (N,) their log-weights and weights (all changed in place); Z (steps, nz); ``sel[k] = [d,
-    i_0 .. i_{d-1}]`` the components measured at step k (:func:`replay.filters.compiled.measured_steps`;
-    d = 0: no weighting at k); Pf[k], Ph[k] the kernels' parameters; qsd[k] the process noise's
-    standard deviations (n,) (a stack of one: the same at every step); R of the measured
-    components at step k as ``gauss_loglik`` takes it: entry u = fac[k] of rdiag (U,), rL (U, nz,
-    nz), rinv (U, nz), rconst (U,) (its top-left d x d, first d); ``limit`` = threshold * N;
-    roughening constant ``rough`` = K; ``logw0`` = -log N; ``opt``: the optimal proposal of the
-    selection ``sidx``, ``ssgn`` with R's variances ``rvar`` (a stack); ``sd0``: the first step's
-    spread (qsd[0], or the prior's with it: PFEngine.start). Writes Xout (steps, n), Pout (steps,
-    n, n) and ess (steps,), the ESS before resampling. Returns the number of resampling steps."""
+def pf_run(f, h, g, cloud, obs, par, prop, rs, xmask, out):
+    """Every step of one run of the bootstrap PF (module docstring). ``cloud`` (:data:`Cloud`): X
+    (N, n) particles, logw and w (N,) their log-weights and weights (all changed in place); ``obs``
+    (:data:`Obs`): Z (steps, nz); ``sel[k] = [d, i_0 .. i_{d-1}]`` the components measured at step
+    k (:func:`replay.filters.compiled.measured_steps`; d = 0: no weighting at k); their angle flags
+    ``mask``; R of the measured components at step k as ``gauss_loglik`` takes it: entry u = fac[k]
+    of rdiag (U,), rL (U, nz, nz), rinv (U, nz), rconst (U,) (its top-left d x d, first d); ``par``
+    (:data:`Params`): Pf[k], Ph[k] the kernels' parameters; qsd[k] the process noise's standard
+    deviations (n,) (a stack of one: the same at every step); ``sd0`` the first step's spread
+    (qsd[0], or the prior's with it: PFEngine.start); ``prop`` (:data:`Proposal`): ``opt``, the
+    optimal proposal of the selection ``sidx``, ``ssgn`` with R's variances ``rvar`` (a stack);
+    ``rs`` (:data:`Resampling`): ``limit`` = threshold * N, roughening constant ``rough`` = K,
+    ``logw0`` = -log N. Writes ``out`` (:data:`Out`): X (steps, n), P (steps, n, n) and ess
+    (steps,), the ESS before resampling. Returns the number of resampling steps."""
+    X, logw, w = cloud
+    Z, sel, zmask, fac, rdiag, rL, rinv, rconst = obs
+    Pf, Ph, qsd, sd0 = par
+    opt, sidx, ssgn, rvar = prop
+    limit, rough, logw0 = rs
+    Xout, Pout, ess = out
     N, n = X.shape
     steps, nz = Z.shape
     Y, zh, ll = np.empty((N, n)), np.empty((N, nz)), np.empty(N)
@@ -148,36 +135,19 @@ def pf_run(
 _GEN = nb.typeof(np.random.default_rng(0))
 _V, _M, _M3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
 _I2 = types.int64[:, ::1]
+_record = types.BaseTuple.from_types  # the numba type of a namedtuple of these field types
+_MASK, _INDEX = types.boolean[::1], types.int64[::1]
 PF_RUN = types.int64(
     ROWS_KERNEL,
     ROWS_KERNEL,
     _GEN,
-    _M,
-    _V,
-    _V,
-    _M,
-    _I2,
-    _M,
-    _M,
-    _M,
-    types.int64[::1],
-    types.boolean[::1],
-    _M3,
-    _M,
-    _V,
-    types.boolean[::1],
-    types.boolean[::1],
-    types.float64,
-    types.float64,
-    types.float64,
-    types.boolean,
-    types.int64[::1],
-    _V,
-    _M,
-    _V,
-    _M,
-    _M3,
-    _V,
+    _record((_M, _V, _V), Cloud),
+    _record((_M, _I2, _MASK, _INDEX, _MASK, _M3, _M, _V), Obs),
+    _record((_M, _M, _M, _V), Params),
+    _record((types.boolean, _INDEX, _V, _M), Proposal),
+    _record((types.float64,) * 3, Resampling),
+    _MASK,
+    _record((_M, _M3, _V), Out),
 )
 
 
@@ -215,24 +185,21 @@ def run(engine, Z, finite):
     opt = bool(engine.optimal)
     sidx, ssgn = selection(m) if opt else (np.zeros(0, np.int64), np.zeros(0))
     rvar = np.ascontiguousarray(np.diagonal(covs[1], axis1=1, axis2=2)) if opt else np.zeros((1, nz))
-    fixed = (xmask, zmask, flt.ess_threshold * N, float(flt.roughening), float(engine.logw0), opt, sidx, ssgn, rvar)
+    prop = Proposal(opt, sidx, ssgn, rvar)
+    rs = Resampling(float(flt.ess_threshold * N), float(flt.roughening), float(engine.logw0))
 
     def runs(lo, hi):  # each run from its own generator: the same numbers on any thread (~0.15 µs
         # a particle-step)
         return [
             call(
                 engine.active[j],
-                *(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w)),
-                Z[j],
-                sels[j][0],
-                *stacks,
-                qsd,
-                *sels[j][1:],
-                *fixed,
-                qsd[0] if engine.sd0 is None else np.ascontiguousarray(engine.sd0[j]),
-                X[j],
-                P[j],
-                E[j],
+                Cloud(*(np.ascontiguousarray(a[j]) for a in (engine.X, engine.logw, engine.w))),
+                Obs(Z[j], sels[j][0], zmask, *sels[j][1:]),
+                Params(*stacks, qsd, qsd[0] if engine.sd0 is None else np.ascontiguousarray(engine.sd0[j])),
+                prop,
+                rs,
+                xmask,
+                Out(X[j], P[j], E[j]),
             )
             for j in range(lo, hi)
         ]

@@ -43,20 +43,23 @@ from replay.util.kernels import cholesky, deviations, solve_rows, symmetrise, we
 
 from .compiled import JACOBIAN_ROWS, ROWS_KERNEL
 from .kalman_kernels import propagate_cov_into, sigma_moments_into, sigma_points_into
+from .kalman_loops import RULE
 
 _VEC, _S2, _S3, _S4 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.float64[:, :, :, ::1]
 _MASK = types.boolean[::1]
 EKF_SMOOTH = types.int64(ROWS_KERNEL, JACOBIAN_ROWS, _S3, _S4, _S2, _S3, _MASK, _S3, _S4)
-SIGMA_SMOOTH = types.int64(ROWS_KERNEL, _S3, _S4, _S2, _S3, _S2, _VEC, _VEC, types.boolean, _MASK, _S3, _S4)
+SIGMA_SMOOTH = types.int64(ROWS_KERNEL, _S3, _S4, _S2, _S3, RULE, types.boolean, _MASK, _S3, _S4)
 
 
 @nb.njit(cache=True)
-def rts_correct(xf, Pf, xp, Pp, C, xn, Pn, xmask, xs, Ps, L, G, d, W):
+def rts_correct(xf, Pf, xp, Pp, C, xn, Pn, xmask, out, work):
     """The gain and smoothed moments (module docstring; Särkkä 2013 eq. 8.6) of each run m of
     the stacks: filtered xf (M, n), Pf; predicted xp, Pp; cross-covariance C (M, n, n); smoothed
-    at the next step xn, Pn. Writes xs, Ps; work arrays L, G, W (n, n), d (n,). Returns -1, or
-    the first run whose P-_{k+1} has no Cholesky factor."""
+    at the next step xn, Pn. Writes ``out`` = (xs, Ps); ``work`` = (L, G, d, W): L, G, W (n, n),
+    d (n,). Returns -1, or the first run whose P-_{k+1} has no Cholesky factor."""
     M, n = xf.shape
+    xs, Ps = out
+    L, G, d, W = work
     for m in range(M):
         if not cholesky(Pp[m], L):
             return m
@@ -137,7 +140,7 @@ def ekf_smooth_run(f, F, X, P, Pf, Q, xmask, Xs, Ps):
         wrap_rows(xp, xmask)
         propagate_cov_into(Fj, Pk, Q[(k + 1) % Q.shape[0]], Pp, FP)
         ekf_cross(Pk, Fj, C)
-        if rts_correct(xk, Pk, xp, Pp, C, xn, Pn, xmask, xs, Psk, L, G, d, W) >= 0:
+        if rts_correct(xk, Pk, xp, Pp, C, xn, Pn, xmask, (xs, Psk), (L, G, d, W)) >= 0:
             return k
         Xs[:, k] = xs
         Ps[:, k] = Psk
@@ -145,10 +148,12 @@ def ekf_smooth_run(f, F, X, P, Pf, Q, xmask, Xs, Ps):
 
 
 @nb.njit(cache=True, nogil=True)
-def sigma_smooth_run(f, X, P, Pf, Q, xi, wm, wc, at_f, xmask, Xs, Ps):
-    """The unscented (UKF points) or cubature (CKF points) RTS backward pass of M runs: the points
-    xi (p, n) and weights of the forward filter; ``at_f``: the predicted mean is f(m_k) (the
-    forward filter's, :attr:`replay.model.Model.mean_at_f`); else as :func:`ekf_smooth_run`."""
+def sigma_smooth_run(f, X, P, Pf, Q, rule, at_f, xmask, Xs, Ps):
+    """The unscented (UKF points) or cubature (CKF points) RTS backward pass of M runs: ``rule``
+    the forward filter's points xi (p, n) and weights (:data:`replay.filters.kalman_kernels.Rule`);
+    ``at_f``: the predicted mean is f(m_k) (the forward filter's,
+    :attr:`replay.model.Model.mean_at_f`); else as :func:`ekf_smooth_run`."""
+    xi, wm, wc = rule
     M, steps, n = X.shape
     p = xi.shape[0]
     xk, xp, xs, xn = np.empty((M, n)), np.empty((M, n)), np.empty((M, n)), np.empty((M, n))
@@ -171,7 +176,7 @@ def sigma_smooth_run(f, X, P, Pf, Q, xi, wm, wc, at_f, xmask, Xs, Ps):
             wrap_rows(xp, xmask)
         sigma_moments_into(Y, wm, wc, xmask, Q[(k + 1) % Q.shape[0]], xp, Pp, D, at_f)
         sigma_cross(dev, Y, xp, wc, xmask, C, D)
-        if rts_correct(xk, Pk, xp, Pp, C, xn, Pn, xmask, xs, Psk, L, G, d, W) >= 0:
+        if rts_correct(xk, Pk, xp, Pp, C, xn, Pn, xmask, (xs, Psk), (L, G, d, W)) >= 0:
             return k
         Xs[:, k] = xs
         Ps[:, k] = Psk

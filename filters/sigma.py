@@ -134,14 +134,15 @@ class SigmaEngine(KalmanEngine):
 
     def __init__(self, flt, model, rngs):
         super().__init__(flt, model, rngs)
-        self.xi, self.wm, self.wc = flt.points(model.nx)
+        self.rule = kernels.Rule(*flt.points(model.nx))  # xi, wm, wc
         self.xmask = angle_mask(model.x_angles, model.nx)
 
     def start(self, X0, P0):
         super().start(X0, P0)
-        self.X, self.dev = np.empty((len(X0),) + self.xi.shape), np.empty((len(X0),) + self.xi.shape)
+        shape = (len(X0),) + self.rule.xi.shape
+        self.X, self.dev = np.empty(shape), np.empty(shape)
         self.missing = np.zeros(len(X0), bool)  # runs without points (no Cholesky factor)
-        self.unmade(kernels.sigma_points(stack_of(X0, False), stack_of(P0, False), self.xi, self.X, self.dev))
+        self.unmade(kernels.sigma_points(stack_of(X0, False), stack_of(P0, False), self.rule.xi, self.X, self.dev))
 
     def unmade(self, bad, rows=None):
         """Mark the runs from ``bad`` on (of ``rows``, or of all) as without points."""
@@ -162,9 +163,7 @@ class SigmaEngine(KalmanEngine):
             (0, 1),
             kalman_loops.sigma_run,
             kalman_loops.SIGMA_RUN,
-            self.xi,
-            self.wm,
-            self.wc,
+            self.rule,
             bool(self.model.mean_at_f),
         )
 
@@ -187,15 +186,12 @@ class SigmaEngine(KalmanEngine):
         self.unmade(
             kernels.sigma_predict(
                 Y,
-                self.wm,
-                self.wc,
+                self.rule,
                 self.xmask,
                 np.ascontiguousarray(m.process_cov(k), dtype=float),
-                self.xi,
                 xm,
                 Pm,
-                self.X,
-                self.dev,
+                kernels.Points(self.X, self.dev),
                 m.mean_at_f,
             )
         )
@@ -212,27 +208,13 @@ class SigmaEngine(KalmanEngine):
         x3, P3 = (x[None], P[None]) if one else (x, P)
         nis = np.empty(len(x3))
         Xn, devn = (self.X, self.dev) if rows is None else (np.empty(X.shape), np.empty(X.shape))
-        args = (
-            Z,
-            dev,
-            stack_of(z, one),
-            self.wm,
-            self.wc,
-            angle_mask(angles, Z.shape[2]),
-            np.ascontiguousarray(R, dtype=float),
-            x3,
-            P3,
-            self.xmask,
-            nis,
-            self.xi,
-            Xn,
-            devn,
-        )
+        meas = kernels.Meas(Z, stack_of(z, one), np.ascontiguousarray(R, dtype=float), angle_mask(angles, Z.shape[2]))
+        args = (meas, dev, self.rule, x3, P3, self.xmask, nis, kernels.Points(Xn, devn))
         if not self.gated:
             bad = kernels.sigma_update(*args)
         else:
             gate, done = self.gate(mask, rows, len(x3))
-            bad = kernels.sigma_update_gated(*args, *gate)
+            bad = kernels.sigma_update_gated(*args, gate)
             self.cut = done()
         if 0 <= bad < len(x3):
             raise not_pd(bad)

@@ -35,6 +35,7 @@ from .base import Estimates, Filter
 from .case import Case
 from .compiled import bound, cov_stacks, derived_from_kernels, grain, loop_ready, param_stacks, row_kernels, split
 from .kalman import EKF, KalmanFilter, jacobians
+from .kalman_kernels import Rule
 from .sigma import CKF, UKF
 
 
@@ -84,7 +85,7 @@ class SigmaRTS(RTSSmoother):
 
     def backward(self, model):
         xi, wm, wc = self.forward().points(model.nx)
-        extra = (np.ascontiguousarray(xi), wm, wc, bool(model.mean_at_f))
+        extra = (Rule(np.ascontiguousarray(xi), wm, wc), bool(model.mean_at_f))
         return rts_loops.sigma_smooth_run, rts_loops.SIGMA_SMOOTH, (0,), extra
 
 

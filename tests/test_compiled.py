@@ -16,6 +16,9 @@ from replay.models.ungm import UNGM
 from replay.tasks import make_task
 
 from oracle_p002 import batched_cholesky, gwo_optimize, oracle_filter
+from replay.models.depth import DepthModel
+from replay.util.errors import ReplayError
+import numba
 
 
 @pytest.fixture(scope="module")
@@ -158,9 +161,6 @@ class OwnLikelihood(UNGM):
 
 @pytest.mark.parametrize("name", ["stcpf", "igwo-stcpf", "gwo-pf", "igwo-pf", "pso-cpf"])
 def test_kernel_filters_refuse_a_model_without_kernels_in_one_line(name):
-    from replay.models.depth import DepthModel
-    from replay.util.errors import ReplayError
-
     rng = [np.random.default_rng(0)]
     flt = make_filter(name)
     with pytest.raises(ReplayError, match=f"^{name} needs a model with compiled kernels .*; DepthModel has none$"):
@@ -173,7 +173,6 @@ def test_kernel_filters_refuse_a_model_without_kernels_in_one_line(name):
 
 def test_filters_without_kernels_run_on_any_model():
     """PSO-PF (bootstrap proposal, model.loglik, PSO) and the bootstrap STCPF need no kernels."""
-    from replay.util.errors import ReplayError
 
     z = np.random.default_rng(0).normal(size=(6, 1))
     for model in (NoKernels(), OwnLikelihood()):
@@ -250,8 +249,9 @@ def test_swarm_kernel_keeps_the_elite_and_matches_the_oracle():
     raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
     a = gwo.schedule(8, True)
     Xk, f, best = X.copy(), np.empty(30), np.empty(9)
-    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), np.zeros(3, bool), None, None,
-                None, raw, a, True, 1e-4, 1e-12, f, best, 3)
+    target = compiled_util.Fit(z, Ri, np.zeros(3, bool), np.zeros(3, bool), 0.0, 3)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), target, np.arange(3), None, None, raw, compiled_util.Gwo(a, True, 1e-4, 1e-12),
+                (f, best))
     assert np.all(np.diff(best) <= 0) and best[-1] < best[0]
     Xn, fn, bn = gwo_optimize(X, lambda Y: np.einsum("...i,ij,...j->...", z - Y, Ri, z - Y),
                               np.random.default_rng(2), t_max=8, improved=True)
@@ -273,8 +273,9 @@ def test_swarm_kernel_moves_only_the_movable_components_and_adds_the_transition_
     raw = gwo.raw_draws([np.random.default_rng(2)], (8, 2, 3, 30, 3))[0]
     a = gwo.schedule(8, True)
     Xk, f, best = X.copy(), np.empty(30), np.empty(9)
-    bound.swarm(np.zeros(0), Xk, np.zeros(3), z, np.arange(3), Ri, np.zeros(3, bool), np.zeros(3, bool), mov, fx,
-                Qi, raw, a, True, 1e-4, 1e-12, f, best, 3)
+    target = compiled_util.Fit(z, Ri, np.zeros(3, bool), np.zeros(3, bool), 0.0, 3)
+    bound.swarm(np.zeros(0), Xk, np.zeros(3), target, np.arange(3), mov, (fx, Qi), raw,
+                compiled_util.Gwo(a, True, 1e-4, 1e-12), (f, best))
     assert np.array_equal(Xk[:, 2], X[:, 2]) and not np.array_equal(Xk[:, :2], X[:, :2])
 
     def fit(Y):
@@ -335,10 +336,6 @@ def test_bound_kernels_are_cached_by_content(tmp_path, monkeypatch):
 
 
 def test_bind_refuses_kernels_that_are_not_module_level():
-    import numba
-
-    from replay.util.errors import ReplayError
-
     @numba.njit
     def local(x, p, out):
         out[:] = x

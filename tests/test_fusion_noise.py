@@ -13,12 +13,14 @@ from replay.adapters import rosmsg
 from replay.adapters.mapping import from_dict
 from replay.filters import make_filter
 from replay.filters import kalman_kernels
-from replay.filters.gating import Gates
+from replay.filters.gating import Gate, Gates
 from replay.frame import Channel
 from replay.models.kinematic import Kinematic2D
 from replay.roles import SensorInput
 from replay.tasks.fusion_inputs import components, variance
 from replay.util.errors import ReplayError
+from pure import pure
+import tomllib
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "docs" / "mappings"
 
@@ -171,12 +173,11 @@ def test_a_gated_update_is_the_update_without_the_rejected_components():
     y = np.array([[40.0, -30.0, 0.3]])  # the first two (one group) far out
     group, limit2 = np.array([0, 0, 1], np.int64), np.array([9.0, np.inf])
     outs = []
-    from pure import pure
 
     for fun in (kalman_kernels.joseph_update_gated, pure(kalman_kernels.joseph_update_gated)):
         xg, Pg, nis = x.copy(), P.copy(), np.empty(1)
         rej, cut = np.zeros((1, 2), np.int64), np.zeros(1, np.int64)
-        assert fun(xg, Pg, y.copy(), H, R, np.zeros(n, bool), nis, group, limit2, rej, cut) == -1
+        assert fun(xg, Pg, y.copy(), H, R, np.zeros(n, bool), nis, Gate(group, limit2, rej, cut)) == -1
         assert rej.tolist() == [[1, 0]] and cut.tolist() == [2]
         outs.append((xg, Pg, nis))
     xr, Pr, nisr = x.copy(), P.copy(), np.empty(1)
@@ -200,16 +201,12 @@ def test_a_filter_that_does_not_gate_is_refused_on_a_gated_model():
     ('rejection_threshold = { sonar = 3 }', "unknown field 'sonar'"),
 ])
 def test_bad_rejection_thresholds_refused(spec, message):
-    import tomllib
-
     doc = tomllib.loads(f'[channels]\nodom = {{ topic = "/odom", {spec} }}\n')
     with pytest.raises(ReplayError, match=message):
         from_dict(doc, "m.toml")
 
 
 def test_rejection_threshold_round_trips_through_the_mapping():
-    import tomllib
-
     doc = tomllib.loads('[channels]\nodom = { topic = "/odom", rejection_threshold = 4 }\n'
                         'gps = { topic = "/fix", rejection_threshold = { position = 3.5 } }\n')
     mp = from_dict(doc, "m.toml")

@@ -23,6 +23,20 @@ from replay.util import angles, kernels
 
 from oracle_p002 import fading_factor as oracle_fading
 from oracle_p002 import next_V
+from replay.filters.p002 import compiled
+from replay import model
+from replay.scoring import likelihood
+from replay.models import noise
+from replay.models.ungm import UNGM
+from replay.filters.p002 import stckf
+from replay.models.random_walk import RandomWalkPosition
+from replay.filters.p002.stcpf import bound_kernels as bind
+import json
+import tempfile
+from pathlib import Path
+from pure import pure
+from replay.sim.auv_sonar import make_frame
+from replay.tasks import make_task
 
 
 def _angles(g, n=4000):
@@ -83,11 +97,6 @@ def test_one_gaussian_log_density():
     assert _same([kernels.gauss_logpdf(a, c) for a, c in zip(maha, const)], ref)
     assert _same(kernels.gauss_logpdf.py_func(maha, const), ref)
     # the rows kernel (bootstrap PF, Model.loglik) and paper 002's kernels call it
-    from replay.filters.p002 import compiled
-    from replay import model
-
-    from replay.scoring import likelihood
-    from replay.models import noise
     assert compiled.gauss_logpdf is kernels.gauss_logpdf and stcpf.gauss_logpdf is kernels.gauss_logpdf
     assert noise.gauss_logpdf is kernels.gauss_logpdf and likelihood.gauss_logpdf is kernels.gauss_logpdf
     assert pf_loop.gauss_loglik is kernels.gauss_loglik and model.kernels is kernels
@@ -101,8 +110,6 @@ def test_one_gaussian_log_density():
 
 
 def test_stcpf_prior_loglik_is_the_gaussian_log_density():
-    from replay.models.ungm import UNGM
-
     m = UNGM()
     flt = make_filter("stcpf", proposal="prior", n_particles=5)
     eng = flt.engine(m, [np.random.default_rng(0)])
@@ -135,8 +142,6 @@ def test_perturb_and_roughen_are_numpy_draws_bit_for_bit():
     assert _same(rough, X + np.random.default_rng(9).standard_normal(X.shape) * (K * np.ptp(X, axis=0) * shrink))
     assert _same(particles.roughen.py_func(X.copy(), K, np.random.default_rng(9)), rough)
     # the bootstrap propagation draws the same noise (a diagonal Q): f(x) + sd e
-    from replay.models.ungm import UNGM
-
     m = UNGM()
     Xs = g.standard_normal((2, 40, 1))
     Y = pf.propagate(m, Xs.copy(), 3, [np.random.default_rng(1), np.random.default_rng(2)])
@@ -171,8 +176,8 @@ def test_fading_factor_kernel_equals_the_numpy_oracle(m_form):
         st = compiled_util.Fading(0.95, 1.2, m_form == "propagated")
         V = np.empty((nz, nz))
         work = [np.empty((nz, n)) for _ in range(3)]
-        lam1 = compiled_util.fading_factor(V, e1, True, H, F, P, Q, R, st, *work)
-        lam2 = compiled_util.fading_factor(V, e2, False, H, F, P, Q, R, st, *work)
+        lam1 = compiled_util.fading_factor(V, e1, True, H, F, P, Q, R, st, tuple(work))
+        lam2 = compiled_util.fading_factor(V, e2, False, H, F, P, Q, R, st, tuple(work))
         V_ref = next_V(next_V(None, e1, 0.95), e2, 0.95)
         np.testing.assert_allclose(V, V_ref, rtol=1e-14)
         ref = oracle_fading(V_ref, H, F, P, Q, R, 1.2, m_form)
@@ -182,8 +187,6 @@ def test_fading_factor_kernel_equals_the_numpy_oracle(m_form):
 
 def test_stckf_calls_the_fading_kernel(monkeypatch):
     """The STCKF's lambdas are the kernel's: counted through a wrapper of it."""
-    from replay.filters.p002 import stckf
-    from replay.models.random_walk import RandomWalkPosition
 
     calls = []
     real = compiled_util.fading_factor
@@ -206,8 +209,6 @@ def test_cubature_step_known_value(stckf):
     """On a linear-Gaussian model the particle's STCKF (CKF) is the exact Kalman update with the
     faded prior: x = [1, 2], P = 2 I, Q = 0.5 I, R = I, z = [5, -2]: e = [4, -4], tr N = 32 - 1 - 2.4,
     tr M = tr P = 4, lambda = 7.15; S = 2.5 lambda + 1, K = 2.5 lambda / S, P+ = 2.5 lambda / S."""
-    from replay.filters.p002.stcpf import bound_kernels as bind
-    from replay.models.random_walk import RandomWalkPosition
 
     m = RandomWalkPosition(0.5 * np.eye(2), np.eye(2))
     k = bind(m.kernels())
@@ -221,8 +222,8 @@ def test_cubature_step_known_value(stckf):
                                 transition=False, have_L=False, have_V=False, logdet_Q=2 * math.log(0.5),
                                 logdet_R=0.0, nzf=2)
     mask = np.zeros(2, bool)
-    k.cubature_step(np.empty(0), np.empty(0), X, P, L, V, logw, z[None], None, E, Q, np.linalg.inv(Q), R,
-                    np.linalg.inv(R), mask, mask, pr, lam, rep, 0, 1)
+    k.cubature_step(np.empty(0), np.empty(0), compiled_util.Particles(X, P, L, V, logw, lam, rep), z[None], None, E,
+                    compiled_util.Noise(Q, np.linalg.inv(Q), R, np.linalg.inv(R), mask, mask), pr, 0, 1)
     g = 7.15 if stckf else 1.0
     S = 2.5 * g + 1.0
     post = x + (2.5 * g / S) * (z - x)
@@ -243,7 +244,6 @@ def test_cubature_step_known_value(stckf):
 def test_plain_python_runs_the_stckf_and_the_stcpf():
     """NUMBA_DISABLE_JIT=1 runs the fading factor and the cubature step as their Python text,
     with the compiled numbers."""
-    import json
 
     def run(plain, out):
         env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_JIT"}
@@ -255,8 +255,6 @@ def test_plain_python_runs_the_stckf_and_the_stcpf():
         assert res.returncode == 0, res.stderr
         return json.loads((out / "manifest.json").read_text())["results"]
 
-    import tempfile
-    from pathlib import Path
 
     with tempfile.TemporaryDirectory() as tmp:
         plain, compiled = run(True, Path(tmp) / "p"), run(False, Path(tmp) / "c")
@@ -271,11 +269,6 @@ def test_plain_python_runs_the_stckf_and_the_stcpf():
 def test_cubature_step_python_text_equals_compiled(stckf, transition):
     """The cubature step run as its Python text (every kernel un-jitted: what NUMBA_DISABLE_JIT=1
     runs) gives the compiled numbers, on the sonar model's particles."""
-    from pure import pure
-
-    from replay.filters.p002.stcpf import bound_kernels as bind
-    from replay.sim.auv_sonar import make_frame
-    from replay.tasks import make_task
 
     pb = make_task("sonar").build(make_frame(np.random.default_rng(1), steps=5), np.random.default_rng(2))
     m, g = pb.model, np.random.default_rng(8)
@@ -297,7 +290,8 @@ def test_cubature_step_python_text_equals_compiled(stckf, transition):
     for step in (k.cubature_step, pure(k.cubature_step)):
         a = [X.copy(), P.copy(), np.empty((M, N, n, n)), np.empty((M, N, nz, nz)), np.zeros((M, N))]
         lam, rep = np.empty((M, N)), np.zeros((M, N), np.int64)
-        step(pf_, ph_, *a, Z, None, E, Q, np.linalg.inv(Q), R, np.linalg.inv(R), xang, zang, pr, lam, rep, 0, M * N)
+        noise = compiled_util.Noise(Q, np.linalg.inv(Q), R, np.linalg.inv(R), xang, zang)
+        step(pf_, ph_, compiled_util.Particles(*a, lam, rep), Z, None, E, noise, pr, 0, M * N)
         outs.append(a[:3] + [a[4], lam, rep] + ([a[3]] if stckf else []))
     for c, p in zip(*outs):
         assert np.isfinite(c).all()

@@ -22,6 +22,9 @@ from replay.models.ungm import UNGM
 from replay.tasks import make_task
 
 from oracle_p002 import batched_jacobian, entropy_weights, gwo_optimize, oracle_filter
+from replay.util.angles import residual
+from replay.filters.p002.stack import fast_residual
+from replay.filters.p002 import swarm_kernels
 
 SHARED = Path(os.environ.get("REPLAY_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
 BOHAI = SHARED / "datasets" / "bohai"
@@ -72,7 +75,7 @@ def test_fading_factor_known_value():
 
     def lam(V, e, fresh, P=P, m_form="propagated", rho=0.95):
         st = compiled_util.Fading(rho, 1.2, m_form == "propagated")
-        return compiled_util.fading_factor(V, e, fresh, H, F, P, Q, R, st, *(np.empty((2, 2)) for _ in range(3)))
+        return compiled_util.fading_factor(V, e, fresh, H, F, P, Q, R, st, tuple(np.empty((2, 2)) for _ in range(3)))
 
     # tr(N) = 14 - 1 - 1.2 * 2 = 10.6; tr(M) = 2
     V = np.empty((2, 2))
@@ -169,9 +172,6 @@ def test_reproduction_table_from_first_runs_equals_a_shorter_evaluation():
 
 
 def test_fast_residual_is_replay_angles_residual_bit_for_bit():
-    from replay.util.angles import residual
-    from replay.filters.p002.stack import fast_residual
-
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(7, 9, 6)) * 10, rng.normal(size=(7, 1, 6)) * 10
     for angles in [(4, 5), (1, 2), (0,), (1, 3), ()]:
@@ -250,7 +250,6 @@ def test_entropy_weights_invert_the_leader_order():
     """002 §3.2.2 as printed: w = 1 - E with E = -p log p peaking at p = 1/e, so the weights are not
     monotone in the fitness: f = [1, 1.5, 10] gives the worst leader the largest weight (the kernel's
     own function, equal to the oracle's numpy reading)."""
-    from replay.filters.p002 import swarm_kernels
 
     f, w = np.array([1.0, 1.5, 10.0]), np.empty(3)
     swarm_kernels.entropy_weights(f, 1e-12, 1e-4, w)
@@ -434,7 +433,6 @@ def test_swarm_filter_with_printed_m_counts_as_divergence_not_a_crash():
 def test_truth_without_process_noise_keeps_the_sonar_noise():
     """truth_noise=false: the truth follows f exactly from x0, and each run's sonar noise is the same
     draws as with the noisy truth (the variants are paired)."""
-    from replay.models.auv_sonar import AUVSonar
 
     a = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3))
     b = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3), truth_noise=False)

@@ -42,6 +42,9 @@ import numpy as np
 
 from replay.filters.p002.compiled_util import (
     Fading,
+    Fit,
+    Noise,
+    Particles,
     Proposal,
     correct,
     cubature_points,
@@ -127,9 +130,12 @@ def innovation(ph, zidx, zang, w):
 
 
 @nb.njit(cache=True)
-def particle_fading(x, z, pf, ph, zidx, zang, P, V, fresh, Q, R, st, w):
+def particle_fading(x, z, pf, ph, zidx, prev, noise, st, w):
     """One particle's fading factor (:func:`replay.filters.p002.compiled_util.fading_factor`): F at its
-    previous state x (covariance P), H and h at its prediction w.mean, e = z - h (wrapped)."""
+    previous state x (covariance P), H and h at its prediction w.mean, e = z - h (wrapped);
+    ``prev`` = (P, V, fresh), its innovation average V (``fresh``: restarted); Q, R and the angle
+    flags of ``noise`` (a :data:`replay.filters.p002.compiled_util.Noise`)."""
+    P, V, fresh = prev
     F(x, pf, w.Fj)
     if zidx is None:
         H(w.mean, ph, w.Hj)
@@ -141,15 +147,18 @@ def particle_fading(x, z, pf, ph, zidx, zang, P, V, fresh, Q, R, st, w):
         observe(w.mean, ph, zidx, w.zf, w.zh0)
     for a in range(z.shape[0]):
         w.ez[a] = z[a] - w.zh0[a]
-    wrap(w.ez, zang)
-    return fading_factor(V, w.ez, fresh, w.Hj, w.Fj, P, Q, R, st, w.HQ, w.HF, w.HFP)
+    wrap(w.ez, noise.zang)
+    return fading_factor(V, w.ez, fresh, w.Hj, w.Fj, P, noise.Q, noise.R, st, (w.HQ, w.HF, w.HFP))
 
 
 @nb.njit(cache=True, nogil=True)
-def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs, start, stop):
+def cubature_step(pf, ph, parts, Z, zidx, E, noise, pr, start, stop):
     """One CKF/STCKF proposal step of particles, the draw and the weight (002 §2.1–2.2).
 
-    For the flat particle indices start .. stop - 1 (index = m N + i, run m, particle i), in
+    ``parts`` the particles' arrays (:data:`replay.filters.p002.compiled_util.Particles`: X, P, L,
+    V, logw, lam, repairs), ``noise`` Q, R and their inverses, the angle flags
+    (:data:`~replay.filters.p002.compiled_util.Noise`). For the flat particle indices start ..
+    stop - 1 (index = m N + i, run m, particle i), in
     place: X[m, i] <- m^i + L^i E[m, i] with (m^i, P^i) the cubature posterior given the measured
     components ``zidx`` of z (Z[m] holds them; R, R^-1, ``zang`` are theirs; ``zidx`` None: all),
     or the prediction (m^i-, P^i-) when ``Z`` is None (a predict-only step; a None argument gives
@@ -163,6 +172,8 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
     factor then propagates P_k = 0. Particles are independent: callers may split the index
     range among threads (the function releases the GIL).
     """
+    X, P, L, V, logw, lam, repairs = parts
+    Q, Qi, R, Ri, xang, zang = noise
     M, N, n = X.shape
     nz = zang.shape[0]  # measured components (0: predict only)
     w = workspace(n, nz, pr.nzf)
@@ -188,21 +199,8 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
         else:
             repairs[m, i] += innovation(ph, zidx, zang, w)
             if pr.stckf:  # fading factor (002 §2.2.2)
-                g = particle_fading(
-                    x,
-                    Z[m],
-                    pf,
-                    ph,
-                    zidx,
-                    zang,
-                    nothing if pr.transition else P[m, i],
-                    V[m, i],
-                    not pr.have_V,
-                    Q,
-                    R,
-                    pr.fading,
-                    w,
-                )
+                prev = (nothing if pr.transition else P[m, i], V[m, i], not pr.have_V)
+                g = particle_fading(x, Z[m], pf, ph, zidx, prev, noise, pr.fading, w)
                 Pzz, Pxz, Pm = w.Pzz, w.Pxz, w.Pm
                 Pzz *= g
                 Pxz *= g
@@ -229,11 +227,14 @@ def cubature_step(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang
 
 
 @nb.njit(cache=True, parallel=True)
-def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, zang, pr, lam, repairs, chunks):
+def cubature_threads(pf, ph, parts, Z, zidx, E, noise, pr, chunks):
     """:func:`cubature_step` over all particles, in ``chunks`` ranges run by numba's threads
     (OpenMP threads spin between steps, so waking them costs microseconds, not the ~70 us of
     a Python thread). Each particle is computed by one thread: the numbers do not depend on it.
-    The record ``pr`` enters the threads as its fields (numba passes no tuple record into them)."""
+    The records ``parts``, ``noise`` and ``pr`` enter the threads as their fields (numba passes no
+    tuple record into them)."""
+    X, P, L, V, logw, lam, repairs = parts
+    Q, Qi, R, Ri, xang, zang = noise
     total = X.shape[0] * X.shape[1]
     size = (total + chunks - 1) // chunks
     rho, beta, propagated = pr.fading.rho, pr.fading.beta, pr.fading.propagated
@@ -241,38 +242,20 @@ def cubature_threads(pf, ph, X, P, L, V, logw, Z, zidx, E, Q, Qi, R, Ri, xang, z
     logdet_Q, logdet_R, nzf = pr.logdet_Q, pr.logdet_R, pr.nzf
     for ch in nb.prange(chunks):
         rec = Proposal(stckf, Fading(rho, beta, propagated), scale, transition, have_L, have_V, logdet_Q, logdet_R, nzf)
-        cubature_step(
-            pf,
-            ph,
-            X,
-            P,
-            L,
-            V,
-            logw,
-            Z,
-            zidx,
-            E,
-            Q,
-            Qi,
-            R,
-            Ri,
-            xang,
-            zang,
-            rec,
-            lam,
-            repairs,
-            ch * size,
-            min(total, (ch + 1) * size),
-        )
+        parts_ch = Particles(X, P, L, V, logw, lam, repairs)
+        noise_ch = Noise(Q, Qi, R, Ri, xang, zang)
+        cubature_step(pf, ph, parts_ch, Z, zidx, E, noise_ch, rec, ch * size, min(total, (ch + 1) * size))
 
 
 @nb.njit(cache=True)
-def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
-    """out[i] = (z - h(c + Xr[i]))' R^-1 (z - h(c + Xr[i])) for rows i not in ``skip`` (wrapped angle
-    residuals; the measured components ``zidx`` of h, ``zf`` a buffer of the whole h); with ``fx``
-    (N, n) (the ``fitness="posterior"`` parameter) plus the transition term
+def fitness_rows(ph, c, Xr, fit, zidx, post, out, skip, zf):
+    """out[i] = (z - h(c + Xr[i]))' R^-1 (z - h(c + Xr[i])) for rows i not in ``skip`` (z, R^-1 and
+    the angle flags from ``fit``, a :data:`replay.filters.p002.compiled_util.Fit`; wrapped angle
+    residuals; the measured components ``zidx`` of h, ``zf`` a buffer of the whole h); with ``post``
+    = (fx (N, n), Q^-1) (the ``fitness="posterior"`` parameter) plus the transition term
     (x - fx[i])' Q^-1 (x - fx[i]) of the particle's own ancestor, fx[i] = f(x^i_{k-1}) (``xang``
-    components wrapped). ``fx`` None: the residual alone (numba prunes the branch)."""
+    components wrapped). ``post`` None: the residual alone (numba prunes the branch)."""
+    z, Ri, zang, xang = fit.z, fit.Ri, fit.zang, fit.xang
     n, nz = Xr.shape[1], z.shape[0]
     x = np.empty(n)
     dx = np.empty(n)
@@ -283,7 +266,8 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
         for a in range(n):
             x[a] = c[a] + Xr[i, a]
         out[i] = maha(x, ph, z, zidx, zang, Ri, zf, zh, d)
-        if fx is not None:
+        if post is not None:
+            fx, Qi = post
             for a in range(n):
                 dx[a] = x[a] - fx[i, a]
             wrap(dx, xang)
@@ -291,15 +275,15 @@ def fitness_rows(ph, c, Xr, z, zidx, Ri, zang, xang, fx, Qi, out, skip, zf):
 
 
 @nb.njit(cache=True, nogil=True)
-def swarm_move(
-    ph, X, logw, Z, zidx, Ri, xang, zang, movable, Fx, Qi, raw, a, improved, xi, eps, logdet_R, nzf, best, start, stop
-):
+def swarm_move(ph, X, logw, fit, zidx, movable, post, raw, search, span):
     """The relocation of :class:`replay.filters.p002.igwo_stcpf.SwarmEngine` (``estimate_at="after"``)
-    for runs start .. stop - 1, in place: GWO/IGWO on the particles X (M, N, n) and their new
-    log weights, log p(z | x) of the measured components ``zidx`` (Z (M, len(zidx)); R^-1 and
-    ``zang`` theirs; ``nzf`` the model's nz). ``movable`` (M, n) bool: the components the wolves
-    move in (None: all; the ``move_components`` parameter); ``Fx`` (M, N, n): each particle's
-    f(x_{k-1}) for the posterior-type fitness with Q^-1 = ``Qi`` (None: the residual alone),
+    for runs ``span`` = (start, stop): start .. stop - 1, in place: GWO/IGWO (``search`` = (settings,
+    a :data:`replay.filters.p002.compiled_util.Gwo`; ``best``)) on the particles X (M, N, n)
+    and their new log weights, log p(z | x) of the measured components ``zidx`` (``fit``, a
+    :data:`~replay.filters.p002.compiled_util.Fit`: Z (M, len(zidx)); R^-1 and ``zang`` theirs;
+    ``nzf`` the model's nz). ``movable`` (M, n) bool: the components the wolves
+    move in (None: all; the ``move_components`` parameter); ``post`` = (Fx (M, N, n), Q^-1): each
+    particle's f(x_{k-1}) for the posterior-type fitness (None: the residual alone),
     then the new log weights are -f / 2 with that fitness.
 
     Per run: normalised weights from ``logw``; their weighted (circular) mean c;
@@ -309,8 +293,11 @@ def swarm_move(
     X <- c + wolves (wrapped); logw <- -(f + log det R + nz log 2 pi) / 2 with f
     the final fitness. ``best`` (M, t_max + 1) as in :func:`swarm`.
     """
+    gwo, best = search
+    start, stop = span
+    xang = fit.xang
     M, N, n = X.shape
-    nz = Z.shape[1]
+    nz = fit.z.shape[1]
     c = np.empty(n)
     Xr = np.empty((N, n))
     f = np.empty(N)
@@ -323,17 +310,18 @@ def swarm_move(
                 Xr[i, q] = X[m, i, q] - c[q]
             wrap(Xr[i], xang)
         mov = None if movable is None else movable[m]
-        fx = None if Fx is None else Fx[m]
-        swarm(ph, Xr, c, Z[m], zidx, Ri, zang, xang, mov, fx, Qi, raw[m - start], a, improved, xi, eps, f, best[m], nzf)
+        pm = None if post is None else (post[0][m], post[1])
+        fm = Fit(fit.z[m], fit.Ri, fit.zang, fit.xang, fit.logdet_R, fit.nzf)
+        swarm(ph, Xr, c, fm, zidx, mov, pm, raw[m - start], gwo, (f, best[m]))
         for i in range(N):
             for q in range(n):
                 X[m, i, q] = c[q] + Xr[i, q]
             wrap(X[m, i], xang)
-            logw[m, i] = gauss_logpdf(f[i] + logdet_R, nz * LOG_2PI)
+            logw[m, i] = gauss_logpdf(f[i] + fit.logdet_R, nz * LOG_2PI)
 
 
 @nb.njit(cache=True)
-def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, eps, fm, best, nzf):
+def swarm(ph, X, c, fit, zidx, mov, post, raw, gwo, out):
     """``t_max = len(a)`` GWO (``improved`` False) or IGWO iterations (002 §3.1–3.2) of one swarm, in place.
 
     X (N, n) are the wolves as deviations from the centre c (n,); the fitness
@@ -341,13 +329,15 @@ def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, 
     N, n) holds the uniforms r1, r2 as 32-bit integers u, r = (u + 0.5) 2^-32;
     ``a`` the convergence factor per iteration. Outputs: fm (N,) the final
     fitness; best (t_max + 1,) the best fitness before and after each
-    iteration. The leaders are not moved (elitism); the candidates are
+    iteration (``out`` = (fm, best)). The leaders are not moved (elitism); the candidates are
     X_L - A |C X_L - X| with A = a (2 r1 - 1), C = 2 r2, combined with weights
     1/k (GWO) or the entropy weights of the leaders' fitness (IGWO,
     002 §3.2.2, :func:`replay.filters.p002.swarm_kernels.entropy_weights`). ``mov`` (n,) bool:
-    only these components move (None: all); ``fx``, ``Qi``: the posterior-type fitness
-    (:func:`fitness_rows`).
+    only these components move (None: all); ``fit`` (its z one row), ``post``: the fitness
+    (:func:`fitness_rows`); ``gwo``: ``a``, ``improved``, the entropy weights' ``xi`` and ``eps``.
     """
+    a, improved, xi, eps = gwo
+    fm, best = out
     N, n = X.shape
     k = raw.shape[2]
     t_max = a.shape[0]
@@ -357,8 +347,8 @@ def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, 
     w = np.empty(k)
     fl = np.empty(k)
     XL = np.empty((k, n))
-    zf = np.empty(nzf)
-    fitness_rows(ph, c, X, z, zidx, Ri, zang, xang, fx, Qi, fm, none, zf)
+    zf = np.empty(fit.nzf)
+    fitness_rows(ph, c, X, fit, zidx, post, fm, none, zf)
     best[0] = fm.min()
     for t in range(t_max):
         leaders(fm, k, lead)
@@ -384,5 +374,5 @@ def swarm(ph, X, c, z, zidx, Ri, zang, xang, mov, fx, Qi, raw, a, improved, xi, 
                     Cq = (raw[t, 1, j, i, q] + 0.5) * U32 * 2.0
                     acc += w[j] * (XL[j, q] - np.abs(Cq * XL[j, q] - X[i, q]) * A)
                 X[i, q] = acc
-        fitness_rows(ph, c, X, z, zidx, Ri, zang, xang, fx, Qi, fm, is_lead, zf)
+        fitness_rows(ph, c, X, fit, zidx, post, fm, is_lead, zf)
         best[t + 1] = fm.min()

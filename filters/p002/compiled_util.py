@@ -183,7 +183,7 @@ def frobenius(A, B):
 
 
 @nb.njit(cache=True, nogil=True)
-def fading_factor(V, e, fresh, H, F, P, Q, R, st, HQ, HF, HFP):
+def fading_factor(V, e, fresh, H, F, P, Q, R, st, work):
     """The fading factor lambda of :mod:`replay.filters.p002.stckf` (002 §2.2.2), st a :class:`Fading`:
 
         V = e e' (``fresh``) or (rho V + e e') / (1 + rho)     (in place; e = z - h(x^-) (nz,))
@@ -193,7 +193,8 @@ def fading_factor(V, e, fresh, H, F, P, Q, R, st, HQ, HF, HFP):
         lambda = max(1, tr N / tr M), 1 when tr M <= 0
 
     H (nz, n) the Jacobian of h at the prediction, F (n, n) that of f at the previous estimate,
-    P its covariance, Q, R (nz, nz); HQ, HF, HFP (nz, n) work arrays. Sums in index order."""
+    P its covariance, Q, R (nz, nz); ``work`` = (HQ, HF, HFP) (nz, n) work arrays. Sums in index order."""
+    HQ, HF, HFP = work
     rho = st.rho
     for a in range(e.shape[0]):
         for b in range(e.shape[0]):
@@ -226,6 +227,16 @@ class Proposal(NamedTuple):
     logdet_R: float
     nzf: int  # the model's measurement size (the length of h(x))
 
+
+# The cubature step's and the swarm's arguments that travel together (namedtuples of arrays):
+Particles = namedtuple("Particles", "X P L V logw lam repairs")  # (M, N, ...) each, changed in place
+Noise = namedtuple("Noise", "Q Qi R Ri xang zang")  # Q, R of the measured components, their inverses,
+# the state's and the measured components' angle flags
+Fit = namedtuple("Fit", "z Ri zang xang logdet_R nzf")  # the swarm's fitness: the measured components z
+# (nz,) (a stack (M, nz) for :func:`replay.filters.p002.compiled.swarm_move`), R^-1, their angle flags,
+# the state's, log det R and the model's nz
+Gwo = namedtuple("Gwo", "a improved xi eps")  # the GWO/IGWO settings: the schedule a (t_max,), IGWO,
+# the entropy weights' xi and eps
 
 Work = namedtuple(
     "Work", "fx mean mpost xnew dx zh zh0 ez y d zf Hf Lp Lm Pm Fj Pn Y pts Dx Zc Dz Hj Pxz K Pzz S HQ HF HFP"

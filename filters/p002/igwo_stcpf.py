@@ -66,7 +66,7 @@ from replay.model import is_diagonal, remap_indices
 
 from .. import particles
 from ..compiled import Kernel, split
-from . import gwo, pso
+from . import compiled_util, gwo, pso
 from .stack import fast_residual, wrap_inplace
 from .stckf import STCKF_PARAMS
 from .stcpf import CubatureParticleFilter, Engine, bound_kernels
@@ -333,24 +333,15 @@ class SwarmEngine(Engine):
         Ri, logdet_R = self.constants("R", meas[0])
         zidx = None if mask is None else np.flatnonzero(mask)  # None: all (no gather in the kernel)
         Qi = self.constants("Q", m.process_cov(k))[0] if self.Fx is not None else None
-        args = (
-            np.asarray(m.kernel_params(k)[1], float),
-            self.X,
-            self.logw,
-            np.ascontiguousarray(zz, float),
-            zidx,
-            Ri,
-            self.xmask,
-            self.zmask if mask is None else self.zmask[zidx],
-            self.movable(k, mask),
-            self.Fx,
-            Qi,
-        )
-        opts = (self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12, logdet_R, m.nz, best)
+        zang = self.zmask if mask is None else self.zmask[zidx]
+        fit = compiled_util.Fit(np.ascontiguousarray(zz, float), Ri, zang, self.xmask, logdet_R, m.nz)
+        post = None if self.Fx is None else (self.Fx, Qi)
+        args = (np.asarray(m.kernel_params(k)[1], float), self.X, self.logw, fit, zidx, self.movable(k, mask), post)
+        search = (compiled_util.Gwo(self.schedule, flt.optimizer == "igwo", float(flt.xi), 1e-12), best)
 
         def runs(start, stop):  # each run draws from its own generator, in the thread that moves it
             for j in range(start, stop):
-                self.k_swarm(*args, gwo.raw_draws([rngs[j]], shape), *opts, j, j + 1)
+                self.k_swarm(*args, gwo.raw_draws([rngs[j]], shape), search, (j, j + 1))
 
         if M == 1:  # one run: no thread to wake
             runs(0, 1)

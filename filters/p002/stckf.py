@@ -157,7 +157,7 @@ class STCKF(CKF):
                 for a in (H, m.F(state.x_prev, k), state.P_prev, m.process_cov(k), R)
             ),
             compiled_util.Fading.of(self),
-            *work,
+            tuple(work),
         )
         state.lambdas.append(lam)
         return lam

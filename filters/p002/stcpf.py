@@ -62,7 +62,7 @@ from ..base import Filter
 from ..pf import propagate
 from ..resampling import SCHEMES
 from ..compiled import Kernel, bind, split, threads
-from . import compiled_util, compiled
+from . import compiled, compiled_util
 from .stack import fast_residual
 from .stckf import STCKF_PARAMS
 
@@ -295,23 +295,12 @@ class Engine:
         args = (
             np.asarray(pf, float),
             np.asarray(ph, float),
-            self.X,
-            self.P,
-            self.L,
-            V,
-            self.logw,
+            compiled_util.Particles(self.X, self.P, self.L, V, self.logw, lam, rep),
             np.ascontiguousarray(zz, float) if nzm else None,
             zidx,
             e,
-            Q,
-            Qi,
-            R,
-            Ri,
-            self.xmask,
-            zang,
+            compiled_util.Noise(Q, Qi, R, Ri, self.xmask, zang),
             pr,
-            lam,
-            rep,
         )
         chunks = min(threads(), M * N // GRAIN)
         if chunks > 1 and M == 1:  # one run: numba's OpenMP threads (they spin between steps)
