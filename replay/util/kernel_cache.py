@@ -23,15 +23,19 @@ is imported (every module with ``cache=True`` functions imports it first, checke
   unpickled: it is removed and the function compiled again (counted in :data:`CACHE_REPORT`, one
   line on the ``replay.kernels`` logger). A data file naming another signature than the index
   says is not executed either: the function is compiled and the entry written again.
-  What this does not stop: someone who can read the key file, i.e. this user (or root); such a
-  person can change the installed code too. Without a usable key, nothing is loaded from or
-  written to these caches (one note): every process compiles.
+* **Bound to every compiled source.** numba keys an index on its function's file alone (a loop cached
+  before an edit or upgrade of a kernel it calls would run the old one): an index also holds
+  :func:`sources_digest`; any change there compiles everything again.
+  Not stopped: whoever reads the key file (this user, root), who can change the code too. Without
+  a usable key nothing is loaded from or written to these caches (one note): every process compiles.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
+import importlib.util
 import io
 import itertools
 import logging
@@ -230,15 +234,40 @@ def locked_load(self, key):
         return NUMBA_LOAD(self, key)
 
 
-# ------------------------------------------------------------------------------------ sealed files
-
-
 def _remove(path) -> None:
     """Remove a file not to be read (a read-only cache: left, and never read either)."""
     try:
         Path(path).unlink(missing_ok=True)
     except OSError:
         pass
+
+
+SOURCES = ("filters", "replay/models", "replay/util", "replay/model.py", "replay/scoring/metrics.py")  # compiled code
+
+
+def source_files() -> list[tuple[str, Path]]:
+    """(name, path) of every source of compiled code (:data:`SOURCES`); ``filters`` where Python
+    imports ``replay.filters`` from (a checkout maps it beside ``replay/``)."""
+    here = Path(__file__).resolve().parents[1]  # the replay package
+    spec = importlib.util.find_spec("replay.filters")
+    roots = {"filters": Path(next(iter(spec.submodule_search_locations))) if spec else here / "filters"}
+    out = []
+    for name in SOURCES:
+        top = roots.get(name, here.parent / name)
+        if top.is_dir():
+            out += [(f"{name}/{f.relative_to(top).as_posix()}", f) for f in sorted(top.rglob("*.py"))]
+        elif top.is_file():
+            out.append((name, top))
+    return out
+
+
+@functools.cache
+def sources_digest() -> str:
+    """SHA-256 over the names and contents of :func:`source_files`, once per process."""
+    h = hashlib.sha256()
+    for name, f in source_files():
+        h.update(name.encode() + b"\0" + hashlib.sha256(f.read_bytes()).digest())
+    return h.hexdigest()
 
 
 class SealedCacheFile(IndexDataCacheFile):
@@ -270,12 +299,12 @@ class SealedCacheFile(IndexDataCacheFile):
         if pickle.load(f) != self._version:
             return {}
         stamp, entries = pickle.loads(f.read())
-        return entries if stamp == self._source_stamp else {}
+        return entries if stamp == (self._source_stamp, sources_digest()) else {}
 
     def _save_index(self, entries):
         f = io.BytesIO()
         pickle.dump(self._version, f, protocol=-1)
-        f.write(self._dump((self._source_stamp, entries)))
+        f.write(self._dump(((self._source_stamp, sources_digest()), entries)))
         self._write(self._index_path, f.getvalue())
 
     def save(self, key, data):
