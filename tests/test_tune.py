@@ -65,7 +65,11 @@ def test_same_seed_twice_same_best_and_rows(tmp_path, tuned_run):
     assert board(tmp_path / "c")[1]["params"] != ra[1]["params"]
 
 
+@pytest.mark.slow
 def test_resume_after_a_trial_left_running_gives_the_uninterrupted_result(tmp_path):
+    """Slow: three tunes (10-25 s); the fast subset keeps tests/test_tune_study.py::
+    test_a_damaged_study_is_refused_naming_the_file_then_recomputed_from_the_units (a tune resumed from
+    its stored units gives the uninterrupted leaderboard, byte for byte)."""
     from replay.tune import study as studies
 
     tune(tmp_path / "whole", trials=5)  # 5 trials: the left-running one is the third
@@ -111,7 +115,11 @@ def test_kill_9_mid_way_then_resume_gives_the_uninterrupted_result(tmp_path):
     assert board(part) == board(tmp_path / "whole")
 
 
+@pytest.mark.slow
 def test_eval_tuned_gives_the_held_out_row(tmp_path, tuned):
+    """Slow: a tune's file through eval, rerun and a campaign in a subprocess (10-25 s); the fast subset
+    keeps tests/test_tuned_views.py::test_eval_tuned_alone_gives_the_held_out_rows_exactly (replay eval
+    --tuned gives the tune's held-out row exactly)."""
     from replay.campaign import board as cboard
 
     row = [r for r in board(tuned) if r["label"] == "kf (tuned)"][0]
