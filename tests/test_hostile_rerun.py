@@ -103,7 +103,7 @@ def _static_columns():
 
 
 COLUMNS = _static_columns()
-# Each case reruns the evaluation (240 reruns in all): the fast subset alters and deletes every column
+# Most cases rerun the evaluation (240 cases in all): the fast subset alters and deletes every column
 # of the EKF's row; the same columns of the UKF's row (the same checks on the other row) are slow.
 CASES = [c if c[0] == "ekf" else pytest.param(c, marks=pytest.mark.slow) for c in COLUMNS]
 register(*(f"rerun-altered-{f}.{k}" for f, k in COLUMNS), *(f"rerun-deleted-{f}.{k}" for f, k in COLUMNS))
