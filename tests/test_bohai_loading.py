@@ -65,7 +65,8 @@ def groups(request, monkeypatch):
     return request.param
 
 
-@pytest.mark.parametrize("kind", ["step", "spike", "noise"])
+# the noise bursts (the oracle's costliest tracks, 15-20 s) are slow: the steps and spikes stay fast
+@pytest.mark.parametrize("kind", ["step", "spike", pytest.param("noise", marks=pytest.mark.slow)])
 def test_mask_jumps_equals_the_quadratic_oracle_with_many_jumps(kind, groups):
     rng = np.random.default_rng({"step": 1, "spike": 2, "noise": 3}[kind])
     masked = 0

@@ -75,7 +75,12 @@ def test_bad_input_is_one_line_and_exit_2(args, expected, tmp_path):
     assert expected.lower() in lines[0].lower()
 
 
+@pytest.mark.slow
 def test_eval_bohai_position_first_1000(bohai_dir, tmp_path):
+    """Slow: four filters x 3 runs on 1000 Bohai rows (6-25 s); the fast subset keeps
+    tests/test_fusion.py::test_bohai_fusion_runs_through_its_sensor_columns (an eval of the same log),
+    tests/test_bohai.py (its loading) and test_eval_sim_writes_leaderboard_and_manifest (the
+    leaderboard's columns)."""
     out = tmp_path / "b"
     res = CliRunner().invoke(main, ["eval", "bohai/20220822_0_6", "--data-dir", str(bohai_dir), "--task",
                                     "position", "--first", "1000", "--runs", "3", "-o", str(out),

@@ -297,7 +297,11 @@ def test_models_with_a_gate_of_arrays_are_compared_field_by_field():
     assert not same_model(Model([5.0, 5.0]), Model([5.0, 5.0, 5.0]))
 
 
+@pytest.mark.slow
 def test_report_of_an_outage_sweep_writes_its_table_recovery_and_figures(tmp_path):
+    """Slow: a campaign and its report's figures (10-30 s); the fast subset keeps
+    test_campaign_fault_tables_sweep_and_robustness_score (the sweep and its table) and
+    test_robustness_score_and_recovery_time_known_values (the numbers)."""
     from replay.outputs.report import make_report
 
     (tmp_path / "c.toml").write_text(

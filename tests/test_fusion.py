@@ -111,10 +111,17 @@ def test_nav2_odometry_against_amcl(shared_dir):
     assert by["recorded:wheel_odometry"]["pos_rmse"] == pytest.approx(0.4958, abs=5e-4)  # SE(3)-aligned
 
 
-def test_recording_without_reference_is_refused(shared_dir, tmp_path):
-    bag = shared_dir / "datasets" / "bags" / "robot_localization" / "test3_groovy.bag"
+@pytest.mark.parametrize("rec, imu, odom", [
+    ("derived/rl_test1_60s_mcap", "/imu/data", "/husky_velocity_controller/odom"),  # its /fix not declared
+    pytest.param("robot_localization/test3_groovy.bag", "/ardrone/imu", "/ardrone/odometry/raw",
+                 marks=pytest.mark.slow),  # no position topic at all; reads 50k messages (15-35 s)
+])
+def test_recording_without_reference_is_refused(shared_dir, tmp_path, rec, imu, odom):
+    """A mapping without [reference] is refused in one line. Slow: test3_groovy.bag; the fast subset
+    keeps the 60 s MCAP conversion of test1.bag (its /fix left out of the mapping)."""
+    bag = shared_dir / "datasets" / "bags" / rec
     mp = tmp_path / "m.toml"
-    mp.write_text('time = "header"\n[channels]\nimu = "/ardrone/imu"\nodom = "/ardrone/odometry/raw"\n')
+    mp.write_text(f'time = "header"\n[channels]\nimu = "{imu}"\nodom = "{odom}"\n')
     out = cli("eval", bag, "--mapping", mp, "--task", "fusion", "-f", "ekf", "-o", tmp_path / "o", code=2)
     assert "nothing to score against" in out and "[reference] position" in out
     assert len(out.splitlines()) == 1 and "Traceback" not in out

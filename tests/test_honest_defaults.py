@@ -7,8 +7,13 @@ from click.testing import CliRunner
 
 from replay.cli import main
 
-RECORDINGS = ["robot_localization/test1.bag", "robot_localization/test3_groovy.bag", "derived/rl_test1_60s_mcap",
-              "derived/rl_test1_60s_sqlite3", "evo/ROS_example.bag", "evo/nav2_turtlebot.mcap"]
+# the ROS 1 bags (test1.bag, test3_groovy.bag and ROS_example.bag: 5-20 s each) are slow: the fast
+# subset keeps test1.bag's MCAP and SQLite conversions and an MCAP recording of another robot (nav2)
+_SLOW = pytest.mark.slow
+RECORDINGS = [pytest.param("robot_localization/test1.bag", marks=_SLOW),
+              pytest.param("robot_localization/test3_groovy.bag", marks=_SLOW),
+              "derived/rl_test1_60s_mcap", "derived/rl_test1_60s_sqlite3",
+              pytest.param("evo/ROS_example.bag", marks=_SLOW), "evo/nav2_turtlebot.mcap"]
 
 
 @pytest.mark.parametrize("rec", RECORDINGS)

@@ -350,9 +350,14 @@ def test_data_file_of_another_signature_is_not_executed(tmp_path):
     assert f.load(("sig-a",)) == "code of a" and f.load(("sig-b",)) == "code of b"
 
 
+@pytest.mark.slow
 def test_model_kernels_own_numba_cache_is_sealed_and_damage_rebuilt(tmp_path):
     """numba's cache of the library's kernels (beside the package, here NUMBA_CACHE_DIR): sealed; a
-    damaged file is removed and rebuilt in the next process, which gives the same numbers."""
+    damaged file is removed and rebuilt in the next process, which gives the same numbers.
+    Slow: each process compiles the kernels into a fresh NUMBA_CACHE_DIR (15-20 s); the fast subset
+    keeps test_random_bytes_over_nbc_detected_removed_counted_same_numbers and
+    test_truncated_index_and_unsealed_plain_numba_files_are_recompiled (damage detected, removed, the
+    same numbers)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     code = ("import numpy as np; from replay.models.random_walk import RandomWalkPosition as M; "
             "m = M(np.eye(2), np.diag([1.0, 2.0])); print(repr(m.f(np.arange(6.0).reshape(3, 2), 0).tolist()))")
@@ -386,10 +391,15 @@ print(out.tolist())
 '''
 
 
+@pytest.mark.slow
 def test_gufunc_loop_cached_beside_another_compilation_of_its_kernel_is_built_again(tmp_path):
     """The crash of issue 33: a gufunc's loop cached by one process beside its kernel compiled by another
     (the kernel's cache entry gone, or written by a concurrent process) names a function this process
-    does not have; numba's own cache then calls a null pointer (segfault). Built again here: the numbers."""
+    does not have; numba's own cache then calls a null pointer (segfault). Built again here: the numbers.
+    Slow: three processes compile the gufunc into fresh caches (15-20 s); the fast subset keeps
+    test_truncated_index_and_unsealed_plain_numba_files_are_recompiled and
+    test_data_file_of_another_signature_is_not_executed (a cache entry this process cannot use is
+    compiled again, never run)."""
     (tmp_path / "gk.py").write_text(GUFUNC)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "PYTHONPATH": str(tmp_path)}
     run = lambda how: subprocess.run([sys.executable, str(tmp_path / "gk.py"), how], env=env,  # noqa: E731

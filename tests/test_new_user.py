@@ -96,9 +96,13 @@ def _run_sections(names: list[str], cwd: Path, shared: Path | None = None) -> in
     return n
 
 
+@pytest.mark.slow
 def test_the_first_ten_minutes_eval_report_and_export_print_what_the_page_shows(tmp_path):
     """Sections 1-5 (no data needed): --version, the evaluation's table, the report, the export
-    (its message count and how to open the file in Foxglove)."""
+    (its message count and how to open the file in Foxglove).
+    Slow: the README's 20-run evaluation, its report and export (30-40 s); the fast subset keeps
+    test_steps_are_read_from_the_page (the page's commands), tests/test_cli.py (eval), tests/test_report.py and
+    tests/test_export_foxglove.py."""
     n = _run_sections(["1.", "2.", "4.", "5."], tmp_path)
     assert n == 4  # --version, eval, report, export
     assert (tmp_path / "runs/sim_auv-sonar/sonar/001/leaderboard.csv").is_file()

@@ -2,6 +2,7 @@
 import csv
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -28,18 +29,31 @@ def board(out):
         return list(csv.DictReader(fh))
 
 
-def test_same_seed_twice_same_best_and_rows(tmp_path):
-    a, b = tune(tmp_path / "a"), tune(tmp_path / "b")
-    ra, rb = board(tmp_path / "a"), board(tmp_path / "b")
+@pytest.fixture(scope="module")
+def tuned_run(tmp_path_factory):
+    """One ``tune(out)`` (SMALL, 6 trials, seed 0) shared by the tests that only read it (read-only:
+    a test that writes into it works on a copy): (its directory, what it printed)."""
+    out = tmp_path_factory.mktemp("tune") / "a"
+    return out, tune(out).output
+
+
+@pytest.fixture(scope="module")
+def tuned(tuned_run):
+    return tuned_run[0]
+
+
+def test_same_seed_twice_same_best_and_rows(tmp_path, tuned_run):
+    (adir, a), b = tuned_run, tune(tmp_path / "b").output
+    ra, rb = board(adir), board(tmp_path / "b")
     assert [r["label"] for r in ra] == ["kf (default)", "kf (tuned)", "ekf (default)", "ekf (tuned)",
                                         "measurements (raw observations)"]
     assert ra[-1]["train_score"] == "" and float(ra[-1]["test_score"]) == float(ra[-1]["pos_rmse"]) > 2
     assert ra == rb
-    table = lambda res: "\n".join(ln for ln in res.output.splitlines() if not ln.startswith("replay: note:"))  # noqa: E731
-    assert table(a).replace("/a/", "/b/") == table(b)  # (a one-time compile note may precede the first)
+    table = lambda out: "\n".join(ln for ln in out.splitlines() if not ln.startswith("replay: note:"))  # noqa: E731
+    assert table(a).replace(f"{adir}/", f"{tmp_path / 'b'}/") == table(b)  # (a one-time compile note may precede)
     for f in ("tuned-kf.toml", "tuned-ekf.toml"):  # tuned to other task parameters: one file each
-        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
-    assert not (tmp_path / "a" / "tuned.toml").exists()
+        assert (adir / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    assert not (adir / "tuned.toml").exists()
     tuned = [r for r in ra if r["label"].endswith("(tuned)")]
     default = [r for r in ra if r["label"].endswith("(default)")]
     for t, d in zip(tuned, default):  # the defaults are trial 0: tuning never ends worse on training
@@ -51,12 +65,16 @@ def test_same_seed_twice_same_best_and_rows(tmp_path):
     assert board(tmp_path / "c")[1]["params"] != ra[1]["params"]
 
 
+@pytest.mark.slow
 def test_resume_after_a_trial_left_running_gives_the_uninterrupted_result(tmp_path):
+    """Slow: three tunes (10-25 s); the fast subset keeps tests/test_tune_study.py::
+    test_a_damaged_study_is_refused_naming_the_file_then_recomputed_from_the_units (a tune resumed from
+    its stored units gives the uninterrupted leaderboard, byte for byte)."""
     from replay.tune import study as studies
 
-    tune(tmp_path / "whole", trials=8)
+    tune(tmp_path / "whole", trials=5)  # 5 trials: the left-running one is the third
     part = tmp_path / "part"
-    tune(part, trials=3)
+    tune(part, trials=2)
     store = studies.storage(part)  # a kill between ask and tell: a RUNNING trial with its parameters
     import optuna
 
@@ -66,7 +84,7 @@ def test_resume_after_a_trial_left_running_gives_the_uninterrupted_result(tmp_pa
     dims = [Dim("task", "q", "log", 0.01, 10), Dim("task", "r", "log", 0.1, 20)]
     studies.next_trial(st, dims, 0, "kf")
     assert len(st.get_trials(states=(optuna.trial.TrialState.RUNNING,))) == 1
-    tune(part, trials=8)
+    tune(part, trials=5)
     assert board(part) == board(tmp_path / "whole")
 
 
@@ -97,13 +115,16 @@ def test_kill_9_mid_way_then_resume_gives_the_uninterrupted_result(tmp_path):
     assert board(part) == board(tmp_path / "whole")
 
 
-def test_eval_tuned_gives_the_held_out_row(tmp_path):
+@pytest.mark.slow
+def test_eval_tuned_gives_the_held_out_row(tmp_path, tuned):
+    """Slow: a tune's file through eval, rerun and a campaign in a subprocess (10-25 s); the fast subset
+    keeps tests/test_tuned_views.py::test_eval_tuned_alone_gives_the_held_out_rows_exactly (replay eval
+    --tuned gives the tune's held-out row exactly)."""
     from replay.campaign import board as cboard
 
-    tune(tmp_path / "t")
-    row = [r for r in board(tmp_path / "t") if r["label"] == "kf (tuned)"][0]
+    row = [r for r in board(tuned) if r["label"] == "kf (tuned)"][0]
     res = CliRunner().invoke(main, ["eval", "sim/linear", "--dataset-param", "steps=60", "--tuned",
-                                    str(tmp_path / "t" / "tuned-kf.toml"), "--runs", "2", "--seed", "1", "-q",
+                                    str(tuned / "tuned-kf.toml"), "--runs", "2", "--seed", "1", "-q",
                                     "--out", str(tmp_path / "e")])
     assert res.exit_code == 0, res.output
     import json
@@ -111,13 +132,13 @@ def test_eval_tuned_gives_the_held_out_row(tmp_path):
     ev = json.loads((tmp_path / "e" / "manifest.json").read_text())["results"]  # full precision
     assert set(ev) == {"kf", "measurements"}  # the file's filters
     assert ev["kf"]["config_hash"] == row["test_config_hashes"]
-    held = {r["config_hash"]: r for r in cboard.campaign_rows(tmp_path / "t")}[row["test_config_hashes"]]
+    held = {r["config_hash"]: r for r in cboard.campaign_rows(tuned)}[row["test_config_hashes"]]
     for col in ("pos_rmse", "pos_rmse_median", "x_rmse", "ate", "final_err", "nees", "nis", "anees", "scored"):
         assert float(ev["kf"][col]) == pytest.approx(float(held[col]), rel=1e-12, abs=0), col
     assert float(row["pos_rmse"]) == pytest.approx(float(ev["kf"]["pos_rmse"]), rel=1e-5)
     again = CliRunner().invoke(main, ["rerun", str(tmp_path / "e" / "manifest.json"), "-q"])
     assert again.exit_code == 0 and "reproduced" in again.output, again.output  # replay rerun repeats it
-    camp = subprocess.run([sys.executable, "-m", "replay.cli", "campaign", "run", str(tmp_path / "t" / "tuned-kf.toml"),
+    camp = subprocess.run([sys.executable, "-m", "replay.cli", "campaign", "run", str(tuned / "tuned-kf.toml"),
                            "--out", str(tmp_path / "c"), "-q", "--workers", "1"], capture_output=True, text=True)
     assert camp.returncode == 0, camp.stderr  # a campaign file too
     assert row["test_config_hashes"] in {r["config_hash"] for r in cboard.campaign_rows(tmp_path / "c")}
@@ -165,8 +186,8 @@ def test_nll_tune_recovers_the_true_q_and_r_within_their_sampling_error(tmp_path
     assert float(row["test_score"]) < float(default["test_score"])
 
 
-def test_report_of_a_tune_directory(tmp_path):
-    tune(tmp_path / "t")
+def test_report_of_a_tune_directory(tmp_path, tuned):
+    shutil.copytree(tuned, tmp_path / "t")  # the report is written into the directory
     res = CliRunner().invoke(main, ["report", str(tmp_path / "t")])
     assert res.exit_code == 0, res.output
     rep = tmp_path / "t" / "report"
@@ -176,7 +197,7 @@ def test_report_of_a_tune_directory(tmp_path):
     assert "Train versus test" in page and "kf (tuned)" in page and page.count("<img") == 4
 
 
-def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
+def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path, tuned):
     """A campaign's [tune] table runs the tune of each dataset x task with the campaign's runs and
     seed: the same rows as `replay tune` with those options; its units in OUT/tune/units."""
     camp = tmp_path / "c.toml"
@@ -186,11 +207,11 @@ def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
                     'space = { "task.q" = "log[0.01,10]", "task.r" = "log[0.1,20]" }\n')
     res = CliRunner().invoke(main, ["campaign", "run", str(camp), "--out", str(tmp_path / "o"), "-q", "--workers", "1"])
     assert res.exit_code == 0, res.output
-    tuned = tmp_path / "o" / "tune" / "sim_linear_linear"
-    assert (tmp_path / "o" / "tune" / "units").is_dir() and not (tuned / "units").exists()
-    tune(tmp_path / "t")  # replay tune with the same data, runs, seed, space and trials
+    tuned_dir = tmp_path / "o" / "tune" / "sim_linear_linear"
+    assert (tmp_path / "o" / "tune" / "units").is_dir() and not (tuned_dir / "units").exists()
+    # `tuned`: replay tune with the same data, runs, seed, space and trials
     strip = lambda rows: [{k: v for k, v in r.items() if k not in ("tuned_on", "tested_on")} for r in rows]
-    assert strip(board(tuned)) == strip(board(tmp_path / "t"))
+    assert strip(board(tuned_dir)) == strip(board(tuned))
     bad = tmp_path / "bad.toml"
     bad.write_text(camp.read_text().replace("trials = 6", "trials = 6\nbudget = 3"))
     res = CliRunner().invoke(main, ["campaign", "run", str(bad), "--out", str(tmp_path / "b"), "-q"])
@@ -201,15 +222,14 @@ def test_campaign_tune_table_shares_one_store_and_gives_the_tune_rows(tmp_path):
     assert res.exit_code == 2 and "a log range needs positive bounds" in res.output and not (tmp_path / "b").exists()
 
 
-def test_local_pool_gives_the_serial_rows(tmp_path):
+def test_local_pool_gives_the_serial_rows(tmp_path, tuned):
     """A trial's runs spread over the workers (one run per job here), with the serial numbers."""
     from replay.campaign.execute import spread_block
 
     assert [spread_block(2, 25, 2, None), spread_block(5, 25, 2, None), spread_block(5, 2, 2, None)] == [1, 3, 2]
     assert spread_block(5, 25, 1, None) == 5 and spread_block(5, 25, 2, "tcp://x:8786") == 25  # Dask: declared
-    tune(tmp_path / "serial")
-    tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes
-    assert board(tmp_path / "pool") == board(tmp_path / "serial")
+    tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes; `tuned`: serial
+    assert board(tmp_path / "pool") == board(tuned)
 
 
 @pytest.mark.parametrize("fparams", [{}, {"q_scale": 0.3, "r_scale": 2.0}])

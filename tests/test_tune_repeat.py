@@ -23,9 +23,13 @@ def test_interval_is_over_the_per_tune_means():
     assert p["difference"] == pytest.approx(0.5) and p["ci95"] == 0.0 and p["different"]
 
 
+@pytest.mark.slow
 def test_two_identical_filters_are_not_called_different(tmp_path):
     """kf and ekf on the linear task are the same filter: after tuning, their gap is the optimiser's.
-    Within one tune a paired test over its runs calls it significant; over 3 tunes x runs it is not."""
+    Within one tune a paired test over its runs calls it significant; over 3 tunes x runs it is not.
+    Slow: 3 tunes x 12 trials x 4 runs (20-40 s); the fast subset keeps
+    test_interval_is_over_the_per_tune_means (the interval's arithmetic) and
+    test_eval_tune_writes_tuned_rows_with_tuning_intervals (the tunes' intervals end to end)."""
     dims = ["log[0.01,10]", "log[0.1,20]"]
     entries = entries_from_cli([f"{f}.{p}={d}" for f in ("kf", "ekf") for p, d in zip(("q_scale", "r_scale"), dims)])
     t = check.prepare(TuneOptions(dataset="sim/linear", filters=["kf", "ekf"], entries=entries, trials=12,
@@ -68,9 +72,12 @@ def test_eval_tune_refusals(tmp_path, args, message):
     assert r.exit_code != 0 and message in r.output and "Traceback" not in r.output, r.output
 
 
+@pytest.mark.slow
 def test_grid_distance_on_the_linear_task(tmp_path):
     """nll fixes both q and r: the grid optimum of 9 x 9 points (log steps of 0.375 and 0.29 decades)
-    lies near the truth (q 0.3, r 2), and 16 TPE trials reach its training score within 5 %."""
+    lies near the truth (q 0.3, r 2), and 16 TPE trials reach its training score within 5 %.
+    Slow: 81 grid points and 2 x 16 trials (20 s); the fast subset keeps tests/test_tune_grid.py (the
+    grid's points and optimum) and test_eval_tune_writes_tuned_rows_with_tuning_intervals."""
     out = tmp_path / "g"
     r = CliRunner().invoke(cli, ["eval", "sim/linear", "-f", "kf", "--tune", "16", "--tune-repeats", "2", "-n", "4",
                                  "--dataset-param", "steps=100", "--out", str(out), "-q", "--tune-grid", "9",
