@@ -227,7 +227,7 @@ def test_local_pool_gives_the_serial_rows(tmp_path, tuned):
     from replay.campaign.execute import spread_block
 
     assert [spread_block(2, 25, 2, None), spread_block(5, 25, 2, None), spread_block(5, 2, 2, None)] == [1, 3, 2]
-    assert spread_block(5, 25, 1, None) == 5 and spread_block(5, 25, 2, "tcp://x:8786") == 25  # Dask: declared
+    assert spread_block(5, 25, 1, None) == 5 and spread_block(5, 25, None, "tcp://x:8786") == 2  # a remote scheduler: 4 workers
     tune(tmp_path / "pool", "--workers", "2")  # each trial's 2 runs in 2 processes; `tuned`: serial
     assert board(tmp_path / "pool") == board(tuned)
 

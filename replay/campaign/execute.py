@@ -327,14 +327,13 @@ def open_backend(workers, scheduler, dask_local, connect_timeout: float, n_jobs:
     return _processes(min(workers, n_jobs)), f"processes({min(workers, n_jobs)})"
 
 
-def spread_block(runs: int, batch: int, workers, distributed) -> int:
+def spread_block(runs: int, batch: int, workers, scheduler) -> int:
     """Runs per job of one trial: at most ``batch``, and few enough that a trial's runs spread over
-    the local workers (trials run one after another; 5 runs in one block of 25 kept one of two cores
-    idle). Numbers do not depend on it: a run's depend only on (seed, run), whatever its block.
-    A Dask cluster keeps the declared block (its worker count is not known here)."""
-    if distributed:
-        return batch
-    w = workers or os.cpu_count() or 1
+    the workers (trials run one after another; 5 runs in one block of 25 kept one of two cores idle).
+    ``workers``: the local pool's or local Dask cluster's size (default: the cores); a remote
+    ``scheduler``'s size is not known here: taken as 4. Numbers do not depend on the block: a run's
+    depend only on (seed, run)."""
+    w = workers or (4 if scheduler else os.cpu_count() or 1)
     return max(1, min(batch, -(-runs // w)))
 
 

@@ -123,7 +123,6 @@ def tune_cmd(
     given = [data_dir, dataset if dataset and Path(dataset).exists() else None, space_file, mapping]
     output = output_set(out, given)
     output.rule(Path(out), out)  # its contents first: a foreign directory refused before the data is read
-    parallel = workers or dask_local or (scheduler and 4)
     t = check.prepare(
         check.TuneOptions(
             dataset=dataset,
@@ -146,7 +145,6 @@ def tune_cmd(
             test=test,
             split=split,
             allow_overlap=allow_overlap,
-            batch=-(-runs // parallel) if parallel and runs > 0 else None,  # a trial's runs over the workers
         )
     )
     check_names(out, "--out")

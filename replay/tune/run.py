@@ -190,7 +190,7 @@ def tune(
         opened = {f: studies.open_study(store, f, t.fingerprint(f), out / "study.db", units) for f in t.filters}
         write_json(out / "tune.json", _asked(t))  # once every study is known to be this configuration's
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
-        block = execute.spread_block(t.runs, t.batch, workers, scheduler or dask_local)
+        block = execute.spread_block(t.runs, t.batch, workers or dask_local, scheduler)
         n_jobs = -(-t.runs // block) * max(len(t.split.train), len(t.split.test))
         ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
         failed: dict = {}  # filter -> why each of its trials of this invocation scored inf
