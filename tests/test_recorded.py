@@ -273,6 +273,39 @@ def test_campaign_rows_equal_eval(rec, tmp_path):
     assert [u for u in units if u.endswith(".parquet")] == ["0.parquet"]  # one unit: run 0
 
 
+def test_campaign_tables_show_a_recording_as_its_file_writes_it(rec, tmp_path):
+    """A recording's id relative to the campaign file is shown so in every table (the printed one,
+    leaderboard.csv, paired.csv, replay leaderboard, the report's sections), never as a machine's
+    path; the configurations keep the absolute path that computing a unit again needs."""
+    import shutil
+
+    from replay.campaign import index
+    from replay.outputs import report_data
+
+    mcap, m = rec
+    shutil.copytree(mcap.parent, tmp_path / "camp" / "data")
+    shutil.copy(m, tmp_path / "camp" / "map.toml")
+    written = f"data/{mcap.name}"
+    camp = tmp_path / "camp" / "c.toml"
+    camp.write_text(f'[campaign]\nruns = 2\n\n[[dataset]]\nid = "{written}"\n'
+                    'params = { mapping = "map.toml" }\nrecorded = ["slam", "ekf"]\n')
+    res = cli("campaign", "run", camp, "--out", tmp_path / "c", "--workers", "1")
+    assert res.exit_code == 0, res.output
+    board = rows_of(tmp_path / "c")
+    assert [r["dataset"] for r in board.values()] == [written, written]
+    assert float(board["recorded:slam"]["pos_rmse"]) > 0
+    paired = (tmp_path / "c" / "paired.csv").read_text()
+    assert f"\n{written},position,recorded:slam,recorded:ekf," in paired
+    shown = cli("leaderboard", tmp_path / "c")
+    assert shown.exit_code == 0 and written in shown.output
+    for text in (res.output, paired, (tmp_path / "c" / "leaderboard.csv").read_text(), shown.output):
+        assert str(tmp_path / "camp") not in text  # the recording's machine path in no table
+    assert [(s.dataset, len(s.paired)) for s in report_data.load(tmp_path / "c")] == [(written, 2)]
+    configs, _, problem = index.read(tmp_path / "c")
+    assert problem is None and {c["dataset"] for c in configs.values()} == {str(tmp_path / "camp" / written)}
+    assert index.names(tmp_path / "c") == {str(tmp_path / "camp" / written): written}
+
+
 # ---------------------------------------------------------------- refusals: one line, file and topic
 
 REFUSALS = [

@@ -20,6 +20,7 @@ from replay.scoring.marks import marks
 from replay.util.errors import ReplayError
 from replay.util.files import write_csv
 
+from . import index
 from .store import Store
 from replay.util.regular import read_bytes
 
@@ -65,6 +66,9 @@ def campaign_rows(
                 "`replay campaign run` again"
             ) from None
     rows = [r for r in rows if r["runs"] or r["failed"]]
+    names = index.names(store.out)  # a recording's id as its campaign file writes it, not a machine's path
+    for r in rows:
+        r["dataset"] = names.get(r["dataset"], r["dataset"])
     if order is not None:
         rank = {h: i for i, h in enumerate(order)}
         rows.sort(key=lambda r: (rank.get(r["config_hash"], len(rank)), r["config_hash"]))

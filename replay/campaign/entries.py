@@ -30,13 +30,15 @@ from replay.filters import make_filter
 @dataclass
 class DatasetEntry:
     """One ``[[dataset]]``: its id (a recording's absolute path for a path), canonical parameters,
-    ``first``, tasks and recorded estimates ({name: association parameters})."""
+    ``first``, tasks, recorded estimates ({name: association parameters}) and ``written``: the id as
+    the file writes it (a recording's path relative to the file), which tables show."""
 
     id: str
     params: dict
     first: int | None
     tasks: list
     recorded: dict
+    written: str = ""
 
 
 def _class_of(registry: dict, name: str):
@@ -72,7 +74,7 @@ def dataset(where, path: Path, entry: dict, data_dir: str | None) -> DatasetEntr
     if (ref.is_sim and VIEW_NAMES & params.keys()) or "fault" in params:  # a view or fault it cannot take: now
         _load_once(where, ref.id, params, first, data_dir)
     recorded = _recorded(where, entry, ref.id, params, first, data_dir, ref.adapter)
-    return DatasetEntry(ref.id, params, first, tasks, recorded)
+    return DatasetEntry(ref.id, params, first, tasks, recorded, entry["id"] if ref.is_path else ref.id)
 
 
 def _dataset_of(where, path: Path, ds_id: str):

@@ -105,9 +105,9 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
         sync_dir(store.units)
     where = data_dir or campaign.data_dir
     new_dirs = {c["dataset"]: str(Path(where).resolve()) for c in cfgs} if where else {}
-    new = {**listed, **dict(zip(hashes, cfgs))}
-    if new != listed or {**dirs, **new_dirs} != dirs or damaged_index is not None:
-        write_json(store.out / index.NAME, index.document(new, {**dirs, **new_dirs}))
+    new, names = {**listed, **dict(zip(hashes, cfgs))}, index.names(store.out)
+    if new != listed or {**dirs, **new_dirs} != dirs or {**names, **campaign.names} != names or damaged_index:
+        write_json(store.out / index.NAME, index.document(new, {**dirs, **new_dirs}, {**names, **campaign.names}))
     return jobs, damaged, stored
 
 

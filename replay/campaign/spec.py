@@ -156,6 +156,7 @@ class Campaign:
     configs: list[Config] = field(default_factory=list)
     tune: dict | None = None  # the [tune] table, checked by replay.tune.campaign (replay tune at scale)
     where: object = None  # finds a key's line for messages about the file
+    names: dict = field(default_factory=dict)  # {a recording's absolute id: its id as the file writes it}
 
 
 def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
@@ -202,7 +203,16 @@ def load(path, allow_modules=(), reader: str = "a campaign file") -> Campaign:
             f"more than a campaign may hold ({MAX_UNITS}); split it",
         )
     return Campaign(
-        path, head["name"], runs, head["seed"], head["batch"], head["data_dir"], configs, doc.get("tune"), where
+        path,
+        head["name"],
+        runs,
+        head["seed"],
+        head["batch"],
+        head["data_dir"],
+        configs,
+        doc.get("tune"),
+        where,
+        {ds.id: ds.written for ds in ds_entries if ds.written != ds.id},
     )
 
 

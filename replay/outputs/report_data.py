@@ -25,7 +25,7 @@ import numpy as np
 
 from replay.trajectory.recorded import is_recorded
 from replay.util.errors import ReplayError
-from replay.campaign import board
+from replay.campaign import board, index
 from replay.campaign.store import Store
 from replay.campaign.board import read_dir
 
@@ -82,11 +82,13 @@ def load_campaign(d: Path) -> list[Section]:
     rows = board.read_dir(d)
     by_hash = {r.get("config_hash"): r for r in rows}
     sections: dict = {}
+    names = index.names(d)  # as the leaderboard shows the dataset (a recording's id as written)
     for h, cfg in store.configs():
         done = [r for r in store.records(h) if r["status"] == "done"]
         if not done:
             continue
-        sec = sections.setdefault((cfg["dataset"], cfg["task"]), Section(cfg["dataset"], cfg["task"]))
+        ds = names.get(cfg["dataset"], cfg["dataset"])
+        sec = sections.setdefault((ds, cfg["task"]), Section(ds, cfg["task"]))
         row = by_hash.get(h)
         lab = _unique(str(row.get("label") if row else cfg["filter"]), sec.runs)
         if row is not None:
