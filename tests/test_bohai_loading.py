@@ -113,9 +113,9 @@ def test_heartbeat_after_a_few_seconds_with_the_stage_and_its_eta():
         load_stage("parsing the table", 0.25)
         time.sleep(0.3)
     lines = out.getvalue().splitlines()
-    assert lines[0].startswith("load long.csv (2.4 GB): ")
+    assert lines[0].startswith("load long.csv (2.40GB): ")
     assert "parsing the table (25 % of the work, ETA" in lines[0]
-    assert lines[-1].startswith("load long.csv (2.4 GB): done in ")
+    assert lines[-1].startswith("load long.csv (2.40GB): done in ")
     assert not Loading.active
 
 

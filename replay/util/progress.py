@@ -1,14 +1,14 @@
-"""Progress of long work: :class:`Progress` is a ``tqdm`` with the project's settings (stderr; a live bar
-on a terminal; off a terminal a plain line every ``every`` seconds and one at the end, never a carriage
-return; nothing when quiet). What tqdm cannot know, it is told:
+"""Progress of long work, drawn by ``tqdm``: on stderr, a live bar on a terminal; off a terminal a plain
+line every ``every`` seconds and one at the end, never a carriage return (:class:`_Lines`); nothing when
+quiet. What is ours is what tqdm cannot know:
 
-* items of unequal cost: tqdm counts their *weight* (expected cost, :func:`particle_weight`), the line
-  shows the items done (``12/60 runs``);
+* items of unequal cost (:class:`Progress`): tqdm counts their *weight* (expected cost,
+  :func:`particle_weight`), the line shows the items done (``12/60 runs``);
 * the ETA's rate is the weight done since the first item finished (the first carries one-time work:
   kernels loaded, data generated; its rate made the ETA 70x too long) over that time minus the time
-  numba spent compiling kernels (once per machine, then cached: :func:`compile_seconds`).
-
-:class:`Loading` is the heartbeat of one slow file load (a tqdm too, refreshed by a thread).
+  numba spent compiling kernels (once per machine, then cached: :func:`compile_seconds`);
+* a file load has no updates of its own: :class:`Loading` is its heartbeat (tqdm's ``delay``, its
+  share and ETA; a thread ticks it, as tqdm's monitor thread only unsticks bars that count).
 """
 
 from __future__ import annotations
@@ -52,7 +52,9 @@ def compile_seconds(now: float | None = None) -> float:
 
 
 class NoteHandler(logging.StreamHandler):
-    """One-line notes: on a terminal tqdm erases its bars first and draws them again below the note."""
+    """One-line notes: on a terminal tqdm erases its bars first and draws them again below the note.
+    Not tqdm's ``logging_redirect_tqdm``: a context manager around the work (this is installed once) that
+    off a terminal would draw a progress line again after each note."""
 
     def emit(self, record):
         if not getattr(self.stream, "isatty", lambda: False)():
@@ -79,72 +81,72 @@ def particle_weight(params: dict, runs: int) -> float:
         return float(runs) * (RUN_OVERHEAD + 1.0)
 
 
+class _Lines:
+    """Off a terminal, what tqdm writes (``\\r``, the display, its padding) as plain lines; its clearing
+    and closing write nothing (tqdm has no line mode)."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        line = text.lstrip("\r").rstrip(" \n")
+        if line:
+            self.stream.write(line + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
 class _Settings(tqdm):
-    """tqdm with the project's settings: stderr, disabled when quiet, drawn by tqdm on a terminal; off a
-    terminal every display is one plain line (no carriage return, no padding) and closing adds none."""
+    """tqdm with the project's settings: stderr, disabled when quiet, a bar on a terminal (redrawn at
+    most every 0.2 s), off it a line at most every ``every`` seconds."""
 
     monitor_interval = 0  # no monitor thread
 
-    def __init__(self, stream, label: str, quiet: bool, every: float, fmt: tuple[str, str], **kw):
+    def __init__(self, stream, label: str, quiet: bool, every: float, fmt: tuple[str, str], leave=None, **kw):
         stream = stream or sys.stderr
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
         super().__init__(
-            file=stream,
+            file=stream if self.tty else _Lines(stream),
             desc=label,
             disable=quiet,
             bar_format=fmt[0] if self.tty else fmt[1],
-            ascii=" 123456789#",
+            ascii=True,
             ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120) if self.tty else 10**6,
             mininterval=0.2 if self.tty else every,
             miniters=0,
-            delay=1e-9,  # nothing drawn before the first update
             smoothing=0,  # the ETA's rate is ours (format_dict)
             nrows=1000,  # a terminal of unknown height (a pty of 0 rows) would hide the bar
-            leave=self.tty,
+            leave=self.tty if leave is None else leave,  # None: off a terminal the end's line is the update's
             **kw,
         )
-
-    def display(self, msg=None, pos=None):
-        if self.tty:
-            return super().display(msg, pos)
-        if msg is None:  # off a terminal: a line of its own; clearing (msg '') writes nothing
-            self.fp.write(str(self) + "\n")
-            self.fp.flush()
-        return False
-
-    def refresh(self, nolock=False, lock_args=None):
-        if not self.disable:
-            self.last_print_t = self._time()  # something is shown (tqdm's close looks)
-        return super().refresh(nolock, lock_args)
-
-    def clear(self, nolock=False):
-        if self.tty:  # a line written off a terminal stays
-            super().clear(nolock)
 
 
 class Progress(_Settings):
     """``start(total, total_weight)`` once the work is known, ``update(n, failed=, weight=)`` after each
-    finished item, ``close()`` at the end (module docstring). ``done``/``total`` count items,
-    ``weight_done``/``total_weight`` their weights (tqdm's ``n`` and its total)."""
+    finished item, ``close()`` at the end (module docstring). ``done``/``items`` count items,
+    ``weight_done``/``total_weight`` their weights (tqdm's ``n`` and ``total``)."""
 
     def __init__(
         self, total=0, quiet=False, stream=None, every=10.0, *, label="progress", unit="unit", total_weight=None
     ):
         self.done = self.failed = 0
-        self.items, self.unit_name, self.first = total, unit, None  # first: (time, compile s, weight)
-        self.c0 = compile_seconds()
+        self.items, self.first, self.c0 = total, None, compile_seconds()  # first: (time, compile s, weight)
         tail = "elapsed {elapsed_s:.0f} s{compiling}{eta}{postfix}"
         fmt = (
-            "{desc}: {percentage:3.0f}%|{bar}| {count} [" + tail + "]",
-            "{desc}: {count} ({percentage:.0f} % of the work), " + tail,
+            "{desc}: {percentage:3.0f}%|{bar}| {count} {unit}s{failed} [" + tail + "]",
+            "{desc}: {count} {unit}s{failed} ({percentage:.0f} % of the work), " + tail,
         )
-        super().__init__(stream, label, quiet, every, fmt, total=float(total if total_weight is None else total_weight))
+        weight = float(total if total_weight is None else total_weight)
+        super().__init__(
+            stream, label, quiet, every, fmt, unit=unit, total=weight, delay=1e-9
+        )  # nothing before an update
 
     total_weight = property(lambda self: self.total)
     weight_done = property(lambda self: self.n)
 
     def start(self, total: int, total_weight: float | None = None) -> None:
-        """Set the amount of work once it is known (before the first update)."""
+        """Set the amount of work once it is known (before the first update; tqdm's reset would draw)."""
         self.items, self.total = total, float(total if total_weight is None else total_weight)
         _listen()  # the work's modules are imported by now: numba too if it compiles
 
@@ -152,18 +154,15 @@ class Progress(_Settings):
         self.done += n
         self.failed += failed
         w = float(n if weight is None else weight)
-        if self.disable:  # quiet: counted, never drawn (tqdm's update would not count)
+        if self.disable:  # quiet: counted, never drawn (tqdm's update does not count then)
             self.n += w
             return
-        first = self.first is None
-        if first:
-            now = time.monotonic()
-            self.first = (now, compile_seconds(now), self.n + w)
-        if not (first and self.tty) and self.items and self.done < self.items:
-            return super().update(w)
-        self.n += w  # the end, and a terminal's first item: drawn now
-        self.refresh()
-        self.last_print_n = self.n
+        now = time.monotonic()
+        at_once = self.first is None and self.tty or not self.items or self.done >= self.items
+        self.first = self.first or (now, compile_seconds(now), self.n + w)
+        if not super().update(w) and at_once:  # a terminal's first item and the end: drawn now
+            self.refresh()
+            self.last_print_n, self.last_print_t = self.n, self._time()  # what tqdm's update does after drawing
 
     def eta(self, now=None) -> float:
         """Seconds left: the weight left over the rate since the first item (compilations left out); NaN
@@ -178,80 +177,64 @@ class Progress(_Settings):
     @property
     def format_dict(self):
         d = super().format_dict
-        now, done = time.monotonic(), min(self.done, self.items) if self.items else self.done
+        now = time.monotonic()
         eta, c = self.eta(now), compile_seconds(now) - self.c0
-        fail = f", {self.failed} failed" if self.failed else ""
-        d["count"] = f"{done}/{self.items} {self.unit_name}s{fail}"
+        d["count"] = f"{min(self.done, self.items) if self.items else self.done}/{self.items}"
+        d["failed"] = f", {self.failed} failed" if self.failed else ""
         d["compiling"] = f", {c:.0f} s compiling kernels" if c >= 0.5 else ""
         d["eta"] = f", ETA {eta:.0f} s" if eta == eta else ""
-        d["n"] = min(d["n"], d["total"]) if d["total"] else 1.0
-        d["total"] = d["total"] or 1.0  # nothing to do: done
+        d["n"] = min(d["n"], d["total"]) if d["total"] else 1.0  # never past the total; nothing to do: done
+        d["total"] = d["total"] or 1.0
         return d
 
 
 class Loading(_Settings):
     """A heartbeat while one file is read (``with Loading(label, size):`` around the adapter's call):
-    nothing for ``after`` seconds, then (a thread refreshing it) the file, its size, the elapsed time and
-    the stage the adapter last named (:func:`load_stage`, with its share of the work and the ETA from
+    nothing for ``after`` seconds (tqdm's ``delay``), then the file, its size, the elapsed time and the
+    stage the adapter last named (:func:`load_stage`, with its share of the work and tqdm's ETA from
     it) every second on a terminal, every ``every`` seconds otherwise, and a closing line. ``quiet``
     None: quiet when the notes of the logger ``replay`` are off (the CLI's ``-q``)."""
 
     active: list = []  # the loads in progress, innermost last (load_stage talks to the last)
+    FORMAT = "{desc}: {elapsed_s:.0f} s{postfix}"
+    SHARE = " ({percentage:.0f} % of the work, ETA {remaining_s:.0f} s)"
 
     def __init__(self, label, size=None, quiet=None, stream=None, after=3.0, every=10.0):
         if quiet is None:
             quiet = not logging.getLogger("replay").isEnabledFor(logging.INFO)
-        self.stage, self.share, self.shown, self.after, self.end = "", None, False, after, ""
-        head = f"load {label}" + ("" if size is None else f" ({_bytes(size)})")
-        fmt = "{desc}: {elapsed_s:.0f} s{postfix}"
-        super().__init__(stream, head, quiet, every, (fmt, fmt), total=1.0)
-        self._stop, self.every = threading.Event(), every
+        head = f"load {label}" + ("" if size is None else f" ({tqdm.format_sizeof(size, 'B')})")
+        fmt = (self.FORMAT, self.FORMAT)
+        super().__init__(stream, head, quiet, 0.0, fmt, total=1.0, delay=after, leave=True)
+        self.every, self._stop, self._thread = 1.0 if self.tty else every, threading.Event(), None
 
     def __enter__(self):
         Loading.active.append(self)
         if not self.disable:
-            threading.Thread(target=self._beat, name="replay-loading", daemon=True).start()
+            self._thread = threading.Thread(target=self._beat, name="replay-loading", daemon=True)
+            self._thread.start()
         return self
 
     def __exit__(self, kind, *_):
         Loading.active.remove(self)
         self._stop.set()
-        if self.shown:
-            with self._lock:
-                self.end = "done" if kind is None else "stopped"
-                self.refresh(nolock=True)
-        self.close()
+        if self._thread is not None:
+            self._thread.join()
+        self.bar_format = f"{{desc}}: {'done' if kind is None else 'stopped'} in {{elapsed_s:.0f}} s"
+        self.close()  # the closing line, if anything was shown (tqdm's delay)
         return False
 
-    @property
-    def format_dict(self):
-        d, el = super().format_dict, self._time() - self.start_t
-        d["postfix"] = f", {self.stage}" if self.stage else ""
-        if self.share:
-            d["postfix"] += f" ({100 * self.share:.0f} % of the work, ETA {el / self.share * (1 - self.share):.0f} s)"
-        if self.end:
-            d["bar_format"] = f"{{desc}}: {self.end} in {{elapsed_s:.0f}} s"
-        return d
-
     def _beat(self) -> None:
-        wait = self.after
+        wait = self.delay
         while not self._stop.wait(wait):
-            with self._lock:
-                if not self._stop.is_set():
-                    self.refresh(nolock=True)
-                    self.shown = True
-            wait = 1.0 if self.tty else self.every
+            self.update(0)  # drawn once the delay has passed
+            wait = self.every
 
 
 def load_stage(stage: str, share: float | None = None) -> None:
     """Name what the adapter is doing now (and the share of its work done before it, 0-1) for the
     heartbeat of the innermost :class:`Loading`; nothing when none is active."""
     if Loading.active:
-        Loading.active[-1].stage, Loading.active[-1].share = stage, share
-
-
-def _bytes(n: int) -> str:
-    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n >= scale:
-            return f"{n / scale:.1f} {unit}"
-    return f"{n} B"
+        ld = Loading.active[-1]
+        ld.bar_format = Loading.FORMAT + (Loading.SHARE if share else "")
+        ld.n = ld.last_print_n = share or 0.0  # set, not counted: tqdm's percentage and ETA from it
+        ld.set_postfix_str(stage, refresh=False)
