@@ -21,7 +21,8 @@ import time
 
 from tqdm import tqdm
 
-_CLOCK = {"depth": 0, "start": 0.0, "total": 0.0, "listening": False}  # numba's outermost compilations
+# numba's outermost compilations, timed here: tqdm cannot tell one-time compiling from the work
+_CLOCK = {"depth": 0, "start": 0.0, "total": 0.0, "listening": False}
 
 
 def _listen() -> None:
@@ -112,9 +113,9 @@ class _Settings(tqdm):
             disable=quiet,
             bar_format=fmt[0] if self.tty else fmt[1],
             ascii=True,
-            ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120) if self.tty else 10**6,
+            ncols=min(shutil.get_terminal_size((100, 24)).columns or 100, 120) if self.tty else 10**6,  # no cut
             mininterval=0.2 if self.tty else every,
-            miniters=0,
+            miniters=0,  # by time only (tqdm's dynamic miniters would skip items of unequal cost)
             smoothing=0,  # the ETA's rate is ours (format_dict)
             nrows=1000,  # a terminal of unknown height (a pty of 0 rows) would hide the bar
             leave=self.tty if leave is None else leave,  # None: off a terminal the end's line is the update's
@@ -235,6 +236,6 @@ def load_stage(stage: str, share: float | None = None) -> None:
     heartbeat of the innermost :class:`Loading`; nothing when none is active."""
     if Loading.active:
         ld = Loading.active[-1]
-        ld.bar_format = Loading.FORMAT + (Loading.SHARE if share else "")
         ld.n = ld.last_print_n = share or 0.0  # set, not counted: tqdm's percentage and ETA from it
         ld.set_postfix_str(stage, refresh=False)
+        ld.bar_format = Loading.FORMAT + (Loading.SHARE if share else "")
