@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.run_options import Existing
 from replay.util.errors import ReplayError
 
 TUNE_OPTIONS = (
@@ -51,7 +52,7 @@ TUNE_OPTIONS = (
     click.option(
         "--tune-space",
         default=None,
-        type=click.Path(dir_okay=False, exists=True),
+        type=Existing(dir_okay=False),
         help="With --tune: a search space file as replay tune --space takes (default: q_scale, r_scale, "
         "and a particle filter's n_particles).",
     ),
