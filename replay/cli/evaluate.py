@@ -7,9 +7,9 @@ import sys
 
 import click
 
-from replay.cli.eval_tune import tune_options
+from replay.cli.eval_tune import data_options, tune_options
 from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, Existing, quiet_notes, run_option
-from replay.cli.view_options import view_options, with_views
+from replay.cli.view_options import view_options
 
 
 @click.command("eval")
@@ -149,22 +149,20 @@ def eval_options(dataset, o: dict):
     """``replay eval``'s options (``o``: its arguments) as one :class:`replay.run.eval_options.EvalOptions`
     (with ``--tuned``: :func:`replay.tune.tuned.with_tuned`, told which options the command line gave)."""
     from replay.cli import params as cli_params
-    from replay.data.registry import check_data_dir
     from replay.run.eval_options import EvalOptions
     from replay.scoring.summary import MIN_SCORED_SHARE
 
-    check_data_dir(o["data_dir"], "--data-dir")
+    tparams, dparams = data_options(o)
     share = o["min_scored_share"]
     share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if share is None else share, "--min-scored-share")
     names, recorded = cli_params.split_filters(f.strip() for f in o["filters"].split(",") if f.strip())
-    views = (o["rate"], o["window"], o["segment"], o["fault"])
     options = EvalOptions(
         task=o["task"],
         filters=names,
         recorded=recorded,
         filter_params=cli_params.filter_params(o["params"], names + (recorded or [])),
-        task_params=cli_params.task_params(o["task_params"], o["task"]),
-        dataset_params=with_views(cli_params.dataset_inputs(o["dataset_params"], o["mapping"]), *views) or None,
+        task_params=tparams,
+        dataset_params=dparams or None,
         **{k: o[k] for k in ("runs", "seed", "first", "data_dir", "adapter", "alignment", "baseline")},
         divergence_threshold=o["divergence_threshold"],
         min_scored_share=share,
@@ -192,7 +190,9 @@ class Printed:
         from replay.cli.bags import export_progress
         from replay.util.progress import Progress
 
-        return Progress(0, self.quiet, label="eval", unit="run") if kind == "eval" else export_progress(kind, self.quiet)
+        return (
+            Progress(0, self.quiet, label="eval", unit="run") if kind == "eval" else export_progress(kind, self.quiet)
+        )
 
     def evaluated(self, ev) -> None:
         from replay.outputs.files import format_table
