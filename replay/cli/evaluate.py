@@ -180,8 +180,8 @@ def eval_options(dataset, o: dict):
 
 
 class Printed:
-    """``replay eval``'s display (:class:`replay.outputs.eval_job.EvalReport`): the progress on stderr
-    (none when ``quiet``), the leaderboard, its notes and the paths written on stdout."""
+    """``replay eval``'s display (the methods of :class:`replay.outputs.eval_job.EvalReport`): the progress
+    on stderr (none when ``quiet``), the leaderboard, its notes and the paths written on stdout."""
 
     def __init__(self, quiet: bool):
         self.quiet = quiet

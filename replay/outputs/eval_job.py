@@ -48,7 +48,11 @@ class EvalRun:
 
 
 class EvalReport:
-    """What :func:`run_eval` tells as it goes (the CLI prints it; every method does nothing here)."""
+    """What :func:`run_eval` tells as it goes (the CLI prints it; every method does nothing here but
+    :meth:`progress`, which gives ``progress``, a display for the runs, if one is given)."""
+
+    def __init__(self, progress=None):
+        self._progress = progress
 
     def evaluated(self, ev: Evaluation) -> None:
         """The evaluation is computed; the output set is not written yet."""
@@ -63,7 +67,7 @@ class EvalReport:
         """A progress display (a :class:`replay.util.progress.Progress`) for the runs of the evaluation
         (``kind`` "eval") or the messages of an export ("mcap", "ros2"), or None; closed when that work
         is done."""
-        return None
+        return self._progress if kind == "eval" else None
 
 
 def run_eval(dataset, options: EvalOptions, output: OutputRequest, report: EvalReport | None = None) -> EvalRun:
