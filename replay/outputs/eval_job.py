@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 
 from replay.data import dataset_ref
 from replay.outputs.eval_output import EvalOutput
-from replay.outputs.exports import export_run
 from replay.run.checks import check_config, check_recorded
 from replay.run.eval_options import EvalOptions
 from replay.run.evaluation import Evaluation, evaluate
@@ -100,6 +99,9 @@ def run_eval(dataset, options: EvalOptions, output: OutputRequest, report: EvalR
         report.published(paths)
         exports = []
         if output.mcap or output.ros2_bag:
+            # lazy: the MCAP and ROS 2 writers and their schemas, ~0.25 s of import (-X importtime), for exports only
+            from replay.outputs.exports import export_run  # noqa: PLC0415
+
             for done in export_run(
                 target.out, output.mcap, output.ros2_bag, data_dir=options.data_dir, progress=report.progress
             ):
