@@ -57,7 +57,7 @@ def load_frame(dataset, *, data_dir=None, seed=None, first: int | None = None, a
     return registry.load_frame(os.fspath(dataset), data_dir=data_dir, rng=seed, first=first, adapter=adapter, **params)
 
 
-def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, **options):
+def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = None, out=None, force=False, **options):
     """Run ``filters`` on ``dataset`` and score them: an :class:`replay.run.evaluation.Evaluation`.
 
     ``filters``: names (``"ekf,ukf"`` or a list), Filter classes or instances (module
@@ -65,13 +65,22 @@ def evaluate(dataset, *, filters=DEFAULT_FILTERS, filter_params: dict | None = N
     ``seed``, ``first``, ``data_dir``, ``task_params``, ``dataset_params``, ``adapter``,
     ``alignment``, ``divergence_threshold``, ``baseline``, ...), the options of ``replay eval``, and
     ``progress``; they become one record, passed whole to :func:`replay.run.evaluation.evaluate`.
+    ``out``: also write it as ``replay eval --out`` does (leaderboard, estimates, manifest; ``force``:
+    replace an earlier eval output there), through :func:`replay.outputs.eval_job.run_eval`, the command's
+    own call: everything refused before the computation, the set written whole.
     """
-    # lazy: module comment
-    from replay.run.evaluation import evaluate as run  # noqa: PLC0415
-
     names, params = filter_names(filters, filter_params)
     progress = options.pop("progress", None)
-    return run(os.fspath(dataset), EvalOptions(filters=names, filter_params=params, **options), progress=progress)
+    o = EvalOptions(filters=names, filter_params=params, **options)
+    if out is None:
+        # lazy: module comment
+        from replay.run.evaluation import evaluate as run  # noqa: PLC0415
+
+        return run(os.fspath(dataset), o, progress=progress)
+    # lazy: module comment
+    from replay.outputs.eval_job import EvalReport, OutputRequest, run_eval  # noqa: PLC0415
+
+    return run_eval(os.fspath(dataset), o, OutputRequest(out, force=force), EvalReport(progress)).evaluation
 
 
 def filter_names(filters, filter_params: dict | None = None) -> tuple[list, dict]:

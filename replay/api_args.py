@@ -134,6 +134,8 @@ ARGS: dict[str, dict] = {
         "batch": EVAL["batch"],
         "filter_params": _p("filter_params", dict, "{filter: {name: value}}", optional=True),
         "min_scored_share": MIN_SCORED_SHARE,
+        "out": PATH(name="out", doc="write replay eval's output set into this directory", optional=True),
+        "force": _p("force", bool, "replace an earlier replay eval output at out", default=False),
     },
     "load_frame": {
         "dataset": DATASET,

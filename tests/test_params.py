@@ -198,7 +198,7 @@ def test_cli_parsing():
 
 
 def test_check_config_is_canonical_and_loads_nothing(monkeypatch):
-    from replay.cli.params import check_config
+    from replay.run.checks import check_config
 
     monkeypatch.setattr(registry, "load_frame", lambda *a, **k: pytest.fail("loaded data"))
     a = check_config("sim/ungm", None, ["ekf"], {}, {"r": 2}, {"q": 10})

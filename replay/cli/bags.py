@@ -78,8 +78,7 @@ def export_outputs(
     over the messages written goes to stderr (a bar on a terminal, a line every ~10 s otherwise), none
     if ``quiet``; a line per export on stdout.
     """
-    from replay.outputs.exports import LABELS, export_run
-    from replay.util.progress import Progress
+    from replay.outputs.exports import export_run
 
     for done in export_run(
         run_dir,
@@ -89,15 +88,28 @@ def export_outputs(
         run=run,
         select=select,
         sigma=sigma,
-        progress=lambda kind: Progress(0, quiet, label=LABELS[kind], unit="message"),
+        progress=lambda kind: export_progress(kind, quiet),
     ):
-        target, slash, tracks = done["target"], "/" if done["kind"] == "ros2" else "", ", ".join(done["tracks"])
-        click.echo(f"wrote {target}{slash} ({done['messages']} messages; run {done['run']}: {tracks})")
-        click.echo(
-            f"  open it in Foxglove: File > Open local file... > {Path(target).name} (3D panel: /replay/<track>/pose)"
-            if slash == ""
-            else f"  play it: ros2 bag play {target} (replay inspect {target} lists its topics)"
-        )
+        echo_export(done)
+
+
+def export_progress(kind: str, quiet: bool):
+    """The progress display of an export (``kind``: "mcap" or "ros2") over its messages."""
+    from replay.outputs.exports import LABELS
+    from replay.util.progress import Progress
+
+    return Progress(0, quiet, label=LABELS[kind], unit="message")
+
+
+def echo_export(done: dict) -> None:
+    """The lines of one export written (:func:`replay.outputs.exports.export_run`'s item)."""
+    target, slash, tracks = done["target"], "/" if done["kind"] == "ros2" else "", ", ".join(done["tracks"])
+    click.echo(f"wrote {target}{slash} ({done['messages']} messages; run {done['run']}: {tracks})")
+    click.echo(
+        f"  open it in Foxglove: File > Open local file... > {Path(target).name} (3D panel: /replay/<track>/pose)"
+        if slash == ""
+        else f"  play it: ros2 bag play {target} (replay inspect {target} lists its topics)"
+    )
 
 
 @click.command("export")  # examples: replay.cli.examples

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import ALLOW_MODULE, DATA_DIR
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, Existing
 from replay.util.errors import ReplayError
 from replay.util.files import check_writable, refuse_overlap
 
@@ -124,7 +124,7 @@ def run_cmd(file, out, workers, scheduler, dask_local, data_dir, retry_failed, q
 
 
 @click.command("leaderboard")
-@click.argument("dirs", nargs=-1, required=True, type=click.Path(exists=True))
+@click.argument("dirs", nargs=-1, required=True, type=Existing())
 @click.option("--sort", default=None, help="Sort by this column (ascending), e.g. pos_rmse, ate.")
 @click.option("--out", "-o", default=None, type=click.Path(dir_okay=False), help="Write the merged CSV here.")
 def leaderboard(dirs, sort, out):
@@ -143,7 +143,7 @@ def leaderboard(dirs, sort, out):
 
 
 @click.command("report")
-@click.argument("dir", type=click.Path(exists=True, file_okay=False))
+@click.argument("dir", type=Existing(file_okay=False))
 @click.option(
     "--out",
     "-o",

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.run_options import Existing
 from replay.util.errors import ReplayError
 
 TUNE_OPTIONS = (
@@ -51,7 +52,7 @@ TUNE_OPTIONS = (
     click.option(
         "--tune-space",
         default=None,
-        type=click.Path(dir_okay=False, exists=True),
+        type=Existing(dir_okay=False),
         help="With --tune: a search space file as replay tune --space takes (default: q_scale, r_scale, "
         "and a particle filter's n_particles).",
     ),
@@ -64,12 +65,22 @@ def tune_options(f):
     return f
 
 
-def from_cli(dataset, o: dict):
-    """``replay eval``'s options (``o``: its arguments) with ``--tune``."""
+def data_options(o: dict) -> tuple[dict, dict]:
+    """(task parameters, dataset parameters) of ``replay eval``'s options ``o`` (its arguments), with or
+    without ``--tune``: ``--data-dir`` checked, ``--task-param``, ``--dataset-param``, ``--mapping`` and
+    the views (``--rate``, ``--window``, ``--segment``, ``--fault``)."""
     from replay.cli import params as cli_params
     from replay.cli.view_options import with_views
     from replay.data.registry import check_data_dir
 
+    check_data_dir(o["data_dir"], "--data-dir")
+    views = (o["rate"], o["window"], o["segment"], o["fault"])
+    dparams = with_views(cli_params.dataset_inputs(o["dataset_params"], o["mapping"]), *views)
+    return cli_params.task_params(o["task_params"], o["task"]), dparams
+
+
+def from_cli(dataset, o: dict):
+    """``replay eval``'s options (``o``: its arguments) with ``--tune``."""
     if o["tune_trials"] is None:
         raise ReplayError(
             "--tune-repeats, --train-segment, --tune-space, --tune-objective and --tune-grid go with --tune N"
@@ -83,11 +94,7 @@ def from_cli(dataset, o: dict):
             "--tune: " + ", ".join("--" + k.replace("_", "-") for k in bad) + " not taken with --tune "
             "(it tunes the filters' declared noise; give a search space with --tune-space)"
         )
-    check_data_dir(o["data_dir"], "--data-dir")
-    dparams = with_views(
-        cli_params.dataset_inputs(o["dataset_params"], o["mapping"]), o["rate"], o["window"], o["segment"]
-    )
-    tparams = cli_params.task_params(o["task_params"], o["task"])
+    tparams, dparams = data_options(o)
     run(
         dataset,
         trials=o["tune_trials"],

@@ -7,10 +7,9 @@ import sys
 
 import click
 
-from replay.cli.eval_tune import tune_options
-from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, quiet_notes, run_option
-from replay.cli.view_options import view_options, with_views
-from replay.util.errors import ReplayError
+from replay.cli.eval_tune import data_options, tune_options
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, MAPPING, Existing, quiet_notes, run_option
+from replay.cli.view_options import view_options
 
 
 @click.command("eval")
@@ -89,7 +88,7 @@ from replay.util.errors import ReplayError
 @click.option(
     "--tuned",
     default=None,
-    type=click.Path(exists=True, dir_okay=False),
+    type=Existing(dir_okay=False),
     help="A tuned.toml of replay tune: its filters (unless --filters), filter and task parameters; on the "
     "dataset it was tested on, also its test data (views, --first, dataset parameters; a differing one is "
     "refused) and its --runs, --seed, --alignment unless given, so that it gives the tune's held-out rows.",
@@ -139,156 +138,81 @@ def eval_cmd(
         from replay.cli import eval_tune
 
         return eval_tune.from_cli(dataset, locals())  # --tune N: replay.tune.repeat
-    from replay.data.registry import check_data_dir
-    from replay.outputs.eval_output import EvalOutput
+    from replay.outputs.eval_job import OutputRequest, run_eval
+
+    options = eval_options(dataset, locals())
+    done = run_eval(dataset, options, OutputRequest(out, force, wait, mcap_out, ros2_out), Printed(quiet))
+    _failed_filters(done.evaluation)
+
+
+def eval_options(dataset, o: dict):
+    """``replay eval``'s options (``o``: its arguments) as one :class:`replay.run.eval_options.EvalOptions`
+    (with ``--tuned``: :func:`replay.tune.tuned.with_tuned`, told which options the command line gave)."""
+    from replay.cli import params as cli_params
+    from replay.run.eval_options import EvalOptions
     from replay.scoring.summary import MIN_SCORED_SHARE
 
-    check_data_dir(data_dir, "--data-dir")
-    min_scored_share = MIN_SCORED_SHARE.check(
-        MIN_SCORED_SHARE.default if min_scored_share is None else min_scored_share, "--min-scored-share"
+    tparams, dparams = data_options(o)
+    share = o["min_scored_share"]
+    share = MIN_SCORED_SHARE.check(MIN_SCORED_SHARE.default if share is None else share, "--min-scored-share")
+    names, recorded = cli_params.split_filters(f.strip() for f in o["filters"].split(",") if f.strip())
+    options = EvalOptions(
+        task=o["task"],
+        filters=names,
+        recorded=recorded,
+        filter_params=cli_params.filter_params(o["params"], names + (recorded or [])),
+        task_params=tparams,
+        dataset_params=dparams or None,
+        **{k: o[k] for k in ("runs", "seed", "first", "data_dir", "adapter", "alignment", "baseline")},
+        divergence_threshold=o["divergence_threshold"],
+        min_scored_share=share,
     )
-    run = dict(runs=runs, seed=seed, first=first, alignment=alignment, divergence_threshold=divergence_threshold)
-    ref, names, recorded, fparams, tparams, dparams, task = _configuration(
-        dataset,
-        task,
-        filters,
-        params,
-        task_params,
-        dataset_params,
-        mapping,
-        baseline,
-        tuned,
-        (rate, window, segment, fault),
-        adapter,
-        run,
-        data_dir,
-        quiet,
-        allow_modules,
-    )
-    output = EvalOutput(
-        ref, dataset, task, out, force=force, mapping=mapping, exports=(mcap_out, ros2_out), data_dir=data_dir
-    )
-    with output.claimed(wait):  # a claimed numbered directory, or --out's lock, until published
-        ev = _evaluate(
-            ref,
-            quiet,
-            task=task,
-            filters=names,
-            data_dir=data_dir,
-            filter_params=fparams,
-            task_params=tparams,
-            adapter=adapter,
-            dataset_params=dparams or None,
-            baseline=baseline,
-            recorded=recorded,
-            min_scored_share=min_scored_share,
-            **run,
-        )
-        _publish(ev, output, quiet)
-    _failed_filters(ev)
-
-
-def _evaluate(ref, quiet: bool, **options):
-    """:func:`replay.run.evaluation.evaluate` with a progress display (none when ``quiet``)."""
-    from replay.run.eval_options import EvalOptions
-    from replay.run.evaluation import evaluate
-    from replay.util.progress import Progress
-
-    quiet_notes(quiet)
-    progress = Progress(0, quiet, label="eval", unit="run")
-    try:
-        return evaluate(ref, EvalOptions(**options), progress=progress)
-    finally:
-        progress.close()
-
-
-def _configuration(
-    dataset,
-    task,
-    filters,
-    params,
-    task_params,
-    dataset_params,
-    mapping,
-    baseline,
-    tuned,
-    views,
-    adapter,
-    run,
-    data_dir,
-    quiet,
-    allow_modules=(),
-):
-    """``replay eval``'s configuration from its options, checked whole before any data is read:
-    (the dataset resolved once, filters, recorded estimates, filter, task and dataset parameters, task).
-    ``run`` (runs, seed, first, alignment, divergence_threshold) is updated in place from ``--tuned``."""
-    from replay.cli import params as cli_params
-    from replay.data import dataset_ref
-    from replay.run.checks import check_recorded
-    from replay.run.pipeline import default_task
-
-    names, recorded = cli_params.split_filters(f.strip() for f in filters.split(",") if f.strip())
-    if (
-        baseline is not None
-        and baseline not in names + (recorded or [])
-        and not (recorded is None and baseline.startswith("recorded:"))
-    ):
-        raise ReplayError(f"--baseline {baseline!r}: not among --filters ({', '.join(names + (recorded or []))})")
-    fparams = cli_params.filter_params(params, names + (recorded or []))
-    tparams = cli_params.task_params(task_params, task)
-    if tuned:  # replay tune's tuned.toml: its filters and their parameters (-p and --task-param win)
-        from replay.tune.tuned import tuned_params
-
-        given = click.get_current_context().get_parameter_source("filters") != click.core.ParameterSource.DEFAULT
-        t_names, t_fparams, t_tparams, task = tuned_params(tuned, task, allow_modules)
-        names = names if given else t_names
-        fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
-        tparams = {**t_tparams, **tparams}
-    dparams = with_views(cli_params.dataset_inputs(dataset_params, mapping), *views)
-    ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, handed down
-    if tuned:  # the data the tune tested on: its views, first, runs and seed (issue 40 item 1)
-        dparams, run["first"], new, note = _tuned_data(tuned, ref, dparams, run)
-        run.update(new)
-        if note and not quiet:
-            click.echo(f"replay: note: {note}", err=True)
-    cli_params.check_config(ref, task, names, fparams, tparams, dparams, adapter=adapter)
-    check_recorded(ref.id, recorded or [], dparams)  # before any recording is read
-    task = task or default_task(
-        ref, first=run["first"], data_dir=data_dir, adapter=adapter, dataset_params=dparams, seed=run["seed"]
-    )
-    return ref, names, recorded, fparams, tparams, dparams, task
-
-
-def _tuned_data(tuned, ref, dparams, run):
-    """:func:`replay.tune.tuned.tuned_data` with the run options given on the command line."""
-    from replay.tune.tuned import RUN_OPTIONS, tuned_data
+    if not o["tuned"]:
+        return options
+    from replay.tune.tuned import RUN_OPTIONS, with_tuned
 
     ctx = click.get_current_context()
-    given = {k for k in RUN_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT}
-    opts = {k: run[k] for k in RUN_OPTIONS}
-    return tuned_data(tuned, ref, dparams, run["first"], opts, given)
-
-
-def _publish(ev, output, quiet: bool) -> None:
-    """Print the leaderboard and write the output set (then the exports): ``output.publish``."""
-    from replay.outputs.files import format_table
-
-    for note in [] if quiet else ev.frame_meta.get("task_notes", []):
+    given = {k for k in ("filters", *RUN_OPTIONS) if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT}
+    options, note = with_tuned(o["tuned"], dataset, options, given, o["allow_modules"])
+    if note and not o["quiet"]:
         click.echo(f"replay: note: {note}", err=True)
-    click.echo(format_table(ev))
-    from replay.scoring import outages
+    return options
 
-    if outages.is_outages(ev):  # fusion score=outages: the end-of-outage errors, the headline
-        click.echo(outages.format_headline(outages.tables(ev)[1]))
-    for note in ev.notes:
-        click.echo(note)
-    paths = output.publish(ev)
-    click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
-    mcap_out, ros2_out = output.exports
-    if mcap_out or ros2_out:
-        from replay.cli.bags import export_outputs
 
-        export_outputs(output.out, mcap_out, ros2_out, data_dir=output.data_dir, quiet=quiet)
+class Printed:
+    """``replay eval``'s display (the methods of :class:`replay.outputs.eval_job.EvalReport`): the progress
+    on stderr (none when ``quiet``), the leaderboard, its notes and the paths written on stdout."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+
+    def progress(self, kind: str):
+        from replay.cli.bags import export_progress
+        from replay.util.progress import Progress
+
+        return (
+            Progress(0, self.quiet, label="eval", unit="run") if kind == "eval" else export_progress(kind, self.quiet)
+        )
+
+    def evaluated(self, ev) -> None:
+        from replay.outputs.files import format_table
+        from replay.scoring import outages
+
+        for note in [] if self.quiet else ev.frame_meta.get("task_notes", []):
+            click.echo(f"replay: note: {note}", err=True)
+        click.echo(format_table(ev))
+        if outages.is_outages(ev):  # fusion score=outages: the end-of-outage errors, the headline
+            click.echo(outages.format_headline(outages.tables(ev)[1]))
+        for note in ev.notes:
+            click.echo(note)
+
+    def published(self, paths: dict) -> None:
+        click.echo(f"wrote {paths['leaderboard']}, {paths['manifest']}, {paths['estimates']}/")
+
+    def exported(self, done: dict) -> None:
+        from replay.cli.bags import echo_export
+
+        echo_export(done)
 
 
 def _failed_filters(ev) -> None:

@@ -11,8 +11,8 @@ option, the parameter, what it accepts and the value given:
   unknown parameter, a value its declaration refuses;
 * :func:`task_params`, :func:`dataset_params`: the same against the task's
   and the dataset's declarations when they are known;
-* :func:`check_config`: the whole configuration at once, before any data is
-  read, with every parameter made canonical (defaults filled in).
+* :func:`replay.run.checks.check_config` (called by :func:`replay.outputs.eval_job.run_eval`):
+  the whole configuration at once, before any data is read, every parameter made canonical.
 
 Recorded estimates (``[estimates]`` of a bag mapping) are named in ``--filters``
 as ``recorded:<name>`` (:func:`split_filters`) and take ``-p
@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import difflib
 import json
-from dataclasses import dataclass
-
 from replay.util.errors import ReplayError, shown
 
 
@@ -178,44 +176,3 @@ def filter_declarations(name: str):
     from replay.util.lookup import resolve
 
     return resolve(FILTERS, name, "filter").PARAMS
-
-
-@dataclass
-class Checked:
-    """A configuration checked by :func:`check_config`, every parameter canonical."""
-
-    task: str | None
-    task_params: dict
-    filter_params: dict  # filter name -> every parameter's value
-    dataset_params: dict
-
-
-def check_config(
-    dataset, task, filters, filter_params=None, task_params=None, dataset_params=None, adapter=None
-) -> Checked:
-    """Check a whole configuration before any data is read; returns it canonical.
-
-    The dataset (its parameters against its generator's declarations or its
-    adapter's options), the task (the given one or the dataset's default) and
-    its parameters, every filter and its parameters (made, so relations between
-    parameters are checked too). A plain file without ``task`` gets its task
-    from the frame: its task parameters are checked when the task is made.
-    """
-    from replay.data import dataset_ref, registry
-    from replay.filters import make_filter
-    from replay.tasks import make_task
-    from replay.util.lookup import params_of
-
-    filters = [n for n in filters if not n.startswith("recorded:")]  # recorded: checked with the frame
-    extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
-    if extra:
-        raise ReplayError(f"-p {extra[0]}: filter {shown(extra[0])} is not in --filters ({', '.join(filters)})")
-    ref = dataset_ref.resolve(dataset, adapter)
-    dparams = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)
-    if task is None and not ref.is_path:
-        task = ref.entry.default_task or None
-    tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
-    fparams = {
-        name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name) for name in filters
-    }
-    return Checked(task, tparams, fparams, dparams)

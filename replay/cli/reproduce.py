@@ -8,12 +8,12 @@ from pathlib import Path
 
 import click
 
-from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, quiet_notes, run_option
+from replay.cli.run_options import ALLOW_MODULE, DATA_DIR, Existing, quiet_notes, run_option
 from replay.util.errors import ReplayError
 
 
 @click.command("rerun")
-@click.argument("manifest_file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("manifest_file", type=Existing(dir_okay=False))
 @DATA_DIR
 @click.option(
     "--out",

@@ -5,8 +5,8 @@ the leaderboard, the results archive and the figures."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
 
 import click
 
@@ -64,7 +64,30 @@ def title(kind: str, rel: str, opts: dict) -> str:
     return t
 
 
-def checked(options: dict) -> SimpleNamespace:
+@dataclass
+class ScoreRun:
+    """``replay score``'s options once checked (:func:`checked`): ``options``, the record that decides
+    the numbers (:class:`replay.trajectory.score_options.ScoreOptions`), and what is read and written."""
+
+    options: object  # replay.trajectory.score_options.ScoreOptions
+    reference: str
+    estimates: list  # the ESTIMATE arguments
+    sets: dict  # the trial sets (--trials), by name
+    members: list  # their members: (name, set, trial, source)
+    sources: list  # every estimate read: the arguments, then the trials' members
+    fmt: str | None
+    kitti_times: str | None
+    columns: str | None
+    time_unit: str | None
+    out: str | None
+    save_results: str | None
+    plot_path: str | None
+    plot_mode: str | None
+    trial_plot: str | None
+    names: list = field(default_factory=list)  # every source's name, once loaded (:func:`load`)
+
+
+def checked(options: dict) -> ScoreRun:
     """The command's options, checked whole before any file is read (one line each), with what
     follows from them: the alignment method, the parsed lengths, the relations, the trial sets and
     every source to read."""
@@ -72,34 +95,36 @@ def checked(options: dict) -> SimpleNamespace:
     from replay.trajectory import io
     from replay.trajectory.plot import FORMATS as PLOT_FORMATS
     from replay.trajectory.plot import paths as plot_paths
+    from replay.trajectory.score_options import PREPARE, ScoreOptions
     from replay.util import outfile
     from replay.util.files import refuse_overlap
 
-    o = SimpleNamespace(**options)
-    if o.p_flag:
+    o = dict(options)
+    if o["p_flag"]:
         raise ReplayError(
             "-p: replay never opens a window; write the figures with --plot FILE (png, pdf, svg; evo's --save_plot)"
         )
-    if o.save_as:
+    if o["save_as"]:
         raise ReplayError(
             "--save_as_tum/--save_as_kitti/--save_as_bag: replay score writes no trajectories; convert "
             "one with replay convert SOURCE OUT.tum (.kitti, .csv, .mcap; --format euroc)"
         )
-    o.method = resolve_align(o.align, o.a_flag, o.s_flag)
-    if o.lengths is not None:
+    align = resolve_align(o["align"], o["a_flag"], o["s_flag"])
+    if o["lengths"] is not None:
         from replay.trajectory import lengths as by_length
 
-        o.lengths = by_length.parse(o.lengths)  # refused before any file is read
-    o.relations = list(dict.fromkeys(o.relations or ["trans"]))
-    o.want_rpe = o.rpe or o.delta is not None or o.all_pairs
-    if "point_distance_error_ratio" in o.relations and not o.want_rpe:
+        o["lengths"] = by_length.parse(o["lengths"])  # refused before any file is read
+    o["relations"] = list(dict.fromkeys(o["relations"] or ["trans"]))
+    numbers = ScoreOptions(align=align, **{k: o[k] for k in SCORE_FIELDS}, **{k: o[k] for k in PREPARE})
+    if "point_distance_error_ratio" in numbers.relations and not numbers.want_rpe:
         raise ReplayError("-r point_distance_error_ratio is an RPE relation: add --rpe")
-    o.sets = trial_sets.parse(o.trial_specs)
-    trial_sets.not_reference(o.sets, o.reference)
-    if not o.estimates and not o.sets:
+    sets = trial_sets.parse(o["trial_specs"])
+    trial_sets.not_reference(sets, o["reference"])
+    if not o["estimates"] and not sets:
         raise ReplayError("replay score REFERENCE ESTIMATE...: no estimate (give estimates, or --trials GLOB)")
-    o.members = trial_sets.members(o.sets)
-    o.sources = [*o.estimates, *(m[3] for m in o.members)]
+    members = trial_sets.members(sets)
+    sources = [*o["estimates"], *(m[3] for m in members)]
+    o = ScoreRun(numbers, sets=sets, members=members, sources=sources, **{k: o[k] for k in IO_FIELDS})
     inputs = [io.split(s)[0] for s in (o.reference, *o.sources)] + ([Path(o.kitti_times)] if o.kitti_times else [])
     if o.trial_plot and not o.sets:
         raise ReplayError("--trials-plot: boxplots of trials: give --trials [NAME=]GLOB")
@@ -119,7 +144,7 @@ def checked(options: dict) -> SimpleNamespace:
     return o
 
 
-def load(o: SimpleNamespace) -> tuple:
+def load(o: ScoreRun) -> tuple:
     """(the reference, the estimates) as trajectories, named; each recording read once."""
     from replay.trajectory.score_result import estimate_name
     from replay.trajectory import io
@@ -139,46 +164,57 @@ def load(o: SimpleNamespace) -> tuple:
     return ref, ests
 
 
-def options(o: SimpleNamespace):
-    """The command's options that decide the numbers, as the one record the library takes."""
-    from replay.trajectory.score_options import PREPARE, ScoreOptions
+# the fields of ScoreOptions taken from the command's options as they are (besides ``align``, resolved
+# from --align/-a/-s, and evo's trajectory options, replay.trajectory.score_options.PREPARE)
+SCORE_FIELDS = (
+    "n_to_align",
+    "align_origin",
+    "t_max_diff",
+    "t_offset",
+    "relations",
+    "rpe",
+    "delta",
+    "delta_unit",
+    "delta_tol",
+    "all_pairs",
+    "pairs_from_reference",
+    "lengths",
+    "lengths_method",
+    "lost_threshold",
+    "lost_steps",
+)
+# ScoreRun's fields taken from the command's options as they are
+IO_FIELDS = (
+    "reference",
+    "estimates",
+    "fmt",
+    "kitti_times",
+    "columns",
+    "time_unit",
+    "out",
+    "save_results",
+    "plot_path",
+    "plot_mode",
+    "trial_plot",
+)
 
-    return ScoreOptions(
-        align=o.method,
-        n_to_align=o.n_to_align,
-        align_origin=o.align_origin,
-        t_max_diff=o.t_max_diff,
-        t_offset=o.t_offset,
-        relations=o.relations,
-        rpe=o.rpe,
-        delta=o.delta,
-        delta_unit=o.delta_unit,
-        delta_tol=o.delta_tol,
-        all_pairs=o.all_pairs,
-        pairs_from_reference=o.pairs_from_reference,
-        lengths=o.lengths,
-        lengths_method=o.lengths_method,
-        lost_threshold=o.lost_threshold,
-        lost_steps=o.lost_steps,
-        **{k: getattr(o, k) for k in PREPARE},
-    )
 
-
-def score_all(o: SimpleNamespace, ref, ests):
+def score_all(o: ScoreRun, ref, ests):
     """Every estimate scored and printed as evo prints it (trials in their table): a ScoreResult."""
     from replay.trajectory import trials as trial_sets
     from replay.trajectory.score_result import ScoreResult, leaderboard_row
     from replay.trajectory import io, score
 
-    opts, scores, summary, first = options(o).settings(), {}, [], len(o.estimates)
+    n = o.options
+    opts, scores, summary, first = n.settings(), {}, [], len(o.estimates)
     for k, (spec, name, est) in enumerate(zip(o.sources, o.names, ests)):
         with trial_sets.naming(o.members[k - first] if k >= first else None):
             s = score(ref, est, **opts)
         scores[name] = s
         click.echo(
             f"{name} vs {ref.name}: {len(s.reference)} of {len(est)} poses matched (reference: {len(ref)} "
-            f"poses; t_max_diff {o.t_max_diff:g} s{f', t_offset {o.t_offset:g} s' if o.t_offset else ''})"
-            + (f"; scale {s.transform[2]:.6f}" if o.method in ("sim3", "scale") else "")
+            f"poses; t_max_diff {n.t_max_diff:g} s{f', t_offset {n.t_offset:g} s' if n.t_offset else ''})"
+            + (f"; scale {s.transform[2]:.6f}" if n.align in ("sim3", "scale") else "")
         )
         row = leaderboard_row(
             s,
@@ -187,8 +223,8 @@ def score_all(o: SimpleNamespace, ref, ests):
             estimate=spec,
             name=name,
             settings=opts,
-            lost_threshold=o.lost_threshold,
-            lost_steps=o.lost_steps,
+            lost_threshold=n.lost_threshold,
+            lost_steps=n.lost_steps,
         )
         summary.append(row)
         if k >= first:  # a trial: its numbers are in the trials table below
@@ -200,7 +236,7 @@ def score_all(o: SimpleNamespace, ref, ests):
     return result
 
 
-def _print_score(o: SimpleNamespace, s, opts: dict) -> None:
+def _print_score(o: ScoreRun, s, opts: dict) -> None:
     for rel in s.ape:
         click.echo(block(title("APE", rel, opts), s.stats("ape", rel)))
     for rel in s.rpe:
@@ -208,30 +244,31 @@ def _print_score(o: SimpleNamespace, s, opts: dict) -> None:
     if s.lengths:
         from replay.trajectory import lengths as by_length
 
-        click.echo(by_length.table(s.lengths, o.lengths_method))
+        click.echo(by_length.table(s.lengths, o.options.lengths_method))
 
 
-def _print_tables(o: SimpleNamespace, result, summary: list) -> None:
+def _print_tables(o: ScoreRun, result, summary: list) -> None:
     """The trial sets' tables, and with several estimates one line each (evo_res's table)."""
     from replay.trajectory import trials as trial_sets
 
+    n = o.options
     rows = result.output_rows()
     for name in o.sets:
         mine = [r for r in rows if r["filter"] == f"recorded:{name}" and "trial" in r]
-        click.echo(trial_sets.table(name, mine, o.relations, o.want_rpe))
+        click.echo(trial_sets.table(name, mine, n.relations, n.want_rpe))
     plain = [row for row in summary if "trial" not in row]
     if len(plain) > 1:
-        rel = o.relations[0]
-        rpe = f" {'RPE ' + rel + ' rmse':>22}" if o.want_rpe else ""
+        rel = n.relations[0]
+        rpe = f" {'RPE ' + rel + ' rmse':>22}" if n.want_rpe else ""
         click.echo(f"{'estimate':<24} {'matched':>8} {'APE ' + rel + ' rmse':>22}" + rpe)
         for row in plain:
             click.echo(
                 f"{row['filter'][9:]:<24} {row['matched']:>8} {row.get(f'ape_{rel}_rmse', math.nan):>22.6f}"
-                + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if o.want_rpe else "")
+                + (f" {row.get(f'rpe_{rel}_rmse', math.nan):>22.6f}" if n.want_rpe else "")
             )
 
 
-def write(o: SimpleNamespace, result) -> None:
+def write(o: ScoreRun, result) -> None:
     """The leaderboard (``-o``), the results archive, the figures and the trials' boxplots."""
     from replay.scoring.summary import columns as leaderboard_columns
     from replay.util import outfile
@@ -250,7 +287,7 @@ def write(o: SimpleNamespace, result) -> None:
         from replay.trajectory import plot
 
         written, removed = plot.write(
-            o.plot_path, result.reference, result.scores, relation=o.relations[0], mode=o.plot_mode
+            o.plot_path, result.reference, result.scores, relation=o.options.relations[0], mode=o.plot_mode
         )
         click.echo(
             f"plot: {', '.join(map(str, written))}"

@@ -1,14 +1,20 @@
-"""What ``replay eval`` refuses before any run: filter names and parameters, recorded estimates the
-mapping does not declare, memory that cannot be had."""
+"""What ``replay eval`` refuses before any run: the whole configuration before any data is read
+(:func:`check_config`), filter names and parameters, recorded estimates the mapping does not declare,
+memory that cannot be had."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 
+from replay.data import dataset_ref, registry
+from replay.filters import make_filter
 from replay.run.pipeline import build_problem, load_frame
 from replay.trajectory.recorded import RECORDED, is_recorded
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 from replay.run.resources import available_memory, check_kept, check_particles
 from replay.adapters.bags import resolve_mapping
+from replay.tasks import make_task
+from replay.util.lookup import params_of
 
 
 def check_filters(filters, filter_params, recorded) -> tuple[list, dict]:
@@ -83,3 +89,39 @@ def recorded_rows(ref, filters, recorded, seed, first, dataset_params, adapter, 
                 f"declare: {', '.join(estimates) or 'none'})"
             )
     return list(dict.fromkeys(named)), estimates
+
+
+@dataclass
+class Checked:
+    """A configuration checked by :func:`check_config`, every parameter canonical."""
+
+    task: str | None
+    task_params: dict
+    filter_params: dict  # filter name -> every parameter's value
+    dataset_params: dict
+
+
+def check_config(
+    dataset, task, filters, filter_params=None, task_params=None, dataset_params=None, adapter=None
+) -> Checked:
+    """Check a whole configuration before any data is read; returns it canonical.
+
+    The dataset (its parameters against its generator's declarations or its
+    adapter's options), the task (the given one or the dataset's default) and
+    its parameters, every filter and its parameters (made, so relations between
+    parameters are checked too). A plain file without ``task`` gets its task
+    from the frame: its task parameters are checked when the task is made.
+    """
+    filters = [n for n in filters if not n.startswith("recorded:")]  # recorded: checked with the frame
+    extra = [n for n in (filter_params or {}) if n not in filters and not n.startswith("recorded:")]
+    if extra:
+        raise ReplayError(f"-p {extra[0]}: filter {shown(extra[0])} is not in --filters ({', '.join(filters)})")
+    ref = dataset_ref.resolve(dataset, adapter)
+    dparams = registry.check_params(ref.target, dataset_params or {}, adapter=adapter)
+    if task is None and not ref.is_path:
+        task = ref.entry.default_task or None
+    tparams = make_task(task, **(task_params or {})).params() if task else dict(task_params or {})
+    fparams = {
+        name: params_of(make_filter(name, **(filter_params or {}).get(name, {})), "filter", name) for name in filters
+    }
+    return Checked(task, tparams, fparams, dparams)

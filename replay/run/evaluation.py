@@ -16,8 +16,7 @@ on the task's reference; their notes (what was associated) are ``Evaluation.note
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
-from types import SimpleNamespace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -147,33 +146,47 @@ def evaluate(dataset, options: EvalOptions | None = None, *, progress=None) -> E
     registry.check_data_dir(o.data_dir)
     s = _resolve(dataset, o)
     configs, built = _configs(s, o.task_params)
-    _start_progress(progress, configs, s.runs)
+    _start_progress(progress, configs, o.runs)
     results = [_run_config(cfg, s, built if cfg is configs[0] else None, progress) for cfg in configs]
     return _assemble(s, configs, results, o.min_scored_share)
 
 
-def _resolve(dataset, o: EvalOptions) -> SimpleNamespace:
+@dataclass
+class Resolved:
+    """An evaluation's settings once resolved (:func:`_resolve`): its ``options`` (checked when made),
+    the dataset id parsed and its parameters made canonical, the task named, the filters made, the
+    recorded rows found. ``filters``: every row in order (it gains ``measurements`` where it applies)."""
+
+    options: EvalOptions
+    dataset: str  # the id, as the configurations and the manifest record it
+    dataset_params: dict  # canonical (every default filled in)
+    task_name: str
+    filter_params: dict  # {row: {parameter: value}} as given
+    offline: list  # the filters run (names)
+    instances: list  # the filters made (their parameters validated up front)
+    names: list  # the recorded rows (recorded:<name>)
+    estimates: dict  # the frame's recorded estimates, by name
+    filters: list  # every row, in order
+
+
+def _resolve(dataset, o: EvalOptions) -> Resolved:
     """The resolved settings of an evaluation (the options checked when ``o`` was made; the filters made,
     the dataset id parsed, the task named, the recorded rows found), in the order ``evaluate`` checks them."""
-    s = SimpleNamespace(**{f.name: getattr(o, f.name) for f in fields(o)})
-    filters, s.filter_params = check_filters(o.filters, o.filter_params, o.recorded)
-    s.offline = [n for n in filters if not is_recorded(n)]
-    s.instances = [make_filter(name, **s.filter_params.get(name, {})) for name in s.offline]  # validated up front
+    filters, filter_params = check_filters(o.filters, o.filter_params, o.recorded)
+    offline = [n for n in filters if not is_recorded(n)]
+    instances = [make_filter(name, **filter_params.get(name, {})) for name in offline]  # validated up front
     adapter, data_dir, first, seed, recorded = o.adapter, o.data_dir, o.first, o.seed, o.recorded
     if adapter is not None:
         registry.adapter_options(adapter)  # an unknown adapter: one line, even where it is not used
     ref = dataset_ref.resolve(dataset, adapter)  # the id parsed once, here (or a DatasetRef handed in)
-    s.dataset = ref.id  # what the configurations and the manifest record
-    s.dataset_params = registry.check_params(ref.target, o.dataset_params or {}, adapter=adapter)  # canonical
-    check_recorded(
-        s.dataset, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], s.dataset_params
+    dparams = registry.check_params(ref.target, o.dataset_params or {}, adapter=adapter)  # canonical
+    check_recorded(ref.id, filters + [n if is_recorded(n) else RECORDED + n for n in recorded or ()], dparams)
+    task = o.task or default_task(
+        ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=dparams, seed=seed
     )
-    s.task_name = o.task or default_task(
-        ref, first=first, data_dir=data_dir, adapter=adapter, dataset_params=s.dataset_params, seed=seed
-    )
-    s.names, s.estimates = recorded_rows(ref, filters, recorded, seed, first, s.dataset_params, adapter, data_dir)
-    s.filters = s.offline + s.names
-    _check_rows(s.dataset, s.filters, s.filter_params, s.baseline)
+    names, estimates = recorded_rows(ref, filters, recorded, seed, first, dparams, adapter, data_dir)
+    s = Resolved(o, ref.id, dparams, task, filter_params, offline, instances, names, estimates, offline + names)
+    _check_rows(s.dataset, s.filters, s.filter_params, o.baseline)
     return s
 
 
@@ -194,24 +207,25 @@ def _check_rows(dataset: str, filters: list, filter_params: dict, baseline: str 
         raise ReplayError(f"--baseline {baseline!r}: not among the rows ({', '.join(filters)})")
 
 
-def _configs(s: SimpleNamespace, task_params: dict | None) -> tuple[list[Config], dict | None]:
+def _configs(s: Resolved, task_params: dict | None) -> tuple[list[Config], dict | None]:
     """One configuration per row (offline filters, ``measurements`` where it applies, recorded
     estimates) and the problems built while checking them (``built``: run 0's of the first);
     ``s.filters`` gains ``measurements`` when its row is added."""
     the_task = make_task(s.task_name, **(task_params or {}))
-    base = (s.dataset, plain(s.dataset_params or {}), s.first, s.task_name, plain(the_task.params()))
-    tail = (s.seed, s.alignment, s.divergence_threshold, s.adapter)
+    o = s.options
+    base = (s.dataset, plain(s.dataset_params or {}), o.first, s.task_name, plain(the_task.params()))
+    tail = (o.seed, o.alignment, o.divergence_threshold, o.adapter)
     configs = [
         Config(*base, name, plain(params_of(f, "filter", name)), *tail) for name, f in zip(s.offline, s.instances)
     ]
     configs += [Config(*base, name, plain(_recorded_params(s, name)), *tail) for name in s.names]
-    built = check_memory(configs, s.runs, s.batch, s.data_dir)  # run 0's problem of the first filter, reused
+    built = check_memory(configs, o.runs, o.batch, o.data_dir)  # run 0's problem of the first filter, reused
     if any(noise_settings(f) for f in s.instances):  # their sizes, known once the task is built: before any run
-        built = built or {0: build_problem(configs[0], 0, s.data_dir)}
+        built = built or {0: build_problem(configs[0], 0, o.data_dir)}
         for f in s.instances:
             check_noise(f, built[0].model)
     if s.offline and MEASUREMENTS not in s.filters:  # beside filters only: nothing to compare otherwise
-        built = built or {0: build_problem(configs[0], 0, s.data_dir)}
+        built = built or {0: build_problem(configs[0], 0, o.data_dir)}
         if observes_position(built[0]):  # the raw observations' row, the baseline a filter must beat
             # after the offline filters, before the recorded estimates: the order the rows take when
             # the configuration names it (a rerun passes it explicitly)
@@ -220,7 +234,7 @@ def _configs(s: SimpleNamespace, task_params: dict | None) -> tuple[list[Config]
     return configs, built
 
 
-def _recorded_params(s: SimpleNamespace, name: str) -> dict:
+def _recorded_params(s: Resolved, name: str) -> dict:
     """The parameters of recorded row ``name`` (``recorded:<estimate>``)."""
     estimate = name[len(RECORDED) :]
     return recorded_params(estimate, s.filter_params.get(name), s.estimates[estimate].params)
@@ -235,15 +249,15 @@ def _start_progress(progress, configs: list[Config], runs: int) -> None:
         )
 
 
-def _run_config(cfg: Config, s: SimpleNamespace, built: dict | None, progress) -> FilterResult:
-    """The runs of one configuration, in blocks of ``s.batch`` (a recorded estimate: one run)."""
-    runs, batch = s.runs, s.batch
+def _run_config(cfg: Config, s: Resolved, built: dict | None, progress) -> FilterResult:
+    """The runs of one configuration, in blocks of ``options.batch`` (a recorded estimate: one run)."""
+    runs, batch = s.options.runs, s.options.batch
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
     recs = []
     n = 1 if is_recorded(cfg.filter) else runs  # a recorded estimate: run 0 only (20/11 runs counted before)
     for start in range(0, n, batch):
         block = list(range(start, min(n, start + batch)))
-        recs += [_filled(r) for r in run_block(c, block, s.data_dir, keep=True, strict=True, built=built)]
+        recs += [_filled(r) for r in run_block(c, block, s.options.data_dir, keep=True, strict=True, built=built)]
         if progress is not None:
             progress.update(len(block), weight=particle_weight(c["filter_params"], len(block)))
     return FilterResult(
@@ -258,10 +272,11 @@ def _run_config(cfg: Config, s: SimpleNamespace, built: dict | None, progress) -
     )
 
 
-def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterResult], min_scored_share) -> Evaluation:
+def _assemble(s: Resolved, configs: list[Config], results: list[FilterResult], min_scored_share) -> Evaluation:
     """The Evaluation: the rows, the configuration as a campaign records it, the frame's meta and report,
     the truths of the runs and the recorded estimates' notes."""
-    rows = _summarise(results, s.baseline)
+    o = s.options
+    rows = _summarise(results, o.baseline)
     problems = [r["problem"] for r in max(results, key=lambda r: len(r.records)).records]
     p0 = problems[0]
     config = {
@@ -270,14 +285,14 @@ def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterRes
         "task_params": configs[0].task_params,
         "filters": s.filters,
         "filter_params": {r.name: r.params for r in results},
-        "runs": s.runs,
-        "seed": s.seed,
-        "first": s.first,
+        "runs": o.runs,
+        "seed": o.seed,
+        "first": o.first,
         "dataset_params": configs[0].dataset_params,
-        "adapter": s.adapter,
-        "alignment": s.alignment,
-        "divergence_threshold": s.divergence_threshold,
-        "baseline": s.baseline,
+        "adapter": o.adapter,
+        "alignment": o.alignment,
+        "divergence_threshold": o.divergence_threshold,
+        "baseline": o.baseline,
         "dataset_sha256": p0.frame_meta.get("sha256"),
         "replay_version": __version__,
         "config_hashes": {r.name: r.config_hash for r in results},
@@ -297,7 +312,7 @@ def _assemble(s: SimpleNamespace, configs: list[Config], results: list[FilterRes
         [p.truth_position for p in problems],
         tuple(p0.axis_names),
         rows,
-        s.baseline,
+        o.baseline,
         notes,
         scorer.units(p0),
         tuple(int(i) for i in p0.position_index),

@@ -8,9 +8,12 @@ test data) gives the rows ``replay tune`` scored on its held-out data.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from replay.util.errors import ReplayError
 from replay.campaign import spec
-from replay.data import registry
+from replay.data import dataset_ref, registry
+from replay.run.eval_options import EvalOptions
 from replay.run.pipeline import plain
 from replay.data import views
 
@@ -42,6 +45,24 @@ def tuned_params(path, task: str | None = None, allow_modules=()) -> tuple[list,
 
 
 RUN_OPTIONS = ("runs", "seed", "alignment", "divergence_threshold")  # of the file's [campaign] table
+
+
+def with_tuned(path, dataset, options: EvalOptions, given=frozenset(), allow_modules=()) -> tuple[EvalOptions, str]:
+    """``replay eval DATASET --tuned FILE``'s options: ``options`` (those of the command line) with the
+    file's filters (unless ``"filters"`` is in ``given``, the names of the options given on the command
+    line), its filter and task parameters (the given ones win) and, on the data the tune tested on
+    (:func:`tuned_data`), its test data and its run options not given; and a note or None."""
+    o = options
+    names, t_fparams, t_tparams, task = tuned_params(path, o.task, allow_modules)
+    names = list(o.filters) if "filters" in given else names
+    fparams = o.filter_params or {}
+    fparams = {n: {**t_fparams.get(n, {}), **fparams.get(n, {})} for n in names if n in t_fparams or n in fparams}
+    ref = dataset_ref.resolve(dataset, o.adapter)
+    run = {k: getattr(o, k) for k in RUN_OPTIONS}
+    dparams, first, run, note = tuned_data(path, ref, o.dataset_params or {}, o.first, run, set(given))
+    tparams = {**t_tparams, **(o.task_params or {})}
+    merged = dict(task=task, filters=names, filter_params=fparams, task_params=tparams, first=first, **run)
+    return replace(o, dataset_params=dparams or None, **merged), note
 
 
 def tuned_data(path, ref, dataset_params: dict, first, run: dict, given: set) -> tuple[dict, object, dict, str | None]:
