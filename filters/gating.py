@@ -189,10 +189,10 @@ def particle_rejects(gates: Gates, model, X, w, z, k, present, extra=None) -> np
 
 def per_filter(results) -> dict:
     """Per filter result (``name``, ``records``: replay's evaluation): each gated input's
-    rejections per run (``record["rejected"]``), where a gate exists."""
+    rejections per run (``record.rejected``), where a gate exists."""
     out = {}
     for r in results:
-        recs = [rec["rejected"] for rec in sorted(r.records, key=lambda d: d["run"]) if "rejected" in rec]
+        recs = [rec.rejected for rec in sorted(r.records, key=lambda d: d.run) if rec.rejected is not None]
         if recs:
             out[r.name] = {k: [int(d.get(k, 0)) for d in recs] for k in recs[0]}
     return out

@@ -205,9 +205,9 @@ def campaign_results(out, *, runs: bool = False):
                     "filter": cfg["filter"],
                     "params": cfg["filter_params"],
                     "config_hash": h,
-                    "run": rec["run"],
-                    "status": rec["status"],
-                    **(rec.get("metrics") or {}),
+                    "run": rec.run,
+                    "status": rec.status,
+                    **(rec.metrics or {}),
                 }
             )
     return pd.DataFrame(rows)
@@ -279,7 +279,7 @@ def export_mcap(evaluation, path, *, run: int = 0, data_dir=None) -> int:
         path, dataset_inputs(cfg["dataset"], (cfg.get("dataset_params") or {}).get("mapping"), data_dir), "mcap"
     )
     frame = frame_of_run(cfg, run, data_dir)
-    problem = tables.result(evaluation, evaluation.results[0].name).records[run]["problem"]
+    problem = tables.result(evaluation, evaluation.results[0].name).records[run].problem
     estimates = {}
     for res in evaluation.results:
         est = res.estimates[run]

@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 from replay.campaign import board, execute, spec
 from replay.cli import main
+from replay.scoring.record import RunRecord
 from replay.util.errors import ReplayError
 
 SMALL = """\
@@ -267,9 +268,9 @@ def test_extended_campaign_computes_only_the_new_filters(serial, tmp_path):
 
 
 def _unit(run, n=4):
-    return {"run": run, "status": "done", "metrics": {"diverged": False},
-            "series": {"k": np.arange(n), "t": np.arange(n) * 0.5, "nees": np.ones(n), "nis": np.ones(n),
-                       "nis_dof": np.full(n, 2)}}
+    return RunRecord(run, "done", {"diverged": False},
+                     {"k": np.arange(n), "t": np.arange(n) * 0.5, "nees": np.ones(n), "nis": np.ones(n),
+                      "nis_dof": np.full(n, 2)})
 
 
 def test_store_flushes_each_record_and_the_directory_once_per_job(tmp_path, monkeypatch):
@@ -283,7 +284,7 @@ def test_store_flushes_each_record_and_the_directory_once_per_job(tmp_path, monk
                                                            real(fd))[1])
     s = store_mod.Store(tmp_path)
     (s.units / "h").mkdir(parents=True)
-    s.write_job("h", [_unit(0), _unit(1), {"run": 2, "status": "failed", "error": "X: y"}])
+    s.write_job("h", [_unit(0), _unit(1), RunRecord(2, "failed", error="X: y")])
     names = [os.path.basename(p) for p in synced]
     # the records in any order (written side by side by write_job's threads), then the directory
     assert sorted(names[:3]) == [f".{run}.json.{os.getpid()}.tmp" for run in (0, 1, 2)] and names[3:] == ["h"]

@@ -17,6 +17,7 @@ import pytest
 from replay.campaign import board, execute, spec, store
 from replay.campaign.store import Store, pack
 from replay.run.pipeline import config_hash
+from replay.scoring.record import RunRecord
 
 from test_campaign import SMALL, write
 
@@ -27,7 +28,7 @@ def _result(run, n=40, seed=0):
     nees[::7] = np.nan
     series = {"k": np.arange(n), "t": np.linspace(0.0, 1.0, n), "x0": rng.normal(size=n), "nees": nees,
               "nis": rng.chisquare(2, n), "nis_dof": np.full(n, 2)}
-    return {"run": run, "status": "done", "metrics": {"pos_rmse": 1.0 + run, "diverged": False}, "series": series}
+    return RunRecord(run, "done", {"pos_rmse": 1.0 + run, "diverged": False}, series)
 
 
 def test_kept_columns_are_the_files_values(tmp_path):
@@ -37,16 +38,16 @@ def test_kept_columns_are_the_files_values(tmp_path):
     reader = Store(tmp_path / "o")  # nothing kept: reads the files
     cols = ["nees", "nis", "nis_dof"]
     for rec in reader.records("h"):
-        sha = rec["table"]["sha256"]
-        kept, disk = writer.series("h", rec["run"], cols, sha), reader.series("h", rec["run"], cols, sha)
-        assert list(kept) == cols and kept["nees"] is writer._kept[("h", rec["run"])][1]["nees"]
+        sha = rec.table["sha256"]
+        kept, disk = writer.series("h", rec.run, cols, sha), reader.series("h", rec.run, cols, sha)
+        assert list(kept) == cols and kept["nees"] is writer._kept[("h", rec.run)][1]["nees"]
         for c in cols:
             assert kept[c].dtype == disk[c].dtype and np.array_equal(kept[c].view(np.uint8), disk[c].view(np.uint8))
     # another table than the one kept (rewritten since), or columns not kept: the file
     other = writer.series("h", 0, cols, "0" * 64)
     assert other["nees"] is not writer._kept[("h", 0)][1]["nees"]
     assert np.array_equal(other["nees"], reader.series("h", 0, cols)["nees"], equal_nan=True)
-    assert "x0" in writer.series("h", 0, ["x0", "nees"], reader.records("h")[0]["table"]["sha256"])
+    assert "x0" in writer.series("h", 0, ["x0", "nees"], reader.records("h")[0].table["sha256"])
 
 
 def test_kept_columns_are_bounded(tmp_path, monkeypatch):
@@ -57,7 +58,7 @@ def test_kept_columns_are_bounded(tmp_path, monkeypatch):
         s.write("h", pack([_result(r)])[0])
     assert sorted(s._kept) == [("h", 0), ("h", 1)] and s._kept_bytes == 2 * 40 * 8 * 3
     s.write("h", pack([_result(0, seed=9)])[0])  # rewritten: its old columns let go, the new ones kept
-    sha = {r["run"]: r["table"]["sha256"] for r in s.records("h")}
+    sha = {r.run: r.table["sha256"] for r in s.records("h")}
     assert sorted(s._kept) == [("h", 0), ("h", 1)] and s._kept_bytes == 2 * 40 * 8 * 3
     assert s._kept[("h", 0)][0] == sha[0] and len(sha) == 4
 

@@ -116,12 +116,13 @@ def test_packed_results_store_the_same_table(tmp_path):
     import numpy as np
 
     from replay.campaign.store import Store, pack
+    from replay.scoring.record import RunRecord
 
     series = {"k": np.arange(5), "t": np.linspace(0, 1, 5), "nees": np.array([1.0, np.nan, 2.0, 3.0, 4.0])}
-    res = [{"run": 0, "status": "done", "metrics": {"rmse": 1.5}, "series": series},
-           {"run": 1, "status": "failed", "error": "X: y"}]
+    res = [RunRecord(0, "done", {"rmse": 1.5}, series), RunRecord(1, "failed", error="X: y")]
     packed = pack(res)
-    assert "series" not in packed[0] and packed[0]["parquet"][:4] == b"PAR1" and packed[1] == res[1]
+    assert packed[0].series is None and packed[0].parquet[:4] == b"PAR1" and packed[1] == res[1]
+    assert list(packed[0].leaderboard_columns) == ["nees"] and res[0].series is series  # the input untouched
     a, b = Store(tmp_path / "a"), Store(tmp_path / "b")
     for store, results in ((a, res), (b, packed)):
         (store.units / "h").mkdir(parents=True)
@@ -136,9 +137,10 @@ def test_unit_tables_do_not_import_pandas(tmp_path):
     """Writing and reading a unit's table stays clear of pandas (about 1 s to import, per process)."""
     code = ("import sys, numpy as np\n"
             "from replay.campaign.store import Store, pack\n"
+            "from replay.scoring.record import RunRecord\n"
             "s = Store(sys.argv[1]); (s.units / 'h').mkdir(parents=True)\n"
-            "r = pack([{'run': 0, 'status': 'done', 'metrics': {}, 'series': {'k': np.arange(4), "
-            "'nees': np.array([1.0, np.nan, 2.0, 3.5])}}])[0]\n"
+            "r = pack([RunRecord(0, 'done', {}, {'k': np.arange(4), "
+            "'nees': np.array([1.0, np.nan, 2.0, 3.5])})])[0]\n"
             "s.write('h', r)\n"
             "t = s.series('h', 0)\n"
             "assert t['k'].dtype == np.int64 and t['k'].tolist() == [0, 1, 2, 3], t\n"

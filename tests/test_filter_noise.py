@@ -33,7 +33,7 @@ def _cfg(filter_params, task_params=None, flt="kf", task="position"):
 
 def _estimates(cfg, runs=(0, 1, 2)):
     recs = run_block(cfg, list(runs), keep=True, strict=True)
-    return [r["estimates"] for r in recs], recs
+    return [r.estimates for r in recs], recs
 
 
 def _same(a, b):

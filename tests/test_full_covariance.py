@@ -100,7 +100,7 @@ def test_campaign_store_keeps_the_whole_state_covariance():
 
     ev = replay.evaluate("sim/auv-sonar", filters=["ckf"], runs=1, first=30)
     res = ev.results[0]
-    series, est = res.records[0]["series"], res.estimates[0]
+    series, est = res.records[0].series, res.estimates[0]
     assert sum(k.startswith("P") and "_" in k for k in series) == 15  # 6 states: every pair
     back, full = covcols.matrices(series, 6)
     assert full and np.array_equal(back, est.P)

@@ -40,7 +40,7 @@ def cli(*args, code=0):
 def test_auv_bag_fusion_ekf_is_consistent_with_the_true_noise():
     ev = replay.evaluate("sim/auv-bag", task="fusion", filters=["ekf"], runs=20, task_params=TRUE_NOISE)
     row = ev.rows[0]
-    assert ev.results[0].records[0]["problem"].model.nx == 12  # depth input: the 3-D state
+    assert ev.results[0].records[0].problem.model.nx == 12  # depth input: the 3-D state
     # the band of the mean over 20 runs x all steps: 3.12 in [2.21, 3.90] at seed 0; 95.5 % of the steps
     # inside their one-step band
     assert row["anees_lo"] <= row["anees"] <= row["anees_hi"] and row["anees_flag"] == "consistent", row
@@ -54,7 +54,7 @@ def test_auv_bag_fusion_ekf_is_consistent_with_the_true_noise():
 
 def test_auv_bag_fusion_uses_dvl_imu_depth_and_no_reference_after_the_start():
     ev = replay.evaluate("sim/auv-bag", task="fusion", filters=["ekf", "ukf"], runs=1, first=400)
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     assert set(prob.inputs) == {"dvl.velocity", "depth.depth", "imu.gyro", "imu.attitude", "reference"}
     assert any("dead reckoning" in n for n in prob.notes)
     # depth is measured as -up; the velocity in the body frame
@@ -91,7 +91,7 @@ def test_test1_fusion_beside_the_recorded_wheel_odometry(test1, tmp_path):
 def test_test1_fusion_short(test1):
     ev = replay.evaluate(str(test1), task="fusion", filters=["ekf"], runs=1, first=3000,
                          dataset_params={"mapping": str(MAPPINGS / "rl_test1_fusion.toml")}, recorded=())
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     assert prob.params["holdout"] and set(prob.inputs) >= {"gps.position", "odom.velocity", "odom.rate", "imu.gyro"}
     fed = np.isfinite(prob.z[:, 0])
     assert not (fed & prob.truth_valid).any()  # a fed fix is never scored
@@ -169,7 +169,7 @@ def test_differential_on_a_circle_gives_the_body_speed():
 def test_bohai_fusion_runs_through_its_sensor_columns(bohai_dir):
     ev = replay.evaluate("bohai/20220822_0_6", task="fusion", filters=["ekf"], runs=1, first=3000,
                          data_dir=bohai_dir)
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     assert set(prob.inputs) == {"gps_position.position", "gyro.gyro", "gyro.attitude", "reference"}
     assert np.isfinite(ev.rows[0]["pos_rmse"])
 

@@ -47,7 +47,7 @@ def test_unconstrained_heading_said_on_the_table_and_in_the_manifest(tmp_path, f
     (line,) = lines(ev)
     got = LINE.match(line)
     assert got and got["angle"] == "heading (yaw)", line
-    pb = ev.results[0].records[0]["problem"]
+    pb = ev.results[0].records[0].problem
     P = ev.results[0].estimates[0].P
     sd = angle_sd(pb.model, pb.z, pb.P0, 2, 5)
     np.testing.assert_allclose(sd, np.sqrt(P[:, 2, 2]), rtol=1e-8)  # the EKF's heading sd at every step
@@ -85,7 +85,7 @@ def test_no_line_when_the_heading_is_measured_or_known(tmp_path):
         assert "unconstrained" not in manifest(ev)["dataset"]["reference"]
     known = {"q_attitude": 1e-6, "r_velocity": 1e-4, "r_rate": 1e-6, "p0_known": 1e-4}
     ev = evaluate(tmp_path, extra=", noise = { velocity = 1e-4, rate = 1e-6 }", task_params=known)
-    pb = ev.results[0].records[0]["problem"]
+    pb = ev.results[0].records[0].problem
     sd = angle_sd(pb.model, pb.z, pb.P0, 2, 5)[-1]
     assert 1 - math.exp(-(sd**2) / 2) < SHRINK_LIMIT and sd < 0.03 and lines(ev) == []
 
@@ -98,7 +98,7 @@ def test_3d_names_each_angle_nothing_measures(tmp_path):
     got = [LINE.match(line) for line in lines(ev)]
     assert all(got) and [g["angle"] for g in got] == ["roll", "pitch", "heading (yaw)"]
     assert all(0.7 < float(g["sd"]) < 1.2 for g in got)
-    pb, P = ev.results[0].records[0]["problem"], ev.results[0].estimates[0].P
+    pb, P = ev.results[0].records[0].problem, ev.results[0].estimates[0].P
     for angle, rate in ((3, 9), (4, 10), (5, 11)):
         np.testing.assert_allclose(angle_sd(pb.model, pb.z, pb.P0, angle, rate), np.sqrt(P[:, angle, angle]), rtol=0.02)
     ev = evaluate(tmp_path, 'fuse = ["velocity", "rate", "attitude"]', dims=3)
@@ -133,7 +133,7 @@ def test_test1_pf_is_the_posterior_mean_the_note_predicts(shared_dir, tmp_path, 
     got = LINE.match(line)
     assert got and got["sd"] == sd_end and got["f"] == factor, line
     assert line in format_table(ev).splitlines()
-    pb = ev.results[0].records[0]["problem"]
+    pb = ev.results[0].records[0].problem
     sd = angle_sd(pb.model, pb.z, pb.P0, 2, 5)
     np.testing.assert_allclose(sd[-1] ** 2, ev.results[0].estimates[0].P[-1, 2, 2], rtol=1e-8)
     early = sd < 1.0  # the particles carry the model's heading spread (their variance, mean over runs)

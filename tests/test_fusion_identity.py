@@ -62,7 +62,7 @@ def test_parent_frame_twist_with_empty_child_refused_unless_declared(tmp_path, d
     by, ev = rmse(tmp_path / "b", mapping(tmp_path / "p.toml", extra=', twist_frame = "parent"'), dims)
     assert_identity(by, path)
     assert max(by.values()) < 0.3
-    notes = ev.results[0].records[0]["problem"].notes
+    notes = ev.results[0].records[0].problem.notes
     assert any("twist_frame = parent declared: rotated" in n for n in notes)
 
 
@@ -79,7 +79,7 @@ def test_twist_contradicting_its_frame_refused(tmp_path):
         assert "\n" not in str(err.value) and "/odom" in str(err.value) and said in str(err.value)
     by, ev = rmse(tmp_path / "c", mapping(tmp_path / "ok.toml"), 2, filters=("ekf",))
     assert by["ekf"] < 0.3
-    assert any("twist in child_frame_id 'base_link' (REP 105)" in n for n in ev.results[0].records[0]["problem"].notes)
+    assert any("twist in child_frame_id 'base_link' (REP 105)" in n for n in ev.results[0].records[0].problem.notes)
 
 
 def test_twist_frame_value_refused(tmp_path):
@@ -103,7 +103,7 @@ def test_test1_odometry_alone_gives_its_track_back(test1, tmp_path, fuse):
     mp.write_text(f'[channels]\nodom = {{ topic = "/husky_velocity_controller/odom", {fuse} }}\n'
                   '[reference]\nposition = "/husky_velocity_controller/odom"\n')
     by, ev = rmse(test1, mp, 2)
-    ref = ev.results[0].records[0]["problem"].truth_position
+    ref = ev.results[0].records[0].problem.truth_position
     path = float(np.linalg.norm(np.diff(ref[np.isfinite(ref).all(axis=1)], axis=0), axis=1).sum())
     assert 355 < path < 365
     assert_identity(by, path)  # at most 3.6 m
@@ -163,7 +163,7 @@ def test_test1_recorded_noise_leaves_the_heading_unknown(test1, tmp_path):
     mp.write_text(f'[channels]\nodom = {{ topic = "/husky_velocity_controller/odom", {VR} }}\n'
                   '[reference]\nposition = "/husky_velocity_controller/odom"\n')
     _, ev = rmse(test1, mp, 2, filters=("ekf",))
-    pb = ev.results[0].records[0]["problem"]
+    pb = ev.results[0].records[0].problem
     P = replay.make_filter("ekf").run(pb.model, pb.z, pb.x0, pb.P0).P[-1]
     assert P[2, 2] > 2.0**2 and max(P[0, 0], P[1, 1]) > 100.0**2
 
@@ -178,7 +178,7 @@ def test_mean_at_f_run_loop_equals_the_step_engine(tmp_path, name, monkeypatch):
 
     write_odometry_bag(tmp_path / "b", duration=20.0)
     _, ev = rmse(tmp_path / "b", mapping(tmp_path / "m.toml"), 2, filters=("ekf",))
-    pb = ev.results[0].records[0]["problem"]
+    pb = ev.results[0].records[0].problem
     assert pb.model.mean_at_f and np.isfinite(pb.z).all()
     assert loop_ready(kalman_loops.sigma_run, kalman_loops.SIGMA_RUN, True)
     flt = replay.make_filter(name)
@@ -276,7 +276,7 @@ def own_track(shared_dir, tmp_path, file, topic, fuse, filters=("ekf", "ukf", "c
     mp = tmp_path / "m.toml"
     mp.write_text(f'[channels]\nodom = {{ topic = "{topic}", {fuse} }}\n[reference]\nposition = "{topic}"\n')
     by, ev = rmse(shared_dir / "datasets" / "bags" / file, mp, 2, filters=filters)
-    ref = ev.results[0].records[0]["problem"].truth_position
+    ref = ev.results[0].records[0].problem.truth_position
     path = float(np.linalg.norm(np.diff(ref[np.isfinite(ref).all(axis=1)], axis=0), axis=1).sum())
     return by, path, ev
 

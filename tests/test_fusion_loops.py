@@ -41,7 +41,7 @@ def test_stacks_of_the_kinematic_model_are_its_covariances_of_every_step():
 @pytest.fixture(scope="module")
 def auv_bag():
     ev = replay.evaluate("sim/auv-bag", task="fusion", filters=["ekf"], runs=1, first=600)
-    return ev.results[0].records[0]["problem"]
+    return ev.results[0].records[0].problem
 
 
 @pytest.mark.slow  # compiles the run loops when numba's cache lacks them

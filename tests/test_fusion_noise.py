@@ -81,7 +81,7 @@ def test_test1_uses_the_recorded_covariances(shared_dir):
     test1 = shared_dir / "datasets" / "bags" / "robot_localization" / "test1.bag"
     ev = replay.evaluate(str(test1), task="fusion", filters=["ekf"], runs=1, first=3000, recorded=(),
                          dataset_params={"mapping": str(MAPPINGS / "rl_test1_fusion.toml")})
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     noise = ev.frame_meta["task_noise"]
     assert noise["odom.rate"] == {"source": "declared", "variance": 0.1}  # the mapping's noise = {rate = 0.1}
     assert noise["odom.velocity"]["source"] == noise["imu.gyro"]["source"] == "recorded"
@@ -223,7 +223,7 @@ def test_bohai_31_columns_fuse_the_forward_velocity(tmp_path):
     reckon the 600 m course to under 1 m (EKF 0.71 m, UKF 0.36 m at seed 0)."""
     path = write_bohai(tmp_path / "b31.csv", 31, "real")
     ev = replay.evaluate(str(path), adapter="bohai-csv", task="fusion", filters=["ekf", "ukf"], runs=1)
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     assert set(prob.inputs) == {"vf.velocity", "gyro.gyro", "gyro.attitude", "reference"}
     fwd = ev.frame_meta["forward_velocity"]
     assert fwd["corr"] > 0.95 and abs(fwd["bias"] - 0.006) < 0.005
@@ -246,6 +246,6 @@ def test_bohai_36_columns_keep_refusing_the_mislabelled_vf(tmp_path):
     path = write_bohai(tmp_path / "b36.csv", 36, "garbage")
     ev = replay.evaluate(str(path), adapter="bohai-csv", task="fusion", filters=["ekf"], runs=1)
     assert "vf" in ev.frame_meta["dropped_columns"] and "velocity" not in ev.frame_meta.get("roles")
-    assert set(ev.results[0].records[0]["problem"].inputs) == {
+    assert set(ev.results[0].records[0].problem.inputs) == {
         "gps_position.position", "gyro.gyro", "gyro.attitude", "reference"}
     assert ev.rows[0]["pos_rmse"] < 1.0

@@ -119,7 +119,7 @@ def test_a_failing_filter_in_the_api_and_a_wrong_shape_never_reaches_nees(plugin
 
     ev = replay.evaluate("sim/auv-sonar", filters=["ekf", badplug.WrongShape], **SONAR)
     bad = ev.results[1]
-    assert [r["status"] for r in bad.records] == ["failed", "failed"] and np.isnan(ev.rows[1]["pos_rmse"])
+    assert [r.status for r in bad.records] == ["failed", "failed"] and np.isnan(ev.rows[1]["pos_rmse"])
     assert np.isnan(bad.estimates[0].P).all() and bad.estimates[0].P.shape == (30, 6, 6)
     assert not ev.rows[1]["nees"] == ev.rows[1]["nees"]  # NaN: no NEES from a broadcast covariance
     assert len(ev.estimates("wrongshape")) == 60  # the tables keep one entry per run and step
@@ -180,10 +180,10 @@ def test_a_campaign_unit_records_the_plugins_failure(plugin, cls):
 
     cfg = Config("sim/auv-sonar", {"steps": 30}, None, "sonar", {}, f"badplug:{cls}", {}, 0)
     recs = run_block(cfg, [0, 1, 2])  # a campaign's job: never raises for one run
-    assert [r["status"] for r in recs] == ["failed"] * 3 and [r["run"] for r in recs] == [0, 1, 2]
+    assert [r.status for r in recs] == ["failed"] * 3 and [r.run for r in recs] == [0, 1, 2]
     import re
 
-    assert all(re.search(CASES[cls], r["error"]) for r in recs)
+    assert all(re.search(CASES[cls], r.error) for r in recs)
 
 
 def test_keyboard_interrupt_is_not_a_failed_run():

@@ -84,7 +84,7 @@ def mapping(path, imu_extra=""):
 def ekf(bag, mp):
     ev = replay.evaluate(str(bag), dataset_params={"mapping": str(mp)}, filters=["ekf"], task="fusion", recorded=(),
                          runs=1)
-    return ev.rows[0]["pos_rmse"], ev.results[0].records[0]["problem"].notes
+    return ev.rows[0]["pos_rmse"], ev.results[0].records[0].problem.notes
 
 
 @pytest.fixture(scope="module")

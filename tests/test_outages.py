@@ -40,7 +40,7 @@ def dives_eval(tmp_path_factory):
 
 def test_known_dives_are_the_events_and_never_reach_a_filter(dives_eval):
     ev = dives_eval
-    prob = ev.results[0].records[0]["problem"]
+    prob = ev.results[0].records[0].problem
     spans = np.array(prob.params["outages"])
     # the last fix before each dive (one second before it) and the first after
     assert np.allclose(spans, [[59, 100], [149, 200], [239, 270]], atol=0.11), spans
@@ -87,7 +87,7 @@ def test_outages_written_and_refused_without_any(dives_eval, tmp_path):
     ev = replay.evaluate(str(path), adapter="bohai-csv", task="fusion", filters=["ekf"], runs=1,
                          task_params={"score": "outages", "outage": 20.0, "outage_every": 60.0})
     steps = scoring.event_steps(ev)
-    first = ev.t[np.flatnonzero(np.isfinite(ev.results[0].records[0]["problem"].z[:, 0]))[0]]
+    first = ev.t[np.flatnonzero(np.isfinite(ev.results[0].records[0].problem.z[:, 0]))[0]]
     assert first == pytest.approx(1.0, abs=0.11)  # the adapter's first fresh fix (the first change)
     assert np.allclose(ev.t[steps], first + np.array([60, 120, 180, 240]), atol=0.11)  # a window's end, each 60 s
 

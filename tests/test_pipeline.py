@@ -87,10 +87,10 @@ def test_block_composition_does_not_change_a_run():
     whole = run_block(cfg, [0, 1, 2])
     alone = [run_block(cfg, [r])[0] for r in (0, 1, 2)]
     for a, b in zip(whole, alone):
-        assert a["status"] == b["status"] == "done"
+        assert a.status == b.status == "done"
         for k in ("pos_rmse", "ate", "nees", "yaw_rmse"):
-            assert a["metrics"][k] == b["metrics"][k], k
-        np.testing.assert_array_equal(a["series"]["x0"], b["series"]["x0"])
+            assert a.metrics[k] == b.metrics[k], k
+        np.testing.assert_array_equal(a.series["x0"], b.series["x0"])
 
 
 def test_config_hash_is_canonical():

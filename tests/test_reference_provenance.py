@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 from replay.cli import main
 from replay.scoring import provenance, summary
+from replay.scoring.record import RunRecord
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "docs" / "mappings"
 
@@ -88,7 +89,7 @@ def test_provenance_of_a_declared_source_and_of_a_bag_topic():
 
 
 def _records(values):
-    return [{"run": i, "status": "done", "metrics": {"diverged": False, "pos_rmse": v}} for i, v in enumerate(values)]
+    return [RunRecord(i, "done", {"diverged": False, "pos_rmse": v}) for i, v in enumerate(values)]
 
 
 def _flag(filter_rmse, meas_rmse, shares=""):

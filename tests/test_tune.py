@@ -150,7 +150,7 @@ def _nll(q, r, runs, steps, seed):
     c = Config("sim/linear", {"steps": steps, "q": 0.3, "r": 2.0}, None, "linear",
                {"q": 1.0, "r": 1.0, "p0": 1.0, "lost_threshold": 20.0, "lost_steps": 10}, "kf",
                {"q_scale": q, "r_scale": r}, seed, "se3", None)
-    return sum(rec["metrics"]["nll"] for rec in run_block(c.as_dict(), list(range(runs))))
+    return sum(rec.metrics["nll"] for rec in run_block(c.as_dict(), list(range(runs))))
 
 
 @pytest.mark.slow
@@ -252,6 +252,6 @@ def test_nll_is_the_textbook_kalman_likelihood(fparams):
         total += 0.5 * (y @ np.linalg.solve(S, y) + np.linalg.slogdet(S)[1] + 3 * math.log(2 * math.pi))
         K = P @ np.linalg.inv(S)
         x, P = x + K @ y, (np.eye(3) - K) @ P
-    assert rec["metrics"]["nll"] == pytest.approx(total, rel=1e-10)
+    assert rec.metrics["nll"] == pytest.approx(total, rel=1e-10)
     rec_pf = run_block({**cfg, "filter": "pf", "filter_params": {"n_particles": 50}}, [0])[0]
-    assert "nll" not in rec_pf["metrics"]  # a particle filter gives none
+    assert "nll" not in rec_pf.metrics  # a particle filter gives none

@@ -129,11 +129,12 @@ def test_board_notes_explain_failed_trials_and_mark_rows_that_never_move():
 
 
 def test_why_a_trial_scores_infinity():
+    from replay.scoring.record import RunRecord
     from replay.tune.objectives import value, why_inf
 
-    ok = {"status": "done", "metrics": {"diverged": False, "pos_rmse": 1.0}}
-    div = {"status": "done", "metrics": {"diverged": True, "pos_rmse": 9.0}}
-    bad = {"status": "failed", "error": "MemoryError"}
+    ok = RunRecord(0, "done", {"diverged": False, "pos_rmse": 1.0})
+    div = RunRecord(1, "done", {"diverged": True, "pos_rmse": 9.0})
+    bad = RunRecord(1, "failed", error="MemoryError")
     w = {"mean_rmse": 1.0}
     assert value(w, [ok, ok]) == 1.0 and why_inf(w, [ok, ok]) == ""
     assert value(w, [ok, div]) == float("inf")

@@ -48,7 +48,7 @@ def campaign_rows(
     rows = []
     for h, cfg in configs.items():
         recs = records[h]
-        sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
+        sha = {r.run: r.table_sha256 for r in recs}
         try:
             rows.append(
                 summary.config_row(
@@ -56,7 +56,7 @@ def campaign_rows(
                     h,
                     recs,
                     lambda run, cols, h=h, sha=sha: store.series(h, run, cols, sha.get(run)),
-                    recs[0].get("version", "") if recs else "",
+                    (recs[0].version or "") if recs else "",
                 )
             )
         except (KeyError, TypeError, ValueError, IndexError) as err:  # records edited by hand

@@ -9,8 +9,11 @@ SHA-256) and writes them (:mod:`replay.campaign.store`).
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 
 import numpy as np
+
+from replay.scoring.record import RunRecord
 
 SUMMARY_COLUMNS = ("nees", "nis", "nis_dof")  # the per-step columns the leaderboard reads
 
@@ -54,14 +57,13 @@ def parquet_bytes(series: dict) -> bytes:
     return sink.getvalue().to_pybytes()
 
 
-def pack(results: list[dict]) -> list[dict]:
+def pack(results: list[RunRecord]) -> list[RunRecord]:
     """Worker side: replace each result's ``series`` by its Parquet bytes (smaller to send,
     and the encoding runs in parallel instead of in the main process), and keep beside them
     the few columns the leaderboard reads (:func:`summary_columns`)."""
     return [
-        {k: v for k, v in r.items() if k != "series"}
-        | {"parquet": parquet_bytes(r["series"]), "summary": summary_columns(r["series"])}
-        if "series" in r
+        replace(r, series=None, parquet=parquet_bytes(r.series), leaderboard_columns=summary_columns(r.series))
+        if r.series is not None
         else r
         for r in results
     ]

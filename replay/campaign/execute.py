@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from replay.run.pipeline import config_hash, runs_of
+from replay.scoring.record import FAILED, RunRecord
 from replay.util.errors import ReplayError
 from replay.util.staging import check_space
 from replay.util.progress import Progress, particle_weight
@@ -90,7 +91,7 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
                 store.save_config(h, c)
                 damaged.append((h, None, problem))
         stored += len(good)
-        have = {r for r, rec in good.items() if not retry_failed or rec["status"] == "done"}
+        have = {r for r, rec in good.items() if not retry_failed or rec.done}
         damaged.extend((h, r, bad[r]) for r in sorted(bad))
         wanted = set(runs_of(c, range(campaign.runs)))  # a recorded estimate: run 0 only
         for start in range(0, campaign.runs, campaign.batch):
@@ -111,7 +112,7 @@ def _plan(campaign: Campaign, store: Store, retry_failed: bool = False, data_dir
     return jobs, damaged, stored
 
 
-def execute_packed(job: Job) -> list[dict]:
+def execute_packed(job: Job) -> list[RunRecord]:
     """What a worker runs: the job's results with each per-step table already Parquet-encoded."""
     return pack(execute_job(job))
 
@@ -193,9 +194,7 @@ def _result(fut, job):
     try:
         return fut.result()
     except Exception as err:  # noqa: BLE001 — recorded per unit, the campaign goes on
-        return [
-            {"run": r, "status": "failed", "error": f"{type(err).__name__}: {err}".splitlines()[0]} for r in job.runs
-        ]
+        return [RunRecord(r, FAILED, error=f"{type(err).__name__}: {err}".splitlines()[0]) for r in job.runs]
 
 
 @dataclass(frozen=True)
@@ -305,7 +304,7 @@ def _run_locked(campaign, out, o: RunOptions) -> dict:
             with backend as mapper:
                 for job, results in mapper(jobs):
                     store_job(store, job, results, saved)
-                    bad = sum(r["status"] != "done" for r in results)
+                    bad = sum(not r.done for r in results)
                     counts["done"] += len(results) - bad
                     counts["failed"] += bad
                     progress.update(

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from replay.scoring.record import RunRecord
 from replay.util import sealed
 
 KEY = "record_sha256"
@@ -55,13 +56,13 @@ def problem(path: Path, record: dict) -> str | None:
     return None
 
 
-def legacy_problem(path: Path, record: dict, read) -> str | None:
+def legacy_problem(path: Path, record: RunRecord, read) -> str | None:
     """For a done record without a checksum: a metric that disagrees with the table, as one line
     naming ``path``; ``read(columns)`` gives the table's columns (called once)."""
-    if KEY in record or record.get("status") != "done":
+    if record.record_sha256 is not None or not record.done:
         return None
     names = read(None)
-    m = record.get("metrics") or {}
+    m = record.metrics or {}
     axes = [k[4:] for k in names if k.startswith("ref_") and f"err_{k[4:]}" in names]
     with np.errstate(all="ignore"):
         pos = np.column_stack([names[f"err_{a}"] for a in axes]) if axes else np.zeros((0, 0))

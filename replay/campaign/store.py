@@ -64,6 +64,7 @@ from .encode import (
     to_numpy,
 )
 from replay.util.files import json_default, sync_dir, write_bytes, write_json
+from replay.scoring.record import DONE, RunRecord
 from replay.run.pipeline import config_hash as hash_of
 from concurrent.futures import ThreadPoolExecutor
 
@@ -82,7 +83,7 @@ class Store:
         self._lock = threading.Lock()
 
     # ---- reading, with checks ------------------------------------------------------------
-    def scan(self, config_hash: str) -> tuple[dict[int, dict], dict[int, str]]:
+    def scan(self, config_hash: str) -> tuple[dict[int, RunRecord], dict[int, str]]:
         """Every stored unit of a configuration, checked: ``({run: record}, {run: problem})``,
         a problem being one line naming the damaged file and what is wrong with it."""
         d = self.units / config_hash
@@ -96,8 +97,8 @@ class Store:
                 continue
             run = int(m.group(1))
             rec, problem = self._read_record(d / name, run, config_hash)
-            if problem is None and rec["status"] == "done":
-                problem, rows = self._check_table(d / f"{run}.parquet", rec.get("table"))
+            if problem is None and rec.done:
+                problem, rows = self._check_table(d / f"{run}.parquet", rec.table)
                 if problem is None and rows is not None:
                     legacy[run] = rows
                 if problem is None:  # a record without its checksum: its metrics against the table
@@ -108,7 +109,7 @@ class Store:
                 bad[run] = problem
         if legacy:  # records without a table description: rows as the configuration's other units
             expected = Counter(legacy.values()).most_common(1)[0][0]
-            described = [r["table"]["rows"] for r in good.values() if isinstance(r.get("table"), dict)]
+            described = [r.table["rows"] for r in good.values() if isinstance(r.table, dict)]
             expected = described[0] if described else expected
             for run, rows in legacy.items():
                 if rows != expected:
@@ -117,7 +118,8 @@ class Store:
         return good, bad
 
     @staticmethod
-    def _read_record(path: Path, run: int, config_hash: str):
+    def _read_record(path: Path, run: int, config_hash: str) -> tuple[RunRecord | None, str | None]:
+        """(record, None) of an intact unit record, else (None, one line naming ``path``)."""
         try:
             raw = path.read_bytes()
         except OSError as err:
@@ -139,7 +141,7 @@ class Store:
         if rec["status"] == "done" and not isinstance(rec.get("metrics"), dict):
             return None, f"{path}: unit record has no metrics"
         sealed = sealing.problem(path, rec)
-        return (None, sealed) if sealed else (rec, None)
+        return (None, sealed) if sealed else (RunRecord.from_dict(rec), None)
 
     @staticmethod
     def _check_table(path: Path, table):
@@ -186,9 +188,9 @@ class Store:
     def stored_runs(self, config_hash: str, include_failed: bool = True) -> set[int]:
         """Runs stored intact (damaged units are not stored: they are computed again)."""
         good = self.scan(config_hash)[0]
-        return {run for run, rec in good.items() if include_failed or rec["status"] == "done"}
+        return {run for run, rec in good.items() if include_failed or rec.done}
 
-    def records(self, config_hash: str) -> list[dict]:
+    def records(self, config_hash: str) -> list[RunRecord]:
         """Stored unit records of a configuration, in run order; a damaged unit raises a
         :class:`ReplayError` naming its file."""
         good, bad = self.scan(config_hash)
@@ -309,26 +311,26 @@ class Store:
             return None if problem.endswith(": missing") else problem
         return None
 
-    def write(self, config_hash: str, result: dict, sync: bool = True) -> None:
+    def write(self, config_hash: str, result: RunRecord, sync: bool = True) -> None:
         """Store one unit: the per-step table (done units), then the record that marks it stored
         and describes the table (rows, columns, size, SHA-256); ``sync``: also flush the
         directory (:meth:`write_job` does it once per job).
 
-        The table comes as ``result["parquet"]`` (bytes from :func:`pack`, encoded by the
-        worker) or as ``result["series"]`` (a dict of arrays, encoded here)."""
+        The table comes as ``result.parquet`` (bytes from :func:`pack`, encoded by the
+        worker) or as ``result.series`` (a dict of arrays, encoded here)."""
         d = self.units / config_hash
-        run = result["run"]
-        record = {k: v for k, v in result.items() if k not in ("series", "parquet", "summary")}
-        record.update(key=f"{config_hash}/{run}", config_hash=config_hash, version=__version__)
-        if result["status"] == "done":
-            data = result["parquet"] if "parquet" in result else parquet_bytes(result["series"])
+        run = result.run
+        record = result.to_dict() | {"key": f"{config_hash}/{run}", "config_hash": config_hash, "version": __version__}
+        if result.status == DONE:
+            data = result.parquet if result.parquet is not None else parquet_bytes(result.series)
             record["table"] = describe(data)
             write_bytes(d / f"{run}.parquet", data, sync=False)  # its record's checksum vouches for it
+            kept = result.leaderboard_columns
             self._keep(
                 config_hash,
                 run,
                 record["table"]["sha256"],
-                result["summary"] if "summary" in result else summary_columns(result.get("series", {})),
+                kept if kept is not None else summary_columns(result.series or {}),
             )
         write_json(d / f"{run}.json", sealing.seal(record, json_default))
         if sync:
@@ -345,7 +347,7 @@ class Store:
                 self._kept[(config_hash, run)] = (sha256, columns)
                 self._kept_bytes += size
 
-    def write_job(self, config_hash: str, results: list[dict]) -> None:
+    def write_job(self, config_hash: str, results: list[RunRecord]) -> None:
         """Store a job's units, then flush the directory once. The units are written by a few
         threads: their flushes then share the file system's journal commits (25 records one
         after the other: 6-100 ms; side by side: a tenth of that)."""

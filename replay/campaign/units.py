@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from replay.run.pipeline import run_block
+from replay.scoring.record import RunRecord
 
 
 @dataclass
@@ -31,6 +32,6 @@ class Job:
     data_dir: str | None = None
 
 
-def execute_job(job: Job) -> list[dict]:
+def execute_job(job: Job) -> list[RunRecord]:
     """Every run of ``job``: one record per run (never raises)."""
     return run_block(job.config, job.runs, job.data_dir)

@@ -228,9 +228,9 @@ def run_rows(ev: Evaluation) -> list[dict]:
                     "filter": r.name,
                     "params": params,
                     "config_hash": r.config_hash,
-                    "run": rec["run"],
-                    "status": rec["status"],
-                    **(rec.get("metrics") or {}),
+                    "run": rec.run,
+                    "status": rec.status,
+                    **(rec.metrics or {}),
                 }
             )
     return rows

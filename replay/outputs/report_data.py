@@ -84,7 +84,7 @@ def load_campaign(d: Path) -> list[Section]:
     sections: dict = {}
     names = index.names(d)  # as the leaderboard shows the dataset (a recording's id as written)
     for h, cfg in store.configs():
-        done = [r for r in store.records(h) if r["status"] == "done"]
+        done = [r for r in store.records(h) if r.done]
         if not done:
             continue
         ds = names.get(cfg["dataset"], cfg["dataset"])
@@ -96,16 +96,16 @@ def load_campaign(d: Path) -> list[Section]:
             sec.rows.append(row)
         runs, mets = {}, {}
         for rec in done:
-            raw = store.series(h, rec["run"])
+            raw = store.series(h, rec.run)
             axes = tuple(k[4:] for k in raw if k.startswith("ref_"))
             ref = np.column_stack([raw[f"ref_{a}"] for a in axes])
             err = np.column_stack([raw[f"err_{a}"] for a in axes])
             pos = np.column_stack([raw[f"x{j}"] for j in range(len(axes))])
-            runs[rec["run"]] = _series(
+            runs[rec.run] = _series(
                 raw["t"], pos, ref, err, {k: np.asarray(raw[k], float) for k in ("nees", "nis", "nis_dof") if k in raw}
             )
-            mets[rec["run"]] = {k: v for k, v in rec["metrics"].items() if isinstance(v, (int, float))}
-            mets[rec["run"]].setdefault("pos_rmse", _rmse(err))
+            mets[rec.run] = {k: v for k, v in rec.metrics.items() if isinstance(v, (int, float))}
+            mets[rec.run].setdefault("pos_rmse", _rmse(err))
             sec.axes = sec.axes or axes
         sec.runs[lab], sec.metrics[lab] = runs, mets
         if is_recorded(cfg["filter"]):

@@ -164,10 +164,12 @@ def load_campaign_run(out, data_dir=None, run: int = 0, select=None) -> dict:
         r = 0 if is_recorded(c["filter"]) else run
         unit = store.units / h
         rec, problem = Store._read_record(unit / f"{r}.json", r, h)  # checked as Store.scan does, one run only
-        if problem is None and rec["status"] != "done":
-            problem = f"{unit / f'{r}.json'}: run {r} failed ({rec.get('error', 'no error recorded')})"
+        if problem is None and not rec.done:
+            problem = (
+                f"{unit / f'{r}.json'}: run {r} failed ({'no error recorded' if rec.error is None else rec.error})"
+            )
         elif problem is None:
-            problem = Store._check_table(unit / f"{r}.parquet", rec.get("table"))[0]
+            problem = Store._check_table(unit / f"{r}.parquet", rec.table)[0]
         if problem is not None:
             stored = sorted(store.stored_runs(h, include_failed=False))
             hint = f"stored runs: {stored[0]} to {stored[-1]}" if stored else RERUN_HINT

@@ -149,7 +149,7 @@ def segments(res) -> dict:
     settling, the frame's ``maneuvers``), over the level runs (``level``), and their ``ratio``."""
     div, seg = np.array([bool(m["diverged"]) for m in res.runs]), {"man": [], "level": []}
     for rec in res.records:
-        p, est = rec["problem"], rec["estimates"]
+        p, est = rec.problem, rec.estimates
         man = scorer.within(p.t, p.frame_meta["maneuvers"])
         seg["man"].append(scorer.score_where(p, est, man))
         seg["level"].append(scorer.score_where(p, est, ~man))

@@ -22,6 +22,7 @@ import numpy as np
 
 from replay.data import dataset_ref, registry
 from replay.scoring import gap, scorer, summary
+from replay.scoring.record import FAILED, RunRecord
 from replay.util.progress import particle_weight
 from replay.util.version import __version__
 from replay.filters import make_filter
@@ -52,7 +53,7 @@ class FilterResult:
     summary: dict = field(default_factory=dict)  # the leaderboard row (replay.scoring.summary)
     config_hash: str = ""
     config: dict = field(default_factory=dict)  # the configuration (replay.run.pipeline.Config)
-    records: list = field(default_factory=list)  # per-run records of replay.run.pipeline.run_block
+    records: list[RunRecord] = field(default_factory=list)  # per-run records of replay.run.pipeline.run_block
 
 
 @dataclass
@@ -118,7 +119,7 @@ class Evaluation:
 def _summarise(results: list[FilterResult], baseline: str | None) -> list[dict]:
     """Each result's leaderboard row (``summary``), labelled, with the paired columns."""
     for res in results:
-        series = {r["run"]: r["series"] for r in res.records}
+        series = {r.run: r.series for r in res.records}
         res.summary = summary.config_row(
             res.config,
             res.config_hash,
@@ -263,9 +264,9 @@ def _run_config(cfg: Config, s: Resolved, built: dict | None, progress) -> Filte
     return FilterResult(
         cfg.filter,
         c["filter_params"],
-        [r["metrics"] for r in recs],
-        [r["errors"] for r in recs],
-        [r["estimates"] for r in recs],
+        [r.metrics for r in recs],
+        [r.errors for r in recs],
+        [r.estimates for r in recs],
         config_hash=h,
         config=c,
         records=recs,
@@ -277,7 +278,7 @@ def _assemble(s: Resolved, configs: list[Config], results: list[FilterResult], m
     the truths of the runs and the recorded estimates' notes."""
     o = s.options
     rows = _summarise(results, o.baseline)
-    problems = [r["problem"] for r in max(results, key=lambda r: len(r.records)).records]
+    problems = [r.problem for r in max(results, key=lambda r: len(r.records)).records]
     p0 = problems[0]
     config = {
         "dataset": s.dataset,
@@ -298,7 +299,7 @@ def _assemble(s: Resolved, configs: list[Config], results: list[FilterResult], m
         "config_hashes": {r.name: r.config_hash for r in results},
         "min_scored_share": min_scored_share,
     }
-    notes = [rec["note"] for r in results for rec in r.records if rec.get("note")]
+    notes = [rec.note for r in results for rec in r.records if rec.note]
     notes += [
         f"{name}: gating rejected (per run) " + "; ".join(f"{k} {v}" for k, v in counts.items())
         for name, counts in per_filter(results).items()
@@ -331,14 +332,14 @@ def observes_position(problem) -> bool:
     return set(int(i) for i in problem.position_index) <= seen
 
 
-def _filled(rec: dict) -> dict:
+def _filled(rec: RunRecord) -> RunRecord:
     """A run's record; a failed run (the filter failed: :mod:`replay.run.failures`) with NaN estimates
     and errors on the problem's steps, so every table keeps one entry per run."""
-    if rec["status"] != "failed":
+    if rec.status != FAILED:
         return rec
-    p = rec["problem"]
+    p = rec.problem
     n, nx = len(p.z), p.model.nx
     est = Estimates(
-        np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None, {"error": rec["error"]}
+        np.full((n, nx), np.nan), np.full((n, nx, nx), np.nan), np.full(n, np.nan), None, {"error": rec.error}
     )
-    return dict(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})
+    return replace(rec, estimates=est, errors=scorer.errors(p, est), metrics={}, series={})

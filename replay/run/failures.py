@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import traceback
 
+from replay.scoring.record import FAILED, RunRecord
 from replay.util.errors import ProtocolError, ReplayError
 
 
@@ -27,14 +28,9 @@ def describe(err: BaseException) -> str:
     return (text.splitlines() or [""])[0][:500]
 
 
-def failed(run: int, err: BaseException) -> dict:
+def failed(run: int, err: BaseException) -> RunRecord:
     """The record of a run that could not be computed."""
-    return {
-        "run": run,
-        "status": "failed",
-        "error": describe(err),
-        "traceback": "".join(traceback.format_exception(err))[-4000:],
-    }
+    return RunRecord(run, FAILED, error=describe(err), traceback="".join(traceback.format_exception(err))[-4000:])
 
 
 def ends_run(err: BaseException, strict: bool) -> bool:

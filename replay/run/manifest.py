@@ -11,6 +11,7 @@ import sys
 import numpy as np
 
 from replay.data import registry
+from replay.scoring.record import FAILED
 from replay.util.version import __version__
 from replay.filters import make_filter
 from replay.filters.gating import per_filter
@@ -24,9 +25,9 @@ def failures(ev) -> dict:
     """``{filter: {"runs": [failed runs], "error": the first error}}`` of the filters that failed."""
     out = {}
     for res in ev.results:
-        bad = [r for r in res.records if r["status"] == "failed"]
+        bad = [r for r in res.records if r.status == FAILED]
         if bad:
-            out[res.name] = {"runs": [r["run"] for r in bad], "error": bad[0]["error"]}
+            out[res.name] = {"runs": [r.run for r in bad], "error": bad[0].error}
     return out
 
 

@@ -20,8 +20,8 @@ filled in, so ``{}`` and the defaults are the same configuration.
    written over the Monte Carlo run axis and each run draws only from its own generator, so a run's
    numbers do not depend on which runs share its block: eval and campaign agree by construction;
 3. each run is scored by :func:`replay.scoring.metrics.run_metrics` (RMSE per axis and
-   angle, ATE, drift, NEES/NIS) into a record ``{"run", "status", "metrics",
-   "series"}``; ``keep=True`` also keeps the problem, the estimates and the
+   angle, ATE, drift, NEES/NIS) into a :class:`replay.scoring.record.RunRecord` (run, status,
+   metrics, series); ``keep=True`` also keeps the problem, the estimates and the
    error series in memory (``replay eval`` writes and plots them).
 
 It never raises for one run: a run whose problem cannot be built or whose
@@ -56,6 +56,7 @@ from replay.util.canonical import config_hash, plain  # noqa: F401 (the pipeline
 from replay.run.eval_options import DEFAULTS
 from replay.run.failures import ends_run, failed
 from replay.scoring import likelihood, marks, metrics, provenance, scorer
+from replay.scoring.record import DONE, RunRecord
 from replay.tasks import make_task, reference_coverage, reference_present, source_of
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
@@ -238,7 +239,7 @@ def _same(x, y) -> bool:
 
 def run_block(
     config: Config | dict, runs, data_dir=None, keep: bool = False, strict: bool = False, built: dict | None = None
-) -> list[dict]:
+) -> list[RunRecord]:
     """Compute and score runs ``runs`` of ``config`` (module docstring); one record per run, in run order.
 
     ``strict``: an error building or scoring a run is raised instead of recorded (``replay eval``);
@@ -287,7 +288,7 @@ def run_block(
         except BaseException as err:  # the filter's failure (any, sys.exit too): its runs failed
             if ends_run(err, strict):
                 raise
-            results += [dict(failed(r, err), **({"problem": problems[r]} if keep else {})) for r in group]
+            results += [dataclasses.replace(failed(r, err), problem=problems[r] if keep else None) for r in group]
             continue
         dt = (perf_counter() - t0) / len(group)
         for r, est in zip(group, out):
@@ -301,10 +302,10 @@ def run_block(
             if strict:
                 raise
             results.append(failed(r, err))
-    return sorted(results, key=lambda d: d["run"])
+    return sorted(results, key=lambda d: d.run)
 
 
-def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> dict:
+def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = False) -> RunRecord:
     """The record of one run: metrics (:func:`replay.scoring.metrics.run_metrics`) and the per-step table."""
     err = scorer.errors(problem, est)
     m, series = metrics.run_metrics(problem, est, c["alignment"], c["divergence_threshold"], err)
@@ -320,24 +321,24 @@ def score_record(c: dict, problem, est, run: int, wall: float, keep: bool = Fals
         cols[f"err_{name}"] = err[name]
     cols.update(series)
     m["seconds"] = wall
-    rec = {"run": run, "status": "done", "metrics": m, "series": cols}
-    rec.update({k: v for k, v in getattr(problem, "frame_meta", {}).items() if k == "content_checked"})
-    shared = marks.reference_inputs(getattr(problem, "frame_meta", {}), c["filter"])
+    meta = getattr(problem, "frame_meta", {})
+    rec = RunRecord(run, DONE, m, cols, content_checked=meta.get("content_checked"))
+    shared = marks.reference_inputs(meta, c["filter"])
     if shared and not (not is_recorded(c["filter"]) and (problem.params or {}).get("holdout")):
-        rec["reference_input"] = shared  # a held-out fix is never fed: not scored against its own input
-    ref = getattr(problem, "frame_meta", {}).get("reference") or {}
+        rec.reference_input = shared  # a held-out fix is never fed: not scored against its own input
+    ref = meta.get("reference") or {}
     if ref:  # where the reference comes from (replay/scoring/provenance.py), on every row
-        rec["reference"] = ref["kind"]
+        rec.reference = ref["kind"]
     if ref.get("shares"):  # the reference shares a source with a fed input
-        rec["reference_shares"] = ref["shares"]
+        rec.reference_shares = ref["shares"]
     if ref.get("unconstrained"):  # an attitude angle nothing measures (replay/tasks/fusion_heading.py)
-        rec["unconstrained"] = " | ".join(ref["unconstrained"])
+        rec.unconstrained = " | ".join(ref["unconstrained"])
     if est.info.get("error"):
-        rec["metrics"]["error"] = est.info["error"]
+        m["error"] = est.info["error"]
     if est.info.get("rejected") is not None:  # per-sensor outlier gating (replay.filters.gating)
-        rec["rejected"] = dict(est.info["rejected"])
+        rec.rejected = dict(est.info["rejected"])
     if keep:
-        rec.update(problem=problem, estimates=est, errors=err)
+        rec.problem, rec.estimates, rec.errors = problem, est, err
     return rec
 
 
@@ -349,16 +350,16 @@ def runs_of(config: dict, runs) -> list:
     return [r for r in runs if r == 0] if is_recorded(config["filter"]) else list(runs)
 
 
-def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> dict:
+def _recorded_run(c: dict, run: int, data_dir, keep: bool, strict: bool) -> RunRecord:
     """The record of run 0 of a ``recorded:<name>`` configuration (never raises unless ``strict``)."""
     try:
         problem = build_problem(c, run, data_dir)
         scored, est, note = recorded_estimates(problem, c["filter"][len(RECORDED) :], c["filter_params"])
         rec = score_record(c, scored, est, run, float("nan"), keep)
-        rec["metrics"].update(unaligned_metrics(scored, est, c["divergence_threshold"]))
+        rec.metrics.update(unaligned_metrics(scored, est, c["divergence_threshold"]))
     except Exception as err:
         if strict:
             raise
         return failed(run, err)
-    rec["note"] = note
+    rec.note = note
     return rec

@@ -63,7 +63,7 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
         off, labels = _geo(source.frame_meta, utm)
         names = tuple(source.axis_names)
         truth = np.asarray(source.truths[run], float)
-        first = next((r.records[run].get("problem") for r in source.results if len(r.records) > run), None)
+        first = next((r.records[run].problem for r in source.results if len(r.records) > run), None)
         if first is not None:  # where the reference is masked, no line (as the scorer skips it)
             truth = np.where(np.asarray(first.truth_valid, bool)[:, None], truth, np.nan)
         truth = _en(truth, names) + off
@@ -71,7 +71,7 @@ def plot_track(source, *, ax=None, utm: bool = True, run: int = 0, filters=None)
         truth = np.column_stack(line(t, truth[:, 0], truth[:, 1])[1:])  # held at GPS fixes only: not dots
         ax.plot(truth[:, 0], truth[:, 1], color="k", lw=3.0, label="reference")
         for res in [tables.result(source, f) for f in filters] if filters else source.results:
-            problem = res.records[run].get("problem") if len(res.records) > run else None
+            problem = res.records[run].problem if len(res.records) > run else None
             if problem is None:
                 continue
             x = res.estimates[run].x[:, list(problem.position_index)]

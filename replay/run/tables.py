@@ -108,7 +108,7 @@ def run_metrics(ev):
     rows = []
     for res in ev.results:
         for rec in res.records:
-            rows.append({"filter": res.name, "run": rec["run"], "status": rec["status"], **rec.get("metrics", {})})
+            rows.append({"filter": res.name, "run": rec.run, "status": rec.status, **(rec.metrics or {})})
     return pd.DataFrame(rows)
 
 

@@ -31,7 +31,7 @@ def spans(ev) -> list:
     """``[[start, end], ...]`` (s, the recording's time) of each outage, from the task's problem."""
     for res in ev.results:
         for rec in res.records:
-            p = rec.get("problem")
+            p = rec.problem
             if p is not None and "outages" in getattr(p, "params", {}):
                 return [list(s) for s in p.params["outages"]]
     return []

@@ -57,6 +57,7 @@ import json
 import numpy as np
 
 from replay.scoring import metrics, scorer
+from replay.scoring.record import RunRecord
 from replay.util.params import Param
 from replay.data.views import NAMES as VIEWS
 from replay.tasks import task_class
@@ -96,11 +97,11 @@ SYNTHETIC = "synthetic"
 TIMING = ("us_per_step",)
 
 
-def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> dict:
+def config_row(cfg: dict, h: str, records: list[RunRecord], series, version: str) -> dict:
     """The row of one configuration from its run records; ``series(run, columns)`` gives a
     run's per-step columns (``nees``, ``nis``, ``nis_dof``)."""
-    done = [r for r in records if r["status"] == "done"]
-    ok = [r for r in done if not r["metrics"]["diverged"]]
+    done = [r for r in records if r.done]
+    ok = [r for r in done if not r.diverged]
     row = {
         "dataset": cfg["dataset"],
         "task": cfg["task"],
@@ -114,19 +115,19 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         "first": cfg["first"] or "",
     }
     with np.errstate(all="ignore"):
-        agg = scorer.aggregate([r["metrics"] for r in done], RUN_METRICS)
+        agg = scorer.aggregate([r.metrics for r in done], RUN_METRICS)
         row.update(
             {k: v for k, v in agg.items() if k not in ("runs", "diverged", "lost", "us_per_step", "scored", "masked")}
         )
-        row["lost"] = agg["lost"] if any(r["metrics"].get("lost") is not None for r in ok) or not ok else ""
-        row["lost_share"] = lost_share([r["metrics"] for r in ok])
-        dof = ok[0]["metrics"].get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
-        row.update(ensemble([series(r["run"], ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
+        row["lost"] = agg["lost"] if any(r.metrics.get("lost") is not None for r in ok) or not ok else ""
+        row["lost_share"] = lost_share([r.metrics for r in ok])
+        dof = ok[0].metrics.get("nees_dof", 3) if ok else 3  # records before nees_dof: 3-D
+        row.update(ensemble([series(r.run, ["nees", "nis", "nis_dof"]) for r in ok], nees_dof=dof))
     if len(done) == 1:  # a recorded estimate moved by its align fit: its numbers before the fit, named
-        row.update({k: ("" if v is None else v) for k, v in done[0]["metrics"].items() if k.endswith("_unaligned")})
+        row.update({k: ("" if v is None else v) for k, v in done[0].metrics.items() if k.endswith("_unaligned")})
     row.update(
         measurements=measurements(cfg),
-        reference=next((r["reference"] for r in done if r.get("reference")), ""),  # provenance.py
+        reference=next((r.reference for r in done if r.reference), ""),  # provenance.py
         scored=agg["scored"],
         masked=agg["masked"],
         us_per_step=agg["us_per_step"],
@@ -134,16 +135,16 @@ def config_row(cfg: dict, h: str, records: list[dict], series, version: str) -> 
         version=version,
         config_hash=h,
     )
-    if ok and all(r["metrics"].get("still") is True for r in ok):  # issue 40: not a filter's error
+    if ok and all(r.metrics.get("still") is True for r in ok):  # issue 40: not a filter's error
         row["still"] = True
-    shared = next((r["reference_input"] for r in done if r.get("reference_input")), "")
+    shared = next((r.reference_input for r in done if r.reference_input), "")
     if shared:  # the reference is one of the row's inputs: a topic scored against itself
         row["reference_input"] = shared
-    if shares := next((r["reference_shares"] for r in done if r.get("reference_shares")), ""):
+    if shares := next((r.reference_shares for r in done if r.reference_shares), ""):
         row["reference_shares"] = shares  # the fed inputs that share a source with the reference
-    if free := next((r["unconstrained"] for r in done if r.get("unconstrained")), ""):
+    if free := next((r.unconstrained for r in done if r.unconstrained), ""):
         row["unconstrained"] = free  # an attitude angle no input measures: what a distance then means
-    checked = [r["content_checked"] for r in done if "content_checked" in r]  # recorded files only
+    checked = [r.content_checked for r in done if r.content_checked is not None]  # recorded files only
     if checked:
         row["content_checked"] = all(checked)
     view = [(k, cfg["dataset_params"][k]) for k in VIEWS if k in (cfg.get("dataset_params") or {})]
@@ -305,13 +306,9 @@ def group_key(cfg: dict) -> str:
     )
 
 
-def per_run(records: list[dict], metric: str) -> dict:
+def per_run(records: list[RunRecord], metric: str) -> dict:
     """{run: value} of a metric over the runs that finished without diverging."""
-    return {
-        r["run"]: r["metrics"].get(metric, np.nan)
-        for r in records
-        if r["status"] == "done" and not r["metrics"]["diverged"]
-    }
+    return {r.run: r.metric(metric) for r in records if r.done and not r.diverged}
 
 
 def add_paired(

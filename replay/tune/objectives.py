@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from replay.scoring.record import RunRecord
 from replay.util.errors import ReplayError
 
 BASIC = ("mean_rmse", "median_rmse", "lost", "nll", "anees")
@@ -51,26 +52,26 @@ def parse(text: str) -> dict[str, float]:
     return out
 
 
-def value(weights: dict[str, float], records: list[dict]) -> float:
+def value(weights: dict[str, float], records: list[RunRecord]) -> float:
     """The objective of one configuration's records."""
-    done = [r for r in records if r.get("status") == "done"]
-    if not records or len(done) < len(records) or any(r["metrics"]["diverged"] for r in done):
+    done = [r for r in records if r.done]
+    if not records or len(done) < len(records) or any(r.diverged for r in done):
         return math.inf
-    return float(sum(w * _basic(name, [r["metrics"] for r in done]) for name, w in weights.items()))
+    return float(sum(w * _basic(name, [r.metrics for r in done]) for name, w in weights.items()))
 
 
-def why_inf(weights: dict[str, float], records: list[dict]) -> str:
+def why_inf(weights: dict[str, float], records: list[RunRecord]) -> str:
     """Why :func:`value` is infinite for these records (one phrase), or '' when it is finite."""
-    done = [r for r in records if r.get("status") == "done"]
+    done = [r for r in records if r.done]
     if not records:
         return "no run was computed"
     if len(done) < len(records):
-        err = next((r.get("error") for r in records if r.get("status") != "done" and r.get("error")), "")
+        err = next((r.error for r in records if not r.done and r.error), "")
         return f"{len(records) - len(done)} of {len(records)} runs failed" + (f" ({err})" if err else "")
-    div = sum(bool(r["metrics"]["diverged"]) for r in done)
+    div = sum(r.diverged for r in done)
     if div:
         return f"{div} of {len(done)} runs diverged (a setting with a diverged run is not usable)"
-    bad = [n for n in weights if not math.isfinite(_basic(n, [r["metrics"] for r in done]))]
+    bad = [n for n in weights if not math.isfinite(_basic(n, [r.metrics for r in done]))]
     return f"objective {', '.join(bad)} not finite (e.g. no likelihood or NEES)" if bad else ""
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from replay.campaign.store import Store
 from replay.run.pipeline import config_hash
+from replay.scoring.record import FAILED
 from replay.scoring.significance import t_interval
 from replay.filters import make_filter
 from replay.util.errors import ReplayError
@@ -64,7 +65,7 @@ def run_repeats(t, out, repeats: int = REPEATS, *, quiet: bool = False, **backen
         for row in res["rows"]:
             kind = "measurements" if row["filter"] == "measurements" else row["label"].split("(")[-1].rstrip(")")
             vals = [
-                float(rec["metrics"].get("pos_rmse", np.nan)) if rec.get("status") != "failed" else np.nan
+                float(rec.metric("pos_rmse")) if rec.status != FAILED else np.nan
                 for c in row["_test"]
                 for rec in store.records(config_hash(c.as_dict()))
             ]

@@ -28,6 +28,7 @@ from replay.run.evaluation import observes_position
 from replay.run.pipeline import Config, build_problem, config_hash, plain
 from replay.filters import make_filter
 from replay.scoring import summary
+from replay.scoring.record import RunRecord
 from replay.tasks import make_task
 from replay.util.progress import Progress, particle_weight
 
@@ -146,7 +147,7 @@ class Runner:
         self.t, self.out, self.store, self.mapper, self.saved = t, out, Store(out), backend, set()
         self.block = block or t.batch  # runs per job (a trial's runs spread over the workers)
 
-    def records(self, cfgs: list[Config]) -> list[list[dict]]:
+    def records(self, cfgs: list[Config]) -> list[list[RunRecord]]:
         camp = Campaign(None, "tune", self.t.runs, 0, self.block, self.t.data_dir, list(cfgs))
         jobs = execute.plan(camp, self.store, data_dir=self.t.data_dir)
         for job, results in self.mapper(jobs):
@@ -353,13 +354,13 @@ def _measurements_row(t: Tune, run: Runner) -> list[dict]:
 def _row(store, cfg: Config, recs) -> dict:
     """The leaderboard row (:func:`replay.scoring.summary.config_row`) of a configuration's stored records."""
     c, h = cfg.as_dict(), config_hash(cfg.as_dict())
-    sha = {r["run"]: r["table"].get("sha256") for r in recs if isinstance(r.get("table"), dict)}
+    sha = {r.run: r.table_sha256 for r in recs}
     return summary.config_row(
         c,
         h,
         recs,
         lambda run_, cols: store.series(h, run_, cols, sha.get(run_)),
-        recs[0].get("version", "") if recs else "",
+        (recs[0].version or "") if recs else "",
     )
 
 
