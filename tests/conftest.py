@@ -20,6 +20,13 @@ before they are read; an edit to a kernel gives a new name and a compilation,
 never stale machine code. ``REPLAY_TEST_CACHE_DIR=DIR`` keeps the whole cache in
 DIR across sessions instead (no store); ``REPLAY_TEST_FRESH_KERNELS=1`` starts the
 session with no kernels (every kernel compiled, as on a clean machine).
+
+Scratch space (``tmp_path`` and the session cache) is on a RAM file system when ``/dev/shm`` is one
+with room to spare (``PYTEST_DEBUG_TEMPROOT``, pytest's own setting, names it; set it to keep them
+elsewhere). The product syncs every file it publishes and optuna's SQLite study every commit, as it
+must; on the CI machine's disk a sync costs 2-8 ms and the quick check makes thousands of them
+(measured 2026-11-29, loaded machine: tests/test_tune*.py 50 s -> 31 s wall, the same CPU). The
+syncs still run: only their wait is gone.
 """
 import os
 import shutil
@@ -31,10 +38,26 @@ import pytest
 import kernel_store
 from replay.data.registry import cache_dir as _user_cache
 
+
+def _ram_temp_root() -> str | None:
+    """``/dev/shm`` when it is a writable tmpfs with at least 2 GiB free, else None."""
+    shm = "/dev/shm"
+    try:
+        st = os.statvfs(shm)
+        with open("/proc/mounts") as mounts:
+            tmpfs = any(ln.split()[1:3] == [shm, "tmpfs"] for ln in mounts if len(ln.split()) > 2)
+    except OSError:
+        return None
+    return shm if tmpfs and os.access(shm, os.W_OK) and st.f_bavail * st.f_frsize >= 2 << 30 else None
+
+
+if not os.environ.get("PYTEST_DEBUG_TEMPROOT") and (_RAM := _ram_temp_root()):
+    os.environ["PYTEST_DEBUG_TEMPROOT"] = _RAM  # read by pytest's tmp_path_factory (and by xdist's workers)
+_TEMP_ROOT = os.environ.get("PYTEST_DEBUG_TEMPROOT") or None
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
-SESSION_CACHE = Path(_KEEP).expanduser() if _KEEP else Path(tempfile.mkdtemp(prefix="replay-tests-"))
+SESSION_CACHE = Path(_KEEP).expanduser() if _KEEP else Path(tempfile.mkdtemp(prefix="replay-tests-", dir=_TEMP_ROOT))
 KERNEL_STORE = kernel_store.store_for(_user_cache(), Path(__file__).resolve().parents[1])
 if not _KEEP and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
     kernel_store.restore(KERNEL_STORE, SESSION_CACHE / "kernels")
@@ -55,6 +78,41 @@ def checkout_entries(root: Path = CHECKOUT) -> set:
         if (runs / a).is_dir():
             out.update(f"runs/{a}/{b}" for b in os.listdir(runs / a))
     return out
+
+
+# Test modules sent to the workers first, the costliest first. With --dist loadscope (pyproject.toml) a module
+# runs whole in one worker and modules are handed out in collection order: a costly module collected last
+# (alphabetical: tests/test_tune*.py) kept one worker busy while the other had nothing left. The rest follow in
+# collection order. CPU seconds of each module in the quick check (-m "not slow" -n 2, 2026-11-29):
+# test_tune_study 5.4, test_tune 4.7, test_export_foxglove 4.5, test_fusion 4.5, test_fusion_identity 4.3,
+# test_export_mcap 3.7, test_reference_provenance 3.7, test_smoothers 3.6, test_hostile_adapters 3.5, then
+# 3.2-2.2; of ~118 in all. The whole suite's longest module (the slow kernel-cache concurrency cases) leads.
+FIRST = (  # file names without ".py"
+    "test_kernel_cache_concurrency",
+    "test_tune_study",
+    "test_tune",
+    "test_export_foxglove",
+    "test_fusion",
+    "test_fusion_identity",
+    "test_export_mcap",
+    "test_reference_provenance",
+    "test_smoothers",
+    "test_hostile_adapters",
+    "test_hostile_score",
+    "test_hostile_rerun",
+    "test_hostile_kernel_cache",
+    "test_reproduce_000",
+    "test_hostile_inputs",
+    "test_tuned_views",
+    "test_aukf_premise",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The modules of ``FIRST`` first, in its order (a stable sort: each module's tests stay together and
+    in order)."""
+    rank = {name: i for i, name in enumerate(FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.stem, len(FIRST)))
 
 
 def pytest_sessionstart(session):

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -216,6 +217,25 @@ def test_output_parents_are_created_and_files_written_whole(files):
     assert_ok(["score", files / "ref.tum", files / "est.tum", "-o", files / "link.csv"])
     assert (files / "link.csv").is_symlink() and (files / "kept.csv").read_text() == out.read_text()
 
+
+
+def test_dev_shm_holds_outputs_but_a_link_from_it_to_a_device_is_refused():
+    """/dev/shm is a RAM file system of regular files (the suite's scratch space, tests/conftest.py), not
+    a device: an output may go there; a link there to /dev/null is refused as any other."""
+    import tempfile
+
+    from replay.util import outfile
+    from replay.util.errors import ReplayError
+
+    if not os.path.isdir("/dev/shm") or not os.access("/dev/shm", os.W_OK):
+        pytest.skip("no writable /dev/shm")
+    with tempfile.TemporaryDirectory(dir="/dev/shm") as d:
+        assert outfile.check(Path(d) / "board.csv", "--out") == Path(d) / "board.csv"
+        (Path(d) / "null.csv").symlink_to(os.devnull)
+        with pytest.raises(ReplayError, match=r"--out .*null\.csv: lies in /dev \(devices and kernel files\)"):
+            outfile.check(Path(d) / "null.csv", "--out")
+    with pytest.raises(ReplayError, match=r"--out /dev/x\.csv: lies in /dev"):
+        outfile.check("/dev/x.csv", "--out")
 
 # ---------------------------------------------------------------- item 12: FIFOs, devices, early refusals
 

@@ -189,7 +189,8 @@ def test_toml_refuses_unknown_missing_and_undeclared(tmp_path, monkeypatch, old,
 
 
 def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch):
-    """An ablation is a TOML edit: a job and a row in its table, no code."""
+    """An ablation is a TOML edit: a job and a row in its table, no code. Computed in this process
+    (REPLAY_WORKERS=1: two worker processes cost 1.6 s of imports; tests/test_verdict.py covers the pool)."""
     from replay.reproduce import p001
     from replay.campaign.longest import evaluate_jobs
 
@@ -202,6 +203,7 @@ def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch)
     row_at = '    ["AUKF (R̂ only), R̂₀ = R × 100", "linear wrong R, R̂ only", "aukf"],\n'
     row = '    ["AUKF (Q̂ only), R̂₀ = R × 100", "linear wrong R, Q̂ only", "aukf"],\n'
     _edited_spec(tmp_path, monkeypatch, (job_at, job + job_at), (row_at, row_at + row))
+    monkeypatch.setenv("REPLAY_WORKERS", "1")
     s = p001.load()
     linear = next(t for t in s["table"] if t["name"] == "linear")
     planned = [j for j in p001.jobs(s, True, {}, 2, 2) if j.key in {r[1] for r in linear["rows"]}]

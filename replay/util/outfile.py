@@ -10,7 +10,8 @@ would, then writes a temporary file beside the target, fsyncs it and renames it 
 (:class:`replay.util.output_set.OutputSet`), so a crash leaves the old file or the new one,
 never a part. A symbolic link keeps pointing where it
 did: the file it points to is replaced. Nothing is written under /dev, /proc or /sys (``-o
-/dev/stdout`` would otherwise rename a file over the link itself).
+/dev/stdout`` would otherwise rename a file over the link itself), except in /dev/shm: a RAM file
+system of regular files (the test suite's scratch space, tests/conftest.py).
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def check(path, what: str, suffixes=None) -> Path:
             f"(at most {NAME_MAX} for the file, 255 for a directory)"
         )
     for q in (Path(os.path.abspath(p)), Path(os.path.realpath(p))):
-        if q.parts[1:2] in (("dev",), ("proc",), ("sys",)):  # /dev/stdout -> /proc/self/fd/1, devices
+        if q.parts[1:2] in (("dev",), ("proc",), ("sys",)) and q.parts[1:3] != ("dev", "shm"):  # /dev/stdout, devices
             raise ReplayError(
                 f"{what} {path}: lies in /{q.parts[1]} (devices and kernel files), not a place for an output file"
             )
