@@ -128,6 +128,36 @@ def test_manifest_command_repeats_the_evaluation(tmp_path):
     assert _rows(tmp_path / "a" / "leaderboard.csv") == _rows(tmp_path / "b" / "leaderboard.csv")
 
 
+def test_a_file_is_read_once_for_all_its_views(tmp_path, monkeypatch):
+    """A tune's training segment, test segment and whole-recording rows are cut from one read of the
+    file (it was read, for a bag decoded, once per view), each equal to the registry's own load."""
+    from replay.data import registry
+    from replay.run import pipeline
+
+    log = tmp_path / "lake.csv"
+    res = CliRunner().invoke(main, ["datasets", "make", "sim/lake-depth", "--out", str(log), "--seed", "0"])
+    assert res.exit_code == 0, res.output
+    real, reads = registry.load_frame, []
+    monkeypatch.setattr(registry, "load_frame", lambda *a, **kw: reads.append(kw) or real(*a, **kw))
+    pipeline.forget_frames()
+    views = [{"segment": "0:0.6"}, {"segment": "0.6:1"}, {}, {"window": "10:50"}]
+    for first in (None, 30):
+        for v in views:
+            cfg = {"dataset": str(log), "dataset_params": v,
+                   "first": first, "seed": 0, "adapter": "lake"}
+            got = pipeline.load_frame(cfg, 0)
+            want = real(str(log), adapter="lake", first=first, **v)
+            assert len(got.t) == len(want.t) and np.array_equal(got.t, want.t)
+            for k, c in want.channels.items():
+                assert np.array_equal(np.asarray(got.channels[k].values), np.asarray(c.values), equal_nan=True)
+            assert got.meta.get("view") == want.meta.get("view")
+    assert len(reads) == 1 and reads[0] == {"data_dir": None, "adapter": "lake"}
+    full = pipeline.load_frame({"dataset": str(log), "dataset_params": {}, "first": None, "seed": 0,
+                                "adapter": "lake"}, 0)
+    assert len(full.t) == len(real(str(log), adapter="lake").t)  # the cached read was not cut in place
+    pipeline.forget_frames()
+
+
 def test_a_file_frame_is_read_again_when_the_file_changes(tmp_path, monkeypatch):
     """A file's frame is read once per process while the file is unchanged; an edit (size, or
     mtime with the same size) or a replacement (new inode) reads it again."""
@@ -141,7 +171,7 @@ def test_a_file_frame_is_read_again_when_the_file_changes(tmp_path, monkeypatch)
     reads = []
     monkeypatch.setattr(registry, "load_frame", lambda dataset, **kw: reads.append(Path(dataset).read_text()) or
                         len(reads))
-    pipeline._file_frame.cache_clear()
+    pipeline.forget_frames()
     path = tmp_path / "log.csv"
     path.write_text("a,b\n1,2\n")
     cfg = {"dataset": str(path), "dataset_params": {}, "first": None, "seed": 0}
@@ -158,4 +188,4 @@ def test_a_file_frame_is_read_again_when_the_file_changes(tmp_path, monkeypatch)
     os.replace(new, path)  # same size and mtime, another file
     assert pipeline.load_frame(cfg, 5) == 4 and pipeline.load_frame(cfg, 6) == 4
     assert reads[-1] == "a,b\n1,2\n7,8\n"
-    pipeline._file_frame.cache_clear()
+    pipeline.forget_frames()

@@ -102,7 +102,7 @@ def test_changed_data_file_is_not_reproduced(tmp_path):
     last = lines[-1].split(",")
     last[-1] = last[-1].rstrip("\n") + "1\n"  # a digit more in the last row (outside --first 50)
     log.write_text("".join(lines[:-1]) + ",".join(last))
-    pipeline._file_frame.cache_clear()  # a new process would read the file again
+    pipeline.forget_frames()  # a new process would read the file again
     assert_refused(["rerun", "-q", path], rf"not reproduced: dataset checksum {sha} -> [0-9a-f]{{64}}$")
 
 

@@ -257,13 +257,20 @@ def load_frame(dataset, *, data_dir=None, rng=None, first: int | None = None, ad
     if isinstance(dataset, Dataset):
         ds = dataset
     elif is_path(dataset):
-        frame = views.apply(_load_path(Path(dataset), adapter, params), chosen, shown).head(first)
+        frame = cut(_load_path(Path(dataset), adapter, params), chosen, first, shown)
         return fault_apply.apply(frame, chosen.get("fault"), faulty, shown)
     else:
         ds = get(dataset)
     frame = _load_sim(ds, rng, params) if ds.kind == "sim" else _load_file(ds, data_dir, params)
     frame.meta["dataset"] = ds.id
-    return fault_apply.apply(views.apply(frame, chosen, shown).head(first), chosen.get("fault"), faulty, shown)
+    return fault_apply.apply(cut(frame, chosen, first, shown), chosen.get("fault"), faulty, shown)
+
+
+def cut(frame, chosen: dict, first: int | None, shown: str):
+    """``frame`` as read, cut by its views ``chosen`` (:mod:`replay.data.views`; faults are applied per
+    run elsewhere) and then to its ``first`` samples: a new frame, ``frame`` itself unchanged (it may
+    be a cached read that other views are cut from)."""
+    return views.apply(frame, chosen, shown).head(first)
 
 
 def is_path(dataset) -> bool:

@@ -48,7 +48,7 @@ from time import perf_counter
 import numpy as np
 
 from replay import roles
-from replay.data import dataset_ref, fault_apply, registry
+from replay.data import dataset_ref, fault_apply, registry, views
 from replay.filters import make_filter
 from replay.filters.base import check_batch
 from replay.filters.noise_params import apply as apply_noise
@@ -60,7 +60,7 @@ from replay.scoring.record import DONE, RunRecord
 from replay.tasks import make_task, reference_coverage, reference_present, source_of
 from replay.trajectory.recorded import RECORDED, is_recorded, recorded_estimates, unaligned_metrics
 from replay.util import covcols
-from replay.util.errors import ReplayError
+from replay.util.errors import ReplayError, shown
 from replay.util.seeds import DATA, FAULT, TASK, filter_rng, rng_for
 
 
@@ -93,11 +93,29 @@ def is_sim(dataset) -> bool:
     return dataset_ref.resolve(dataset).is_sim
 
 
+@functools.lru_cache(maxsize=2)
+def _file_read(dataset, data_dir, adapter, params_json, state=()):
+    """A file dataset's frame as its adapter reads it (no view, no ``first``), read once per process
+    while the file is unchanged: ``state`` (:func:`_file_state`) is part of the key, so an edited file
+    is read again. A tune's training and test segments and its whole-recording rows are cut from
+    this one read (the bag was decoded once per view before)."""
+    return registry.load_frame(dataset, data_dir=data_dir, adapter=adapter, **json.loads(params_json))
+
+
 @functools.lru_cache(maxsize=4)
 def _file_frame(dataset, first, data_dir, adapter, params_json, state=()):
-    """A file dataset's frame, read once per process (the same for every run) while the file is
-    unchanged: ``state`` (:func:`_file_state`) is part of the key, so an edited file is read again."""
-    return registry.load_frame(dataset, data_dir=data_dir, first=first, adapter=adapter, **json.loads(params_json))
+    """A file dataset's frame with its views and ``first`` (the same for every run): cut from the
+    one read of :func:`_file_read` (checked first: a bad view is refused before the file is read)."""
+    chosen, own = views.split(json.loads(params_json))
+    chosen, first = views.check(chosen, f"dataset {shown(dataset)}"), registry.FIRST.check(first)
+    frame = _file_read(dataset, data_dir, adapter, json.dumps(own, sort_keys=True), state)
+    return registry.cut(frame, chosen, first, str(dataset)) if chosen or first is not None else frame
+
+
+def forget_frames() -> None:
+    """Forget the files' frames read by this process (the next run reads its file again)."""
+    _file_read.cache_clear()
+    _file_frame.cache_clear()
 
 
 def _file_state(target, data_dir) -> tuple:
