@@ -112,6 +112,9 @@ def _no_compute(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("computed although the output was refused")
 
+    # replay eval's one call (eval_job) binds evaluate at its import: patched there first (imported with the
+    # real one bound), then at its source
+    monkeypatch.setattr("replay.outputs.eval_job.evaluate", boom)
     monkeypatch.setattr("replay.run.evaluation.evaluate", boom)
 
 

@@ -162,12 +162,14 @@ def test_a_plugin_failing_before_any_run_is_refused_in_one_line(plugin, tmp_path
 
 
 def test_an_unpredicted_memory_error_is_out_of_memory_not_a_traceback(monkeypatch, tmp_path):
+    import replay.outputs.eval_job as job
     import replay.run.evaluation as module
 
     def hungry(*a, **k):
         raise MemoryError("Unable to allocate 9.1 TiB")
 
     monkeypatch.setattr(module, "evaluate", hungry)
+    monkeypatch.setattr(job, "evaluate", hungry)  # replay eval's one call binds it at import
     assert_refused(["eval", "sim/auv-sonar", "--filters", "ekf", "-o", tmp_path / "o"],
                    r"^replay: error: out of memory \(Unable to allocate 9\.1 TiB\)$")
     with pytest.raises(ReplayError, match=r"^replay\.evaluate: out of memory \(MemoryError: Unable to allocate"):

@@ -143,6 +143,9 @@ def test_full_and_read_only_refused_before_computing(tmpfs, small, monkeypatch):
     out = tmpfs / "out"
     write_all(small, out)
     before = tree(out)
+    # replay eval's one call (eval_job) binds evaluate at its import: patched there first (imported with the
+    # real one bound), then at its source
+    monkeypatch.setattr("replay.outputs.eval_job.evaluate", boom)
     monkeypatch.setattr("replay.run.evaluation.evaluate", boom)
     args = ["eval", "sim/ungm", "--task", "ungm", "--filters", "ekf", "-o", out]
     fill(tmpfs, 64 * 1024)
