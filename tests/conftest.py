@@ -31,6 +31,8 @@ import pytest
 import kernel_store
 from replay.data.registry import cache_dir as _user_cache
 
+pytest_plugins = ["schedule"]  # the costliest modules first over the xdist workers (tests/schedule.py)
+
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
