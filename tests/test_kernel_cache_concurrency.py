@@ -10,8 +10,8 @@ library's own kernels). Tiny workloads (60 steps, 2 runs): the cost is the compi
 command runs two filters that between them compile both kinds of shared kernel: the EKF the
 model's kernels (two signatures of ``f`` and of ``H`` in one index, as in the issue's crash) and the
 STCPF those too and its bound copy of the paper-002 kernels (the issue's repro also ran pf, and the
-eval ukf: more of the same kinds, a quarter more compilation per process; measured cold on one
-core: eval 36.7 s with ekf,ukf,pf,stcpf, 27.3 s with ekf,stcpf).
+eval ukf: more of the same kinds, a third more compilation per process; CPU seconds of one cold
+eval process: 36.7 with ekf,ukf,pf,stcpf, 27.3 with ekf,stcpf).
 """
 from __future__ import annotations
 
