@@ -54,6 +54,9 @@ def _ram_temp_root() -> str | None:
 if not os.environ.get("PYTEST_DEBUG_TEMPROOT") and (_RAM := _ram_temp_root()):
     os.environ["PYTEST_DEBUG_TEMPROOT"] = _RAM  # read by pytest's tmp_path_factory (and by xdist's workers)
 _TEMP_ROOT = os.environ.get("PYTEST_DEBUG_TEMPROOT") or None
+
+pytest_plugins = ["schedule"]  # the costliest modules first over the xdist workers (tests/schedule.py)
+
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
@@ -78,41 +81,6 @@ def checkout_entries(root: Path = CHECKOUT) -> set:
         if (runs / a).is_dir():
             out.update(f"runs/{a}/{b}" for b in os.listdir(runs / a))
     return out
-
-
-# Test modules sent to the workers first, the costliest first. With --dist loadscope (pyproject.toml) a module
-# runs whole in one worker and modules are handed out in collection order: a costly module collected last
-# (alphabetical: tests/test_tune*.py) kept one worker busy while the other had nothing left. The rest follow in
-# collection order. CPU seconds of each module in the quick check (-m "not slow" -n 2, 2026-11-29):
-# test_tune_study 5.4, test_tune 4.7, test_export_foxglove 4.5, test_fusion 4.5, test_fusion_identity 4.3,
-# test_export_mcap 3.7, test_reference_provenance 3.7, test_smoothers 3.6, test_hostile_adapters 3.5, then
-# 3.2-2.2; of ~118 in all. The whole suite's longest module (the slow kernel-cache concurrency cases) leads.
-FIRST = (  # file names without ".py"
-    "test_kernel_cache_concurrency",
-    "test_tune_study",
-    "test_tune",
-    "test_export_foxglove",
-    "test_fusion",
-    "test_fusion_identity",
-    "test_export_mcap",
-    "test_reference_provenance",
-    "test_smoothers",
-    "test_hostile_adapters",
-    "test_hostile_score",
-    "test_hostile_rerun",
-    "test_hostile_kernel_cache",
-    "test_reproduce_000",
-    "test_hostile_inputs",
-    "test_tuned_views",
-    "test_aukf_premise",
-)
-
-
-def pytest_collection_modifyitems(config, items):
-    """The modules of ``FIRST`` first, in its order (a stable sort: each module's tests stay together and
-    in order)."""
-    rank = {name: i for i, name in enumerate(FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.stem, len(FIRST)))
 
 
 def pytest_sessionstart(session):

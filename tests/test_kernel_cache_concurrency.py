@@ -6,7 +6,12 @@ every later run segfaulted (exit 139) until ``replay/models/__pycache__`` was de
 (replay.util.kernel_cache) every process must exit 0 with the numbers of a run that had a cache to
 itself, the normal run after them too, and every numba file written must carry this user's seal.
 Cold means a fresh ``REPLAY_CACHE_DIR`` (the bound copies) and a fresh ``NUMBA_CACHE_DIR`` (the
-library's own kernels). Tiny workloads (60 steps, 2 runs): the cost is the compilation.
+library's own kernels). Tiny workloads (60 steps, 2 runs): the cost is the compilation, so each
+command runs two filters that between them compile both kinds of shared kernel: the EKF the
+model's kernels (two signatures of ``f`` and of ``H`` in one index, as in the issue's crash) and the
+STCPF those too and its bound copy of the paper-002 kernels (the issue's repro also ran pf, and the
+eval ukf: more of the same kinds, a third more compilation per process; CPU seconds of one cold
+eval process: 36.7 with ekf,ukf,pf,stcpf, 27.3 with ekf,stcpf).
 """
 from __future__ import annotations
 
@@ -23,10 +28,10 @@ from replay.util.kernel_cache import unseal
 pytestmark = pytest.mark.slow
 
 REPLAY = [sys.executable, "-m", "replay.cli"]
-TUNE = ["tune", "sim/auv-sonar", "--filters", "ekf,pf,stcpf", "--split", "seeds", "--runs", "2",
+TUNE = ["tune", "sim/auv-sonar", "--filters", "ekf,stcpf", "--split", "seeds", "--runs", "2",
         "--dataset-param", "steps=60", "--trials", "3", "-p", "ekf.q_scale=log[0.1,10]",
-        "-p", "pf.q_scale=log[0.1,10]", "-p", "stcpf.q_scale=log[0.1,10]"]
-EVAL = ["eval", "sim/auv-sonar", "--runs", "2", "--dataset-param", "steps=60", "--filters", "ekf,ukf,pf,stcpf"]
+        "-p", "stcpf.q_scale=log[0.1,10]"]
+EVAL = ["eval", "sim/auv-sonar", "--runs", "2", "--dataset-param", "steps=60", "--filters", "ekf,stcpf"]
 CAMPAIGN = """[campaign]
 runs = 2
 [[dataset]]
@@ -34,8 +39,6 @@ id = "sim/auv-sonar"
 params = { steps = 60 }
 [[filter]]
 name = "ekf"
-[[filter]]
-name = "pf"
 [[filter]]
 name = "stcpf"
 """
