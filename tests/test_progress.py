@@ -259,3 +259,26 @@ def test_every_display_is_tqdm_s_and_off_a_terminal_each_is_a_plain_line():
             time.sleep(0.01)
         assert isinstance(ld, tqdm.tqdm)
     assert tty.getvalue().startswith("\rload f.csv (2.00kB): 0 s") and tty.getvalue().endswith("done in 0 s\n")
+
+
+def test_a_load_heartbeat_under_a_run_bar_off_a_terminal_writes_no_control_sequence():
+    """Two displays at once off a terminal (a file's load heartbeat while a run's bar is open): tqdm
+    moves the cursor between them (ESC [A); a log must get plain lines only. CI once saw an error
+    line preceded by a line holding only ESC [A."""
+    import time
+
+    from replay.util import progress
+
+    out = io.StringIO()
+    bar = Progress(2, stream=out, label="eval", unit="run", every=0.0)
+    bar.update(1)
+    with progress.Loading("f.csv", 2000, quiet=False, stream=out, after=0.0, every=0.01):
+        deadline = time.monotonic() + 5
+        while "load f.csv" not in out.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.01)
+    bar.update(1)
+    bar.close()
+    text = out.getvalue()
+    assert "load f.csv (2.00kB): 0 s" in text and "done in 0 s" in text and "eval: 2/2 runs" in text
+    assert "\x1b" not in text and "\r" not in text
+    assert all(line.strip() for line in text.splitlines())  # no empty line either

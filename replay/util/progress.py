@@ -14,6 +14,7 @@ quiet. What is ours is what tqdm cannot know:
 from __future__ import annotations
 
 import logging
+import re
 import shutil
 import sys
 import threading
@@ -82,15 +83,19 @@ def particle_weight(params: dict, runs: int) -> float:
         return float(runs) * (RUN_OVERHEAD + 1.0)
 
 
+_CURSOR = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")  # a terminal's control sequence (tqdm's cursor moves)
+
+
 class _Lines:
     """Off a terminal, what tqdm writes (``\\r``, the display, its padding) as plain lines; its clearing
-    and closing write nothing (tqdm has no line mode)."""
+    and closing write nothing (tqdm has no line mode), nor its cursor moves between two displays at
+    once (a load's heartbeat under a run's bar: tqdm's ``moveto`` writes ``ESC [A``)."""
 
     def __init__(self, stream):
         self.stream = stream
 
     def write(self, text: str) -> None:
-        line = text.lstrip("\r").rstrip(" \n")
+        line = _CURSOR.sub("", text).lstrip("\r").rstrip(" \n")
         if line:
             self.stream.write(line + "\n")
 
