@@ -12,7 +12,7 @@ The compiled kernels (``filters/compiled/copies.py`` keeps them in ``$REPLAY_CAC
 survive from one session to the next: the session's ``kernels`` directory starts
 as a copy of this checkout's test kernel store (``<user cache>/test-kernels/<hash
 of the checkout's path>``, owner-only) and is merged into it at the end
-(tests/kernel_store.py; parallel workers each merge theirs). The store is
+(tests/kernel_store.py; pytest-xdist's workers share the session's cache, below). The store is
 the product's own cache, used as the product uses it: every copy is named by the
 hash of its text (the template, its helpers and the model's kernels), checked
 against it before it is imported, and numba's files are sealed and checked
@@ -60,9 +60,21 @@ pytest_plugins = ["schedule"]  # the costliest modules first over the xdist work
 # the MCAP validator is looked for in the user cache (tests/test_export_mcap.py): keep finding it there
 os.environ.setdefault("REPLAY_MCAP_VALIDATE_DIR", str(_user_cache() / "mcap-validate"))
 _KEEP = os.environ.get("REPLAY_TEST_CACHE_DIR")
-SESSION_CACHE = Path(_KEEP).expanduser() if _KEEP else Path(tempfile.mkdtemp(prefix="replay-tests-", dir=_TEMP_ROOT))
+# Under pytest-xdist the workers use the session cache of the process that started them (inherited in the
+# environment): a kernel one worker compiled is loaded by the other instead of compiled again (on a clean
+# clone every copy was compiled once per worker). The cache is made for processes sharing it (issue 33:
+# tests/test_kernel_cache_concurrency.py); the process that made it restores, saves and removes it.
+_SHARED = os.environ.get("REPLAY_TEST_SESSION_CACHE") if os.environ.get("PYTEST_XDIST_WORKER") else None
+_OWNER = not _KEEP and not _SHARED
+if _KEEP:
+    SESSION_CACHE = Path(_KEEP).expanduser()
+elif _SHARED:
+    SESSION_CACHE = Path(_SHARED)
+else:
+    SESSION_CACHE = Path(tempfile.mkdtemp(prefix="replay-tests-", dir=_TEMP_ROOT))
+    os.environ["REPLAY_TEST_SESSION_CACHE"] = str(SESSION_CACHE)
 KERNEL_STORE = kernel_store.store_for(_user_cache(), Path(__file__).resolve().parents[1])
-if not _KEEP and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
+if _OWNER and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
     kernel_store.restore(KERNEL_STORE, SESSION_CACHE / "kernels")
 os.environ["REPLAY_CACHE_DIR"] = str(SESSION_CACHE)
 
@@ -106,7 +118,7 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 def pytest_unconfigure(config):
-    if not _KEEP:
+    if _OWNER:  # after the workers (pytest-xdist's controller ends last)
         kernel_store.save(SESSION_CACHE / "kernels", KERNEL_STORE)
         shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
