@@ -212,3 +212,46 @@ def test_campaign_run_with_a_silent_scheduler_ends(tmp_path):
     assert res.returncode == 2
     assert res.stderr.strip().splitlines() == [f"replay: error: Dask scheduler {address}: no answer within 5 s "
                                                "(it accepted the connection but sent no handshake)"]
+
+
+
+_PARENT, _ORIGINAL = os.getpid(), []
+
+
+def _where(job):  # whether the job ran in the test's process, and its records
+    return os.getpid() == _PARENT, _ORIGINAL[0](job)
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="the warm-first pool is forked (Linux)")
+def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch):
+    """``replay tune``'s pool (warm_first): the first job of each filter runs in this process, the
+    others in workers forked after it (they start with its kernels compiled); the records equal
+    those of the serial backend."""
+    from replay.campaign import execute
+    from replay.campaign.units import Job
+    from replay.run.pipeline import Config
+
+    def job(name, runs):
+        c = Config("sim/auv-sonar", {"steps": 20}, None, "sonar", {}, name, {}, 0, "se3", None).as_dict()
+        return Job(c, name, runs)
+
+    def numbers(records):  # all but the timings
+        return [(r.run, r.status, {k: v for k, v in r.metrics.items() if k not in ("us_per_step", "seconds")})
+                for r in records]
+
+    jobs = [job("ekf", [r]) for r in range(3)] + [job("kf", [r]) for r in range(2)]
+    serial = {(j.config_hash, j.runs[0]): numbers(res) for j, res in execute._serial(jobs)}
+    _ORIGINAL.append(execute.execute_packed)
+    monkeypatch.setattr(execute, "execute_packed", _where)
+    got = {}
+    try:
+        with execute._processes(2, warm_first=True) as run:
+            for name in ("ekf", "kf"):
+                order = [(j, here, recs) for j, (here, recs) in run([j for j in jobs if j.config_hash == name])]
+                assert order[0][0].runs == [0] and order[0][1] is True  # the first job: here
+                assert len(order) == len(jobs) - 3 * (name == "kf") - 2 * (name == "ekf")
+                assert not any(here for _, here, _ in order[1:])  # the others: in the forked workers
+                got.update({(j.config_hash, j.runs[0]): numbers(recs) for j, _, recs in order})
+    finally:
+        _ORIGINAL.clear()
+    assert got == serial and len(got) == 5

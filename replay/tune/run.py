@@ -193,7 +193,7 @@ def tune(
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         block = execute.spread_block(t.runs, t.batch, workers or dask_local, scheduler)
         n_jobs = -(-t.runs // block) * max(len(t.split.train), len(t.split.test))
-        ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs)
+        ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs, warm_first=True)
         failed: dict = {}  # filter -> why each of its trials of this invocation scored inf
         cost = {f: {p: _cost(t.configs(p, f, {}), t.runs) for p in ("train", "test")} for f in t.filters}
         progress = Progress(
