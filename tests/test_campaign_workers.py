@@ -223,6 +223,7 @@ def _where(job):  # whether the job ran in the test's process, and its records
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the warm-first pool is forked (Linux)")
+@pytest.mark.slow
 def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch):
     """``replay tune``'s pool (warm_first): the first job of each filter runs in this process, the
     others in workers forked after it (they start with its kernels compiled); the records equal
