@@ -30,7 +30,9 @@ syncs still run: only their wait is gone.
 """
 import os
 import shutil
+import sys
 import tempfile
+import threading
 from pathlib import Path
 
 import pytest
@@ -77,6 +79,19 @@ KERNEL_STORE = kernel_store.store_for(_user_cache(), Path(__file__).resolve().pa
 if _OWNER and os.environ.get("REPLAY_TEST_FRESH_KERNELS") != "1":
     kernel_store.restore(KERNEL_STORE, SESSION_CACHE / "kernels")
 os.environ["REPLAY_CACHE_DIR"] = str(SESSION_CACHE)
+
+
+
+def _untraced_child():
+    """A process forked from a test (a campaign's, tune's or reproduction's pool) runs untraced: with
+    ``--cov`` it inherited coverage's tracer, which slowed every job and numba compilation it ran by
+    about a third, and what it measured was lost at the worker's exit (coverage follows no fork here)."""
+    sys.settrace(None)
+    threading.settrace(None)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_untraced_child)
 
 
 CHECKOUT = Path(__file__).resolve().parents[1]

@@ -46,6 +46,8 @@ from replay.filters.p002.compiled_util import (
     Noise,
     Particles,
     Proposal,
+    copy1,
+    copy2,
     correct,
     cubature_points,
     draw,
@@ -143,7 +145,7 @@ def particle_fading(x, z, pf, ph, zidx, prev, noise, st, w):
     else:
         H(w.mean, ph, w.Hf)
         for a in range(zidx.shape[0]):
-            w.Hj[a] = w.Hf[zidx[a]]
+            copy1(w.Hj[a], w.Hf[zidx[a]])
         observe(w.mean, ph, zidx, w.zf, w.zh0)
     for a in range(z.shape[0]):
         w.ez[a] = z[a] - w.zh0[a]
@@ -183,19 +185,19 @@ def cubature_step(pf, ph, parts, Z, zidx, E, noise, pr, start, stop):
         x = X[m, i]
         f(x, pf, w.fx)  # f(x_prev), for p(x | x_prev)
         if pr.transition:  # the fixed sample's transition density N(f(x), Q)
-            w.mean[:] = w.fx
+            copy1(w.mean, w.fx)
             wrap(w.mean, xang)
-            w.Pm[:, :] = Q
+            copy2(w.Pm, Q)
         else:
             if pr.have_L:
-                w.Lp[:, :] = L[m, i]
+                copy2(w.Lp, L[m, i])
             else:
                 repairs[m, i] = factor(P[m, i], w.Lp)
             predict(x, pf, Q, xang, w)
         g = 1.0
         if Z is None:  # predict only: the importance density is the prediction
-            w.mpost[:] = w.mean
-            w.Pn[:, :] = w.Pm
+            copy1(w.mpost, w.mean)
+            copy2(w.Pn, w.Pm)
         else:
             repairs[m, i] += innovation(ph, zidx, zang, w)
             if pr.stckf:  # fading factor (002 §2.2.2)
@@ -209,8 +211,8 @@ def cubature_step(pf, ph, parts, Z, zidx, E, noise, pr, start, stop):
             correct(Z[m], R, zang, xang, w)
         lam[m, i] = g
         repairs[m, i] += draw(w.mpost, w.Pn, E[m, i], L[m, i], xang, w.xnew)  # x = m + L e
-        P[m, i] = w.Pn
-        X[m, i] = w.xnew
+        copy2(P[m, i], w.Pn)
+        copy1(X[m, i], w.xnew)
         loglik = 0.0
         if Z is not None:
             loglik = gauss_logpdf(maha(w.xnew, ph, Z[m], zidx, zang, Ri, w.zf, w.zh0, w.d) + pr.logdet_R, nz * LOG_2PI)
@@ -356,7 +358,7 @@ def swarm(ph, X, c, fit, zidx, mov, post, raw, gwo, out):
         for j in range(k):
             is_lead[lead[j]] = True
             fl[j] = fm[lead[j]]
-            XL[j] = X[lead[j]]
+            copy1(XL[j], X[lead[j]])
         if improved:  # entropy weights (002 §3.2.2)
             entropy_weights(fl, eps, xi, w)
         else:

@@ -61,6 +61,22 @@ def wrap_rows(X, mask):
 
 
 @nb.njit(cache=True)
+def copy1(dst, src):
+    """dst[:] = src, element by element (numba's array assignment also compiles its shape-error
+    message: ~2-4 s more per array rank on a process's first compilation)."""
+    for a in range(dst.shape[0]):
+        dst[a] = src[a]
+
+
+@nb.njit(cache=True)
+def copy2(dst, src):
+    """dst[:, :] = src, element by element (:func:`copy1`)."""
+    for a in range(dst.shape[0]):
+        for b in range(dst.shape[1]):
+            dst[a, b] = src[a, b]
+
+
+@nb.njit(cache=True)
 def factor(A, L):
     """Cholesky factor of A into L, or of a repaired copy of A when needed: symmetrise, floor the
     eigenvalues at 1e-12 max(1, largest). A is not changed. Returns 1 when repaired, else 0."""
