@@ -91,7 +91,9 @@ def test_a_pool_gets_the_heaviest_jobs_first(tmp_path, monkeypatch):
     order = []
 
     @contextmanager
-    def fake_pool(workers):
+    def fake_pool(workers, warm_first):
+        assert not warm_first  # a campaign's jobs go to the pool as they are (only tune warms first)
+
         def run(jobs):
             for job in jobs:
                 order.append((job.config["filter"], job.runs[0]))

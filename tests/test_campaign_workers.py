@@ -218,17 +218,18 @@ def test_campaign_run_with_a_silent_scheduler_ends(tmp_path):
 _PARENT, _ORIGINAL = os.getpid(), []
 
 
-def _where(job):  # whether the job ran in the test's process, and its records
-    return os.getpid() == _PARENT, _ORIGINAL[0](job)
+def _where(job):  # whether the job ran in the test's process, with how many kernel threads, and its records
+    return (os.getpid() == _PARENT, os.environ.get("REPLAY_THREADS")), _ORIGINAL[0](job)
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the warm-first pool is forked (Linux)")
 @pytest.mark.slow
 def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch):
-    """``replay tune``'s pool (warm_first): the first job of each filter runs in this process, the
-    others in workers forked after it (they start with its kernels compiled); the records equal
-    those of the serial backend."""
+    """``replay tune``'s pool (warm_first): the first job of each filter runs in this process with the
+    workers' thread count (so that it compiles the kernels they call), the others in workers forked
+    after it (they start with its kernels compiled); the records equal those of the serial backend."""
     from replay.campaign import execute
+    from replay.campaign.workers import worker_threads
     from replay.campaign.units import Job
     from replay.run.pipeline import Config
 
@@ -248,10 +249,13 @@ def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch
     try:
         with execute._processes(2, warm_first=True) as run:
             for name in ("ekf", "kf"):
+                before = os.environ.get("REPLAY_THREADS")
                 order = [(j, here, recs) for j, (here, recs) in run([j for j in jobs if j.config_hash == name])]
-                assert order[0][0].runs == [0] and order[0][1] is True  # the first job: here
+                assert os.environ.get("REPLAY_THREADS") == before  # this process's own setting again
+                assert order[0][0].runs == [0] and order[0][1][0] is True  # the first job: here
                 assert len(order) == len(jobs) - 3 * (name == "kf") - 2 * (name == "ekf")
-                assert not any(here for _, here, _ in order[1:])  # the others: in the forked workers
+                assert not any(here for _, (here, _), _ in order[1:])  # the others: in the forked workers
+                assert {threads for _, (_, threads), _ in order} == {str(worker_threads(2))}
                 got.update({(j.config_hash, j.runs[0]): numbers(recs) for j, _, recs in order})
     finally:
         _ORIGINAL.clear()

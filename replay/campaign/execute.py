@@ -49,7 +49,7 @@ from replay.util.files import sync_dir, write_bytes, write_json
 
 from .store import Store, pack
 from .units import Job, execute_job
-from .workers import connect_scheduler, process_pool, start_method
+from .workers import connect_scheduler, like_a_worker, process_pool, start_method
 
 
 PLAN_PROGRESS = 1000  # configurations from which checking the stored units shows its progress
@@ -152,7 +152,9 @@ def _processes(workers: int, warm_first: bool = False):
                 if _kernels_of(job) not in ran_here:  # one job per filter, the others to the pool
                     ran_here.add(_kernels_of(job))
                     jobs.remove(job)
-                    yield job, execute_packed(job)
+                    with like_a_worker(workers):  # the workers' threads: it compiles what they run
+                        results = execute_packed(job)
+                    yield job, results
         if not jobs:
             return
         if pool is None or (warm_first and forked_with != len(ran_here)):

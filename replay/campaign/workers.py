@@ -32,6 +32,7 @@ import signal
 import sys
 import threading
 import time
+from contextlib import contextmanager
 
 from replay.util.errors import ReplayError
 import multiprocessing as mp
@@ -87,16 +88,39 @@ def start_method() -> str:
     return "fork" if sys.platform == "linux" and "fork" in mp.get_all_start_methods() else "spawn"
 
 
+def worker_threads(n: int) -> int:
+    """The BLAS and compiled-kernel threads of each worker of a pool of ``n``: cores // n."""
+    return max(1, (os.cpu_count() or 1) // n)
+
+
 def process_pool(n: int):
     """A process pool of ``n`` of our workers (:func:`init_worker`): each ends with this process
-    and gets cores // n BLAS and compiled-kernel threads, so n workers on n cores do not run
-    n² threads. Campaigns and reproductions both start theirs here."""
+    and gets :func:`worker_threads` BLAS and compiled-kernel threads, so n workers on n cores do
+    not run n² threads. Campaigns and reproductions both start theirs here."""
     return ProcessPoolExecutor(
         max_workers=n,
         mp_context=mp.get_context(start_method()),
         initializer=init_worker,
-        initargs=(os.getpid(), max(1, (os.cpu_count() or 1) // n)),
+        initargs=(os.getpid(), worker_threads(n)),
     )
+
+
+@contextmanager
+def like_a_worker(n: int):
+    """For its duration, this process's BLAS and compiled-kernel threads are those of a worker of a
+    pool of ``n`` (:func:`worker_threads`): a job run here takes the workers' code paths (a filter
+    picks its kernels by its thread count: one thread and a single run, the plain kernel instead of the
+    OpenMP one, which compiles 8 s longer and a worker would never call)."""
+    k, before = worker_threads(n), os.environ.get("REPLAY_THREADS")
+    os.environ["REPLAY_THREADS"] = str(k)
+    try:
+        with threadpool_limits(limits=k):
+            yield
+    finally:
+        if before is None:
+            os.environ.pop("REPLAY_THREADS", None)
+        else:
+            os.environ["REPLAY_THREADS"] = before
 
 
 def connect_scheduler(address: str, timeout: float):
