@@ -125,11 +125,13 @@ def _serial(jobs):
 @contextmanager
 def _processes(workers: int, warm_first: bool = False):
     """A local pool of ``workers`` processes as a job mapper. ``warm_first``: the first job of a filter
-    this process has not run yet runs here, and the pool is forked (again) after it, so that its
-    workers start with that filter's kernels compiled (``replay tune``: a trial's jobs are one
-    filter's runs spread over the workers, which on a cold cache each compiled the same kernels: a
-    cold ``replay tune sim/auv-sonar -f ekf,stcpf`` on 2 workers took 43 CPU s, 23 with this).
-    Results do not depend on where a job runs."""
+    this process has not run yet runs here, with the workers' thread count, and the pool is forked
+    (again) after it, so that its workers start with that filter's kernels compiled (``replay tune``:
+    a trial's jobs are one filter's runs spread over the workers, which on a cold cache each compiled
+    the same kernels: a cold ``replay tune sim/auv-sonar -f ekf,stcpf --runs 2 --dataset-param
+    steps=60 --trials 3`` on 2 workers took 43 CPU s and 25.8 s, now 20.1 CPU s and 20.6 s). Results
+    do not depend on where a job runs. Not for campaigns: their jobs are mostly distinct filters,
+    whose first jobs would then run one after another here."""
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
         # lazy: only a forked pool's parent needs it
