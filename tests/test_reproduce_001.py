@@ -188,6 +188,8 @@ def test_toml_refuses_unknown_missing_and_undeclared(tmp_path, monkeypatch, old,
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
+# slow: a reproduction's jobs computed (the quick check keeps the TOML checks)
+@pytest.mark.slow
 def test_a_row_added_in_the_toml_is_a_row_of_the_document(tmp_path, monkeypatch):
     """An ablation is a TOML edit: a job and a row in its table, no code. Computed in this process
     (REPLAY_WORKERS=1: two worker processes cost 1.6 s of imports; tests/test_verdict.py covers the pool)."""

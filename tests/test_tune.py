@@ -42,6 +42,8 @@ def tuned(tuned_run):
     return tuned_run[0]
 
 
+# slow: a second whole tune (the quick check keeps test_local_pool_gives_the_serial_rows)
+@pytest.mark.slow
 def test_same_seed_twice_same_best_and_rows(tmp_path, tuned_run):
     (adir, a), b = tuned_run, tune(tmp_path / "b").output
     ra, rb = board(adir), board(tmp_path / "b")

@@ -46,6 +46,8 @@ def test_two_identical_filters_are_not_called_different(tmp_path):
     assert any("not distinguishable" in line for line in repeat.ranking(res))
 
 
+# slow: two tunes of two filters through the CLI
+@pytest.mark.slow
 def test_eval_tune_writes_tuned_rows_with_tuning_intervals(tmp_path):
     out = tmp_path / "tuned"
     r = CliRunner().invoke(cli, ["eval", "sim/linear", "-f", "kf,ukf", "--tune", "4", "--tune-repeats", "2", "-n", "2",

@@ -138,6 +138,8 @@ def test_a_new_tune_directory_holding_only_the_lock_is_waited_for(tmp_path):
     assert res.exit_code == 2 and "not a replay tune output (no study.db, no tune.json)" in res.output
 
 
+# slow: a tune of a generated recording
+@pytest.mark.slow
 def test_tune_takes_mapping_like_eval(shared_dir, tmp_path, monkeypatch):
     """``replay tune --mapping FILE`` is ``--dataset-param mapping=<FILE's absolute path>`` (issue 35
     item 3): the same study, resumed with nothing to compute, the same leaderboard."""
