@@ -91,8 +91,8 @@ def test_a_pool_gets_the_heaviest_jobs_first(tmp_path, monkeypatch):
     order = []
 
     @contextmanager
-    def fake_pool(workers, warm_first):
-        assert not warm_first  # a campaign's jobs go to the pool as they are (only tune warms first)
+    def fake_pool(workers, warm):
+        assert not warm  # a campaign's jobs go to the pool as they are (only tune warms its kernels first)
 
         def run(jobs):
             for job in jobs:

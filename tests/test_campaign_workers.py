@@ -215,26 +215,30 @@ def test_campaign_run_with_a_silent_scheduler_ends(tmp_path):
 
 
 
-_PARENT, _ORIGINAL = os.getpid(), []
+
+_PARENT, _ORIGINAL, _HERE = os.getpid(), [], []
 
 
-def _where(job):  # whether the job ran in the test's process, with how many kernel threads, and its records
-    return (os.getpid() == _PARENT, os.environ.get("REPLAY_THREADS")), _ORIGINAL[0](job)
+def _where(job):  # (whether the job ran in the test's process, its kernel threads), its records
+    here = (os.getpid() == _PARENT, os.environ.get("REPLAY_THREADS"))
+    if here[0]:
+        _HERE.append((job.config_hash, here[1]))  # seen only when run in this process
+    return here, _ORIGINAL[0](job)
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="the warm-first pool is forked (Linux)")
 @pytest.mark.slow
-def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch):
-    """``replay tune``'s pool (warm_first): the first job of each filter runs in this process with the
-    workers' thread count (so that it compiles the kernels they call), the others in workers forked
-    after it (they start with its kernels compiled); the records equal those of the serial backend."""
+def test_warm_jobs_run_here_with_the_workers_threads_before_the_pool_forks(monkeypatch):
+    """``replay tune``'s pool: its warm jobs (a short run of each filter) run in this process with the
+    workers' thread count, before the workers are forked (they start with those kernels compiled);
+    every job given to the pool runs in a worker, and the records equal those of the serial backend."""
     from replay.campaign import execute
-    from replay.campaign.workers import worker_threads
     from replay.campaign.units import Job
+    from replay.campaign.workers import worker_threads
     from replay.run.pipeline import Config
 
-    def job(name, runs):
-        c = Config("sim/auv-sonar", {"steps": 20}, None, "sonar", {}, name, {}, 0, "se3", None).as_dict()
+    def job(name, runs, first=None):
+        c = Config("sim/auv-sonar", {"steps": 20}, first, "sonar", {}, name, {}, 0, "se3", None).as_dict()
         return Job(c, name, runs)
 
     def numbers(records):  # all but the timings
@@ -245,18 +249,20 @@ def test_warm_first_pool_runs_each_filters_first_job_here_then_forks(monkeypatch
     serial = {(j.config_hash, j.runs[0]): numbers(res) for j, res in execute._serial(jobs)}
     _ORIGINAL.append(execute.execute_packed)
     monkeypatch.setattr(execute, "execute_packed", _where)
+    warm = [job("ekf-warm", [0], 5), job("kf-warm", [0], 5)]
+    for w in warm:
+        w.config["filter"] = w.config_hash.split("-")[0]
     got = {}
     try:
-        with execute._processes(2, warm_first=True) as run:
+        before = os.environ.get("REPLAY_THREADS")
+        with execute._processes(2, warm=warm) as run:
             for name in ("ekf", "kf"):
-                before = os.environ.get("REPLAY_THREADS")
-                order = [(j, here, recs) for j, (here, recs) in run([j for j in jobs if j.config_hash == name])]
-                assert os.environ.get("REPLAY_THREADS") == before  # this process's own setting again
-                assert order[0][0].runs == [0] and order[0][1][0] is True  # the first job: here
-                assert len(order) == len(jobs) - 3 * (name == "kf") - 2 * (name == "ekf")
-                assert not any(here for _, (here, _), _ in order[1:])  # the others: in the forked workers
-                assert {threads for _, (_, threads), _ in order} == {str(worker_threads(2))}
-                got.update({(j.config_hash, j.runs[0]): numbers(recs) for j, _, recs in order})
+                for j, ((here, threads), recs) in run([j for j in jobs if j.config_hash == name]):
+                    assert not here and threads == str(worker_threads(2))  # in a worker
+                    got[j.config_hash, j.runs[0]] = numbers(recs)
+        assert os.environ.get("REPLAY_THREADS") == before  # this process's own setting again
+        assert _HERE == [("ekf-warm", str(worker_threads(2))), ("kf-warm", str(worker_threads(2)))]
     finally:
         _ORIGINAL.clear()
+        _HERE.clear()
     assert got == serial and len(got) == 5

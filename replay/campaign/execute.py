@@ -123,44 +123,32 @@ def _serial(jobs):
 
 
 @contextmanager
-def _processes(workers: int, warm_first: bool = False):
-    """A local pool of ``workers`` processes as a job mapper. ``warm_first``: the first job of a filter
-    this process has not run yet runs here, with the workers' thread count, and the pool is forked
-    (again) after it, so that its workers start with that filter's kernels compiled (``replay tune``:
-    a trial's jobs are one filter's runs spread over the workers, which on a cold cache each compiled
-    the same kernels: a cold ``replay tune sim/auv-sonar -f ekf,stcpf --runs 2 --dataset-param
-    steps=60 --trials 3`` on 2 workers took 43 CPU s and 25.8 s, now 20.1 CPU s and 20.6 s). Results
-    do not depend on where a job runs. Not for campaigns: their jobs are mostly distinct filters,
-    whose first jobs would then run one after another here."""
+def _processes(workers: int, warm: list | None = None):
+    """A local pool of ``workers`` processes as a job mapper. ``warm``: jobs run here, before the pool
+    is forked, with the workers' thread count, their results dropped: the workers start with the
+    kernels those jobs compiled (``replay tune`` passes one short run of each filter: a trial's jobs
+    are one filter's runs spread over the workers, which on a cold cache each compiled the same
+    kernels. A cold ``replay tune sim/auv-sonar -f ekf,stcpf --runs 2 --dataset-param steps=60
+    --trials 3`` on 2 workers took 43 CPU s and 25.8 s; 20 CPU s and 21 s with this; on a warm cache
+    the short runs cost milliseconds). Not for campaigns: their jobs are mostly distinct filters,
+    which the workers compile in parallel."""
     method = start_method()
     if method == "fork":  # imported once here rather than in every worker
         # lazy: only a forked pool's parent needs it
         import pyarrow.parquet  # noqa: F401, PLC0415
     frozen = method == "fork" and not gc.get_freeze_count()
-    pool, ran_here, forked_with = None, set(), None
-
-    def fresh_pool():
-        nonlocal pool, forked_with
-        if pool is not None:
-            pool.shutdown(wait=True)
-        if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
-            gc.freeze()
-        pool, forked_with = process_pool(workers), len(ran_here)
+    pool = None
 
     def run(jobs):
-        jobs = list(jobs)
-        if warm_first:
-            for job in list(jobs):
-                if _kernels_of(job) not in ran_here:  # one job per filter, the others to the pool
-                    ran_here.add(_kernels_of(job))
-                    jobs.remove(job)
-                    with like_a_worker(workers):  # the workers' threads: it compiles what they run
-                        results = execute_packed(job)
-                    yield job, results
-        if not jobs:
-            return
-        if pool is None or (warm_first and forked_with != len(ran_here)):
-            fresh_pool()
+        nonlocal pool
+        if pool is None:
+            if warm and method == "fork":  # a spawned worker would compile on its own anyway
+                with like_a_worker(workers):  # the workers' threads: it compiles what they run
+                    for job in warm:
+                        execute_packed(job)
+            if frozen:  # what exists now is never collected in a worker: no scan (nor page copy) of it there
+                gc.freeze()
+            pool = process_pool(workers)
         futures = {pool.submit(execute_packed, job): job for job in jobs}
         for fut in as_completed(futures):
             yield futures[fut], _result(fut, futures[fut])
@@ -172,12 +160,6 @@ def _processes(workers: int, warm_first: bool = False):
             pool.shutdown(wait=True, cancel_futures=True)
         if frozen:
             gc.unfreeze()
-
-
-def _kernels_of(job: Job) -> tuple:
-    """What decides the kernels a job compiles: its dataset (the model), task and filter."""
-    c = job.config
-    return c["dataset"], c["task"], c["filter"]
 
 
 @contextmanager
@@ -350,15 +332,15 @@ def _run_locked(campaign, out, o: RunOptions) -> dict:
     return counts
 
 
-def open_backend(workers, scheduler, dask_local, connect_timeout: float, n_jobs: int, warm_first: bool = False):
+def open_backend(workers, scheduler, dask_local, connect_timeout: float, n_jobs: int, warm: list | None = None):
     """(a context manager giving the job mapper, its name): Dask, a local pool, or this process.
-    ``warm_first`` (a local pool): see :func:`_processes`."""
+    ``warm`` (a local pool): see :func:`_processes`."""
     workers = workers or os.cpu_count() or 1
     if scheduler or dask_local:
         return _dask(scheduler, dask_local, connect_timeout), "dask"
     if workers == 1 or n_jobs == 1:
         return _nullcontext(_serial), "serial"
-    return _processes(min(workers, n_jobs), warm_first), f"processes({min(workers, n_jobs)})"
+    return _processes(min(workers, n_jobs), warm), f"processes({min(workers, n_jobs)})"
 
 
 def spread_block(runs: int, batch: int, workers, scheduler) -> int:

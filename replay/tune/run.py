@@ -193,7 +193,7 @@ def tune(
         todo = {f: max(0, t.trials - len(studies.complete(s))) for f, s in opened.items()}
         block = execute.spread_block(t.runs, t.batch, workers or dask_local, scheduler)
         n_jobs = -(-t.runs // block) * max(len(t.split.train), len(t.split.test))
-        ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs, warm_first=True)
+        ctx, _ = execute.open_backend(workers, scheduler, dask_local, connect_timeout, n_jobs, _warm_jobs(t))
         failed: dict = {}  # filter -> why each of its trials of this invocation scored inf
         cost = {f: {p: _cost(t.configs(p, f, {}), t.runs) for p in ("train", "test")} for f in t.filters}
         progress = Progress(
@@ -233,6 +233,21 @@ def tune(
         "paths": paths,
         "failed": failed,
     }
+
+
+WARM_SAMPLES = 50  # samples of the short run that compiles a filter's kernels before the pool forks
+
+
+def _warm_jobs(t: Tune) -> list:
+    """One short run (the first :data:`WARM_SAMPLES` samples, run 0) of each filter with its defaults
+    on the first training dataset: run before the workers are forked, so that they start with its
+    kernels compiled (:func:`replay.campaign.execute._processes`); their results are not kept."""
+    jobs = []
+    for name in t.filters:
+        c = t.configs("train", name, {})[0].as_dict()
+        c["first"] = WARM_SAMPLES if c["first"] is None else min(c["first"], WARM_SAMPLES)
+        jobs.append(execute.Job(c, "warm", [0], t.data_dir))
+    return jobs
 
 
 def _asked(t: Tune) -> dict:
