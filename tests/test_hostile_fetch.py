@@ -189,6 +189,20 @@ def test_declared_rows_and_spans_match_the_real_files(bohai_dir):
     assert seen == 6
 
 
+@pytest.mark.parametrize(("head", "said"), [
+    (b"\x1f\x8b\x08\x00'\x22\x0ck" + b"x" * 40, "a gzip stream, not a CSV (starts with bytes 1f 8b 08 00 27 22 0c 6b)"),
+    (b"PK\x03\x04" + b"\x00" * 40, "a zip archive, not a CSV (starts with bytes 50 4b 03 04 00 00 00 00)"),
+    (b"time,lat\n1,\x002\n", "binary data, not a CSV (starts with bytes 74 69 6d 65 2c 6c 61 74)")])
+def test_binary_content_is_named_in_hex_whatever_its_bytes(tmp_path, head, said):
+    """A binary body is refused with its first bytes in hex: the same line for any bytes (a gzip header's
+    time stamp holding a quote once turned repr's quotes around and the message with them)."""
+    path = tmp_path / "x.csv"
+    path.write_bytes(head)
+    with pytest.raises(ValueError) as e:
+        bohai_csv(path)
+    assert str(e.value) == said
+
+
 register("fetch-cut-at-line-end-declared", "fetch-time-in-ms-declared", "fetch-cut-at-line-end-undeclared")
 
 

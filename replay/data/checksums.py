@@ -208,7 +208,9 @@ def bohai_csv(path: Path) -> Content:
         if not head.strip():
             raise ValueError("the body is empty")
         if b"\0" in head or head[:2] == b"\x1f\x8b" or head[:4] == b"PK\x03\x04":
-            raise ValueError(f"binary data, not a CSV (starts with {head[:8]!r})")
+            kind = {b"\x1f\x8b": "a gzip stream", b"PK": "a zip archive"}.get(head[:2], "binary data")
+            # hex, not repr: repr's quotes change with the bytes (a gzip header's time stamp)
+            raise ValueError(f"{kind}, not a CSV (starts with bytes {head[:8].hex(' ')})")
         f.seek(0)
         first = f.readline(1 << 16)
         try:
