@@ -27,6 +27,9 @@ What :func:`load` does (everything counted in ``frame.report``):
   at most ``max_gap`` seconds apart (default 0.5 s) it is linearly
   interpolated ("repaired"); inside a longer gap, or outside the reference's
   time span, it is masked. ``meta["reference_alignment"]`` holds the counts.
+* ``Frame.columns`` names the column of each channel (``"reference depth"`` for the
+  reference's), ``Frame.maneuvers`` the header's ``maneuvers`` segments (on ``t``),
+  and ``Frame.default_task`` is ``depth``.
 
 Bad input (no time column, unrecognised unit, a reference with no time
 overlap, ...) raises :class:`replay.util.errors.DataError`: one line naming the
@@ -138,21 +141,18 @@ def load(path, *, max_gap) -> Frame:
         "comments": comments,
         "header": header,
         "synthetic": header.get("synthetic", "").lower() in ("true", "yes", "1"),
-        "columns": {("ref_" if r else "") + k: c for (r, k), c in cols.items()},
         "time": {
             "offset": t0,
             "median_step": float(np.median(step)),
             "min_step": float(step.min()),
             "max_step": float(step.max()),
         },
-        "dt": float(np.median(step)),
         "reference_alignment": alignment,
         "pitch_convention": "pitch positive nose down",
-        "default_task": "depth",
     }
-    if "maneuvers" in header:
-        meta["maneuvers"] = _parse_maneuvers(header["maneuvers"], t0)
-    return Frame(t, channels, reference, None, meta, report)
+    columns = {("reference " if r else "") + k: (c,) for (r, k), c in cols.items()}
+    maneuvers = _parse_maneuvers(header["maneuvers"], t0) if "maneuvers" in header else ()
+    return Frame(t, channels, reference, None, meta, report, columns=columns, maneuvers=maneuvers, default_task="depth")
 
 
 def _columns(path, table, units_line, report) -> dict[tuple[bool, str], str]:
@@ -296,12 +296,12 @@ def _channel(path, col, kind, unit, v, report, description) -> Channel:
     )
 
 
-def _parse_maneuvers(text: str, t0: float) -> list[list]:
+def _parse_maneuvers(text: str, t0: float) -> list[tuple]:
     out = []
     for item in text.split(";"):
         m = re.match(r"\s*([-\d.eE+]+)\s*-\s*([-\d.eE+]+)\s*(.*)$", item)
         if m:
-            out.append([float(m.group(1)) - t0, float(m.group(2)) - t0, m.group(3).strip()])
+            out.append((float(m.group(1)) - t0, float(m.group(2)) - t0, m.group(3).strip()))
     return out
 
 

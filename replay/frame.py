@@ -30,13 +30,23 @@ Every adapter produces a :class:`Frame`; every task consumes one. Conventions:
   (:class:`replay.roles.SensorInput`: role, entry, source, channels by field, the mapping's
   fusion settings); tasks find their inputs by role through them. None: the adapter declares
   none (simulated frames; tasks fall back to channels named after the role).
+* **Simulation** (``Frame.simulation``, :class:`Simulation`): how a simulator made the
+  frame (its parameters as validated, its step, the true state a paper's protocol starts
+  its filters from); None for a recording. **Maneuvers** (``Frame.maneuvers``): labelled
+  ``(start, end, label)`` segments on ``t`` that scoring can split by (a lake trial's
+  pitch commands); views move them with the time axis. **Columns**
+  (``Frame.columns``): the source columns each channel is made of (CSV adapters), so a
+  missing input can be traced to the column the report dropped. **Default task**
+  (``Frame.default_task``): the task the adapter's data is for, when it declares one.
+* **Meta** (``Frame.meta``): metadata only (source, CRS and origin, checksums, what the
+  adapter found): read to describe and record, never as a task's input.
 * **Report**: the adapter's account of every sample or channel it dropped,
   flagged, masked or repaired. Nothing is removed silently.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from replay.util.dataframes import frame_table
@@ -139,6 +149,52 @@ class RecordedEstimate:
         )
 
 
+@dataclass(frozen=True)
+class Simulation:
+    """How a simulator made a frame: what a paper's protocol lets a task know of the truth.
+
+    ``generator`` the simulator's module; ``params`` its parameters as validated, one attribute
+    per declaration (a frozen record, filled in by :func:`replay.sim.generator`); ``dt`` the
+    generation step in seconds (None: the simulator has none); ``initial_state`` the true
+    state its task starts from, components named by ``state`` (sim/ungm and sim/auv-sonar:
+    ``x0`` at the step before the first sample; sim/sauv-current: the NED state at the first
+    sample); None when its task does not start from the truth. A frame with an initial state
+    takes only views that keep its first sample and its step (:mod:`replay.data.views`).
+    """
+
+    generator: str = ""
+    params: object = None
+    dt: float | None = None
+    initial_state: tuple[float, ...] | None = None
+    state: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.initial_state is not None:
+            x0 = tuple(float(x) for x in np.asarray(self.initial_state, float).ravel())
+            if self.state and len(self.state) != len(x0):
+                raise ValueError(f"initial state of {len(x0)} components, {len(self.state)} named")
+            object.__setattr__(self, "initial_state", x0)
+
+    def start(self, state: tuple[str, ...], who: str) -> np.ndarray:
+        """The initial state as an array, refused in one line unless its components are ``state``."""
+        if self.initial_state is None or self.state != tuple(state):
+            raise ValueError(
+                f"{who}: needs a simulated initial state ({', '.join(state)}); "
+                f"{self.generator or 'this simulation'} has {', '.join(self.state) or 'none'}"
+            )
+        return np.array(self.initial_state, float)
+
+    def as_meta(self) -> dict:
+        """Plain values for a manifest: generator, step, initial state and the parameters."""
+        params = self.params
+        if params is not None and not isinstance(params, dict):
+            params = {f.name: getattr(params, f.name) for f in fields(params)}
+        out = {"generator": self.generator, "dt": self.dt}
+        if self.initial_state is not None:
+            out.update(initial_state=list(self.initial_state), state=list(self.state))
+        return out | {"params": params or {}}
+
+
 @dataclass
 class ReportEntry:
     action: str  # "dropped", "flagged", "masked", "repaired", "info"
@@ -185,6 +241,10 @@ class Frame:
     estimates: dict[str, RecordedEstimate] = field(default_factory=dict)
     # the sensor inputs the adapter found (replay.roles.SensorInput); None: it declares none
     roles: tuple | None = None
+    simulation: Simulation | None = None  # how a simulator made it; None: a recording
+    maneuvers: tuple[tuple[float, float, str], ...] = ()  # labelled (start, end, label) segments on t
+    columns: dict[str, tuple[str, ...]] = field(default_factory=dict)  # channel -> the source columns it is made of
+    default_task: str | None = None  # the task the adapter's data is for, when it declares one
 
     def to_pandas(self, *, reference: bool = False, masks: bool = False, time: str = "relative"):
         """The sensor channels (``reference=True``: the reference) as a DataFrame (:mod:`replay.util.dataframes`)."""
@@ -196,6 +256,8 @@ class Frame:
             raise ValueError("time axis must be one-dimensional")
         if len(self.t) > 1 and not np.all(np.diff(self.t) > 0):
             raise ValueError("time axis must be strictly increasing")
+        self.maneuvers = tuple((float(a), float(b), str(label)) for a, b, label in self.maneuvers)
+        self.columns = {name: tuple(cols) for name, cols in self.columns.items()}
         for group in (self.channels, self.reference):
             for name, ch in group.items():
                 if len(ch) != len(self.t):
@@ -209,17 +271,15 @@ class Frame:
         if n is None or n >= len(self.t):
             return self
         sl = slice(0, int(n))
-        meta = dict(self.meta, first=int(n))
-        end = float(self.t[int(n) - 1])  # recorded estimates: the poses stamped within the kept span
-        return Frame(
-            self.t[sl],
-            {k: c.take(sl) for k, c in self.channels.items()},
-            {k: c.take(sl) for k, c in self.reference.items()},
-            self.epoch,
-            meta,
-            self.report,
-            {k: e.until(end) for k, e in self.estimates.items()},
-            self.roles,
+        end = float(self.t[int(n) - 1])  # recorded estimates and maneuvers: those within the kept span
+        return replace(
+            self,
+            t=self.t[sl],
+            channels={k: c.take(sl) for k, c in self.channels.items()},
+            reference={k: c.take(sl) for k, c in self.reference.items()},
+            meta=dict(self.meta, first=int(n)),
+            estimates={k: e.until(end) for k, e in self.estimates.items()},
+            maneuvers=tuple(m for m in self.maneuvers if m[0] <= end),  # as they were: t < end of each holds
         )
 
     def summary(self) -> list[str]:

@@ -360,7 +360,7 @@ def test_ungm_model_and_simulator():
     assert m.h(np.array([2.0]), 0)[0] == pytest.approx(0.2)
     fr = registry.load_frame("sim/ungm", rng=np.random.default_rng(0), q=10.0, r=10.0)
     x, z = fr.reference["position"].values[:, 0], fr.channels["z"].values[:, 0]
-    assert len(x) == 100 and fr.meta["q"] == 10.0
+    assert len(x) == 100 and fr.simulation.params.q == 10.0
     assert np.std(z - x**2 / 20) == pytest.approx(np.sqrt(10), rel=0.25)
 
 
@@ -437,7 +437,7 @@ def test_truth_without_process_noise_keeps_the_sonar_noise():
     a = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3))
     b = registry.load_frame("sim/auv-sonar", rng=np.random.default_rng(3), truth_noise=False)
     m = AUVSonar()
-    x = np.asarray(b.meta["initial_state"])
+    x = np.asarray(b.simulation.initial_state)
     truth = np.column_stack([b.reference["position"].values, b.reference["speed"].values,
                              b.reference["attitude"].values])
     for k in range(len(truth)):

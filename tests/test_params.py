@@ -168,7 +168,7 @@ def test_task_and_sim_refusals_name_owner_parameter_and_value():
 
 def test_sim_parameters_reach_the_frame_with_defaults_filled_in():
     frame = registry.load_frame("sim/ungm", rng=0, q=10, steps=7)
-    assert len(frame) == 7 and frame.meta["q"] == 10.0 and frame.meta["r"] == 1.0
+    assert len(frame) == 7 and frame.simulation.params.q == 10.0 and frame.simulation.params.r == 1.0
     assert registry.check_params("sim/ungm", {"q": 10}) == {"steps": 100, "q": 10.0, "r": 1.0, "x0": 0.0,
                                                             "growth": 2.5}
 

@@ -51,7 +51,7 @@ def test_profile_seed_fixes_the_trajectory_across_runs():
     np.testing.assert_array_equal(a.reference["depth"].values, b.reference["depth"].values)
     assert not np.array_equal(a.channels["depth"].values, b.channels["depth"].values)
     assert not np.array_equal(a.reference["depth"].values, c.reference["depth"].values)
-    assert a.meta["maneuvers"] == maneuvers(90.0, profile=random_profile(3))
+    assert [list(m) for m in a.maneuvers] == maneuvers(90.0, profile=random_profile(3))
     assert random_profile(3) == random_profile(3) != random_profile(4)
 
 

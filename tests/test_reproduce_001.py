@@ -23,7 +23,7 @@ def test_water_track_measures_through_water_velocity():
     default = make_frame(np.random.default_rng(3))
     explicit = make_frame(np.random.default_rng(3), dvl_track="bottom")
     assert np.array_equal(default.channels["dvl_velocity"].values, explicit.channels["dvl_velocity"].values)
-    assert water.meta["dvl_track"] == "water"
+    assert water.simulation.params.dvl_track == "water"
 
 
 def test_water_track_error_is_the_integrated_current():
@@ -37,7 +37,7 @@ def test_water_track_error_is_the_integrated_current():
 
         frame = load_frame(ev.results[0].config, run)
         cur = frame.reference["current"].values
-        T = frame.meta["dt"]
+        T = frame.simulation.dt
         shift = np.linalg.norm(T * cur[:-1].sum(axis=0))
         final = ev.results[0].runs[run]["final_err"]
         assert shift > 50

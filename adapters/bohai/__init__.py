@@ -37,7 +37,7 @@ What the returned :class:`~replay.frame.Frame` holds:
   ``vf`` (a body forward velocity, as a DVL's) when it follows the track's speed along
   the heading (``meta["forward_velocity"]``: correlation, median difference; the
   31-column files; the 36-column files' ``vf`` fails the magnitude check); ``imu`` =
-  ``gyro`` when its wz follows the yaw rate. ``meta["channel_columns"]`` maps
+  ``gyro`` when its wz follows the yaw rate. ``Frame.columns`` maps
   a channel to its columns, so that a task lacking a channel can name the
   report line that removed it.
 * ``meta``: source, sha256, layout, adapter, crs, epsg, origin, rows, time,

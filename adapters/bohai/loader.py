@@ -127,13 +127,13 @@ def load(path, *, jump_threshold, max_speed, gps_tolerance, gap_factor) -> Frame
         )
     if layout == 36:
         _time_of_day(cols["time_gps"], t, report, meta)
-    meta["channel_columns"] = {
-        "attitude": ["roll", "pitch", "yaw"],
-        "gyro": ["wx", "wy", "wz"],
-        "gps_position": ["lat_gps", "lon_gps"],
-        "gps_alt": ["alt_gps"],
+    columns = {  # the channels made of several columns (for a missing input's reason: the report names columns)
+        "attitude": ("roll", "pitch", "yaw"),
+        "gyro": ("wx", "wy", "wz"),
+        "gps_position": ("lat_gps", "lon_gps"),
+        "gps_alt": ("alt_gps",),
     }
-    return Frame(t, channels, reference, None, meta, report, roles=_roles(channels, meta))
+    return Frame(t, channels, reference, None, meta, report, roles=_roles(channels, meta), columns=columns)
 
 
 def _roles(channels, meta) -> tuple:

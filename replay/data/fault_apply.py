@@ -7,11 +7,13 @@ fault's draws. Each fault adds report lines and a ``meta["faults"]`` entry with 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from replay.data import faults as decl
 from replay.util.errors import ReplayError
-from replay.frame import Frame, Report, Channel
+from replay.frame import Report, Channel
 from replay.util.seeds import FAULT, rng_for
 from replay.data.views import pick
 
@@ -50,7 +52,7 @@ def apply(frame, specs, rng: np.random.Generator, source: str = "dataset"):
         counts.append(entry)
         _report(report, spec, channel, entry)
     meta = dict(frame.meta, faults=counts)
-    return Frame(frame.t, channels, frame.reference, frame.epoch, meta, report, frame.estimates, frame.roles)
+    return dataclasses.replace(frame, channels=channels, meta=meta, report=report)
 
 
 def stream(rng) -> np.random.Generator:

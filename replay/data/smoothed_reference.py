@@ -122,9 +122,7 @@ def replace(frame, path, source: str = "dataset"):
             **header,
         },
     )
-    out = type(frame)(
-        frame.t, dict(frame.channels), ref, frame.epoch, meta, _report(frame), dict(frame.estimates), frame.roles
-    )
+    out = changed(frame, channels=dict(frame.channels), reference=ref, meta=meta, report=_report(frame))
     out.report.add(
         "replaced",
         "reference position",

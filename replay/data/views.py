@@ -30,10 +30,11 @@ the offset of its first sample from the original first sample, so it starts
 where the original started (``t = 0`` for a recording: the frame convention);
 the grid starts there too. ``meta["view"]`` keeps the offset (``offset_s``), the
 original sample range and the grid; ``epoch`` moves with the offset. Recorded
-estimates keep their own stamps (re-based alike, cut to the kept span).
+estimates keep their own stamps (re-based alike, cut to the kept span); the frame's maneuvers
+are re-based alike (those wholly outside the kept span are left out).
 
 A simulation whose task starts from its simulated first state and steps at
-its generation step (``meta["initial_state"]``, ``dt``: ``sim/ungm``,
+its generation step (``Frame.simulation``'s initial state and ``dt``: ``sim/ungm``,
 ``sim/auv-sonar``, ...) takes only views that keep its first sample and its
 step (a window ``:END``, a segment ``0:B``); the others are refused in one line
 (the task's model would not describe the frame). Its training and test data
@@ -42,6 +43,7 @@ differ by seed (:mod:`replay.data.splits`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 
@@ -49,7 +51,7 @@ import numpy as np
 
 from replay.util.errors import ReplayError
 from replay.util.params import Param
-from replay.frame import Frame, Report, Channel
+from replay.frame import Report, Channel
 from replay.data import faults
 from replay.data.smoothed_reference import replace
 
@@ -214,12 +216,11 @@ def apply(frame, views: dict, source: str = "dataset"):
 
 def _check_simulation(frame, views, offset, source):
     """A simulation whose task starts from its simulated state at the first sample and steps at the
-    generation step (``meta["initial_state"]``, ``meta["dt"]``) cannot be cut at its start or resampled:
-    its task's model would no longer describe the frame. One line instead of a wrong number."""
-    meta = frame.meta
-    if not ({"initial_state", "initial_state_ned"} & meta.keys()):
+    generation step (``frame.simulation``: its initial state and ``dt``) cannot be cut at its start or
+    resampled: its task's model would no longer describe the frame. One line instead of a wrong number."""
+    if frame.simulation is None or frame.simulation.initial_state is None:
         return
-    dt = meta.get("dt")
+    dt = frame.simulation.dt
     if offset > 0:
         why = f"{_describe(views)} starts {offset:g} s after the first sample"
     elif "rate" in views and not (isinstance(dt, (int, float)) and abs(views["rate"] * dt - 1) < 1e-12):
@@ -263,10 +264,18 @@ def _rebuild(frame, t, channels, reference, offset, view, report=None):
             e.description,
             dict(e.params),
         )
-    meta = dict(frame.meta, view=view)
-    epoch = None if frame.epoch is None else frame.epoch + offset
-    report = report if report is not None else Report(list(frame.report.entries))
-    return Frame(t, channels, reference, epoch, meta, report, estimates, frame.roles)
+    maneuvers = [(a - offset, b - offset, label) for a, b, label in frame.maneuvers]
+    return dataclasses.replace(
+        frame,
+        t=t,
+        channels=channels,
+        reference=reference,
+        epoch=None if frame.epoch is None else frame.epoch + offset,
+        meta=dict(frame.meta, view=view),
+        report=report if report is not None else Report(list(frame.report.entries)),
+        estimates=estimates,
+        maneuvers=tuple(m for m in maneuvers if m[1] > start and m[0] <= end),
+    )
 
 
 def grid_index(t: np.ndarray, rate: float) -> np.ndarray:

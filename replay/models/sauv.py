@@ -3,7 +3,7 @@
 State (10), in the paper's north-east-down navigation frame n and body frame b
 (x forward, y starboard, z down):
 
-    x = [p_N, p_E, p_D, v_xb, v_yb, v_zb, a_xb, a_yb, a_zb, psi]
+    x = [p_N, p_E, p_D, v_xb, v_yb, v_zb, a_xb, a_yb, a_zb, psi]   (:data:`COMPONENTS`)
 
 (``p_D`` is depth, positive down; ``psi`` the heading, 0 = north, clockwise
 positive, radians). Roll gamma and pitch theta are *not* states (001 note 1):

@@ -171,7 +171,17 @@ def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_pa
     cfg = {"dataset": ref.id, "dataset_params": dataset_params or {}, "first": first, "seed": seed, "adapter": adapter}
     frame = load_frame(cfg, 0, data_dir, ds=ref.entry)
     sensors = any(i.role != roles.NONE for i in frame.roles or ())
-    return frame.meta.get("default_task") or ("fusion" if sensors else "position")
+    return frame.default_task or ("fusion" if sensors else "position")
+
+
+def frame_records(frame) -> dict:
+    """The frame's typed records beside its metadata, as plain values for the manifest's "dataset" section."""
+    out = {"simulation": frame.simulation.as_meta()} if frame.simulation is not None else {}
+    if frame.maneuvers:
+        out["maneuvers"] = [list(m) for m in frame.maneuvers]
+    if frame.columns:
+        out["columns"] = {name: list(cols) for name, cols in frame.columns.items()}
+    return out | ({"default_task": frame.default_task} if frame.default_task else {})
 
 
 def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
@@ -190,6 +200,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     )
     if frame.roles is not None:  # the adapter's sensor inputs (Frame.roles), as the manifest records them
         problem.frame_meta.update(roles=roles.as_meta(frame.roles))
+    problem.frame_meta.update(frame_records(frame))
     if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
         problem.frame_meta["task_noise"] = problem.noise
     problem.frame_meta["reference"] = provenance.provenance(  # issue 35: printed on every table

@@ -87,7 +87,7 @@ def still(positions) -> bool:
 
 def within(t, spans) -> np.ndarray:
     """A bool per time of ``t``: inside any span ``[t0, t1, ...]`` of ``spans`` (t0 <= t < t1; further items,
-    e.g. a label, ignored), such as a frame's ``meta["maneuvers"]``."""
+    e.g. a label, ignored), such as a frame's ``maneuvers``."""
     t = np.asarray(t, float)
     inside = np.zeros(t.shape, bool)
     for t0, t1, *_ in spans:

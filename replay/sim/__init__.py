@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, make_dataclass
+from dataclasses import dataclass, make_dataclass, replace
 
 from replay.util.params import Param, _is_number, validate
+from replay.frame import Simulation
 
 
 def generator(params: tuple[Param, ...], record: bool = False):
@@ -28,16 +29,22 @@ def generator(params: tuple[Param, ...], record: bool = False):
     The decorated function carries the declarations as ``PARAMS``. ``record=True``: the function receives
     the values as one record, ``make_frame(rng, p)`` (a frozen dataclass with one field per declaration,
     in their order), instead of one keyword each; it is still called ``make_frame(rng, **params)``.
+    The frame it returns carries that record as ``frame.simulation.params`` (:class:`replay.frame.Simulation`,
+    with the step and initial state the function declared there, if any) and the simulator's module as
+    ``frame.simulation.generator``.
     """
 
     def wrap(make_frame):
         owner = f"simulator {make_frame.__module__}"
-        kind = make_dataclass("Params", [p.name for p in params], frozen=True) if record else None
+        kind = make_dataclass("Params", [p.name for p in params], frozen=True)
 
         @functools.wraps(make_frame)
         def make(rng, **given):
             values = validate(params, given, owner)
-            return make_frame(rng, kind(**values)) if record else make_frame(rng, **values)
+            p = kind(**values)
+            frame = make_frame(rng, p) if record else make_frame(rng, **values)
+            frame.simulation = replace(frame.simulation or Simulation(), generator=make_frame.__module__, params=p)
+            return frame
 
         make.PARAMS = params
         return make

@@ -24,13 +24,14 @@ import numpy as np
 
 from replay.util.angles import wrap
 from replay.util.params import Param
-from replay.frame import Channel, Frame
+from replay.frame import Channel, Frame, Simulation
 from replay.models.auv_sonar import AUVSonar, Q_TABLE2, R_TABLE2
 from replay.models.noise import Covariance, as_matrix, diagonal
 
 from . import Numbers, generator
 
 X0_TABLE2 = (0.0, 0.0, 0.0, 10.0, np.pi / 4, np.pi / 10)
+STATE = ("x", "y", "z", "v", "pitch", "yaw")  # the model's state (replay.models.auv_sonar)
 
 PARAMS = (
     Param("steps", int, 100, "number of samples (t = T, 2T, ..., steps T)", low=1),
@@ -112,18 +113,6 @@ def make_frame(
         angles=(1, 2),
         description="single active sonar (002 §1.2)",
     )
-    meta = {
-        "source": "synthetic: replay.sim.auv_sonar",
-        "synthetic": True,
-        "crs": None,
-        "initial_state": x0.tolist(),
-        "dt": T,
-        "yaw_rate": yaw_rate,
-        "Q": np.diag(model.Q).tolist(),
-        "R": np.diag(model.R).tolist(),
-        "mixture_eps": mixture_eps,
-        "mixture_scale": mixture_scale,
-        "truth_noise": truth_noise,
-        "sonar_origin": [0.0, 0.0, 0.0],
-    }
-    return Frame(t, {"sonar": sonar}, ref, None, meta)
+    meta = {"source": "synthetic: replay.sim.auv_sonar", "synthetic": True, "crs": None}
+    sim = Simulation(dt=T, initial_state=x0, state=STATE)  # the sonar at the model's origin (0, 0, 0)
+    return Frame(t, {"sonar": sonar}, ref, None, meta, simulation=sim)

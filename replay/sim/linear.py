@@ -2,7 +2,7 @@
 
 x_k = x_{k-1} + w_k, w ~ N(0, q I3); z_k = x_k + v_k, v ~ N(0, r I3); x_0 = 0.
 The truth is the reference ``position``; the measurements are the sensor
-channel ``z``. The true ``q`` and ``r`` are in the frame's metadata: a filter
+channel ``z``. The true ``q`` and ``r`` are the frame's ``simulation.params``: a filter
 tuned on its innovations' likelihood (``replay tune --objective nll``) should
 find them (task ``linear``, whose assumed q and r are parameters).
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.frame import Channel, Frame
+from replay.frame import Channel, Frame, Simulation
 from replay.util.params import Param
 
 from . import generator
@@ -31,5 +31,5 @@ def make_frame(rng: np.random.Generator, *, steps, q, r) -> Frame:
     t = np.arange(1, steps + 1, dtype=float)
     ref = {"position": Channel(x, "m", "enu", components=("x", "y", "z"), description="true position")}
     meas = Channel(z, "m", "enu", components=("x", "y", "z"), description="position + N(0, r I3)")
-    meta = {"source": "synthetic: replay.sim.linear", "synthetic": True, "crs": None, "dt": 1.0, "q": q, "r": r}
-    return Frame(t, {"z": meas}, ref, None, meta)
+    meta = {"source": "synthetic: replay.sim.linear", "synthetic": True, "crs": None}
+    return Frame(t, {"z": meas}, ref, None, meta, simulation=Simulation(dt=1.0))

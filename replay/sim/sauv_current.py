@@ -68,8 +68,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from replay.util.angles import wrap
-from replay.frame import Channel, Frame
-from replay.models.sauv import DEG, KNOT, body_to_level
+from replay.frame import Channel, Frame, Simulation
+from replay.models.sauv import COMPONENTS, DEG, KNOT, body_to_level
 from replay.util.params import Param
 
 from . import Numbers, generator
@@ -347,13 +347,7 @@ def make_frame(rng: np.random.Generator, p) -> Frame:
         "source": "synthetic: replay.sim.sauv_current",
         "synthetic": True,
         "crs": None,
-        "dt": p.T,
-        "strength": p.strength,
-        "length_scale": p.length_scale,
-        "grid": p.grid,
-        "depth_full_scale": p.depth_full_scale,
-        "ahrs_tau": p.ahrs_tau,
-        "dvl_track": p.dvl_track,
-        "initial_state_ned": np.concatenate([tr.pos[0], tr.v_b[0], tr.a_b[0], [heading[0]]]).tolist(),
     }
-    return Frame(t, _channels(sn, p.dvl_track), _reference(tr, sn.att_true), None, meta)
+    x0 = np.concatenate([tr.pos[0], tr.v_b[0], tr.a_b[0], [heading[0]]])  # the NED state at the first sample
+    sim = Simulation(dt=p.T, initial_state=x0, state=COMPONENTS)
+    return Frame(t, _channels(sn, p.dvl_track), _reference(tr, sn.att_true), None, meta, simulation=sim)

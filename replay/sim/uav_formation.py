@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from replay.util.angles import wrap
-from replay.frame import Channel, Frame
+from replay.frame import Channel, Frame, Simulation
 from replay.models.formation import Formation
 from replay.models.noise import Glint
 from replay.util.params import Param
@@ -124,12 +124,6 @@ def make_frame(rng: np.random.Generator, p) -> Frame:
         "source": "synthetic: replay.sim.uav_formation",
         "synthetic": True,
         "crs": None,
-        "dt": p.T,
-        "initial_state": list(map(float, p.x0)),
-        "accel_sigma": p.accel_sigma,
-        "eps": p.eps,
-        "range_sigma": p.range_sigma,
-        "sigma1": p.sigma1,
-        "sigma2": p.sigma2,
     }
-    return Frame(t, channels, reference, None, meta)
+    sim = Simulation(dt=p.T, initial_state=p.x0, state=("x", "y", "vx", "vy"))  # the follower's x0
+    return Frame(t, channels, reference, None, meta, simulation=sim)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from replay.frame import Channel, Frame
+from replay.frame import Channel, Frame, Simulation
 from replay.models.ungm import UNGM
 from replay.util.params import Param
 
@@ -44,14 +44,5 @@ def make_frame(rng: np.random.Generator, *, steps, q, r, x0, growth) -> Frame:
         )
     }
     meas = Channel(z[:, None], "1", "measurement", components=("z",), description="z = x^2/20 + v")
-    meta = {
-        "source": "synthetic: replay.sim.ungm",
-        "synthetic": True,
-        "crs": None,
-        "dt": 1.0,
-        "initial_state": [float(x0)],
-        "q": q,
-        "r": r,
-        "growth": growth,
-    }
-    return Frame(t, {"z": meas}, ref, None, meta)
+    meta = {"source": "synthetic: replay.sim.ungm", "synthetic": True, "crs": None}
+    return Frame(t, {"z": meas}, ref, None, meta, simulation=Simulation(dt=1.0, initial_state=(x0,), state=("x",)))

@@ -146,6 +146,30 @@ def source_of(frame) -> str:
     return str(frame.meta.get("source") or frame.meta.get("path") or frame.meta.get("dataset") or "frame")
 
 
+def simulated(frame, name: str, task: str, hint: str = ""):
+    """The simulator's parameter ``name`` that made ``frame`` (``frame.simulation.params``); a frame
+    without one (a recording, another simulator) is refused in one line, ``hint`` saying what to do."""
+    params = getattr(frame.simulation, "params", None)
+    if params is None or not hasattr(params, name):
+        made = getattr(frame.simulation, "generator", "") or source_of(frame)
+        raise ReplayError(
+            f"task {task}: needs the simulator's {name}, which {made} does not declare" + (f"; {hint}" if hint else "")
+        )
+    return getattr(params, name)
+
+
+def simulated_start(frame, state: tuple[str, ...], task: str) -> np.ndarray:
+    """The simulated initial state of ``frame`` (``frame.simulation``), its components ``state``; else one line."""
+    if frame.simulation is None:
+        raise ReplayError(
+            f"task {task}: needs a simulated initial state ({', '.join(state)}); {source_of(frame)} is not a simulation"
+        )
+    try:
+        return frame.simulation.start(state, f"task {task}")
+    except ValueError as e:
+        raise ReplayError(str(e)) from None
+
+
 def describe(frame, name: str, group: str = "channels") -> str:
     """'name (what it holds)' of a channel (or reference channel), for ``Problem.inputs``."""
     ch = getattr(frame, group).get(name)
@@ -191,12 +215,11 @@ def role_input(frame, role: str, task: str) -> SensorInput | None:
 def why_missing(frame, names) -> str:
     """What the adapter's report says about channels or columns ``names`` (dropped, masked), or ''.
 
-    ``meta["channel_columns"]`` (bohai-csv) maps a channel to the columns it is made of.
+    ``frame.columns`` maps a channel to the columns it is made of (the report names columns).
     """
-    cols = frame.meta.get("channel_columns", {})
     wanted = []
     for n in names:
-        wanted += [n, *cols.get(n, [])]
+        wanted += [n, *frame.columns.get(n, ())]
     for action in ("dropped", "masked", "flagged"):
         for e in frame.report.entries:
             if e.action == action and e.what in wanted:

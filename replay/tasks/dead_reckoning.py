@@ -36,10 +36,10 @@ import numpy as np
 
 from replay.util.angles import wrap
 from replay.util.params import Param
-from replay.models.sauv import DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
+from replay.models.sauv import COMPONENTS, DEG, PAPER_MEASURED, SAUV, Q_DEFAULT
 from replay.models.noise import Covariance, as_matrix
 
-from . import Problem, Task, describe, missing
+from . import Problem, Task, describe, missing, simulated_start
 
 BOHAI_MEASURED = (0, 1, 4, 5, 6, 7, 8, 9)
 
@@ -146,7 +146,7 @@ class DeadReckoningTask(Task):
             if self.P0 is None
             else as_matrix(self.P0)
         )
-        x_true0 = np.asarray(frame.meta["initial_state_ned"], float)
+        x_true0 = simulated_start(frame, COMPONENTS, self.name)
         x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(10)
         x0[9] = wrap(x0[9])
         pb = Problem(

@@ -61,7 +61,7 @@ class DepthTask(Task):
     def build(self, frame, rng):
         Qgiven, R, P0given = as_matrix(self.Q), as_matrix(self.R), as_matrix(self.P0)
         source = frame.meta.get("path") or frame.meta.get("source") or frame.meta.get("dataset")
-        columns = frame.meta.get("columns", {})
+        columns = {name: cols[0] for name, cols in frame.columns.items() if cols}
         z = np.empty((len(frame.t), 3))
         for i, name in enumerate(CHANNELS):
             ch = frame.channels.get(name)
@@ -86,11 +86,11 @@ class DepthTask(Task):
         if ref is None:
             raise DataError(source, "no reference depth column (e.g. ref_depth_m) to score against")
         if not ref.valid.any():
-            why = why_missing(frame, ("reference depth", columns.get("ref_depth", "ref_depth")))
+            why = why_missing(frame, ("reference depth", columns.get("reference depth", "ref_depth")))
             raise DataError(source, "no valid reference depth sample to score against" + (f" ({why})" if why else ""))
         truth = np.where(ref.valid, ref.values, np.nan)[:, None]
         step = np.diff(frame.t)
-        med = float(np.median(step)) if len(step) else float(frame.meta.get("dt", 0.05))
+        med = float(np.median(step)) if len(step) else float(getattr(frame.simulation, "dt", None) or 0.05)
         uniform = len(step) == 0 or float(step.max() - step.min()) <= 1e-6 * med
         dt = med if uniform else np.concatenate([[med], step])
         Q = paper_Q()[0] if Qgiven is None else Qgiven

@@ -20,7 +20,7 @@ from replay.models.formation import Formation
 from replay.models.noise import Covariance, as_matrix
 from replay.sim.uav_formation import glint_003
 
-from . import Problem, Task
+from . import Problem, Task, simulated, simulated_start
 
 
 class FormationTask(Task):
@@ -50,19 +50,21 @@ class FormationTask(Task):
         need = ("radar", "leader_position", "turn_rate")
         if any(c not in frame.channels for c in need):
             raise ReplayError(f"{frame.meta.get('dataset', 'frame')}: formation needs channels {', '.join(need)}")
-        m = frame.meta
-        noise = glint_003(m["eps"] if self.eps is None else self.eps, m["range_sigma"], m["sigma1"], m["sigma2"])
+        sim = {k: simulated(frame, k, self.name) for k in ("range_sigma", "sigma1", "sigma2", "accel_sigma")}
+        eps = simulated(frame, "eps", self.name, "give it as a task parameter") if self.eps is None else self.eps
+        noise = glint_003(eps, sim["range_sigma"], sim["sigma1"], sim["sigma2"])
+        x_true0 = simulated_start(frame, ("x", "y", "vx", "vy"), self.name)
         model = Formation(
             frame.channels["leader_position"].values,
             frame.channels["turn_rate"].values,
-            m["dt"],
-            m["accel_sigma"] ** 2 * np.eye(2),
+            frame.simulation.dt,
+            sim["accel_sigma"] ** 2 * np.eye(2),
             noise,
         )
         radar = frame.channels["radar"]
         z = np.where(radar.valid[:, None], radar.values, np.nan)
         P0 = as_matrix(self.P0)
-        x0 = np.asarray(m["initial_state"], float) + np.linalg.cholesky(P0) @ rng.standard_normal(4)
+        x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(4)
         ref = frame.reference
         pb = Problem(
             model,

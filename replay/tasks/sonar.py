@@ -22,7 +22,8 @@ from replay.util.params import Param
 from replay.models.auv_sonar import P0_TABLE2, Q_TABLE2, R_TABLE2, AUVSonar
 from replay.models.noise import Covariance, as_matrix, diagonal
 
-from . import Problem, Task, describe, reference_position_3d
+from replay.sim.auv_sonar import STATE
+from . import Problem, Task, describe, reference_position_3d, simulated, simulated_start
 
 
 class SonarTask(Task):
@@ -61,18 +62,14 @@ class SonarTask(Task):
         Q, R, P0 = as_matrix(self.Q), as_matrix(self.R), as_matrix(self.P0)
         truth, valid = reference_position_3d(frame, task="sonar")
         if "sonar" in frame.channels:
-            meta = frame.meta
-            model = AUVSonar(
-                Q,
-                R,
-                dt=meta.get("dt", 1.0),
-                yaw_rate=meta.get("yaw_rate", 0.25) if self.yaw_rate is None else self.yaw_rate,
-                origin=meta.get("sonar_origin", (0, 0, 0)),
-            )
+            x_true0 = simulated_start(frame, STATE, self.name)
+            yaw_rate = self.yaw_rate
+            if yaw_rate is None:
+                yaw_rate = simulated(frame, "yaw_rate", self.name, "give it as a task parameter")
+            model = AUVSonar(Q, R, dt=frame.simulation.dt, yaw_rate=yaw_rate)  # the sonar at the origin, as simulated
             ch = frame.channels["sonar"]
             z = np.where(ch.valid[:, None], ch.values, np.nan)
             P0 = P0_TABLE2 if P0 is None else P0
-            x_true0 = np.asarray(meta["initial_state"], float)
             x0 = x_true0 + np.linalg.cholesky(P0) @ rng.standard_normal(6)
             x0[4:] = wrap(x0[4:])
         else:

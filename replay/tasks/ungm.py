@@ -1,7 +1,7 @@
 """``ungm``: filter the UNGM measurements of ``sim/ungm`` (paper 002, §3.2).
 
-The model's Q, R and growth come from the frame's metadata (the values the
-simulator used) unless given. Prior: x_0 = the simulator's initial state (0)
+The model's Q, R and growth are the simulator's (``frame.simulation.params``)
+unless given. Prior: x_0 = the simulator's initial state (0)
 with P0 = ``p0`` (002 gives x_0 = 0 and no P0; we take 1).
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 from replay.models.ungm import UNGM
 from replay.util.params import Param
 
-from . import Problem, Task
+from . import Problem, Task, simulated, simulated_start
 from replay.util.errors import ReplayError
 
 
@@ -46,14 +46,14 @@ class UNGMTask(Task):
     def build(self, frame, rng):
         if "z" not in frame.channels or "position" not in frame.reference:
             raise ReplayError("task ungm: needs a frame from sim/ungm (channel 'z', reference 'position')")
-        meta = frame.meta
-        q = meta.get("q", 1.0) if self.q is None else self.q
-        r = meta.get("r", 1.0) if self.r is None else self.r
-        g = meta.get("growth", 2.5) if self.growth is None else self.growth
+        hint = "give it as a task parameter"
+        q = simulated(frame, "q", self.name, hint) if self.q is None else self.q
+        r = simulated(frame, "r", self.name, hint) if self.r is None else self.r
+        g = simulated(frame, "growth", self.name, hint) if self.growth is None else self.growth
         model = UNGM(q, r, g)
         ch, ref = frame.channels["z"], frame.reference["position"]
         z = np.where(ch.valid[:, None], ch.values, np.nan)
-        x0 = np.asarray(meta.get("initial_state", [0.0]), float)
+        x0 = simulated_start(frame, ("x",), self.name)
         return Problem(
             model,
             z,

@@ -90,7 +90,7 @@ class RangeBearingTask(Task):
             raise missing(frame, self.name, "at least one valid range and bearing", ("range", "bearing"))
         z = np.where(valid[:, None], np.column_stack([rng_ch.values, brg.values]), np.nan)
         dt = float(np.median(np.diff(frame.t))) if len(frame.t) > 1 else 1.0
-        sensor = frame.meta.get("sensor", (0.0, 0.0))
+        sensor = SENSOR  # where the simulator puts it (a task's inputs are channels and records, not meta)
         model = RangeBearingCV(dt, self.q, self.sigma_range, self.sigma_bearing, sensor)
         first = int(np.argmax(valid))  # the prior: the first valid fix, at rest, one step before it
         r, b = z[first]
@@ -102,6 +102,8 @@ class RangeBearingTask(Task):
                        inputs={"range": describe(frame, "range"), "bearing": describe(frame, "bearing"),
                                "reference": describe(frame, "position", "reference")})
 
+
+SENSOR = (0.0, 0.0)  # the sensor's position, east and north (m)
 
 PARAMS = (
     Param("steps", int, 300, "number of samples", low=2),
@@ -116,7 +118,7 @@ PARAMS = (
 @generator(PARAMS)
 def make_frame(rng: np.random.Generator, *, steps, dt, q, sigma_range, sigma_bearing, dropout) -> Frame:
     """A target crossing at about 10 m/s, 1-2 km from a range-bearing sensor (example plugin's simulator)."""
-    model = RangeBearingCV(dt, q, sigma_range, sigma_bearing)
+    model = RangeBearingCV(dt, q, sigma_range, sigma_bearing, SENSOR)
     x = np.array([-1500.0, 800.0, 10.0, -2.0])
     L = np.linalg.cholesky(model.Q)
     truth = np.empty((steps, 4))
@@ -134,8 +136,7 @@ def make_frame(rng: np.random.Generator, *, steps, dt, q, sigma_range, sigma_bea
     }
     reference = {"position": Channel(np.column_stack([truth[:, :2], np.zeros(steps)]), "m", "enu",
                                      components=("east", "north", "up"), description="simulated target")}
-    meta = {"source": "synthetic: replay_plugin_example.target", "synthetic": True, "crs": None, "dt": dt,
-            "sensor": (0.0, 0.0)}
+    meta = {"source": "synthetic: replay_plugin_example.target", "synthetic": True, "crs": None}
     return Frame(t, channels, reference, None, meta)
 
 
