@@ -282,6 +282,16 @@ class Frame:
             maneuvers=tuple(m for m in self.maneuvers if m[0] <= end),  # as they were: t < end of each holds
         )
 
+    def records(self) -> dict:
+        """The typed records beside the metadata (simulation, maneuvers, columns, default task), those set,
+        as plain values: a manifest's "dataset" section is ``meta`` with these."""
+        out = {"simulation": self.simulation.as_meta()} if self.simulation is not None else {}
+        if self.maneuvers:
+            out["maneuvers"] = [list(m) for m in self.maneuvers]
+        if self.columns:
+            out["columns"] = {name: list(cols) for name, cols in self.columns.items()}
+        return out | ({"default_task": self.default_task} if self.default_task else {})
+
     def summary(self) -> list[str]:
         """Human-readable lines: span, channels, reference, report."""
         out = []

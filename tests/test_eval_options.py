@@ -27,7 +27,7 @@ def test_dataset_param_reaches_the_simulator_and_manifest(tmp_path):
     given = {k: man["config"]["dataset_params"][k] for k in ("q", "r")}
     assert given == {"q": 10, "r": 10}  # stored canonically: the other parameters with their defaults
     assert "--dataset-param q=10" in man["command"] and "--dataset-param r=10" in man["command"]
-    assert man["dataset"]["q"] == 10.0 and man["dataset"]["r"] == 10.0
+    assert man["dataset"]["simulation"]["params"]["q"] == 10.0 and man["dataset"]["simulation"]["params"]["r"] == 10.0
     ev = evaluate("sim/ungm", task="ungm", filters=("ekf",), runs=3, dataset_params={"q": 10, "r": 10})
     row = next(csv.DictReader(open(out / "leaderboard.csv")))
     assert float(row["pos_rmse"]) == pytest.approx(ev.results[0].summary["pos_rmse"], rel=1e-5)

@@ -104,7 +104,7 @@ def info_cmd(
 
 
 def _describe(frame) -> None:
-    """What loading gave: the frame's summary, the adapter's report and the metadata."""
+    """What loading gave: the frame's summary, the adapter's report, its records and the metadata."""
     click.echo("summary:")
     for line in frame.summary():
         click.echo(f"  {line}")
@@ -119,6 +119,18 @@ def _describe(frame) -> None:
             m = i.recorded_mount
             mount = f"; /tf_static {m.parent} -> {m.child}" if m else ""
             click.echo(f"  {i.role}: {i.entry} = {i.source} ({chans}){mount}")
+    sim = frame.simulation
+    if sim is not None:  # the simulator's validated parameters (replay.frame.Simulation)
+        rec = sim.as_meta()
+        step = "" if sim.dt is None else f", step {sim.dt:g} s"
+        click.echo(f"simulation: {sim.generator}{step}")
+        if sim.initial_state is not None:
+            start = ", ".join(f"{n} = {x:g}" for n, x in zip(sim.state, sim.initial_state))
+            click.echo(f"  initial state: {_short(start, 100)}")
+        for key, value in rec["params"].items():
+            click.echo(f"  {key}: {_short(str(value), 100)}")
+    for key, value in {k: v for k, v in frame.records().items() if k != "simulation"}.items():
+        click.echo(f"{key}: {_short(str(value), 100)}")
     click.echo("meta:")
     for key, value in frame.meta.items():
         click.echo(f"  {key}: {_short(str(value), 100)}")

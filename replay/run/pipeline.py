@@ -174,16 +174,6 @@ def default_task(dataset, *, first=None, data_dir=None, adapter=None, dataset_pa
     return frame.default_task or ("fusion" if sensors else "position")
 
 
-def frame_records(frame) -> dict:
-    """The frame's typed records beside its metadata, as plain values for the manifest's "dataset" section."""
-    out = {"simulation": frame.simulation.as_meta()} if frame.simulation is not None else {}
-    if frame.maneuvers:
-        out["maneuvers"] = [list(m) for m in frame.maneuvers]
-    if frame.columns:
-        out["columns"] = {name: list(cols) for name, cols in frame.columns.items()}
-    return out | ({"default_task": frame.default_task} if frame.default_task else {})
-
-
 def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     """The Problem of ``run`` under ``config`` (frame, then the task on the run's task stream)."""
     c = config.as_dict() if isinstance(config, Config) else config
@@ -200,7 +190,7 @@ def build_problem(config: Config | dict, run: int, data_dir=None, ds=False):
     )
     if frame.roles is not None:  # the adapter's sensor inputs (Frame.roles), as the manifest records them
         problem.frame_meta.update(roles=roles.as_meta(frame.roles))
-    problem.frame_meta.update(frame_records(frame))
+    problem.frame_meta.update(frame.records())  # the simulation, maneuvers, columns, default task
     if getattr(problem, "noise", None):  # the fusion task: where each input's noise came from
         problem.frame_meta["task_noise"] = problem.noise
     problem.frame_meta["reference"] = provenance.provenance(  # issue 35: printed on every table

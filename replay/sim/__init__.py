@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass, make_dataclass, replace
 
 from replay.util.params import Param, _is_number, validate
-from replay.frame import Simulation
+from replay.frame import Frame, Simulation
 
 
 def generator(params: tuple[Param, ...], record: bool = False):
@@ -43,7 +43,8 @@ def generator(params: tuple[Param, ...], record: bool = False):
             values = validate(params, given, owner)
             p = kind(**values)
             frame = make_frame(rng, p) if record else make_frame(rng, **values)
-            frame.simulation = replace(frame.simulation or Simulation(), generator=make_frame.__module__, params=p)
+            if isinstance(frame, Frame):  # (what else it returns is refused where a frame is needed)
+                frame.simulation = replace(frame.simulation or Simulation(), generator=make_frame.__module__, params=p)
             return frame
 
         make.PARAMS = params
