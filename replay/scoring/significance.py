@@ -26,10 +26,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import special, stats
-from replay.scoring.scorer import deterministic
+from replay.scoring.scorer import deterministic, t_ppf
 
 ALTERNATIVES = ("less", "greater", "two-sided")
+
+
+def _scipy():
+    """``(scipy.stats, scipy.special)``, imported at the first test: every ``replay`` command imports this
+    module (the tables' intervals, :func:`t_interval`, need only ``t_ppf``) and scipy.stats costs about
+    0.3 s of a command's start (``python -X importtime``), for the tests of reproductions and ``tune``."""
+    # lazy: start-up, scipy.stats measured ~0.3 s on `replay eval` beside what the intervals import
+    from scipy import special, stats  # noqa: PLC0415
+
+    return stats, special
 
 
 def _alt(alternative: str) -> str:
@@ -74,11 +83,12 @@ def t_interval(x, level: float = 0.95) -> tuple[float, float]:
 
     if deterministic(x):  # one value up to rounding: an interval of exactly 0
         return float(x.mean()), 0.0
-    half = stats.t.ppf(0.5 + level / 2, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
+    half = t_ppf(0.5 + level / 2, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
     return float(x.mean()), float(half)
 
 
 def _p_from_t(t: float, df: int, alternative: str) -> float:
+    stats, _ = _scipy()
     if alternative == "less":
         return float(stats.t.cdf(t, df))
     if alternative == "greater":
@@ -105,7 +115,7 @@ def paired_t(a, b, alternative: str = "less") -> tuple[float, float]:
 
 
 def _ranks(x: np.ndarray) -> np.ndarray:
-    return stats.rankdata(x)  # average ranks of ties
+    return _scipy()[0].rankdata(x)  # average ranks of ties
 
 
 def _exact_signed_rank_cdf(ranks: np.ndarray) -> tuple[np.ndarray, int]:
@@ -146,6 +156,7 @@ def wilcoxon_paired(a, b, alternative: str = "less") -> tuple[float, float]:
     _, tie = np.unique(r, return_counts=True)
     var = n * (n + 1) * (2 * n + 1) / 24 - (tie**3 - tie).sum() / 48
     z = (w - mean) / math.sqrt(var)
+    stats, _ = _scipy()
     p = {"less": stats.norm.cdf(z), "greater": stats.norm.sf(z), "two-sided": 2 * stats.norm.sf(abs(z))}[alternative]
     return _w_stat(w, n * (n + 1) / 2, alternative), float(min(1.0, p))
 
@@ -174,6 +185,7 @@ def _binom_p(k: int, n: int, alternative: str) -> float:
     """Exact binomial test of k successes in n at 1/2."""
     if n == 0:
         return 1.0
+    stats, _ = _scipy()
     if alternative == "less":
         return float(stats.binom.cdf(k, n, 0.5))
     if alternative == "greater":
@@ -203,6 +215,7 @@ def fisher_exact_lost(k_a: int, n_a: int, k_b: int, n_b: int, alternative: str =
     lost, total = k_a + k_b, n_a + n_b
     lo, hi = max(0, lost - n_b), min(n_a, lost)
     ks = np.arange(lo, hi + 1)
+    _, special = _scipy()
     logp = (
         special.gammaln(n_a + 1)
         - special.gammaln(ks + 1)
